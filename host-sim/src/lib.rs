@@ -1,0 +1,2 @@
+//! host-sim: plant models, firmware-in-the-loop simulation, recordings, identification and
+//! diagnosis for pneumatic-artificial-muscle joints.

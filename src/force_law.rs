@@ -1,0 +1,234 @@
+//! Trig-free identified force law of a McKibben muscle (seed 002, eq. 6):
+//!
+//! ```text
+//! F = (c1 P^2 + c2 e^2 + c3 P + c4 e + c5 P/e + c6) / (c7 P + c8 e) + c9 + c10 exp(e - 0.7)
+//! ```
+//!
+//! Convention adopted here (documented in `config/force_law.toml` too):
+//! - `P` is the **gauge pressure in MPa** (the unit of the paper's Fig. 4). The API takes
+//!   pascal (`p_gauge_pa`) and converts at this one place.
+//! - `e` is the **deformation L/L0** (the paper's Fig. 4 axis, 0.75 .. 1.05), not the
+//!   contraction ratio of its eq. 4. With e >= 0.75 the terms `P/e` and `exp(e - 0.7)` stay
+//!   well behaved.
+//! - `F` is the tension in N, clamped at 0 (a muscle cannot push).
+//!
+//! Every input is checked: non-finite inputs give 0 N with [`ForceFlags::INVALID_INPUT`];
+//! inputs outside the identified domain are clamped to its edge and flagged; a denominator
+//! near zero gives 0 N with [`ForceFlags::SINGULAR`]. The function never panics and never
+//! returns NaN.
+
+/// Identified constants c1..c10 and the domain they were identified on.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ForceLawParams {
+    /// c1..c10 of eq. 6 (P in MPa gauge, e = L/L0, F in N).
+    pub c: [f32; 10],
+    /// Highest gauge pressure of the identification data [Pa].
+    pub p_gauge_max_pa: f32,
+    /// Lowest deformation L/L0 of the identification data.
+    pub stretch_min: f32,
+    /// Highest deformation L/L0 of the identification data.
+    pub stretch_max: f32,
+}
+
+/// Flags describing how a force estimate was obtained (bit set, 0 = clean).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ForceFlags(pub u8);
+
+impl ForceFlags {
+    /// No flag: the inputs were inside the identified domain.
+    pub const NONE: ForceFlags = ForceFlags(0);
+    /// A non-finite (NaN or infinite) input: the force is 0.
+    pub const INVALID_INPUT: ForceFlags = ForceFlags(1 << 0);
+    /// Pressure below 0 gauge: clamped to 0.
+    pub const PRESSURE_LOW: ForceFlags = ForceFlags(1 << 1);
+    /// Pressure above the identified maximum: clamped to it.
+    pub const PRESSURE_HIGH: ForceFlags = ForceFlags(1 << 2);
+    /// Deformation below the identified minimum: clamped to it.
+    pub const STRETCH_LOW: ForceFlags = ForceFlags(1 << 3);
+    /// Deformation above the identified maximum: clamped to it.
+    pub const STRETCH_HIGH: ForceFlags = ForceFlags(1 << 4);
+    /// Denominator `c7 P + c8 e` near zero, or a non-finite intermediate: the force is 0.
+    pub const SINGULAR: ForceFlags = ForceFlags(1 << 5);
+
+    /// Flags that mean the estimate cannot be trusted at all (as opposed to clamped inputs).
+    pub const FATAL: ForceFlags = ForceFlags(Self::INVALID_INPUT.0 | Self::SINGULAR.0);
+
+    /// True when no flag is set.
+    #[inline]
+    pub const fn is_clean(self) -> bool {
+        self.0 == 0
+    }
+    /// True when any flag of `other` is set.
+    #[inline]
+    pub const fn contains_any(self, other: ForceFlags) -> bool {
+        self.0 & other.0 != 0
+    }
+    /// Union of two flag sets.
+    #[inline]
+    pub const fn union(self, other: ForceFlags) -> ForceFlags {
+        ForceFlags(self.0 | other.0)
+    }
+}
+
+/// A force estimate with the flags that qualify it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ForceEstimate {
+    /// Tension [N], finite and >= 0.
+    pub force_n: f32,
+    /// How the estimate was obtained.
+    pub flags: ForceFlags,
+}
+
+/// Pa -> MPa, the law's pressure unit.
+pub const MPA_PER_PA: f32 = 1.0e-6;
+/// |denominator| below this is treated as singular.
+const DEN_EPS: f32 = 1.0e-6;
+
+impl ForceLawParams {
+    /// Raw eq. 6 with P in MPa gauge and e = L/L0, no checks (may return any f32).
+    /// For identification and tests; the firmware uses [`ForceLawParams::force`].
+    #[inline]
+    pub fn eval_raw(&self, p_mpa: f32, e: f32) -> f32 {
+        let c = &self.c;
+        let num =
+            c[0] * p_mpa * p_mpa + c[1] * e * e + c[2] * p_mpa + c[3] * e + c[4] * p_mpa / e + c[5];
+        let den = c[6] * p_mpa + c[7] * e;
+        num / den + c[8] + c[9] * libm::expf(e - 0.7)
+    }
+
+    /// Tension [N] of a muscle at gauge pressure `p_gauge_pa` and deformation `stretch`
+    /// (L/L0), with domain checks. Never panics, never NaN.
+    pub fn force(&self, p_gauge_pa: f32, stretch: f32) -> ForceEstimate {
+        if !p_gauge_pa.is_finite() || !stretch.is_finite() {
+            return ForceEstimate {
+                force_n: 0.0,
+                flags: ForceFlags::INVALID_INPUT,
+            };
+        }
+        let mut flags = ForceFlags::NONE;
+        let mut p = p_gauge_pa;
+        if p < 0.0 {
+            p = 0.0;
+            flags = flags.union(ForceFlags::PRESSURE_LOW);
+        } else if p > self.p_gauge_max_pa {
+            p = self.p_gauge_max_pa;
+            flags = flags.union(ForceFlags::PRESSURE_HIGH);
+        }
+        let mut e = stretch;
+        if e < self.stretch_min {
+            e = self.stretch_min;
+            flags = flags.union(ForceFlags::STRETCH_LOW);
+        } else if e > self.stretch_max {
+            e = self.stretch_max;
+            flags = flags.union(ForceFlags::STRETCH_HIGH);
+        }
+        let p_mpa = p * MPA_PER_PA;
+        let c = &self.c;
+        let den = c[6] * p_mpa + c[7] * e;
+        // `e` is clamped to the domain, which must exclude 0 (checked at build time for the
+        // generated constants); guard anyway so a bad parameter set cannot divide by zero.
+        if !(libm::fabsf(den) > DEN_EPS) || !(libm::fabsf(e) > DEN_EPS) {
+            return ForceEstimate {
+                force_n: 0.0,
+                flags: flags.union(ForceFlags::SINGULAR),
+            };
+        }
+        let f = self.eval_raw(p_mpa, e);
+        if !f.is_finite() {
+            return ForceEstimate {
+                force_n: 0.0,
+                flags: flags.union(ForceFlags::SINGULAR),
+            };
+        }
+        ForceEstimate {
+            force_n: if f > 0.0 { f } else { 0.0 },
+            flags,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::constants::FORCE_LAW;
+
+    /// Hand-computed value of eq. 6 (f64, from the constants in config/force_law.toml).
+    fn eq6_f64(c: &[f64; 10], p: f64, e: f64) -> f64 {
+        (c[0] * p * p + c[1] * e * e + c[2] * p + c[3] * e + c[4] * p / e + c[5])
+            / (c[6] * p + c[7] * e)
+            + c[8]
+            + c[9] * (e - 0.7).exp()
+    }
+
+    #[test]
+    fn force_matches_double_precision_eq6_at_operating_point() {
+        let c64 = FORCE_LAW.c.map(|x| x as f64);
+        let want = eq6_f64(&c64, 0.55, 0.86);
+        let got = FORCE_LAW.force(550_000.0, 0.86);
+        assert!(got.flags.is_clean());
+        // Large constants cancel: allow f32 rounding of a few 1e-3 relative to the terms.
+        assert!(
+            (got.force_n as f64 - want).abs() < 0.05,
+            "{} vs {}",
+            got.force_n,
+            want
+        );
+    }
+
+    #[test]
+    fn reference_constants_reproduce_tondu_force_at_equilibrium() {
+        // Tondu (PLANT.md) at 550 kPa, chi = 0.14: 529.601 N (first row of the fixtures).
+        let f = FORCE_LAW.force(550_000.0, 0.86).force_n;
+        assert!((f - 529.6).abs() < 30.0, "{f}");
+    }
+
+    #[test]
+    fn non_finite_inputs_give_zero_and_flag() {
+        for (p, e) in [
+            (f32::NAN, 0.9),
+            (3e5, f32::NAN),
+            (f32::INFINITY, 0.9),
+            (3e5, f32::NEG_INFINITY),
+        ] {
+            let r = FORCE_LAW.force(p, e);
+            assert_eq!(r.force_n, 0.0);
+            assert!(r.flags.contains_any(ForceFlags::INVALID_INPUT));
+        }
+    }
+
+    #[test]
+    fn out_of_domain_inputs_are_clamped_and_flagged() {
+        let r = FORCE_LAW.force(-10_000.0, 0.9);
+        assert!(r.flags.contains_any(ForceFlags::PRESSURE_LOW));
+        assert_eq!(r.force_n, FORCE_LAW.force(0.0, 0.9).force_n);
+        let r = FORCE_LAW.force(900_000.0, 1.2);
+        assert!(r.flags.contains_any(ForceFlags::PRESSURE_HIGH));
+        assert!(r.flags.contains_any(ForceFlags::STRETCH_HIGH));
+        assert_eq!(r.force_n, FORCE_LAW.force(600_000.0, 1.05).force_n);
+        let r = FORCE_LAW.force(300_000.0, 0.5);
+        assert!(r.flags.contains_any(ForceFlags::STRETCH_LOW));
+    }
+
+    #[test]
+    fn singular_denominator_is_flagged_not_divided() {
+        let mut p = FORCE_LAW;
+        p.c[6] = 0.0;
+        p.c[7] = 0.0;
+        let r = p.force(300_000.0, 0.9);
+        assert_eq!(r.force_n, 0.0);
+        assert!(r.flags.contains_any(ForceFlags::SINGULAR));
+    }
+
+    #[test]
+    fn force_grows_with_pressure_and_stretch() {
+        let lo = FORCE_LAW.force(200_000.0, 0.9).force_n;
+        let hi = FORCE_LAW.force(500_000.0, 0.9).force_n;
+        assert!(hi > lo);
+        let short = FORCE_LAW.force(400_000.0, 0.8).force_n;
+        let long = FORCE_LAW.force(400_000.0, 1.0).force_n;
+        assert!(long > short);
+    }
+}

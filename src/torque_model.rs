@@ -1,0 +1,242 @@
+//! Simplified torque model of an antagonistic muscle joint (seed 003, eq. 11) and its inverse:
+//!
+//! ```text
+//! T = A r^2 alpha + B r dp + C alpha'^3 + D alpha'
+//! ```
+//!
+//! with the paper's symmetric activation `p1 = p0 - dp`, `p2 = p0 + dp` (gauge). All
+//! quantities are SI here: `alpha` [rad], `alpha'` [rad/s], `dp` [Pa], `T` [N m],
+//! `A` [N/(m rad)], `B` [m^2], `C` [N m s^3/rad^3], `D` [N m s/rad]. The paper's constants
+//! are in pi-rad and kg/cm^2 units; [`TorqueModelParams::from_paper_units`] is the one place
+//! that converts them.
+//!
+//! Torque sign: positive torque drives the joint angle up (PLANT.md, `T = (F1 - F2) r`).
+
+use crate::P_MUSCLE_MAX_GAUGE_PA;
+
+/// 1 kg/cm^2 (kilogram-force per square centimetre) in Pa.
+pub const PA_PER_KGF_CM2: f32 = 98_066.5;
+
+/// Constants of eq. 11 plus the activation scheme, in SI units.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TorqueModelParams {
+    /// A [N/(m rad)]: angle stiffness per r^2.
+    pub a_n_per_m_rad: f32,
+    /// B [m^2]: torque per unit activation per unit radius.
+    pub b_m2: f32,
+    /// C [N m s^3/rad^3]: cubic velocity term.
+    pub c_nms3_per_rad3: f32,
+    /// D [N m s/rad]: linear velocity term.
+    pub d_nms_per_rad: f32,
+    /// Sprocket radius r [m].
+    pub sprocket_radius_m: f32,
+    /// Mid pressure p0 of the symmetric activation, gauge [Pa].
+    pub p0_gauge_pa: f32,
+    /// Largest |dp| [Pa] the activation may use.
+    pub dp_max_pa: f32,
+}
+
+/// Result of inverting the torque model.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Activation {
+    /// Activation dp [Pa], finite and within the valid range.
+    pub dp_pa: f32,
+    /// True when the desired torque needed more than the valid range (dp was clamped), or
+    /// an input was not finite (dp = 0).
+    pub saturated: bool,
+}
+
+impl TorqueModelParams {
+    /// Converts the paper's units (seed 003 section 4): A in N/(m pi-rad), B in
+    /// N cm^2/kg (torque per radius per kg/cm^2), C in N m (s/pi)^3, D in N m s/pi.
+    pub fn from_paper_units(
+        a_n_per_m_pi: f32,
+        b_n_cm2_per_kg: f32,
+        c_nm_s3_per_pi3: f32,
+        d_nm_s_per_pi: f32,
+        sprocket_radius_m: f32,
+        p0_kgf_cm2: f32,
+        dp_max_kgf_cm2: f32,
+    ) -> Self {
+        let pi = core::f32::consts::PI;
+        TorqueModelParams {
+            // alpha[pi] = alpha[rad] / pi
+            a_n_per_m_rad: a_n_per_m_pi / pi,
+            // dp[kg/cm^2] = dp[Pa] / 98066.5
+            b_m2: b_n_cm2_per_kg / PA_PER_KGF_CM2,
+            // alpha'[pi/s]^3 = alpha'[rad/s]^3 / pi^3
+            c_nms3_per_rad3: c_nm_s3_per_pi3 / (pi * pi * pi),
+            d_nms_per_rad: d_nm_s_per_pi / pi,
+            sprocket_radius_m,
+            p0_gauge_pa: p0_kgf_cm2 * PA_PER_KGF_CM2,
+            dp_max_pa: dp_max_kgf_cm2 * PA_PER_KGF_CM2,
+        }
+    }
+
+    /// The paper's identified joint (Shadow muscles, r = 0.019 m / 2 chain wheel diameter
+    /// quoted as r, p0 = 3 kg/cm^2, dp within +-2 kg/cm^2).
+    pub fn paper_si() -> Self {
+        Self::from_paper_units(-73_670.0, 174.2, 0.07, 0.45, 0.019, 3.0, 2.0)
+    }
+
+    /// The part of the torque that does not depend on the activation [N m].
+    #[inline]
+    fn passive_nm(&self, angle_rad: f32, velocity_rad_s: f32) -> f32 {
+        let r = self.sprocket_radius_m;
+        let v = velocity_rad_s;
+        self.a_n_per_m_rad * r * r * angle_rad
+            + self.c_nms3_per_rad3 * v * v * v
+            + self.d_nms_per_rad * v
+    }
+
+    /// Forward model: joint torque [N m] at the angle, velocity and activation.
+    #[inline]
+    pub fn torque_nm(&self, angle_rad: f32, velocity_rad_s: f32, dp_pa: f32) -> f32 {
+        self.passive_nm(angle_rad, velocity_rad_s) + self.b_m2 * self.sprocket_radius_m * dp_pa
+    }
+
+    /// Inverse model: the activation dp [Pa] that yields `torque_nm` at the angle and
+    /// velocity, clamped to `+-dp_max_pa` and to the pressures staying within
+    /// `[0, P_MUSCLE_MAX_GAUGE_PA]`. Non-finite inputs give dp = 0, saturated.
+    pub fn activation(&self, torque_nm: f32, angle_rad: f32, velocity_rad_s: f32) -> Activation {
+        let gain = self.b_m2 * self.sprocket_radius_m;
+        if !torque_nm.is_finite()
+            || !angle_rad.is_finite()
+            || !velocity_rad_s.is_finite()
+            || gain == 0.0
+        {
+            return Activation {
+                dp_pa: 0.0,
+                saturated: true,
+            };
+        }
+        let dp = (torque_nm - self.passive_nm(angle_rad, velocity_rad_s)) / gain;
+        if !dp.is_finite() {
+            return Activation {
+                dp_pa: 0.0,
+                saturated: true,
+            };
+        }
+        let lim = self.dp_limit_pa();
+        if dp > lim {
+            Activation {
+                dp_pa: lim,
+                saturated: true,
+            }
+        } else if dp < -lim {
+            Activation {
+                dp_pa: -lim,
+                saturated: true,
+            }
+        } else {
+            Activation {
+                dp_pa: dp,
+                saturated: false,
+            }
+        }
+    }
+
+    /// The usable |dp| [Pa]: `dp_max_pa`, reduced so that both `p0 -+ dp` stay within
+    /// `[0, P_MUSCLE_MAX_GAUGE_PA]`.
+    #[inline]
+    pub fn dp_limit_pa(&self) -> f32 {
+        let p0 = self.p0_gauge_pa;
+        let room = if p0 < P_MUSCLE_MAX_GAUGE_PA - p0 {
+            p0
+        } else {
+            P_MUSCLE_MAX_GAUGE_PA - p0
+        };
+        let room = if room > 0.0 { room } else { 0.0 };
+        if self.dp_max_pa < room {
+            self.dp_max_pa
+        } else {
+            room
+        }
+    }
+
+    /// Pressure set-points (p1, p2) gauge [Pa] of the symmetric activation
+    /// `p1 = p0 - dp`, `p2 = p0 + dp`, each clamped to `[0, P_MUSCLE_MAX_GAUGE_PA]`.
+    #[inline]
+    pub fn pressures_gauge_pa(&self, dp_pa: f32) -> (f32, f32) {
+        let clamp = |p: f32| {
+            if !(p >= 0.0) {
+                0.0
+            } else if p > P_MUSCLE_MAX_GAUGE_PA {
+                P_MUSCLE_MAX_GAUGE_PA
+            } else {
+                p
+            }
+        };
+        (
+            clamp(self.p0_gauge_pa - dp_pa),
+            clamp(self.p0_gauge_pa + dp_pa),
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::constants::TORQUE_MODEL;
+
+    #[test]
+    fn paper_constants_convert_to_si() {
+        let m = TorqueModelParams::paper_si();
+        let pi = core::f32::consts::PI;
+        assert!((m.a_n_per_m_rad - (-73_670.0 / pi)).abs() < 0.01);
+        assert!((m.b_m2 - 174.2 / 98_066.5).abs() < 1e-9);
+        assert!((m.c_nms3_per_rad3 - 0.07 / (pi * pi * pi)).abs() < 1e-9);
+        assert!((m.d_nms_per_rad - 0.45 / pi).abs() < 1e-7);
+        assert!((m.p0_gauge_pa - 294_199.5).abs() < 0.5);
+    }
+
+    #[test]
+    fn forward_model_matches_hand_computed_value() {
+        // A r^2 alpha + B r dp + C a'^3 + D a' with the config constants:
+        // -23204 * 0.025^2 * 0.2 + (-1.926e-3) * 0.025 * 1e5 + 0 + (-0.30) * 1.5
+        // = -2.9005 - 4.815 - 0.45 = -8.1655
+        let t = TORQUE_MODEL.torque_nm(0.2, 1.5, 100_000.0);
+        assert!((t - (-8.1655)).abs() < 1e-3, "{t}");
+    }
+
+    #[test]
+    fn inverse_round_trips_forward_model_inside_range() {
+        for &(a, v, dp) in &[
+            (0.0, 0.0, 0.0),
+            (0.3, -1.0, 150_000.0),
+            (-0.4, 2.0, -250_000.0),
+        ] {
+            let t = TORQUE_MODEL.torque_nm(a, v, dp);
+            let act = TORQUE_MODEL.activation(t, a, v);
+            assert!(!act.saturated);
+            assert!((act.dp_pa - dp).abs() < 1.0, "{} vs {}", act.dp_pa, dp);
+        }
+    }
+
+    #[test]
+    fn inverse_saturates_and_pressures_respect_limits() {
+        let act = TORQUE_MODEL.activation(1.0e6, 0.0, 0.0);
+        assert!(act.saturated);
+        assert_eq!(act.dp_pa.abs(), TORQUE_MODEL.dp_limit_pa());
+        let (p1, p2) = TORQUE_MODEL.pressures_gauge_pa(act.dp_pa);
+        assert!((0.0..=P_MUSCLE_MAX_GAUGE_PA).contains(&p1));
+        assert!((0.0..=P_MUSCLE_MAX_GAUGE_PA).contains(&p2));
+        let act = TORQUE_MODEL.activation(f32::NAN, 0.0, 0.0);
+        assert_eq!(
+            act,
+            Activation {
+                dp_pa: 0.0,
+                saturated: true
+            }
+        );
+    }
+
+    #[test]
+    fn symmetric_activation_is_p0_minus_plus_dp() {
+        let (p1, p2) = TORQUE_MODEL.pressures_gauge_pa(50_000.0);
+        assert_eq!(p1, TORQUE_MODEL.p0_gauge_pa - 50_000.0);
+        assert_eq!(p2, TORQUE_MODEL.p0_gauge_pa + 50_000.0);
+    }
+}
