@@ -126,15 +126,22 @@ impl ControllerConfig {
     /// J = 0.014 kg m^2, r = 25 mm, supply 600 kPa gauge, on/off valves C = 8e-9) with the
     /// cascade running at `tick_hz` (tuned at 1 kHz).
     ///
-    /// Tuning rationale (see the report in the commit history):
-    /// - Plant about p0 = 300 kPa: passive stiffness A r^2 = -14.5 N m/rad, damping
-    ///   D = -0.3 N m s/rad, both cancelled by the inverse model; what remains for the
-    ///   position loop is mostly the inertia J. PD placed for omega_n ~ 20 rad/s,
-    ///   zeta ~ 1: kp = J omega_n^2 ~ 5.6 N m/rad, kd = 2 zeta J omega_n ~ 0.56 N m s/rad.
-    ///   ki small, i_limit 1.5 N m: removes the force-law/linearisation mismatch.
-    /// - Torque loop: integral only (ki = 10 1/s, +-1.5 N m): slow trim of the model.
+    /// Tuning rationale:
+    /// - Plant about p0 = 300 kPa: passive stiffness A r^2 = -14.5 N m/rad and damping
+    ///   D = -0.3 N m s/rad are cancelled by the inverse model, so the position loop mostly
+    ///   sees the inertia J. Start point: PD for omega_n ~ 25 rad/s (kp = J omega_n^2,
+    ///   kd = 2 zeta J omega_n), then a grid search (kp 4..14, kd 0.3..0.9, ki 0..20,
+    ///   torque ki 0..60, pressure kp 1/30..1/15 kPa) in the closed-loop stand-in of
+    ///   `tests/closed_loop_smoke.rs`, also run with the 11x inertia of
+    ///   `reference-1dof-loaded.toml` to keep that stable.
+    ///   Result: kp = 11 N m/rad, kd = 0.8 N m s/rad, ki = 8 N m/(rad s), +-1.5 N m.
+    /// - Torque loop: integral only (ki = 30 1/s, +-1.5 N m): trims the force-law /
+    ///   linearisation mismatch; proportional torque feedback through the measured
+    ///   pressures gave no benefit with on/off valves.
     /// - Pressure loop: P with kp = 1/30 kPa (full valve opening at 30 kPa error; choked
-    ///   flow moves a muscle ~4 kPa per ms), deadband 3 kPa (< one minimum valve pulse).
+    ///   flow moves a muscle ~4 kPa per ms), deadband 3 kPa.
+    /// - On/off PWM ([`crate::valves::OnOffPwmConfig::REFERENCE`]): 10 ticks period, 2 ticks
+    ///   minimum on-time.
     pub fn reference(tick_hz: f32) -> Self {
         let ticks = |s: f32| -> u32 {
             // `as` saturates: NaN -> 0, huge -> u32::MAX; at least 1 tick.
@@ -152,15 +159,15 @@ impl ControllerConfig {
             force_law: FORCE_LAW,
             torque_model: TORQUE_MODEL,
             position: PidGains {
-                kp: 5.6,
+                kp: 11.0,
                 ki: 8.0,
-                kd: 0.5,
+                kd: 0.8,
                 i_limit: 1.5,
                 out_limit: 10.0,
             },
             torque: TorqueLoopGains {
                 kp: 0.0,
-                ki: 10.0,
+                ki: 30.0,
                 corr_limit_nm: 1.5,
                 p_set_max_gauge_pa: P_MUSCLE_MAX_GAUGE_PA,
             },

@@ -22,6 +22,7 @@ struct Plant {
     omega: f64,
     p1: f64, // absolute [Pa]
     p2: f64,
+    inertia_kgm2: f64,
 }
 
 const P_ATM: f64 = 101_325.0;
@@ -33,7 +34,8 @@ const K_END: f64 = 1.446;
 const GAMMA: f64 = 2.0e-4;
 const VOL: [f64; 4] = [79.0e-6, 48.0e-5, -18.0e-6, -11.0e-4];
 const R: f64 = 0.025;
-const J: f64 = 0.014;
+/// J_n of reference-1dof.toml; reference-1dof-loaded.toml has 11 x J_n.
+const J_NOMINAL: f64 = 0.014;
 const CHI0: f64 = 0.14;
 const C_VALVE: f64 = 8.0e-9;
 const B_CRIT: f64 = 0.433;
@@ -64,8 +66,9 @@ fn q(p_a: f64, p_b: f64) -> f64 {
 }
 
 impl Plant {
-    fn new() -> Self {
+    fn new(inertia_kgm2: f64) -> Self {
         Plant {
+            inertia_kgm2,
             beta: 0.0,
             omega: 0.0,
             p1: 550_000.0 + P_ATM,
@@ -111,7 +114,7 @@ impl Plant {
             let dp2 = dp(self.p2, u.u_in2, u.u_ex2, chi2, -dchi1);
             let torque = (f1 - f2) * R;
             self.beta += h * self.omega;
-            self.omega += h * torque / J;
+            self.omega += h * torque / self.inertia_kgm2;
             self.p1 += h * dp1;
             self.p2 += h * dp2;
         }
@@ -163,13 +166,14 @@ struct Run {
 /// Runs the loop for `seconds`; the set-point is 0 until `t_step`, then `target`.
 /// `inject(k, frame)` may corrupt the frame of tick k.
 fn simulate(
+    inertia_kgm2: f64,
     cfg: ControllerConfig,
     seconds: f64,
     t_step: f64,
     target: f32,
     mut inject: impl FnMut(usize, &mut SensorFrame),
 ) -> Run {
-    let mut plant = Plant::new();
+    let mut plant = Plant::new(inertia_kgm2);
     let mut tick = ControlTick::new(cfg);
     let mut valves = OnOffValves::new(
         FakePin,
@@ -224,14 +228,16 @@ fn settling_time(run: &Run, t_step: f64, target: f64, band: f64) -> Option<f64> 
 const T_STEP: f64 = 0.5;
 const TARGET: f64 = 0.2;
 /// Stated requirement of this smoke test: after the 0 -> 0.2 rad step the angle enters
-/// and stays within +-0.01 rad (5 % of the step) within 1.0 s, overshoot below 0.04 rad.
+/// and stays within +-0.01 rad (5 % of the step) within 0.3 s, overshoot below 0.02 rad
+/// (measured with the reference tuning: 0.16 s, 0.0025 rad).
 const BAND_RAD: f64 = 0.01;
-const SETTLE_MAX_S: f64 = 1.0;
-const OVERSHOOT_MAX_RAD: f64 = 0.04;
+const SETTLE_MAX_S: f64 = 0.3;
+const OVERSHOOT_MAX_RAD: f64 = 0.02;
 
 #[test]
 fn step_0_to_0p2_rad_settles_within_bound() {
     let run = simulate(
+        J_NOMINAL,
         ControllerConfig::reference(TICK_HZ),
         3.0,
         T_STEP,
@@ -318,7 +324,7 @@ fn nan_injection(safe: SafeState) {
     let k_nan = 1500; // 1.5 s: after the step has settled, in closed loop
     let mut cfg = ControllerConfig::reference(TICK_HZ);
     cfg.safe_state = safe;
-    let run = simulate(cfg, 1.7, T_STEP, TARGET as f32, |k, f| {
+    let run = simulate(J_NOMINAL, cfg, 1.7, T_STEP, TARGET as f32, |k, f| {
         if k == k_nan {
             f.p2_gauge_pa = Some(f32::NAN);
         }
@@ -369,4 +375,28 @@ fn nan_sensor_mid_run_gives_hold_state_in_same_tick_and_fault_code() {
 #[test]
 fn nan_sensor_mid_run_gives_vent_state_in_same_tick_and_fault_code() {
     nan_injection(SafeState::Vent);
+}
+
+/// Robustness: the same gains on the loaded joint (11 x J, reference-1dof-loaded.toml)
+/// must stay stable and settle, more slowly (measured: 1.3 s, overshoot 0.088 rad).
+#[test]
+fn loaded_joint_11x_inertia_step_is_stable_and_settles() {
+    let run = simulate(
+        11.0 * J_NOMINAL,
+        ControllerConfig::reference(TICK_HZ),
+        4.0,
+        T_STEP,
+        TARGET as f32,
+        |_, _| {},
+    );
+    assert!(run.out.iter().all(|o| o.fault.is_none()));
+    let ts = settling_time(&run, T_STEP, TARGET, BAND_RAD).expect("never settled");
+    let peak = run.beta.iter().cloned().fold(f64::MIN, f64::max);
+    println!(
+        "loaded joint (J = {:.3} kg m^2): settling (+-{BAND_RAD} rad) {ts:.3} s, overshoot {:.4} rad",
+        11.0 * J_NOMINAL,
+        peak - TARGET
+    );
+    assert!(ts <= 2.0, "settling {ts} s");
+    assert!(peak - TARGET <= 0.12);
 }
