@@ -9,6 +9,7 @@
 //! Modules:
 //! - [`force_law`]: the trig-free identified force law (seed 002, eq. 6).
 //! - [`torque_model`]: the simplified joint torque model and its inverse (seed 003, eq. 11).
+//! - [`fixed_point`]: fixed-point build of both models for FPU-less cores (Cortex-M0/M3).
 //! - [`constants`]: constants generated at build time from `config/*.toml`.
 #![no_std]
 #![deny(unsafe_code)]
@@ -17,6 +18,7 @@
 #[macro_use]
 mod fmt;
 
+pub mod fixed_point;
 pub mod force_law;
 pub mod geometry;
 pub mod torque_model;

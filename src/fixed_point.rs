@@ -1,0 +1,503 @@
+//! Fixed-point build of the force law (seed 002, eq. 6) and of the torque model (seed 003,
+//! eq. 11) for FPU-less cores (Cortex-M0/M0+/M3), on the [`fixed`] crate.
+//!
+//! Same API shape and the same flag semantics as the f32 versions in [`crate::force_law`]
+//! and [`crate::torque_model`]; no floating-point operation on the evaluation path (only the
+//! `*_from_f32` edge adapters and [`FixedForceLaw::from_params`] /
+//! [`FixedTorqueModel::from_params`] touch floats; the MCU uses the compile-time constants
+//! [`crate::constants::FIXED_FORCE_LAW`] and [`crate::constants::FIXED_TORQUE_MODEL`]).
+//!
+//! # Types at the interface
+//!
+//! | quantity                     | type            | resolution        | range             |
+//! |------------------------------|-----------------|-------------------|-------------------|
+//! | gauge pressure, dp [Pa]      | [`PressurePa`] = `I32F0`  | 1 Pa    | +-2.1e9 Pa        |
+//! | stretch L/L0                 | [`Stretch`] = `I16F16`    | 1.5e-5  | +-32768           |
+//! | force [N]                    | [`ForceN`] = `I16F16`     | 1.5e-5 N| 0 .. 32768 N      |
+//! | angle [rad], velocity [rad/s]| `I16F16`                  | 1.5e-5  | +-32768           |
+//! | torque [N m]                 | [`TorqueNm`] = `I16F16`   | 1.5e-5 N m | +-32768 N m    |
+//!
+//! # Scaling
+//!
+//! The identified constants are large (|c| up to ~5.7e4) and cancel to forces of 0..~1900 N,
+//! so every intermediate is `I32F32` (i64, 2^-32 resolution, range +-2.1e9): the terms of eq. 6
+//! (<= ~1e5) keep ~10 decimal digits after the cancellation. Specifically:
+//!
+//! - `P` [MPa] = `p_gauge_pa / 10^6` in `I32F32` (an exact integer division, error < 2^-32).
+//! - The two divisions of eq. 6 are merged into one:
+//!   `N/den + c5 P/(e den) = (N e + c5 P) / (e den)` with `N = c1 P^2 + c2 e^2 + c3 P + c4 e + c6`.
+//! - `c10 exp(e - 0.7)` is a table of `c10 exp(k_i - 0.7)` at 9 knots `k_i` spread over the
+//!   stretch domain (computed in f64 at build time), times a degree-4 Taylor polynomial in
+//!   `d = e - k_i` around the nearest knot (|d| <= 0.019 for the 0.75..1.05 domain, truncation
+//!   error < 3e-11 relative, i.e. < 2e-6 N).
+//! - Torque model: `A r^2`, `C`, `D` and `1/(B r)` in `I32F32`; `B r` (~5e-5 N m/Pa) in
+//!   `I16F48` so that it keeps ~10 significant digits; `B r dp` is formed in i128 and
+//!   narrowed to `I32F32`.
+//! - Every operation is checked (force law: an overflow is reported like a non-finite
+//!   intermediate of the f32 law, [`ForceFlags::SINGULAR`]) or saturating (torque model),
+//!   so nothing can panic or wrap.
+//!
+//! The pre-scaling (f64) lives in `src/fixed_point/prescale.rs`, shared by `build.rs` and
+//! `from_params`, and starts from the f32 constants, so the fixed model is the f32 model.
+//! Domain bounds are rounded inwards to the input resolution: a quantised input is flagged
+//! exactly when the f32 law flags the same value.
+//!
+//! # Accuracy (measured)
+//!
+//! `cargo test -p pam-firmware --lib fixed_point::tests::worst_case -- --nocapture` prints
+//! the worst cases over dense grids of quantised inputs (the f32 and f64 references are
+//! evaluated at exactly the same input values):
+//!
+//! - force, 301 x 301 grid, P 0..600 kPa, L/L0 0.75..1.05 (force range 0..~1900 N):
+//!   |fixed - f64| <= 2.5e-5 N, |fixed - f32| <= 0.026 N (the f32 law's own rounding:
+//!   |f32 - f64| <= 0.026 N). Asserted: |fixed - f64| < 1e-3 N, |fixed - f32| < 0.1 N.
+//! - torque, 101 x 101 x 101 grid, angle +-1.5 rad, velocity +-10 rad/s, dp +-dp_limit:
+//!   |fixed - f64| <= 1.6e-5 N m (asserted < 1e-4 N m); inverse |dp_fixed - dp_f32| <= 0.5 Pa
+//!   (asserted <= 1 Pa; dp is rounded to whole pascal).
+//!
+//! # Cost
+//!
+//! The force law is ~20 `I32F32` multiplications (64x64->128 bit) and one `I32F32`
+//! division; on a Cortex-M0 these are integer library calls (`__multi3`, `__divti3`), not
+//! soft-float.
+
+use fixed::types::{I16F16, I16F48, I32F0, I32F32};
+
+use crate::force_law::{ForceFlags, ForceLawParams};
+use crate::torque_model::TorqueModelParams;
+
+/// Pre-scaling of the constants into bit patterns (f64), shared with `build.rs`.
+pub mod prescale;
+
+use prescale::{ForceLawBits, TorqueModelBits, EXP_KNOTS};
+
+/// Gauge pressure or pressure difference [Pa], whole pascal.
+pub type PressurePa = I32F0;
+/// Deformation L/L0.
+pub type Stretch = I16F16;
+/// Muscle tension [N].
+pub type ForceN = I16F16;
+/// Joint angle [rad].
+pub type AngleRad = I16F16;
+/// Joint velocity [rad/s].
+pub type VelocityRadS = I16F16;
+/// Joint torque [N m].
+pub type TorqueNm = I16F16;
+
+/// Internal format of every intermediate.
+type Wide = I32F32;
+
+/// |denominator| below this (1e-6, as in the f32 law) is singular, in `I32F32` bits.
+const DEN_EPS_BITS: u64 = 4295;
+/// Half an LSB of `I16F16`, in `I32F32` bits: added before narrowing to round to nearest.
+const HALF_Q16_IN_Q32: i64 = 1 << 15;
+/// Upper limit for any muscle pressure set-point [Pa] (= [`crate::P_MUSCLE_MAX_GAUGE_PA`]).
+pub const P_MUSCLE_MAX_GAUGE_PA_FIXED: PressurePa = PressurePa::from_bits(600_000);
+
+/// Fixed-point force law (eq. 6); see the [module docs](self).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FixedForceLaw {
+    c: [Wide; 10],
+    p_gauge_max_pa: PressurePa,
+    stretch_min: Stretch,
+    stretch_max: Stretch,
+    knot: [Wide; EXP_KNOTS],
+    c10_exp: [Wide; EXP_KNOTS],
+    inv_knot_step: Wide,
+}
+
+/// A fixed-point force estimate with the flags that qualify it (as [`crate::force_law::ForceEstimate`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FixedForceEstimate {
+    /// Tension [N], >= 0.
+    pub force_n: ForceN,
+    /// How the estimate was obtained.
+    pub flags: ForceFlags,
+}
+
+impl FixedForceEstimate {
+    const fn invalid(flags: ForceFlags) -> Self {
+        FixedForceEstimate {
+            force_n: ForceN::ZERO,
+            flags,
+        }
+    }
+}
+
+/// f32 -> [`PressurePa`] at the edge (host / FPU side): `None` for NaN and infinities,
+/// otherwise rounded to the nearest pascal, saturating at the type's range.
+pub fn pressure_pa_from_f32(x: f32) -> Option<PressurePa> {
+    if x.is_finite() {
+        Some(PressurePa::saturating_from_num(x))
+    } else {
+        None
+    }
+}
+
+/// f32 -> `I16F16` ([`Stretch`], [`AngleRad`], [`VelocityRadS`], [`TorqueNm`]) at the edge:
+/// `None` for NaN and infinities, otherwise rounded to nearest, saturating.
+pub fn q16_from_f32(x: f32) -> Option<I16F16> {
+    if x.is_finite() {
+        Some(I16F16::saturating_from_num(x))
+    } else {
+        None
+    }
+}
+
+/// `I16F16` -> `I32F32`, exact.
+#[inline]
+const fn widen(x: I16F16) -> Wide {
+    Wide::from_bits((x.to_bits() as i64) << 16)
+}
+
+/// `I32F32` -> `I16F16`, rounded to nearest, saturating.
+#[inline]
+fn narrow_sat(x: Wide) -> I16F16 {
+    I16F16::saturating_from_num(x.saturating_add(Wide::from_bits(HALF_Q16_IN_Q32)))
+}
+
+impl FixedForceLaw {
+    /// Builds the law from pre-scaled bit patterns (what `build.rs` emits).
+    pub const fn from_bits(b: ForceLawBits) -> Self {
+        let mut c = [Wide::ZERO; 10];
+        let mut i = 0;
+        while i < 10 {
+            c[i] = Wide::from_bits(b.c_q32[i]);
+            i += 1;
+        }
+        let mut knot = [Wide::ZERO; EXP_KNOTS];
+        let mut c10_exp = [Wide::ZERO; EXP_KNOTS];
+        let mut k = 0;
+        while k < EXP_KNOTS {
+            knot[k] = Wide::from_bits(b.knot_q32[k]);
+            c10_exp[k] = Wide::from_bits(b.c10_exp_q32[k]);
+            k += 1;
+        }
+        FixedForceLaw {
+            c,
+            p_gauge_max_pa: PressurePa::from_bits(b.p_gauge_max_pa),
+            stretch_min: Stretch::from_bits(b.stretch_min_q16),
+            stretch_max: Stretch::from_bits(b.stretch_max_q16),
+            knot,
+            c10_exp,
+            inv_knot_step: Wide::from_bits(b.inv_knot_step_q32),
+        }
+    }
+
+    /// Pre-scales f32 parameters at run time (host, or once at start-up: uses f64 soft-float
+    /// on an FPU-less core). Gives the same constants as `build.rs` for the same parameters.
+    pub fn from_params(p: &ForceLawParams) -> Self {
+        Self::from_bits(prescale::force_law_bits(
+            p.c.map(|x| x as f64),
+            p.p_gauge_max_pa as f64,
+            p.stretch_min as f64,
+            p.stretch_max as f64,
+            libm::exp,
+        ))
+    }
+
+    /// Highest gauge pressure of the domain [Pa].
+    pub const fn p_gauge_max_pa(&self) -> PressurePa {
+        self.p_gauge_max_pa
+    }
+    /// Lowest stretch of the domain.
+    pub const fn stretch_min(&self) -> Stretch {
+        self.stretch_min
+    }
+    /// Highest stretch of the domain.
+    pub const fn stretch_max(&self) -> Stretch {
+        self.stretch_max
+    }
+
+    /// Tension [N] at gauge pressure `p_gauge_pa` and deformation `stretch` (L/L0), with the
+    /// domain checks of [`ForceLawParams::force`]: out-of-domain inputs are clamped and
+    /// flagged; a near-zero denominator or an overflowing intermediate gives 0 N with
+    /// [`ForceFlags::SINGULAR`]. Never panics; the force is always >= 0.
+    pub fn force(&self, p_gauge_pa: PressurePa, stretch: Stretch) -> FixedForceEstimate {
+        let mut flags = ForceFlags::NONE;
+        let mut p = p_gauge_pa;
+        if p < PressurePa::ZERO {
+            p = PressurePa::ZERO;
+            flags = flags.union(ForceFlags::PRESSURE_LOW);
+        } else if p > self.p_gauge_max_pa {
+            p = self.p_gauge_max_pa;
+            flags = flags.union(ForceFlags::PRESSURE_HIGH);
+        }
+        let mut e = stretch;
+        if e < self.stretch_min {
+            e = self.stretch_min;
+            flags = flags.union(ForceFlags::STRETCH_LOW);
+        } else if e > self.stretch_max {
+            e = self.stretch_max;
+            flags = flags.union(ForceFlags::STRETCH_HIGH);
+        }
+        match self.eval_clamped(p, e) {
+            Some(f) => FixedForceEstimate { force_n: f, flags },
+            None => FixedForceEstimate::invalid(flags.union(ForceFlags::SINGULAR)),
+        }
+    }
+
+    /// As [`FixedForceLaw::force`], for readings that may be missing or invalid: `None`
+    /// (e.g. a NaN that could not be converted) gives 0 N with [`ForceFlags::INVALID_INPUT`].
+    pub fn force_opt(
+        &self,
+        p_gauge_pa: Option<PressurePa>,
+        stretch: Option<Stretch>,
+    ) -> FixedForceEstimate {
+        match (p_gauge_pa, stretch) {
+            (Some(p), Some(e)) => self.force(p, e),
+            _ => FixedForceEstimate::invalid(ForceFlags::INVALID_INPUT),
+        }
+    }
+
+    /// Edge adapter for f32 inputs (host / FPU side; uses float compares and conversions):
+    /// non-finite inputs are [`ForceFlags::INVALID_INPUT`], finite ones are quantised with
+    /// [`pressure_pa_from_f32`] / [`q16_from_f32`] (saturating, so huge values are flagged
+    /// as out of domain).
+    pub fn force_from_f32(&self, p_gauge_pa: f32, stretch: f32) -> FixedForceEstimate {
+        self.force_opt(pressure_pa_from_f32(p_gauge_pa), q16_from_f32(stretch))
+    }
+
+    /// Eq. 6 on clamped inputs; `None` when singular or on overflow.
+    fn eval_clamped(&self, p_gauge_pa: PressurePa, stretch: Stretch) -> Option<ForceN> {
+        let c = &self.c;
+        let p = Wide::checked_from_num(p_gauge_pa)?.checked_div_int(1_000_000)?;
+        let e = widen(stretch);
+        let p2 = p.checked_mul(p)?;
+        let e2 = e.checked_mul(e)?;
+        // N = c1 P^2 + c2 e^2 + c3 P + c4 e + c6
+        let n = c[0]
+            .checked_mul(p2)?
+            .checked_add(c[1].checked_mul(e2)?)?
+            .checked_add(c[2].checked_mul(p)?)?
+            .checked_add(c[3].checked_mul(e)?)?
+            .checked_add(c[5])?;
+        let den = c[6].checked_mul(p)?.checked_add(c[7].checked_mul(e)?)?;
+        if den.to_bits().unsigned_abs() <= DEN_EPS_BITS || e.to_bits().unsigned_abs() <= DEN_EPS_BITS
+        {
+            return None;
+        }
+        // N/den + c5 P/(e den) = (N e + c5 P) / (e den): one division instead of two.
+        let num = n.checked_mul(e)?.checked_add(c[4].checked_mul(p)?)?;
+        let q = num.checked_div(e.checked_mul(den)?)?;
+        let f = q.checked_add(c[8])?.checked_add(self.c10_exp_term(e)?)?;
+        if f <= Wide::ZERO {
+            return Some(ForceN::ZERO);
+        }
+        ForceN::checked_from_num(f.checked_add(Wide::from_bits(HALF_Q16_IN_Q32))?)
+    }
+
+    /// c10 exp(e - 0.7) for `e` inside the domain: nearest table knot times a degree-4
+    /// Taylor polynomial of exp(d), d = e - knot.
+    fn c10_exp_term(&self, e: Wide) -> Option<Wide> {
+        let t = e
+            .checked_sub(self.knot[0])?
+            .checked_mul(self.inv_knot_step)?
+            .checked_add(Wide::from_bits(1 << 31))?;
+        let i = t.to_bits() >> 32;
+        let i = if i < 0 {
+            0
+        } else if i > (EXP_KNOTS - 1) as i64 {
+            EXP_KNOTS - 1
+        } else {
+            i as usize
+        };
+        let d = e.checked_sub(self.knot[i])?;
+        // 1 + d (1 + d/2 (1 + d/3 (1 + d/4)))
+        let mut h = Wide::ONE.checked_add(d.checked_div_int(4)?)?;
+        h = Wide::ONE.checked_add(d.checked_mul(h)?.checked_div_int(3)?)?;
+        h = Wide::ONE.checked_add(d.checked_mul(h)?.checked_div_int(2)?)?;
+        h = Wide::ONE.checked_add(d.checked_mul(h)?)?;
+        self.c10_exp[i].checked_mul(h)
+    }
+}
+
+/// Fixed-point torque model (eq. 11) and its inverse; see the [module docs](self).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FixedTorqueModel {
+    a_r2: Wide,
+    b_r: I16F48,
+    c: Wide,
+    d: Wide,
+    inv_b_r: Wide,
+    p0_gauge_pa: PressurePa,
+    dp_limit_pa: PressurePa,
+}
+
+/// Result of inverting the fixed-point torque model (as [`crate::torque_model::Activation`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FixedActivation {
+    /// Activation dp [Pa], within `+-dp_limit_pa`.
+    pub dp_pa: PressurePa,
+    /// True when the desired torque needed more than the valid range (dp was clamped), or
+    /// an input was missing (dp = 0).
+    pub saturated: bool,
+}
+
+impl FixedActivation {
+    const INVALID: FixedActivation = FixedActivation {
+        dp_pa: PressurePa::ZERO,
+        saturated: true,
+    };
+}
+
+impl FixedTorqueModel {
+    /// Builds the model from pre-scaled bit patterns (what `build.rs` emits).
+    pub const fn from_bits(b: TorqueModelBits) -> Self {
+        FixedTorqueModel {
+            a_r2: Wide::from_bits(b.a_r2_q32),
+            b_r: I16F48::from_bits(b.b_r_q48),
+            c: Wide::from_bits(b.c_q32),
+            d: Wide::from_bits(b.d_q32),
+            inv_b_r: Wide::from_bits(b.inv_b_r_q32),
+            p0_gauge_pa: PressurePa::from_bits(b.p0_gauge_pa),
+            dp_limit_pa: PressurePa::from_bits(b.dp_limit_pa),
+        }
+    }
+
+    /// Pre-scales f32 parameters at run time (host, or once at start-up).
+    pub fn from_params(p: &TorqueModelParams) -> Self {
+        Self::from_bits(prescale::torque_model_bits(
+            p.a_n_per_m_rad as f64,
+            p.b_m2 as f64,
+            p.c_nms3_per_rad3 as f64,
+            p.d_nms_per_rad as f64,
+            p.sprocket_radius_m as f64,
+            p.p0_gauge_pa as f64,
+            p.dp_max_pa as f64,
+        ))
+    }
+
+    /// Mid pressure p0 of the symmetric activation [Pa].
+    pub const fn p0_gauge_pa(&self) -> PressurePa {
+        self.p0_gauge_pa
+    }
+
+    /// The usable |dp| [Pa] (as [`TorqueModelParams::dp_limit_pa`], rounded down).
+    pub const fn dp_limit_pa(&self) -> PressurePa {
+        self.dp_limit_pa
+    }
+
+    /// Torque not depending on the activation, saturating.
+    #[inline]
+    fn passive(&self, angle: Wide, v: Wide) -> Wide {
+        let v3 = v.saturating_mul(v).saturating_mul(v);
+        self.a_r2
+            .saturating_mul(angle)
+            .saturating_add(self.c.saturating_mul(v3))
+            .saturating_add(self.d.saturating_mul(v))
+    }
+
+    /// Forward model: joint torque [N m] at the angle, velocity and activation. Saturates at
+    /// the range of [`TorqueNm`]; never panics.
+    pub fn torque_nm(
+        &self,
+        angle_rad: AngleRad,
+        velocity_rad_s: VelocityRadS,
+        dp_pa: PressurePa,
+    ) -> TorqueNm {
+        // B r dp: Q48 x Q0 in i128 (|.| < 2^94), shifted to Q32 and saturated.
+        let prod = (self.b_r.to_bits() as i128) * (dp_pa.to_bits() as i128);
+        let active = sat_i128_to_i64(prod >> 16);
+        let t = self
+            .passive(widen(angle_rad), widen(velocity_rad_s))
+            .saturating_add(Wide::from_bits(active));
+        narrow_sat(t)
+    }
+
+    /// Inverse model: the activation dp [Pa] that yields `torque_nm` at the angle and
+    /// velocity, rounded to whole pascal and clamped to `+-dp_limit_pa` (then `saturated`).
+    /// A model with `B r = 0` gives dp = 0, saturated. Never panics.
+    pub fn activation(
+        &self,
+        torque_nm: TorqueNm,
+        angle_rad: AngleRad,
+        velocity_rad_s: VelocityRadS,
+    ) -> FixedActivation {
+        if self.inv_b_r == Wide::ZERO {
+            return FixedActivation::INVALID;
+        }
+        let rest = widen(torque_nm)
+            .saturating_sub(self.passive(widen(angle_rad), widen(velocity_rad_s)));
+        let dp = rest.saturating_mul(self.inv_b_r).saturating_round();
+        let dp = prescale::sat_i32(dp.to_bits() >> 32);
+        let lim = self.dp_limit_pa.to_bits();
+        if dp > lim {
+            FixedActivation {
+                dp_pa: PressurePa::from_bits(lim),
+                saturated: true,
+            }
+        } else if dp < -lim {
+            FixedActivation {
+                dp_pa: PressurePa::from_bits(-lim),
+                saturated: true,
+            }
+        } else {
+            FixedActivation {
+                dp_pa: PressurePa::from_bits(dp),
+                saturated: false,
+            }
+        }
+    }
+
+    /// As [`FixedTorqueModel::activation`] for inputs that may be missing: any `None` gives
+    /// dp = 0, saturated (as a non-finite input of the f32 model).
+    pub fn activation_opt(
+        &self,
+        torque_nm: Option<TorqueNm>,
+        angle_rad: Option<AngleRad>,
+        velocity_rad_s: Option<VelocityRadS>,
+    ) -> FixedActivation {
+        match (torque_nm, angle_rad, velocity_rad_s) {
+            (Some(t), Some(a), Some(v)) => self.activation(t, a, v),
+            _ => FixedActivation::INVALID,
+        }
+    }
+
+    /// Edge adapter for f32 inputs (host / FPU side): non-finite inputs give dp = 0,
+    /// saturated; finite ones are quantised with [`q16_from_f32`].
+    pub fn activation_from_f32(
+        &self,
+        torque_nm: f32,
+        angle_rad: f32,
+        velocity_rad_s: f32,
+    ) -> FixedActivation {
+        self.activation_opt(
+            q16_from_f32(torque_nm),
+            q16_from_f32(angle_rad),
+            q16_from_f32(velocity_rad_s),
+        )
+    }
+
+    /// Pressure set-points (p1, p2) [Pa] of the symmetric activation `p1 = p0 - dp`,
+    /// `p2 = p0 + dp`, each clamped to `[0, 600 kPa]`.
+    pub fn pressures_gauge_pa(&self, dp_pa: PressurePa) -> (PressurePa, PressurePa) {
+        let clamp = |p: PressurePa| {
+            if p < PressurePa::ZERO {
+                PressurePa::ZERO
+            } else if p > P_MUSCLE_MAX_GAUGE_PA_FIXED {
+                P_MUSCLE_MAX_GAUGE_PA_FIXED
+            } else {
+                p
+            }
+        };
+        (
+            clamp(self.p0_gauge_pa.saturating_sub(dp_pa)),
+            clamp(self.p0_gauge_pa.saturating_add(dp_pa)),
+        )
+    }
+}
+
+/// Saturating i128 -> i64.
+#[inline]
+fn sat_i128_to_i64(x: i128) -> i64 {
+    if x > i64::MAX as i128 {
+        i64::MAX
+    } else if x < i64::MIN as i128 {
+        i64::MIN
+    } else {
+        x as i64
+    }
+}
