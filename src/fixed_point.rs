@@ -48,12 +48,18 @@
 //! the worst cases over dense grids of quantised inputs (the f32 and f64 references are
 //! evaluated at exactly the same input values):
 //!
-//! - force, 301 x 301 grid, P 0..600 kPa, L/L0 0.75..1.05 (force range 0..~1900 N):
-//!   |fixed - f64| <= 2.5e-5 N, |fixed - f32| <= 0.026 N (the f32 law's own rounding:
-//!   |f32 - f64| <= 0.026 N). Asserted: |fixed - f64| < 1e-3 N, |fixed - f32| < 0.1 N.
-//! - torque, 101 x 101 x 101 grid, angle +-1.5 rad, velocity +-10 rad/s, dp +-dp_limit:
-//!   |fixed - f64| <= 1.6e-5 N m (asserted < 1e-4 N m); inverse |dp_fixed - dp_f32| <= 0.5 Pa
-//!   (asserted <= 1 Pa; dp is rounded to whole pascal).
+//! - force, 301 x 301 grid, P 0..600 kPa, L/L0 0.75..1.05 (force 0..1839 N):
+//!   max |fixed - f64| = 4.1e-5 N, max |fixed - f32| = 1.7e-2 N, which is the f32 law's own
+//!   rounding (max |f32 - f64| = 1.7e-2 N): the fixed build is more accurate than the f32 one.
+//!   Asserted: |fixed - f64| < 1e-3 N, |fixed - f32| < 0.1 N (0.005 % of the range).
+//! - torque, 101^3 grid, angle +-1.5 rad, velocity +-10 rad/s, dp +-dp_limit (280 kPa):
+//!   forward max |fixed - f64| = 7.6e-6 N m (asserted < 1e-4 N m), |fixed - f32| = 1.1e-5 N m;
+//!   inverse at the same torque max |dp_fixed - dp_f32| = 0.5 Pa (dp is rounded to whole
+//!   pascal; asserted <= 1 Pa); fixed round trip dp -> T -> dp exact on the grid (asserted
+//!   <= 1 Pa, also by a property test).
+//!
+//! Clamping goes to the inward-rounded bounds, so an out-of-domain stretch is evaluated at
+//! most one input LSB (1.5e-5) inside the f32 law's bound.
 //!
 //! # Cost
 //!
@@ -499,5 +505,317 @@ fn sat_i128_to_i64(x: i128) -> i64 {
         i64::MIN
     } else {
         x as i64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::constants::{FIXED_FORCE_LAW, FIXED_TORQUE_MODEL, FORCE_LAW, TORQUE_MODEL};
+    use crate::P_MUSCLE_MAX_GAUGE_PA;
+    use proptest::prelude::*;
+    use std::println;
+
+    /// Eq. 6 in f64 with the f32 constants, on inputs inside the domain.
+    fn eq6_f64(p_pa: f64, e: f64) -> f64 {
+        let c = FORCE_LAW.c.map(|x| x as f64);
+        let p = p_pa * 1e-6;
+        let f = (c[0] * p * p + c[1] * e * e + c[2] * p + c[3] * e + c[4] * p / e + c[5])
+            / (c[6] * p + c[7] * e)
+            + c[8]
+            + c[9] * (e - 0.7).exp();
+        f.max(0.0)
+    }
+
+    /// Eq. 11 in f64 with the f32 constants.
+    fn eq11_f64(angle: f64, v: f64, dp: f64) -> f64 {
+        let m = &TORQUE_MODEL;
+        let r = m.sprocket_radius_m as f64;
+        m.a_n_per_m_rad as f64 * r * r * angle
+            + m.b_m2 as f64 * r * dp
+            + m.c_nms3_per_rad3 as f64 * v * v * v
+            + m.d_nms_per_rad as f64 * v
+    }
+
+    fn q16(x: f64) -> I16F16 {
+        I16F16::from_num(x)
+    }
+
+    #[test]
+    fn run_time_prescaling_gives_the_build_time_constants() {
+        assert_eq!(FixedForceLaw::from_params(&FORCE_LAW), FIXED_FORCE_LAW);
+        assert_eq!(FixedTorqueModel::from_params(&TORQUE_MODEL), FIXED_TORQUE_MODEL);
+    }
+
+    #[test]
+    fn domain_bounds_are_rounded_inwards() {
+        let l = &FIXED_FORCE_LAW;
+        assert!(l.stretch_min().to_num::<f32>() >= FORCE_LAW.stretch_min);
+        assert!(l.stretch_max().to_num::<f32>() <= FORCE_LAW.stretch_max);
+        // One LSB further out is outside the f32 domain.
+        let below = Stretch::from_bits(l.stretch_min().to_bits() - 1);
+        let above = Stretch::from_bits(l.stretch_max().to_bits() + 1);
+        assert!(below.to_num::<f32>() < FORCE_LAW.stretch_min);
+        assert!(above.to_num::<f32>() > FORCE_LAW.stretch_max);
+        assert_eq!(l.p_gauge_max_pa(), PressurePa::from_num(600_000));
+    }
+
+    /// Worst-case error of the fixed force law on a 301 x 301 grid over the whole domain,
+    /// against f64 and against the f32 law at the same (quantised) inputs.
+    #[test]
+    fn worst_case_force_error_on_301x301_grid() {
+        let l = &FIXED_FORCE_LAW;
+        let (mut fix_f64, mut fix_f32, mut f32_f64) = (0.0f64, 0.0f64, 0.0f64);
+        let (mut at_fix_f64, mut at_fix_f32) = ((0, 0.0), (0, 0.0));
+        let mut f_max = 0.0f64;
+        for i in 0..=300 {
+            let p = PressurePa::from_num(2000 * i);
+            for j in 0..=300 {
+                let e = q16(0.75 + 0.3 * j as f64 / 300.0).clamp(l.stretch_min(), l.stretch_max());
+                let (p32, e32) = (p.to_num::<f32>(), e.to_num::<f32>());
+                let fx = l.force(p, e);
+                let fl = FORCE_LAW.force(p32, e32);
+                assert!(fx.flags.is_clean(), "{p} {e} {:?}", fx.flags);
+                assert!(fl.flags.is_clean());
+                let fx = fx.force_n.to_num::<f64>();
+                let want = eq6_f64(p32 as f64, e32 as f64);
+                f_max = f_max.max(want);
+                let d64 = (fx - want).abs();
+                let d32 = (fx - fl.force_n as f64).abs();
+                if d64 > fix_f64 {
+                    fix_f64 = d64;
+                    at_fix_f64 = (p.to_num::<i32>(), e32);
+                }
+                if d32 > fix_f32 {
+                    fix_f32 = d32;
+                    at_fix_f32 = (p.to_num::<i32>(), e32);
+                }
+                f32_f64 = f32_f64.max((fl.force_n as f64 - want).abs());
+            }
+        }
+        println!(
+            "force law, 301x301 grid, P 0..600 kPa, L/L0 0.75..1.05, F 0..{f_max:.1} N:\n  \
+             max |fixed - f64| = {fix_f64:.3e} N at (P, e) = {at_fix_f64:?}\n  \
+             max |fixed - f32| = {fix_f32:.3e} N at (P, e) = {at_fix_f32:?}\n  \
+             max |f32 - f64|   = {f32_f64:.3e} N"
+        );
+        assert!(fix_f64 < 1e-3, "{fix_f64}");
+        assert!(fix_f32 < 0.1, "{fix_f32}");
+    }
+
+    /// Worst-case error of the fixed torque model (forward and inverse) on a 101^3 grid.
+    #[test]
+    fn worst_case_torque_error_on_101_cubed_grid() {
+        let m = &FIXED_TORQUE_MODEL;
+        let lim = m.dp_limit_pa().to_num::<i32>();
+        assert_eq!(lim as f32, TORQUE_MODEL.dp_limit_pa());
+        let (mut fwd_f64, mut fwd_f32, mut inv_f32, mut round_trip) = (0.0f64, 0.0f64, 0.0f32, 0i32);
+        for i in 0..=100 {
+            let a = q16(-1.5 + 3.0 * i as f64 / 100.0);
+            for j in 0..=100 {
+                let v = q16(-10.0 + 20.0 * j as f64 / 100.0);
+                for k in 0..=100 {
+                    let dp = PressurePa::from_num(-lim + (2 * lim / 100) * k);
+                    let (a32, v32, dp32) = (a.to_num::<f32>(), v.to_num::<f32>(), dp.to_num::<f32>());
+                    let t = m.torque_nm(a, v, dp);
+                    let want = eq11_f64(a32 as f64, v32 as f64, dp32 as f64);
+                    fwd_f64 = fwd_f64.max((t.to_num::<f64>() - want).abs());
+                    let t32 = TORQUE_MODEL.torque_nm(a32, v32, dp32);
+                    fwd_f32 = fwd_f32.max((t.to_num::<f64>() - t32 as f64).abs());
+                    // Inverse at the same (quantised) torque: fixed vs f32.
+                    let act = m.activation(t, a, v);
+                    let act32 = TORQUE_MODEL.activation(t.to_num::<f32>(), a32, v32);
+                    inv_f32 = inv_f32.max((act.dp_pa.to_num::<f32>() - act32.dp_pa).abs());
+                    round_trip = round_trip.max((act.dp_pa - dp).abs().to_num::<i32>());
+                }
+            }
+        }
+        println!(
+            "torque model, 101^3 grid, angle +-1.5 rad, velocity +-10 rad/s, dp +-{lim} Pa:\n  \
+             forward max |fixed - f64| = {fwd_f64:.3e} N m, max |fixed - f32| = {fwd_f32:.3e} N m\n  \
+             inverse max |dp_fixed - dp_f32| = {inv_f32:.3} Pa, \
+             round trip max |dp' - dp| = {round_trip} Pa"
+        );
+        assert!(fwd_f64 < 1e-4, "{fwd_f64}");
+        assert!(inv_f32 <= 1.0, "{inv_f32}");
+        assert!(round_trip <= 1, "{round_trip}");
+    }
+
+    #[test]
+    fn missing_inputs_give_zero_and_invalid_flag() {
+        let l = &FIXED_FORCE_LAW;
+        for r in [
+            l.force_opt(None, Some(q16(0.9))),
+            l.force_opt(Some(PressurePa::from_num(300_000)), None),
+            l.force_from_f32(f32::NAN, 0.9),
+            l.force_from_f32(3e5, f32::INFINITY),
+        ] {
+            assert_eq!(r, FixedForceEstimate::invalid(ForceFlags::INVALID_INPUT));
+        }
+    }
+
+    #[test]
+    fn out_of_domain_inputs_are_clamped_and_flagged_like_f32() {
+        let l = &FIXED_FORCE_LAW;
+        let r = l.force_from_f32(-10_000.0, 0.9);
+        assert!(r.flags.contains_any(ForceFlags::PRESSURE_LOW));
+        assert_eq!(r.force_n, l.force_from_f32(0.0, 0.9).force_n);
+        let r = l.force_from_f32(9e30, 1.2);
+        assert_eq!(r.flags, ForceFlags::PRESSURE_HIGH.union(ForceFlags::STRETCH_HIGH));
+        assert_eq!(r.force_n, l.force(l.p_gauge_max_pa(), l.stretch_max()).force_n);
+        let r = l.force_from_f32(300_000.0, -1e30);
+        assert_eq!(r.flags, ForceFlags::STRETCH_LOW);
+        // Same flags as the f32 law on the four edges of the domain.
+        for (p, e) in [(-1.0f32, 0.9f32), (600_001.0, 0.9), (3e5, 0.7499), (3e5, 1.0501)] {
+            assert_eq!(l.force_from_f32(p, e).flags, FORCE_LAW.force(p, e).flags, "{p} {e}");
+        }
+    }
+
+    #[test]
+    fn singular_denominator_is_flagged_not_divided() {
+        let mut p = FORCE_LAW;
+        p.c[6] = 0.0;
+        p.c[7] = 0.0;
+        let l = FixedForceLaw::from_params(&p);
+        let r = l.force_from_f32(300_000.0, 0.9);
+        assert_eq!(r, FixedForceEstimate::invalid(ForceFlags::SINGULAR));
+    }
+
+    #[test]
+    fn overflowing_intermediate_is_flagged_singular() {
+        let mut p = FORCE_LAW;
+        p.c[1] = 3.0e9; // c2 e^2 no longer fits I32F32
+        let r = FixedForceLaw::from_params(&p).force_from_f32(300_000.0, 1.0);
+        assert_eq!(r, FixedForceEstimate::invalid(ForceFlags::SINGULAR));
+    }
+
+    #[test]
+    fn force_grows_with_pressure_and_stretch() {
+        let l = &FIXED_FORCE_LAW;
+        let f = |p: f32, e: f32| l.force_from_f32(p, e).force_n;
+        assert!(f(500_000.0, 0.9) > f(200_000.0, 0.9));
+        assert!(f(400_000.0, 1.0) > f(400_000.0, 0.8));
+    }
+
+    #[test]
+    fn uninvertible_model_gives_zero_saturated() {
+        let mut p = TORQUE_MODEL;
+        p.b_m2 = 0.0;
+        let m = FixedTorqueModel::from_params(&p);
+        assert_eq!(m.activation(q16(1.0), q16(0.1), q16(0.0)), FixedActivation::INVALID);
+    }
+
+    #[test]
+    fn inverse_saturates_at_the_limit_and_pressures_stay_in_range() {
+        let m = &FIXED_TORQUE_MODEL;
+        let act = m.activation(TorqueNm::MAX, q16(0.0), q16(0.0));
+        assert!(act.saturated);
+        assert_eq!(act.dp_pa.abs(), m.dp_limit_pa());
+        let act = m.activation(TorqueNm::MIN, q16(0.0), q16(0.0));
+        assert!(act.saturated);
+        assert_eq!(act.dp_pa.abs(), m.dp_limit_pa());
+        let (p1, p2) = m.pressures_gauge_pa(PressurePa::from_num(50_000));
+        assert_eq!((p1.to_num::<i32>(), p2.to_num::<i32>()), (250_000, 350_000));
+        assert_eq!(m.activation_from_f32(f32::NAN, 0.0, 0.0), FixedActivation::INVALID);
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(4096))]
+
+        /// Any f32 bit pattern: never panics, force >= 0, flags as the f32 law would set them
+        /// for the quantised inputs, INVALID_INPUT exactly for non-finite inputs.
+        #[test]
+        fn fixed_force_from_any_f32_is_safe_and_flagged(p in proptest::num::f32::ANY, e in proptest::num::f32::ANY) {
+            let l = &FIXED_FORCE_LAW;
+            let r = l.force_from_f32(p, e);
+            prop_assert!(r.force_n >= ForceN::ZERO);
+            if !p.is_finite() || !e.is_finite() {
+                prop_assert_eq!(r, FixedForceEstimate::invalid(ForceFlags::INVALID_INPUT));
+            } else {
+                let (pq, eq) = (pressure_pa_from_f32(p).unwrap(), q16_from_f32(e).unwrap());
+                prop_assert_eq!(r, l.force(pq, eq));
+                prop_assert!(!r.flags.contains_any(ForceFlags::FATAL));
+                prop_assert_eq!(r.flags.contains_any(ForceFlags::PRESSURE_LOW), pq < 0);
+                prop_assert_eq!(r.flags.contains_any(ForceFlags::PRESSURE_HIGH), pq > l.p_gauge_max_pa());
+                prop_assert_eq!(r.flags.contains_any(ForceFlags::STRETCH_LOW), eq < l.stretch_min());
+                prop_assert_eq!(r.flags.contains_any(ForceFlags::STRETCH_HIGH), eq > l.stretch_max());
+                // Flags agree with the f32 law at the quantised value.
+                prop_assert_eq!(r.flags, FORCE_LAW.force(pq.to_num::<f32>(), eq.to_num::<f32>()).flags);
+            }
+        }
+
+        /// Any fixed bit pattern: never panics, force >= 0 and equal to the force at the
+        /// clamped inputs.
+        #[test]
+        fn fixed_force_from_any_bits_is_safe(pb in any::<i32>(), eb in any::<i32>()) {
+            let l = &FIXED_FORCE_LAW;
+            let r = l.force(PressurePa::from_bits(pb), Stretch::from_bits(eb));
+            prop_assert!(r.force_n >= ForceN::ZERO);
+            prop_assert!(!r.flags.contains_any(ForceFlags::FATAL));
+            let pc = PressurePa::from_bits(pb).clamp(PressurePa::ZERO, l.p_gauge_max_pa());
+            let ec = Stretch::from_bits(eb).clamp(l.stretch_min(), l.stretch_max());
+            prop_assert_eq!(r.force_n, l.force(pc, ec).force_n);
+        }
+
+        /// Inside the domain, random points: fixed within 0.1 N of the f32 law.
+        #[test]
+        fn fixed_force_tracks_f32_inside_domain(p in 0i32..=600_000, e in 49152i32..=68812) {
+            let (p, e) = (PressurePa::from_bits(p), Stretch::from_bits(e));
+            let fx = FIXED_FORCE_LAW.force(p, e);
+            let fl = FORCE_LAW.force(p.to_num::<f32>(), e.to_num::<f32>());
+            prop_assert!(fx.flags.is_clean());
+            prop_assert!((fx.force_n.to_num::<f32>() - fl.force_n).abs() < 0.1);
+        }
+
+        /// Forward model: any bit patterns, never panics (saturates).
+        #[test]
+        fn fixed_torque_forward_never_panics(a in any::<i32>(), v in any::<i32>(), dp in any::<i32>()) {
+            let _ = FIXED_TORQUE_MODEL.torque_nm(
+                AngleRad::from_bits(a), VelocityRadS::from_bits(v), PressurePa::from_bits(dp));
+        }
+
+        /// Inverse from any f32 bit patterns: |dp| within the limit, pressures in [0, 600 kPa].
+        #[test]
+        fn fixed_activation_is_bounded_for_any_f32(
+            t in proptest::num::f32::ANY, a in proptest::num::f32::ANY, v in proptest::num::f32::ANY,
+        ) {
+            let m = &FIXED_TORQUE_MODEL;
+            let act = m.activation_from_f32(t, a, v);
+            prop_assert!(act.dp_pa.abs() <= m.dp_limit_pa());
+            if !t.is_finite() || !a.is_finite() || !v.is_finite() {
+                prop_assert_eq!(act, FixedActivation::INVALID);
+            }
+            let (p1, p2) = m.pressures_gauge_pa(act.dp_pa);
+            for p in [p1, p2] {
+                prop_assert!(p >= 0 && p <= P_MUSCLE_MAX_GAUGE_PA_FIXED);
+            }
+        }
+
+        /// Inverse from any fixed bit patterns: bounded, pressures in range for any dp.
+        #[test]
+        fn fixed_activation_and_pressures_bounded_for_any_bits(
+            t in any::<i32>(), a in any::<i32>(), v in any::<i32>(), dp in any::<i32>(),
+        ) {
+            let m = &FIXED_TORQUE_MODEL;
+            let act = m.activation(TorqueNm::from_bits(t), AngleRad::from_bits(a), VelocityRadS::from_bits(v));
+            prop_assert!(act.dp_pa.abs() <= m.dp_limit_pa());
+            let (p1, p2) = m.pressures_gauge_pa(PressurePa::from_bits(dp));
+            for p in [p1, p2] {
+                prop_assert!(p >= 0 && p.to_num::<f32>() <= P_MUSCLE_MAX_GAUGE_PA);
+            }
+        }
+
+        /// Inside the range the inverse undoes the forward model to within 1 Pa.
+        #[test]
+        fn fixed_inverse_round_trips_forward_inside_range(
+            a in -1.5f64..1.5, v in -10.0f64..10.0, frac in -1.0f64..1.0,
+        ) {
+            let m = &FIXED_TORQUE_MODEL;
+            let dp = PressurePa::from_num((frac * m.dp_limit_pa().to_num::<f64>()).round() as i32);
+            let (a, v) = (q16(a), q16(v));
+            let act = m.activation(m.torque_nm(a, v, dp), a, v);
+            prop_assert!((act.dp_pa - dp).abs() <= 1, "{} vs {}", act.dp_pa, dp);
+            prop_assert!(!act.saturated || (dp.abs() >= m.dp_limit_pa() - PressurePa::ONE));
+        }
     }
 }

@@ -15,6 +15,10 @@
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
+// Unit tests (proptest, printing worst cases) run on the host with std.
+#[cfg(test)]
+extern crate std;
+
 #[macro_use]
 mod fmt;
 
