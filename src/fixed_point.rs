@@ -54,7 +54,7 @@
 //!   Asserted: |fixed - f64| < 1e-3 N, |fixed - f32| < 0.1 N (0.005 % of the range).
 //! - torque, 101^3 grid, angle +-1.5 rad, velocity +-10 rad/s, dp +-dp_limit (280 kPa):
 //!   forward max |fixed - f64| = 7.6e-6 N m (asserted < 1e-4 N m), |fixed - f32| = 1.1e-5 N m;
-//!   inverse at the same torque max |dp_fixed - dp_f32| = 0.5 Pa (dp is rounded to whole
+//!   inverse at the same torque max |dp_fixed - dp_f32| = 0.23 Pa (dp is rounded to whole
 //!   pascal; asserted <= 1 Pa); fixed round trip dp -> T -> dp exact on the grid (asserted
 //!   <= 1 Pa, also by a property test).
 //!
