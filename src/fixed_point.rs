@@ -286,7 +286,7 @@ impl FixedForceLaw {
         }
         // N/den + c5 P/(e den) = (N e + c5 P) / (e den): one division instead of two.
         let num = n.checked_mul(e)?.checked_add(c[4].checked_mul(p)?)?;
-        let q = num.checked_div(e.checked_mul(den)?)?;
+        let q = checked_div_wide(num, e.checked_mul(den)?)?;
         let f = q.checked_add(c[8])?.checked_add(self.c10_exp_term(e)?)?;
         if f <= Wide::ZERO {
             return Some(ForceN::ZERO);
@@ -494,6 +494,15 @@ impl FixedTorqueModel {
             clamp(self.p0_gauge_pa.saturating_add(dp_pa)),
         )
     }
+}
+
+/// `I32F32` division (truncating, like `fixed`'s), `None` for a zero divisor or overflow.
+/// Spelled out with `i128::checked_div` because `I32F32::checked_div` leaves an (unreachable)
+/// divide-by-zero panic branch in the thumbv6m code; this way the force law has no panic path.
+#[inline]
+fn checked_div_wide(n: Wide, d: Wide) -> Option<Wide> {
+    let q = ((n.to_bits() as i128) << 32).checked_div(d.to_bits() as i128)?;
+    i64::try_from(q).ok().map(Wide::from_bits)
 }
 
 /// Saturating i128 -> i64.
