@@ -9,13 +9,16 @@
 //!
 //! # Types at the interface
 //!
-//! | quantity                     | type            | resolution        | range             |
-//! |------------------------------|-----------------|-------------------|-------------------|
-//! | gauge pressure, dp [Pa]      | [`PressurePa`] = `I32F0`  | 1 Pa    | +-2.1e9 Pa        |
-//! | stretch L/L0                 | [`Stretch`] = `I16F16`    | 1.5e-5  | +-32768           |
-//! | force [N]                    | [`ForceN`] = `I16F16`     | 1.5e-5 N| 0 .. 32768 N      |
-//! | angle [rad], velocity [rad/s]| `I16F16`                  | 1.5e-5  | +-32768           |
-//! | torque [N m]                 | [`TorqueNm`] = `I16F16`   | 1.5e-5 N m | +-32768 N m    |
+//! | quantity                          | type                     | resolution | range       |
+//! |-----------------------------------|--------------------------|------------|-------------|
+//! | gauge pressure, dp \[Pa\]           | [`PressurePa`] = `I32F0` | 1 Pa       | +-2.1e9 Pa  |
+//! | stretch L/L0                      | [`Stretch`] = `I16F16`   | 1.5e-5     | +-32768     |
+//! | force \[N\]                         | [`ForceN`] = `I16F16`    | 1.5e-5 N   | 0..32768 N  |
+//! | angle \[rad\], velocity \[rad/s\]     | `I16F16`                 | 1.5e-5     | +-32768     |
+//! | torque \[N m\]                      | [`TorqueNm`] = `I16F16`  | 1.5e-5 N m | +-32768 N m |
+//!
+//! Readings that may be missing go through the `*_opt` functions (`None` plays the part of
+//! the f32 law's NaN); the `*_from_f32` adapters quantise f32 values (host / FPU side).
 //!
 //! # Scaling
 //!
@@ -23,13 +26,13 @@
 //! so every intermediate is `I32F32` (i64, 2^-32 resolution, range +-2.1e9): the terms of eq. 6
 //! (<= ~1e5) keep ~10 decimal digits after the cancellation. Specifically:
 //!
-//! - `P` [MPa] = `p_gauge_pa / 10^6` in `I32F32` (an exact integer division, error < 2^-32).
+//! - `P` \[MPa\] = `p_gauge_pa / 10^6` in `I32F32` (an exact integer division, error < 2^-32).
 //! - The two divisions of eq. 6 are merged into one:
 //!   `N/den + c5 P/(e den) = (N e + c5 P) / (e den)` with `N = c1 P^2 + c2 e^2 + c3 P + c4 e + c6`.
 //! - `c10 exp(e - 0.7)` is a table of `c10 exp(k_i - 0.7)` at 9 knots `k_i` spread over the
 //!   stretch domain (computed in f64 at build time), times a degree-4 Taylor polynomial in
 //!   `d = e - k_i` around the nearest knot (|d| <= 0.019 for the 0.75..1.05 domain, truncation
-//!   error < 3e-11 relative, i.e. < 2e-6 N).
+//!   error < 2e-11 relative, i.e. < 1e-6 N).
 //! - Torque model: `A r^2`, `C`, `D` and `1/(B r)` in `I32F32`; `B r` (~5e-5 N m/Pa) in
 //!   `I16F48` so that it keeps ~10 significant digits; `B r dp` is formed in i128 and
 //!   narrowed to `I32F32`.
@@ -61,11 +64,13 @@
 //! Clamping goes to the inward-rounded bounds, so an out-of-domain stretch is evaluated at
 //! most one input LSB (1.5e-5) inside the f32 law's bound.
 //!
-//! # Cost
+//! # Cost and float-freedom
 //!
-//! The force law is ~20 `I32F32` multiplications (64x64->128 bit) and one `I32F32`
-//! division; on a Cortex-M0 these are integer library calls (`__multi3`, `__divti3`), not
-//! soft-float.
+//! The force law is ~20 `I32F32` multiplications (64 x 64 -> 128 bit) and one 128 / 64 bit
+//! division. On thumbv6m (Cortex-M0) the evaluation functions call only `__aeabi_lmul`,
+//! `__aeabi_ldivmod` and `__clzsi2` (LLVM expands the 128-bit division inline): no soft-float
+//! and no panic path. `bash scripts/check-fixed-no-float.sh` checks this on the release
+//! assembly. Not yet benchmarked on hardware.
 
 use fixed::types::{I16F16, I16F48, I32F0, I32F32};
 
@@ -77,17 +82,17 @@ pub mod prescale;
 
 use prescale::{ForceLawBits, TorqueModelBits, EXP_KNOTS};
 
-/// Gauge pressure or pressure difference [Pa], whole pascal.
+/// Gauge pressure or pressure difference \[Pa\], whole pascal.
 pub type PressurePa = I32F0;
 /// Deformation L/L0.
 pub type Stretch = I16F16;
-/// Muscle tension [N].
+/// Muscle tension \[N\].
 pub type ForceN = I16F16;
-/// Joint angle [rad].
+/// Joint angle \[rad\].
 pub type AngleRad = I16F16;
-/// Joint velocity [rad/s].
+/// Joint velocity \[rad/s\].
 pub type VelocityRadS = I16F16;
-/// Joint torque [N m].
+/// Joint torque \[N m\].
 pub type TorqueNm = I16F16;
 
 /// Internal format of every intermediate.
@@ -97,7 +102,7 @@ type Wide = I32F32;
 const DEN_EPS_BITS: u64 = 4295;
 /// Half an LSB of `I16F16`, in `I32F32` bits: added before narrowing to round to nearest.
 const HALF_Q16_IN_Q32: i64 = 1 << 15;
-/// Upper limit for any muscle pressure set-point [Pa] (= [`crate::P_MUSCLE_MAX_GAUGE_PA`]).
+/// Upper limit for any muscle pressure set-point \[Pa\] (= [`crate::P_MUSCLE_MAX_GAUGE_PA`]).
 pub const P_MUSCLE_MAX_GAUGE_PA_FIXED: PressurePa = PressurePa::from_bits(600_000);
 
 /// Fixed-point force law (eq. 6); see the [module docs](self).
@@ -116,7 +121,7 @@ pub struct FixedForceLaw {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct FixedForceEstimate {
-    /// Tension [N], >= 0.
+    /// Tension \[N\], >= 0.
     pub force_n: ForceN,
     /// How the estimate was obtained.
     pub flags: ForceFlags,
@@ -203,7 +208,7 @@ impl FixedForceLaw {
         ))
     }
 
-    /// Highest gauge pressure of the domain [Pa].
+    /// Highest gauge pressure of the domain \[Pa\].
     pub const fn p_gauge_max_pa(&self) -> PressurePa {
         self.p_gauge_max_pa
     }
@@ -216,7 +221,7 @@ impl FixedForceLaw {
         self.stretch_max
     }
 
-    /// Tension [N] at gauge pressure `p_gauge_pa` and deformation `stretch` (L/L0), with the
+    /// Tension \[N\] at gauge pressure `p_gauge_pa` and deformation `stretch` (L/L0), with the
     /// domain checks of [`ForceLawParams::force`]: out-of-domain inputs are clamped and
     /// flagged; a near-zero denominator or an overflowing intermediate gives 0 N with
     /// [`ForceFlags::SINGULAR`]. Never panics; the force is always >= 0.
@@ -280,7 +285,8 @@ impl FixedForceLaw {
             .checked_add(c[3].checked_mul(e)?)?
             .checked_add(c[5])?;
         let den = c[6].checked_mul(p)?.checked_add(c[7].checked_mul(e)?)?;
-        if den.to_bits().unsigned_abs() <= DEN_EPS_BITS || e.to_bits().unsigned_abs() <= DEN_EPS_BITS
+        if den.to_bits().unsigned_abs() <= DEN_EPS_BITS
+            || e.to_bits().unsigned_abs() <= DEN_EPS_BITS
         {
             return None;
         }
@@ -335,7 +341,7 @@ pub struct FixedTorqueModel {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct FixedActivation {
-    /// Activation dp [Pa], within `+-dp_limit_pa`.
+    /// Activation dp \[Pa\], within `+-dp_limit_pa`.
     pub dp_pa: PressurePa,
     /// True when the desired torque needed more than the valid range (dp was clamped), or
     /// an input was missing (dp = 0).
@@ -376,12 +382,12 @@ impl FixedTorqueModel {
         ))
     }
 
-    /// Mid pressure p0 of the symmetric activation [Pa].
+    /// Mid pressure p0 of the symmetric activation \[Pa\].
     pub const fn p0_gauge_pa(&self) -> PressurePa {
         self.p0_gauge_pa
     }
 
-    /// The usable |dp| [Pa] (as [`TorqueModelParams::dp_limit_pa`], rounded down).
+    /// The usable |dp| \[Pa\] (as [`TorqueModelParams::dp_limit_pa`], rounded down).
     pub const fn dp_limit_pa(&self) -> PressurePa {
         self.dp_limit_pa
     }
@@ -396,7 +402,7 @@ impl FixedTorqueModel {
             .saturating_add(self.d.saturating_mul(v))
     }
 
-    /// Forward model: joint torque [N m] at the angle, velocity and activation. Saturates at
+    /// Forward model: joint torque \[N m\] at the angle, velocity and activation. Saturates at
     /// the range of [`TorqueNm`]; never panics.
     pub fn torque_nm(
         &self,
@@ -413,7 +419,7 @@ impl FixedTorqueModel {
         narrow_sat(t)
     }
 
-    /// Inverse model: the activation dp [Pa] that yields `torque_nm` at the angle and
+    /// Inverse model: the activation dp \[Pa\] that yields `torque_nm` at the angle and
     /// velocity, rounded to whole pascal and clamped to `+-dp_limit_pa` (then `saturated`).
     /// A model with `B r = 0` gives dp = 0, saturated. Never panics.
     pub fn activation(
@@ -425,8 +431,8 @@ impl FixedTorqueModel {
         if self.inv_b_r == Wide::ZERO {
             return FixedActivation::INVALID;
         }
-        let rest = widen(torque_nm)
-            .saturating_sub(self.passive(widen(angle_rad), widen(velocity_rad_s)));
+        let rest =
+            widen(torque_nm).saturating_sub(self.passive(widen(angle_rad), widen(velocity_rad_s)));
         let dp = rest.saturating_mul(self.inv_b_r).saturating_round();
         let dp = prescale::sat_i32(dp.to_bits() >> 32);
         let lim = self.dp_limit_pa.to_bits();
@@ -477,8 +483,8 @@ impl FixedTorqueModel {
         )
     }
 
-    /// Pressure set-points (p1, p2) [Pa] of the symmetric activation `p1 = p0 - dp`,
-    /// `p2 = p0 + dp`, each clamped to `[0, 600 kPa]`.
+    /// Pressure set-points (p1, p2) \[Pa\] of the symmetric activation `p1 = p0 - dp`,
+    /// `p2 = p0 + dp`, each clamped to `\[0, 600 kPa\]`.
     pub fn pressures_gauge_pa(&self, dp_pa: PressurePa) -> (PressurePa, PressurePa) {
         let clamp = |p: PressurePa| {
             if p < PressurePa::ZERO {
@@ -553,7 +559,10 @@ mod tests {
     #[test]
     fn run_time_prescaling_gives_the_build_time_constants() {
         assert_eq!(FixedForceLaw::from_params(&FORCE_LAW), FIXED_FORCE_LAW);
-        assert_eq!(FixedTorqueModel::from_params(&TORQUE_MODEL), FIXED_TORQUE_MODEL);
+        assert_eq!(
+            FixedTorqueModel::from_params(&TORQUE_MODEL),
+            FIXED_TORQUE_MODEL
+        );
     }
 
     #[test]
@@ -618,14 +627,16 @@ mod tests {
         let m = &FIXED_TORQUE_MODEL;
         let lim = m.dp_limit_pa().to_num::<i32>();
         assert_eq!(lim as f32, TORQUE_MODEL.dp_limit_pa());
-        let (mut fwd_f64, mut fwd_f32, mut inv_f32, mut round_trip) = (0.0f64, 0.0f64, 0.0f32, 0i32);
+        let (mut fwd_f64, mut fwd_f32, mut inv_f32, mut round_trip) =
+            (0.0f64, 0.0f64, 0.0f32, 0i32);
         for i in 0..=100 {
             let a = q16(-1.5 + 3.0 * i as f64 / 100.0);
             for j in 0..=100 {
                 let v = q16(-10.0 + 20.0 * j as f64 / 100.0);
                 for k in 0..=100 {
                     let dp = PressurePa::from_num(-lim + (2 * lim / 100) * k);
-                    let (a32, v32, dp32) = (a.to_num::<f32>(), v.to_num::<f32>(), dp.to_num::<f32>());
+                    let (a32, v32, dp32) =
+                        (a.to_num::<f32>(), v.to_num::<f32>(), dp.to_num::<f32>());
                     let t = m.torque_nm(a, v, dp);
                     let want = eq11_f64(a32 as f64, v32 as f64, dp32 as f64);
                     fwd_f64 = fwd_f64.max((t.to_num::<f64>() - want).abs());
@@ -670,13 +681,28 @@ mod tests {
         assert!(r.flags.contains_any(ForceFlags::PRESSURE_LOW));
         assert_eq!(r.force_n, l.force_from_f32(0.0, 0.9).force_n);
         let r = l.force_from_f32(9e30, 1.2);
-        assert_eq!(r.flags, ForceFlags::PRESSURE_HIGH.union(ForceFlags::STRETCH_HIGH));
-        assert_eq!(r.force_n, l.force(l.p_gauge_max_pa(), l.stretch_max()).force_n);
+        assert_eq!(
+            r.flags,
+            ForceFlags::PRESSURE_HIGH.union(ForceFlags::STRETCH_HIGH)
+        );
+        assert_eq!(
+            r.force_n,
+            l.force(l.p_gauge_max_pa(), l.stretch_max()).force_n
+        );
         let r = l.force_from_f32(300_000.0, -1e30);
         assert_eq!(r.flags, ForceFlags::STRETCH_LOW);
         // Same flags as the f32 law on the four edges of the domain.
-        for (p, e) in [(-1.0f32, 0.9f32), (600_001.0, 0.9), (3e5, 0.7499), (3e5, 1.0501)] {
-            assert_eq!(l.force_from_f32(p, e).flags, FORCE_LAW.force(p, e).flags, "{p} {e}");
+        for (p, e) in [
+            (-1.0f32, 0.9f32),
+            (600_001.0, 0.9),
+            (3e5, 0.7499),
+            (3e5, 1.0501),
+        ] {
+            assert_eq!(
+                l.force_from_f32(p, e).flags,
+                FORCE_LAW.force(p, e).flags,
+                "{p} {e}"
+            );
         }
     }
 
@@ -711,7 +737,10 @@ mod tests {
         let mut p = TORQUE_MODEL;
         p.b_m2 = 0.0;
         let m = FixedTorqueModel::from_params(&p);
-        assert_eq!(m.activation(q16(1.0), q16(0.1), q16(0.0)), FixedActivation::INVALID);
+        assert_eq!(
+            m.activation(q16(1.0), q16(0.1), q16(0.0)),
+            FixedActivation::INVALID
+        );
     }
 
     #[test]
@@ -725,7 +754,10 @@ mod tests {
         assert_eq!(act.dp_pa.abs(), m.dp_limit_pa());
         let (p1, p2) = m.pressures_gauge_pa(PressurePa::from_num(50_000));
         assert_eq!((p1.to_num::<i32>(), p2.to_num::<i32>()), (250_000, 350_000));
-        assert_eq!(m.activation_from_f32(f32::NAN, 0.0, 0.0), FixedActivation::INVALID);
+        assert_eq!(
+            m.activation_from_f32(f32::NAN, 0.0, 0.0),
+            FixedActivation::INVALID
+        );
     }
 
     proptest! {
@@ -783,7 +815,7 @@ mod tests {
                 AngleRad::from_bits(a), VelocityRadS::from_bits(v), PressurePa::from_bits(dp));
         }
 
-        /// Inverse from any f32 bit patterns: |dp| within the limit, pressures in [0, 600 kPa].
+        /// Inverse from any f32 bit patterns: |dp| within the limit, pressures in \[0, 600 kPa\].
         #[test]
         fn fixed_activation_is_bounded_for_any_f32(
             t in proptest::num::f32::ANY, a in proptest::num::f32::ANY, v in proptest::num::f32::ANY,

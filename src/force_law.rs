@@ -101,6 +101,8 @@ impl ForceLawParams {
 
     /// Tension [N] of a muscle at gauge pressure `p_gauge_pa` and deformation `stretch`
     /// (L/L0), with domain checks. Never panics, never NaN.
+    // `!(x > eps)` is deliberate: it is also true for NaN.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     pub fn force(&self, p_gauge_pa: f32, stretch: f32) -> ForceEstimate {
         if !p_gauge_pa.is_finite() || !stretch.is_finite() {
             return ForceEstimate {

@@ -20,7 +20,7 @@ pub const Q48: f64 = 281_474_976_710_656.0;
 pub const EXP_KNOTS: usize = 9;
 /// The offset of the exponential term of eq. 6.
 pub const EXP_OFFSET: f64 = 0.7;
-/// Upper limit of any muscle pressure set-point [Pa] (same value as
+/// Upper limit of any muscle pressure set-point \[Pa\] (same value as
 /// `crate::P_MUSCLE_MAX_GAUGE_PA`).
 pub const P_MAX_PA: f64 = 600_000.0;
 
@@ -69,7 +69,7 @@ pub fn sat_i32(x: i64) -> i32 {
 pub struct ForceLawBits {
     /// c1..c10 in Q32 (I32F32).
     pub c_q32: [i64; 10],
-    /// Highest gauge pressure [Pa], rounded down (I32F0).
+    /// Highest gauge pressure \[Pa\], rounded down (I32F0).
     pub p_gauge_max_pa: i32,
     /// Lowest stretch in Q16 (I16F16), rounded up: the fixed domain lies inside the f32 one,
     /// so a Q16 input is flagged exactly when its value is flagged by the f32 law.
@@ -132,19 +132,19 @@ pub fn force_law_bits(
 /// Bit patterns of the fixed-point torque model.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct TorqueModelBits {
-    /// A r^2 [N m/rad] in Q32.
+    /// A r^2 \[N m/rad\] in Q32.
     pub a_r2_q32: i64,
-    /// B r [N m/Pa] in Q48 (I16F48): B r is ~1e-5, Q32 would keep only ~5 digits.
+    /// B r \[N m/Pa\] in Q48 (I16F48): B r is ~1e-5, Q32 would keep only ~5 digits.
     pub b_r_q48: i64,
-    /// C [N m s^3/rad^3] in Q32.
+    /// C \[N m s^3/rad^3\] in Q32.
     pub c_q32: i64,
-    /// D [N m s/rad] in Q32.
+    /// D \[N m s/rad\] in Q32.
     pub d_q32: i64,
-    /// 1 / (B r) [Pa/(N m)] in Q32; 0 when B r is 0 (the model cannot be inverted).
+    /// 1 / (B r) \[Pa/(N m)\] in Q32; 0 when B r is 0 (the model cannot be inverted).
     pub inv_b_r_q32: i64,
-    /// p0 [Pa], rounded.
+    /// p0 \[Pa\], rounded.
     pub p0_gauge_pa: i32,
-    /// Usable |dp| [Pa], rounded down: `min(dp_max, p0, P_MAX - p0)`, at least 0.
+    /// Usable |dp| \[Pa\], rounded down: `min(dp_max, p0, P_MAX - p0)`, at least 0.
     pub dp_limit_pa: i32,
 }
 
@@ -173,11 +173,7 @@ pub fn torque_model_bits(
         b_r_q48: round_i64(b_r * Q48),
         c_q32: round_i64(c_nms3_per_rad3 * Q32),
         d_q32: round_i64(d_nms_per_rad * Q32),
-        inv_b_r_q32: if b_r != 0.0 {
-            round_i64(Q32 / b_r)
-        } else {
-            0
-        },
+        inv_b_r_q32: if b_r != 0.0 { round_i64(Q32 / b_r) } else { 0 },
         p0_gauge_pa: sat_i32(round_i64(p0_gauge_pa)),
         dp_limit_pa: sat_i32(floor_i64(lim)),
     }
