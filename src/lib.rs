@@ -9,6 +9,7 @@
 //! Modules:
 //! - [`force_law`]: the trig-free identified force law (seed 002, eq. 6).
 //! - [`torque_model`]: the simplified joint torque model and its inverse (seed 003, eq. 11).
+//! - [`fixed_point`]: fixed-point build of both models for FPU-less cores (Cortex-M0/M3).
 //! - [`constants`]: constants generated at build time from `config/*.toml`.
 //! - [`sensors`]: sensor traits, per-channel validation, velocity estimate.
 //! - [`control`]: pure control laws of the cascade (position -> torque -> pressure).
@@ -20,10 +21,15 @@
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
+// Unit tests (proptest, printing worst cases) run on the host with std.
+#[cfg(test)]
+extern crate std;
+
 #[macro_use]
 mod fmt;
 
 pub mod control;
+pub mod fixed_point;
 pub mod force_law;
 pub mod geometry;
 pub mod log;
