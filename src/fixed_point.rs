@@ -808,6 +808,31 @@ mod tests {
             prop_assert!((fx.force_n.to_num::<f32>() - fl.force_n).abs() < 0.1);
         }
 
+        /// Any parameter set (NaN, huge, zero constants or domains) pre-scales without
+        /// panicking, and the resulting law still never panics nor returns a negative force.
+        #[test]
+        fn any_parameters_give_a_safe_fixed_law(
+            c in proptest::array::uniform10(proptest::num::f32::ANY),
+            bounds in proptest::array::uniform3(proptest::num::f32::ANY),
+            tm in proptest::array::uniform7(proptest::num::f32::ANY),
+            pb in any::<i32>(), eb in any::<i32>(), t in any::<i32>(), a in any::<i32>(),
+        ) {
+            let l = FixedForceLaw::from_params(&ForceLawParams {
+                c, p_gauge_max_pa: bounds[0], stretch_min: bounds[1], stretch_max: bounds[2],
+            });
+            let r = l.force(PressurePa::from_bits(pb), Stretch::from_bits(eb));
+            prop_assert!(r.force_n >= ForceN::ZERO);
+            let m = FixedTorqueModel::from_params(&TorqueModelParams {
+                a_n_per_m_rad: tm[0], b_m2: tm[1], c_nms3_per_rad3: tm[2], d_nms_per_rad: tm[3],
+                sprocket_radius_m: tm[4], p0_gauge_pa: tm[5], dp_max_pa: tm[6],
+            });
+            let act = m.activation(TorqueNm::from_bits(t), AngleRad::from_bits(a), VelocityRadS::ZERO);
+            prop_assert!(act.dp_pa.abs() <= m.dp_limit_pa());
+            let _ = m.torque_nm(AngleRad::from_bits(a), VelocityRadS::from_bits(t), PressurePa::from_bits(pb));
+            let (p1, p2) = m.pressures_gauge_pa(act.dp_pa);
+            prop_assert!(p1 >= 0 && p2 >= 0 && p1 <= P_MUSCLE_MAX_GAUGE_PA_FIXED && p2 <= P_MUSCLE_MAX_GAUGE_PA_FIXED);
+        }
+
         /// Forward model: any bit patterns, never panics (saturates).
         #[test]
         fn fixed_torque_forward_never_panics(a in any::<i32>(), v in any::<i32>(), dp in any::<i32>()) {

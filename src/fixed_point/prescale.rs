@@ -37,7 +37,7 @@ pub fn round_i64(x: f64) -> i64 {
 pub fn floor_i64(x: f64) -> i64 {
     let t = x as i64;
     if (t as f64) > x {
-        t - 1
+        t.saturating_sub(1)
     } else {
         t
     }
@@ -47,7 +47,7 @@ pub fn floor_i64(x: f64) -> i64 {
 pub fn ceil_i64(x: f64) -> i64 {
     let t = x as i64;
     if (t as f64) < x {
-        t + 1
+        t.saturating_add(1)
     } else {
         t
     }
