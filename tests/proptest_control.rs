@@ -199,12 +199,12 @@ proptest! {
         let mut c = PressureController::new(PressureLoopGains { kp_per_pa: kp, ki_per_pa_s: ki, deadband_pa: 3000.0, i_limit: 0.3 });
         let inputs_ok = p.is_finite() && sp.is_finite() && dt.is_finite() && dt > 0.0;
         for _ in 0..n {
-            match c.step(p, sp, dt) {
-                Ok(u) => {
-                    prop_assert!(inputs_ok);
-                    prop_assert!(u.is_finite() && (-1.0..=1.0).contains(&u));
-                }
-                Err(_) => {}
+            let r = c.step(p, sp, dt);
+            if !inputs_ok {
+                prop_assert!(r.is_err());
+            }
+            if let Ok(u) = r {
+                prop_assert!(u.is_finite() && (-1.0..=1.0).contains(&u));
             }
         }
         if !inputs_ok {
