@@ -307,4 +307,33 @@ proptest! {
         prop_assert!(t.reset());
         prop_assert!(t.step(&good, &sp, 1e-3).armed);
     }
+
+    #[test]
+    fn control_tick_on_plausible_random_walk_stays_armed_finite_and_bounded(
+        steps in prop::collection::vec(
+            (-5_000.0f32..5_000.0, -5_000.0f32..5_000.0, -0.005f32..0.005, f32_any_or(-2.0, 2.0)),
+            1..200),
+    ) {
+        let mut t = ControlTick::new(ControllerConfig::reference(1000.0));
+        let (mut p1, mut p2, mut a) = (300_000.0f32, 300_000.0f32, 0.0f32);
+        for (d1, d2, da, sp) in steps {
+            p1 = (p1 + d1).clamp(0.0, 600_000.0);
+            p2 = (p2 + d2).clamp(0.0, 600_000.0);
+            a = (a + da).clamp(-0.9, 0.9);
+            let f = SensorFrame { p1_gauge_pa: Some(p1), p2_gauge_pa: Some(p2), angle_rad: Some(a) };
+            let o = t.step(&f, &Setpoint { angle_rad: sp }, 1e-3);
+            if sp.is_finite() {
+                prop_assert!(o.armed && o.fault.is_none(), "{:?}", o);
+            } else {
+                prop_assert!(o.fault.is_some());
+                break;
+            }
+            prop_assert!(outputs_finite(&o));
+            prop_assert!((-1.0..=1.0).contains(&o.valves.muscle1));
+            prop_assert!((-1.0..=1.0).contains(&o.valves.muscle2));
+            prop_assert!((0.0..=P_MUSCLE_MAX_GAUGE_PA).contains(&o.p1_set_gauge_pa));
+            prop_assert!((0.0..=P_MUSCLE_MAX_GAUGE_PA).contains(&o.p2_set_gauge_pa));
+            prop_assert!(o.torque_des_nm.abs() <= 10.0);
+        }
+    }
 }
