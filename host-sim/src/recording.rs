@@ -422,6 +422,24 @@ pub fn write_atomically(
         w.flush()?;
     }
     tmp.as_file().sync_all()?;
+    set_output_permissions(tmp.as_file(), path)?;
     tmp.persist(path).map_err(|e| e.error)?;
+    Ok(())
+}
+
+/// Temporary files are created private (0600); give the output the permissions of the file
+/// it replaces, or ordinary ones (0644) for a new file.
+pub(crate) fn set_output_permissions(file: &std::fs::File, target: &Path) -> std::io::Result<()> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let perm = match std::fs::metadata(target) {
+            Ok(m) => m.permissions(),
+            Err(_) => std::fs::Permissions::from_mode(0o644),
+        };
+        file.set_permissions(perm)?;
+    }
+    #[cfg(not(unix))]
+    let _ = (file, target);
     Ok(())
 }
