@@ -115,7 +115,9 @@ fn main() {
     fs::write(&out, src).expect("write constants.rs");
 
     // Bare-metal firmware binaries only (the `firmware` feature gates them): linker scripts (cortex-m-rt's link.x, defmt's defmt.x).
-    if env::var("CARGO_CFG_TARGET_OS").as_deref() == Ok("none") && env::var("CARGO_FEATURE_FIRMWARE").is_ok() {
+    if env::var("CARGO_CFG_TARGET_OS").as_deref() == Ok("none")
+        && env::var("CARGO_FEATURE_FIRMWARE").is_ok()
+    {
         let dir = PathBuf::from(env::var("CARGO_MANIFEST_DIR").unwrap());
         println!("cargo:rustc-link-search={}", dir.display());
         println!("cargo:rerun-if-changed=memory.x");
