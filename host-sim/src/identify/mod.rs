@@ -1,8 +1,10 @@
 //! Identification of model parameters from data (issue "Identification").
 //!
 //! - [`force`]: the static force law (seed 002 eq. 6, and the Tondu baseline) from isometric data.
+//! - [`torque`]: the simplified torque model (seed 003 eq. 11) from angle, pressures and tensions.
 
 pub mod force;
+pub mod torque;
 
 use std::io::Write;
 use std::path::Path;
