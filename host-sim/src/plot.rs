@@ -65,7 +65,8 @@ pub fn plot_comparison(
     }
     crate::recording::set_output_permissions(tmp.as_file(), path)
         .map_err(|e| draw_err(e.to_string()))?;
-    tmp.persist(path).map_err(|e| draw_err(e.error.to_string()))?;
+    tmp.persist(path)
+        .map_err(|e| draw_err(e.error.to_string()))?;
     Ok(())
 }
 

@@ -204,7 +204,8 @@ impl Recording {
             Ok(first)
         };
         let required = |name: &str| -> Result<usize, RecordingError> {
-            find(name)?.ok_or_else(|| field_err(header_line, name, "required column is missing".into()))
+            find(name)?
+                .ok_or_else(|| field_err(header_line, name, "required column is missing".into()))
         };
         let t_col = required("t_s")?;
         let mut u_cols = [0usize; 4];
@@ -303,7 +304,7 @@ impl Recording {
             });
         }
         let dt = rec.sample_period_s();
-        if !(dt > 0.0) {
+        if dt.is_nan() || dt <= 0.0 {
             return Err(field_err(
                 lines[n - 1],
                 "t_s",
@@ -345,7 +346,8 @@ impl Recording {
                 let declared: f64 = v.parse().map_err(|_| {
                     field_err(line, "sample_period_s", format!("not a number: {v:?}"))
                 })?;
-                if !((declared - dt).abs() <= tol) {
+                let d = (declared - dt).abs();
+                if d.is_nan() || d > tol {
                     return Err(field_err(
                         line,
                         "sample_period_s",
@@ -365,9 +367,7 @@ impl Recording {
             source,
         };
         let n = self.t_s.len();
-        if self.inputs.len() != n
-            || self.outputs.iter().flatten().any(|c| c.len() != n)
-        {
+        if self.inputs.len() != n || self.outputs.iter().flatten().any(|c| c.len() != n) {
             return Err(RecordingError::Invalid {
                 path: path.to_owned(),
                 message: "columns of unequal length".into(),
@@ -399,7 +399,10 @@ impl Recording {
                     row.push(format!("{v}"));
                 }
                 for c in &present {
-                    row.push(format!("{:.6}", self.outputs[c.index()].as_ref().unwrap()[k]));
+                    row.push(format!(
+                        "{:.6}",
+                        self.outputs[c.index()].as_ref().unwrap()[k]
+                    ));
                 }
                 cw.write_record(&row)?;
             }

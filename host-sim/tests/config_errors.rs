@@ -43,7 +43,10 @@ fn unknown_key_names_key_and_file() {
 
 #[test]
 fn unknown_table_names_key_and_file() {
-    let text = format!("{}\n[effects.valve_dead_time]\ndelay_s = 0.01\n", nominal_text());
+    let text = format!(
+        "{}\n[effects.valve_dead_time]\ndelay_s = 0.01\n",
+        nominal_text()
+    );
     let e = load_err(&text);
     assert!(e.contains("valve_dead_time"), "{e}");
     assert!(e.contains("custom-plant.toml"), "{e}");
@@ -63,7 +66,9 @@ fn missing_key_names_key_and_file() {
 
 #[test]
 fn missing_file_names_file() {
-    let e = PlantConfig::load("/nonexistent/dir/plant-xyz.toml").unwrap_err().to_string();
+    let e = PlantConfig::load("/nonexistent/dir/plant-xyz.toml")
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("plant-xyz.toml"), "{e}");
 }
 
@@ -95,9 +100,11 @@ fn effects_tables_switch_on_friction_and_sensor_calibration() {
          [effects.sensor.angle_deg]\noffset = 1.5\ngain = 2.0\n",
         nominal_text()
     );
-    let cfg = PlantConfig::from_toml_str(&text, "with-effects.toml").unwrap_or_else(|e| panic!("{e}"));
+    let cfg =
+        PlantConfig::from_toml_str(&text, "with-effects.toml").unwrap_or_else(|e| panic!("{e}"));
     let plant = Plant::from_config(&cfg);
-    let nominal = Plant::from_config(&PlantConfig::from_toml_str(&nominal_text(), "n.toml").unwrap());
+    let nominal =
+        Plant::from_config(&PlantConfig::from_toml_str(&nominal_text(), "n.toml").unwrap());
 
     // Friction decelerates a joint moving at equal pressures.
     let mut x = plant.initial_state();
@@ -119,7 +126,10 @@ fn effects_tables_switch_on_friction_and_sensor_calibration() {
     // enabled = false switches an effect off without deleting its table.
     let off = text.replace("coulomb_nm = 0.2", "enabled = false\ncoulomb_nm = 0.2");
     let p_off = Plant::from_config(&PlantConfig::from_toml_str(&off, "off.toml").unwrap());
-    assert_eq!(p_off.derivatives(&x, &ValveInputs::CLOSED).velocity_rad_s, without);
+    assert_eq!(
+        p_off.derivatives(&x, &ValveInputs::CLOSED).velocity_rad_s,
+        without
+    );
 }
 
 #[test]
@@ -132,12 +142,16 @@ fn leakage_and_gravity_act_on_the_right_hand_side() {
     let plant = Plant::from_config(&PlantConfig::from_toml_str(&text, "e.toml").unwrap());
     let mut x = plant.initial_state();
     let d = plant.derivatives(&x, &ValveInputs::CLOSED);
-    assert!(d.p1_abs_pa < 0.0 && d.p2_abs_pa < 0.0, "leak lowers the pressures: {d:?}");
+    assert!(
+        d.p1_abs_pa < 0.0 && d.p2_abs_pa < 0.0,
+        "leak lowers the pressures: {d:?}"
+    );
     x.angle_rad = 0.5;
     x.p1_abs_pa = x.p2_abs_pa; // same pressures; remove the spring torque difference
-    let nominal = Plant::from_config(&PlantConfig::from_toml_str(&nominal_text(), "n.toml").unwrap());
+    let nominal =
+        Plant::from_config(&PlantConfig::from_toml_str(&nominal_text(), "n.toml").unwrap());
     let dg = plant.derivatives(&x, &ValveInputs::CLOSED).velocity_rad_s
         - nominal.derivatives(&x, &ValveInputs::CLOSED).velocity_rad_s;
-    let expected = -1.0 * 9.80665 * 0.1 * 0.5f64.sin() / 0.014;
+    let expected = -9.80665 * 0.1 * 0.5f64.sin() / 0.014;
     assert!((dg - expected).abs() < 1e-9, "{dg} vs {expected}");
 }
