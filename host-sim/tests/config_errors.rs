@@ -155,3 +155,28 @@ fn leakage_and_gravity_act_on_the_right_hand_side() {
     let expected = -9.80665 * 0.1 * 0.5f64.sin() / 0.014;
     assert!((dg - expected).abs() < 1e-9, "{dg} vs {expected}");
 }
+
+#[test]
+fn polytropic_exponent_scales_the_pressure_rate() {
+    let text = format!("{}\n[effects.polytropic]\nexponent = 1.4\n", nominal_text());
+    let plant = Plant::from_config(&PlantConfig::from_toml_str(&text, "p.toml").unwrap());
+    let nominal =
+        Plant::from_config(&PlantConfig::from_toml_str(&nominal_text(), "n.toml").unwrap());
+    let u = ValveInputs {
+        u_in1: 1.0,
+        u_ex2: 0.5,
+        ..ValveInputs::CLOSED
+    };
+    let mut x = plant.initial_state();
+    x.velocity_rad_s = 0.3;
+    let a = plant.derivatives(&x, &u);
+    let b = nominal.derivatives(&x, &u);
+    assert!((a.p1_abs_pa - 1.4 * b.p1_abs_pa).abs() < 1e-9 * b.p1_abs_pa.abs());
+    assert!((a.p2_abs_pa - 1.4 * b.p2_abs_pa).abs() < 1e-9 * b.p2_abs_pa.abs());
+    assert_eq!(a.velocity_rad_s, b.velocity_rad_s);
+    let bad = text.replace("exponent = 1.4", "exponent = 0.0");
+    let e = PlantConfig::from_toml_str(&bad, "p.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("effects.polytropic.exponent"), "{e}");
+}

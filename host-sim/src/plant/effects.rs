@@ -5,12 +5,13 @@
 //! Effects plug into one of three places:
 //! - joint torque (right-hand side of J omega' = T + sum of effect torques): [`JointFriction`],
 //!   [`Gravity`];
-//! - chamber flow (right-hand side of the pressure ODE): [`Leakage`];
+//! - chamber flow and pressure law (right-hand side of the pressure ODE): [`Leakage`],
+//!   [`Polytropic`];
 //! - the measurement (what a sensor reports for a state): [`SensorCalibration`].
 //!
 //! Not implemented yet (the table name is rejected as unknown, so a file asking for it fails
 //! loudly instead of being silently simulated without it): braid hysteresis, sensor lag,
-//! valve dead time, supply pressure drop, polytropic pressure dynamics.
+//! valve dead time, supply pressure drop.
 
 use std::path::Path;
 
@@ -30,7 +31,19 @@ pub struct EffectsConfig {
     pub joint_friction: Option<JointFriction>,
     pub gravity: Option<Gravity>,
     pub leakage: Option<Leakage>,
+    pub polytropic: Option<Polytropic>,
     pub sensor: Option<SensorCalibration>,
+}
+
+/// `[effects.polytropic]`: polytropic instead of isothermal chamber process (seed 004 eq. 3
+/// with the standard flow at the reference temperature): dp/dt = n (p_atm Q - p dV/dt) / V.
+/// `exponent = 1` is the nominal isothermal (Boyle-Mariotte) model, 1.4 adiabatic air.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Polytropic {
+    #[serde(default = "enabled_default")]
+    pub enabled: bool,
+    pub exponent: f64,
 }
 
 /// `[effects.joint_friction]`: Coulomb + viscous + Stribeck friction torque on the joint
@@ -145,13 +158,27 @@ pub struct SensorCalibration {
 }
 
 /// The enabled effects, in the form the right-hand side uses.
-#[derive(Debug, Clone, Default, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Effects {
     pub joint_friction: Option<JointFriction>,
     pub gravity: Option<Gravity>,
     pub leak: Option<Iso6358Valve>,
+    /// Polytropic exponent n of the pressure law (1 when the effect is off).
+    pub pressure_exponent: f64,
     /// Calibrations of angle_deg, p1_kpa, p2_kpa, f1_n, f2_n (identity when absent).
     pub sensor: Option<[ChannelCalibration; 5]>,
+}
+
+impl Default for Effects {
+    fn default() -> Self {
+        Self {
+            joint_friction: None,
+            gravity: None,
+            leak: None,
+            pressure_exponent: 1.0,
+            sensor: None,
+        }
+    }
 }
 
 impl Effects {
@@ -171,6 +198,11 @@ impl Effects {
                     valve_laminar_ratio,
                 )
             }),
+            pressure_exponent: c
+                .polytropic
+                .as_ref()
+                .filter(|p| p.enabled)
+                .map_or(1.0, |p| p.exponent),
             sensor: c.sensor.as_ref().filter(|s| s.enabled).map(|s| {
                 [
                     s.angle_deg.unwrap_or(id),
@@ -269,6 +301,9 @@ impl EffectsConfig {
                     "must be >= 0".into(),
                 ));
             }
+        }
+        if let Some(p) = &self.polytropic {
+            check("effects.polytropic.exponent", p.exponent, Some(0.0))?;
         }
         if let Some(s) = &self.sensor {
             for (name, c) in [

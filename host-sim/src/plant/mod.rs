@@ -171,13 +171,14 @@ impl Plant {
             let q = u_in[i] * self.valve.flow_m3_s(self.p_supply_abs_pa, p[i])
                 - u_ex[i] * self.valve.flow_m3_s(p[i], self.p_atm_pa)
                 + self.effects.chamber_flow_m3_s(p[i], self.p_atm_pa);
-            dp[i] = pressure::pressure_rate_pa_s(
-                self.p_atm_pa,
-                p[i],
-                q,
-                self.muscle.volume_m3(chi[i]),
-                self.muscle.volume_rate_m3_s(chi[i], dchi[i]),
-            );
+            dp[i] = self.effects.pressure_exponent
+                * pressure::pressure_rate_pa_s(
+                    self.p_atm_pa,
+                    p[i],
+                    q,
+                    self.muscle.volume_m3(chi[i]),
+                    self.muscle.volume_rate_m3_s(chi[i], dchi[i]),
+                );
         }
         let torque = self.joint.muscle_torque_nm(tension)
             + self.effects.joint_torque_nm(x.angle_rad, x.velocity_rad_s);
