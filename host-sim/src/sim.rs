@@ -10,6 +10,7 @@
 use nalgebra::SVector;
 use ode_solvers::{Dopri5, OutputType, System};
 
+use crate::plant::effects::DeadTimeLine;
 use crate::plant::{Plant, PlantState, ValveInputs};
 
 type Vector4 = SVector<f64, 4>;
@@ -54,6 +55,8 @@ pub enum SimError {
     SamplePeriod(f64),
     #[error("invalid valve input at sample {index}: {inputs:?} (openings must be in [0, 1])")]
     Input { index: usize, inputs: ValveInputs },
+    #[error("valve dead time {delay_s} s is not a whole number of sample periods ({dt_s} s)")]
+    DeadTime { delay_s: f64, dt_s: f64 },
 }
 
 struct Rhs<'a> {
@@ -252,6 +255,16 @@ pub fn simulate_with_progress(
     if let Some((index, u)) = inputs.iter().enumerate().find(|(_, u)| !valid_inputs(u)) {
         return Err(SimError::Input { index, inputs: *u });
     }
+    let delayed: Vec<ValveInputs>;
+    let inputs = match plant.effects.valve_dead_time_s {
+        None => inputs,
+        Some(delay_s) => {
+            let mut line =
+                DeadTimeLine::new(delay_s, dt_s).ok_or(SimError::DeadTime { delay_s, dt_s })?;
+            delayed = inputs.iter().map(|u| line.push(*u)).collect();
+            &delayed
+        }
+    };
     let mut integ = Integrator::new(plant, plant.initial_state(), *opts);
     let mut states = Vec::with_capacity(inputs.len());
     let mut k = 0;

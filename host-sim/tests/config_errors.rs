@@ -44,11 +44,11 @@ fn unknown_key_names_key_and_file() {
 #[test]
 fn unknown_table_names_key_and_file() {
     let text = format!(
-        "{}\n[effects.valve_dead_time]\ndelay_s = 0.01\n",
+        "{}\n[effects.braid_hysteresis]\nwidth_n = 5.0\n",
         nominal_text()
     );
     let e = load_err(&text);
-    assert!(e.contains("valve_dead_time"), "{e}");
+    assert!(e.contains("braid_hysteresis"), "{e}");
     assert!(e.contains("custom-plant.toml"), "{e}");
 }
 
@@ -179,4 +179,40 @@ fn polytropic_exponent_scales_the_pressure_rate() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("effects.polytropic.exponent"), "{e}");
+}
+
+#[test]
+fn valve_dead_time_delays_the_inputs_by_whole_samples() {
+    use host_sim::sim::{simulate, SolverOptions};
+    let text = format!(
+        "{}\n[effects.valve_dead_time]\ndelay_s = 0.003\n",
+        nominal_text()
+    );
+    let delayed = Plant::from_config(&PlantConfig::from_toml_str(&text, "d.toml").unwrap());
+    let nominal =
+        Plant::from_config(&PlantConfig::from_toml_str(&nominal_text(), "n.toml").unwrap());
+    let dt = 0.001;
+    let mut u = vec![ValveInputs::CLOSED; 40];
+    for v in &mut u[5..25] {
+        v.u_in1 = 1.0;
+        v.u_ex2 = 1.0;
+    }
+    let opts = SolverOptions::default();
+    let a = simulate(&delayed, &u, dt, &opts).unwrap().states;
+    let b = simulate(&nominal, &u, dt, &opts).unwrap().states;
+    // The delayed run is the nominal run shifted by 3 samples (valves closed at rest = equilibrium).
+    for (k, x) in a.iter().enumerate().take(8) {
+        assert_eq!(*x, delayed.initial_state(), "sample {k}");
+    }
+    assert!(b[7].p1_abs_pa > b[5].p1_abs_pa);
+    for k in 3..40 {
+        let d = (a[k].p1_abs_pa - b[k - 3].p1_abs_pa).abs();
+        assert!(d < 1.0, "sample {k}: {d} Pa");
+    }
+    // 2.5 samples cannot be represented.
+    let bad = Plant::from_config(
+        &PlantConfig::from_toml_str(&text.replace("0.003", "0.0025"), "d.toml").unwrap(),
+    );
+    let e = simulate(&bad, &u, dt, &opts).unwrap_err().to_string();
+    assert!(e.contains("dead time"), "{e}");
 }

@@ -7,11 +7,13 @@
 //!   [`Gravity`];
 //! - chamber flow and pressure law (right-hand side of the pressure ODE): [`Leakage`],
 //!   [`Polytropic`];
-//! - the measurement (what a sensor reports for a state): [`SensorCalibration`].
+//! - the measurement (what a sensor reports for a state): [`SensorCalibration`];
+//! - the valve command path (what the valves see of a command): [`ValveDeadTime`], applied by
+//!   [`DeadTimeLine`] once per sample.
 //!
 //! Not implemented yet (the table name is rejected as unknown, so a file asking for it fails
 //! loudly instead of being silently simulated without it): braid hysteresis, sensor lag,
-//! valve dead time, supply pressure drop.
+//! supply pressure drop.
 
 use std::path::Path;
 
@@ -19,6 +21,7 @@ use serde::Deserialize;
 
 use crate::config::ConfigError;
 use crate::plant::valve::Iso6358Valve;
+use crate::plant::ValveInputs;
 
 fn enabled_default() -> bool {
     true
@@ -32,7 +35,54 @@ pub struct EffectsConfig {
     pub gravity: Option<Gravity>,
     pub leakage: Option<Leakage>,
     pub polytropic: Option<Polytropic>,
+    pub valve_dead_time: Option<ValveDeadTime>,
     pub sensor: Option<SensorCalibration>,
+}
+
+/// `[effects.valve_dead_time]`: every valve applies a command `delay_s` later (valves closed
+/// before the first delayed command arrives). The delay must be a whole number of sample
+/// periods of the run it is used with.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ValveDeadTime {
+    #[serde(default = "enabled_default")]
+    pub enabled: bool,
+    pub delay_s: f64,
+}
+
+/// A delay line of whole samples between valve commands and valve openings.
+#[derive(Debug, Clone)]
+pub struct DeadTimeLine {
+    fifo: std::collections::VecDeque<ValveInputs>,
+}
+
+impl DeadTimeLine {
+    /// A line for `delay_s` at sample period `dt_s`; `None` when the delay is not a whole
+    /// number of samples (within 1e-6 of a sample).
+    pub fn new(delay_s: f64, dt_s: f64) -> Option<Self> {
+        let samples = delay_s / dt_s;
+        let n = samples.round();
+        if !(n >= 0.0 && (samples - n).abs() <= 1e-6 && n < 1e9) {
+            return None;
+        }
+        Some(Self {
+            fifo: std::iter::repeat_n(ValveInputs::CLOSED, n as usize).collect(),
+        })
+    }
+
+    /// Delay in samples.
+    pub fn samples(&self) -> usize {
+        self.fifo.len()
+    }
+
+    /// Feeds the command of this sample; returns the opening the valves apply over it.
+    pub fn push(&mut self, command: ValveInputs) -> ValveInputs {
+        if self.fifo.is_empty() {
+            return command;
+        }
+        self.fifo.push_back(command);
+        self.fifo.pop_front().expect("non-empty")
+    }
 }
 
 /// `[effects.polytropic]`: polytropic instead of isothermal chamber process (seed 004 eq. 3
@@ -163,6 +213,8 @@ pub struct Effects {
     pub joint_friction: Option<JointFriction>,
     pub gravity: Option<Gravity>,
     pub leak: Option<Iso6358Valve>,
+    /// Valve dead time [s], if enabled.
+    pub valve_dead_time_s: Option<f64>,
     /// Polytropic exponent n of the pressure law (1 when the effect is off).
     pub pressure_exponent: f64,
     /// Calibrations of angle_deg, p1_kpa, p2_kpa, f1_n, f2_n (identity when absent).
@@ -175,6 +227,7 @@ impl Default for Effects {
             joint_friction: None,
             gravity: None,
             leak: None,
+            valve_dead_time_s: None,
             pressure_exponent: 1.0,
             sensor: None,
         }
@@ -198,6 +251,11 @@ impl Effects {
                     valve_laminar_ratio,
                 )
             }),
+            valve_dead_time_s: c
+                .valve_dead_time
+                .as_ref()
+                .filter(|d| d.enabled)
+                .map(|d| d.delay_s),
             pressure_exponent: c
                 .polytropic
                 .as_ref()
@@ -299,6 +357,15 @@ impl EffectsConfig {
                 return Err(bad(
                     "effects.leakage.sonic_conductance_m3_per_s_pa",
                     "must be >= 0".into(),
+                ));
+            }
+        }
+        if let Some(d) = &self.valve_dead_time {
+            check("effects.valve_dead_time.delay_s", d.delay_s, None)?;
+            if d.delay_s < 0.0 {
+                return Err(bad(
+                    "effects.valve_dead_time.delay_s",
+                    format!("must be >= 0, got {}", d.delay_s),
                 ));
             }
         }
