@@ -1,7 +1,7 @@
 //! `host-sim` command line: open-loop replay of recordings on the plant model, fit metrics,
 //! plots. Closed-loop scenarios (`simulate --scenario`) come with the firmware control API.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{bail, Context, Result};
@@ -105,6 +105,18 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
     let inputs_path = a.inputs.as_ref().expect("clap: --inputs required");
     let plant = Plant::load(plant_path)?;
     let rec = Recording::read(inputs_path)?;
+    if let Some(named) = rec.meta("plant") {
+        let given = plant_path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned());
+        if given.as_deref() != Path::new(named).file_name().and_then(|n| n.to_str()) {
+            eprintln!(
+                "warning: {} was recorded on plant `{named}`, simulating {}",
+                inputs_path.display(),
+                plant_path.display()
+            );
+        }
+    }
     let opts = SolverOptions {
         rtol: a.rtol,
         atol: a.atol,

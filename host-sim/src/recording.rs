@@ -145,6 +145,7 @@ impl Recording {
     /// Parses recording text; `path` is used in error messages.
     pub fn parse(text: &str, path: impl AsRef<Path>) -> Result<Self, RecordingError> {
         let path = path.as_ref();
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         let field_err = |line: u64, field: &str, message: String| RecordingError::Field {
             path: path.to_owned(),
             line,

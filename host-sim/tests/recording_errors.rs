@@ -126,3 +126,11 @@ fn failed_write_keeps_the_previous_good_file() {
     assert_eq!(std::fs::read(&path).unwrap(), before);
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
 }
+
+#[test]
+fn utf8_bom_and_crlf_are_accepted() {
+    let text = format!("\u{feff}{}", GOOD.replace('\n', "\r\n"));
+    let r = Recording::parse(&text, "run-42.csv").unwrap();
+    assert_eq!(r.len(), 3);
+    assert_eq!(r.meta("plant"), Some("reference-1dof.toml"));
+}

@@ -168,9 +168,14 @@ impl Plant {
         for i in 0..2 {
             let pg = p[i] - self.p_atm_pa;
             tension[i] = self.muscle.tension_n(pg, chi[i], dchi[i]);
-            let q = u_in[i] * self.valve.flow_m3_s(self.p_supply_abs_pa, p[i])
-                - u_ex[i] * self.valve.flow_m3_s(p[i], self.p_atm_pa)
-                + self.effects.chamber_flow_m3_s(p[i], self.p_atm_pa);
+            // A closed valve contributes nothing (skip the flow function).
+            let mut q = self.effects.chamber_flow_m3_s(p[i], self.p_atm_pa);
+            if u_in[i] != 0.0 {
+                q += u_in[i] * self.valve.flow_m3_s(self.p_supply_abs_pa, p[i]);
+            }
+            if u_ex[i] != 0.0 {
+                q -= u_ex[i] * self.valve.flow_m3_s(p[i], self.p_atm_pa);
+            }
             dp[i] = self.effects.pressure_exponent
                 * pressure::pressure_rate_pa_s(
                     self.p_atm_pa,
