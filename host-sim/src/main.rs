@@ -157,7 +157,7 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
         inputs: rec.inputs.clone(),
         ..Default::default()
     };
-    let meas: Vec<_> = sim.states.iter().map(|x| plant.measure(x)).collect();
+    let meas = plant.measure_series(&sim.states, dt);
     for c in Channel::ALL {
         out.set_channel(c, meas.iter().map(|m| c.of(m)).collect());
     }

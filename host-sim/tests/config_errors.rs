@@ -216,3 +216,37 @@ fn valve_dead_time_delays_the_inputs_by_whole_samples() {
     let e = simulate(&bad, &u, dt, &opts).unwrap_err().to_string();
     assert!(e.contains("dead time"), "{e}");
 }
+
+#[test]
+fn sensor_lag_filters_the_sampled_channels() {
+    use host_sim::plant::PlantState;
+    let text = format!(
+        "{}\n[effects.sensor_lag]\nangle_time_constant_s = 0.01\n",
+        nominal_text()
+    );
+    let plant = Plant::from_config(&PlantConfig::from_toml_str(&text, "l.toml").unwrap());
+    let x0 = plant.initial_state();
+    let mut x1 = x0;
+    x1.angle_rad = 1f64.to_radians();
+    let states: Vec<PlantState> = std::iter::once(x0)
+        .chain(std::iter::repeat_n(x1, 3))
+        .collect();
+    let m = plant.measure_series(&states, 0.001);
+    let a = 1.0 - (-0.1f64).exp();
+    assert_eq!(m[0].angle_deg, 0.0);
+    assert!((m[1].angle_deg - a).abs() < 1e-12);
+    assert!((m[2].angle_deg - (a + a * (1.0 - a))).abs() < 1e-12);
+    // Pressures and forces have no lag configured.
+    assert_eq!(m[1].f1_n, plant.measure(&x1).f1_n);
+    let bad = text.replace(
+        "angle_time_constant_s = 0.01",
+        "angle_time_constant_s = -1.0",
+    );
+    let e = PlantConfig::from_toml_str(&bad, "l.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("effects.sensor_lag.angle_time_constant_s"),
+        "{e}"
+    );
+}

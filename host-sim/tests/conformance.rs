@@ -43,7 +43,7 @@ fn check(file: &PathBuf, opts: &SolverOptions) -> Vec<(Channel, f64)> {
         inputs: reference.inputs.clone(),
         ..Default::default()
     };
-    let meas: Vec<_> = sim.states.iter().map(|x| plant.measure(x)).collect();
+    let meas = plant.measure_series(&sim.states, reference.sample_period_s());
     for c in Channel::ALL {
         model.set_channel(c, meas.iter().map(|m| c.of(m)).collect());
     }

@@ -7,12 +7,13 @@
 //!   [`Gravity`];
 //! - chamber flow and pressure law (right-hand side of the pressure ODE): [`Leakage`],
 //!   [`Polytropic`];
-//! - the measurement (what a sensor reports for a state): [`SensorCalibration`];
+//! - the measurement (what a sensor reports for a state): [`SensorCalibration`], and over a
+//!   sampled sequence [`SensorLag`] (applied by [`SensorLagFilter`] once per sample);
 //! - the valve command path (what the valves see of a command): [`ValveDeadTime`], applied by
 //!   [`DeadTimeLine`] once per sample.
 //!
 //! Not implemented yet (the table name is rejected as unknown, so a file asking for it fails
-//! loudly instead of being silently simulated without it): braid hysteresis, sensor lag,
+//! loudly instead of being silently simulated without it): braid hysteresis,
 //! supply pressure drop.
 
 use std::path::Path;
@@ -37,6 +38,64 @@ pub struct EffectsConfig {
     pub polytropic: Option<Polytropic>,
     pub valve_dead_time: Option<ValveDeadTime>,
     pub sensor: Option<SensorCalibration>,
+    pub sensor_lag: Option<SensorLag>,
+}
+
+/// `[effects.sensor_lag]`: first-order sensor dynamics per channel group, as the sensor's
+/// own sampled low-pass: y_k = y_{k-1} + a (x_k - y_{k-1}), a = 1 - exp(-dt / tau), started
+/// at the first sample. An absent time constant means no lag on that group.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorLag {
+    #[serde(default = "enabled_default")]
+    pub enabled: bool,
+    /// angle_deg.
+    pub angle_time_constant_s: Option<f64>,
+    /// p1_kpa, p2_kpa.
+    pub pressure_time_constant_s: Option<f64>,
+    /// f1_n, f2_n.
+    pub force_time_constant_s: Option<f64>,
+}
+
+/// The running state of [`SensorLag`] for one sample period.
+#[derive(Debug, Clone)]
+pub struct SensorLagFilter {
+    /// Filter gains of angle, p1, p2, f1, f2 (1 = no lag).
+    gain: [f64; 5],
+    y: Option<[f64; 5]>,
+}
+
+impl SensorLagFilter {
+    pub fn new(lag: &SensorLag, dt_s: f64) -> Self {
+        let a = |tau: Option<f64>| match tau {
+            Some(t) if t > 0.0 => 1.0 - (-dt_s / t).exp(),
+            _ => 1.0,
+        };
+        let (ang, p, f) = (
+            a(lag.angle_time_constant_s),
+            a(lag.pressure_time_constant_s),
+            a(lag.force_time_constant_s),
+        );
+        Self {
+            gain: [ang, p, p, f, f],
+            y: None,
+        }
+    }
+
+    /// Feeds the undelayed channels of one sample (angle, p1, p2, f1, f2); returns the lagged ones.
+    pub fn push(&mut self, x: [f64; 5]) -> [f64; 5] {
+        let y = match self.y {
+            None => x,
+            Some(mut y) => {
+                for i in 0..5 {
+                    y[i] += self.gain[i] * (x[i] - y[i]);
+                }
+                y
+            }
+        };
+        self.y = Some(y);
+        y
+    }
 }
 
 /// `[effects.valve_dead_time]`: every valve applies a command `delay_s` later (valves closed
@@ -217,6 +276,8 @@ pub struct Effects {
     pub valve_dead_time_s: Option<f64>,
     /// Polytropic exponent n of the pressure law (1 when the effect is off).
     pub pressure_exponent: f64,
+    /// Sensor lag, if enabled.
+    pub sensor_lag: Option<SensorLag>,
     /// Calibrations of angle_deg, p1_kpa, p2_kpa, f1_n, f2_n (identity when absent).
     pub sensor: Option<[ChannelCalibration; 5]>,
 }
@@ -229,6 +290,7 @@ impl Default for Effects {
             leak: None,
             valve_dead_time_s: None,
             pressure_exponent: 1.0,
+            sensor_lag: None,
             sensor: None,
         }
     }
@@ -251,6 +313,7 @@ impl Effects {
                     valve_laminar_ratio,
                 )
             }),
+            sensor_lag: c.sensor_lag.clone().filter(|l| l.enabled),
             valve_dead_time_s: c
                 .valve_dead_time
                 .as_ref()
@@ -367,6 +430,23 @@ impl EffectsConfig {
                     "effects.valve_dead_time.delay_s",
                     format!("must be >= 0, got {}", d.delay_s),
                 ));
+            }
+        }
+        if let Some(l) = &self.sensor_lag {
+            for (key, tau) in [
+                ("angle_time_constant_s", l.angle_time_constant_s),
+                ("pressure_time_constant_s", l.pressure_time_constant_s),
+                ("force_time_constant_s", l.force_time_constant_s),
+            ] {
+                if let Some(t) = tau {
+                    check(&format!("effects.sensor_lag.{key}"), t, None)?;
+                    if t < 0.0 {
+                        return Err(bad(
+                            &format!("effects.sensor_lag.{key}"),
+                            format!("must be >= 0, got {t}"),
+                        ));
+                    }
+                }
             }
         }
         if let Some(p) = &self.polytropic {

@@ -195,16 +195,49 @@ impl Plant {
         }
     }
 
-    /// The recorded channels for a state, with the sensor calibration effect if enabled.
+    /// The recorded channels of a sampled run (`states[k]` at `t_k = k dt`), with the
+    /// sensor effects (lag, then calibration) if enabled.
+    pub fn measure_series(&self, states: &[PlantState], dt_s: f64) -> Vec<Measurement> {
+        match &self.effects.sensor_lag {
+            None => states.iter().map(|x| self.measure(x)).collect(),
+            Some(lag) => {
+                let mut filter = effects::SensorLagFilter::new(lag, dt_s);
+                states
+                    .iter()
+                    .map(|x| {
+                        let y = filter.push(self.true_channels(x).to_array());
+                        self.calibrate(Measurement {
+                            angle_deg: y[0],
+                            p1_kpa: y[1],
+                            p2_kpa: y[2],
+                            f1_n: y[3],
+                            f2_n: y[4],
+                        })
+                    })
+                    .collect()
+            }
+        }
+    }
+
+    /// The recorded channels for a state, with the sensor calibration effect if enabled
+    /// (sensor lag needs the history: see [`Self::measure_series`]).
     pub fn measure(&self, x: &PlantState) -> Measurement {
+        self.calibrate(self.true_channels(x))
+    }
+
+    /// The physical values of the recorded channels (PLANT.md "Measured channels").
+    pub fn true_channels(&self, x: &PlantState) -> Measurement {
         let f = self.tensions_n(x);
-        let m = Measurement {
+        Measurement {
             angle_deg: x.angle_rad.to_degrees(),
             p1_kpa: (x.p1_abs_pa - self.p_atm_pa) / 1000.0,
             p2_kpa: (x.p2_abs_pa - self.p_atm_pa) / 1000.0,
             f1_n: f[0],
             f2_n: f[1],
-        };
+        }
+    }
+
+    fn calibrate(&self, m: Measurement) -> Measurement {
         match &self.effects.sensor {
             None => m,
             Some(c) => Measurement {
