@@ -2,7 +2,7 @@
 //!
 //! Each effect is its own TOML table under `[effects]`; a table that is absent (as in the
 //! nominal reference files) or has `enabled = false` leaves the nominal model untouched.
-//! Effects plug into one of three places:
+//! Effects plug into one of four places:
 //! - joint torque (right-hand side of J omega' = T + sum of effect torques): [`JointFriction`],
 //!   [`Gravity`];
 //! - chamber flow and pressure law (right-hand side of the pressure ODE): [`Leakage`],
@@ -272,7 +272,7 @@ pub struct Effects {
     pub joint_friction: Option<JointFriction>,
     pub gravity: Option<Gravity>,
     pub leak: Option<Iso6358Valve>,
-    /// Valve dead time [s], if enabled.
+    /// Valve dead time in seconds, if enabled.
     pub valve_dead_time_s: Option<f64>,
     /// Polytropic exponent n of the pressure law (1 when the effect is off).
     pub pressure_exponent: f64,

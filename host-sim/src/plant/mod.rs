@@ -142,7 +142,7 @@ impl Plant {
         self.initial
     }
 
-    /// Muscle tensions F1, F2 [N] for a state.
+    /// Muscle tensions F1, F2 in newtons for a state.
     #[inline(always)]
     pub fn tensions_n(&self, x: &PlantState) -> [f64; 2] {
         let chi = self.joint.contractions(x.angle_rad);
