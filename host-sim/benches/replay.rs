@@ -8,7 +8,7 @@ use std::hint::black_box;
 use std::path::PathBuf;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use host_sim::sim::{simulate, SolverOptions};
+use host_sim::sim::{simulate, Integrator, SolverOptions};
 use host_sim::{Plant, Recording};
 
 fn shared() -> PathBuf {
@@ -45,5 +45,25 @@ fn replay(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, replay);
+/// Closed-loop pattern: one integrator restart per 1 ms tick (no segment spanning).
+fn per_tick(c: &mut Criterion) {
+    let mut group = c.benchmark_group("per_tick");
+    group.sample_size(20);
+    let rec = Recording::read(shared().join("conformance/pulses_nominal.csv")).unwrap();
+    let plant = Plant::load(shared().join("plant/reference-1dof.toml")).unwrap();
+    let dt = rec.sample_period_s();
+    group.bench_function("pulses_nominal/rtol1e-6", |b| {
+        b.iter(|| {
+            let mut integ =
+                Integrator::new(&plant, plant.initial_state(), SolverOptions::default());
+            for u in &rec.inputs {
+                integ.advance(*u, dt).unwrap();
+            }
+            black_box(integ.state())
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, replay, per_tick);
 criterion_main!(benches);

@@ -71,7 +71,8 @@ pub fn compare(reference: &Recording, model: &Recording) -> Result<Vec<ChannelFi
     }
     let tol = 0.01 * reference.sample_period_s().abs();
     for (index, (a, b)) in reference.t_s.iter().zip(&model.t_s).enumerate() {
-        if !((a - b).abs() <= tol) {
+        let d = (a - b).abs();
+        if d.is_nan() || d > tol {
             return Err(FitError::Time {
                 index,
                 a: *a,

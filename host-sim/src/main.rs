@@ -1,7 +1,7 @@
 //! `host-sim` command line: open-loop replay of recordings on the plant model, fit metrics,
 //! plots. Closed-loop scenarios (`simulate --scenario`) come with the firmware control API.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{bail, Context, Result};
@@ -15,7 +15,11 @@ use host_sim::sim::{simulate_with_progress, SolverOptions};
 use host_sim::{Plant, Recording};
 
 #[derive(Parser)]
-#[command(name = "host-sim", version, about = "PAM joint plant simulator (shared/plant/PLANT.md)")]
+#[command(
+    name = "host-sim",
+    version,
+    about = "PAM joint plant simulator (shared/plant/PLANT.md)"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -36,7 +40,12 @@ struct SimulateArgs {
     #[arg(long, value_name = "P.toml", required_unless_present = "scenario")]
     plant: Option<PathBuf>,
     /// Recording whose t_s and valve columns are replayed (RECORDING.md).
-    #[arg(long, value_name = "REC.csv", required_unless_present = "scenario", conflicts_with = "scenario")]
+    #[arg(
+        long,
+        value_name = "REC.csv",
+        required_unless_present = "scenario",
+        conflicts_with = "scenario"
+    )]
     inputs: Option<PathBuf>,
     /// Closed-loop scenario (firmware in the loop).
     #[arg(long, value_name = "S.toml")]
@@ -96,6 +105,18 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
     let inputs_path = a.inputs.as_ref().expect("clap: --inputs required");
     let plant = Plant::load(plant_path)?;
     let rec = Recording::read(inputs_path)?;
+    if let Some(named) = rec.meta("plant") {
+        let given = plant_path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned());
+        if given.as_deref() != Path::new(named).file_name().and_then(|n| n.to_str()) {
+            eprintln!(
+                "warning: {} was recorded on plant `{named}`, simulating {}",
+                inputs_path.display(),
+                plant_path.display()
+            );
+        }
+    }
     let opts = SolverOptions {
         rtol: a.rtol,
         atol: a.atol,
@@ -136,7 +157,7 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
         inputs: rec.inputs.clone(),
         ..Default::default()
     };
-    let meas: Vec<_> = sim.states.iter().map(|x| plant.measure(x)).collect();
+    let meas = plant.measure_series(&sim.states, dt);
     for c in Channel::ALL {
         out.set_channel(c, meas.iter().map(|m| c.of(m)).collect());
     }
@@ -159,16 +180,18 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
 fn run_fit(a: &FitArgs) -> Result<ExitCode> {
     let ra = Recording::read(&a.a)?;
     let rb = Recording::read(&a.b)?;
-    let fits = compare(&ra, &rb).with_context(|| {
-        format!("cannot compare {} with {}", a.a.display(), a.b.display())
-    })?;
+    let fits = compare(&ra, &rb)
+        .with_context(|| format!("cannot compare {} with {}", a.a.display(), a.b.display()))?;
     println!("reference: {}\nmodel:     {}", a.a.display(), a.b.display());
     print!("{}", format_table(&fits));
     if let Some(p) = &a.plot {
         plot_comparison(p, Some(&ra), &only_common(&rb, &ra))?;
     }
     if let Some(min) = a.min_fit {
-        let bad: Vec<_> = fits.iter().filter(|f| !(f.fit_percent >= min)).collect();
+        let bad: Vec<_> = fits
+            .iter()
+            .filter(|f| f.fit_percent.is_nan() || f.fit_percent < min)
+            .collect();
         if !bad.is_empty() {
             for f in bad {
                 eprintln!("{}: fit {:.4} % < {min} %", f.channel.name(), f.fit_percent);
@@ -189,4 +212,3 @@ fn only_common(model: &Recording, reference: &Recording) -> Recording {
     }
     r
 }
-

@@ -1,4 +1,7 @@
 //! Measured vs simulated channel plots with `plotters` (PNG or SVG by file extension).
+//!
+//! Text is laid out with `ab_glyph` (pure Rust, no fontconfig/freetype build dependency) from
+//! a TrueType font found at run time: `$HOST_SIM_FONT`, else a common system sans font.
 
 use std::path::{Path, PathBuf};
 
@@ -6,6 +9,48 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use crate::recording::{Channel, Recording};
+
+/// Fonts tried when `$HOST_SIM_FONT` is not set.
+const FONT_CANDIDATES: &[&str] = &[
+    "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
+    "/usr/share/fonts/TTF/DejaVuSans.ttf",
+    "/usr/share/fonts/dejavu/DejaVuSans.ttf",
+    "/usr/share/fonts/dejavu-sans-fonts/DejaVuSans.ttf",
+    "/usr/share/fonts/truetype/liberation/LiberationSans-Regular.ttf",
+    "/usr/share/fonts/liberation-sans/LiberationSans-Regular.ttf",
+    "/usr/share/fonts/noto/NotoSans-Regular.ttf",
+    "/usr/share/fonts/truetype/noto/NotoSans-Regular.ttf",
+    "/Library/Fonts/Arial.ttf",
+    "/System/Library/Fonts/Supplemental/Arial.ttf",
+    "C:\\Windows\\Fonts\\arial.ttf",
+];
+
+/// Registers the plot font once; the error says where we looked.
+fn ensure_font() -> Result<(), String> {
+    static FONT: std::sync::OnceLock<Result<(), String>> = std::sync::OnceLock::new();
+    FONT.get_or_init(|| {
+        let from_env = std::env::var_os("HOST_SIM_FONT").map(PathBuf::from);
+        let candidates: Vec<PathBuf> = match &from_env {
+            Some(p) => vec![p.clone()],
+            None => FONT_CANDIDATES.iter().map(PathBuf::from).collect(),
+        };
+        for p in &candidates {
+            if let Ok(bytes) = std::fs::read(p) {
+                let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
+                return plotters::style::register_font("sans-serif", FontStyle::Normal, bytes)
+                    .map_err(|_| format!("{}: not a usable TrueType/OpenType font", p.display()));
+            }
+        }
+        Err(match from_env {
+            Some(p) => format!("HOST_SIM_FONT={}: cannot read the font file", p.display()),
+            None => format!(
+                "no font for the plot text found (tried {}); set HOST_SIM_FONT=/path/to/font.ttf",
+                FONT_CANDIDATES.join(", ")
+            ),
+        })
+    })
+    .clone()
+}
 
 #[derive(Debug, thiserror::Error)]
 pub enum PlotError {
@@ -43,6 +88,7 @@ pub fn plot_comparison(
         path: path.to_owned(),
         message,
     };
+    ensure_font().map_err(draw_err)?;
     // Temporary name keeps the extension so the backend picks the right encoder.
     let tmp = tempfile::Builder::new()
         .prefix(".plot.")
@@ -65,7 +111,8 @@ pub fn plot_comparison(
     }
     crate::recording::set_output_permissions(tmp.as_file(), path)
         .map_err(|e| draw_err(e.to_string()))?;
-    tmp.persist(path).map_err(|e| draw_err(e.error.to_string()))?;
+    tmp.persist(path)
+        .map_err(|e| draw_err(e.error.to_string()))?;
     Ok(())
 }
 

@@ -145,6 +145,7 @@ impl Recording {
     /// Parses recording text; `path` is used in error messages.
     pub fn parse(text: &str, path: impl AsRef<Path>) -> Result<Self, RecordingError> {
         let path = path.as_ref();
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         let field_err = |line: u64, field: &str, message: String| RecordingError::Field {
             path: path.to_owned(),
             line,
@@ -304,7 +305,7 @@ impl Recording {
             });
         }
         let dt = rec.sample_period_s();
-        if !(dt > 0.0) {
+        if dt.is_nan() || dt <= 0.0 {
             return Err(field_err(
                 lines[n - 1],
                 "t_s",
@@ -346,7 +347,8 @@ impl Recording {
                 let declared: f64 = v.parse().map_err(|_| {
                     field_err(line, "sample_period_s", format!("not a number: {v:?}"))
                 })?;
-                if !((declared - dt).abs() <= tol) {
+                let d = (declared - dt).abs();
+                if d.is_nan() || d > tol {
                     return Err(field_err(
                         line,
                         "sample_period_s",

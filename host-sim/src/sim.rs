@@ -10,6 +10,7 @@
 use nalgebra::SVector;
 use ode_solvers::{Dopri5, OutputType, System};
 
+use crate::plant::effects::DeadTimeLine;
 use crate::plant::{Plant, PlantState, ValveInputs};
 
 type Vector4 = SVector<f64, 4>;
@@ -54,6 +55,8 @@ pub enum SimError {
     SamplePeriod(f64),
     #[error("invalid valve input at sample {index}: {inputs:?} (openings must be in [0, 1])")]
     Input { index: usize, inputs: ValveInputs },
+    #[error("valve dead time {delay_s} s is not a whole number of sample periods ({dt_s} s)")]
+    DeadTime { delay_s: f64, dt_s: f64 },
 }
 
 struct Rhs<'a> {
@@ -142,7 +145,14 @@ impl<'a> Integrator<'a> {
         // within 1e-9 of it, even after a step that has not reached x_end (then it
         // extrapolates). Ending the segment a hair after the last sample time keeps every
         // output an interpolation inside an accepted step.
-        let x_end = duration_s + (1e-6 * dt_s).max(4e-9);
+        // A single sample needs no dense output: integrate exactly to its end (sparse output,
+        // the last point is the end of the last accepted step).
+        let single = n == 1;
+        let x_end = if single {
+            duration_s
+        } else {
+            duration_s + (1e-6 * dt_s).max(4e-9)
+        };
         let h0 = if self.h_s > 0.0 {
             self.h_s.min(duration_s)
         } else {
@@ -168,7 +178,11 @@ impl<'a> Integrator<'a> {
             h0,
             self.opts.max_steps_per_segment,
             u32::MAX, // stiffness test off: the laminar patch keeps |lambda| h small
-            OutputType::Dense,
+            if single {
+                OutputType::Sparse
+            } else {
+                OutputType::Dense
+            },
         );
         let st = solver.integrate().map_err(|e| SimError::Integration {
             t_s: self.t_s,
@@ -179,6 +193,34 @@ impl<'a> Integrator<'a> {
         self.stats.accepted_steps += u64::from(st.accepted_steps);
         self.stats.rejected_steps += u64::from(st.rejected_steps);
         let ys = solver.y_out();
+        let end = if single {
+            let y = ys.last().expect("sparse output holds the start point");
+            let end = PlantState::from_array([y[0], y[1], y[2], y[3]]);
+            on_sample(&self.state);
+            end
+        } else {
+            self.dense_samples(ys, n, &mut on_sample)?
+        };
+        if !end.to_array().iter().all(|v| v.is_finite()) {
+            return Err(SimError::NonFinite {
+                t_s: self.t_s + duration_s,
+                state: end,
+            });
+        }
+        self.state = end;
+        self.t_s += duration_s;
+        // Mean accepted step of this segment, as the first step of the next one.
+        self.h_s = duration_s / f64::from(st.accepted_steps.max(1));
+        Ok(())
+    }
+
+    /// Sample states 0..n from the dense output (n + 1 points); returns point n.
+    fn dense_samples(
+        &mut self,
+        ys: &[Vector4],
+        n: usize,
+        on_sample: &mut impl FnMut(&PlantState),
+    ) -> Result<PlantState, SimError> {
         if ys.len() < n + 1 {
             return Err(SimError::Integration {
                 t_s: self.t_s,
@@ -197,18 +239,7 @@ impl<'a> Integrator<'a> {
         for x in &self.dense[..n] {
             on_sample(x);
         }
-        let end = self.dense[n];
-        if !end.to_array().iter().all(|v| v.is_finite()) {
-            return Err(SimError::NonFinite {
-                t_s: self.t_s + duration_s,
-                state: end,
-            });
-        }
-        self.state = end;
-        self.t_s += duration_s;
-        // Mean accepted step of this segment, as the first step of the next one.
-        self.h_s = duration_s / f64::from(st.accepted_steps.max(1));
-        Ok(())
+        Ok(self.dense[n])
     }
 
     /// Holds `inputs` for `duration_s` (one control tick) and returns the state at its end.
@@ -252,6 +283,16 @@ pub fn simulate_with_progress(
     if let Some((index, u)) = inputs.iter().enumerate().find(|(_, u)| !valid_inputs(u)) {
         return Err(SimError::Input { index, inputs: *u });
     }
+    let delayed: Vec<ValveInputs>;
+    let inputs = match plant.effects.valve_dead_time_s {
+        None => inputs,
+        Some(delay_s) => {
+            let mut line =
+                DeadTimeLine::new(delay_s, dt_s).ok_or(SimError::DeadTime { delay_s, dt_s })?;
+            delayed = inputs.iter().map(|u| line.push(*u)).collect();
+            &delayed
+        }
+    };
     let mut integ = Integrator::new(plant, plant.initial_state(), *opts);
     let mut states = Vec::with_capacity(inputs.len());
     let mut k = 0;

@@ -43,9 +43,12 @@ fn unknown_key_names_key_and_file() {
 
 #[test]
 fn unknown_table_names_key_and_file() {
-    let text = format!("{}\n[effects.valve_dead_time]\ndelay_s = 0.01\n", nominal_text());
+    let text = format!(
+        "{}\n[effects.braid_hysteresis]\nwidth_n = 5.0\n",
+        nominal_text()
+    );
     let e = load_err(&text);
-    assert!(e.contains("valve_dead_time"), "{e}");
+    assert!(e.contains("braid_hysteresis"), "{e}");
     assert!(e.contains("custom-plant.toml"), "{e}");
 }
 
@@ -63,7 +66,9 @@ fn missing_key_names_key_and_file() {
 
 #[test]
 fn missing_file_names_file() {
-    let e = PlantConfig::load("/nonexistent/dir/plant-xyz.toml").unwrap_err().to_string();
+    let e = PlantConfig::load("/nonexistent/dir/plant-xyz.toml")
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("plant-xyz.toml"), "{e}");
 }
 
@@ -95,9 +100,11 @@ fn effects_tables_switch_on_friction_and_sensor_calibration() {
          [effects.sensor.angle_deg]\noffset = 1.5\ngain = 2.0\n",
         nominal_text()
     );
-    let cfg = PlantConfig::from_toml_str(&text, "with-effects.toml").unwrap_or_else(|e| panic!("{e}"));
+    let cfg =
+        PlantConfig::from_toml_str(&text, "with-effects.toml").unwrap_or_else(|e| panic!("{e}"));
     let plant = Plant::from_config(&cfg);
-    let nominal = Plant::from_config(&PlantConfig::from_toml_str(&nominal_text(), "n.toml").unwrap());
+    let nominal =
+        Plant::from_config(&PlantConfig::from_toml_str(&nominal_text(), "n.toml").unwrap());
 
     // Friction decelerates a joint moving at equal pressures.
     let mut x = plant.initial_state();
@@ -119,7 +126,10 @@ fn effects_tables_switch_on_friction_and_sensor_calibration() {
     // enabled = false switches an effect off without deleting its table.
     let off = text.replace("coulomb_nm = 0.2", "enabled = false\ncoulomb_nm = 0.2");
     let p_off = Plant::from_config(&PlantConfig::from_toml_str(&off, "off.toml").unwrap());
-    assert_eq!(p_off.derivatives(&x, &ValveInputs::CLOSED).velocity_rad_s, without);
+    assert_eq!(
+        p_off.derivatives(&x, &ValveInputs::CLOSED).velocity_rad_s,
+        without
+    );
 }
 
 #[test]
@@ -132,12 +142,111 @@ fn leakage_and_gravity_act_on_the_right_hand_side() {
     let plant = Plant::from_config(&PlantConfig::from_toml_str(&text, "e.toml").unwrap());
     let mut x = plant.initial_state();
     let d = plant.derivatives(&x, &ValveInputs::CLOSED);
-    assert!(d.p1_abs_pa < 0.0 && d.p2_abs_pa < 0.0, "leak lowers the pressures: {d:?}");
+    assert!(
+        d.p1_abs_pa < 0.0 && d.p2_abs_pa < 0.0,
+        "leak lowers the pressures: {d:?}"
+    );
     x.angle_rad = 0.5;
     x.p1_abs_pa = x.p2_abs_pa; // same pressures; remove the spring torque difference
-    let nominal = Plant::from_config(&PlantConfig::from_toml_str(&nominal_text(), "n.toml").unwrap());
+    let nominal =
+        Plant::from_config(&PlantConfig::from_toml_str(&nominal_text(), "n.toml").unwrap());
     let dg = plant.derivatives(&x, &ValveInputs::CLOSED).velocity_rad_s
         - nominal.derivatives(&x, &ValveInputs::CLOSED).velocity_rad_s;
-    let expected = -1.0 * 9.80665 * 0.1 * 0.5f64.sin() / 0.014;
+    let expected = -9.80665 * 0.1 * 0.5f64.sin() / 0.014;
     assert!((dg - expected).abs() < 1e-9, "{dg} vs {expected}");
+}
+
+#[test]
+fn polytropic_exponent_scales_the_pressure_rate() {
+    let text = format!("{}\n[effects.polytropic]\nexponent = 1.4\n", nominal_text());
+    let plant = Plant::from_config(&PlantConfig::from_toml_str(&text, "p.toml").unwrap());
+    let nominal =
+        Plant::from_config(&PlantConfig::from_toml_str(&nominal_text(), "n.toml").unwrap());
+    let u = ValveInputs {
+        u_in1: 1.0,
+        u_ex2: 0.5,
+        ..ValveInputs::CLOSED
+    };
+    let mut x = plant.initial_state();
+    x.velocity_rad_s = 0.3;
+    let a = plant.derivatives(&x, &u);
+    let b = nominal.derivatives(&x, &u);
+    assert!((a.p1_abs_pa - 1.4 * b.p1_abs_pa).abs() < 1e-9 * b.p1_abs_pa.abs());
+    assert!((a.p2_abs_pa - 1.4 * b.p2_abs_pa).abs() < 1e-9 * b.p2_abs_pa.abs());
+    assert_eq!(a.velocity_rad_s, b.velocity_rad_s);
+    let bad = text.replace("exponent = 1.4", "exponent = 0.0");
+    let e = PlantConfig::from_toml_str(&bad, "p.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("effects.polytropic.exponent"), "{e}");
+}
+
+#[test]
+fn valve_dead_time_delays_the_inputs_by_whole_samples() {
+    use host_sim::sim::{simulate, SolverOptions};
+    let text = format!(
+        "{}\n[effects.valve_dead_time]\ndelay_s = 0.003\n",
+        nominal_text()
+    );
+    let delayed = Plant::from_config(&PlantConfig::from_toml_str(&text, "d.toml").unwrap());
+    let nominal =
+        Plant::from_config(&PlantConfig::from_toml_str(&nominal_text(), "n.toml").unwrap());
+    let dt = 0.001;
+    let mut u = vec![ValveInputs::CLOSED; 40];
+    for v in &mut u[5..25] {
+        v.u_in1 = 1.0;
+        v.u_ex2 = 1.0;
+    }
+    let opts = SolverOptions::default();
+    let a = simulate(&delayed, &u, dt, &opts).unwrap().states;
+    let b = simulate(&nominal, &u, dt, &opts).unwrap().states;
+    // The delayed run is the nominal run shifted by 3 samples (valves closed at rest = equilibrium).
+    for (k, x) in a.iter().enumerate().take(8) {
+        assert_eq!(*x, delayed.initial_state(), "sample {k}");
+    }
+    assert!(b[7].p1_abs_pa > b[5].p1_abs_pa);
+    for k in 3..40 {
+        let d = (a[k].p1_abs_pa - b[k - 3].p1_abs_pa).abs();
+        assert!(d < 1.0, "sample {k}: {d} Pa");
+    }
+    // 2.5 samples cannot be represented.
+    let bad = Plant::from_config(
+        &PlantConfig::from_toml_str(&text.replace("0.003", "0.0025"), "d.toml").unwrap(),
+    );
+    let e = simulate(&bad, &u, dt, &opts).unwrap_err().to_string();
+    assert!(e.contains("dead time"), "{e}");
+}
+
+#[test]
+fn sensor_lag_filters_the_sampled_channels() {
+    use host_sim::plant::PlantState;
+    let text = format!(
+        "{}\n[effects.sensor_lag]\nangle_time_constant_s = 0.01\n",
+        nominal_text()
+    );
+    let plant = Plant::from_config(&PlantConfig::from_toml_str(&text, "l.toml").unwrap());
+    let x0 = plant.initial_state();
+    let mut x1 = x0;
+    x1.angle_rad = 1f64.to_radians();
+    let states: Vec<PlantState> = std::iter::once(x0)
+        .chain(std::iter::repeat_n(x1, 3))
+        .collect();
+    let m = plant.measure_series(&states, 0.001);
+    let a = 1.0 - (-0.1f64).exp();
+    assert_eq!(m[0].angle_deg, 0.0);
+    assert!((m[1].angle_deg - a).abs() < 1e-12);
+    assert!((m[2].angle_deg - (a + a * (1.0 - a))).abs() < 1e-12);
+    // Pressures and forces have no lag configured.
+    assert_eq!(m[1].f1_n, plant.measure(&x1).f1_n);
+    let bad = text.replace(
+        "angle_time_constant_s = 0.01",
+        "angle_time_constant_s = -1.0",
+    );
+    let e = PlantConfig::from_toml_str(&bad, "l.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("effects.sensor_lag.angle_time_constant_s"),
+        "{e}"
+    );
 }

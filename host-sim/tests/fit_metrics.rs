@@ -54,5 +54,8 @@ fn compare_rejects_different_lengths_and_times() {
     let b = rec(&[0.0, 0.1], &[0.0, 1.0], None);
     assert!(matches!(compare(&a, &b), Err(FitError::Length(3, 2))));
     let c = rec(&[1.0, 1.1, 1.2], &[0.0, 1.0, 2.0], None);
-    assert!(matches!(compare(&a, &c), Err(FitError::Time { index: 0, .. })));
+    assert!(matches!(
+        compare(&a, &c),
+        Err(FitError::Time { index: 0, .. })
+    ));
 }

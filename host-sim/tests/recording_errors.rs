@@ -4,7 +4,8 @@
 use host_sim::recording::Channel;
 use host_sim::{Recording, RecordingError};
 
-const GOOD: &str = "# plant = reference-1dof.toml\n# sample_period_s = 0.001\n# operator = someone\n\
+const GOOD: &str =
+    "# plant = reference-1dof.toml\n# sample_period_s = 0.001\n# operator = someone\n\
 angle_deg,u_ex2,t_s,u_in2,u_in1,u_ex1,extra_col\n\
 0.5,0,0.000,0,1,0,x\n\
 0.6,0.25,0.001,0,1,0,y\n\
@@ -19,8 +20,14 @@ fn err(text: &str) -> String {
 
 fn assert_names(e: &str, line: u64, field: &str) {
     assert!(e.contains("run-42.csv"), "file not named: {e}");
-    assert!(e.contains(&format!(":{line}:")), "line {line} not named: {e}");
-    assert!(e.contains(&format!("`{field}`")), "field {field} not named: {e}");
+    assert!(
+        e.contains(&format!(":{line}:")),
+        "line {line} not named: {e}"
+    );
+    assert!(
+        e.contains(&format!("`{field}`")),
+        "field {field} not named: {e}"
+    );
 }
 
 #[test]
@@ -118,4 +125,12 @@ fn failed_write_keeps_the_previous_good_file() {
     assert!(good.write(dir.path().join("no/such/dir/out.csv")).is_err());
     assert_eq!(std::fs::read(&path).unwrap(), before);
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+}
+
+#[test]
+fn utf8_bom_and_crlf_are_accepted() {
+    let text = format!("\u{feff}{}", GOOD.replace('\n', "\r\n"));
+    let r = Recording::parse(&text, "run-42.csv").unwrap();
+    assert_eq!(r.len(), 3);
+    assert_eq!(r.meta("plant"), Some("reference-1dof.toml"));
 }

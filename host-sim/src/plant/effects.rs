@@ -2,15 +2,19 @@
 //!
 //! Each effect is its own TOML table under `[effects]`; a table that is absent (as in the
 //! nominal reference files) or has `enabled = false` leaves the nominal model untouched.
-//! Effects plug into one of three places:
+//! Effects plug into one of four places:
 //! - joint torque (right-hand side of J omega' = T + sum of effect torques): [`JointFriction`],
 //!   [`Gravity`];
-//! - chamber flow (right-hand side of the pressure ODE): [`Leakage`];
-//! - the measurement (what a sensor reports for a state): [`SensorCalibration`].
+//! - chamber flow and pressure law (right-hand side of the pressure ODE): [`Leakage`],
+//!   [`Polytropic`];
+//! - the measurement (what a sensor reports for a state): [`SensorCalibration`], and over a
+//!   sampled sequence [`SensorLag`] (applied by [`SensorLagFilter`] once per sample);
+//! - the valve command path (what the valves see of a command): [`ValveDeadTime`], applied by
+//!   [`DeadTimeLine`] once per sample.
 //!
 //! Not implemented yet (the table name is rejected as unknown, so a file asking for it fails
-//! loudly instead of being silently simulated without it): braid hysteresis, sensor lag,
-//! valve dead time, supply pressure drop, polytropic pressure dynamics.
+//! loudly instead of being silently simulated without it): braid hysteresis,
+//! supply pressure drop.
 
 use std::path::Path;
 
@@ -18,6 +22,7 @@ use serde::Deserialize;
 
 use crate::config::ConfigError;
 use crate::plant::valve::Iso6358Valve;
+use crate::plant::ValveInputs;
 
 fn enabled_default() -> bool {
     true
@@ -30,7 +35,124 @@ pub struct EffectsConfig {
     pub joint_friction: Option<JointFriction>,
     pub gravity: Option<Gravity>,
     pub leakage: Option<Leakage>,
+    pub polytropic: Option<Polytropic>,
+    pub valve_dead_time: Option<ValveDeadTime>,
     pub sensor: Option<SensorCalibration>,
+    pub sensor_lag: Option<SensorLag>,
+}
+
+/// `[effects.sensor_lag]`: first-order sensor dynamics per channel group, as the sensor's
+/// own sampled low-pass: y_k = y_{k-1} + a (x_k - y_{k-1}), a = 1 - exp(-dt / tau), started
+/// at the first sample. An absent time constant means no lag on that group.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorLag {
+    #[serde(default = "enabled_default")]
+    pub enabled: bool,
+    /// angle_deg.
+    pub angle_time_constant_s: Option<f64>,
+    /// p1_kpa, p2_kpa.
+    pub pressure_time_constant_s: Option<f64>,
+    /// f1_n, f2_n.
+    pub force_time_constant_s: Option<f64>,
+}
+
+/// The running state of [`SensorLag`] for one sample period.
+#[derive(Debug, Clone)]
+pub struct SensorLagFilter {
+    /// Filter gains of angle, p1, p2, f1, f2 (1 = no lag).
+    gain: [f64; 5],
+    y: Option<[f64; 5]>,
+}
+
+impl SensorLagFilter {
+    pub fn new(lag: &SensorLag, dt_s: f64) -> Self {
+        let a = |tau: Option<f64>| match tau {
+            Some(t) if t > 0.0 => 1.0 - (-dt_s / t).exp(),
+            _ => 1.0,
+        };
+        let (ang, p, f) = (
+            a(lag.angle_time_constant_s),
+            a(lag.pressure_time_constant_s),
+            a(lag.force_time_constant_s),
+        );
+        Self {
+            gain: [ang, p, p, f, f],
+            y: None,
+        }
+    }
+
+    /// Feeds the undelayed channels of one sample (angle, p1, p2, f1, f2); returns the lagged ones.
+    pub fn push(&mut self, x: [f64; 5]) -> [f64; 5] {
+        let y = match self.y {
+            None => x,
+            Some(mut y) => {
+                for i in 0..5 {
+                    y[i] += self.gain[i] * (x[i] - y[i]);
+                }
+                y
+            }
+        };
+        self.y = Some(y);
+        y
+    }
+}
+
+/// `[effects.valve_dead_time]`: every valve applies a command `delay_s` later (valves closed
+/// before the first delayed command arrives). The delay must be a whole number of sample
+/// periods of the run it is used with.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ValveDeadTime {
+    #[serde(default = "enabled_default")]
+    pub enabled: bool,
+    pub delay_s: f64,
+}
+
+/// A delay line of whole samples between valve commands and valve openings.
+#[derive(Debug, Clone)]
+pub struct DeadTimeLine {
+    fifo: std::collections::VecDeque<ValveInputs>,
+}
+
+impl DeadTimeLine {
+    /// A line for `delay_s` at sample period `dt_s`; `None` when the delay is not a whole
+    /// number of samples (within 1e-6 of a sample).
+    pub fn new(delay_s: f64, dt_s: f64) -> Option<Self> {
+        let samples = delay_s / dt_s;
+        let n = samples.round();
+        if !(n >= 0.0 && (samples - n).abs() <= 1e-6 && n < 1e9) {
+            return None;
+        }
+        Some(Self {
+            fifo: std::iter::repeat_n(ValveInputs::CLOSED, n as usize).collect(),
+        })
+    }
+
+    /// Delay in samples.
+    pub fn samples(&self) -> usize {
+        self.fifo.len()
+    }
+
+    /// Feeds the command of this sample; returns the opening the valves apply over it.
+    pub fn push(&mut self, command: ValveInputs) -> ValveInputs {
+        if self.fifo.is_empty() {
+            return command;
+        }
+        self.fifo.push_back(command);
+        self.fifo.pop_front().expect("non-empty")
+    }
+}
+
+/// `[effects.polytropic]`: polytropic instead of isothermal chamber process (seed 004 eq. 3
+/// with the standard flow at the reference temperature): dp/dt = n (p_atm Q - p dV/dt) / V.
+/// `exponent = 1` is the nominal isothermal (Boyle-Mariotte) model, 1.4 adiabatic air.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Polytropic {
+    #[serde(default = "enabled_default")]
+    pub enabled: bool,
+    pub exponent: f64,
 }
 
 /// `[effects.joint_friction]`: Coulomb + viscous + Stribeck friction torque on the joint
@@ -145,13 +267,33 @@ pub struct SensorCalibration {
 }
 
 /// The enabled effects, in the form the right-hand side uses.
-#[derive(Debug, Clone, Default, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Effects {
     pub joint_friction: Option<JointFriction>,
     pub gravity: Option<Gravity>,
     pub leak: Option<Iso6358Valve>,
+    /// Valve dead time in seconds, if enabled.
+    pub valve_dead_time_s: Option<f64>,
+    /// Polytropic exponent n of the pressure law (1 when the effect is off).
+    pub pressure_exponent: f64,
+    /// Sensor lag, if enabled.
+    pub sensor_lag: Option<SensorLag>,
     /// Calibrations of angle_deg, p1_kpa, p2_kpa, f1_n, f2_n (identity when absent).
     pub sensor: Option<[ChannelCalibration; 5]>,
+}
+
+impl Default for Effects {
+    fn default() -> Self {
+        Self {
+            joint_friction: None,
+            gravity: None,
+            leak: None,
+            valve_dead_time_s: None,
+            pressure_exponent: 1.0,
+            sensor_lag: None,
+            sensor: None,
+        }
+    }
 }
 
 impl Effects {
@@ -171,6 +313,17 @@ impl Effects {
                     valve_laminar_ratio,
                 )
             }),
+            sensor_lag: c.sensor_lag.clone().filter(|l| l.enabled),
+            valve_dead_time_s: c
+                .valve_dead_time
+                .as_ref()
+                .filter(|d| d.enabled)
+                .map(|d| d.delay_s),
+            pressure_exponent: c
+                .polytropic
+                .as_ref()
+                .filter(|p| p.enabled)
+                .map_or(1.0, |p| p.exponent),
             sensor: c.sensor.as_ref().filter(|s| s.enabled).map(|s| {
                 [
                     s.angle_deg.unwrap_or(id),
@@ -269,6 +422,35 @@ impl EffectsConfig {
                     "must be >= 0".into(),
                 ));
             }
+        }
+        if let Some(d) = &self.valve_dead_time {
+            check("effects.valve_dead_time.delay_s", d.delay_s, None)?;
+            if d.delay_s < 0.0 {
+                return Err(bad(
+                    "effects.valve_dead_time.delay_s",
+                    format!("must be >= 0, got {}", d.delay_s),
+                ));
+            }
+        }
+        if let Some(l) = &self.sensor_lag {
+            for (key, tau) in [
+                ("angle_time_constant_s", l.angle_time_constant_s),
+                ("pressure_time_constant_s", l.pressure_time_constant_s),
+                ("force_time_constant_s", l.force_time_constant_s),
+            ] {
+                if let Some(t) = tau {
+                    check(&format!("effects.sensor_lag.{key}"), t, None)?;
+                    if t < 0.0 {
+                        return Err(bad(
+                            &format!("effects.sensor_lag.{key}"),
+                            format!("must be >= 0, got {t}"),
+                        ));
+                    }
+                }
+            }
+        }
+        if let Some(p) = &self.polytropic {
+            check("effects.polytropic.exponent", p.exponent, Some(0.0))?;
         }
         if let Some(s) = &self.sensor {
             for (name, c) in [

@@ -142,7 +142,7 @@ impl Plant {
         self.initial
     }
 
-    /// Muscle tensions F1, F2 [N] for a state.
+    /// Muscle tensions F1, F2 in newtons for a state.
     #[inline(always)]
     pub fn tensions_n(&self, x: &PlantState) -> [f64; 2] {
         let chi = self.joint.contractions(x.angle_rad);
@@ -168,16 +168,22 @@ impl Plant {
         for i in 0..2 {
             let pg = p[i] - self.p_atm_pa;
             tension[i] = self.muscle.tension_n(pg, chi[i], dchi[i]);
-            let q = u_in[i] * self.valve.flow_m3_s(self.p_supply_abs_pa, p[i])
-                - u_ex[i] * self.valve.flow_m3_s(p[i], self.p_atm_pa)
-                + self.effects.chamber_flow_m3_s(p[i], self.p_atm_pa);
-            dp[i] = pressure::pressure_rate_pa_s(
-                self.p_atm_pa,
-                p[i],
-                q,
-                self.muscle.volume_m3(chi[i]),
-                self.muscle.volume_rate_m3_s(chi[i], dchi[i]),
-            );
+            // A closed valve contributes nothing (skip the flow function).
+            let mut q = self.effects.chamber_flow_m3_s(p[i], self.p_atm_pa);
+            if u_in[i] != 0.0 {
+                q += u_in[i] * self.valve.flow_m3_s(self.p_supply_abs_pa, p[i]);
+            }
+            if u_ex[i] != 0.0 {
+                q -= u_ex[i] * self.valve.flow_m3_s(p[i], self.p_atm_pa);
+            }
+            dp[i] = self.effects.pressure_exponent
+                * pressure::pressure_rate_pa_s(
+                    self.p_atm_pa,
+                    p[i],
+                    q,
+                    self.muscle.volume_m3(chi[i]),
+                    self.muscle.volume_rate_m3_s(chi[i], dchi[i]),
+                );
         }
         let torque = self.joint.muscle_torque_nm(tension)
             + self.effects.joint_torque_nm(x.angle_rad, x.velocity_rad_s);
@@ -189,16 +195,49 @@ impl Plant {
         }
     }
 
-    /// The recorded channels for a state, with the sensor calibration effect if enabled.
+    /// The recorded channels of a sampled run (`states[k]` at `t_k = k dt`), with the
+    /// sensor effects (lag, then calibration) if enabled.
+    pub fn measure_series(&self, states: &[PlantState], dt_s: f64) -> Vec<Measurement> {
+        match &self.effects.sensor_lag {
+            None => states.iter().map(|x| self.measure(x)).collect(),
+            Some(lag) => {
+                let mut filter = effects::SensorLagFilter::new(lag, dt_s);
+                states
+                    .iter()
+                    .map(|x| {
+                        let y = filter.push(self.true_channels(x).to_array());
+                        self.calibrate(Measurement {
+                            angle_deg: y[0],
+                            p1_kpa: y[1],
+                            p2_kpa: y[2],
+                            f1_n: y[3],
+                            f2_n: y[4],
+                        })
+                    })
+                    .collect()
+            }
+        }
+    }
+
+    /// The recorded channels for a state, with the sensor calibration effect if enabled
+    /// (sensor lag needs the history: see [`Self::measure_series`]).
     pub fn measure(&self, x: &PlantState) -> Measurement {
+        self.calibrate(self.true_channels(x))
+    }
+
+    /// The physical values of the recorded channels (PLANT.md "Measured channels").
+    pub fn true_channels(&self, x: &PlantState) -> Measurement {
         let f = self.tensions_n(x);
-        let m = Measurement {
+        Measurement {
             angle_deg: x.angle_rad.to_degrees(),
             p1_kpa: (x.p1_abs_pa - self.p_atm_pa) / 1000.0,
             p2_kpa: (x.p2_abs_pa - self.p_atm_pa) / 1000.0,
             f1_n: f[0],
             f2_n: f[1],
-        };
+        }
+    }
+
+    fn calibrate(&self, m: Measurement) -> Measurement {
         match &self.effects.sensor {
             None => m,
             Some(c) => Measurement {

@@ -16,6 +16,8 @@ pub struct Iso6358Valve {
     pub laminar_ratio: f64,
     /// phi(l) / (1 - l), slope of the laminar patch (precomputed).
     laminar_slope: f64,
+    /// 1 / (1 - b_c) (precomputed).
+    inv_subsonic_span: f64,
 }
 
 impl Iso6358Valve {
@@ -29,6 +31,7 @@ impl Iso6358Valve {
             critical_ratio,
             laminar_ratio,
             laminar_slope: 0.0,
+            inv_subsonic_span: 1.0 / (1.0 - critical_ratio),
         };
         v.laminar_slope = v.subsonic_phi(laminar_ratio) / (1.0 - laminar_ratio);
         v
@@ -36,7 +39,7 @@ impl Iso6358Valve {
 
     #[inline(always)]
     fn subsonic_phi(&self, s: f64) -> f64 {
-        let x = (s - self.critical_ratio) / (1.0 - self.critical_ratio);
+        let x = (s - self.critical_ratio) * self.inv_subsonic_span;
         (1.0 - x * x).max(0.0).sqrt()
     }
 
