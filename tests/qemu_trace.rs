@@ -38,11 +38,8 @@ fn parse_tick(line: &str) -> Option<TickRecord> {
     (n == WORDS).then_some(TickRecord { tick, words, hash })
 }
 
-#[test]
-fn qemu_run_matches_host_run_bit_for_bit() {
-    let host = host_records();
-    assert_eq!(host.len(), TraceRunner::len());
-
+/// True when QEMU and defmt-print are installed; panics in CI (CI=true) when they are not.
+fn qemu_available() -> bool {
     let missing: Vec<&str> = ["qemu-system-arm", "defmt-print"]
         .into_iter()
         .filter(|t| !have(t))
@@ -56,18 +53,35 @@ fn qemu_run_matches_host_run_bit_for_bit() {
             panic!("{msg}: required in CI");
         }
         eprintln!("SKIPPED {msg}");
-        return;
+        return false;
     }
+    true
+}
 
-    // `cargo qemu` exactly as a developer runs it (alias in .cargo/config.toml).
+/// `cargo qemu [-- qemu args]` exactly as a developer runs it (alias in .cargo/config.toml).
+fn cargo_qemu(qemu_args: &[&str]) -> std::process::Output {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let out = Command::new(cargo)
-        .arg("qemu")
-        .current_dir(root)
+    let mut cmd = Command::new(cargo);
+    cmd.arg("qemu");
+    if !qemu_args.is_empty() {
+        cmd.arg("--").args(qemu_args);
+    }
+    cmd.current_dir(root)
         .env("DEFMT_PRINT_ARGS", "--log-format {s}")
+        .env("QEMU_TIMEOUT_S", "60")
         .output()
-        .expect("cannot start cargo qemu");
+        .expect("cannot start cargo qemu")
+}
+
+#[test]
+fn qemu_run_matches_host_run_bit_for_bit() {
+    let host = host_records();
+    assert_eq!(host.len(), TraceRunner::len());
+    if !qemu_available() {
+        return;
+    }
+    let out = cargo_qemu(&[]);
     let stdout = String::from_utf8_lossy(&out.stdout);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
@@ -101,6 +115,29 @@ fn qemu_run_matches_host_run_bit_for_bit() {
         "qemu_trace: {} ticks identical, digest {digest:08x}",
         host.len()
     );
+}
+
+#[test]
+fn qemu_panic_and_hardfault_exit_with_status_1() {
+    if !qemu_available() {
+        return;
+    }
+    for fault in ["panic", "hardfault"] {
+        let out = cargo_qemu(&["-append", fault]);
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert_eq!(
+            out.status.code(),
+            Some(1),
+            "{fault}: expected exit status 1, got {}:\n{stdout}\n{}",
+            out.status,
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(stdout.contains("HardFault at pc="), "{fault}:\n{stdout}");
+        assert!(
+            !stdout.contains("trace done"),
+            "{fault}: the trace must not run"
+        );
+    }
 }
 
 #[test]

@@ -9,6 +9,9 @@
 //!    `qemu-system-arm -icount shift=0` virtual time advances exactly with the instructions
 //!    executed, so counts convert to instructions; without `-icount` they are meaningless.
 //!
+//! Fault injection (tests/qemu_trace.rs checks the exit status): `cargo qemu -- -append panic`
+//! panics, `-append hardfault` reads unmapped memory; both must end with exit status 1.
+//!
 //! defmt goes out over semihosting (decode with `defmt-print -e <elf>`, which
 //! `scripts/qemu-run.sh` does). The exit status reaches QEMU through the semihosting exit call:
 //! 0 at the end, 1 on a panic or a HardFault.
@@ -41,18 +44,18 @@ extern "C" {
 }
 
 fn stack_bounds() -> (usize, usize) {
-    // SAFETY: only the addresses of the linker symbols are taken.
-    unsafe {
-        (
-            core::ptr::addr_of!(_stack_end) as usize,
-            core::ptr::addr_of!(_stack_start) as usize,
-        )
-    }
+    // Only the addresses of the linker symbols are taken.
+    (
+        core::ptr::addr_of!(_stack_end) as usize,
+        core::ptr::addr_of!(_stack_start) as usize,
+    )
 }
 
 /// Paints the free stack (from the end of .bss/.uninit up to just below the current frame).
+/// Returns the bytes from the top of RAM to the painted region: a measured high-water mark
+/// below this figure only says "at most this much".
 #[inline(never)]
-fn paint_stack() {
+fn paint_stack() -> u32 {
     let (lo, _) = stack_bounds();
     let sp = cortex_m::register::msp::read() as usize;
     let hi = sp - PAINT_MARGIN_WORDS * 4;
@@ -62,6 +65,8 @@ fn paint_stack() {
         unsafe { core::ptr::write_volatile(p as *mut u32, PAINT) };
         p += 4;
     }
+    let (_, top) = stack_bounds();
+    (top - hi) as u32
 }
 
 /// Bytes of stack ever used: from the top of RAM down to the lowest overwritten painted word.
@@ -165,10 +170,42 @@ fn bench(syst: &mut SYST) {
     defmt::info!("bench force_law_fixed unavailable");
 }
 
+/// The fault requested on the semihosting command line (`-append panic|hardfault`), if any.
+#[inline(never)]
+fn injected_fault() -> Option<&'static str> {
+    let mut buf = [0u8; 256];
+    let mut block = [buf.as_mut_ptr() as usize, buf.len()];
+    // SAFETY: SYS_GET_CMDLINE writes at most `block[1]` bytes into `buf` and the length back
+    // into `block[1]`; both outlive the call.
+    let r = unsafe {
+        cortex_m_semihosting::syscall1(
+            cortex_m_semihosting::nr::GET_CMDLINE,
+            block.as_mut_ptr() as usize,
+        )
+    };
+    if r != 0 || block[1] > buf.len() {
+        return None;
+    }
+    let line = &buf[..block[1]];
+    ["panic", "hardfault"]
+        .into_iter()
+        .find(|w| line.ends_with(w.as_bytes()))
+}
+
 #[entry]
 fn main() -> ! {
-    paint_stack();
+    let unpainted = paint_stack();
     let mut cp = cortex_m::Peripherals::take().unwrap();
+    match injected_fault() {
+        Some("panic") => panic!("injected panic"),
+        Some(_) => {
+            defmt::warn!("injecting a HardFault (read of unmapped memory)");
+            // SAFETY: deliberately faulting read (0xF000_0000 is unmapped on the STM32F405).
+            let v = unsafe { core::ptr::read_volatile(0xF000_0000 as *const u32) };
+            defmt::error!("unmapped read returned {=u32:x}", v);
+        }
+        None => {}
+    }
 
     defmt::info!(
         "pam-firmware qemu: replaying {=usize} ticks at {=f32} Hz",
@@ -194,7 +231,11 @@ fn main() -> ! {
     bench(&mut cp.SYST);
 
     // After everything ran: the deepest the stack ever got (main, the tick, defmt, bench).
-    defmt::info!("stack_used_bytes={=u32}", stack_used_bytes());
+    defmt::info!(
+        "stack_used_bytes={=u32} unpainted_top_bytes={=u32}",
+        stack_used_bytes(),
+        unpainted
+    );
     debug::exit(debug::EXIT_SUCCESS);
     loop {
         cortex_m::asm::bkpt();

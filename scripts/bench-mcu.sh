@@ -1,0 +1,92 @@
+#!/usr/bin/env bash
+# MCU cost figures (a benchmark, not a test): instructions per control tick and per force-law
+# evaluation on the Cortex-M4F build under QEMU, flash / static RAM of the QEMU and board
+# images, worst-case stack.
+#
+# Method
+# - Instructions: the QEMU image (src/bin/qemu.rs) reads SysTick (core clock) around each call.
+#   Under `-icount shift=0` QEMU advances virtual time by exactly 1 ns per executed instruction,
+#   so SysTick counts are proportional to instructions; the factor is calibrated in the same
+#   run on an asm loop of a known instruction count (2 x 100000), and the cost of an empty
+#   measurement is subtracted. Resolution: one SysTick count (about 6 instructions) per
+#   measurement; the mean over all armed ticks of the trace is finer than that.
+# - Flash = .vector_table + .text + .rodata + .data (load image); static RAM = .data + .bss +
+#   .uninit (llvm-size from rustup's llvm-tools).
+# - Stack: the QEMU image paints the free RAM at start-up and reports the deepest overwritten
+#   word after the trace and the benchmarks ran (stack painting, measured at run time).
+# Exit status 1 if a target is missed (<= 1000 instructions per f32 tick, <= 32 KiB flash,
+# <= 8 KiB static RAM).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+sysroot=$(rustc --print sysroot)
+host=$(rustc -vV | sed -n 's/^host: //p')
+llvm_size="$sysroot/lib/rustlib/$host/bin/llvm-size"
+[ -x "$llvm_size" ] || { echo "bench-mcu.sh: llvm-size missing: rustup component add llvm-tools" >&2; exit 2; }
+
+cargo build -q -p pam-firmware --bin qemu --features pam-firmware/firmware --release --target thumbv7em-none-eabihf
+cargo flash-build -q
+qemu_elf=target/thumbv7em-none-eabihf/release/qemu
+board_elf=target/thumbv7em-none-eabihf/release/board
+
+log=$(QEMU_EXTRA_ARGS="-icount shift=0" DEFMT_PRINT_ARGS="--log-format {s}" \
+  scripts/qemu-run.sh "$qemu_elf" | grep -v '^tick=')
+
+field() { # field <line-prefix> <key>
+  grep "^$1" <<<"$log" | tr ' ' '\n' | sed -n "s/^$2=//p" | head -1
+}
+cal_insns=$(field "bench calib" insns)
+cal_counts=$(field "bench calib" counts)
+empty=$(field "bench calib" empty_counts)
+tick_n=$(field "bench tick" n)
+tick_sum=$(field "bench tick" sum_counts)
+tick_max=$(field "bench tick" max_counts)
+fl_n=$(field "bench force_law_f32" n)
+fl_sum=$(field "bench force_law_f32" sum_counts)
+fl_max=$(field "bench force_law_f32" max_counts)
+stack=$(grep -o 'stack_used_bytes=[0-9]*' <<<"$log" | cut -d= -f2)
+unpainted=$(grep -o 'unpainted_top_bytes=[0-9]*' <<<"$log" | cut -d= -f2)
+if [ "${stack:-0}" -le "${unpainted:-0}" ]; then stack="<= $unpainted"; fi
+for v in cal_insns cal_counts empty tick_n tick_sum tick_max fl_n fl_sum fl_max stack; do
+  [ -n "${!v}" ] || { echo "bench-mcu.sh: no '$v' in the QEMU output:" >&2; echo "$log" >&2; exit 2; }
+done
+
+read -r tick_mean tick_worst fl_mean fl_worst k < <(awk -v ci="$cal_insns" -v cc="$cal_counts" -v e="$empty" \
+  -v tn="$tick_n" -v ts="$tick_sum" -v tm="$tick_max" -v fn="$fl_n" -v fs="$fl_sum" -v fm="$fl_max" 'BEGIN {
+    k = ci / (cc - e);
+    printf "%.0f %.0f %.0f %.0f %.5f\n", (ts / tn - e) * k, (tm - e) * k, (fs / fn - e) * k, (fm - e) * k, k }')
+
+sizes() { # sizes <elf> -> "flash ram"
+  "$llvm_size" -A "$1" | awk '
+    $1 == ".vector_table" || $1 == ".text" || $1 == ".rodata" { f += $2 }
+    $1 == ".data" { f += $2; r += $2 }
+    $1 == ".bss" || $1 == ".uninit" { r += $2 }
+    END { print f, r }'
+}
+read -r qemu_flash qemu_ram < <(sizes "$qemu_elf")
+read -r board_flash board_ram < <(sizes "$board_elf")
+
+fail=0
+check() { # check <value> <limit>
+  if [ "$1" -le "$2" ]; then echo "ok"; else echo "OVER"; fail=1; fi
+}
+fixed_note=$(grep -o 'force_law_fixed.*' <<<"$log" || true)
+cat <<REPORT
+## MCU cost (scripts/bench-mcu.sh, $(qemu-system-arm --version | head -1 | sed 's/ *(.*//'), netduinoplus2, -icount shift=0)
+
+calibration: $cal_insns instructions = $((cal_counts - empty)) SysTick counts (k = $k instructions/count)
+
+| figure | measured | target | |
+|---|---|---|---|
+| full f32 control tick, mean over $tick_n armed ticks | $tick_mean instructions | <= 1000 | $(check "$tick_mean" 1000) |
+| full f32 control tick, worst tick of the trace | $tick_worst instructions | | |
+| force law alone (f32, one muscle), mean over $fl_n calls | $fl_mean instructions | | |
+| force law alone (f32), worst call | $fl_worst instructions | | |
+| force law fixed point | ${fixed_note:-not measured} | | |
+| QEMU image flash | $qemu_flash B | <= 32768 | $(check "$qemu_flash" 32768) |
+| QEMU image static RAM | $qemu_ram B | <= 8192 | $(check "$qemu_ram" 8192) |
+| board image flash | $board_flash B | <= 32768 | $(check "$board_flash" 32768) |
+| board image static RAM | $board_ram B | <= 8192 | $(check "$board_ram" 8192) |
+| worst-case stack (QEMU image, painted) | $stack B | | |
+REPORT
+exit $fail
