@@ -22,7 +22,10 @@ cd "$(dirname "$0")/.."
 sysroot=$(rustc --print sysroot)
 host=$(rustc -vV | sed -n 's/^host: //p')
 llvm_size="$sysroot/lib/rustlib/$host/bin/llvm-size"
-[ -x "$llvm_size" ] || { echo "bench-mcu.sh: llvm-size missing: rustup component add llvm-tools" >&2; exit 2; }
+if [ ! -x "$llvm_size" ]; then
+  llvm_size=$(command -v arm-none-eabi-size || true) # same -A output (Debian binutils-arm-none-eabi)
+  [ -n "$llvm_size" ] || { echo "bench-mcu.sh: no size tool: run scripts/setup.sh" >&2; exit 2; }
+fi
 
 cargo build -q -p pam-firmware --bin qemu --features pam-firmware/firmware --release --target thumbv7em-none-eabihf
 cargo flash-build -q
