@@ -117,7 +117,9 @@ fn main() {
     sensor_trace("traces/qemu_sensor_trace.csv");
 
     // Bare-metal firmware binaries only (the `firmware` feature gates them): linker scripts (cortex-m-rt's link.x, defmt's defmt.x).
-    if env::var("CARGO_CFG_TARGET_OS").as_deref() == Ok("none") && env::var("CARGO_FEATURE_FIRMWARE").is_ok() {
+    if env::var("CARGO_CFG_TARGET_OS").as_deref() == Ok("none")
+        && env::var("CARGO_FEATURE_FIRMWARE").is_ok()
+    {
         let dir = PathBuf::from(env::var("CARGO_MANIFEST_DIR").unwrap());
         println!("cargo:rustc-link-search={}", dir.display());
         println!("cargo:rerun-if-changed=memory.x");
@@ -170,11 +172,18 @@ fn sensor_trace(path: &str) {
         let int = |j: usize, lo: i64, hi: i64, optional: bool| -> Option<i64> {
             let f = fields[j];
             if f.is_empty() {
-                assert!(optional, "{path}:{line_no}: field `{}` is required", COLS[j]);
+                assert!(
+                    optional,
+                    "{path}:{line_no}: field `{}` is required",
+                    COLS[j]
+                );
                 return None;
             }
             let v: i64 = f.parse().unwrap_or_else(|e| {
-                panic!("{path}:{line_no}: field `{}`: `{f}` is not an integer: {e}", COLS[j])
+                panic!(
+                    "{path}:{line_no}: field `{}`: `{f}` is not an integer: {e}",
+                    COLS[j]
+                )
             });
             assert!(
                 (lo..=hi).contains(&v),

@@ -6,13 +6,13 @@
 //! [`TickRecord::words`]) must be bit-for-bit identical between the Cortex-M4F build and the
 //! host build.
 
-// The control tick driven by the trace. Switching to the real one (branch `ctrl`, src/tick.rs)
-// is this one line: `use crate::tick;`.
-use crate::tick_standin as tick;
+// The control tick driven by the trace: the real one of `tick_contract.md` (src/tick.rs).
+use crate::tick;
 
 pub use tick::{ControlTick, ControllerConfig, SensorFrame, Setpoint, TickOutput};
 
-use crate::sensor_scaling::{EncoderScaling, PressureScaling};
+use crate::sensors::PressureScaling;
+use crate::wiring;
 
 /// One tick of raw sensor data.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -53,13 +53,14 @@ pub struct TickRecord {
 }
 
 impl TraceRow {
-    /// The sensor frame this row delivers.
+    /// The sensor frame this row delivers through the reference wiring's scaling.
     #[inline]
-    pub fn frame(&self, p: &PressureScaling, e: &EncoderScaling) -> SensorFrame {
+    pub fn frame(&self, p: &PressureScaling) -> SensorFrame {
         SensorFrame {
-            p1_gauge_pa: (self.p1_adc != MISSING_ADC).then(|| p.gauge_pa(self.p1_adc)),
-            p2_gauge_pa: (self.p2_adc != MISSING_ADC).then(|| p.gauge_pa(self.p2_adc)),
-            angle_rad: (self.encoder != MISSING_ENCODER).then(|| e.angle_rad(self.encoder as i32)),
+            p1_gauge_pa: (self.p1_adc != MISSING_ADC).then(|| p.to_gauge_pa(self.p1_adc as u32)),
+            p2_gauge_pa: (self.p2_adc != MISSING_ADC).then(|| p.to_gauge_pa(self.p2_adc as u32)),
+            angle_rad: (self.encoder != MISSING_ENCODER)
+                .then(|| wiring::angle_rad(self.encoder as i32)),
         }
     }
 
@@ -109,7 +110,6 @@ pub fn output_words(o: &TickOutput) -> [u32; WORDS] {
 pub struct TraceRunner {
     tick: ControlTick,
     pressure: PressureScaling,
-    encoder: EncoderScaling,
     next: usize,
     hash: u32,
     dt_s: f32,
@@ -126,8 +126,7 @@ impl TraceRunner {
     pub fn new() -> Self {
         TraceRunner {
             tick: ControlTick::new(ControllerConfig::reference(TRACE_TICK_HZ)),
-            pressure: PressureScaling::REFERENCE,
-            encoder: EncoderScaling::REFERENCE,
+            pressure: wiring::pressure_scaling(),
             next: 0,
             hash: FNV_OFFSET,
             dt_s: 1.0 / TRACE_TICK_HZ,
@@ -143,7 +142,7 @@ impl TraceRunner {
     #[inline]
     pub fn step(&mut self) -> Option<TickRecord> {
         let row = SENSOR_TRACE.get(self.next)?;
-        let frame = row.frame(&self.pressure, &self.encoder);
+        let frame = row.frame(&self.pressure);
         let out = self.tick.step(&frame, &row.setpoint(), self.dt_s);
         let words = output_words(&out);
         for w in words {

@@ -28,10 +28,10 @@ use panic_probe as _;
 
 use pam_firmware::constants::FORCE_LAW;
 use pam_firmware::geometry::JointGeometry;
-use pam_firmware::sensor_scaling::{EncoderScaling, PressureScaling};
 use pam_firmware::trace::{
     ControlTick, ControllerConfig, TraceRunner, SENSOR_TRACE, TRACE_TICK_HZ,
 };
+use pam_firmware::wiring;
 
 /// Pattern of the painted (never used) stack.
 const PAINT: u32 = 0xDEAD_C0DE;
@@ -121,13 +121,12 @@ fn bench(syst: &mut SYST) {
     );
 
     // Full control tick, each tick measured alone (frame built before the measurement).
-    let p = PressureScaling::REFERENCE;
-    let e = EncoderScaling::REFERENCE;
+    let p = wiring::pressure_scaling();
     let dt = 1.0 / TRACE_TICK_HZ;
     let mut tick = ControlTick::new(ControllerConfig::reference(TRACE_TICK_HZ));
     let (mut sum_armed, mut n_armed, mut max_any) = (0u32, 0u32, 0u32);
     for row in SENSOR_TRACE.iter() {
-        let frame = black_box(row.frame(&p, &e));
+        let frame = black_box(row.frame(&p));
         let sp = black_box(row.setpoint());
         let (c, out) = measure(|| tick.step(&frame, &sp, black_box(dt)));
         let out = black_box(out);
@@ -148,7 +147,7 @@ fn bench(syst: &mut SYST) {
     let g = JointGeometry::REFERENCE;
     let (mut sum, mut n, mut max) = (0u32, 0u32, 0u32);
     for row in SENSOR_TRACE.iter() {
-        let f = row.frame(&p, &e);
+        let f = row.frame(&p);
         let (Some(p1), Some(a)) = (f.p1_gauge_pa, f.angle_rad) else {
             continue;
         };

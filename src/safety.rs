@@ -1,0 +1,300 @@
+//! Safety state machine: latched fault codes, the defined safe valve state, and the
+//! pressure set-point limit.
+//!
+//! ```text
+//!            fault (any)                      reset() && condition gone
+//!   Armed ----------------> Faulted(code) ---------------------------> Armed
+//!     ^                         |  reset() while the condition persists: stays Faulted
+//!     +-------------------------+
+//! ```
+//!
+//! - A fault forces the safe valve command ([`SafeState::Hold`]: all valves closed, or
+//!   [`SafeState::Vent`]: exhaust valves fully open) in the same tick it is raised.
+//! - The first fault is latched; later faults do not overwrite it (the root cause stays
+//!   visible). Nothing re-arms without an explicit [`SafetyMonitor::reset`].
+//! - Pressure set-points pass through [`clamp_pressure_setpoint_pa`]: never above
+//!   [`crate::P_MUSCLE_MAX_GAUGE_PA`] (600 kPa gauge), never below 0, never NaN.
+
+use crate::tick::ValveCommand;
+use crate::P_MUSCLE_MAX_GAUGE_PA;
+
+/// Latched fault codes. The numbers are stable (they appear in logs and recordings).
+#[repr(u8)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FaultCode {
+    /// Muscle 1 pressure is NaN or infinite.
+    PressureInvalid1 = 1,
+    /// Muscle 2 pressure is NaN or infinite.
+    PressureInvalid2 = 2,
+    /// Joint angle is NaN or infinite.
+    AngleInvalid = 3,
+    /// Muscle 1 pressure outside the sensor range.
+    PressureOutOfRange1 = 4,
+    /// Muscle 2 pressure outside the sensor range.
+    PressureOutOfRange2 = 5,
+    /// Joint angle outside the allowed range (joint limits).
+    AngleOutOfRange = 6,
+    /// No new muscle 1 pressure sample for too long.
+    PressureStale1 = 7,
+    /// No new muscle 2 pressure sample for too long.
+    PressureStale2 = 8,
+    /// No new angle sample for too long.
+    AngleStale = 9,
+    /// Muscle 1 pressure jumped faster than physically possible.
+    PressureImplausible1 = 10,
+    /// Muscle 2 pressure jumped faster than physically possible.
+    PressureImplausible2 = 11,
+    /// Joint angle jumped faster than physically possible.
+    AngleImplausible = 12,
+    /// Muscle 1 measured above the over-pressure limit.
+    OverPressure1 = 13,
+    /// Muscle 2 measured above the over-pressure limit.
+    OverPressure2 = 14,
+    /// The angle set-point is NaN or infinite.
+    SetpointInvalid = 15,
+    /// The tick period `dt` is NaN, not positive, or far longer than nominal (a missed
+    /// deadline / watchdog).
+    Watchdog = 16,
+    /// A control law produced or received a non-finite value.
+    ControllerNumeric = 17,
+    /// The configuration failed validation.
+    ConfigInvalid = 18,
+}
+
+impl FaultCode {
+    /// The stable numeric code.
+    #[inline]
+    pub const fn code(self) -> u8 {
+        self as u8
+    }
+
+    /// The fault with this code, if any.
+    pub const fn from_code(code: u8) -> Option<FaultCode> {
+        use FaultCode::*;
+        Some(match code {
+            1 => PressureInvalid1,
+            2 => PressureInvalid2,
+            3 => AngleInvalid,
+            4 => PressureOutOfRange1,
+            5 => PressureOutOfRange2,
+            6 => AngleOutOfRange,
+            7 => PressureStale1,
+            8 => PressureStale2,
+            9 => AngleStale,
+            10 => PressureImplausible1,
+            11 => PressureImplausible2,
+            12 => AngleImplausible,
+            13 => OverPressure1,
+            14 => OverPressure2,
+            15 => SetpointInvalid,
+            16 => Watchdog,
+            17 => ControllerNumeric,
+            18 => ConfigInvalid,
+            _ => return None,
+        })
+    }
+}
+
+/// The valve state applied on a fault.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SafeState {
+    /// All valves closed: the muscles keep their air and the joint stays stiff near where
+    /// it is (default: no sudden motion on the reference joint).
+    #[default]
+    Hold,
+    /// Exhaust valves fully open, inflate valves closed: both muscles vent to atmosphere.
+    Vent,
+}
+
+impl SafeState {
+    /// The valve command of this safe state.
+    #[inline]
+    pub const fn command(self) -> ValveCommand {
+        match self {
+            SafeState::Hold => ValveCommand {
+                muscle1: 0.0,
+                muscle2: 0.0,
+            },
+            SafeState::Vent => ValveCommand {
+                muscle1: -1.0,
+                muscle2: -1.0,
+            },
+        }
+    }
+}
+
+/// Clamps a pressure set-point [Pa gauge] to `[0, min(limit_pa, P_MUSCLE_MAX_GAUGE_PA)]`.
+/// NaN gives 0 (the caller raises a fault for non-finite set-points before this).
+#[inline]
+pub fn clamp_pressure_setpoint_pa(p_gauge_pa: f32, limit_pa: f32) -> f32 {
+    // A NaN or negative limit allows nothing but 0 (conservative).
+    let hi = if !(limit_pa >= 0.0) {
+        0.0
+    } else if limit_pa < P_MUSCLE_MAX_GAUGE_PA {
+        limit_pa
+    } else {
+        P_MUSCLE_MAX_GAUGE_PA
+    };
+    if !(p_gauge_pa > 0.0) {
+        0.0
+    } else if p_gauge_pa > hi {
+        hi
+    } else {
+        p_gauge_pa
+    }
+}
+
+/// The safety state machine: latches the first fault until an explicit reset.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SafetyMonitor {
+    safe_state: SafeState,
+    fault: Option<FaultCode>,
+}
+
+impl SafetyMonitor {
+    /// An armed monitor with the given safe state.
+    pub const fn new(safe_state: SafeState) -> Self {
+        SafetyMonitor {
+            safe_state,
+            fault: None,
+        }
+    }
+
+    /// The configured safe state.
+    pub fn safe_state(&self) -> SafeState {
+        self.safe_state
+    }
+
+    /// The latched fault.
+    pub fn fault(&self) -> Option<FaultCode> {
+        self.fault
+    }
+
+    /// True when no fault is latched.
+    pub fn is_armed(&self) -> bool {
+        self.fault.is_none()
+    }
+
+    /// Raises a fault. The first one is latched; later ones are logged but not stored.
+    pub fn raise(&mut self, code: FaultCode) {
+        if self.fault.is_none() {
+            error!("fault latched: {}", code);
+            self.fault = Some(code);
+        }
+    }
+
+    /// The command the valves get this tick: `requested` while armed, the safe state
+    /// otherwise. A non-finite requested command is itself answered with the safe state.
+    pub fn gate(&self, requested: ValveCommand) -> ValveCommand {
+        if self.fault.is_some() || !requested.muscle1.is_finite() || !requested.muscle2.is_finite()
+        {
+            self.safe_state.command()
+        } else {
+            ValveCommand {
+                muscle1: requested.muscle1.clamp(-1.0, 1.0),
+                muscle2: requested.muscle2.clamp(-1.0, 1.0),
+            }
+        }
+    }
+
+    /// Explicit re-arm. `condition_cleared` says whether the cause is gone (judged by the
+    /// caller on the latest measurements). Returns true when armed afterwards.
+    pub fn reset(&mut self, condition_cleared: bool) -> bool {
+        if self.fault.is_some() && condition_cleared {
+            info!("fault reset");
+            self.fault = None;
+        }
+        self.fault.is_none()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fault_codes_round_trip_and_are_stable() {
+        for c in 1..=18u8 {
+            assert_eq!(FaultCode::from_code(c).unwrap().code(), c);
+        }
+        assert_eq!(FaultCode::from_code(0), None);
+        assert_eq!(FaultCode::from_code(19), None);
+        assert_eq!(FaultCode::OverPressure1 as u8, 13);
+    }
+
+    #[test]
+    fn first_fault_is_latched() {
+        let mut s = SafetyMonitor::new(SafeState::Hold);
+        assert!(s.is_armed());
+        s.raise(FaultCode::AngleStale);
+        s.raise(FaultCode::OverPressure2);
+        assert_eq!(s.fault(), Some(FaultCode::AngleStale));
+        assert!(!s.is_armed());
+    }
+
+    #[test]
+    fn fault_forces_hold_state_in_same_call() {
+        let mut s = SafetyMonitor::new(SafeState::Hold);
+        let req = ValveCommand {
+            muscle1: 0.7,
+            muscle2: -0.3,
+        };
+        assert_eq!(s.gate(req), req);
+        s.raise(FaultCode::PressureInvalid1);
+        assert_eq!(s.gate(req), ValveCommand::default());
+    }
+
+    #[test]
+    fn fault_forces_vent_state_when_configured() {
+        let mut s = SafetyMonitor::new(SafeState::Vent);
+        s.raise(FaultCode::Watchdog);
+        let c = s.gate(ValveCommand {
+            muscle1: 1.0,
+            muscle2: 1.0,
+        });
+        assert_eq!(c.muscle1, -1.0);
+        assert_eq!(c.muscle2, -1.0);
+    }
+
+    #[test]
+    fn non_finite_request_gets_safe_state_and_finite_is_clamped() {
+        let s = SafetyMonitor::new(SafeState::Hold);
+        let c = s.gate(ValveCommand {
+            muscle1: f32::NAN,
+            muscle2: 0.5,
+        });
+        assert_eq!(c, ValveCommand::default());
+        let c = s.gate(ValveCommand {
+            muscle1: 3.0,
+            muscle2: -7.0,
+        });
+        assert_eq!((c.muscle1, c.muscle2), (1.0, -1.0));
+    }
+
+    #[test]
+    fn no_rearm_without_reset_and_not_while_condition_persists() {
+        let mut s = SafetyMonitor::new(SafeState::Hold);
+        s.raise(FaultCode::AngleOutOfRange);
+        assert!(!s.reset(false));
+        assert_eq!(s.fault(), Some(FaultCode::AngleOutOfRange));
+        assert!(s.reset(true));
+        assert!(s.is_armed());
+    }
+
+    #[test]
+    fn pressure_setpoint_never_exceeds_600_kpa() {
+        assert_eq!(clamp_pressure_setpoint_pa(700_000.0, 1e9), 600_000.0);
+        assert_eq!(clamp_pressure_setpoint_pa(700_000.0, 550_000.0), 550_000.0);
+        assert_eq!(clamp_pressure_setpoint_pa(f32::NAN, 550_000.0), 0.0);
+        assert_eq!(clamp_pressure_setpoint_pa(f32::INFINITY, f32::NAN), 0.0);
+        assert_eq!(
+            clamp_pressure_setpoint_pa(f32::INFINITY, f32::INFINITY),
+            600_000.0
+        );
+        assert_eq!(clamp_pressure_setpoint_pa(-5.0, 550_000.0), 0.0);
+        assert_eq!(clamp_pressure_setpoint_pa(300_000.0, 550_000.0), 300_000.0);
+    }
+}

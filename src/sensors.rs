@@ -1,0 +1,534 @@
+//! Sensor traits of our own (embedded-hal 1.0 has no ADC, encoder or timer traits), the
+//! per-channel validation of measurements, and the joint velocity estimate.
+//!
+//! - [`PressureSensor`]: raw ADC counts -> gauge pressure [Pa] through a linear
+//!   [`PressureScaling`].
+//! - [`AngleSensor`]: quadrature-encoder counts -> joint angle [rad] (`counts_per_rev`).
+//! - [`Clock`]: a monotonic tick counter.
+//! - [`ChannelValidator`]: per-channel checks, run once per control tick: non-finite
+//!   values, range, staleness (every measurement is aged every tick) and implausible jumps
+//!   (a maximum rate of change).
+//! - [`VelocityEstimator`]: first-order low-pass differentiator (documented there).
+//!
+//! Board code and host-sim fakes implement the traits; the control tick only sees the
+//! converted values (`Option<f32>`), so it never touches a register.
+
+use core::f32::consts::PI;
+
+/// Linear ADC scaling: `p_gauge_pa = offset_pa + pa_per_count * counts`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PressureScaling {
+    /// Pascal per ADC count.
+    pub pa_per_count: f32,
+    /// Gauge pressure at 0 counts [Pa] (negative for a 0.5-4.5 V type sensor).
+    pub offset_pa: f32,
+}
+
+impl PressureScaling {
+    /// Scaling of a ratiometric sensor whose `counts_at_zero` read 0 Pa gauge and
+    /// `counts_at_full` read `full_scale_pa`. Identical counts give a NaN slope, which the
+    /// validation then rejects (no panic).
+    pub fn from_two_points(counts_at_zero: u32, counts_at_full: u32, full_scale_pa: f32) -> Self {
+        let span = counts_at_full as f32 - counts_at_zero as f32;
+        let pa_per_count = if span != 0.0 {
+            full_scale_pa / span
+        } else {
+            f32::NAN
+        };
+        PressureScaling {
+            pa_per_count,
+            offset_pa: -pa_per_count * counts_at_zero as f32,
+        }
+    }
+
+    /// Gauge pressure [Pa] for the raw counts (may be non-finite for a bad scaling; the
+    /// validator catches that).
+    #[inline]
+    pub fn to_gauge_pa(&self, counts: u32) -> f32 {
+        self.offset_pa + self.pa_per_count * counts as f32
+    }
+}
+
+/// A muscle pressure sensor behind an ADC.
+pub trait PressureSensor {
+    /// Bus / peripheral error.
+    type Error;
+    /// The newest conversion result in ADC counts, `Ok(None)` when no new conversion is
+    /// ready since the last call.
+    fn read_counts(&mut self) -> Result<Option<u32>, Self::Error>;
+    /// The linear scaling of this channel.
+    fn scaling(&self) -> PressureScaling;
+    /// The newest gauge pressure [Pa], `Ok(None)` when no new sample is ready.
+    fn read_gauge_pa(&mut self) -> Result<Option<f32>, Self::Error> {
+        let s = self.scaling();
+        Ok(self.read_counts()?.map(|c| s.to_gauge_pa(c)))
+    }
+}
+
+/// A joint angle sensor: a quadrature encoder counter.
+pub trait AngleSensor {
+    /// Bus / peripheral error.
+    type Error;
+    /// Signed encoder position in counts (4x decoded, zero at the reference angle),
+    /// `Ok(None)` when no new sample is ready.
+    fn read_counts(&mut self) -> Result<Option<i32>, Self::Error>;
+    /// Counts per revolution of the joint (e.g. 8000 as in seed 003's testbed).
+    fn counts_per_rev(&self) -> u32;
+    /// The newest joint angle [rad], `Ok(None)` when no new sample is ready.
+    fn read_angle_rad(&mut self) -> Result<Option<f32>, Self::Error> {
+        let cpr = self.counts_per_rev();
+        Ok(self.read_counts()?.map(|c| counts_to_rad(c, cpr)))
+    }
+}
+
+/// Encoder counts -> angle [rad]; `counts_per_rev == 0` gives NaN (rejected downstream).
+#[inline]
+pub fn counts_to_rad(counts: i32, counts_per_rev: u32) -> f32 {
+    if counts_per_rev == 0 {
+        return f32::NAN;
+    }
+    // Split to keep f32 precision for large counts: whole turns + remainder.
+    let cpr = counts_per_rev as i64;
+    let c = counts as i64;
+    let turns = c.div_euclid(cpr);
+    let rem = c.rem_euclid(cpr);
+    2.0 * PI * (turns as f32 + rem as f32 / counts_per_rev as f32)
+}
+
+/// A monotonic tick source (e.g. a SysTick / timer counter, or host-sim's step counter).
+pub trait Clock {
+    /// Ticks since start; never decreases.
+    fn now_ticks(&self) -> u64;
+    /// Tick frequency [Hz].
+    fn tick_hz(&self) -> u32;
+}
+
+/// Limits for one measured channel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ChannelLimits {
+    /// Lowest plausible value (sensor range).
+    pub min: f32,
+    /// Highest plausible value (sensor range).
+    pub max: f32,
+    /// Largest physically possible rate of change [unit/s]; a jump larger than
+    /// `max_rate_per_s * elapsed + jump_margin` between two samples is implausible.
+    pub max_rate_per_s: f32,
+    /// Allowance for noise / quantisation added to the jump limit [unit].
+    pub jump_margin: f32,
+    /// A channel whose newest sample is older than this many ticks is stale.
+    pub stale_ticks: u32,
+}
+
+/// Why a channel is not usable.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ChannelFault {
+    /// NaN or infinite sample.
+    NotFinite,
+    /// Sample outside `[min, max]`.
+    OutOfRange,
+    /// No new sample for more than `stale_ticks` ticks.
+    Stale,
+    /// Jump larger than the rate limit allows.
+    Implausible,
+}
+
+/// State of a channel after this tick's update.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ChannelStatus {
+    /// A valid value (the newest sample, `age_ticks` ticks old; 0 = new this tick).
+    Valid {
+        /// The value.
+        value: f32,
+        /// Ticks since it was sampled.
+        age_ticks: u32,
+    },
+    /// No sample yet, still within the start-up allowance (`stale_ticks`).
+    Waiting,
+    /// The channel is faulty.
+    Fault(ChannelFault),
+}
+
+impl ChannelStatus {
+    /// The value when valid.
+    #[inline]
+    pub fn value(&self) -> Option<f32> {
+        match *self {
+            ChannelStatus::Valid { value, .. } => Some(value),
+            _ => None,
+        }
+    }
+}
+
+/// Validates one channel, tick by tick. Not latching by itself (the safety layer latches):
+/// a good sample after a bad one is valid again, except that the jump check compares with
+/// the last *accepted* sample.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ChannelValidator {
+    limits: ChannelLimits,
+    last: Option<f32>,
+    age_ticks: u32,
+    /// Time since the last accepted sample [s] (for the jump limit).
+    elapsed_s: f32,
+}
+
+impl ChannelValidator {
+    /// A validator with no sample yet.
+    pub const fn new(limits: ChannelLimits) -> Self {
+        ChannelValidator {
+            limits,
+            last: None,
+            age_ticks: 0,
+            elapsed_s: 0.0,
+        }
+    }
+
+    /// The limits.
+    pub fn limits(&self) -> &ChannelLimits {
+        &self.limits
+    }
+
+    /// Ticks since the last accepted sample (or since start).
+    pub fn age_ticks(&self) -> u32 {
+        self.age_ticks
+    }
+
+    /// Forgets the history (the next sample is not jump-checked).
+    pub fn clear(&mut self) {
+        self.last = None;
+        self.age_ticks = 0;
+        self.elapsed_s = 0.0;
+    }
+
+    /// One tick: ages the stored sample by one tick of `dt_s` seconds, then checks `sample`
+    /// (`None` = no new sample this tick). Never panics.
+    pub fn update(&mut self, sample: Option<f32>, dt_s: f32) -> ChannelStatus {
+        self.age_ticks = self.age_ticks.saturating_add(1);
+        if dt_s.is_finite() && dt_s > 0.0 {
+            self.elapsed_s += dt_s;
+        }
+        let l = self.limits;
+        if let Some(x) = sample {
+            if !x.is_finite() {
+                return ChannelStatus::Fault(ChannelFault::NotFinite);
+            }
+            if !(x >= l.min && x <= l.max) {
+                return ChannelStatus::Fault(ChannelFault::OutOfRange);
+            }
+            if let Some(prev) = self.last {
+                let allowed = l.max_rate_per_s * self.elapsed_s + l.jump_margin;
+                // `!(a <= b)` also rejects a NaN limit.
+                if !(libm::fabsf(x - prev) <= allowed) {
+                    return ChannelStatus::Fault(ChannelFault::Implausible);
+                }
+            }
+            self.last = Some(x);
+            self.age_ticks = 0;
+            self.elapsed_s = 0.0;
+            return ChannelStatus::Valid {
+                value: x,
+                age_ticks: 0,
+            };
+        }
+        if self.age_ticks > l.stale_ticks {
+            return ChannelStatus::Fault(ChannelFault::Stale);
+        }
+        match self.last {
+            Some(value) => ChannelStatus::Valid {
+                value,
+                age_ticks: self.age_ticks,
+            },
+            None => ChannelStatus::Waiting,
+        }
+    }
+}
+
+/// Joint velocity from the angle: a first-order low-pass differentiator.
+///
+/// ```text
+/// v_raw = (theta_k - theta_last) / (t_k - t_last)       (on each new angle sample)
+/// v_k   = v_{k-1} + a (v_raw - v_{k-1}),   a = dt / (tau + dt),   tau = 1 / (2 pi f_c)
+/// ```
+///
+/// i.e. the discretised `G(s) = s / (tau s + 1)`: a differentiator below the cutoff `f_c`,
+/// flat gain `1/tau` above it, which bounds the amplification of encoder quantisation
+/// (one count of 8000 per rev at 1 kHz is 0.79 rad/s raw; with f_c = 40 Hz the filtered
+/// step is 0.16 rad/s). The group delay at low frequency is `tau` (4 ms at 40 Hz).
+/// Ticks without a new angle sample keep the estimate and accumulate the elapsed time, so
+/// the next difference is divided by the true sample spacing.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct VelocityEstimator {
+    tau_s: f32,
+    last_angle_rad: Option<f32>,
+    since_last_s: f32,
+    velocity_rad_s: f32,
+}
+
+impl VelocityEstimator {
+    /// Estimator with cutoff `cutoff_hz` (non-finite or <= 0 gives an unfiltered
+    /// difference quotient).
+    pub fn new(cutoff_hz: f32) -> Self {
+        let tau_s = if cutoff_hz.is_finite() && cutoff_hz > 0.0 {
+            1.0 / (2.0 * PI * cutoff_hz)
+        } else {
+            0.0
+        };
+        VelocityEstimator {
+            tau_s,
+            last_angle_rad: None,
+            since_last_s: 0.0,
+            velocity_rad_s: 0.0,
+        }
+    }
+
+    /// Time constant tau [s].
+    pub fn tau_s(&self) -> f32 {
+        self.tau_s
+    }
+
+    /// Current estimate [rad/s].
+    pub fn velocity_rad_s(&self) -> f32 {
+        self.velocity_rad_s
+    }
+
+    /// Forgets the history (estimate 0, next sample starts over).
+    pub fn reset(&mut self) {
+        self.last_angle_rad = None;
+        self.since_last_s = 0.0;
+        self.velocity_rad_s = 0.0;
+    }
+
+    /// One tick of `dt_s`; `angle_rad` is a new *validated* sample or `None`.
+    /// Non-finite inputs are ignored (the estimate holds). Returns the estimate.
+    pub fn update(&mut self, angle_rad: Option<f32>, dt_s: f32) -> f32 {
+        if !(dt_s.is_finite() && dt_s > 0.0) {
+            return self.velocity_rad_s;
+        }
+        self.since_last_s += dt_s;
+        let Some(theta) = angle_rad.filter(|a| a.is_finite()) else {
+            return self.velocity_rad_s;
+        };
+        if let Some(prev) = self.last_angle_rad {
+            let h = self.since_last_s;
+            let v_raw = (theta - prev) / h;
+            let a = h / (self.tau_s + h);
+            let v = self.velocity_rad_s + a * (v_raw - self.velocity_rad_s);
+            if v.is_finite() {
+                self.velocity_rad_s = v;
+            }
+        }
+        self.last_angle_rad = Some(theta);
+        self.since_last_s = 0.0;
+        self.velocity_rad_s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn limits() -> ChannelLimits {
+        ChannelLimits {
+            min: -50_000.0,
+            max: 1_000_000.0,
+            max_rate_per_s: 10_000_000.0,
+            jump_margin: 10_000.0,
+            stale_ticks: 5,
+        }
+    }
+
+    #[test]
+    fn scaling_maps_two_points_linearly() {
+        let s = PressureScaling::from_two_points(400, 3600, 1_000_000.0);
+        assert!((s.to_gauge_pa(400)).abs() < 1e-3);
+        assert!((s.to_gauge_pa(3600) - 1_000_000.0).abs() < 1.0);
+        assert!((s.to_gauge_pa(2000) - 500_000.0).abs() < 1.0);
+    }
+
+    #[test]
+    fn degenerate_scaling_gives_nan_which_validation_rejects() {
+        let s = PressureScaling::from_two_points(100, 100, 1e6);
+        let mut v = ChannelValidator::new(limits());
+        assert_eq!(
+            v.update(Some(s.to_gauge_pa(100)), 1e-3),
+            ChannelStatus::Fault(ChannelFault::NotFinite)
+        );
+    }
+
+    #[test]
+    fn encoder_counts_convert_to_radians() {
+        assert!((counts_to_rad(2000, 8000) - PI / 2.0).abs() < 1e-6);
+        assert!((counts_to_rad(-2000, 8000) + PI / 2.0).abs() < 1e-6);
+        assert!((counts_to_rad(8000 * 3 + 4000, 8000) - 7.0 * PI).abs() < 1e-4);
+        assert!(counts_to_rad(5, 0).is_nan());
+        assert!(counts_to_rad(i32::MIN, 8000).is_finite());
+    }
+
+    struct FakeEncoder(i32);
+    impl AngleSensor for FakeEncoder {
+        type Error = ();
+        fn read_counts(&mut self) -> Result<Option<i32>, ()> {
+            Ok(Some(self.0))
+        }
+        fn counts_per_rev(&self) -> u32 {
+            8000
+        }
+    }
+    struct FakeAdc(Option<u32>);
+    impl PressureSensor for FakeAdc {
+        type Error = ();
+        fn read_counts(&mut self) -> Result<Option<u32>, ()> {
+            Ok(self.0.take())
+        }
+        fn scaling(&self) -> PressureScaling {
+            PressureScaling {
+                pa_per_count: 250.0,
+                offset_pa: -100_000.0,
+            }
+        }
+    }
+
+    #[test]
+    fn trait_default_methods_convert_units() {
+        let mut e = FakeEncoder(4000);
+        assert!((e.read_angle_rad().unwrap().unwrap() - PI).abs() < 1e-6);
+        let mut a = FakeAdc(Some(2000));
+        assert_eq!(a.read_gauge_pa().unwrap(), Some(400_000.0));
+        assert_eq!(a.read_gauge_pa().unwrap(), None);
+    }
+
+    #[test]
+    fn validator_accepts_good_samples() {
+        let mut v = ChannelValidator::new(limits());
+        assert_eq!(
+            v.update(Some(300_000.0), 1e-3),
+            ChannelStatus::Valid {
+                value: 300_000.0,
+                age_ticks: 0
+            }
+        );
+        assert_eq!(v.update(Some(305_000.0), 1e-3).value(), Some(305_000.0));
+    }
+
+    #[test]
+    fn validator_rejects_nan_and_inf() {
+        let mut v = ChannelValidator::new(limits());
+        for x in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            assert_eq!(
+                v.update(Some(x), 1e-3),
+                ChannelStatus::Fault(ChannelFault::NotFinite)
+            );
+        }
+    }
+
+    #[test]
+    fn validator_rejects_out_of_range() {
+        let mut v = ChannelValidator::new(limits());
+        assert_eq!(
+            v.update(Some(-60_000.0), 1e-3),
+            ChannelStatus::Fault(ChannelFault::OutOfRange)
+        );
+        assert_eq!(
+            v.update(Some(2e6), 1e-3),
+            ChannelStatus::Fault(ChannelFault::OutOfRange)
+        );
+    }
+
+    #[test]
+    fn validator_ages_measurements_every_tick_and_flags_stale() {
+        let mut v = ChannelValidator::new(limits());
+        assert!(v.update(Some(1.0), 1e-3).value().is_some());
+        for k in 1..=5 {
+            assert_eq!(
+                v.update(None, 1e-3),
+                ChannelStatus::Valid {
+                    value: 1.0,
+                    age_ticks: k
+                }
+            );
+        }
+        assert_eq!(
+            v.update(None, 1e-3),
+            ChannelStatus::Fault(ChannelFault::Stale)
+        );
+        // A fresh sample makes it valid again (latching is the safety layer's job).
+        assert_eq!(v.update(Some(2.0), 1e-3).value(), Some(2.0));
+    }
+
+    #[test]
+    fn validator_waits_for_first_sample_then_times_out() {
+        let mut v = ChannelValidator::new(limits());
+        for _ in 0..5 {
+            assert_eq!(v.update(None, 1e-3), ChannelStatus::Waiting);
+        }
+        assert_eq!(
+            v.update(None, 1e-3),
+            ChannelStatus::Fault(ChannelFault::Stale)
+        );
+    }
+
+    #[test]
+    fn validator_flags_implausible_jump_but_allows_rate_over_elapsed_time() {
+        let mut v = ChannelValidator::new(limits());
+        v.update(Some(100_000.0), 1e-3);
+        // 1 ms: allowed 10 kPa + 10 kPa margin.
+        assert_eq!(
+            v.update(Some(130_000.0), 1e-3),
+            ChannelStatus::Fault(ChannelFault::Implausible)
+        );
+        // The rejected sample is not accepted; after 3 more ms (4 ms since the last
+        // accepted sample) 130 kPa is within 40 + 10 kPa.
+        v.update(None, 1e-3);
+        v.update(None, 1e-3);
+        assert_eq!(v.update(Some(130_000.0), 1e-3).value(), Some(130_000.0));
+    }
+
+    #[test]
+    fn velocity_estimator_tracks_a_ramp() {
+        let mut ve = VelocityEstimator::new(40.0);
+        let dt = 1e-3;
+        let mut v = 0.0;
+        for k in 0..200 {
+            v = ve.update(Some(2.0 * k as f32 * dt), dt);
+        }
+        assert!((v - 2.0).abs() < 1e-3, "{v}");
+    }
+
+    #[test]
+    fn velocity_estimator_uses_true_spacing_when_samples_are_missing() {
+        let mut ve = VelocityEstimator::new(1e6); // practically unfiltered
+        let dt = 1e-3;
+        ve.update(Some(0.0), dt);
+        ve.update(None, dt);
+        let v = ve.update(Some(0.002), dt); // 2 ms later
+        assert!((v - 1.0).abs() < 1e-3, "{v}");
+    }
+
+    #[test]
+    fn velocity_estimator_filters_quantisation_step() {
+        let mut ve = VelocityEstimator::new(40.0);
+        let dt = 1e-3;
+        ve.update(Some(0.0), dt);
+        let count = 2.0 * PI / 8000.0;
+        let v = ve.update(Some(count), dt);
+        let raw = count / dt;
+        let a = dt / (1.0 / (2.0 * PI * 40.0) + dt);
+        assert!((v - a * raw).abs() < 1e-5);
+        assert!(v < 0.25 * raw);
+    }
+
+    #[test]
+    fn velocity_estimator_ignores_nan_and_bad_dt() {
+        let mut ve = VelocityEstimator::new(40.0);
+        ve.update(Some(0.0), 1e-3);
+        assert_eq!(ve.update(Some(f32::NAN), 1e-3), 0.0);
+        assert_eq!(ve.update(Some(1.0), f32::NAN), 0.0);
+        assert_eq!(ve.update(Some(1.0), -1.0), 0.0);
+        assert!(ve.update(Some(1e-3), 1e-3).is_finite());
+    }
+}

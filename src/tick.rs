@@ -1,0 +1,740 @@
+//! The control tick (API contract `tick_contract.md`): sensor validation, the control
+//! cascade of [`crate::control`], and the safety state machine of [`crate::safety`], in
+//! one pure `step` per tick. Consumed by the QEMU binary, the board binary and host-sim.
+//!
+//! Order within one tick:
+//! 1. `dt` check (watchdog: NaN, <= 0 or longer than `dt_max_s`).
+//! 2. Every channel is aged and validated ([`ChannelValidator`]); the velocity estimate is
+//!    updated from a new accepted angle sample.
+//! 3. Fault conditions (channel faults, over-pressure, invalid set-point, invalid
+//!    configuration) latch a [`FaultCode`]; the safe valve state is output in this tick.
+//! 4. While a channel has not delivered its first sample (start-up), the valves stay closed
+//!    and the tick is not armed (no fault unless the channel goes stale).
+//! 5. Otherwise: position PID -> torque loop -> pressure loops -> valve command. A control
+//!    law that reports an error latches [`FaultCode::ControllerNumeric`] (ODrive style).
+
+use crate::constants::{FORCE_LAW, TORQUE_MODEL};
+use crate::control::{
+    torque_estimate_nm, JointState, PidGains, PositionController, PressureController,
+    PressureLoopGains, TorqueController, TorqueLoopGains, TorqueMeasurement,
+};
+use crate::force_law::{ForceFlags, ForceLawParams};
+use crate::geometry::JointGeometry;
+use crate::safety::{clamp_pressure_setpoint_pa, SafeState, SafetyMonitor};
+use crate::sensors::{
+    ChannelFault, ChannelLimits, ChannelStatus, ChannelValidator, VelocityEstimator,
+};
+use crate::torque_model::TorqueModelParams;
+use crate::P_MUSCLE_MAX_GAUGE_PA;
+
+pub use crate::safety::FaultCode;
+
+/// What the sensors delivered this tick. `None` = no new sample this tick (not ready /
+/// missing). Values may be NaN or out of range: the tick validates them.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SensorFrame {
+    /// Muscle 1 gauge pressure [Pa].
+    pub p1_gauge_pa: Option<f32>,
+    /// Muscle 2 gauge pressure [Pa].
+    pub p2_gauge_pa: Option<f32>,
+    /// Joint angle [rad].
+    pub angle_rad: Option<f32>,
+}
+
+/// The joint angle set-point.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Setpoint {
+    /// Desired joint angle [rad].
+    pub angle_rad: f32,
+}
+
+/// Per-muscle valve command in [-1, 1]: > 0 inflate duty (inflate valve open that fraction
+/// of the time), < 0 exhaust duty, 0 both closed. Never inflate and exhaust one muscle at
+/// once.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ValveCommand {
+    /// Muscle 1 command.
+    pub muscle1: f32,
+    /// Muscle 2 command.
+    pub muscle2: f32,
+}
+
+/// Everything one tick produced. All floats are finite.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TickOutput {
+    /// What the valve driver applies this tick.
+    pub valves: ValveCommand,
+    /// Muscle 1 pressure set-point [Pa gauge] (<= 600 kPa). While faulted: the held
+    /// (last accepted measured) pressure for [`SafeState::Hold`], 0 for [`SafeState::Vent`].
+    pub p1_set_gauge_pa: f32,
+    /// Muscle 2 pressure set-point [Pa gauge] (<= 600 kPa).
+    pub p2_set_gauge_pa: f32,
+    /// Outer loop output [N m] (0 when not controlling).
+    pub torque_des_nm: f32,
+    /// `(F1 - F2) r` from the force law, measured p and angle [N m] (0 when unknown).
+    pub torque_est_nm: f32,
+    /// Last accepted angle [rad] (0 before the first sample).
+    pub angle_est_rad: f32,
+    /// Velocity estimate [rad/s].
+    pub velocity_est_rad_s: f32,
+    /// Latched fault (Some => valves are in the safe state).
+    pub fault: Option<FaultCode>,
+    /// True when the cascade computed this tick's command.
+    pub armed: bool,
+}
+
+/// Configuration of the control tick.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ControllerConfig {
+    /// Nominal tick rate [Hz].
+    pub tick_hz: f32,
+    /// Longest accepted `dt` [s]; longer (a missed deadline) raises [`FaultCode::Watchdog`].
+    pub dt_max_s: f32,
+    /// Joint geometry (stretches for the force law, sprocket radius).
+    pub geometry: JointGeometry,
+    /// Identified force law (torque feedback).
+    pub force_law: ForceLawParams,
+    /// Torque model (inverse = activation).
+    pub torque_model: TorqueModelParams,
+    /// Position PID.
+    pub position: PidGains,
+    /// Torque loop.
+    pub torque: TorqueLoopGains,
+    /// Per-muscle pressure loop (same gains for both).
+    pub pressure: PressureLoopGains,
+    /// Cutoff of the velocity differentiator [Hz].
+    pub velocity_cutoff_hz: f32,
+    /// Valve state on a fault.
+    pub safe_state: SafeState,
+    /// Validation of both pressure channels [Pa gauge, Pa/s].
+    pub pressure_limits: ChannelLimits,
+    /// Validation of the angle channel [rad, rad/s]; its range is the allowed joint range.
+    pub angle_limits: ChannelLimits,
+    /// Measured pressure above this raises an over-pressure fault [Pa gauge].
+    pub p_over_gauge_pa: f32,
+    /// Angle set-points are clamped to `[-angle_setpoint_max_rad, angle_setpoint_max_rad]`.
+    pub angle_setpoint_max_rad: f32,
+}
+
+impl ControllerConfig {
+    /// Configuration tuned for the reference joint (`shared/plant/reference-1dof.toml`:
+    /// J = 0.014 kg m^2, r = 25 mm, supply 600 kPa gauge, on/off valves C = 8e-9) with the
+    /// cascade running at `tick_hz` (tuned at 1 kHz).
+    ///
+    /// Tuning rationale:
+    /// - Plant about p0 = 300 kPa: passive stiffness A r^2 = -14.5 N m/rad and damping
+    ///   D = -0.3 N m s/rad are cancelled by the inverse model, so the position loop mostly
+    ///   sees the inertia J. Start point: PD for omega_n ~ 25 rad/s (kp = J omega_n^2,
+    ///   kd = 2 zeta J omega_n), then a grid search (kp 4..14, kd 0.3..0.9, ki 0..20,
+    ///   torque ki 0..60, pressure kp 1/30..1/15 kPa) in the closed-loop stand-in of
+    ///   `tests/closed_loop_smoke.rs`, also run with the 11x inertia of
+    ///   `reference-1dof-loaded.toml` to keep that stable.
+    ///   Result: kp = 11 N m/rad, kd = 0.8 N m s/rad, ki = 8 N m/(rad s), +-1.5 N m.
+    /// - Torque loop: integral only (ki = 30 1/s, +-1.5 N m): trims the force-law /
+    ///   linearisation mismatch; proportional torque feedback through the measured
+    ///   pressures gave no benefit with on/off valves.
+    /// - Pressure loop: P with kp = 1/30 kPa (full valve opening at 30 kPa error; choked
+    ///   flow moves a muscle ~4 kPa per ms), deadband 3 kPa.
+    /// - On/off PWM ([`crate::valves::OnOffPwmConfig::REFERENCE`]): 10 ticks period, 2 ticks
+    ///   minimum on-time.
+    pub fn reference(tick_hz: f32) -> Self {
+        let ticks = |s: f32| -> u32 {
+            // `as` saturates: NaN -> 0, huge -> u32::MAX; at least 1 tick.
+            let t = libm::ceilf(s * tick_hz) as u32;
+            if t < 1 {
+                1
+            } else {
+                t
+            }
+        };
+        ControllerConfig {
+            tick_hz,
+            dt_max_s: 5.0 / tick_hz,
+            geometry: JointGeometry::REFERENCE,
+            force_law: FORCE_LAW,
+            torque_model: TORQUE_MODEL,
+            position: PidGains {
+                kp: 11.0,
+                ki: 8.0,
+                kd: 0.8,
+                i_limit: 1.5,
+                out_limit: 10.0,
+            },
+            torque: TorqueLoopGains {
+                kp: 0.0,
+                ki: 30.0,
+                corr_limit_nm: 1.5,
+                p_set_max_gauge_pa: P_MUSCLE_MAX_GAUGE_PA,
+            },
+            pressure: PressureLoopGains {
+                kp_per_pa: 1.0 / 30_000.0,
+                ki_per_pa_s: 0.0,
+                deadband_pa: 3_000.0,
+                i_limit: 0.0,
+            },
+            velocity_cutoff_hz: 40.0,
+            safe_state: SafeState::Hold,
+            pressure_limits: ChannelLimits {
+                min: -50_000.0,
+                max: 1_000_000.0,
+                // Choked inflow into the smallest chamber: ~7 MPa/s; margin x3.
+                max_rate_per_s: 20_000_000.0,
+                jump_margin: 20_000.0,
+                stale_ticks: ticks(0.010),
+            },
+            angle_limits: ChannelLimits {
+                // Force-law stretch domain 0.75..1.05 ends at |angle| = 1.1 rad.
+                min: -1.0,
+                max: 1.0,
+                max_rate_per_s: 50.0,
+                jump_margin: 0.02,
+                stale_ticks: ticks(0.010),
+            },
+            p_over_gauge_pa: 630_000.0,
+            angle_setpoint_max_rad: 0.8,
+        }
+    }
+
+    /// True when every parameter is usable (finite, positive where needed, consistent).
+    pub fn is_valid(&self) -> bool {
+        let pos = |x: f32| x.is_finite() && x > 0.0;
+        let nonneg = |x: f32| x.is_finite() && x >= 0.0;
+        let lim_ok = |l: &ChannelLimits| {
+            l.min.is_finite()
+                && l.max.is_finite()
+                && l.min < l.max
+                && nonneg(l.max_rate_per_s)
+                && nonneg(l.jump_margin)
+        };
+        let g = &self.geometry;
+        let p = &self.position;
+        let t = &self.torque;
+        let pr = &self.pressure;
+        pos(self.tick_hz)
+            && pos(self.dt_max_s)
+            && pos(g.sprocket_radius_m)
+            && pos(g.rest_length_m)
+            && g.initial_contraction.is_finite()
+            && self.force_law.c.iter().all(|c| c.is_finite())
+            && self.torque_model.b_m2.is_finite()
+            && self.torque_model.b_m2 != 0.0
+            && self.torque_model.sprocket_radius_m.is_finite()
+            && self.torque_model.sprocket_radius_m != 0.0
+            && self.torque_model.a_n_per_m_rad.is_finite()
+            && self.torque_model.c_nms3_per_rad3.is_finite()
+            && self.torque_model.d_nms_per_rad.is_finite()
+            && nonneg(self.torque_model.p0_gauge_pa)
+            && self.torque_model.p0_gauge_pa <= P_MUSCLE_MAX_GAUGE_PA
+            && nonneg(self.torque_model.dp_max_pa)
+            && [p.kp, p.ki, p.kd, p.i_limit, p.out_limit]
+                .iter()
+                .all(|&x| nonneg(x))
+            && [t.kp, t.ki, t.corr_limit_nm, t.p_set_max_gauge_pa]
+                .iter()
+                .all(|&x| nonneg(x))
+            && [pr.kp_per_pa, pr.ki_per_pa_s, pr.deadband_pa, pr.i_limit]
+                .iter()
+                .all(|&x| nonneg(x))
+            && nonneg(self.velocity_cutoff_hz)
+            && lim_ok(&self.pressure_limits)
+            && lim_ok(&self.angle_limits)
+            && pos(self.p_over_gauge_pa)
+            && nonneg(self.angle_setpoint_max_rad)
+    }
+}
+
+/// The control tick: validation + cascade + safety. No allocation, no panic, no hidden time.
+pub struct ControlTick {
+    cfg: ControllerConfig,
+    config_ok: bool,
+    p1: ChannelValidator,
+    p2: ChannelValidator,
+    angle: ChannelValidator,
+    velocity: VelocityEstimator,
+    position: PositionController,
+    torque: TorqueController,
+    pressure1: PressureController,
+    pressure2: PressureController,
+    safety: SafetyMonitor,
+    /// The fault condition seen in the last tick (None = all conditions clear).
+    condition: Option<FaultCode>,
+    last_p1_pa: Option<f32>,
+    last_p2_pa: Option<f32>,
+    last_angle_rad: Option<f32>,
+}
+
+fn channel_fault(
+    f: ChannelFault,
+    invalid: FaultCode,
+    range: FaultCode,
+    stale: FaultCode,
+    jump: FaultCode,
+) -> FaultCode {
+    match f {
+        ChannelFault::NotFinite => invalid,
+        ChannelFault::OutOfRange => range,
+        ChannelFault::Stale => stale,
+        ChannelFault::Implausible => jump,
+    }
+}
+
+impl ControlTick {
+    /// A tick in the armed state (control starts once every channel delivered a valid
+    /// sample). An invalid configuration latches [`FaultCode::ConfigInvalid`] for good.
+    pub fn new(cfg: ControllerConfig) -> Self {
+        let config_ok = cfg.is_valid();
+        let mut safety = SafetyMonitor::new(cfg.safe_state);
+        if !config_ok {
+            safety.raise(FaultCode::ConfigInvalid);
+        }
+        ControlTick {
+            cfg,
+            config_ok,
+            p1: ChannelValidator::new(cfg.pressure_limits),
+            p2: ChannelValidator::new(cfg.pressure_limits),
+            angle: ChannelValidator::new(cfg.angle_limits),
+            velocity: VelocityEstimator::new(cfg.velocity_cutoff_hz),
+            position: PositionController::new(cfg.position),
+            torque: TorqueController::new(
+                cfg.torque,
+                cfg.force_law,
+                cfg.geometry,
+                cfg.torque_model,
+            ),
+            pressure1: PressureController::new(cfg.pressure),
+            pressure2: PressureController::new(cfg.pressure),
+            safety,
+            condition: if config_ok {
+                None
+            } else {
+                Some(FaultCode::ConfigInvalid)
+            },
+            last_p1_pa: None,
+            last_p2_pa: None,
+            last_angle_rad: None,
+        }
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &ControllerConfig {
+        &self.cfg
+    }
+
+    /// The latched fault.
+    pub fn fault(&self) -> Option<FaultCode> {
+        self.safety.fault()
+    }
+
+    fn reset_laws(&mut self) {
+        self.position.reset();
+        self.torque.reset();
+        self.pressure1.reset();
+        self.pressure2.reset();
+    }
+
+    /// Explicit re-arm after a fault. Returns false (and stays faulted) when the fault
+    /// condition was still present in the last tick or the configuration is invalid.
+    pub fn reset(&mut self) -> bool {
+        if !self.config_ok || self.condition.is_some() {
+            return false;
+        }
+        self.reset_laws();
+        self.safety.reset(true)
+    }
+
+    /// One control tick. Pure: no hidden time, no I/O. Never panics; every float of the
+    /// output is finite.
+    pub fn step(&mut self, frame: &SensorFrame, setpoint: &Setpoint, dt_s: f32) -> TickOutput {
+        let cfg = self.cfg;
+        let dt_ok = dt_s.is_finite() && dt_s > 0.0 && dt_s <= cfg.dt_max_s;
+        // Channels are aged by the nominal period when dt itself is bad.
+        let dt_age = if dt_ok {
+            dt_s
+        } else if cfg.tick_hz.is_finite() && cfg.tick_hz > 0.0 {
+            1.0 / cfg.tick_hz
+        } else {
+            1.0e-3
+        };
+
+        let s1 = self.p1.update(frame.p1_gauge_pa, dt_age);
+        let s2 = self.p2.update(frame.p2_gauge_pa, dt_age);
+        let sa = self.angle.update(frame.angle_rad, dt_age);
+        if let Some(v) = s1.value() {
+            self.last_p1_pa = Some(v);
+        }
+        if let Some(v) = s2.value() {
+            self.last_p2_pa = Some(v);
+        }
+        if let Some(v) = sa.value() {
+            self.last_angle_rad = Some(v);
+        }
+        let new_angle = match sa {
+            ChannelStatus::Valid {
+                value,
+                age_ticks: 0,
+            } => Some(value),
+            _ => None,
+        };
+        let vel = self.velocity.update(new_angle, dt_age);
+
+        // Fault conditions of this tick (the first one found is reported).
+        let mut cond: Option<FaultCode> = None;
+        let mut note = |c: FaultCode| {
+            if cond.is_none() {
+                cond = Some(c);
+            }
+        };
+        if !self.config_ok {
+            note(FaultCode::ConfigInvalid);
+        }
+        if !dt_ok {
+            note(FaultCode::Watchdog);
+        }
+        use FaultCode::*;
+        if let ChannelStatus::Fault(f) = s1 {
+            note(channel_fault(
+                f,
+                PressureInvalid1,
+                PressureOutOfRange1,
+                PressureStale1,
+                PressureImplausible1,
+            ));
+        }
+        if let ChannelStatus::Fault(f) = s2 {
+            note(channel_fault(
+                f,
+                PressureInvalid2,
+                PressureOutOfRange2,
+                PressureStale2,
+                PressureImplausible2,
+            ));
+        }
+        if let ChannelStatus::Fault(f) = sa {
+            note(channel_fault(
+                f,
+                AngleInvalid,
+                AngleOutOfRange,
+                AngleStale,
+                AngleImplausible,
+            ));
+        }
+        if let Some(p) = s1.value() {
+            if p > cfg.p_over_gauge_pa {
+                note(OverPressure1);
+            }
+        }
+        if let Some(p) = s2.value() {
+            if p > cfg.p_over_gauge_pa {
+                note(OverPressure2);
+            }
+        }
+        if !setpoint.angle_rad.is_finite() {
+            note(SetpointInvalid);
+        }
+        self.condition = cond;
+        if let Some(c) = cond {
+            self.safety.raise(c);
+        }
+
+        let angle_est = self.last_angle_rad.unwrap_or(0.0);
+        let torque_est = match (self.last_p1_pa, self.last_p2_pa, self.last_angle_rad) {
+            (Some(p1), Some(p2), Some(a)) => {
+                let (t, flags) = torque_estimate_nm(&cfg.force_law, &cfg.geometry, p1, p2, a);
+                if flags.contains_any(ForceFlags::FATAL) || !t.is_finite() {
+                    0.0
+                } else {
+                    t
+                }
+            }
+            _ => 0.0,
+        };
+        let vel = if vel.is_finite() { vel } else { 0.0 };
+
+        let mut out = TickOutput {
+            valves: ValveCommand::default(),
+            p1_set_gauge_pa: 0.0,
+            p2_set_gauge_pa: 0.0,
+            torque_des_nm: 0.0,
+            torque_est_nm: torque_est,
+            angle_est_rad: angle_est,
+            velocity_est_rad_s: vel,
+            fault: None,
+            armed: false,
+        };
+
+        if self.safety.fault().is_some() {
+            return self.safe_output(out);
+        }
+
+        let (Some(p1), Some(p2), Some(angle)) = (s1.value(), s2.value(), sa.value()) else {
+            // Start-up: some channel has not delivered yet. Valves closed, not armed.
+            self.reset_laws();
+            return out;
+        };
+
+        let sp = setpoint
+            .angle_rad
+            .clamp(-cfg.angle_setpoint_max_rad, cfg.angle_setpoint_max_rad);
+        let result = (|| {
+            let t_des = self.position.step(
+                JointState {
+                    angle_rad: angle,
+                    velocity_rad_s: vel,
+                },
+                sp,
+                dt_s,
+            )?;
+            let ps = self.torque.step(
+                TorqueMeasurement {
+                    p1_gauge_pa: p1,
+                    p2_gauge_pa: p2,
+                    angle_rad: angle,
+                    velocity_rad_s: vel,
+                },
+                t_des,
+                dt_s,
+            )?;
+            let u1 = self.pressure1.step(p1, ps.p1_gauge_pa, dt_s)?;
+            let u2 = self.pressure2.step(p2, ps.p2_gauge_pa, dt_s)?;
+            Ok::<_, crate::control::ControlError>((t_des, ps, u1, u2))
+        })();
+        match result {
+            Ok((t_des, ps, u1, u2)) => {
+                let cmd = ValveCommand {
+                    muscle1: u1,
+                    muscle2: u2,
+                };
+                out.valves = self.safety.gate(cmd);
+                out.p1_set_gauge_pa =
+                    clamp_pressure_setpoint_pa(ps.p1_gauge_pa, P_MUSCLE_MAX_GAUGE_PA);
+                out.p2_set_gauge_pa =
+                    clamp_pressure_setpoint_pa(ps.p2_gauge_pa, P_MUSCLE_MAX_GAUGE_PA);
+                out.torque_des_nm = t_des;
+                out.torque_est_nm = ps.torque_est_nm;
+                out.armed = true;
+                trace!(
+                    "tick sp={} a={} T*={} p*=({}, {}) u=({}, {})",
+                    sp,
+                    angle,
+                    t_des,
+                    ps.p1_gauge_pa,
+                    ps.p2_gauge_pa,
+                    u1,
+                    u2
+                );
+                out
+            }
+            Err(e) => {
+                warn!("control law error: {}", e);
+                self.condition = Some(FaultCode::ControllerNumeric);
+                self.safety.raise(FaultCode::ControllerNumeric);
+                self.safe_output(out)
+            }
+        }
+    }
+
+    fn safe_output(&mut self, mut out: TickOutput) -> TickOutput {
+        self.reset_laws();
+        out.valves = self.safety.safe_state().command();
+        let (h1, h2) = match self.safety.safe_state() {
+            SafeState::Hold => (
+                clamp_pressure_setpoint_pa(self.last_p1_pa.unwrap_or(0.0), P_MUSCLE_MAX_GAUGE_PA),
+                clamp_pressure_setpoint_pa(self.last_p2_pa.unwrap_or(0.0), P_MUSCLE_MAX_GAUGE_PA),
+            ),
+            SafeState::Vent => (0.0, 0.0),
+        };
+        out.p1_set_gauge_pa = h1;
+        out.p2_set_gauge_pa = h2;
+        out.torque_des_nm = 0.0;
+        out.fault = self.safety.fault();
+        out.armed = false;
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const DT: f32 = 1e-3;
+
+    fn frame(p1: f32, p2: f32, a: f32) -> SensorFrame {
+        SensorFrame {
+            p1_gauge_pa: Some(p1),
+            p2_gauge_pa: Some(p2),
+            angle_rad: Some(a),
+        }
+    }
+
+    fn tick() -> ControlTick {
+        ControlTick::new(ControllerConfig::reference(1000.0))
+    }
+
+    const SP0: Setpoint = Setpoint { angle_rad: 0.0 };
+
+    #[test]
+    fn reference_config_is_valid() {
+        assert!(ControllerConfig::reference(1000.0).is_valid());
+        assert!(ControllerConfig::reference(500.0).is_valid());
+        assert!(!ControllerConfig::reference(f32::NAN).is_valid());
+        assert!(!ControllerConfig::reference(0.0).is_valid());
+    }
+
+    #[test]
+    fn valid_frame_arms_and_commands_finite_valves() {
+        let mut t = tick();
+        let o = t.step(&frame(550e3, 550e3, 0.0), &SP0, DT);
+        assert!(o.armed);
+        assert_eq!(o.fault, None);
+        // 550 kPa measured, p0 = 300 kPa wanted: both muscles exhaust.
+        assert!(o.valves.muscle1 < 0.0 && o.valves.muscle2 < 0.0);
+        assert!(o.p1_set_gauge_pa <= P_MUSCLE_MAX_GAUGE_PA);
+    }
+
+    #[test]
+    fn startup_waits_closed_without_fault_until_all_channels_arrive() {
+        let mut t = tick();
+        let f = SensorFrame {
+            p1_gauge_pa: Some(300e3),
+            p2_gauge_pa: None,
+            angle_rad: Some(0.0),
+        };
+        let o = t.step(&f, &SP0, DT);
+        assert!(!o.armed);
+        assert_eq!(o.fault, None);
+        assert_eq!(o.valves, ValveCommand::default());
+    }
+
+    #[test]
+    fn nan_pressure_gives_safe_state_in_same_tick() {
+        let mut t = tick();
+        t.step(&frame(300e3, 300e3, 0.0), &Setpoint { angle_rad: 0.3 }, DT);
+        let o = t.step(
+            &frame(f32::NAN, 300e3, 0.0),
+            &Setpoint { angle_rad: 0.3 },
+            DT,
+        );
+        assert_eq!(o.fault, Some(FaultCode::PressureInvalid1));
+        assert_eq!(o.valves, ValveCommand::default());
+        assert!(!o.armed);
+    }
+
+    #[test]
+    fn vent_safe_state_opens_exhausts() {
+        let mut cfg = ControllerConfig::reference(1000.0);
+        cfg.safe_state = SafeState::Vent;
+        let mut t = ControlTick::new(cfg);
+        let o = t.step(&frame(300e3, 300e3, f32::INFINITY), &SP0, DT);
+        assert_eq!(o.fault, Some(FaultCode::AngleInvalid));
+        assert_eq!(
+            o.valves,
+            ValveCommand {
+                muscle1: -1.0,
+                muscle2: -1.0
+            }
+        );
+    }
+
+    #[test]
+    fn fault_is_latched_until_explicit_reset() {
+        let mut t = tick();
+        t.step(&frame(300e3, 300e3, 0.0), &SP0, DT);
+        t.step(&frame(300e3, 300e3, 2.0), &SP0, DT);
+        assert_eq!(t.fault(), Some(FaultCode::AngleOutOfRange));
+        // Good data again: still latched.
+        for _ in 0..10 {
+            let o = t.step(&frame(300e3, 300e3, 0.0), &SP0, DT);
+            assert_eq!(o.fault, Some(FaultCode::AngleOutOfRange));
+            assert!(!o.armed);
+        }
+        assert!(t.reset());
+        let o = t.step(&frame(300e3, 300e3, 0.0), &SP0, DT);
+        assert!(o.armed);
+        assert_eq!(o.fault, None);
+    }
+
+    #[test]
+    fn reset_refused_while_condition_persists() {
+        let mut t = tick();
+        t.step(&frame(700e3, 300e3, 0.0), &SP0, DT);
+        assert_eq!(t.fault(), Some(FaultCode::OverPressure1));
+        t.step(&frame(700e3, 300e3, 0.0), &SP0, DT);
+        assert!(!t.reset());
+        assert_eq!(t.fault(), Some(FaultCode::OverPressure1));
+    }
+
+    #[test]
+    fn stale_angle_raises_fault_after_limit() {
+        let mut t = tick();
+        t.step(&frame(300e3, 300e3, 0.0), &SP0, DT);
+        let f = SensorFrame {
+            p1_gauge_pa: Some(300e3),
+            p2_gauge_pa: Some(300e3),
+            angle_rad: None,
+        };
+        for _ in 0..10 {
+            assert!(t.step(&f, &SP0, DT).armed);
+        }
+        let o = t.step(&f, &SP0, DT);
+        assert_eq!(o.fault, Some(FaultCode::AngleStale));
+    }
+
+    #[test]
+    fn implausible_pressure_jump_raises_fault() {
+        let mut t = tick();
+        t.step(&frame(300e3, 300e3, 0.0), &SP0, DT);
+        let o = t.step(&frame(300e3, 500e3, 0.0), &SP0, DT);
+        assert_eq!(o.fault, Some(FaultCode::PressureImplausible2));
+    }
+
+    #[test]
+    fn bad_dt_raises_watchdog() {
+        for dt in [f32::NAN, 0.0, -1e-3, 1.0, f32::INFINITY] {
+            let mut t = tick();
+            let o = t.step(&frame(300e3, 300e3, 0.0), &SP0, dt);
+            assert_eq!(o.fault, Some(FaultCode::Watchdog), "dt {dt}");
+        }
+    }
+
+    #[test]
+    fn nan_setpoint_raises_fault_and_large_setpoint_is_clamped() {
+        let mut t = tick();
+        let o = t.step(
+            &frame(300e3, 300e3, 0.0),
+            &Setpoint {
+                angle_rad: f32::NAN,
+            },
+            DT,
+        );
+        assert_eq!(o.fault, Some(FaultCode::SetpointInvalid));
+        let mut a = tick();
+        let mut b = tick();
+        let oa = a.step(&frame(300e3, 300e3, 0.0), &Setpoint { angle_rad: 1e30 }, DT);
+        let ob = b.step(&frame(300e3, 300e3, 0.0), &Setpoint { angle_rad: 0.8 }, DT);
+        assert_eq!(oa, ob);
+    }
+
+    #[test]
+    fn invalid_config_latches_config_fault_forever() {
+        let mut cfg = ControllerConfig::reference(1000.0);
+        cfg.position.kp = f32::NAN;
+        let mut t = ControlTick::new(cfg);
+        let o = t.step(&frame(300e3, 300e3, 0.0), &SP0, DT);
+        assert_eq!(o.fault, Some(FaultCode::ConfigInvalid));
+        assert!(!t.reset());
+    }
+
+    #[test]
+    fn positive_step_inflates_muscle_one_and_deflates_muscle_two() {
+        let mut t = tick();
+        let o = t.step(&frame(300e3, 300e3, 0.0), &Setpoint { angle_rad: 0.2 }, DT);
+        assert!(o.torque_des_nm > 0.0);
+        assert!(o.p1_set_gauge_pa > 300e3 && o.p2_set_gauge_pa < 300e3);
+        assert!(o.valves.muscle1 > 0.0 && o.valves.muscle2 < 0.0);
+    }
+}
