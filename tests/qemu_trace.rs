@@ -132,7 +132,11 @@ fn qemu_panic_and_hardfault_exit_with_status_1() {
             out.status,
             String::from_utf8_lossy(&out.stderr)
         );
-        assert!(stdout.contains("HardFault at pc="), "{fault}:\n{stdout}");
+        let marker = match fault {
+            "panic" => "panicked at src/bin/qemu.rs:",
+            _ => "HardFault at pc=",
+        };
+        assert!(stdout.contains(marker), "{fault}: no `{marker}`:\n{stdout}");
         assert!(
             !stdout.contains("trace done"),
             "{fault}: the trace must not run"

@@ -10,7 +10,7 @@
 //!   reset leaves every GPIO a floating input and the valve drivers' pull-downs close all valves
 //!   (the safe state). A boot after a watchdog reset stays in that safe state (valves off,
 //!   controller not run) until the next power-on / reset-button reset.
-//! - HardFault (a panic ends there through panic-probe): valves off at register level, then wait
+//! - HardFault (a panic ends there too, after logging its location): valves off at register level, then wait
 //!   for the watchdog.
 //! - defmt over RTT (defmt-rtt), read by `probe-rs run` (scripts/flash-run.sh).
 //!
@@ -27,7 +27,6 @@ use cortex_m::interrupt::Mutex;
 use cortex_m::peripheral::DWT;
 use cortex_m_rt::{entry, exception, ExceptionFrame};
 use defmt_rtt as _;
-use panic_probe as _;
 use stm32f4xx_hal::{
     adc::{
         config::{AdcConfig, SampleTime},
@@ -335,6 +334,16 @@ fn main() -> ! {
     loop {
         cortex_m::asm::wfi();
     }
+}
+
+/// Panic: log the location (not the message: see Cargo.toml), then fault (valves off below).
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    match info.location() {
+        Some(l) => defmt::error!("panicked at {=str}:{=u32}", l.file(), l.line()),
+        None => defmt::error!("panicked"),
+    }
+    cortex_m::asm::udf()
 }
 
 #[exception]

@@ -14,7 +14,7 @@
 //!
 //! defmt goes out over semihosting (decode with `defmt-print -e <elf>`, which
 //! `scripts/qemu-run.sh` does). The exit status reaches QEMU through the semihosting exit call:
-//! 0 at the end, 1 on a panic or a HardFault.
+//! 0 at the end, 1 on a panic (location logged) or a HardFault (PC logged).
 #![no_std]
 #![no_main]
 
@@ -24,7 +24,6 @@ use cortex_m::peripheral::{syst::SystClkSource, SYST};
 use cortex_m_rt::{entry, exception, ExceptionFrame};
 use cortex_m_semihosting::debug;
 use defmt_semihosting as _;
-use panic_probe as _;
 
 use pam_firmware::constants::FORCE_LAW;
 use pam_firmware::geometry::JointGeometry;
@@ -236,6 +235,19 @@ fn main() -> ! {
         unpainted
     );
     debug::exit(debug::EXIT_SUCCESS);
+    loop {
+        cortex_m::asm::bkpt();
+    }
+}
+
+/// Panic: log the location (not the message: see Cargo.toml) and exit with status 1.
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    match info.location() {
+        Some(l) => defmt::error!("panicked at {=str}:{=u32}", l.file(), l.line()),
+        None => defmt::error!("panicked"),
+    }
+    debug::exit(debug::EXIT_FAILURE);
     loop {
         cortex_m::asm::bkpt();
     }
