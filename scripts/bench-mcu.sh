@@ -14,10 +14,14 @@
 #   .uninit (llvm-size from rustup's llvm-tools).
 # - Stack: the QEMU image paints the free RAM at start-up and reports the deepest overwritten
 #   word after the trace and the benchmarks ran (stack painting, measured at run time).
+# - --breakdown: also runs QEMU with -singlestep -d exec (one log line per instruction, a few
+#   hundred MB under /tmp) and prints where a tick's instructions go (scripts/tick-profile.py).
 # Exit status 1 if a target is missed (<= 1000 instructions per f32 tick, <= 32 KiB flash,
 # <= 8 KiB static RAM).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+breakdown=0
+[ "${1:-}" = "--breakdown" ] && breakdown=1
 
 sysroot=$(rustc --print sysroot)
 host=$(rustc -vV | sed -n 's/^host: //p')
@@ -92,4 +96,13 @@ calibration: $cal_insns instructions = $((cal_counts - empty)) SysTick counts (k
 | board image static RAM | $board_ram B | <= 8192 | $(check "$board_ram" 8192) |
 | worst-case stack (QEMU image, painted) | $stack B | | |
 REPORT
+if [ "$breakdown" = 1 ]; then
+  exec_log=$(mktemp /tmp/bench-mcu-exec.XXXXXX)
+  trap 'rm -f "$exec_log"' EXIT
+  qemu-system-arm -machine netduinoplus2 -nographic -monitor none -serial none \
+    -semihosting-config enable=on,target=native -singlestep -d exec,nochain -D "$exec_log" \
+    -kernel "$qemu_elf" >/dev/null
+  echo
+  python3 scripts/tick-profile.py "$(grep -c . traces/qemu_sensor_trace.csv | awk '{print $1 - 3}')" <"$exec_log"
+fi
 exit $fail

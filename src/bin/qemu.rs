@@ -119,7 +119,17 @@ fn bench(syst: &mut SYST) {
         empty
     );
 
-    // Full control tick, each tick measured alone (frame built before the measurement).
+    bench_ticks();
+    bench_force_law();
+    // Slot for the fixed-point force law (branch `fixed`, src/fixed_point.rs): not merged here.
+    defmt::info!("bench force_law_fixed unavailable");
+}
+
+/// Full control tick, each tick measured alone (frame built before the measurement).
+/// Not inlined: `scripts/bench-mcu.sh --breakdown` attributes the instructions executed
+/// between this function's entry and `bench_force_law`'s to symbols.
+#[inline(never)]
+fn bench_ticks() {
     let p = wiring::pressure_scaling();
     let dt = 1.0 / TRACE_TICK_HZ;
     let mut tick = ControlTick::new(ControllerConfig::reference(TRACE_TICK_HZ));
@@ -141,8 +151,12 @@ fn bench(syst: &mut SYST) {
         sum_armed,
         max_any
     );
+}
 
-    // Force law alone (f32), at the trace's pressures and the stretches of its angles.
+/// Force law alone (f32), at the trace's pressures and the stretches of its angles.
+#[inline(never)]
+fn bench_force_law() {
+    let p = wiring::pressure_scaling();
     let g = JointGeometry::REFERENCE;
     let (mut sum, mut n, mut max) = (0u32, 0u32, 0u32);
     for row in SENSOR_TRACE.iter() {
@@ -164,8 +178,6 @@ fn bench(syst: &mut SYST) {
         sum,
         max
     );
-    // Slot for the fixed-point force law (branch `fixed`, src/fixed_point.rs): not merged here.
-    defmt::info!("bench force_law_fixed unavailable");
 }
 
 /// The fault requested on the semihosting command line (`-append panic|hardfault`), if any.
