@@ -15,6 +15,9 @@
 //! - Pressure set-points pass through [`clamp_pressure_setpoint_pa`]: never above
 //!   [`crate::P_MUSCLE_MAX_GAUGE_PA`] (600 kPa gauge), never below 0, never NaN.
 
+// `!(x > y)` is the deliberate NaN-rejecting comparison (NaN fails every comparison).
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use crate::tick::ValveCommand;
 use crate::P_MUSCLE_MAX_GAUGE_PA;
 

@@ -13,6 +13,9 @@
 //! Board code and host-sim fakes implement the traits; the control tick only sees the
 //! converted values (`Option<f32>`), so it never touches a register.
 
+// `!(x > y)` is the deliberate NaN-rejecting comparison (NaN fails every comparison).
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use core::f32::consts::PI;
 
 /// Linear ADC scaling: `p_gauge_pa = offset_pa + pa_per_count * counts`.
@@ -102,6 +105,38 @@ pub trait Clock {
     fn now_ticks(&self) -> u64;
     /// Tick frequency [Hz].
     fn tick_hz(&self) -> u32;
+}
+
+/// Measures the control period from a [`Clock`]: `dt_s` is the time since the previous
+/// call. The first call returns the nominal period `1 / tick_hz`. A clock that went
+/// backwards or a zero tick rate gives NaN, which the control tick answers with a
+/// watchdog fault (no panic).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TickTimer {
+    last_ticks: Option<u64>,
+}
+
+impl TickTimer {
+    /// A timer that has not been read yet.
+    pub const fn new() -> Self {
+        TickTimer { last_ticks: None }
+    }
+
+    /// Seconds since the previous call.
+    pub fn dt_s<C: Clock>(&mut self, clock: &C) -> f32 {
+        let now = clock.now_ticks();
+        let hz = clock.tick_hz();
+        let prev = self.last_ticks.replace(now);
+        if hz == 0 {
+            return f32::NAN;
+        }
+        match prev {
+            None => 1.0 / hz as f32,
+            Some(p) if now >= p => ((now - p) as f64 / hz as f64) as f32,
+            Some(_) => f32::NAN,
+        }
+    }
 }
 
 /// Limits for one measured channel.
@@ -400,6 +435,29 @@ mod tests {
         let mut a = FakeAdc(Some(2000));
         assert_eq!(a.read_gauge_pa().unwrap(), Some(400_000.0));
         assert_eq!(a.read_gauge_pa().unwrap(), None);
+    }
+
+    struct FakeClock(core::cell::Cell<u64>, u32);
+    impl Clock for FakeClock {
+        fn now_ticks(&self) -> u64 {
+            self.0.get()
+        }
+        fn tick_hz(&self) -> u32 {
+            self.1
+        }
+    }
+
+    #[test]
+    fn tick_timer_measures_elapsed_time_and_flags_backwards_clock() {
+        let c = FakeClock(core::cell::Cell::new(1_000), 1_000_000);
+        let mut t = TickTimer::new();
+        assert_eq!(t.dt_s(&c), 1e-6);
+        c.0.set(2_000);
+        assert!((t.dt_s(&c) - 1e-3).abs() < 1e-9);
+        c.0.set(1_500);
+        assert!(t.dt_s(&c).is_nan());
+        let z = FakeClock(core::cell::Cell::new(0), 0);
+        assert!(TickTimer::new().dt_s(&z).is_nan());
     }
 
     #[test]

@@ -9,6 +9,7 @@
 use core::convert::Infallible;
 use core::f64::consts::PI;
 
+use pam_firmware::log::{TickLog, TickRecord};
 use pam_firmware::safety::SafeState;
 use pam_firmware::sensors::{counts_to_rad, PressureScaling};
 use pam_firmware::tick::{
@@ -161,6 +162,8 @@ struct Run {
     out: Vec<TickOutput>,
     openings: Vec<ValveOpenings>,
     p_max_gauge: f64,
+    /// The firmware's ring log of the last 256 ticks.
+    log: TickLog<256>,
 }
 
 /// Runs the loop for `seconds`; the set-point is 0 until `t_step`, then `target`.
@@ -189,6 +192,7 @@ fn simulate(
         out: Vec::with_capacity(n),
         openings: Vec::with_capacity(n),
         p_max_gauge: 0.0,
+        log: TickLog::new(),
     };
     for k in 0..n {
         let t = k as f64 * DT;
@@ -199,6 +203,7 @@ fn simulate(
         inject(k, &mut frame);
         let out = tick.step(&frame, &sp, DT as f32);
         let u = valves.apply(&out.valves).unwrap();
+        run.log.push(TickRecord::new(k as u32, &frame, &sp, &out));
         run.t.push(t);
         run.beta.push(plant.beta);
         run.out.push(out);
@@ -359,6 +364,12 @@ fn nan_injection(safe: SafeState) {
         assert_eq!(run.openings[k], want_open, "tick {k}");
         assert_eq!(run.out[k].fault, Some(FaultCode::PressureInvalid2));
     }
+    // The tick log holds the NaN tick with its fault code, and the ticks before it armed.
+    let recs: Vec<&TickRecord> = run.log.iter().collect();
+    let at = recs.iter().position(|r| r.tick as usize == k_nan).unwrap();
+    assert!(recs[at].p2_meas_gauge_pa.is_nan());
+    assert_eq!(recs[at].fault_code, FaultCode::PressureInvalid2 as u8);
+    assert!(recs[at - 1].armed && recs[at - 1].fault_code == 0);
     // Hold keeps the joint near where it was (the muscles keep their air).
     if safe == SafeState::Hold {
         let drift = (run.beta.last().unwrap() - run.beta[k_nan]).abs();
