@@ -8,6 +8,12 @@
 
 use std::{env, fs, path::PathBuf};
 
+// Shared with the library (`crate::fixed_point::prescale`): the same f64 pre-scaling runs here
+// for the compile-time constants and in `FixedForceLaw::from_params` at run time.
+#[allow(dead_code)]
+#[path = "src/fixed_point/prescale.rs"]
+mod prescale;
+
 #[derive(serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 struct ForceFile {
@@ -47,6 +53,12 @@ fn read<T: serde::de::DeserializeOwned>(path: &str) -> T {
     toml::from_str(&text).unwrap_or_else(|e| panic!("{path}: {e}"))
 }
 
+/// The f32 constant the firmware uses, widened back to f64 (the fixed-point model is pre-scaled
+/// from exactly the values of the f32 model).
+fn f32w(x: f64) -> f64 {
+    x as f32 as f64
+}
+
 /// Formats an f64 as an f32 literal that round-trips.
 fn lit(x: f64) -> String {
     assert!(x.is_finite(), "non-finite constant {x}");
@@ -54,6 +66,7 @@ fn lit(x: f64) -> String {
 }
 
 fn main() {
+    println!("cargo:rerun-if-changed=src/fixed_point/prescale.rs");
     let force: ForceFile = read("config/force_law.toml");
     let torque: TorqueFile = read("config/torque_model.toml");
     let f = force.force_law;
@@ -110,6 +123,33 @@ fn main() {
         lit(t.sprocket_radius_m),
         lit(t.p0_gauge_pa),
         lit(t.dp_max_pa),
+    );
+    let fb = prescale::force_law_bits(
+        f.c.map(f32w),
+        f32w(f.p_gauge_max_pa),
+        f32w(f.stretch_min),
+        f32w(f.stretch_max),
+        f64::exp,
+    );
+    let tb = prescale::torque_model_bits(
+        f32w(t.a_n_per_m_rad),
+        f32w(t.b_m2),
+        f32w(t.c_nms3_per_rad3),
+        f32w(t.d_nms_per_rad),
+        f32w(t.sprocket_radius_m),
+        f32w(t.p0_gauge_pa),
+        f32w(t.dp_max_pa),
+    );
+    let src = format!(
+        "{src}\
+         /// Fixed-point force law pre-scaled (in f64, by `src/fixed_point/prescale.rs`) from the\n\
+         /// f32 constants of [`FORCE_LAW`].\n\
+         pub const FIXED_FORCE_LAW: crate::fixed_point::FixedForceLaw = crate::fixed_point::FixedForceLaw::from_bits(\n\
+         \x20   crate::fixed_point::prescale::{fb:?});\n\
+         /// Fixed-point torque model pre-scaled (in f64, by `src/fixed_point/prescale.rs`) from the\n\
+         /// f32 constants of [`TORQUE_MODEL`].\n\
+         pub const FIXED_TORQUE_MODEL: crate::fixed_point::FixedTorqueModel = crate::fixed_point::FixedTorqueModel::from_bits(\n\
+         \x20   crate::fixed_point::prescale::{tb:?});\n"
     );
     let out = PathBuf::from(env::var("OUT_DIR").unwrap()).join("constants.rs");
     fs::write(&out, src).expect("write constants.rs");

@@ -101,6 +101,8 @@ impl ForceLawParams {
 
     /// Tension [N] of a muscle at gauge pressure `p_gauge_pa` and deformation `stretch`
     /// (L/L0), with domain checks. Never panics, never NaN.
+    // `!(x > eps)` is deliberate: it is also true for NaN.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     pub fn force(&self, p_gauge_pa: f32, stretch: f32) -> ForceEstimate {
         if !p_gauge_pa.is_finite() || !stretch.is_finite() {
             return ForceEstimate {
@@ -230,5 +232,44 @@ mod tests {
         let short = FORCE_LAW.force(400_000.0, 0.8).force_n;
         let long = FORCE_LAW.force(400_000.0, 1.0).force_n;
         assert!(long > short);
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(4096))]
+
+        /// Any f32 bit patterns (NaN, infinities, subnormals, huge values): never panics,
+        /// never NaN or negative, flags exactly describe the input class.
+        #[test]
+        fn force_of_any_f32_is_finite_non_negative_and_flagged(
+            p in proptest::num::f32::ANY,
+            e in proptest::num::f32::ANY,
+        ) {
+            let l = &FORCE_LAW;
+            let r = l.force(p, e);
+            proptest::prop_assert!(r.force_n.is_finite() && r.force_n >= 0.0, "{:?}", r);
+            if !p.is_finite() || !e.is_finite() {
+                proptest::prop_assert_eq!(
+                    r,
+                    ForceEstimate { force_n: 0.0, flags: ForceFlags::INVALID_INPUT }
+                );
+            } else {
+                let f = r.flags;
+                proptest::prop_assert!(!f.contains_any(ForceFlags::FATAL));
+                proptest::prop_assert_eq!(f.contains_any(ForceFlags::PRESSURE_LOW), p < 0.0);
+                proptest::prop_assert_eq!(
+                    f.contains_any(ForceFlags::PRESSURE_HIGH),
+                    p > l.p_gauge_max_pa
+                );
+                proptest::prop_assert_eq!(f.contains_any(ForceFlags::STRETCH_LOW), e < l.stretch_min);
+                proptest::prop_assert_eq!(
+                    f.contains_any(ForceFlags::STRETCH_HIGH),
+                    e > l.stretch_max
+                );
+                // Out of domain = the value at the clamped input.
+                let pc = p.clamp(0.0, l.p_gauge_max_pa);
+                let ec = e.clamp(l.stretch_min, l.stretch_max);
+                proptest::prop_assert_eq!(r.force_n, l.force(pc, ec).force_n);
+            }
+        }
     }
 }

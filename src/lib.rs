@@ -9,6 +9,7 @@
 //! Modules:
 //! - [`force_law`]: the trig-free identified force law (seed 002, eq. 6).
 //! - [`torque_model`]: the simplified joint torque model and its inverse (seed 003, eq. 11).
+//! - [`fixed_point`]: fixed-point build of both models for FPU-less cores (Cortex-M0/M3).
 //! - [`constants`]: constants generated at build time from `config/*.toml`.
 //! - [`trace`]: replays the embedded sensor trace through the control tick (QEMU run).
 //! - [`wiring`]: sensor scaling of the reference board wiring (raw counts -> SI).
@@ -22,10 +23,15 @@
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
+// Unit tests (proptest, printing worst cases) run on the host with std.
+#[cfg(test)]
+extern crate std;
+
 #[macro_use]
 mod fmt;
 
 pub mod control;
+pub mod fixed_point;
 pub mod force_law;
 pub mod geometry;
 pub mod log;

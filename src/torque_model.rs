@@ -159,6 +159,8 @@ impl TorqueModelParams {
     /// Pressure set-points (p1, p2) gauge [Pa] of the symmetric activation
     /// `p1 = p0 - dp`, `p2 = p0 + dp`, each clamped to `[0, P_MUSCLE_MAX_GAUGE_PA]`.
     #[inline]
+    // `!(p >= 0.0)` is deliberate: a NaN pressure maps to 0.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     pub fn pressures_gauge_pa(&self, dp_pa: f32) -> (f32, f32) {
         let clamp = |p: f32| {
             if !(p >= 0.0) {
@@ -238,5 +240,67 @@ mod tests {
         let (p1, p2) = TORQUE_MODEL.pressures_gauge_pa(50_000.0);
         assert_eq!(p1, TORQUE_MODEL.p0_gauge_pa - 50_000.0);
         assert_eq!(p2, TORQUE_MODEL.p0_gauge_pa + 50_000.0);
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(4096))]
+
+        /// Any f32 bit patterns: the activation is finite and within +-dp_limit, and the
+        /// pressures it leads to are within [0, 600 kPa]; non-finite inputs give dp = 0.
+        #[test]
+        fn activation_of_any_f32_is_finite_and_bounded(
+            t in proptest::num::f32::ANY,
+            a in proptest::num::f32::ANY,
+            v in proptest::num::f32::ANY,
+        ) {
+            let m = &TORQUE_MODEL;
+            let act = m.activation(t, a, v);
+            proptest::prop_assert!(act.dp_pa.is_finite());
+            proptest::prop_assert!(act.dp_pa.abs() <= m.dp_limit_pa(), "{:?}", act);
+            if !t.is_finite() || !a.is_finite() || !v.is_finite() {
+                proptest::prop_assert_eq!(act, Activation { dp_pa: 0.0, saturated: true });
+            }
+            let (p1, p2) = m.pressures_gauge_pa(act.dp_pa);
+            for p in [p1, p2] {
+                proptest::prop_assert!((0.0..=P_MUSCLE_MAX_GAUGE_PA).contains(&p));
+            }
+        }
+
+        /// Pressures stay within [0, 600 kPa] for any dp bit pattern (NaN included).
+        #[test]
+        fn pressures_of_any_dp_are_in_range(dp in proptest::num::f32::ANY) {
+            let (p1, p2) = TORQUE_MODEL.pressures_gauge_pa(dp);
+            for p in [p1, p2] {
+                proptest::prop_assert!((0.0..=P_MUSCLE_MAX_GAUGE_PA).contains(&p), "{dp} -> {p}");
+            }
+        }
+
+        /// The forward model never panics on any bit pattern and is finite for finite,
+        /// physically meaningful inputs.
+        #[test]
+        fn forward_never_panics(
+            a in proptest::num::f32::ANY,
+            v in proptest::num::f32::ANY,
+            dp in proptest::num::f32::ANY,
+        ) {
+            let t = TORQUE_MODEL.torque_nm(a, v, dp);
+            if a.abs() <= 1e3 && v.abs() <= 1e3 && dp.abs() <= 1e7 {
+                proptest::prop_assert!(t.is_finite(), "{a} {v} {dp} -> {t}");
+            }
+        }
+
+        /// Inside the range the inverse undoes the forward model (to well below 1 Pa).
+        #[test]
+        fn inverse_round_trips_forward_inside_range(
+            a in -1.5f32..1.5,
+            v in -10.0f32..10.0,
+            frac in -0.999f32..0.999,
+        ) {
+            let m = &TORQUE_MODEL;
+            let dp = frac * m.dp_limit_pa();
+            let act = m.activation(m.torque_nm(a, v, dp), a, v);
+            proptest::prop_assert!(!act.saturated);
+            proptest::prop_assert!((act.dp_pa - dp).abs() < 1.0, "{} vs {}", act.dp_pa, dp);
+        }
     }
 }

@@ -1,2 +1,21 @@
 //! host-sim: plant models, firmware-in-the-loop simulation, recordings, identification and
 //! diagnosis for pneumatic-artificial-muscle joints.
+//!
+//! - [`plant`]: the reference 1-DOF antagonistic joint of `shared/plant/PLANT.md`.
+//! - [`config`]: its TOML parameter files.
+//! - [`sim`]: open-loop integration under zero-order-held valve inputs.
+//! - [`recording`]: the CSV recording format of `shared/plant/RECORDING.md`.
+//! - [`fit`]: NRMSE fit, MAE, MSE per channel.
+//! - [`plot`]: measured vs simulated channel plots.
+
+pub mod config;
+pub mod fit;
+pub mod plant;
+pub mod plot;
+pub mod recording;
+pub mod sim;
+
+pub use config::{ConfigError, PlantConfig};
+pub use plant::{Measurement, Plant, PlantState, ValveInputs};
+pub use recording::{Channel, Recording, RecordingError};
+pub use sim::{simulate, SimError, Simulation, SolverOptions};

@@ -1,0 +1,191 @@
+//! Plant parameter files (TOML), e.g. `shared/plant/reference-1dof.toml`.
+//!
+//! Every table is `deny_unknown_fields`: a misspelt or unknown key is an error, and so is a
+//! missing one. Errors name the file and the key (the `toml` crate reports line, column and
+//! the key; we prefix the file path).
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use crate::plant::effects::EffectsConfig;
+
+/// The whole plant file.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlantConfig {
+    pub environment: EnvironmentConfig,
+    pub muscle: MuscleConfig,
+    pub joint: JointConfig,
+    pub valve: ValveConfig,
+    pub initial: InitialConfig,
+    /// Optional, switchable model extensions; absent in the nominal reference files.
+    #[serde(default)]
+    pub effects: EffectsConfig,
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EnvironmentConfig {
+    /// Atmospheric pressure, absolute.
+    pub p_atm_pa: f64,
+    /// Supply pressure above atmosphere.
+    pub supply_gauge_pa: f64,
+}
+
+/// Both muscles are identical.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MuscleConfig {
+    /// l_n, length at zero contraction.
+    pub rest_length_m: f64,
+    /// r0, braid radius at rest (Tondu model).
+    pub radius_m: f64,
+    /// alpha0, initial braid angle.
+    pub braid_angle_deg: f64,
+    /// k, end-effect factor.
+    pub end_factor: f64,
+    /// gamma in F_d = gamma * p_gauge * dchi/dt.
+    pub damping_m2s: f64,
+    /// V(chi) = b0 + b1 chi + b2 chi^2 + b3 chi^3 in m^3.
+    pub volume_poly_m3: [f64; 4],
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointConfig {
+    /// r.
+    pub sprocket_radius_m: f64,
+    /// J.
+    pub inertia_kgm2: f64,
+    /// chi0, contraction of both muscles at angle 0.
+    pub initial_contraction: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ValveConfig {
+    /// C, ISO 6358 sonic conductance.
+    pub sonic_conductance_m3_per_s_pa: f64,
+    /// b, critical pressure ratio.
+    pub critical_ratio: f64,
+    /// l, laminar ratio (flow falls linearly to zero above it).
+    pub laminar_ratio: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InitialConfig {
+    pub angle_rad: f64,
+    pub velocity_rad_s: f64,
+    pub p1_gauge_pa: f64,
+    pub p2_gauge_pa: f64,
+}
+
+/// A plant file that could not be read or is invalid.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("{path}: cannot read plant file: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}: {message}")]
+    Parse { path: PathBuf, message: String },
+    #[error("{path}: key `{key}`: {message}")]
+    Invalid {
+        path: PathBuf,
+        key: String,
+        message: String,
+    },
+}
+
+impl PlantConfig {
+    /// Reads and validates a plant file.
+    pub fn load(path: impl AsRef<Path>) -> Result<Self, ConfigError> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        Self::from_toml_str(&text, path)
+    }
+
+    /// Parses and validates plant TOML text; `path` is only used in error messages.
+    pub fn from_toml_str(text: &str, path: impl AsRef<Path>) -> Result<Self, ConfigError> {
+        let path = path.as_ref();
+        let cfg: PlantConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            path: path.to_owned(),
+            // toml's message already names the key (`unknown field `x``, `missing field `y``)
+            // and the line; keep it on one line after the file name.
+            message: e.to_string().trim_end().replace('\n', "\n  "),
+        })?;
+        cfg.validate(path)?;
+        Ok(cfg)
+    }
+
+    fn validate(&self, path: &Path) -> Result<(), ConfigError> {
+        let bad = |key: &str, message: &str| ConfigError::Invalid {
+            path: path.to_owned(),
+            key: key.to_owned(),
+            message: message.to_owned(),
+        };
+        let positive = [
+            ("environment.p_atm_pa", self.environment.p_atm_pa),
+            ("muscle.rest_length_m", self.muscle.rest_length_m),
+            ("muscle.radius_m", self.muscle.radius_m),
+            ("muscle.braid_angle_deg", self.muscle.braid_angle_deg),
+            ("joint.sprocket_radius_m", self.joint.sprocket_radius_m),
+            ("joint.inertia_kgm2", self.joint.inertia_kgm2),
+            (
+                "valve.sonic_conductance_m3_per_s_pa",
+                self.valve.sonic_conductance_m3_per_s_pa,
+            ),
+        ];
+        for (key, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(bad(key, &format!("must be a finite number > 0, got {v}")));
+            }
+        }
+        let finite = [
+            ("environment.supply_gauge_pa", self.environment.supply_gauge_pa),
+            ("muscle.end_factor", self.muscle.end_factor),
+            ("muscle.damping_m2s", self.muscle.damping_m2s),
+            ("joint.initial_contraction", self.joint.initial_contraction),
+            ("initial.angle_rad", self.initial.angle_rad),
+            ("initial.velocity_rad_s", self.initial.velocity_rad_s),
+            ("initial.p1_gauge_pa", self.initial.p1_gauge_pa),
+            ("initial.p2_gauge_pa", self.initial.p2_gauge_pa),
+        ];
+        for (key, v) in finite {
+            if !v.is_finite() {
+                return Err(bad(key, &format!("must be a finite number, got {v}")));
+            }
+        }
+        if self.muscle.volume_poly_m3.iter().any(|v| !v.is_finite()) {
+            return Err(bad("muscle.volume_poly_m3", "coefficients must be finite"));
+        }
+        if self.muscle.braid_angle_deg >= 90.0 {
+            return Err(bad("muscle.braid_angle_deg", "must be below 90 degrees"));
+        }
+        let b = self.valve.critical_ratio;
+        let l = self.valve.laminar_ratio;
+        if !(b.is_finite() && (0.0..1.0).contains(&b)) {
+            return Err(bad("valve.critical_ratio", "must be in [0, 1)"));
+        }
+        if !(l.is_finite() && l > b && l < 1.0) {
+            return Err(bad(
+                "valve.laminar_ratio",
+                "must be in (critical_ratio, 1)",
+            ));
+        }
+        if self.muscle.volume_poly_m3[0] <= 0.0 {
+            return Err(bad(
+                "muscle.volume_poly_m3",
+                "b0 (volume at zero contraction) must be > 0",
+            ));
+        }
+        self.effects.validate(path)
+    }
+}

@@ -1,0 +1,202 @@
+//! The reference 1-DOF antagonistic PAM joint of `shared/plant/PLANT.md`.
+//!
+//! Each physics term lives in its own module: [`valve`] (ISO 6358 flow), [`muscle`] (Tondu
+//! force, damper, tension, volume polynomial), [`joint`] (kinematics, J omega' = T),
+//! [`pressure`] (Boyle-Mariotte), [`effects`] (optional extensions, off in the nominal files).
+
+pub mod effects;
+pub mod joint;
+pub mod muscle;
+pub mod pressure;
+pub mod valve;
+
+use std::path::Path;
+
+use crate::config::{ConfigError, PlantConfig};
+use effects::Effects;
+use joint::Joint;
+use muscle::Muscle;
+use valve::Iso6358Valve;
+
+/// Plant state (SI, absolute pressures).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PlantState {
+    /// beta.
+    pub angle_rad: f64,
+    /// omega.
+    pub velocity_rad_s: f64,
+    /// p1, absolute.
+    pub p1_abs_pa: f64,
+    /// p2, absolute.
+    pub p2_abs_pa: f64,
+}
+
+impl PlantState {
+    pub fn to_array(self) -> [f64; 4] {
+        [self.angle_rad, self.velocity_rad_s, self.p1_abs_pa, self.p2_abs_pa]
+    }
+    pub fn from_array(a: [f64; 4]) -> Self {
+        Self {
+            angle_rad: a[0],
+            velocity_rad_s: a[1],
+            p1_abs_pa: a[2],
+            p2_abs_pa: a[3],
+        }
+    }
+}
+
+/// Valve openings in [0, 1], held over one sample period (a PWM duty counts as opening).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ValveInputs {
+    pub u_in1: f64,
+    pub u_ex1: f64,
+    pub u_in2: f64,
+    pub u_ex2: f64,
+}
+
+impl ValveInputs {
+    pub const CLOSED: Self = Self {
+        u_in1: 0.0,
+        u_ex1: 0.0,
+        u_in2: 0.0,
+        u_ex2: 0.0,
+    };
+}
+
+/// What the sensors of a recording report (PLANT.md "Measured channels").
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Measurement {
+    pub angle_deg: f64,
+    /// Gauge.
+    pub p1_kpa: f64,
+    /// Gauge.
+    pub p2_kpa: f64,
+    pub f1_n: f64,
+    pub f2_n: f64,
+}
+
+impl Measurement {
+    pub fn to_array(self) -> [f64; 5] {
+        [self.angle_deg, self.p1_kpa, self.p2_kpa, self.f1_n, self.f2_n]
+    }
+}
+
+/// The plant with its derived constants; cheap to copy into the integrator.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plant {
+    pub p_atm_pa: f64,
+    /// p_s, absolute supply pressure.
+    pub p_supply_abs_pa: f64,
+    pub muscle: Muscle,
+    pub joint: Joint,
+    pub valve: Iso6358Valve,
+    pub effects: Effects,
+    pub initial: PlantState,
+}
+
+impl Plant {
+    pub fn from_config(c: &PlantConfig) -> Self {
+        let p_atm_pa = c.environment.p_atm_pa;
+        Self {
+            p_atm_pa,
+            p_supply_abs_pa: c.environment.supply_gauge_pa + p_atm_pa,
+            muscle: Muscle::from_config(&c.muscle),
+            joint: Joint::from_config(&c.joint, c.muscle.rest_length_m),
+            valve: Iso6358Valve::new(
+                c.valve.sonic_conductance_m3_per_s_pa,
+                c.valve.critical_ratio,
+                c.valve.laminar_ratio,
+            ),
+            effects: Effects::from_config(
+                &c.effects,
+                c.valve.critical_ratio,
+                c.valve.laminar_ratio,
+            ),
+            initial: PlantState {
+                angle_rad: c.initial.angle_rad,
+                velocity_rad_s: c.initial.velocity_rad_s,
+                p1_abs_pa: c.initial.p1_gauge_pa + p_atm_pa,
+                p2_abs_pa: c.initial.p2_gauge_pa + p_atm_pa,
+            },
+        }
+    }
+
+    /// Loads a plant TOML file (see [`PlantConfig::load`]).
+    pub fn load(path: impl AsRef<Path>) -> Result<Self, ConfigError> {
+        Ok(Self::from_config(&PlantConfig::load(path)?))
+    }
+
+    /// The `[initial]` state.
+    pub fn initial_state(&self) -> PlantState {
+        self.initial
+    }
+
+    /// Muscle tensions F1, F2 [N] for a state.
+    #[inline(always)]
+    pub fn tensions_n(&self, x: &PlantState) -> [f64; 2] {
+        let chi = self.joint.contractions(x.angle_rad);
+        let dchi = self.joint.contraction_rates(x.velocity_rad_s);
+        [
+            self.muscle
+                .tension_n(x.p1_abs_pa - self.p_atm_pa, chi[0], dchi[0]),
+            self.muscle
+                .tension_n(x.p2_abs_pa - self.p_atm_pa, chi[1], dchi[1]),
+        ]
+    }
+
+    /// Right-hand side: d/dt of (beta, omega, p1, p2) for inputs `u`.
+    #[inline(always)]
+    pub fn derivatives(&self, x: &PlantState, u: &ValveInputs) -> PlantState {
+        let chi = self.joint.contractions(x.angle_rad);
+        let dchi = self.joint.contraction_rates(x.velocity_rad_s);
+        let p = [x.p1_abs_pa, x.p2_abs_pa];
+        let u_in = [u.u_in1, u.u_in2];
+        let u_ex = [u.u_ex1, u.u_ex2];
+        let mut tension = [0.0; 2];
+        let mut dp = [0.0; 2];
+        for i in 0..2 {
+            let pg = p[i] - self.p_atm_pa;
+            tension[i] = self.muscle.tension_n(pg, chi[i], dchi[i]);
+            let q = u_in[i] * self.valve.flow_m3_s(self.p_supply_abs_pa, p[i])
+                - u_ex[i] * self.valve.flow_m3_s(p[i], self.p_atm_pa)
+                + self.effects.chamber_flow_m3_s(p[i], self.p_atm_pa);
+            dp[i] = pressure::pressure_rate_pa_s(
+                self.p_atm_pa,
+                p[i],
+                q,
+                self.muscle.volume_m3(chi[i]),
+                self.muscle.volume_rate_m3_s(chi[i], dchi[i]),
+            );
+        }
+        let torque = self.joint.muscle_torque_nm(tension)
+            + self.effects.joint_torque_nm(x.angle_rad, x.velocity_rad_s);
+        PlantState {
+            angle_rad: x.velocity_rad_s,
+            velocity_rad_s: self.joint.angular_acceleration_rad_s2(torque),
+            p1_abs_pa: dp[0],
+            p2_abs_pa: dp[1],
+        }
+    }
+
+    /// The recorded channels for a state, with the sensor calibration effect if enabled.
+    pub fn measure(&self, x: &PlantState) -> Measurement {
+        let f = self.tensions_n(x);
+        let m = Measurement {
+            angle_deg: x.angle_rad.to_degrees(),
+            p1_kpa: (x.p1_abs_pa - self.p_atm_pa) / 1000.0,
+            p2_kpa: (x.p2_abs_pa - self.p_atm_pa) / 1000.0,
+            f1_n: f[0],
+            f2_n: f[1],
+        };
+        match &self.effects.sensor {
+            None => m,
+            Some(c) => Measurement {
+                angle_deg: c[0].apply(m.angle_deg),
+                p1_kpa: c[1].apply(m.p1_kpa),
+                p2_kpa: c[2].apply(m.p2_kpa),
+                f1_n: c[3].apply(m.f1_n),
+                f2_n: c[4].apply(m.f2_n),
+            },
+        }
+    }
+}

@@ -1,0 +1,129 @@
+//! Measured vs simulated channel plots with `plotters` (PNG or SVG by file extension).
+
+use std::path::{Path, PathBuf};
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use crate::recording::{Channel, Recording};
+
+#[derive(Debug, thiserror::Error)]
+pub enum PlotError {
+    #[error("{}: unsupported plot format (use .png or .svg)", .0.display())]
+    Format(PathBuf),
+    #[error("{}: {message}", path.display())]
+    Draw { path: PathBuf, message: String },
+    #[error("{}: nothing to plot (no output channel)", .0.display())]
+    Empty(PathBuf),
+}
+
+/// Draws one panel per output channel of `model`; `reference` (measured) is drawn under it
+/// where it has the channel. Written to a temporary file and renamed over `path`.
+pub fn plot_comparison(
+    path: &Path,
+    reference: Option<&Recording>,
+    model: &Recording,
+) -> Result<(), PlotError> {
+    let channels: Vec<Channel> = Channel::ALL
+        .into_iter()
+        .filter(|c| model.channel(*c).is_some())
+        .collect();
+    if channels.is_empty() {
+        return Err(PlotError::Empty(path.to_owned()));
+    }
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
+        _ => PathBuf::from("."),
+    };
+    let draw_err = |message: String| PlotError::Draw {
+        path: path.to_owned(),
+        message,
+    };
+    // Temporary name keeps the extension so the backend picks the right encoder.
+    let tmp = tempfile::Builder::new()
+        .prefix(".plot.")
+        .suffix(&format!(".{ext}"))
+        .tempfile_in(&dir)
+        .map_err(|e| draw_err(e.to_string()))?;
+    let size = (1200u32, 260 * channels.len() as u32);
+    match ext.as_str() {
+        "png" => {
+            let root = BitMapBackend::new(tmp.path(), size).into_drawing_area();
+            draw(&root, reference, model, &channels).map_err(draw_err)?;
+            root.present().map_err(|e| draw_err(e.to_string()))?;
+        }
+        "svg" => {
+            let root = SVGBackend::new(tmp.path(), size).into_drawing_area();
+            draw(&root, reference, model, &channels).map_err(draw_err)?;
+            root.present().map_err(|e| draw_err(e.to_string()))?;
+        }
+        _ => return Err(PlotError::Format(path.to_owned())),
+    }
+    tmp.persist(path).map_err(|e| draw_err(e.error.to_string()))?;
+    Ok(())
+}
+
+fn draw<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    reference: Option<&Recording>,
+    model: &Recording,
+    channels: &[Channel],
+) -> Result<(), String> {
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let panels = root.split_evenly((channels.len(), 1));
+    for (panel, c) in panels.iter().zip(channels) {
+        let sim = model.channel(*c).unwrap();
+        let meas = reference.and_then(|r| r.channel(*c).map(|m| (r, m)));
+        let t0 = model.t_s.first().copied().unwrap_or(0.0);
+        let t1 = model.t_s.last().copied().unwrap_or(1.0).max(t0 + 1e-9);
+        let mut lo = f64::INFINITY;
+        let mut hi = f64::NEG_INFINITY;
+        for v in sim.iter().chain(meas.iter().flat_map(|(_, m)| m.iter())) {
+            lo = lo.min(*v);
+            hi = hi.max(*v);
+        }
+        let pad = ((hi - lo) * 0.05).max(1e-6);
+        let mut chart = ChartBuilder::on(panel)
+            .margin(8)
+            .x_label_area_size(28)
+            .y_label_area_size(70)
+            .caption(c.name(), ("sans-serif", 16))
+            .build_cartesian_2d(t0..t1, (lo - pad)..(hi + pad))
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .x_desc("t_s")
+            .y_desc(c.name())
+            .draw()
+            .map_err(|e| e.to_string())?;
+        if let Some((r, m)) = meas {
+            chart
+                .draw_series(LineSeries::new(
+                    r.t_s.iter().copied().zip(m.iter().copied()),
+                    BLUE.stroke_width(2),
+                ))
+                .map_err(|e| e.to_string())?
+                .label("measured")
+                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));
+        }
+        chart
+            .draw_series(LineSeries::new(
+                model.t_s.iter().copied().zip(sim.iter().copied()),
+                RED.stroke_width(1),
+            ))
+            .map_err(|e| e.to_string())?
+            .label("simulated")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}

@@ -1,0 +1,427 @@
+//! Recordings: the CSV format of `shared/plant/RECORDING.md`, read and written with `csv`.
+//!
+//! - leading comment lines `# key = value` are metadata, kept in order (unknown keys too);
+//! - one header line, columns by name in any order;
+//! - required: `t_s` (uniform steps), `u_in1`, `u_ex1`, `u_in2`, `u_ex2` (in [0, 1]) and at
+//!   least one of `angle_deg`, `p1_kpa`, `p2_kpa`, `f1_n`, `f2_n`; other columns are ignored.
+//!
+//! Every error names the file, the line and the field. Writing goes to a temporary file in
+//! the target directory that is renamed over the target only when complete.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use crate::plant::{Measurement, ValveInputs};
+
+/// A measured (or simulated) output channel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Channel {
+    AngleDeg,
+    P1Kpa,
+    P2Kpa,
+    F1N,
+    F2N,
+}
+
+impl Channel {
+    pub const ALL: [Channel; 5] = [
+        Channel::AngleDeg,
+        Channel::P1Kpa,
+        Channel::P2Kpa,
+        Channel::F1N,
+        Channel::F2N,
+    ];
+
+    /// Column name in a recording.
+    pub fn name(self) -> &'static str {
+        match self {
+            Channel::AngleDeg => "angle_deg",
+            Channel::P1Kpa => "p1_kpa",
+            Channel::P2Kpa => "p2_kpa",
+            Channel::F1N => "f1_n",
+            Channel::F2N => "f2_n",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|c| c.name() == name)
+    }
+
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    /// The value of this channel in a measurement.
+    pub fn of(self, m: &Measurement) -> f64 {
+        m.to_array()[self.index()]
+    }
+}
+
+/// The input columns, in the order of [`ValveInputs`].
+pub const INPUT_COLUMNS: [&str; 4] = ["u_in1", "u_ex1", "u_in2", "u_ex2"];
+
+/// One recording (one run).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Recording {
+    /// `# key = value` lines in file order (a comment without `=` has an empty key).
+    pub metadata: Vec<(String, String)>,
+    pub t_s: Vec<f64>,
+    pub inputs: Vec<ValveInputs>,
+    /// Output channels present, indexed by [`Channel::index`].
+    pub outputs: [Option<Vec<f64>>; 5],
+}
+
+/// A recording that could not be read or written.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordingError {
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{}:{line}: field `{field}`: {message}", path.display())]
+    Field {
+        path: PathBuf,
+        line: u64,
+        field: String,
+        message: String,
+    },
+    #[error("{}:{line}: {message}", path.display())]
+    Line {
+        path: PathBuf,
+        line: u64,
+        message: String,
+    },
+    #[error("{}: {message}", path.display())]
+    Invalid { path: PathBuf, message: String },
+}
+
+impl Recording {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.t_s.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.t_s.is_empty()
+    }
+
+    /// Uniform sample period, from the first and last time stamps.
+    pub fn sample_period_s(&self) -> f64 {
+        let n = self.t_s.len();
+        if n < 2 {
+            return f64::NAN;
+        }
+        (self.t_s[n - 1] - self.t_s[0]) / (n - 1) as f64
+    }
+
+    pub fn channel(&self, c: Channel) -> Option<&[f64]> {
+        self.outputs[c.index()].as_deref()
+    }
+
+    pub fn set_channel(&mut self, c: Channel, values: Vec<f64>) {
+        self.outputs[c.index()] = Some(values);
+    }
+
+    /// The value of a metadata key, if present.
+    pub fn meta(&self, key: &str) -> Option<&str> {
+        self.metadata
+            .iter()
+            .find(|(k, _)| k == key)
+            .map(|(_, v)| v.as_str())
+    }
+
+    /// Reads and validates a recording file.
+    pub fn read(path: impl AsRef<Path>) -> Result<Self, RecordingError> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|source| RecordingError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// Parses recording text; `path` is used in error messages.
+    pub fn parse(text: &str, path: impl AsRef<Path>) -> Result<Self, RecordingError> {
+        let path = path.as_ref();
+        let field_err = |line: u64, field: &str, message: String| RecordingError::Field {
+            path: path.to_owned(),
+            line,
+            field: field.to_owned(),
+            message,
+        };
+
+        // Leading metadata / blank lines.
+        let mut metadata = Vec::new();
+        let mut meta_lines: u64 = 0;
+        let mut offset = 0;
+        let mut meta_line_of = Vec::new();
+        for raw in text.split_inclusive('\n') {
+            let line = raw.trim_end_matches(['\n', '\r']);
+            let trimmed = line.trim();
+            if let Some(c) = trimmed.strip_prefix('#') {
+                let c = c.trim();
+                match c.split_once('=') {
+                    Some((k, v)) => metadata.push((k.trim().to_owned(), v.trim().to_owned())),
+                    None => metadata.push((String::new(), c.to_owned())),
+                }
+                meta_line_of.push(meta_lines + 1);
+            } else if !trimmed.is_empty() {
+                break;
+            }
+            meta_lines += 1;
+            offset += raw.len();
+        }
+        let body = &text[offset..];
+
+        let mut rdr = csv::ReaderBuilder::new()
+            .has_headers(true)
+            .trim(csv::Trim::All)
+            .from_reader(body.as_bytes());
+        let header_line = meta_lines + 1;
+        let headers = rdr
+            .headers()
+            .map_err(|e| RecordingError::Line {
+                path: path.to_owned(),
+                line: header_line,
+                message: format!("cannot read the header: {e}"),
+            })?
+            .clone();
+        if headers.is_empty() || (headers.len() == 1 && headers[0].is_empty()) {
+            return Err(RecordingError::Line {
+                path: path.to_owned(),
+                line: header_line,
+                message: "no header line (expected t_s,u_in1,u_ex1,u_in2,u_ex2,...)".into(),
+            });
+        }
+        let find = |name: &str| -> Result<Option<usize>, RecordingError> {
+            let mut it = headers.iter().enumerate().filter(|(_, h)| *h == name);
+            let first = it.next().map(|(i, _)| i);
+            if it.next().is_some() {
+                return Err(field_err(header_line, name, "column appears twice".into()));
+            }
+            Ok(first)
+        };
+        let required = |name: &str| -> Result<usize, RecordingError> {
+            find(name)?.ok_or_else(|| field_err(header_line, name, "required column is missing".into()))
+        };
+        let t_col = required("t_s")?;
+        let mut u_cols = [0usize; 4];
+        for (i, name) in INPUT_COLUMNS.iter().enumerate() {
+            u_cols[i] = required(name)?;
+        }
+        let mut out_cols: [Option<usize>; 5] = [None; 5];
+        for c in Channel::ALL {
+            out_cols[c.index()] = find(c.name())?;
+        }
+        if out_cols.iter().all(|c| c.is_none()) {
+            return Err(field_err(
+                header_line,
+                "angle_deg",
+                "no output column (need at least one of angle_deg, p1_kpa, p2_kpa, f1_n, f2_n)"
+                    .into(),
+            ));
+        }
+
+        let mut rec = Recording {
+            metadata,
+            ..Default::default()
+        };
+        for c in Channel::ALL {
+            if out_cols[c.index()].is_some() {
+                rec.outputs[c.index()] = Some(Vec::new());
+            }
+        }
+        let mut lines = Vec::new();
+        let mut record = csv::StringRecord::new();
+        loop {
+            match rdr.read_record(&mut record) {
+                Ok(false) => break,
+                Ok(true) => {}
+                Err(e) => {
+                    let line = e
+                        .position()
+                        .map(|p| p.line() + meta_lines)
+                        .unwrap_or(header_line);
+                    let message = match e.kind() {
+                        csv::ErrorKind::UnequalLengths {
+                            expected_len, len, ..
+                        } => format!("{len} fields, the header has {expected_len}"),
+                        _ => e.to_string(),
+                    };
+                    return Err(RecordingError::Line {
+                        path: path.to_owned(),
+                        line,
+                        message,
+                    });
+                }
+            }
+            let line = record.position().map(|p| p.line()).unwrap_or(0) + meta_lines;
+            let num = |col: usize, name: &str| -> Result<f64, RecordingError> {
+                let s = record.get(col).unwrap_or("");
+                let v: f64 = s
+                    .parse()
+                    .map_err(|_| field_err(line, name, format!("not a number: {s:?}")))?;
+                if !v.is_finite() {
+                    return Err(field_err(line, name, format!("not a finite number: {s:?}")));
+                }
+                Ok(v)
+            };
+            rec.t_s.push(num(t_col, "t_s")?);
+            let mut u = [0.0; 4];
+            for i in 0..4 {
+                u[i] = num(u_cols[i], INPUT_COLUMNS[i])?;
+                if !(0.0..=1.0).contains(&u[i]) {
+                    return Err(field_err(
+                        line,
+                        INPUT_COLUMNS[i],
+                        format!("valve opening {} outside [0, 1]", u[i]),
+                    ));
+                }
+            }
+            rec.inputs.push(ValveInputs {
+                u_in1: u[0],
+                u_ex1: u[1],
+                u_in2: u[2],
+                u_ex2: u[3],
+            });
+            for c in Channel::ALL {
+                if let Some(col) = out_cols[c.index()] {
+                    let v = num(col, c.name())?;
+                    rec.outputs[c.index()].as_mut().unwrap().push(v);
+                }
+            }
+            lines.push(line);
+        }
+
+        let n = rec.t_s.len();
+        if n < 2 {
+            return Err(RecordingError::Invalid {
+                path: path.to_owned(),
+                message: format!("{n} data rows; a recording needs at least 2"),
+            });
+        }
+        let dt = rec.sample_period_s();
+        if !(dt > 0.0) {
+            return Err(field_err(
+                lines[n - 1],
+                "t_s",
+                "time does not increase (last time <= first time)".into(),
+            ));
+        }
+        let tol = 0.01 * dt;
+        for k in 1..n {
+            let step = rec.t_s[k] - rec.t_s[k - 1];
+            let drift = rec.t_s[k] - (rec.t_s[0] + k as f64 * dt);
+            if (step - dt).abs() > tol || drift.abs() > tol {
+                return Err(field_err(
+                    lines[k],
+                    "t_s",
+                    format!(
+                        "non-uniform time: {} after {} (sample period {dt} s)",
+                        rec.t_s[k],
+                        rec.t_s[k - 1]
+                    ),
+                ));
+            }
+        }
+        for (i, (k, v)) in rec.metadata.iter().enumerate() {
+            if k == "sample_period_s" {
+                let line = meta_line_of[i];
+                let declared: f64 = v.parse().map_err(|_| {
+                    field_err(line, "sample_period_s", format!("not a number: {v:?}"))
+                })?;
+                if !((declared - dt).abs() <= tol) {
+                    return Err(field_err(
+                        line,
+                        "sample_period_s",
+                        format!("declares {declared} s but the time column steps by {dt} s"),
+                    ));
+                }
+            }
+        }
+        Ok(rec)
+    }
+
+    /// Writes the recording; the target is replaced only once the new file is complete.
+    pub fn write(&self, path: impl AsRef<Path>) -> Result<(), RecordingError> {
+        let path = path.as_ref();
+        let io = |source: std::io::Error| RecordingError::Io {
+            path: path.to_owned(),
+            source,
+        };
+        let n = self.t_s.len();
+        if self.inputs.len() != n
+            || self.outputs.iter().flatten().any(|c| c.len() != n)
+        {
+            return Err(RecordingError::Invalid {
+                path: path.to_owned(),
+                message: "columns of unequal length".into(),
+            });
+        }
+        write_atomically(path, |w| {
+            for (k, v) in &self.metadata {
+                if k.is_empty() {
+                    writeln!(w, "# {v}")?;
+                } else {
+                    writeln!(w, "# {k} = {v}")?;
+                }
+            }
+            let mut cw = csv::WriterBuilder::new().from_writer(&mut *w);
+            let mut header: Vec<&str> = vec!["t_s"];
+            header.extend(INPUT_COLUMNS);
+            let present: Vec<Channel> = Channel::ALL
+                .into_iter()
+                .filter(|c| self.outputs[c.index()].is_some())
+                .collect();
+            header.extend(present.iter().map(|c| c.name()));
+            cw.write_record(&header)?;
+            let mut row: Vec<String> = Vec::with_capacity(header.len());
+            for k in 0..n {
+                row.clear();
+                row.push(format!("{}", self.t_s[k]));
+                let u = &self.inputs[k];
+                for v in [u.u_in1, u.u_ex1, u.u_in2, u.u_ex2] {
+                    row.push(format!("{v}"));
+                }
+                for c in &present {
+                    row.push(format!("{:.6}", self.outputs[c.index()].as_ref().unwrap()[k]));
+                }
+                cw.write_record(&row)?;
+            }
+            cw.flush()?;
+            Ok(())
+        })
+        .map_err(io)
+    }
+}
+
+/// Writes a file through a temporary file in the same directory, renamed over `path` only
+/// after `fill` succeeded and the data is flushed: a failure never leaves a half-written
+/// target (an existing good file stays as it was).
+pub fn write_atomically(
+    path: &Path,
+    fill: impl FnOnce(&mut std::io::BufWriter<&std::fs::File>) -> std::io::Result<()>,
+) -> std::io::Result<()> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
+        _ => PathBuf::from("."),
+    };
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "out".into());
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!(".{name}."))
+        .suffix(".tmp")
+        .tempfile_in(&dir)?;
+    {
+        let mut w = std::io::BufWriter::new(tmp.as_file());
+        fill(&mut w)?;
+        w.flush()?;
+    }
+    tmp.as_file().sync_all()?;
+    tmp.persist(path).map_err(|e| e.error)?;
+    Ok(())
+}

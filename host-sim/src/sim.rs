@@ -1,0 +1,267 @@
+//! Open-loop integration of the plant with `ode_solvers::Dopri5` (Dormand-Prince 5(4),
+//! adaptive, error controlled, 4th-order dense output).
+//!
+//! Inputs are zero-order held, so the right-hand side jumps at sample boundaries where an
+//! input changes. The integrator is therefore restarted at every input change (never
+//! stepping across a discontinuity) and runs of identical inputs are integrated as one
+//! segment, with the sample states taken from the dense output. The step size is carried
+//! from one segment to the next (no fresh step-size guess at each restart).
+
+use nalgebra::SVector;
+use ode_solvers::{Dopri5, OutputType, System};
+
+use crate::plant::{Plant, PlantState, ValveInputs};
+
+type Vector4 = SVector<f64, 4>;
+
+/// Tolerances of the adaptive integrator.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SolverOptions {
+    /// Relative tolerance (per state component).
+    pub rtol: f64,
+    /// Absolute tolerance (rad, rad/s, Pa: the pressures are always dominated by `rtol`).
+    pub atol: f64,
+    /// Upper bound on steps in one constant-input segment (guards against a runaway).
+    pub max_steps_per_segment: u32,
+}
+
+impl Default for SolverOptions {
+    fn default() -> Self {
+        Self {
+            rtol: 1e-6,
+            atol: 1e-6,
+            max_steps_per_segment: 1_000_000,
+        }
+    }
+}
+
+/// Counters of one simulation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct SimStats {
+    pub segments: u64,
+    pub rhs_evaluations: u64,
+    pub accepted_steps: u64,
+    pub rejected_steps: u64,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    #[error("integration failed at t = {t_s} s: {message}")]
+    Integration { t_s: f64, message: String },
+    #[error("state became non-finite at t = {t_s} s (state {state:?})")]
+    NonFinite { t_s: f64, state: PlantState },
+    #[error("invalid sample period {0} s (must be finite and > 0)")]
+    SamplePeriod(f64),
+    #[error("invalid valve input at sample {index}: {inputs:?} (openings must be in [0, 1])")]
+    Input { index: usize, inputs: ValveInputs },
+}
+
+struct Rhs<'a> {
+    plant: &'a Plant,
+    u: ValveInputs,
+}
+
+impl System<f64, Vector4> for Rhs<'_> {
+    #[inline(always)]
+    fn system(&self, _t: f64, y: &Vector4, dy: &mut Vector4) {
+        let x = PlantState {
+            angle_rad: y[0],
+            velocity_rad_s: y[1],
+            p1_abs_pa: y[2],
+            p2_abs_pa: y[3],
+        };
+        let d = self.plant.derivatives(&x, &self.u);
+        dy[0] = d.angle_rad;
+        dy[1] = d.velocity_rad_s;
+        dy[2] = d.p1_abs_pa;
+        dy[3] = d.p2_abs_pa;
+    }
+}
+
+fn valid_inputs(u: &ValveInputs) -> bool {
+    [u.u_in1, u.u_ex1, u.u_in2, u.u_ex2]
+        .iter()
+        .all(|v| (0.0..=1.0).contains(v))
+}
+
+/// A plant state advanced piecewise under zero-order-held inputs. Keeps the step size
+/// between calls, so it also serves closed-loop use (one call per control tick).
+pub struct Integrator<'a> {
+    plant: &'a Plant,
+    state: PlantState,
+    t_s: f64,
+    h_s: f64,
+    opts: SolverOptions,
+    stats: SimStats,
+    dense: Vec<PlantState>,
+}
+
+impl<'a> Integrator<'a> {
+    pub fn new(plant: &'a Plant, state: PlantState, opts: SolverOptions) -> Self {
+        Self {
+            plant,
+            state,
+            t_s: 0.0,
+            h_s: 0.0,
+            opts,
+            stats: SimStats::default(),
+            dense: Vec::new(),
+        }
+    }
+
+    pub fn state(&self) -> PlantState {
+        self.state
+    }
+    pub fn time_s(&self) -> f64 {
+        self.t_s
+    }
+    pub fn stats(&self) -> SimStats {
+        self.stats
+    }
+
+    /// Holds `inputs` for `n` samples of `dt_s`; calls `on_sample` with the state at the
+    /// start of each of the `n` samples; afterwards [`Self::state`] is the state at the end.
+    pub fn advance_samples(
+        &mut self,
+        inputs: ValveInputs,
+        dt_s: f64,
+        n: usize,
+        mut on_sample: impl FnMut(&PlantState),
+    ) -> Result<(), SimError> {
+        if !(dt_s.is_finite() && dt_s > 0.0) {
+            return Err(SimError::SamplePeriod(dt_s));
+        }
+        if !valid_inputs(&inputs) {
+            return Err(SimError::Input { index: 0, inputs });
+        }
+        if n == 0 {
+            return Ok(());
+        }
+        let duration_s = n as f64 * dt_s;
+        // ode_solvers' dense output adds x_end as soon as the next pending output time is
+        // within 1e-9 of it, even after a step that has not reached x_end (then it
+        // extrapolates). Ending the segment a hair after the last sample time keeps every
+        // output an interpolation inside an accepted step.
+        let x_end = duration_s + (1e-6 * dt_s).max(4e-9);
+        let h0 = if self.h_s > 0.0 {
+            self.h_s.min(duration_s)
+        } else {
+            0.0 // let Dopri5 pick the first step
+        };
+        let y0 = Vector4::from(self.state.to_array());
+        let mut solver = Dopri5::from_param(
+            Rhs {
+                plant: self.plant,
+                u: inputs,
+            },
+            0.0,
+            x_end,
+            dt_s,
+            y0,
+            self.opts.rtol,
+            self.opts.atol,
+            0.9,
+            0.04,
+            0.2,
+            10.0,
+            x_end,
+            h0,
+            self.opts.max_steps_per_segment,
+            u32::MAX, // stiffness test off: the laminar patch keeps |lambda| h small
+            OutputType::Dense,
+        );
+        let st = solver
+            .integrate()
+            .map_err(|e| SimError::Integration {
+                t_s: self.t_s,
+                message: e.to_string(),
+            })?;
+        self.stats.segments += 1;
+        self.stats.rhs_evaluations += u64::from(st.num_eval);
+        self.stats.accepted_steps += u64::from(st.accepted_steps);
+        self.stats.rejected_steps += u64::from(st.rejected_steps);
+        let ys = solver.y_out();
+        if ys.len() < n + 1 {
+            return Err(SimError::Integration {
+                t_s: self.t_s,
+                message: format!(
+                    "dense output gave {} points for {} samples",
+                    ys.len(),
+                    n + 1
+                ),
+            });
+        }
+        self.dense.clear();
+        for y in &ys[..=n] {
+            self.dense.push(PlantState::from_array([y[0], y[1], y[2], y[3]]));
+        }
+        for x in &self.dense[..n] {
+            on_sample(x);
+        }
+        let end = self.dense[n];
+        if !end.to_array().iter().all(|v| v.is_finite()) {
+            return Err(SimError::NonFinite {
+                t_s: self.t_s + duration_s,
+                state: end,
+            });
+        }
+        self.state = end;
+        self.t_s += duration_s;
+        // Mean accepted step of this segment, as the first step of the next one.
+        self.h_s = duration_s / f64::from(st.accepted_steps.max(1));
+        Ok(())
+    }
+
+    /// Holds `inputs` for `duration_s` (one control tick) and returns the state at its end.
+    pub fn advance(&mut self, inputs: ValveInputs, duration_s: f64) -> Result<PlantState, SimError> {
+        self.advance_samples(inputs, duration_s, 1, |_| {})?;
+        Ok(self.state)
+    }
+}
+
+/// The result of an open-loop replay: `states[k]` is the state at `t_k = k dt`.
+#[derive(Debug, Clone)]
+pub struct Simulation {
+    pub states: Vec<PlantState>,
+    pub final_state: PlantState,
+    pub stats: SimStats,
+}
+
+/// Open-loop replay from the plant's `[initial]` state: `inputs[k]` is held over
+/// `[t_k, t_k + dt)`; returns one state per input sample (the state at `t_k`).
+pub fn simulate(
+    plant: &Plant,
+    inputs: &[ValveInputs],
+    dt_s: f64,
+    opts: &SolverOptions,
+) -> Result<Simulation, SimError> {
+    simulate_with_progress(plant, inputs, dt_s, opts, |_| {})
+}
+
+/// [`simulate`] with a progress callback (number of samples done so far).
+pub fn simulate_with_progress(
+    plant: &Plant,
+    inputs: &[ValveInputs],
+    dt_s: f64,
+    opts: &SolverOptions,
+    mut progress: impl FnMut(usize),
+) -> Result<Simulation, SimError> {
+    if let Some((index, u)) = inputs.iter().enumerate().find(|(_, u)| !valid_inputs(u)) {
+        return Err(SimError::Input { index, inputs: *u });
+    }
+    let mut integ = Integrator::new(plant, plant.initial_state(), *opts);
+    let mut states = Vec::with_capacity(inputs.len());
+    let mut k = 0;
+    while k < inputs.len() {
+        let u = inputs[k];
+        let run = inputs[k..].iter().take_while(|v| **v == u).count();
+        integ.advance_samples(u, dt_s, run, |x| states.push(*x))?;
+        k += run;
+        progress(k);
+    }
+    Ok(Simulation {
+        states,
+        final_state: integ.state(),
+        stats: integ.stats(),
+    })
+}

@@ -1,0 +1,78 @@
+//! Every fixture in `shared/conformance/` reproduced with fit >= 99.5 % on every channel.
+
+use std::path::PathBuf;
+
+use host_sim::fit::{compare, format_table};
+use host_sim::recording::Channel;
+use host_sim::sim::{simulate, SolverOptions};
+use host_sim::{Plant, Recording};
+
+fn shared_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared")
+}
+
+fn conformance_files() -> Vec<PathBuf> {
+    let dir = shared_dir().join("conformance");
+    let entries = std::fs::read_dir(&dir).unwrap_or_else(|e| {
+        panic!(
+            "conformance fixtures not found at {} ({e}); the shared directory must sit next to the workspace",
+            dir.display()
+        )
+    });
+    let mut files: Vec<PathBuf> = entries
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "csv"))
+        .collect();
+    files.sort();
+    assert!(!files.is_empty(), "no .csv fixture in {}", dir.display());
+    files
+}
+
+/// Replays the fixture's inputs on the plant its metadata names and compares.
+fn check(file: &PathBuf, opts: &SolverOptions) -> Vec<(Channel, f64)> {
+    let reference = Recording::read(file).unwrap_or_else(|e| panic!("{e}"));
+    let plant_name = reference
+        .meta("plant")
+        .unwrap_or_else(|| panic!("{}: no `# plant = ...` metadata", file.display()));
+    let plant_path = shared_dir().join("plant").join(plant_name);
+    let plant = Plant::load(&plant_path).unwrap_or_else(|e| panic!("{e}"));
+    let sim = simulate(&plant, &reference.inputs, reference.sample_period_s(), opts)
+        .unwrap_or_else(|e| panic!("{}: {e}", file.display()));
+    let mut model = Recording {
+        t_s: reference.t_s.clone(),
+        inputs: reference.inputs.clone(),
+        ..Default::default()
+    };
+    let meas: Vec<_> = sim.states.iter().map(|x| plant.measure(x)).collect();
+    for c in Channel::ALL {
+        model.set_channel(c, meas.iter().map(|m| c.of(m)).collect());
+    }
+    let fits = compare(&reference, &model).unwrap();
+    println!(
+        "{} (plant {plant_name}, {} samples, {:?}):\n{}",
+        file.file_name().unwrap().to_string_lossy(),
+        reference.len(),
+        sim.stats,
+        format_table(&fits)
+    );
+    let present = Channel::ALL
+        .into_iter()
+        .filter(|c| reference.channel(*c).is_some())
+        .count();
+    assert_eq!(fits.len(), present, "every channel of the fixture is compared");
+    fits.iter().map(|f| (f.channel, f.fit_percent)).collect()
+}
+
+#[test]
+fn every_fixture_is_reproduced_with_fit_at_least_99_5_percent() {
+    let opts = SolverOptions::default();
+    let mut failures = Vec::new();
+    for file in conformance_files() {
+        for (c, fit) in check(&file, &opts) {
+            if !(fit >= 99.5) {
+                failures.push(format!("{} {}: {fit:.4} %", file.display(), c.name()));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "fit below 99.5 %: {failures:#?}");
+}
