@@ -51,17 +51,23 @@ tick_max=$(field "bench tick" max_counts)
 fl_n=$(field "bench force_law_f32" n)
 fl_sum=$(field "bench force_law_f32" sum_counts)
 fl_max=$(field "bench force_law_f32" max_counts)
+fx_n=$(field "bench force_law_fixed" n)
+fx_sum=$(field "bench force_law_fixed" sum_counts)
+fx_max=$(field "bench force_law_fixed" max_counts)
+fx_off=$(field "bench force_law_fixed" off_by_more_than_0.1N)
 stack=$(grep -o 'stack_used_bytes=[0-9]*' <<<"$log" | cut -d= -f2)
 unpainted=$(grep -o 'unpainted_top_bytes=[0-9]*' <<<"$log" | cut -d= -f2)
 if [ "${stack:-0}" -le "${unpainted:-0}" ]; then stack="<= $unpainted"; fi
-for v in cal_insns cal_counts empty tick_n tick_sum tick_max fl_n fl_sum fl_max stack; do
+for v in cal_insns cal_counts empty tick_n tick_sum tick_max fl_n fl_sum fl_max fx_n fx_sum fx_max stack; do
   [ -n "${!v}" ] || { echo "bench-mcu.sh: no '$v' in the QEMU output:" >&2; echo "$log" >&2; exit 2; }
 done
 
-read -r tick_mean tick_worst fl_mean fl_worst k < <(awk -v ci="$cal_insns" -v cc="$cal_counts" -v e="$empty" \
-  -v tn="$tick_n" -v ts="$tick_sum" -v tm="$tick_max" -v fn="$fl_n" -v fs="$fl_sum" -v fm="$fl_max" 'BEGIN {
+read -r tick_mean tick_worst fl_mean fl_worst fx_mean fx_worst k < <(awk -v ci="$cal_insns" \
+  -v cc="$cal_counts" -v e="$empty" -v tn="$tick_n" -v ts="$tick_sum" -v tm="$tick_max" \
+  -v fn="$fl_n" -v fs="$fl_sum" -v fm="$fl_max" -v xn="$fx_n" -v xs="$fx_sum" -v xm="$fx_max" 'BEGIN {
     k = ci / (cc - e);
-    printf "%.0f %.0f %.0f %.0f %.5f\n", (ts / tn - e) * k, (tm - e) * k, (fs / fn - e) * k, (fm - e) * k, k }')
+    printf "%.0f %.0f %.0f %.0f %.0f %.0f %.5f\n", (ts / tn - e) * k, (tm - e) * k,
+      (fs / fn - e) * k, (fm - e) * k, (xs / xn - e) * k, (xm - e) * k, k }')
 
 sizes() { # sizes <elf> -> "flash ram"
   "$llvm_size" -A "$1" | awk '
@@ -77,7 +83,6 @@ fail=0
 check() { # check <value> <limit>
   if [ "$1" -le "$2" ]; then echo "ok"; else echo "OVER"; fail=1; fi
 }
-fixed_note=$(grep -o 'force_law_fixed.*' <<<"$log" || true)
 cat <<REPORT
 ## MCU cost (scripts/bench-mcu.sh, $(qemu-system-arm --version | head -1 | sed 's/ *(.*//'), netduinoplus2, -icount shift=0)
 
@@ -89,7 +94,8 @@ calibration: $cal_insns instructions = $((cal_counts - empty)) SysTick counts (k
 | full f32 control tick, worst tick of the trace | $tick_worst instructions | | |
 | force law alone (f32, one muscle), mean over $fl_n calls | $fl_mean instructions | | |
 | force law alone (f32), worst call | $fl_worst instructions | | |
-| force law fixed point | ${fixed_note:-not measured} | | |
+| force law fixed point (I32F32, same inputs quantised), mean over $fx_n calls ($fx_off off the f32 law by > 0.1 N) | $fx_mean instructions | | |
+| force law fixed point, worst call | $fx_worst instructions | | |
 | QEMU image flash | $qemu_flash B | <= 32768 | $(check "$qemu_flash" 32768) |
 | QEMU image static RAM | $qemu_ram B | <= 8192 | $(check "$qemu_ram" 8192) |
 | board image flash | $board_flash B | <= 32768 | $(check "$board_flash" 32768) |
@@ -103,6 +109,9 @@ if [ "$breakdown" = 1 ]; then
     -semihosting-config enable=on,target=native -singlestep -d exec,nochain -D "$exec_log" \
     -kernel "$qemu_elf" >/dev/null
   echo
-  python3 scripts/tick-profile.py "$(grep -c . traces/qemu_sensor_trace.csv | awk '{print $1 - 3}')" <"$exec_log"
+  python3 scripts/tick-profile.py "$(grep -c . traces/qemu_sensor_trace.csv | awk '{print $1 - 3}')" \
+    bench_ticks bench_force_law <"$exec_log"
+  echo
+  python3 scripts/tick-profile.py "$fx_n" bench_force_law_fixed _defmt_acquire <"$exec_log"
 fi
 exit $fail

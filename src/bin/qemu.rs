@@ -25,7 +25,8 @@ use cortex_m_rt::{entry, exception, ExceptionFrame};
 use cortex_m_semihosting::debug;
 use defmt_semihosting as _;
 
-use pam_firmware::constants::FORCE_LAW;
+use pam_firmware::constants::{FIXED_FORCE_LAW, FORCE_LAW};
+use pam_firmware::fixed_point::{pressure_pa_from_f32, q16_from_f32};
 use pam_firmware::geometry::JointGeometry;
 use pam_firmware::trace::{
     ControlTick, ControllerConfig, TraceRunner, SENSOR_TRACE, TRACE_TICK_HZ,
@@ -121,8 +122,7 @@ fn bench(syst: &mut SYST) {
 
     bench_ticks();
     bench_force_law();
-    // Slot for the fixed-point force law (branch `fixed`, src/fixed_point.rs): not merged here.
-    defmt::info!("bench force_law_fixed unavailable");
+    bench_force_law_fixed();
 }
 
 /// Full control tick, each tick measured alone (frame built before the measurement).
@@ -200,6 +200,47 @@ fn injected_fault() -> Option<&'static str> {
     ["panic", "hardfault"]
         .into_iter()
         .find(|w| line.ends_with(w.as_bytes()))
+}
+
+/// Fixed-point force law (src/fixed_point.rs, `constants::FIXED_FORCE_LAW`) at the same
+/// inputs as [`bench_force_law`], quantised before the measurement (the FPU-less build gets
+/// integer readings).
+#[inline(never)]
+fn bench_force_law_fixed() {
+    let p = wiring::pressure_scaling();
+    let g = JointGeometry::REFERENCE;
+    let law = FIXED_FORCE_LAW;
+    let (mut sum, mut n, mut max, mut off) = (0u32, 0u32, 0u32, 0u32);
+    for row in SENSOR_TRACE.iter() {
+        let f = row.frame(&p);
+        let (Some(p1), Some(a)) = (f.p1_gauge_pa, f.angle_rad) else {
+            continue;
+        };
+        let (e1, _) = g.stretches(a);
+        let (Some(pq), Some(eq)) = (pressure_pa_from_f32(p1), q16_from_f32(e1)) else {
+            continue;
+        };
+        let (pq, eq) = (black_box(pq), black_box(eq));
+        let (c, r) = measure(|| law.force(pq, eq));
+        let r = black_box(r);
+        // Sanity: a real evaluation, within 0.1 N of the f32 law (fixed_point.rs's bound).
+        let f32_law = FORCE_LAW.force(p1, e1);
+        if r.flags != f32_law.flags
+            || libm::fabsf(r.force_n.to_num::<f32>() - f32_law.force_n) > 0.1
+        {
+            off += 1;
+        }
+        sum += c;
+        n += 1;
+        max = max.max(c);
+    }
+    defmt::info!(
+        "bench force_law_fixed n={=u32} sum_counts={=u32} max_counts={=u32} off_by_more_than_0.1N={=u32}",
+        n,
+        sum,
+        max,
+        off
+    );
 }
 
 #[entry]
