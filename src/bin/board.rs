@@ -42,7 +42,7 @@ use stm32f4xx_hal::{
     watchdog::IndependentWatchdog,
 };
 
-use pam_firmware::sensors::{AngleSensor, Clock, PressureScaling, PressureSensor};
+use pam_firmware::sensors::{AngleSensor, Clock, PressureScaling, PressureSensor, TickTimer};
 use pam_firmware::tick::{ControlTick, ControllerConfig, SensorFrame, Setpoint};
 use pam_firmware::valves::{OnOffPwmConfig, OnOffValves};
 use pam_firmware::wiring;
@@ -155,7 +155,7 @@ struct Board {
     scaling: PressureScaling,
     angle: QeiAngle,
     clock: DwtClock,
-    last_tick: u64,
+    period: TickTimer,
     valves: Valves,
     timer: CounterHz<TIM7>,
     watchdog: IndependentWatchdog,
@@ -198,9 +198,7 @@ impl Board {
     fn on_tick(&mut self) {
         self.timer.clear_flags(Flag::Update);
         // Measured period: a late tick (> dt_max_s) latches FaultCode::Watchdog in the tick.
-        let now = self.clock.now_ticks();
-        let dt_s = (now - self.last_tick) as f32 / self.clock.tick_hz() as f32;
-        self.last_tick = now;
+        let dt_s = self.period.dt_s(&self.clock);
         let frame = self.read_frame();
         let sp = Setpoint {
             angle_rad: SETPOINT_RAD,
@@ -301,7 +299,8 @@ fn main() -> ! {
         last: Cell::new(0),
         high: Cell::new(0),
     };
-    let last_tick = clock.now_ticks();
+    let mut period = TickTimer::new();
+    period.dt_s(&clock); // start the period measurement now
 
     let mut timer = dp.TIM7.counter_hz(&mut rcc);
     timer.start(TICK_HZ.Hz()).unwrap();
@@ -314,7 +313,7 @@ fn main() -> ! {
         scaling: wiring::pressure_scaling(),
         angle,
         clock,
-        last_tick,
+        period,
         valves,
         timer,
         watchdog,
