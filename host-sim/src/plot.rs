@@ -63,8 +63,7 @@ pub fn plot_comparison(
         }
         _ => return Err(PlotError::Format(path.to_owned())),
     }
-    tmp.persist(path)
-        .map_err(|e| draw_err(e.error.to_string()))?;
+    tmp.persist(path).map_err(|e| draw_err(e.error.to_string()))?;
     Ok(())
 }
 

@@ -204,8 +204,7 @@ impl Recording {
             Ok(first)
         };
         let required = |name: &str| -> Result<usize, RecordingError> {
-            find(name)?
-                .ok_or_else(|| field_err(header_line, name, "required column is missing".into()))
+            find(name)?.ok_or_else(|| field_err(header_line, name, "required column is missing".into()))
         };
         let t_col = required("t_s")?;
         let mut u_cols = [0usize; 4];
@@ -353,7 +352,9 @@ impl Recording {
             source,
         };
         let n = self.t_s.len();
-        if self.inputs.len() != n || self.outputs.iter().flatten().any(|c| c.len() != n) {
+        if self.inputs.len() != n
+            || self.outputs.iter().flatten().any(|c| c.len() != n)
+        {
             return Err(RecordingError::Invalid {
                 path: path.to_owned(),
                 message: "columns of unequal length".into(),
@@ -385,10 +386,7 @@ impl Recording {
                     row.push(format!("{v}"));
                 }
                 for c in &present {
-                    row.push(format!(
-                        "{:.6}",
-                        self.outputs[c.index()].as_ref().unwrap()[k]
-                    ));
+                    row.push(format!("{:.6}", self.outputs[c.index()].as_ref().unwrap()[k]));
                 }
                 cw.write_record(&row)?;
             }
