@@ -149,7 +149,10 @@ impl PlantConfig {
             }
         }
         let finite = [
-            ("environment.supply_gauge_pa", self.environment.supply_gauge_pa),
+            (
+                "environment.supply_gauge_pa",
+                self.environment.supply_gauge_pa,
+            ),
             ("muscle.end_factor", self.muscle.end_factor),
             ("muscle.damping_m2s", self.muscle.damping_m2s),
             ("joint.initial_contraction", self.joint.initial_contraction),
@@ -175,10 +178,7 @@ impl PlantConfig {
             return Err(bad("valve.critical_ratio", "must be in [0, 1)"));
         }
         if !(l.is_finite() && l > b && l < 1.0) {
-            return Err(bad(
-                "valve.laminar_ratio",
-                "must be in (critical_ratio, 1)",
-            ));
+            return Err(bad("valve.laminar_ratio", "must be in (critical_ratio, 1)"));
         }
         if self.muscle.volume_poly_m3[0] <= 0.0 {
             return Err(bad(

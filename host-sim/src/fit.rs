@@ -11,8 +11,17 @@ pub fn fit_percent(y: &[f64], y_hat: &[f64]) -> f64 {
     assert_eq!(y.len(), y_hat.len(), "fit_percent: lengths differ");
     let n = y.len() as f64;
     let mean = y.iter().sum::<f64>() / n;
-    let err: f64 = y.iter().zip(y_hat).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt();
-    let spread: f64 = y.iter().map(|a| (a - mean) * (a - mean)).sum::<f64>().sqrt();
+    let err: f64 = y
+        .iter()
+        .zip(y_hat)
+        .map(|(a, b)| (a - b) * (a - b))
+        .sum::<f64>()
+        .sqrt();
+    let spread: f64 = y
+        .iter()
+        .map(|a| (a - mean) * (a - mean))
+        .sum::<f64>()
+        .sqrt();
     if spread == 0.0 {
         return if err == 0.0 { 100.0 } else { f64::NEG_INFINITY };
     }
@@ -28,7 +37,11 @@ pub fn mae(y: &[f64], y_hat: &[f64]) -> f64 {
 /// Mean squared error.
 pub fn mse(y: &[f64], y_hat: &[f64]) -> f64 {
     assert_eq!(y.len(), y_hat.len(), "mse: lengths differ");
-    y.iter().zip(y_hat).map(|(a, b)| (a - b) * (a - b)).sum::<f64>() / y.len() as f64
+    y.iter()
+        .zip(y_hat)
+        .map(|(a, b)| (a - b) * (a - b))
+        .sum::<f64>()
+        / y.len() as f64
 }
 
 /// The fit of one channel.

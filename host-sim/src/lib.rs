@@ -2,14 +2,18 @@
 //! diagnosis for pneumatic-artificial-muscle joints.
 //!
 //! - [`plant`]: the reference 1-DOF antagonistic joint of `shared/plant/PLANT.md`.
+//! - [`closed_loop`]: the firmware's control tick in the loop with the plant, scenarios.
 //! - [`config`]: its TOML parameter files.
 //! - [`sim`]: open-loop integration under zero-order-held valve inputs.
 //! - [`recording`]: the CSV recording format of `shared/plant/RECORDING.md`.
 //! - [`fit`]: NRMSE fit, MAE, MSE per channel.
+//! - [`identify`]: force law, torque model and plant parameters from data.
 //! - [`plot`]: measured vs simulated channel plots.
 
+pub mod closed_loop;
 pub mod config;
 pub mod fit;
+pub mod identify;
 pub mod plant;
 pub mod plot;
 pub mod recording;

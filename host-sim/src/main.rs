@@ -1,1 +1,192 @@
-fn main(){}
+//! `host-sim` command line: open-loop replay of recordings on the plant model, fit metrics,
+//! plots. Closed-loop scenarios (`simulate --scenario`) come with the firmware control API.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+use host_sim::fit::{compare, format_table};
+use host_sim::plot::plot_comparison;
+use host_sim::recording::Channel;
+use host_sim::sim::{simulate_with_progress, SolverOptions};
+use host_sim::{Plant, Recording};
+
+#[derive(Parser)]
+#[command(name = "host-sim", version, about = "PAM joint plant simulator (shared/plant/PLANT.md)")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Replay the valve inputs of a recording on the plant (open loop), or run a closed-loop
+    /// scenario with the firmware in the loop.
+    Simulate(SimulateArgs),
+    /// Per-channel fit (NRMSE %), MAE and MSE of B (model) against A (reference/measured).
+    Fit(FitArgs),
+}
+
+#[derive(Args)]
+struct SimulateArgs {
+    /// Plant parameter file (TOML, e.g. shared/plant/reference-1dof.toml).
+    #[arg(long, value_name = "P.toml", required_unless_present = "scenario")]
+    plant: Option<PathBuf>,
+    /// Recording whose t_s and valve columns are replayed (RECORDING.md).
+    #[arg(long, value_name = "REC.csv", required_unless_present = "scenario", conflicts_with = "scenario")]
+    inputs: Option<PathBuf>,
+    /// Closed-loop scenario (firmware in the loop).
+    #[arg(long, value_name = "S.toml")]
+    scenario: Option<PathBuf>,
+    /// Output recording: the input t_s and valve columns plus the simulated channels.
+    #[arg(long, value_name = "OUT.csv")]
+    out: PathBuf,
+    /// Also draw the simulated channels (over the measured ones of --inputs) to .png or .svg.
+    #[arg(long, value_name = "out.png|svg")]
+    plot: Option<PathBuf>,
+    /// Relative tolerance of the integrator.
+    #[arg(long, default_value_t = SolverOptions::default().rtol)]
+    rtol: f64,
+    /// Absolute tolerance of the integrator.
+    #[arg(long, default_value_t = SolverOptions::default().atol)]
+    atol: f64,
+}
+
+#[derive(Args)]
+struct FitArgs {
+    /// Reference (measured) recording.
+    a: PathBuf,
+    /// Model (simulated) recording.
+    b: PathBuf,
+    /// Draw B over A for every channel to .png or .svg.
+    #[arg(long, value_name = "out.png|svg")]
+    plot: Option<PathBuf>,
+    /// Exit with status 1 if any channel fits below this many percent.
+    #[arg(long, value_name = "PERCENT")]
+    min_fit: Option<f64>,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Simulate(a) => run_simulate(&a),
+        Command::Fit(a) => run_fit(&a),
+    };
+    match result {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
+    if let Some(s) = &a.scenario {
+        bail!(
+            "{}: closed-loop scenarios are not implemented yet (they need the firmware control API); \
+             use --plant P.toml --inputs REC.csv for an open-loop replay",
+            s.display()
+        );
+    }
+    let plant_path = a.plant.as_ref().expect("clap: --plant required");
+    let inputs_path = a.inputs.as_ref().expect("clap: --inputs required");
+    let plant = Plant::load(plant_path)?;
+    let rec = Recording::read(inputs_path)?;
+    let opts = SolverOptions {
+        rtol: a.rtol,
+        atol: a.atol,
+        ..SolverOptions::default()
+    };
+    if !(opts.rtol > 0.0 && opts.atol > 0.0) {
+        bail!("--rtol and --atol must be > 0");
+    }
+    let dt = rec.sample_period_s();
+    let bar = ProgressBar::with_draw_target(Some(rec.len() as u64), ProgressDrawTarget::stderr());
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} simulate [{bar:40}] {pos}/{len} samples {elapsed}")
+            .expect("static template")
+            .progress_chars("=> "),
+    );
+    let sim = simulate_with_progress(&plant, &rec.inputs, dt, &opts, |k| {
+        bar.set_position(k as u64)
+    })
+    .with_context(|| format!("{}: simulation failed", inputs_path.display()))?;
+    bar.finish_and_clear();
+
+    let mut out = Recording {
+        metadata: vec![
+            ("plant".into(), plant_path.display().to_string()),
+            ("inputs".into(), inputs_path.display().to_string()),
+            ("sample_period_s".into(), format!("{dt}")),
+            (
+                "source".into(),
+                format!(
+                    "host-sim {} simulate, ode_solvers Dopri5 rtol={} atol={}",
+                    env!("CARGO_PKG_VERSION"),
+                    opts.rtol,
+                    opts.atol
+                ),
+            ),
+        ],
+        t_s: rec.t_s.clone(),
+        inputs: rec.inputs.clone(),
+        ..Default::default()
+    };
+    let meas: Vec<_> = sim.states.iter().map(|x| plant.measure(x)).collect();
+    for c in Channel::ALL {
+        out.set_channel(c, meas.iter().map(|m| c.of(m)).collect());
+    }
+    out.write(&a.out)?;
+    eprintln!(
+        "{}: {} samples, {} segments, {} steps ({} rejected), {} rhs evaluations",
+        a.out.display(),
+        out.len(),
+        sim.stats.segments,
+        sim.stats.accepted_steps,
+        sim.stats.rejected_steps,
+        sim.stats.rhs_evaluations
+    );
+    if let Some(p) = &a.plot {
+        plot_comparison(p, Some(&rec), &out)?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn run_fit(a: &FitArgs) -> Result<ExitCode> {
+    let ra = Recording::read(&a.a)?;
+    let rb = Recording::read(&a.b)?;
+    let fits = compare(&ra, &rb).with_context(|| {
+        format!("cannot compare {} with {}", a.a.display(), a.b.display())
+    })?;
+    println!("reference: {}\nmodel:     {}", a.a.display(), a.b.display());
+    print!("{}", format_table(&fits));
+    if let Some(p) = &a.plot {
+        plot_comparison(p, Some(&ra), &only_common(&rb, &ra))?;
+    }
+    if let Some(min) = a.min_fit {
+        let bad: Vec<_> = fits.iter().filter(|f| !(f.fit_percent >= min)).collect();
+        if !bad.is_empty() {
+            for f in bad {
+                eprintln!("{}: fit {:.4} % < {min} %", f.channel.name(), f.fit_percent);
+            }
+            return Ok(ExitCode::from(1));
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `model` restricted to the channels `reference` has too.
+fn only_common(model: &Recording, reference: &Recording) -> Recording {
+    let mut r = model.clone();
+    for c in Channel::ALL {
+        if reference.channel(c).is_none() {
+            r.outputs[c.index()] = None;
+        }
+    }
+    r
+}
+

@@ -63,6 +63,8 @@ pub fn plot_comparison(
         }
         _ => return Err(PlotError::Format(path.to_owned())),
     }
+    crate::recording::set_output_permissions(tmp.as_file(), path)
+        .map_err(|e| draw_err(e.to_string()))?;
     tmp.persist(path).map_err(|e| draw_err(e.error.to_string()))?;
     Ok(())
 }

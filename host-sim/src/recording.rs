@@ -204,7 +204,8 @@ impl Recording {
             Ok(first)
         };
         let required = |name: &str| -> Result<usize, RecordingError> {
-            find(name)?.ok_or_else(|| field_err(header_line, name, "required column is missing".into()))
+            find(name)?
+                .ok_or_else(|| field_err(header_line, name, "required column is missing".into()))
         };
         let t_col = required("t_s")?;
         let mut u_cols = [0usize; 4];
@@ -311,19 +312,32 @@ impl Recording {
             ));
         }
         let tol = 0.01 * dt;
+        // Each step against the median step (robust to one bad step), then the time stamps
+        // against the end-to-end period (catches a slow drift).
+        let mut steps: Vec<f64> = rec.t_s.windows(2).map(|w| w[1] - w[0]).collect();
+        steps.sort_by(f64::total_cmp);
+        let median_step = steps[steps.len() / 2];
+        let non_uniform = |k: usize, period: f64| {
+            field_err(
+                lines[k],
+                "t_s",
+                format!(
+                    "non-uniform time: {} after {} (sample period {period} s)",
+                    rec.t_s[k],
+                    rec.t_s[k - 1]
+                ),
+            )
+        };
         for k in 1..n {
             let step = rec.t_s[k] - rec.t_s[k - 1];
+            if (step - median_step).abs() > 0.01 * median_step.abs() {
+                return Err(non_uniform(k, median_step));
+            }
+        }
+        for k in 1..n {
             let drift = rec.t_s[k] - (rec.t_s[0] + k as f64 * dt);
-            if (step - dt).abs() > tol || drift.abs() > tol {
-                return Err(field_err(
-                    lines[k],
-                    "t_s",
-                    format!(
-                        "non-uniform time: {} after {} (sample period {dt} s)",
-                        rec.t_s[k],
-                        rec.t_s[k - 1]
-                    ),
-                ));
+            if drift.abs() > tol {
+                return Err(non_uniform(k, dt));
             }
         }
         for (i, (k, v)) in rec.metadata.iter().enumerate() {
@@ -352,9 +366,7 @@ impl Recording {
             source,
         };
         let n = self.t_s.len();
-        if self.inputs.len() != n
-            || self.outputs.iter().flatten().any(|c| c.len() != n)
-        {
+        if self.inputs.len() != n || self.outputs.iter().flatten().any(|c| c.len() != n) {
             return Err(RecordingError::Invalid {
                 path: path.to_owned(),
                 message: "columns of unequal length".into(),
@@ -386,7 +398,10 @@ impl Recording {
                     row.push(format!("{v}"));
                 }
                 for c in &present {
-                    row.push(format!("{:.6}", self.outputs[c.index()].as_ref().unwrap()[k]));
+                    row.push(format!(
+                        "{:.6}",
+                        self.outputs[c.index()].as_ref().unwrap()[k]
+                    ));
                 }
                 cw.write_record(&row)?;
             }
@@ -422,6 +437,24 @@ pub fn write_atomically(
         w.flush()?;
     }
     tmp.as_file().sync_all()?;
+    set_output_permissions(tmp.as_file(), path)?;
     tmp.persist(path).map_err(|e| e.error)?;
+    Ok(())
+}
+
+/// Temporary files are created private (0600); give the output the permissions of the file
+/// it replaces, or ordinary ones (0644) for a new file.
+pub(crate) fn set_output_permissions(file: &std::fs::File, target: &Path) -> std::io::Result<()> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let perm = match std::fs::metadata(target) {
+            Ok(m) => m.permissions(),
+            Err(_) => std::fs::Permissions::from_mode(0o644),
+        };
+        file.set_permissions(perm)?;
+    }
+    #[cfg(not(unix))]
+    let _ = (file, target);
     Ok(())
 }

@@ -170,12 +170,10 @@ impl<'a> Integrator<'a> {
             u32::MAX, // stiffness test off: the laminar patch keeps |lambda| h small
             OutputType::Dense,
         );
-        let st = solver
-            .integrate()
-            .map_err(|e| SimError::Integration {
-                t_s: self.t_s,
-                message: e.to_string(),
-            })?;
+        let st = solver.integrate().map_err(|e| SimError::Integration {
+            t_s: self.t_s,
+            message: e.to_string(),
+        })?;
         self.stats.segments += 1;
         self.stats.rhs_evaluations += u64::from(st.num_eval);
         self.stats.accepted_steps += u64::from(st.accepted_steps);
@@ -193,7 +191,8 @@ impl<'a> Integrator<'a> {
         }
         self.dense.clear();
         for y in &ys[..=n] {
-            self.dense.push(PlantState::from_array([y[0], y[1], y[2], y[3]]));
+            self.dense
+                .push(PlantState::from_array([y[0], y[1], y[2], y[3]]));
         }
         for x in &self.dense[..n] {
             on_sample(x);
@@ -213,7 +212,11 @@ impl<'a> Integrator<'a> {
     }
 
     /// Holds `inputs` for `duration_s` (one control tick) and returns the state at its end.
-    pub fn advance(&mut self, inputs: ValveInputs, duration_s: f64) -> Result<PlantState, SimError> {
+    pub fn advance(
+        &mut self,
+        inputs: ValveInputs,
+        duration_s: f64,
+    ) -> Result<PlantState, SimError> {
         self.advance_samples(inputs, duration_s, 1, |_| {})?;
         Ok(self.state)
     }

@@ -59,7 +59,11 @@ fn check(file: &PathBuf, opts: &SolverOptions) -> Vec<(Channel, f64)> {
         .into_iter()
         .filter(|c| reference.channel(*c).is_some())
         .count();
-    assert_eq!(fits.len(), present, "every channel of the fixture is compared");
+    assert_eq!(
+        fits.len(),
+        present,
+        "every channel of the fixture is compared"
+    );
     fits.iter().map(|f| (f.channel, f.fit_percent)).collect()
 }
 

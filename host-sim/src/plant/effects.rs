@@ -88,7 +88,10 @@ fn standard_gravity() -> f64 {
 impl Gravity {
     #[inline]
     pub fn torque_nm(&self, angle_rad: f64) -> f64 {
-        -self.mass_kg * self.g_m_s2 * self.com_distance_m * (angle_rad - self.hanging_angle_rad).sin()
+        -self.mass_kg
+            * self.g_m_s2
+            * self.com_distance_m
+            * (angle_rad - self.hanging_angle_rad).sin()
     }
 }
 
@@ -152,7 +155,11 @@ pub struct Effects {
 }
 
 impl Effects {
-    pub fn from_config(c: &EffectsConfig, valve_critical_ratio: f64, valve_laminar_ratio: f64) -> Self {
+    pub fn from_config(
+        c: &EffectsConfig,
+        valve_critical_ratio: f64,
+        valve_laminar_ratio: f64,
+    ) -> Self {
         let id = ChannelCalibration::IDENTITY;
         Self {
             joint_friction: c.joint_friction.clone().filter(|f| f.enabled),
@@ -221,9 +228,21 @@ impl EffectsConfig {
             let k = "effects.joint_friction.";
             check(&format!("{k}coulomb_nm"), f.coulomb_nm, None)?;
             check(&format!("{k}breakaway_nm"), f.breakaway_nm, None)?;
-            check(&format!("{k}viscous_nm_s_per_rad"), f.viscous_nm_s_per_rad, None)?;
-            check(&format!("{k}stribeck_velocity_rad_s"), f.stribeck_velocity_rad_s, Some(0.0))?;
-            check(&format!("{k}smoothing_velocity_rad_s"), f.smoothing_velocity_rad_s, Some(0.0))?;
+            check(
+                &format!("{k}viscous_nm_s_per_rad"),
+                f.viscous_nm_s_per_rad,
+                None,
+            )?;
+            check(
+                &format!("{k}stribeck_velocity_rad_s"),
+                f.stribeck_velocity_rad_s,
+                Some(0.0),
+            )?;
+            check(
+                &format!("{k}smoothing_velocity_rad_s"),
+                f.smoothing_velocity_rad_s,
+                Some(0.0),
+            )?;
             if f.coulomb_nm < 0.0 || f.breakaway_nm < f.coulomb_nm {
                 return Err(bad(
                     &format!("{k}breakaway_nm"),

@@ -33,7 +33,12 @@ pub struct PlantState {
 
 impl PlantState {
     pub fn to_array(self) -> [f64; 4] {
-        [self.angle_rad, self.velocity_rad_s, self.p1_abs_pa, self.p2_abs_pa]
+        [
+            self.angle_rad,
+            self.velocity_rad_s,
+            self.p1_abs_pa,
+            self.p2_abs_pa,
+        ]
     }
     pub fn from_array(a: [f64; 4]) -> Self {
         Self {
@@ -77,7 +82,13 @@ pub struct Measurement {
 
 impl Measurement {
     pub fn to_array(self) -> [f64; 5] {
-        [self.angle_deg, self.p1_kpa, self.p2_kpa, self.f1_n, self.f2_n]
+        [
+            self.angle_deg,
+            self.p1_kpa,
+            self.p2_kpa,
+            self.f1_n,
+            self.f2_n,
+        ]
     }
 }
 

@@ -19,7 +19,11 @@ pub struct Iso6358Valve {
 }
 
 impl Iso6358Valve {
-    pub fn new(sonic_conductance_m3_per_s_pa: f64, critical_ratio: f64, laminar_ratio: f64) -> Self {
+    pub fn new(
+        sonic_conductance_m3_per_s_pa: f64,
+        critical_ratio: f64,
+        laminar_ratio: f64,
+    ) -> Self {
         let mut v = Self {
             sonic_conductance_m3_per_s_pa,
             critical_ratio,

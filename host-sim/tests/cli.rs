@@ -1,0 +1,104 @@
+//! End-to-end: the built `host-sim` binary simulates a fixture and fits it.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn shared() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared")
+}
+
+fn host_sim() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_host-sim"))
+}
+
+#[test]
+fn simulate_then_fit_a_fixture() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("sim.csv");
+    let plot = dir.path().join("sim.svg");
+    let fixture = shared().join("conformance/pulses_nominal.csv");
+    let r = host_sim()
+        .arg("simulate")
+        .arg("--plant")
+        .arg(shared().join("plant/reference-1dof.toml"))
+        .arg("--inputs")
+        .arg(&fixture)
+        .arg("--out")
+        .arg(&out)
+        .arg("--plot")
+        .arg(&plot)
+        .output()
+        .unwrap();
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let text = std::fs::read_to_string(&out).unwrap();
+    let header = text.lines().find(|l| !l.starts_with('#')).unwrap();
+    assert_eq!(header, "t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg,p1_kpa,p2_kpa,f1_n,f2_n");
+    let rows = text.lines().filter(|l| !l.starts_with('#')).count() - 1;
+    assert_eq!(rows, 20_000);
+    assert!(std::fs::metadata(&plot).unwrap().len() > 1000);
+
+    let r = host_sim()
+        .arg("fit")
+        .arg(&fixture)
+        .arg(&out)
+        .arg("--min-fit")
+        .arg("99.5")
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&r.stdout);
+    println!("{stdout}");
+    assert!(r.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&r.stderr));
+    for c in ["angle_deg", "p1_kpa", "p2_kpa", "f1_n", "f2_n"] {
+        let line = stdout.lines().find(|l| l.starts_with(c)).unwrap();
+        let fit: f64 = line.split_whitespace().nth(1).unwrap().parse().unwrap();
+        assert!(fit >= 99.5, "{line}");
+    }
+}
+
+#[test]
+fn fit_fails_with_status_1_below_min_fit() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = dir.path().join("a.csv");
+    let b = dir.path().join("b.csv");
+    std::fs::write(&a, "t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg\n0,0,0,0,0,0\n0.1,0,0,0,0,1\n0.2,0,0,0,0,2\n").unwrap();
+    std::fs::write(&b, "t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg\n0,0,0,0,0,0\n0.1,0,0,0,0,1\n0.2,0,0,0,0,1\n").unwrap();
+    let r = host_sim().arg("fit").arg(&a).arg(&b).arg("--min-fit").arg("99").output().unwrap();
+    assert_eq!(r.status.code(), Some(1));
+}
+
+#[test]
+fn bad_input_is_reported_with_file_line_and_field_and_keeps_old_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let inputs = dir.path().join("bad.csv");
+    let out = dir.path().join("out.csv");
+    std::fs::write(&out, "previous good output\n").unwrap();
+    std::fs::write(
+        &inputs,
+        "t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg\n0,0,0,0,0,0\n0.001,0,oops,0,0,0\n",
+    )
+    .unwrap();
+    let r = host_sim()
+        .arg("simulate")
+        .arg("--plant")
+        .arg(shared().join("plant/reference-1dof.toml"))
+        .arg("--inputs")
+        .arg(&inputs)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(r.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(err.contains("bad.csv:3:") && err.contains("`u_ex1`"), "{err}");
+    assert_eq!(std::fs::read_to_string(&out).unwrap(), "previous good output\n");
+}
+
+#[test]
+fn scenario_slot_reports_not_implemented() {
+    let r = host_sim()
+        .args(["simulate", "--scenario", "s.toml", "--out", "/tmp/never-written.csv"])
+        .output()
+        .unwrap();
+    assert_eq!(r.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("not implemented yet"));
+}

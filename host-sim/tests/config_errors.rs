@@ -1,0 +1,143 @@
+//! Plant TOML: the nominal files load unchanged; unknown or missing keys are errors naming
+//! the key and the file; effects tables switch on model extensions.
+
+use std::path::PathBuf;
+
+use host_sim::plant::PlantState;
+use host_sim::{Plant, PlantConfig, ValveInputs};
+
+fn plant_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant")
+}
+
+fn nominal_text() -> String {
+    std::fs::read_to_string(plant_dir().join("reference-1dof.toml"))
+        .expect("shared/plant/reference-1dof.toml next to the workspace")
+}
+
+fn load_err(text: &str) -> String {
+    match PlantConfig::from_toml_str(text, "custom-plant.toml") {
+        Ok(_) => panic!("expected an error for:\n{text}"),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn both_reference_files_load_unchanged_without_effects() {
+    for f in ["reference-1dof.toml", "reference-1dof-loaded.toml"] {
+        let cfg = PlantConfig::load(plant_dir().join(f)).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(cfg.effects, Default::default(), "{f}");
+    }
+    let n = PlantConfig::load(plant_dir().join("reference-1dof.toml")).unwrap();
+    let l = PlantConfig::load(plant_dir().join("reference-1dof-loaded.toml")).unwrap();
+    assert!(l.joint.inertia_kgm2 > 10.0 * n.joint.inertia_kgm2);
+}
+
+#[test]
+fn unknown_key_names_key_and_file() {
+    let text = nominal_text().replace("end_factor = 1.446", "end_factor = 1.446\nend_fctor = 2.0");
+    let e = load_err(&text);
+    assert!(e.contains("end_fctor"), "{e}");
+    assert!(e.contains("custom-plant.toml"), "{e}");
+}
+
+#[test]
+fn unknown_table_names_key_and_file() {
+    let text = format!("{}\n[effects.valve_dead_time]\ndelay_s = 0.01\n", nominal_text());
+    let e = load_err(&text);
+    assert!(e.contains("valve_dead_time"), "{e}");
+    assert!(e.contains("custom-plant.toml"), "{e}");
+}
+
+#[test]
+fn missing_key_names_key_and_file() {
+    let text: String = nominal_text()
+        .lines()
+        .filter(|l| !l.starts_with("inertia_kgm2"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let e = load_err(&text);
+    assert!(e.contains("inertia_kgm2"), "{e}");
+    assert!(e.contains("custom-plant.toml"), "{e}");
+}
+
+#[test]
+fn missing_file_names_file() {
+    let e = PlantConfig::load("/nonexistent/dir/plant-xyz.toml").unwrap_err().to_string();
+    assert!(e.contains("plant-xyz.toml"), "{e}");
+}
+
+#[test]
+fn invalid_value_names_key() {
+    let text = nominal_text().replace("laminar_ratio = 0.999", "laminar_ratio = 1.5");
+    let e = load_err(&text);
+    assert!(e.contains("valve.laminar_ratio"), "{e}");
+}
+
+#[test]
+fn initial_state_is_an_equilibrium_with_the_fixture_tension() {
+    let plant = Plant::load(plant_dir().join("reference-1dof.toml")).unwrap();
+    let x = plant.initial_state();
+    let d = plant.derivatives(&x, &ValveInputs::CLOSED);
+    assert_eq!(d, PlantState::default());
+    let m = plant.measure(&x);
+    assert!((m.p1_kpa - 550.0).abs() < 1e-9 && (m.p2_kpa - 550.0).abs() < 1e-9);
+    // Row 0 of the conformance fixtures: f1_n = f2_n = 529.601003.
+    assert!((m.f1_n - 529.601003).abs() < 1e-5, "{}", m.f1_n);
+    assert_eq!(m.f1_n, m.f2_n);
+}
+
+#[test]
+fn effects_tables_switch_on_friction_and_sensor_calibration() {
+    let text = format!(
+        "{}\n[effects.joint_friction]\ncoulomb_nm = 0.2\nbreakaway_nm = 0.3\n\
+         stribeck_velocity_rad_s = 0.1\nviscous_nm_s_per_rad = 0.05\nsmoothing_velocity_rad_s = 0.01\n\
+         [effects.sensor.angle_deg]\noffset = 1.5\ngain = 2.0\n",
+        nominal_text()
+    );
+    let cfg = PlantConfig::from_toml_str(&text, "with-effects.toml").unwrap_or_else(|e| panic!("{e}"));
+    let plant = Plant::from_config(&cfg);
+    let nominal = Plant::from_config(&PlantConfig::from_toml_str(&nominal_text(), "n.toml").unwrap());
+
+    // Friction decelerates a joint moving at equal pressures.
+    let mut x = plant.initial_state();
+    x.velocity_rad_s = 1.0;
+    let with = plant.derivatives(&x, &ValveInputs::CLOSED).velocity_rad_s;
+    let without = nominal.derivatives(&x, &ValveInputs::CLOSED).velocity_rad_s;
+    let j = cfg.joint.inertia_kgm2;
+    let expected_torque = -(0.2 + 0.1 * (-100.0f64).exp()) * (100.0f64).tanh() - 0.05;
+    assert!(((with - without) * j - expected_torque).abs() < 1e-9);
+
+    // Sensor calibration only changes the measurement.
+    let x0 = plant.initial_state();
+    assert_eq!(plant.measure(&x0).angle_deg, 1.5);
+    let mut x1 = x0;
+    x1.angle_rad = 1f64.to_radians();
+    assert!((plant.measure(&x1).angle_deg - 3.5).abs() < 1e-12);
+    assert_eq!(plant.measure(&x1).p1_kpa, nominal.measure(&x1).p1_kpa);
+
+    // enabled = false switches an effect off without deleting its table.
+    let off = text.replace("coulomb_nm = 0.2", "enabled = false\ncoulomb_nm = 0.2");
+    let p_off = Plant::from_config(&PlantConfig::from_toml_str(&off, "off.toml").unwrap());
+    assert_eq!(p_off.derivatives(&x, &ValveInputs::CLOSED).velocity_rad_s, without);
+}
+
+#[test]
+fn leakage_and_gravity_act_on_the_right_hand_side() {
+    let text = format!(
+        "{}\n[effects.leakage]\nsonic_conductance_m3_per_s_pa = 1.0e-11\n\
+         [effects.gravity]\nmass_kg = 1.0\ncom_distance_m = 0.1\nhanging_angle_rad = 0.0\n",
+        nominal_text()
+    );
+    let plant = Plant::from_config(&PlantConfig::from_toml_str(&text, "e.toml").unwrap());
+    let mut x = plant.initial_state();
+    let d = plant.derivatives(&x, &ValveInputs::CLOSED);
+    assert!(d.p1_abs_pa < 0.0 && d.p2_abs_pa < 0.0, "leak lowers the pressures: {d:?}");
+    x.angle_rad = 0.5;
+    x.p1_abs_pa = x.p2_abs_pa; // same pressures; remove the spring torque difference
+    let nominal = Plant::from_config(&PlantConfig::from_toml_str(&nominal_text(), "n.toml").unwrap());
+    let dg = plant.derivatives(&x, &ValveInputs::CLOSED).velocity_rad_s
+        - nominal.derivatives(&x, &ValveInputs::CLOSED).velocity_rad_s;
+    let expected = -1.0 * 9.80665 * 0.1 * 0.5f64.sin() / 0.014;
+    assert!((dg - expected).abs() < 1e-9, "{dg} vs {expected}");
+}

@@ -1,0 +1,121 @@
+//! Recording format: metadata kept, columns by name, errors naming file, line and field,
+//! atomic writes.
+
+use host_sim::recording::Channel;
+use host_sim::{Recording, RecordingError};
+
+const GOOD: &str = "# plant = reference-1dof.toml\n# sample_period_s = 0.001\n# operator = someone\n\
+angle_deg,u_ex2,t_s,u_in2,u_in1,u_ex1,extra_col\n\
+0.5,0,0.000,0,1,0,x\n\
+0.6,0.25,0.001,0,1,0,y\n\
+0.7,0,0.002,1,0,0,z\n";
+
+fn err(text: &str) -> String {
+    match Recording::parse(text, "run-42.csv") {
+        Ok(_) => panic!("expected an error for:\n{text}"),
+        Err(e) => e.to_string(),
+    }
+}
+
+fn assert_names(e: &str, line: u64, field: &str) {
+    assert!(e.contains("run-42.csv"), "file not named: {e}");
+    assert!(e.contains(&format!(":{line}:")), "line {line} not named: {e}");
+    assert!(e.contains(&format!("`{field}`")), "field {field} not named: {e}");
+}
+
+#[test]
+fn columns_in_any_order_and_metadata_kept() {
+    let r = Recording::parse(GOOD, "run-42.csv").unwrap();
+    assert_eq!(r.len(), 3);
+    assert_eq!(r.meta("operator"), Some("someone"));
+    assert_eq!(r.metadata.len(), 3);
+    assert!((r.sample_period_s() - 0.001).abs() < 1e-12);
+    assert_eq!(r.inputs[1].u_ex2, 0.25);
+    assert_eq!(r.inputs[2].u_in2, 1.0);
+    assert_eq!(r.channel(Channel::AngleDeg).unwrap(), &[0.5, 0.6, 0.7]);
+    assert!(r.channel(Channel::P1Kpa).is_none());
+}
+
+#[test]
+fn missing_required_column_names_the_header_line_and_column() {
+    let e = err(&GOOD.replace("u_in2", "u_inX"));
+    assert_names(&e, 4, "u_in2");
+}
+
+#[test]
+fn no_output_column_is_an_error() {
+    let e = err(&GOOD.replace("angle_deg", "angle_rad_not_a_channel"));
+    assert_names(&e, 4, "angle_deg");
+}
+
+#[test]
+fn unparsable_number_names_line_and_field() {
+    let e = err(&GOOD.replace("0.6,0.25", "0.6,0.2x5"));
+    assert_names(&e, 6, "u_ex2");
+}
+
+#[test]
+fn nan_names_line_and_field() {
+    let e = err(&GOOD.replace("0.7,0,0.002", "NaN,0,0.002"));
+    assert_names(&e, 7, "angle_deg");
+}
+
+#[test]
+fn non_uniform_time_names_line_and_field() {
+    let text = format!("{GOOD}0.8,0,0.0045,0,0,0,w\n0.9,0,0.005,0,0,0,w\n");
+    let e = err(&text);
+    assert_names(&e, 8, "t_s");
+}
+
+#[test]
+fn opening_outside_0_1_names_line_and_field() {
+    let e = err(&GOOD.replace("0.5,0,0.000,0,1,0", "0.5,0,0.000,0,1.5,0"));
+    assert_names(&e, 5, "u_in1");
+}
+
+#[test]
+fn sample_period_metadata_must_match_the_time_column() {
+    let e = err(&GOOD.replace("sample_period_s = 0.001", "sample_period_s = 0.01"));
+    assert_names(&e, 2, "sample_period_s");
+}
+
+#[test]
+fn short_row_names_the_line() {
+    let e = err(&GOOD.replace("0.6,0.25,0.001,0,1,0,y", "0.6,0.25,0.001"));
+    assert!(e.contains("run-42.csv:6:"), "{e}");
+}
+
+#[test]
+fn missing_file_names_the_file() {
+    let e = Recording::read("/nonexistent/rec-77.csv").unwrap_err();
+    assert!(matches!(e, RecordingError::Io { .. }));
+    assert!(e.to_string().contains("rec-77.csv"));
+}
+
+#[test]
+fn write_then_read_round_trips_and_keeps_metadata() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("out.csv");
+    let r = Recording::parse(GOOD, "run-42.csv").unwrap();
+    r.write(&path).unwrap();
+    let back = Recording::read(&path).unwrap();
+    assert_eq!(back, r);
+    // No temporary file is left behind.
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+}
+
+#[test]
+fn failed_write_keeps_the_previous_good_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("out.csv");
+    let good = Recording::parse(GOOD, "run-42.csv").unwrap();
+    good.write(&path).unwrap();
+    let before = std::fs::read(&path).unwrap();
+    let mut bad = good.clone();
+    bad.inputs.pop(); // unequal column lengths: refused before anything is written
+    assert!(bad.write(&path).is_err());
+    // Writing into a missing directory fails without touching anything.
+    assert!(good.write(dir.path().join("no/such/dir/out.csv")).is_err());
+    assert_eq!(std::fs::read(&path).unwrap(), before);
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+}
