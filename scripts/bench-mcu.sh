@@ -34,7 +34,7 @@ fi
 cargo build -q -p pam-firmware --bin qemu --features pam-firmware/firmware --release --target thumbv7em-none-eabihf
 cargo flash-build -q
 qemu_elf=target/thumbv7em-none-eabihf/release/qemu
-board_elf=target/thumbv7em-none-eabihf/release/board
+board_elf=target/board/thumbv7em-none-eabihf/release/board
 
 log=$(QEMU_EXTRA_ARGS="-icount shift=0" DEFMT_PRINT_ARGS="--log-format {s}" \
   scripts/qemu-run.sh "$qemu_elf" | grep -v '^tick=')
