@@ -3,7 +3,7 @@
 firmware (src/bin/qemu.rs) and tests/qemu_trace.rs feed to the control tick.
 
 One row per control tick (1 kHz). Raw counts, as the board delivers them: 12-bit ADC counts of
-the two pressure transducers (src/sensor_scaling.rs, PressureScaling::REFERENCE) and the x4
+the two pressure transducers (src/wiring.rs: 455 counts = 0 Pa, 4095 counts = 1 MPa) and the x4
 quadrature count of the 8000 counts/turn encoder. An empty field is a missing sample.
 
 Scenario (a recorded-like, open-loop trace; the trace does not react to the commands):
@@ -60,7 +60,7 @@ out = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "traces", "
 tmp = out + ".tmp"
 with open(tmp, "w") as f:
     f.write("# Raw sensor trace for the QEMU run and tests/qemu_trace.rs (scripts/gen-qemu-trace.py).\n")
-    f.write("# tick_hz = 1000; empty field = missing sample; counts per src/sensor_scaling.rs REFERENCE.\n")
+    f.write("# tick_hz = 1000; empty field = missing sample; counts per src/wiring.rs.\n")
     f.write("tick,angle_set_mrad,p1_adc_counts,p2_adc_counts,encoder_counts\n")
     f.write("\n".join(rows) + "\n")
 os.replace(tmp, out)
