@@ -33,8 +33,14 @@ fi
 
 cargo build -q -p pam-firmware --bin qemu --features pam-firmware/firmware --release --target thumbv7em-none-eabihf
 cargo flash-build -q
-qemu_elf=target/thumbv7em-none-eabihf/release/qemu
-board_elf=target/board/thumbv7em-none-eabihf/release/board
+# Honour CARGO_TARGET_DIR (the flash-build alias's --target-dir target/board is then ignored).
+if [ -n "${CARGO_TARGET_DIR:-}" ]; then
+  qemu_elf=$CARGO_TARGET_DIR/thumbv7em-none-eabihf/release/qemu
+  board_elf=$CARGO_TARGET_DIR/thumbv7em-none-eabihf/release/board
+else
+  qemu_elf=target/thumbv7em-none-eabihf/release/qemu
+  board_elf=target/board/thumbv7em-none-eabihf/release/board
+fi
 
 log=$(QEMU_EXTRA_ARGS="-icount shift=0" DEFMT_PRINT_ARGS="--log-format {s}" \
   scripts/qemu-run.sh "$qemu_elf" | grep -v '^tick=')
