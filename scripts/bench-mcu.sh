@@ -33,14 +33,10 @@ fi
 
 cargo build -q -p pam-firmware --bin qemu --features pam-firmware/firmware --release --target thumbv7em-none-eabihf
 cargo flash-build -q
-# Honour CARGO_TARGET_DIR (the flash-build alias's --target-dir target/board is then ignored).
-if [ -n "${CARGO_TARGET_DIR:-}" ]; then
-  qemu_elf=$CARGO_TARGET_DIR/thumbv7em-none-eabihf/release/qemu
-  board_elf=$CARGO_TARGET_DIR/thumbv7em-none-eabihf/release/board
-else
-  qemu_elf=target/thumbv7em-none-eabihf/release/qemu
-  board_elf=target/board/thumbv7em-none-eabihf/release/board
-fi
+# The QEMU image honours CARGO_TARGET_DIR; the board image is always in target/board (the
+# flash-build alias's --target-dir wins over the environment).
+qemu_elf=${CARGO_TARGET_DIR:-target}/thumbv7em-none-eabihf/release/qemu
+board_elf=target/board/thumbv7em-none-eabihf/release/board
 
 log=$(QEMU_EXTRA_ARGS="-icount shift=0" DEFMT_PRINT_ARGS="--log-format {s}" \
   scripts/qemu-run.sh "$qemu_elf" | grep -v '^tick=')
