@@ -161,8 +161,20 @@ fn main() {
         && env::var("CARGO_FEATURE_FIRMWARE").is_ok()
     {
         let dir = PathBuf::from(env::var("CARGO_MANIFEST_DIR").unwrap());
-        println!("cargo:rustc-link-search={}", dir.display());
-        println!("cargo:rerun-if-changed=memory.x");
+        // memory.x: memory/stm32f4 (QEMU netduinoplus2 and the board); Cortex-M0 builds
+        // (thumbv6m, the FPU-less benchmark image under QEMU `microbit`) use memory/nrf51.
+        // Not in the crate root: the linker looks for INCLUDEd files in its working
+        // directory first, which would shadow the per-target choice.
+        let mem = if env::var("TARGET")
+            .unwrap_or_default()
+            .starts_with("thumbv6m")
+        {
+            "memory/nrf51"
+        } else {
+            "memory/stm32f4"
+        };
+        println!("cargo:rustc-link-search={}", dir.join(mem).display());
+        println!("cargo:rerun-if-changed={mem}/memory.x");
         println!("cargo:rustc-link-arg-bins=--nmagic");
         println!("cargo:rustc-link-arg-bins=-Tlink.x");
         if env::var("CARGO_FEATURE_DEFMT").is_ok() {

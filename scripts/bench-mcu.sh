@@ -33,6 +33,7 @@ fi
 
 cargo build -q -p pam-firmware --bin qemu --features pam-firmware/firmware --release --target thumbv7em-none-eabihf
 cargo flash-build -q
+cargo build -q -p pam-firmware --bin qemu_m0 --features pam-firmware/firmware --release --target thumbv6m-none-eabi
 # The QEMU image honours CARGO_TARGET_DIR; the board image is always in target/board (the
 # flash-build alias's --target-dir wins over the environment).
 qemu_elf=${CARGO_TARGET_DIR:-target}/thumbv7em-none-eabihf/release/qemu
@@ -40,6 +41,22 @@ board_elf=target/board/thumbv7em-none-eabihf/release/board
 
 log=$(QEMU_EXTRA_ARGS="-icount shift=0" DEFMT_PRINT_ARGS="--log-format {s}" \
   scripts/qemu-run.sh "$qemu_elf" | grep -v '^tick=')
+# Cortex-M0 (no FPU) image on QEMU microbit: SysTick runs at 16 MHz there, so 64 ns per
+# instruction (-icount shift=6) keeps about one count per instruction.
+m0_elf=${CARGO_TARGET_DIR:-target}/thumbv6m-none-eabi/release/qemu_m0
+m0_log=$(QEMU_EXTRA_ARGS="-icount shift=6" DEFMT_PRINT_ARGS="--log-format {s}" \
+  scripts/qemu-run.sh "$m0_elf")
+m0() { # m0 <line-prefix> <key>
+  grep "^$1" <<<"$m0_log" | tr ' ' '\n' | sed -n "s/^$2=//p" | head -1
+}
+read -r m0_fx_mean m0_fx_worst m0_fl_mean m0_fl_worst m0_n < <(awk \
+  -v ci="$(m0 "bench calib" insns)" -v cc="$(m0 "bench calib" counts)" -v e="$(m0 "bench calib" empty_counts)" \
+  -v n="$(m0 "bench m0 force_law_fixed" n)" \
+  -v xs="$(m0 "bench m0 force_law_fixed" sum_counts)" -v xm="$(m0 "bench m0 force_law_fixed" max_counts)" \
+  -v fs="$(m0 "bench m0 force_law_f32_soft" sum_counts)" -v fm="$(m0 "bench m0 force_law_f32_soft" max_counts)" 'BEGIN {
+    if (n == "" || n == 0 || cc == "") { print "? ? ? ? 0"; exit }
+    k = ci / (cc - e);
+    printf "%.0f %.0f %.0f %.0f %d\n", (xs / n - e) * k, (xm - e) * k, (fs / n - e) * k, (fm - e) * k, n }')
 
 field() { # field <line-prefix> <key>
   grep "^$1" <<<"$log" | tr ' ' '\n' | sed -n "s/^$2=//p" | head -1
@@ -98,6 +115,8 @@ calibration: $cal_insns instructions = $((cal_counts - empty)) SysTick counts (k
 | force law alone (f32), worst call | $fl_worst instructions | | |
 | force law fixed point (I32F32, same inputs quantised), mean over $fx_n calls ($fx_off off the f32 law by > 0.1 N) | $fx_mean instructions | | |
 | force law fixed point, worst call | $fx_worst instructions | | |
+| Cortex-M0 (QEMU microbit, no FPU): force law fixed point, mean / worst over $m0_n calls | $m0_fx_mean / $m0_fx_worst instructions | | |
+| Cortex-M0: force law f32 in soft-float, mean / worst | $m0_fl_mean / $m0_fl_worst instructions | | |
 | QEMU image flash | $qemu_flash B | <= 32768 | $(check "$qemu_flash" 32768) |
 | QEMU image static RAM | $qemu_ram B | <= 8192 | $(check "$qemu_ram" 8192) |
 | board image flash | $board_flash B | <= 32768 | $(check "$board_flash" 32768) |

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Cargo runner for thumbv7em-none-eabihf (.cargo/config.toml): runs a firmware ELF on QEMU's
-# netduinoplus2 (STM32F405, Cortex-M4F) and decodes its defmt output (semihosting stdout)
+# Cargo runner for thumbv7em-none-eabihf and thumbv6m-none-eabi (.cargo/config.toml): runs a
+# firmware ELF on QEMU's netduinoplus2 (STM32F405, Cortex-M4F) or, for thumbv6m images, its
+# microbit (nRF51822, Cortex-M0), and decodes its defmt output (semihosting stdout)
 # with defmt-print. Exits with QEMU's status (the firmware's semihosting exit: 0 = success,
 # 1 = panic / HardFault), or 124 if QEMU_TIMEOUT_S (default 120 s) runs out.
 #
@@ -20,8 +21,14 @@ done
 
 # shellcheck disable=SC2086
 set +e
+# Cortex-M0 images (thumbv6m, src/bin/qemu_m0.rs) run on the micro:bit model (nRF51822);
+# everything else on netduinoplus2. QEMU_MACHINE overrides.
+case "$elf" in
+  *thumbv6m*) machine=${QEMU_MACHINE:-microbit} ;;
+  *) machine=${QEMU_MACHINE:-netduinoplus2} ;;
+esac
 timeout "${QEMU_TIMEOUT_S:-120}" qemu-system-arm \
-  -machine netduinoplus2 -cpu cortex-m4 -nographic -monitor none -serial none \
+  -machine "$machine" -nographic -monitor none -serial none \
   -semihosting-config enable=on,target=native \
   ${QEMU_EXTRA_ARGS:-} "$@" \
   -kernel "$elf" \
