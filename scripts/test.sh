@@ -6,4 +6,9 @@ cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 cargo build -p pam-firmware --lib --target thumbv7em-none-eabihf --release
 cargo build -p pam-firmware --lib --target thumbv6m-none-eabi --release
+# Firmware images: the QEMU image and the STM32F407 board image (flip-link), no hardware needed.
+cargo build -p pam-firmware --bin qemu --features pam-firmware/firmware --release --target thumbv7em-none-eabihf
+cargo flash-build
+# Includes tests/qemu_trace.rs: the QEMU run (cargo qemu) bit-for-bit against the host run,
+# and the non-zero exit of a panic / HardFault; with CI=true a missing QEMU fails it.
 cargo test --workspace

@@ -477,9 +477,17 @@ impl ControlTick {
             return out;
         };
 
-        let sp = setpoint
-            .angle_rad
-            .clamp(-cfg.angle_setpoint_max_rad, cfg.angle_setpoint_max_rad);
+        // Same result as `f32::clamp`, but without its (unreachable: the configuration is
+        // validated) panic, whose message would link core::fmt's float formatting (~20 KiB of
+        // MCU flash).
+        let sp_max = cfg.angle_setpoint_max_rad;
+        let sp = if setpoint.angle_rad > sp_max {
+            sp_max
+        } else if setpoint.angle_rad < -sp_max {
+            -sp_max
+        } else {
+            setpoint.angle_rad
+        };
         let result = (|| {
             let t_des = self.position.step(
                 JointState {

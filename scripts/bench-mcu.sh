@@ -1,0 +1,138 @@
+#!/usr/bin/env bash
+# MCU cost figures (a benchmark, not a test): instructions per control tick and per force-law
+# evaluation on the Cortex-M4F build under QEMU, flash / static RAM of the QEMU and board
+# images, worst-case stack.
+#
+# Method
+# - Instructions: the QEMU image (src/bin/qemu.rs) reads SysTick (core clock) around each call.
+#   Under `-icount shift=0` QEMU advances virtual time by exactly 1 ns per executed instruction,
+#   so SysTick counts are proportional to instructions; the factor is calibrated in the same
+#   run on an asm loop of a known instruction count (2 x 100000), and the cost of an empty
+#   measurement is subtracted. Resolution: one SysTick count (about 6 instructions) per
+#   measurement; the mean over all armed ticks of the trace is finer than that.
+# - Flash = .vector_table + .text + .rodata + .data (load image); static RAM = .data + .bss +
+#   .uninit (llvm-size from rustup's llvm-tools).
+# - Stack: the QEMU image paints the free RAM at start-up and reports the deepest overwritten
+#   word after the trace and the benchmarks ran (stack painting, measured at run time).
+# - --breakdown: also runs QEMU with -singlestep -d exec (one log line per instruction, a few
+#   hundred MB under /tmp) and prints where a tick's instructions go (scripts/tick-profile.py).
+# Exit status 1 if a target is missed (<= 1000 instructions per f32 tick, <= 32 KiB flash,
+# <= 8 KiB static RAM).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+breakdown=0
+[ "${1:-}" = "--breakdown" ] && breakdown=1
+
+sysroot=$(rustc --print sysroot)
+host=$(rustc -vV | sed -n 's/^host: //p')
+llvm_size="$sysroot/lib/rustlib/$host/bin/llvm-size"
+if [ ! -x "$llvm_size" ]; then
+  llvm_size=$(command -v arm-none-eabi-size || true) # same -A output (Debian binutils-arm-none-eabi)
+  [ -n "$llvm_size" ] || { echo "bench-mcu.sh: no size tool: run scripts/setup.sh" >&2; exit 2; }
+fi
+
+cargo build -q -p pam-firmware --bin qemu --features pam-firmware/firmware --release --target thumbv7em-none-eabihf
+cargo flash-build -q
+cargo build -q -p pam-firmware --bin qemu_m0 --features pam-firmware/firmware --release --target thumbv6m-none-eabi
+# The QEMU image honours CARGO_TARGET_DIR; the board image is always in target/board (the
+# flash-build alias's --target-dir wins over the environment).
+qemu_elf=${CARGO_TARGET_DIR:-target}/thumbv7em-none-eabihf/release/qemu
+board_elf=target/board/thumbv7em-none-eabihf/release/board
+
+log=$(QEMU_EXTRA_ARGS="-icount shift=0" DEFMT_PRINT_ARGS="--log-format {s}" \
+  scripts/qemu-run.sh "$qemu_elf" | grep -v '^tick=')
+# Cortex-M0 (no FPU) image on QEMU microbit: SysTick runs at 16 MHz there, so 64 ns per
+# instruction (-icount shift=6) keeps about one count per instruction.
+m0_elf=${CARGO_TARGET_DIR:-target}/thumbv6m-none-eabi/release/qemu_m0
+m0_log=$(QEMU_EXTRA_ARGS="-icount shift=6" DEFMT_PRINT_ARGS="--log-format {s}" \
+  scripts/qemu-run.sh "$m0_elf")
+m0() { # m0 <line-prefix> <key>
+  grep "^$1" <<<"$m0_log" | tr ' ' '\n' | sed -n "s/^$2=//p" | head -1
+}
+read -r m0_fx_mean m0_fx_worst m0_fl_mean m0_fl_worst m0_n < <(awk \
+  -v ci="$(m0 "bench calib" insns)" -v cc="$(m0 "bench calib" counts)" -v e="$(m0 "bench calib" empty_counts)" \
+  -v n="$(m0 "bench m0 force_law_fixed" n)" \
+  -v xs="$(m0 "bench m0 force_law_fixed" sum_counts)" -v xm="$(m0 "bench m0 force_law_fixed" max_counts)" \
+  -v fs="$(m0 "bench m0 force_law_f32_soft" sum_counts)" -v fm="$(m0 "bench m0 force_law_f32_soft" max_counts)" 'BEGIN {
+    if (n == "" || n == 0 || cc == "") { print "? ? ? ? 0"; exit }
+    k = ci / (cc - e);
+    printf "%.0f %.0f %.0f %.0f %d\n", (xs / n - e) * k, (xm - e) * k, (fs / n - e) * k, (fm - e) * k, n }')
+
+field() { # field <line-prefix> <key>
+  grep "^$1" <<<"$log" | tr ' ' '\n' | sed -n "s/^$2=//p" | head -1
+}
+cal_insns=$(field "bench calib" insns)
+cal_counts=$(field "bench calib" counts)
+empty=$(field "bench calib" empty_counts)
+tick_n=$(field "bench tick" n)
+tick_sum=$(field "bench tick" sum_counts)
+tick_max=$(field "bench tick" max_counts)
+fl_n=$(field "bench force_law_f32" n)
+fl_sum=$(field "bench force_law_f32" sum_counts)
+fl_max=$(field "bench force_law_f32" max_counts)
+fx_n=$(field "bench force_law_fixed" n)
+fx_sum=$(field "bench force_law_fixed" sum_counts)
+fx_max=$(field "bench force_law_fixed" max_counts)
+fx_off=$(field "bench force_law_fixed" off_by_more_than_0.1N)
+stack=$(grep -o 'stack_used_bytes=[0-9]*' <<<"$log" | cut -d= -f2)
+unpainted=$(grep -o 'unpainted_top_bytes=[0-9]*' <<<"$log" | cut -d= -f2)
+if [ "${stack:-0}" -le "${unpainted:-0}" ]; then stack="<= $unpainted"; fi
+for v in cal_insns cal_counts empty tick_n tick_sum tick_max fl_n fl_sum fl_max fx_n fx_sum fx_max stack; do
+  [ -n "${!v}" ] || { echo "bench-mcu.sh: no '$v' in the QEMU output:" >&2; echo "$log" >&2; exit 2; }
+done
+
+read -r tick_mean tick_worst fl_mean fl_worst fx_mean fx_worst k < <(awk -v ci="$cal_insns" \
+  -v cc="$cal_counts" -v e="$empty" -v tn="$tick_n" -v ts="$tick_sum" -v tm="$tick_max" \
+  -v fn="$fl_n" -v fs="$fl_sum" -v fm="$fl_max" -v xn="$fx_n" -v xs="$fx_sum" -v xm="$fx_max" 'BEGIN {
+    k = ci / (cc - e);
+    printf "%.0f %.0f %.0f %.0f %.0f %.0f %.5f\n", (ts / tn - e) * k, (tm - e) * k,
+      (fs / fn - e) * k, (fm - e) * k, (xs / xn - e) * k, (xm - e) * k, k }')
+
+sizes() { # sizes <elf> -> "flash ram"
+  "$llvm_size" -A "$1" | awk '
+    $1 == ".vector_table" || $1 == ".text" || $1 == ".rodata" { f += $2 }
+    $1 == ".data" { f += $2; r += $2 }
+    $1 == ".bss" || $1 == ".uninit" { r += $2 }
+    END { print f, r }'
+}
+read -r qemu_flash qemu_ram < <(sizes "$qemu_elf")
+read -r board_flash board_ram < <(sizes "$board_elf")
+
+fail=0
+check() { # check <value> <limit>
+  if [ "$1" -le "$2" ]; then echo "ok"; else echo "OVER"; fail=1; fi
+}
+cat <<REPORT
+## MCU cost (scripts/bench-mcu.sh, $(qemu-system-arm --version | head -1 | sed 's/ *(.*//'), netduinoplus2, -icount shift=0)
+
+calibration: $cal_insns instructions = $((cal_counts - empty)) SysTick counts (k = $k instructions/count)
+
+| figure | measured | target | |
+|---|---|---|---|
+| full f32 control tick, mean over $tick_n armed ticks | $tick_mean instructions | <= 1000 | $(check "$tick_mean" 1000) |
+| full f32 control tick, worst tick of the trace | $tick_worst instructions | | |
+| force law alone (f32, one muscle), mean over $fl_n calls | $fl_mean instructions | | |
+| force law alone (f32), worst call | $fl_worst instructions | | |
+| force law fixed point (I32F32, same inputs quantised), mean over $fx_n calls ($fx_off off the f32 law by > 0.1 N) | $fx_mean instructions | | |
+| force law fixed point, worst call | $fx_worst instructions | | |
+| Cortex-M0 (QEMU microbit, no FPU): force law fixed point, mean / worst over $m0_n calls | $m0_fx_mean / $m0_fx_worst instructions | | |
+| Cortex-M0: force law f32 in soft-float, mean / worst | $m0_fl_mean / $m0_fl_worst instructions | | |
+| QEMU image flash | $qemu_flash B | <= 32768 | $(check "$qemu_flash" 32768) |
+| QEMU image static RAM | $qemu_ram B | <= 8192 | $(check "$qemu_ram" 8192) |
+| board image flash | $board_flash B | <= 32768 | $(check "$board_flash" 32768) |
+| board image static RAM | $board_ram B | <= 8192 | $(check "$board_ram" 8192) |
+| worst-case stack (QEMU image, painted) | $stack B | | |
+REPORT
+if [ "$breakdown" = 1 ]; then
+  exec_log=$(mktemp /tmp/bench-mcu-exec.XXXXXX)
+  trap 'rm -f "$exec_log"' EXIT
+  qemu-system-arm -machine netduinoplus2 -nographic -monitor none -serial none \
+    -semihosting-config enable=on,target=native -singlestep -d exec,nochain -D "$exec_log" \
+    -kernel "$qemu_elf" >/dev/null
+  echo
+  python3 scripts/tick-profile.py "$(grep -c . traces/qemu_sensor_trace.csv | awk '{print $1 - 3}')" \
+    bench_ticks bench_force_law <"$exec_log"
+  echo
+  python3 scripts/tick-profile.py "$fx_n" bench_force_law_fixed _defmt_acquire <"$exec_log"
+fi
+exit $fail

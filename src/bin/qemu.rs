@@ -1,0 +1,316 @@
+//! The firmware under QEMU (`cargo qemu`): `netduinoplus2` (STM32F405, Cortex-M4F).
+//!
+//! 1. Replays the embedded raw sensor trace (`traces/qemu_sensor_trace.csv`) through sensor
+//!    scaling and the control tick, logging every tick's outputs as f32 bit patterns plus a
+//!    running FNV-1a hash (`tests/qemu_trace.rs` requires them bit-for-bit equal to a host run).
+//! 2. Reports the stack high-water mark (the free RAM is painted at start-up).
+//! 3. Benchmarks (`scripts/bench-mcu.sh`): SysTick counts around the full control tick, the
+//!    force law alone and a calibration loop of a known instruction count. Under
+//!    `qemu-system-arm -icount shift=0` virtual time advances exactly with the instructions
+//!    executed, so counts convert to instructions; without `-icount` they are meaningless.
+//!
+//! Fault injection (tests/qemu_trace.rs checks the exit status): `cargo qemu -- -append panic`
+//! panics, `-append hardfault` reads unmapped memory; both must end with exit status 1.
+//!
+//! defmt goes out over semihosting (decode with `defmt-print -e <elf>`, which
+//! `scripts/qemu-run.sh` does). The exit status reaches QEMU through the semihosting exit call:
+//! 0 at the end, 1 on a panic (location logged) or a HardFault (PC logged).
+#![no_std]
+#![no_main]
+
+use core::hint::black_box;
+
+use cortex_m::peripheral::{syst::SystClkSource, SYST};
+use cortex_m_rt::{entry, exception, ExceptionFrame};
+use cortex_m_semihosting::debug;
+use defmt_semihosting as _;
+
+use pam_firmware::constants::{FIXED_FORCE_LAW, FORCE_LAW};
+use pam_firmware::fixed_point::{pressure_pa_from_f32, q16_from_f32};
+use pam_firmware::geometry::JointGeometry;
+use pam_firmware::trace::{
+    ControlTick, ControllerConfig, TraceRunner, SENSOR_TRACE, TRACE_TICK_HZ,
+};
+use pam_firmware::wiring;
+
+/// Pattern of the painted (never used) stack.
+const PAINT: u32 = 0xDEAD_C0DE;
+/// Words below the current stack pointer left unpainted (the painting function's own frame).
+const PAINT_MARGIN_WORDS: usize = 64;
+
+extern "C" {
+    static mut _stack_end: u32;
+    static mut _stack_start: u32;
+}
+
+fn stack_bounds() -> (usize, usize) {
+    // Only the addresses of the linker symbols are taken.
+    (
+        core::ptr::addr_of!(_stack_end) as usize,
+        core::ptr::addr_of!(_stack_start) as usize,
+    )
+}
+
+/// Paints the free stack (from the end of .bss/.uninit up to just below the current frame).
+/// Returns the bytes from the top of RAM to the painted region: a measured high-water mark
+/// below this figure only says "at most this much".
+#[inline(never)]
+fn paint_stack() -> u32 {
+    let (lo, _) = stack_bounds();
+    let sp = cortex_m::register::msp::read() as usize;
+    let hi = sp - PAINT_MARGIN_WORDS * 4;
+    let mut p = lo;
+    while p < hi {
+        // SAFETY: [lo, hi) is RAM between the statics and the live stack; nothing uses it yet.
+        unsafe { core::ptr::write_volatile(p as *mut u32, PAINT) };
+        p += 4;
+    }
+    let (_, top) = stack_bounds();
+    (top - hi) as u32
+}
+
+/// Bytes of stack ever used: from the top of RAM down to the lowest overwritten painted word.
+fn stack_used_bytes() -> u32 {
+    let (lo, top) = stack_bounds();
+    let mut p = lo;
+    // SAFETY: reads of RAM inside the painted region.
+    while p < top && unsafe { core::ptr::read_volatile(p as *const u32) } == PAINT {
+        p += 4;
+    }
+    (top - p) as u32
+}
+
+/// SysTick counts elapsed while `f` runs (24-bit down counter, wraps once at most).
+#[inline(always)]
+fn measure<R>(f: impl FnOnce() -> R) -> (u32, R) {
+    let a = SYST::get_current();
+    let r = f();
+    let b = SYST::get_current();
+    (a.wrapping_sub(b) & 0x00FF_FFFF, r)
+}
+
+/// Calibration: exactly 2 instructions per iteration (`subs`, `bne`).
+#[inline(never)]
+fn spin(iterations: u32) {
+    // SAFETY: a register-only loop.
+    unsafe {
+        core::arch::asm!(
+            "1:",
+            "subs {0}, {0}, #1",
+            "bne 1b",
+            inout(reg) iterations => _,
+            options(nomem, nostack),
+        );
+    }
+}
+
+fn bench(syst: &mut SYST) {
+    syst.set_clock_source(SystClkSource::Core);
+    syst.set_reload(0x00FF_FFFF);
+    syst.clear_current();
+    syst.enable_counter();
+
+    const CAL_ITER: u32 = 100_000;
+    let (cal, _) = measure(|| spin(black_box(CAL_ITER)));
+    let (empty, _) = measure(|| black_box(0u32));
+    defmt::info!(
+        "bench calib insns={=u32} counts={=u32} empty_counts={=u32}",
+        2 * CAL_ITER,
+        cal,
+        empty
+    );
+
+    bench_ticks();
+    bench_force_law();
+    bench_force_law_fixed();
+}
+
+/// Full control tick, each tick measured alone (frame built before the measurement).
+/// Not inlined: `scripts/bench-mcu.sh --breakdown` attributes the instructions executed
+/// between this function's entry and `bench_force_law`'s to symbols.
+#[inline(never)]
+fn bench_ticks() {
+    let p = wiring::pressure_scaling();
+    let dt = 1.0 / TRACE_TICK_HZ;
+    let mut tick = ControlTick::new(ControllerConfig::reference(TRACE_TICK_HZ));
+    let (mut sum_armed, mut n_armed, mut max_any) = (0u32, 0u32, 0u32);
+    for row in SENSOR_TRACE.iter() {
+        let frame = black_box(row.frame(&p));
+        let sp = black_box(row.setpoint());
+        let (c, out) = measure(|| tick.step(&frame, &sp, black_box(dt)));
+        let out = black_box(out);
+        if out.armed {
+            sum_armed += c;
+            n_armed += 1;
+        }
+        max_any = max_any.max(c);
+    }
+    defmt::info!(
+        "bench tick n={=u32} sum_counts={=u32} max_counts={=u32}",
+        n_armed,
+        sum_armed,
+        max_any
+    );
+}
+
+/// Force law alone (f32), at the trace's pressures and the stretches of its angles.
+#[inline(never)]
+fn bench_force_law() {
+    let p = wiring::pressure_scaling();
+    let g = JointGeometry::REFERENCE;
+    let (mut sum, mut n, mut max) = (0u32, 0u32, 0u32);
+    for row in SENSOR_TRACE.iter() {
+        let f = row.frame(&p);
+        let (Some(p1), Some(a)) = (f.p1_gauge_pa, f.angle_rad) else {
+            continue;
+        };
+        let (e1, _) = g.stretches(a);
+        let (p1, e1) = (black_box(p1), black_box(e1));
+        let (c, r) = measure(|| FORCE_LAW.force(p1, e1));
+        black_box(r);
+        sum += c;
+        n += 1;
+        max = max.max(c);
+    }
+    defmt::info!(
+        "bench force_law_f32 n={=u32} sum_counts={=u32} max_counts={=u32}",
+        n,
+        sum,
+        max
+    );
+}
+
+/// The fault requested on the semihosting command line (`-append panic|hardfault`), if any.
+#[inline(never)]
+fn injected_fault() -> Option<&'static str> {
+    let mut buf = [0u8; 256];
+    let mut block = [buf.as_mut_ptr() as usize, buf.len()];
+    // SAFETY: SYS_GET_CMDLINE writes at most `block[1]` bytes into `buf` and the length back
+    // into `block[1]`; both outlive the call.
+    let r = unsafe {
+        cortex_m_semihosting::syscall1(
+            cortex_m_semihosting::nr::GET_CMDLINE,
+            block.as_mut_ptr() as usize,
+        )
+    };
+    if r != 0 || block[1] > buf.len() {
+        return None;
+    }
+    let line = &buf[..block[1]];
+    ["panic", "hardfault"]
+        .into_iter()
+        .find(|w| line.ends_with(w.as_bytes()))
+}
+
+/// Fixed-point force law (src/fixed_point.rs, `constants::FIXED_FORCE_LAW`) at the same
+/// inputs as [`bench_force_law`], quantised before the measurement (the FPU-less build gets
+/// integer readings).
+#[inline(never)]
+fn bench_force_law_fixed() {
+    let p = wiring::pressure_scaling();
+    let g = JointGeometry::REFERENCE;
+    let law = FIXED_FORCE_LAW;
+    let (mut sum, mut n, mut max, mut off) = (0u32, 0u32, 0u32, 0u32);
+    for row in SENSOR_TRACE.iter() {
+        let f = row.frame(&p);
+        let (Some(p1), Some(a)) = (f.p1_gauge_pa, f.angle_rad) else {
+            continue;
+        };
+        let (e1, _) = g.stretches(a);
+        let (Some(pq), Some(eq)) = (pressure_pa_from_f32(p1), q16_from_f32(e1)) else {
+            continue;
+        };
+        let (pq, eq) = (black_box(pq), black_box(eq));
+        let (c, r) = measure(|| law.force(pq, eq));
+        let r = black_box(r);
+        // Sanity: a real evaluation, within 0.1 N of the f32 law (fixed_point.rs's bound).
+        let f32_law = FORCE_LAW.force(p1, e1);
+        if r.flags != f32_law.flags
+            || libm::fabsf(r.force_n.to_num::<f32>() - f32_law.force_n) > 0.1
+        {
+            off += 1;
+        }
+        sum += c;
+        n += 1;
+        max = max.max(c);
+    }
+    defmt::info!(
+        "bench force_law_fixed n={=u32} sum_counts={=u32} max_counts={=u32} off_by_more_than_0.1N={=u32}",
+        n,
+        sum,
+        max,
+        off
+    );
+}
+
+#[entry]
+fn main() -> ! {
+    let unpainted = paint_stack();
+    let mut cp = cortex_m::Peripherals::take().unwrap();
+    match injected_fault() {
+        Some("panic") => panic!("injected panic"),
+        Some(_) => {
+            defmt::warn!("injecting a HardFault (read of unmapped memory)");
+            // SAFETY: deliberately faulting read (0xF000_0000 is unmapped on the STM32F405).
+            let v = unsafe { core::ptr::read_volatile(0xF000_0000 as *const u32) };
+            defmt::error!("unmapped read returned {=u32:x}", v);
+        }
+        None => {}
+    }
+
+    defmt::info!(
+        "pam-firmware qemu: replaying {=usize} ticks at {=f32} Hz",
+        TraceRunner::len(),
+        TRACE_TICK_HZ
+    );
+    let mut runner = TraceRunner::new();
+    let mut ticks = 0u32;
+    while let Some(r) = runner.step() {
+        let w = r.words;
+        defmt::info!(
+            "tick={=u32} out={=u32:x},{=u32:x},{=u32:x},{=u32:x},{=u32:x},{=u32:x},{=u32:x},{=u32:x},{=u32:x} hash={=u32:x}",
+            r.tick, w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7], w[8], r.hash
+        );
+        ticks += 1;
+    }
+    defmt::info!(
+        "trace done ticks={=u32} digest={=u32:x}",
+        ticks,
+        runner.hash()
+    );
+
+    bench(&mut cp.SYST);
+
+    // After everything ran: the deepest the stack ever got (main, the tick, defmt, bench).
+    defmt::info!(
+        "stack_used_bytes={=u32} unpainted_top_bytes={=u32}",
+        stack_used_bytes(),
+        unpainted
+    );
+    debug::exit(debug::EXIT_SUCCESS);
+    loop {
+        cortex_m::asm::bkpt();
+    }
+}
+
+/// Panic: log the location (not the message: see Cargo.toml) and exit with status 1.
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    match info.location() {
+        Some(l) => defmt::error!("panicked at {=str}:{=u32}", l.file(), l.line()),
+        None => defmt::error!("panicked"),
+    }
+    debug::exit(debug::EXIT_FAILURE);
+    loop {
+        cortex_m::asm::bkpt();
+    }
+}
+
+#[exception]
+unsafe fn HardFault(ef: &ExceptionFrame) -> ! {
+    defmt::error!("HardFault at pc={=u32:x}", ef.pc());
+    debug::exit(debug::EXIT_FAILURE);
+    loop {
+        cortex_m::asm::bkpt();
+    }
+}

@@ -1,0 +1,128 @@
+//! FPU-less benchmark image (`thumbv6m-none-eabi`, QEMU `microbit` = nRF51822, Cortex-M0):
+//! the cost of the fixed-point force law (src/fixed_point.rs) where it is meant to run, next to
+//! the f32 law in soft-float. Same method as src/bin/qemu.rs (SysTick around each call under
+//! `-icount`, calibrated on a loop of known instruction count); `scripts/bench-mcu.sh` runs it.
+//!
+//! `cargo run -p pam-firmware --bin qemu_m0 --features pam-firmware/firmware --release
+//! --target thumbv6m-none-eabi` (runner: scripts/qemu-run.sh, which picks `microbit`).
+#![no_std]
+#![no_main]
+
+use core::hint::black_box;
+
+use cortex_m::peripheral::{syst::SystClkSource, SYST};
+use cortex_m_rt::{entry, exception, ExceptionFrame};
+use cortex_m_semihosting::debug;
+use defmt_semihosting as _;
+
+use pam_firmware::constants::{FIXED_FORCE_LAW, FORCE_LAW};
+use pam_firmware::fixed_point::{pressure_pa_from_f32, q16_from_f32};
+use pam_firmware::geometry::JointGeometry;
+use pam_firmware::trace::SENSOR_TRACE;
+use pam_firmware::wiring;
+
+#[inline(always)]
+fn measure<R>(f: impl FnOnce() -> R) -> (u32, R) {
+    let a = SYST::get_current();
+    let r = f();
+    let b = SYST::get_current();
+    (a.wrapping_sub(b) & 0x00FF_FFFF, r)
+}
+
+/// Calibration: exactly 2 instructions per iteration (`subs`, `bne`).
+#[inline(never)]
+fn spin(iterations: u32) {
+    // SAFETY: a register-only loop.
+    unsafe {
+        core::arch::asm!(
+            "1:",
+            "subs {0}, {0}, #1",
+            "bne 1b",
+            inout(reg) iterations => _,
+            options(nomem, nostack),
+        );
+    }
+}
+
+#[entry]
+fn main() -> ! {
+    let mut cp = cortex_m::Peripherals::take().unwrap();
+    let syst = &mut cp.SYST;
+    syst.set_clock_source(SystClkSource::Core);
+    syst.set_reload(0x00FF_FFFF);
+    syst.clear_current();
+    syst.enable_counter();
+
+    const CAL_ITER: u32 = 100_000;
+    let (cal, _) = measure(|| spin(black_box(CAL_ITER)));
+    let (empty, _) = measure(|| black_box(0u32));
+    defmt::info!(
+        "bench calib insns={=u32} counts={=u32} empty_counts={=u32}",
+        2 * CAL_ITER,
+        cal,
+        empty
+    );
+
+    let p = wiring::pressure_scaling();
+    let g = JointGeometry::REFERENCE;
+    let law = FIXED_FORCE_LAW;
+    let (mut fx_sum, mut fx_max, mut fl_sum, mut fl_max, mut n) = (0u32, 0u32, 0u32, 0u32, 0u32);
+    for row in SENSOR_TRACE.iter() {
+        let f = row.frame(&p);
+        let (Some(p1), Some(a)) = (f.p1_gauge_pa, f.angle_rad) else {
+            continue;
+        };
+        let (e1, _) = g.stretches(a);
+        let (Some(pq), Some(eq)) = (pressure_pa_from_f32(p1), q16_from_f32(e1)) else {
+            continue;
+        };
+        let (pq, eq) = (black_box(pq), black_box(eq));
+        let (c, r) = measure(|| law.force(pq, eq));
+        black_box(r);
+        fx_sum += c;
+        fx_max = fx_max.max(c);
+        let (p1, e1) = (black_box(p1), black_box(e1));
+        let (c, r) = measure(|| FORCE_LAW.force(p1, e1));
+        black_box(r);
+        fl_sum += c;
+        fl_max = fl_max.max(c);
+        n += 1;
+    }
+    defmt::info!(
+        "bench m0 force_law_fixed n={=u32} sum_counts={=u32} max_counts={=u32}",
+        n,
+        fx_sum,
+        fx_max
+    );
+    defmt::info!(
+        "bench m0 force_law_f32_soft n={=u32} sum_counts={=u32} max_counts={=u32}",
+        n,
+        fl_sum,
+        fl_max
+    );
+    debug::exit(debug::EXIT_SUCCESS);
+    loop {
+        cortex_m::asm::bkpt();
+    }
+}
+
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    match info.location() {
+        Some(l) => defmt::error!("panicked at {=str}:{=u32}", l.file(), l.line()),
+        None => defmt::error!("panicked"),
+    }
+    debug::exit(debug::EXIT_FAILURE);
+    loop {
+        cortex_m::asm::bkpt();
+    }
+}
+
+#[exception]
+unsafe fn HardFault(ef: &ExceptionFrame) -> ! {
+    defmt::error!("HardFault at pc={=u32:x}", ef.pc());
+    debug::exit(debug::EXIT_FAILURE);
+    loop {
+        cortex_m::asm::bkpt();
+    }
+}
