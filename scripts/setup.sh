@@ -47,3 +47,13 @@ if ! rustup component list --installed 2>/dev/null | grep -q '^llvm-tools'; then
     fi
   fi
 fi
+
+# Plots (host-sim --plot, demo, diagnosis reports) lay out text with a TrueType font read at run
+# time (host-sim/src/plot.rs): install DejaVu Sans when no usable font is present.
+if [ -z "${HOST_SIM_FONT:-}" ] && ! ls /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf \
+    /usr/share/fonts/TTF/DejaVuSans.ttf /usr/share/fonts/dejavu/DejaVuSans.ttf \
+    /usr/share/fonts/truetype/liberation/LiberationSans-Regular.ttf >/dev/null 2>&1; then
+  say "apt-get install fonts-dejavu-core"
+  as_root apt-get update
+  as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends fonts-dejavu-core
+fi
