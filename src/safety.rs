@@ -63,6 +63,11 @@ pub enum FaultCode {
     ControllerNumeric = 17,
     /// The configuration failed validation.
     ConfigInvalid = 18,
+    /// Muscle 1 pressure stayed far from its set-point with the valve command saturated
+    /// towards it for too long (stuck or disconnected valve, lost supply, burst line).
+    PressureTrackingLost1 = 19,
+    /// As [`FaultCode::PressureTrackingLost1`], muscle 2.
+    PressureTrackingLost2 = 20,
 }
 
 impl FaultCode {
@@ -94,8 +99,54 @@ impl FaultCode {
             16 => Watchdog,
             17 => ControllerNumeric,
             18 => ConfigInvalid,
+            19 => PressureTrackingLost1,
+            20 => PressureTrackingLost2,
             _ => return None,
         })
+    }
+}
+
+/// Pressure-tracking supervision of one muscle: a fault when the pressure error stays above
+/// `error_pa` while the valve command is saturated *towards* the set-point (the valve is
+/// doing all it can and the pressure does not follow) for more than `ticks` consecutive
+/// ticks. A healthy on/off valve closes a 100 kPa gap in a few tens of ms; a stuck-open
+/// valve, a lost supply or a burst line keeps the gap. Any tick that breaks the condition
+/// (error small, command not saturated, or saturated away from the error) restarts the count.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TrackingMonitor {
+    count: u32,
+}
+
+impl TrackingMonitor {
+    /// Command magnitude counted as saturated.
+    pub const SATURATED: f32 = 0.999;
+
+    /// One tick; true when tracking is lost. NaN inputs never count (other checks catch them).
+    #[inline]
+    pub fn update(
+        &mut self,
+        p_set_gauge_pa: f32,
+        p_meas_gauge_pa: f32,
+        command: f32,
+        error_pa: f32,
+        ticks: u32,
+    ) -> bool {
+        let e = p_set_gauge_pa - p_meas_gauge_pa;
+        let pushing = (e > error_pa && command >= Self::SATURATED)
+            || (e < -error_pa && command <= -Self::SATURATED);
+        self.count = if pushing {
+            self.count.saturating_add(1)
+        } else {
+            0
+        };
+        self.count > ticks
+    }
+
+    /// Restarts the count.
+    #[inline]
+    pub fn reset(&mut self) {
+        self.count = 0;
     }
 }
 
@@ -216,16 +267,46 @@ impl SafetyMonitor {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn tracking_monitor_trips_only_after_persistent_saturated_gap() {
+        let mut m = TrackingMonitor::default();
+        // Gap of 150 kPa, command saturated towards it: trips on tick 11 with ticks = 10.
+        for k in 1..=10 {
+            assert!(!m.update(400e3, 250e3, 1.0, 100e3, 10), "tick {k}");
+        }
+        assert!(m.update(400e3, 250e3, 1.0, 100e3, 10));
+        // One tick with the gap closed restarts the count.
+        m.update(400e3, 350e3, 1.0, 100e3, 10);
+        for _ in 0..10 {
+            assert!(!m.update(400e3, 250e3, 1.0, 100e3, 10));
+        }
+        // Saturated away from the error (or not saturated) never counts.
+        let mut m = TrackingMonitor::default();
+        for _ in 0..100 {
+            assert!(!m.update(400e3, 250e3, -1.0, 100e3, 10));
+            assert!(!m.update(400e3, 250e3, 0.9, 100e3, 10));
+            assert!(!m.update(f32::NAN, 250e3, 1.0, 100e3, 10));
+        }
+        // Exhausting against a pressure stuck high counts as well.
+        let mut m = TrackingMonitor::default();
+        for _ in 0..=10 {
+            m.update(100e3, 500e3, -1.0, 100e3, 10);
+        }
+        assert!(m.update(100e3, 500e3, -1.0, 100e3, 10));
+    }
+
     use super::*;
 
     #[test]
     fn fault_codes_round_trip_and_are_stable() {
-        for c in 1..=18u8 {
+        for c in 1..=20u8 {
             assert_eq!(FaultCode::from_code(c).unwrap().code(), c);
         }
         assert_eq!(FaultCode::from_code(0), None);
-        assert_eq!(FaultCode::from_code(19), None);
+        assert_eq!(FaultCode::from_code(21), None);
         assert_eq!(FaultCode::OverPressure1 as u8, 13);
+        assert_eq!(FaultCode::PressureTrackingLost2 as u8, 20);
     }
 
     #[test]

@@ -20,7 +20,7 @@ use crate::control::{
 };
 use crate::force_law::{ForceFlags, ForceLawParams};
 use crate::geometry::JointGeometry;
-use crate::safety::{clamp_pressure_setpoint_pa, SafeState, SafetyMonitor};
+use crate::safety::{clamp_pressure_setpoint_pa, SafeState, SafetyMonitor, TrackingMonitor};
 use crate::sensors::{
     ChannelFault, ChannelLimits, ChannelStatus, ChannelValidator, VelocityEstimator,
 };
@@ -119,6 +119,11 @@ pub struct ControllerConfig {
     pub p_over_gauge_pa: f32,
     /// Angle set-points are clamped to `[-angle_setpoint_max_rad, angle_setpoint_max_rad]`.
     pub angle_setpoint_max_rad: f32,
+    /// Pressure error [Pa] above which a saturated valve command counts as not tracking
+    /// ([`crate::safety::TrackingMonitor`]).
+    pub tracking_error_pa: f32,
+    /// Consecutive non-tracking ticks that raise `PressureTrackingLost1/2`.
+    pub tracking_ticks: u32,
 }
 
 impl ControllerConfig {
@@ -197,6 +202,10 @@ impl ControllerConfig {
             },
             p_over_gauge_pa: 630_000.0,
             angle_setpoint_max_rad: 0.8,
+            // Filling a muscle across 100 kPa takes ~25 ms with the reference valve; 0.3 s
+            // of saturated command without getting there is a valve or supply failure.
+            tracking_error_pa: 100_000.0,
+            tracking_ticks: ticks(0.3),
         }
     }
 
@@ -245,6 +254,8 @@ impl ControllerConfig {
             && lim_ok(&self.angle_limits)
             && pos(self.p_over_gauge_pa)
             && nonneg(self.angle_setpoint_max_rad)
+            && pos(self.tracking_error_pa)
+            && self.tracking_ticks > 0
     }
 }
 
@@ -266,6 +277,8 @@ pub struct ControlTick {
     last_p1_pa: Option<f32>,
     last_p2_pa: Option<f32>,
     last_angle_rad: Option<f32>,
+    tracking1: TrackingMonitor,
+    tracking2: TrackingMonitor,
 }
 
 fn channel_fault(
@@ -317,6 +330,8 @@ impl ControlTick {
             last_p1_pa: None,
             last_p2_pa: None,
             last_angle_rad: None,
+            tracking1: TrackingMonitor::default(),
+            tracking2: TrackingMonitor::default(),
         }
     }
 
@@ -331,6 +346,8 @@ impl ControlTick {
     }
 
     fn reset_laws(&mut self) {
+        self.tracking1.reset();
+        self.tracking2.reset();
         self.position.reset();
         self.torque.reset();
         self.pressure1.reset();
@@ -350,13 +367,18 @@ impl ControlTick {
     /// One control tick. Pure: no hidden time, no I/O. Never panics; every float of the
     /// output is finite.
     pub fn step(&mut self, frame: &SensorFrame, setpoint: &Setpoint, dt_s: f32) -> TickOutput {
-        let cfg = self.cfg;
-        let dt_ok = dt_s.is_finite() && dt_s > 0.0 && dt_s <= cfg.dt_max_s;
+        // Scalars read once; the configuration (with its force-law and torque-model tables) is
+        // not copied: a whole-struct copy cost ~190 instructions per tick on the Cortex-M4.
+        let dt_max_s = self.cfg.dt_max_s;
+        let tick_hz = self.cfg.tick_hz;
+        let p_over_gauge_pa = self.cfg.p_over_gauge_pa;
+        let sp_max = self.cfg.angle_setpoint_max_rad;
+        let dt_ok = dt_s.is_finite() && dt_s > 0.0 && dt_s <= dt_max_s;
         // Channels are aged by the nominal period when dt itself is bad.
         let dt_age = if dt_ok {
             dt_s
-        } else if cfg.tick_hz.is_finite() && cfg.tick_hz > 0.0 {
-            1.0 / cfg.tick_hz
+        } else if tick_hz.is_finite() && tick_hz > 0.0 {
+            1.0 / tick_hz
         } else {
             1.0e-3
         };
@@ -424,12 +446,12 @@ impl ControlTick {
             ));
         }
         if let Some(p) = s1.value() {
-            if p > cfg.p_over_gauge_pa {
+            if p > p_over_gauge_pa {
                 note(OverPressure1);
             }
         }
         if let Some(p) = s2.value() {
-            if p > cfg.p_over_gauge_pa {
+            if p > p_over_gauge_pa {
                 note(OverPressure2);
             }
         }
@@ -442,15 +464,21 @@ impl ControlTick {
         }
 
         let angle_est = self.last_angle_rad.unwrap_or(0.0);
-        let torque_est = match (self.last_p1_pa, self.last_p2_pa, self.last_angle_rad) {
-            (Some(p1), Some(p2), Some(a)) => {
-                let (t, flags) = torque_estimate_nm(&cfg.force_law, &cfg.geometry, p1, p2, a);
-                if flags.contains_any(ForceFlags::FATAL) || !t.is_finite() {
-                    0.0
-                } else {
-                    t
-                }
-            }
+        // The force-law torque estimate, computed once per tick: it is both the logged
+        // `torque_est_nm` and, when all channels are fresh this tick (then `last_*` are this
+        // tick's values), the torque loop's feedback.
+        let estimate = match (self.last_p1_pa, self.last_p2_pa, self.last_angle_rad) {
+            (Some(p1), Some(p2), Some(a)) => Some(torque_estimate_nm(
+                &self.cfg.force_law,
+                &self.cfg.geometry,
+                p1,
+                p2,
+                a,
+            )),
+            _ => None,
+        };
+        let torque_est = match estimate {
+            Some((t, flags)) if !flags.contains_any(ForceFlags::FATAL) && t.is_finite() => t,
             _ => 0.0,
         };
         let vel = if vel.is_finite() { vel } else { 0.0 };
@@ -480,7 +508,6 @@ impl ControlTick {
         // Same result as `f32::clamp`, but without its (unreachable: the configuration is
         // validated) panic, whose message would link core::fmt's float formatting (~20 KiB of
         // MCU flash).
-        let sp_max = cfg.angle_setpoint_max_rad;
         let sp = if setpoint.angle_rad > sp_max {
             sp_max
         } else if setpoint.angle_rad < -sp_max {
@@ -497,22 +524,39 @@ impl ControlTick {
                 sp,
                 dt_s,
             )?;
-            let ps = self.torque.step(
-                TorqueMeasurement {
-                    p1_gauge_pa: p1,
-                    p2_gauge_pa: p2,
-                    angle_rad: angle,
-                    velocity_rad_s: vel,
-                },
-                t_des,
-                dt_s,
-            )?;
+            let meas = TorqueMeasurement {
+                p1_gauge_pa: p1,
+                p2_gauge_pa: p2,
+                angle_rad: angle,
+                velocity_rad_s: vel,
+            };
+            let ps = match estimate {
+                // Armed implies all three channels valid this tick, so `estimate` was
+                // computed from exactly `meas`; the torque loop reuses it (the loop's own force
+                // law is the configuration's, see `ControlTick::new`).
+                Some(est) => self.torque.step_with_estimate(meas, est, t_des, dt_s)?,
+                None => self.torque.step(meas, t_des, dt_s)?,
+            };
             let u1 = self.pressure1.step(p1, ps.p1_gauge_pa, dt_s)?;
             let u2 = self.pressure2.step(p2, ps.p2_gauge_pa, dt_s)?;
             Ok::<_, crate::control::ControlError>((t_des, ps, u1, u2))
         })();
         match result {
             Ok((t_des, ps, u1, u2)) => {
+                let (e_pa, n) = (self.cfg.tracking_error_pa, self.cfg.tracking_ticks);
+                let lost1 = self.tracking1.update(ps.p1_gauge_pa, p1, u1, e_pa, n);
+                let lost2 = self.tracking2.update(ps.p2_gauge_pa, p2, u2, e_pa, n);
+                if lost1 || lost2 {
+                    let f = if lost1 {
+                        FaultCode::PressureTrackingLost1
+                    } else {
+                        FaultCode::PressureTrackingLost2
+                    };
+                    warn!("pressure tracking lost: {}", f);
+                    self.safety.raise(f);
+                    out.torque_des_nm = t_des;
+                    return self.safe_output(out);
+                }
                 let cmd = ValveCommand {
                     muscle1: u1,
                     muscle2: u2,

@@ -101,40 +101,26 @@ impl TorqueModelParams {
     /// velocity, clamped to `+-dp_max_pa` and to the pressures staying within
     /// `[0, P_MUSCLE_MAX_GAUGE_PA]`. Non-finite inputs give dp = 0, saturated.
     pub fn activation(&self, torque_nm: f32, angle_rad: f32, velocity_rad_s: f32) -> Activation {
+        self.inverse_at(angle_rad, velocity_rad_s)
+            .activation(torque_nm)
+    }
+
+    /// The inverse model at one joint state, for several torques: the passive torque, the
+    /// gain `B r` and the limit are computed once (the torque loop inverts twice per tick).
+    /// `inverse_at(a, v).activation(t)` is exactly `activation(t, a, v)`.
+    #[inline]
+    pub fn inverse_at(&self, angle_rad: f32, velocity_rad_s: f32) -> InverseAt {
         let gain = self.b_m2 * self.sprocket_radius_m;
-        if !torque_nm.is_finite()
-            || !angle_rad.is_finite()
-            || !velocity_rad_s.is_finite()
-            || gain == 0.0
-        {
-            return Activation {
-                dp_pa: 0.0,
-                saturated: true,
-            };
-        }
-        let dp = (torque_nm - self.passive_nm(angle_rad, velocity_rad_s)) / gain;
-        if !dp.is_finite() {
-            return Activation {
-                dp_pa: 0.0,
-                saturated: true,
-            };
-        }
-        let lim = self.dp_limit_pa();
-        if dp > lim {
-            Activation {
-                dp_pa: lim,
-                saturated: true,
-            }
-        } else if dp < -lim {
-            Activation {
-                dp_pa: -lim,
-                saturated: true,
-            }
-        } else {
-            Activation {
-                dp_pa: dp,
-                saturated: false,
-            }
+        let valid = angle_rad.is_finite() && velocity_rad_s.is_finite() && gain != 0.0;
+        InverseAt {
+            passive_nm: if valid {
+                self.passive_nm(angle_rad, velocity_rad_s)
+            } else {
+                0.0
+            },
+            gain_m3: gain,
+            dp_limit_pa: self.dp_limit_pa(),
+            valid,
         }
     }
 
@@ -178,10 +164,84 @@ impl TorqueModelParams {
     }
 }
 
+/// [`TorqueModelParams::inverse_at`]: the inverse torque model at one angle and velocity.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InverseAt {
+    passive_nm: f32,
+    gain_m3: f32,
+    dp_limit_pa: f32,
+    valid: bool,
+}
+
+impl InverseAt {
+    /// The activation dp [Pa] that yields `torque_nm`, clamped to the usable range;
+    /// non-finite inputs give dp = 0, saturated.
+    #[inline]
+    pub fn activation(&self, torque_nm: f32) -> Activation {
+        if !self.valid || !torque_nm.is_finite() {
+            return Activation {
+                dp_pa: 0.0,
+                saturated: true,
+            };
+        }
+        let dp = (torque_nm - self.passive_nm) / self.gain_m3;
+        if !dp.is_finite() {
+            return Activation {
+                dp_pa: 0.0,
+                saturated: true,
+            };
+        }
+        let lim = self.dp_limit_pa;
+        if dp > lim {
+            Activation {
+                dp_pa: lim,
+                saturated: true,
+            }
+        } else if dp < -lim {
+            Activation {
+                dp_pa: -lim,
+                saturated: true,
+            }
+        } else {
+            Activation {
+                dp_pa: dp,
+                saturated: false,
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::constants::TORQUE_MODEL;
+
+    #[test]
+    fn inverse_at_equals_activation_bit_for_bit() {
+        let m = TORQUE_MODEL;
+        let vals = [
+            0.0f32,
+            -0.0,
+            1e-3,
+            -2.5,
+            7.0,
+            40.0,
+            -1e6,
+            f32::NAN,
+            f32::INFINITY,
+            1e-30,
+        ];
+        for &t in &vals {
+            for &a in &vals {
+                for &v in &vals {
+                    let x = m.activation(t, a, v);
+                    let y = m.inverse_at(a, v).activation(t);
+                    assert_eq!(x.dp_pa.to_bits(), y.dp_pa.to_bits(), "t={t} a={a} v={v}");
+                    assert_eq!(x.saturated, y.saturated);
+                }
+            }
+        }
+    }
 
     #[test]
     fn paper_constants_convert_to_si() {

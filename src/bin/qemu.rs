@@ -19,6 +19,7 @@
 #![no_main]
 
 use core::hint::black_box;
+use core::sync::atomic::{AtomicU32, Ordering};
 
 use cortex_m::peripheral::{syst::SystClkSource, SYST};
 use cortex_m_rt::{entry, exception, ExceptionFrame};
@@ -31,6 +32,7 @@ use pam_firmware::geometry::JointGeometry;
 use pam_firmware::trace::{
     ControlTick, ControllerConfig, TraceRunner, SENSOR_TRACE, TRACE_TICK_HZ,
 };
+use pam_firmware::valves::{OnOffPwmConfig, OnOffValves};
 use pam_firmware::wiring;
 
 /// Pattern of the painted (never used) stack.
@@ -133,11 +135,24 @@ fn bench_ticks() {
     let p = wiring::pressure_scaling();
     let dt = 1.0 / TRACE_TICK_HZ;
     let mut tick = ControlTick::new(ControllerConfig::reference(TRACE_TICK_HZ));
+    // The valve update is part of the measured tick: the reference on/off driver (tick-level
+    // PWM, minimum on-time) writing four pins, each a volatile store like a GPIO BSRR write.
+    let mut valves = OnOffValves::new(
+        BenchPin(0),
+        BenchPin(1),
+        BenchPin(2),
+        BenchPin(3),
+        OnOffPwmConfig::REFERENCE,
+    );
     let (mut sum_armed, mut n_armed, mut max_any) = (0u32, 0u32, 0u32);
     for row in SENSOR_TRACE.iter() {
         let frame = black_box(row.frame(&p));
         let sp = black_box(row.setpoint());
-        let (c, out) = measure(|| tick.step(&frame, &sp, black_box(dt)));
+        let (c, out) = measure(|| {
+            let out = tick.step(&frame, &sp, black_box(dt));
+            let _ = valves.apply(&out.valves);
+            out
+        });
         let out = black_box(out);
         if out.armed {
             sum_armed += c;
@@ -151,6 +166,27 @@ fn bench_ticks() {
         sum_armed,
         max_any
     );
+}
+
+/// A valve output for the tick benchmark: set/reset are single volatile stores (as a GPIO
+/// BSRR write on the board).
+struct BenchPin(u32);
+
+static BENCH_GPIO: AtomicU32 = AtomicU32::new(0);
+
+impl embedded_hal::digital::ErrorType for BenchPin {
+    type Error = core::convert::Infallible;
+}
+
+impl embedded_hal::digital::OutputPin for BenchPin {
+    fn set_low(&mut self) -> Result<(), Self::Error> {
+        BENCH_GPIO.store(1 << (self.0 + 16), Ordering::Relaxed);
+        Ok(())
+    }
+    fn set_high(&mut self) -> Result<(), Self::Error> {
+        BENCH_GPIO.store(1 << self.0, Ordering::Relaxed);
+        Ok(())
+    }
 }
 
 /// Force law alone (f32), at the trace's pressures and the stretches of its angles.
