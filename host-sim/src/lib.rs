@@ -17,6 +17,7 @@ pub mod identify;
 pub mod plant;
 pub mod plot;
 pub mod recording;
+pub mod scenario_io;
 pub mod sim;
 
 pub use config::{ConfigError, PlantConfig};
