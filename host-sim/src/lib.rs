@@ -12,6 +12,7 @@
 
 pub mod closed_loop;
 pub mod config;
+pub mod demo;
 pub mod fit;
 pub mod identify;
 pub mod plant;

@@ -32,6 +32,22 @@ enum Command {
     Simulate(SimulateArgs),
     /// Per-channel fit (NRMSE %), MAE and MSE of B (model) against A (reference/measured).
     Fit(FitArgs),
+    /// The main job: the reference plant with the firmware in the loop on the step, sine and
+    /// random scenarios (CSV + plots), and the conformance fit of an open-loop replay.
+    Demo(DemoArgs),
+}
+
+#[derive(Args)]
+struct DemoArgs {
+    /// Output directory (created if missing).
+    #[arg(long, value_name = "DIR", default_value = "target/demo")]
+    out_dir: PathBuf,
+    /// Plant file [default: ../shared/plant/reference-1dof.toml].
+    #[arg(long, value_name = "P.toml")]
+    plant: Option<PathBuf>,
+    /// Conformance fixture replayed open loop [default: pulses_nominal.csv in shared/conformance].
+    #[arg(long, value_name = "REC.csv")]
+    fixture: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -85,6 +101,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Simulate(a) => run_simulate(&a),
         Command::Fit(a) => run_fit(&a),
+        Command::Demo(a) => run_demo(&a),
     };
     match result {
         Ok(code) => code,
@@ -189,6 +206,23 @@ fn run_closed_loop(
     print!("{}", r.summary);
     println!("wrote {} and {}", out.display(), r.trace_path.display());
     Ok(if r.fails.is_empty() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
+}
+
+fn run_demo(a: &DemoArgs) -> Result<ExitCode> {
+    let t0 = std::time::Instant::now();
+    let opts = host_sim::demo::DemoOptions {
+        out_dir: a.out_dir.clone(),
+        plant: a.plant.clone(),
+        fixture: a.fixture.clone(),
+    };
+    let r = host_sim::demo::run_demo(&opts)?;
+    print!("{}", host_sim::demo::format_report(&r, &a.out_dir));
+    println!("done in {:.2} s", t0.elapsed().as_secs_f64());
+    Ok(if r.ok() {
         ExitCode::SUCCESS
     } else {
         ExitCode::from(1)
