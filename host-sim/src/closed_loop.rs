@@ -340,40 +340,212 @@ impl Scenario {
 
     /// Parses and validates scenario TOML text (`file` names it in errors).
     pub fn from_toml_str(text: &str, file: &str) -> Result<Self, ClosedLoopError> {
-        let s: Scenario = toml::from_str(text).map_err(|e| ClosedLoopError::Scenario {
-            file: file.to_string(),
-            msg: e.to_string(),
-        })?;
-        let bad = |msg: String| {
-            Err(ClosedLoopError::Scenario {
+        let s: Scenario = toml::from_str(text).map_err(|e| {
+            let mut msg = e.to_string().trim_end().to_string();
+            // Tagged tables (`[setpoint]`, `[[events]]`) are reported at their header line;
+            // point at the offending key's own line too.
+            if let Some(name) = msg
+                .split("unknown field `")
+                .nth(1)
+                .and_then(|r| r.split('`').next())
+            {
+                if let Some((i, _)) = text
+                    .lines()
+                    .enumerate()
+                    .find(|(_, l)| sets_key(l.trim(), name))
+                {
+                    msg = format!("line {}: key `{name}`: {msg}", i + 1);
+                }
+            }
+            ClosedLoopError::Scenario {
                 file: file.to_string(),
                 msg,
-            })
+            }
+        })?;
+        // Validation errors name the line of the offending key (the first line that sets
+        // it inside its table) as the TOML parser's own errors do.
+        let bad = |table: &str, key: &str, msg: String| {
+            let at = key_line(text, table, key)
+                .map(|l| format!("line {l}: "))
+                .unwrap_or_default();
+            ClosedLoopError::Scenario {
+                file: file.to_string(),
+                msg: format!("{at}[{table}] {key}: {msg}"),
+            }
         };
-        if !(s.scenario.duration_s > 0.0 && s.scenario.duration_s.is_finite()) {
-            return bad(format!(
-                "[scenario] duration_s = {} must be > 0",
-                s.scenario.duration_s
+        let h = &s.scenario;
+        if !(h.duration_s > 0.0 && h.duration_s.is_finite()) {
+            return Err(bad(
+                "scenario",
+                "duration_s",
+                format!("{} must be > 0", h.duration_s),
             ));
         }
-        if !(s.scenario.tick_hz >= 10.0 && s.scenario.tick_hz <= 100_000.0) {
-            return bad(format!(
-                "[scenario] tick_hz = {} must be within 10..100000",
-                s.scenario.tick_hz
+        if !(h.tick_hz >= 10.0 && h.tick_hz <= 100_000.0) {
+            return Err(bad(
+                "scenario",
+                "tick_hz",
+                format!("{} must be within 10..100000", h.tick_hz),
             ));
         }
-        if let SetpointProfile::Random { hold_s, .. } = s.setpoint {
-            if !(hold_s > 0.0) {
-                return bad("[setpoint] hold_s must be > 0".into());
+        let finite = |key: &str, v: f64| -> Result<(), ClosedLoopError> {
+            if v.is_finite() {
+                Ok(())
+            } else {
+                Err(bad("setpoint", key, format!("{v} must be a finite number")))
+            }
+        };
+        match s.setpoint {
+            SetpointProfile::Step {
+                initial_rad,
+                final_rad,
+                at_s,
+            } => {
+                finite("initial_rad", initial_rad)?;
+                finite("final_rad", final_rad)?;
+                finite("at_s", at_s)?;
+            }
+            SetpointProfile::Ramp {
+                from_rad,
+                to_rad,
+                start_s,
+                end_s,
+            } => {
+                finite("from_rad", from_rad)?;
+                finite("to_rad", to_rad)?;
+                finite("start_s", start_s)?;
+                finite("end_s", end_s)?;
+                if !(end_s > start_s) {
+                    return Err(bad(
+                        "setpoint",
+                        "end_s",
+                        format!("{end_s} must be > start_s"),
+                    ));
+                }
+            }
+            SetpointProfile::Sine {
+                offset_rad,
+                amplitude_rad,
+                freq_hz,
+                start_s,
+            } => {
+                finite("offset_rad", offset_rad)?;
+                finite("amplitude_rad", amplitude_rad)?;
+                finite("freq_hz", freq_hz)?;
+                finite("start_s", start_s)?;
+            }
+            SetpointProfile::Random {
+                amplitude_rad,
+                hold_s,
+                start_s,
+            } => {
+                finite("amplitude_rad", amplitude_rad)?;
+                finite("start_s", start_s)?;
+                if !(hold_s > 0.0 && hold_s.is_finite()) {
+                    return Err(bad("setpoint", "hold_s", format!("{hold_s} must be > 0")));
+                }
             }
         }
-        if let SetpointProfile::Ramp { start_s, end_s, .. } = s.setpoint {
-            if !(end_s > start_s) {
-                return bad("[setpoint] end_s must be > start_s".into());
+        let se = &s.sensors;
+        if !(se.pressure_noise_pa >= 0.0 && se.pressure_noise_pa.is_finite()) {
+            return Err(bad(
+                "sensors",
+                "pressure_noise_pa",
+                format!("{} must be >= 0", se.pressure_noise_pa),
+            ));
+        }
+        if !(se.pressure_lsb_pa >= 0.0 && se.pressure_lsb_pa.is_finite()) {
+            return Err(bad(
+                "sensors",
+                "pressure_lsb_pa",
+                format!("{} must be >= 0", se.pressure_lsb_pa),
+            ));
+        }
+        if se.delay_ticks > 10_000 {
+            return Err(bad(
+                "sensors",
+                "delay_ticks",
+                format!("{} is more than 10000 ticks", se.delay_ticks),
+            ));
+        }
+        for (i, e) in s.events.iter().enumerate() {
+            let ev_bad = |key: &str, msg: String| -> Result<(), ClosedLoopError> {
+                let at = event_key_line(text, i, key)
+                    .map(|l| format!("line {l}: "))
+                    .unwrap_or_default();
+                Err(ClosedLoopError::Scenario {
+                    file: file.to_string(),
+                    msg: format!("{at}[[events]] #{} {key}: {msg}", i + 1),
+                })
+            };
+            let at_s = event_time(e);
+            if !(at_s >= 0.0 && at_s.is_finite()) {
+                ev_bad("at_s", format!("{at_s} must be a finite time >= 0"))?;
+            }
+            match *e {
+                Event::SensorDropout { duration_s, .. } | Event::SensorNan { duration_s, .. } => {
+                    if !(duration_s > 0.0 && duration_s.is_finite()) {
+                        ev_bad("duration_s", format!("{duration_s} must be > 0"))?;
+                    }
+                }
+                Event::LoadInertia { inertia_kgm2, .. } => {
+                    if !(inertia_kgm2 > 0.0 && inertia_kgm2.is_finite()) {
+                        ev_bad("inertia_kgm2", format!("{inertia_kgm2} must be > 0"))?;
+                    }
+                }
+                Event::SupplyLoss {
+                    supply_gauge_pa, ..
+                } => {
+                    if !(supply_gauge_pa >= 0.0 && supply_gauge_pa.is_finite()) {
+                        ev_bad("supply_gauge_pa", format!("{supply_gauge_pa} must be >= 0"))?;
+                    }
+                }
+                Event::StuckValve { .. } => {}
             }
         }
         Ok(s)
     }
+}
+
+/// 1-based line of `key = ...` inside `[table]` of TOML `text`, if it is there.
+fn key_line(text: &str, table: &str, key: &str) -> Option<usize> {
+    let mut in_table = false;
+    for (i, line) in text.lines().enumerate() {
+        let l = line.trim();
+        if l.starts_with('[') {
+            in_table = l.trim_start_matches('[').trim_end_matches(']').trim() == table;
+            continue;
+        }
+        if in_table && sets_key(l, key) {
+            return Some(i + 1);
+        }
+    }
+    None
+}
+
+/// 1-based line of `key = ...` inside the `index`-th `[[events]]` table.
+fn event_key_line(text: &str, index: usize, key: &str) -> Option<usize> {
+    let mut n: Option<usize> = None;
+    let mut in_table = false;
+    for (i, line) in text.lines().enumerate() {
+        let l = line.trim();
+        if l.starts_with('[') {
+            in_table = l == "[[events]]" && {
+                n = Some(n.map_or(0, |n| n + 1));
+                n == Some(index)
+            };
+            continue;
+        }
+        if in_table && sets_key(l, key) {
+            return Some(i + 1);
+        }
+    }
+    None
+}
+
+fn sets_key(line: &str, key: &str) -> bool {
+    line.strip_prefix(key)
+        .is_some_and(|rest| rest.trim_start().starts_with('='))
 }
 
 // ---------------------------------------------------------------------------------------

@@ -12,11 +12,13 @@
 
 pub mod closed_loop;
 pub mod config;
+pub mod demo;
 pub mod fit;
 pub mod identify;
 pub mod plant;
 pub mod plot;
 pub mod recording;
+pub mod scenario_io;
 pub mod sim;
 
 pub use config::{ConfigError, PlantConfig};

@@ -1,5 +1,5 @@
-//! `host-sim` command line: open-loop replay of recordings on the plant model, fit metrics,
-//! plots. Closed-loop scenarios (`simulate --scenario`) come with the firmware control API.
+//! `host-sim` command line: open-loop replay of recordings on the plant model, closed-loop
+//! scenarios with the firmware in the loop (`simulate --scenario`), fit metrics, plots.
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -32,13 +32,29 @@ enum Command {
     Simulate(SimulateArgs),
     /// Per-channel fit (NRMSE %), MAE and MSE of B (model) against A (reference/measured).
     Fit(FitArgs),
+    /// The main job: the reference plant with the firmware in the loop on the step, sine and
+    /// random scenarios (CSV + plots), and the conformance fit of an open-loop replay.
+    Demo(DemoArgs),
+}
+
+#[derive(Args)]
+struct DemoArgs {
+    /// Output directory (created if missing).
+    #[arg(long, value_name = "DIR", default_value = "target/demo")]
+    out_dir: PathBuf,
+    /// Plant file [default: ../shared/plant/reference-1dof.toml].
+    #[arg(long, value_name = "P.toml")]
+    plant: Option<PathBuf>,
+    /// Conformance fixture replayed open loop [default: pulses_nominal.csv in shared/conformance].
+    #[arg(long, value_name = "REC.csv")]
+    fixture: Option<PathBuf>,
 }
 
 #[derive(Args)]
 struct SimulateArgs {
     /// Plant parameter file (TOML, e.g. shared/plant/reference-1dof.toml).
-    #[arg(long, value_name = "P.toml", required_unless_present = "scenario")]
-    plant: Option<PathBuf>,
+    #[arg(long, value_name = "P.toml")]
+    plant: PathBuf,
     /// Recording whose t_s and valve columns are replayed (RECORDING.md).
     #[arg(
         long,
@@ -47,7 +63,9 @@ struct SimulateArgs {
         conflicts_with = "scenario"
     )]
     inputs: Option<PathBuf>,
-    /// Closed-loop scenario (firmware in the loop).
+    /// Closed-loop scenario (firmware in the loop): OUT.csv is a RECORDING.md recording, the
+    /// firmware's set-point, torque estimate and fault code go to OUT.firmware.csv; the
+    /// tracking summary goes to stdout; exit status 1 if the scenario's [expect] is not met.
     #[arg(long, value_name = "S.toml")]
     scenario: Option<PathBuf>,
     /// Output recording: the input t_s and valve columns plus the simulated channels.
@@ -83,6 +101,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Simulate(a) => run_simulate(&a),
         Command::Fit(a) => run_fit(&a),
+        Command::Demo(a) => run_demo(&a),
     };
     match result {
         Ok(code) => code,
@@ -94,14 +113,10 @@ fn main() -> ExitCode {
 }
 
 fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
+    let plant_path = &a.plant;
     if let Some(s) = &a.scenario {
-        bail!(
-            "{}: closed-loop scenarios are not implemented yet (they need the firmware control API); \
-             use --plant P.toml --inputs REC.csv for an open-loop replay",
-            s.display()
-        );
+        return run_closed_loop(plant_path, s, &a.out, a.plot.as_deref());
     }
-    let plant_path = a.plant.as_ref().expect("clap: --plant required");
     let inputs_path = a.inputs.as_ref().expect("clap: --inputs required");
     let plant = Plant::load(plant_path)?;
     let rec = Recording::read(inputs_path)?;
@@ -175,6 +190,43 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
         plot_comparison(p, Some(&rec), &out)?;
     }
     Ok(ExitCode::SUCCESS)
+}
+
+fn run_closed_loop(
+    plant: &Path,
+    scenario: &Path,
+    out: &Path,
+    plot: Option<&Path>,
+) -> Result<ExitCode> {
+    let bar = ProgressBar::with_draw_target(Some(1000), ProgressDrawTarget::stderr());
+    let r = host_sim::scenario_io::simulate_scenario(plant, scenario, out, plot, &mut |f| {
+        bar.set_position((f * 1000.0) as u64)
+    })?;
+    bar.finish_and_clear();
+    print!("{}", r.summary);
+    println!("wrote {} and {}", out.display(), r.trace_path.display());
+    Ok(if r.fails.is_empty() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
+}
+
+fn run_demo(a: &DemoArgs) -> Result<ExitCode> {
+    let t0 = std::time::Instant::now();
+    let opts = host_sim::demo::DemoOptions {
+        out_dir: a.out_dir.clone(),
+        plant: a.plant.clone(),
+        fixture: a.fixture.clone(),
+    };
+    let r = host_sim::demo::run_demo(&opts)?;
+    print!("{}", host_sim::demo::format_report(&r, &a.out_dir));
+    println!("done in {:.2} s", t0.elapsed().as_secs_f64());
+    Ok(if r.ok() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
 }
 
 fn run_fit(a: &FitArgs) -> Result<ExitCode> {

@@ -26,7 +26,7 @@ const FONT_CANDIDATES: &[&str] = &[
 ];
 
 /// Registers the plot font once; the error says where we looked.
-fn ensure_font() -> Result<(), String> {
+pub(crate) fn ensure_font() -> Result<(), String> {
     static FONT: std::sync::OnceLock<Result<(), String>> = std::sync::OnceLock::new();
     FONT.get_or_init(|| {
         let from_env = std::env::var_os("HOST_SIM_FONT").map(PathBuf::from);

@@ -122,7 +122,7 @@ fn bad_input_is_reported_with_file_line_and_field_and_keeps_old_output() {
 }
 
 #[test]
-fn scenario_slot_reports_not_implemented() {
+fn scenario_needs_a_plant_and_a_readable_file() {
     let r = host_sim()
         .args([
             "simulate",
@@ -134,5 +134,21 @@ fn scenario_slot_reports_not_implemented() {
         .output()
         .unwrap();
     assert_eq!(r.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&r.stderr).contains("not implemented yet"));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("--plant"));
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("missing.toml");
+    let r = host_sim()
+        .arg("simulate")
+        .arg("--plant")
+        .arg(shared().join("plant/reference-1dof.toml"))
+        .arg("--scenario")
+        .arg(&missing)
+        .arg("--out")
+        .arg(dir.path().join("o.csv"))
+        .output()
+        .unwrap();
+    assert_eq!(r.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(err.contains(&missing.display().to_string()), "{err}");
+    assert!(!dir.path().join("o.csv").exists());
 }

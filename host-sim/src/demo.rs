@@ -1,0 +1,284 @@
+//! `host-sim demo`: the project's main job in one command.
+//!
+//! Runs the reference plant (`shared/plant/reference-1dof.toml`) in closed loop with the
+//! firmware's control tick on the step, sine and random scenarios of `scenarios/`, writes a
+//! recording, a firmware trace and a plot per scenario, replays the conformance fixture
+//! `pulses_nominal.csv` open loop and reports its per-channel fit.
+//!
+//! The three scenario files are compiled in (they are part of this repository); the plant and
+//! the fixture are read from `shared/` at run time: `--plant` / `--fixture`, else
+//! `../shared/...` relative to the working directory (a repository checkout next to
+//! `shared/`), else relative to the source tree this binary was built from.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+
+use crate::closed_loop::{run, Scenario};
+use crate::fit::{compare, ChannelFit};
+use crate::plant::Plant;
+use crate::plot::plot_comparison;
+use crate::recording::{Channel, Recording};
+use crate::scenario_io::{firmware_trace_path, plot_run, run_recording, write_firmware_trace};
+use crate::sim::{simulate, SolverOptions};
+
+/// The demo's scenarios: (file name in `scenarios/`, its text).
+pub const SCENARIOS: [(&str, &str); 3] = [
+    (
+        "scenarios/step.toml",
+        include_str!("../../scenarios/step.toml"),
+    ),
+    (
+        "scenarios/sine.toml",
+        include_str!("../../scenarios/sine.toml"),
+    ),
+    (
+        "scenarios/random.toml",
+        include_str!("../../scenarios/random.toml"),
+    ),
+];
+
+/// Inputs and output directory of a demo run.
+#[derive(Debug, Clone)]
+pub struct DemoOptions {
+    /// Where the files go (created if missing).
+    pub out_dir: PathBuf,
+    /// Plant file; `None`: look for `shared/plant/reference-1dof.toml`.
+    pub plant: Option<PathBuf>,
+    /// Conformance fixture; `None`: `conformance/pulses_nominal.csv` next to the plant's
+    /// directory.
+    pub fixture: Option<PathBuf>,
+}
+
+/// One closed-loop row of the demo table.
+#[derive(Debug, Clone)]
+pub struct ScenarioResult {
+    pub name: String,
+    pub duration_s: f64,
+    pub settle_after_s: f64,
+    pub rms_error_rad: f64,
+    pub max_abs_error_rad: f64,
+    pub faults: usize,
+    pub expect_fails: Vec<String>,
+    /// Simulated seconds per wall second of the closed loop (plant + firmware).
+    pub speed_x: f64,
+    pub files: Vec<PathBuf>,
+}
+
+/// The demo's results.
+#[derive(Debug, Clone)]
+pub struct DemoReport {
+    pub plant: PathBuf,
+    pub fixture: PathBuf,
+    pub scenarios: Vec<ScenarioResult>,
+    pub fixture_fits: Vec<ChannelFit>,
+    pub replay_speed_x: f64,
+    pub replay_files: Vec<PathBuf>,
+}
+
+/// `shared/<rel>` candidates: `../shared/<rel>` from the working directory, then from the
+/// source tree.
+fn shared_candidates(rel: &str) -> Vec<PathBuf> {
+    vec![
+        PathBuf::from("../shared").join(rel),
+        PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("../../shared")
+            .join(rel),
+    ]
+}
+
+fn first_existing(what: &str, flag: &str, candidates: Vec<PathBuf>) -> Result<PathBuf> {
+    if let Some(p) = candidates.iter().find(|p| p.is_file()) {
+        return Ok(p.clone());
+    }
+    let tried: Vec<String> = candidates.iter().map(|p| p.display().to_string()).collect();
+    bail!(
+        "cannot find the {what} (tried {}); pass {flag} PATH",
+        tried.join(", ")
+    )
+}
+
+/// Runs the demo, writing into `opts.out_dir`.
+pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
+    let plant_path = match &opts.plant {
+        Some(p) => p.clone(),
+        None => first_existing(
+            "reference plant",
+            "--plant",
+            shared_candidates("plant/reference-1dof.toml"),
+        )?,
+    };
+    let fixture_path = match &opts.fixture {
+        Some(p) => p.clone(),
+        None => {
+            let mut c = Vec::new();
+            if let Some(dir) = plant_path.parent().and_then(Path::parent) {
+                c.push(dir.join("conformance/pulses_nominal.csv"));
+            }
+            c.extend(shared_candidates("conformance/pulses_nominal.csv"));
+            first_existing("conformance fixture pulses_nominal.csv", "--fixture", c)?
+        }
+    };
+    let plant = Plant::load(&plant_path)?;
+    std::fs::create_dir_all(&opts.out_dir)
+        .with_context(|| format!("{}: cannot create the directory", opts.out_dir.display()))?;
+
+    let mut scenarios = Vec::new();
+    for (file, text) in SCENARIOS {
+        let s = Scenario::from_toml_str(text, file)?;
+        let t0 = Instant::now();
+        let r = run(&plant, &s).with_context(|| format!("{file}: closed-loop run failed"))?;
+        let wall = t0.elapsed().as_secs_f64();
+        let name = &s.scenario.name;
+        let csv = opts.out_dir.join(format!("{name}.csv"));
+        let trace = firmware_trace_path(&csv);
+        let png = opts.out_dir.join(format!("{name}.png"));
+        write_firmware_trace(&r, &trace)?;
+        run_recording(
+            &r,
+            &plant,
+            &plant_path.display().to_string(),
+            file,
+            Some(&trace),
+        )
+        .write(&csv)?;
+        plot_run(&png, &r, &plant)?;
+        let st = r.tracking(s.expect.settle_after_s);
+        scenarios.push(ScenarioResult {
+            name: name.clone(),
+            duration_s: s.scenario.duration_s,
+            settle_after_s: s.expect.settle_after_s,
+            rms_error_rad: st.rms_rad,
+            max_abs_error_rad: st.max_abs_rad,
+            faults: crate::scenario_io::fault_changes(&r)
+                .iter()
+                .filter(|c| c.fault.is_some())
+                .count(),
+            expect_fails: r.check(),
+            speed_x: s.scenario.duration_s / wall.max(1e-9),
+            files: vec![csv, trace, png],
+        });
+    }
+
+    // Open-loop replay of the conformance fixture and its fit.
+    let fixture = Recording::read(&fixture_path)?;
+    let dt = fixture.sample_period_s();
+    let t0 = Instant::now();
+    let sim = simulate(&plant, &fixture.inputs, dt, &SolverOptions::default())
+        .with_context(|| format!("{}: replay failed", fixture_path.display()))?;
+    let replay_wall = t0.elapsed().as_secs_f64();
+    let mut out = Recording {
+        metadata: vec![
+            ("plant".into(), plant_path.display().to_string()),
+            ("inputs".into(), fixture_path.display().to_string()),
+            ("sample_period_s".into(), format!("{dt}")),
+            (
+                "source".into(),
+                "host-sim demo: open-loop replay, ode_solvers Dopri5".into(),
+            ),
+        ],
+        t_s: fixture.t_s.clone(),
+        inputs: fixture.inputs.clone(),
+        ..Default::default()
+    };
+    let meas = plant.measure_series(&sim.states, dt);
+    for c in Channel::ALL {
+        out.set_channel(c, meas.iter().map(|m| c.of(m)).collect());
+    }
+    let stem = fixture_path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "fixture".into());
+    let replay_csv = opts.out_dir.join(format!("{stem}_replay.csv"));
+    let replay_png = opts.out_dir.join(format!("{stem}_replay.png"));
+    out.write(&replay_csv)?;
+    let fits = compare(&fixture, &out)
+        .with_context(|| format!("cannot compare {} with the replay", fixture_path.display()))?;
+    plot_comparison(&replay_png, Some(&fixture), &out)?;
+    let duration_s = dt * fixture.len() as f64;
+    Ok(DemoReport {
+        plant: plant_path,
+        fixture: fixture_path,
+        scenarios,
+        fixture_fits: fits,
+        replay_speed_x: duration_s / replay_wall.max(1e-9),
+        replay_files: vec![replay_csv, replay_png],
+    })
+}
+
+/// The demo's text report.
+pub fn format_report(r: &DemoReport, out_dir: &Path) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "plant {}: firmware (pam_firmware::tick::ControlTick, reference gains) in the loop",
+        r.plant.display()
+    );
+    let _ = writeln!(
+        s,
+        "\n{:<8} {:>6} {:>8} {:>10} {:>10} {:>7} {:>7} {:>10}",
+        "scenario", "len_s", "after_s", "rms_deg", "max_deg", "faults", "expect", "x_realtime"
+    );
+    for c in &r.scenarios {
+        let _ = writeln!(
+            s,
+            "{:<8} {:>6.1} {:>8.1} {:>10.3} {:>10.3} {:>7} {:>7} {:>10.0}",
+            c.name,
+            c.duration_s,
+            c.settle_after_s,
+            c.rms_error_rad.to_degrees(),
+            c.max_abs_error_rad.to_degrees(),
+            c.faults,
+            if c.expect_fails.is_empty() {
+                "met"
+            } else {
+                "FAILED"
+            },
+            c.speed_x
+        );
+        for f in &c.expect_fails {
+            let _ = writeln!(s, "  {}: {f}", c.name);
+        }
+    }
+    let _ = writeln!(
+        s,
+        "\nconformance: open-loop replay of {} ({:.0} x real time), fit per channel (>= 99.5 % required):",
+        r.fixture.display(),
+        r.replay_speed_x
+    );
+    for f in &r.fixture_fits {
+        let _ = writeln!(
+            s,
+            "  {:<10} {:>8.4} %{}",
+            f.channel.name(),
+            f.fit_percent,
+            if f.fit_percent >= 99.5 {
+                ""
+            } else {
+                "  BELOW 99.5 %"
+            }
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\nfiles in {}: <scenario>.csv (RECORDING.md), <scenario>.firmware.csv (set-point, torque estimate, fault code), <scenario>.png, {}",
+        out_dir.display(),
+        r.replay_files
+            .iter()
+            .filter_map(|p| p.file_name())
+            .map(|n| n.to_string_lossy().into_owned())
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    s
+}
+
+impl DemoReport {
+    /// True when every scenario met its expectations and every fixture channel fits >= 99.5 %.
+    pub fn ok(&self) -> bool {
+        self.scenarios.iter().all(|c| c.expect_fails.is_empty())
+            && self.fixture_fits.iter().all(|f| f.fit_percent >= 99.5)
+    }
+}

@@ -1,0 +1,446 @@
+//! Files and reports of closed-loop runs (`host-sim simulate --scenario`, `host-sim demo`).
+//!
+//! A run is written as two CSV files:
+//! - `OUT.csv`, a recording strictly in the `shared/plant/RECORDING.md` format (`t_s`, the
+//!   four valve openings actually applied, and the true plant channels `angle_deg`, `p1_kpa`,
+//!   `p2_kpa`, `f1_n`, `f2_n`). RECORDING.md lists the columns of a recording and says
+//!   nothing about others, so no extra column goes into it: every tool that reads
+//!   recordings can read it (`host-sim fit`, identification, diagnosis).
+//! - `OUT.firmware.csv`, the firmware side of the same ticks (same `t_s`): the angle
+//!   set-point, the firmware's torque estimate and demand, its pressure set-points, the
+//!   latched fault code (0 = none, else [`FaultCode::code`]) and whether it was armed. The
+//!   recording names it in its metadata (`# firmware_trace = ...`).
+//!
+//! Both are written through a temporary file renamed over the target when complete.
+
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+
+use pam_firmware::safety::FaultCode;
+use plotters::prelude::*;
+
+use crate::closed_loop::{ClosedLoopRun, Scenario, TrackingStats};
+use crate::plant::Plant;
+use crate::plot::PlotError;
+use crate::recording::{write_atomically, Recording, RecordingError};
+
+/// Header of the firmware trace (the sidecar of a closed-loop recording).
+pub const FIRMWARE_COLUMNS: [&str; 8] = [
+    "t_s",
+    "setpoint_angle_deg",
+    "torque_est_nm",
+    "torque_des_nm",
+    "p1_set_kpa",
+    "p2_set_kpa",
+    "fault_code",
+    "armed",
+];
+
+/// `dir/name.csv` -> `dir/name.firmware.csv` (the firmware trace next to a recording).
+pub fn firmware_trace_path(recording: &Path) -> PathBuf {
+    let stem = recording
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "out".into());
+    recording.with_file_name(format!("{stem}.firmware.csv"))
+}
+
+/// The recording of a run with metadata naming the plant, the scenario and the trace file.
+pub fn run_recording(
+    run: &ClosedLoopRun,
+    plant: &Plant,
+    plant_name: &str,
+    scenario_name: &str,
+    trace: Option<&Path>,
+) -> Recording {
+    let mut rec = run.to_recording(plant);
+    rec.metadata.insert(0, ("plant".into(), plant_name.into()));
+    rec.metadata
+        .insert(1, ("scenario".into(), scenario_name.into()));
+    if let Some(t) = trace {
+        let name = t
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        rec.metadata.push(("firmware_trace".into(), name));
+    }
+    rec.metadata.push((
+        "notes".into(),
+        "channels are the true plant state at t_s; inputs are the valve openings applied over [t_s, t_s + dt)"
+            .into(),
+    ));
+    rec
+}
+
+/// Writes the firmware trace of `run` (columns [`FIRMWARE_COLUMNS`]) atomically.
+pub fn write_firmware_trace(run: &ClosedLoopRun, path: &Path) -> Result<(), RecordingError> {
+    write_atomically(path, |w| {
+        writeln!(
+            w,
+            "# source = host-sim closed loop, scenario {}, firmware pam_firmware::tick::ControlTick",
+            run.name
+        )?;
+        writeln!(w, "# sample_period_s = {}", run.dt_s)?;
+        writeln!(
+            w,
+            "# fault_code: 0 = none, else pam_firmware::safety::FaultCode numbers"
+        )?;
+        writeln!(w, "{}", FIRMWARE_COLUMNS.join(","))?;
+        for r in &run.rows {
+            writeln!(
+                w,
+                "{},{:.6},{:.6},{:.6},{:.3},{:.3},{},{}",
+                r.t_s,
+                r.setpoint_rad.to_degrees(),
+                r.out.torque_est_nm,
+                r.out.torque_des_nm,
+                r.out.p1_set_gauge_pa / 1e3,
+                r.out.p2_set_gauge_pa / 1e3,
+                r.out.fault.map_or(0, FaultCode::code),
+                u8::from(r.out.armed)
+            )?;
+        }
+        Ok(())
+    })
+    .map_err(|source| RecordingError::Io {
+        path: path.to_owned(),
+        source,
+    })
+}
+
+/// A change of the firmware's latched fault.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FaultChange {
+    /// Tick index.
+    pub tick: usize,
+    /// Time [s].
+    pub t_s: f64,
+    /// The fault from this tick on (`None`: cleared).
+    pub fault: Option<FaultCode>,
+}
+
+/// Every tick at which the latched fault changed (first latch, change of code, clearing).
+pub fn fault_changes(run: &ClosedLoopRun) -> Vec<FaultChange> {
+    let mut prev = None;
+    let mut out = Vec::new();
+    for (k, r) in run.rows.iter().enumerate() {
+        if r.out.fault != prev {
+            out.push(FaultChange {
+                tick: k,
+                t_s: r.t_s,
+                fault: r.out.fault,
+            });
+            prev = r.out.fault;
+        }
+    }
+    out
+}
+
+fn tracking_line(label: &str, st: &TrackingStats) -> String {
+    if st.n == 0 {
+        format!("{label}: no tick without a latched fault\n")
+    } else {
+        format!(
+            "{label}: rms {:.5} rad ({:.3} deg), max {:.5} rad ({:.3} deg) over {} ticks\n",
+            st.rms_rad,
+            st.rms_rad.to_degrees(),
+            st.max_abs_rad,
+            st.max_abs_rad.to_degrees(),
+            st.n
+        )
+    }
+}
+
+/// The tracking summary of a run: error over the whole run and after the scenario's settle
+/// time, fault changes with tick and time, and the `[expect]` verdict (`fails` from
+/// [`ClosedLoopRun::check`]).
+pub fn summary(run: &ClosedLoopRun, scenario: &Scenario, fails: &[String]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "scenario {}: {} ticks at {} Hz ({} s)",
+        run.name,
+        run.rows.len(),
+        scenario.scenario.tick_hz,
+        scenario.scenario.duration_s
+    );
+    s += &tracking_line("angle error, whole run", &run.tracking(0.0));
+    let settle = scenario.expect.settle_after_s;
+    if settle > 0.0 {
+        s += &tracking_line(
+            &format!("angle error after {settle} s"),
+            &run.tracking(settle),
+        );
+    }
+    if let Some(k) = run.first_injected_fault_tick {
+        let _ = writeln!(
+            s,
+            "injected sensor fault from tick {k} (t = {:.3} s)",
+            run.rows[k].t_s
+        );
+    }
+    let changes = fault_changes(run);
+    if changes.is_empty() {
+        s += "faults: none\n";
+    }
+    for c in changes {
+        match c.fault {
+            Some(f) => {
+                let _ = writeln!(
+                    s,
+                    "fault {f:?} (code {}) latched at tick {} (t = {:.3} s)",
+                    f.code(),
+                    c.tick,
+                    c.t_s
+                );
+            }
+            None => {
+                let _ = writeln!(s, "fault cleared at tick {} (t = {:.3} s)", c.tick, c.t_s);
+            }
+        }
+    }
+    let _ = writeln!(
+        s,
+        "max muscle pressure {:.1} kPa, max pressure set-point {:.1} kPa",
+        run.max_p_gauge_pa / 1e3,
+        run.max_p_set_gauge_pa / 1e3
+    );
+    if fails.is_empty() {
+        s += "expectations: met\n";
+    } else {
+        for f in fails {
+            let _ = writeln!(s, "expectation not met: {f}");
+        }
+    }
+    s
+}
+
+/// Draws a closed-loop run (`.png` or `.svg`): angle and set-point, muscle pressures and the
+/// firmware's pressure set-points, the firmware's torque estimate and demand; ticks with a
+/// latched fault are shaded. Written through a temporary file renamed over `path`.
+pub fn plot_run(path: &Path, run: &ClosedLoopRun, plant: &Plant) -> Result<(), PlotError> {
+    if run.rows.is_empty() {
+        return Err(PlotError::Empty(path.to_owned()));
+    }
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    let draw_err = |message: String| PlotError::Draw {
+        path: path.to_owned(),
+        message,
+    };
+    crate::plot::ensure_font().map_err(draw_err)?;
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
+        _ => PathBuf::from("."),
+    };
+    let tmp = tempfile::Builder::new()
+        .prefix(".plot.")
+        .suffix(&format!(".{ext}"))
+        .tempfile_in(&dir)
+        .map_err(|e| draw_err(e.to_string()))?;
+    let size = (1200u32, 780u32);
+    match ext.as_str() {
+        "png" => {
+            let root = BitMapBackend::new(tmp.path(), size).into_drawing_area();
+            draw_run(&root, run, plant).map_err(draw_err)?;
+            root.present().map_err(|e| draw_err(e.to_string()))?;
+        }
+        "svg" => {
+            let root = SVGBackend::new(tmp.path(), size).into_drawing_area();
+            draw_run(&root, run, plant).map_err(draw_err)?;
+            root.present().map_err(|e| draw_err(e.to_string()))?;
+        }
+        _ => return Err(PlotError::Format(path.to_owned())),
+    }
+    crate::recording::set_output_permissions(tmp.as_file(), path)
+        .map_err(|e| draw_err(e.to_string()))?;
+    tmp.persist(path)
+        .map_err(|e| draw_err(e.error.to_string()))?;
+    Ok(())
+}
+
+type Series<'a> = (&'a str, RGBColor, Vec<f64>);
+
+fn draw_run<DB: DrawingBackend>(
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+    run: &ClosedLoopRun,
+    plant: &Plant,
+) -> Result<(), String> {
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let t: Vec<f64> = run.rows.iter().map(|r| r.t_s).collect();
+    let col = |f: &dyn Fn(&crate::closed_loop::TickRow) -> f64| -> Vec<f64> {
+        run.rows.iter().map(f).collect()
+    };
+    let orange = RGBColor(230, 130, 0);
+    let green = RGBColor(0, 140, 60);
+    let panels: [(&str, Vec<Series>); 3] = [
+        (
+            "angle_deg",
+            vec![
+                ("set-point", BLUE, col(&|r| r.setpoint_rad.to_degrees())),
+                ("simulated", RED, col(&|r| r.state.angle_rad.to_degrees())),
+            ],
+        ),
+        (
+            "pressure_kpa (gauge)",
+            vec![
+                (
+                    "p1",
+                    RED,
+                    col(&|r| (r.state.p1_abs_pa - plant.p_atm_pa) / 1e3),
+                ),
+                (
+                    "p1 set",
+                    orange,
+                    col(&|r| r.out.p1_set_gauge_pa as f64 / 1e3),
+                ),
+                (
+                    "p2",
+                    BLUE,
+                    col(&|r| (r.state.p2_abs_pa - plant.p_atm_pa) / 1e3),
+                ),
+                (
+                    "p2 set",
+                    green,
+                    col(&|r| r.out.p2_set_gauge_pa as f64 / 1e3),
+                ),
+            ],
+        ),
+        (
+            "torque_nm (firmware)",
+            vec![
+                ("estimate", RED, col(&|r| r.out.torque_est_nm as f64)),
+                ("demand", BLUE, col(&|r| r.out.torque_des_nm as f64)),
+            ],
+        ),
+    ];
+    let faulted: Vec<bool> = run.rows.iter().map(|r| r.out.fault.is_some()).collect();
+    let t0 = t[0];
+    let t1 = t[t.len() - 1].max(t0 + 1e-9);
+    for (area, (name, series)) in root.split_evenly((3, 1)).iter().zip(panels) {
+        let mut lo = f64::INFINITY;
+        let mut hi = f64::NEG_INFINITY;
+        for v in series.iter().flat_map(|s| s.2.iter()) {
+            if v.is_finite() {
+                lo = lo.min(*v);
+                hi = hi.max(*v);
+            }
+        }
+        if !(lo.is_finite() && hi.is_finite()) {
+            lo = -1.0;
+            hi = 1.0;
+        }
+        let pad = ((hi - lo) * 0.05).max(1e-6);
+        let (lo, hi) = (lo - pad, hi + pad);
+        let mut chart = ChartBuilder::on(area)
+            .margin(8)
+            .x_label_area_size(28)
+            .y_label_area_size(70)
+            .caption(format!("{} / {name}", run.name), ("sans-serif", 16))
+            .build_cartesian_2d(t0..t1, lo..hi)
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .x_desc("t_s")
+            .y_desc(name)
+            .draw()
+            .map_err(|e| e.to_string())?;
+        // Shade the ticks with a latched fault.
+        let mut k = 0;
+        while k < faulted.len() {
+            if !faulted[k] {
+                k += 1;
+                continue;
+            }
+            let start = k;
+            while k < faulted.len() && faulted[k] {
+                k += 1;
+            }
+            let end_t = if k < t.len() { t[k] } else { t1 };
+            chart
+                .draw_series(std::iter::once(Rectangle::new(
+                    [(t[start], lo), (end_t, hi)],
+                    RGBColor(255, 200, 200).mix(0.5).filled(),
+                )))
+                .map_err(|e| e.to_string())?;
+        }
+        for (label, color, v) in series {
+            chart
+                .draw_series(LineSeries::new(
+                    t.iter().copied().zip(v.iter().copied()),
+                    color.stroke_width(1),
+                ))
+                .map_err(|e| e.to_string())?
+                .label(label)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}
+
+/// What [`simulate_scenario`] produced.
+#[derive(Debug)]
+pub struct ScenarioOutcome {
+    /// The run.
+    pub run: ClosedLoopRun,
+    /// The `[expect]` failures (empty: met).
+    pub fails: Vec<String>,
+    /// The printed summary.
+    pub summary: String,
+    /// The firmware trace written next to the recording.
+    pub trace_path: PathBuf,
+    /// Wall time of the closed loop alone (plant + firmware), seconds.
+    pub wall_s: f64,
+}
+
+/// `host-sim simulate --plant P --scenario S --out OUT [--plot F]`: runs the scenario with
+/// the firmware's reference controller, writes `OUT` (RECORDING.md) and its firmware trace
+/// ([`firmware_trace_path`]), optionally the plot.
+pub fn simulate_scenario(
+    plant_path: &Path,
+    scenario_path: &Path,
+    out: &Path,
+    plot: Option<&Path>,
+    progress: &mut dyn FnMut(f64),
+) -> anyhow::Result<ScenarioOutcome> {
+    use anyhow::Context;
+    let plant = Plant::load(plant_path)?;
+    let scenario = Scenario::load(scenario_path)?;
+    let cfg = pam_firmware::tick::ControllerConfig::reference(scenario.scenario.tick_hz as f32);
+    let t0 = std::time::Instant::now();
+    let run = crate::closed_loop::run_with(&plant, &scenario, cfg, progress)
+        .with_context(|| format!("{}: closed-loop run failed", scenario_path.display()))?;
+    let wall_s = t0.elapsed().as_secs_f64();
+    let fails = run.check();
+    let trace_path = firmware_trace_path(out);
+    let rec = run_recording(
+        &run,
+        &plant,
+        &plant_path.display().to_string(),
+        &scenario_path.display().to_string(),
+        Some(&trace_path),
+    );
+    // The trace first: the recording that names it appears only once both are complete.
+    write_firmware_trace(&run, &trace_path)?;
+    rec.write(out)?;
+    if let Some(p) = plot {
+        plot_run(p, &run, &plant)?;
+    }
+    let summary = summary(&run, &scenario, &fails);
+    Ok(ScenarioOutcome {
+        run,
+        fails,
+        summary,
+        trace_path,
+        wall_s,
+    })
+}

@@ -1,0 +1,99 @@
+//! End-to-end: `host-sim demo --out-dir DIR`, the README's first command, through the built
+//! binary (run from the repository root, as `cargo run -p host-sim -- demo` does).
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use host_sim::recording::Recording;
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+#[test]
+fn demo_writes_every_file_and_reports_tracking_and_conformance() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_dir = dir.path().join("demo"); // does not exist yet: the demo creates it
+    let r = Command::new(env!("CARGO_BIN_EXE_host-sim"))
+        .current_dir(repo())
+        .arg("demo")
+        .arg("--out-dir")
+        .arg(&out_dir)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&r.stdout);
+    println!("{stdout}");
+    assert!(
+        r.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&r.stderr)
+    );
+
+    for (name, ticks) in [("step", 4000), ("sine", 6000), ("random", 8000)] {
+        let rec = Recording::read(out_dir.join(format!("{name}.csv"))).unwrap();
+        assert_eq!(rec.len(), ticks, "{name}");
+        assert_eq!(
+            rec.meta("firmware_trace"),
+            Some(&*format!("{name}.firmware.csv"))
+        );
+        let trace = std::fs::read_to_string(out_dir.join(format!("{name}.firmware.csv"))).unwrap();
+        assert_eq!(
+            trace.lines().filter(|l| !l.starts_with('#')).count(),
+            ticks + 1,
+            "{name}: header + one row per tick"
+        );
+        let png = std::fs::read(out_dir.join(format!("{name}.png"))).unwrap();
+        assert!(
+            png.starts_with(b"\x89PNG") && png.len() > 10_000,
+            "{name}.png"
+        );
+        // The table row: name, length, settle time, rms, max, faults, verdict, speed.
+        let row = stdout
+            .lines()
+            .find(|l| l.split_whitespace().next() == Some(name))
+            .unwrap_or_else(|| panic!("no table row for {name}"));
+        let f: Vec<&str> = row.split_whitespace().collect();
+        let rms_deg: f64 = f[3].parse().unwrap();
+        let max_deg: f64 = f[4].parse().unwrap();
+        assert!(
+            rms_deg > 0.0 && rms_deg <= max_deg && max_deg < 20.0,
+            "{row}"
+        );
+        assert_eq!(f[5], "0", "{row}: faults");
+        assert_eq!(f[6], "met", "{row}");
+    }
+    let replay = Recording::read(out_dir.join("pulses_nominal_replay.csv")).unwrap();
+    assert_eq!(replay.len(), 20_000);
+    assert!(
+        std::fs::metadata(out_dir.join("pulses_nominal_replay.png"))
+            .unwrap()
+            .len()
+            > 10_000
+    );
+    // Conformance fit lines: every channel >= 99.5 %.
+    for c in ["angle_deg", "p1_kpa", "p2_kpa", "f1_n", "f2_n"] {
+        let line = stdout
+            .lines()
+            .find(|l| l.trim_start().starts_with(c))
+            .unwrap_or_else(|| panic!("no fit line for {c}"));
+        let fit: f64 = line.split_whitespace().nth(1).unwrap().parse().unwrap();
+        assert!(fit >= 99.5, "{line}");
+    }
+}
+
+#[test]
+fn demo_with_a_missing_plant_says_where_it_looked() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("nope.toml");
+    let r = Command::new(env!("CARGO_BIN_EXE_host-sim"))
+        .arg("demo")
+        .arg("--out-dir")
+        .arg(dir.path().join("d"))
+        .arg("--plant")
+        .arg(&missing)
+        .output()
+        .unwrap();
+    assert_eq!(r.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(err.contains(&missing.display().to_string()), "{err}");
+}

@@ -1,0 +1,189 @@
+//! End-to-end: `host-sim simulate --plant P --scenario S --out OUT [--plot F]` (closed loop,
+//! firmware in the loop) through the built binary.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use host_sim::recording::Recording;
+use host_sim::scenario_io::FIRMWARE_COLUMNS;
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn plant() -> PathBuf {
+    root().join("../shared/plant/reference-1dof.toml")
+}
+
+fn simulate(scenario: &Path, out: &Path, extra: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_host-sim"))
+        .arg("simulate")
+        .arg("--plant")
+        .arg(plant())
+        .arg("--scenario")
+        .arg(scenario)
+        .arg("--out")
+        .arg(out)
+        .args(extra)
+        .output()
+        .unwrap()
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+/// Data rows (after the comment lines and the header) of a CSV file.
+fn data_rows(path: &Path) -> (String, Vec<String>) {
+    let t = std::fs::read_to_string(path).unwrap();
+    let mut lines = t.lines().filter(|l| !l.starts_with('#'));
+    let header = lines.next().unwrap().to_owned();
+    (header, lines.map(str::to_owned).collect())
+}
+
+#[test]
+fn step_scenario_writes_recording_trace_plot_and_summary() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("step.csv");
+    let plot = dir.path().join("step.png");
+    let r = simulate(
+        &root().join("scenarios/step.toml"),
+        &out,
+        &["--plot", plot.to_str().unwrap()],
+    );
+    let stdout = text(&r.stdout);
+    assert!(r.status.success(), "{stdout}\n{}", text(&r.stderr));
+
+    // The recording is strictly RECORDING.md and reads back; one row per 1 ms tick over 4 s.
+    let (header, rows) = data_rows(&out);
+    assert_eq!(
+        header,
+        "t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg,p1_kpa,p2_kpa,f1_n,f2_n"
+    );
+    assert_eq!(rows.len(), 4000);
+    let rec = Recording::read(&out).unwrap();
+    assert!((rec.sample_period_s() - 1e-3).abs() < 1e-12);
+    assert_eq!(rec.meta("firmware_trace"), Some("step.firmware.csv"));
+    // The step to 0.2 rad (11.46 deg) is reached.
+    let angle = rec.channel(host_sim::Channel::AngleDeg).unwrap();
+    assert!(
+        (angle[3999] - 0.2f64.to_degrees()).abs() < 0.5,
+        "{}",
+        angle[3999]
+    );
+
+    // Firmware trace: same ticks, set-point column steps at 1 s, no fault.
+    let trace = dir.path().join("step.firmware.csv");
+    let (theader, trows) = data_rows(&trace);
+    assert_eq!(theader, FIRMWARE_COLUMNS.join(","));
+    assert_eq!(trows.len(), rows.len());
+    for (k, (a, b)) in rows.iter().zip(&trows).enumerate() {
+        assert_eq!(a.split(',').next(), b.split(',').next(), "t_s of row {k}");
+        let f: Vec<&str> = b.split(',').collect();
+        assert_eq!(f[6], "0", "fault code at row {k}");
+        let sp: f64 = f[1].parse().unwrap();
+        let want = if k < 1000 { 0.0 } else { 0.2f64.to_degrees() };
+        assert!((sp - want).abs() < 1e-4, "set-point at row {k}: {sp}");
+    }
+    assert!(std::fs::metadata(&plot).unwrap().len() > 10_000);
+
+    // Summary on stdout: whole run and after the settle time, faults, verdict.
+    assert!(stdout.contains("scenario step: 4000 ticks"), "{stdout}");
+    assert!(stdout.contains("angle error after 2 s: rms"), "{stdout}");
+    assert!(stdout.contains("faults: none"), "{stdout}");
+    assert!(stdout.contains("expectations: met"), "{stdout}");
+}
+
+#[test]
+fn injected_nan_reports_the_fault_tick_and_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("nan.csv");
+    let r = simulate(&root().join("scenarios/sensor_nan.toml"), &out, &[]);
+    let stdout = text(&r.stdout);
+    assert!(r.status.success(), "{stdout}\n{}", text(&r.stderr));
+    // NaN on p2 from 1.5 s: latched in that very tick.
+    assert!(
+        stdout.contains("fault PressureInvalid2 (code 2) latched at tick 1500 (t = 1.500 s)"),
+        "{stdout}"
+    );
+    let (_, trows) = data_rows(&dir.path().join("nan.firmware.csv"));
+    assert!(trows[1499].split(',').nth(6) == Some("0"));
+    assert!(trows[1500].split(',').nth(6) == Some("2"));
+}
+
+#[test]
+fn unmet_expectation_exits_with_status_1_and_says_why() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = dir.path().join("tight.toml");
+    let step = std::fs::read_to_string(root().join("scenarios/step.toml")).unwrap();
+    std::fs::write(
+        &s,
+        step.replace("max_abs_error_rad = 0.01", "max_abs_error_rad = 0.00001"),
+    )
+    .unwrap();
+    let r = simulate(&s, &dir.path().join("o.csv"), &[]);
+    assert_eq!(r.status.code(), Some(1), "{}", text(&r.stderr));
+    assert!(
+        text(&r.stdout).contains("expectation not met: max |angle error|"),
+        "{}",
+        text(&r.stdout)
+    );
+    assert!(dir.path().join("o.csv").exists());
+}
+
+#[test]
+fn bad_scenario_names_file_line_and_key_and_keeps_the_old_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("o.csv");
+    std::fs::write(&out, "good old file\n").unwrap();
+    let step = std::fs::read_to_string(root().join("scenarios/step.toml")).unwrap();
+    let cases = [
+        // (replace, with, expected fragments)
+        (
+            "duration_s = 4.0",
+            "duration_s = -4.0",
+            vec!["line 4", "[scenario] duration_s", "must be > 0"],
+        ),
+        (
+            "at_s = 1.0",
+            "at_s = 1.0\nat_z = 2.0",
+            vec!["line 13: key `at_z`", "unknown field", "at_z"],
+        ),
+        (
+            "pressure_noise_pa = 500.0",
+            "pressure_noise_pa = -1.0",
+            vec!["line 15", "[sensors] pressure_noise_pa"],
+        ),
+        (
+            "kind = \"step\"",
+            "kind = \"stepp\"",
+            vec!["line 9", "unknown variant", "stepp"],
+        ),
+    ];
+    for (from, to, want) in cases {
+        let s = dir.path().join("bad.toml");
+        assert!(step.contains(from));
+        std::fs::write(&s, step.replace(from, to)).unwrap();
+        let r = simulate(&s, &out, &[]);
+        let err = text(&r.stderr);
+        assert_eq!(r.status.code(), Some(2), "{to}: {err}");
+        assert!(err.contains(&s.display().to_string()), "{err}");
+        for w in want {
+            assert!(err.contains(w), "{to}: expected {w:?} in {err}");
+        }
+        assert_eq!(std::fs::read_to_string(&out).unwrap(), "good old file\n");
+    }
+    // A bad event names its [[events]] entry and line.
+    let s = dir.path().join("ev.toml");
+    std::fs::write(
+        &s,
+        format!("{step}\n[[events]]\nkind = \"sensor_nan\"\nat_s = 1.0\nduration_s = 0.0\nchannel = \"p1\"\n"),
+    )
+    .unwrap();
+    let r = simulate(&s, &out, &[]);
+    let err = text(&r.stderr);
+    assert_eq!(r.status.code(), Some(2), "{err}");
+    assert!(err.contains("[[events]] #1 duration_s"), "{err}");
+    let line = step.lines().count() + 5;
+    assert!(err.contains(&format!("line {line}:")), "{err}");
+}
