@@ -709,7 +709,9 @@ pub fn run_with(
         while plant_idx + 1 < plants.len() && plants[plant_idx + 1].0 <= k {
             plant_idx += 1;
             let x = integ.state();
+            let p_tank = integ.supply_abs_pa();
             integ = Integrator::new(&plants[plant_idx].1, x, opts);
+            integ.set_supply_abs_pa(p_tank); // a supply reservoir keeps its pressure
         }
         let p = &plants[plant_idx].1;
         let x = integ.state();

@@ -9,10 +9,12 @@
 //! - [`fit`]: NRMSE fit, MAE, MSE per channel.
 //! - [`identify`]: force law, torque model and plant parameters from data.
 //! - [`plot`]: measured vs simulated channel plots.
+//! - [`diagnose_baseline`]: Elman-network residual model, the black-box baseline of the diagnosis.
 
 pub mod closed_loop;
 pub mod config;
 pub mod demo;
+pub mod diagnose_baseline;
 pub mod fit;
 pub mod identify;
 pub mod plant;

@@ -6,6 +6,11 @@
 //! stepping across a discontinuity) and runs of identical inputs are integrated as one
 //! segment, with the sample states taken from the dense output. The step size is carried
 //! from one segment to the next (no fresh step-size guess at each restart).
+//!
+//! The ODE state is (beta, omega, p1, p2); a plant with a supply reservoir
+//! ([`crate::plant::effects::SupplyDrop`], `model = "reservoir"`) adds the tank pressure as a
+//! fifth state, carried by the [`Integrator`] ([`Integrator::supply_abs_pa`]). Without it the
+//! 4-state path is unchanged.
 
 use nalgebra::SVector;
 use ode_solvers::{Dopri5, OutputType, System};
@@ -14,6 +19,7 @@ use crate::plant::effects::DeadTimeLine;
 use crate::plant::{Plant, PlantState, ValveInputs};
 
 type Vector4 = SVector<f64, 4>;
+type Vector5 = SVector<f64, 5>;
 
 /// Tolerances of the adaptive integrator.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -57,6 +63,8 @@ pub enum SimError {
     Input { index: usize, inputs: ValveInputs },
     #[error("valve dead time {delay_s} s is not a whole number of sample periods ({dt_s} s)")]
     DeadTime { delay_s: f64, dt_s: f64 },
+    #[error("supply reservoir pressure became non-finite at t = {t_s} s")]
+    NonFiniteSupply { t_s: f64 },
 }
 
 struct Rhs<'a> {
@@ -81,6 +89,30 @@ impl System<f64, Vector4> for Rhs<'_> {
     }
 }
 
+/// The plant with a supply reservoir: state (beta, omega, p1, p2, p_tank).
+struct Rhs5<'a> {
+    plant: &'a Plant,
+    u: ValveInputs,
+}
+
+impl System<f64, Vector5> for Rhs5<'_> {
+    #[inline(always)]
+    fn system(&self, _t: f64, y: &Vector5, dy: &mut Vector5) {
+        let x = PlantState {
+            angle_rad: y[0],
+            velocity_rad_s: y[1],
+            p1_abs_pa: y[2],
+            p2_abs_pa: y[3],
+        };
+        let (d, d_tank) = self.plant.derivatives_with_supply(&x, y[4], &self.u);
+        dy[0] = d.angle_rad;
+        dy[1] = d.velocity_rad_s;
+        dy[2] = d.p1_abs_pa;
+        dy[3] = d.p2_abs_pa;
+        dy[4] = d_tank;
+    }
+}
+
 fn valid_inputs(u: &ValveInputs) -> bool {
     [u.u_in1, u.u_ex1, u.u_in2, u.u_ex2]
         .iter()
@@ -97,6 +129,8 @@ pub struct Integrator<'a> {
     opts: SolverOptions,
     stats: SimStats,
     dense: Vec<PlantState>,
+    /// Supply reservoir pressure (absolute; p_s0 and constant without a reservoir).
+    supply_abs_pa: f64,
 }
 
 impl<'a> Integrator<'a> {
@@ -109,7 +143,19 @@ impl<'a> Integrator<'a> {
             opts,
             stats: SimStats::default(),
             dense: Vec::new(),
+            supply_abs_pa: plant.initial_supply_abs_pa(),
         }
+    }
+
+    /// Sets the supply reservoir pressure (absolute), e.g. to carry it over to an integrator
+    /// of another plant. No effect on a plant without a reservoir.
+    pub fn set_supply_abs_pa(&mut self, p_abs_pa: f64) {
+        self.supply_abs_pa = p_abs_pa;
+    }
+
+    /// The supply reservoir pressure now (absolute); p_s0 for a plant without a reservoir.
+    pub fn supply_abs_pa(&self) -> f64 {
+        self.supply_abs_pa
     }
 
     pub fn state(&self) -> PlantState {
@@ -158,6 +204,9 @@ impl<'a> Integrator<'a> {
         } else {
             0.0 // let Dopri5 pick the first step
         };
+        if self.plant.has_supply_state() {
+            return self.advance_samples_reservoir(inputs, dt_s, n, x_end, h0, single, on_sample);
+        }
         let y0 = Vector4::from(self.state.to_array());
         let mut solver = Dopri5::from_param(
             Rhs {
@@ -240,6 +289,96 @@ impl<'a> Integrator<'a> {
             on_sample(x);
         }
         Ok(self.dense[n])
+    }
+
+    /// [`Self::advance_samples`] for a plant with a supply reservoir (5 states).
+    #[allow(clippy::too_many_arguments)]
+    fn advance_samples_reservoir(
+        &mut self,
+        inputs: ValveInputs,
+        dt_s: f64,
+        n: usize,
+        x_end: f64,
+        h0: f64,
+        single: bool,
+        mut on_sample: impl FnMut(&PlantState),
+    ) -> Result<(), SimError> {
+        let duration_s = n as f64 * dt_s;
+        let a = self.state.to_array();
+        let y0 = Vector5::from([a[0], a[1], a[2], a[3], self.supply_abs_pa]);
+        let mut solver = Dopri5::from_param(
+            Rhs5 {
+                plant: self.plant,
+                u: inputs,
+            },
+            0.0,
+            x_end,
+            dt_s,
+            y0,
+            self.opts.rtol,
+            self.opts.atol,
+            0.9,
+            0.04,
+            0.2,
+            10.0,
+            x_end,
+            h0,
+            self.opts.max_steps_per_segment,
+            u32::MAX,
+            if single {
+                OutputType::Sparse
+            } else {
+                OutputType::Dense
+            },
+        );
+        let st = solver.integrate().map_err(|e| SimError::Integration {
+            t_s: self.t_s,
+            message: e.to_string(),
+        })?;
+        self.stats.segments += 1;
+        self.stats.rhs_evaluations += u64::from(st.num_eval);
+        self.stats.accepted_steps += u64::from(st.accepted_steps);
+        self.stats.rejected_steps += u64::from(st.rejected_steps);
+        let ys = solver.y_out();
+        let last = if single {
+            *ys.last().expect("sparse output holds the start point")
+        } else {
+            if ys.len() < n + 1 {
+                return Err(SimError::Integration {
+                    t_s: self.t_s,
+                    message: format!(
+                        "dense output gave {} points for {} samples",
+                        ys.len(),
+                        n + 1
+                    ),
+                });
+            }
+            ys[n]
+        };
+        let end = PlantState::from_array([last[0], last[1], last[2], last[3]]);
+        if !end.to_array().iter().all(|v| v.is_finite()) {
+            return Err(SimError::NonFinite {
+                t_s: self.t_s + duration_s,
+                state: end,
+            });
+        }
+        if !last[4].is_finite() {
+            return Err(SimError::NonFiniteSupply {
+                t_s: self.t_s + duration_s,
+            });
+        }
+        if single {
+            on_sample(&self.state);
+        } else {
+            for y in &ys[..n] {
+                on_sample(&PlantState::from_array([y[0], y[1], y[2], y[3]]));
+            }
+        }
+        self.state = end;
+        self.supply_abs_pa = last[4];
+        self.t_s += duration_s;
+        self.h_s = duration_s / f64::from(st.accepted_steps.max(1));
+        Ok(())
     }
 
     /// Holds `inputs` for `duration_s` (one control tick) and returns the state at its end.

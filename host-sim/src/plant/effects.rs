@@ -10,11 +10,12 @@
 //! - the measurement (what a sensor reports for a state): [`SensorCalibration`], and over a
 //!   sampled sequence [`SensorLag`] (applied by [`SensorLagFilter`] once per sample);
 //! - the valve command path (what the valves see of a command): [`ValveDeadTime`], applied by
-//!   [`DeadTimeLine`] once per sample.
-//!
-//! Not implemented yet (the table name is rejected as unknown, so a file asking for it fails
-//! loudly instead of being silently simulated without it): braid hysteresis,
-//! supply pressure drop.
+//!   [`DeadTimeLine`] once per sample;
+//! - the muscle tension (what the cable transmits and the force sensors measure):
+//!   [`MuscleHysteresis`] (braid friction);
+//! - the supply pressure the inlet valves see: [`SupplyDrop`], either a static flow-dependent
+//!   drop or a reservoir with its own pressure state (the fifth ODE state, see
+//!   [`crate::sim::Integrator`]).
 
 use std::path::Path;
 
@@ -39,6 +40,176 @@ pub struct EffectsConfig {
     pub valve_dead_time: Option<ValveDeadTime>,
     pub sensor: Option<SensorCalibration>,
     pub sensor_lag: Option<SensorLag>,
+    pub muscle_hysteresis: Option<MuscleHysteresis>,
+    pub supply_drop: Option<SupplyDrop>,
+}
+
+/// `[effects.muscle_hysteresis]`: friction in the braid (thread on thread, thread on bladder;
+/// seed 003 names both, and finds the torque hysteresis to be a velocity-dependent offset on
+/// the static characteristic that widens with speed), as a force in each muscle opposing its
+/// contraction rate, with a magnitude proportional to the gauge pressure (the normal force
+/// between the braid threads grows with it):
+///
+/// F_h,i = (f0 + k_p max(pg_i, 0)) tanh(dchi_i/dt / v_s),
+/// F_i = max(0, Fs_i - gamma pg_i dchi_i/dt - F_h,i).
+///
+/// It acts inside the muscle, so it shows in the measured tensions `f1_n`, `f2_n` (a
+/// contracting muscle pulls less, a stretched one more); joint friction does not. It is
+/// memoryless (no extra ODE state): seed 003 measured an offset that is a function of the
+/// velocity, not a history-dependent loop, and a tanh-regularized Coulomb term keeps the
+/// right-hand side smooth for the explicit integrator. It always dissipates: the change of
+/// joint torque it causes has the sign of -omega.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MuscleHysteresis {
+    #[serde(default = "enabled_default")]
+    pub enabled: bool,
+    /// f0, friction force at zero gauge pressure (>= 0).
+    pub base_force_n: f64,
+    /// k_p, friction force per pascal of gauge pressure (>= 0).
+    pub pressure_gain_n_per_pa: f64,
+    /// v_s, contraction rate (1/s, dchi/dt) at which the friction reaches tanh(1) = 76 % of
+    /// its level (> 0; small: Coulomb-like, large: viscous-like).
+    pub smoothing_rate_per_s: f64,
+}
+
+impl MuscleHysteresis {
+    /// Friction force F_h opposing a contraction rate `contraction_rate_per_s` (positive while
+    /// contracting), at gauge pressure `p_gauge_pa`.
+    #[inline(always)]
+    pub fn force_n(&self, p_gauge_pa: f64, contraction_rate_per_s: f64) -> f64 {
+        (self.base_force_n + self.pressure_gain_n_per_pa * p_gauge_pa.max(0.0))
+            * (contraction_rate_per_s / self.smoothing_rate_per_s).tanh()
+    }
+}
+
+/// Form of [`SupplyDrop`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SupplyDropModel {
+    /// p_supply = p_s0 - R q_in: a line resistance, solved with the valve flow it feeds.
+    Static,
+    /// A tank of volume V_t fed from p_s0 through an ISO 6358 conductance, drained by the
+    /// inlet valves; its pressure is an ODE state.
+    Reservoir,
+}
+
+/// `[effects.supply_drop]`: the supply pressure sags while the inlet valves draw air (seed
+/// 000 lists the compressor pressure drop among the causes of its model error). p_s0 is the
+/// nominal supply `environment.supply_gauge_pa + p_atm`.
+///
+/// - `model = "static"`: p_s = p_s0 - R q_in(p_s), q_in = sum_i u_in_i Q(p_s, p_i) the
+///   standard volume flow through the inlet valves; the implicit equation has one root (its
+///   left side minus right side grows with p_s) and is solved in every right-hand-side call.
+///   Key: `resistance_pa_s_per_m3` (R >= 0).
+/// - `model = "reservoir"`: a tank (isothermal) at p_t, fed from p_s0 through an ISO 6358
+///   orifice with the valves' critical and laminar ratios and sonic conductance C_f:
+///   dp_t/dt = p_atm (C_f-flow(p_s0, p_t) - q_in(p_t)) / V_t, p_t(0) = p_s0; the inlet
+///   valves see p_t. At rest the tank refills to p_s0. Keys: `tank_volume_m3` (V_t > 0),
+///   `feed_conductance_m3_per_s_pa` (C_f > 0).
+///
+/// Keys of the other form are errors.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SupplyDrop {
+    #[serde(default = "enabled_default")]
+    pub enabled: bool,
+    pub model: SupplyDropModel,
+    /// R (static form).
+    pub resistance_pa_s_per_m3: Option<f64>,
+    /// V_t (reservoir form).
+    pub tank_volume_m3: Option<f64>,
+    /// C_f (reservoir form).
+    pub feed_conductance_m3_per_s_pa: Option<f64>,
+}
+
+/// The supply the inlet valves see, in the form the right-hand side uses.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Supply {
+    /// The constant nominal supply p_s0 (PLANT.md).
+    Ideal,
+    /// p_s = p_s0 - R q_in(p_s).
+    Static { resistance_pa_s_per_m3: f64 },
+    /// A tank with its own pressure state.
+    Reservoir {
+        tank_volume_m3: f64,
+        feed: Iso6358Valve,
+    },
+}
+
+impl Supply {
+    /// Whether the supply adds a state (the tank pressure) to the ODE.
+    #[inline(always)]
+    pub fn has_state(&self) -> bool {
+        matches!(self, Supply::Reservoir { .. })
+    }
+}
+
+/// Solves p_s = p_s0 - R q(p_s) for the static supply drop, q(p) = sum_i u_i Q(p, p_i) (the
+/// inlet flow at supply pressure p). g(p) = p - p_s0 + R q(p) is increasing in p (each Q(p,
+/// p_i) is), negative at min(p_s0, p_i) and positive at max(p_s0, p_i), so the root is
+/// bracketed; Illinois regula falsi to |g| <= 1e-7 Pa (g' >= 1, so that is the error in p).
+pub fn static_supply_pressure_pa(
+    valve: &Iso6358Valve,
+    p_s0_pa: f64,
+    resistance_pa_s_per_m3: f64,
+    p_chamber_pa: [f64; 2],
+    u_in: [f64; 2],
+) -> f64 {
+    if resistance_pa_s_per_m3 == 0.0 || (u_in[0] == 0.0 && u_in[1] == 0.0) {
+        return p_s0_pa;
+    }
+    let g = |p: f64| {
+        let mut q = 0.0;
+        for i in 0..2 {
+            if u_in[i] != 0.0 {
+                q += u_in[i] * valve.flow_m3_s(p, p_chamber_pa[i]);
+            }
+        }
+        p - p_s0_pa + resistance_pa_s_per_m3 * q
+    };
+    let (mut lo, mut hi) = (p_s0_pa, p_s0_pa);
+    for i in 0..2 {
+        if u_in[i] != 0.0 {
+            lo = lo.min(p_chamber_pa[i]);
+            hi = hi.max(p_chamber_pa[i]);
+        }
+    }
+    let (mut g_lo, mut g_hi) = (g(lo), g(hi));
+    if g_lo >= 0.0 {
+        return lo;
+    }
+    if g_hi <= 0.0 {
+        return hi;
+    }
+    let mut side = 0i8;
+    let mut p = 0.5 * (lo + hi);
+    for _ in 0..200 {
+        p = (lo * g_hi - hi * g_lo) / (g_hi - g_lo);
+        if !(p > lo && p < hi) {
+            p = 0.5 * (lo + hi);
+        }
+        let gp = g(p);
+        if gp.abs() <= 1e-7 || hi - lo <= 1e-9 {
+            return p;
+        }
+        if gp < 0.0 {
+            lo = p;
+            g_lo = gp;
+            if side == -1 {
+                g_hi *= 0.5;
+            }
+            side = -1;
+        } else {
+            hi = p;
+            g_hi = gp;
+            if side == 1 {
+                g_lo *= 0.5;
+            }
+            side = 1;
+        }
+    }
+    p
 }
 
 /// `[effects.sensor_lag]`: first-order sensor dynamics per channel group, as the sensor's
@@ -280,6 +451,10 @@ pub struct Effects {
     pub sensor_lag: Option<SensorLag>,
     /// Calibrations of angle_deg, p1_kpa, p2_kpa, f1_n, f2_n (identity when absent).
     pub sensor: Option<[ChannelCalibration; 5]>,
+    /// Braid friction in the muscle tension, if enabled.
+    pub muscle_hysteresis: Option<MuscleHysteresis>,
+    /// The supply the inlet valves see ([`Supply::Ideal`] when the drop is off).
+    pub supply: Supply,
 }
 
 impl Default for Effects {
@@ -292,6 +467,8 @@ impl Default for Effects {
             pressure_exponent: 1.0,
             sensor_lag: None,
             sensor: None,
+            muscle_hysteresis: None,
+            supply: Supply::Ideal,
         }
     }
 }
@@ -333,6 +510,24 @@ impl Effects {
                     s.f2_n.unwrap_or(id),
                 ]
             }),
+            muscle_hysteresis: c.muscle_hysteresis.clone().filter(|h| h.enabled),
+            supply: match c.supply_drop.as_ref().filter(|d| d.enabled) {
+                None => Supply::Ideal,
+                Some(d) => match d.model {
+                    // validate() guarantees the keys of the chosen form are present.
+                    SupplyDropModel::Static => Supply::Static {
+                        resistance_pa_s_per_m3: d.resistance_pa_s_per_m3.unwrap_or(0.0),
+                    },
+                    SupplyDropModel::Reservoir => Supply::Reservoir {
+                        tank_volume_m3: d.tank_volume_m3.unwrap_or(f64::INFINITY),
+                        feed: Iso6358Valve::new(
+                            d.feed_conductance_m3_per_s_pa.unwrap_or(0.0),
+                            valve_critical_ratio,
+                            valve_laminar_ratio,
+                        ),
+                    },
+                },
+            },
         }
     }
 
@@ -358,6 +553,9 @@ impl Effects {
         }
     }
 }
+
+/// A TOML key (within its table) and its value, if given.
+type KeyValue<'a> = (&'a str, Option<f64>);
 
 impl EffectsConfig {
     pub(crate) fn validate(&self, path: &Path) -> Result<(), ConfigError> {
@@ -451,6 +649,77 @@ impl EffectsConfig {
         }
         if let Some(p) = &self.polytropic {
             check("effects.polytropic.exponent", p.exponent, Some(0.0))?;
+        }
+        if let Some(h) = &self.muscle_hysteresis {
+            let k = "effects.muscle_hysteresis.";
+            for (key, v) in [
+                ("base_force_n", h.base_force_n),
+                ("pressure_gain_n_per_pa", h.pressure_gain_n_per_pa),
+            ] {
+                check(&format!("{k}{key}"), v, None)?;
+                if v < 0.0 {
+                    return Err(bad(&format!("{k}{key}"), format!("must be >= 0, got {v}")));
+                }
+            }
+            check(
+                &format!("{k}smoothing_rate_per_s"),
+                h.smoothing_rate_per_s,
+                Some(0.0),
+            )?;
+        }
+        if let Some(d) = &self.supply_drop {
+            let k = "effects.supply_drop.";
+            let (needed, foreign): (&[KeyValue], &[KeyValue]) = match d.model {
+                SupplyDropModel::Static => (
+                    &[("resistance_pa_s_per_m3", d.resistance_pa_s_per_m3)],
+                    &[
+                        ("tank_volume_m3", d.tank_volume_m3),
+                        (
+                            "feed_conductance_m3_per_s_pa",
+                            d.feed_conductance_m3_per_s_pa,
+                        ),
+                    ],
+                ),
+                SupplyDropModel::Reservoir => (
+                    &[
+                        ("tank_volume_m3", d.tank_volume_m3),
+                        (
+                            "feed_conductance_m3_per_s_pa",
+                            d.feed_conductance_m3_per_s_pa,
+                        ),
+                    ],
+                    &[("resistance_pa_s_per_m3", d.resistance_pa_s_per_m3)],
+                ),
+            };
+            let model = match d.model {
+                SupplyDropModel::Static => "static",
+                SupplyDropModel::Reservoir => "reservoir",
+            };
+            for (key, v) in foreign {
+                if v.is_some() {
+                    return Err(bad(
+                        &format!("{k}{key}"),
+                        format!("does not belong to model = \"{model}\""),
+                    ));
+                }
+            }
+            for (key, v) in needed {
+                let Some(v) = v else {
+                    return Err(bad(
+                        &format!("{k}{key}"),
+                        format!("missing (required by model = \"{model}\")"),
+                    ));
+                };
+                check(&format!("{k}{key}"), *v, None)?;
+                let positive = *key != "resistance_pa_s_per_m3";
+                if (positive && *v <= 0.0) || *v < 0.0 {
+                    let bound = if positive { "> 0" } else { ">= 0" };
+                    return Err(bad(
+                        &format!("{k}{key}"),
+                        format!("must be {bound}, got {v}"),
+                    ));
+                }
+            }
         }
         if let Some(s) = &self.sensor {
             for (name, c) in [

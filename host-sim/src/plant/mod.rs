@@ -13,7 +13,7 @@ pub mod valve;
 use std::path::Path;
 
 use crate::config::{ConfigError, PlantConfig};
-use effects::Effects;
+use effects::{Effects, Supply};
 use joint::Joint;
 use muscle::Muscle;
 use valve::Iso6358Valve;
@@ -142,36 +142,95 @@ impl Plant {
         self.initial
     }
 
-    /// Muscle tensions F1, F2 in newtons for a state.
+    /// Muscle tensions F1, F2 in newtons for a state (with the braid friction effect if
+    /// enabled: these are the measured `f1_n`, `f2_n`).
     #[inline(always)]
     pub fn tensions_n(&self, x: &PlantState) -> [f64; 2] {
         let chi = self.joint.contractions(x.angle_rad);
         let dchi = self.joint.contraction_rates(x.velocity_rad_s);
         [
-            self.muscle
-                .tension_n(x.p1_abs_pa - self.p_atm_pa, chi[0], dchi[0]),
-            self.muscle
-                .tension_n(x.p2_abs_pa - self.p_atm_pa, chi[1], dchi[1]),
+            self.tension_n(x.p1_abs_pa - self.p_atm_pa, chi[0], dchi[0]),
+            self.tension_n(x.p2_abs_pa - self.p_atm_pa, chi[1], dchi[1]),
         ]
     }
 
+    /// Tension of one muscle: the nominal one, minus the braid friction if enabled.
+    #[inline(always)]
+    fn tension_n(&self, p_gauge_pa: f64, contraction: f64, contraction_rate_per_s: f64) -> f64 {
+        match &self.effects.muscle_hysteresis {
+            None => self
+                .muscle
+                .tension_n(p_gauge_pa, contraction, contraction_rate_per_s),
+            Some(h) => self.muscle.tension_with_friction_n(
+                p_gauge_pa,
+                contraction,
+                contraction_rate_per_s,
+                h.force_n(p_gauge_pa, contraction_rate_per_s),
+            ),
+        }
+    }
+
+    /// Whether the plant has a state beyond (beta, omega, p1, p2): the supply reservoir's
+    /// pressure ([`effects::SupplyDrop`] with `model = "reservoir"`).
+    pub fn has_supply_state(&self) -> bool {
+        self.effects.supply.has_state()
+    }
+
+    /// The supply pressure (absolute) the inlet valves see at the start of a run: p_s0, also
+    /// the initial reservoir pressure.
+    pub fn initial_supply_abs_pa(&self) -> f64 {
+        self.p_supply_abs_pa
+    }
+
     /// Right-hand side: d/dt of (beta, omega, p1, p2) for inputs `u`.
+    ///
+    /// With a supply reservoir this takes its pressure at the full p_s0; use
+    /// [`Self::derivatives_with_supply`] to give it.
     #[inline(always)]
     pub fn derivatives(&self, x: &PlantState, u: &ValveInputs) -> PlantState {
+        self.derivatives_with_supply(x, self.p_supply_abs_pa, u).0
+    }
+
+    /// Right-hand side with the supply reservoir state: returns d/dt of (beta, omega, p1, p2)
+    /// and d/dt of the reservoir pressure `reservoir_abs_pa` (0 and ignored unless the plant
+    /// has a reservoir, see [`Self::has_supply_state`]).
+    #[inline(always)]
+    pub fn derivatives_with_supply(
+        &self,
+        x: &PlantState,
+        reservoir_abs_pa: f64,
+        u: &ValveInputs,
+    ) -> (PlantState, f64) {
         let chi = self.joint.contractions(x.angle_rad);
         let dchi = self.joint.contraction_rates(x.velocity_rad_s);
         let p = [x.p1_abs_pa, x.p2_abs_pa];
         let u_in = [u.u_in1, u.u_in2];
         let u_ex = [u.u_ex1, u.u_ex2];
+        let p_supply = match &self.effects.supply {
+            Supply::Ideal => self.p_supply_abs_pa,
+            Supply::Static {
+                resistance_pa_s_per_m3,
+            } => effects::static_supply_pressure_pa(
+                &self.valve,
+                self.p_supply_abs_pa,
+                *resistance_pa_s_per_m3,
+                p,
+                u_in,
+            ),
+            Supply::Reservoir { .. } => reservoir_abs_pa,
+        };
+        let mut q_supply = 0.0;
         let mut tension = [0.0; 2];
         let mut dp = [0.0; 2];
         for i in 0..2 {
             let pg = p[i] - self.p_atm_pa;
-            tension[i] = self.muscle.tension_n(pg, chi[i], dchi[i]);
+            tension[i] = self.tension_n(pg, chi[i], dchi[i]);
             // A closed valve contributes nothing (skip the flow function).
             let mut q = self.effects.chamber_flow_m3_s(p[i], self.p_atm_pa);
             if u_in[i] != 0.0 {
-                q += u_in[i] * self.valve.flow_m3_s(self.p_supply_abs_pa, p[i]);
+                let q_in = u_in[i] * self.valve.flow_m3_s(p_supply, p[i]);
+                q_supply += q_in;
+                q += q_in;
             }
             if u_ex[i] != 0.0 {
                 q -= u_ex[i] * self.valve.flow_m3_s(p[i], self.p_atm_pa);
@@ -187,12 +246,25 @@ impl Plant {
         }
         let torque = self.joint.muscle_torque_nm(tension)
             + self.effects.joint_torque_nm(x.angle_rad, x.velocity_rad_s);
-        PlantState {
-            angle_rad: x.velocity_rad_s,
-            velocity_rad_s: self.joint.angular_acceleration_rad_s2(torque),
-            p1_abs_pa: dp[0],
-            p2_abs_pa: dp[1],
-        }
+        let d_reservoir = match &self.effects.supply {
+            Supply::Reservoir {
+                tank_volume_m3,
+                feed,
+            } => {
+                let q_feed = feed.flow_m3_s(self.p_supply_abs_pa, reservoir_abs_pa);
+                self.p_atm_pa * (q_feed - q_supply) / tank_volume_m3
+            }
+            _ => 0.0,
+        };
+        (
+            PlantState {
+                angle_rad: x.velocity_rad_s,
+                velocity_rad_s: self.joint.angular_acceleration_rad_s2(torque),
+                p1_abs_pa: dp[0],
+                p2_abs_pa: dp[1],
+            },
+            d_reservoir,
+        )
     }
 
     /// The recorded channels of a sampled run (`states[k]` at `t_k = k dt`), with the

@@ -52,6 +52,23 @@ impl Muscle {
             .max(0.0)
     }
 
+    /// Cable tension with an extra friction force `friction_n` opposing the contraction
+    /// (braid friction, [`crate::plant::effects::MuscleHysteresis`]):
+    /// F = max(0, Fs - gamma pg dchi/dt - F_h).
+    #[inline(always)]
+    pub fn tension_with_friction_n(
+        &self,
+        p_gauge_pa: f64,
+        contraction: f64,
+        contraction_rate_per_s: f64,
+        friction_n: f64,
+    ) -> f64 {
+        (self.static_force_n(p_gauge_pa, contraction)
+            - self.damping_m2s * p_gauge_pa * contraction_rate_per_s
+            - friction_n)
+            .max(0.0)
+    }
+
     /// Chamber volume V(chi).
     #[inline(always)]
     pub fn volume_m3(&self, contraction: f64) -> f64 {
