@@ -14,6 +14,7 @@
 pub mod closed_loop;
 pub mod config;
 pub mod demo;
+pub mod diagnose;
 pub mod diagnose_baseline;
 pub mod fit;
 pub mod identify;

@@ -35,6 +35,31 @@ enum Command {
     /// The main job: the reference plant with the firmware in the loop on the step, sine and
     /// random scenarios (CSV + plots), and the conformance fit of an open-loop replay.
     Demo(DemoArgs),
+    /// Diagnosis: locate where a recording departs from the nominal model, name the left-out
+    /// physics, model it and report the fit before/after (issue 6).
+    Diagnose(DiagnoseArgs),
+}
+
+#[derive(Args)]
+struct DiagnoseArgs {
+    /// Nominal plant file (TOML) the user believes in.
+    #[arg(long, value_name = "P.toml")]
+    plant: PathBuf,
+    /// Training recording of the real rig (RECORDING.md).
+    #[arg(long, value_name = "TRAIN.csv")]
+    recording: PathBuf,
+    /// Optional check recording (other excitation), used only to validate.
+    #[arg(long, value_name = "CHECK.csv")]
+    check: Option<PathBuf>,
+    /// Output JSON (written atomically).
+    #[arg(long, value_name = "OUT.json")]
+    json: PathBuf,
+    /// Also write an HTML report with plots (DIR/index.html, DIR/diagnosis.json).
+    #[arg(long, value_name = "DIR")]
+    report: Option<PathBuf>,
+    /// Worker threads for the candidate refits.
+    #[arg(long, default_value_t = 2)]
+    threads: usize,
 }
 
 #[derive(Args)]
@@ -102,6 +127,7 @@ fn main() -> ExitCode {
         Command::Simulate(a) => run_simulate(&a),
         Command::Fit(a) => run_fit(&a),
         Command::Demo(a) => run_demo(&a),
+        Command::Diagnose(a) => run_diagnose(&a),
     };
     match result {
         Ok(code) => code,
@@ -263,4 +289,46 @@ fn only_common(model: &Recording, reference: &Recording) -> Recording {
         }
     }
     r
+}
+
+fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
+    use host_sim::diagnose::{diagnose, report::write_report, DiagnoseOptions};
+    if a.threads == 0 {
+        bail!("--threads must be >= 1");
+    }
+    let cfg = host_sim::PlantConfig::load(&a.plant)?;
+    let train = Recording::read(&a.recording)?;
+    let check = a.check.as_ref().map(Recording::read).transpose()?;
+    let bar = ProgressBar::with_draw_target(Some(100), ProgressDrawTarget::stderr());
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} diagnose [{bar:40}] {pos}/{len} {msg} {elapsed}")
+            .expect("static template")
+            .progress_chars("=> "),
+    );
+    let opts = DiagnoseOptions {
+        threads: a.threads,
+        ..DiagnoseOptions::default()
+    };
+    let d = diagnose(&cfg, &train, check.as_ref(), &opts, &|done, total, msg| {
+        bar.set_length(total);
+        bar.set_position(done);
+        bar.set_message(msg.to_string());
+    })
+    .with_context(|| format!("{}: diagnosis failed", a.recording.display()))?;
+    bar.finish_and_clear();
+    let json = serde_json::to_string_pretty(&d.to_json())? + "\n";
+    host_sim::identify::write_atomic(&a.json, json.as_bytes())?;
+    if let Some(dir) = &a.report {
+        write_report(
+            dir,
+            &d,
+            &json,
+            &a.recording.display().to_string(),
+            a.check.as_ref().map(|c| c.display().to_string()).as_deref(),
+        )
+        .map_err(|e| anyhow::anyhow!("report {}: {e}", dir.display()))?;
+    }
+    print!("{}", d.answer());
+    println!("wrote {}", a.json.display());
+    Ok(ExitCode::SUCCESS)
 }

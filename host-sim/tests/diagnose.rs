@@ -1,0 +1,283 @@
+//! Diagnosis (issue 6) on synthetic rig recordings: the null case says nothing is missing,
+//! single concealed effects are named exactly with a check fit >= 95 % on every channel, a
+//! Stribeck truth is named by the Coulomb+viscous candidate, a recording without force
+//! channels gets the look-alike statement, and bad input gives clear errors.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use host_sim::diagnose::synth::{expected_id, generate, plant_with, Excitation, SynthSpec};
+use host_sim::diagnose::{diagnose, DiagnoseOptions, Diagnosis};
+use host_sim::{PlantConfig, Recording};
+
+fn nominal_path() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant/reference-1dof.toml")
+}
+
+fn nominal_text() -> String {
+    std::fs::read_to_string(nominal_path()).unwrap()
+}
+
+fn nominal() -> PlantConfig {
+    PlantConfig::load(nominal_path()).unwrap()
+}
+
+/// TRAIN (pulses) and CHECK (chirp + steps) recordings of the rig with `truths` concealed.
+fn recordings(
+    truths: &[&str],
+    seed: u64,
+    dt_s: f64,
+    channels: [bool; 5],
+) -> (Recording, Recording) {
+    let cfg = plant_with(&nominal_text(), truths, dt_s).unwrap();
+    let label = truths.join("+");
+    let train = generate(
+        &cfg,
+        &SynthSpec {
+            excitation: Excitation::Pulses,
+            duration_s: 8.0,
+            dt_s,
+            seed,
+            noise: true,
+            channels,
+        },
+        &label,
+    )
+    .unwrap();
+    let check = generate(
+        &cfg,
+        &SynthSpec {
+            excitation: Excitation::ChirpSteps,
+            duration_s: 6.0,
+            dt_s,
+            seed: seed + 1000,
+            noise: true,
+            channels,
+        },
+        &label,
+    )
+    .unwrap();
+    (train, check)
+}
+
+fn run(truths: &[&str], seed: u64, dt_s: f64, channels: [bool; 5]) -> Diagnosis {
+    let (train, check) = recordings(truths, seed, dt_s, channels);
+    diagnose(
+        &nominal(),
+        &train,
+        Some(&check),
+        &DiagnoseOptions::default(),
+        &|_, _, _| {},
+    )
+    .unwrap()
+}
+
+fn named(d: &Diagnosis) -> Vec<String> {
+    let mut v: Vec<String> = d.effects.iter().map(|e| e.id.clone()).collect();
+    v.sort();
+    v
+}
+
+fn assert_named_and_fits(truth: &str, seed: u64, dt_s: f64) {
+    let d = run(&[truth], seed, dt_s, [true; 5]);
+    assert_eq!(
+        named(&d),
+        vec![expected_id(truth).to_string()],
+        "{truth}: {}",
+        d.answer()
+    );
+    let check = d.check_after.as_ref().unwrap();
+    for (k, v) in check {
+        assert!(
+            *v >= 95.0,
+            "{truth}: check fit of {k} {v:.2} % < 95 %\n{}",
+            d.answer()
+        );
+    }
+    let json = d.to_json();
+    assert_eq!(json["effects"][0]["id"], expected_id(truth));
+    assert!(json["check"]["after"]["angle_deg"].as_f64().unwrap() >= 95.0);
+}
+
+#[test]
+fn null_case_says_nothing_is_missing() {
+    let d = run(&[], 11, 1e-3, [true; 5]);
+    assert!(d.nothing_missing, "{}", d.answer());
+    assert!(d.effects.is_empty());
+    assert!(
+        d.answer().starts_with("Nothing is missing"),
+        "{}",
+        d.answer()
+    );
+    let json = d.to_json();
+    assert_eq!(json["effects"].as_array().unwrap().len(), 0);
+    assert!(json["check"]["before"]["angle_deg"].as_f64().unwrap() > 95.0);
+}
+
+#[test]
+fn joint_friction_is_named() {
+    assert_named_and_fits("joint_friction", 21, 1e-3);
+}
+
+#[test]
+fn leakage_is_named_at_2_ms() {
+    assert_named_and_fits("leakage", 22, 2e-3);
+}
+
+#[test]
+fn sensor_lag_is_named() {
+    assert_named_and_fits("sensor_lag", 23, 1e-3);
+}
+
+#[test]
+fn muscle_hysteresis_is_named() {
+    assert_named_and_fits("muscle_hysteresis", 24, 1e-3);
+}
+
+#[test]
+fn stribeck_truth_is_named_joint_friction() {
+    assert_named_and_fits("joint_friction_stribeck", 25, 1e-3);
+}
+
+#[test]
+fn without_force_channels_the_lookalike_is_stated() {
+    let d = run(
+        &["joint_friction"],
+        26,
+        1e-3,
+        [true, true, true, false, false],
+    );
+    let ids = named(&d);
+    assert!(
+        ids == ["joint_friction"] || ids == ["muscle_hysteresis"],
+        "{ids:?}\n{}",
+        d.answer()
+    );
+    assert!(
+        d.answer().contains("cannot be told apart"),
+        "{}",
+        d.answer()
+    );
+    assert!(d.effects[0].evidence.contains("cannot be told apart"));
+}
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_host-sim"))
+}
+
+#[test]
+fn cli_end_to_end_writes_json_and_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let (train, check) = recordings(&["leakage"], 31, 1e-3, [true; 5]);
+    let tp = dir.path().join("train.csv");
+    let cp = dir.path().join("check.csv");
+    train.write(&tp).unwrap();
+    check.write(&cp).unwrap();
+    let out = dir.path().join("out.json");
+    let rep = dir.path().join("report");
+    let o = bin()
+        .args(["diagnose", "--plant"])
+        .arg(nominal_path())
+        .arg("--recording")
+        .arg(&tp)
+        .arg("--check")
+        .arg(&cp)
+        .arg("--json")
+        .arg(&out)
+        .arg("--report")
+        .arg(&rep)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(stdout.contains("The model leaves out leakage"), "{stdout}");
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    for key in ["located", "effects", "fit", "check"] {
+        assert!(v.get(key).is_some(), "missing {key}");
+    }
+    assert_eq!(v["effects"][0]["id"], "leakage");
+    assert!(
+        v["effects"][0]["params"]["sonic_conductance_m3_per_s_pa"]
+            .as_f64()
+            .unwrap()
+            > 0.0
+    );
+    assert!(v["located"][0]["windows_s"].as_array().is_some());
+    let html = std::fs::read_to_string(rep.join("index.html")).unwrap();
+    assert!(html.contains("<svg") && html.contains("Candidate scores"));
+    assert!(rep.join("diagnosis.json").exists());
+}
+
+#[test]
+fn bad_inputs_give_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    // A recording with a non-number on line 4 (2 comment lines, header, then data).
+    let bad = dir.path().join("bad.csv");
+    std::fs::write(
+        &bad,
+        "# sample_period_s = 0.001\n# x = y\nt_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg\n0,0,0,0,0,zero\n0.001,0,0,0,0,0\n",
+    )
+    .unwrap();
+    let out = dir.path().join("o.json");
+    let o = bin()
+        .args(["diagnose", "--plant"])
+        .arg(nominal_path())
+        .arg("--recording")
+        .arg(&bad)
+        .arg("--json")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("bad.csv:4") && err.contains("angle_deg"),
+        "{err}"
+    );
+    assert!(!out.exists());
+    // A plant file with a misspelt key.
+    let plant = dir.path().join("p.toml");
+    std::fs::write(&plant, nominal_text().replace("inertia_kgm2", "inertia_kg")).unwrap();
+    let o = bin()
+        .args(["diagnose", "--plant"])
+        .arg(&plant)
+        .arg("--recording")
+        .arg(&bad)
+        .arg("--json")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("p.toml") && err.contains("inertia_kg"),
+        "{err}"
+    );
+    // Too short a recording.
+    let short = dir.path().join("short.csv");
+    std::fs::write(
+        &short,
+        "t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg\n0,0,0,0,0,0\n0.001,0,0,0,0,0\n0.002,0,0,0,0,0\n",
+    )
+    .unwrap();
+    let o = bin()
+        .args(["diagnose", "--plant"])
+        .arg(nominal_path())
+        .arg("--recording")
+        .arg(&short)
+        .arg("--json")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("short.csv") && err.contains("at least"),
+        "{err}"
+    );
+}
