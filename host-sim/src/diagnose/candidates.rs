@@ -105,6 +105,7 @@ pub fn catalogue() -> Vec<Box<dyn Candidate>> {
         Box::new(SensorLagCandidate),
         Box::new(ValveDelayCandidate),
         Box::new(SupplyDropCandidate),
+        Box::new(SupplyReservoirCandidate),
         Box::new(PolytropicCandidate),
         Box::new(GravityCandidate),
         Box::new(InertiaCandidate),
@@ -489,9 +490,6 @@ impl Candidate for SupplyDropCandidate {
     fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
         vec![ParamSpec::new("resistance_pa_s_per_m3", 0.0, 1e9, 1e7)]
     }
-    fn fixed(&self) -> Vec<(&'static str, f64)> {
-        vec![("model_static", 1.0)]
-    }
     fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
         let (c, r2) = regress_pressure(ev, &ev.supply_signature);
         Screening {
@@ -516,6 +514,52 @@ impl Candidate for SupplyDropCandidate {
         format!(
             "the supply pressure sags while the inlet valves draw air (line resistance {:.3e} Pa s/m^3)",
             p[0]
+        )
+    }
+}
+
+/// The supply drop in its reservoir form (same effect id as [`SupplyDropCandidate`]: the
+/// selection keeps whichever form explains the held-out data better, never both).
+pub struct SupplyReservoirCandidate;
+
+impl Candidate for SupplyReservoirCandidate {
+    fn id(&self) -> &'static str {
+        "supply_drop"
+    }
+    fn label(&self) -> &'static str {
+        "supply pressure drop"
+    }
+    fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
+        vec![
+            ParamSpec::new("tank_volume_m3", 1e-6, 0.1, 1e-3),
+            ParamSpec::new("feed_conductance_m3_per_s_pa", 1e-11, 1e-6, 1e-8),
+        ]
+    }
+    fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
+        let (_, r2) = regress_pressure(ev, &ev.supply_signature);
+        Screening {
+            score: r2,
+            initial: self.params(s).iter().map(|p| p.scale).collect(),
+            note: format!(
+                "the chambers fill slower than nominal while the inlet valves draw air, as from a supply tank that drains and refills (R^2 {r2:.2})"
+            ),
+            scatter: pressure_scatter(ev, &ev.supply_signature, "supply-drop regressor [Pa/s per Pa s/m^3]"),
+        }
+    }
+    fn apply(&self, cfg: &mut PlantConfig, p: &[f64], _s: &Setup) {
+        cfg.effects.supply_drop = Some(SupplyDrop {
+            enabled: true,
+            model: SupplyDropModel::Reservoir,
+            resistance_pa_s_per_m3: None,
+            tank_volume_m3: Some(p[0].max(1e-9)),
+            feed_conductance_m3_per_s_pa: Some(p[1].max(1e-14)),
+        });
+    }
+    fn describe(&self, p: &[f64], _s: &Setup) -> String {
+        format!(
+            "the supply sags while the inlet valves draw air, as from a {:.2} L tank fed through a conductance of {:.3e} m^3/(s Pa)",
+            p[0] * 1e3,
+            p[1]
         )
     }
 }
