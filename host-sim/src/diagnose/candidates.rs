@@ -612,7 +612,7 @@ impl Candidate for GravityCandidate {
     }
     fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
         vec![
-            ParamSpec::new("mass_kg", 0.0, 100.0, 1.0),
+            ParamSpec::new("mass_kg", 0.0, 20.0, 1.0),
             ParamSpec::new(
                 "hanging_angle_rad",
                 -std::f64::consts::PI,
@@ -675,7 +675,7 @@ impl Candidate for InertiaCandidate {
         "inertia (load) mismatch"
     }
     fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
-        vec![ParamSpec::new("inertia_kgm2", 1e-4, 10.0, 0.01)]
+        vec![ParamSpec::new("inertia_kgm2", 1e-3, 10.0, 0.01)]
     }
     fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
         let (c, r2) = regress(&ev.torque_residual_nm, &[&ev.alpha_rad_s2]);

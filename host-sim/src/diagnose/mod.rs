@@ -76,7 +76,9 @@ impl Default for DiagnoseOptions {
             solver: SolverOptions {
                 rtol: 1e-5,
                 atol: 1e-6,
-                ..SolverOptions::default()
+                // A candidate parameter that makes the plant very stiff fails fast (and
+                // scores as a failed simulation) instead of stalling the search.
+                max_steps_per_segment: 20_000,
             },
         }
     }
@@ -110,6 +112,8 @@ pub struct CandidateScore {
     /// Change of the BIC-like score (negative: better).
     pub bic_delta: f64,
     pub accepted: bool,
+    /// Wall time of its refit.
+    pub seconds: f64,
 }
 
 /// Channels of one recording for the report.
@@ -283,6 +287,7 @@ pub fn diagnose(
                 .filter(|i| !current.iter().any(|p| p.candidate.id() == cands[*i].id()))
                 .collect();
             let results = par_map(&todo, opts.threads, |&i| {
+                let t0 = std::time::Instant::now();
                 let mut parts = current.clone();
                 parts.push(Part {
                     candidate: cands[i].as_ref(),
@@ -294,12 +299,12 @@ pub fn diagnose(
                     None => f64::INFINITY,
                 };
                 step(&format!("round {round}: {}", cands[i].id()));
-                (i, fitted, jh)
+                (i, fitted, jh, t0.elapsed().as_secs_f64())
             });
             let excess = (j_cur - noise_cost).max(1e-12);
             let k_cur: usize = current.iter().map(|p| p.params.len()).sum();
             let mut best: Option<(usize, Vec<Part>, f64, f64)> = None;
-            for (i, fitted, jh) in results {
+            for (i, fitted, jh, seconds) in results {
                 let explained = ((j_cur - jh) / excess).clamp(-1.0, 1.0);
                 let k_new = fitted.iter().map(|p| p.params.len()).sum::<usize>();
                 let bic_delta = bic(jh, k_new) - bic(j_cur, k_cur);
@@ -325,6 +330,7 @@ pub fn diagnose(
                     explained,
                     bic_delta,
                     accepted: false,
+                    seconds,
                 });
                 if ok && best.as_ref().is_none_or(|b| jh < b.2) {
                     best = Some((i, fitted, jh, explained));

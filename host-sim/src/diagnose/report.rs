@@ -235,7 +235,7 @@ pub fn write_report(
             h.push('\n');
         }
     }
-    h += "<h2>Candidate scores</h2>\n<p>Each candidate refitted by output error on the first 70 % of TRAIN and scored on the last 30 %: held-out cost = sum over channels of mean squared error / variance; explained = share of the held-out error beyond noise it removes; BIC delta = change of N ln(cost) + k ln(N) (negative: better).</p>\n<table><tr><th>candidate</th><th>round</th><th>screening R^2</th><th>held-out cost</th><th>explained</th><th>BIC delta</th><th>accepted</th><th>parameters</th></tr>\n";
+    h += "<h2>Candidate scores</h2>\n<p>Each candidate refitted by output error on the first 70 % of TRAIN and scored on the last 30 %: held-out cost = sum over channels of mean squared error / variance; explained = share of the held-out error beyond noise it removes; BIC delta = change of N ln(cost) + k ln(N) (negative: better).</p>\n<table><tr><th>candidate</th><th>round</th><th>screening R^2</th><th>held-out cost</th><th>explained</th><th>BIC delta</th><th>accepted</th><th>refit s</th><th>parameters</th></tr>\n";
     for s in &d.candidates {
         let params: Vec<String> = s
             .params
@@ -244,10 +244,11 @@ pub fn write_report(
             .collect();
         let _ = writeln!(
             h,
-            "<tr{}><td>{}</td><td>{}</td><td>{:.3}</td><td>{:.3e}</td><td>{:.1} %</td><td>{:.0}</td><td>{}</td><td style=\"text-align:left\">{}</td></tr>",
+            "<tr{}><td>{}</td><td>{}</td><td>{:.3}</td><td>{:.3e}</td><td>{:.1} %</td><td>{:.0}</td><td>{}</td><td>{:.2}</td><td style=\"text-align:left\">{}</td></tr>",
             if s.accepted { " class=\"ok\"" } else { "" },
             s.id, s.round, s.screening, s.heldout_cost, 100.0 * s.explained, s.bic_delta,
             if s.accepted { "yes" } else { "no" },
+            s.seconds,
             esc(&params.join(", "))
         );
     }
