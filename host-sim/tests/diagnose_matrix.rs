@@ -37,7 +37,14 @@ struct Outcome {
     line: String,
 }
 
-fn run_case(text: &str, nominal: &PlantConfig, truths: &[&str], seed: u64, dt_s: f64) -> Outcome {
+fn run_case(
+    text: &str,
+    nominal: &PlantConfig,
+    truths: &[&str],
+    seed: u64,
+    dt_s: f64,
+    channels: [bool; 5],
+) -> Outcome {
     let cfg = plant_with(text, truths, dt_s).unwrap();
     let label = if truths.is_empty() {
         "none".to_string()
@@ -50,7 +57,7 @@ fn run_case(text: &str, nominal: &PlantConfig, truths: &[&str], seed: u64, dt_s:
         dt_s,
         seed,
         noise: true,
-        channels: [true; 5],
+        channels,
     };
     let train = generate(&cfg, &spec(Excitation::Pulses, 10.0, seed), &label).unwrap();
     let check = generate(
@@ -87,7 +94,23 @@ fn run_case(text: &str, nominal: &PlantConfig, truths: &[&str], seed: u64, dt_s:
         .values()
         .copied()
         .fold(f64::INFINITY, f64::min);
-    let pass = want == got && min_check >= 95.0;
+    // Without force channels joint friction and muscle hysteresis cannot be told apart
+    // (the diagnosis says so): either name counts.
+    let alike = |v: &[String]| -> Vec<String> {
+        let mut v: Vec<String> = v
+            .iter()
+            .map(|id| {
+                if !channels[3] && id == "muscle_hysteresis" {
+                    "joint_friction".to_string()
+                } else {
+                    id.clone()
+                }
+            })
+            .collect();
+        v.sort();
+        v
+    };
+    let pass = alike(&want) == alike(&got) && min_check >= 95.0;
     Outcome {
         pass,
         line: format!(
@@ -121,7 +144,14 @@ fn diagnosis_matrix() {
         for &seed in seeds {
             for (i, truths) in cases.iter().enumerate() {
                 let dt = [1e-3, 2e-3, 3e-3][(i + seed as usize) % 3];
-                let o = run_case(&text, &nominal, truths, seed * 1000 + i as u64, dt);
+                let o = run_case(
+                    &text,
+                    &nominal,
+                    truths,
+                    seed * 1000 + i as u64,
+                    dt,
+                    [true; 5],
+                );
                 println!("{}", o.line);
                 total += 1;
                 if o.pass {
@@ -138,4 +168,38 @@ fn diagnosis_matrix() {
             "{name}: only {pass}/{total} cases pass"
         );
     }
+}
+
+/// The same cases on recordings without force channels (angle and pressures only), held-out
+/// seeds only: `cargo test --release -p host-sim --test diagnose_matrix -- --ignored --nocapture`.
+#[test]
+#[ignore = "release build, a few minutes: see README"]
+fn diagnosis_matrix_without_force_channels() {
+    let path =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant/reference-1dof.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let nominal = PlantConfig::load(&path).unwrap();
+    let (mut pass, mut total) = (0, 0);
+    println!("\nno force channels, seed 7003\n| concealed | seed | dt ms | named | check min fit before % | check min fit after % | s | result |\n|---|---|---|---|---|---|---|---|");
+    for (i, truths) in cases().iter().enumerate() {
+        let dt = [1e-3, 2e-3, 3e-3][i % 3];
+        let o = run_case(
+            &text,
+            &nominal,
+            truths,
+            7_003_000 + i as u64,
+            dt,
+            [true, true, true, false, false],
+        );
+        println!("{}", o.line);
+        total += 1;
+        if o.pass {
+            pass += 1;
+        }
+    }
+    println!("no force channels: {pass}/{total} cases pass");
+    assert!(
+        pass as f64 >= 0.8 * total as f64,
+        "only {pass}/{total} cases pass"
+    );
 }
