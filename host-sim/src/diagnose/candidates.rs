@@ -841,6 +841,7 @@ impl Candidate for SensorOffsetCandidate {
 
 /// Regression of both chambers' pressure-rate residual on one regressor per chamber;
 /// returns (coefficient, R^2).
+#[allow(clippy::needless_range_loop)]
 fn regress_pressure(ev: &Evidence, reg: &[Vec<f64>; 2]) -> (f64, f64) {
     let mut y = Vec::new();
     let mut x = Vec::new();

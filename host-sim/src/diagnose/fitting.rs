@@ -58,10 +58,6 @@ impl<'a> Problem<'a> {
         })
     }
 
-    pub fn len(&self) -> usize {
-        self.inputs.len()
-    }
-
     /// The plant configuration with `parts` switched on.
     pub fn config(&self, parts: &[Part]) -> PlantConfig {
         let mut cfg = self.nominal.clone();

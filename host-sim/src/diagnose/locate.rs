@@ -47,6 +47,7 @@ fn moving_rms(r: &[f64], h: usize) -> Vec<f64> {
 }
 
 /// Per-sample operating-regime flags (name, flags).
+#[allow(clippy::needless_range_loop)]
 fn regimes(
     rec: &Recording,
     angle_rad: &[f64],
@@ -128,6 +129,7 @@ fn regimes(
     ]
 }
 
+#[allow(clippy::needless_range_loop)]
 fn spread_flags(at: &[bool], h: usize) -> Vec<bool> {
     let n = at.len();
     let mut out = vec![false; n];
@@ -145,6 +147,7 @@ fn spread_flags(at: &[bool], h: usize) -> Vec<bool> {
     out
 }
 
+#[allow(clippy::needless_range_loop)]
 fn trailing_flags(at: &[bool], h: usize) -> Vec<bool> {
     let n = at.len();
     let mut out = vec![false; n];

@@ -219,7 +219,7 @@ pub fn generate(cfg: &PlantConfig, spec: &SynthSpec, label: &str) -> Result<Reco
     let plant = Plant::from_config(cfg);
     let sim = simulate(&plant, &inputs, spec.dt_s, &SolverOptions::default())?;
     let meas = plant.measure_series(&sim.states, spec.dt_s);
-    let mut rng = StdRng::seed_from_u64(spec.seed ^ 0x5eed_0f_0015e);
+    let mut rng = StdRng::seed_from_u64(spec.seed ^ 0x05ee_d0f0_015e);
     let mut rec = Recording {
         metadata: vec![
             ("sample_period_s".into(), format!("{}", spec.dt_s)),
