@@ -349,6 +349,10 @@ impl Candidate for SensorLagCandidate {
             .filter(|(_, c)| ev.lag_samples[c.index()] > 0)
             .map(|(_, c)| c.name())
             .collect();
+        let most = groups
+            .iter()
+            .max_by(|a, b| ev.lag_gain[a.1.index()].total_cmp(&ev.lag_gain[b.1.index()]))
+            .map(|g| g.1);
         Screening {
             score,
             initial: clamp_to(&self.params(s), initial),
@@ -360,7 +364,7 @@ impl Candidate for SensorLagCandidate {
                     lagging.join(", ")
                 )
             },
-            scatter: None,
+            scatter: most.and_then(|c| ev.lag_scatter(c)),
         }
     }
     fn apply(&self, cfg: &mut PlantConfig, p: &[f64], s: &Setup) {
@@ -448,7 +452,7 @@ impl Candidate for ValveDelayCandidate {
             } else {
                 "not every channel lags: no common dead time in front of the plant".into()
             },
-            scatter: None,
+            scatter: ev.lag_scatter(ch),
         }
     }
     fn apply(&self, cfg: &mut PlantConfig, p: &[f64], s: &Setup) {

@@ -96,6 +96,9 @@ pub struct Evidence {
     pub force_residual_n: Option<[Option<Vec<f64>>; 2]>,
     /// Measured - nominal simulation, per channel present.
     pub residual: [Option<Vec<f64>>; 5],
+    /// d/dt of the nominal simulation of each measured channel (a lag tau leaves a
+    /// residual of about -tau times it).
+    pub nominal_rate: [Option<Vec<f64>>; 5],
     /// Standard deviation of each measured channel (1 when absent).
     pub spread: [f64; 5],
     /// Shift (samples) by which the nominal simulation best matches each channel.
@@ -110,6 +113,16 @@ pub struct Evidence {
 pub const MAX_LAG_S: f64 = 0.05;
 
 impl Evidence {
+    /// Residual of channel `c` against its nominal rate (the lag signature).
+    pub fn lag_scatter(&self, c: Channel) -> Option<Scatter> {
+        Some(Scatter::new(
+            &format!("nominal d({})/dt [{} per s]", c.name(), c.name()),
+            &format!("{} residual, measured - nominal", c.name()),
+            self.nominal_rate[c.index()].as_ref()?,
+            self.residual[c.index()].as_ref()?,
+        ))
+    }
+
     pub fn build(
         cfg: &PlantConfig,
         rec: &Recording,
@@ -204,6 +217,7 @@ impl Evidence {
                 .map(|d| d.iter().zip(&nominal_dp[i]).map(|(a, b)| a - b).collect())
         });
         let mut residual: [Option<Vec<f64>>; 5] = Default::default();
+        let mut nominal_rate: [Option<Vec<f64>>; 5] = Default::default();
         let mut spread = [1.0; 5];
         let mut lag_samples = [0usize; 5];
         let mut lag_gain = [0.0; 5];
@@ -212,6 +226,7 @@ impl Evidence {
             if let Some(y) = meas(c) {
                 let yn = nom(c);
                 residual[c.index()] = Some(y.iter().zip(&yn).map(|(a, b)| a - b).collect());
+                nominal_rate[c.index()] = Some(diff.derivative(&yn, dt));
                 let mean = y.iter().sum::<f64>() / n as f64;
                 let sd = (y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n as f64).sqrt();
                 spread[c.index()] = if sd > 0.0 { sd } else { 1.0 };
@@ -250,6 +265,7 @@ impl Evidence {
                 [meas(Channel::F1N).map(|_| a), meas(Channel::F2N).map(|_| b)]
             }),
             residual,
+            nominal_rate,
             spread,
             lag_samples,
             lag_gain,
