@@ -281,3 +281,33 @@ fn bad_inputs_give_clear_errors() {
         "{err}"
     );
 }
+
+#[test]
+fn independent_loaded_fixture_is_an_inertia_mismatch() {
+    // shared/conformance/pulses_loaded.csv comes from an independent implementation of the
+    // plant with the 3.34 kg load (J = 0.155 kg m^2); diagnosed against the unloaded
+    // nominal file, the answer must be the inertia, refitted to the loaded value.
+    let rec = Recording::read(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("../../shared/conformance/pulses_loaded.csv"),
+    )
+    .unwrap();
+    let d = diagnose(
+        &nominal(),
+        &rec,
+        None,
+        &DiagnoseOptions::default(),
+        &|_, _, _| {},
+    )
+    .unwrap();
+    assert_eq!(named(&d), vec!["inertia".to_string()], "{}", d.answer());
+    let j = d.effects[0]
+        .params
+        .iter()
+        .find(|(k, _)| k == "inertia_kgm2")
+        .unwrap()
+        .1;
+    assert!((j - 0.155).abs() < 0.155 * 0.02, "J = {j}");
+    assert!(d.fit_after.values().all(|f| *f > 99.0), "{:?}", d.fit_after);
+    assert!(d.to_json().get("check").is_none());
+}
