@@ -128,7 +128,7 @@ impl Arm3Recording {
         let mut rdr = csv::ReaderBuilder::new()
             .has_headers(true)
             .trim(csv::Trim::All)
-            .from_reader(text[offset..].as_bytes());
+            .from_reader(&text.as_bytes()[offset..]);
         let header_line = meta_lines + 1;
         let headers = rdr
             .headers()
@@ -261,12 +261,12 @@ impl Arm3Recording {
                 "time does not increase (last time <= first time)".into(),
             ));
         }
-        for k in 1..n {
+        for (k, line) in lines.iter().enumerate().skip(1) {
             let step = rec.t_s[k] - rec.t_s[k - 1];
             let drift = rec.t_s[k] - (rec.t_s[0] + k as f64 * dt);
             if (step - dt).abs() > 0.01 * dt || drift.abs() > 0.01 * dt {
                 return Err(field_err(
-                    lines[k],
+                    *line,
                     "t_s",
                     format!(
                         "non-uniform time: {} after {} (sample period {dt} s)",
@@ -514,6 +514,14 @@ pub fn plot_arm3(
     Ok(())
 }
 
+/// A channel, its colour, its simulated values and the reference values if any.
+type Series<'a> = (
+    Channel,
+    plotters::style::RGBColor,
+    &'a [f64],
+    Option<&'a [f64]>,
+);
+
 fn draw_arm3<DB: plotters::prelude::DrawingBackend>(
     root: &plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
     reference: Option<&Arm3Recording>,
@@ -533,7 +541,7 @@ fn draw_arm3<DB: plotters::prelude::DrawingBackend>(
         .enumerate()
         {
             let panel = &panels[2 * j + col];
-            let series: Vec<(Channel, RGBColor, &[f64], Option<&[f64]>)> = chans
+            let series: Vec<Series> = chans
                 .iter()
                 .filter_map(|(c, color)| {
                     model

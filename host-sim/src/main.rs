@@ -115,6 +115,13 @@ fn main() -> ExitCode {
 fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
     let plant_path = &a.plant;
     if let Some(s) = &a.scenario {
+        if host_sim::plant::arm3::is_arm3_file(plant_path)? {
+            bail!(
+                "{}: a 3-DOF arm plant (kind = \"arm3\"); --scenario runs the 1-DOF plant with \
+                 the firmware, use --inputs with a 3-joint recording",
+                plant_path.display()
+            );
+        }
         return run_closed_loop(plant_path, s, &a.out, a.plot.as_deref());
     }
     let inputs_path = a.inputs.as_ref().expect("clap: --inputs required");

@@ -394,20 +394,20 @@ fn pressure_step_scenario_settles_to_the_static_equilibria() {
     for (k_end, m) in [(34_999usize, 0usize), (89_999, 1)] {
         let x = &states[k_end];
         let mut p = arm.initial.p_abs_pa;
-        for j in 0..3 {
-            p[j][m] -= sc.deflation_kpa[j] * 1e3;
+        for (j, pj) in p.iter_mut().enumerate() {
+            pj[m] -= sc.deflation_kpa[j] * 1e3;
             // The regulated pressures reached their references.
-            assert!((x.p_abs_pa[j][m] - p[j][m]).abs() < 2e3, "{x:?}");
+            assert!((x.p_abs_pa[j][m] - pj[m]).abs() < 2e3, "{x:?}");
         }
         let q = arm.static_equilibrium(&p, x.angles_rad).unwrap();
-        for j in 0..3 {
-            let err_deg = (x.angles_rad[j] - q[j]).to_degrees();
+        for (j, qj) in q.iter().enumerate() {
+            let err_deg = (x.angles_rad[j] - qj).to_degrees();
             println!(
                 "muscle {} deflated, joint {}: {:.3} deg, static {:.3} deg",
                 m + 1,
                 j + 1,
                 x.angles_rad[j].to_degrees(),
-                q[j].to_degrees()
+                qj.to_degrees()
             );
             assert!(
                 err_deg.abs() < 0.5,
