@@ -111,9 +111,11 @@ impl Arm3Recording {
         let mut metadata = Vec::new();
         let mut meta_lines: u64 = 0;
         let mut offset = 0;
+        let mut meta_line_of = Vec::new();
         for raw in text.split_inclusive('\n') {
             let trimmed = raw.trim();
             if let Some(c) = trimmed.strip_prefix('#') {
+                meta_line_of.push(meta_lines + 1);
                 let c = c.trim();
                 match c.split_once('=') {
                     Some((k, v)) => metadata.push((k.trim().to_owned(), v.trim().to_owned())),
@@ -274,6 +276,22 @@ impl Arm3Recording {
                         rec.t_s[k - 1]
                     ),
                 ));
+            }
+        }
+        for (i, (k, v)) in rec.metadata.iter().enumerate() {
+            if k == "sample_period_s" {
+                let line = meta_line_of[i];
+                let declared: f64 = v.parse().map_err(|_| {
+                    field_err(line, "sample_period_s", format!("not a number: {v:?}"))
+                })?;
+                let d = (declared - dt).abs();
+                if d.is_nan() || d > 0.01 * dt {
+                    return Err(field_err(
+                        line,
+                        "sample_period_s",
+                        format!("declares {declared} s but the time column steps by {dt} s"),
+                    ));
+                }
             }
         }
         Ok(rec)

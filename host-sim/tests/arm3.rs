@@ -519,3 +519,108 @@ fn one_dof_special_case_matches_the_one_dof_plant_and_the_conformance_fixture() 
         assert!(fit >= 99.5, "{}: {fit}", c.name());
     }
 }
+
+#[test]
+fn one_dof_special_case_with_friction_matches_the_one_dof_joint_friction_effect() {
+    // Eq. 7 with f_e = f_g = 0 is the 1-DOF [effects.joint_friction] without a Stribeck dip
+    // (breakaway = Coulomb), both with sgn(w) ~ tanh(w / w_eps).
+    let (f_c, f_d, w_eps) = (0.15, 0.004, 0.01);
+    let mut cfg = PlantConfig::load(shared().join("plant/reference-1dof.toml")).unwrap();
+    cfg.effects.joint_friction = Some(host_sim::plant::effects::JointFriction {
+        enabled: true,
+        coulomb_nm: f_c,
+        breakaway_nm: f_c,
+        stribeck_velocity_rad_s: 1.0,
+        viscous_nm_s_per_rad: f_d,
+        smoothing_velocity_rad_s: w_eps,
+    });
+    let plant = Plant::from_config(&cfg);
+    let text = one_dof_arm_toml(&cfg).replacen(
+        "coulomb_nm = 0.0\nviscous_nm_s_per_rad = 0.0",
+        &format!("coulomb_nm = {f_c}\nviscous_nm_s_per_rad = {f_d}"),
+        1,
+    );
+    let arm =
+        Arm3::from_config(&Arm3Config::from_toml_str(&text, "friction-arm.toml").unwrap()).unwrap();
+    assert_eq!(arm.friction[0].f_c, f_c);
+    assert_eq!(arm.friction[1].f_c, 0.0);
+    let fixture = Recording::read(shared().join("conformance/pulses_nominal.csv")).unwrap();
+    let n = 5000; // 5 s
+    let dt = fixture.sample_period_s();
+    let opts = SolverOptions {
+        rtol: 1e-9,
+        atol: 1e-9,
+        ..SolverOptions::default()
+    };
+    let one = simulate(&plant, &fixture.inputs[..n], dt, &opts).unwrap();
+    let inputs: Vec<Arm3Inputs> = fixture.inputs[..n]
+        .iter()
+        .map(|u| [*u, ValveInputs::CLOSED, ValveInputs::CLOSED])
+        .collect();
+    let three = simulate_arm3(&arm, &inputs, dt, &opts, |_| {}).unwrap();
+    let mut max_angle_diff_deg: f64 = 0.0;
+    let mut max_effect_deg: f64 = 0.0;
+    let frictionless = simulate(
+        &Plant::from_config(
+            &PlantConfig::load(shared().join("plant/reference-1dof.toml")).unwrap(),
+        ),
+        &fixture.inputs[..n],
+        dt,
+        &opts,
+    )
+    .unwrap();
+    for k in 0..n {
+        let a = three.states[k].angles_rad[0].to_degrees();
+        let b = one.states[k].angle_rad.to_degrees();
+        max_angle_diff_deg = max_angle_diff_deg.max((a - b).abs());
+        max_effect_deg =
+            max_effect_deg.max((b - frictionless.states[k].angle_rad.to_degrees()).abs());
+    }
+    println!("friction changes the angle by up to {max_effect_deg} deg; arm vs 1-DOF: {max_angle_diff_deg} deg");
+    assert!(max_effect_deg > 0.1, "{max_effect_deg}");
+    assert!(max_angle_diff_deg < 1e-4, "{max_angle_diff_deg}");
+}
+
+#[test]
+fn muscle_driven_arm_obeys_the_power_balance() {
+    // d/dt (T + V) = (tau_muscle - F) . q' along any motion of the full plant: the muscle
+    // torques and the friction enter through M^-1 with the right signs, C does no work.
+    let arm = seed_arm();
+    let sc = PressureStepScenario {
+        switch_times_s: [0.2, 1.2, 1.4, 2.4],
+        duration_s: 3.0,
+        dt_s: 2e-4,
+        ..PressureStepScenario::seed001()
+    };
+    let opts = SolverOptions {
+        rtol: 1e-10,
+        atol: 1e-10,
+        ..SolverOptions::default()
+    };
+    let (_, states) = sc.run(&arm, &opts, |_| {}).unwrap();
+    let energy = |x: &Arm3State| {
+        arm.links
+            .kinetic_energy_j(&x.angles_rad, &x.velocities_rad_s)
+            + arm.links.potential_energy_j(&x.angles_rad)
+    };
+    let power = |x: &Arm3State| {
+        let tau = arm.muscle_torques_nm(x);
+        let f = arm.friction_torques_nm(&x.velocities_rad_s);
+        (0..3)
+            .map(|i| (tau[i] - f[i]) * x.velocities_rad_s[i])
+            .sum::<f64>()
+    };
+    let e0 = energy(&states[0]);
+    let mut work = 0.0;
+    let mut max_err: f64 = 0.0;
+    let mut max_change: f64 = 0.0;
+    for w in states.windows(2) {
+        work += 0.5 * (power(&w[0]) + power(&w[1])) * sc.dt_s;
+        let change = energy(&w[1]) - e0;
+        max_change = max_change.max(change.abs());
+        max_err = max_err.max((change - work).abs());
+    }
+    println!("max |E - E0| = {max_change} J, max |E - E0 - work| = {max_err} J");
+    assert!(max_change > 1.0, "{max_change}");
+    assert!(max_err < 1e-5 * max_change, "{max_err} J vs {max_change} J");
+}

@@ -114,6 +114,17 @@ fn recording_round_trips_and_bad_files_name_file_line_field() {
         .to_string();
     assert!(e.contains(&format!("bad.csv:{}", header_idx + 4)), "{e}");
     assert!(e.contains("u_in1_j2"), "{e}");
+    // A declared sample period that the time column contradicts.
+    let e = Arm3Recording::parse(
+        &text.replacen("sample_period_s = 0.001", "sample_period_s = 0.002", 1),
+        "bad.csv",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("bad.csv:2") && e.contains("sample_period_s"),
+        "{e}"
+    );
     // A valve opening out of range.
     fields[5] = "1.5".into();
     lines[header_idx + 3] = fields.join(",");
