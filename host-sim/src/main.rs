@@ -203,7 +203,7 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
 }
 
 /// `simulate` on a 3-DOF arm plant file (`kind = "arm3"`): replays a 3-joint recording
-/// (columns with `_j1`.._j3` suffixes, `host_sim::arm3_io`).
+/// (columns with `_j1`..`_j3` suffixes, `host_sim::arm3_io`).
 fn run_simulate_arm3(a: &SimulateArgs, inputs_path: &Path) -> Result<ExitCode> {
     use host_sim::arm3_io::{fits, plot_arm3, Arm3Recording};
     use host_sim::plant::arm3::{simulate_arm3, Arm3};

@@ -62,6 +62,20 @@ fn plant_kind_is_recognised() {
     let one_dof =
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant/reference-1dof.toml");
     assert!(!is_arm3_file(one_dof).unwrap());
+    // A misspelt kind is routed to the arm loader, which names it.
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("arm.toml");
+    std::fs::write(
+        &bad,
+        seed_text().replace("kind = \"arm3\"", "kind = \"arm_3\""),
+    )
+    .unwrap();
+    assert!(is_arm3_file(&bad).unwrap());
+    let e = Arm3::load(&bad).unwrap_err().to_string();
+    assert!(
+        e.contains("arm.toml") && e.contains("kind") && e.contains("arm_3"),
+        "{e}"
+    );
 }
 
 fn short_run() -> (Arm3, Arm3Recording) {

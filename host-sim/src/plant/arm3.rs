@@ -389,8 +389,9 @@ enum Bound {
     NonNegative,
 }
 
-/// Whether a plant file is a 3-DOF arm file (top-level `kind = "arm3"`); the 1-DOF files
-/// have no `kind`. Errors only if the file cannot be read or is not TOML.
+/// Whether a plant file is for [`Arm3Config`]: it has a top-level `kind` (the 1-DOF files
+/// have none; a `kind` other than `"arm3"` is then reported by [`Arm3Config::load`]). Errors
+/// only if the file cannot be read or is not TOML.
 pub fn is_arm3_file(path: impl AsRef<Path>) -> Result<bool, ConfigError> {
     let path = path.as_ref();
     let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
@@ -401,7 +402,7 @@ pub fn is_arm3_file(path: impl AsRef<Path>) -> Result<bool, ConfigError> {
         path: path.to_owned(),
         message: e.to_string().trim_end().replace('\n', "\n  "),
     })?;
-    Ok(v.get("kind").and_then(|k| k.as_str()) == Some(KIND))
+    Ok(v.contains_key("kind"))
 }
 
 // ---------------------------------------------------------------------------------------
