@@ -22,7 +22,8 @@
 //!     lifts the arm.
 //!   - F (eq. 7) per joint: f_c sgn(w) + f_d w + f_e w^2 sgn(w) + f_g w^3, with sgn(w)
 //!     regularised as tanh(w / w_eps) (the right-hand side must stay continuous for the
-//!     explicit integrator) and w^2 sgn(w) = w |w| exactly.
+//!     explicit integrator) and w^2 sgn(w) = w |w| exactly. So there is no true stiction:
+//!     a joint loaded below f_c creeps at about w_eps atanh(tau / f_c) instead of sticking.
 //! - Muscles, valves and pressures: the 1-DOF code of `shared/plant/PLANT.md` per joint
 //!   ([`Muscle`] Tondu force + pressure-proportional damper + volume polynomial,
 //!   [`Iso6358Valve`], [`pressure::pressure_rate_pa_s`] Boyle-Mariotte). Muscle 1 of joint i
