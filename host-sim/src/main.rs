@@ -404,7 +404,9 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
         )
         .map_err(|e| anyhow::anyhow!("report {}: {e}", dir.display()))?;
     }
-    print!("{}", d.answer());
-    println!("wrote {}", a.json.display());
+    // A closed stdout (`| head`) is not an error of the diagnosis: the JSON is written.
+    use std::io::Write as _;
+    let mut out = std::io::stdout().lock();
+    let _ = write!(out, "{}wrote {}\n", d.answer(), a.json.display());
     Ok(ExitCode::SUCCESS)
 }
