@@ -1,6 +1,6 @@
 //! The generated diagnosis matrix of issue 6 (release build, a few minutes):
 //!
-//! `cargo test --release -p host-sim --test diagnose_matrix -- --ignored --nocapture`
+//! `cargo test --release -p host-sim --test diagnose_matrix -- --ignored --nocapture --test-threads=1`
 //!
 //! For every concealed effect (each catalogue id, plus a Stribeck friction and a supply
 //! reservoir whose true forms differ from the candidates'), null cases and pairs: TRAIN
@@ -171,7 +171,7 @@ fn diagnosis_matrix() {
 }
 
 /// The same cases on recordings without force channels (angle and pressures only), held-out
-/// seeds only: `cargo test --release -p host-sim --test diagnose_matrix -- --ignored --nocapture`.
+/// seeds only: `cargo test --release -p host-sim --test diagnose_matrix -- --ignored --nocapture --test-threads=1`.
 #[test]
 #[ignore = "release build, a few minutes: see README"]
 fn diagnosis_matrix_without_force_channels() {
