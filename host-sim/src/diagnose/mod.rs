@@ -61,6 +61,9 @@ pub struct DiagnoseOptions {
     pub null_ratio: f64,
     /// An effect must remove at least this share of the held-out error beyond noise.
     pub min_explained: f64,
+    /// ... and lower the held-out cost by at least this many times the noise's cost (an
+    /// improvement clearly beyond noise, also when little error is left).
+    pub min_gain_noise: f64,
     pub solver: SolverOptions,
 }
 
@@ -73,6 +76,7 @@ impl Default for DiagnoseOptions {
             threads: 2,
             null_ratio: 1.5,
             min_explained: 0.3,
+            min_gain_noise: 0.5,
             solver: SolverOptions {
                 rtol: 1e-5,
                 atol: 1e-6,
@@ -311,6 +315,7 @@ pub fn diagnose(
                 let ok = jh.is_finite()
                     && explained >= opts.min_explained
                     && jh < j_cur * 0.98
+                    && j_cur - jh >= opts.min_gain_noise * noise_cost
                     && bic_delta < 0.0;
                 if round == 1 {
                     round1_explained.insert(cands[i].id(), explained);
