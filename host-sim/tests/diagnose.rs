@@ -311,3 +311,14 @@ fn independent_loaded_fixture_is_an_inertia_mismatch() {
     assert!(d.fit_after.values().all(|f| *f > 99.0), "{:?}", d.fit_after);
     assert!(d.to_json().get("check").is_none());
 }
+
+#[test]
+fn valve_delay_is_told_from_sensor_lag() {
+    assert_named_and_fits("valve_delay", 27, 3e-3);
+    let d = run(&["valve_delay"], 27, 3e-3, [true; 5]);
+    let a = d.answer();
+    assert!(a.contains("Sensor lag vs valve delay"), "{a}");
+    // 8 ms rounded to whole 3 ms samples: 9 ms.
+    let delay = d.effects[0].params[0].1;
+    assert!((delay - 9e-3).abs() < 1e-9, "delay {delay}");
+}
