@@ -439,3 +439,23 @@ fn identify_plant_rejects_unknown_keys_and_bad_bounds_without_writing() {
         assert!(!out.exists());
     }
 }
+
+#[test]
+fn identify_torque_warns_when_the_activation_is_not_symmetric() {
+    // The pulses fixture drives the muscles independently: (p1 + p2) / 2 is far from constant,
+    // which eq. 11 assumes; the command still fits but says so.
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("torque.toml");
+    let s = ok(&host_sim(&[
+        &"identify",
+        &"torque",
+        &"--recording",
+        &shared().join("conformance/pulses_nominal.csv"),
+        &"--plant",
+        &plant(),
+        &"--out",
+        &out,
+    ]));
+    assert!(s.contains("warning: (p1 + p2) / 2 spreads"), "{s}");
+    assert!(out.exists());
+}

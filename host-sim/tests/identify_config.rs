@@ -57,7 +57,16 @@ fn checked_in_force_law_is_what_identify_gives_from_the_generated_sweep() {
     let data = dir.path().join("force_sweep.csv");
     let out = dir.path().join("force_law.toml");
     run(&[&"sweep", &"force", &"--plant", &plant(), &"--out", &data]);
-    run(&[&"identify", &"force", &"--data", &data, &"--out", &out]);
+    run(&[
+        &"identify",
+        &"force",
+        &"--data",
+        &data,
+        &"--p-gauge-max-kpa",
+        &"600",
+        &"--out",
+        &out,
+    ]);
     let fresh = table(&out, "force_law");
     let checked_in = table(&root().join("config/force_law.toml"), "force_law");
     assert_eq!(

@@ -142,6 +142,10 @@ pub struct IdentifyForceArgs {
     /// Output TOML (the format of config/force_law.toml).
     #[arg(long, value_name = "force.toml")]
     pub out: PathBuf,
+    /// Upper end of the pressure domain written for the firmware [kPa] [default: the largest
+    /// pressure in the data, which sensor noise pushes above the sweep's nominal maximum].
+    #[arg(long)]
+    pub p_gauge_max_kpa: Option<f64>,
 }
 
 #[derive(Args, Debug)]
@@ -333,7 +337,13 @@ fn sweep_torque(a: &SweepTorqueArgs) -> Result<String> {
 
 fn identify_force(a: &IdentifyForceArgs) -> Result<String> {
     let data = force::read_force_csv(&a.data)?;
-    let id = force::identify(&data)?;
+    let mut id = force::identify(&data)?;
+    if let Some(p) = a.p_gauge_max_kpa {
+        if !(p > 0.0 && p.is_finite()) {
+            bail!("--p-gauge-max-kpa must be > 0");
+        }
+        id.domain.0 = p * 1e3;
+    }
     let toml = with_provenance(
         &id.to_toml(&a.data.display().to_string()),
         &a.data,
@@ -393,8 +403,28 @@ fn identify_torque(a: &IdentifyTorqueArgs) -> Result<String> {
         }
         samples = torque::constant_velocity_samples(&samples, dt, hw, max);
     }
-    let (model, q) = torque::fit(&samples, plant.joint.sprocket_radius_m)
+    let (mut model, q) = torque::fit(&samples, plant.joint.sprocket_radius_m)
         .with_context(|| format!("{file}: torque model fit"))?;
+    // p0 is the controller's mid pressure: the data mean to 0.1 kPa (the mean of noisy
+    // readings is not meaningful below that).
+    model.p0_gauge_pa = (model.p0_gauge_pa / 100.0).round() * 100.0;
+    // Eq. 11 assumes the symmetric activation p1 + p2 = 2 p0: report how far the data is from it.
+    let p0_sd_pa = (samples
+        .iter()
+        .map(|s| (0.5 * (s.p1_gauge_pa + s.p2_gauge_pa) - model.p0_gauge_pa).powi(2))
+        .sum::<f64>()
+        / samples.len() as f64)
+        .sqrt();
+    let symmetric_note = if p0_sd_pa > 0.05 * model.p0_gauge_pa.abs().max(1e3) {
+        format!(
+            "warning: (p1 + p2) / 2 spreads by {:.1} kPa (sd) around p0 = {:.1} kPa; eq. 11 assumes the \
+             symmetric activation p1 = p0 - dp, p2 = p0 + dp (seed 003), so its fit is poor on such data\n",
+            p0_sd_pa / 1e3,
+            model.p0_gauge_pa / 1e3
+        )
+    } else {
+        String::new()
+    };
     let supply_gauge_pa = plant.p_supply_abs_pa - plant.p_atm_pa;
     let dp_max_pa = match a.dp_max_kpa {
         Some(v) => {
@@ -435,7 +465,7 @@ fn identify_torque(a: &IdentifyTorqueArgs) -> Result<String> {
          A = {:.6e} N/(m rad), B = {:.6e} m^2, C = {:.6e} N m s^3/rad^3, D = {:.6e} N m s/rad \
          (r = {} m, p0 = {:.1} kPa)\n\
          fit against the force-derived torque: {:.3} % (static part A, B only: {:.3} %), \
-         MAE {:.4} N m, RMSE {:.4} N m, max {:.4} N m\nwrote {}\n",
+         MAE {:.4} N m, RMSE {:.4} N m, max {:.4} N m\n{symmetric_note}wrote {}\n",
         q.n,
         2 * hw + 1,
         match source {
