@@ -459,3 +459,53 @@ fn identify_torque_warns_when_the_activation_is_not_symmetric() {
     assert!(s.contains("warning: (p1 + p2) / 2 spreads"), "{s}");
     assert!(out.exists());
 }
+
+#[test]
+fn identify_plant_finds_the_load_inertia_in_the_independent_loaded_fixture() {
+    // pulses_loaded.csv was computed by an independent implementation from
+    // reference-1dof-loaded.toml (J = 0.155 kg m^2, 11 x the nominal 0.014). Starting from the
+    // nominal plant, the fit must find the load and leave damping and conductance alone.
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("P2.toml");
+    let s = ok(&host_sim(&[
+        &"identify",
+        &"plant",
+        &"--recording",
+        &shared().join("conformance/pulses_loaded.csv"),
+        &"--plant",
+        &plant(),
+        &"--params",
+        &"joint.inertia_kgm2,muscle.damping_m2s,valve.sonic_conductance_m3_per_s_pa",
+        &"--out",
+        &out,
+    ]));
+    println!("{s}");
+    let cfg = host_sim::PlantConfig::load(&out).unwrap();
+    assert!(
+        (cfg.joint.inertia_kgm2 / 0.155 - 1.0).abs() < 0.005,
+        "{cfg:?}"
+    );
+    assert!(
+        (cfg.muscle.damping_m2s / 2.0e-4 - 1.0).abs() < 0.005,
+        "{cfg:?}"
+    );
+    assert!(
+        (cfg.valve.sonic_conductance_m3_per_s_pa / 8.0e-9 - 1.0).abs() < 0.005,
+        "{cfg:?}"
+    );
+    // Held-out tail: the mean fit goes from about 51 % to the conformance level.
+    let tail = s
+        .split("held-out tail")
+        .nth(1)
+        .unwrap()
+        .lines()
+        .find(|l| l.trim_start().starts_with("mean"))
+        .unwrap()
+        .to_string();
+    let v: Vec<f64> = tail
+        .split_whitespace()
+        .skip(1)
+        .map(|x| x.parse().unwrap())
+        .collect();
+    assert!(v[0] < 80.0 && v[1] > 99.5, "{tail}");
+}
