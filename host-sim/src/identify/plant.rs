@@ -19,6 +19,9 @@
 //! - Output: the input plant file with only the fitted values replaced (comments, order and
 //!   the other keys kept, `toml_edit`), written atomically.
 
+// `!(x > 0.0)` is deliberate: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord, clippy::nonminimal_bool)]
+
 use std::cell::RefCell;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -274,7 +277,8 @@ fn set_number(doc: &mut DocumentMut, key: &str, x: f64) {
         it = &mut it[part];
     }
     let decor = it.as_value().map(|v| v.decor().clone());
-    let mut v = Value::from(x);
+    // Scientific notation keeps small SI values readable (8e-9, not 0.000000008).
+    let mut v: Value = format!("{x:e}").parse().unwrap_or_else(|_| Value::from(x));
     if let Some(d) = decor {
         *v.decor_mut() = d;
     }
@@ -649,6 +653,9 @@ mod tests {
         let mut doc: DocumentMut = "[a]\nx = 2.0   # the x\n".parse().unwrap();
         set_number(&mut doc, "a.x", 3.5);
         let s = doc.to_string();
-        assert!(s.contains("x = 3.5   # the x"), "{s}");
+        assert!(s.contains("x = 3.5e0   # the x"), "{s}");
+        set_number(&mut doc, "a.x", 6.5e-9);
+        assert!(doc.to_string().contains("x = 6.5e-9   # the x"));
+        assert_eq!(get_number(&doc, "a.x", "p.toml").unwrap(), 6.5e-9);
     }
 }
