@@ -20,6 +20,7 @@ use crate::control::{
 };
 use crate::force_law::{ForceFlags, ForceLawParams};
 use crate::geometry::JointGeometry;
+use crate::pid::{DpPid, DpPidGains};
 use crate::safety::{clamp_pressure_setpoint_pa, SafeState, SafetyMonitor, TrackingMonitor};
 use crate::sensors::{
     ChannelFault, ChannelLimits, ChannelStatus, ChannelValidator, VelocityEstimator,
@@ -87,6 +88,20 @@ pub struct TickOutput {
     pub armed: bool,
 }
 
+/// Which control law turns the angle set-point into pressure set-points. Both feed the same
+/// pressure loops, valve command, pressure-tracking supervision and safety path.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ControlLaw {
+    /// The model-based cascade of seed 003 Fig. 5 ([`crate::control`]): position PID ->
+    /// torque loop with the force-law feedback and the inverse torque model -> pressures.
+    Cascade,
+    /// The model-free baseline ([`crate::pid`]): one PD / PID from the angle straight to the
+    /// activation `dp`, `p1 = p0 - dp`, `p2 = p0 + dp` (the gains of `position` and `torque`
+    /// are not used). `torque_des_nm` is then reported as 0.
+    DirectPid(DpPidGains),
+}
+
 /// Configuration of the control tick.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -124,6 +139,8 @@ pub struct ControllerConfig {
     pub tracking_error_pa: f32,
     /// Consecutive non-tracking ticks that raise `PressureTrackingLost1/2`.
     pub tracking_ticks: u32,
+    /// The control law ([`ControlLaw::Cascade`] in [`ControllerConfig::reference`]).
+    pub law: ControlLaw,
 }
 
 impl ControllerConfig {
@@ -206,6 +223,7 @@ impl ControllerConfig {
             // of saturated command without getting there is a valve or supply failure.
             tracking_error_pa: 100_000.0,
             tracking_ticks: ticks(0.3),
+            law: ControlLaw::Cascade,
         }
     }
 
@@ -256,6 +274,10 @@ impl ControllerConfig {
             && nonneg(self.angle_setpoint_max_rad)
             && pos(self.tracking_error_pa)
             && self.tracking_ticks > 0
+            && match self.law {
+                ControlLaw::Cascade => true,
+                ControlLaw::DirectPid(g) => g.is_valid(),
+            }
     }
 }
 
@@ -269,6 +291,8 @@ pub struct ControlTick {
     velocity: VelocityEstimator,
     position: PositionController,
     torque: TorqueController,
+    /// The model-free law when the configuration selects [`ControlLaw::DirectPid`].
+    dp_pid: Option<DpPid>,
     pressure1: PressureController,
     pressure2: PressureController,
     safety: SafetyMonitor,
@@ -319,6 +343,10 @@ impl ControlTick {
                 cfg.geometry,
                 cfg.torque_model,
             ),
+            dp_pid: match cfg.law {
+                ControlLaw::Cascade => None,
+                ControlLaw::DirectPid(g) => Some(DpPid::new(g)),
+            },
             pressure1: PressureController::new(cfg.pressure),
             pressure2: PressureController::new(cfg.pressure),
             safety,
@@ -350,6 +378,9 @@ impl ControlTick {
         self.tracking2.reset();
         self.position.reset();
         self.torque.reset();
+        if let Some(pid) = self.dp_pid.as_mut() {
+            pid.reset();
+        }
         self.pressure1.reset();
         self.pressure2.reset();
     }
@@ -516,6 +547,27 @@ impl ControlTick {
             setpoint.angle_rad
         };
         let result = (|| {
+            if let Some(pid) = self.dp_pid.as_mut() {
+                // Model-free baseline: angle -> dp -> pressure set-points, no torque level.
+                let c = pid.step(
+                    JointState {
+                        angle_rad: angle,
+                        velocity_rad_s: vel,
+                    },
+                    sp,
+                    dt_s,
+                )?;
+                let u1 = self.pressure1.step(p1, c.p1_gauge_pa, dt_s)?;
+                let u2 = self.pressure2.step(p2, c.p2_gauge_pa, dt_s)?;
+                return Ok::<_, crate::control::ControlError>((
+                    0.0,
+                    c.p1_gauge_pa,
+                    c.p2_gauge_pa,
+                    torque_est,
+                    u1,
+                    u2,
+                ));
+            }
             let t_des = self.position.step(
                 JointState {
                     angle_rad: angle,
@@ -539,13 +591,20 @@ impl ControlTick {
             };
             let u1 = self.pressure1.step(p1, ps.p1_gauge_pa, dt_s)?;
             let u2 = self.pressure2.step(p2, ps.p2_gauge_pa, dt_s)?;
-            Ok::<_, crate::control::ControlError>((t_des, ps, u1, u2))
+            Ok((
+                t_des,
+                ps.p1_gauge_pa,
+                ps.p2_gauge_pa,
+                ps.torque_est_nm,
+                u1,
+                u2,
+            ))
         })();
         match result {
-            Ok((t_des, ps, u1, u2)) => {
+            Ok((t_des, p1_set, p2_set, t_est, u1, u2)) => {
                 let (e_pa, n) = (self.cfg.tracking_error_pa, self.cfg.tracking_ticks);
-                let lost1 = self.tracking1.update(ps.p1_gauge_pa, p1, u1, e_pa, n);
-                let lost2 = self.tracking2.update(ps.p2_gauge_pa, p2, u2, e_pa, n);
+                let lost1 = self.tracking1.update(p1_set, p1, u1, e_pa, n);
+                let lost2 = self.tracking2.update(p2_set, p2, u2, e_pa, n);
                 if lost1 || lost2 {
                     let f = if lost1 {
                         FaultCode::PressureTrackingLost1
@@ -562,20 +621,18 @@ impl ControlTick {
                     muscle2: u2,
                 };
                 out.valves = self.safety.gate(cmd);
-                out.p1_set_gauge_pa =
-                    clamp_pressure_setpoint_pa(ps.p1_gauge_pa, P_MUSCLE_MAX_GAUGE_PA);
-                out.p2_set_gauge_pa =
-                    clamp_pressure_setpoint_pa(ps.p2_gauge_pa, P_MUSCLE_MAX_GAUGE_PA);
+                out.p1_set_gauge_pa = clamp_pressure_setpoint_pa(p1_set, P_MUSCLE_MAX_GAUGE_PA);
+                out.p2_set_gauge_pa = clamp_pressure_setpoint_pa(p2_set, P_MUSCLE_MAX_GAUGE_PA);
                 out.torque_des_nm = t_des;
-                out.torque_est_nm = ps.torque_est_nm;
+                out.torque_est_nm = t_est;
                 out.armed = true;
                 trace!(
                     "tick sp={} a={} T*={} p*=({}, {}) u=({}, {})",
                     sp,
                     angle,
                     t_des,
-                    ps.p1_gauge_pa,
-                    ps.p2_gauge_pa,
+                    p1_set,
+                    p2_set,
                     u1,
                     u2
                 );
