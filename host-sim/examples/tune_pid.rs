@@ -34,10 +34,11 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use host_sim::closed_loop::Scenario;
 use host_sim::control_compare::{
-    nelder_mead, pid_tuned_path, reference_plant_path, score_suite, suite_scenarios, DpPidToml,
-    PidTuning,
+    nelder_mead, pid_tuned_path, reference_plant_path, score_suite, score_suite_with,
+    suite_scenarios, DpPidToml, PidTuning,
 };
 use host_sim::Plant;
+use pam_firmware::feedforward::FeedforwardGains;
 use pam_firmware::pid::DpPidGains;
 use pam_firmware::tick::{ControlLaw, ControllerConfig};
 
@@ -228,49 +229,70 @@ fn tune(ctx: &Ctx, ki_on: bool, threads: usize) -> (DpPidGains, f64, String) {
     (g, c_check, note)
 }
 
-fn tune_cascade(ctx: &Ctx) {
-    let reference = ControllerConfig::reference(1000.0).position;
-    let c_ref = ctx.cost(ControlLaw::Cascade);
+/// The cascade's position-loop gains with the trajectory feed-forward on (`w = 1`, 20 Hz,
+/// inertia `j_kgm2`): Nelder-Mead on (log10 kp, log10 ki, log10 kd) from `start`, then the
+/// same polish as the PD / PID. Prints the result; returns (config, suite MSE).
+fn tune_cascade(ctx: &Ctx, start: ControllerConfig) -> (ControllerConfig, f64) {
+    let cost_cfg = |cfg: ControllerConfig| {
+        ctx.runs.fetch_add(1, Ordering::Relaxed);
+        score_suite_with(&ctx.plant, &ctx.scenarios, cfg)
+            .map(|s| s.mse_rad2)
+            .unwrap_or(f64::INFINITY)
+    };
+    let c_start = cost_cfg(start);
     eprintln!(
-        "cascade: reference gains kp {} ki {} kd {}: suite MSE {:.4e} rad^2",
-        reference.kp, reference.ki, reference.kd, c_ref
+        "cascade: start kp {} ki {} kd {} feed-forward {:?}: suite MSE {:.4e} rad^2",
+        start.position.kp, start.position.ki, start.position.kd, start.feedforward, c_start
     );
-    // The position gains live in the configuration, not in the law: score through a custom
-    // configuration per point.
-    let cost = |x: &[f64]| {
-        let mut cfg = ControllerConfig::reference(1000.0);
+    let with = |x: &[f64]| {
+        let mut cfg = start;
         cfg.position.kp = 10f64.powf(x[0]) as f32;
         cfg.position.ki = 10f64.powf(x[1]) as f32;
         cfg.position.kd = 10f64.powf(x[2]) as f32;
-        ctx.runs.fetch_add(1, Ordering::Relaxed);
-        let mut sum = 0.0;
-        for s in &ctx.scenarios {
-            let cfg = ControllerConfig {
-                tick_hz: s.scenario.tick_hz as f32,
-                ..cfg
-            };
-            match host_sim::closed_loop::run_with(&ctx.plant, s, cfg, &mut |_| {}) {
-                Ok(r) if r.first_latched_fault_tick.is_none() => sum += r.tracking(0.0).mse_rad2,
-                _ => return f64::INFINITY,
-            }
-        }
-        sum / ctx.scenarios.len() as f64 / c_ref
+        cfg
     };
     let x0 = [
-        (reference.kp as f64).log10(),
-        (reference.ki as f64).log10(),
-        (reference.kd as f64).log10(),
+        (start.position.kp as f64).log10(),
+        (start.position.ki as f64).log10(),
+        (start.position.kd as f64).log10(),
     ];
-    let r = nelder_mead(cost, &x0, &[0.2; 3], 2e-3, 120);
+    let r = nelder_mead(|x| cost_cfg(with(x)) / c_start, &x0, &[0.2; 3], 2e-3, 120);
+    let (mut cfg, mut c) = if r.cost < 1.0 {
+        (with(&r.x), r.cost * c_start)
+    } else {
+        (start, c_start)
+    };
+    loop {
+        let mut moves = Vec::new();
+        for f in [0.7f32, 1.4] {
+            let mut m = cfg;
+            m.position.kp *= f;
+            moves.push(m);
+            let mut m = cfg;
+            m.position.ki *= f;
+            moves.push(m);
+            let mut m = cfg;
+            m.position.kd *= f;
+            moves.push(m);
+        }
+        let costs: Vec<f64> = moves.iter().map(|m| cost_cfg(*m)).collect();
+        let (i, &cm) = costs
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1.total_cmp(b.1))
+            .expect("moves");
+        if cm < c {
+            cfg = moves[i];
+            c = cm;
+        } else {
+            break;
+        }
+    }
     eprintln!(
-        "cascade: Nelder-Mead {} runs: suite MSE {:.4e} rad^2 ({:.2} x reference) at kp {:.3} ki {:.3} kd {:.3}",
-        r.evaluations,
-        r.cost * c_ref,
-        r.cost,
-        10f64.powf(r.x[0]),
-        10f64.powf(r.x[1]),
-        10f64.powf(r.x[2])
+        "cascade: Nelder-Mead {} runs + polish: suite MSE {:.4e} rad^2 ({:.3} x start) at kp {} ki {} kd {}",
+        r.evaluations, c, c / c_start, cfg.position.kp, cfg.position.ki, cfg.position.kd
     );
+    (cfg, c)
 }
 
 fn main() -> Result<()> {
@@ -306,7 +328,17 @@ fn main() -> Result<()> {
     };
     let t0 = Instant::now();
     if cascade {
-        tune_cascade(&ctx);
+        let reference = ControllerConfig::reference(1000.0);
+        for j_kgm2 in [0.0f32, 0.014] {
+            let mut start = reference;
+            start.feedforward = FeedforwardGains {
+                rate_weight: 1.0,
+                inertia_kgm2: j_kgm2,
+                cutoff_hz: 20.0,
+                limit_nm: 10.0,
+            };
+            tune_cascade(&ctx, start);
+        }
     }
     let (pd, c_pd, note_pd) = tune(&ctx, false, threads);
     let (pid, c_pid, note_pid) = tune(&ctx, true, threads);

@@ -236,6 +236,9 @@ pub struct ScenarioScore {
     pub mse_rad2: f64,
     /// Largest |angle error| [rad].
     pub max_abs_rad: f64,
+    /// Mean squared angle error after the scenario's `settle_after_s` [rad^2] (infinite if a
+    /// fault latched): the tracking phase without the first transient.
+    pub mse_settled_rad2: f64,
     /// The first latched fault, if any.
     pub fault: Option<FaultCode>,
 }
@@ -247,6 +250,8 @@ pub struct SuiteScore {
     pub scenarios: Vec<ScenarioScore>,
     /// Mean of the scenario MSEs [rad^2] (infinite if any run latched a fault).
     pub mse_rad2: f64,
+    /// Mean of the scenario MSEs after their settle times [rad^2].
+    pub mse_settled_rad2: f64,
 }
 
 /// The parsed suite scenarios.
@@ -263,14 +268,34 @@ pub fn score_suite(
     scenarios: &[Scenario],
     law: ControlLaw,
 ) -> Result<SuiteScore, ClosedLoopError> {
+    score_suite_with(plant, scenarios, config_for(law, 1000.0))
+}
+
+/// [`score_suite`] with a whole tick configuration (`tick_hz` and `dt_max_s` are set per
+/// scenario).
+pub fn score_suite_with(
+    plant: &Plant,
+    scenarios: &[Scenario],
+    cfg: ControllerConfig,
+) -> Result<SuiteScore, ClosedLoopError> {
     let mut out = Vec::with_capacity(scenarios.len());
     for s in scenarios {
-        let cfg = config_for(law, s.scenario.tick_hz as f32);
+        let tick_hz = s.scenario.tick_hz as f32;
+        let reference = ControllerConfig::reference(tick_hz);
+        let cfg = ControllerConfig {
+            tick_hz,
+            dt_max_s: reference.dt_max_s,
+            pressure_limits: reference.pressure_limits,
+            angle_limits: reference.angle_limits,
+            tracking_ticks: reference.tracking_ticks,
+            ..cfg
+        };
         let run = run_with(plant, s, cfg, &mut |_| {})?;
         let fault = run
             .first_latched_fault_tick
             .and_then(|k| run.rows[k].out.fault);
         let st = run.tracking(0.0);
+        let settled = run.tracking(s.expect.settle_after_s);
         out.push(ScenarioScore {
             name: run.name.clone(),
             mse_rad2: if fault.is_some() || st.n == 0 {
@@ -279,13 +304,28 @@ pub fn score_suite(
                 st.mse_rad2
             },
             max_abs_rad: st.max_abs_rad,
+            mse_settled_rad2: if fault.is_some() || settled.n == 0 {
+                f64::INFINITY
+            } else {
+                settled.mse_rad2
+            },
             fault,
         });
     }
-    let mse = out.iter().map(|s| s.mse_rad2).sum::<f64>() / out.len().max(1) as f64;
+    let mean = |f: fn(&ScenarioScore) -> f64| {
+        let m = out.iter().map(f).sum::<f64>() / out.len().max(1) as f64;
+        if m.is_nan() {
+            f64::INFINITY
+        } else {
+            m
+        }
+    };
+    let mse_rad2 = mean(|s| s.mse_rad2);
+    let mse_settled_rad2 = mean(|s| s.mse_settled_rad2);
     Ok(SuiteScore {
         scenarios: out,
-        mse_rad2: if mse.is_nan() { f64::INFINITY } else { mse },
+        mse_rad2,
+        mse_settled_rad2,
     })
 }
 
@@ -317,7 +357,8 @@ pub fn compare(plant: &Plant, tuning: &PidTuning) -> Result<Vec<Row>, ClosedLoop
 }
 
 /// The comparison as a Markdown table: MSE per scenario and for the suite in rad^2 and deg^2,
-/// and each controller's suite MSE relative to the cascade's.
+/// each controller's suite MSE relative to the cascade's, and the same after each scenario's
+/// `settle_after_s` (step 2 s, sine 2 s, random 0.5 s).
 pub fn format_table(rows: &[Row]) -> String {
     let mut s = String::new();
     let names: Vec<&str> = rows
@@ -328,13 +369,20 @@ pub fn format_table(rows: &[Row]) -> String {
     for n in &names {
         let _ = write!(s, " {n} MSE [deg^2] |");
     }
-    let _ = writeln!(s, " suite MSE [deg^2] | suite MSE [rad^2] | / cascade |");
+    let _ = writeln!(
+        s,
+        " suite MSE [deg^2] | suite MSE [rad^2] | / cascade | suite MSE after settle [deg^2] | / cascade |"
+    );
     let _ = write!(s, "|---|");
     for _ in &names {
         let _ = write!(s, "---:|");
     }
-    let _ = writeln!(s, "---:|---:|---:|");
+    let _ = writeln!(s, "---:|---:|---:|---:|---:|");
     let base = rows.first().map(|r| r.score.mse_rad2).unwrap_or(f64::NAN);
+    let base_settled = rows
+        .first()
+        .map(|r| r.score.mse_settled_rad2)
+        .unwrap_or(f64::NAN);
     let deg2 = (180.0 / std::f64::consts::PI).powi(2);
     for r in rows {
         let _ = write!(s, "| {} |", r.controller);
@@ -350,10 +398,12 @@ pub fn format_table(rows: &[Row]) -> String {
         }
         let _ = writeln!(
             s,
-            " {:.4} | {:.3e} | {:.2} |",
+            " {:.4} | {:.3e} | {:.2} | {:.4} | {:.2} |",
             r.score.mse_rad2 * deg2,
             r.score.mse_rad2,
-            r.score.mse_rad2 / base
+            r.score.mse_rad2 / base,
+            r.score.mse_settled_rad2 * deg2,
+            r.score.mse_settled_rad2 / base_settled
         );
     }
     s
