@@ -34,8 +34,8 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use host_sim::closed_loop::Scenario;
 use host_sim::control_compare::{
-    nelder_mead, pid_tuned_path, reference_plant_path, score_suite, score_suite_with,
-    suite_scenarios, DpPidToml, PidTuning,
+    config_for, nelder_mead, pid_tuned_path, reference_plant_path, suite_scenarios, tuning_cost,
+    DpPidToml, PidTuning, GAIN_MARGIN,
 };
 use host_sim::Plant;
 use pam_firmware::feedforward::FeedforwardGains;
@@ -76,12 +76,15 @@ struct Ctx {
 }
 
 impl Ctx {
+    /// The tuning cost of `law` (worse of nominal and gain-margin suite MSE).
     fn cost(&self, law: ControlLaw) -> f64 {
-        self.runs.fetch_add(1, Ordering::Relaxed);
-        match score_suite(&self.plant, &self.scenarios, law) {
-            Ok(s) => s.mse_rad2,
-            Err(_) => f64::INFINITY,
-        }
+        self.cost_cfg(config_for(law, 1000.0)).0
+    }
+
+    /// (tuning cost, nominal suite MSE, suite MSE at the gain margin) of `cfg`.
+    fn cost_cfg(&self, cfg: ControllerConfig) -> (f64, f64, f64) {
+        self.runs.fetch_add(2, Ordering::Relaxed);
+        tuning_cost(&self.plant, &self.scenarios, cfg)
     }
 
     /// Costs of `points`, evaluated on `threads` threads.
@@ -101,7 +104,7 @@ impl Ctx {
     }
 }
 
-fn tune(ctx: &Ctx, ki_on: bool, threads: usize) -> (DpPidGains, f64, String) {
+fn tune(ctx: &Ctx, ki_on: bool, threads: usize) -> (DpPidGains, (f64, f64), String) {
     let name = if ki_on { "PID" } else { "PD" };
     let mut grid = Vec::new();
     for w in [0.0f32, 1.0] {
@@ -207,7 +210,7 @@ fn tune(ctx: &Ctx, ki_on: bool, threads: usize) -> (DpPidGains, f64, String) {
         }
     }
     // Re-measure the stored point (f32 rounding of the gains).
-    let c_check = ctx.cost(ControlLaw::DirectPid(g));
+    let (c_check, c_nominal, c_margin) = ctx.cost_cfg(config_for(ControlLaw::DirectPid(g), 1000.0));
     eprintln!(
         "{name}: Nelder-Mead {} runs in {:.0} s: suite MSE {:.3e} rad^2 (re-measured {:.3e}) at kp {:.4e} kd {:.4e} ki {:.4e}",
         r.evaluations,
@@ -219,29 +222,27 @@ fn tune(ctx: &Ctx, ki_on: bool, threads: usize) -> (DpPidGains, f64, String) {
         g.ki_pa_per_rad_s
     );
     let note = format!(
-        "{name}: grid {} runs (best {:.4e} rad^2), Nelder-Mead {} runs from it (w = {w}), polish {} runs -> {:.4e} rad^2",
+        "{name}: grid {} points (best cost {:.4e} rad^2), Nelder-Mead {} points from it (w = {w}),\n\
+         \x20 polish {} points -> cost {:.4e} rad^2 (suite MSE {:.4e} rad^2, at the gain margin {:.4e} rad^2)",
         grid.len(),
         cbest,
         r.evaluations,
         polish_runs,
-        c_check
+        c_check,
+        c_nominal,
+        c_margin
     );
-    (g, c_check, note)
+    (g, (c_nominal, c_margin), note)
 }
 
 /// The cascade's position-loop gains with the trajectory feed-forward on (`w = 1`, 20 Hz,
 /// inertia `j_kgm2`): Nelder-Mead on (log10 kp, log10 ki, log10 kd) from `start`, then the
 /// same polish as the PD / PID. Prints the result; returns (config, suite MSE).
 fn tune_cascade(ctx: &Ctx, start: ControllerConfig) -> (ControllerConfig, f64) {
-    let cost_cfg = |cfg: ControllerConfig| {
-        ctx.runs.fetch_add(1, Ordering::Relaxed);
-        score_suite_with(&ctx.plant, &ctx.scenarios, cfg)
-            .map(|s| s.mse_rad2)
-            .unwrap_or(f64::INFINITY)
-    };
+    let cost_cfg = |cfg: ControllerConfig| ctx.cost_cfg(cfg).0;
     let c_start = cost_cfg(start);
     eprintln!(
-        "cascade: start kp {} ki {} kd {} feed-forward {:?}: suite MSE {:.4e} rad^2",
+        "cascade: start kp {} ki {} kd {} feed-forward {:?}: cost {:.4e} rad^2",
         start.position.kp, start.position.ki, start.position.kd, start.feedforward, c_start
     );
     let with = |x: &[f64]| {
@@ -288,9 +289,10 @@ fn tune_cascade(ctx: &Ctx, start: ControllerConfig) -> (ControllerConfig, f64) {
             break;
         }
     }
+    let (_, nominal, margin) = ctx.cost_cfg(cfg);
     eprintln!(
-        "cascade: Nelder-Mead {} runs + polish: suite MSE {:.4e} rad^2 ({:.3} x start) at kp {} ki {} kd {}",
-        r.evaluations, c, c / c_start, cfg.position.kp, cfg.position.ki, cfg.position.kd
+        "cascade: Nelder-Mead {} points + polish: cost {:.4e} rad^2 ({:.3} x start; suite MSE {:.4e}, at the margin {:.4e}) at kp {} ki {} kd {}",
+        r.evaluations, c, c / c_start, nominal, margin, cfg.position.kp, cfg.position.ki, cfg.position.kd
     );
     (cfg, c)
 }
@@ -330,7 +332,11 @@ fn main() -> Result<()> {
     if cascade {
         let reference = ControllerConfig::reference(1000.0);
         for j_kgm2 in [0.0f32, 0.014] {
+            // The documented start point: the gains tuned before the feed-forward existed.
             let mut start = reference;
+            start.position.kp = 11.0;
+            start.position.ki = 8.0;
+            start.position.kd = 0.8;
             start.feedforward = FeedforwardGains {
                 rate_weight: 1.0,
                 inertia_kgm2: j_kgm2,
@@ -342,25 +348,30 @@ fn main() -> Result<()> {
     }
     let (pd, c_pd, note_pd) = tune(&ctx, false, threads);
     let (pid, c_pid, note_pid) = tune(&ctx, true, threads);
-    let c_cascade = ctx.cost(ControlLaw::Cascade);
+    let (_, c_cascade, c_cascade_margin) = ctx.cost_cfg(ControllerConfig::reference(1000.0));
     let tuning = PidTuning {
-        pd: DpPidToml::from_gains(&pd, c_pd),
-        pid: DpPidToml::from_gains(&pid, c_pid),
+        pd: DpPidToml::from_gains(&pd, c_pd.0, c_pd.1),
+        pid: DpPidToml::from_gains(&pid, c_pid.0, c_pid.1),
     };
     let header = format!(
         "Tuned model-free baselines (pam_firmware::pid::DpPid: angle -> dp, p1 = p0 - dp, p2 = p0 + dp)\n\
          for the closed-loop comparison of issue 5. Written by\n\
          \x20 cargo run --release -p host-sim --example tune_pid\n\
-         on {} with the firmware in the loop; cost = suite MSE of the angle (mean over the\n\
-         step, sine and random scenarios of the per-scenario MSE over every tick; a latched\n\
-         fault = infinite). Procedure: coarse grid, then Nelder-Mead on log10 gains (see the\n\
+         on {} with the firmware in the loop. Suite MSE = mean over the step, sine and\n\
+         random scenarios of the MSE of the angle over every tick (a latched fault = infinite);\n\
+         cost = the worse of the suite MSE at the gains and with kp, ki, kd x {} (gain margin).\n\
+         Procedure: coarse grid, Nelder-Mead on log10 gains, x0.7 / x1.4 polish (see the\n\
          example's documentation).\n\
          {note_pd}\n\
          {note_pid}\n\
-         For comparison, the cascade (ControllerConfig::reference) scored {:.4e} rad^2.\n\
-         Units: SI (Pa, rad, s); suite_mse_rad2 is what the tuner measured.",
+         For comparison, the cascade (ControllerConfig::reference) scored {:.4e} rad^2\n\
+         ({:.4e} rad^2 at the gain margin).\n\
+         Units: SI (Pa, rad, s); suite_mse_rad2 and suite_mse_at_margin_rad2 are what the tuner\n\
+         measured (tests/control_compare.rs re-measures them).",
         plant_path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
-        c_cascade
+        GAIN_MARGIN,
+        c_cascade,
+        c_cascade_margin
     );
     tuning.write(&out, &header)?;
     eprintln!(

@@ -71,6 +71,8 @@ pub struct DpPidToml {
     pub p0_gauge_pa: f64,
     /// Suite MSE the tuner measured with these gains [rad^2] (checked by the tests).
     pub suite_mse_rad2: f64,
+    /// Suite MSE with kp, ki, kd scaled by [`GAIN_MARGIN`] [rad^2] (checked by the tests).
+    pub suite_mse_at_margin_rad2: f64,
 }
 
 impl DpPidToml {
@@ -88,8 +90,8 @@ impl DpPidToml {
         }
     }
 
-    /// From firmware gains and the measured suite MSE.
-    pub fn from_gains(g: &DpPidGains, suite_mse_rad2: f64) -> Self {
+    /// From firmware gains and the measured suite MSEs (nominal, at the gain margin).
+    pub fn from_gains(g: &DpPidGains, suite_mse_rad2: f64, suite_mse_at_margin_rad2: f64) -> Self {
         DpPidToml {
             kp_pa_per_rad: g.kp_pa_per_rad as f64,
             ki_pa_per_rad_s: g.ki_pa_per_rad_s as f64,
@@ -100,6 +102,7 @@ impl DpPidToml {
             dp_max_pa: g.dp_max_pa as f64,
             p0_gauge_pa: g.p0_gauge_pa as f64,
             suite_mse_rad2,
+            suite_mse_at_margin_rad2,
         }
     }
 
@@ -114,6 +117,11 @@ impl DpPidToml {
             ("dp_max_pa", self.dp_max_pa, 6e5),
             ("p0_gauge_pa", self.p0_gauge_pa, 6e5),
             ("suite_mse_rad2", self.suite_mse_rad2, f64::INFINITY),
+            (
+                "suite_mse_at_margin_rad2",
+                self.suite_mse_at_margin_rad2,
+                f64::INFINITY,
+            ),
         ];
         for (key, v, max) in fields {
             if !(v.is_finite() && v >= 0.0 && v <= max && (v as f32).is_finite()) {
@@ -225,6 +233,50 @@ pub fn config_for(law: ControlLaw, tick_hz: f32) -> ControllerConfig {
         law,
         ..ControllerConfig::reference(tick_hz)
     }
+}
+
+/// Loop-gain margin every tuning must keep: the tuning cost is the worse of the suite MSE at
+/// the gains and at the feedback gains (kp, ki, kd) times this factor. Without it the suite
+/// optimum of both the cascade and the PID sits at the edge of a limit cycle (the cascade
+/// tuned on the suite MSE alone went from 1.04 to 4.1 deg^2 with kp x1.2).
+pub const GAIN_MARGIN: f32 = 1.25;
+
+/// `cfg` with the feedback gains of its law (cascade: the position PID; PD / PID: kp, ki, kd)
+/// multiplied by `factor`: the loop as it runs when the actuator's gain is `factor` times
+/// the model's.
+pub fn scale_feedback(cfg: ControllerConfig, factor: f32) -> ControllerConfig {
+    let mut c = cfg;
+    match &mut c.law {
+        ControlLaw::Cascade => {
+            c.position.kp *= factor;
+            c.position.ki *= factor;
+            c.position.kd *= factor;
+        }
+        ControlLaw::DirectPid(g) => {
+            g.kp_pa_per_rad *= factor;
+            g.ki_pa_per_rad_s *= factor;
+            g.kd_pa_s_per_rad *= factor;
+        }
+    }
+    c
+}
+
+/// The tuning cost [rad^2]: the worse of the suite MSE of `cfg` and of
+/// `scale_feedback(cfg, GAIN_MARGIN)`; infinite when a run fails. Returns (cost, nominal
+/// suite MSE, suite MSE at the margin).
+pub fn tuning_cost(
+    plant: &Plant,
+    scenarios: &[Scenario],
+    cfg: ControllerConfig,
+) -> (f64, f64, f64) {
+    let mse = |c: ControllerConfig| {
+        score_suite_with(plant, scenarios, c)
+            .map(|s| s.mse_rad2)
+            .unwrap_or(f64::INFINITY)
+    };
+    let nominal = mse(cfg);
+    let margin = mse(scale_feedback(cfg, GAIN_MARGIN));
+    (nominal.max(margin), nominal, margin)
 }
 
 /// Score of one scenario.
@@ -553,6 +605,7 @@ i_limit_pa = 0.0
 dp_max_pa = 280000.0
 p0_gauge_pa = 300000.0
 suite_mse_rad2 = 0.001
+suite_mse_at_margin_rad2 = 0.002
 
 [pid]
 kp_pa_per_rad = 500000.0
@@ -564,6 +617,7 @@ i_limit_pa = 150000.0
 dp_max_pa = 280000.0
 p0_gauge_pa = 300000.0
 suite_mse_rad2 = 0.001
+suite_mse_at_margin_rad2 = 0.002
 ";
 
     #[test]
@@ -583,7 +637,7 @@ suite_mse_rad2 = 0.001
             .unwrap_err()
             .to_string();
         assert!(
-            e.starts_with("t.toml:15: field `pid.kd_pa_s_per_rad`"),
+            e.starts_with("t.toml:16: field `pid.kd_pa_s_per_rad`"),
             "{e}"
         );
         let bad = GOOD.replace("ki_pa_per_rad_s = 0.0", "ki_pa_per_rad_s = 3.0");

@@ -5,14 +5,15 @@
 //!
 //! What holds and is asserted here (measured figures in README, "Closed loop: cascade vs
 //! tuned PD / PID"):
-//! - the cascade's suite MSE is at least 2x lower than the tuned PD's (measured 4.8x);
-//! - it is lower than the tuned PID's (measured 1.11x): the issue's 2x against the best tuned
+//! - the cascade's suite MSE is at least 2x lower than the tuned PD's (measured 5.4x);
+//! - it is lower than the tuned PID's (measured 1.12x): the issue's 2x against the best tuned
 //!   PD / PID is NOT reached on the suite MSE. The step and random scenarios are dominated by
 //!   the first ~100 ms after each set-point jump, where both laws open the valves fully and
-//!   the rise is bounded by the valve flow (both within 4 % of each other there);
+//!   the rise is bounded by the valve flow (within 4 % / 12 % of each other there);
 //! - on the tracking part of the suite (the sine) the cascade is at least 2x better than both
-//!   (measured 19x against the PID);
-//! - the stored gains of all three laws are local optima of the suite MSE.
+//!   (measured 4.6x against the PID);
+//! - the stored gains of all three laws are local optima of the tuning cost (the worse of the
+//!   suite MSE at the gains and at 1.25 x the feedback gains).
 //!
 //! `cargo test -p host-sim --test control_compare -- --nocapture` prints the table
 //! (`cargo run --release -p host-sim --example compare_control` prints the same).
@@ -20,8 +21,8 @@
 use std::path::PathBuf;
 
 use host_sim::control_compare::{
-    compare, config_for, format_table, pid_tuned_path, score_suite, score_suite_with,
-    suite_scenarios, PidTuning,
+    compare, config_for, format_table, pid_tuned_path, scale_feedback, suite_scenarios,
+    tuning_cost, PidTuning, GAIN_MARGIN,
 };
 use host_sim::Plant;
 use pam_firmware::pid::DpPidGains;
@@ -58,15 +59,29 @@ fn cascade_beats_tuned_pd_by_2x_and_tuned_pid_on_the_suite_and_both_by_2x_on_the
     }
     // The stored gains score what the tuner measured (the file is the tuner's result and the
     // runs are deterministic).
+    let sc = suite_scenarios().unwrap();
     for (row, stored) in [(&rows[1], &t.pd), (&rows[2], &t.pid)] {
-        let rel = (row.score.mse_rad2 - stored.suite_mse_rad2).abs() / stored.suite_mse_rad2;
-        assert!(
-            rel < 1e-6,
-            "{}: measured {:.6e} rad^2, stored {:.6e} rad^2",
-            row.controller,
-            row.score.mse_rad2,
-            stored.suite_mse_rad2
+        let (_, nominal, margin) = tuning_cost(
+            &plant,
+            &sc,
+            config_for(ControlLaw::DirectPid(stored.gains()), 1000.0),
         );
+        assert_eq!(nominal, row.score.mse_rad2);
+        for (what, measured, recorded) in [
+            ("suite", nominal, stored.suite_mse_rad2),
+            (
+                "at the gain margin",
+                margin,
+                stored.suite_mse_at_margin_rad2,
+            ),
+        ] {
+            let rel = (measured - recorded).abs() / recorded;
+            assert!(
+                rel < 1e-6,
+                "{} {what}: measured {measured:.6e} rad^2, stored {recorded:.6e} rad^2",
+                row.controller
+            );
+        }
     }
     let (cascade, pd, pid) = (&rows[0].score, &rows[1].score, &rows[2].score);
     assert!(
@@ -100,14 +115,15 @@ fn cascade_beats_tuned_pd_by_2x_and_tuned_pid_on_the_suite_and_both_by_2x_on_the
 }
 
 /// The cascade's reference position gains are tuned with its feed-forward on: scaling kp, ki
-/// or kd by 0.7 or 1.4 does not lower the suite MSE by more than 2 %; switching the
-/// feed-forward off makes it worse.
+/// or kd by 0.7 or 1.4 does not lower the tuning cost by more than 2 %; the loop keeps its
+/// gain margin; switching the feed-forward off makes the suite MSE worse.
 #[test]
-fn reference_cascade_gains_are_a_local_optimum_of_the_suite_mse() {
+fn reference_cascade_gains_are_a_local_optimum_of_the_tuning_cost() {
     let plant = reference_plant();
     let sc = suite_scenarios().unwrap();
     let base = config_for(ControlLaw::Cascade, 1000.0);
-    let c0 = score_suite_with(&plant, &sc, base).unwrap().mse_rad2;
+    let (c0, nominal, margin) = tuning_cost(&plant, &sc, base);
+    assert!(margin <= 1.1 * nominal, "{margin:.4e} vs {nominal:.4e}");
     for f in [0.7f32, 1.4] {
         for (what, k) in [("kp", 0), ("ki", 1), ("kd", 2)] {
             let mut cfg = base;
@@ -116,25 +132,29 @@ fn reference_cascade_gains_are_a_local_optimum_of_the_suite_mse() {
                 1 => cfg.position.ki *= f,
                 _ => cfg.position.kd *= f,
             }
-            let c = score_suite_with(&plant, &sc, cfg).unwrap().mse_rad2;
-            eprintln!("cascade {what} x{f}: suite MSE {c:.4e} rad^2 (reference {c0:.4e})");
+            let (c, ..) = tuning_cost(&plant, &sc, cfg);
+            eprintln!("cascade {what} x{f}: cost {c:.4e} rad^2 (reference {c0:.4e})");
             assert!(
                 c >= 0.98 * c0,
-                "cascade with {what} x{f} scores {c:.4e} rad^2 < reference {c0:.4e} rad^2"
+                "cascade with {what} x{f} costs {c:.4e} rad^2 < reference {c0:.4e} rad^2"
             );
         }
     }
     let mut off = base;
     off.feedforward = pam_firmware::feedforward::FeedforwardGains::OFF;
-    let c_off = score_suite_with(&plant, &sc, off).unwrap().mse_rad2;
-    eprintln!("cascade without feed-forward: suite MSE {c_off:.4e} rad^2 (with {c0:.4e})");
-    assert!(c_off > c0);
+    let (_, n_off, _) = tuning_cost(&plant, &sc, off);
+    eprintln!("cascade without feed-forward: suite MSE {n_off:.4e} rad^2 (with {nominal:.4e})");
+    assert!(n_off > nominal);
+    // The gain margin is real: 1.25 x the loop gains still tracks (scale_feedback is what
+    // the cost used).
+    let (_, n_margin, _) = tuning_cost(&plant, &sc, scale_feedback(base, GAIN_MARGIN));
+    assert!(n_margin.is_finite());
 }
 
 /// The stored PD / PID are tuned: scaling any one gain by 0.7 or 1.4 (or flipping the
-/// derivative's set-point weight) does not lower the suite MSE by more than 2 %.
+/// derivative's set-point weight) does not lower the tuning cost by more than 2 %.
 #[test]
-fn stored_pd_and_pid_gains_are_a_local_optimum_of_the_suite_mse() {
+fn stored_pd_and_pid_gains_are_a_local_optimum_of_the_tuning_cost() {
     let plant = reference_plant();
     let sc = suite_scenarios().unwrap();
     let t = tuning();
@@ -173,17 +193,13 @@ fn stored_pd_and_pid_gains_are_a_local_optimum_of_the_suite_mse() {
                 ..g
             },
         ));
+        let c0 = stored.suite_mse_rad2.max(stored.suite_mse_at_margin_rad2);
         for (what, v) in variants {
-            let s = score_suite(&plant, &sc, ControlLaw::DirectPid(v)).unwrap();
-            eprintln!(
-                "{name} {what}: suite MSE {:.4e} rad^2 (stored {:.4e})",
-                s.mse_rad2, stored.suite_mse_rad2
-            );
+            let (c, ..) = tuning_cost(&plant, &sc, config_for(ControlLaw::DirectPid(v), 1000.0));
+            eprintln!("{name} {what}: cost {c:.4e} rad^2 (stored {c0:.4e})");
             assert!(
-                s.mse_rad2 >= 0.98 * stored.suite_mse_rad2,
-                "{name} with {what} scores {:.4e} rad^2 < stored {:.4e} rad^2: not tuned",
-                s.mse_rad2,
-                stored.suite_mse_rad2
+                c >= 0.98 * c0,
+                "{name} with {what} costs {c:.4e} rad^2 < stored {c0:.4e} rad^2: not tuned"
             );
         }
     }
