@@ -10,9 +10,11 @@
 //!   of the run (from t = 0, including the transients); the suite MSE is the mean of the three
 //!   scenario MSEs. A run that latches any fault scores infinity.
 //! - The PD / PID gains: `config/pid_tuned.toml`, written by `examples/tune_pid.rs`
-//!   ([`nelder_mead`] on log-gains from the best point of a coarse grid, minimising the suite
-//!   MSE). The cascade: [`ControllerConfig::reference`] (its gains and how they were chosen
-//!   are documented there).
+//!   ([`nelder_mead`] on log-gains from the best point of a coarse grid, then a polish,
+//!   minimising [`tuning_cost`]: the worse of the suite MSE at the gains and at
+//!   [`GAIN_MARGIN`] x the feedback gains, step overshoot <= [`MAX_OVERSHOOT_FRAC`]). The
+//!   cascade: [`ControllerConfig::reference`], tuned by the same procedure (`tune_pid
+//!   --cascade`; its gains and how they were chosen are documented there).
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -21,7 +23,7 @@ use pam_firmware::pid::DpPidGains;
 use pam_firmware::tick::{ControlLaw, ControllerConfig, FaultCode};
 use serde::{Deserialize, Serialize};
 
-use crate::closed_loop::{run_with, ClosedLoopError, Scenario};
+use crate::closed_loop::{run_with, ClosedLoopError, Scenario, SetpointProfile};
 use crate::identify::{write_atomic, IdentError};
 use crate::plant::Plant;
 
@@ -261,22 +263,39 @@ pub fn scale_feedback(cfg: ControllerConfig, factor: f32) -> ControllerConfig {
     c
 }
 
+/// Largest step overshoot a tuning may have, as a fraction of the step: the firmware's own
+/// step requirement (`tests/closed_loop_smoke.rs`: 0.02 rad on a 0.2 rad step).
+pub const MAX_OVERSHOOT_FRAC: f64 = 0.10;
+
 /// The tuning cost [rad^2]: the worse of the suite MSE of `cfg` and of
-/// `scale_feedback(cfg, GAIN_MARGIN)`; infinite when a run fails. Returns (cost, nominal
-/// suite MSE, suite MSE at the margin).
+/// `scale_feedback(cfg, GAIN_MARGIN)`; infinite when a run fails or the step overshoots by
+/// more than [`MAX_OVERSHOOT_FRAC`] at the nominal gains. Returns (cost, nominal suite MSE,
+/// suite MSE at the margin).
 pub fn tuning_cost(
     plant: &Plant,
     scenarios: &[Scenario],
     cfg: ControllerConfig,
 ) -> (f64, f64, f64) {
-    let mse = |c: ControllerConfig| {
-        score_suite_with(plant, scenarios, c)
-            .map(|s| s.mse_rad2)
-            .unwrap_or(f64::INFINITY)
+    let nominal = score_suite_with(plant, scenarios, cfg);
+    let margin = score_suite_with(plant, scenarios, scale_feedback(cfg, GAIN_MARGIN))
+        .map(|s| s.mse_rad2)
+        .unwrap_or(f64::INFINITY);
+    let (mse, overshoot) = match nominal {
+        Ok(s) => (
+            s.mse_rad2,
+            s.scenarios
+                .iter()
+                .map(|c| c.overshoot_frac)
+                .fold(0.0, f64::max),
+        ),
+        Err(_) => (f64::INFINITY, 0.0),
     };
-    let nominal = mse(cfg);
-    let margin = mse(scale_feedback(cfg, GAIN_MARGIN));
-    (nominal.max(margin), nominal, margin)
+    let cost = if overshoot > MAX_OVERSHOOT_FRAC {
+        f64::INFINITY
+    } else {
+        mse.max(margin)
+    };
+    (cost, mse, margin)
 }
 
 /// Score of one scenario.
@@ -291,6 +310,9 @@ pub struct ScenarioScore {
     /// Mean squared angle error after the scenario's `settle_after_s` [rad^2] (infinite if a
     /// fault latched): the tracking phase without the first transient.
     pub mse_settled_rad2: f64,
+    /// Step scenarios: overshoot past the final set-point as a fraction of the step (0 for
+    /// other set-point profiles).
+    pub overshoot_frac: f64,
     /// The first latched fault, if any.
     pub fault: Option<FaultCode>,
 }
@@ -348,6 +370,23 @@ pub fn score_suite_with(
             .and_then(|k| run.rows[k].out.fault);
         let st = run.tracking(0.0);
         let settled = run.tracking(s.expect.settle_after_s);
+        let overshoot_frac = match s.setpoint {
+            SetpointProfile::Step {
+                initial_rad,
+                final_rad,
+                at_s,
+            } if final_rad != initial_rad => {
+                let dir = (final_rad - initial_rad).signum();
+                let past = run
+                    .rows
+                    .iter()
+                    .filter(|r| r.t_s >= at_s)
+                    .map(|r| (r.state.angle_rad - final_rad) * dir)
+                    .fold(0.0f64, f64::max);
+                past / (final_rad - initial_rad).abs()
+            }
+            _ => 0.0,
+        };
         out.push(ScenarioScore {
             name: run.name.clone(),
             mse_rad2: if fault.is_some() || st.n == 0 {
@@ -361,6 +400,7 @@ pub fn score_suite_with(
             } else {
                 settled.mse_rad2
             },
+            overshoot_frac,
             fault,
         });
     }
