@@ -9,7 +9,8 @@
 //! - it is lower than the tuned PID's (measured 1.27x): the 2x against the best tuned
 //!   PD / PID is NOT reached on the suite MSE. The step and random scenarios are dominated by
 //!   the first ~100 ms after each set-point jump, where both laws open the valves fully and
-//!   the rise is bounded by the valve flow (cascade and PID within 1 % of each other there);
+//!   the rise is bounded by the valve flow (cascade and PID within 1 % of each other there,
+//!   the PID marginally ahead);
 //! - on the tracking part of the suite (the sine) the cascade is at least 2x better than both
 //!   (measured 59x against the PID);
 //! - the stored gains of all three laws are local optima of the tuning cost (the worse of the
