@@ -214,3 +214,28 @@ fn the_checked_in_tuning_file_parses_and_names_both_laws() {
     assert!(t.pid.ki_pa_per_rad_s > 0.0);
     assert!(text.contains("tune_pid"), "provenance header missing");
 }
+
+/// Robustness, not part of the criterion: the same gains on the loaded joint
+/// (`reference-1dof-loaded.toml`, 11x the inertia, no retuning). The cascade stays stable and
+/// best; the PID tuned on the nominal joint limit-cycles there (measured 128x the cascade's
+/// suite MSE, README).
+#[test]
+fn on_the_loaded_joint_the_cascade_stays_stable_and_best() {
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/plant/reference-1dof-loaded.toml");
+    let plant = Plant::load(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+    let rows = compare(&plant, &tuning()).unwrap();
+    eprintln!("{}", format_table(&rows));
+    let cascade = &rows[0].score;
+    assert!(cascade.scenarios.iter().all(|s| s.fault.is_none()));
+    assert!(cascade.mse_rad2.is_finite());
+    for r in &rows[1..] {
+        assert!(
+            r.score.mse_rad2 > cascade.mse_rad2,
+            "{}: {:.4e} rad^2 vs cascade {:.4e} rad^2",
+            r.controller,
+            r.score.mse_rad2,
+            cascade.mse_rad2
+        );
+    }
+}
