@@ -2,7 +2,8 @@
 //! tick running it (`ControlLaw::DirectPid`): over the whole f32 input space (NaN, +-inf,
 //! huge values, mixed with realistic ones) the law never panics, never emits a non-finite
 //! value, keeps both set-points in [0, 600 kPa] and symmetric about p0, and refuses bad
-//! input with an error; the tick with it faults on bad input and never outputs NaN.
+//! input with an error; the tick with it faults on bad input and never outputs NaN. Also the
+//! cascade's trajectory feed-forward (`pam_firmware::feedforward`) in the tick.
 
 use pam_firmware::control::{ControlError, JointState};
 use pam_firmware::pid::{DpPid, DpPidGains};
@@ -239,4 +240,72 @@ fn tick_with_pid_drives_a_positive_step_like_the_cascade() {
     // kp e = 1e6 * 0.2 = 200 kPa (no rate on the first tick, integrator 1 ms old).
     assert!((a.p1_set_gauge_pa - 500e3).abs() < 100.0, "{a:?}");
     assert!((a.p2_set_gauge_pa - 100e3).abs() < 100.0, "{a:?}");
+}
+
+#[test]
+fn invalid_feedforward_latches_config_fault() {
+    use pam_firmware::feedforward::FeedforwardGains;
+    for ff in [
+        FeedforwardGains {
+            rate_weight: f32::NAN,
+            ..ControllerConfig::reference(1000.0).feedforward
+        },
+        FeedforwardGains {
+            rate_weight: 1.5,
+            ..ControllerConfig::reference(1000.0).feedforward
+        },
+        FeedforwardGains {
+            inertia_kgm2: -0.1,
+            ..ControllerConfig::reference(1000.0).feedforward
+        },
+    ] {
+        let mut cfg = ControllerConfig::reference(1000.0);
+        cfg.feedforward = ff;
+        assert!(!cfg.is_valid());
+        let mut t = ControlTick::new(cfg);
+        let f = SensorFrame {
+            p1_gauge_pa: Some(300e3),
+            p2_gauge_pa: Some(300e3),
+            angle_rad: Some(0.0),
+        };
+        let o = t.step(&f, &Setpoint { angle_rad: 0.0 }, 1e-3);
+        assert!(o.fault.is_some() && !o.armed);
+    }
+}
+
+#[test]
+fn cascade_feedforward_adds_kd_times_setpoint_rate_on_a_ramp() {
+    // The angle sits exactly on a 0.5 rad/s ramp and moves with it (velocity estimate from
+    // the angle samples): with w = 1 the derivative acts on the error, so the desired torque
+    // no longer brakes the motion; without the feed-forward it brakes by ~kd * 0.5 N m.
+    use pam_firmware::feedforward::FeedforwardGains;
+    let run = |ff: FeedforwardGains| {
+        let mut cfg = ControllerConfig::reference(1000.0);
+        cfg.feedforward = FeedforwardGains {
+            inertia_kgm2: 0.0,
+            ..ff
+        };
+        let kd = cfg.position.kd;
+        let mut t = ControlTick::new(cfg);
+        let mut last = None;
+        for k in 0..400 {
+            let a = 0.5 * k as f32 * 1e-3;
+            let f = SensorFrame {
+                p1_gauge_pa: Some(300e3),
+                p2_gauge_pa: Some(300e3),
+                angle_rad: Some(a),
+            };
+            last = Some(t.step(&f, &Setpoint { angle_rad: a }, 1e-3));
+        }
+        (last.unwrap(), kd)
+    };
+    let (with, kd) = run(ControllerConfig::reference(1000.0).feedforward);
+    let (without, _) = run(FeedforwardGains::OFF);
+    assert!(with.armed && without.armed);
+    let diff = with.torque_des_nm - without.torque_des_nm;
+    assert!(
+        (diff - kd * 0.5).abs() < 0.05 * kd,
+        "{diff} vs {}",
+        kd * 0.5
+    );
 }
