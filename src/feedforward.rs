@@ -146,7 +146,7 @@ pub fn feedforward_torque_nm(g: &FeedforwardGains, kd: f32, rate_rad_s: f32, acc
         lim
     } else if t < -lim {
         -lim
-    } else if t == t {
+    } else if !t.is_nan() {
         t
     } else {
         0.0
