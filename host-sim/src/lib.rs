@@ -12,6 +12,7 @@
 //! - [`plot`]: measured vs simulated channel plots.
 //! - [`diagnose_baseline`]: Elman-network residual model, the black-box baseline of the diagnosis.
 
+pub mod arm3_io;
 pub mod closed_loop;
 pub mod config;
 pub mod control_compare;

@@ -115,9 +115,19 @@ fn main() -> ExitCode {
 fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
     let plant_path = &a.plant;
     if let Some(s) = &a.scenario {
+        if host_sim::plant::arm3::is_arm3_file(plant_path)? {
+            bail!(
+                "{}: a 3-DOF arm plant (kind = \"arm3\"); --scenario runs the 1-DOF plant with \
+                 the firmware, use --inputs with a 3-joint recording",
+                plant_path.display()
+            );
+        }
         return run_closed_loop(plant_path, s, &a.out, a.plot.as_deref());
     }
     let inputs_path = a.inputs.as_ref().expect("clap: --inputs required");
+    if host_sim::plant::arm3::is_arm3_file(plant_path)? {
+        return run_simulate_arm3(a, inputs_path);
+    }
     let plant = Plant::load(plant_path)?;
     let rec = Recording::read(inputs_path)?;
     if let Some(named) = rec.meta("plant") {
@@ -188,6 +198,72 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
     );
     if let Some(p) = &a.plot {
         plot_comparison(p, Some(&rec), &out)?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `simulate` on a 3-DOF arm plant file (`kind = "arm3"`): replays a 3-joint recording
+/// (columns with `_j1`..`_j3` suffixes, `host_sim::arm3_io`).
+fn run_simulate_arm3(a: &SimulateArgs, inputs_path: &Path) -> Result<ExitCode> {
+    use host_sim::arm3_io::{fits, plot_arm3, Arm3Recording};
+    use host_sim::plant::arm3::{simulate_arm3, Arm3};
+    let arm = Arm3::load(&a.plant)?;
+    let rec = Arm3Recording::read(inputs_path)?;
+    let opts = SolverOptions {
+        rtol: a.rtol,
+        atol: a.atol,
+        ..SolverOptions::default()
+    };
+    if !(opts.rtol > 0.0 && opts.atol > 0.0) {
+        bail!("--rtol and --atol must be > 0");
+    }
+    let dt = rec.sample_period_s();
+    let bar = ProgressBar::with_draw_target(Some(rec.len() as u64), ProgressDrawTarget::stderr());
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{spinner} simulate arm3 [{bar:40}] {pos}/{len} samples {elapsed}",
+        )
+        .expect("static template")
+        .progress_chars("=> "),
+    );
+    let sim = simulate_arm3(&arm, &rec.inputs, dt, &opts, |k| bar.set_position(k as u64))
+        .with_context(|| format!("{}: simulation failed", inputs_path.display()))?;
+    bar.finish_and_clear();
+    let mut out = Arm3Recording {
+        metadata: vec![
+            ("plant".into(), a.plant.display().to_string()),
+            ("inputs".into(), inputs_path.display().to_string()),
+            ("sample_period_s".into(), format!("{dt}")),
+            (
+                "source".into(),
+                format!(
+                    "host-sim {} simulate (arm3), ode_solvers Dopri5 rtol={} atol={}",
+                    env!("CARGO_PKG_VERSION"),
+                    opts.rtol,
+                    opts.atol
+                ),
+            ),
+        ],
+        t_s: rec.t_s.clone(),
+        inputs: rec.inputs.clone(),
+        ..Default::default()
+    };
+    out.set_outputs_from_states(&arm, &sim.states);
+    out.write(&a.out)?;
+    eprintln!(
+        "{}: {} samples, {} segments, {} steps ({} rejected), {} rhs evaluations",
+        a.out.display(),
+        out.len(),
+        sim.stats.segments,
+        sim.stats.accepted_steps,
+        sim.stats.rejected_steps,
+        sim.stats.rhs_evaluations
+    );
+    for (name, fit) in fits(&rec, &out) {
+        println!("{name:<14} fit {fit:9.4} %");
+    }
+    if let Some(p) = &a.plot {
+        plot_arm3(p, Some(&rec), &out)?;
     }
     Ok(ExitCode::SUCCESS)
 }

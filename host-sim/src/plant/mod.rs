@@ -4,6 +4,7 @@
 //! force, damper, tension, volume polynomial), [`joint`] (kinematics, J omega' = T),
 //! [`pressure`] (Boyle-Mariotte), [`effects`] (optional extensions, off in the nominal files).
 
+pub mod arm3;
 pub mod effects;
 pub mod joint;
 pub mod muscle;

@@ -1,0 +1,1139 @@
+//! The 3-DOF angular (anthropomorphic) arm of seed 001 (Cakurda, Trojanova, Hosovsky,
+//! "Complete dynamic model validation of 3-DOF compliant manipulator with fluidic muscles"),
+//! each joint driven by an antagonistic pair of muscles through a sprocket.
+//!
+//! # Model
+//! - Arm (seed 001 eqs. 2-6, from Murray, Li, Sastry 1994 ex. 4.3, the "elbow manipulator"):
+//!   joint 1 turns about the vertical axis, joints 2 and 3 about horizontal axes; q2 is the
+//!   elevation of link 2 above the horizontal, q3 the angle of link 3 relative to link 2.
+//!   `M(q) q'' + C(q, q') q' + G(q) + F(q') = tau`. With s2 = sin q2, c23 = cos(q2 + q3) etc.
+//!   and A = l2 c2 + lc3 c23 (the horizontal reach of the link-3 centre of mass):
+//!   - M11 = Iy2 s2^2 + Iy3 s23^2 + Iz1 + Iz2 c2^2 + Iz3 c23^2 + m2 lc2^2 c2^2 + m3 A^2,
+//!     M12 = M13 = 0,
+//!   - M22 = Ix2 + Ix3 + m3 l2^2 + m2 lc2^2 + m3 lc3^2 + 2 m3 l2 lc3 c3,
+//!   - M23 = Ix3 + m3 lc3^2 + m3 l2 lc3 c3, M33 = Ix3 + m3 lc3^2;
+//!   - C from the Christoffel symbols of M: C_ij = sum_k 1/2 (dM_ij/dq_k + dM_ik/dq_j -
+//!     dM_jk/dq_i) q'_k, so that M' - 2C is skew-symmetric (the closed forms of eqs. 2-4 are
+//!     checked against this in the tests);
+//!   - G = dV/dq, V = g [(m2 lc2 + m3 l2) s2 + m3 lc3 s23]: G1 = 0 (seed 001: "in the case of
+//!     Joint 1 the effect of gravity is not considered"), G2, G3 as in seed 001 eqs. 21-22
+//!     (the static force differences times g / r). Seed 001 eq. 3 prints G2 with a minus sign,
+//!     i.e. its q2 grows downwards; we measure q2 upwards so that a positive muscle torque
+//!     lifts the arm.
+//!   - F (eq. 7) per joint: f_c sgn(w) + f_d w + f_e w^2 sgn(w) + f_g w^3, with sgn(w)
+//!     regularised as tanh(w / w_eps) (the right-hand side must stay continuous for the
+//!     explicit integrator) and w^2 sgn(w) = w |w| exactly. So there is no true stiction:
+//!     a joint loaded below f_c creeps at about w_eps atanh(tau / f_c) instead of sticking.
+//! - Muscles, valves and pressures: the 1-DOF code of `shared/plant/PLANT.md` per joint
+//!   ([`Muscle`] Tondu force + pressure-proportional damper + volume polynomial,
+//!   [`Iso6358Valve`], [`pressure::pressure_rate_pa_s`] Boyle-Mariotte). Muscle 1 of joint i
+//!   contracts when q_i grows: chi1 = chi0 + (r / l_n)(q_i - q_i,n), chi2 = chi0 - (r / l_n)
+//!   (q_i - q_i,n), q_i,n the joint's neutral angle; tau_i = (F1 - F2) r (seed 001 eq. 20).
+//!
+//! State (12): q1..q3 [rad], q1'..q3' [rad/s], absolute pressures (p1, p2) of joints 1..3.
+//! Inputs: four valve openings per joint ([`ValveInputs`]), zero-order held over each sample.
+//!
+//! Integration: [`Arm3Integrator`], `ode_solvers::Dopri5` (adaptive, error controlled, dense
+//! output) restarted at every input change, exactly as the 1-DOF [`crate::sim`].
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Matrix3, SVector, Vector3};
+use ode_solvers::{Dopri5, OutputType, System};
+use serde::Deserialize;
+
+use crate::config::{ConfigError, EnvironmentConfig, InitialConfig, MuscleConfig, ValveConfig};
+use crate::plant::muscle::Muscle;
+use crate::plant::pressure;
+use crate::plant::valve::Iso6358Valve;
+use crate::plant::ValveInputs;
+use crate::sim::SolverOptions;
+
+/// The 12-element ODE state vector.
+pub type Vector12 = SVector<f64, 12>;
+
+/// The value of the top-level `kind` key of a 3-DOF arm plant file.
+pub const KIND: &str = "arm3";
+
+// ---------------------------------------------------------------------------------------
+// Configuration (TOML)
+// ---------------------------------------------------------------------------------------
+
+/// A 3-DOF arm plant file, e.g. `host-sim/plants/arm3-seed001.toml`. Every table denies
+/// unknown keys; every key without a stated default is required.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Arm3Config {
+    /// Must be `"arm3"` (what `host-sim simulate` dispatches on).
+    pub kind: String,
+    /// Replace the `[jointN.initial]` angles by the static equilibrium under gravity at the
+    /// initial pressures (found from those angles by Newton's method). Default false.
+    #[serde(default)]
+    pub settle_initial_angles: bool,
+    pub environment: EnvironmentConfig,
+    /// The same ISO 6358 characteristic for all twelve valves.
+    pub valve: ValveConfig,
+    pub links: LinksConfig,
+    pub joint1: ArmJointConfig,
+    pub joint2: ArmJointConfig,
+    pub joint3: ArmJointConfig,
+}
+
+/// `[links]`: the rigid-body parameters of seed 001 tables 3-4 (names of its table 1).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LinksConfig {
+    /// I_x2.
+    pub inertia_x2_kgm2: f64,
+    /// I_x3.
+    pub inertia_x3_kgm2: f64,
+    /// I_y2.
+    pub inertia_y2_kgm2: f64,
+    /// I_y3.
+    pub inertia_y3_kgm2: f64,
+    /// I_z1.
+    pub inertia_z1_kgm2: f64,
+    /// I_z2.
+    pub inertia_z2_kgm2: f64,
+    /// I_z3.
+    pub inertia_z3_kgm2: f64,
+    /// m2.
+    pub mass2_kg: f64,
+    /// m3.
+    pub mass3_kg: f64,
+    /// l2, length of link 2 (joint 2 to joint 3).
+    pub length2_m: f64,
+    /// l_c2, joint 2 to the centre of mass of link 2.
+    pub com2_m: f64,
+    /// l_c3, joint 3 to the centre of mass of link 3.
+    pub com3_m: f64,
+    /// g (0 for a gravity-free variant).
+    pub gravity_m_s2: f64,
+}
+
+/// `[jointN]`: one joint with its muscle pair, friction and initial state.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ArmJointConfig {
+    /// r = d / 2 of seed 001 eq. 20.
+    pub sprocket_radius_m: f64,
+    /// chi0, contraction of both muscles at the neutral angle.
+    pub initial_contraction: f64,
+    /// q_n, the joint angle (in the frame of the M, C, G equations) at which both muscles
+    /// have the contraction chi0.
+    pub neutral_angle_rad: f64,
+    /// Both muscles of the pair (the 1-DOF `[muscle]` table).
+    pub muscle: MuscleConfig,
+    pub friction: FrictionConfig,
+    /// `angle_rad`, `velocity_rad_s`, `p1_gauge_pa`, `p2_gauge_pa` (the 1-DOF `[initial]`).
+    pub initial: InitialConfig,
+}
+
+/// `[jointN.friction]`: seed 001 eq. 7, f_c sgn(w) + f_d w + f_e w^2 sgn(w) + f_g w^3.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FrictionConfig {
+    /// f_c.
+    pub coulomb_nm: f64,
+    /// f_d.
+    pub viscous_nm_s_per_rad: f64,
+    /// f_e.
+    pub quadratic_nm_s2_per_rad2: f64,
+    /// f_g.
+    pub cubic_nm_s3_per_rad3: f64,
+    /// w_eps of sgn(w) ~ tanh(w / w_eps) (not in seed 001; small, > 0).
+    pub sign_smoothing_velocity_rad_s: f64,
+}
+
+impl Arm3Config {
+    /// Reads and validates a 3-DOF arm plant file.
+    pub fn load(path: impl AsRef<Path>) -> Result<Self, ConfigError> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        Self::from_toml_str(&text, path)
+    }
+
+    /// Parses and validates arm TOML text; `path` is only used in error messages.
+    pub fn from_toml_str(text: &str, path: impl AsRef<Path>) -> Result<Self, ConfigError> {
+        let path = path.as_ref();
+        let cfg: Arm3Config = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            path: path.to_owned(),
+            message: e.to_string().trim_end().replace('\n', "\n  "),
+        })?;
+        cfg.validate(path)?;
+        Ok(cfg)
+    }
+
+    fn validate(&self, path: &Path) -> Result<(), ConfigError> {
+        let bad = |key: &str, message: String| ConfigError::Invalid {
+            path: path.to_owned(),
+            key: key.to_owned(),
+            message,
+        };
+        if self.kind != KIND {
+            return Err(bad(
+                "kind",
+                format!(
+                    "must be \"{KIND}\" in a 3-DOF arm file, got {:?}",
+                    self.kind
+                ),
+            ));
+        }
+        let l = &self.links;
+        let mut checks: Vec<(String, f64, Bound)> = vec![
+            (
+                "environment.p_atm_pa".into(),
+                self.environment.p_atm_pa,
+                Bound::Positive,
+            ),
+            (
+                "environment.supply_gauge_pa".into(),
+                self.environment.supply_gauge_pa,
+                Bound::Finite,
+            ),
+            (
+                "valve.sonic_conductance_m3_per_s_pa".into(),
+                self.valve.sonic_conductance_m3_per_s_pa,
+                Bound::Positive,
+            ),
+            // M stays positive definite for every q if Iz1, Ix2, Ix3 > 0 and the rest >= 0.
+            (
+                "links.inertia_x2_kgm2".into(),
+                l.inertia_x2_kgm2,
+                Bound::Positive,
+            ),
+            (
+                "links.inertia_x3_kgm2".into(),
+                l.inertia_x3_kgm2,
+                Bound::Positive,
+            ),
+            (
+                "links.inertia_z1_kgm2".into(),
+                l.inertia_z1_kgm2,
+                Bound::Positive,
+            ),
+            (
+                "links.inertia_y2_kgm2".into(),
+                l.inertia_y2_kgm2,
+                Bound::NonNegative,
+            ),
+            (
+                "links.inertia_y3_kgm2".into(),
+                l.inertia_y3_kgm2,
+                Bound::NonNegative,
+            ),
+            (
+                "links.inertia_z2_kgm2".into(),
+                l.inertia_z2_kgm2,
+                Bound::NonNegative,
+            ),
+            (
+                "links.inertia_z3_kgm2".into(),
+                l.inertia_z3_kgm2,
+                Bound::NonNegative,
+            ),
+            ("links.mass2_kg".into(), l.mass2_kg, Bound::NonNegative),
+            ("links.mass3_kg".into(), l.mass3_kg, Bound::NonNegative),
+            ("links.length2_m".into(), l.length2_m, Bound::NonNegative),
+            ("links.com2_m".into(), l.com2_m, Bound::Finite),
+            ("links.com3_m".into(), l.com3_m, Bound::Finite),
+            (
+                "links.gravity_m_s2".into(),
+                l.gravity_m_s2,
+                Bound::NonNegative,
+            ),
+        ];
+        for (i, j) in self.joints().iter().enumerate() {
+            let k = format!("joint{}.", i + 1);
+            let m = &j.muscle;
+            let f = &j.friction;
+            let n = &j.initial;
+            checks.extend([
+                (
+                    format!("{k}sprocket_radius_m"),
+                    j.sprocket_radius_m,
+                    Bound::Positive,
+                ),
+                (
+                    format!("{k}initial_contraction"),
+                    j.initial_contraction,
+                    Bound::Finite,
+                ),
+                (
+                    format!("{k}neutral_angle_rad"),
+                    j.neutral_angle_rad,
+                    Bound::Finite,
+                ),
+                (
+                    format!("{k}muscle.rest_length_m"),
+                    m.rest_length_m,
+                    Bound::Positive,
+                ),
+                (format!("{k}muscle.radius_m"), m.radius_m, Bound::Positive),
+                (
+                    format!("{k}muscle.braid_angle_deg"),
+                    m.braid_angle_deg,
+                    Bound::Positive,
+                ),
+                (format!("{k}muscle.end_factor"), m.end_factor, Bound::Finite),
+                (
+                    format!("{k}muscle.damping_m2s"),
+                    m.damping_m2s,
+                    Bound::NonNegative,
+                ),
+                (
+                    format!("{k}friction.coulomb_nm"),
+                    f.coulomb_nm,
+                    Bound::NonNegative,
+                ),
+                (
+                    format!("{k}friction.viscous_nm_s_per_rad"),
+                    f.viscous_nm_s_per_rad,
+                    Bound::NonNegative,
+                ),
+                (
+                    format!("{k}friction.quadratic_nm_s2_per_rad2"),
+                    f.quadratic_nm_s2_per_rad2,
+                    Bound::NonNegative,
+                ),
+                (
+                    format!("{k}friction.cubic_nm_s3_per_rad3"),
+                    f.cubic_nm_s3_per_rad3,
+                    Bound::NonNegative,
+                ),
+                (
+                    format!("{k}friction.sign_smoothing_velocity_rad_s"),
+                    f.sign_smoothing_velocity_rad_s,
+                    Bound::Positive,
+                ),
+                (format!("{k}initial.angle_rad"), n.angle_rad, Bound::Finite),
+                (
+                    format!("{k}initial.velocity_rad_s"),
+                    n.velocity_rad_s,
+                    Bound::Finite,
+                ),
+                (
+                    format!("{k}initial.p1_gauge_pa"),
+                    n.p1_gauge_pa,
+                    Bound::Finite,
+                ),
+                (
+                    format!("{k}initial.p2_gauge_pa"),
+                    n.p2_gauge_pa,
+                    Bound::Finite,
+                ),
+            ]);
+            if m.braid_angle_deg >= 90.0 {
+                return Err(bad(
+                    &format!("{k}muscle.braid_angle_deg"),
+                    "must be below 90 degrees".into(),
+                ));
+            }
+            if m.volume_poly_m3.iter().any(|v| !v.is_finite()) || m.volume_poly_m3[0] <= 0.0 {
+                return Err(bad(
+                    &format!("{k}muscle.volume_poly_m3"),
+                    "coefficients must be finite, b0 (volume at zero contraction) > 0".into(),
+                ));
+            }
+            for (name, p) in [
+                ("p1_gauge_pa", n.p1_gauge_pa),
+                ("p2_gauge_pa", n.p2_gauge_pa),
+            ] {
+                if p + self.environment.p_atm_pa <= 0.0 {
+                    return Err(bad(
+                        &format!("{k}initial.{name}"),
+                        format!("absolute pressure must be > 0, got gauge {p} Pa"),
+                    ));
+                }
+            }
+        }
+        for (key, v, b) in &checks {
+            let ok = match b {
+                Bound::Finite => v.is_finite(),
+                Bound::Positive => v.is_finite() && *v > 0.0,
+                Bound::NonNegative => v.is_finite() && *v >= 0.0,
+            };
+            if !ok {
+                let need = match b {
+                    Bound::Finite => "a finite number",
+                    Bound::Positive => "a finite number > 0",
+                    Bound::NonNegative => "a finite number >= 0",
+                };
+                return Err(bad(key, format!("must be {need}, got {v}")));
+            }
+        }
+        let b = self.valve.critical_ratio;
+        let lr = self.valve.laminar_ratio;
+        if !(b.is_finite() && (0.0..1.0).contains(&b)) {
+            return Err(bad("valve.critical_ratio", "must be in [0, 1)".into()));
+        }
+        if !(lr.is_finite() && lr > b && lr < 1.0) {
+            return Err(bad(
+                "valve.laminar_ratio",
+                "must be in (critical_ratio, 1)".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    fn joints(&self) -> [&ArmJointConfig; 3] {
+        [&self.joint1, &self.joint2, &self.joint3]
+    }
+}
+
+enum Bound {
+    Finite,
+    Positive,
+    NonNegative,
+}
+
+/// Whether a plant file is for [`Arm3Config`]: it has a top-level `kind` (the 1-DOF files
+/// have none; a `kind` other than `"arm3"` is then reported by [`Arm3Config::load`]). Errors
+/// only if the file cannot be read or is not TOML.
+pub fn is_arm3_file(path: impl AsRef<Path>) -> Result<bool, ConfigError> {
+    let path = path.as_ref();
+    let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    let v: toml::Table = toml::from_str(&text).map_err(|e| ConfigError::Parse {
+        path: path.to_owned(),
+        message: e.to_string().trim_end().replace('\n', "\n  "),
+    })?;
+    Ok(v.contains_key("kind"))
+}
+
+// ---------------------------------------------------------------------------------------
+// Rigid-body dynamics: M, C, G, friction
+// ---------------------------------------------------------------------------------------
+
+/// The link parameters in SI (seed 001 table 1 names).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Links {
+    pub ix2: f64,
+    pub ix3: f64,
+    pub iy2: f64,
+    pub iy3: f64,
+    pub iz1: f64,
+    pub iz2: f64,
+    pub iz3: f64,
+    pub m2: f64,
+    pub m3: f64,
+    pub l2: f64,
+    pub lc2: f64,
+    pub lc3: f64,
+    pub g: f64,
+}
+
+impl Links {
+    pub fn from_config(c: &LinksConfig) -> Self {
+        Self {
+            ix2: c.inertia_x2_kgm2,
+            ix3: c.inertia_x3_kgm2,
+            iy2: c.inertia_y2_kgm2,
+            iy3: c.inertia_y3_kgm2,
+            iz1: c.inertia_z1_kgm2,
+            iz2: c.inertia_z2_kgm2,
+            iz3: c.inertia_z3_kgm2,
+            m2: c.mass2_kg,
+            m3: c.mass3_kg,
+            l2: c.length2_m,
+            lc2: c.com2_m,
+            lc3: c.com3_m,
+            g: c.gravity_m_s2,
+        }
+    }
+
+    /// Mass (inertia) matrix M(q).
+    pub fn mass_matrix(&self, q: &[f64; 3]) -> Matrix3<f64> {
+        let (s2, c2) = q[1].sin_cos();
+        let (s23, c23) = (q[1] + q[2]).sin_cos();
+        let c3 = q[2].cos();
+        let a = self.l2 * c2 + self.lc3 * c23;
+        let m11 = self.iy2 * s2 * s2
+            + self.iy3 * s23 * s23
+            + self.iz1
+            + self.iz2 * c2 * c2
+            + self.iz3 * c23 * c23
+            + self.m2 * self.lc2 * self.lc2 * c2 * c2
+            + self.m3 * a * a;
+        let m33 = self.ix3 + self.m3 * self.lc3 * self.lc3;
+        let m23 = m33 + self.m3 * self.l2 * self.lc3 * c3;
+        let m22 = self.ix2
+            + self.ix3
+            + self.m3 * self.l2 * self.l2
+            + self.m2 * self.lc2 * self.lc2
+            + self.m3 * self.lc3 * self.lc3
+            + 2.0 * self.m3 * self.l2 * self.lc3 * c3;
+        Matrix3::new(m11, 0.0, 0.0, 0.0, m22, m23, 0.0, m23, m33)
+    }
+
+    /// The partial derivatives dM/dq_k, k = 1..3 (M does not depend on q1).
+    pub fn mass_matrix_partials(&self, q: &[f64; 3]) -> [Matrix3<f64>; 3] {
+        let (s2, c2) = q[1].sin_cos();
+        let (s23, c23) = (q[1] + q[2]).sin_cos();
+        let s3 = q[2].sin();
+        let a = self.l2 * c2 + self.lc3 * c23;
+        let b = self.l2 * s2 + self.lc3 * s23;
+        // Seed 001 eq. 2: the coefficients of q1' q2' and q1' q3' are these halves.
+        let h12 = (self.iy2 - self.iz2 - self.m2 * self.lc2 * self.lc2) * c2 * s2
+            + (self.iy3 - self.iz3) * c23 * s23
+            - self.m3 * a * b;
+        let h13 = (self.iy3 - self.iz3) * c23 * s23 - self.m3 * self.lc3 * s23 * a;
+        let e = self.m3 * self.l2 * self.lc3 * s3;
+        let d2 = Matrix3::new(2.0 * h12, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+        let d3 = Matrix3::new(2.0 * h13, 0.0, 0.0, 0.0, -2.0 * e, -e, 0.0, -e, 0.0);
+        [Matrix3::zeros(), d2, d3]
+    }
+
+    /// Coriolis and centrifugal matrix C(q, q') from the Christoffel symbols of M.
+    pub fn coriolis_matrix(&self, q: &[f64; 3], qd: &[f64; 3]) -> Matrix3<f64> {
+        let dm = self.mass_matrix_partials(q);
+        let mut c = Matrix3::zeros();
+        for i in 0..3 {
+            for j in 0..3 {
+                let mut s = 0.0;
+                for k in 0..3 {
+                    s += 0.5 * (dm[k][(i, j)] + dm[j][(i, k)] - dm[i][(j, k)]) * qd[k];
+                }
+                c[(i, j)] = s;
+            }
+        }
+        c
+    }
+
+    /// Potential energy V(q) (zero with both links horizontal at the joint-2 height).
+    pub fn potential_energy_j(&self, q: &[f64; 3]) -> f64 {
+        self.g
+            * ((self.m2 * self.lc2 + self.m3 * self.l2) * q[1].sin()
+                + self.m3 * self.lc3 * (q[1] + q[2]).sin())
+    }
+
+    /// Gravity torques G(q) = dV/dq.
+    pub fn gravity_torques_nm(&self, q: &[f64; 3]) -> Vector3<f64> {
+        let c2 = q[1].cos();
+        let c23 = (q[1] + q[2]).cos();
+        let g3 = self.g * self.m3 * self.lc3 * c23;
+        let g2 = self.g * (self.m2 * self.lc2 + self.m3 * self.l2) * c2 + g3;
+        Vector3::new(0.0, g2, g3)
+    }
+
+    /// Kinetic energy 1/2 q'^T M q'.
+    pub fn kinetic_energy_j(&self, q: &[f64; 3], qd: &[f64; 3]) -> f64 {
+        let v = Vector3::from(*qd);
+        0.5 * v.dot(&(self.mass_matrix(q) * v))
+    }
+
+    /// q'' = M^-1 (tau - C q' - G - F) for joint torques `tau` (muscles) and friction torques
+    /// `friction` (the F of eq. 6, i.e. opposing the motion when positive along q').
+    pub fn acceleration(
+        &self,
+        q: &[f64; 3],
+        qd: &[f64; 3],
+        tau: &[f64; 3],
+        friction: &[f64; 3],
+    ) -> [f64; 3] {
+        let m = self.mass_matrix(q);
+        let v = Vector3::from(*qd);
+        let rhs = Vector3::from(*tau)
+            - self.coriolis_matrix(q, qd) * v
+            - self.gravity_torques_nm(q)
+            - Vector3::from(*friction);
+        // M is symmetric positive definite (validated parameters): Cholesky.
+        let x = match m.cholesky() {
+            Some(ch) => ch.solve(&rhs),
+            None => Vector3::repeat(f64::NAN),
+        };
+        [x[0], x[1], x[2]]
+    }
+}
+
+/// Seed 001 eq. 7 for one joint.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Eq7Friction {
+    pub f_c: f64,
+    pub f_d: f64,
+    pub f_e: f64,
+    pub f_g: f64,
+    pub w_eps: f64,
+}
+
+impl Eq7Friction {
+    pub fn from_config(c: &FrictionConfig) -> Self {
+        Self {
+            f_c: c.coulomb_nm,
+            f_d: c.viscous_nm_s_per_rad,
+            f_e: c.quadratic_nm_s2_per_rad2,
+            f_g: c.cubic_nm_s3_per_rad3,
+            w_eps: c.sign_smoothing_velocity_rad_s,
+        }
+    }
+
+    /// F(w) = f_c sgn(w) + f_d w + f_e w |w| + f_g w^3 (the torque the joint loses; it
+    /// opposes the motion: w F(w) >= 0).
+    #[inline(always)]
+    pub fn torque_nm(&self, w: f64) -> f64 {
+        self.f_c * (w / self.w_eps).tanh()
+            + self.f_d * w
+            + self.f_e * w * w.abs()
+            + self.f_g * w * w * w
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// The arm with its muscles
+// ---------------------------------------------------------------------------------------
+
+/// One joint's antagonistic muscle pair over its sprocket.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MusclePair {
+    pub muscle: Muscle,
+    /// r.
+    pub sprocket_radius_m: f64,
+    /// chi0.
+    pub initial_contraction: f64,
+    /// q_n.
+    pub neutral_angle_rad: f64,
+    /// r / l_n.
+    pub contraction_per_rad: f64,
+}
+
+impl MusclePair {
+    /// (chi1, chi2) at joint angle `q`.
+    #[inline(always)]
+    pub fn contractions(&self, q_rad: f64) -> [f64; 2] {
+        let d = self.contraction_per_rad * (q_rad - self.neutral_angle_rad);
+        [self.initial_contraction + d, self.initial_contraction - d]
+    }
+
+    /// (dchi1/dt, dchi2/dt).
+    #[inline(always)]
+    pub fn contraction_rates(&self, qd_rad_s: f64) -> [f64; 2] {
+        let d = self.contraction_per_rad * qd_rad_s;
+        [d, -d]
+    }
+
+    /// Tensions (F1, F2) at absolute pressures `p_abs`.
+    #[inline(always)]
+    pub fn tensions_n(&self, p_atm_pa: f64, p_abs_pa: [f64; 2], q: f64, qd: f64) -> [f64; 2] {
+        let chi = self.contractions(q);
+        let dchi = self.contraction_rates(qd);
+        [
+            self.muscle
+                .tension_n(p_abs_pa[0] - p_atm_pa, chi[0], dchi[0]),
+            self.muscle
+                .tension_n(p_abs_pa[1] - p_atm_pa, chi[1], dchi[1]),
+        ]
+    }
+}
+
+/// Arm state (SI, absolute pressures).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Arm3State {
+    pub angles_rad: [f64; 3],
+    pub velocities_rad_s: [f64; 3],
+    /// (p1, p2) of joints 1..3, absolute.
+    pub p_abs_pa: [[f64; 2]; 3],
+}
+
+impl Arm3State {
+    pub fn to_vector(&self) -> Vector12 {
+        let mut y = Vector12::zeros();
+        for i in 0..3 {
+            y[i] = self.angles_rad[i];
+            y[3 + i] = self.velocities_rad_s[i];
+            y[6 + 2 * i] = self.p_abs_pa[i][0];
+            y[7 + 2 * i] = self.p_abs_pa[i][1];
+        }
+        y
+    }
+
+    pub fn from_vector(y: &Vector12) -> Self {
+        let mut s = Self::default();
+        for i in 0..3 {
+            s.angles_rad[i] = y[i];
+            s.velocities_rad_s[i] = y[3 + i];
+            s.p_abs_pa[i] = [y[6 + 2 * i], y[7 + 2 * i]];
+        }
+        s
+    }
+
+    fn is_finite(&self) -> bool {
+        self.to_vector().iter().all(|v| v.is_finite())
+    }
+}
+
+/// Valve openings of the three joints, held over one sample.
+pub type Arm3Inputs = [ValveInputs; 3];
+
+/// The recorded channels of one joint (same names and units as the 1-DOF recording, with a
+/// `_jN` suffix in a 3-joint recording).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct JointMeasurement {
+    pub angle_deg: f64,
+    /// Gauge.
+    pub p1_kpa: f64,
+    /// Gauge.
+    pub p2_kpa: f64,
+    pub f1_n: f64,
+    pub f2_n: f64,
+}
+
+/// The 3-DOF arm plant with its derived constants.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Arm3 {
+    pub p_atm_pa: f64,
+    pub p_supply_abs_pa: f64,
+    pub valve: Iso6358Valve,
+    pub links: Links,
+    pub pairs: [MusclePair; 3],
+    pub friction: [Eq7Friction; 3],
+    pub initial: Arm3State,
+}
+
+/// A static equilibrium that could not be found.
+#[derive(Debug, thiserror::Error)]
+#[error("no static equilibrium found from {start_rad:?} rad: {message}")]
+pub struct EquilibriumError {
+    pub start_rad: [f64; 3],
+    pub message: String,
+}
+
+impl Arm3 {
+    /// The arm of a validated configuration; with `settle_initial_angles` the initial angles
+    /// are the static equilibrium at the initial pressures (velocities then must be zero).
+    pub fn from_config(c: &Arm3Config) -> Result<Self, EquilibriumError> {
+        let p_atm_pa = c.environment.p_atm_pa;
+        let joints = c.joints();
+        let pair = |j: &ArmJointConfig| MusclePair {
+            muscle: Muscle::from_config(&j.muscle),
+            sprocket_radius_m: j.sprocket_radius_m,
+            initial_contraction: j.initial_contraction,
+            neutral_angle_rad: j.neutral_angle_rad,
+            contraction_per_rad: j.sprocket_radius_m / j.muscle.rest_length_m,
+        };
+        let mut initial = Arm3State::default();
+        for (i, j) in joints.iter().enumerate() {
+            initial.angles_rad[i] = j.initial.angle_rad;
+            initial.velocities_rad_s[i] = j.initial.velocity_rad_s;
+            initial.p_abs_pa[i] = [
+                j.initial.p1_gauge_pa + p_atm_pa,
+                j.initial.p2_gauge_pa + p_atm_pa,
+            ];
+        }
+        let mut arm = Self {
+            p_atm_pa,
+            p_supply_abs_pa: c.environment.supply_gauge_pa + p_atm_pa,
+            valve: Iso6358Valve::new(
+                c.valve.sonic_conductance_m3_per_s_pa,
+                c.valve.critical_ratio,
+                c.valve.laminar_ratio,
+            ),
+            links: Links::from_config(&c.links),
+            pairs: joints.map(pair),
+            friction: joints.map(|j| Eq7Friction::from_config(&j.friction)),
+            initial,
+        };
+        if c.settle_initial_angles {
+            arm.initial.angles_rad =
+                arm.static_equilibrium(&initial.p_abs_pa, initial.angles_rad)?;
+        }
+        Ok(arm)
+    }
+
+    /// Loads a plant file; the errors name the file (and the key where there is one).
+    pub fn load(path: impl AsRef<Path>) -> Result<Self, Arm3LoadError> {
+        let path = path.as_ref();
+        let cfg = Arm3Config::load(path)?;
+        Self::from_config(&cfg).map_err(|e| Arm3LoadError::Equilibrium {
+            path: path.to_owned(),
+            source: e,
+        })
+    }
+
+    /// Muscle torques tau_i = (F1 - F2) r_i (seed 001 eq. 20).
+    pub fn muscle_torques_nm(&self, x: &Arm3State) -> [f64; 3] {
+        let mut tau = [0.0; 3];
+        for (i, pair) in self.pairs.iter().enumerate() {
+            let f = pair.tensions_n(
+                self.p_atm_pa,
+                x.p_abs_pa[i],
+                x.angles_rad[i],
+                x.velocities_rad_s[i],
+            );
+            tau[i] = (f[0] - f[1]) * pair.sprocket_radius_m;
+        }
+        tau
+    }
+
+    /// Friction torques F(q') of eq. 7.
+    pub fn friction_torques_nm(&self, qd: &[f64; 3]) -> [f64; 3] {
+        [
+            self.friction[0].torque_nm(qd[0]),
+            self.friction[1].torque_nm(qd[1]),
+            self.friction[2].torque_nm(qd[2]),
+        ]
+    }
+
+    /// Right-hand side d/dt of the state for inputs `u`.
+    pub fn derivatives(&self, x: &Arm3State, u: &Arm3Inputs) -> Arm3State {
+        let mut d = Arm3State {
+            angles_rad: x.velocities_rad_s,
+            ..Default::default()
+        };
+        let mut tau = [0.0; 3];
+        for (i, pair) in self.pairs.iter().enumerate() {
+            let chi = pair.contractions(x.angles_rad[i]);
+            let dchi = pair.contraction_rates(x.velocities_rad_s[i]);
+            let u_in = [u[i].u_in1, u[i].u_in2];
+            let u_ex = [u[i].u_ex1, u[i].u_ex2];
+            let mut f = [0.0; 2];
+            for m in 0..2 {
+                let p = x.p_abs_pa[i][m];
+                f[m] = pair.muscle.tension_n(p - self.p_atm_pa, chi[m], dchi[m]);
+                let mut q = 0.0;
+                if u_in[m] != 0.0 {
+                    q += u_in[m] * self.valve.flow_m3_s(self.p_supply_abs_pa, p);
+                }
+                if u_ex[m] != 0.0 {
+                    q -= u_ex[m] * self.valve.flow_m3_s(p, self.p_atm_pa);
+                }
+                d.p_abs_pa[i][m] = pressure::pressure_rate_pa_s(
+                    self.p_atm_pa,
+                    p,
+                    q,
+                    pair.muscle.volume_m3(chi[m]),
+                    pair.muscle.volume_rate_m3_s(chi[m], dchi[m]),
+                );
+            }
+            tau[i] = (f[0] - f[1]) * pair.sprocket_radius_m;
+        }
+        let fr = self.friction_torques_nm(&x.velocities_rad_s);
+        d.velocities_rad_s = self
+            .links
+            .acceleration(&x.angles_rad, &x.velocities_rad_s, &tau, &fr);
+        d
+    }
+
+    /// The recorded channels of each joint.
+    pub fn measure(&self, x: &Arm3State) -> [JointMeasurement; 3] {
+        std::array::from_fn(|i| {
+            let f = self.pairs[i].tensions_n(
+                self.p_atm_pa,
+                x.p_abs_pa[i],
+                x.angles_rad[i],
+                x.velocities_rad_s[i],
+            );
+            JointMeasurement {
+                angle_deg: x.angles_rad[i].to_degrees(),
+                p1_kpa: (x.p_abs_pa[i][0] - self.p_atm_pa) / 1000.0,
+                p2_kpa: (x.p_abs_pa[i][1] - self.p_atm_pa) / 1000.0,
+                f1_n: f[0],
+                f2_n: f[1],
+            }
+        })
+    }
+
+    /// Static torque balance at rest: tau_muscle(q, p) - G(q) (friction is zero at rest).
+    pub fn static_residual_nm(&self, p_abs_pa: &[[f64; 2]; 3], q: &[f64; 3]) -> Vector3<f64> {
+        let x = Arm3State {
+            angles_rad: *q,
+            velocities_rad_s: [0.0; 3],
+            p_abs_pa: *p_abs_pa,
+        };
+        Vector3::from(self.muscle_torques_nm(&x)) - self.links.gravity_torques_nm(q)
+    }
+
+    /// The angles at which the arm rests under gravity with the muscle pressures `p_abs_pa`
+    /// (Newton's method from `start_rad` with a central-difference Jacobian and step
+    /// halving). Converged when every torque residual is below 1e-9 N m.
+    pub fn static_equilibrium(
+        &self,
+        p_abs_pa: &[[f64; 2]; 3],
+        start_rad: [f64; 3],
+    ) -> Result<[f64; 3], EquilibriumError> {
+        let fail = |message: String| EquilibriumError { start_rad, message };
+        let mut q = start_rad;
+        let mut r = self.static_residual_nm(p_abs_pa, &q);
+        for _ in 0..100 {
+            if r.amax() < 1e-9 {
+                return Ok(q);
+            }
+            let h = 1e-7;
+            let mut jac = Matrix3::zeros();
+            for k in 0..3 {
+                let mut qp = q;
+                let mut qm = q;
+                qp[k] += h;
+                qm[k] -= h;
+                let col = (self.static_residual_nm(p_abs_pa, &qp)
+                    - self.static_residual_nm(p_abs_pa, &qm))
+                    / (2.0 * h);
+                jac.set_column(k, &col);
+            }
+            let step = jac
+                .lu()
+                .solve(&(-r))
+                .ok_or_else(|| fail(format!("singular stiffness at {q:?} rad")))?;
+            let mut lambda = 1.0;
+            loop {
+                let qn = [
+                    q[0] + lambda * step[0],
+                    q[1] + lambda * step[1],
+                    q[2] + lambda * step[2],
+                ];
+                let rn = self.static_residual_nm(p_abs_pa, &qn);
+                if rn.norm() < r.norm() || lambda < 1e-6 {
+                    q = qn;
+                    r = rn;
+                    break;
+                }
+                lambda *= 0.5;
+            }
+        }
+        Err(fail(format!(
+            "no convergence in 100 Newton steps (residual {:?} N m at {q:?} rad)",
+            r.as_slice()
+        )))
+    }
+}
+
+/// An arm plant file that could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum Arm3LoadError {
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    #[error("{}: settle_initial_angles: {source}", path.display())]
+    Equilibrium {
+        path: PathBuf,
+        #[source]
+        source: EquilibriumError,
+    },
+}
+
+// ---------------------------------------------------------------------------------------
+// Integration under zero-order-held inputs
+// ---------------------------------------------------------------------------------------
+
+/// A failed arm simulation.
+#[derive(Debug, thiserror::Error)]
+pub enum Arm3SimError {
+    #[error("integration failed at t = {t_s} s: {message}")]
+    Integration { t_s: f64, message: String },
+    #[error("state became non-finite at t = {t_s} s (state {state:?})")]
+    NonFinite { t_s: f64, state: Arm3State },
+    #[error("invalid sample period {0} s (must be finite and > 0)")]
+    SamplePeriod(f64),
+    #[error("invalid valve input at sample {index}, joint {joint}: {inputs:?} (openings must be in [0, 1])")]
+    Input {
+        index: usize,
+        joint: usize,
+        inputs: ValveInputs,
+    },
+}
+
+struct Rhs<'a> {
+    arm: &'a Arm3,
+    u: Arm3Inputs,
+}
+
+impl System<f64, Vector12> for Rhs<'_> {
+    fn system(&self, _t: f64, y: &Vector12, dy: &mut Vector12) {
+        let d = self.arm.derivatives(&Arm3State::from_vector(y), &self.u);
+        *dy = d.to_vector();
+    }
+}
+
+fn check_inputs(index: usize, u: &Arm3Inputs) -> Result<(), Arm3SimError> {
+    for (j, v) in u.iter().enumerate() {
+        if ![v.u_in1, v.u_ex1, v.u_in2, v.u_ex2]
+            .iter()
+            .all(|x| (0.0..=1.0).contains(x))
+        {
+            return Err(Arm3SimError::Input {
+                index,
+                joint: j + 1,
+                inputs: *v,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Counters of an arm simulation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Arm3Stats {
+    pub segments: u64,
+    pub rhs_evaluations: u64,
+    pub accepted_steps: u64,
+    pub rejected_steps: u64,
+}
+
+/// The arm state advanced piecewise under zero-order-held inputs (one Dopri5 run per run of
+/// equal inputs, never stepping across an input change; the step size carried over).
+pub struct Arm3Integrator<'a> {
+    arm: &'a Arm3,
+    state: Arm3State,
+    t_s: f64,
+    h_s: f64,
+    opts: SolverOptions,
+    stats: Arm3Stats,
+}
+
+impl<'a> Arm3Integrator<'a> {
+    pub fn new(arm: &'a Arm3, state: Arm3State, opts: SolverOptions) -> Self {
+        Self {
+            arm,
+            state,
+            t_s: 0.0,
+            h_s: 0.0,
+            opts,
+            stats: Arm3Stats::default(),
+        }
+    }
+
+    pub fn state(&self) -> Arm3State {
+        self.state
+    }
+    pub fn time_s(&self) -> f64 {
+        self.t_s
+    }
+    pub fn stats(&self) -> Arm3Stats {
+        self.stats
+    }
+
+    /// Holds `inputs` for `n` samples of `dt_s`; calls `on_sample` with the state at the
+    /// start of each sample; afterwards [`Self::state`] is the state at the end.
+    pub fn advance_samples(
+        &mut self,
+        inputs: Arm3Inputs,
+        dt_s: f64,
+        n: usize,
+        mut on_sample: impl FnMut(&Arm3State),
+    ) -> Result<(), Arm3SimError> {
+        if !(dt_s.is_finite() && dt_s > 0.0) {
+            return Err(Arm3SimError::SamplePeriod(dt_s));
+        }
+        check_inputs(0, &inputs)?;
+        if n == 0 {
+            return Ok(());
+        }
+        let duration_s = n as f64 * dt_s;
+        // As in crate::sim: end a hair after the last sample so that every dense output is an
+        // interpolation inside an accepted step; a single sample integrates exactly to its end.
+        let single = n == 1;
+        let x_end = if single {
+            duration_s
+        } else {
+            duration_s + (1e-6 * dt_s).max(4e-9)
+        };
+        let h0 = if self.h_s > 0.0 {
+            self.h_s.min(duration_s)
+        } else {
+            0.0
+        };
+        let mut solver = Dopri5::from_param(
+            Rhs {
+                arm: self.arm,
+                u: inputs,
+            },
+            0.0,
+            x_end,
+            dt_s,
+            self.state.to_vector(),
+            self.opts.rtol,
+            self.opts.atol,
+            0.9,
+            0.04,
+            0.2,
+            10.0,
+            x_end,
+            h0,
+            self.opts.max_steps_per_segment,
+            u32::MAX,
+            if single {
+                OutputType::Sparse
+            } else {
+                OutputType::Dense
+            },
+        );
+        let st = solver.integrate().map_err(|e| Arm3SimError::Integration {
+            t_s: self.t_s,
+            message: e.to_string(),
+        })?;
+        self.stats.segments += 1;
+        self.stats.rhs_evaluations += u64::from(st.num_eval);
+        self.stats.accepted_steps += u64::from(st.accepted_steps);
+        self.stats.rejected_steps += u64::from(st.rejected_steps);
+        let ys = solver.y_out();
+        let end = if single {
+            on_sample(&self.state);
+            Arm3State::from_vector(ys.last().expect("sparse output holds the start point"))
+        } else {
+            if ys.len() < n + 1 {
+                return Err(Arm3SimError::Integration {
+                    t_s: self.t_s,
+                    message: format!(
+                        "dense output gave {} points for {} samples",
+                        ys.len(),
+                        n + 1
+                    ),
+                });
+            }
+            for y in &ys[..n] {
+                on_sample(&Arm3State::from_vector(y));
+            }
+            Arm3State::from_vector(&ys[n])
+        };
+        if !end.is_finite() {
+            return Err(Arm3SimError::NonFinite {
+                t_s: self.t_s + duration_s,
+                state: end,
+            });
+        }
+        self.state = end;
+        self.t_s += duration_s;
+        self.h_s = duration_s / f64::from(st.accepted_steps.max(1));
+        Ok(())
+    }
+}
+
+/// An open-loop arm run: `states[k]` is the state at `t_k = k dt`.
+#[derive(Debug, Clone)]
+pub struct Arm3Simulation {
+    pub states: Vec<Arm3State>,
+    pub final_state: Arm3State,
+    pub stats: Arm3Stats,
+}
+
+/// Open-loop replay from the arm's initial state: `inputs[k]` held over `[t_k, t_k + dt)`;
+/// `progress` gets the number of samples done.
+pub fn simulate_arm3(
+    arm: &Arm3,
+    inputs: &[Arm3Inputs],
+    dt_s: f64,
+    opts: &SolverOptions,
+    mut progress: impl FnMut(usize),
+) -> Result<Arm3Simulation, Arm3SimError> {
+    for (k, u) in inputs.iter().enumerate() {
+        check_inputs(k, u)?;
+    }
+    let mut integ = Arm3Integrator::new(arm, arm.initial, *opts);
+    let mut states = Vec::with_capacity(inputs.len());
+    let mut k = 0;
+    while k < inputs.len() {
+        let u = inputs[k];
+        let run = inputs[k..].iter().take_while(|v| **v == u).count();
+        integ.advance_samples(u, dt_s, run, |x| states.push(*x))?;
+        k += run;
+        progress(k);
+    }
+    Ok(Arm3Simulation {
+        states,
+        final_state: integ.state(),
+        stats: integ.stats(),
+    })
+}
