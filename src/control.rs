@@ -58,6 +58,21 @@ fn clampf(x: f32, lim: f32) -> f32 {
     }
 }
 
+/// Clamp of a pressure set-point to `[0, hi]` (`hi` from [`clamp_pressure_setpoint_pa`]
+/// with an infinite pressure, so `0 <= hi <= P_MUSCLE_MAX_GAUGE_PA`); NaN and p <= 0 give +0.
+#[inline(always)]
+// `!(p > 0.0)` is deliberate: it is also true for NaN.
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
+fn clamp_setpoint_to(p_gauge_pa: f32, hi: f32) -> f32 {
+    if !(p_gauge_pa > 0.0) {
+        0.0
+    } else if p_gauge_pa > hi {
+        hi
+    } else {
+        p_gauge_pa
+    }
+}
+
 /// Gains of the position PID. Units: `kp` [N m/rad], `ki` [N m/(rad s)], `kd` [N m s/rad].
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -127,6 +142,18 @@ impl PositionController {
             self.reset();
             return Err(ControlError::NonFiniteInput);
         }
+        self.step_finite(meas, setpoint_rad, dt_s)
+    }
+
+    /// [`Self::step`] without its input check, for a caller that has validated the inputs
+    /// (all finite, `dt_s > 0`): then the same result, bit for bit.
+    #[inline(always)]
+    pub(crate) fn step_finite(
+        &mut self,
+        meas: JointState,
+        setpoint_rad: f32,
+        dt_s: f32,
+    ) -> Result<f32, ControlError> {
         let g = &self.gains;
         let e = setpoint_rad - meas.angle_rad;
         let pd = g.kp * e - g.kd * meas.velocity_rad_s;
@@ -304,6 +331,19 @@ impl TorqueController {
             self.reset();
             return Err(ControlError::NonFiniteInput);
         }
+        self.step_finite(meas, estimate, torque_des_nm, dt_s)
+    }
+
+    /// [`Self::step_with_estimate`] without its input check, for a caller that has
+    /// validated the inputs (all finite, `dt_s > 0`): then the same result, bit for bit.
+    #[inline(always)]
+    pub(crate) fn step_finite(
+        &mut self,
+        meas: TorqueMeasurement,
+        estimate: (f32, ForceFlags),
+        torque_des_nm: f32,
+        dt_s: f32,
+    ) -> Result<PressureSetpoints, ControlError> {
         let (t_est, flags) = estimate;
         if flags.contains_any(ForceFlags::FATAL) {
             self.reset();
@@ -323,10 +363,15 @@ impl TorqueController {
         }
         let t_cmd = torque_des_nm + clampf(g.kp * t_err + self.integral_nm, lim);
         let act = inverse.activation(t_cmd);
-        let (p1, p2) = m.pressures_gauge_pa(act.dp_pa);
-        let p1 = clamp_pressure_setpoint_pa(p1, g.p_set_max_gauge_pa);
-        let p2 = clamp_pressure_setpoint_pa(p2, g.p_set_max_gauge_pa);
-        if !finite(&[t_est, t_cmd, act.dp_pa, p1, p2, self.integral_nm]) {
+        // `clamp_pressure_setpoint_pa(m.pressures_gauge_pa(dp), p_set_max)` in one clamp per
+        // muscle (the same value for every input: both map NaN and p <= 0 to +0, and the
+        // bound is min(p_set_max, P_MUSCLE_MAX) <= the model's own bound).
+        let hi = clamp_pressure_setpoint_pa(f32::INFINITY, g.p_set_max_gauge_pa);
+        let p1 = clamp_setpoint_to(m.p0_gauge_pa - act.dp_pa, hi);
+        let p2 = clamp_setpoint_to(m.p0_gauge_pa + act.dp_pa, hi);
+        // p1, p2 (clamped, NaN -> 0) and dp (finite by construction of `activation`) are
+        // always finite.
+        if !finite(&[t_est, t_cmd, self.integral_nm]) {
             self.reset();
             return Err(ControlError::NonFiniteOutput);
         }
@@ -392,6 +437,18 @@ impl PressureController {
             self.reset();
             return Err(ControlError::NonFiniteInput);
         }
+        self.step_finite(p_meas_gauge_pa, p_set_gauge_pa, dt_s)
+    }
+
+    /// [`Self::step`] without its input check, for a caller that has validated the inputs
+    /// (all finite, `dt_s > 0`): then the same result, bit for bit.
+    #[inline(always)]
+    pub(crate) fn step_finite(
+        &mut self,
+        p_meas_gauge_pa: f32,
+        p_set_gauge_pa: f32,
+        dt_s: f32,
+    ) -> Result<f32, ControlError> {
         let g = &self.gains;
         let e = p_set_gauge_pa - p_meas_gauge_pa;
         if libm::fabsf(e) <= g.deadband_pa {

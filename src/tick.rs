@@ -263,6 +263,9 @@ impl ControllerConfig {
 pub struct ControlTick {
     cfg: ControllerConfig,
     config_ok: bool,
+    /// The period channels are aged by when `dt` itself is bad: `1 / tick_hz`, or 1 ms for
+    /// an unusable `tick_hz` (computed once here instead of every tick).
+    dt_fallback_s: f32,
     p1: ChannelValidator,
     p2: ChannelValidator,
     angle: ChannelValidator,
@@ -296,6 +299,67 @@ fn channel_fault(
     }
 }
 
+/// The first fault condition of a tick, in the documented order (configuration, `dt`,
+/// pressure 1, pressure 2, angle, over-pressure 1, 2, set-point). Off the hot path.
+#[cold]
+#[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn first_condition(
+    config_ok: bool,
+    dt_ok: bool,
+    s1: ChannelStatus,
+    s2: ChannelStatus,
+    sa: ChannelStatus,
+    over1: bool,
+    over2: bool,
+    sp_ok: bool,
+) -> Option<FaultCode> {
+    use FaultCode::*;
+    if !config_ok {
+        return Some(ConfigInvalid);
+    }
+    if !dt_ok {
+        return Some(Watchdog);
+    }
+    if let ChannelStatus::Fault(f) = s1 {
+        return Some(channel_fault(
+            f,
+            PressureInvalid1,
+            PressureOutOfRange1,
+            PressureStale1,
+            PressureImplausible1,
+        ));
+    }
+    if let ChannelStatus::Fault(f) = s2 {
+        return Some(channel_fault(
+            f,
+            PressureInvalid2,
+            PressureOutOfRange2,
+            PressureStale2,
+            PressureImplausible2,
+        ));
+    }
+    if let ChannelStatus::Fault(f) = sa {
+        return Some(channel_fault(
+            f,
+            AngleInvalid,
+            AngleOutOfRange,
+            AngleStale,
+            AngleImplausible,
+        ));
+    }
+    if over1 {
+        return Some(OverPressure1);
+    }
+    if over2 {
+        return Some(OverPressure2);
+    }
+    if !sp_ok {
+        return Some(SetpointInvalid);
+    }
+    None
+}
+
 impl ControlTick {
     /// A tick in the armed state (control starts once every channel delivered a valid
     /// sample). An invalid configuration latches [`FaultCode::ConfigInvalid`] for good.
@@ -305,9 +369,15 @@ impl ControlTick {
         if !config_ok {
             safety.raise(FaultCode::ConfigInvalid);
         }
+        let dt_fallback_s = if cfg.tick_hz.is_finite() && cfg.tick_hz > 0.0 {
+            1.0 / cfg.tick_hz
+        } else {
+            1.0e-3
+        };
         ControlTick {
             cfg,
             config_ok,
+            dt_fallback_s,
             p1: ChannelValidator::new(cfg.pressure_limits),
             p2: ChannelValidator::new(cfg.pressure_limits),
             angle: ChannelValidator::new(cfg.angle_limits),
@@ -370,18 +440,11 @@ impl ControlTick {
         // Scalars read once; the configuration (with its force-law and torque-model tables) is
         // not copied: a whole-struct copy cost ~190 instructions per tick on the Cortex-M4.
         let dt_max_s = self.cfg.dt_max_s;
-        let tick_hz = self.cfg.tick_hz;
         let p_over_gauge_pa = self.cfg.p_over_gauge_pa;
         let sp_max = self.cfg.angle_setpoint_max_rad;
         let dt_ok = dt_s.is_finite() && dt_s > 0.0 && dt_s <= dt_max_s;
         // Channels are aged by the nominal period when dt itself is bad.
-        let dt_age = if dt_ok {
-            dt_s
-        } else if tick_hz.is_finite() && tick_hz > 0.0 {
-            1.0 / tick_hz
-        } else {
-            1.0e-3
-        };
+        let dt_age = if dt_ok { dt_s } else { self.dt_fallback_s };
 
         let s1 = self.p1.update(frame.p1_gauge_pa, dt_age);
         let s2 = self.p2.update(frame.p2_gauge_pa, dt_age);
@@ -404,60 +467,24 @@ impl ControlTick {
         };
         let vel = self.velocity.update(new_angle, dt_age);
 
-        // Fault conditions of this tick (the first one found is reported).
-        let mut cond: Option<FaultCode> = None;
-        let mut note = |c: FaultCode| {
-            if cond.is_none() {
-                cond = Some(c);
-            }
+        // Fault conditions of this tick (the first one found is reported). Fast path: one
+        // branch-free test of all of them; the ordered search runs only when one holds.
+        let over1 = matches!(s1.value(), Some(p) if p > p_over_gauge_pa);
+        let over2 = matches!(s2.value(), Some(p) if p > p_over_gauge_pa);
+        let sp_ok = setpoint.angle_rad.is_finite();
+        let any = !self.config_ok
+            | !dt_ok
+            | matches!(s1, ChannelStatus::Fault(_))
+            | matches!(s2, ChannelStatus::Fault(_))
+            | matches!(sa, ChannelStatus::Fault(_))
+            | over1
+            | over2
+            | !sp_ok;
+        let cond = if any {
+            first_condition(self.config_ok, dt_ok, s1, s2, sa, over1, over2, sp_ok)
+        } else {
+            None
         };
-        if !self.config_ok {
-            note(FaultCode::ConfigInvalid);
-        }
-        if !dt_ok {
-            note(FaultCode::Watchdog);
-        }
-        use FaultCode::*;
-        if let ChannelStatus::Fault(f) = s1 {
-            note(channel_fault(
-                f,
-                PressureInvalid1,
-                PressureOutOfRange1,
-                PressureStale1,
-                PressureImplausible1,
-            ));
-        }
-        if let ChannelStatus::Fault(f) = s2 {
-            note(channel_fault(
-                f,
-                PressureInvalid2,
-                PressureOutOfRange2,
-                PressureStale2,
-                PressureImplausible2,
-            ));
-        }
-        if let ChannelStatus::Fault(f) = sa {
-            note(channel_fault(
-                f,
-                AngleInvalid,
-                AngleOutOfRange,
-                AngleStale,
-                AngleImplausible,
-            ));
-        }
-        if let Some(p) = s1.value() {
-            if p > p_over_gauge_pa {
-                note(OverPressure1);
-            }
-        }
-        if let Some(p) = s2.value() {
-            if p > p_over_gauge_pa {
-                note(OverPressure2);
-            }
-        }
-        if !setpoint.angle_rad.is_finite() {
-            note(SetpointInvalid);
-        }
         self.condition = cond;
         if let Some(c) = cond {
             self.safety.raise(c);
@@ -515,8 +542,11 @@ impl ControlTick {
         } else {
             setpoint.angle_rad
         };
+        // Every input of the control laws below is finite and `dt_s > 0` here (validated
+        // channels, sanitised velocity, finite set-point, `dt_ok`), so the laws run without
+        // their own input checks (`step_finite`: bit-identical to `step` for such inputs).
         let result = (|| {
-            let t_des = self.position.step(
+            let t_des = self.position.step_finite(
                 JointState {
                     angle_rad: angle,
                     velocity_rad_s: vel,
@@ -534,11 +564,11 @@ impl ControlTick {
                 // Armed implies all three channels valid this tick, so `estimate` was
                 // computed from exactly `meas`; the torque loop reuses it (the loop's own force
                 // law is the configuration's, see `ControlTick::new`).
-                Some(est) => self.torque.step_with_estimate(meas, est, t_des, dt_s)?,
+                Some(est) => self.torque.step_finite(meas, est, t_des, dt_s)?,
                 None => self.torque.step(meas, t_des, dt_s)?,
             };
-            let u1 = self.pressure1.step(p1, ps.p1_gauge_pa, dt_s)?;
-            let u2 = self.pressure2.step(p2, ps.p2_gauge_pa, dt_s)?;
+            let u1 = self.pressure1.step_finite(p1, ps.p1_gauge_pa, dt_s)?;
+            let u2 = self.pressure2.step_finite(p2, ps.p2_gauge_pa, dt_s)?;
             Ok::<_, crate::control::ControlError>((t_des, ps, u1, u2))
         })();
         match result {
@@ -557,15 +587,16 @@ impl ControlTick {
                     out.torque_des_nm = t_des;
                     return self.safe_output(out);
                 }
-                let cmd = ValveCommand {
+                // What `self.safety.gate(cmd)` and `clamp_pressure_setpoint_pa(p, P_MAX)` return
+                // here, without recomputing it: no fault is latched (checked above, tracking
+                // returned early), u1/u2 are finite and in [-1, 1] (pressure loop output),
+                // and the torque loop's set-points are already in [0, P_MUSCLE_MAX].
+                out.valves = ValveCommand {
                     muscle1: u1,
                     muscle2: u2,
                 };
-                out.valves = self.safety.gate(cmd);
-                out.p1_set_gauge_pa =
-                    clamp_pressure_setpoint_pa(ps.p1_gauge_pa, P_MUSCLE_MAX_GAUGE_PA);
-                out.p2_set_gauge_pa =
-                    clamp_pressure_setpoint_pa(ps.p2_gauge_pa, P_MUSCLE_MAX_GAUGE_PA);
+                out.p1_set_gauge_pa = ps.p1_gauge_pa;
+                out.p2_set_gauge_pa = ps.p2_gauge_pa;
                 out.torque_des_nm = t_des;
                 out.torque_est_nm = ps.torque_est_nm;
                 out.armed = true;
