@@ -331,11 +331,13 @@ impl TorqueController {
             self.reset();
             return Err(ControlError::NonFiniteInput);
         }
-        self.step_finite(meas, estimate, torque_des_nm, dt_s)
+        let dp_limit_pa = self.model.dp_limit_pa();
+        self.step_finite(meas, estimate, torque_des_nm, dt_s, dp_limit_pa)
     }
 
     /// [`Self::step_with_estimate`] without its input check, for a caller that has
-    /// validated the inputs (all finite, `dt_s > 0`): then the same result, bit for bit.
+    /// validated the inputs (all finite, `dt_s > 0`) and passes `self.model.dp_limit_pa()`
+    /// (a configuration constant): then the same result, bit for bit.
     #[inline(always)]
     pub(crate) fn step_finite(
         &mut self,
@@ -343,6 +345,7 @@ impl TorqueController {
         estimate: (f32, ForceFlags),
         torque_des_nm: f32,
         dt_s: f32,
+        dp_limit_pa: f32,
     ) -> Result<PressureSetpoints, ControlError> {
         let (t_est, flags) = estimate;
         if flags.contains_any(ForceFlags::FATAL) {
@@ -355,7 +358,8 @@ impl TorqueController {
         let t_err = (torque_des_nm - t_dyn) - t_est;
         let g = &self.gains;
         let lim = libm::fabsf(g.corr_limit_nm);
-        let inverse = m.inverse_at(meas.angle_rad, v);
+        // Angle and velocity are finite here.
+        let inverse = m.inverse_at_finite(meas.angle_rad, v, dp_limit_pa);
         let first =
             inverse.activation(torque_des_nm + clampf(g.kp * t_err + self.integral_nm, lim));
         if !first.saturated {

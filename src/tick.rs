@@ -266,6 +266,11 @@ pub struct ControlTick {
     /// The period channels are aged by when `dt` itself is bad: `1 / tick_hz`, or 1 ms for
     /// an unusable `tick_hz` (computed once here instead of every tick).
     dt_fallback_s: f32,
+    /// `dt_max_s`, with +inf replaced by `f32::MAX`: then `dt_ok` is the two comparisons
+    /// `0 < dt <= dt_limit_s` (NaN and +inf fail them), the same as the finiteness test too.
+    dt_limit_s: f32,
+    /// `cfg.torque_model.dp_limit_pa()` (a configuration constant of the torque loop).
+    dp_limit_pa: f32,
     p1: ChannelValidator,
     p2: ChannelValidator,
     angle: ChannelValidator,
@@ -374,10 +379,17 @@ impl ControlTick {
         } else {
             1.0e-3
         };
+        let dt_limit_s = if cfg.dt_max_s == f32::INFINITY {
+            f32::MAX
+        } else {
+            cfg.dt_max_s
+        };
         ControlTick {
             cfg,
             config_ok,
             dt_fallback_s,
+            dt_limit_s,
+            dp_limit_pa: cfg.torque_model.dp_limit_pa(),
             p1: ChannelValidator::new(cfg.pressure_limits),
             p2: ChannelValidator::new(cfg.pressure_limits),
             angle: ChannelValidator::new(cfg.angle_limits),
@@ -439,10 +451,10 @@ impl ControlTick {
     pub fn step(&mut self, frame: &SensorFrame, setpoint: &Setpoint, dt_s: f32) -> TickOutput {
         // Scalars read once; the configuration (with its force-law and torque-model tables) is
         // not copied: a whole-struct copy cost ~190 instructions per tick on the Cortex-M4.
-        let dt_max_s = self.cfg.dt_max_s;
         let p_over_gauge_pa = self.cfg.p_over_gauge_pa;
         let sp_max = self.cfg.angle_setpoint_max_rad;
-        let dt_ok = dt_s.is_finite() && dt_s > 0.0 && dt_s <= dt_max_s;
+        // `dt_s.is_finite() && dt_s > 0.0 && dt_s <= dt_max_s` (see `dt_limit_s`).
+        let dt_ok = dt_s > 0.0 && dt_s <= self.dt_limit_s;
         // Channels are aged by the nominal period when dt itself is bad.
         let dt_age = if dt_ok { dt_s } else { self.dt_fallback_s };
 
@@ -564,7 +576,9 @@ impl ControlTick {
                 // Armed implies all three channels valid this tick, so `estimate` was
                 // computed from exactly `meas`; the torque loop reuses it (the loop's own force
                 // law is the configuration's, see `ControlTick::new`).
-                Some(est) => self.torque.step_finite(meas, est, t_des, dt_s)?,
+                Some(est) => self
+                    .torque
+                    .step_finite(meas, est, t_des, dt_s, self.dp_limit_pa)?,
                 None => self.torque.step(meas, t_des, dt_s)?,
             };
             let u1 = self.pressure1.step_finite(p1, ps.p1_gauge_pa, dt_s)?;

@@ -124,6 +124,29 @@ impl TorqueModelParams {
         }
     }
 
+    /// [`Self::inverse_at`] for a finite angle and velocity, with `dp_limit_pa` =
+    /// [`Self::dp_limit_pa`] precomputed by the caller: the same result, bit for bit.
+    #[inline(always)]
+    pub(crate) fn inverse_at_finite(
+        &self,
+        angle_rad: f32,
+        velocity_rad_s: f32,
+        dp_limit_pa: f32,
+    ) -> InverseAt {
+        let gain = self.b_m2 * self.sprocket_radius_m;
+        let valid = gain != 0.0;
+        InverseAt {
+            passive_nm: if valid {
+                self.passive_nm(angle_rad, velocity_rad_s)
+            } else {
+                0.0
+            },
+            gain_m3: gain,
+            dp_limit_pa,
+            valid,
+        }
+    }
+
     /// The usable |dp| [Pa]: `dp_max_pa`, reduced so that both `p0 -+ dp` stay within
     /// `[0, P_MUSCLE_MAX_GAUGE_PA]`.
     #[inline]
