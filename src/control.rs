@@ -231,8 +231,8 @@ pub fn torque_estimate_nm(
     angle_rad: f32,
 ) -> (f32, ForceFlags) {
     let (e1, e2) = geometry.stretches(angle_rad);
-    let f1 = force_law.force(p1_gauge_pa, e1);
-    let f2 = force_law.force(p2_gauge_pa, e2);
+    let f1 = force_law.force_inline(p1_gauge_pa, e1);
+    let f2 = force_law.force_inline(p2_gauge_pa, e2);
     (
         (f1.force_n - f2.force_n) * geometry.sprocket_radius_m,
         f1.flags.union(f2.flags),

@@ -124,6 +124,14 @@ impl ForceLawParams {
     // `!(x > eps)` is deliberate: it is also true for NaN.
     #[allow(clippy::neg_cmp_op_on_partial_ord)]
     pub fn force(&self, p_gauge_pa: f32, stretch: f32) -> ForceEstimate {
+        self.force_inline(p_gauge_pa, stretch)
+    }
+
+    /// [`Self::force`], always inlined: the control tick's torque estimate evaluates it
+    /// twice per tick, without the call overhead.
+    #[inline(always)]
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    pub(crate) fn force_inline(&self, p_gauge_pa: f32, stretch: f32) -> ForceEstimate {
         if !p_gauge_pa.is_finite() || !stretch.is_finite() {
             return ForceEstimate {
                 force_n: 0.0,

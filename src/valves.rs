@@ -155,6 +155,7 @@ impl PwmChannel {
     }
 
     /// Advances one tick with command `u` (sanitized); returns (inflate open, exhaust open).
+    #[inline(always)]
     fn tick(&mut self, u: f32, n: u16, min_on: u16) -> (bool, bool) {
         let dir = if u > 0.0 {
             Dir::Inflate
