@@ -266,6 +266,8 @@ pub struct ControlTick {
     /// The period channels are aged by when `dt` itself is bad: `1 / tick_hz`, or 1 ms for
     /// an unusable `tick_hz` (computed once here instead of every tick).
     dt_fallback_s: f32,
+    /// `dt_fallback_s.is_finite() && dt_fallback_s > 0.0`.
+    dt_fallback_good: bool,
     /// `dt_max_s`, with +inf replaced by `f32::MAX`: then `dt_ok` is the two comparisons
     /// `0 < dt <= dt_limit_s` (NaN and +inf fail them), the same as the finiteness test too.
     dt_limit_s: f32,
@@ -388,6 +390,7 @@ impl ControlTick {
             cfg,
             config_ok,
             dt_fallback_s,
+            dt_fallback_good: dt_fallback_s.is_finite() && dt_fallback_s > 0.0,
             dt_limit_s,
             dp_limit_pa: cfg.torque_model.dp_limit_pa(),
             p1: ChannelValidator::new(cfg.pressure_limits),
@@ -458,9 +461,11 @@ impl ControlTick {
         // Channels are aged by the nominal period when dt itself is bad.
         let dt_age = if dt_ok { dt_s } else { self.dt_fallback_s };
 
-        let s1 = self.p1.update(frame.p1_gauge_pa, dt_age);
-        let s2 = self.p2.update(frame.p2_gauge_pa, dt_age);
-        let sa = self.angle.update(frame.angle_rad, dt_age);
+        // `dt_age.is_finite() && dt_age > 0.0`, decided once (`dt_ok` implies it).
+        let dt_age_good = dt_ok || self.dt_fallback_good;
+        let s1 = self.p1.update_with(frame.p1_gauge_pa, dt_age, dt_age_good);
+        let s2 = self.p2.update_with(frame.p2_gauge_pa, dt_age, dt_age_good);
+        let sa = self.angle.update_with(frame.angle_rad, dt_age, dt_age_good);
         if let Some(v) = s1.value() {
             self.last_p1_pa = Some(v);
         }
@@ -477,7 +482,7 @@ impl ControlTick {
             } => Some(value),
             _ => None,
         };
-        let vel = self.velocity.update(new_angle, dt_age);
+        let vel = self.velocity.update_with(new_angle, dt_age, dt_age_good);
 
         // Fault conditions of this tick (the first one found is reported). Fast path: one
         // branch-free test of all of them; the ordered search runs only when one holds.
