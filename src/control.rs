@@ -223,6 +223,7 @@ pub struct PressureSetpoints {
 
 /// Static joint torque `(F1 - F2) r` [N m] from the force law at the measured pressures
 /// and the stretches of the measured angle, with the force-law flags of both muscles.
+#[inline]
 pub fn torque_estimate_nm(
     force_law: &ForceLawParams,
     geometry: &JointGeometry,
@@ -332,12 +333,22 @@ impl TorqueController {
             return Err(ControlError::NonFiniteInput);
         }
         let dp_limit_pa = self.model.dp_limit_pa();
-        self.step_finite(meas, estimate, torque_des_nm, dt_s, dp_limit_pa)
+        let p_set_hi_pa = clamp_pressure_setpoint_pa(f32::INFINITY, self.gains.p_set_max_gauge_pa);
+        self.step_finite(
+            meas,
+            estimate,
+            torque_des_nm,
+            dt_s,
+            dp_limit_pa,
+            p_set_hi_pa,
+        )
     }
 
     /// [`Self::step_with_estimate`] without its input check, for a caller that has
-    /// validated the inputs (all finite, `dt_s > 0`) and passes `self.model.dp_limit_pa()`
-    /// (a configuration constant): then the same result, bit for bit.
+    /// validated the inputs (all finite, `dt_s > 0`) and passes the configuration constants
+    /// `dp_limit_pa = self.model.dp_limit_pa()` and `p_set_hi_pa =
+    /// clamp_pressure_setpoint_pa(f32::INFINITY, self.gains.p_set_max_gauge_pa)`: then the
+    /// same result, bit for bit.
     #[inline(always)]
     pub(crate) fn step_finite(
         &mut self,
@@ -346,6 +357,7 @@ impl TorqueController {
         torque_des_nm: f32,
         dt_s: f32,
         dp_limit_pa: f32,
+        p_set_hi_pa: f32,
     ) -> Result<PressureSetpoints, ControlError> {
         let (t_est, flags) = estimate;
         if flags.contains_any(ForceFlags::FATAL) {
@@ -370,9 +382,8 @@ impl TorqueController {
         // `clamp_pressure_setpoint_pa(m.pressures_gauge_pa(dp), p_set_max)` in one clamp per
         // muscle (the same value for every input: both map NaN and p <= 0 to +0, and the
         // bound is min(p_set_max, P_MUSCLE_MAX) <= the model's own bound).
-        let hi = clamp_pressure_setpoint_pa(f32::INFINITY, g.p_set_max_gauge_pa);
-        let p1 = clamp_setpoint_to(m.p0_gauge_pa - act.dp_pa, hi);
-        let p2 = clamp_setpoint_to(m.p0_gauge_pa + act.dp_pa, hi);
+        let p1 = clamp_setpoint_to(m.p0_gauge_pa - act.dp_pa, p_set_hi_pa);
+        let p2 = clamp_setpoint_to(m.p0_gauge_pa + act.dp_pa, p_set_hi_pa);
         // p1, p2 (clamped, NaN -> 0) and dp (finite by construction of `activation`) are
         // always finite.
         if !finite(&[t_est, t_cmd, self.integral_nm]) {

@@ -273,6 +273,9 @@ pub struct ControlTick {
     dt_limit_s: f32,
     /// `cfg.torque_model.dp_limit_pa()` (a configuration constant of the torque loop).
     dp_limit_pa: f32,
+    /// `clamp_pressure_setpoint_pa(f32::INFINITY, cfg.torque.p_set_max_gauge_pa)`: the
+    /// torque loop's upper set-point bound (a configuration constant).
+    p_set_hi_pa: f32,
     p1: ChannelValidator,
     p2: ChannelValidator,
     angle: ChannelValidator,
@@ -393,6 +396,7 @@ impl ControlTick {
             dt_fallback_good: dt_fallback_s.is_finite() && dt_fallback_s > 0.0,
             dt_limit_s,
             dp_limit_pa: cfg.torque_model.dp_limit_pa(),
+            p_set_hi_pa: clamp_pressure_setpoint_pa(f32::INFINITY, cfg.torque.p_set_max_gauge_pa),
             p1: ChannelValidator::new(cfg.pressure_limits),
             p2: ChannelValidator::new(cfg.pressure_limits),
             angle: ChannelValidator::new(cfg.angle_limits),
@@ -525,7 +529,7 @@ impl ControlTick {
             Some((t, flags)) if !flags.contains_any(ForceFlags::FATAL) && t.is_finite() => t,
             _ => 0.0,
         };
-        let vel = if vel.is_finite() { vel } else { 0.0 };
+        // `vel` is finite: the estimator stores only finite velocities (starts at 0).
 
         let mut out = TickOutput {
             valves: ValveCommand::default(),
@@ -581,9 +585,14 @@ impl ControlTick {
                 // Armed implies all three channels valid this tick, so `estimate` was
                 // computed from exactly `meas`; the torque loop reuses it (the loop's own force
                 // law is the configuration's, see `ControlTick::new`).
-                Some(est) => self
-                    .torque
-                    .step_finite(meas, est, t_des, dt_s, self.dp_limit_pa)?,
+                Some(est) => self.torque.step_finite(
+                    meas,
+                    est,
+                    t_des,
+                    dt_s,
+                    self.dp_limit_pa,
+                    self.p_set_hi_pa,
+                )?,
                 None => self.torque.step(meas, t_des, dt_s)?,
             };
             let u1 = self.pressure1.step_finite(p1, ps.p1_gauge_pa, dt_s)?;
