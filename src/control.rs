@@ -167,7 +167,7 @@ impl PositionController {
             self.integral_nm = clampf(self.integral_nm + di, g.i_limit);
         }
         let out = clampf(pd + self.integral_nm, lim);
-        if !out.is_finite() || !self.integral_nm.is_finite() {
+        if !finite(&[out, self.integral_nm]) {
             self.reset();
             return Err(ControlError::NonFiniteOutput);
         }

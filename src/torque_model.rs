@@ -201,13 +201,15 @@ impl InverseAt {
     /// non-finite inputs give dp = 0, saturated.
     #[inline]
     pub fn activation(&self, torque_nm: f32) -> Activation {
-        if !self.valid || !torque_nm.is_finite() {
+        if !self.valid {
             return Activation {
                 dp_pa: 0.0,
                 saturated: true,
             };
         }
         let dp = (torque_nm - self.passive_nm) / self.gain_m3;
+        // A non-finite torque always gives a non-finite dp (inf - finite, NaN, and a
+        // non-finite numerator over any divisor), so this one test also rejects it.
         if !dp.is_finite() {
             return Activation {
                 dp_pa: 0.0,
