@@ -15,6 +15,8 @@
 //! - [`wiring`]: sensor scaling of the reference board wiring (raw counts -> SI).
 //! - [`sensors`]: sensor traits, per-channel validation, velocity estimate.
 //! - [`control`]: pure control laws of the cascade (position -> torque -> pressure).
+//! - [`feedforward`]: trajectory feed-forward of the cascade (set-point rate, inertia).
+//! - [`pid`]: model-free PD / PID from the angle to the activation dp (comparison baseline).
 //! - [`safety`]: fault codes, safe valve state, latching state machine.
 //! - [`valves`]: on/off and proportional valve drivers over embedded-hal 1.0.
 //! - [`tick`]: the control tick combining all of the above (`tick_contract.md`).
@@ -31,10 +33,12 @@ extern crate std;
 mod fmt;
 
 pub mod control;
+pub mod feedforward;
 pub mod fixed_point;
 pub mod force_law;
 pub mod geometry;
 pub mod log;
+pub mod pid;
 pub mod safety;
 pub mod sensors;
 pub mod tick;

@@ -281,11 +281,12 @@ mod tests {
 
     #[test]
     fn forward_model_matches_hand_computed_value() {
-        // A r^2 alpha + B r dp + C a'^3 + D a' with the config constants:
-        // -23204 * 0.025^2 * 0.2 + (-1.926e-3) * 0.025 * 1e5 + 0 + (-0.30) * 1.5
-        // = -2.9005 - 4.815 - 0.45 = -8.1655
+        // A r^2 alpha + B r dp + C a'^3 + D a' with the config constants (identified by
+        // `host-sim identify torque`, README "Identification"):
+        // -23351.22 * 0.025^2 * 0.2 + (-1.932721e-3) * 0.025 * 1e5 + (-6.947928e-5) * 1.5^3
+        //   + (-0.2993833) * 1.5 = -2.918903 - 4.831803 - 0.000234 - 0.449075 = -8.200015
         let t = TORQUE_MODEL.torque_nm(0.2, 1.5, 100_000.0);
-        assert!((t - (-8.1655)).abs() < 1e-3, "{t}");
+        assert!((t - (-8.200015)).abs() < 1e-3, "{t}");
     }
 
     #[test]

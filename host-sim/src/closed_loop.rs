@@ -27,7 +27,7 @@ use serde::Deserialize;
 
 use crate::plant::{Plant, PlantState, ValveInputs};
 use crate::recording::{Channel, Recording};
-use crate::sim::{Integrator, SimError, SolverOptions};
+use crate::sim::{Integrator, SimError, SimStats, SolverOptions};
 
 // ---------------------------------------------------------------------------------------
 // Scenario files.
@@ -617,6 +617,8 @@ pub struct ClosedLoopRun {
     pub max_p_gauge_pa: f64,
     /// Highest pressure set-point the firmware issued [Pa].
     pub max_p_set_gauge_pa: f64,
+    /// Integrator work over the run (steps, right-hand-side evaluations).
+    pub sim_stats: SimStats,
 }
 
 /// Runs `scenario` with the firmware's reference controller on `plant`.
@@ -694,6 +696,7 @@ pub fn run_with(
         ..SolverOptions::default()
     };
     let mut plant_idx = 0;
+    let mut stats_done = SimStats::default();
     let mut integ = Integrator::new(&plants[0].1, plant.initial_state(), opts);
     let p_noise =
         Normal::new(0.0, scenario.sensors.pressure_noise_pa.max(0.0)).expect("finite noise");
@@ -710,6 +713,7 @@ pub fn run_with(
             plant_idx += 1;
             let x = integ.state();
             let p_tank = integ.supply_abs_pa();
+            stats_done.add(&integ.stats());
             integ = Integrator::new(&plants[plant_idx].1, x, opts);
             integ.set_supply_abs_pa(p_tank); // a supply reservoir keeps its pressure
         }
@@ -824,6 +828,7 @@ pub fn run_with(
         }
     }
     progress(1.0);
+    stats_done.add(&integ.stats());
     Ok(ClosedLoopRun {
         name: scenario.scenario.name.clone(),
         dt_s,
@@ -833,6 +838,7 @@ pub fn run_with(
         expect: scenario.expect.clone(),
         max_p_gauge_pa: max_p,
         max_p_set_gauge_pa: max_p_set,
+        sim_stats: stats_done,
     })
 }
 

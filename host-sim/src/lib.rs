@@ -4,6 +4,7 @@
 //! - [`plant`]: the reference 1-DOF antagonistic joint of `shared/plant/PLANT.md`.
 //! - [`closed_loop`]: the firmware's control tick in the loop with the plant, scenarios.
 //! - [`config`]: its TOML parameter files.
+//! - [`control_compare`]: cascade vs tuned PD / PID on the set-point suite (issue 5 proof).
 //! - [`sim`]: open-loop integration under zero-order-held valve inputs.
 //! - [`recording`]: the CSV recording format of `shared/plant/RECORDING.md`.
 //! - [`fit`]: NRMSE fit, MAE, MSE per channel.
@@ -14,6 +15,7 @@
 pub mod arm3_io;
 pub mod closed_loop;
 pub mod config;
+pub mod control_compare;
 pub mod demo;
 pub mod diagnose_baseline;
 pub mod fit;

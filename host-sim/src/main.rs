@@ -35,6 +35,10 @@ enum Command {
     /// The main job: the reference plant with the firmware in the loop on the step, sine and
     /// random scenarios (CSV + plots), and the conformance fit of an open-loop replay.
     Demo(DemoArgs),
+    /// Generate identification data from a plant file (force: isometric sweep; torque: seed 003 sweep).
+    Sweep(host_sim::identify::cli::SweepArgs),
+    /// Identify the force law, the torque model or plant parameters from data.
+    Identify(host_sim::identify::cli::IdentifyArgs),
 }
 
 #[derive(Args)]
@@ -102,6 +106,8 @@ fn main() -> ExitCode {
         Command::Simulate(a) => run_simulate(&a),
         Command::Fit(a) => run_fit(&a),
         Command::Demo(a) => run_demo(&a),
+        Command::Sweep(a) => run_report(host_sim::identify::cli::run_sweep(&a)),
+        Command::Identify(a) => run_report(host_sim::identify::cli::run_identify(&a)),
     };
     match result {
         Ok(code) => code,
@@ -110,6 +116,12 @@ fn main() -> ExitCode {
             ExitCode::from(2)
         }
     }
+}
+
+/// Prints the report of a sweep / identify command.
+fn run_report(report: Result<String>) -> Result<ExitCode> {
+    print!("{}", report?);
+    Ok(ExitCode::SUCCESS)
 }
 
 fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {

@@ -51,6 +51,16 @@ pub struct SimStats {
     pub rejected_steps: u64,
 }
 
+impl SimStats {
+    /// Adds the counters of `other` (e.g. of an integrator replaced mid-run).
+    pub fn add(&mut self, other: &SimStats) {
+        self.segments += other.segments;
+        self.rhs_evaluations += other.rhs_evaluations;
+        self.accepted_steps += other.accepted_steps;
+        self.rejected_steps += other.rejected_steps;
+    }
+}
+
 #[derive(Debug, thiserror::Error)]
 pub enum SimError {
     #[error("integration failed at t = {t_s} s: {message}")]
@@ -131,6 +141,11 @@ pub struct Integrator<'a> {
     dense: Vec<PlantState>,
     /// Supply reservoir pressure (absolute; p_s0 and constant without a reservoir).
     supply_abs_pa: f64,
+    /// f(state, inputs) of the last single-sample step (first-same-as-last), with the
+    /// inputs it was evaluated under.
+    fsal: Option<(ValveInputs, [f64; 4])>,
+    /// Whether single samples may take [`Self::single_step`] (default true).
+    single_step_path: bool,
 }
 
 impl<'a> Integrator<'a> {
@@ -144,7 +159,16 @@ impl<'a> Integrator<'a> {
             stats: SimStats::default(),
             dense: Vec::new(),
             supply_abs_pa: plant.initial_supply_abs_pa(),
+            fsal: None,
+            single_step_path: true,
         }
+    }
+
+    /// Integrates every sample with `Dopri5` itself, never with the allocation-free single
+    /// step (which gives the same accepted steps; this is how tests check that).
+    pub fn without_single_step_path(mut self) -> Self {
+        self.single_step_path = false;
+        self
     }
 
     /// Sets the supply reservoir pressure (absolute), e.g. to carry it over to an integrator
@@ -204,6 +228,19 @@ impl<'a> Integrator<'a> {
         } else {
             0.0 // let Dopri5 pick the first step
         };
+        if single
+            && self.single_step_path
+            && !self.plant.has_supply_state()
+            && self.h_s >= 0.5 * duration_s
+        {
+            if let Some(end) = self.single_step(inputs, duration_s) {
+                on_sample(&self.state);
+                self.state = end;
+                self.t_s += duration_s;
+                return Ok(());
+            }
+        }
+        self.fsal = None;
         if self.plant.has_supply_state() {
             return self.advance_samples_reservoir(inputs, dt_s, n, x_end, h0, single, on_sample);
         }
@@ -261,6 +298,90 @@ impl<'a> Integrator<'a> {
         // Mean accepted step of this segment, as the first step of the next one.
         self.h_s = duration_s / f64::from(st.accepted_steps.max(1));
         Ok(())
+    }
+
+    /// One Dormand-Prince 5(4) step over the whole sample, the step `Dopri5` takes first when
+    /// the previous sample needed a single step (same tableau, same error norm, same
+    /// acceptance rule err <= 1, so an accepted step gives the state `Dopri5` would), without
+    /// its per-call allocations, and reusing the last stage of the previous sample
+    /// (first-same-as-last) while the inputs stay the same. This is the closed-loop pattern:
+    /// one restart per control tick; tried when the previous sample needed at most two steps.
+    /// `None` when the step is rejected or not finite; the
+    /// caller then integrates the sample adaptively.
+    fn single_step(&mut self, inputs: ValveInputs, h: f64) -> Option<PlantState> {
+        let f = |y: &[f64; 4]| {
+            self.plant
+                .derivatives(&PlantState::from_array(*y), &inputs)
+                .to_array()
+        };
+        let y0 = self.state.to_array();
+        let (k1, fresh) = match self.fsal {
+            Some((u, k)) if u == inputs => (k, 0),
+            _ => (f(&y0), 1),
+        };
+        let stage = |coef: &[(f64, &[f64; 4])]| -> [f64; 4] {
+            let mut y = y0;
+            for (a, k) in coef {
+                for i in 0..4 {
+                    y[i] += h * a * k[i];
+                }
+            }
+            y
+        };
+        let k2 = f(&stage(&[(1.0 / 5.0, &k1)]));
+        let k3 = f(&stage(&[(3.0 / 40.0, &k1), (9.0 / 40.0, &k2)]));
+        let k4 = f(&stage(&[
+            (44.0 / 45.0, &k1),
+            (-56.0 / 15.0, &k2),
+            (32.0 / 9.0, &k3),
+        ]));
+        let k5 = f(&stage(&[
+            (19372.0 / 6561.0, &k1),
+            (-25360.0 / 2187.0, &k2),
+            (64448.0 / 6561.0, &k3),
+            (-212.0 / 729.0, &k4),
+        ]));
+        let k6 = f(&stage(&[
+            (9017.0 / 3168.0, &k1),
+            (-355.0 / 33.0, &k2),
+            (46732.0 / 5247.0, &k3),
+            (49.0 / 176.0, &k4),
+            (-5103.0 / 18656.0, &k5),
+        ]));
+        let y1 = stage(&[
+            (35.0 / 384.0, &k1),
+            (500.0 / 1113.0, &k3),
+            (125.0 / 192.0, &k4),
+            (-2187.0 / 6784.0, &k5),
+            (11.0 / 84.0, &k6),
+        ]);
+        let k7 = f(&y1);
+        self.stats.rhs_evaluations += 6 + fresh;
+        let mut err2 = 0.0;
+        for i in 0..4 {
+            let e = h
+                * (71.0 / 57600.0 * k1[i] - 71.0 / 16695.0 * k3[i] + 71.0 / 1920.0 * k4[i]
+                    - 17253.0 / 339200.0 * k5[i]
+                    + 22.0 / 525.0 * k6[i]
+                    - 1.0 / 40.0 * k7[i]);
+            let sc = self.opts.atol + y0[i].abs().max(y1[i].abs()) * self.opts.rtol;
+            err2 += (e / sc) * (e / sc);
+        }
+        let err = (err2 / 4.0).sqrt();
+        if !(err <= 1.0 && y1.iter().all(|v| v.is_finite())) {
+            self.stats.rejected_steps += 1;
+            // The adaptive integration starts from the step Dopri5's controller would retry.
+            self.h_s = if err.is_finite() {
+                h * (0.9 * err.powf(-0.2)).clamp(0.2, 1.0)
+            } else {
+                0.2 * h
+            };
+            return None;
+        }
+        self.stats.segments += 1;
+        self.stats.accepted_steps += 1;
+        self.fsal = Some((inputs, k7));
+        Some(PlantState::from_array(y1))
     }
 
     /// Sample states 0..n from the dense output (n + 1 points); returns point n.

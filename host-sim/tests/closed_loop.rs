@@ -97,7 +97,9 @@ fn stuck_inflate_valve_latches_pressure_tracking_lost() {
     // while the pressure loop exhausts at full command. The firmware must latch
     // PressureTrackingLost1 (0.3 s of saturated command against a > 100 kPa gap) within
     // 0.5 s of the failure, and not before it.
-    let l = r.first_latched_fault_tick.expect("stuck valve not detected");
+    let l = r
+        .first_latched_fault_tick
+        .expect("stuck valve not detected");
     let t_s = r.rows[l].t_s;
     assert_eq!(
         r.rows[l].out.fault,

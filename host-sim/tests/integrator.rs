@@ -77,3 +77,55 @@ fn tightening_the_tolerance_changes_the_result_by_little() {
     println!("default vs rtol 1e-10, max relative difference: {d:?}");
     assert!(d.iter().all(|v| *v < 1e-3), "{d:?}");
 }
+
+/// The allocation-free single step per sample (closed-loop pattern) takes the step Dopri5
+/// takes: per-sample restarts with and without it agree to rounding, on a recording whose
+/// inputs switch often (first-same-as-last reuse and its invalidation on an input change are
+/// both exercised), and it does the same work or less.
+#[test]
+fn single_step_path_matches_dopri5_per_sample() {
+    // The valve commands the firmware issued on the random set-point scenario.
+    let plant = Plant::load(shared().join("plant/reference-1dof.toml")).unwrap();
+    let scenario = host_sim::closed_loop::Scenario::load(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenarios/random.toml"),
+    )
+    .unwrap();
+    let run = host_sim::closed_loop::run(&plant, &scenario).unwrap();
+    let inputs: Vec<_> = run.rows.iter().map(|r| r.inputs).collect();
+    let dt = run.dt_s;
+    // The closed loop's tolerances (closed_loop::run_with).
+    let opts = SolverOptions {
+        rtol: 1e-6,
+        atol: 1e-6,
+        ..SolverOptions::default()
+    };
+    let mut fast = Integrator::new(&plant, plant.initial_state(), opts);
+    let mut slow = Integrator::new(&plant, plant.initial_state(), opts).without_single_step_path();
+    let mut a = Vec::new();
+    let mut b = Vec::new();
+    let mut switches = 0;
+    for (k, u) in inputs.iter().enumerate() {
+        if k > 0 && *u != inputs[k - 1] {
+            switches += 1;
+        }
+        fast.advance(*u, dt).unwrap();
+        slow.advance(*u, dt).unwrap();
+        a.push(fast.state().to_array());
+        b.push(slow.state().to_array());
+    }
+    assert!(
+        switches > 50,
+        "fixture switches its inputs {switches} times"
+    );
+    let d = max_rel_diff(&a, &b);
+    assert!(d.iter().all(|v| *v < 1e-9), "max relative difference {d:?}");
+    let (sf, ss) = (fast.stats(), slow.stats());
+    assert_eq!(
+        sf.accepted_steps, ss.accepted_steps,
+        "fast {sf:?} vs Dopri5 {ss:?}"
+    );
+    assert!(
+        sf.rhs_evaluations < ss.rhs_evaluations,
+        "fast {sf:?} vs Dopri5 {ss:?}"
+    );
+}

@@ -647,25 +647,38 @@ impl ForceIdentification {
         let _ = writeln!(s, "#");
         let _ = writeln!(s, "#   F = (c1 P^2 + c2 e^2 + c3 P + c4 e + c5 P/e + c6) / (c7 P + c8 e) + c9 + c10 exp(e - 0.7)");
         let _ = writeln!(s, "#");
-        let _ = writeln!(s, "# P = gauge pressure in MPa, e = deformation L/L0, F = tension in N (clamped at 0); c8 = 1.");
+        for l in [
+            "# Conventions (fixed by the firmware, see src/force_law.rs):",
+            "#   P  = gauge pressure in MPa (the unit of the paper's Fig. 4)",
+            "#   e  = deformation L / L0 (the paper's Fig. 4 axis), L0 = rest length",
+            "#   F  = muscle tension in N (clamped at 0: the muscle cannot push)",
+            "# The scale of the rational part is fixed by c8 = 1. p_gauge_max_pa, stretch_min and",
+            "# stretch_max are the domain of the data; outside it the firmware's law returns a",
+            "# flagged, clamped result.",
+            "#",
+        ] {
+            let _ = writeln!(s, "{l}");
+        }
         let _ = writeln!(
             s,
             "# Written by `host-sim identify force` from {source} ({} samples).",
             self.n_samples
         );
-        let st = &self.eq6_stats;
+        for (name, st) in [("eq. 6: ", &self.eq6_stats), ("Tondu: ", &self.tondu_stats)] {
+            let _ = writeln!(
+                s,
+                "# {name} MAE {:.3} N = {:.3} % of the force range, RMSE {:.3} N, max {:.3} N at {:.0} kPa, L/L0 {:.3}",
+                st.mae_n, st.mae_pct_of_range, st.rmse_n, st.max_abs_n, st.max_at.0, st.max_at.1
+            );
+            let _ = writeln!(
+                s,
+                "#          largest mean error: {} ({:.3} N)",
+                st.worst_region, st.worst_region_mae_n
+            );
+        }
         let _ = writeln!(
             s,
-            "# eq. 6:  MAE {:.3} N = {:.3} % of the force range, RMSE {:.3} N, max {:.3} N at {:.0} kPa, L/L0 {:.3}",
-            st.mae_n, st.mae_pct_of_range, st.rmse_n, st.max_abs_n, st.max_at.0, st.max_at.1
-        );
-        let st = &self.tondu_stats;
-        let _ = writeln!(
-            s,
-            "# Tondu:  MAE {:.3} N = {:.3} % of the force range, max {:.3} N (r0 = {:.4} mm, alpha0 = {:.3} deg, k = {:.4})",
-            st.mae_n,
-            st.mae_pct_of_range,
-            st.max_abs_n,
+            "# Tondu fit: r0 = {:.4} mm, alpha0 = {:.3} deg, k = {:.4}",
             self.tondu.r0_m * 1e3,
             self.tondu.alpha0_rad.to_degrees(),
             self.tondu.k

@@ -2,8 +2,12 @@
 //!
 //! - [`force`]: the static force law (seed 002 eq. 6, and the Tondu baseline) from isometric data.
 //! - [`torque`]: the simplified torque model (seed 003 eq. 11) from angle, pressures and tensions.
+//! - [`plant`]: output-error fit of plant-file parameters by replaying a recording.
+//! - [`cli`]: the `host-sim sweep` and `host-sim identify` commands.
 
+pub mod cli;
 pub mod force;
+pub mod plant;
 pub mod torque;
 
 use std::io::Write;
@@ -79,4 +83,74 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IdentError> {
         let _ = std::fs::remove_file(&tmp);
     }
     result.map_err(io)
+}
+
+/// Sensor imperfections added to a generated recording (RECORDING.md: an encoder of 8000
+/// counts per turn, pressure noise of about 0.5 kPa, force noise of a few N).
+#[derive(Clone, Debug, PartialEq)]
+pub struct MeasurementNoise {
+    /// Encoder counts per turn the angle is quantised to (0: no quantisation).
+    pub encoder_counts_per_turn: u32,
+    /// Pressure noise, standard deviation [Pa].
+    pub pressure_noise_pa: f64,
+    /// Force noise, standard deviation [N].
+    pub force_noise_n: f64,
+    /// Random seed.
+    pub seed: u64,
+}
+
+impl Default for MeasurementNoise {
+    fn default() -> Self {
+        MeasurementNoise {
+            encoder_counts_per_turn: 8000,
+            pressure_noise_pa: 500.0,
+            force_noise_n: 2.0,
+            seed: 1,
+        }
+    }
+}
+
+impl MeasurementNoise {
+    /// No noise at all.
+    pub const NONE: MeasurementNoise = MeasurementNoise {
+        encoder_counts_per_turn: 0,
+        pressure_noise_pa: 0.0,
+        force_noise_n: 0.0,
+        seed: 0,
+    };
+
+    /// Adds the noise to the output channels present in `rec` (deterministic for a seed).
+    pub fn apply(&self, rec: &mut crate::Recording) {
+        use crate::recording::Channel;
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(self.seed);
+        let p = Normal::new(0.0, self.pressure_noise_pa.max(0.0) / 1e3).expect("finite sd");
+        let f = Normal::new(0.0, self.force_noise_n.max(0.0)).expect("finite sd");
+        for c in Channel::ALL {
+            let Some(v) = rec.outputs[c.index()].as_mut() else {
+                continue;
+            };
+            match c {
+                Channel::AngleDeg => {
+                    if self.encoder_counts_per_turn > 0 {
+                        let q = 360.0 / self.encoder_counts_per_turn as f64;
+                        for x in v.iter_mut() {
+                            *x = (*x / q).round() * q;
+                        }
+                    }
+                }
+                Channel::P1Kpa | Channel::P2Kpa => {
+                    if self.pressure_noise_pa > 0.0 {
+                        v.iter_mut().for_each(|x| *x += p.sample(&mut rng));
+                    }
+                }
+                Channel::F1N | Channel::F2N => {
+                    if self.force_noise_n > 0.0 {
+                        v.iter_mut().for_each(|x| *x += f.sample(&mut rng));
+                    }
+                }
+            }
+        }
+    }
 }

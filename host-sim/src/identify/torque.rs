@@ -289,6 +289,141 @@ pub fn sweep_kinematics(opt: &TorqueSweep) -> Vec<KinematicSample> {
     out
 }
 
+/// The sweep as a recording (RECORDING.md columns) of the plant: the joint is driven through
+/// the motion of [`sweep_kinematics`] while regulators hold the pressures, and the channels are
+/// what the plant's sensors report (tensions from its force model, with its damper). The valve
+/// columns are 0: the pressures are regulator-held, so the file is not an open-loop replay.
+pub fn sweep_recording(plant: &crate::Plant, opt: &TorqueSweep) -> crate::Recording {
+    use crate::recording::Channel;
+    let ks = sweep_kinematics(opt);
+    let mut rec = crate::Recording {
+        metadata: vec![
+            ("sample_period_s".into(), format!("{}", opt.dt_s)),
+            (
+                "source".into(),
+                format!(
+                    "host-sim {} sweep torque: prescribed motion, regulator-held pressures (valve columns unused)",
+                    env!("CARGO_PKG_VERSION")
+                ),
+            ),
+        ],
+        t_s: ks.iter().map(|k| k.t_s).collect(),
+        inputs: vec![crate::ValveInputs::CLOSED; ks.len()],
+        ..Default::default()
+    };
+    let meas: Vec<crate::Measurement> = ks
+        .iter()
+        .map(|k| {
+            plant.measure(&crate::PlantState {
+                angle_rad: k.angle_rad,
+                velocity_rad_s: k.velocity_rad_s,
+                p1_abs_pa: k.p1_gauge_pa + plant.p_atm_pa,
+                p2_abs_pa: k.p2_gauge_pa + plant.p_atm_pa,
+            })
+        })
+        .collect();
+    for c in Channel::ALL {
+        rec.set_channel(c, meas.iter().map(|m| c.of(m)).collect());
+    }
+    rec
+}
+
+/// Seed 003 fits only the points of constant velocity: keeps the samples whose velocity changes
+/// by at most `max_accel_rad_s2` (as an average acceleration) over `half_window` samples either
+/// side, which also drops the samples whose velocity estimate straddles a reversal.
+pub fn constant_velocity_samples(
+    samples: &[TorqueSample],
+    dt_s: f64,
+    half_window: usize,
+    max_accel_rad_s2: f64,
+) -> Vec<TorqueSample> {
+    let n = samples.len();
+    let m = half_window.max(1);
+    (0..n)
+        .filter(|&k| {
+            let (lo, hi) = (k.saturating_sub(m), (k + m).min(n - 1));
+            if hi == lo {
+                return false;
+            }
+            let accel = (samples[hi].velocity_rad_s - samples[lo].velocity_rad_s)
+                / ((hi - lo) as f64 * dt_s);
+            accel.abs() <= max_accel_rad_s2
+        })
+        .map(|k| samples[k])
+        .collect()
+}
+
+/// How the torque samples of a recording were obtained.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TorqueSource {
+    /// From the recorded tensions `f1_n`, `f2_n`.
+    MeasuredTensions,
+    /// From the plant's force model at the recorded pressures and angle (no tension columns).
+    PlantForceModel,
+}
+
+/// Torque samples of a recording: angle from `angle_deg`, velocity by a Savitzky-Golay
+/// derivative over `2 half_window + 1` samples, `dp` from `p1_kpa`, `p2_kpa`, and the torque
+/// `(F1 - F2) r` with r of the plant, from the recorded tensions when present, else from the
+/// plant's force model. `file` and `header_line` name the file in errors.
+pub fn samples_from_recording(
+    rec: &crate::Recording,
+    plant: &crate::Plant,
+    half_window: usize,
+    file: &str,
+    header_line: usize,
+) -> Result<(Vec<TorqueSample>, TorqueSource), IdentError> {
+    use crate::recording::Channel;
+    let need = |c: Channel| {
+        rec.channel(c).ok_or_else(|| {
+            IdentError::at(
+                file,
+                header_line,
+                c.name(),
+                "required column is missing (identify torque needs angle_deg, p1_kpa, p2_kpa)",
+            )
+        })
+    };
+    let angle_deg = need(Channel::AngleDeg)?;
+    let p1 = need(Channel::P1Kpa)?;
+    let p2 = need(Channel::P2Kpa)?;
+    let angle: Vec<f64> = angle_deg.iter().map(|a| a.to_radians()).collect();
+    let vel = savgol_velocity(&angle, rec.sample_period_s(), half_window);
+    let r = plant.joint.sprocket_radius_m;
+    let (f1, f2) = (rec.channel(Channel::F1N), rec.channel(Channel::F2N));
+    let source = if f1.is_some() && f2.is_some() {
+        TorqueSource::MeasuredTensions
+    } else {
+        TorqueSource::PlantForceModel
+    };
+    let samples = (0..rec.len())
+        .map(|k| {
+            let p1_gauge_pa = p1[k] * 1e3;
+            let p2_gauge_pa = p2[k] * 1e3;
+            let torque_nm = match (f1, f2) {
+                (Some(f1), Some(f2)) => (f1[k] - f2[k]) * r,
+                _ => {
+                    let f = plant.tensions_n(&crate::PlantState {
+                        angle_rad: angle[k],
+                        velocity_rad_s: vel[k],
+                        p1_abs_pa: p1_gauge_pa + plant.p_atm_pa,
+                        p2_abs_pa: p2_gauge_pa + plant.p_atm_pa,
+                    });
+                    (f[0] - f[1]) * r
+                }
+            };
+            TorqueSample {
+                angle_rad: angle[k],
+                velocity_rad_s: vel[k],
+                p1_gauge_pa,
+                p2_gauge_pa,
+                torque_nm,
+            }
+        })
+        .collect();
+    Ok((samples, source))
+}
+
 impl TorqueModelFit {
     /// The `config/torque_model.toml` text (the firmware's build reads it). `dp_max_pa` is the
     /// usable activation the controller may command.
@@ -298,8 +433,22 @@ impl TorqueModelFit {
             s,
             "# Simplified torque model of the antagonistic joint (seed 003 eq. 11), SI units:"
         );
-        let _ = writeln!(s, "#   T = A r^2 alpha + B r dp + C alpha'^3 + D alpha',  p1 = p0 - dp, p2 = p0 + dp (gauge)");
-        let _ = writeln!(s, "#   T positive drives the angle up (T = (F1 - F2) r); A [N/(m rad)], B [m^2], C [N m s^3/rad^3], D [N m s/rad]");
+        for l in [
+            "#",
+            "#   T = A r^2 alpha + B r dp + C alpha'^3 + D alpha'",
+            "#",
+            "#   T      joint torque [N m], positive when it drives the angle up (PLANT.md: T = (F1 - F2) r)",
+            "#   alpha  joint angle [rad], alpha' joint velocity [rad/s]",
+            "#   dp     activation [Pa] with the paper's symmetric scheme p1 = p0 - dp, p2 = p0 + dp",
+            "#          (gauge). On the reference joint muscle 1 pulls the angle up, so B < 0 here.",
+            "#   A [N/(m rad)], B [m^2], C [N m s^3/rad^3], D [N m s/rad]",
+            "#",
+            "# Paper values for comparison (converted from pi-rad and kg/cm^2 in src/torque_model.rs::paper_si):",
+            "#   A = -73670 N/(m pi), B = 174.2 N cm^2/kg, C = 0.07 N m (s/pi)^3, D = 0.45 N m s/pi.",
+            "#",
+        ] {
+            let _ = writeln!(s, "{l}");
+        }
         let _ = writeln!(
             s,
             "# Written by `host-sim identify torque` from {source} ({} samples).",
@@ -360,6 +509,36 @@ mod tests {
         assert!((m.d_nms_per_rad / truth.d_nms_per_rad - 1.0).abs() < 1e-6);
         assert!(q.fit_pct > 99.99);
         assert!((m.p0_gauge_pa - 300_000.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn constant_velocity_filter_drops_the_reversals_only() {
+        let opt = TorqueSweep {
+            dp_levels_pa: vec![0.0],
+            speeds_rad_s: vec![1.0],
+            dt_s: 0.005,
+            ..TorqueSweep::default()
+        };
+        let ks = sweep_kinematics(&opt);
+        let angle: Vec<f64> = ks.iter().map(|k| k.angle_rad).collect();
+        let v = savgol_velocity(&angle, opt.dt_s, 5);
+        let samples: Vec<TorqueSample> = ks
+            .iter()
+            .zip(&v)
+            .map(|(k, v)| TorqueSample {
+                angle_rad: k.angle_rad,
+                velocity_rad_s: *v,
+                p1_gauge_pa: k.p1_gauge_pa,
+                p2_gauge_pa: k.p2_gauge_pa,
+                torque_nm: 0.0,
+            })
+            .collect();
+        let kept = constant_velocity_samples(&samples, opt.dt_s, 5, 2.0);
+        // One reversal in the middle (+-10 samples) and the two ends (one-sided estimates).
+        assert!(kept.len() < samples.len() && kept.len() + 30 > samples.len());
+        assert!(kept
+            .iter()
+            .all(|s| (s.velocity_rad_s.abs() - 1.0).abs() < 1e-9));
     }
 
     #[test]

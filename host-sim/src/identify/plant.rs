@@ -1,0 +1,661 @@
+//! Output-error identification of plant parameters from a recording.
+//!
+//! Chosen numeric keys of a plant TOML file (e.g. `valve.sonic_conductance_m3_per_s_pa`,
+//! `muscle.damping_m2s`, `joint.inertia_kgm2`, or any key of an `[effects.*]` table) are fitted
+//! by replaying the recording's valve inputs open loop on the plant ([`crate::sim::simulate`])
+//! and minimising the difference between the simulated and the recorded channels with the
+//! `levenberg-marquardt` crate (MINPACK's trust-region Levenberg-Marquardt).
+//!
+//! - Bounds by reparameterisation: a parameter with bounds `(lo, hi)` is `lo + (hi - lo)
+//!   sigmoid(z)`, with only a lower bound `lo + (x0 - lo) e^z`, with only an upper bound
+//!   `hi - (hi - x0) e^z`; every z starts at 0. Default bounds: `(0, inf)` for a positive start
+//!   value, `(-inf, 0)` for a negative one, `(0, 1)` for the valve pressure ratios.
+//! - Residuals: per recorded channel, `(simulated - measured) / std(measured)`, weighted so
+//!   every channel counts equally; the Jacobian by central differences (2 replays per
+//!   parameter), with a tight integrator tolerance so the differences are smooth.
+//! - Validation: the fit uses the head of the recording; the tail (`holdout_fraction`) is
+//!   held out. The whole recording is replayed with the start and the fitted values and the
+//!   NRMSE fit of every channel is reported on the held-out tail (and on the training part).
+//! - Output: the input plant file with only the fitted values replaced (comments, order and
+//!   the other keys kept, `toml_edit`), written atomically.
+
+// `!(x > 0.0)` is deliberate: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord, clippy::nonminimal_bool)]
+
+use std::cell::RefCell;
+use std::fmt::Write as _;
+use std::path::Path;
+
+use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
+use nalgebra::{DMatrix, DVector, Dyn, Owned};
+use toml_edit::{DocumentMut, Item, Value};
+
+use super::{write_atomic, IdentError};
+use crate::fit::fit_percent;
+use crate::recording::{Channel, Recording};
+use crate::sim::{simulate, SolverOptions};
+use crate::{Plant, PlantConfig};
+
+/// One parameter to fit: a dotted key of the plant file and its bounds.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParamSpec {
+    /// Dotted key, e.g. `muscle.damping_m2s`.
+    pub key: String,
+    /// Lower bound (may be `-inf`).
+    pub lower: f64,
+    /// Upper bound (may be `inf`).
+    pub upper: f64,
+}
+
+/// Options of the plant fit.
+#[derive(Clone, Debug)]
+pub struct PlantFitOptions {
+    /// Fraction of the recording (its tail) held out of the fit for validation.
+    pub holdout_fraction: f64,
+    /// Integrator tolerances for the replays (tight: the Jacobian is a finite difference).
+    pub solver: SolverOptions,
+    /// Relative step of the central differences, in the reparameterised coordinates.
+    pub fd_step: f64,
+    /// Levenberg-Marquardt patience (evaluations = patience * (parameters + 1)).
+    pub patience: usize,
+}
+
+impl Default for PlantFitOptions {
+    fn default() -> Self {
+        PlantFitOptions {
+            holdout_fraction: 0.25,
+            solver: SolverOptions {
+                rtol: 1e-9,
+                atol: 1e-9,
+                ..SolverOptions::default()
+            },
+            fd_step: 1e-4,
+            patience: 40,
+        }
+    }
+}
+
+/// Fit of one channel on one part of the recording.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChannelScore {
+    /// The channel.
+    pub channel: Channel,
+    /// NRMSE fit [%] with the start values.
+    pub before_pct: f64,
+    /// NRMSE fit [%] with the fitted values.
+    pub after_pct: f64,
+}
+
+/// Result of [`fit_plant`].
+#[derive(Clone, Debug)]
+pub struct PlantFit {
+    /// (key, start value, fitted value), in the order of the specs.
+    pub params: Vec<(String, f64, f64)>,
+    /// Per-channel fit on the training part (head).
+    pub train: Vec<ChannelScore>,
+    /// Per-channel fit on the held-out tail.
+    pub holdout: Vec<ChannelScore>,
+    /// Samples used for the fit / held out.
+    pub samples: (usize, usize),
+    /// Levenberg-Marquardt termination and number of residual evaluations.
+    pub termination: String,
+    /// Replays of the training part.
+    pub evaluations: usize,
+    /// Weighted cost 0.5 |r|^2 at the start and at the end.
+    pub cost: (f64, f64),
+    /// The fitted plant file (the input text with the fitted values replaced).
+    pub toml: String,
+}
+
+impl PlantFit {
+    /// Mean over channels of the held-out fit before and after.
+    pub fn holdout_mean_pct(&self) -> (f64, f64) {
+        mean_scores(&self.holdout)
+    }
+
+    /// Human-readable report.
+    pub fn summary(&self) -> String {
+        let mut s = String::new();
+        let _ = writeln!(
+            s,
+            "output-error fit: {} training samples, {} held out; {} replays; {}",
+            self.samples.0, self.samples.1, self.evaluations, self.termination
+        );
+        let _ = writeln!(
+            s,
+            "cost 0.5|r|^2: {:.6e} -> {:.6e}",
+            self.cost.0, self.cost.1
+        );
+        let _ = writeln!(
+            s,
+            "{:<44} {:>14} {:>14} {:>9}",
+            "parameter", "start", "fitted", "change"
+        );
+        for (k, a, b) in &self.params {
+            let _ = writeln!(
+                s,
+                "{k:<44} {a:>14.6e} {b:>14.6e} {:>8.2}%",
+                if *a != 0.0 {
+                    100.0 * (b / a - 1.0)
+                } else {
+                    f64::NAN
+                }
+            );
+        }
+        for (name, scores) in [
+            ("training part", &self.train),
+            ("held-out tail", &self.holdout),
+        ] {
+            let _ = writeln!(
+                s,
+                "fit [%] on the {name}: {:<10} {:>9} {:>9}",
+                "channel", "before", "after"
+            );
+            for c in scores.iter() {
+                let _ = writeln!(
+                    s,
+                    "{:>33} {:<10} {:>9.3} {:>9.3}",
+                    "",
+                    c.channel.name(),
+                    c.before_pct,
+                    c.after_pct
+                );
+            }
+            let (b, a) = mean_scores(scores);
+            let _ = writeln!(s, "{:>33} {:<10} {:>9.3} {:>9.3}", "", "mean", b, a);
+        }
+        s
+    }
+}
+
+fn mean_scores(scores: &[ChannelScore]) -> (f64, f64) {
+    let n = scores.len().max(1) as f64;
+    (
+        scores.iter().map(|c| c.before_pct).sum::<f64>() / n,
+        scores.iter().map(|c| c.after_pct).sum::<f64>() / n,
+    )
+}
+
+/// Parses `--params a,b,c` with optional bounds `key=lo:hi` (either side may be empty).
+pub fn parse_param_specs(
+    list: &[String],
+    doc_text: &str,
+    file: &str,
+) -> Result<Vec<ParamSpec>, IdentError> {
+    let doc: DocumentMut = doc_text
+        .parse()
+        .map_err(|e: toml_edit::TomlError| IdentError::Data(format!("{file}: {e}")))?;
+    let mut out: Vec<ParamSpec> = Vec::new();
+    for raw in list {
+        let raw = raw.trim();
+        if raw.is_empty() {
+            continue;
+        }
+        let (key, bounds) = match raw.split_once('=') {
+            Some((k, b)) => (k.trim(), Some(b.trim())),
+            None => (raw, None),
+        };
+        let x0 = get_number(&doc, key, file)?;
+        let (mut lo, mut hi) = default_bounds(key, x0);
+        if let Some(b) = bounds {
+            let (l, h) = b.split_once(':').ok_or_else(|| {
+                IdentError::Data(format!(
+                    "--params {raw}: bounds must be `key=lo:hi` (either side may be empty)"
+                ))
+            })?;
+            let num = |s: &str, inf: f64| -> Result<f64, IdentError> {
+                if s.trim().is_empty() {
+                    Ok(inf)
+                } else {
+                    s.trim().parse().map_err(|_| {
+                        IdentError::Data(format!("--params {raw}: bound {s:?} is not a number"))
+                    })
+                }
+            };
+            lo = num(l, f64::NEG_INFINITY)?;
+            hi = num(h, f64::INFINITY)?;
+        }
+        if !(lo < hi) || !(x0 > lo && x0 < hi) {
+            return Err(IdentError::Data(format!(
+                "--params {raw}: the start value {x0} of `{key}` in {file} must lie strictly inside the bounds ({lo}, {hi})"
+            )));
+        }
+        if out.iter().any(|p| p.key == key) {
+            return Err(IdentError::Data(format!("--params: `{key}` given twice")));
+        }
+        out.push(ParamSpec {
+            key: key.to_string(),
+            lower: lo,
+            upper: hi,
+        });
+    }
+    if out.is_empty() {
+        return Err(IdentError::Data("--params: no parameter given".into()));
+    }
+    Ok(out)
+}
+
+fn default_bounds(key: &str, x0: f64) -> (f64, f64) {
+    if key.ends_with("critical_ratio") || key.ends_with("laminar_ratio") {
+        (0.0, 1.0)
+    } else if x0 > 0.0 {
+        (0.0, f64::INFINITY)
+    } else if x0 < 0.0 {
+        (f64::NEG_INFINITY, 0.0)
+    } else {
+        (f64::NEG_INFINITY, f64::INFINITY)
+    }
+}
+
+fn item_at<'a>(doc: &'a DocumentMut, key: &str) -> Option<&'a Item> {
+    let mut it: &Item = doc.as_item();
+    for part in key.split('.') {
+        it = it.get(part)?;
+    }
+    Some(it)
+}
+
+fn get_number(doc: &DocumentMut, key: &str, file: &str) -> Result<f64, IdentError> {
+    let item = item_at(doc, key).ok_or_else(|| {
+        IdentError::Data(format!(
+            "{file}: key `{key}`: no such key in the plant file"
+        ))
+    })?;
+    match item.as_value() {
+        Some(Value::Float(f)) => Ok(*f.value()),
+        Some(Value::Integer(i)) => Ok(*i.value() as f64),
+        _ => Err(IdentError::Data(format!(
+            "{file}: key `{key}`: not a number (only scalar numeric keys can be fitted)"
+        ))),
+    }
+}
+
+/// Sets a numeric key, keeping the comment that follows the value.
+fn set_number(doc: &mut DocumentMut, key: &str, x: f64) {
+    let mut it: &mut Item = doc.as_item_mut();
+    for part in key.split('.') {
+        it = &mut it[part];
+    }
+    let decor = it.as_value().map(|v| v.decor().clone());
+    // Scientific notation keeps small SI values readable (8e-9, not 0.000000008).
+    let mut v: Value = format!("{x:e}").parse().unwrap_or_else(|_| Value::from(x));
+    if let Some(d) = decor {
+        *v.decor_mut() = d;
+    }
+    *it = Item::Value(v);
+}
+
+impl ParamSpec {
+    /// x(z); z = 0 gives `x0`.
+    fn to_x(&self, z: f64, x0: f64) -> f64 {
+        let (lo, hi) = (self.lower, self.upper);
+        match (lo.is_finite(), hi.is_finite()) {
+            (true, true) => {
+                let s0 = ((x0 - lo) / (hi - lo)).clamp(1e-300, 1.0 - 1e-16);
+                let z0 = (s0 / (1.0 - s0)).ln();
+                lo + (hi - lo) / (1.0 + (-(z + z0)).exp())
+            }
+            (true, false) => lo + (x0 - lo) * z.exp(),
+            (false, true) => hi - (hi - x0) * z.exp(),
+            (false, false) => x0 + z * x0.abs().max(1.0),
+        }
+    }
+}
+
+/// The channels of a recording used by the fit.
+fn channels_of(rec: &Recording) -> Vec<Channel> {
+    Channel::ALL
+        .into_iter()
+        .filter(|c| rec.channel(*c).is_some())
+        .collect()
+}
+
+struct Model<'a> {
+    specs: &'a [ParamSpec],
+    x0: Vec<f64>,
+    doc: RefCell<DocumentMut>,
+    file: String,
+}
+
+impl Model<'_> {
+    fn values(&self, z: &[f64]) -> Vec<f64> {
+        self.specs
+            .iter()
+            .zip(z)
+            .zip(&self.x0)
+            .map(|((s, z), x0)| s.to_x(*z, *x0))
+            .collect()
+    }
+
+    /// The plant with the parameters at z; also returns the file text.
+    fn plant(&self, z: &[f64]) -> Result<(Plant, String), IdentError> {
+        let xs = self.values(z);
+        let mut doc = self.doc.borrow_mut();
+        for (s, x) in self.specs.iter().zip(&xs) {
+            set_number(&mut doc, &s.key, *x);
+        }
+        let text = doc.to_string();
+        let cfg = PlantConfig::from_toml_str(&text, &self.file)
+            .map_err(|e| IdentError::Data(e.to_string()))?;
+        Ok((Plant::from_config(&cfg), text))
+    }
+}
+
+/// Replays `rec`'s first `n` inputs on `plant` and returns the recorded channels.
+fn replay(plant: &Plant, rec: &Recording, n: usize, opts: &SolverOptions) -> Option<Vec<Vec<f64>>> {
+    let dt = rec.sample_period_s();
+    let sim = simulate(plant, &rec.inputs[..n], dt, opts).ok()?;
+    let meas = plant.measure_series(&sim.states, dt);
+    let out: Vec<Vec<f64>> = channels_of(rec)
+        .iter()
+        .map(|c| meas.iter().map(|m| c.of(m)).collect())
+        .collect();
+    out.iter()
+        .all(|ch| ch.iter().all(|v| v.is_finite()))
+        .then_some(out)
+}
+
+struct OeProblem<'a> {
+    model: &'a Model<'a>,
+    rec: &'a Recording,
+    n_train: usize,
+    /// Per channel: 1 / (std * sqrt(n_train * channels)).
+    weights: Vec<f64>,
+    opts: &'a PlantFitOptions,
+    z: DVector<f64>,
+    /// Cached residuals at z.
+    r: Option<DVector<f64>>,
+    evaluations: RefCell<usize>,
+    best: RefCell<(f64, DVector<f64>)>,
+}
+
+impl OeProblem<'_> {
+    fn m(&self) -> usize {
+        self.n_train * self.weights.len()
+    }
+
+    fn eval(&self, z: &DVector<f64>) -> DVector<f64> {
+        *self.evaluations.borrow_mut() += 1;
+        let chans = channels_of(self.rec);
+        let sim = self
+            .model
+            .plant(z.as_slice())
+            .ok()
+            .and_then(|(p, _)| replay(&p, self.rec, self.n_train, &self.opts.solver));
+        let r = match sim {
+            Some(sim) => {
+                let mut r = DVector::zeros(self.m());
+                for (ci, c) in chans.iter().enumerate() {
+                    let y = &self.rec.channel(*c).expect("present")[..self.n_train];
+                    for k in 0..self.n_train {
+                        r[ci * self.n_train + k] = (sim[ci][k] - y[k]) * self.weights[ci];
+                    }
+                }
+                r
+            }
+            // A plant that cannot be simulated: a large finite residual makes the trust region
+            // shrink instead of ending the fit.
+            None => DVector::from_element(self.m(), 10.0),
+        };
+        let cost = 0.5 * r.norm_squared();
+        let mut best = self.best.borrow_mut();
+        if cost < best.0 {
+            *best = (cost, z.clone());
+        }
+        r
+    }
+}
+
+impl LeastSquaresProblem<f64, Dyn, Dyn> for OeProblem<'_> {
+    type ResidualStorage = Owned<f64, Dyn>;
+    type JacobianStorage = Owned<f64, Dyn, Dyn>;
+    type ParameterStorage = Owned<f64, Dyn>;
+
+    fn set_params(&mut self, z: &DVector<f64>) {
+        self.z.copy_from(z);
+        self.r = Some(self.eval(z));
+    }
+
+    fn params(&self) -> DVector<f64> {
+        self.z.clone()
+    }
+
+    fn residuals(&self) -> Option<DVector<f64>> {
+        self.r.clone()
+    }
+
+    fn jacobian(&self) -> Option<DMatrix<f64>> {
+        let p = self.z.len();
+        let mut j = DMatrix::zeros(self.m(), p);
+        let h = self.opts.fd_step;
+        for k in 0..p {
+            let mut zp = self.z.clone();
+            let mut zm = self.z.clone();
+            zp[k] += h;
+            zm[k] -= h;
+            let rp = self.eval(&zp);
+            let rm = self.eval(&zm);
+            j.set_column(k, &((rp - rm) / (2.0 * h)));
+        }
+        Some(j)
+    }
+}
+
+/// Fits `specs` of the plant file `plant_text` (named `plant_file` in messages) to `rec`.
+pub fn fit_plant(
+    rec: &Recording,
+    plant_text: &str,
+    plant_file: &str,
+    specs: &[ParamSpec],
+    opts: &PlantFitOptions,
+) -> Result<PlantFit, IdentError> {
+    if !(opts.holdout_fraction >= 0.0 && opts.holdout_fraction < 1.0) {
+        return Err(IdentError::Data(
+            "hold-out fraction must be in [0, 1)".into(),
+        ));
+    }
+    let n = rec.len();
+    let n_train = ((1.0 - opts.holdout_fraction) * n as f64).round() as usize;
+    if n_train < 10 * specs.len().max(1) || n_train < 20 {
+        return Err(IdentError::Data(format!(
+            "recording too short: {n_train} training samples for {} parameters",
+            specs.len()
+        )));
+    }
+    let chans = channels_of(rec);
+    let doc: DocumentMut = plant_text
+        .parse()
+        .map_err(|e: toml_edit::TomlError| IdentError::Data(format!("{plant_file}: {e}")))?;
+    let x0: Vec<f64> = specs
+        .iter()
+        .map(|s| get_number(&doc, &s.key, plant_file))
+        .collect::<Result<_, _>>()?;
+    let model = Model {
+        specs,
+        x0: x0.clone(),
+        doc: RefCell::new(doc),
+        file: plant_file.to_string(),
+    };
+    // Check the start plant before fitting.
+    let (plant0, _) = model.plant(&vec![0.0; specs.len()])?;
+    let weights: Vec<f64> = chans
+        .iter()
+        .map(|c| {
+            let y = &rec.channel(*c).expect("present")[..n_train];
+            let mean = y.iter().sum::<f64>() / y.len() as f64;
+            let var = y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / y.len() as f64;
+            // A flat channel is weighted by a unit spread.
+            let sd = if var > 0.0 { var.sqrt() } else { 1.0 };
+            1.0 / (sd * ((n_train * chans.len()) as f64).sqrt())
+        })
+        .collect();
+    let z0 = DVector::zeros(specs.len());
+    let mut problem = OeProblem {
+        model: &model,
+        rec,
+        n_train,
+        weights,
+        opts,
+        z: z0.clone(),
+        r: None,
+        evaluations: RefCell::new(0),
+        best: RefCell::new((f64::INFINITY, z0.clone())),
+    };
+    problem.set_params(&z0);
+    let cost0 = problem.best.borrow().0;
+    if replay(&plant0, rec, n_train, &opts.solver).is_none() {
+        return Err(IdentError::Data(format!(
+            "{plant_file}: the start plant cannot replay the recording"
+        )));
+    }
+    let (problem, report) = LevenbergMarquardt::new()
+        .with_stepbound(1.0)
+        .with_patience(opts.patience)
+        .minimize(problem);
+    let (cost1, z_best) = problem.best.borrow().clone();
+    let evaluations = *problem.evaluations.borrow();
+    let (plant1, toml) = model.plant(z_best.as_slice())?;
+    let x1 = model.values(z_best.as_slice());
+
+    // Validation: whole recording, before and after.
+    let full0 = replay(&plant0, rec, n, &opts.solver)
+        .ok_or_else(|| IdentError::Data("the start plant cannot replay the recording".into()))?;
+    let full1 = replay(&plant1, rec, n, &opts.solver)
+        .ok_or_else(|| IdentError::Data("the fitted plant cannot replay the recording".into()))?;
+    let score = |range: std::ops::Range<usize>| -> Vec<ChannelScore> {
+        chans
+            .iter()
+            .enumerate()
+            .map(|(ci, c)| {
+                let y = &rec.channel(*c).expect("present")[range.clone()];
+                ChannelScore {
+                    channel: *c,
+                    before_pct: fit_percent(y, &full0[ci][range.clone()]),
+                    after_pct: fit_percent(y, &full1[ci][range.clone()]),
+                }
+            })
+            .collect()
+    };
+    Ok(PlantFit {
+        params: specs
+            .iter()
+            .zip(x0.iter().zip(&x1))
+            .map(|(s, (a, b))| (s.key.clone(), *a, *b))
+            .collect(),
+        train: score(0..n_train),
+        holdout: if n_train < n {
+            score(n_train..n)
+        } else {
+            Vec::new()
+        },
+        samples: (n_train, n - n_train),
+        termination: format!(
+            "{:?} after {} evaluations",
+            report.termination, report.number_of_evaluations
+        ),
+        evaluations,
+        cost: (cost0, cost1),
+        toml,
+    })
+}
+
+/// Reads the recording and the plant file, fits, writes the fitted plant file atomically.
+pub fn identify_plant_files(
+    recording: &Path,
+    plant: &Path,
+    params: &[String],
+    out: &Path,
+    opts: &PlantFitOptions,
+) -> Result<PlantFit, IdentError> {
+    let rec = Recording::read(recording).map_err(|e| IdentError::Data(e.to_string()))?;
+    let file = plant.display().to_string();
+    let text = std::fs::read_to_string(plant).map_err(|e| IdentError::Io {
+        file: file.clone(),
+        msg: e.to_string(),
+    })?;
+    // Validate the plant file as a whole first (errors name the key).
+    PlantConfig::from_toml_str(&text, plant).map_err(|e| IdentError::Data(e.to_string()))?;
+    let specs = parse_param_specs(params, &text, &file)?;
+    let fit = fit_plant(&rec, &text, &file, &specs, opts)?;
+    let mut body = String::new();
+    let _ = writeln!(
+        body,
+        "# Fitted by `host-sim identify plant` from {} (start: {file}):",
+        recording.display()
+    );
+    for (k, a, b) in &fit.params {
+        let _ = writeln!(body, "#   {k}: {a:e} -> {b:e}");
+    }
+    let (hb, ha) = fit.holdout_mean_pct();
+    let _ = writeln!(
+        body,
+        "#   held-out tail ({} samples): mean fit {hb:.3} % -> {ha:.3} %",
+        fit.samples.1
+    );
+    body.push_str(&fit.toml);
+    write_atomic(out, body.as_bytes())?;
+    Ok(fit)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reparameterisation_starts_at_x0_and_respects_bounds() {
+        let both = ParamSpec {
+            key: "valve.critical_ratio".into(),
+            lower: 0.0,
+            upper: 1.0,
+        };
+        assert!((both.to_x(0.0, 0.433) - 0.433).abs() < 1e-12);
+        for z in [-50.0, -3.0, 3.0, 50.0] {
+            let x = both.to_x(z, 0.433);
+            assert!((0.0..=1.0).contains(&x), "{x}");
+        }
+        let lower = ParamSpec {
+            key: "joint.inertia_kgm2".into(),
+            lower: 0.0,
+            upper: f64::INFINITY,
+        };
+        assert!((lower.to_x(0.0, 0.014) - 0.014).abs() < 1e-15);
+        assert!(lower.to_x(-40.0, 0.014) > 0.0);
+        let upper = ParamSpec {
+            key: "x".into(),
+            lower: f64::NEG_INFINITY,
+            upper: 0.0,
+        };
+        assert!((upper.to_x(0.0, -2.0) + 2.0).abs() < 1e-15);
+        assert!(upper.to_x(5.0, -2.0) < 0.0);
+    }
+
+    #[test]
+    fn param_specs_parse_bounds_and_reject_bad_keys() {
+        let text = "[a]\nx = 2.0 # c\ny = -1\nz = \"s\"\n";
+        let s = parse_param_specs(&["a.x".into(), "a.y=-5:".into()], text, "p.toml").unwrap();
+        assert_eq!(s[0].lower, 0.0);
+        assert_eq!(s[0].upper, f64::INFINITY);
+        assert_eq!(s[1].lower, -5.0);
+        assert_eq!(s[1].upper, f64::INFINITY);
+        let e = parse_param_specs(&["a.q".into()], text, "p.toml").unwrap_err();
+        assert!(
+            e.to_string().contains("p.toml") && e.to_string().contains("a.q"),
+            "{e}"
+        );
+        let e = parse_param_specs(&["a.z".into()], text, "p.toml").unwrap_err();
+        assert!(e.to_string().contains("not a number"), "{e}");
+        let e = parse_param_specs(&["a.x=3:4".into()], text, "p.toml").unwrap_err();
+        assert!(e.to_string().contains("inside the bounds"), "{e}");
+    }
+
+    #[test]
+    fn set_number_keeps_the_comment() {
+        let mut doc: DocumentMut = "[a]\nx = 2.0   # the x\n".parse().unwrap();
+        set_number(&mut doc, "a.x", 3.5);
+        let s = doc.to_string();
+        assert!(s.contains("x = 3.5e0   # the x"), "{s}");
+        set_number(&mut doc, "a.x", 6.5e-9);
+        assert!(doc.to_string().contains("x = 6.5e-9   # the x"));
+        assert_eq!(get_number(&doc, "a.x", "p.toml").unwrap(), 6.5e-9);
+    }
+}
