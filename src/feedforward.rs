@@ -113,11 +113,30 @@ impl SetpointDerivatives {
             self.reset();
             return Err(ControlError::NonFiniteInput);
         }
+        self.update_finite(setpoint_rad, dt_s, cutoff_hz, Self::tau_s(cutoff_hz))
+    }
+
+    /// The filter time constant `update` uses for `cutoff_hz` [s].
+    #[inline]
+    pub(crate) fn tau_s(cutoff_hz: f32) -> f32 {
+        1.0 / (2.0 * core::f32::consts::PI * cutoff_hz)
+    }
+
+    /// [`Self::update`] for a caller that has checked its inputs (finite set-point and
+    /// `dt_s > 0`, finite `cutoff_hz`) and passes `tau_s = Self::tau_s(cutoff_hz)`
+    /// (a configuration constant): the same result, bit for bit.
+    #[inline(always)]
+    pub(crate) fn update_finite(
+        &mut self,
+        setpoint_rad: f32,
+        dt_s: f32,
+        cutoff_hz: f32,
+        tau_s: f32,
+    ) -> Result<(f32, f32), ControlError> {
         if cutoff_hz <= 0.0 {
             self.reset();
             return Ok((0.0, 0.0));
         }
-        let tau_s = 1.0 / (2.0 * core::f32::consts::PI * cutoff_hz);
         let a = dt_s / (dt_s + tau_s);
         if self.prev_rad.is_finite() {
             let raw = (setpoint_rad - self.prev_rad) / dt_s;

@@ -329,6 +329,8 @@ pub struct ControlTick {
     /// `clamp_pressure_setpoint_pa(f32::INFINITY, cfg.torque.p_set_max_gauge_pa)`: the
     /// torque loop's upper set-point bound (a configuration constant).
     p_set_hi_pa: f32,
+    /// `SetpointDerivatives::tau_s(cfg.feedforward.cutoff_hz)` (a configuration constant).
+    ff_tau_s: f32,
     p1: ChannelValidator,
     p2: ChannelValidator,
     angle: ChannelValidator,
@@ -454,6 +456,7 @@ impl ControlTick {
             dt_limit_s,
             dp_limit_pa: cfg.torque_model.dp_limit_pa(),
             p_set_hi_pa: clamp_pressure_setpoint_pa(f32::INFINITY, cfg.torque.p_set_max_gauge_pa),
+            ff_tau_s: SetpointDerivatives::tau_s(cfg.feedforward.cutoff_hz),
             p1: ChannelValidator::new(cfg.pressure_limits),
             p2: ChannelValidator::new(cfg.pressure_limits),
             angle: ChannelValidator::new(cfg.angle_limits),
@@ -656,7 +659,10 @@ impl ControlTick {
                 ));
             }
             let ff = &self.cfg.feedforward;
-            let (rate, accel) = self.setpoint_derivatives.update(sp, dt_s, ff.cutoff_hz)?;
+            // Valid configuration here: `ff.cutoff_hz` is finite (>= 0).
+            let (rate, accel) =
+                self.setpoint_derivatives
+                    .update_finite(sp, dt_s, ff.cutoff_hz, self.ff_tau_s)?;
             let t_pid = self.position.step_finite(
                 JointState {
                     angle_rad: angle,
