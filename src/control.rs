@@ -470,10 +470,16 @@ impl PressureController {
             return Ok(0.0);
         }
         let p = g.kp_per_pa * e;
-        let di = g.ki_per_pa_s * e * dt_s;
-        let unsat = p + self.integral;
-        if !((unsat >= 1.0 && di > 0.0) || (unsat <= -1.0 && di < 0.0)) {
-            self.integral = clampf(self.integral + di, g.i_limit);
+        // P-only loop (ki = 0, the reference) with the integrator at +0: `di` is +-0 (finite
+        // e and dt), +0 + +-0 = +0 and clampf(+0, any limit) = +0, so the integrator update
+        // below would leave it bit for bit unchanged; skip it.
+        let integral_idle = g.ki_per_pa_s == 0.0 && self.integral.to_bits() == 0;
+        if !integral_idle {
+            let di = g.ki_per_pa_s * e * dt_s;
+            let unsat = p + self.integral;
+            if !((unsat >= 1.0 && di > 0.0) || (unsat <= -1.0 && di < 0.0)) {
+                self.integral = clampf(self.integral + di, g.i_limit);
+            }
         }
         let u = clampf(p + self.integral, 1.0);
         if !u.is_finite() {
