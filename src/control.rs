@@ -49,7 +49,11 @@ fn finite(xs: &[f32]) -> bool {
 #[inline]
 fn clampf(x: f32, lim: f32) -> f32 {
     let lim = libm::fabsf(lim);
-    if x > lim {
+    // Usual case first, one comparison: |x| <= lim means x is returned below too (also for
+    // x = -0); NaN x or lim fail it and take the full chain, which returns x then.
+    if libm::fabsf(x) <= lim {
+        x
+    } else if x > lim {
         lim
     } else if x < -lim {
         -lim
@@ -162,8 +166,10 @@ impl PositionController {
         let saturated_high = unsat > lim;
         let saturated_low = unsat < -lim;
         let di = g.ki * e * dt_s;
-        // Conditional integration: do not integrate further into saturation.
-        if !((saturated_high && di > 0.0) || (saturated_low && di < 0.0)) {
+        // Conditional integration: do not integrate further into saturation. (Unsaturated
+        // - the usual case - is decided by one comparison; NaN takes the full test.)
+        let within = libm::fabsf(unsat) <= lim;
+        if within || !((saturated_high && di > 0.0) || (saturated_low && di < 0.0)) {
             self.integral_nm = clampf(self.integral_nm + di, g.i_limit);
         }
         let out = clampf(pd + self.integral_nm, lim);
