@@ -161,7 +161,10 @@ impl SetpointDerivatives {
 pub fn feedforward_torque_nm(g: &FeedforwardGains, kd: f32, rate_rad_s: f32, accel: f32) -> f32 {
     let t = kd * g.rate_weight * rate_rad_s + g.inertia_kgm2 * accel;
     let lim = libm::fabsf(g.limit_nm);
-    if t > lim {
+    // In range (the usual case): one comparison; NaN fails it and takes the chain below.
+    if libm::fabsf(t) <= lim {
+        t
+    } else if t > lim {
         lim
     } else if t < -lim {
         -lim

@@ -625,7 +625,10 @@ impl ControlTick {
         // Same result as `f32::clamp`, but without its (unreachable: the configuration is
         // validated) panic, whose message would link core::fmt's float formatting (~20 KiB of
         // MCU flash).
-        let sp = if setpoint.angle_rad > sp_max {
+        let sp = if libm::fabsf(setpoint.angle_rad) <= sp_max {
+            // In range: one comparison (NaN fails it; a NaN set-point has faulted anyway).
+            setpoint.angle_rad
+        } else if setpoint.angle_rad > sp_max {
             sp_max
         } else if setpoint.angle_rad < -sp_max {
             -sp_max
@@ -676,7 +679,10 @@ impl ControlTick {
             let t_ff = feedforward_torque_nm(ff, self.cfg.position.kd, rate, accel);
             let t_lim = libm::fabsf(self.cfg.position.out_limit);
             let t_sum = t_pid + t_ff;
-            let t_des = if t_sum > t_lim {
+            // In range (the usual case, one comparison; NaN fails it) or the full clamp.
+            let t_des = if libm::fabsf(t_sum) <= t_lim {
+                t_sum
+            } else if t_sum > t_lim {
                 t_lim
             } else if t_sum < -t_lim {
                 -t_lim
