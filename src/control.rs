@@ -512,6 +512,99 @@ mod tests {
         })
     }
 
+    const EDGE_VALUES: [f32; 14] = [
+        0.0,
+        -0.0,
+        1e-45,
+        -1e-45,
+        0.5,
+        -0.5,
+        1.0,
+        -1.0,
+        3.0,
+        -3.0,
+        f32::MAX,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::NAN,
+    ];
+
+    #[test]
+    fn clampf_matches_the_plain_comparison_chain_bitwise() {
+        // The chain `clampf` had before its in-range fast path.
+        let chain = |x: f32, lim: f32| {
+            let lim = libm::fabsf(lim);
+            if x > lim {
+                lim
+            } else if x < -lim {
+                -lim
+            } else {
+                x
+            }
+        };
+        for x in EDGE_VALUES {
+            for lim in EDGE_VALUES {
+                assert_eq!(
+                    clampf(x, lim).to_bits(),
+                    chain(x, lim).to_bits(),
+                    "x {x:e} lim {lim:e}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn p_only_pressure_loop_matches_the_full_integrator_update_bitwise() {
+        // The loop before the P-only skip of the integrator update (same gains, kp = 0 too,
+        // which makes p = -0 for negative errors: the sign of zero must survive).
+        struct Reference {
+            g: PressureLoopGains,
+            integral: f32,
+        }
+        impl Reference {
+            fn step(&mut self, p_meas: f32, p_set: f32, dt_s: f32) -> f32 {
+                let g = &self.g;
+                let e = p_set - p_meas;
+                if libm::fabsf(e) <= g.deadband_pa {
+                    return 0.0;
+                }
+                let p = g.kp_per_pa * e;
+                let di = g.ki_per_pa_s * e * dt_s;
+                let unsat = p + self.integral;
+                if !((unsat >= 1.0 && di > 0.0) || (unsat <= -1.0 && di < 0.0)) {
+                    self.integral = clampf(self.integral + di, g.i_limit);
+                }
+                clampf(p + self.integral, 1.0)
+            }
+        }
+        for (kp, i_limit) in [
+            (1.0 / 30_000.0, 0.0),
+            (0.0, 0.0),
+            (1e-4, 5.0),
+            (0.0, f32::NAN),
+        ] {
+            for ki in [0.0f32, -0.0] {
+                let g = PressureLoopGains {
+                    kp_per_pa: kp,
+                    ki_per_pa_s: ki,
+                    deadband_pa: 3_000.0,
+                    i_limit,
+                };
+                let mut reference = Reference { g, integral: 0.0 };
+                let mut fast = PressureController::new(g);
+                for k in 0..2_000 {
+                    let x = k as f32;
+                    let p_meas = 300_000.0 + 200_000.0 * libm::sinf(0.013 * x);
+                    let p_set = 300_000.0 + 250_000.0 * libm::sinf(0.007 * x + 1.0);
+                    let want = reference.step(p_meas, p_set, 1e-3);
+                    let got = fast.step(p_meas, p_set, 1e-3).unwrap();
+                    assert_eq!(got.to_bits(), want.to_bits(), "kp {kp} ki {ki} tick {k}");
+                    assert_eq!(fast.integral.to_bits(), reference.integral.to_bits());
+                }
+            }
+        }
+    }
+
     #[test]
     fn finite_rejects_exactly_nan_and_infinities() {
         let ok = [

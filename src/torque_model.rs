@@ -242,6 +242,25 @@ mod tests {
     use crate::constants::TORQUE_MODEL;
 
     #[test]
+    fn non_finite_torque_gives_zero_saturated_activation() {
+        // `InverseAt::activation` tests only dp for finiteness; a non-finite torque must
+        // still give the safe answer, at finite and at extreme passive torques.
+        let m = TORQUE_MODEL;
+        for (angle, v) in [(0.0f32, 0.0f32), (0.5, -2.0), (1e30, 1e30), (-1e30, 3e12)] {
+            let inv = m.inverse_at(angle, v);
+            for t in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -f32::NAN] {
+                let a = inv.activation(t);
+                assert_eq!(
+                    a.dp_pa.to_bits(),
+                    0.0f32.to_bits(),
+                    "angle {angle} v {v} t {t}"
+                );
+                assert!(a.saturated);
+            }
+        }
+    }
+
+    #[test]
     fn inverse_at_equals_activation_bit_for_bit() {
         let m = TORQUE_MODEL;
         let vals = [
