@@ -92,6 +92,8 @@ pub const MPA_PER_PA: f32 = 1.0e-6;
 /// Cortex-M4F (no call, no special-case and reduction tests). `expf_matches_libm_bitwise`
 /// checks it against `libm::expf` over the whole inlined range and beyond.
 #[inline(always)]
+// P1, P2 are libm's literals, verbatim.
+#[allow(clippy::excessive_precision)]
 fn expf_libm(x: f32) -> f32 {
     const P1: f32 = 1.6666625440e-1;
     const P2: f32 = -2.7667332906e-3;
