@@ -35,7 +35,7 @@ pub enum ControlError {
 }
 
 #[inline]
-fn finite(xs: &[f32]) -> bool {
+pub(crate) fn finite(xs: &[f32]) -> bool {
     // Branch-free: `x * 0` is +-0 for every finite x and NaN for NaN and +-inf, so the sum is
     // 0 exactly when all are finite (about 2 instructions per value on the Cortex-M4F
     // instead of a compare-and-branch chain).

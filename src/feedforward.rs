@@ -148,7 +148,7 @@ impl SetpointDerivatives {
             self.prev_rate_rad_s = self.rate_rad_s;
         }
         self.prev_rad = setpoint_rad;
-        if !(self.rate_rad_s.is_finite() && self.accel_rad_s2.is_finite()) {
+        if !crate::control::finite(&[self.rate_rad_s, self.accel_rad_s2]) {
             self.reset();
             return Err(ControlError::NonFiniteOutput);
         }
