@@ -35,7 +35,7 @@ pub enum ControlError {
 }
 
 #[inline]
-fn finite(xs: &[f32]) -> bool {
+pub(crate) fn finite(xs: &[f32]) -> bool {
     // Branch-free: `x * 0` is +-0 for every finite x and NaN for NaN and +-inf, so the sum is
     // 0 exactly when all are finite (about 2 instructions per value on the Cortex-M4F
     // instead of a compare-and-branch chain).
@@ -49,12 +49,31 @@ fn finite(xs: &[f32]) -> bool {
 #[inline]
 fn clampf(x: f32, lim: f32) -> f32 {
     let lim = libm::fabsf(lim);
-    if x > lim {
+    // Usual case first, one comparison: |x| <= lim means x is returned below too (also for
+    // x = -0); NaN x or lim fail it and take the full chain, which returns x then.
+    if libm::fabsf(x) <= lim {
+        x
+    } else if x > lim {
         lim
     } else if x < -lim {
         -lim
     } else {
         x
+    }
+}
+
+/// Clamp of a pressure set-point to `[0, hi]` (`hi` from [`clamp_pressure_setpoint_pa`]
+/// with an infinite pressure, so `0 <= hi <= P_MUSCLE_MAX_GAUGE_PA`); NaN and p <= 0 give +0.
+#[inline(always)]
+// `!(p > 0.0)` is deliberate: it is also true for NaN.
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
+fn clamp_setpoint_to(p_gauge_pa: f32, hi: f32) -> f32 {
+    if !(p_gauge_pa > 0.0) {
+        0.0
+    } else if p_gauge_pa > hi {
+        hi
+    } else {
+        p_gauge_pa
     }
 }
 
@@ -127,6 +146,18 @@ impl PositionController {
             self.reset();
             return Err(ControlError::NonFiniteInput);
         }
+        self.step_finite(meas, setpoint_rad, dt_s)
+    }
+
+    /// [`Self::step`] without its input check, for a caller that has validated the inputs
+    /// (all finite, `dt_s > 0`): then the same result, bit for bit.
+    #[inline(always)]
+    pub(crate) fn step_finite(
+        &mut self,
+        meas: JointState,
+        setpoint_rad: f32,
+        dt_s: f32,
+    ) -> Result<f32, ControlError> {
         let g = &self.gains;
         let e = setpoint_rad - meas.angle_rad;
         let pd = g.kp * e - g.kd * meas.velocity_rad_s;
@@ -135,12 +166,14 @@ impl PositionController {
         let saturated_high = unsat > lim;
         let saturated_low = unsat < -lim;
         let di = g.ki * e * dt_s;
-        // Conditional integration: do not integrate further into saturation.
-        if !((saturated_high && di > 0.0) || (saturated_low && di < 0.0)) {
+        // Conditional integration: do not integrate further into saturation. (Unsaturated
+        // - the usual case - is decided by one comparison; NaN takes the full test.)
+        let within = libm::fabsf(unsat) <= lim;
+        if within || !((saturated_high && di > 0.0) || (saturated_low && di < 0.0)) {
             self.integral_nm = clampf(self.integral_nm + di, g.i_limit);
         }
         let out = clampf(pd + self.integral_nm, lim);
-        if !out.is_finite() || !self.integral_nm.is_finite() {
+        if !finite(&[out, self.integral_nm]) {
             self.reset();
             return Err(ControlError::NonFiniteOutput);
         }
@@ -196,6 +229,7 @@ pub struct PressureSetpoints {
 
 /// Static joint torque `(F1 - F2) r` [N m] from the force law at the measured pressures
 /// and the stretches of the measured angle, with the force-law flags of both muscles.
+#[inline]
 pub fn torque_estimate_nm(
     force_law: &ForceLawParams,
     geometry: &JointGeometry,
@@ -204,8 +238,8 @@ pub fn torque_estimate_nm(
     angle_rad: f32,
 ) -> (f32, ForceFlags) {
     let (e1, e2) = geometry.stretches(angle_rad);
-    let f1 = force_law.force(p1_gauge_pa, e1);
-    let f2 = force_law.force(p2_gauge_pa, e2);
+    let f1 = force_law.force_inline(p1_gauge_pa, e1);
+    let f2 = force_law.force_inline(p2_gauge_pa, e2);
     (
         (f1.force_n - f2.force_n) * geometry.sprocket_radius_m,
         f1.flags.union(f2.flags),
@@ -304,6 +338,33 @@ impl TorqueController {
             self.reset();
             return Err(ControlError::NonFiniteInput);
         }
+        let dp_limit_pa = self.model.dp_limit_pa();
+        let p_set_hi_pa = clamp_pressure_setpoint_pa(f32::INFINITY, self.gains.p_set_max_gauge_pa);
+        self.step_finite(
+            meas,
+            estimate,
+            torque_des_nm,
+            dt_s,
+            dp_limit_pa,
+            p_set_hi_pa,
+        )
+    }
+
+    /// [`Self::step_with_estimate`] without its input check, for a caller that has
+    /// validated the inputs (all finite, `dt_s > 0`) and passes the configuration constants
+    /// `dp_limit_pa = self.model.dp_limit_pa()` and `p_set_hi_pa =
+    /// clamp_pressure_setpoint_pa(f32::INFINITY, self.gains.p_set_max_gauge_pa)`: then the
+    /// same result, bit for bit.
+    #[inline(always)]
+    pub(crate) fn step_finite(
+        &mut self,
+        meas: TorqueMeasurement,
+        estimate: (f32, ForceFlags),
+        torque_des_nm: f32,
+        dt_s: f32,
+        dp_limit_pa: f32,
+        p_set_hi_pa: f32,
+    ) -> Result<PressureSetpoints, ControlError> {
         let (t_est, flags) = estimate;
         if flags.contains_any(ForceFlags::FATAL) {
             self.reset();
@@ -315,7 +376,8 @@ impl TorqueController {
         let t_err = (torque_des_nm - t_dyn) - t_est;
         let g = &self.gains;
         let lim = libm::fabsf(g.corr_limit_nm);
-        let inverse = m.inverse_at(meas.angle_rad, v);
+        // Angle and velocity are finite here.
+        let inverse = m.inverse_at_finite(meas.angle_rad, v, dp_limit_pa);
         let first =
             inverse.activation(torque_des_nm + clampf(g.kp * t_err + self.integral_nm, lim));
         if !first.saturated {
@@ -323,10 +385,14 @@ impl TorqueController {
         }
         let t_cmd = torque_des_nm + clampf(g.kp * t_err + self.integral_nm, lim);
         let act = inverse.activation(t_cmd);
-        let (p1, p2) = m.pressures_gauge_pa(act.dp_pa);
-        let p1 = clamp_pressure_setpoint_pa(p1, g.p_set_max_gauge_pa);
-        let p2 = clamp_pressure_setpoint_pa(p2, g.p_set_max_gauge_pa);
-        if !finite(&[t_est, t_cmd, act.dp_pa, p1, p2, self.integral_nm]) {
+        // `clamp_pressure_setpoint_pa(m.pressures_gauge_pa(dp), p_set_max)` in one clamp per
+        // muscle (the same value for every input: both map NaN and p <= 0 to +0, and the
+        // bound is min(p_set_max, P_MUSCLE_MAX) <= the model's own bound).
+        let p1 = clamp_setpoint_to(m.p0_gauge_pa - act.dp_pa, p_set_hi_pa);
+        let p2 = clamp_setpoint_to(m.p0_gauge_pa + act.dp_pa, p_set_hi_pa);
+        // p1, p2 (clamped, NaN -> 0) and dp (finite by construction of `activation`) are
+        // always finite.
+        if !finite(&[t_est, t_cmd, self.integral_nm]) {
             self.reset();
             return Err(ControlError::NonFiniteOutput);
         }
@@ -392,16 +458,34 @@ impl PressureController {
             self.reset();
             return Err(ControlError::NonFiniteInput);
         }
+        self.step_finite(p_meas_gauge_pa, p_set_gauge_pa, dt_s)
+    }
+
+    /// [`Self::step`] without its input check, for a caller that has validated the inputs
+    /// (all finite, `dt_s > 0`): then the same result, bit for bit.
+    #[inline(always)]
+    pub(crate) fn step_finite(
+        &mut self,
+        p_meas_gauge_pa: f32,
+        p_set_gauge_pa: f32,
+        dt_s: f32,
+    ) -> Result<f32, ControlError> {
         let g = &self.gains;
         let e = p_set_gauge_pa - p_meas_gauge_pa;
         if libm::fabsf(e) <= g.deadband_pa {
             return Ok(0.0);
         }
         let p = g.kp_per_pa * e;
-        let di = g.ki_per_pa_s * e * dt_s;
-        let unsat = p + self.integral;
-        if !((unsat >= 1.0 && di > 0.0) || (unsat <= -1.0 && di < 0.0)) {
-            self.integral = clampf(self.integral + di, g.i_limit);
+        // P-only loop (ki = 0, the reference) with the integrator at +0: `di` is +-0 (finite
+        // e and dt), +0 + +-0 = +0 and clampf(+0, any limit) = +0, so the integrator update
+        // below would leave it bit for bit unchanged; skip it.
+        let integral_idle = g.ki_per_pa_s == 0.0 && self.integral.to_bits() == 0;
+        if !integral_idle {
+            let di = g.ki_per_pa_s * e * dt_s;
+            let unsat = p + self.integral;
+            if !((unsat >= 1.0 && di > 0.0) || (unsat <= -1.0 && di < 0.0)) {
+                self.integral = clampf(self.integral + di, g.i_limit);
+            }
         }
         let u = clampf(p + self.integral, 1.0);
         if !u.is_finite() {
@@ -426,6 +510,99 @@ mod tests {
             i_limit: 2.0,
             out_limit: 10.0,
         })
+    }
+
+    const EDGE_VALUES: [f32; 14] = [
+        0.0,
+        -0.0,
+        1e-45,
+        -1e-45,
+        0.5,
+        -0.5,
+        1.0,
+        -1.0,
+        3.0,
+        -3.0,
+        f32::MAX,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::NAN,
+    ];
+
+    #[test]
+    fn clampf_matches_the_plain_comparison_chain_bitwise() {
+        // The chain `clampf` had before its in-range fast path.
+        let chain = |x: f32, lim: f32| {
+            let lim = libm::fabsf(lim);
+            if x > lim {
+                lim
+            } else if x < -lim {
+                -lim
+            } else {
+                x
+            }
+        };
+        for x in EDGE_VALUES {
+            for lim in EDGE_VALUES {
+                assert_eq!(
+                    clampf(x, lim).to_bits(),
+                    chain(x, lim).to_bits(),
+                    "x {x:e} lim {lim:e}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn p_only_pressure_loop_matches_the_full_integrator_update_bitwise() {
+        // The loop before the P-only skip of the integrator update (same gains, kp = 0 too,
+        // which makes p = -0 for negative errors: the sign of zero must survive).
+        struct Reference {
+            g: PressureLoopGains,
+            integral: f32,
+        }
+        impl Reference {
+            fn step(&mut self, p_meas: f32, p_set: f32, dt_s: f32) -> f32 {
+                let g = &self.g;
+                let e = p_set - p_meas;
+                if libm::fabsf(e) <= g.deadband_pa {
+                    return 0.0;
+                }
+                let p = g.kp_per_pa * e;
+                let di = g.ki_per_pa_s * e * dt_s;
+                let unsat = p + self.integral;
+                if !((unsat >= 1.0 && di > 0.0) || (unsat <= -1.0 && di < 0.0)) {
+                    self.integral = clampf(self.integral + di, g.i_limit);
+                }
+                clampf(p + self.integral, 1.0)
+            }
+        }
+        for (kp, i_limit) in [
+            (1.0 / 30_000.0, 0.0),
+            (0.0, 0.0),
+            (1e-4, 5.0),
+            (0.0, f32::NAN),
+        ] {
+            for ki in [0.0f32, -0.0] {
+                let g = PressureLoopGains {
+                    kp_per_pa: kp,
+                    ki_per_pa_s: ki,
+                    deadband_pa: 3_000.0,
+                    i_limit,
+                };
+                let mut reference = Reference { g, integral: 0.0 };
+                let mut fast = PressureController::new(g);
+                for k in 0..2_000 {
+                    let x = k as f32;
+                    let p_meas = 300_000.0 + 200_000.0 * libm::sinf(0.013 * x);
+                    let p_set = 300_000.0 + 250_000.0 * libm::sinf(0.007 * x + 1.0);
+                    let want = reference.step(p_meas, p_set, 1e-3);
+                    let got = fast.step(p_meas, p_set, 1e-3).unwrap();
+                    assert_eq!(got.to_bits(), want.to_bits(), "kp {kp} ki {ki} tick {k}");
+                    assert_eq!(fast.integral.to_bits(), reference.integral.to_bits());
+                }
+            }
+        }
     }
 
     #[test]

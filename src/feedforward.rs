@@ -113,11 +113,30 @@ impl SetpointDerivatives {
             self.reset();
             return Err(ControlError::NonFiniteInput);
         }
+        self.update_finite(setpoint_rad, dt_s, cutoff_hz, Self::tau_s(cutoff_hz))
+    }
+
+    /// The filter time constant `update` uses for `cutoff_hz` [s].
+    #[inline]
+    pub(crate) fn tau_s(cutoff_hz: f32) -> f32 {
+        1.0 / (2.0 * core::f32::consts::PI * cutoff_hz)
+    }
+
+    /// [`Self::update`] for a caller that has checked its inputs (finite set-point and
+    /// `dt_s > 0`, finite `cutoff_hz`) and passes `tau_s = Self::tau_s(cutoff_hz)`
+    /// (a configuration constant): the same result, bit for bit.
+    #[inline(always)]
+    pub(crate) fn update_finite(
+        &mut self,
+        setpoint_rad: f32,
+        dt_s: f32,
+        cutoff_hz: f32,
+        tau_s: f32,
+    ) -> Result<(f32, f32), ControlError> {
         if cutoff_hz <= 0.0 {
             self.reset();
             return Ok((0.0, 0.0));
         }
-        let tau_s = 1.0 / (2.0 * core::f32::consts::PI * cutoff_hz);
         let a = dt_s / (dt_s + tau_s);
         if self.prev_rad.is_finite() {
             let raw = (setpoint_rad - self.prev_rad) / dt_s;
@@ -129,7 +148,7 @@ impl SetpointDerivatives {
             self.prev_rate_rad_s = self.rate_rad_s;
         }
         self.prev_rad = setpoint_rad;
-        if !(self.rate_rad_s.is_finite() && self.accel_rad_s2.is_finite()) {
+        if !crate::control::finite(&[self.rate_rad_s, self.accel_rad_s2]) {
             self.reset();
             return Err(ControlError::NonFiniteOutput);
         }
@@ -142,7 +161,10 @@ impl SetpointDerivatives {
 pub fn feedforward_torque_nm(g: &FeedforwardGains, kd: f32, rate_rad_s: f32, accel: f32) -> f32 {
     let t = kd * g.rate_weight * rate_rad_s + g.inertia_kgm2 * accel;
     let lim = libm::fabsf(g.limit_nm);
-    if t > lim {
+    // In range (the usual case): one comparison; NaN fails it and takes the chain below.
+    if libm::fabsf(t) <= lim {
+        t
+    } else if t > lim {
         lim
     } else if t < -lim {
         -lim

@@ -132,9 +132,13 @@ impl TrackingMonitor {
         error_pa: f32,
         ticks: u32,
     ) -> bool {
-        let e = p_set_gauge_pa - p_meas_gauge_pa;
-        let pushing = (e > error_pa && command >= Self::SATURATED)
-            || (e < -error_pa && command <= -Self::SATURATED);
+        // Almost always the command is not saturated: one test of |command| decides then
+        // (a NaN command fails it as it fails both comparisons of the full test).
+        let pushing = libm::fabsf(command) >= Self::SATURATED && {
+            let e = p_set_gauge_pa - p_meas_gauge_pa;
+            (e > error_pa && command >= Self::SATURATED)
+                || (e < -error_pa && command <= -Self::SATURATED)
+        };
         self.count = if pushing {
             self.count.saturating_add(1)
         } else {

@@ -242,8 +242,20 @@ impl ChannelValidator {
     /// One tick: ages the stored sample by one tick of `dt_s` seconds, then checks `sample`
     /// (`None` = no new sample this tick). Never panics.
     pub fn update(&mut self, sample: Option<f32>, dt_s: f32) -> ChannelStatus {
+        self.update_with(sample, dt_s, dt_s.is_finite() && dt_s > 0.0)
+    }
+
+    /// [`Self::update`] with `dt_good = dt_s.is_finite() && dt_s > 0.0` known to the caller
+    /// (the control tick decides it once for its three channels and the velocity).
+    #[inline(always)]
+    pub(crate) fn update_with(
+        &mut self,
+        sample: Option<f32>,
+        dt_s: f32,
+        dt_good: bool,
+    ) -> ChannelStatus {
         self.age_ticks = self.age_ticks.saturating_add(1);
-        if dt_s.is_finite() && dt_s > 0.0 {
+        if dt_good {
             self.elapsed_s += dt_s;
         }
         let l = self.limits;
@@ -341,7 +353,13 @@ impl VelocityEstimator {
     /// One tick of `dt_s`; `angle_rad` is a new *validated* sample or `None`.
     /// Non-finite inputs are ignored (the estimate holds). Returns the estimate.
     pub fn update(&mut self, angle_rad: Option<f32>, dt_s: f32) -> f32 {
-        if !(dt_s.is_finite() && dt_s > 0.0) {
+        self.update_with(angle_rad, dt_s, dt_s.is_finite() && dt_s > 0.0)
+    }
+
+    /// [`Self::update`] with `dt_good = dt_s.is_finite() && dt_s > 0.0` known to the caller.
+    #[inline(always)]
+    pub(crate) fn update_with(&mut self, angle_rad: Option<f32>, dt_s: f32, dt_good: bool) -> f32 {
+        if !dt_good {
             return self.velocity_rad_s;
         }
         self.since_last_s += dt_s;

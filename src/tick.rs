@@ -316,6 +316,21 @@ impl ControllerConfig {
 pub struct ControlTick {
     cfg: ControllerConfig,
     config_ok: bool,
+    /// The period channels are aged by when `dt` itself is bad: `1 / tick_hz`, or 1 ms for
+    /// an unusable `tick_hz` (computed once here instead of every tick).
+    dt_fallback_s: f32,
+    /// `dt_fallback_s.is_finite() && dt_fallback_s > 0.0`.
+    dt_fallback_good: bool,
+    /// `dt_max_s`, with +inf replaced by `f32::MAX`: then `dt_ok` is the two comparisons
+    /// `0 < dt <= dt_limit_s` (NaN and +inf fail them), the same as the finiteness test too.
+    dt_limit_s: f32,
+    /// `cfg.torque_model.dp_limit_pa()` (a configuration constant of the torque loop).
+    dp_limit_pa: f32,
+    /// `clamp_pressure_setpoint_pa(f32::INFINITY, cfg.torque.p_set_max_gauge_pa)`: the
+    /// torque loop's upper set-point bound (a configuration constant).
+    p_set_hi_pa: f32,
+    /// `SetpointDerivatives::tau_s(cfg.feedforward.cutoff_hz)` (a configuration constant).
+    ff_tau_s: f32,
     p1: ChannelValidator,
     p2: ChannelValidator,
     angle: ChannelValidator,
@@ -353,6 +368,67 @@ fn channel_fault(
     }
 }
 
+/// The first fault condition of a tick, in the documented order (configuration, `dt`,
+/// pressure 1, pressure 2, angle, over-pressure 1, 2, set-point). Off the hot path.
+#[cold]
+#[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn first_condition(
+    config_ok: bool,
+    dt_ok: bool,
+    s1: ChannelStatus,
+    s2: ChannelStatus,
+    sa: ChannelStatus,
+    over1: bool,
+    over2: bool,
+    sp_ok: bool,
+) -> Option<FaultCode> {
+    use FaultCode::*;
+    if !config_ok {
+        return Some(ConfigInvalid);
+    }
+    if !dt_ok {
+        return Some(Watchdog);
+    }
+    if let ChannelStatus::Fault(f) = s1 {
+        return Some(channel_fault(
+            f,
+            PressureInvalid1,
+            PressureOutOfRange1,
+            PressureStale1,
+            PressureImplausible1,
+        ));
+    }
+    if let ChannelStatus::Fault(f) = s2 {
+        return Some(channel_fault(
+            f,
+            PressureInvalid2,
+            PressureOutOfRange2,
+            PressureStale2,
+            PressureImplausible2,
+        ));
+    }
+    if let ChannelStatus::Fault(f) = sa {
+        return Some(channel_fault(
+            f,
+            AngleInvalid,
+            AngleOutOfRange,
+            AngleStale,
+            AngleImplausible,
+        ));
+    }
+    if over1 {
+        return Some(OverPressure1);
+    }
+    if over2 {
+        return Some(OverPressure2);
+    }
+    if !sp_ok {
+        return Some(SetpointInvalid);
+    }
+    None
+}
+
 impl ControlTick {
     /// A tick in the armed state (control starts once every channel delivered a valid
     /// sample). An invalid configuration latches [`FaultCode::ConfigInvalid`] for good.
@@ -362,9 +438,25 @@ impl ControlTick {
         if !config_ok {
             safety.raise(FaultCode::ConfigInvalid);
         }
+        let dt_fallback_s = if cfg.tick_hz.is_finite() && cfg.tick_hz > 0.0 {
+            1.0 / cfg.tick_hz
+        } else {
+            1.0e-3
+        };
+        let dt_limit_s = if cfg.dt_max_s == f32::INFINITY {
+            f32::MAX
+        } else {
+            cfg.dt_max_s
+        };
         ControlTick {
             cfg,
             config_ok,
+            dt_fallback_s,
+            dt_fallback_good: dt_fallback_s.is_finite() && dt_fallback_s > 0.0,
+            dt_limit_s,
+            dp_limit_pa: cfg.torque_model.dp_limit_pa(),
+            p_set_hi_pa: clamp_pressure_setpoint_pa(f32::INFINITY, cfg.torque.p_set_max_gauge_pa),
+            ff_tau_s: SetpointDerivatives::tau_s(cfg.feedforward.cutoff_hz),
             p1: ChannelValidator::new(cfg.pressure_limits),
             p2: ChannelValidator::new(cfg.pressure_limits),
             angle: ChannelValidator::new(cfg.angle_limits),
@@ -435,23 +527,18 @@ impl ControlTick {
     pub fn step(&mut self, frame: &SensorFrame, setpoint: &Setpoint, dt_s: f32) -> TickOutput {
         // Scalars read once; the configuration (with its force-law and torque-model tables) is
         // not copied: a whole-struct copy cost ~190 instructions per tick on the Cortex-M4.
-        let dt_max_s = self.cfg.dt_max_s;
-        let tick_hz = self.cfg.tick_hz;
         let p_over_gauge_pa = self.cfg.p_over_gauge_pa;
         let sp_max = self.cfg.angle_setpoint_max_rad;
-        let dt_ok = dt_s.is_finite() && dt_s > 0.0 && dt_s <= dt_max_s;
+        // `dt_s.is_finite() && dt_s > 0.0 && dt_s <= dt_max_s` (see `dt_limit_s`).
+        let dt_ok = dt_s > 0.0 && dt_s <= self.dt_limit_s;
         // Channels are aged by the nominal period when dt itself is bad.
-        let dt_age = if dt_ok {
-            dt_s
-        } else if tick_hz.is_finite() && tick_hz > 0.0 {
-            1.0 / tick_hz
-        } else {
-            1.0e-3
-        };
+        let dt_age = if dt_ok { dt_s } else { self.dt_fallback_s };
 
-        let s1 = self.p1.update(frame.p1_gauge_pa, dt_age);
-        let s2 = self.p2.update(frame.p2_gauge_pa, dt_age);
-        let sa = self.angle.update(frame.angle_rad, dt_age);
+        // `dt_age.is_finite() && dt_age > 0.0`, decided once (`dt_ok` implies it).
+        let dt_age_good = dt_ok || self.dt_fallback_good;
+        let s1 = self.p1.update_with(frame.p1_gauge_pa, dt_age, dt_age_good);
+        let s2 = self.p2.update_with(frame.p2_gauge_pa, dt_age, dt_age_good);
+        let sa = self.angle.update_with(frame.angle_rad, dt_age, dt_age_good);
         if let Some(v) = s1.value() {
             self.last_p1_pa = Some(v);
         }
@@ -468,62 +555,26 @@ impl ControlTick {
             } => Some(value),
             _ => None,
         };
-        let vel = self.velocity.update(new_angle, dt_age);
+        let vel = self.velocity.update_with(new_angle, dt_age, dt_age_good);
 
-        // Fault conditions of this tick (the first one found is reported).
-        let mut cond: Option<FaultCode> = None;
-        let mut note = |c: FaultCode| {
-            if cond.is_none() {
-                cond = Some(c);
-            }
+        // Fault conditions of this tick (the first one found is reported). Fast path: one
+        // branch-free test of all of them; the ordered search runs only when one holds.
+        let over1 = matches!(s1.value(), Some(p) if p > p_over_gauge_pa);
+        let over2 = matches!(s2.value(), Some(p) if p > p_over_gauge_pa);
+        let sp_ok = setpoint.angle_rad.is_finite();
+        let any = !self.config_ok
+            | !dt_ok
+            | matches!(s1, ChannelStatus::Fault(_))
+            | matches!(s2, ChannelStatus::Fault(_))
+            | matches!(sa, ChannelStatus::Fault(_))
+            | over1
+            | over2
+            | !sp_ok;
+        let cond = if any {
+            first_condition(self.config_ok, dt_ok, s1, s2, sa, over1, over2, sp_ok)
+        } else {
+            None
         };
-        if !self.config_ok {
-            note(FaultCode::ConfigInvalid);
-        }
-        if !dt_ok {
-            note(FaultCode::Watchdog);
-        }
-        use FaultCode::*;
-        if let ChannelStatus::Fault(f) = s1 {
-            note(channel_fault(
-                f,
-                PressureInvalid1,
-                PressureOutOfRange1,
-                PressureStale1,
-                PressureImplausible1,
-            ));
-        }
-        if let ChannelStatus::Fault(f) = s2 {
-            note(channel_fault(
-                f,
-                PressureInvalid2,
-                PressureOutOfRange2,
-                PressureStale2,
-                PressureImplausible2,
-            ));
-        }
-        if let ChannelStatus::Fault(f) = sa {
-            note(channel_fault(
-                f,
-                AngleInvalid,
-                AngleOutOfRange,
-                AngleStale,
-                AngleImplausible,
-            ));
-        }
-        if let Some(p) = s1.value() {
-            if p > p_over_gauge_pa {
-                note(OverPressure1);
-            }
-        }
-        if let Some(p) = s2.value() {
-            if p > p_over_gauge_pa {
-                note(OverPressure2);
-            }
-        }
-        if !setpoint.angle_rad.is_finite() {
-            note(SetpointInvalid);
-        }
         self.condition = cond;
         if let Some(c) = cond {
             self.safety.raise(c);
@@ -547,7 +598,7 @@ impl ControlTick {
             Some((t, flags)) if !flags.contains_any(ForceFlags::FATAL) && t.is_finite() => t,
             _ => 0.0,
         };
-        let vel = if vel.is_finite() { vel } else { 0.0 };
+        // `vel` is finite: the estimator stores only finite velocities (starts at 0).
 
         let mut out = TickOutput {
             valves: ValveCommand::default(),
@@ -574,13 +625,20 @@ impl ControlTick {
         // Same result as `f32::clamp`, but without its (unreachable: the configuration is
         // validated) panic, whose message would link core::fmt's float formatting (~20 KiB of
         // MCU flash).
-        let sp = if setpoint.angle_rad > sp_max {
+        let sp = if libm::fabsf(setpoint.angle_rad) <= sp_max {
+            // In range: one comparison (NaN fails it; a NaN set-point has faulted anyway).
+            setpoint.angle_rad
+        } else if setpoint.angle_rad > sp_max {
             sp_max
         } else if setpoint.angle_rad < -sp_max {
             -sp_max
         } else {
             setpoint.angle_rad
         };
+        // Every input of the control laws below is finite and `dt_s > 0` here (validated
+        // channels, sanitised velocity, finite set-point, `dt_ok`; `t_des` is the clamped sum
+        // of two finite torques), so the laws run without their own input checks
+        // (`step_finite`: bit-identical to `step` for such inputs).
         let result = (|| {
             if let Some(pid) = self.dp_pid.as_mut() {
                 // Model-free baseline: angle -> dp -> pressure set-points, no torque level.
@@ -604,8 +662,11 @@ impl ControlTick {
                 ));
             }
             let ff = &self.cfg.feedforward;
-            let (rate, accel) = self.setpoint_derivatives.update(sp, dt_s, ff.cutoff_hz)?;
-            let t_pid = self.position.step(
+            // Valid configuration here: `ff.cutoff_hz` is finite (>= 0).
+            let (rate, accel) =
+                self.setpoint_derivatives
+                    .update_finite(sp, dt_s, ff.cutoff_hz, self.ff_tau_s)?;
+            let t_pid = self.position.step_finite(
                 JointState {
                     angle_rad: angle,
                     velocity_rad_s: vel,
@@ -618,7 +679,10 @@ impl ControlTick {
             let t_ff = feedforward_torque_nm(ff, self.cfg.position.kd, rate, accel);
             let t_lim = libm::fabsf(self.cfg.position.out_limit);
             let t_sum = t_pid + t_ff;
-            let t_des = if t_sum > t_lim {
+            // In range (the usual case, one comparison; NaN fails it) or the full clamp.
+            let t_des = if libm::fabsf(t_sum) <= t_lim {
+                t_sum
+            } else if t_sum > t_lim {
                 t_lim
             } else if t_sum < -t_lim {
                 -t_lim
@@ -635,11 +699,18 @@ impl ControlTick {
                 // Armed implies all three channels valid this tick, so `estimate` was
                 // computed from exactly `meas`; the torque loop reuses it (the loop's own force
                 // law is the configuration's, see `ControlTick::new`).
-                Some(est) => self.torque.step_with_estimate(meas, est, t_des, dt_s)?,
+                Some(est) => self.torque.step_finite(
+                    meas,
+                    est,
+                    t_des,
+                    dt_s,
+                    self.dp_limit_pa,
+                    self.p_set_hi_pa,
+                )?,
                 None => self.torque.step(meas, t_des, dt_s)?,
             };
-            let u1 = self.pressure1.step(p1, ps.p1_gauge_pa, dt_s)?;
-            let u2 = self.pressure2.step(p2, ps.p2_gauge_pa, dt_s)?;
+            let u1 = self.pressure1.step_finite(p1, ps.p1_gauge_pa, dt_s)?;
+            let u2 = self.pressure2.step_finite(p2, ps.p2_gauge_pa, dt_s)?;
             Ok((
                 t_des,
                 ps.p1_gauge_pa,
@@ -665,13 +736,17 @@ impl ControlTick {
                     out.torque_des_nm = t_des;
                     return self.safe_output(out);
                 }
-                let cmd = ValveCommand {
+                // What `self.safety.gate(cmd)` and `clamp_pressure_setpoint_pa(p, P_MAX)` return
+                // here, without recomputing it: no fault is latched (checked above, tracking
+                // returned early), u1/u2 are finite and in [-1, 1] (pressure loop output),
+                // and both laws' set-points are already in [0, P_MUSCLE_MAX] (the torque loop's
+                // clamp, `DpPid::step`'s `clamp_pressure_setpoint_pa`).
+                out.valves = ValveCommand {
                     muscle1: u1,
                     muscle2: u2,
                 };
-                out.valves = self.safety.gate(cmd);
-                out.p1_set_gauge_pa = clamp_pressure_setpoint_pa(p1_set, P_MUSCLE_MAX_GAUGE_PA);
-                out.p2_set_gauge_pa = clamp_pressure_setpoint_pa(p2_set, P_MUSCLE_MAX_GAUGE_PA);
+                out.p1_set_gauge_pa = p1_set;
+                out.p2_set_gauge_pa = p2_set;
                 out.torque_des_nm = t_des;
                 out.torque_est_nm = t_est;
                 out.armed = true;

@@ -124,6 +124,29 @@ impl TorqueModelParams {
         }
     }
 
+    /// [`Self::inverse_at`] for a finite angle and velocity, with `dp_limit_pa` =
+    /// [`Self::dp_limit_pa`] precomputed by the caller: the same result, bit for bit.
+    #[inline(always)]
+    pub(crate) fn inverse_at_finite(
+        &self,
+        angle_rad: f32,
+        velocity_rad_s: f32,
+        dp_limit_pa: f32,
+    ) -> InverseAt {
+        let gain = self.b_m2 * self.sprocket_radius_m;
+        let valid = gain != 0.0;
+        InverseAt {
+            passive_nm: if valid {
+                self.passive_nm(angle_rad, velocity_rad_s)
+            } else {
+                0.0
+            },
+            gain_m3: gain,
+            dp_limit_pa,
+            valid,
+        }
+    }
+
     /// The usable |dp| [Pa]: `dp_max_pa`, reduced so that both `p0 -+ dp` stay within
     /// `[0, P_MUSCLE_MAX_GAUGE_PA]`.
     #[inline]
@@ -178,13 +201,15 @@ impl InverseAt {
     /// non-finite inputs give dp = 0, saturated.
     #[inline]
     pub fn activation(&self, torque_nm: f32) -> Activation {
-        if !self.valid || !torque_nm.is_finite() {
+        if !self.valid {
             return Activation {
                 dp_pa: 0.0,
                 saturated: true,
             };
         }
         let dp = (torque_nm - self.passive_nm) / self.gain_m3;
+        // A non-finite torque always gives a non-finite dp (inf - finite, NaN, and a
+        // non-finite numerator over any divisor), so this one test also rejects it.
         if !dp.is_finite() {
             return Activation {
                 dp_pa: 0.0,
@@ -215,6 +240,25 @@ impl InverseAt {
 mod tests {
     use super::*;
     use crate::constants::TORQUE_MODEL;
+
+    #[test]
+    fn non_finite_torque_gives_zero_saturated_activation() {
+        // `InverseAt::activation` tests only dp for finiteness; a non-finite torque must
+        // still give the safe answer, at finite and at extreme passive torques.
+        let m = TORQUE_MODEL;
+        for (angle, v) in [(0.0f32, 0.0f32), (0.5, -2.0), (1e30, 1e30), (-1e30, 3e12)] {
+            let inv = m.inverse_at(angle, v);
+            for t in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -f32::NAN] {
+                let a = inv.activation(t);
+                assert_eq!(
+                    a.dp_pa.to_bits(),
+                    0.0f32.to_bits(),
+                    "angle {angle} v {v} t {t}"
+                );
+                assert!(a.saturated);
+            }
+        }
+    }
 
     #[test]
     fn inverse_at_equals_activation_bit_for_bit() {

@@ -66,7 +66,10 @@ pub enum Error<EI1, EE1, EI2, EE2> {
 /// NaN -> 0, clamp to [-1, 1].
 #[inline]
 fn sanitize(x: f32) -> f32 {
-    if !x.is_finite() {
+    // The usual command is already in [-1, 1] (one test; false for NaN and +-inf).
+    if libm::fabsf(x) <= 1.0 {
+        x
+    } else if !x.is_finite() {
         // +-inf are commands too, but only NaN is meaningless; treat all non-finite as
         // closed (the safety layer never produces them).
         0.0
@@ -155,6 +158,7 @@ impl PwmChannel {
     }
 
     /// Advances one tick with command `u` (sanitized); returns (inflate open, exhaust open).
+    #[inline(always)]
     fn tick(&mut self, u: f32, n: u16, min_on: u16) -> (bool, bool) {
         let dir = if u > 0.0 {
             Dir::Inflate
