@@ -194,6 +194,10 @@ impl PwmChannel {
             // Carry bounded to one period so a long saturation cannot store a burst.
             self.carry = (x - on).clamp(-nf, nf);
             self.on_ticks = on as u16;
+        } else if u >= 1.0 || u <= -1.0 {
+            // A full-scale command (the vent safe state among others) opens the valve at
+            // once, not at the start of the next switching period.
+            self.on_ticks = n;
         }
         let open = self.phase < self.on_ticks || (self.run > 0 && self.run < min_on);
         self.run = if open { self.run.saturating_add(1) } else { 0 };
