@@ -108,38 +108,14 @@ impl Arm3Recording {
             field: field.to_owned(),
             message,
         };
-        let mut metadata = Vec::new();
-        let mut meta_lines: u64 = 0;
-        let mut offset = 0;
-        let mut meta_line_of = Vec::new();
-        for raw in text.split_inclusive('\n') {
-            let trimmed = raw.trim();
-            if let Some(c) = trimmed.strip_prefix('#') {
-                meta_line_of.push(meta_lines + 1);
-                let c = c.trim();
-                match c.split_once('=') {
-                    Some((k, v)) => metadata.push((k.trim().to_owned(), v.trim().to_owned())),
-                    None => metadata.push((String::new(), c.to_owned())),
-                }
-            } else if !trimmed.is_empty() {
-                break;
-            }
-            meta_lines += 1;
-            offset += raw.len();
-        }
-        let mut rdr = csv::ReaderBuilder::new()
-            .has_headers(true)
-            .trim(csv::Trim::All)
-            .from_reader(&text.as_bytes()[offset..]);
-        let header_line = meta_lines + 1;
-        let headers = rdr
-            .headers()
-            .map_err(|e| RecordingError::Line {
-                path: path.to_owned(),
-                line: header_line,
-                message: format!("cannot read the header: {e}"),
-            })?
-            .clone();
+        let crate::recording::Preamble {
+            metadata,
+            meta_line_of,
+            lines: meta_lines,
+            offset,
+        } = crate::recording::Preamble::of(text);
+        let (mut rdr, header_line, headers) =
+            crate::recording::csv_body(text, offset, meta_lines, path)?;
         let find = |name: &str| -> Result<Option<usize>, RecordingError> {
             let mut it = headers.iter().enumerate().filter(|(_, h)| *h == name);
             let first = it.next().map(|(i, _)| i);

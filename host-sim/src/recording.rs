@@ -154,41 +154,13 @@ impl Recording {
         };
 
         // Leading metadata / blank lines.
-        let mut metadata = Vec::new();
-        let mut meta_lines: u64 = 0;
-        let mut offset = 0;
-        let mut meta_line_of = Vec::new();
-        for raw in text.split_inclusive('\n') {
-            let line = raw.trim_end_matches(['\n', '\r']);
-            let trimmed = line.trim();
-            if let Some(c) = trimmed.strip_prefix('#') {
-                let c = c.trim();
-                match c.split_once('=') {
-                    Some((k, v)) => metadata.push((k.trim().to_owned(), v.trim().to_owned())),
-                    None => metadata.push((String::new(), c.to_owned())),
-                }
-                meta_line_of.push(meta_lines + 1);
-            } else if !trimmed.is_empty() {
-                break;
-            }
-            meta_lines += 1;
-            offset += raw.len();
-        }
-        let body = &text[offset..];
-
-        let mut rdr = csv::ReaderBuilder::new()
-            .has_headers(true)
-            .trim(csv::Trim::All)
-            .from_reader(body.as_bytes());
-        let header_line = meta_lines + 1;
-        let headers = rdr
-            .headers()
-            .map_err(|e| RecordingError::Line {
-                path: path.to_owned(),
-                line: header_line,
-                message: format!("cannot read the header: {e}"),
-            })?
-            .clone();
+        let Preamble {
+            metadata,
+            meta_line_of,
+            lines: meta_lines,
+            offset,
+        } = Preamble::of(text);
+        let (mut rdr, header_line, headers) = csv_body(text, offset, meta_lines, path)?;
         if headers.is_empty() || (headers.len() == 1 && headers[0].is_empty()) {
             return Err(RecordingError::Line {
                 path: path.to_owned(),
@@ -459,4 +431,67 @@ pub(crate) fn set_output_permissions(file: &std::fs::File, target: &Path) -> std
     #[cfg(not(unix))]
     let _ = (file, target);
     Ok(())
+}
+
+/// The leading `# key = value` metadata and blank lines of a recording (RECORDING.md).
+pub(crate) struct Preamble {
+    /// (key, value); a comment without `=` has an empty key.
+    pub metadata: Vec<(String, String)>,
+    /// 1-based line of each metadata entry.
+    pub meta_line_of: Vec<u64>,
+    /// Lines before the CSV header.
+    pub lines: u64,
+    /// Byte offset of the CSV header.
+    pub offset: usize,
+}
+
+impl Preamble {
+    pub(crate) fn of(text: &str) -> Self {
+        let mut p = Preamble {
+            metadata: Vec::new(),
+            meta_line_of: Vec::new(),
+            lines: 0,
+            offset: 0,
+        };
+        for raw in text.split_inclusive('\n') {
+            let trimmed = raw.trim();
+            if let Some(c) = trimmed.strip_prefix('#') {
+                let c = c.trim();
+                match c.split_once('=') {
+                    Some((k, v)) => p.metadata.push((k.trim().to_owned(), v.trim().to_owned())),
+                    None => p.metadata.push((String::new(), c.to_owned())),
+                }
+                p.meta_line_of.push(p.lines + 1);
+            } else if !trimmed.is_empty() {
+                break;
+            }
+            p.lines += 1;
+            p.offset += raw.len();
+        }
+        p
+    }
+}
+
+/// The CSV part of a recording from byte `offset` (after `preamble_lines` lines): its
+/// reader, the header's 1-based line and the header record.
+pub(crate) fn csv_body<'t>(
+    text: &'t str,
+    offset: usize,
+    preamble_lines: u64,
+    path: &Path,
+) -> Result<(csv::Reader<&'t [u8]>, u64, csv::StringRecord), RecordingError> {
+    let mut rdr = csv::ReaderBuilder::new()
+        .has_headers(true)
+        .trim(csv::Trim::All)
+        .from_reader(&text.as_bytes()[offset..]);
+    let header_line = preamble_lines + 1;
+    let headers = rdr
+        .headers()
+        .map_err(|e| RecordingError::Line {
+            path: path.to_owned(),
+            line: header_line,
+            message: format!("cannot read the header: {e}"),
+        })?
+        .clone();
+    Ok((rdr, header_line, headers))
 }

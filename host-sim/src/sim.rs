@@ -123,6 +123,52 @@ impl System<f64, Vector5> for Rhs5<'_> {
     }
 }
 
+/// One `Dopri5` run over a segment of zero-order-held inputs, with the settings every
+/// integrator here uses (safety 0.9, step-size factors, stiffness test off: the laminar patch
+/// keeps |lambda| h small), sparse output for a single sample (the last point is the end of
+/// the last accepted step), dense output at the sample times otherwise. Adds the run's
+/// counters to `stats`; returns the solver (its `y_out`) and the accepted steps.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn dopri_segment<const N: usize, F: System<f64, SVector<f64, N>>>(
+    f: F,
+    y0: SVector<f64, N>,
+    x_end: f64,
+    dt_s: f64,
+    h0: f64,
+    opts: &SolverOptions,
+    single: bool,
+    stats: &mut SimStats,
+) -> Result<(Dopri5<f64, SVector<f64, N>, F>, u32), String> {
+    let mut solver = Dopri5::from_param(
+        f,
+        0.0,
+        x_end,
+        dt_s,
+        y0,
+        opts.rtol,
+        opts.atol,
+        0.9,
+        0.04,
+        0.2,
+        10.0,
+        x_end,
+        h0,
+        opts.max_steps_per_segment,
+        u32::MAX,
+        if single {
+            OutputType::Sparse
+        } else {
+            OutputType::Dense
+        },
+    );
+    let st = solver.integrate().map_err(|e| e.to_string())?;
+    stats.segments += 1;
+    stats.rhs_evaluations += u64::from(st.num_eval);
+    stats.accepted_steps += u64::from(st.accepted_steps);
+    stats.rejected_steps += u64::from(st.rejected_steps);
+    Ok((solver, st.accepted_steps))
+}
+
 fn valid_inputs(u: &ValveInputs) -> bool {
     [u.u_in1, u.u_ex1, u.u_in2, u.u_ex2]
         .iter()
@@ -245,39 +291,23 @@ impl<'a> Integrator<'a> {
             return self.advance_samples_reservoir(inputs, dt_s, n, x_end, h0, single, on_sample);
         }
         let y0 = Vector4::from(self.state.to_array());
-        let mut solver = Dopri5::from_param(
+        let (solver, accepted) = dopri_segment(
             Rhs {
                 plant: self.plant,
                 u: inputs,
             },
-            0.0,
+            y0,
             x_end,
             dt_s,
-            y0,
-            self.opts.rtol,
-            self.opts.atol,
-            0.9,
-            0.04,
-            0.2,
-            10.0,
-            x_end,
             h0,
-            self.opts.max_steps_per_segment,
-            u32::MAX, // stiffness test off: the laminar patch keeps |lambda| h small
-            if single {
-                OutputType::Sparse
-            } else {
-                OutputType::Dense
-            },
-        );
-        let st = solver.integrate().map_err(|e| SimError::Integration {
+            &self.opts,
+            single,
+            &mut self.stats,
+        )
+        .map_err(|message| SimError::Integration {
             t_s: self.t_s,
-            message: e.to_string(),
+            message,
         })?;
-        self.stats.segments += 1;
-        self.stats.rhs_evaluations += u64::from(st.num_eval);
-        self.stats.accepted_steps += u64::from(st.accepted_steps);
-        self.stats.rejected_steps += u64::from(st.rejected_steps);
         let ys = solver.y_out();
         let end = if single {
             let y = ys.last().expect("sparse output holds the start point");
@@ -296,7 +326,7 @@ impl<'a> Integrator<'a> {
         self.state = end;
         self.t_s += duration_s;
         // Mean accepted step of this segment, as the first step of the next one.
-        self.h_s = duration_s / f64::from(st.accepted_steps.max(1));
+        self.h_s = duration_s / f64::from(accepted.max(1));
         Ok(())
     }
 
@@ -427,39 +457,23 @@ impl<'a> Integrator<'a> {
         let duration_s = n as f64 * dt_s;
         let a = self.state.to_array();
         let y0 = Vector5::from([a[0], a[1], a[2], a[3], self.supply_abs_pa]);
-        let mut solver = Dopri5::from_param(
+        let (solver, accepted) = dopri_segment(
             Rhs5 {
                 plant: self.plant,
                 u: inputs,
             },
-            0.0,
+            y0,
             x_end,
             dt_s,
-            y0,
-            self.opts.rtol,
-            self.opts.atol,
-            0.9,
-            0.04,
-            0.2,
-            10.0,
-            x_end,
             h0,
-            self.opts.max_steps_per_segment,
-            u32::MAX,
-            if single {
-                OutputType::Sparse
-            } else {
-                OutputType::Dense
-            },
-        );
-        let st = solver.integrate().map_err(|e| SimError::Integration {
+            &self.opts,
+            single,
+            &mut self.stats,
+        )
+        .map_err(|message| SimError::Integration {
             t_s: self.t_s,
-            message: e.to_string(),
+            message,
         })?;
-        self.stats.segments += 1;
-        self.stats.rhs_evaluations += u64::from(st.num_eval);
-        self.stats.accepted_steps += u64::from(st.accepted_steps);
-        self.stats.rejected_steps += u64::from(st.rejected_steps);
         let ys = solver.y_out();
         let last = if single {
             *ys.last().expect("sparse output holds the start point")
@@ -498,7 +512,7 @@ impl<'a> Integrator<'a> {
         self.state = end;
         self.supply_abs_pa = last[4];
         self.t_s += duration_s;
-        self.h_s = duration_s / f64::from(st.accepted_steps.max(1));
+        self.h_s = duration_s / f64::from(accepted.max(1));
         Ok(())
     }
 

@@ -39,7 +39,7 @@
 use std::path::{Path, PathBuf};
 
 use nalgebra::{Matrix3, SVector, Vector3};
-use ode_solvers::{Dopri5, OutputType, System};
+use ode_solvers::System;
 use serde::Deserialize;
 
 use crate::config::{ConfigError, EnvironmentConfig, InitialConfig, MuscleConfig, ValveConfig};
@@ -963,14 +963,8 @@ fn check_inputs(index: usize, u: &Arm3Inputs) -> Result<(), Arm3SimError> {
     Ok(())
 }
 
-/// Counters of an arm simulation.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct Arm3Stats {
-    pub segments: u64,
-    pub rhs_evaluations: u64,
-    pub accepted_steps: u64,
-    pub rejected_steps: u64,
-}
+/// Counters of an arm simulation (the 1-DOF integrator's).
+pub type Arm3Stats = crate::sim::SimStats;
 
 /// The arm state advanced piecewise under zero-order-held inputs (one Dopri5 run per run of
 /// equal inputs, never stepping across an input change; the step size carried over).
@@ -1035,39 +1029,23 @@ impl<'a> Arm3Integrator<'a> {
         } else {
             0.0
         };
-        let mut solver = Dopri5::from_param(
+        let (solver, accepted) = crate::sim::dopri_segment(
             Rhs {
                 arm: self.arm,
                 u: inputs,
             },
-            0.0,
+            self.state.to_vector(),
             x_end,
             dt_s,
-            self.state.to_vector(),
-            self.opts.rtol,
-            self.opts.atol,
-            0.9,
-            0.04,
-            0.2,
-            10.0,
-            x_end,
             h0,
-            self.opts.max_steps_per_segment,
-            u32::MAX,
-            if single {
-                OutputType::Sparse
-            } else {
-                OutputType::Dense
-            },
-        );
-        let st = solver.integrate().map_err(|e| Arm3SimError::Integration {
+            &self.opts,
+            single,
+            &mut self.stats,
+        )
+        .map_err(|message| Arm3SimError::Integration {
             t_s: self.t_s,
-            message: e.to_string(),
+            message,
         })?;
-        self.stats.segments += 1;
-        self.stats.rhs_evaluations += u64::from(st.num_eval);
-        self.stats.accepted_steps += u64::from(st.accepted_steps);
-        self.stats.rejected_steps += u64::from(st.rejected_steps);
         let ys = solver.y_out();
         let end = if single {
             on_sample(&self.state);
@@ -1096,7 +1074,7 @@ impl<'a> Arm3Integrator<'a> {
         }
         self.state = end;
         self.t_s += duration_s;
-        self.h_s = duration_s / f64::from(st.accepted_steps.max(1));
+        self.h_s = duration_s / f64::from(accepted.max(1));
         Ok(())
     }
 }
