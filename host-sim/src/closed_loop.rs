@@ -78,7 +78,9 @@ fn default_seed() -> u64 {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum SetpointProfile {
-    /// `initial_rad` until `at_s`, then `final_rad`.
+    /// `initial_rad` until `at_s`, then `final_rad`; with `transition_s > 0` the change is a
+    /// minimum-jerk move (quintic `10 u^3 - 15 u^4 + 6 u^5`, zero rate and acceleration at
+    /// both ends) over `transition_s` starting at `at_s`.
     Step {
         /// Before the step [rad].
         initial_rad: f64,
@@ -86,6 +88,9 @@ pub enum SetpointProfile {
         final_rad: f64,
         /// Step time [s].
         at_s: f64,
+        /// Duration of the minimum-jerk move [s] (0: a jump).
+        #[serde(default)]
+        transition_s: f64,
     },
     /// Linear from `from_rad` at `start_s` to `to_rad` at `end_s`, constant outside.
     Ramp {
@@ -110,12 +115,17 @@ pub enum SetpointProfile {
         #[serde(default)]
         start_s: f64,
     },
-    /// Piecewise-constant random levels, uniform in `+-amplitude_rad`, each held `hold_s`.
+    /// Piecewise-constant random levels, uniform in `+-amplitude_rad`, each held `hold_s`;
+    /// with `transition_s > 0` each change is a minimum-jerk move over the first
+    /// `transition_s` of the new level's hold (from 0 rad for the first level).
     Random {
         /// Level bound [rad].
         amplitude_rad: f64,
         /// Hold time of each level [s].
         hold_s: f64,
+        /// Duration of the minimum-jerk move into each level [s] (0: jumps), <= `hold_s`.
+        #[serde(default)]
+        transition_s: f64,
         /// Start [s] (0 rad before).
         #[serde(default)]
         start_s: f64,
@@ -130,11 +140,12 @@ impl SetpointProfile {
                 initial_rad,
                 final_rad,
                 at_s,
+                transition_s,
             } => {
                 if t_s < at_s {
                     initial_rad
                 } else {
-                    final_rad
+                    initial_rad + (final_rad - initial_rad) * min_jerk(t_s - at_s, transition_s)
                 }
             }
             SetpointProfile::Ramp {
@@ -166,17 +177,32 @@ impl SetpointProfile {
                 }
             }
             SetpointProfile::Random {
-                hold_s, start_s, ..
+                hold_s,
+                start_s,
+                transition_s,
+                ..
             } => {
                 if t_s < start_s || levels.is_empty() {
                     0.0
                 } else {
                     let i = (((t_s - start_s) / hold_s).floor() as usize).min(levels.len() - 1);
-                    levels[i]
+                    let from = if i == 0 { 0.0 } else { levels[i - 1] };
+                    let since_s = t_s - start_s - i as f64 * hold_s;
+                    from + (levels[i] - from) * min_jerk(since_s, transition_s)
                 }
             }
         }
     }
+}
+
+/// The minimum-jerk blend `10 u^3 - 15 u^4 + 6 u^5` of `u = t / duration`, clamped to 0..1
+/// (a jump, 1 for every `t >= 0`, when `duration_s <= 0`).
+fn min_jerk(t_s: f64, duration_s: f64) -> f64 {
+    if duration_s <= 0.0 || t_s >= duration_s {
+        return 1.0;
+    }
+    let u = (t_s / duration_s).max(0.0);
+    u * u * u * (10.0 + u * (-15.0 + 6.0 * u))
 }
 
 /// The fake sensors.
@@ -400,10 +426,18 @@ impl Scenario {
                 initial_rad,
                 final_rad,
                 at_s,
+                transition_s,
             } => {
                 finite("initial_rad", initial_rad)?;
                 finite("final_rad", final_rad)?;
                 finite("at_s", at_s)?;
+                if !(transition_s >= 0.0 && transition_s.is_finite()) {
+                    return Err(bad(
+                        "setpoint",
+                        "transition_s",
+                        format!("{transition_s} must be >= 0"),
+                    ));
+                }
             }
             SetpointProfile::Ramp {
                 from_rad,
@@ -438,11 +472,19 @@ impl Scenario {
                 amplitude_rad,
                 hold_s,
                 start_s,
+                transition_s,
             } => {
                 finite("amplitude_rad", amplitude_rad)?;
                 finite("start_s", start_s)?;
                 if !(hold_s > 0.0 && hold_s.is_finite()) {
                     return Err(bad("setpoint", "hold_s", format!("{hold_s} must be > 0")));
+                }
+                if !(transition_s >= 0.0 && transition_s <= hold_s) {
+                    return Err(bad(
+                        "setpoint",
+                        "transition_s",
+                        format!("{transition_s} must be within 0..hold_s ({hold_s})"),
+                    ));
                 }
             }
         }

@@ -113,3 +113,97 @@ fn supply_loss_never_commands_above_limit() {
     let r = run_scenario("supply_loss");
     assert!(r.check().is_empty(), "{:?}", r.check());
 }
+
+/// `transition_s` turns a step into a minimum-jerk move: the set-point starts at the old
+/// value at `at_s`, is half-way at `at_s + T/2`, arrives at `at_s + T`, and never moves by
+/// more than the quintic's peak rate (1.875 x step / T) per tick; the random profile does the
+/// same into every level, from the previous one.
+#[test]
+fn transition_s_makes_set_point_changes_minimum_jerk_moves() {
+    let plant = reference_plant();
+    let step = Scenario::load(root().join("scenarios/suite/step_move.toml")).unwrap();
+    let r = run(&plant, &step).unwrap();
+    let at = |t: f64| {
+        r.rows
+            .iter()
+            .find(|row| (row.t_s - t).abs() < 1e-9)
+            .unwrap_or_else(|| panic!("no tick at {t} s"))
+            .setpoint_rad
+    };
+    // 0 -> 0.2 rad at 1.0 s over 0.15 s.
+    assert_eq!(at(0.999), 0.0);
+    assert_eq!(at(1.0), 0.0);
+    assert!((at(1.075) - 0.1).abs() < 1e-12, "{}", at(1.075));
+    assert!((at(1.15) - 0.2).abs() < 1e-12);
+    assert_eq!(at(2.0), 0.2);
+    let peak_rate = 1.875 * 0.2 / 0.15;
+    let max_step = r
+        .rows
+        .windows(2)
+        .map(|w| (w[1].setpoint_rad - w[0].setpoint_rad).abs())
+        .fold(0.0, f64::max);
+    assert!(max_step <= peak_rate * r.dt_s * 1.0001 && max_step > 0.9 * peak_rate * r.dt_s);
+
+    // The same levels as the jump scenario, reached by moves.
+    let jumps = run(
+        &plant,
+        &Scenario::load(root().join("scenarios/random.toml")).unwrap(),
+    )
+    .unwrap();
+    let moves = run(
+        &plant,
+        &Scenario::load(root().join("scenarios/suite/random_move.toml")).unwrap(),
+    )
+    .unwrap();
+    let mut checked = 0;
+    for (a, b) in jumps.rows.iter().zip(&moves.rows) {
+        let since = (a.t_s - 0.5).rem_euclid(1.0);
+        if a.t_s >= 0.5 && since >= 0.15 + 1e-9 {
+            assert_eq!(a.setpoint_rad, b.setpoint_rad, "t = {}", a.t_s);
+            checked += 1;
+        }
+    }
+    assert!(checked > 6000);
+    let max_move = moves
+        .rows
+        .windows(2)
+        .map(|w| (w[1].setpoint_rad - w[0].setpoint_rad).abs())
+        .fold(0.0, f64::max);
+    // Levels within +-0.3 rad: no change larger than 0.6 rad, so no tick moves more than
+    // the quintic's peak rate for 0.6 rad in 0.15 s.
+    assert!(
+        max_move <= 1.875 * 0.6 / 0.15 * moves.dt_s * 1.0001,
+        "{max_move}"
+    );
+}
+
+#[test]
+fn transition_longer_than_the_hold_is_rejected_with_file_line_and_key() {
+    let text = std::fs::read_to_string(root().join("scenarios/suite/random_move.toml"))
+        .unwrap()
+        .replace("transition_s = 0.15", "transition_s = 1.5");
+    let e = Scenario::from_toml_str(&text, "random_move.toml")
+        .unwrap_err()
+        .to_string();
+    let line = text
+        .lines()
+        .position(|l| l.starts_with("transition_s"))
+        .unwrap()
+        + 1;
+    assert!(e.contains("random_move.toml"), "{e}");
+    assert!(e.contains("transition_s"), "{e}");
+    assert!(e.contains(&format!("line {line}")), "{e}");
+    let neg = std::fs::read_to_string(root().join("scenarios/suite/step_move.toml"))
+        .unwrap()
+        .replace("transition_s = 0.15", "transition_s = -0.1");
+    let e = Scenario::from_toml_str(&neg, "step_move.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("transition_s") && e.contains(">= 0"), "{e}");
+}
+
+#[test]
+fn comparison_suite_moves_are_tracked_with_the_default_gains() {
+    assert_expectations("suite/step_move");
+    assert_expectations("suite/random_move");
+}
