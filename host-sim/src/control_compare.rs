@@ -908,12 +908,29 @@ dp_max_pa = 280000.0
 p0_gauge_pa = 300000.0
 suite_mse_rad2 = 0.001
 suite_mse_at_margin_rad2 = 0.002
+
+[cascade]
+position_kp_nm_per_rad = 55.0
+position_ki_nm_per_rad_s = 40.0
+position_kd_nm_s_per_rad = 0.5
+torque_ki_per_s = 2.0
+feedforward_inertia_kgm2 = 0.015625
+setpoint_rate_cutoff_hz = 150.0
+suite_mse_rad2 = 0.000001
+suite_mse_at_margin_rad2 = 0.000001
 ";
 
     #[test]
     fn tuning_file_round_trips() {
         let t = ControlTuning::from_toml_str(GOOD, "t.toml").unwrap();
         assert_eq!(t.pid.gains().ki_pa_per_rad_s, 100_000.0);
+        let c = t.cascade.config(1000.0);
+        assert_eq!((c.position.kp, c.torque.ki), (55.0, 2.0));
+        assert_eq!(
+            (c.feedforward.inertia_kgm2, c.feedforward.cutoff_hz),
+            (0.015625, 150.0)
+        );
+        assert_eq!(CascadeToml::from_config(&c, 1e-6, 1e-6), t.cascade);
         let text = t.to_toml_string("provenance\nline two");
         assert!(text.starts_with("# provenance\n# line two\n"));
         assert_eq!(ControlTuning::from_toml_str(&text, "t.toml").unwrap(), t);
@@ -940,6 +957,14 @@ suite_mse_at_margin_rad2 = 0.002
             .unwrap_err()
             .to_string();
         assert!(e.contains("t.toml:8:") && e.contains("kq"), "{e}");
+        let bad = GOOD.replace("torque_ki_per_s = 2.0", "torque_ki_per_s = nan");
+        let e = ControlTuning::from_toml_str(&bad, "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("t.toml:29: field `cascade.torque_ki_per_s`"),
+            "{e}"
+        );
         let bad = GOOD.replace("setpoint_rate_weight = 1.0\n", "");
         let e = ControlTuning::from_toml_str(&bad, "t.toml")
             .unwrap_err()
