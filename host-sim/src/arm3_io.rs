@@ -12,7 +12,7 @@
 //! Muscle 1 of joint N contracts when the joint angle grows. Every error names the file, the
 //! line and the field; outputs are written atomically.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use crate::fit::fit_percent;
 use crate::plant::arm3::{Arm3, Arm3Inputs, Arm3Integrator, Arm3SimError, Arm3State};
@@ -468,44 +468,19 @@ pub fn plot_arm3(
     reference: Option<&Arm3Recording>,
     model: &Arm3Recording,
 ) -> Result<(), crate::plot::PlotError> {
-    use plotters::prelude::*;
-    let ext = path
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase())
-        .unwrap_or_default();
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
-        _ => PathBuf::from("."),
-    };
-    let draw_err = |message: String| crate::plot::PlotError::Draw {
-        path: path.to_owned(),
-        message,
-    };
-    crate::plot::ensure_font().map_err(draw_err)?;
-    let tmp = tempfile::Builder::new()
-        .prefix(".plot.")
-        .suffix(&format!(".{ext}"))
-        .tempfile_in(&dir)
-        .map_err(|e| draw_err(e.to_string()))?;
-    let size = (1400u32, 900u32);
-    match ext.as_str() {
-        "png" => {
-            let root = BitMapBackend::new(tmp.path(), size).into_drawing_area();
-            draw_arm3(&root, reference, model).map_err(draw_err)?;
-            root.present().map_err(|e| draw_err(e.to_string()))?;
-        }
-        "svg" => {
-            let root = SVGBackend::new(tmp.path(), size).into_drawing_area();
-            draw_arm3(&root, reference, model).map_err(draw_err)?;
-            root.present().map_err(|e| draw_err(e.to_string()))?;
-        }
-        _ => return Err(crate::plot::PlotError::Format(path.to_owned())),
+    struct Arm<'a> {
+        reference: Option<&'a Arm3Recording>,
+        model: &'a Arm3Recording,
     }
-    crate::recording::set_output_permissions(tmp.as_file(), path)
-        .map_err(|e| draw_err(e.to_string()))?;
-    tmp.persist(path)
-        .map_err(|e| draw_err(e.error.to_string()))?;
-    Ok(())
+    impl crate::plot::Figure for Arm<'_> {
+        fn draw<DB: plotters::prelude::DrawingBackend>(
+            &self,
+            root: &plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
+        ) -> Result<(), String> {
+            draw_arm3(root, self.reference, self.model)
+        }
+    }
+    crate::plot::write_plot(path, (1400u32, 900u32), &Arm { reference, model })
 }
 
 /// A channel, its colour, its simulated values and the reference values if any.

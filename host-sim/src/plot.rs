@@ -62,6 +62,59 @@ pub enum PlotError {
     Empty(PathBuf),
 }
 
+/// A figure that can draw itself on any `plotters` backend (a generic method, which a closure
+/// cannot have: [`write_plot`] picks the backend from the file extension).
+pub(crate) trait Figure {
+    /// Draws the whole figure on `root`.
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String>;
+}
+
+/// Writes `figure` at `size` pixels to `path` (`.png` or `.svg`, by extension): drawn into a
+/// temporary file next to `path` (same extension, so the backend picks the encoder), given
+/// the permissions an output file gets, and renamed over `path`. A failed plot leaves the old
+/// `path` as it was.
+pub(crate) fn write_plot(
+    path: &Path,
+    size: (u32, u32),
+    figure: &impl Figure,
+) -> Result<(), PlotError> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    if ext != "png" && ext != "svg" {
+        return Err(PlotError::Format(path.to_owned()));
+    }
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
+        _ => PathBuf::from("."),
+    };
+    let draw_err = |message: String| PlotError::Draw {
+        path: path.to_owned(),
+        message,
+    };
+    ensure_font().map_err(draw_err)?;
+    let tmp = tempfile::Builder::new()
+        .prefix(".plot.")
+        .suffix(&format!(".{ext}"))
+        .tempfile_in(&dir)
+        .map_err(|e| draw_err(e.to_string()))?;
+    if ext == "png" {
+        let root = BitMapBackend::new(tmp.path(), size).into_drawing_area();
+        figure.draw(&root).map_err(draw_err)?;
+        root.present().map_err(|e| draw_err(e.to_string()))?;
+    } else {
+        let root = SVGBackend::new(tmp.path(), size).into_drawing_area();
+        figure.draw(&root).map_err(draw_err)?;
+        root.present().map_err(|e| draw_err(e.to_string()))?;
+    }
+    crate::recording::set_output_permissions(tmp.as_file(), path)
+        .map_err(|e| draw_err(e.to_string()))?;
+    tmp.persist(path)
+        .map_err(|e| draw_err(e.error.to_string()))?;
+    Ok(())
+}
+
 /// Draws one panel per output channel of `model`; `reference` (measured) is drawn under it
 /// where it has the channel. Written to a temporary file and renamed over `path`.
 pub fn plot_comparison(
@@ -76,44 +129,25 @@ pub fn plot_comparison(
     if channels.is_empty() {
         return Err(PlotError::Empty(path.to_owned()));
     }
-    let ext = path
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase())
-        .unwrap_or_default();
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
-        _ => PathBuf::from("."),
-    };
-    let draw_err = |message: String| PlotError::Draw {
-        path: path.to_owned(),
-        message,
-    };
-    ensure_font().map_err(draw_err)?;
-    // Temporary name keeps the extension so the backend picks the right encoder.
-    let tmp = tempfile::Builder::new()
-        .prefix(".plot.")
-        .suffix(&format!(".{ext}"))
-        .tempfile_in(&dir)
-        .map_err(|e| draw_err(e.to_string()))?;
-    let size = (1200u32, 260 * channels.len() as u32);
-    match ext.as_str() {
-        "png" => {
-            let root = BitMapBackend::new(tmp.path(), size).into_drawing_area();
-            draw(&root, reference, model, &channels).map_err(draw_err)?;
-            root.present().map_err(|e| draw_err(e.to_string()))?;
-        }
-        "svg" => {
-            let root = SVGBackend::new(tmp.path(), size).into_drawing_area();
-            draw(&root, reference, model, &channels).map_err(draw_err)?;
-            root.present().map_err(|e| draw_err(e.to_string()))?;
-        }
-        _ => return Err(PlotError::Format(path.to_owned())),
+    struct Comparison<'a> {
+        reference: Option<&'a Recording>,
+        model: &'a Recording,
+        channels: &'a [Channel],
     }
-    crate::recording::set_output_permissions(tmp.as_file(), path)
-        .map_err(|e| draw_err(e.to_string()))?;
-    tmp.persist(path)
-        .map_err(|e| draw_err(e.error.to_string()))?;
-    Ok(())
+    impl Figure for Comparison<'_> {
+        fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+            draw(root, self.reference, self.model, self.channels)
+        }
+    }
+    write_plot(
+        path,
+        (1200u32, 260 * channels.len() as u32),
+        &Comparison {
+            reference,
+            model,
+            channels: &channels,
+        },
+    )
 }
 
 fn draw<DB: DrawingBackend>(

@@ -223,43 +223,19 @@ pub fn plot_run(path: &Path, run: &ClosedLoopRun, plant: &Plant) -> Result<(), P
     if run.rows.is_empty() {
         return Err(PlotError::Empty(path.to_owned()));
     }
-    let ext = path
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase())
-        .unwrap_or_default();
-    let draw_err = |message: String| PlotError::Draw {
-        path: path.to_owned(),
-        message,
-    };
-    crate::plot::ensure_font().map_err(draw_err)?;
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
-        _ => PathBuf::from("."),
-    };
-    let tmp = tempfile::Builder::new()
-        .prefix(".plot.")
-        .suffix(&format!(".{ext}"))
-        .tempfile_in(&dir)
-        .map_err(|e| draw_err(e.to_string()))?;
-    let size = (1200u32, 780u32);
-    match ext.as_str() {
-        "png" => {
-            let root = BitMapBackend::new(tmp.path(), size).into_drawing_area();
-            draw_run(&root, run, plant).map_err(draw_err)?;
-            root.present().map_err(|e| draw_err(e.to_string()))?;
-        }
-        "svg" => {
-            let root = SVGBackend::new(tmp.path(), size).into_drawing_area();
-            draw_run(&root, run, plant).map_err(draw_err)?;
-            root.present().map_err(|e| draw_err(e.to_string()))?;
-        }
-        _ => return Err(PlotError::Format(path.to_owned())),
+    struct Run<'a> {
+        run: &'a ClosedLoopRun,
+        plant: &'a Plant,
     }
-    crate::recording::set_output_permissions(tmp.as_file(), path)
-        .map_err(|e| draw_err(e.to_string()))?;
-    tmp.persist(path)
-        .map_err(|e| draw_err(e.error.to_string()))?;
-    Ok(())
+    impl crate::plot::Figure for Run<'_> {
+        fn draw<DB: DrawingBackend>(
+            &self,
+            root: &DrawingArea<DB, plotters::coord::Shift>,
+        ) -> Result<(), String> {
+            draw_run(root, self.run, self.plant)
+        }
+    }
+    crate::plot::write_plot(path, (1200u32, 780u32), &Run { run, plant })
 }
 
 type Series<'a> = (&'a str, RGBColor, Vec<f64>);
