@@ -19,7 +19,8 @@ use host_sim::diagnose::{diagnose, DiagnoseOptions};
 use host_sim::PlantConfig;
 
 const TUNING_SEEDS: [u64; 1] = [101];
-const HELD_OUT_SEEDS: [u64; 2] = [7001, 7002];
+/// 7008 was added with the swap pass of the selection and first run after it was final.
+const HELD_OUT_SEEDS: [u64; 3] = [7001, 7002, 7008];
 
 fn cases() -> Vec<Vec<&'static str>> {
     let mut c: Vec<Vec<&str>> = vec![vec![], vec![]];
@@ -76,6 +77,24 @@ fn run_case(
     )
     .unwrap();
     let secs = t0.elapsed().as_secs_f64();
+    // DIAG_DEBUG=SEED prints that case's candidate scores.
+    if std::env::var("DIAG_DEBUG").ok() == Some(seed.to_string()) {
+        eprintln!(
+            "seed {seed}: nominal cost {:.4e}, noise cost {:.4e}",
+            d.nominal_cost, d.noise_cost
+        );
+        for c in &d.candidates {
+            eprintln!(
+                "  round {} {:<40} held-out {:.4e} explained {:>6.1} % bic {:>9.1} {}",
+                c.round,
+                c.id,
+                c.heldout_cost,
+                100.0 * c.explained,
+                c.bic_delta,
+                if c.accepted { "ACCEPTED" } else { "" }
+            );
+        }
+    }
     let mut want: Vec<String> = truths.iter().map(|t| expected_id(t).to_string()).collect();
     want.sort();
     let mut got: Vec<String> = d.effects.iter().map(|e| e.id.clone()).collect();
@@ -180,8 +199,10 @@ fn diagnosis_matrix_without_force_channels() {
     let text = std::fs::read_to_string(&path).unwrap();
     let nominal = PlantConfig::load(&path).unwrap();
     let (mut pass, mut total) = (0, 0);
-    println!("\nno force channels, seeds 7003, 7004, 7005\n| concealed | seed | dt ms | named | check min fit before % | check min fit after % | s | result |\n|---|---|---|---|---|---|---|---|");
-    for seed in [7003u64, 7004, 7005] {
+    println!("\nno force channels, seeds 7003, 7004, 7005, 7006, 7007\n| concealed | seed | dt ms | named | check min fit before % | check min fit after % | s | result |\n|---|---|---|---|---|---|---|---|");
+    // 7006 and 7007 were added with the swap pass of the selection and first run after it
+    // was final (7005 had shown the misses the swap pass fixes).
+    for seed in [7003u64, 7004, 7005, 7006, 7007] {
         for (i, truths) in cases().iter().enumerate() {
             let dt = [1e-3, 2e-3, 3e-3][(i + seed as usize - 7003) % 3];
             let channels = [true, true, true, false, false];

@@ -105,7 +105,8 @@ pub struct NamedEffect {
 #[derive(Debug, Clone)]
 pub struct CandidateScore {
     pub id: String,
-    /// Selection round (1: alone on the nominal model, 2: on top of the first effect).
+    /// Selection round (1: alone on the nominal model, 2: on top of the first effect;
+    /// above `max_effects`: a swap pass, `id` then names the whole trial set `a+b`).
     pub round: usize,
     pub screening: f64,
     pub params: Vec<(String, f64)>,
@@ -165,6 +166,9 @@ pub enum DiagnoseError {
 
 /// Fewest samples a recording needs.
 pub const MIN_SAMPLES: usize = 200;
+
+/// Round-1 candidates (best held-out cost first) the swap pass of [`diagnose`] draws from.
+const SWAP_TOP: usize = 5;
 
 fn fits_of(rec: &Recording, pred: &[Measurement]) -> BTreeMap<&'static str, f64> {
     let mut m = BTreeMap::new();
@@ -353,6 +357,123 @@ pub fn diagnose(
             current = fitted;
             j_cur = jh;
             chosen_explained.push(explained);
+        }
+        // Swap pass (stepwise selection): forward selection is greedy, and a first pick
+        // that stands in for two effects at once (supply drop for friction + leakage
+        // without force channels) blocks the right pair. While the held-out error is still
+        // clearly above noise, try the sets the greedy path skipped: each chosen effect
+        // replaced by one of the SWAP_TOP best round-1 candidates, and (below max_effects)
+        // every pair of those that leaves the chosen effects out. The best set is taken if it beats the current one by the
+        // same rules as a forward step; repeated while it helps.
+        let mut top: Vec<(usize, f64)> = scores
+            .iter()
+            .filter(|s| s.round == 1 && s.heldout_cost.is_finite())
+            .filter_map(|s| {
+                cands
+                    .iter()
+                    .position(|c| c.id() == s.id)
+                    .map(|i| (i, s.heldout_cost))
+            })
+            .collect();
+        top.sort_by(|a, b| a.1.total_cmp(&b.1));
+        // One entry per effect id (supply drop has two forms).
+        let mut seen: Vec<&str> = Vec::new();
+        top.retain(|(i, _)| {
+            let id = cands[*i].id();
+            let new = !seen.contains(&id);
+            seen.push(id);
+            new
+        });
+        top.truncate(SWAP_TOP);
+        let part = |i: usize| Part {
+            candidate: cands[i].as_ref(),
+            params: screenings[i].initial.clone(),
+        };
+        for pass in 1..=2 {
+            if current.is_empty() || j_cur <= opts.null_ratio * noise_cost {
+                break;
+            }
+            let in_current = |i: usize| current.iter().any(|p| p.candidate.id() == cands[i].id());
+            let mut trials: Vec<Vec<Part>> = Vec::new();
+            for j in 0..current.len() {
+                for &(i, _) in top.iter().filter(|(i, _)| !in_current(*i)) {
+                    let mut t = current.clone();
+                    t[j] = part(i);
+                    trials.push(t);
+                }
+            }
+            if current.len() < opts.max_effects {
+                for (a, &(i, _)) in top.iter().enumerate() {
+                    for &(k, _) in &top[a + 1..] {
+                        // Pairs that keep a chosen effect were the forward step's.
+                        if !in_current(i) && !in_current(k) {
+                            trials.push(vec![part(i), part(k)]);
+                        }
+                    }
+                }
+            }
+            let results = par_map(&trials, opts.threads, |parts| {
+                let t0 = std::time::Instant::now();
+                let (fitted, _) = problem.fit(parts, fit_range.clone(), opts.max_iter);
+                let jh = match problem.predict(&fitted) {
+                    Some(p) => problem.channel_costs(&p, held.clone()).iter().sum(),
+                    None => f64::INFINITY,
+                };
+                (fitted, jh, t0.elapsed().as_secs_f64())
+            });
+            let k_cur: usize = current.iter().map(|p| p.params.len()).sum();
+            let excess = (j_cur - noise_cost).max(1e-12);
+            let mut best: Option<(Vec<Part>, f64)> = None;
+            let round = opts.max_effects + pass;
+            for (fitted, jh, seconds) in results {
+                let k_new = fitted.iter().map(|p| p.params.len()).sum::<usize>();
+                let bic_delta = bic(jh, k_new) - bic(j_cur, k_cur);
+                let ok = jh.is_finite()
+                    && jh < j_cur * 0.98
+                    && j_cur - jh >= opts.min_gain_noise * noise_cost
+                    && bic_delta < 0.0;
+                scores.push(CandidateScore {
+                    id: fitted
+                        .iter()
+                        .map(|p| p.candidate.id())
+                        .collect::<Vec<_>>()
+                        .join("+"),
+                    round,
+                    screening: f64::NAN,
+                    params: Vec::new(),
+                    heldout_cost: jh,
+                    explained: ((j_cur - jh) / excess).clamp(-1.0, 1.0),
+                    bic_delta,
+                    accepted: false,
+                    seconds,
+                });
+                if ok && best.as_ref().is_none_or(|b| jh < b.1) {
+                    best = Some((fitted, jh));
+                }
+            }
+            let Some((fitted, jh)) = best else {
+                break;
+            };
+            let id = fitted
+                .iter()
+                .map(|p| p.candidate.id())
+                .collect::<Vec<_>>()
+                .join("+");
+            if let Some(s) = scores.iter_mut().find(|s| s.round == round && s.id == id) {
+                s.accepted = true;
+            }
+            // Each effect's share: what it removed alone in round 1.
+            chosen_explained = fitted
+                .iter()
+                .map(|p| {
+                    round1_explained
+                        .get(p.candidate.id())
+                        .copied()
+                        .unwrap_or(0.0)
+                })
+                .collect();
+            current = fitted;
+            j_cur = jh;
         }
         chosen = current;
     }
