@@ -156,6 +156,29 @@ fn restarted_nm<T: Copy>(
     (p, c)
 }
 
+/// Pattern search: evaluates `moves_of(p)` (with `costs`), moves to the best if it lowers the
+/// cost, until no move does. Returns the point, its cost and the number of evaluations.
+fn polish<T: Copy>(
+    mut p: T,
+    mut c: f64,
+    moves_of: impl Fn(&T) -> Vec<T>,
+    costs: impl Fn(&[T]) -> Vec<f64>,
+) -> (T, f64, usize) {
+    let mut evaluations = 0;
+    loop {
+        let moves = moves_of(&p);
+        let cs = costs(&moves);
+        evaluations += moves.len();
+        match cs.iter().enumerate().min_by(|a, b| a.1.total_cmp(b.1)) {
+            Some((i, &cm)) if cm < c => {
+                p = moves[i];
+                c = cm;
+            }
+            _ => return (p, c, evaluations),
+        }
+    }
+}
+
 fn tune(
     ctx: &Ctx,
     ki_on: bool,
@@ -255,7 +278,7 @@ fn tune(
     // Nelder-Mead restarted from its own result until a restart gains less than 1 % (a
     // simplex that has collapsed in one direction stalls; a fresh one does not).
     let w = g.setpoint_rate_weight;
-    let (mut g, mut c) = restarted_nm(
+    let (g, c) = restarted_nm(
         |g: &DpPidGains| {
             let mut x = vec![
                 (g.kp_pa_per_rad as f64).log10(),
@@ -282,43 +305,35 @@ fn tune(
     // Polish: pattern search with the moves the local-optimum test checks (each gain x0.7 /
     // x1.4, the derivative's set-point weight flipped), accepting any improvement, until no
     // move improves.
-    let mut polish_runs = 0;
-    loop {
-        let mut moves = Vec::new();
-        for f in [0.7f32, 1.4] {
-            moves.push(DpPidGains {
-                kp_pa_per_rad: g.kp_pa_per_rad * f,
-                ..g
-            });
-            moves.push(DpPidGains {
-                kd_pa_s_per_rad: g.kd_pa_s_per_rad * f,
-                ..g
-            });
-            if ki_on {
+    let (g, c, polish_runs) = polish(
+        g,
+        c,
+        |g: &DpPidGains| {
+            let mut moves = Vec::new();
+            for f in [0.7f32, 1.4] {
                 moves.push(DpPidGains {
-                    ki_pa_per_rad_s: g.ki_pa_per_rad_s * f,
-                    ..g
+                    kp_pa_per_rad: g.kp_pa_per_rad * f,
+                    ..*g
                 });
+                moves.push(DpPidGains {
+                    kd_pa_s_per_rad: g.kd_pa_s_per_rad * f,
+                    ..*g
+                });
+                if ki_on {
+                    moves.push(DpPidGains {
+                        ki_pa_per_rad_s: g.ki_pa_per_rad_s * f,
+                        ..*g
+                    });
+                }
             }
-        }
-        moves.push(DpPidGains {
-            setpoint_rate_weight: 1.0 - g.setpoint_rate_weight,
-            ..g
-        });
-        let costs = ctx.costs(&moves, threads);
-        polish_runs += moves.len();
-        let (i, &cm) = costs
-            .iter()
-            .enumerate()
-            .min_by(|a, b| a.1.total_cmp(b.1))
-            .expect("moves");
-        if cm < c {
-            g = moves[i];
-            c = cm;
-        } else {
-            break;
-        }
-    }
+            moves.push(DpPidGains {
+                setpoint_rate_weight: 1.0 - g.setpoint_rate_weight,
+                ..*g
+            });
+            moves
+        },
+        |moves: &[DpPidGains]| ctx.costs(moves, threads),
+    );
     // Re-measure the stored point (f32 rounding of the gains).
     let (c_check, c_nominal, c_margin) = ctx.cost_cfg(config_for(ControlLaw::DirectPid(g), 1000.0));
     eprintln!(
@@ -388,7 +403,7 @@ fn tune_cascade(ctx: &Ctx, start: ControllerConfig) -> (ControllerConfig, f64) {
         (start, c_start)
     };
     let mut evaluations = r.evaluations;
-    let (mut cfg, mut c) = if c.is_finite() {
+    let (cfg, c) = if c.is_finite() {
         restarted_nm(
             |cfg: &ControllerConfig| {
                 vec![
@@ -408,35 +423,29 @@ fn tune_cascade(ctx: &Ctx, start: ControllerConfig) -> (ControllerConfig, f64) {
     } else {
         (cfg, c)
     };
-    loop {
-        let mut moves = Vec::new();
-        for f in [0.7f32, 1.4] {
-            let mut m = cfg;
-            m.position.kp *= f;
-            moves.push(m);
-            let mut m = cfg;
-            m.position.ki *= f;
-            moves.push(m);
-            let mut m = cfg;
-            m.position.kd *= f;
-            moves.push(m);
-            let mut m = cfg;
-            m.torque.ki *= f;
-            moves.push(m);
-        }
-        let costs: Vec<f64> = moves.iter().map(|m| cost_cfg(*m)).collect();
-        let (i, &cm) = costs
-            .iter()
-            .enumerate()
-            .min_by(|a, b| a.1.total_cmp(b.1))
-            .expect("moves");
-        if cm < c {
-            cfg = moves[i];
-            c = cm;
-        } else {
-            break;
-        }
-    }
+    let (cfg, c, _) = polish(
+        cfg,
+        c,
+        |cfg: &ControllerConfig| {
+            let mut moves = Vec::new();
+            for f in [0.7f32, 1.4] {
+                let mut m = *cfg;
+                m.position.kp *= f;
+                moves.push(m);
+                let mut m = *cfg;
+                m.position.ki *= f;
+                moves.push(m);
+                let mut m = *cfg;
+                m.position.kd *= f;
+                moves.push(m);
+                let mut m = *cfg;
+                m.torque.ki *= f;
+                moves.push(m);
+            }
+            moves
+        },
+        |moves: &[ControllerConfig]| moves.iter().map(|m| cost_cfg(*m)).collect(),
+    );
     let (_, nominal, margin) = ctx.cost_cfg(cfg);
     eprintln!(
         "cascade: Nelder-Mead {} points + polish: cost {:.4e} rad^2 ({:.3} x start; suite MSE {:.4e}, at the margin {:.4e}) at kp {} ki {} kd {} torque ki {} (J {}, cutoff {} Hz)",
