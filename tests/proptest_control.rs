@@ -21,47 +21,10 @@ use pam_firmware::valves::{OnOffPwmConfig, OnOffValves, ValveOpenings};
 use pam_firmware::P_MUSCLE_MAX_GAUGE_PA;
 use proptest::prelude::*;
 
+mod common;
+use common::{angle, dt, f32_any_or, frame, opt, outputs_finite, pressure};
+
 /// Any f32 (all classes), or a value in a realistic range, or a special value.
-fn f32_any_or(lo: f32, hi: f32) -> impl Strategy<Value = f32> {
-    prop_oneof![
-        3 => proptest::num::f32::ANY,
-        5 => lo..hi,
-        1 => prop::sample::select(vec![
-            f32::NAN,
-            f32::INFINITY,
-            f32::NEG_INFINITY,
-            0.0,
-            -0.0,
-            f32::MAX,
-            f32::MIN,
-            f32::MIN_POSITIVE,
-            f32::EPSILON,
-        ]),
-    ]
-}
-
-fn opt(s: impl Strategy<Value = f32>) -> impl Strategy<Value = Option<f32>> {
-    prop_oneof![1 => Just(None), 6 => s.prop_map(Some)]
-}
-
-fn pressure() -> impl Strategy<Value = f32> {
-    f32_any_or(-100_000.0, 800_000.0)
-}
-fn angle() -> impl Strategy<Value = f32> {
-    f32_any_or(-1.5, 1.5)
-}
-fn dt() -> impl Strategy<Value = f32> {
-    prop_oneof![8 => Just(1e-3f32), 2 => f32_any_or(0.0, 0.01)]
-}
-
-fn frame() -> impl Strategy<Value = SensorFrame> {
-    (opt(pressure()), opt(pressure()), opt(angle())).prop_map(|(p1, p2, a)| SensorFrame {
-        p1_gauge_pa: p1,
-        p2_gauge_pa: p2,
-        angle_rad: a,
-    })
-}
-
 fn limits() -> ChannelLimits {
     ChannelLimits {
         min: -50_000.0,
@@ -70,21 +33,6 @@ fn limits() -> ChannelLimits {
         jump_margin: 2e4,
         stale_ticks: 10,
     }
-}
-
-fn outputs_finite(o: &pam_firmware::tick::TickOutput) -> bool {
-    [
-        o.valves.muscle1,
-        o.valves.muscle2,
-        o.p1_set_gauge_pa,
-        o.p2_set_gauge_pa,
-        o.torque_des_nm,
-        o.torque_est_nm,
-        o.angle_est_rad,
-        o.velocity_est_rad_s,
-    ]
-    .iter()
-    .all(|x| x.is_finite())
 }
 
 struct FakePin;
@@ -254,30 +202,8 @@ proptest! {
         let mut latched = None;
         for (f, sp, dt) in steps {
             let o = t.step(&f, &Setpoint { angle_rad: sp }, dt);
-            prop_assert!(outputs_finite(&o));
-            prop_assert!((-1.0..=1.0).contains(&o.valves.muscle1));
-            prop_assert!((-1.0..=1.0).contains(&o.valves.muscle2));
-            prop_assert!((0.0..=P_MUSCLE_MAX_GAUGE_PA).contains(&o.p1_set_gauge_pa));
-            prop_assert!((0.0..=P_MUSCLE_MAX_GAUGE_PA).contains(&o.p2_set_gauge_pa));
-            // A non-finite input in this tick raises (or keeps) a fault in this tick.
-            let bad = [f.p1_gauge_pa, f.p2_gauge_pa, f.angle_rad]
-                .iter()
-                .any(|x| matches!(x, Some(v) if !v.is_finite()))
-                || !sp.is_finite()
-                || !dt.is_finite()
-                || dt <= 0.0;
-            if bad {
-                prop_assert!(o.fault.is_some());
-            }
-            // Latched: once a fault, the same fault for the rest of the run.
-            if let Some(l) = latched {
-                prop_assert_eq!(o.fault, Some(l));
-            }
-            if o.fault.is_some() {
-                latched = o.fault;
-                prop_assert_eq!(o.valves, safe_cmd);
-                prop_assert!(!o.armed);
-            }
+            // Finite, bounded, a fault in the tick of a bad input, latched, safe valves.
+            common::check_tick_output(&o, &f, sp, dt, &mut latched, safe_cmd)?;
         }
     }
 

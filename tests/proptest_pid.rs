@@ -12,26 +12,8 @@ use pam_firmware::tick::{ControlLaw, ControlTick, ControllerConfig, SensorFrame,
 use pam_firmware::P_MUSCLE_MAX_GAUGE_PA;
 use proptest::prelude::*;
 
-fn f32_any_or(lo: f32, hi: f32) -> impl Strategy<Value = f32> {
-    prop_oneof![
-        3 => proptest::num::f32::ANY,
-        5 => lo..hi,
-        1 => prop::sample::select(vec![
-            f32::NAN,
-            f32::INFINITY,
-            f32::NEG_INFINITY,
-            0.0,
-            -0.0,
-            f32::MAX,
-            f32::MIN,
-            f32::MIN_POSITIVE,
-        ]),
-    ]
-}
-
-fn dt() -> impl Strategy<Value = f32> {
-    prop_oneof![8 => Just(1e-3f32), 2 => f32_any_or(0.0, 0.01)]
-}
+mod common;
+use common::{dt, f32_any_or, frame};
 
 fn realistic_gains() -> impl Strategy<Value = DpPidGains> {
     (
@@ -95,23 +77,6 @@ fn tuned_like() -> DpPidGains {
     }
 }
 
-fn opt(s: impl Strategy<Value = f32>) -> impl Strategy<Value = Option<f32>> {
-    prop_oneof![1 => Just(None), 6 => s.prop_map(Some)]
-}
-
-fn frame() -> impl Strategy<Value = SensorFrame> {
-    (
-        opt(f32_any_or(-100_000.0, 800_000.0)),
-        opt(f32_any_or(-100_000.0, 800_000.0)),
-        opt(f32_any_or(-1.5, 1.5)),
-    )
-        .prop_map(|(p1, p2, a)| SensorFrame {
-            p1_gauge_pa: p1,
-            p2_gauge_pa: p2,
-            angle_rad: a,
-        })
-}
-
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(1000))]
 
@@ -167,31 +132,7 @@ proptest! {
         let mut latched = None;
         for (f, sp, dt) in steps {
             let o = t.step(&f, &Setpoint { angle_rad: sp }, dt);
-            for x in [o.valves.muscle1, o.valves.muscle2, o.p1_set_gauge_pa, o.p2_set_gauge_pa,
-                      o.torque_des_nm, o.torque_est_nm, o.angle_est_rad, o.velocity_est_rad_s] {
-                prop_assert!(x.is_finite());
-            }
-            prop_assert!((-1.0..=1.0).contains(&o.valves.muscle1));
-            prop_assert!((-1.0..=1.0).contains(&o.valves.muscle2));
-            prop_assert!((0.0..=P_MUSCLE_MAX_GAUGE_PA).contains(&o.p1_set_gauge_pa));
-            prop_assert!((0.0..=P_MUSCLE_MAX_GAUGE_PA).contains(&o.p2_set_gauge_pa));
-            let bad = [f.p1_gauge_pa, f.p2_gauge_pa, f.angle_rad]
-                .iter()
-                .any(|x| matches!(x, Some(v) if !v.is_finite()))
-                || !sp.is_finite()
-                || !dt.is_finite()
-                || dt <= 0.0;
-            if bad {
-                prop_assert!(o.fault.is_some());
-            }
-            if let Some(l) = latched {
-                prop_assert_eq!(o.fault, Some(l));
-            }
-            if o.fault.is_some() {
-                latched = o.fault;
-                prop_assert_eq!(o.valves, safe_cmd);
-                prop_assert!(!o.armed);
-            }
+            common::check_tick_output(&o, &f, sp, dt, &mut latched, safe_cmd)?;
             if o.armed {
                 prop_assert_eq!(o.torque_des_nm, 0.0);
             }
