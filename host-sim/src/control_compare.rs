@@ -707,7 +707,7 @@ pub fn format_table(rows: &[Row]) -> String {
     }
     let _ = writeln!(
         s,
-        " suite MSE [deg^2] | suite MSE [rad^2] | / cascade | suite MSE after settle [deg^2] | / cascade | firmware step tests (1x J / 11x J) |"
+        " suite MSE [deg^2] | suite MSE [rad^2] | / cascade | suite MSE after settle [deg^2] | / cascade | firmware step tests (1x / 11x this plant's J) |"
     );
     let _ = write!(s, "|---|");
     for _ in &names {
