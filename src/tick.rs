@@ -165,29 +165,27 @@ impl ControllerConfig {
     ///   `kd r' / kp` (0.06 rad on the 0.5 Hz sine).
     /// - Trajectory feed-forward ([`crate::feedforward`], added for the closed-loop proof of
     ///   issue 5): derivative on the error (`w = 1`) and the inertia torque `J r''` of the
-    ///   desired motion (J = 0.014 kg m^2 of the reference joint), set-point differentiators
-    ///   at 20 Hz, limited to +-2 N m (tracking at 2 rad/s needs kd r' = 1.8 N m; a larger
-    ///   limit only adds a kick on set-point steps). With it, the position gains were
-    ///   retuned on the full reference plant with the firmware in the loop by the same
-    ///   procedure as the model-free baselines:
-    ///   `cargo run --release -p host-sim --example tune_pid -- --cascade` (Nelder-Mead on
-    ///   log10 (kp, ki, kd) from (11, 8, 0.8), then an x0.7 / x1.4 polish) minimising the
-    ///   worse of the step / sine / random suite MSE at the gains and at 1.25 x the gains (a
-    ///   loop-gain margin: on the suite MSE alone the optimum sat at the edge of a limit
-    ///   cycle, kp = 41 going from 1.0 to 4.1 deg^2 with kp x1.2), subject to at most 10 %
-    ///   step overshoot (the requirement of `tests/closed_loop_smoke.rs`):
-    ///   kp = 29.662365 N m/rad, ki = 4.819047 N m/(rad s), kd = 0.9451818 N m s/rad with
-    ///   the inertia term off (cost 3.169e-4 rad^2; with the inertia term, J = 0.014, the
-    ///   best was 3.194e-4 at kp 39.3, so it is off). Retuned on 2026-11-23 after the
-    ///   identified force-law / torque-model constants of `config/` and the valve driver's
-    ///   immediate full-scale opening changed the loop (the previous gains kp 33.88, ki 4.69,
-    ///   kd 0.897 with J = 0.014 cost 3.387e-4 there). `host-sim/tests/control_compare.rs` checks that it is a local
-    ///   optimum of that cost, `host-sim/tests/closed_loop.rs` that every scenario, the 11x
-    ///   load change included, still meets its bounds.
+    ///   desired motion (J = 0.014 kg m^2 of the reference joint), limited to +-2 N m
+    ///   (tracking at 2 rad/s needs kd r' = 1.8 N m; a larger limit only adds a kick on
+    ///   set-point jumps). The position gains were tuned with it on the full reference plant
+    ///   with the firmware in the loop, on the jump suite (step / sine / random set-points
+    ///   that jump), minimising the worse of the suite MSE at the gains and at 1.25 x the
+    ///   gains, at most 10 % step overshoot: kp = 29.662365 N m/rad, ki = 4.819047
+    ///   N m/(rad s), kd = 0.9451818 N m s/rad (Nelder-Mead from (11, 8, 0.8) + polish, on
+    ///   2026-11-23, after the identified `config/` constants and the valve driver's
+    ///   immediate full-scale opening). Then the inertia term was switched on and the
+    ///   set-point differentiators raised from 20 to 150 Hz (the set-point is noise-free, so
+    ///   the filter only has to round tick-to-tick jumps). On the issue-5 suite of 0.15 s
+    ///   minimum-jerk moves that tracks 2.6x better (0.0545 -> 0.0206 deg^2). On the jump
+    ///   suite it costs 2 % (1.0375 -> 1.0591 deg^2). The step tests of
+    ///   `tests/closed_loop_smoke.rs` improve (overshoot 0.0156 -> 0.0110 rad; the 11x load
+    ///   is unchanged, 1.0 s). `host-sim/tests/closed_loop.rs` checks that every scenario,
+    ///   the 11x load change included, still meets its bounds, and
+    ///   `host-sim/tests/control_compare.rs` that these gains pass both step requirements.
     ///   These are the robust defaults. The gains tuned for the tracking suite of the issue-5
     ///   comparison (host-sim `control_compare`, 6 dB gain margin) are in
     ///   `config/control_tuned.toml` `[cascade]`: kp 55.7, ki 39.9, kd 0.50, torque ki 2.26,
-    ///   inertia term on, 150 Hz. They track 19x better on that suite but fail both step
+    ///   inertia term on, 150 Hz. They track 7x better on that suite but fail both step
     ///   requirements (the 0.3 s settling and the 11x load). They are not the default.
     /// - Torque loop: integral only (ki = 30 1/s, +-1.5 N m): trims the force-law /
     ///   linearisation mismatch; proportional torque feedback through the measured
@@ -258,8 +256,8 @@ impl ControllerConfig {
             law: ControlLaw::Cascade,
             feedforward: FeedforwardGains {
                 rate_weight: 1.0,
-                inertia_kgm2: 0.0,
-                cutoff_hz: 20.0,
+                inertia_kgm2: 0.014,
+                cutoff_hz: 150.0,
                 limit_nm: 2.0,
             },
         }

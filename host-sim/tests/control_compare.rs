@@ -240,7 +240,7 @@ fn the_checked_in_tuning_file_parses_and_names_all_three_laws() {
 /// Robustness, not part of the criterion: the same gains on the loaded joint
 /// (`reference-1dof-loaded.toml`, 11x the inertia, no retuning). The cascade with the
 /// firmware's default gains stays stable and beats every suite-tuned law; the PID tuned on the
-/// nominal joint limit-cycles there (measured 20x the default cascade's suite MSE, README).
+/// nominal joint limit-cycles there (measured 26x the default cascade's suite MSE, README).
 #[test]
 fn on_the_loaded_joint_the_firmware_default_cascade_stays_stable_and_best() {
     let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
