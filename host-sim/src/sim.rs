@@ -169,6 +169,45 @@ pub(crate) fn dopri_segment<const N: usize, F: System<f64, SVector<f64, N>>>(
     Ok((solver, st.accepted_steps))
 }
 
+/// Where one segment of `n` samples of `dt_s` ends and how it starts (shared by the 1-DOF
+/// integrator and the 3-DOF arm's).
+pub(crate) struct SegmentPlan {
+    /// `n dt_s`.
+    pub duration_s: f64,
+    /// One sample: sparse output, integrated exactly to its end.
+    pub single: bool,
+    /// End of the integration.
+    pub x_end: f64,
+    /// First step (0: let Dopri5 pick it).
+    pub h0: f64,
+}
+
+impl SegmentPlan {
+    /// `h_s`: the step size kept from the previous segment (<= 0: none).
+    pub fn new(n: usize, dt_s: f64, h_s: f64) -> Self {
+        let duration_s = n as f64 * dt_s;
+        // ode_solvers' dense output adds x_end as soon as the next pending output time is
+        // within 1e-9 of it, even after a step that has not reached x_end (then it
+        // extrapolates). Ending the segment a hair after the last sample time keeps every
+        // output an interpolation inside an accepted step.
+        // A single sample needs no dense output: integrate exactly to its end (sparse output,
+        // the last point is the end of the last accepted step).
+        let single = n == 1;
+        let x_end = if single {
+            duration_s
+        } else {
+            duration_s + (1e-6 * dt_s).max(4e-9)
+        };
+        let h0 = if h_s > 0.0 { h_s.min(duration_s) } else { 0.0 };
+        SegmentPlan {
+            duration_s,
+            single,
+            x_end,
+            h0,
+        }
+    }
+}
+
 fn valid_inputs(u: &ValveInputs) -> bool {
     [u.u_in1, u.u_ex1, u.u_in2, u.u_ex2]
         .iter()
@@ -256,24 +295,12 @@ impl<'a> Integrator<'a> {
         if n == 0 {
             return Ok(());
         }
-        let duration_s = n as f64 * dt_s;
-        // ode_solvers' dense output adds x_end as soon as the next pending output time is
-        // within 1e-9 of it, even after a step that has not reached x_end (then it
-        // extrapolates). Ending the segment a hair after the last sample time keeps every
-        // output an interpolation inside an accepted step.
-        // A single sample needs no dense output: integrate exactly to its end (sparse output,
-        // the last point is the end of the last accepted step).
-        let single = n == 1;
-        let x_end = if single {
-            duration_s
-        } else {
-            duration_s + (1e-6 * dt_s).max(4e-9)
-        };
-        let h0 = if self.h_s > 0.0 {
-            self.h_s.min(duration_s)
-        } else {
-            0.0 // let Dopri5 pick the first step
-        };
+        let SegmentPlan {
+            duration_s,
+            single,
+            x_end,
+            h0,
+        } = SegmentPlan::new(n, dt_s, self.h_s);
         if single
             && self.single_step_path
             && !self.plant.has_supply_state()

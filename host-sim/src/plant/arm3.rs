@@ -1015,20 +1015,12 @@ impl<'a> Arm3Integrator<'a> {
         if n == 0 {
             return Ok(());
         }
-        let duration_s = n as f64 * dt_s;
-        // As in crate::sim: end a hair after the last sample so that every dense output is an
-        // interpolation inside an accepted step; a single sample integrates exactly to its end.
-        let single = n == 1;
-        let x_end = if single {
-            duration_s
-        } else {
-            duration_s + (1e-6 * dt_s).max(4e-9)
-        };
-        let h0 = if self.h_s > 0.0 {
-            self.h_s.min(duration_s)
-        } else {
-            0.0
-        };
+        let crate::sim::SegmentPlan {
+            duration_s,
+            single,
+            x_end,
+            h0,
+        } = crate::sim::SegmentPlan::new(n, dt_s, self.h_s);
         let (solver, accepted) = crate::sim::dopri_segment(
             Rhs {
                 arm: self.arm,
