@@ -180,14 +180,7 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
             );
         }
     }
-    let opts = SolverOptions {
-        rtol: a.rtol,
-        atol: a.atol,
-        ..SolverOptions::default()
-    };
-    if !(opts.rtol > 0.0 && opts.atol > 0.0) {
-        bail!("--rtol and --atol must be > 0");
-    }
+    let opts = a.solver_options()?;
     let dt = rec.sample_period_s();
     let bar = ProgressBar::with_draw_target(Some(rec.len() as u64), ProgressDrawTarget::stderr());
     bar.set_style(
@@ -202,20 +195,7 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
     bar.finish_and_clear();
 
     let mut out = Recording {
-        metadata: vec![
-            ("plant".into(), plant_path.display().to_string()),
-            ("inputs".into(), inputs_path.display().to_string()),
-            ("sample_period_s".into(), format!("{dt}")),
-            (
-                "source".into(),
-                format!(
-                    "host-sim {} simulate, ode_solvers Dopri5 rtol={} atol={}",
-                    env!("CARGO_PKG_VERSION"),
-                    opts.rtol,
-                    opts.atol
-                ),
-            ),
-        ],
+        metadata: simulate_metadata(plant_path, inputs_path, dt, &opts, "simulate"),
         t_s: rec.t_s.clone(),
         inputs: rec.inputs.clone(),
         ..Default::default()
@@ -240,6 +220,45 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+impl SimulateArgs {
+    /// The solver tolerances of `--rtol` / `--atol`, both > 0.
+    fn solver_options(&self) -> Result<SolverOptions> {
+        let opts = SolverOptions {
+            rtol: self.rtol,
+            atol: self.atol,
+            ..SolverOptions::default()
+        };
+        if !(opts.rtol > 0.0 && opts.atol > 0.0) {
+            bail!("--rtol and --atol must be > 0");
+        }
+        Ok(opts)
+    }
+}
+
+/// Metadata of a recording written by `simulate`: plant, inputs, sample period and source.
+fn simulate_metadata(
+    plant: &Path,
+    inputs: &Path,
+    dt_s: f64,
+    opts: &SolverOptions,
+    what: &str,
+) -> Vec<(String, String)> {
+    vec![
+        ("plant".into(), plant.display().to_string()),
+        ("inputs".into(), inputs.display().to_string()),
+        ("sample_period_s".into(), format!("{dt_s}")),
+        (
+            "source".into(),
+            format!(
+                "host-sim {} {what}, ode_solvers Dopri5 rtol={} atol={}",
+                env!("CARGO_PKG_VERSION"),
+                opts.rtol,
+                opts.atol
+            ),
+        ),
+    ]
+}
+
 /// `simulate` on a 3-DOF arm plant file (`kind = "arm3"`): replays a 3-joint recording
 /// (columns with `_j1`..`_j3` suffixes, `host_sim::arm3_io`).
 fn run_simulate_arm3(a: &SimulateArgs, inputs_path: &Path) -> Result<ExitCode> {
@@ -247,14 +266,7 @@ fn run_simulate_arm3(a: &SimulateArgs, inputs_path: &Path) -> Result<ExitCode> {
     use host_sim::plant::arm3::{simulate_arm3, Arm3};
     let arm = Arm3::load(&a.plant)?;
     let rec = Arm3Recording::read(inputs_path)?;
-    let opts = SolverOptions {
-        rtol: a.rtol,
-        atol: a.atol,
-        ..SolverOptions::default()
-    };
-    if !(opts.rtol > 0.0 && opts.atol > 0.0) {
-        bail!("--rtol and --atol must be > 0");
-    }
+    let opts = a.solver_options()?;
     let dt = rec.sample_period_s();
     let bar = ProgressBar::with_draw_target(Some(rec.len() as u64), ProgressDrawTarget::stderr());
     bar.set_style(
@@ -268,20 +280,7 @@ fn run_simulate_arm3(a: &SimulateArgs, inputs_path: &Path) -> Result<ExitCode> {
         .with_context(|| format!("{}: simulation failed", inputs_path.display()))?;
     bar.finish_and_clear();
     let mut out = Arm3Recording {
-        metadata: vec![
-            ("plant".into(), a.plant.display().to_string()),
-            ("inputs".into(), inputs_path.display().to_string()),
-            ("sample_period_s".into(), format!("{dt}")),
-            (
-                "source".into(),
-                format!(
-                    "host-sim {} simulate (arm3), ode_solvers Dopri5 rtol={} atol={}",
-                    env!("CARGO_PKG_VERSION"),
-                    opts.rtol,
-                    opts.atol
-                ),
-            ),
-        ],
+        metadata: simulate_metadata(&a.plant, inputs_path, dt, &opts, "simulate (arm3)"),
         t_s: rec.t_s.clone(),
         inputs: rec.inputs.clone(),
         ..Default::default()
