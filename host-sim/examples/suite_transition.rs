@@ -27,11 +27,7 @@ fn with_transition(scenarios: &[Scenario], t_s: f64) -> Vec<Scenario> {
         .iter()
         .cloned()
         .map(|mut s| {
-            match &mut s.setpoint {
-                SetpointProfile::Step { transition_s, .. }
-                | SetpointProfile::Random { transition_s, .. } => *transition_s = t_s,
-                _ => {}
-            }
+            s.set_transition_s(t_s);
             s
         })
         .collect()

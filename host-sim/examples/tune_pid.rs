@@ -41,7 +41,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use host_sim::closed_loop::{Scenario, SetpointProfile};
+use host_sim::closed_loop::Scenario;
 use host_sim::control_compare::{
     config_for, control_tuned_path, nelder_mead, reference_plant_path, suite_scenarios,
     tuning_cost, CascadeToml, ControlTuning, DpPidToml, GAIN_MARGIN,
@@ -50,15 +50,12 @@ use host_sim::Plant;
 use pam_firmware::pid::DpPidGains;
 use pam_firmware::tick::{ControlLaw, ControllerConfig};
 
-/// Cut-off of the set-point differentiators [Hz] of every law tuned (`--setpoint-cutoff-hz`).
-static SETPOINT_CUTOFF_HZ: AtomicUsize = AtomicUsize::new(150);
-
 const KP_GRID: [f64; 7] = [3e4, 1e5, 2e5, 5e5, 1e6, 2e6, 5e6];
 const KD_GRID: [f64; 5] = [1e3, 3e3, 1e4, 3e4, 1e5];
 const KI_GRID: [f64; 7] = [3e4, 1e5, 1e6, 3e6, 1e7, 3e7, 1e8];
 
-fn base(ki_on: bool) -> DpPidGains {
-    let cutoff_hz = SETPOINT_CUTOFF_HZ.load(Ordering::Relaxed) as f32;
+/// The fixed part of every PD / PID tried; `cutoff_hz`: the set-point differentiators.
+fn base(ki_on: bool, cutoff_hz: f32) -> DpPidGains {
     DpPidGains {
         kp_pa_per_rad: 0.0,
         ki_pa_per_rad_s: 0.0,
@@ -71,13 +68,13 @@ fn base(ki_on: bool) -> DpPidGains {
     }
 }
 
-fn gains(ki_on: bool, w: f32, kp: f64, kd: f64, ki: f64) -> DpPidGains {
+fn gains(ki_on: bool, cutoff_hz: f32, w: f32, kp: f64, kd: f64, ki: f64) -> DpPidGains {
     DpPidGains {
         kp_pa_per_rad: kp as f32,
         kd_pa_s_per_rad: kd as f32,
         ki_pa_per_rad_s: if ki_on { ki as f32 } else { 0.0 },
         setpoint_rate_weight: w,
-        ..base(ki_on)
+        ..base(ki_on, cutoff_hz)
     }
 }
 
@@ -85,6 +82,8 @@ struct Ctx {
     plant: Plant,
     scenarios: Vec<Scenario>,
     runs: AtomicUsize,
+    /// Cut-off of the set-point differentiators of every law tuned [Hz].
+    cutoff_hz: f32,
 }
 
 impl Ctx {
@@ -192,10 +191,10 @@ fn tune(
             for kd in KD_GRID {
                 if ki_on {
                     for ki in KI_GRID {
-                        grid.push(gains(true, w, kp, kd, ki));
+                        grid.push(gains(true, ctx.cutoff_hz, w, kp, kd, ki));
                     }
                 } else {
-                    grid.push(gains(false, w, kp, kd, 0.0));
+                    grid.push(gains(false, ctx.cutoff_hz, w, kp, kd, 0.0));
                 }
             }
         }
@@ -461,6 +460,8 @@ fn main() -> Result<()> {
     let mut threads = 2usize;
     let mut cascade_starts: Vec<(f32, f32, f32, Option<f32>)> = Vec::new();
     let mut transition_s: Option<f64> = None;
+    // Cut-off of the set-point differentiators of every law tuned [Hz].
+    let mut cutoff_hz = 150.0f32;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -473,13 +474,13 @@ fn main() -> Result<()> {
                     .parse()
                     .context("--threads N")?
             }
-            "--setpoint-cutoff-hz" => SETPOINT_CUTOFF_HZ.store(
-                args.next()
-                    .context("--setpoint-cutoff-hz N")?
+            "--setpoint-cutoff-hz" => {
+                cutoff_hz = args
+                    .next()
+                    .context("--setpoint-cutoff-hz HZ")?
                     .parse()
-                    .context("--setpoint-cutoff-hz N (integer Hz)")?,
-                Ordering::Relaxed,
-            ),
+                    .context("--setpoint-cutoff-hz HZ")?
+            }
             "--transition-s" => {
                 transition_s = Some(
                     args.next()
@@ -513,11 +514,7 @@ fn main() -> Result<()> {
     if let Some(t) = transition_s {
         // A sweep over the suite's move duration (scripts/suite-transition-sweep.sh).
         for s in &mut scenarios {
-            match &mut s.setpoint {
-                SetpointProfile::Step { transition_s, .. }
-                | SetpointProfile::Random { transition_s, .. } => *transition_s = t,
-                _ => {}
-            }
+            s.set_transition_s(t);
         }
         eprintln!("suite with every set-point move lasting {t} s");
     }
@@ -525,8 +522,8 @@ fn main() -> Result<()> {
         plant: Plant::load(&plant_path)?,
         scenarios,
         runs: AtomicUsize::new(0),
+        cutoff_hz,
     };
-    let cutoff_hz = SETPOINT_CUTOFF_HZ.load(Ordering::Relaxed) as f32;
     // The gains stored in the output file (if it exists and loads) are one more start point
     // of every search.
     let stored = match ControlTuning::load(&out) {

@@ -353,6 +353,16 @@ pub enum ClosedLoopError {
 }
 
 impl Scenario {
+    /// Sets the minimum-jerk move duration of a `step` or `random` set-point (other
+    /// profiles have none and are left alone).
+    pub fn set_transition_s(&mut self, t_s: f64) {
+        match &mut self.setpoint {
+            SetpointProfile::Step { transition_s, .. }
+            | SetpointProfile::Random { transition_s, .. } => *transition_s = t_s,
+            _ => {}
+        }
+    }
+
     /// Reads and validates a scenario TOML file.
     pub fn load(path: impl AsRef<Path>) -> Result<Self, ClosedLoopError> {
         let path = path.as_ref();
