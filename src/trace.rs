@@ -201,3 +201,48 @@ mod tests {
         assert_eq!(recs[499].hash, r.hash());
     }
 }
+
+/// The fixed-point path (src/fixed_point.rs) over the trace, as the FPU-less image runs it:
+/// for every row with both pressures and the angle, the fixed force law on both muscles
+/// (force bits and flags) and the fixed torque model (forward at half the pressure
+/// difference, then inverted), FNV-1a hashed. Returns (rows evaluated, hash). The Cortex-M0
+/// image (`src/bin/qemu_m0.rs`) prints it; `tests/qemu_trace.rs` compares it with this host
+/// run bit for bit.
+pub fn fixed_path_digest() -> (u32, u32) {
+    use crate::constants::{FIXED_FORCE_LAW, FIXED_TORQUE_MODEL};
+    use crate::fixed_point::{pressure_pa_from_f32, q16_from_f32, PressurePa, VelocityRadS};
+    let p = wiring::pressure_scaling();
+    let g = crate::geometry::JointGeometry::REFERENCE;
+    let (mut n, mut h) = (0u32, FNV_OFFSET);
+    for row in SENSOR_TRACE.iter() {
+        let f = row.frame(&p);
+        let (Some(p1), Some(p2), Some(a)) = (f.p1_gauge_pa, f.p2_gauge_pa, f.angle_rad) else {
+            continue;
+        };
+        let (e1, e2) = g.stretches(a);
+        let (Some(p1), Some(p2), Some(e1), Some(e2), Some(aq)) = (
+            pressure_pa_from_f32(p1),
+            pressure_pa_from_f32(p2),
+            q16_from_f32(e1),
+            q16_from_f32(e2),
+            q16_from_f32(a),
+        ) else {
+            continue;
+        };
+        for (pp, e) in [(p1, e1), (p2, e2)] {
+            let r = FIXED_FORCE_LAW.force(pp, e);
+            h = fnv1a(h, r.force_n.to_bits() as u32);
+            h = fnv1a(h, r.flags.0 as u32);
+        }
+        let dp = PressurePa::from_bits((p2.to_bits() - p1.to_bits()) / 2);
+        let t = FIXED_TORQUE_MODEL.torque_nm(aq, VelocityRadS::ZERO, dp);
+        let act = FIXED_TORQUE_MODEL.activation(t, aq, VelocityRadS::ZERO);
+        h = fnv1a(h, t.to_bits() as u32);
+        h = fnv1a(
+            h,
+            act.dp_pa.to_bits() as u32 ^ ((act.saturated as u32) << 31),
+        );
+        n += 1;
+    }
+    (n, h)
+}

@@ -117,6 +117,51 @@ fn qemu_run_matches_host_run_bit_for_bit() {
     );
 }
 
+/// The Cortex-M0 image (no FPU, QEMU `microbit`) runs the fixed-point path over the trace and
+/// prints its digest; the host run of the same function must give the same bits.
+#[test]
+fn qemu_m0_fixed_path_matches_host_bit_for_bit() {
+    let (rows, hash) = pam_firmware::trace::fixed_path_digest();
+    assert!(rows > 100, "only {rows} trace rows reach the fixed path");
+    if !qemu_available() {
+        return;
+    }
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let out = Command::new(cargo)
+        .args([
+            "run",
+            "-p",
+            "pam-firmware",
+            "--bin",
+            "qemu_m0",
+            "--features",
+            "pam-firmware/firmware",
+            "--release",
+            "--target",
+            "thumbv6m-none-eabi",
+        ])
+        .current_dir(root)
+        .env("DEFMT_PRINT_ARGS", "--log-format {s}")
+        .env("QEMU_TIMEOUT_S", "60")
+        .output()
+        .expect("cannot start cargo run --bin qemu_m0");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "qemu_m0 failed ({}):\n{}\n{stdout}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let line = stdout
+        .lines()
+        .find(|l| l.contains("fixed path rows="))
+        .unwrap_or_else(|| panic!("no `fixed path` line:\n{stdout}"));
+    let want = format!("fixed path rows={rows} digest={hash:08x}");
+    assert!(line.contains(&want), "M0: `{line}`, host: `{want}`");
+    eprintln!("qemu_m0: fixed path over {rows} rows identical, digest {hash:08x}");
+}
+
 #[test]
 fn qemu_panic_and_hardfault_exit_with_status_1() {
     if !qemu_available() {

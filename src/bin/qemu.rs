@@ -86,7 +86,9 @@ fn stack_used_bytes() -> u32 {
 #[inline(always)]
 fn measure<R>(f: impl FnOnce() -> R) -> (u32, R) {
     let a = SYST::get_current();
-    let r = f();
+    // black_box: the result must exist before the second read (a pure computation could
+    // otherwise be scheduled after it and not be measured).
+    let r = black_box(f());
     let b = SYST::get_current();
     (a.wrapping_sub(b) & 0x00FF_FFFF, r)
 }

@@ -16,8 +16,6 @@ pub const Q32: f64 = 4_294_967_296.0;
 pub const Q16: f64 = 65_536.0;
 /// 2^48: scale of the Q48 (I16F48) format.
 pub const Q48: f64 = 281_474_976_710_656.0;
-/// Knots of the exp(e - 0.7) table: 8 equal intervals over the stretch domain.
-pub const EXP_KNOTS: usize = 9;
 /// The offset of the exponential term of eq. 6.
 pub const EXP_OFFSET: f64 = 0.7;
 /// Upper limit of any muscle pressure set-point \[Pa\] (same value as
@@ -64,11 +62,71 @@ pub fn sat_i32(x: i64) -> i32 {
     }
 }
 
+// ---------------------------------------------------------------------------------------------
+// Force law (eq. 6) for a 32-bit core without FPU or divider.
+//
+// Rewritten so that the large identified constants cancel here, in f64, and not at run time:
+//
+//   F(P, e) = k(e) + phi (A e phi + M(e)) / (e^2 + G e phi)
+//
+// with phi = p_gauge_pa / 2^20 (so P[MPa] = lambda phi, lambda = 1.048576), and
+//   k(e) = F(0, e)          = c9 + c4/c8 + c10 exp(e - 0.7) + (c2/c8) e + (c6/c8) / e
+//   A    = lambda^2 c1 / c8
+//   M(e) = lambda (m2 e^2 + m1 e + m0) / c8^2,  m2 = -c7 c2, m1 = c3 c8 - c7 c4, m0 = c5 c8 - c7 c6
+//   G    = lambda c7 / c8
+// (F - k(e) = P (c1 c8 e P + m(e)) / (c8 e (c7 P + c8 e)), exact algebra.) k(e) is about
+// F(0, e) (tens of newton) where the terms of eq. 6 are ~5e4 N each; every run-time quantity is
+// a few thousand at most, so 32-bit integers with 10 fractional bits carry it.
+//
+// The stretch domain is cut into segments of 2^SEG_SHIFT Q16 LSB (1/32); inside a segment with
+// centre c, x = e_q16 - c_q16 in [-1024, 1023] and t = x / 1024. Per segment, k is a cubic
+// Taylor polynomial in t (truncation < 5e-3 N for e >= 0.7), M is exact (quadratic), A e,
+// G e and e^2 are exact (linear / quadratic). The one division is a reciprocal: a
+// piecewise-linear seed (SEED_MAX chords of 1/d over the denominator's proven range) and one
+// Newton step.
+// ---------------------------------------------------------------------------------------------
+
+/// Segment width of the stretch domain: 2^SEG_SHIFT Q16 LSB (1/32 in L/L0).
+pub const SEG_SHIFT: u32 = 11;
+/// Most segments: the stretch domain may be up to SEG_MAX / 32 = 0.5 wide (L/L0 0.7..1.1 is 0.4).
+pub const SEG_MAX: usize = 16;
+/// Chords of the reciprocal's seed.
+pub const SEED_MAX: usize = 32;
+/// Force-like quantities (k, M, numerator, F) in Q10 newton (resolution 1e-3 N).
+pub const Q_F: i32 = 10;
+/// A e in Q16.
+pub const Q_AE: i32 = 16;
+/// Denominator, e^2 and G e in Q24.
+pub const Q_D: i32 = 24;
+/// Seed of the reciprocal in Q14.
+pub const Q_R0: i32 = 14;
+/// Largest gauge pressure the fixed law accepts as its domain bound \[Pa\]: phi16 =
+/// (p + 8) >> 4 must fit 16 bits unsigned.
+pub const P_MAX_FIXED_PA: f64 = 1_048_560.0;
+/// MPa per unit of phi (phi = p / 2^20 Pa).
+pub const LAMBDA_MPA: f64 = 1.048576;
+
+/// Per segment: k (Q10, in t: k0..k3), M (Q10: m0, m1), A e at the centre (Q16), G e at the
+/// centre (Q24), e^2 at the centre and its t coefficient (Q24).
+pub const SEG_K0: usize = 0;
+/// See [`SEG_K0`].
+pub const SEG_M0: usize = 4;
+/// See [`SEG_K0`].
+pub const SEG_AE0: usize = 6;
+/// See [`SEG_K0`].
+pub const SEG_GE0: usize = 7;
+/// See [`SEG_K0`].
+pub const SEG_E20: usize = 8;
+/// Words per segment.
+pub const SEG_WORDS: usize = 10;
+
 /// Bit patterns of the fixed-point force law.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ForceLawBits {
-    /// c1..c10 in Q32 (I32F32).
-    pub c_q32: [i64; 10],
+    /// False when the parameters do not fit the formats (or c8 = 0, a domain reaching e <= 0,
+    /// a denominator that is not bounded away from 0, ...): every evaluation is then flagged
+    /// singular. True for any law whose intermediates provably fit (checked below).
+    pub valid: bool,
     /// Highest gauge pressure \[Pa\], rounded down (I32F0).
     pub p_gauge_max_pa: i32,
     /// Lowest stretch in Q16 (I16F16), rounded up: the fixed domain lies inside the f32 one,
@@ -76,15 +134,46 @@ pub struct ForceLawBits {
     pub stretch_min_q16: i32,
     /// Highest stretch in Q16 (I16F16), rounded down (see `stretch_min_q16`).
     pub stretch_max_q16: i32,
-    /// Stretch at the exp-table knots in Q32 (exact: derived from the Q16 bounds).
-    pub knot_q32: [i64; EXP_KNOTS],
-    /// c10 * exp(knot - 0.7) in Q32.
-    pub c10_exp_q32: [i64; EXP_KNOTS],
-    /// 1 / knot spacing in Q32 (0 for an empty domain).
-    pub inv_knot_step_q32: i64,
+    /// Per-segment words (see [`SEG_K0`] ... [`SEG_WORDS`]); segment i is centred on
+    /// `stretch_min_q16 + i 2^SEG_SHIFT + 2^(SEG_SHIFT-1)`.
+    pub seg: [[i32; SEG_WORDS]; SEG_MAX],
+    /// t^2 coefficient of M (Q10), the same in every segment.
+    pub m2: i32,
+    /// t coefficient of A e (Q16).
+    pub ae1: i32,
+    /// t coefficient of G e (Q24).
+    pub ge1: i32,
+    /// Lower bound of the denominator over the whole domain (Q24), start of the seed table.
+    pub d_lo_q24: i32,
+    /// log2 of the seed chords' width (Q24 LSB), >= 15.
+    pub seed_shift: i32,
+    /// Per chord: 1/d at its start (Q14) and the drop of 1/d over the chord (Q14).
+    pub seed: [[i32; 2]; SEED_MAX],
 }
 
-/// Pre-scales the force-law constants (c1..c10 with P in MPa, e = L/L0).
+/// Rounds to i32 if |x| < `lim` (and finite); `None` otherwise.
+fn fit(x: f64, lim: f64) -> Option<i32> {
+    if x.is_finite() && x.abs() < lim && lim <= 2_147_483_647.0 {
+        Some(round_i64(x) as i32)
+    } else {
+        None
+    }
+}
+
+const B21: f64 = 2_097_152.0;
+const B30: f64 = 1_073_741_824.0;
+const B31: f64 = 2_147_483_647.0;
+
+fn abs(x: f64) -> f64 {
+    if x < 0.0 {
+        -x
+    } else {
+        x
+    }
+}
+
+/// Pre-scales the force-law constants (c1..c10 with P in MPa, e = L/L0). Never panics: any
+/// parameter set gives bits, flagged `valid = false` when they do not fit.
 pub fn force_law_bits(
     c: [f64; 10],
     p_gauge_max_pa: f64,
@@ -92,41 +181,175 @@ pub fn force_law_bits(
     stretch_max: f64,
     exp: fn(f64) -> f64,
 ) -> ForceLawBits {
-    let mut c_q32 = [0i64; 10];
-    let mut i = 0;
-    while i < 10 {
-        c_q32[i] = round_i64(c[i] * Q32);
-        i += 1;
-    }
     let smin = sat_i32(ceil_i64(stretch_min * Q16));
     let smax = sat_i32(floor_i64(stretch_max * Q16));
     let smax = if smax < smin { smin } else { smax };
-    let min_q32 = (smin as i64) << 16;
-    let span_q32 = ((smax as i64) - (smin as i64)) << 16;
-    let step_q32 = span_q32 / (EXP_KNOTS as i64 - 1);
-    let inv_knot_step_q32 = if step_q32 > 0 {
-        round_i64(Q32 * Q32 / step_q32 as f64)
-    } else {
-        0
-    };
-    let mut knot_q32 = [0i64; EXP_KNOTS];
-    let mut c10_exp_q32 = [0i64; EXP_KNOTS];
-    let mut k = 0;
-    while k < EXP_KNOTS {
-        let knot = min_q32 + (k as i64) * step_q32;
-        knot_q32[k] = knot;
-        c10_exp_q32[k] = round_i64(c[9] * exp(knot as f64 / Q32 - EXP_OFFSET) * Q32);
-        k += 1;
-    }
-    ForceLawBits {
-        c_q32,
+    let mut b = ForceLawBits {
+        valid: false,
         p_gauge_max_pa: sat_i32(floor_i64(p_gauge_max_pa)),
         stretch_min_q16: smin,
         stretch_max_q16: smax,
-        knot_q32,
-        c10_exp_q32,
-        inv_knot_step_q32,
+        seg: [[0; SEG_WORDS]; SEG_MAX],
+        m2: 0,
+        ae1: 0,
+        ge1: 0,
+        d_lo_q24: 1 << 24,
+        seed_shift: 15,
+        seed: [[0; 2]; SEED_MAX],
+    };
+    if let Some(ok) = fill_force_law(&mut b, c, exp) {
+        b.valid = ok;
     }
+    if !b.valid {
+        // Keep only the domain (flags still work); the tables are meaningless.
+        b.seg = [[0; SEG_WORDS]; SEG_MAX];
+        b.seed = [[0; 2]; SEED_MAX];
+        b.m2 = 0;
+        b.ae1 = 0;
+        b.ge1 = 0;
+        b.d_lo_q24 = 1 << 24;
+        b.seed_shift = 15;
+    }
+    b
+}
+
+/// Fills the tables; `Some(true)` when every bound holds, `None`/`Some(false)` otherwise.
+fn fill_force_law(b: &mut ForceLawBits, c: [f64; 10], exp: fn(f64) -> f64) -> Option<bool> {
+    let mut i = 0;
+    while i < 10 {
+        if !c[i].is_finite() {
+            return None;
+        }
+        i += 1;
+    }
+    let pmax = b.p_gauge_max_pa as f64;
+    if !(pmax > 0.0 && pmax <= P_MAX_FIXED_PA) || c[7] == 0.0 {
+        return None;
+    }
+    let (smin, smax) = (b.stretch_min_q16, b.stretch_max_q16);
+    // e > 0 over the whole domain, at most SEG_MAX segments.
+    if smin <= 0 || smax <= smin {
+        return None;
+    }
+    let n_seg = (((smax - smin) >> SEG_SHIFT) + 1) as usize;
+    if n_seg > SEG_MAX {
+        return None;
+    }
+    let c8 = c[7];
+    let lam = LAMBDA_MPA;
+    let a = lam * lam * c[0] / c8;
+    let g = lam * c[6] / c8;
+    let m2 = lam * (-c[6] * c[1]) / (c8 * c8);
+    let m1 = lam * (c[2] * c8 - c[6] * c[3]) / (c8 * c8);
+    let m0 = lam * (c[4] * c8 - c[6] * c[5]) / (c8 * c8);
+    let k_const = c[8] + c[3] / c8;
+    let (k_lin, k_inv) = (c[1] / c8, c[5] / c8);
+    let half = (1i32 << (SEG_SHIFT - 1)) as f64;
+    let h = half / Q16; // t = 1 <-> xi = h
+    let qf = (1i64 << Q_F) as f64;
+    let qae = (1i64 << Q_AE) as f64;
+    let qd = (1i64 << Q_D) as f64;
+    b.m2 = fit(m2 * h * h * qf, B21)?;
+    b.ae1 = fit(a * h * qae, B21)?;
+    b.ge1 = fit(g * h * qd, B21)?;
+    let e2_2 = (h * h * qd) as i64; // t^2 coefficient of e^2: 2^12, exact
+    let phi_max = ((b.p_gauge_max_pa + 8) >> 4) as f64; // phi16 = (p + 8) >> 4 <= 65535
+    let (mut d_lo, mut d_hi, mut bn_max, mut bk_max) = (f64::MAX, 0.0f64, 0.0f64, 0.0f64);
+    let mut s = 0;
+    while s < n_seg {
+        let cq = smin + ((s as i32) << SEG_SHIFT) + (1 << (SEG_SHIFT - 1));
+        let ce = cq as f64 / Q16;
+        let ex = c[9] * exp(ce - EXP_OFFSET);
+        let k0 = k_const + ex + k_lin * ce + k_inv / ce;
+        let k1 = ex + k_lin - k_inv / (ce * ce);
+        let k2 = ex / 2.0 + k_inv / (ce * ce * ce);
+        let k3 = ex / 6.0 - k_inv / (ce * ce * ce * ce);
+        let w = &mut b.seg[s];
+        w[SEG_K0 + 3] = fit(k3 * h * h * h * qf, B21)?;
+        w[SEG_K0 + 2] = fit(k2 * h * h * qf, B21)?;
+        w[SEG_K0 + 1] = fit(k1 * h * qf, B21)?;
+        w[SEG_K0] = fit(k0 * qf, B30)?;
+        w[SEG_M0] = fit((m2 * ce * ce + m1 * ce + m0) * qf, B30)?;
+        w[SEG_M0 + 1] = fit((2.0 * m2 * ce + m1) * h * qf, B21)?;
+        w[SEG_AE0] = fit(a * ce * qae, B30)?;
+        w[SEG_GE0] = fit(g * ce * qd, B30)?;
+        w[SEG_E20] = fit(ce * ce * qd, B30)?;
+        w[SEG_E20 + 1] = fit(2.0 * ce * h * qd, B21)?;
+        // Bounds of every intermediate over |t| <= 1 (integer units, +1 per floor).
+        let f = |x: i32| abs(x as f64);
+        let bk2 = f(w[SEG_K0 + 2]) + f(w[SEG_K0 + 3]) + 1.0;
+        let bk1 = f(w[SEG_K0 + 1]) + bk2 + 1.0;
+        let bk0 = f(w[SEG_K0]) + bk1 + 1.0;
+        let bm1 = f(w[SEG_M0 + 1]) + f(b.m2) + 1.0;
+        let bm0 = f(w[SEG_M0]) + bm1 + 1.0;
+        let be1 = f(w[SEG_E20 + 1]) + e2_2 as f64 + 1.0;
+        if bk2 >= B21 || bk1 >= B21 || bm1 >= B21 || be1 >= B21 || bk0 >= B30 {
+            return Some(false);
+        }
+        let bae = f(w[SEG_AE0]) + f(b.ae1) + 1.0;
+        let inner = bae * phi_max / 4_194_304.0 + 1.0 + bm0; // Ae phi >> 22, + M
+        let bn = inner * phi_max / 65_536.0 + 1.0;
+        if inner >= B31 || bn >= B30 {
+            return Some(false);
+        }
+        let e2_lo = w[SEG_E20] as f64 - be1 - 1.0;
+        let e2_hi = w[SEG_E20] as f64 + be1 + 1.0;
+        let ge_lo = w[SEG_GE0] as f64 - f(b.ge1) - 1.0;
+        let ge_hi = w[SEG_GE0] as f64 + f(b.ge1) + 1.0;
+        let gphi_lo = if ge_lo < 0.0 {
+            ge_lo * phi_max / 65_536.0 - 1.0
+        } else {
+            -1.0
+        };
+        let gphi_hi = if ge_hi > 0.0 {
+            ge_hi * phi_max / 65_536.0 + 1.0
+        } else {
+            0.0
+        };
+        let lo = e2_lo + gphi_lo;
+        let hi = e2_hi + gphi_hi;
+        d_lo = if lo < d_lo { lo } else { d_lo };
+        d_hi = if hi > d_hi { hi } else { d_hi };
+        bn_max = if bn > bn_max { bn } else { bn_max };
+        bk_max = if bk0 > bk_max { bk0 } else { bk_max };
+        s += 1;
+    }
+    // Denominator in [1/3, 4) (Q24): the reciprocal stays below 3 (Q14 seed fits 16 bits,
+    // Q29 reciprocal fits 31 bits).
+    if !(d_lo >= qd / 3.0 && d_hi < 4.0 * qd) {
+        return Some(false);
+    }
+    let d_lo_i = floor_i64(d_lo);
+    let d_hi_i = ceil_i64(d_hi);
+    let mut shift = 15;
+    while ((d_hi_i - d_lo_i) >> shift) >= SEED_MAX as i64 {
+        shift += 1;
+    }
+    b.d_lo_q24 = d_lo_i as i32;
+    b.seed_shift = shift;
+    let width = (1i64 << shift) as f64;
+    let qr0 = (1i64 << Q_R0) as f64;
+    let mut j = 0;
+    while j < SEED_MAX {
+        let a0 = (d_lo_i as f64 + j as f64 * width) / qd;
+        let a1 = (d_lo_i as f64 + (j + 1) as f64 * width) / qd;
+        let r_a = round_i64(qr0 / a0);
+        let r_b = round_i64(qr0 / a1);
+        b.seed[j] = [r_a as i32, (r_a - r_b) as i32];
+        // Chord error of 1/d on [a0, a1] is (a1 - a0)^2 / (4 a0 a1); with the Q14 rounding it
+        // must stay below 2^-8 so that one Newton step leaves < 2^-16 (real law: < 1e-6).
+        let chord = (a1 - a0) * (a1 - a0) / (4.0 * a0 * a1) + 1.0 / qr0 * a1;
+        if chord >= 1.0 / 256.0 || r_a >= 65_536 || (r_a - r_b) >= 65_536 {
+            return Some(false);
+        }
+        j += 1;
+    }
+    // |q| <= |num| / d_lo (with the Newton residual), F = k + q must fit with margin.
+    let bq = bn_max * qd / d_lo * 1.01 + 4.0;
+    if bq + bk_max >= B30 {
+        return Some(false);
+    }
+    Some(true)
 }
 
 /// Bit patterns of the fixed-point torque model.
