@@ -161,20 +161,22 @@ fn main() {
         && env::var("CARGO_FEATURE_FIRMWARE").is_ok()
     {
         let dir = PathBuf::from(env::var("CARGO_MANIFEST_DIR").unwrap());
-        // memory.x: memory/stm32f4 (QEMU netduinoplus2 and the board); Cortex-M0 builds
-        // (thumbv6m, the FPU-less benchmark image under QEMU `microbit`) use memory/nrf51.
-        // Not in the crate root: the linker looks for INCLUDEd files in its working
-        // directory first, which would shadow the per-target choice.
+        // memory.x: the top-level one (STM32F405/F407: QEMU netduinoplus2 and the board) is
+        // the default; the linker finds it in its working directory (the workspace root) and
+        // through this search path. Cortex-M0 builds (thumbv6m, the FPU-less benchmark image
+        // under QEMU `microbit`) use memory/nrf51/memory.x: their linker
+        // (scripts/ld-nrf51.sh, .cargo/config.toml) runs in that directory, because an
+        // INCLUDEd file in the working directory would shadow any search path.
         let mem = if env::var("TARGET")
             .unwrap_or_default()
             .starts_with("thumbv6m")
         {
-            "memory/nrf51"
+            dir.join("memory/nrf51")
         } else {
-            "memory/stm32f4"
+            dir.clone()
         };
-        println!("cargo:rustc-link-search={}", dir.join(mem).display());
-        println!("cargo:rerun-if-changed={mem}/memory.x");
+        println!("cargo:rustc-link-search={}", mem.display());
+        println!("cargo:rerun-if-changed={}", mem.join("memory.x").display());
         println!("cargo:rustc-link-arg-bins=--nmagic");
         println!("cargo:rustc-link-arg-bins=-Tlink.x");
         if env::var("CARGO_FEATURE_DEFMT").is_ok() {

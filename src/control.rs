@@ -34,6 +34,55 @@ pub enum ControlError {
     ForceLawInvalid,
 }
 
+/// Which way the command downstream of a loop is stuck at a limit, in the loop's output
+/// direction (for the position and torque loops: joint torque). Anti-windup: an integrator
+/// does not integrate in a blocked direction (conditional integration on the command that
+/// is actually applied, not on the loop's own output).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Saturation {
+    /// The applied command is below the requested one: more cannot be delivered.
+    pub high: bool,
+    /// The applied command is above the requested one: less cannot be delivered.
+    pub low: bool,
+}
+
+impl Saturation {
+    /// Nothing saturated.
+    pub const NONE: Saturation = Saturation {
+        high: false,
+        low: false,
+    };
+
+    /// Either direction.
+    #[inline]
+    pub const fn union(self, o: Saturation) -> Saturation {
+        Saturation {
+            high: self.high || o.high,
+            low: self.low || o.low,
+        }
+    }
+
+    /// The same limits seen through a gain of sign `negative` (true: the directions swap).
+    #[inline]
+    pub const fn through(self, negative: bool) -> Saturation {
+        if negative {
+            Saturation {
+                high: self.low,
+                low: self.high,
+            }
+        } else {
+            self
+        }
+    }
+
+    /// True when an integrator increment `di` would push further into a saturated side.
+    #[inline]
+    pub fn blocks(self, di: f32) -> bool {
+        (self.high && di > 0.0) || (self.low && di < 0.0)
+    }
+}
+
 #[inline]
 pub(crate) fn finite(xs: &[f32]) -> bool {
     // Branch-free: `x * 0` is +-0 for every finite x and NaN for NaN and +-inf, so the sum is
@@ -142,11 +191,25 @@ impl PositionController {
         setpoint_rad: f32,
         dt_s: f32,
     ) -> Result<f32, ControlError> {
+        self.step_limited(meas, setpoint_rad, dt_s, Saturation::NONE)
+    }
+
+    /// [`Self::step`] with anti-windup from downstream: `downstream` says which way the
+    /// torque actually applied last tick fell short of the command (torque loop at its
+    /// pressure or activation limits, valves fully open); the integrator does not move in a
+    /// blocked direction. `Saturation::NONE` gives exactly [`Self::step`].
+    pub fn step_limited(
+        &mut self,
+        meas: JointState,
+        setpoint_rad: f32,
+        dt_s: f32,
+        downstream: Saturation,
+    ) -> Result<f32, ControlError> {
         if !finite(&[meas.angle_rad, meas.velocity_rad_s, setpoint_rad, dt_s]) || dt_s <= 0.0 {
             self.reset();
             return Err(ControlError::NonFiniteInput);
         }
-        self.step_finite(meas, setpoint_rad, dt_s)
+        self.step_finite(meas, setpoint_rad, dt_s, downstream)
     }
 
     /// [`Self::step`] without its input check, for a caller that has validated the inputs
@@ -157,6 +220,7 @@ impl PositionController {
         meas: JointState,
         setpoint_rad: f32,
         dt_s: f32,
+        downstream: Saturation,
     ) -> Result<f32, ControlError> {
         let g = &self.gains;
         let e = setpoint_rad - meas.angle_rad;
@@ -169,7 +233,9 @@ impl PositionController {
         // Conditional integration: do not integrate further into saturation. (Unsaturated
         // - the usual case - is decided by one comparison; NaN takes the full test.)
         let within = libm::fabsf(unsat) <= lim;
-        if within || !((saturated_high && di > 0.0) || (saturated_low && di < 0.0)) {
+        if (within || !((saturated_high && di > 0.0) || (saturated_low && di < 0.0)))
+            && !downstream.blocks(di)
+        {
             self.integral_nm = clampf(self.integral_nm + di, g.i_limit);
         }
         let out = clampf(pd + self.integral_nm, lim);
@@ -223,6 +289,10 @@ pub struct PressureSetpoints {
     pub torque_est_nm: f32,
     /// True when the inverse model saturated dp.
     pub saturated: bool,
+    /// Which way the applied torque falls short of the loop's command (dp at its limit or a
+    /// pressure set-point clamped), in joint-torque direction: the position loop's
+    /// anti-windup input for the next tick.
+    pub saturation: Saturation,
     /// Union of the force-law flags of both muscles (clamped inputs etc.).
     pub force_flags: ForceFlags,
 }
@@ -347,6 +417,7 @@ impl TorqueController {
             dt_s,
             dp_limit_pa,
             p_set_hi_pa,
+            Saturation::NONE,
         )
     }
 
@@ -364,6 +435,7 @@ impl TorqueController {
         dt_s: f32,
         dp_limit_pa: f32,
         p_set_hi_pa: f32,
+        downstream: Saturation,
     ) -> Result<PressureSetpoints, ControlError> {
         let (t_est, flags) = estimate;
         if flags.contains_any(ForceFlags::FATAL) {
@@ -380,11 +452,21 @@ impl TorqueController {
         let inverse = m.inverse_at_finite(meas.angle_rad, v, dp_limit_pa);
         let first =
             inverse.activation(torque_des_nm + clampf(g.kp * t_err + self.integral_nm, lim));
-        if !first.saturated {
-            self.integral_nm = clampf(self.integral_nm + g.ki * t_err * dt_s, lim);
+        // Anti-windup: conditional integration on the command that is actually applied (dp
+        // at its limit, a pressure set-point clamped, or the valves fully open last tick),
+        // in joint-torque direction: the sign of B r maps dp to torque.
+        let gain_negative = m.b_m2 * m.sprocket_radius_m < 0.0;
+        let sat_first = dp_saturation(first.dp_pa, first.saturated, m.p0_gauge_pa, p_set_hi_pa)
+            .through(gain_negative)
+            .union(downstream);
+        let di = g.ki * t_err * dt_s;
+        if !sat_first.blocks(di) {
+            self.integral_nm = clampf(self.integral_nm + di, lim);
         }
         let t_cmd = torque_des_nm + clampf(g.kp * t_err + self.integral_nm, lim);
         let act = inverse.activation(t_cmd);
+        let saturation = dp_saturation(act.dp_pa, act.saturated, m.p0_gauge_pa, p_set_hi_pa)
+            .through(gain_negative);
         // `clamp_pressure_setpoint_pa(m.pressures_gauge_pa(dp), p_set_max)` in one clamp per
         // muscle (the same value for every input: both map NaN and p <= 0 to +0, and the
         // bound is min(p_set_max, P_MUSCLE_MAX) <= the model's own bound).
@@ -402,8 +484,22 @@ impl TorqueController {
             dp_pa: act.dp_pa,
             torque_est_nm: t_est,
             saturated: act.saturated,
+            saturation,
             force_flags: flags,
         })
+    }
+}
+
+/// Which way the activation `dp` that is applied falls short of the requested one, in dp
+/// direction: `dp` clipped at its limit (`saturated`; dp = 0 saturated blocks both ways),
+/// or a set-point `p0 -+ dp` outside `[0, p_hi]` (then clamped by the torque loop).
+#[inline(always)]
+fn dp_saturation(dp_pa: f32, saturated: bool, p0_gauge_pa: f32, p_hi_pa: f32) -> Saturation {
+    let p1 = p0_gauge_pa - dp_pa;
+    let p2 = p0_gauge_pa + dp_pa;
+    Saturation {
+        high: (saturated && dp_pa >= 0.0) || p2 > p_hi_pa || p1 < 0.0,
+        low: (saturated && dp_pa <= 0.0) || p2 < 0.0 || p1 > p_hi_pa,
     }
 }
 
@@ -708,6 +804,127 @@ mod tests {
             )
             .unwrap();
         assert!((t + 0.6).abs() < 1e-6);
+    }
+
+    /// A saturated step, with and without anti-windup from downstream: the joint (inertia
+    /// 0.01 kg m^2, damping 0.05 N m s/rad) only receives +-0.8 N m (the torque the
+    /// pressures can give), far below the position loop's own 10 N m limit, so the loop's
+    /// conditional integration alone never sees saturation. Step 0 -> 1 rad, 4 s at 1 kHz.
+    /// Returns (overshoot [rad], largest integrator [N m], settling time to +-0.02 rad [s]).
+    fn saturated_step(anti_windup: bool) -> (f32, f32, f32) {
+        let mut c = pid();
+        let (j, b, t_sat, dt) = (0.01f32, 0.05f32, 0.8f32, 1e-3f32);
+        let (mut a, mut w) = (0.0f32, 0.0f32);
+        let mut sat = Saturation::NONE;
+        let (mut peak, mut i_max, mut settled_at) = (0.0f32, 0.0f32, 0.0f32);
+        for k in 0..4000 {
+            let meas = JointState {
+                angle_rad: a,
+                velocity_rad_s: w,
+            };
+            let down = if anti_windup { sat } else { Saturation::NONE };
+            let t_cmd = c.step_limited(meas, 1.0, dt, down).unwrap();
+            let t_applied = t_cmd.clamp(-t_sat, t_sat);
+            sat = Saturation {
+                high: t_cmd > t_applied,
+                low: t_cmd < t_applied,
+            };
+            w += (t_applied - b * w) / j * dt;
+            a += w * dt;
+            peak = peak.max(a);
+            i_max = i_max.max(c.integral_nm().abs());
+            if (a - 1.0).abs() > 0.02 {
+                settled_at = (k + 1) as f32 * dt;
+            }
+        }
+        (peak - 1.0, i_max, settled_at)
+    }
+
+    #[test]
+    fn anti_windup_from_downstream_saturation_cuts_the_overshoot_of_a_saturated_step() {
+        let (os_with, i_with, ts_with) = saturated_step(true);
+        let (os_without, i_without, ts_without) = saturated_step(false);
+        std::println!(
+            "saturated step 0 -> 1 rad: with anti-windup overshoot {os_with:.3} rad, \
+             |I| max {i_with:.2} N m, settled {ts_with:.3} s; without: overshoot \
+             {os_without:.3} rad, |I| max {i_without:.2} N m, settled {ts_without:.3} s"
+        );
+        // Without: the integrator winds up while the torque is saturated, and the
+        // joint overshoots by a lot; with: it stays small and so does the overshoot.
+        assert!(i_without > 1.0, "{i_without}");
+        assert!(i_with < 0.5 * i_without, "{i_with} vs {i_without}");
+        assert!(os_with < 0.5 * os_without, "{os_with} vs {os_without}");
+        assert!(ts_with < ts_without, "{ts_with} vs {ts_without}");
+        // Both reach the set-point in the end.
+        assert!(ts_with < 4.0 && ts_without < 4.0);
+    }
+
+    #[test]
+    fn downstream_saturation_blocks_only_its_own_direction() {
+        let meas = JointState {
+            angle_rad: 0.0,
+            velocity_rad_s: 0.0,
+        };
+        let high = Saturation {
+            high: true,
+            low: false,
+        };
+        // Positive error -> positive increment: blocked by `high`.
+        let mut c = pid();
+        c.step_limited(meas, 0.1, 0.01, high).unwrap();
+        assert_eq!(c.integral_nm(), 0.0);
+        // Negative error -> negative increment: integrates (drives out of saturation).
+        c.step_limited(meas, -0.1, 0.01, high).unwrap();
+        assert!(c.integral_nm() < 0.0);
+        // No downstream saturation: exactly `step`.
+        let (mut a, mut b) = (pid(), pid());
+        for k in 0..50 {
+            let sp = (k as f32 * 0.1).sin();
+            let x = a.step(meas, sp, 0.01).unwrap();
+            let y = b.step_limited(meas, sp, 0.01, Saturation::NONE).unwrap();
+            assert_eq!(x.to_bits(), y.to_bits());
+        }
+        assert_eq!(
+            high.through(true),
+            Saturation {
+                high: false,
+                low: true
+            }
+        );
+    }
+
+    /// The torque loop at its pressure ceiling: a set-point clamp (not the model's dp limit)
+    /// stops the integrator in the blocked direction and reports the saturation; a
+    /// reversed error integrates again.
+    #[test]
+    fn torque_loop_integrator_stops_at_the_pressure_ceiling() {
+        let mut t = torque_loop();
+        t.gains.p_set_max_gauge_pa = 320_000.0; // only 20 kPa above p0: dp is clipped there
+        let meas = TorqueMeasurement {
+            p1_gauge_pa: 300e3,
+            p2_gauge_pa: 300e3,
+            angle_rad: 0.0,
+            velocity_rad_s: 0.0,
+        };
+        // A large torque demand in either direction saturates a set-point at the ceiling.
+        for t_des in [5.0f32, -5.0] {
+            t.reset();
+            let mut i_prev = 0.0f32;
+            for _ in 0..200 {
+                let ps = t.step(meas, t_des, 1e-3).unwrap();
+                assert!(!ps.saturated, "dp itself stays inside its own limit");
+                assert!(ps.p1_gauge_pa.max(ps.p2_gauge_pa) <= 320_000.0);
+                let s = ps.saturation;
+                assert!(if t_des > 0.0 {
+                    s.high && !s.low
+                } else {
+                    s.low && !s.high
+                });
+                i_prev = t.integral_nm();
+            }
+            // The error is in the blocked direction all along: the integrator never moved.
+            assert_eq!(i_prev, 0.0, "{t_des}");
+        }
     }
 
     #[test]

@@ -16,7 +16,7 @@
 use crate::constants::{FORCE_LAW, TORQUE_MODEL};
 use crate::control::{
     torque_estimate_nm, JointState, PidGains, PositionController, PressureController,
-    PressureLoopGains, TorqueController, TorqueLoopGains, TorqueMeasurement,
+    PressureLoopGains, Saturation, TorqueController, TorqueLoopGains, TorqueMeasurement,
 };
 use crate::feedforward::{feedforward_torque_nm, FeedforwardGains, SetpointDerivatives};
 use crate::force_law::{ForceFlags, ForceLawParams};
@@ -30,6 +30,8 @@ use crate::torque_model::TorqueModelParams;
 use crate::P_MUSCLE_MAX_GAUGE_PA;
 
 pub use crate::safety::FaultCode;
+/// The valve command type lives with the valve drivers; re-exported for the tick's users.
+pub use crate::valves::ValveCommand;
 
 /// What the sensors delivered this tick. `None` = no new sample this tick (not ready /
 /// missing). Values may be NaN or out of range: the tick validates them.
@@ -50,18 +52,6 @@ pub struct SensorFrame {
 pub struct Setpoint {
     /// Desired joint angle [rad].
     pub angle_rad: f32,
-}
-
-/// Per-muscle valve command in [-1, 1]: > 0 inflate duty (inflate valve open that fraction
-/// of the time), < 0 exhaust duty, 0 both closed. Never inflate and exhaust one muscle at
-/// once.
-#[derive(Clone, Copy, Debug, PartialEq, Default)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct ValveCommand {
-    /// Muscle 1 command.
-    pub muscle1: f32,
-    /// Muscle 2 command.
-    pub muscle2: f32,
 }
 
 /// Everything one tick produced. All floats are finite.
@@ -349,6 +339,14 @@ pub struct ControlTick {
     setpoint_derivatives: SetpointDerivatives,
     pressure1: PressureController,
     pressure2: PressureController,
+    /// Anti-windup state: which way the torque loop's applied command fell short last tick
+    /// (joint-torque direction).
+    torque_saturation: Saturation,
+    /// Anti-windup state: which way the valves were fully open last tick, as a joint-torque
+    /// direction (see [`valve_saturation`]).
+    valve_saturation: Saturation,
+    /// `B r < 0` for the configured torque model (maps dp to torque direction).
+    torque_gain_negative: bool,
     safety: SafetyMonitor,
     /// The fault condition seen in the last tick (None = all conditions clear).
     condition: Option<FaultCode>,
@@ -481,6 +479,9 @@ impl ControlTick {
             setpoint_derivatives: SetpointDerivatives::new(),
             pressure1: PressureController::new(cfg.pressure),
             pressure2: PressureController::new(cfg.pressure),
+            torque_saturation: Saturation::NONE,
+            valve_saturation: Saturation::NONE,
+            torque_gain_negative: cfg.torque_model.b_m2 * cfg.torque_model.sprocket_radius_m < 0.0,
             safety,
             condition: if config_ok {
                 None
@@ -516,6 +517,8 @@ impl ControlTick {
         self.setpoint_derivatives.reset();
         self.pressure1.reset();
         self.pressure2.reset();
+        self.torque_saturation = Saturation::NONE;
+        self.valve_saturation = Saturation::NONE;
     }
 
     /// Explicit re-arm after a fault. Returns false (and stays faulted) when the fault
@@ -672,6 +675,8 @@ impl ControlTick {
             let (rate, accel) =
                 self.setpoint_derivatives
                     .update_finite(sp, dt_s, ff.cutoff_hz, self.ff_tau_s)?;
+            // Anti-windup from downstream: the torque loop's and the valves' saturation of
+            // the last tick, in joint-torque direction.
             let t_pid = self.position.step_finite(
                 JointState {
                     angle_rad: angle,
@@ -679,6 +684,7 @@ impl ControlTick {
                 },
                 sp,
                 dt_s,
+                self.torque_saturation.union(self.valve_saturation),
             )?;
             // Trajectory feed-forward (derivative on the error, inertia of the desired
             // motion), within the position loop's output limit.
@@ -712,11 +718,14 @@ impl ControlTick {
                     dt_s,
                     self.dp_limit_pa,
                     self.p_set_hi_pa,
+                    self.valve_saturation,
                 )?,
                 None => self.torque.step(meas, t_des, dt_s)?,
             };
             let u1 = self.pressure1.step_finite(p1, ps.p1_gauge_pa, dt_s)?;
             let u2 = self.pressure2.step_finite(p2, ps.p2_gauge_pa, dt_s)?;
+            self.torque_saturation = ps.saturation;
+            self.valve_saturation = valve_saturation(u1, u2, self.torque_gain_negative);
             Ok((
                 t_des,
                 ps.p1_gauge_pa,
@@ -794,6 +803,18 @@ impl ControlTick {
         out.armed = false;
         out
     }
+}
+
+/// The valves' saturation as a joint-torque direction: a muscle whose valve command is at
+/// +-1 cannot change its pressure faster that way. Muscle 1 follows `p1 = p0 - dp`, muscle 2
+/// `p2 = p0 + dp`; `gain_negative` (B r < 0) maps dp to torque.
+#[inline(always)]
+fn valve_saturation(u1: f32, u2: f32, gain_negative: bool) -> Saturation {
+    Saturation {
+        high: u1 <= -1.0 || u2 >= 1.0,
+        low: u1 >= 1.0 || u2 <= -1.0,
+    }
+    .through(gain_negative)
 }
 
 #[cfg(test)]

@@ -18,7 +18,17 @@
 use embedded_hal::digital::OutputPin;
 use embedded_hal::pwm::SetDutyCycle;
 
-use crate::tick::ValveCommand;
+/// Per-muscle valve command in [-1, 1]: > 0 inflate duty (inflate valve open that fraction
+/// of the time), < 0 exhaust duty, 0 both closed. Never inflate and exhaust one muscle at
+/// once. Produced by the control tick ([`crate::tick`]), applied by the drivers below.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ValveCommand {
+    /// Muscle 1 command.
+    pub muscle1: f32,
+    /// Muscle 2 command.
+    pub muscle2: f32,
+}
 
 /// Valve openings in [0, 1] this tick (0 closed, 1 open; a PWM duty counts as the opening).
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
