@@ -9,5 +9,8 @@ set -eu
 here=$(cd "$(dirname "$0")/.." && pwd)
 lld="$(rustc --print sysroot)/lib/rustlib/$(rustc -vV | sed -n 's/^host: //p')/bin/gcc-ld/ld.lld"
 [ -x "$lld" ] || { echo "ld-nrf51.sh: no $lld (rustup component rust-src/llvm-tools? see scripts/setup.sh)" >&2; exit 2; }
+# rustc passes `-flavor gnu` first (the target's linker flavour is rust-lld's); ld.lld is
+# already that flavour.
+if [ "${1:-}" = "-flavor" ]; then shift 2; fi
 cd "$here/memory/nrf51"
 exec "$lld" "$@"
