@@ -4,7 +4,8 @@
 //!    scaling and the control tick, logging every tick's outputs as f32 bit patterns plus a
 //!    running FNV-1a hash (`tests/qemu_trace.rs` requires them bit-for-bit equal to a host run).
 //! 2. Reports the stack high-water mark (the free RAM is painted at start-up).
-//! 3. Benchmarks (`scripts/bench-mcu.sh`): SysTick counts around the full control tick, the
+//! 3. With the `mcu-bench` feature only (`scripts/bench-mcu.sh`; not in the shipped image):
+//!    benchmarks: SysTick counts around the full control tick, the
 //!    force law alone and a calibration loop of a known instruction count. Under
 //!    `qemu-system-arm -icount shift=0` virtual time advances exactly with the instructions
 //!    executed, so counts convert to instructions; without `-icount` they are meaningless.
@@ -18,22 +19,12 @@
 #![no_std]
 #![no_main]
 
-use core::hint::black_box;
-use core::sync::atomic::{AtomicU32, Ordering};
 
-use cortex_m::peripheral::{syst::SystClkSource, SYST};
 use cortex_m_rt::{entry, exception, ExceptionFrame};
 use cortex_m_semihosting::debug;
 use defmt_semihosting as _;
 
-use pam_firmware::constants::{FIXED_FORCE_LAW, FORCE_LAW};
-use pam_firmware::fixed_point::{pressure_pa_from_f32, q16_from_f32};
-use pam_firmware::geometry::JointGeometry;
-use pam_firmware::trace::{
-    ControlTick, ControllerConfig, TraceRunner, SENSOR_TRACE, TRACE_TICK_HZ,
-};
-use pam_firmware::valves::{OnOffPwmConfig, OnOffValves};
-use pam_firmware::wiring;
+use pam_firmware::trace::{TraceRunner, TRACE_TICK_HZ};
 
 /// Pattern of the painted (never used) stack.
 const PAINT: u32 = 0xDEAD_C0DE;
@@ -82,142 +73,6 @@ fn stack_used_bytes() -> u32 {
     (top - p) as u32
 }
 
-/// SysTick counts elapsed while `f` runs (24-bit down counter, wraps once at most).
-#[inline(always)]
-fn measure<R>(f: impl FnOnce() -> R) -> (u32, R) {
-    let a = SYST::get_current();
-    // black_box: the result must exist before the second read (a pure computation could
-    // otherwise be scheduled after it and not be measured).
-    let r = black_box(f());
-    let b = SYST::get_current();
-    (a.wrapping_sub(b) & 0x00FF_FFFF, r)
-}
-
-/// Calibration: exactly 2 instructions per iteration (`subs`, `bne`).
-#[inline(never)]
-fn spin(iterations: u32) {
-    // SAFETY: a register-only loop.
-    unsafe {
-        core::arch::asm!(
-            "1:",
-            "subs {0}, {0}, #1",
-            "bne 1b",
-            inout(reg) iterations => _,
-            options(nomem, nostack),
-        );
-    }
-}
-
-fn bench(syst: &mut SYST) {
-    syst.set_clock_source(SystClkSource::Core);
-    syst.set_reload(0x00FF_FFFF);
-    syst.clear_current();
-    syst.enable_counter();
-
-    const CAL_ITER: u32 = 100_000;
-    let (cal, _) = measure(|| spin(black_box(CAL_ITER)));
-    let (empty, _) = measure(|| black_box(0u32));
-    defmt::info!(
-        "bench calib insns={=u32} counts={=u32} empty_counts={=u32}",
-        2 * CAL_ITER,
-        cal,
-        empty
-    );
-
-    bench_ticks();
-    bench_force_law();
-    bench_force_law_fixed();
-}
-
-/// Full control tick, each tick measured alone (frame built before the measurement).
-/// Not inlined: `scripts/bench-mcu.sh --breakdown` attributes the instructions executed
-/// between this function's entry and `bench_force_law`'s to symbols.
-#[inline(never)]
-fn bench_ticks() {
-    let p = wiring::pressure_scaling();
-    let dt = 1.0 / TRACE_TICK_HZ;
-    let mut tick = ControlTick::new(ControllerConfig::reference(TRACE_TICK_HZ));
-    // The valve update is part of the measured tick: the reference on/off driver (tick-level
-    // PWM, minimum on-time) writing four pins, each a volatile store like a GPIO BSRR write.
-    let mut valves = OnOffValves::new(
-        BenchPin(0),
-        BenchPin(1),
-        BenchPin(2),
-        BenchPin(3),
-        OnOffPwmConfig::REFERENCE,
-    );
-    let (mut sum_armed, mut n_armed, mut max_any) = (0u32, 0u32, 0u32);
-    for row in SENSOR_TRACE.iter() {
-        let frame = black_box(row.frame(&p));
-        let sp = black_box(row.setpoint());
-        let (c, out) = measure(|| {
-            let out = tick.step(&frame, &sp, black_box(dt));
-            let _ = valves.apply(&out.valves);
-            out
-        });
-        let out = black_box(out);
-        if out.armed {
-            sum_armed += c;
-            n_armed += 1;
-        }
-        max_any = max_any.max(c);
-    }
-    defmt::info!(
-        "bench tick n={=u32} sum_counts={=u32} max_counts={=u32}",
-        n_armed,
-        sum_armed,
-        max_any
-    );
-}
-
-/// A valve output for the tick benchmark: set/reset are single volatile stores (as a GPIO
-/// BSRR write on the board).
-struct BenchPin(u32);
-
-static BENCH_GPIO: AtomicU32 = AtomicU32::new(0);
-
-impl embedded_hal::digital::ErrorType for BenchPin {
-    type Error = core::convert::Infallible;
-}
-
-impl embedded_hal::digital::OutputPin for BenchPin {
-    fn set_low(&mut self) -> Result<(), Self::Error> {
-        BENCH_GPIO.store(1 << (self.0 + 16), Ordering::Relaxed);
-        Ok(())
-    }
-    fn set_high(&mut self) -> Result<(), Self::Error> {
-        BENCH_GPIO.store(1 << self.0, Ordering::Relaxed);
-        Ok(())
-    }
-}
-
-/// Force law alone (f32), at the trace's pressures and the stretches of its angles.
-#[inline(never)]
-fn bench_force_law() {
-    let p = wiring::pressure_scaling();
-    let g = JointGeometry::REFERENCE;
-    let (mut sum, mut n, mut max) = (0u32, 0u32, 0u32);
-    for row in SENSOR_TRACE.iter() {
-        let f = row.frame(&p);
-        let (Some(p1), Some(a)) = (f.p1_gauge_pa, f.angle_rad) else {
-            continue;
-        };
-        let (e1, _) = g.stretches(a);
-        let (p1, e1) = (black_box(p1), black_box(e1));
-        let (c, r) = measure(|| FORCE_LAW.force(p1, e1));
-        black_box(r);
-        sum += c;
-        n += 1;
-        max = max.max(c);
-    }
-    defmt::info!(
-        "bench force_law_f32 n={=u32} sum_counts={=u32} max_counts={=u32}",
-        n,
-        sum,
-        max
-    );
-}
-
 /// The fault requested on the semihosting command line (`-append panic|hardfault`), if any.
 #[inline(never)]
 fn injected_fault() -> Option<&'static str> {
@@ -240,51 +95,205 @@ fn injected_fault() -> Option<&'static str> {
         .find(|w| line.ends_with(w.as_bytes()))
 }
 
-/// Fixed-point force law (src/fixed_point.rs, `constants::FIXED_FORCE_LAW`) at the same
-/// inputs as [`bench_force_law`], quantised before the measurement (the FPU-less build gets
-/// integer readings).
-#[inline(never)]
-fn bench_force_law_fixed() {
-    let p = wiring::pressure_scaling();
-    let g = JointGeometry::REFERENCE;
-    let law = FIXED_FORCE_LAW;
-    let (mut sum, mut n, mut max, mut off) = (0u32, 0u32, 0u32, 0u32);
-    for row in SENSOR_TRACE.iter() {
-        let f = row.frame(&p);
-        let (Some(p1), Some(a)) = (f.p1_gauge_pa, f.angle_rad) else {
-            continue;
-        };
-        let (e1, _) = g.stretches(a);
-        let (Some(pq), Some(eq)) = (pressure_pa_from_f32(p1), q16_from_f32(e1)) else {
-            continue;
-        };
-        let (pq, eq) = (black_box(pq), black_box(eq));
-        let (c, r) = measure(|| law.force(pq, eq));
-        let r = black_box(r);
-        // Sanity: a real evaluation, within 0.1 N of the f32 law (fixed_point.rs's bound).
-        let f32_law = FORCE_LAW.force(p1, e1);
-        if r.flags != f32_law.flags
-            || libm::fabsf(r.force_n.to_num::<f32>() - f32_law.force_n) > 0.1
-        {
-            off += 1;
-        }
-        sum += c;
-        n += 1;
-        max = max.max(c);
+/// The benchmarks (`scripts/bench-mcu.sh`): built only with the `mcu-bench` feature, so the
+/// shipped image carries the trace replay and the stack report only.
+#[cfg(feature = "mcu-bench")]
+mod bench {
+    use core::hint::black_box;
+    use core::sync::atomic::{AtomicU32, Ordering};
+
+    use cortex_m::peripheral::{syst::SystClkSource, SYST};
+
+    use pam_firmware::constants::{FIXED_FORCE_LAW, FORCE_LAW};
+    use pam_firmware::fixed_point::{pressure_pa_from_f32, q16_from_f32};
+    use pam_firmware::geometry::JointGeometry;
+    use pam_firmware::trace::{ControlTick, ControllerConfig, SENSOR_TRACE, TRACE_TICK_HZ};
+    use pam_firmware::valves::{OnOffPwmConfig, OnOffValves};
+    use pam_firmware::wiring;
+
+    /// SysTick counts elapsed while `f` runs (24-bit down counter, wraps once at most).
+    #[inline(always)]
+    fn measure<R>(f: impl FnOnce() -> R) -> (u32, R) {
+        let a = SYST::get_current();
+        // black_box: the result must exist before the second read (a pure computation could
+        // otherwise be scheduled after it and not be measured).
+        let r = black_box(f());
+        let b = SYST::get_current();
+        (a.wrapping_sub(b) & 0x00FF_FFFF, r)
     }
-    defmt::info!(
-        "bench force_law_fixed n={=u32} sum_counts={=u32} max_counts={=u32} off_by_more_than_0.1N={=u32}",
-        n,
-        sum,
-        max,
-        off
-    );
+
+    /// Calibration: exactly 2 instructions per iteration (`subs`, `bne`).
+    #[inline(never)]
+    fn spin(iterations: u32) {
+        // SAFETY: a register-only loop.
+        unsafe {
+            core::arch::asm!(
+                "1:",
+                "subs {0}, {0}, #1",
+                "bne 1b",
+                inout(reg) iterations => _,
+                options(nomem, nostack),
+            );
+        }
+    }
+
+    pub fn bench(syst: &mut SYST) {
+        syst.set_clock_source(SystClkSource::Core);
+        syst.set_reload(0x00FF_FFFF);
+        syst.clear_current();
+        syst.enable_counter();
+
+        const CAL_ITER: u32 = 100_000;
+        let (cal, _) = measure(|| spin(black_box(CAL_ITER)));
+        let (empty, _) = measure(|| black_box(0u32));
+        defmt::info!(
+            "bench calib insns={=u32} counts={=u32} empty_counts={=u32}",
+            2 * CAL_ITER,
+            cal,
+            empty
+        );
+
+        bench_ticks();
+        bench_force_law();
+        bench_force_law_fixed();
+    }
+
+    /// Full control tick, each tick measured alone (frame built before the measurement).
+    /// Not inlined: `scripts/bench-mcu.sh --breakdown` attributes the instructions executed
+    /// between this function's entry and `bench_force_law`'s to symbols.
+    #[inline(never)]
+    fn bench_ticks() {
+        let p = wiring::pressure_scaling();
+        let dt = 1.0 / TRACE_TICK_HZ;
+        let mut tick = ControlTick::new(ControllerConfig::reference(TRACE_TICK_HZ));
+        // The valve update is part of the measured tick: the reference on/off driver (tick-level
+        // PWM, minimum on-time) writing four pins, each a volatile store like a GPIO BSRR write.
+        let mut valves = OnOffValves::new(
+            BenchPin(0),
+            BenchPin(1),
+            BenchPin(2),
+            BenchPin(3),
+            OnOffPwmConfig::REFERENCE,
+        );
+        let (mut sum_armed, mut n_armed, mut max_any) = (0u32, 0u32, 0u32);
+        for row in SENSOR_TRACE.iter() {
+            let frame = black_box(row.frame(&p));
+            let sp = black_box(row.setpoint());
+            let (c, out) = measure(|| {
+                let out = tick.step(&frame, &sp, black_box(dt));
+                let _ = valves.apply(&out.valves);
+                out
+            });
+            let out = black_box(out);
+            if out.armed {
+                sum_armed += c;
+                n_armed += 1;
+            }
+            max_any = max_any.max(c);
+        }
+        defmt::info!(
+            "bench tick n={=u32} sum_counts={=u32} max_counts={=u32}",
+            n_armed,
+            sum_armed,
+            max_any
+        );
+    }
+
+    /// A valve output for the tick benchmark: set/reset are single volatile stores (as a GPIO
+    /// BSRR write on the board).
+    struct BenchPin(u32);
+
+    static BENCH_GPIO: AtomicU32 = AtomicU32::new(0);
+
+    impl embedded_hal::digital::ErrorType for BenchPin {
+        type Error = core::convert::Infallible;
+    }
+
+    impl embedded_hal::digital::OutputPin for BenchPin {
+        fn set_low(&mut self) -> Result<(), Self::Error> {
+            BENCH_GPIO.store(1 << (self.0 + 16), Ordering::Relaxed);
+            Ok(())
+        }
+        fn set_high(&mut self) -> Result<(), Self::Error> {
+            BENCH_GPIO.store(1 << self.0, Ordering::Relaxed);
+            Ok(())
+        }
+    }
+
+    /// Force law alone (f32), at the trace's pressures and the stretches of its angles.
+    #[inline(never)]
+    fn bench_force_law() {
+        let p = wiring::pressure_scaling();
+        let g = JointGeometry::REFERENCE;
+        let (mut sum, mut n, mut max) = (0u32, 0u32, 0u32);
+        for row in SENSOR_TRACE.iter() {
+            let f = row.frame(&p);
+            let (Some(p1), Some(a)) = (f.p1_gauge_pa, f.angle_rad) else {
+                continue;
+            };
+            let (e1, _) = g.stretches(a);
+            let (p1, e1) = (black_box(p1), black_box(e1));
+            let (c, r) = measure(|| FORCE_LAW.force(p1, e1));
+            black_box(r);
+            sum += c;
+            n += 1;
+            max = max.max(c);
+        }
+        defmt::info!(
+            "bench force_law_f32 n={=u32} sum_counts={=u32} max_counts={=u32}",
+            n,
+            sum,
+            max
+        );
+    }
+
+
+
+    /// Fixed-point force law (src/fixed_point.rs, `constants::FIXED_FORCE_LAW`) at the same
+    /// inputs as [`bench_force_law`], quantised before the measurement (the FPU-less build gets
+    /// integer readings).
+    #[inline(never)]
+    fn bench_force_law_fixed() {
+        let p = wiring::pressure_scaling();
+        let g = JointGeometry::REFERENCE;
+        let law = FIXED_FORCE_LAW;
+        let (mut sum, mut n, mut max, mut off) = (0u32, 0u32, 0u32, 0u32);
+        for row in SENSOR_TRACE.iter() {
+            let f = row.frame(&p);
+            let (Some(p1), Some(a)) = (f.p1_gauge_pa, f.angle_rad) else {
+                continue;
+            };
+            let (e1, _) = g.stretches(a);
+            let (Some(pq), Some(eq)) = (pressure_pa_from_f32(p1), q16_from_f32(e1)) else {
+                continue;
+            };
+            let (pq, eq) = (black_box(pq), black_box(eq));
+            let (c, r) = measure(|| law.force(pq, eq));
+            let r = black_box(r);
+            // Sanity: a real evaluation, within 0.1 N of the f32 law (fixed_point.rs's bound).
+            let f32_law = FORCE_LAW.force(p1, e1);
+            if r.flags != f32_law.flags
+                || libm::fabsf(r.force_n.to_num::<f32>() - f32_law.force_n) > 0.1
+            {
+                off += 1;
+            }
+            sum += c;
+            n += 1;
+            max = max.max(c);
+        }
+        defmt::info!(
+            "bench force_law_fixed n={=u32} sum_counts={=u32} max_counts={=u32} off_by_more_than_0.1N={=u32}",
+            n,
+            sum,
+            max,
+            off
+        );
+    }
 }
 
 #[entry]
 fn main() -> ! {
     let unpainted = paint_stack();
-    let mut cp = cortex_m::Peripherals::take().unwrap();
     match injected_fault() {
         Some("panic") => panic!("injected panic"),
         Some(_) => {
@@ -317,7 +326,8 @@ fn main() -> ! {
         runner.hash()
     );
 
-    bench(&mut cp.SYST);
+    #[cfg(feature = "mcu-bench")]
+    bench::bench(&mut cortex_m::Peripherals::take().unwrap().SYST);
 
     // After everything ran: the deepest the stack ever got (main, the tick, defmt, bench).
     defmt::info!(

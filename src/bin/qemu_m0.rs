@@ -18,7 +18,7 @@ use defmt_semihosting as _;
 use pam_firmware::constants::{FIXED_FORCE_LAW, FORCE_LAW};
 use pam_firmware::fixed_point::{pressure_pa_from_f32, q16_from_f32};
 use pam_firmware::geometry::JointGeometry;
-use pam_firmware::trace::SENSOR_TRACE;
+use pam_firmware::trace::{ControlTick, ControllerConfig, SENSOR_TRACE, TRACE_TICK_HZ};
 use pam_firmware::wiring;
 
 #[inline(always)]
@@ -101,6 +101,27 @@ fn main() -> ! {
         n,
         fl_sum,
         fl_max
+    );
+    // The whole control tick (f32, in soft-float: the cascade has no fixed-point build) on
+    // the M0, per armed tick of the trace: what a 1 kHz tick costs on an FPU-less core.
+    let dt = 1.0 / TRACE_TICK_HZ;
+    let mut tick = ControlTick::new(ControllerConfig::reference(TRACE_TICK_HZ));
+    let (mut t_sum, mut t_max, mut t_n) = (0u32, 0u32, 0u32);
+    for row in SENSOR_TRACE.iter() {
+        let frame = black_box(row.frame(&p));
+        let sp = black_box(row.setpoint());
+        let (c, out) = measure(|| tick.step(&frame, &sp, black_box(dt)));
+        if out.armed {
+            t_sum += c;
+            t_n += 1;
+        }
+        t_max = t_max.max(c);
+    }
+    defmt::info!(
+        "bench m0 tick_f32_soft n={=u32} sum_counts={=u32} max_counts={=u32}",
+        t_n,
+        t_sum,
+        t_max
     );
     // The fixed-point path over the whole trace, hashed: tests/qemu_trace.rs compares it with
     // the host run of the same function bit for bit.
