@@ -34,54 +34,24 @@ pub enum ControlError {
     ForceLawInvalid,
 }
 
-/// Which way the command downstream of a loop is stuck at a limit, in the loop's output
-/// direction (for the position and torque loops: joint torque). Anti-windup: an integrator
-/// does not integrate in a blocked direction (conditional integration on the command that
-/// is actually applied, not on the loop's own output).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Saturation {
-    /// The applied command is below the requested one: more cannot be delivered.
-    pub high: bool,
-    /// The applied command is above the requested one: less cannot be delivered.
-    pub low: bool,
+/// Anti-windup input: which way the command downstream of a loop fell short of the request
+/// last tick, in the loop's output direction (joint torque for the position and torque
+/// loops): > 0 the applied command was below the requested one (more could not be
+/// delivered: a pressure set-point or dp at its limit, valves fully open), < 0 above it, 0
+/// nothing saturated. Only the sign is used: the integrator does not integrate in that
+/// direction (conditional integration on the command actually applied).
+pub type Shortfall = f32;
+
+/// True when an integrator increment `di` would push further the way `shortfall` says the
+/// downstream cannot follow.
+#[inline(always)]
+pub fn blocks(shortfall: Shortfall, di: f32) -> bool {
+    di * shortfall > 0.0
 }
 
-impl Saturation {
-    /// Nothing saturated.
-    pub const NONE: Saturation = Saturation {
-        high: false,
-        low: false,
-    };
-
-    /// Either direction.
-    #[inline]
-    pub const fn union(self, o: Saturation) -> Saturation {
-        Saturation {
-            high: self.high || o.high,
-            low: self.low || o.low,
-        }
-    }
-
-    /// The same limits seen through a gain of sign `negative` (true: the directions swap).
-    #[inline]
-    pub const fn through(self, negative: bool) -> Saturation {
-        if negative {
-            Saturation {
-                high: self.low,
-                low: self.high,
-            }
-        } else {
-            self
-        }
-    }
-
-    /// True when an integrator increment `di` would push further into a saturated side.
-    #[inline]
-    pub fn blocks(self, di: f32) -> bool {
-        (self.high && di > 0.0) || (self.low && di < 0.0)
-    }
-}
+/// A shortfall of the torque loop's command below this [N m] is float rounding, not
+/// saturation.
+const SHORTFALL_TOL_NM: f32 = 1e-4;
 
 #[inline]
 pub(crate) fn finite(xs: &[f32]) -> bool {
@@ -191,19 +161,19 @@ impl PositionController {
         setpoint_rad: f32,
         dt_s: f32,
     ) -> Result<f32, ControlError> {
-        self.step_limited(meas, setpoint_rad, dt_s, Saturation::NONE)
+        self.step_limited(meas, setpoint_rad, dt_s, 0.0)
     }
 
-    /// [`Self::step`] with anti-windup from downstream: `downstream` says which way the
-    /// torque actually applied last tick fell short of the command (torque loop at its
-    /// pressure or activation limits, valves fully open); the integrator does not move in a
-    /// blocked direction. `Saturation::NONE` gives exactly [`Self::step`].
+    /// [`Self::step`] with anti-windup from downstream: `downstream` ([`Shortfall`]) says
+    /// which way the torque actually applied last tick fell short of the command (torque
+    /// loop at its pressure or activation limits, valves fully open); the integrator does not
+    /// move that way. 0 gives exactly [`Self::step`].
     pub fn step_limited(
         &mut self,
         meas: JointState,
         setpoint_rad: f32,
         dt_s: f32,
-        downstream: Saturation,
+        downstream: Shortfall,
     ) -> Result<f32, ControlError> {
         if !finite(&[meas.angle_rad, meas.velocity_rad_s, setpoint_rad, dt_s]) || dt_s <= 0.0 {
             self.reset();
@@ -220,7 +190,7 @@ impl PositionController {
         meas: JointState,
         setpoint_rad: f32,
         dt_s: f32,
-        downstream: Saturation,
+        downstream: Shortfall,
     ) -> Result<f32, ControlError> {
         let g = &self.gains;
         let e = setpoint_rad - meas.angle_rad;
@@ -234,7 +204,7 @@ impl PositionController {
         // - the usual case - is decided by one comparison; NaN takes the full test.)
         let within = libm::fabsf(unsat) <= lim;
         if (within || !((saturated_high && di > 0.0) || (saturated_low && di < 0.0)))
-            && !downstream.blocks(di)
+            && !blocks(downstream, di)
         {
             self.integral_nm = clampf(self.integral_nm + di, g.i_limit);
         }
@@ -289,10 +259,10 @@ pub struct PressureSetpoints {
     pub torque_est_nm: f32,
     /// True when the inverse model saturated dp.
     pub saturated: bool,
-    /// Which way the applied torque falls short of the loop's command (dp at its limit or a
-    /// pressure set-point clamped), in joint-torque direction: the position loop's
-    /// anti-windup input for the next tick.
-    pub saturation: Saturation,
+    /// The loop's command minus the torque the applied set-points give (dp at its limit or a
+    /// pressure set-point clamped) [N m], 0 when not saturated: the position loop's
+    /// anti-windup input ([`Shortfall`]) for the next tick.
+    pub shortfall_nm: f32,
     /// Union of the force-law flags of both muscles (clamped inputs etc.).
     pub force_flags: ForceFlags,
 }
@@ -339,6 +309,8 @@ pub struct TorqueController {
     /// Torque model for the inverse (feed-forward) path.
     pub model: TorqueModelParams,
     integral_nm: f32,
+    /// [`PressureSetpoints::shortfall_nm`] of the last step (anti-windup).
+    shortfall_nm: f32,
 }
 
 impl TorqueController {
@@ -355,6 +327,7 @@ impl TorqueController {
             geometry,
             model,
             integral_nm: 0.0,
+            shortfall_nm: 0.0,
         }
     }
 
@@ -363,9 +336,15 @@ impl TorqueController {
         self.integral_nm
     }
 
-    /// Clears the integrator.
+    /// Clears the integrator and the anti-windup state.
     pub fn reset(&mut self) {
         self.integral_nm = 0.0;
+        self.shortfall_nm = 0.0;
+    }
+
+    /// The last step's [`PressureSetpoints::shortfall_nm`] (0 after a reset).
+    pub fn shortfall_nm(&self) -> f32 {
+        self.shortfall_nm
     }
 
     /// One step: pressure set-points for the desired torque `torque_des_nm`.
@@ -417,7 +396,7 @@ impl TorqueController {
             dt_s,
             dp_limit_pa,
             p_set_hi_pa,
-            Saturation::NONE,
+            0.0,
         )
     }
 
@@ -435,7 +414,7 @@ impl TorqueController {
         dt_s: f32,
         dp_limit_pa: f32,
         p_set_hi_pa: f32,
-        downstream: Saturation,
+        downstream: Shortfall,
     ) -> Result<PressureSetpoints, ControlError> {
         let (t_est, flags) = estimate;
         if flags.contains_any(ForceFlags::FATAL) {
@@ -450,28 +429,27 @@ impl TorqueController {
         let lim = libm::fabsf(g.corr_limit_nm);
         // Angle and velocity are finite here.
         let inverse = m.inverse_at_finite(meas.angle_rad, v, dp_limit_pa);
-        let first =
-            inverse.activation(torque_des_nm + clampf(g.kp * t_err + self.integral_nm, lim));
-        // Anti-windup: conditional integration on the command that is actually applied (dp
-        // at its limit, a pressure set-point clamped, or the valves fully open last tick),
-        // in joint-torque direction: the sign of B r maps dp to torque.
-        let gain_negative = m.b_m2 * m.sprocket_radius_m < 0.0;
-        let sat_first = dp_saturation(first.dp_pa, first.saturated, m.p0_gauge_pa, p_set_hi_pa)
-            .through(gain_negative)
-            .union(downstream);
+        // Anti-windup: conditional integration on the command actually applied. The
+        // integrator does not move the way the last command fell short (dp at its limit or a
+        // pressure set-point clamped) or the way the valves could not follow (`downstream`).
         let di = g.ki * t_err * dt_s;
-        if !sat_first.blocks(di) {
+        if !blocks(self.shortfall_nm + downstream, di) {
             self.integral_nm = clampf(self.integral_nm + di, lim);
         }
         let t_cmd = torque_des_nm + clampf(g.kp * t_err + self.integral_nm, lim);
         let act = inverse.activation(t_cmd);
-        let saturation = dp_saturation(act.dp_pa, act.saturated, m.p0_gauge_pa, p_set_hi_pa)
-            .through(gain_negative);
         // `clamp_pressure_setpoint_pa(m.pressures_gauge_pa(dp), p_set_max)` in one clamp per
         // muscle (the same value for every input: both map NaN and p <= 0 to +0, and the
         // bound is min(p_set_max, P_MUSCLE_MAX) <= the model's own bound).
         let p1 = clamp_setpoint_to(m.p0_gauge_pa - act.dp_pa, p_set_hi_pa);
         let p2 = clamp_setpoint_to(m.p0_gauge_pa + act.dp_pa, p_set_hi_pa);
+        // What these set-points give against what was asked (sign = direction of the limit).
+        let short = t_cmd - inverse.torque_nm(0.5 * (p2 - p1));
+        self.shortfall_nm = if libm::fabsf(short) > SHORTFALL_TOL_NM {
+            short
+        } else {
+            0.0
+        };
         // p1, p2 (clamped, NaN -> 0) and dp (finite by construction of `activation`) are
         // always finite.
         if !finite(&[t_est, t_cmd, self.integral_nm]) {
@@ -484,22 +462,9 @@ impl TorqueController {
             dp_pa: act.dp_pa,
             torque_est_nm: t_est,
             saturated: act.saturated,
-            saturation,
+            shortfall_nm: self.shortfall_nm,
             force_flags: flags,
         })
-    }
-}
-
-/// Which way the activation `dp` that is applied falls short of the requested one, in dp
-/// direction: `dp` clipped at its limit (`saturated`; dp = 0 saturated blocks both ways),
-/// or a set-point `p0 -+ dp` outside `[0, p_hi]` (then clamped by the torque loop).
-#[inline(always)]
-fn dp_saturation(dp_pa: f32, saturated: bool, p0_gauge_pa: f32, p_hi_pa: f32) -> Saturation {
-    let p1 = p0_gauge_pa - dp_pa;
-    let p2 = p0_gauge_pa + dp_pa;
-    Saturation {
-        high: (saturated && dp_pa >= 0.0) || p2 > p_hi_pa || p1 < 0.0,
-        low: (saturated && dp_pa <= 0.0) || p2 < 0.0 || p1 > p_hi_pa,
     }
 }
 
@@ -815,20 +780,17 @@ mod tests {
         let mut c = pid();
         let (j, b, t_sat, dt) = (0.01f32, 0.05f32, 0.8f32, 1e-3f32);
         let (mut a, mut w) = (0.0f32, 0.0f32);
-        let mut sat = Saturation::NONE;
+        let mut short = 0.0f32;
         let (mut peak, mut i_max, mut settled_at) = (0.0f32, 0.0f32, 0.0f32);
         for k in 0..4000 {
             let meas = JointState {
                 angle_rad: a,
                 velocity_rad_s: w,
             };
-            let down = if anti_windup { sat } else { Saturation::NONE };
+            let down = if anti_windup { short } else { 0.0 };
             let t_cmd = c.step_limited(meas, 1.0, dt, down).unwrap();
             let t_applied = t_cmd.clamp(-t_sat, t_sat);
-            sat = Saturation {
-                high: t_cmd > t_applied,
-                low: t_cmd < t_applied,
-            };
+            short = t_cmd - t_applied;
             w += (t_applied - b * w) / j * dt;
             a += w * dt;
             peak = peak.max(a);
@@ -865,10 +827,7 @@ mod tests {
             angle_rad: 0.0,
             velocity_rad_s: 0.0,
         };
-        let high = Saturation {
-            high: true,
-            low: false,
-        };
+        let high: Shortfall = 1.0;
         // Positive error -> positive increment: blocked by `high`.
         let mut c = pid();
         c.step_limited(meas, 0.1, 0.01, high).unwrap();
@@ -881,16 +840,9 @@ mod tests {
         for k in 0..50 {
             let sp = (k as f32 * 0.1).sin();
             let x = a.step(meas, sp, 0.01).unwrap();
-            let y = b.step_limited(meas, sp, 0.01, Saturation::NONE).unwrap();
+            let y = b.step_limited(meas, sp, 0.01, 0.0).unwrap();
             assert_eq!(x.to_bits(), y.to_bits());
         }
-        assert_eq!(
-            high.through(true),
-            Saturation {
-                high: false,
-                low: true
-            }
-        );
     }
 
     /// The torque loop at its pressure ceiling: a set-point clamp (not the model's dp limit)
@@ -909,22 +861,30 @@ mod tests {
         // A large torque demand in either direction saturates a set-point at the ceiling.
         for t_des in [5.0f32, -5.0] {
             t.reset();
-            let mut i_prev = 0.0f32;
+            let mut i_after_first = None;
             for _ in 0..200 {
                 let ps = t.step(meas, t_des, 1e-3).unwrap();
                 assert!(!ps.saturated, "dp itself stays inside its own limit");
                 assert!(ps.p1_gauge_pa.max(ps.p2_gauge_pa) <= 320_000.0);
-                let s = ps.saturation;
-                assert!(if t_des > 0.0 {
-                    s.high && !s.low
-                } else {
-                    s.low && !s.high
-                });
-                i_prev = t.integral_nm();
+                // The shortfall points the way of the demand.
+                assert!(
+                    ps.shortfall_nm * t_des > 0.0,
+                    "{t_des}: {}",
+                    ps.shortfall_nm
+                );
+                // The first step integrates (nothing known to be saturated yet), then the
+                // integrator stays where it is: the error keeps pointing into the limit.
+                match i_after_first {
+                    None => i_after_first = Some(t.integral_nm()),
+                    Some(i) => assert_eq!(t.integral_nm(), i, "{t_des}"),
+                }
             }
-            // The error is in the blocked direction all along: the integrator never moved.
-            assert_eq!(i_prev, 0.0, "{t_des}");
         }
+        // The error reversed (after the negative demand, a positive one): the last command
+        // fell short downwards, the increment is upwards, so the integrator moves again.
+        let before = t.integral_nm();
+        t.step(meas, 5.0, 1e-3).unwrap();
+        assert!(t.integral_nm() > before, "{} vs {before}", t.integral_nm());
     }
 
     #[test]

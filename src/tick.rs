@@ -16,7 +16,7 @@
 use crate::constants::{FORCE_LAW, TORQUE_MODEL};
 use crate::control::{
     torque_estimate_nm, JointState, PidGains, PositionController, PressureController,
-    PressureLoopGains, Saturation, TorqueController, TorqueLoopGains, TorqueMeasurement,
+    PressureLoopGains, TorqueController, TorqueLoopGains, TorqueMeasurement,
 };
 use crate::feedforward::{feedforward_torque_nm, FeedforwardGains, SetpointDerivatives};
 use crate::force_law::{ForceFlags, ForceLawParams};
@@ -339,14 +339,11 @@ pub struct ControlTick {
     setpoint_derivatives: SetpointDerivatives,
     pressure1: PressureController,
     pressure2: PressureController,
-    /// Anti-windup state: which way the torque loop's applied command fell short last tick
-    /// (joint-torque direction).
-    torque_saturation: Saturation,
     /// Anti-windup state: which way the valves were fully open last tick, as a joint-torque
-    /// direction (see [`valve_saturation`]).
-    valve_saturation: Saturation,
-    /// `B r < 0` for the configured torque model (maps dp to torque direction).
-    torque_gain_negative: bool,
+    /// [`crate::control::Shortfall`] (see [`valve_shortfall`]).
+    valve_shortfall: f32,
+    /// Sign of `B r` of the configured torque model (+-1: maps dp to torque direction).
+    torque_sign: f32,
     safety: SafetyMonitor,
     /// The fault condition seen in the last tick (None = all conditions clear).
     condition: Option<FaultCode>,
@@ -479,9 +476,12 @@ impl ControlTick {
             setpoint_derivatives: SetpointDerivatives::new(),
             pressure1: PressureController::new(cfg.pressure),
             pressure2: PressureController::new(cfg.pressure),
-            torque_saturation: Saturation::NONE,
-            valve_saturation: Saturation::NONE,
-            torque_gain_negative: cfg.torque_model.b_m2 * cfg.torque_model.sprocket_radius_m < 0.0,
+            valve_shortfall: 0.0,
+            torque_sign: if cfg.torque_model.b_m2 * cfg.torque_model.sprocket_radius_m < 0.0 {
+                -1.0
+            } else {
+                1.0
+            },
             safety,
             condition: if config_ok {
                 None
@@ -517,8 +517,7 @@ impl ControlTick {
         self.setpoint_derivatives.reset();
         self.pressure1.reset();
         self.pressure2.reset();
-        self.torque_saturation = Saturation::NONE;
-        self.valve_saturation = Saturation::NONE;
+        self.valve_shortfall = 0.0;
     }
 
     /// Explicit re-arm after a fault. Returns false (and stays faulted) when the fault
@@ -684,7 +683,7 @@ impl ControlTick {
                 },
                 sp,
                 dt_s,
-                self.torque_saturation.union(self.valve_saturation),
+                self.torque.shortfall_nm() + self.valve_shortfall,
             )?;
             // Trajectory feed-forward (derivative on the error, inertia of the desired
             // motion), within the position loop's output limit.
@@ -718,14 +717,13 @@ impl ControlTick {
                     dt_s,
                     self.dp_limit_pa,
                     self.p_set_hi_pa,
-                    self.valve_saturation,
+                    self.valve_shortfall,
                 )?,
                 None => self.torque.step(meas, t_des, dt_s)?,
             };
             let u1 = self.pressure1.step_finite(p1, ps.p1_gauge_pa, dt_s)?;
             let u2 = self.pressure2.step_finite(p2, ps.p2_gauge_pa, dt_s)?;
-            self.torque_saturation = ps.saturation;
-            self.valve_saturation = valve_saturation(u1, u2, self.torque_gain_negative);
+            self.valve_shortfall = valve_shortfall(u1, u2, self.torque_sign);
             Ok((
                 t_des,
                 ps.p1_gauge_pa,
@@ -805,16 +803,14 @@ impl ControlTick {
     }
 }
 
-/// The valves' saturation as a joint-torque direction: a muscle whose valve command is at
-/// +-1 cannot change its pressure faster that way. Muscle 1 follows `p1 = p0 - dp`, muscle 2
-/// `p2 = p0 + dp`; `gain_negative` (B r < 0) maps dp to torque.
+/// The valves' saturation as a joint-torque [`crate::control::Shortfall`]: a muscle whose
+/// valve command is at +-1 cannot change its pressure faster that way. Muscle 1 follows
+/// `p1 = p0 - dp`, muscle 2 `p2 = p0 + dp`; `torque_sign` (sign of B r) maps dp to torque.
+/// The commands are in [-1, 1], so their truncation is +-1 exactly at saturation, else 0:
+/// `trunc(u2) - trunc(u1)` is the blocked dp direction (two conversions, no branch).
 #[inline(always)]
-fn valve_saturation(u1: f32, u2: f32, gain_negative: bool) -> Saturation {
-    Saturation {
-        high: u1 <= -1.0 || u2 >= 1.0,
-        low: u1 >= 1.0 || u2 <= -1.0,
-    }
-    .through(gain_negative)
+fn valve_shortfall(u1: f32, u2: f32, torque_sign: f32) -> f32 {
+    ((u2 as i32) - (u1 as i32)) as f32 * torque_sign
 }
 
 #[cfg(test)]
@@ -837,6 +833,20 @@ mod tests {
 
     const SP0: Setpoint = Setpoint { angle_rad: 0.0 };
 
+
+    #[test]
+    fn valve_shortfall_maps_full_valves_to_the_blocked_torque_direction() {
+        // Muscle 1 inflating flat out: p1 = p0 - dp cannot rise faster, so dp cannot fall
+        // faster: the low side is blocked (with B r > 0 that is the low torque side too).
+        assert_eq!(valve_shortfall(1.0, 0.0, 1.0), -1.0);
+        assert_eq!(valve_shortfall(1.0, 0.0, -1.0), 1.0);
+        // Muscle 2 inflating flat out: dp cannot rise faster.
+        assert_eq!(valve_shortfall(0.0, 1.0, 1.0), 1.0);
+        assert_eq!(valve_shortfall(-1.0, 1.0, 1.0), 2.0);
+        // Anything short of +-1 is not saturated.
+        assert_eq!(valve_shortfall(0.999, -0.999, 1.0), 0.0);
+        assert_eq!(valve_shortfall(0.0, 0.0, -1.0), 0.0);
+    }
     #[test]
     fn reference_config_is_valid() {
         assert!(ControllerConfig::reference(1000.0).is_valid());

@@ -197,6 +197,13 @@ pub struct InverseAt {
 }
 
 impl InverseAt {
+    /// The forward model at this joint state: the torque [N m] that the activation `dp_pa`
+    /// gives (0 for an invalid inverse).
+    #[inline(always)]
+    pub fn torque_nm(&self, dp_pa: f32) -> f32 {
+        self.passive_nm + self.gain_m3 * dp_pa
+    }
+
     /// The activation dp [Pa] that yields `torque_nm`, clamped to the usable range;
     /// non-finite inputs give dp = 0, saturated.
     #[inline]
