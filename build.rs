@@ -177,10 +177,17 @@ fn main() {
         };
         println!("cargo:rustc-link-search={}", mem.display());
         println!("cargo:rerun-if-changed={}", mem.join("memory.x").display());
-        println!("cargo:rustc-link-arg-bins=--nmagic");
-        println!("cargo:rustc-link-arg-bins=-Tlink.x");
-        if env::var("CARGO_FEATURE_DEFMT").is_ok() {
-            println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
+        // Binaries, and the on-target tests (tests/on_target.rs) when they are built.
+        let mut kinds = vec!["bins"];
+        if env::var("CARGO_FEATURE_ON_TARGET_TESTS").is_ok() {
+            kinds.push("tests");
+        }
+        for kind in kinds {
+            println!("cargo:rustc-link-arg-{kind}=--nmagic");
+            println!("cargo:rustc-link-arg-{kind}=-Tlink.x");
+            if env::var("CARGO_FEATURE_DEFMT").is_ok() {
+                println!("cargo:rustc-link-arg-{kind}=-Tdefmt.x");
+            }
         }
     }
 }

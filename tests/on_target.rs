@@ -1,0 +1,110 @@
+//! On-target tests (defmt-test) for the Cortex-M4F build: run under QEMU's netduinoplus2
+//! (STM32F405) through the cargo runner, or on a board with a probe:
+//!
+//! `cargo test -p pam-firmware --test on_target --features pam-firmware/on-target-tests
+//! --target thumbv7em-none-eabihf`
+//!
+//! They check on the target, with its FPU and its code generation, what the host tests check
+//! on the host: the fixed-point force law against the f32 law, the anti-windup of a saturated
+//! step, and the valve commands of the control tick over the embedded sensor trace.
+#![no_std]
+#![no_main]
+
+use defmt_semihosting as _;
+
+/// A failed assertion panics: log the location and exit with status 1 (semihosting).
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    match info.location() {
+        Some(l) => defmt::error!("panicked at {=str}:{=u32}", l.file(), l.line()),
+        None => defmt::error!("panicked"),
+    }
+    cortex_m_semihosting::debug::exit(cortex_m_semihosting::debug::EXIT_FAILURE);
+    loop {
+        cortex_m::asm::bkpt();
+    }
+}
+
+#[defmt_test::tests]
+mod tests {
+    use pam_firmware::constants::{FIXED_FORCE_LAW, FORCE_LAW};
+    use pam_firmware::control::{JointState, PidGains, PositionController};
+    use pam_firmware::fixed_point::{pressure_pa_from_f32, q16_from_f32};
+    use pam_firmware::geometry::JointGeometry;
+    use pam_firmware::trace::{TraceRunner, SENSOR_TRACE};
+    use pam_firmware::wiring;
+
+    /// Over the trace: the fixed-point force law within 0.1 N of the f32 law (the FPU's) at
+    /// the same inputs, for every row with a pressure and an angle.
+    #[test]
+    fn fixed_force_law_tracks_the_f32_law_over_the_trace() {
+        let p = wiring::pressure_scaling();
+        let g = JointGeometry::REFERENCE;
+        let mut n = 0u32;
+        for row in SENSOR_TRACE.iter() {
+            let f = row.frame(&p);
+            let (Some(p1), Some(a)) = (f.p1_gauge_pa, f.angle_rad) else {
+                continue;
+            };
+            let (e1, _) = g.stretches(a);
+            let (Some(pq), Some(eq)) = (pressure_pa_from_f32(p1), q16_from_f32(e1)) else {
+                continue;
+            };
+            let fx = FIXED_FORCE_LAW.force(pq, eq);
+            let fl = FORCE_LAW.force(pq.to_num::<f32>(), eq.to_num::<f32>());
+            let d = fx.force_n.to_num::<f32>() - fl.force_n;
+            defmt::assert!(d.abs() < 0.1, "{=f32} N off at {=i32} Pa", d, pq.to_num::<i32>());
+            n += 1;
+        }
+        defmt::assert!(n > 100);
+    }
+
+    /// The saturated step of the host test (`control::tests`), on the target: 0.8 N m
+    /// available, step 0 -> 1 rad; with anti-windup the overshoot is less than half.
+    #[test]
+    fn anti_windup_cuts_the_overshoot_of_a_saturated_step() {
+        let run = |anti_windup: bool| {
+            let mut c = PositionController::new(PidGains {
+                kp: 4.0,
+                ki: 10.0,
+                kd: 0.3,
+                i_limit: 2.0,
+                out_limit: 10.0,
+            });
+            let (j, b, t_sat, dt) = (0.01f32, 0.05f32, 0.8f32, 1e-3f32);
+            let (mut a, mut w, mut short, mut peak) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
+            for _ in 0..4000 {
+                let meas = JointState {
+                    angle_rad: a,
+                    velocity_rad_s: w,
+                };
+                let down = if anti_windup { short } else { 0.0 };
+                let t_cmd = c.step_limited(meas, 1.0, dt, down).unwrap();
+                let t_applied = t_cmd.clamp(-t_sat, t_sat);
+                short = t_cmd - t_applied;
+                w += (t_applied - b * w) / j * dt;
+                a += w * dt;
+                peak = peak.max(a);
+            }
+            peak - 1.0
+        };
+        let (with, without) = (run(true), run(false));
+        defmt::info!("overshoot with {=f32} rad, without {=f32} rad", with, without);
+        defmt::assert!(with < 0.5 * without);
+    }
+
+    /// The control tick over the whole trace: every valve command finite and within [-1, 1].
+    #[test]
+    fn tick_valve_commands_stay_in_range_over_the_trace() {
+        let mut r = TraceRunner::new();
+        let mut n = 0u32;
+        while let Some(rec) = r.step() {
+            for w in [rec.words[0], rec.words[1]] {
+                let u = f32::from_bits(w);
+                defmt::assert!(u.is_finite() && (-1.0..=1.0).contains(&u));
+            }
+            n += 1;
+        }
+        defmt::assert_eq!(n as usize, TraceRunner::len());
+    }
+}
