@@ -49,7 +49,7 @@ if ! rustup component list --installed 2>/dev/null | grep -q '^llvm-tools'; then
 fi
 
 # Plots (host-sim --plot, demo, diagnosis reports) lay out text with a TrueType font read at run
-# time (host-sim/src/plot.rs): install DejaVu Sans when no usable font is present.
+# time (host-sim/src/io/plot.rs): install DejaVu Sans when no usable font is present.
 if [ -z "${HOST_SIM_FONT:-}" ] && ! ls /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf \
     /usr/share/fonts/TTF/DejaVuSans.ttf /usr/share/fonts/dejavu/DejaVuSans.ttf \
     /usr/share/fonts/truetype/liberation/LiberationSans-Regular.ttf >/dev/null 2>&1; then

@@ -10,7 +10,7 @@ use std::hint::black_box;
 use std::path::PathBuf;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use host_sim::closed_loop::{run, Scenario};
+use host_sim::control::closed_loop::{run, Scenario};
 use host_sim::Plant;
 
 fn root() -> PathBuf {

@@ -8,7 +8,7 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
-use host_sim::arm3_io::{plot_arm3, PressureStepScenario, JOINTS};
+use host_sim::io::arm3::{plot_arm3, PressureStepScenario, JOINTS};
 use host_sim::plant::arm3::Arm3;
 use host_sim::sim::SolverOptions;
 

@@ -1,6 +1,6 @@
 //! The closed-loop comparison of issue 5 (seed 004 Table 3): the model-based cascade with the
 //! identified constants against the tuned PD and PID of `config/control_tuned.toml`, firmware in
-//! the loop on the reference plant, step / sine / random suite (`control_compare::SUITE`:
+//! the loop on the reference plant, step / sine / random suite (`control::compare::SUITE`:
 //! set-point changes as 0.15 s minimum-jerk moves). Prints the MSE table (the one in README),
 //! then the same laws on the jump suite (the demo's step / sine / random, changes as jumps) for
 //! reference, and exits with status 1 when the cascade's suite MSE is not at least 2x lower
@@ -15,7 +15,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use host_sim::control_compare::{
+use host_sim::control::compare::{
     compare, compare_on, control_tuned_path, format_table, jump_suite_scenarios,
     reference_plant_path, ControlTuning,
 };

@@ -1,5 +1,5 @@
 //! Diagnosis vs the black-box residual model of seeds 000/004 (an Elman network on the
-//! residual, `host_sim::diagnose_baseline`), trained on the same TRAIN recording (valve
+//! residual, `host_sim::diagnose::baseline`), trained on the same TRAIN recording (valve
 //! pulses) and judged on a CHECK recording with unlike excitation (chirp + steps of
 //! PWM-like duties). Prints a Markdown table of check-recording fits (README "Diagnosis vs
 //! Elman"):
@@ -10,7 +10,7 @@ use std::path::PathBuf;
 
 use host_sim::diagnose::synth::{generate, plant_with, Excitation, SynthSpec};
 use host_sim::diagnose::{diagnose, DiagnoseOptions};
-use host_sim::diagnose_baseline::{train, ElmanOptions};
+use host_sim::diagnose::baseline::{train, ElmanOptions};
 use host_sim::fit::fit_percent;
 use host_sim::sim::{simulate, SolverOptions};
 use host_sim::{Channel, Plant, PlantConfig, Recording};

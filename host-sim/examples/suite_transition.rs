@@ -14,8 +14,8 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use host_sim::closed_loop::{run, Scenario, SetpointProfile};
-use host_sim::control_compare::{
+use host_sim::control::closed_loop::{run, Scenario, SetpointProfile};
+use host_sim::control::compare::{
     control_tuned_path, jump_suite_scenarios, reference_plant_path, score_suite, score_suite_with,
     ControlTuning,
 };

@@ -9,7 +9,7 @@
 //! ```
 //!
 //! Procedure (deterministic: the scenarios carry their noise seeds; ~35 s on 2 cores). Suite =
-//! `control_compare::SUITE` (`--transition-s T` changes the duration of its set-point moves,
+//! `control::compare::SUITE` (`--transition-s T` changes the duration of its set-point moves,
 //! for `scripts/suite-transition-sweep.sh`). Suite MSE = the mean over its step, sine and
 //! random scenarios of the MSE of the angle over every tick (a latched fault = infinite).
 //! Cost ([`tuning_cost`]) = the worse of the suite MSE at the gains and with the feedback gains
@@ -41,8 +41,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use host_sim::closed_loop::Scenario;
-use host_sim::control_compare::{
+use host_sim::control::closed_loop::Scenario;
+use host_sim::control::compare::{
     config_for, control_tuned_path, nelder_mead, reference_plant_path, suite_scenarios,
     tuning_cost, CascadeToml, ControlTuning, DpPidToml, GAIN_MARGIN,
 };
@@ -607,7 +607,7 @@ fn main() -> Result<()> {
     };
     let header = format!(
         "The three laws of the closed-loop comparison of issue 5, each tuned on the suite\n\
-         (host-sim control_compare::SUITE) by the same procedure and cost. Written by\n\
+         (host-sim control::compare::SUITE) by the same procedure and cost. Written by\n\
          \x20 cargo run --release -p host-sim --example tune_pid\n\
          on {} with the firmware in the loop. Suite MSE = mean over the step_move, sine and\n\
          random_move scenarios of the MSE of the angle over every tick (a latched fault = infinite);\n\

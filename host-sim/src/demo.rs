@@ -16,12 +16,12 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 
-use crate::closed_loop::{run, Scenario};
+use crate::control::closed_loop::{run, Scenario};
 use crate::fit::{compare, ChannelFit};
 use crate::plant::Plant;
-use crate::plot::plot_comparison;
-use crate::recording::{Channel, Recording};
-use crate::scenario_io::{firmware_trace_path, plot_run, run_recording, write_firmware_trace};
+use crate::io::plot::plot_comparison;
+use crate::io::recording::{Channel, Recording};
+use crate::io::run_files::{firmware_trace_path, plot_run, run_recording, write_firmware_trace};
 use crate::sim::{simulate, SolverOptions};
 
 /// The demo's scenarios: (file name in `scenarios/`, its text).
@@ -152,7 +152,7 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
             settle_after_s: s.expect.settle_after_s,
             rms_error_rad: st.rms_rad,
             max_abs_error_rad: st.max_abs_rad,
-            faults: crate::scenario_io::fault_changes(&r)
+            faults: crate::io::run_files::fault_changes(&r)
                 .iter()
                 .filter(|c| c.fault.is_some())
                 .count(),

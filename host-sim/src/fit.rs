@@ -1,7 +1,7 @@
 //! Goodness of fit per channel: NRMSE fit in % (Cakurda et al. eq. 23, PLANT.md "Fit"),
 //! MAE (eq. 24) and MSE.
 
-use crate::recording::{Channel, Recording};
+use crate::io::recording::{Channel, Recording};
 
 /// fit = 100 (1 - ||y - y_hat|| / ||y - mean(y)||).
 ///

@@ -9,8 +9,8 @@ use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use host_sim::fit::{compare, format_table};
-use host_sim::plot::plot_comparison;
-use host_sim::recording::Channel;
+use host_sim::io::plot::plot_comparison;
+use host_sim::io::recording::Channel;
 use host_sim::sim::{simulate_with_progress, SolverOptions};
 use host_sim::{Plant, Recording};
 
@@ -260,9 +260,9 @@ fn simulate_metadata(
 }
 
 /// `simulate` on a 3-DOF arm plant file (`kind = "arm3"`): replays a 3-joint recording
-/// (columns with `_j1`..`_j3` suffixes, `host_sim::arm3_io`).
+/// (columns with `_j1`..`_j3` suffixes, `host_sim::io::arm3`).
 fn run_simulate_arm3(a: &SimulateArgs, inputs_path: &Path) -> Result<ExitCode> {
-    use host_sim::arm3_io::{fits, plot_arm3, Arm3Recording};
+    use host_sim::io::arm3::{fits, plot_arm3, Arm3Recording};
     use host_sim::plant::arm3::{simulate_arm3, Arm3};
     let arm = Arm3::load(&a.plant)?;
     let rec = Arm3Recording::read(inputs_path)?;
@@ -312,7 +312,7 @@ fn run_closed_loop(
     plot: Option<&Path>,
 ) -> Result<ExitCode> {
     let bar = ProgressBar::with_draw_target(Some(1000), ProgressDrawTarget::stderr());
-    let r = host_sim::scenario_io::simulate_scenario(plant, scenario, out, plot, &mut |f| {
+    let r = host_sim::io::run_files::simulate_scenario(plant, scenario, out, plot, &mut |f| {
         bar.set_position((f * 1000.0) as u64)
     })?;
     bar.finish_and_clear();

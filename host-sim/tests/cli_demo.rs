@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 use std::process::Command;
 
-use host_sim::recording::Recording;
+use host_sim::io::recording::Recording;
 
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")

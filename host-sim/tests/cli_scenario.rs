@@ -4,8 +4,8 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use host_sim::recording::Recording;
-use host_sim::scenario_io::FIRMWARE_COLUMNS;
+use host_sim::io::recording::Recording;
+use host_sim::io::run_files::FIRMWARE_COLUMNS;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")

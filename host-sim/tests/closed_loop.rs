@@ -4,7 +4,7 @@
 
 use std::path::PathBuf;
 
-use host_sim::closed_loop::{run, Scenario};
+use host_sim::control::closed_loop::{run, Scenario};
 use host_sim::Plant;
 
 fn root() -> PathBuf {
@@ -16,7 +16,7 @@ fn reference_plant() -> Plant {
     Plant::load(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
 
-fn run_scenario(name: &str) -> host_sim::closed_loop::ClosedLoopRun {
+fn run_scenario(name: &str) -> host_sim::control::closed_loop::ClosedLoopRun {
     let s = Scenario::load(root().join("scenarios").join(format!("{name}.toml"))).unwrap();
     let r = run(&reference_plant(), &s).unwrap();
     let st = r.tracking(s.expect.settle_after_s);

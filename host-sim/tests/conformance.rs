@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use host_sim::fit::{compare, format_table};
-use host_sim::recording::Channel;
+use host_sim::io::recording::Channel;
 use host_sim::sim::{simulate, SolverOptions};
 use host_sim::{Plant, Recording};
 

@@ -2,7 +2,7 @@
 //! model-based cascade (identified constants, trajectory feed-forward, torque loop) against the
 //! tuned PD and PID, all three tuned on the suite by the same procedure and cost and stored in
 //! `config/control_tuned.toml` (seed 004 Table 3: PD 3.61 vs model-based 1.95, 1.85x).
-//! The suite: `control_compare::SUITE` (step and random levels reached by 0.15 s minimum-jerk
+//! The suite: `control::compare::SUITE` (step and random levels reached by 0.15 s minimum-jerk
 //! moves, 0.5 Hz sine).
 //!
 //! What holds and is asserted here (measured figures in README, "Closed loop: cascade vs
@@ -20,7 +20,7 @@
 
 use std::path::PathBuf;
 
-use host_sim::control_compare::{
+use host_sim::control::compare::{
     compare, config_for, control_tuned_path, format_table, meets_step_requirement, scale_feedback,
     suite_scenarios, tuning_cost, ControlTuning, GAIN_MARGIN, STEP_REQUIREMENTS,
 };

@@ -4,7 +4,7 @@
 
 use std::path::PathBuf;
 
-use host_sim::diagnose_baseline::{train, BaselineError, ElmanOptions};
+use host_sim::diagnose::baseline::{train, BaselineError, ElmanOptions};
 use host_sim::sim::{simulate, SolverOptions};
 use host_sim::{Measurement, Plant, PlantConfig, ValveInputs};
 

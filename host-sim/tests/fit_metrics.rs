@@ -1,7 +1,7 @@
 //! Fit metrics (PLANT.md / Cakurda et al. eqs. 23-24) and recording comparison.
 
 use host_sim::fit::{compare, fit_percent, mae, mse, FitError};
-use host_sim::recording::Channel;
+use host_sim::io::recording::Channel;
 use host_sim::{Recording, ValveInputs};
 
 fn rec(t: &[f64], angle: &[f64], p1: Option<&[f64]>) -> Recording {

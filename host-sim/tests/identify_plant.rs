@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use host_sim::identify::plant::{fit_plant, parse_param_specs, PlantFitOptions};
 use host_sim::identify::MeasurementNoise;
-use host_sim::recording::Channel;
+use host_sim::io::recording::Channel;
 use host_sim::sim::{simulate, SolverOptions};
 use host_sim::{Plant, PlantConfig, Recording};
 

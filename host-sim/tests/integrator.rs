@@ -86,11 +86,11 @@ fn tightening_the_tolerance_changes_the_result_by_little() {
 fn single_step_path_matches_dopri5_per_sample() {
     // The valve commands the firmware issued on the random set-point scenario.
     let plant = Plant::load(shared().join("plant/reference-1dof.toml")).unwrap();
-    let scenario = host_sim::closed_loop::Scenario::load(
+    let scenario = host_sim::control::closed_loop::Scenario::load(
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenarios/random.toml"),
     )
     .unwrap();
-    let run = host_sim::closed_loop::run(&plant, &scenario).unwrap();
+    let run = host_sim::control::closed_loop::run(&plant, &scenario).unwrap();
     let inputs: Vec<_> = run.rows.iter().map(|r| r.inputs).collect();
     let dt = run.dt_s;
     // The closed loop's tolerances (closed_loop::run_with).

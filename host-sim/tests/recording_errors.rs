@@ -1,7 +1,7 @@
 //! Recording format: metadata kept, columns by name, errors naming file, line and field,
 //! atomic writes.
 
-use host_sim::recording::Channel;
+use host_sim::io::recording::Channel;
 use host_sim::{Recording, RecordingError};
 
 const GOOD: &str =

@@ -4,12 +4,12 @@
 //! [`PlantConfig`] (the same `[effects]` tables the simulator runs, so the corrected model
 //! is the plant code itself).
 
-use crate::config::PlantConfig;
+use crate::plant::config::PlantConfig;
 use crate::plant::effects::{
     ChannelCalibration, Gravity, JointFriction, Leakage, MuscleHysteresis, Polytropic,
     SensorCalibration, SensorLag, SupplyDrop, SupplyDropModel, ValveDeadTime,
 };
-use crate::recording::Channel;
+use crate::io::recording::Channel;
 
 use super::screen::{regress, Evidence, Scatter};
 

@@ -9,9 +9,9 @@
 //! iterations, failed simulations as rejected steps), which the crate's trait interface
 //! would hide behind separate `residuals`/`jacobian` calls.
 
-use crate::config::PlantConfig;
+use crate::plant::config::PlantConfig;
 use crate::plant::{Measurement, Plant, PlantState, ValveInputs};
-use crate::recording::{Channel, Recording};
+use crate::io::recording::{Channel, Recording};
 use crate::sim::{simulate, SolverOptions};
 
 use super::candidates::{Candidate, Setup};

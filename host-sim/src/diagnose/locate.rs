@@ -3,7 +3,7 @@
 //! first departs from the measurement.
 
 use crate::plant::Measurement;
-use crate::recording::{Channel, Recording};
+use crate::io::recording::{Channel, Recording};
 
 use super::differentiate::Differentiator;
 

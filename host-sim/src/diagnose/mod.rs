@@ -22,6 +22,7 @@
 //! named; (5) the chosen set is refitted on all of TRAIN and fits are reported on TRAIN and
 //! CHECK.
 
+pub mod baseline;
 pub mod candidates;
 pub mod differentiate;
 pub mod fitting;
@@ -33,10 +34,10 @@ pub mod synth;
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use crate::config::PlantConfig;
+use crate::plant::config::PlantConfig;
 use crate::fit::fit_percent;
 use crate::plant::{Measurement, Plant};
-use crate::recording::{Channel, Recording};
+use crate::io::recording::{Channel, Recording};
 use crate::sim::{simulate, SolverOptions};
 
 pub use candidates::{catalogue, Candidate, Screening, Setup};

@@ -8,7 +8,7 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
-use crate::recording::Channel;
+use crate::io::recording::Channel;
 
 use super::screen::Scatter;
 use super::{Diagnosis, Series};
@@ -162,7 +162,7 @@ pub fn write_report(
     check_name: Option<&str>,
 ) -> Result<(), String> {
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    crate::plot::ensure_font()?;
+    crate::io::plot::ensure_font()?;
     let mut h = String::new();
     let _ = write!(
         h,

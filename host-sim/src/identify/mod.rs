@@ -121,7 +121,7 @@ impl MeasurementNoise {
 
     /// Adds the noise to the output channels present in `rec` (deterministic for a seed).
     pub fn apply(&self, rec: &mut crate::Recording) {
-        use crate::recording::Channel;
+        use crate::io::recording::Channel;
         use rand::SeedableRng;
         use rand_distr::{Distribution, Normal};
         let mut rng = rand::rngs::StdRng::seed_from_u64(self.seed);

@@ -32,7 +32,7 @@ use toml_edit::{DocumentMut, Item, Value};
 
 use super::{write_atomic, IdentError};
 use crate::fit::fit_percent;
-use crate::recording::{Channel, Recording};
+use crate::io::recording::{Channel, Recording};
 use crate::sim::{simulate, SolverOptions};
 use crate::{Plant, PlantConfig};
 

@@ -294,7 +294,7 @@ pub fn sweep_kinematics(opt: &TorqueSweep) -> Vec<KinematicSample> {
 /// what the plant's sensors report (tensions from its force model, with its damper). The valve
 /// columns are 0: the pressures are regulator-held, so the file is not an open-loop replay.
 pub fn sweep_recording(plant: &crate::Plant, opt: &TorqueSweep) -> crate::Recording {
-    use crate::recording::Channel;
+    use crate::io::recording::Channel;
     let ks = sweep_kinematics(opt);
     let mut rec = crate::Recording {
         metadata: vec![
@@ -373,7 +373,7 @@ pub fn samples_from_recording(
     file: &str,
     header_line: usize,
 ) -> Result<(Vec<TorqueSample>, TorqueSource), IdentError> {
-    use crate::recording::Channel;
+    use crate::io::recording::Channel;
     let need = |c: Channel| {
         rec.channel(c).ok_or_else(|| {
             IdentError::at(

@@ -21,7 +21,7 @@ use std::path::Path;
 
 use serde::Deserialize;
 
-use crate::config::ConfigError;
+use crate::plant::config::ConfigError;
 use crate::plant::valve::Iso6358Valve;
 use crate::plant::ValveInputs;
 

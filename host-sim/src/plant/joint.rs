@@ -1,7 +1,7 @@
 //! The rotational joint: muscle kinematics over the sprocket and J omega' = T
 //! (PLANT.md "Muscle i" contraction and "Joint").
 
-use crate::config::JointConfig;
+use crate::plant::config::JointConfig;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Joint {

@@ -5,6 +5,7 @@
 //! [`pressure`] (Boyle-Mariotte), [`effects`] (optional extensions, off in the nominal files).
 
 pub mod arm3;
+pub mod config;
 pub mod effects;
 pub mod joint;
 pub mod muscle;
@@ -13,7 +14,7 @@ pub mod valve;
 
 use std::path::Path;
 
-use crate::config::{ConfigError, PlantConfig};
+use crate::plant::config::{ConfigError, PlantConfig};
 use effects::{Effects, Supply};
 use joint::Joint;
 use muscle::Muscle;

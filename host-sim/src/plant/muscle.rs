@@ -1,7 +1,7 @@
 //! One McKibben muscle: Tondu-Lopez static force with end-effect factor, pressure
 //! proportional damper, cable tension, chamber volume polynomial (PLANT.md "Muscle i").
 
-use crate::config::MuscleConfig;
+use crate::plant::config::MuscleConfig;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Muscle {

@@ -28,7 +28,7 @@ use pam_firmware::pid::DpPidGains;
 use pam_firmware::tick::{ControlLaw, ControllerConfig, FaultCode};
 use serde::{Deserialize, Serialize};
 
-use crate::closed_loop::{run_with, ClosedLoopError, Scenario, SetpointProfile};
+use crate::control::closed_loop::{run_with, ClosedLoopError, Scenario, SetpointProfile};
 use crate::identify::{write_atomic, IdentError};
 use crate::plant::Plant;
 
@@ -39,15 +39,15 @@ use crate::plant::Plant;
 pub const SUITE: [(&str, &str); 3] = [
     (
         "scenarios/suite/step_move.toml",
-        include_str!("../../scenarios/suite/step_move.toml"),
+        include_str!("../../../scenarios/suite/step_move.toml"),
     ),
     (
         "scenarios/sine.toml",
-        include_str!("../../scenarios/sine.toml"),
+        include_str!("../../../scenarios/sine.toml"),
     ),
     (
         "scenarios/suite/random_move.toml",
-        include_str!("../../scenarios/suite/random_move.toml"),
+        include_str!("../../../scenarios/suite/random_move.toml"),
     ),
 ];
 

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::recording::{Channel, Recording};
+use crate::io::recording::{Channel, Recording};
 
 /// Fonts tried when `$HOST_SIM_FONT` is not set.
 const FONT_CANDIDATES: &[&str] = &[
@@ -108,7 +108,7 @@ pub(crate) fn write_plot(
         figure.draw(&root).map_err(draw_err)?;
         root.present().map_err(|e| draw_err(e.to_string()))?;
     }
-    crate::recording::set_output_permissions(tmp.as_file(), path)
+    crate::io::recording::set_output_permissions(tmp.as_file(), path)
         .map_err(|e| draw_err(e.to_string()))?;
     tmp.persist(path)
         .map_err(|e| draw_err(e.error.to_string()))?;

@@ -20,10 +20,10 @@ use std::path::{Path, PathBuf};
 use pam_firmware::safety::FaultCode;
 use plotters::prelude::*;
 
-use crate::closed_loop::{ClosedLoopRun, Scenario, TrackingStats};
+use crate::control::closed_loop::{ClosedLoopRun, Scenario, TrackingStats};
 use crate::plant::Plant;
-use crate::plot::PlotError;
-use crate::recording::{write_atomically, Recording, RecordingError};
+use crate::io::plot::PlotError;
+use crate::io::recording::{write_atomically, Recording, RecordingError};
 
 /// Header of the firmware trace (the sidecar of a closed-loop recording).
 pub const FIRMWARE_COLUMNS: [&str; 8] = [
@@ -227,7 +227,7 @@ pub fn plot_run(path: &Path, run: &ClosedLoopRun, plant: &Plant) -> Result<(), P
         run: &'a ClosedLoopRun,
         plant: &'a Plant,
     }
-    impl crate::plot::Figure for Run<'_> {
+    impl crate::io::plot::Figure for Run<'_> {
         fn draw<DB: DrawingBackend>(
             &self,
             root: &DrawingArea<DB, plotters::coord::Shift>,
@@ -235,7 +235,7 @@ pub fn plot_run(path: &Path, run: &ClosedLoopRun, plant: &Plant) -> Result<(), P
             draw_run(root, self.run, self.plant)
         }
     }
-    crate::plot::write_plot(path, (1200u32, 780u32), &Run { run, plant })
+    crate::io::plot::write_plot(path, (1200u32, 780u32), &Run { run, plant })
 }
 
 type Series<'a> = (&'a str, RGBColor, Vec<f64>);
@@ -247,7 +247,7 @@ fn draw_run<DB: DrawingBackend>(
 ) -> Result<(), String> {
     root.fill(&WHITE).map_err(|e| e.to_string())?;
     let t: Vec<f64> = run.rows.iter().map(|r| r.t_s).collect();
-    let col = |f: &dyn Fn(&crate::closed_loop::TickRow) -> f64| -> Vec<f64> {
+    let col = |f: &dyn Fn(&crate::control::closed_loop::TickRow) -> f64| -> Vec<f64> {
         run.rows.iter().map(f).collect()
     };
     let orange = RGBColor(230, 130, 0);
@@ -393,7 +393,7 @@ pub fn simulate_scenario(
     let scenario = Scenario::load(scenario_path)?;
     let cfg = pam_firmware::tick::ControllerConfig::reference(scenario.scenario.tick_hz as f32);
     let t0 = std::time::Instant::now();
-    let run = crate::closed_loop::run_with(&plant, &scenario, cfg, progress)
+    let run = crate::control::closed_loop::run_with(&plant, &scenario, cfg, progress)
         .with_context(|| format!("{}: closed-loop run failed", scenario_path.display()))?;
     let wall_s = t0.elapsed().as_secs_f64();
     let fails = run.check();

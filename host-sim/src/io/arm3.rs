@@ -17,7 +17,7 @@ use std::path::Path;
 use crate::fit::fit_percent;
 use crate::plant::arm3::{Arm3, Arm3Inputs, Arm3Integrator, Arm3SimError, Arm3State};
 use crate::plant::ValveInputs;
-use crate::recording::{write_atomically, Channel, Recording, RecordingError, INPUT_COLUMNS};
+use crate::io::recording::{write_atomically, Channel, Recording, RecordingError, INPUT_COLUMNS};
 use crate::sim::SolverOptions;
 
 /// Number of joints.
@@ -61,7 +61,7 @@ impl Arm3Recording {
     }
 
     /// Joint `joint` (0-based) as a 1-DOF [`Recording`] (columns without the suffix), for
-    /// [`crate::fit::compare`] and [`crate::plot::plot_comparison`].
+    /// [`crate::fit::compare`] and [`crate::io::plot::plot_comparison`].
     pub fn joint_recording(&self, joint: usize) -> Recording {
         Recording {
             metadata: self.metadata.clone(),
@@ -108,14 +108,14 @@ impl Arm3Recording {
             field: field.to_owned(),
             message,
         };
-        let crate::recording::Preamble {
+        let crate::io::recording::Preamble {
             metadata,
             meta_line_of,
             lines: meta_lines,
             offset,
-        } = crate::recording::Preamble::of(text);
+        } = crate::io::recording::Preamble::of(text);
         let (mut rdr, header_line, headers) =
-            crate::recording::csv_body(text, offset, meta_lines, path)?;
+            crate::io::recording::csv_body(text, offset, meta_lines, path)?;
         let find = |name: &str| -> Result<Option<usize>, RecordingError> {
             let mut it = headers.iter().enumerate().filter(|(_, h)| *h == name);
             let first = it.next().map(|(i, _)| i);
@@ -467,12 +467,12 @@ pub fn plot_arm3(
     path: &Path,
     reference: Option<&Arm3Recording>,
     model: &Arm3Recording,
-) -> Result<(), crate::plot::PlotError> {
+) -> Result<(), crate::io::plot::PlotError> {
     struct Arm<'a> {
         reference: Option<&'a Arm3Recording>,
         model: &'a Arm3Recording,
     }
-    impl crate::plot::Figure for Arm<'_> {
+    impl crate::io::plot::Figure for Arm<'_> {
         fn draw<DB: plotters::prelude::DrawingBackend>(
             &self,
             root: &plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
@@ -480,7 +480,7 @@ pub fn plot_arm3(
             draw_arm3(root, self.reference, self.model)
         }
     }
-    crate::plot::write_plot(path, (1400u32, 900u32), &Arm { reference, model })
+    crate::io::plot::write_plot(path, (1400u32, 900u32), &Arm { reference, model })
 }
 
 /// A channel, its colour, its simulated values and the reference values if any.

@@ -25,7 +25,7 @@
 use rand::{Rng, SeedableRng};
 
 use crate::plant::{Measurement, ValveInputs};
-use crate::recording::Channel;
+use crate::io::recording::Channel;
 
 /// Number of network inputs: 4 valve openings + 5 nominal channels.
 const N_IN: usize = 9;
