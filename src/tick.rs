@@ -22,7 +22,9 @@ use crate::feedforward::{feedforward_torque_nm, FeedforwardGains, SetpointDeriva
 use crate::force_law::{ForceFlags, ForceLawParams};
 use crate::geometry::JointGeometry;
 use crate::pid::{DpPid, DpPidGains};
-use crate::safety::{clamp_pressure_setpoint_pa, SafeState, SafetyMonitor, TrackingMonitor};
+use crate::safety::{
+    clamp_pressure_setpoint_pa, FaultSet, SafeState, SafetyMonitor, TrackingMonitor,
+};
 use crate::sensors::{
     ChannelFault, ChannelLimits, ChannelStatus, ChannelValidator, VelocityEstimator,
 };
@@ -83,8 +85,12 @@ pub struct TickOutput {
     pub angle_est_rad: f32,
     /// Velocity estimate [rad/s].
     pub velocity_est_rad_s: f32,
-    /// Latched fault (Some => valves are in the safe state).
+    /// Latched fault: the first cause (Some => valves are in the safe state).
     pub fault: Option<FaultCode>,
+    /// Every fault condition that holds in this tick (bit `code - 1`; empty while all is
+    /// well). While faulted it keeps being evaluated; [`ControlTick::reset`] is refused
+    /// while it is not empty.
+    pub active: FaultSet,
     /// True when the cascade computed this tick's command.
     pub armed: bool,
 }
@@ -111,6 +117,10 @@ pub struct ControllerConfig {
     pub tick_hz: f32,
     /// Longest accepted `dt` [s]; longer (a missed deadline) raises [`FaultCode::Watchdog`].
     pub dt_max_s: f32,
+    /// Shortest accepted `dt` [s] (> 0, < `dt_max_s`); shorter (a double-triggered tick, a
+    /// broken timer) raises [`FaultCode::Watchdog`]: the differentiators and the integrators
+    /// assume at least this period.
+    pub dt_min_s: f32,
     /// Joint geometry (stretches for the force law, sprocket radius).
     pub geometry: JointGeometry,
     /// Identified force law (torque feedback).
@@ -131,7 +141,9 @@ pub struct ControllerConfig {
     pub pressure_limits: ChannelLimits,
     /// Validation of the angle channel [rad, rad/s]; its range is the allowed joint range.
     pub angle_limits: ChannelLimits,
-    /// Measured pressure above this raises an over-pressure fault [Pa gauge].
+    /// Measured pressure above this raises an over-pressure fault, and vents that muscle
+    /// while faulted whatever the safe state [Pa gauge]. At most
+    /// [`crate::P_MUSCLE_MAX_GAUGE_PA`] (validated); lower for a weaker muscle.
     pub p_over_gauge_pa: f32,
     /// Angle set-points are clamped to `[-angle_setpoint_max_rad, angle_setpoint_max_rad]`.
     pub angle_setpoint_max_rad: f32,
@@ -207,6 +219,7 @@ impl ControllerConfig {
         ControllerConfig {
             tick_hz,
             dt_max_s: 5.0 / tick_hz,
+            dt_min_s: 0.25 / tick_hz,
             geometry: JointGeometry::REFERENCE,
             force_law: FORCE_LAW,
             torque_model: TORQUE_MODEL,
@@ -247,7 +260,7 @@ impl ControllerConfig {
                 jump_margin: 0.02,
                 stale_ticks: ticks(0.010),
             },
-            p_over_gauge_pa: 630_000.0,
+            p_over_gauge_pa: P_MUSCLE_MAX_GAUGE_PA,
             angle_setpoint_max_rad: 0.8,
             // Filling a muscle across 100 kPa takes ~25 ms with the reference valve; 0.3 s
             // of saturated command without getting there is a valve or supply failure.
@@ -280,6 +293,8 @@ impl ControllerConfig {
         let pr = &self.pressure;
         pos(self.tick_hz)
             && pos(self.dt_max_s)
+            && pos(self.dt_min_s)
+            && self.dt_min_s < self.dt_max_s
             && pos(g.sprocket_radius_m)
             && pos(g.rest_length_m)
             && g.initial_contraction.is_finite()
@@ -307,6 +322,7 @@ impl ControllerConfig {
             && lim_ok(&self.pressure_limits)
             && lim_ok(&self.angle_limits)
             && pos(self.p_over_gauge_pa)
+            && self.p_over_gauge_pa <= P_MUSCLE_MAX_GAUGE_PA
             && nonneg(self.angle_setpoint_max_rad)
             && pos(self.tracking_error_pa)
             && self.tracking_ticks > 0
@@ -328,8 +344,12 @@ pub struct ControlTick {
     /// `dt_fallback_s.is_finite() && dt_fallback_s > 0.0`.
     dt_fallback_good: bool,
     /// `dt_max_s`, with +inf replaced by `f32::MAX`: then `dt_ok` is the two comparisons
-    /// `0 < dt <= dt_limit_s` (NaN and +inf fail them), the same as the finiteness test too.
+    /// `dt_floor_s <= dt <= dt_limit_s` (NaN and +inf fail them), the same as the finiteness
+    /// test too.
     dt_limit_s: f32,
+    /// `dt_min_s`, or the smallest positive float when that is not positive (then the
+    /// configuration is invalid and faulted anyway): `dt >= dt_floor_s` implies `dt > 0`.
+    dt_floor_s: f32,
     /// `cfg.torque_model.dp_limit_pa()` (a configuration constant of the torque loop).
     dp_limit_pa: f32,
     /// `clamp_pressure_setpoint_pa(f32::INFINITY, cfg.torque.p_set_max_gauge_pa)`: the
@@ -350,8 +370,8 @@ pub struct ControlTick {
     pressure1: PressureController,
     pressure2: PressureController,
     safety: SafetyMonitor,
-    /// The fault condition seen in the last tick (None = all conditions clear).
-    condition: Option<FaultCode>,
+    /// The fault conditions that held in the last tick (empty = all clear).
+    active: FaultSet,
     last_p1_pa: Option<f32>,
     last_p2_pa: Option<f32>,
     last_angle_rad: Option<f32>,
@@ -374,10 +394,42 @@ fn channel_fault(
     }
 }
 
-/// The first fault condition of a tick, in the documented order (configuration, `dt`,
-/// pressure 1, pressure 2, angle, over-pressure 1, 2, set-point). Off the hot path.
+/// Every fault condition of a tick, and the first one in the documented order
+/// (configuration, `dt`, pressure 1, pressure 2, angle, over-pressure 1, 2, set-point).
+/// Off the hot path.
 #[cold]
 #[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn conditions(
+    config_ok: bool,
+    dt_ok: bool,
+    s1: ChannelStatus,
+    s2: ChannelStatus,
+    sa: ChannelStatus,
+    over1: bool,
+    over2: bool,
+    sp_ok: bool,
+) -> (FaultSet, Option<FaultCode>) {
+    let first = first_condition(config_ok, dt_ok, s1, s2, sa, over1, over2, sp_ok);
+    let mut set = FaultSet::EMPTY;
+    let none = ChannelStatus::Waiting;
+    // Each condition alone, through the same ordered test.
+    let parts = [
+        first_condition(config_ok, true, none, none, none, false, false, true),
+        first_condition(true, dt_ok, none, none, none, false, false, true),
+        first_condition(true, true, s1, none, none, false, false, true),
+        first_condition(true, true, none, s2, none, false, false, true),
+        first_condition(true, true, none, none, sa, false, false, true),
+        first_condition(true, true, none, none, none, over1, false, true),
+        first_condition(true, true, none, none, none, false, over2, true),
+        first_condition(true, true, none, none, none, false, false, sp_ok),
+    ];
+    for c in parts.into_iter().flatten() {
+        set.insert(c);
+    }
+    (set, first)
+}
+
 #[allow(clippy::too_many_arguments)]
 fn first_condition(
     config_ok: bool,
@@ -454,12 +506,18 @@ impl ControlTick {
         } else {
             cfg.dt_max_s
         };
+        let dt_floor_s = if cfg.dt_min_s > 0.0 {
+            cfg.dt_min_s
+        } else {
+            f32::MIN_POSITIVE
+        };
         ControlTick {
             cfg,
             config_ok,
             dt_fallback_s,
             dt_fallback_good: dt_fallback_s.is_finite() && dt_fallback_s > 0.0,
             dt_limit_s,
+            dt_floor_s,
             dp_limit_pa: cfg.torque_model.dp_limit_pa(),
             p_set_hi_pa: clamp_pressure_setpoint_pa(f32::INFINITY, cfg.torque.p_set_max_gauge_pa),
             ff_tau_s: SetpointDerivatives::tau_s(cfg.feedforward.cutoff_hz),
@@ -482,10 +540,10 @@ impl ControlTick {
             pressure1: PressureController::new(cfg.pressure),
             pressure2: PressureController::new(cfg.pressure),
             safety,
-            condition: if config_ok {
-                None
+            active: if config_ok {
+                FaultSet::EMPTY
             } else {
-                Some(FaultCode::ConfigInvalid)
+                FaultSet::of(FaultCode::ConfigInvalid)
             },
             last_p1_pa: None,
             last_p2_pa: None,
@@ -500,9 +558,19 @@ impl ControlTick {
         &self.cfg
     }
 
-    /// The latched fault.
+    /// The latched fault (the first cause).
     pub fn fault(&self) -> Option<FaultCode> {
         self.safety.fault()
+    }
+
+    /// Every fault raised since the last reset.
+    pub fn faults_seen(&self) -> FaultSet {
+        self.safety.seen()
+    }
+
+    /// The fault conditions that held in the last tick.
+    pub fn active_conditions(&self) -> FaultSet {
+        self.active
     }
 
     fn reset_laws(&mut self) {
@@ -518,10 +586,10 @@ impl ControlTick {
         self.pressure2.reset();
     }
 
-    /// Explicit re-arm after a fault. Returns false (and stays faulted) when the fault
+    /// Explicit re-arm after a fault. Returns false (and stays faulted) when any fault
     /// condition was still present in the last tick or the configuration is invalid.
     pub fn reset(&mut self) -> bool {
-        if !self.config_ok || self.condition.is_some() {
+        if !self.config_ok || !self.active.is_empty() {
             return false;
         }
         self.reset_laws();
@@ -535,8 +603,8 @@ impl ControlTick {
         // not copied: a whole-struct copy cost ~190 instructions per tick on the Cortex-M4.
         let p_over_gauge_pa = self.cfg.p_over_gauge_pa;
         let sp_max = self.cfg.angle_setpoint_max_rad;
-        // `dt_s.is_finite() && dt_s > 0.0 && dt_s <= dt_max_s` (see `dt_limit_s`).
-        let dt_ok = dt_s > 0.0 && dt_s <= self.dt_limit_s;
+        // `dt_s.is_finite() && dt_s >= dt_min_s && dt_s <= dt_max_s` (see `dt_limit_s`).
+        let dt_ok = dt_s >= self.dt_floor_s && dt_s <= self.dt_limit_s;
         // Channels are aged by the nominal period when dt itself is bad.
         let dt_age = if dt_ok { dt_s } else { self.dt_fallback_s };
 
@@ -576,14 +644,22 @@ impl ControlTick {
             | over1
             | over2
             | !sp_ok;
-        let cond = if any {
-            first_condition(self.config_ok, dt_ok, s1, s2, sa, over1, over2, sp_ok)
-        } else {
-            None
-        };
-        self.condition = cond;
-        if let Some(c) = cond {
-            self.safety.raise(c);
+        self.active = FaultSet::EMPTY;
+        if any {
+            let (set, first) = conditions(self.config_ok, dt_ok, s1, s2, sa, over1, over2, sp_ok);
+            self.active = set;
+            if let Some(c) = first {
+                self.safety.raise(c);
+            }
+            self.safety.raise_all(set);
+            // Escalation: a muscle above the over-pressure limit is vented (this tick: the
+            // over-pressure fault itself puts the valves in the safe state).
+            if over1 {
+                self.safety.escalate_vent(0);
+            }
+            if over2 {
+                self.safety.escalate_vent(1);
+            }
         }
 
         let angle_est = self.last_angle_rad.unwrap_or(0.0);
@@ -615,10 +691,18 @@ impl ControlTick {
             angle_est_rad: angle_est,
             velocity_est_rad_s: vel,
             fault: None,
+            active: FaultSet::EMPTY,
             armed: false,
         };
 
         if self.safety.fault().is_some() {
+            // A numeric fault persists while the force-law estimate of the current
+            // measurements is unusable.
+            if self.safety.seen().contains(FaultCode::ControllerNumeric)
+                && !matches!(estimate, Some((t, flags)) if !flags.contains_any(ForceFlags::FATAL) && t.is_finite())
+            {
+                self.active.insert(FaultCode::ControllerNumeric);
+            }
             return self.safe_output(out);
         }
 
@@ -739,6 +823,13 @@ impl ControlTick {
                     };
                     warn!("pressure tracking lost: {}", f);
                     self.safety.raise(f);
+                    if lost1 {
+                        self.active.insert(FaultCode::PressureTrackingLost1);
+                    }
+                    if lost2 {
+                        self.active.insert(FaultCode::PressureTrackingLost2);
+                        self.safety.raise(FaultCode::PressureTrackingLost2);
+                    }
                     out.torque_des_nm = t_des;
                     return self.safe_output(out);
                 }
@@ -770,7 +861,7 @@ impl ControlTick {
             }
             Err(e) => {
                 warn!("control law error: {}", e);
-                self.condition = Some(FaultCode::ControllerNumeric);
+                self.active.insert(FaultCode::ControllerNumeric);
                 self.safety.raise(FaultCode::ControllerNumeric);
                 self.safe_output(out)
             }
@@ -779,7 +870,7 @@ impl ControlTick {
 
     fn safe_output(&mut self, mut out: TickOutput) -> TickOutput {
         self.reset_laws();
-        out.valves = self.safety.safe_state().command();
+        out.valves = self.safety.safe_command();
         let (h1, h2) = match self.safety.safe_state() {
             SafeState::Hold => (
                 clamp_pressure_setpoint_pa(self.last_p1_pa.unwrap_or(0.0), P_MUSCLE_MAX_GAUGE_PA),
@@ -787,10 +878,12 @@ impl ControlTick {
             ),
             SafeState::Vent => (0.0, 0.0),
         };
-        out.p1_set_gauge_pa = h1;
-        out.p2_set_gauge_pa = h2;
+        let vented = self.safety.vented();
+        out.p1_set_gauge_pa = if vented[0] { 0.0 } else { h1 };
+        out.p2_set_gauge_pa = if vented[1] { 0.0 } else { h2 };
         out.torque_des_nm = 0.0;
         out.fault = self.safety.fault();
+        out.active = self.active;
         out.armed = false;
         out
     }
@@ -905,6 +998,64 @@ mod tests {
         t.step(&frame(700e3, 300e3, 0.0), &SP0, DT);
         assert!(!t.reset());
         assert_eq!(t.fault(), Some(FaultCode::OverPressure1));
+    }
+
+    #[test]
+    fn over_pressure_in_hold_vents_that_muscle_and_reports_all_conditions() {
+        let mut t = tick();
+        t.step(&frame(300e3, 300e3, 0.0), &SP0, DT);
+        // A first fault (angle out of range) puts the joint in Hold.
+        let o = t.step(&frame(300e3, 300e3, 1.5), &SP0, DT);
+        assert_eq!(o.fault, Some(FaultCode::AngleOutOfRange));
+        assert_eq!(o.valves, ValveCommand::default());
+        // Muscle 2 is compressed in Hold (10 kPa per tick): up to 598 kPa it is held...
+        let mut p2: f32 = 300e3;
+        while p2 < 598e3 {
+            p2 = (p2 + 10e3).min(598e3);
+            let o = t.step(&frame(300e3, p2, 1.5), &SP0, DT);
+            assert_eq!(o.valves, ValveCommand::default(), "{p2}");
+        }
+        // ... 602 kPa (above the 600 kPa limit) vents muscle 2 only, and the cause stays.
+        let o = t.step(&frame(300e3, 602e3, 1.5), &SP0, DT);
+        assert_eq!(o.fault, Some(FaultCode::AngleOutOfRange));
+        assert_eq!(o.valves.muscle1, 0.0);
+        assert_eq!(o.valves.muscle2, -1.0);
+        assert_eq!(o.p2_set_gauge_pa, 0.0);
+        assert!(o.active.contains(FaultCode::AngleOutOfRange));
+        assert!(o.active.contains(FaultCode::OverPressure2));
+        assert!(t.faults_seen().contains(FaultCode::OverPressure2));
+        // The vent stays after the pressure fell; reset refused while the angle is out.
+        let o = t.step(&frame(300e3, 590e3, 1.5), &SP0, DT);
+        assert_eq!(o.valves.muscle2, -1.0);
+        assert!(!t.reset());
+        t.step(&frame(300e3, 590e3, 0.2), &SP0, DT);
+        assert!(t.reset());
+        let o = t.step(&frame(300e3, 590e3, 0.2), &SP0, DT);
+        assert!(o.armed && o.active.is_empty());
+    }
+
+    #[test]
+    fn over_pressure_vents_with_vent_or_hold_and_limit_is_validated() {
+        let mut cfg = ControllerConfig::reference(1000.0);
+        cfg.p_over_gauge_pa = 500e3;
+        let mut t = ControlTick::new(cfg);
+        let o = t.step(&frame(520e3, 300e3, 0.0), &SP0, DT);
+        assert_eq!(o.fault, Some(FaultCode::OverPressure1));
+        assert_eq!(o.valves.muscle1, -1.0);
+        assert_eq!(o.valves.muscle2, 0.0);
+        cfg.p_over_gauge_pa = 630e3;
+        assert!(!cfg.is_valid());
+    }
+
+    #[test]
+    fn short_dt_raises_watchdog() {
+        let mut t = tick();
+        t.step(&frame(300e3, 300e3, 0.0), &SP0, DT);
+        let o = t.step(&frame(300e3, 300e3, 0.0), &SP0, 1e-5);
+        assert_eq!(o.fault, Some(FaultCode::Watchdog));
+        let mut cfg = ControllerConfig::reference(1000.0);
+        cfg.dt_min_s = 0.0;
+        assert!(!cfg.is_valid());
     }
 
     #[test]
