@@ -93,6 +93,10 @@ pub enum FaultCode {
     ExhaustStuckClosed2 = 28,
     /// A muscle loses pressure while its inlet is open: the supply is gone.
     SupplyLost = 29,
+    /// The MCU restarted by anything but a power-on with a clean latch record (watchdog,
+    /// brown-out, software or pin reset, corrupt record): it boots into the safe state
+    /// ([`crate::latch`]).
+    ResetLatched = 30,
 }
 
 /// A set of fault codes, one bit per code (bit `code - 1`); `bits()` is the value logged.
@@ -156,7 +160,7 @@ impl FaultSet {
 
 impl FaultCode {
     /// Number of fault codes (codes are `1..=COUNT`).
-    pub const COUNT: u32 = 29;
+    pub const COUNT: u32 = 30;
 
     /// The stable numeric code.
     #[inline]
@@ -197,6 +201,7 @@ impl FaultCode {
             27 => ExhaustStuckClosed1,
             28 => ExhaustStuckClosed2,
             29 => SupplyLost,
+            30 => ResetLatched,
             _ => return None,
         })
     }
@@ -406,6 +411,17 @@ impl SafetyMonitor {
                 muscle1: requested.muscle1.clamp(-1.0, 1.0),
                 muscle2: requested.muscle2.clamp(-1.0, 1.0),
             }
+        }
+    }
+
+    /// Restores a latched state (cause, faults seen, vented muscles), e.g. from the
+    /// persistent latch at boot. An empty cause changes nothing.
+    pub fn restore(&mut self, cause: Option<FaultCode>, seen: FaultSet, vented: [bool; 2]) {
+        if let Some(c) = cause {
+            self.raise(c);
+            self.raise_all(seen);
+            self.vent[0] |= vented[0];
+            self.vent[1] |= vented[1];
         }
     }
 

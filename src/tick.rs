@@ -22,6 +22,7 @@ use crate::feedforward::{feedforward_torque_nm, FeedforwardGains, SetpointDeriva
 use crate::force_law::{ForceFlags, ForceLawParams};
 use crate::geometry::JointGeometry;
 use crate::pid::{DpPid, DpPidGains};
+use crate::residual::{ResidualMonitor, ValveModelParams};
 use crate::safety::{
     clamp_pressure_setpoint_pa, FaultSet, SafeState, SafetyMonitor, TrackingMonitor,
 };
@@ -157,6 +158,9 @@ pub struct ControllerConfig {
     /// Trajectory feed-forward of the cascade ([`crate::feedforward`]); unused by
     /// [`ControlLaw::DirectPid`].
     pub feedforward: FeedforwardGains,
+    /// The muscle pressure model and thresholds of the valve / supply supervision
+    /// ([`crate::residual`]).
+    pub valve_model: ValveModelParams,
 }
 
 impl ControllerConfig {
@@ -273,6 +277,7 @@ impl ControllerConfig {
                 cutoff_hz: 150.0,
                 limit_nm: 2.0,
             },
+            valve_model: ValveModelParams::REFERENCE,
         }
     }
 
@@ -327,6 +332,7 @@ impl ControllerConfig {
             && pos(self.tracking_error_pa)
             && self.tracking_ticks > 0
             && self.feedforward.is_valid()
+            && self.valve_model.is_valid()
             && match self.law {
                 ControlLaw::Cascade => true,
                 ControlLaw::DirectPid(g) => g.is_valid(),
@@ -377,6 +383,10 @@ pub struct ControlTick {
     last_angle_rad: Option<f32>,
     tracking1: TrackingMonitor,
     tracking2: TrackingMonitor,
+    residual: ResidualMonitor,
+    /// The last command, and whether its openings still have to be given to the residual.
+    last_command: ValveCommand,
+    pending_command: bool,
 }
 
 fn channel_fault(
@@ -550,6 +560,12 @@ impl ControlTick {
             last_angle_rad: None,
             tracking1: TrackingMonitor::default(),
             tracking2: TrackingMonitor::default(),
+            residual: ResidualMonitor::new(cfg.valve_model, &cfg.geometry),
+            last_command: ValveCommand {
+                muscle1: 0.0,
+                muscle2: 0.0,
+            },
+            pending_command: false,
         }
     }
 
@@ -571,6 +587,23 @@ impl ControlTick {
     /// The fault conditions that held in the last tick.
     pub fn active_conditions(&self) -> FaultSet {
         self.active
+    }
+
+    /// The latched state as a persistent-latch record ([`crate::latch`]): store it after
+    /// every tick ([`crate::latch::PersistentLatch::update`] writes only on a change).
+    pub fn latch_record(&self) -> crate::latch::LatchRecord {
+        crate::latch::LatchRecord {
+            cause: self.safety.fault(),
+            seen: self.safety.seen(),
+            vented: self.safety.vented(),
+        }
+    }
+
+    /// Starts in the latched state of a stored record (the boot decision was
+    /// [`crate::latch::BootDecision::Safe`]): the safe state from the first tick, until an
+    /// explicit [`ControlTick::reset`].
+    pub fn restore_latch(&mut self, record: &crate::latch::LatchRecord) {
+        self.safety.restore(record.cause, record.seen, record.vented);
     }
 
     fn reset_laws(&mut self) {
@@ -598,7 +631,47 @@ impl ControlTick {
 
     /// One control tick. Pure: no hidden time, no I/O. Never panics; every float of the
     /// output is finite.
+    #[inline]
     pub fn step(&mut self, frame: &SensorFrame, setpoint: &Setpoint, dt_s: f32) -> TickOutput {
+        if self.pending_command {
+            // The caller did not report the driver's openings: the command stands in.
+            let c = crate::valves::ValveOpenings::from_command(&self.last_command);
+            self.residual.openings(c.u_in1, c.u_ex1, c.u_in2, c.u_ex2);
+        }
+        let out = self.step_inner(frame, setpoint, dt_s);
+        self.last_command = out.valves;
+        self.pending_command = true;
+        out
+    }
+
+    /// Reports what the valve driver switched for this tick's command (the return of
+    /// [`crate::valves::OnOffValves::apply`]), for the valve / supply supervision
+    /// ([`crate::residual`]). Call after every `step`; without it the command stands in.
+    #[inline]
+    pub fn valves_applied(&mut self, o: &crate::valves::ValveOpenings) {
+        self.residual.openings(o.u_in1, o.u_ex1, o.u_in2, o.u_ex2);
+        self.pending_command = false;
+    }
+
+    /// A residual (valve / supply) fault: raised, and a tracking-lost cause of the same
+    /// muscle stays active while it persists.
+    #[cold]
+    #[inline(never)]
+    fn residual_fault(&mut self, set: FaultSet) {
+        use FaultCode::*;
+        let m1 = [InletStuckOpen1, InletStuckClosed1, ExhaustStuckOpen1, ExhaustStuckClosed1, SupplyLost];
+        let m2 = [InletStuckOpen2, InletStuckClosed2, ExhaustStuckOpen2, ExhaustStuckClosed2, SupplyLost];
+        let seen = self.safety.seen();
+        if m1.iter().any(|&c| set.contains(c)) && seen.contains(PressureTrackingLost1) {
+            self.active.insert(PressureTrackingLost1);
+        }
+        if m2.iter().any(|&c| set.contains(c)) && seen.contains(PressureTrackingLost2) {
+            self.active.insert(PressureTrackingLost2);
+        }
+        self.safety.raise_all(set);
+    }
+
+    fn step_inner(&mut self, frame: &SensorFrame, setpoint: &Setpoint, dt_s: f32) -> TickOutput {
         // Scalars read once; the configuration (with its force-law and torque-model tables) is
         // not copied: a whole-struct copy cost ~190 instructions per tick on the Cortex-M4.
         let p_over_gauge_pa = self.cfg.p_over_gauge_pa;
@@ -630,6 +703,21 @@ impl ControlTick {
             _ => None,
         };
         let vel = self.velocity.update_with(new_angle, dt_age, dt_age_good);
+        // Valve / supply supervision on this tick's fresh samples.
+        let residual = match (s1, s2, new_angle) {
+            (
+                ChannelStatus::Valid {
+                    value: p1,
+                    age_ticks: 0,
+                },
+                ChannelStatus::Valid {
+                    value: p2,
+                    age_ticks: 0,
+                },
+                Some(a),
+            ) if dt_ok => self.residual.observe(true, p1, p2, a, dt_s),
+            _ => self.residual.observe(false, 0.0, 0.0, 0.0, dt_s),
+        };
 
         // Fault conditions of this tick (the first one found is reported). Fast path: one
         // branch-free test of all of them; the ordered search runs only when one holds.
@@ -644,10 +732,13 @@ impl ControlTick {
             | over1
             | over2
             | !sp_ok;
-        self.active = FaultSet::EMPTY;
+        self.active = residual;
+        if !residual.is_empty() {
+            self.residual_fault(residual);
+        }
         if any {
             let (set, first) = conditions(self.config_ok, dt_ok, s1, s2, sa, over1, over2, sp_ok);
-            self.active = set;
+            self.active = set.union(residual);
             if let Some(c) = first {
                 self.safety.raise(c);
             }
