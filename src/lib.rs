@@ -18,6 +18,8 @@
 //! - [`feedforward`]: trajectory feed-forward of the cascade (set-point rate, inertia).
 //! - [`pid`]: model-free PD / PID from the angle to the activation dp (comparison baseline).
 //! - [`safety`]: fault codes, safe valve state, latching state machine.
+//! - [`residual`]: model-based valve and supply supervision (pressure residual).
+//! - [`latch`]: the fault latch across resets (record, checksum, boot decision).
 //! - [`valves`]: on/off and proportional valve drivers over embedded-hal 1.0.
 //! - [`tick`]: the control tick combining all of the above (`tick_contract.md`).
 //! - [`log`]: ring buffer of per-tick records.
@@ -37,8 +39,12 @@ pub mod feedforward;
 pub mod fixed_point;
 pub mod force_law;
 pub mod geometry;
+pub mod latch;
+#[cfg(feature = "board")]
+pub mod latch_bkpsram;
 pub mod log;
 pub mod pid;
+pub mod residual;
 pub mod safety;
 pub mod sensors;
 pub mod tick;

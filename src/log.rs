@@ -39,6 +39,8 @@ pub struct TickRecord {
     pub valves: ValveCommand,
     /// Latched fault code (0 = none; see [`crate::safety::FaultCode`]).
     pub fault_code: u8,
+    /// Fault conditions active this tick (bit `code - 1`, see [`crate::safety::FaultSet`]).
+    pub active_faults: u32,
     /// Armed this tick.
     pub armed: bool,
 }
@@ -59,6 +61,7 @@ impl TickRecord {
             velocity_est_rad_s: out.velocity_est_rad_s,
             valves: out.valves,
             fault_code: out.fault.map_or(0, |f| f.code()),
+            active_faults: out.active.bits(),
             armed: out.armed,
         }
     }
@@ -145,6 +148,7 @@ mod tests {
             angle_est_rad: 5.0,
             velocity_est_rad_s: 6.0,
             fault,
+            active: crate::safety::FaultSet::EMPTY,
             armed: fault.is_none(),
         }
     }

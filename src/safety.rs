@@ -10,8 +10,12 @@
 //!
 //! - A fault forces the safe valve command ([`SafeState::Hold`]: all valves closed, or
 //!   [`SafeState::Vent`]: exhaust valves fully open) in the same tick it is raised.
-//! - The first fault is latched; later faults do not overwrite it (the root cause stays
-//!   visible). Nothing re-arms without an explicit [`SafetyMonitor::reset`].
+//! - The first fault is latched as the cause; later faults do not overwrite it (the root
+//!   cause stays visible) but are added to the set of faults seen ([`FaultSet`]), so every
+//!   condition is reported. Nothing re-arms without an explicit [`SafetyMonitor::reset`].
+//! - Escalation while faulted: a muscle whose measured pressure rises above the
+//!   over-pressure limit is vented (exhaust open, inlet closed) whatever the configured
+//!   safe state, until the next reset ([`SafetyMonitor::escalate_vent`]).
 //! - Pressure set-points pass through [`clamp_pressure_setpoint_pa`]: never above
 //!   [`crate::P_MUSCLE_MAX_GAUGE_PA`] (600 kPa gauge), never below 0, never NaN.
 
@@ -56,8 +60,8 @@ pub enum FaultCode {
     OverPressure2 = 14,
     /// The angle set-point is NaN or infinite.
     SetpointInvalid = 15,
-    /// The tick period `dt` is NaN, not positive, or far longer than nominal (a missed
-    /// deadline / watchdog).
+    /// The tick period `dt` is NaN, shorter than `dt_min_s` (a double-triggered tick or a
+    /// broken timer), or longer than `dt_max_s` (a missed deadline / watchdog).
     Watchdog = 16,
     /// A control law produced or received a non-finite value.
     ControllerNumeric = 17,
@@ -68,9 +72,96 @@ pub enum FaultCode {
     PressureTrackingLost1 = 19,
     /// As [`FaultCode::PressureTrackingLost1`], muscle 2.
     PressureTrackingLost2 = 20,
+    /// Muscle 1 pressure rises faster than the valve model allows with its inlet closed
+    /// (inlet valve stuck open or leaking), see [`crate::residual`].
+    InletStuckOpen1 = 21,
+    /// As [`FaultCode::InletStuckOpen1`], muscle 2.
+    InletStuckOpen2 = 22,
+    /// Muscle 1 pressure does not rise with its inlet open and the supply present (inlet
+    /// valve stuck closed or line blocked).
+    InletStuckClosed1 = 23,
+    /// As [`FaultCode::InletStuckClosed1`], muscle 2.
+    InletStuckClosed2 = 24,
+    /// Muscle 1 pressure falls faster than the valve model allows with its exhaust closed
+    /// (exhaust valve stuck open, leak, burst line).
+    ExhaustStuckOpen1 = 25,
+    /// As [`FaultCode::ExhaustStuckOpen1`], muscle 2.
+    ExhaustStuckOpen2 = 26,
+    /// Muscle 1 pressure does not fall with its exhaust open (exhaust stuck closed).
+    ExhaustStuckClosed1 = 27,
+    /// As [`FaultCode::ExhaustStuckClosed1`], muscle 2.
+    ExhaustStuckClosed2 = 28,
+    /// A muscle loses pressure while its inlet is open: the supply is gone.
+    SupplyLost = 29,
+    /// The MCU restarted by anything but a power-on with a clean latch record (watchdog,
+    /// brown-out, software or pin reset, corrupt record): it boots into the safe state
+    /// ([`crate::latch`]).
+    ResetLatched = 30,
+}
+
+/// A set of fault codes, one bit per code (bit `code - 1`); `bits()` is the value logged.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FaultSet(u32);
+
+impl FaultSet {
+    /// No fault.
+    pub const EMPTY: FaultSet = FaultSet(0);
+
+    /// The set with exactly `code`.
+    #[inline]
+    pub const fn of(code: FaultCode) -> Self {
+        FaultSet(1u32 << (code as u8 - 1))
+    }
+
+    /// The set of these bits (unknown bits are dropped).
+    #[inline]
+    pub const fn from_bits(bits: u32) -> Self {
+        FaultSet(bits & ((1u32 << FaultCode::COUNT) - 1))
+    }
+
+    /// The bits (bit `code - 1` set when `code` is in the set).
+    #[inline]
+    pub const fn bits(self) -> u32 {
+        self.0
+    }
+
+    /// True when the set is empty.
+    #[inline]
+    pub const fn is_empty(self) -> bool {
+        self.0 == 0
+    }
+
+    /// True when `code` is in the set.
+    #[inline]
+    pub const fn contains(self, code: FaultCode) -> bool {
+        self.0 & Self::of(code).0 != 0
+    }
+
+    /// Adds `code`.
+    #[inline]
+    pub fn insert(&mut self, code: FaultCode) {
+        self.0 |= Self::of(code).0;
+    }
+
+    /// Both sets.
+    #[inline]
+    pub const fn union(self, other: FaultSet) -> FaultSet {
+        FaultSet(self.0 | other.0)
+    }
+
+    /// The codes in the set, lowest code first.
+    pub fn iter(self) -> impl Iterator<Item = FaultCode> {
+        (1..=FaultCode::COUNT as u8)
+            .filter(move |c| self.0 & (1u32 << (c - 1)) != 0)
+            .filter_map(FaultCode::from_code)
+    }
 }
 
 impl FaultCode {
+    /// Number of fault codes (codes are `1..=COUNT`).
+    pub const COUNT: u32 = 30;
+
     /// The stable numeric code.
     #[inline]
     pub const fn code(self) -> u8 {
@@ -101,6 +192,16 @@ impl FaultCode {
             18 => ConfigInvalid,
             19 => PressureTrackingLost1,
             20 => PressureTrackingLost2,
+            21 => InletStuckOpen1,
+            22 => InletStuckOpen2,
+            23 => InletStuckClosed1,
+            24 => InletStuckClosed2,
+            25 => ExhaustStuckOpen1,
+            26 => ExhaustStuckOpen2,
+            27 => ExhaustStuckClosed1,
+            28 => ExhaustStuckClosed2,
+            29 => SupplyLost,
+            30 => ResetLatched,
             _ => return None,
         })
     }
@@ -210,6 +311,8 @@ pub fn clamp_pressure_setpoint_pa(p_gauge_pa: f32, limit_pa: f32) -> f32 {
 pub struct SafetyMonitor {
     safe_state: SafeState,
     fault: Option<FaultCode>,
+    seen: FaultSet,
+    vent: [bool; 2],
 }
 
 impl SafetyMonitor {
@@ -218,7 +321,45 @@ impl SafetyMonitor {
         SafetyMonitor {
             safe_state,
             fault: None,
+            seen: FaultSet::EMPTY,
+            vent: [false; 2],
         }
+    }
+
+    /// Every fault raised since the last reset (the cause included).
+    pub fn seen(&self) -> FaultSet {
+        self.seen
+    }
+
+    /// Which muscles the escalation vents (`[muscle 1, muscle 2]`).
+    pub fn vented(&self) -> [bool; 2] {
+        self.vent
+    }
+
+    /// Escalation: vents `muscle` (0 = muscle 1, 1 = muscle 2; others ignored) in the safe
+    /// state until the next reset, whatever the configured safe state. Called when a
+    /// muscle's measured pressure exceeds the over-pressure limit.
+    pub fn escalate_vent(&mut self, muscle: usize) {
+        if let Some(v) = self.vent.get_mut(muscle) {
+            if !*v {
+                error!("over-pressure: venting muscle {}", muscle + 1);
+            }
+            *v = true;
+        }
+    }
+
+    /// The safe valve command: the configured safe state, with every escalated muscle
+    /// vented.
+    #[inline]
+    pub fn safe_command(&self) -> ValveCommand {
+        let mut c = self.safe_state.command();
+        if self.vent[0] {
+            c.muscle1 = -1.0;
+        }
+        if self.vent[1] {
+            c.muscle2 = -1.0;
+        }
+        c
     }
 
     /// The configured safe state.
@@ -236,19 +377,34 @@ impl SafetyMonitor {
         self.fault.is_none()
     }
 
-    /// Raises a fault. The first one is latched; later ones are logged but not stored.
+    /// Raises a fault. The first one is latched as the cause; every one is added to
+    /// [`SafetyMonitor::seen`].
     pub fn raise(&mut self, code: FaultCode) {
-        if self.fault.is_none() {
-            error!("fault latched: {}", code);
-            self.fault = Some(code);
+        if !self.seen.contains(code) {
+            self.seen.insert(code);
+            if self.fault.is_none() {
+                error!("fault latched: {}", code);
+                self.fault = Some(code);
+            } else {
+                warn!("further fault: {}", code);
+            }
+        }
+    }
+
+    /// Raises every fault of `set`, lowest code first (the caller raises its preferred
+    /// cause first).
+    pub fn raise_all(&mut self, set: FaultSet) {
+        for c in set.iter() {
+            self.raise(c);
         }
     }
 
     /// The command the valves get this tick: `requested` while armed, the safe state
     /// otherwise. A non-finite requested command is itself answered with the safe state.
     pub fn gate(&self, requested: ValveCommand) -> ValveCommand {
-        if self.fault.is_some() || !requested.muscle1.is_finite() || !requested.muscle2.is_finite()
-        {
+        if self.fault.is_some() {
+            self.safe_command()
+        } else if !requested.muscle1.is_finite() || !requested.muscle2.is_finite() {
             self.safe_state.command()
         } else {
             ValveCommand {
@@ -258,12 +414,26 @@ impl SafetyMonitor {
         }
     }
 
-    /// Explicit re-arm. `condition_cleared` says whether the cause is gone (judged by the
-    /// caller on the latest measurements). Returns true when armed afterwards.
+    /// Restores a latched state (cause, faults seen, vented muscles), e.g. from the
+    /// persistent latch at boot. An empty cause changes nothing.
+    pub fn restore(&mut self, cause: Option<FaultCode>, seen: FaultSet, vented: [bool; 2]) {
+        if let Some(c) = cause {
+            self.raise(c);
+            self.raise_all(seen);
+            self.vent[0] |= vented[0];
+            self.vent[1] |= vented[1];
+        }
+    }
+
+    /// Explicit re-arm. `condition_cleared` says whether every cause is gone (judged by the
+    /// caller on the latest measurements). Returns true when armed afterwards; then the set
+    /// of faults seen and the escalation are cleared too.
     pub fn reset(&mut self, condition_cleared: bool) -> bool {
         if self.fault.is_some() && condition_cleared {
             info!("fault reset");
             self.fault = None;
+            self.seen = FaultSet::EMPTY;
+            self.vent = [false; 2];
         }
         self.fault.is_none()
     }
@@ -304,11 +474,12 @@ mod tests {
 
     #[test]
     fn fault_codes_round_trip_and_are_stable() {
-        for c in 1..=20u8 {
+        for c in 1..=FaultCode::COUNT as u8 {
             assert_eq!(FaultCode::from_code(c).unwrap().code(), c);
         }
         assert_eq!(FaultCode::from_code(0), None);
-        assert_eq!(FaultCode::from_code(21), None);
+        assert_eq!(FaultCode::from_code(FaultCode::COUNT as u8 + 1), None);
+        assert_eq!(FaultCode::SupplyLost as u8, 29);
         assert_eq!(FaultCode::OverPressure1 as u8, 13);
         assert_eq!(FaultCode::PressureTrackingLost2 as u8, 20);
     }
@@ -321,6 +492,41 @@ mod tests {
         s.raise(FaultCode::OverPressure2);
         assert_eq!(s.fault(), Some(FaultCode::AngleStale));
         assert!(!s.is_armed());
+        // Every fault is reported in the set.
+        let seen: std::vec::Vec<_> = s.seen().iter().collect();
+        assert_eq!(seen, [FaultCode::AngleStale, FaultCode::OverPressure2]);
+        assert_eq!(
+            s.seen().bits(),
+            (1 << (FaultCode::AngleStale as u32 - 1)) | (1 << (FaultCode::OverPressure2 as u32 - 1))
+        );
+        assert!(s.reset(true));
+        assert!(s.seen().is_empty());
+    }
+
+    #[test]
+    fn escalation_vents_a_muscle_whatever_the_safe_state() {
+        let mut s = SafetyMonitor::new(SafeState::Hold);
+        s.raise(FaultCode::PressureTrackingLost1);
+        s.escalate_vent(1);
+        s.escalate_vent(7); // ignored
+        let c = s.gate(ValveCommand {
+            muscle1: 1.0,
+            muscle2: 1.0,
+        });
+        assert_eq!((c.muscle1, c.muscle2), (0.0, -1.0));
+        assert_eq!(s.vented(), [false, true]);
+        assert!(s.reset(true));
+        assert_eq!(s.vented(), [false, false]);
+    }
+
+    #[test]
+    fn fault_set_bits_round_trip() {
+        let mut f = FaultSet::EMPTY;
+        f.insert(FaultCode::SupplyLost);
+        f.insert(FaultCode::PressureInvalid1);
+        assert_eq!(f.bits(), 1 | (1 << 28));
+        assert_eq!(FaultSet::from_bits(u32::MAX).iter().count(), FaultCode::COUNT as usize);
+        assert!(f.contains(FaultCode::SupplyLost) && !f.contains(FaultCode::Watchdog));
     }
 
     #[test]

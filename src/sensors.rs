@@ -294,6 +294,35 @@ impl ChannelValidator {
     }
 }
 
+/// Turns a sensor read that always returns a value (a DMA buffer, an encoder register)
+/// into "a new sample or none", by the sample's sequence number: the DMA transfer count, an
+/// end-of-conversion counter or a capture timestamp. A sequence number equal to the last one
+/// means the sensor did not deliver: `None`, so the tick's stale check fires on the board
+/// when the sensor or its DMA freezes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SequenceGate {
+    last: Option<u32>,
+}
+
+impl SequenceGate {
+    /// A gate that has seen no sample.
+    pub const fn new() -> Self {
+        SequenceGate { last: None }
+    }
+
+    /// `Some(value)` when `seq` differs from the previous call's, else `None`.
+    #[inline]
+    pub fn gate(&mut self, seq: u32, value: f32) -> Option<f32> {
+        if self.last == Some(seq) {
+            None
+        } else {
+            self.last = Some(seq);
+            Some(value)
+        }
+    }
+}
+
 /// Joint velocity from the angle: a first-order low-pass differentiator.
 ///
 /// ```text
@@ -606,5 +635,27 @@ mod tests {
         assert_eq!(ve.update(Some(1.0), f32::NAN), 0.0);
         assert_eq!(ve.update(Some(1.0), -1.0), 0.0);
         assert!(ve.update(Some(1e-3), 1e-3).is_finite());
+    }
+
+    #[test]
+    fn sequence_gate_drops_repeated_samples() {
+        let mut g = SequenceGate::new();
+        assert_eq!(g.gate(7, 1.0), Some(1.0));
+        assert_eq!(g.gate(7, 1.0), None);
+        assert_eq!(g.gate(8, 2.0), Some(2.0));
+        // A frozen DMA: the stale check of the channel fires after `stale_ticks`.
+        let mut v = ChannelValidator::new(ChannelLimits {
+            min: -1.0,
+            max: 1.0,
+            max_rate_per_s: 10.0,
+            jump_margin: 0.1,
+            stale_ticks: 3,
+        });
+        assert!(v.update(g.gate(9, 0.5), 1e-3).value().is_some());
+        let mut last = ChannelStatus::Waiting;
+        for _ in 0..4 {
+            last = v.update(g.gate(9, 0.5), 1e-3);
+        }
+        assert_eq!(last, ChannelStatus::Fault(ChannelFault::Stale));
     }
 }

@@ -22,7 +22,10 @@ use crate::feedforward::{feedforward_torque_nm, FeedforwardGains, SetpointDeriva
 use crate::force_law::{ForceFlags, ForceLawParams};
 use crate::geometry::JointGeometry;
 use crate::pid::{DpPid, DpPidGains};
-use crate::safety::{clamp_pressure_setpoint_pa, SafeState, SafetyMonitor, TrackingMonitor};
+use crate::residual::{ResidualMonitor, ValveModelParams};
+use crate::safety::{
+    clamp_pressure_setpoint_pa, FaultSet, SafeState, SafetyMonitor, TrackingMonitor,
+};
 use crate::sensors::{
     ChannelFault, ChannelLimits, ChannelStatus, ChannelValidator, VelocityEstimator,
 };
@@ -73,8 +76,12 @@ pub struct TickOutput {
     pub angle_est_rad: f32,
     /// Velocity estimate [rad/s].
     pub velocity_est_rad_s: f32,
-    /// Latched fault (Some => valves are in the safe state).
+    /// Latched fault: the first cause (Some => valves are in the safe state).
     pub fault: Option<FaultCode>,
+    /// Every fault condition that holds in this tick (bit `code - 1`; empty while all is
+    /// well). While faulted it keeps being evaluated; [`ControlTick::reset`] is refused
+    /// while it is not empty.
+    pub active: FaultSet,
     /// True when the cascade computed this tick's command.
     pub armed: bool,
 }
@@ -101,6 +108,10 @@ pub struct ControllerConfig {
     pub tick_hz: f32,
     /// Longest accepted `dt` [s]; longer (a missed deadline) raises [`FaultCode::Watchdog`].
     pub dt_max_s: f32,
+    /// Shortest accepted `dt` [s] (> 0, < `dt_max_s`); shorter (a double-triggered tick, a
+    /// broken timer) raises [`FaultCode::Watchdog`]: the differentiators and the integrators
+    /// assume at least this period.
+    pub dt_min_s: f32,
     /// Joint geometry (stretches for the force law, sprocket radius).
     pub geometry: JointGeometry,
     /// Identified force law (torque feedback).
@@ -121,7 +132,9 @@ pub struct ControllerConfig {
     pub pressure_limits: ChannelLimits,
     /// Validation of the angle channel [rad, rad/s]; its range is the allowed joint range.
     pub angle_limits: ChannelLimits,
-    /// Measured pressure above this raises an over-pressure fault [Pa gauge].
+    /// Measured pressure above this raises an over-pressure fault, and vents that muscle
+    /// while faulted whatever the safe state [Pa gauge]. At most
+    /// [`crate::P_MUSCLE_MAX_GAUGE_PA`] (validated); lower for a weaker muscle.
     pub p_over_gauge_pa: f32,
     /// Angle set-points are clamped to `[-angle_setpoint_max_rad, angle_setpoint_max_rad]`.
     pub angle_setpoint_max_rad: f32,
@@ -135,6 +148,9 @@ pub struct ControllerConfig {
     /// Trajectory feed-forward of the cascade ([`crate::feedforward`]); unused by
     /// [`ControlLaw::DirectPid`].
     pub feedforward: FeedforwardGains,
+    /// The muscle pressure model and thresholds of the valve / supply supervision
+    /// ([`crate::residual`]).
+    pub valve_model: ValveModelParams,
 }
 
 impl ControllerConfig {
@@ -197,6 +213,7 @@ impl ControllerConfig {
         ControllerConfig {
             tick_hz,
             dt_max_s: 5.0 / tick_hz,
+            dt_min_s: 0.25 / tick_hz,
             geometry: JointGeometry::REFERENCE,
             force_law: FORCE_LAW,
             torque_model: TORQUE_MODEL,
@@ -237,7 +254,7 @@ impl ControllerConfig {
                 jump_margin: 0.02,
                 stale_ticks: ticks(0.010),
             },
-            p_over_gauge_pa: 630_000.0,
+            p_over_gauge_pa: P_MUSCLE_MAX_GAUGE_PA,
             angle_setpoint_max_rad: 0.8,
             // Filling a muscle across 100 kPa takes ~25 ms with the reference valve; 0.3 s
             // of saturated command without getting there is a valve or supply failure.
@@ -250,6 +267,7 @@ impl ControllerConfig {
                 cutoff_hz: 150.0,
                 limit_nm: 2.0,
             },
+            valve_model: ValveModelParams::REFERENCE,
         }
     }
 
@@ -270,6 +288,8 @@ impl ControllerConfig {
         let pr = &self.pressure;
         pos(self.tick_hz)
             && pos(self.dt_max_s)
+            && pos(self.dt_min_s)
+            && self.dt_min_s < self.dt_max_s
             && pos(g.sprocket_radius_m)
             && pos(g.rest_length_m)
             && g.initial_contraction.is_finite()
@@ -297,10 +317,12 @@ impl ControllerConfig {
             && lim_ok(&self.pressure_limits)
             && lim_ok(&self.angle_limits)
             && pos(self.p_over_gauge_pa)
+            && self.p_over_gauge_pa <= P_MUSCLE_MAX_GAUGE_PA
             && nonneg(self.angle_setpoint_max_rad)
             && pos(self.tracking_error_pa)
             && self.tracking_ticks > 0
             && self.feedforward.is_valid()
+            && self.valve_model.is_valid()
             && match self.law {
                 ControlLaw::Cascade => true,
                 ControlLaw::DirectPid(g) => g.is_valid(),
@@ -318,8 +340,12 @@ pub struct ControlTick {
     /// `dt_fallback_s.is_finite() && dt_fallback_s > 0.0`.
     dt_fallback_good: bool,
     /// `dt_max_s`, with +inf replaced by `f32::MAX`: then `dt_ok` is the two comparisons
-    /// `0 < dt <= dt_limit_s` (NaN and +inf fail them), the same as the finiteness test too.
+    /// `dt_floor_s <= dt <= dt_limit_s` (NaN and +inf fail them), the same as the finiteness
+    /// test too.
     dt_limit_s: f32,
+    /// `dt_min_s`, or the smallest positive float when that is not positive (then the
+    /// configuration is invalid and faulted anyway): `dt >= dt_floor_s` implies `dt > 0`.
+    dt_floor_s: f32,
     /// `cfg.torque_model.dp_limit_pa()` (a configuration constant of the torque loop).
     dp_limit_pa: f32,
     /// `clamp_pressure_setpoint_pa(f32::INFINITY, cfg.torque.p_set_max_gauge_pa)`: the
@@ -345,13 +371,17 @@ pub struct ControlTick {
     /// Sign of `B r` of the configured torque model (+-1: maps dp to torque direction).
     torque_sign: f32,
     safety: SafetyMonitor,
-    /// The fault condition seen in the last tick (None = all conditions clear).
-    condition: Option<FaultCode>,
+    /// The fault conditions that held in the last tick (empty = all clear).
+    active: FaultSet,
     last_p1_pa: Option<f32>,
     last_p2_pa: Option<f32>,
     last_angle_rad: Option<f32>,
     tracking1: TrackingMonitor,
     tracking2: TrackingMonitor,
+    residual: ResidualMonitor,
+    /// The last command, and whether its openings still have to be given to the residual.
+    last_command: ValveCommand,
+    pending_command: bool,
 }
 
 fn channel_fault(
@@ -369,10 +399,42 @@ fn channel_fault(
     }
 }
 
-/// The first fault condition of a tick, in the documented order (configuration, `dt`,
-/// pressure 1, pressure 2, angle, over-pressure 1, 2, set-point). Off the hot path.
+/// Every fault condition of a tick, and the first one in the documented order
+/// (configuration, `dt`, pressure 1, pressure 2, angle, over-pressure 1, 2, set-point).
+/// Off the hot path.
 #[cold]
 #[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn conditions(
+    config_ok: bool,
+    dt_ok: bool,
+    s1: ChannelStatus,
+    s2: ChannelStatus,
+    sa: ChannelStatus,
+    over1: bool,
+    over2: bool,
+    sp_ok: bool,
+) -> (FaultSet, Option<FaultCode>) {
+    let first = first_condition(config_ok, dt_ok, s1, s2, sa, over1, over2, sp_ok);
+    let mut set = FaultSet::EMPTY;
+    let none = ChannelStatus::Waiting;
+    // Each condition alone, through the same ordered test.
+    let parts = [
+        first_condition(config_ok, true, none, none, none, false, false, true),
+        first_condition(true, dt_ok, none, none, none, false, false, true),
+        first_condition(true, true, s1, none, none, false, false, true),
+        first_condition(true, true, none, s2, none, false, false, true),
+        first_condition(true, true, none, none, sa, false, false, true),
+        first_condition(true, true, none, none, none, over1, false, true),
+        first_condition(true, true, none, none, none, false, over2, true),
+        first_condition(true, true, none, none, none, false, false, sp_ok),
+    ];
+    for c in parts.into_iter().flatten() {
+        set.insert(c);
+    }
+    (set, first)
+}
+
 #[allow(clippy::too_many_arguments)]
 fn first_condition(
     config_ok: bool,
@@ -449,12 +511,18 @@ impl ControlTick {
         } else {
             cfg.dt_max_s
         };
+        let dt_floor_s = if cfg.dt_min_s > 0.0 {
+            cfg.dt_min_s
+        } else {
+            f32::MIN_POSITIVE
+        };
         ControlTick {
             cfg,
             config_ok,
             dt_fallback_s,
             dt_fallback_good: dt_fallback_s.is_finite() && dt_fallback_s > 0.0,
             dt_limit_s,
+            dt_floor_s,
             dp_limit_pa: cfg.torque_model.dp_limit_pa(),
             p_set_hi_pa: clamp_pressure_setpoint_pa(f32::INFINITY, cfg.torque.p_set_max_gauge_pa),
             ff_tau_s: SetpointDerivatives::tau_s(cfg.feedforward.cutoff_hz),
@@ -483,16 +551,22 @@ impl ControlTick {
                 1.0
             },
             safety,
-            condition: if config_ok {
-                None
+            active: if config_ok {
+                FaultSet::EMPTY
             } else {
-                Some(FaultCode::ConfigInvalid)
+                FaultSet::of(FaultCode::ConfigInvalid)
             },
             last_p1_pa: None,
             last_p2_pa: None,
             last_angle_rad: None,
             tracking1: TrackingMonitor::default(),
             tracking2: TrackingMonitor::default(),
+            residual: ResidualMonitor::new(cfg.valve_model, &cfg.geometry),
+            last_command: ValveCommand {
+                muscle1: 0.0,
+                muscle2: 0.0,
+            },
+            pending_command: false,
         }
     }
 
@@ -501,9 +575,36 @@ impl ControlTick {
         &self.cfg
     }
 
-    /// The latched fault.
+    /// The latched fault (the first cause).
     pub fn fault(&self) -> Option<FaultCode> {
         self.safety.fault()
+    }
+
+    /// Every fault raised since the last reset.
+    pub fn faults_seen(&self) -> FaultSet {
+        self.safety.seen()
+    }
+
+    /// The fault conditions that held in the last tick.
+    pub fn active_conditions(&self) -> FaultSet {
+        self.active
+    }
+
+    /// The latched state as a persistent-latch record ([`crate::latch`]): store it after
+    /// every tick ([`crate::latch::PersistentLatch::update`] writes only on a change).
+    pub fn latch_record(&self) -> crate::latch::LatchRecord {
+        crate::latch::LatchRecord {
+            cause: self.safety.fault(),
+            seen: self.safety.seen(),
+            vented: self.safety.vented(),
+        }
+    }
+
+    /// Starts in the latched state of a stored record (the boot decision was
+    /// [`crate::latch::BootDecision::Safe`]): the safe state from the first tick, until an
+    /// explicit [`ControlTick::reset`].
+    pub fn restore_latch(&mut self, record: &crate::latch::LatchRecord) {
+        self.safety.restore(record.cause, record.seen, record.vented);
     }
 
     fn reset_laws(&mut self) {
@@ -520,10 +621,10 @@ impl ControlTick {
         self.valve_shortfall = 0.0;
     }
 
-    /// Explicit re-arm after a fault. Returns false (and stays faulted) when the fault
+    /// Explicit re-arm after a fault. Returns false (and stays faulted) when any fault
     /// condition was still present in the last tick or the configuration is invalid.
     pub fn reset(&mut self) -> bool {
-        if !self.config_ok || self.condition.is_some() {
+        if !self.config_ok || !self.active.is_empty() {
             return false;
         }
         self.reset_laws();
@@ -532,13 +633,53 @@ impl ControlTick {
 
     /// One control tick. Pure: no hidden time, no I/O. Never panics; every float of the
     /// output is finite.
+    #[inline]
     pub fn step(&mut self, frame: &SensorFrame, setpoint: &Setpoint, dt_s: f32) -> TickOutput {
+        if self.pending_command {
+            // The caller did not report the driver's openings: the command stands in.
+            let c = crate::valves::ValveOpenings::from_command(&self.last_command);
+            self.residual.openings(c.u_in1, c.u_ex1, c.u_in2, c.u_ex2);
+        }
+        let out = self.step_inner(frame, setpoint, dt_s);
+        self.last_command = out.valves;
+        self.pending_command = true;
+        out
+    }
+
+    /// Reports what the valve driver switched for this tick's command (the return of
+    /// [`crate::valves::OnOffValves::apply`]), for the valve / supply supervision
+    /// ([`crate::residual`]). Call after every `step`; without it the command stands in.
+    #[inline]
+    pub fn valves_applied(&mut self, o: &crate::valves::ValveOpenings) {
+        self.residual.openings(o.u_in1, o.u_ex1, o.u_in2, o.u_ex2);
+        self.pending_command = false;
+    }
+
+    /// A residual (valve / supply) fault: raised, and a tracking-lost cause of the same
+    /// muscle stays active while it persists.
+    #[cold]
+    #[inline(never)]
+    fn residual_fault(&mut self, set: FaultSet) {
+        use FaultCode::*;
+        let m1 = [InletStuckOpen1, InletStuckClosed1, ExhaustStuckOpen1, ExhaustStuckClosed1, SupplyLost];
+        let m2 = [InletStuckOpen2, InletStuckClosed2, ExhaustStuckOpen2, ExhaustStuckClosed2, SupplyLost];
+        let seen = self.safety.seen();
+        if m1.iter().any(|&c| set.contains(c)) && seen.contains(PressureTrackingLost1) {
+            self.active.insert(PressureTrackingLost1);
+        }
+        if m2.iter().any(|&c| set.contains(c)) && seen.contains(PressureTrackingLost2) {
+            self.active.insert(PressureTrackingLost2);
+        }
+        self.safety.raise_all(set);
+    }
+
+    fn step_inner(&mut self, frame: &SensorFrame, setpoint: &Setpoint, dt_s: f32) -> TickOutput {
         // Scalars read once; the configuration (with its force-law and torque-model tables) is
         // not copied: a whole-struct copy cost ~190 instructions per tick on the Cortex-M4.
         let p_over_gauge_pa = self.cfg.p_over_gauge_pa;
         let sp_max = self.cfg.angle_setpoint_max_rad;
-        // `dt_s.is_finite() && dt_s > 0.0 && dt_s <= dt_max_s` (see `dt_limit_s`).
-        let dt_ok = dt_s > 0.0 && dt_s <= self.dt_limit_s;
+        // `dt_s.is_finite() && dt_s >= dt_min_s && dt_s <= dt_max_s` (see `dt_limit_s`).
+        let dt_ok = dt_s >= self.dt_floor_s && dt_s <= self.dt_limit_s;
         // Channels are aged by the nominal period when dt itself is bad.
         let dt_age = if dt_ok { dt_s } else { self.dt_fallback_s };
 
@@ -564,6 +705,21 @@ impl ControlTick {
             _ => None,
         };
         let vel = self.velocity.update_with(new_angle, dt_age, dt_age_good);
+        // Valve / supply supervision on this tick's fresh samples.
+        let residual = match (s1, s2, new_angle) {
+            (
+                ChannelStatus::Valid {
+                    value: p1,
+                    age_ticks: 0,
+                },
+                ChannelStatus::Valid {
+                    value: p2,
+                    age_ticks: 0,
+                },
+                Some(a),
+            ) if dt_ok => self.residual.observe(true, p1, p2, a, dt_s),
+            _ => self.residual.observe(false, 0.0, 0.0, 0.0, dt_s),
+        };
 
         // Fault conditions of this tick (the first one found is reported). Fast path: one
         // branch-free test of all of them; the ordered search runs only when one holds.
@@ -578,14 +734,25 @@ impl ControlTick {
             | over1
             | over2
             | !sp_ok;
-        let cond = if any {
-            first_condition(self.config_ok, dt_ok, s1, s2, sa, over1, over2, sp_ok)
-        } else {
-            None
-        };
-        self.condition = cond;
-        if let Some(c) = cond {
-            self.safety.raise(c);
+        self.active = residual;
+        if !residual.is_empty() {
+            self.residual_fault(residual);
+        }
+        if any {
+            let (set, first) = conditions(self.config_ok, dt_ok, s1, s2, sa, over1, over2, sp_ok);
+            self.active = set.union(residual);
+            if let Some(c) = first {
+                self.safety.raise(c);
+            }
+            self.safety.raise_all(set);
+            // Escalation: a muscle above the over-pressure limit is vented (this tick: the
+            // over-pressure fault itself puts the valves in the safe state).
+            if over1 {
+                self.safety.escalate_vent(0);
+            }
+            if over2 {
+                self.safety.escalate_vent(1);
+            }
         }
 
         let angle_est = self.last_angle_rad.unwrap_or(0.0);
@@ -617,10 +784,18 @@ impl ControlTick {
             angle_est_rad: angle_est,
             velocity_est_rad_s: vel,
             fault: None,
+            active: FaultSet::EMPTY,
             armed: false,
         };
 
         if self.safety.fault().is_some() {
+            // A numeric fault persists while the force-law estimate of the current
+            // measurements is unusable.
+            if self.safety.seen().contains(FaultCode::ControllerNumeric)
+                && !matches!(estimate, Some((t, flags)) if !flags.contains_any(ForceFlags::FATAL) && t.is_finite())
+            {
+                self.active.insert(FaultCode::ControllerNumeric);
+            }
             return self.safe_output(out);
         }
 
@@ -746,6 +921,13 @@ impl ControlTick {
                     };
                     warn!("pressure tracking lost: {}", f);
                     self.safety.raise(f);
+                    if lost1 {
+                        self.active.insert(FaultCode::PressureTrackingLost1);
+                    }
+                    if lost2 {
+                        self.active.insert(FaultCode::PressureTrackingLost2);
+                        self.safety.raise(FaultCode::PressureTrackingLost2);
+                    }
                     out.torque_des_nm = t_des;
                     return self.safe_output(out);
                 }
@@ -777,7 +959,7 @@ impl ControlTick {
             }
             Err(e) => {
                 warn!("control law error: {}", e);
-                self.condition = Some(FaultCode::ControllerNumeric);
+                self.active.insert(FaultCode::ControllerNumeric);
                 self.safety.raise(FaultCode::ControllerNumeric);
                 self.safe_output(out)
             }
@@ -786,7 +968,7 @@ impl ControlTick {
 
     fn safe_output(&mut self, mut out: TickOutput) -> TickOutput {
         self.reset_laws();
-        out.valves = self.safety.safe_state().command();
+        out.valves = self.safety.safe_command();
         let (h1, h2) = match self.safety.safe_state() {
             SafeState::Hold => (
                 clamp_pressure_setpoint_pa(self.last_p1_pa.unwrap_or(0.0), P_MUSCLE_MAX_GAUGE_PA),
@@ -794,10 +976,12 @@ impl ControlTick {
             ),
             SafeState::Vent => (0.0, 0.0),
         };
-        out.p1_set_gauge_pa = h1;
-        out.p2_set_gauge_pa = h2;
+        let vented = self.safety.vented();
+        out.p1_set_gauge_pa = if vented[0] { 0.0 } else { h1 };
+        out.p2_set_gauge_pa = if vented[1] { 0.0 } else { h2 };
         out.torque_des_nm = 0.0;
         out.fault = self.safety.fault();
+        out.active = self.active;
         out.armed = false;
         out
     }
@@ -936,6 +1120,64 @@ mod tests {
         t.step(&frame(700e3, 300e3, 0.0), &SP0, DT);
         assert!(!t.reset());
         assert_eq!(t.fault(), Some(FaultCode::OverPressure1));
+    }
+
+    #[test]
+    fn over_pressure_in_hold_vents_that_muscle_and_reports_all_conditions() {
+        let mut t = tick();
+        t.step(&frame(300e3, 300e3, 0.0), &SP0, DT);
+        // A first fault (angle out of range) puts the joint in Hold.
+        let o = t.step(&frame(300e3, 300e3, 1.5), &SP0, DT);
+        assert_eq!(o.fault, Some(FaultCode::AngleOutOfRange));
+        assert_eq!(o.valves, ValveCommand::default());
+        // Muscle 2 is compressed in Hold (10 kPa per tick): up to 598 kPa it is held...
+        let mut p2: f32 = 300e3;
+        while p2 < 598e3 {
+            p2 = (p2 + 10e3).min(598e3);
+            let o = t.step(&frame(300e3, p2, 1.5), &SP0, DT);
+            assert_eq!(o.valves, ValveCommand::default(), "{p2}");
+        }
+        // ... 602 kPa (above the 600 kPa limit) vents muscle 2 only, and the cause stays.
+        let o = t.step(&frame(300e3, 602e3, 1.5), &SP0, DT);
+        assert_eq!(o.fault, Some(FaultCode::AngleOutOfRange));
+        assert_eq!(o.valves.muscle1, 0.0);
+        assert_eq!(o.valves.muscle2, -1.0);
+        assert_eq!(o.p2_set_gauge_pa, 0.0);
+        assert!(o.active.contains(FaultCode::AngleOutOfRange));
+        assert!(o.active.contains(FaultCode::OverPressure2));
+        assert!(t.faults_seen().contains(FaultCode::OverPressure2));
+        // The vent stays after the pressure fell; reset refused while the angle is out.
+        let o = t.step(&frame(300e3, 590e3, 1.5), &SP0, DT);
+        assert_eq!(o.valves.muscle2, -1.0);
+        assert!(!t.reset());
+        t.step(&frame(300e3, 590e3, 0.2), &SP0, DT);
+        assert!(t.reset());
+        let o = t.step(&frame(300e3, 590e3, 0.2), &SP0, DT);
+        assert!(o.armed && o.active.is_empty());
+    }
+
+    #[test]
+    fn over_pressure_vents_with_vent_or_hold_and_limit_is_validated() {
+        let mut cfg = ControllerConfig::reference(1000.0);
+        cfg.p_over_gauge_pa = 500e3;
+        let mut t = ControlTick::new(cfg);
+        let o = t.step(&frame(520e3, 300e3, 0.0), &SP0, DT);
+        assert_eq!(o.fault, Some(FaultCode::OverPressure1));
+        assert_eq!(o.valves.muscle1, -1.0);
+        assert_eq!(o.valves.muscle2, 0.0);
+        cfg.p_over_gauge_pa = 630e3;
+        assert!(!cfg.is_valid());
+    }
+
+    #[test]
+    fn short_dt_raises_watchdog() {
+        let mut t = tick();
+        t.step(&frame(300e3, 300e3, 0.0), &SP0, DT);
+        let o = t.step(&frame(300e3, 300e3, 0.0), &SP0, 1e-5);
+        assert_eq!(o.fault, Some(FaultCode::Watchdog));
+        let mut cfg = ControllerConfig::reference(1000.0);
+        cfg.dt_min_s = 0.0;
+        assert!(!cfg.is_valid());
     }
 
     #[test]

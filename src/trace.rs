@@ -106,6 +106,17 @@ pub fn output_words(o: &TickOutput) -> [u32; WORDS] {
     ]
 }
 
+/// The configuration the trace runs with: the reference one at [`TRACE_TICK_HZ`], with the
+/// valve / supply residual ([`crate::residual`]) unable to trip. The trace is a recorded
+/// replay: its pressures do not answer this run's valve commands, so any model-based
+/// residual would (rightly) call them faulty. The supervision still runs every tick, so its
+/// cost is in the MCU figures.
+pub fn trace_config() -> ControllerConfig {
+    let mut cfg = ControllerConfig::reference(TRACE_TICK_HZ);
+    cfg.valve_model.residual_abs_pa_s = f32::MAX;
+    cfg
+}
+
 /// Steps a control tick through [`SENSOR_TRACE`].
 pub struct TraceRunner {
     tick: ControlTick,
@@ -125,7 +136,7 @@ impl TraceRunner {
     /// A fresh controller (reference configuration at [`TRACE_TICK_HZ`]) at the trace start.
     pub fn new() -> Self {
         TraceRunner {
-            tick: ControlTick::new(ControllerConfig::reference(TRACE_TICK_HZ)),
+            tick: ControlTick::new(trace_config()),
             pressure: wiring::pressure_scaling(),
             next: 0,
             hash: FNV_OFFSET,

@@ -203,6 +203,7 @@ fn simulate(
         inject(k, &mut frame);
         let out = tick.step(&frame, &sp, DT as f32);
         let u = valves.apply(&out.valves).unwrap();
+        tick.valves_applied(&u);
         run.log.push(TickRecord::new(k as u32, &frame, &sp, &out));
         run.t.push(t);
         run.beta.push(plant.beta);

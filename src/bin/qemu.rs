@@ -106,7 +106,7 @@ mod bench {
     use pam_firmware::constants::{FIXED_FORCE_LAW, FORCE_LAW};
     use pam_firmware::fixed_point::{pressure_pa_from_f32, q16_from_f32};
     use pam_firmware::geometry::JointGeometry;
-    use pam_firmware::trace::{ControlTick, ControllerConfig, SENSOR_TRACE, TRACE_TICK_HZ};
+    use pam_firmware::trace::{ControlTick, SENSOR_TRACE, TRACE_TICK_HZ};
     use pam_firmware::valves::{OnOffPwmConfig, OnOffValves};
     use pam_firmware::wiring;
 
@@ -174,7 +174,7 @@ mod bench {
     fn bench_ticks() {
         let p = wiring::pressure_scaling();
         let dt = 1.0 / TRACE_TICK_HZ;
-        let mut tick = ControlTick::new(ControllerConfig::reference(TRACE_TICK_HZ));
+        let mut tick = ControlTick::new(pam_firmware::trace::trace_config());
         // The valve update is part of the measured tick: the reference on/off driver (tick-level
         // PWM, minimum on-time) writing four pins, each a volatile store like a GPIO BSRR write.
         let mut valves = OnOffValves::new(
@@ -192,7 +192,9 @@ mod bench {
             // keep the whole tick before the second SysTick read.
             let (c, out) = measure_effectful(|| {
                 let out = tick.step(&frame, &sp, black_box(dt));
-                let _ = valves.apply(&out.valves);
+                // The bench pins cannot fail (`Infallible`).
+                let Ok(o) = valves.apply(&out.valves);
+                tick.valves_applied(&o);
                 out
             });
             let out = black_box(out);

@@ -18,7 +18,7 @@ use defmt_semihosting as _;
 use pam_firmware::constants::{FIXED_FORCE_LAW, FORCE_LAW};
 use pam_firmware::fixed_point::{pressure_pa_from_f32, q16_from_f32};
 use pam_firmware::geometry::JointGeometry;
-use pam_firmware::trace::{ControlTick, ControllerConfig, SENSOR_TRACE, TRACE_TICK_HZ};
+use pam_firmware::trace::{ControlTick, SENSOR_TRACE, TRACE_TICK_HZ};
 use pam_firmware::wiring;
 
 #[inline(always)]
@@ -105,7 +105,7 @@ fn main() -> ! {
     // The whole control tick (f32, in soft-float: the cascade has no fixed-point build) on
     // the M0, per armed tick of the trace: what a 1 kHz tick costs on an FPU-less core.
     let dt = 1.0 / TRACE_TICK_HZ;
-    let mut tick = ControlTick::new(ControllerConfig::reference(TRACE_TICK_HZ));
+    let mut tick = ControlTick::new(pam_firmware::trace::trace_config());
     let (mut t_sum, mut t_max, mut t_n) = (0u32, 0u32, 0u32);
     for row in SENSOR_TRACE.iter() {
         let frame = black_box(row.frame(&p));

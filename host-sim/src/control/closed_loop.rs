@@ -18,6 +18,8 @@ use std::cell::Cell;
 use std::collections::VecDeque;
 use std::rc::Rc;
 
+use pam_firmware::latch::{BootDecision, PersistentLatch, RamStorage, ResetCause};
+use pam_firmware::sensors::SequenceGate;
 use pam_firmware::tick::{ControlTick, ControllerConfig, SensorFrame, Setpoint, TickOutput};
 use pam_firmware::valves::{OnOffPwmConfig, OnOffValves};
 use rand::SeedableRng;
@@ -90,14 +92,23 @@ pub struct ClosedLoopRun {
     pub dt_s: f64,
     /// One row per tick.
     pub rows: Vec<TickRow>,
-    /// Tick of the first injected sensor fault, if any.
+    /// Tick of the first injected fault (sensor, valve or supply), if any.
     pub first_injected_fault_tick: Option<usize>,
+    /// Tick at which each injected fault started, in time order.
+    pub injected_fault_ticks: Vec<usize>,
+    /// Ticks at which the MCU was reset (scenario `firmware_reset` events).
+    pub reset_ticks: Vec<usize>,
     /// Tick at which the firmware first latched a fault, if any.
     pub first_latched_fault_tick: Option<usize>,
     /// Expectations of the scenario.
     pub expect: Expectations,
     /// Highest gauge pressure seen in either muscle [Pa].
     pub max_p_gauge_pa: f64,
+    /// Largest |joint angle| over the run [rad].
+    pub max_abs_angle_rad: f64,
+    /// Ticks integrated by the fallback (fixed-step) integrator after the adaptive one
+    /// failed.
+    pub fallback_ticks: usize,
     /// Highest pressure set-point the firmware issued [Pa].
     pub max_p_set_gauge_pa: f64,
     /// Integrator work over the run (steps, right-hand-side evaluations).
@@ -173,6 +184,16 @@ pub fn run_with(
         OnOffPwmConfig::REFERENCE,
     );
     let mut tick = ControlTick::new(cfg);
+    // The persistent latch in simulated retained RAM: the run starts as a power-on with a
+    // clean record.
+    let (mut latch, _) = PersistentLatch::boot(
+        RamStorage(pam_firmware::latch::LatchRecord::CLEAN.encode()),
+        ResetCause::PowerOn,
+    );
+    let mut resets: Vec<usize> = Vec::new();
+    let mut seq = [0u32; 3];
+    let mut last_values = [0.0f32; 3];
+    let mut gates = [SequenceGate::new(); 3];
     let opts = SolverOptions {
         rtol: 1e-6,
         atol: 1e-6,
@@ -185,8 +206,10 @@ pub fn run_with(
         Normal::new(0.0, scenario.sensors.pressure_noise_pa.max(0.0)).expect("finite noise");
     let mut delay: VecDeque<SensorFrame> = VecDeque::new();
     let mut rows = Vec::with_capacity(n_ticks);
-    let mut first_injected = None;
     let mut first_latched = None;
+    let mut injected: Vec<usize> = Vec::new();
+    let mut max_abs_angle: f64 = 0.0;
+    let mut fallback_ticks = 0;
     let mut max_p = f64::NEG_INFINITY;
     let mut max_p_set = f64::NEG_INFINITY;
 
@@ -204,6 +227,21 @@ pub fn run_with(
         let x = integ.state();
         let m = p.measure(&x);
         max_p = max_p.max((x.p1_abs_pa - p.p_atm_pa).max(x.p2_abs_pa - p.p_atm_pa));
+        max_abs_angle = max_abs_angle.max(x.angle_rad.abs());
+        // Injection ticks of the faults that start at this tick.
+        for e in &scenario.events {
+            let starts = match *e {
+                Event::SupplyLoss { at_s, .. } => (at_s / dt_s).round() as usize == k,
+                Event::LoadInertia { .. } => false,
+                _ => {
+                    let at_s = event_time(e);
+                    t_s + 0.5 * dt_s >= at_s && t_s - 0.5 * dt_s < at_s
+                }
+            };
+            if starts {
+                injected.push(k);
+            }
+        }
 
         // Fake sensors: noise, quantisation.
         let quant_p = |pa: f64, rng: &mut rand::rngs::StdRng| {
@@ -225,10 +263,42 @@ pub fn run_with(
         } else {
             angle_rad as f32
         };
+        let mut values = [p1, p2, angle];
+        // Sensor steps (persistent offsets) and frozen sensors: a frozen sensor repeats its
+        // value and sequence number; the firmware's sequence gate turns that into "no new
+        // sample" as on the board.
+        let mut frozen = [false; 3];
+        for e in &scenario.events {
+            match *e {
+                Event::SensorStep {
+                    at_s,
+                    channel,
+                    offset,
+                } if t_s + 0.5 * dt_s >= at_s => {
+                    values[channel as usize] += offset as f32;
+                }
+                Event::SensorStuck {
+                    at_s,
+                    duration_s,
+                    channel,
+                } if t_s + 0.5 * dt_s >= at_s && t_s < at_s + duration_s => {
+                    frozen[channel as usize] = true;
+                }
+                _ => {}
+            }
+        }
+        let mut gated = [None; 3];
+        for i in 0..3 {
+            if !frozen[i] {
+                seq[i] = seq[i].wrapping_add(1);
+                last_values[i] = values[i];
+            }
+            gated[i] = gates[i].gate(seq[i], last_values[i]);
+        }
         let mut frame = SensorFrame {
-            p1_gauge_pa: Some(p1),
-            p2_gauge_pa: Some(p2),
-            angle_rad: Some(angle),
+            p1_gauge_pa: gated[0],
+            p2_gauge_pa: gated[1],
+            angle_rad: gated[2],
         };
         // Injected sensor faults.
         for e in &scenario.events {
@@ -252,7 +322,6 @@ pub fn run_with(
                     SensorChannel::Angle => &mut frame.angle_rad,
                 };
                 *slot = if nan { Some(f32::NAN) } else { None };
-                first_injected.get_or_insert(k);
             }
         }
         // Transport delay.
@@ -263,14 +332,51 @@ pub fn run_with(
             SensorFrame::default()
         };
 
+        // MCU resets: the tick and the valve driver restart; the latch decides the boot.
+        for e in &scenario.events {
+            if let Event::FirmwareReset { at_s, power_on } = *e {
+                if (at_s / dt_s).round() as usize == k {
+                    let cause = if power_on {
+                        ResetCause::PowerOn
+                    } else {
+                        ResetCause::Watchdog
+                    };
+                    let storage = latch.release();
+                    let (l, boot) = PersistentLatch::boot(storage, cause);
+                    latch = l;
+                    tick = ControlTick::new(cfg);
+                    if let BootDecision::Safe(rec) = boot {
+                        tick.restore_latch(&rec);
+                    }
+                    valves = OnOffValves::new(
+                        pins[0].clone(),
+                        pins[1].clone(),
+                        pins[2].clone(),
+                        pins[3].clone(),
+                        OnOffPwmConfig::REFERENCE,
+                    );
+                    resets.push(k);
+                }
+            }
+        }
+        // A late tick: the firmware measures a longer period.
+        let mut dt_meas_s = dt_s;
+        for e in &scenario.events {
+            if let Event::TickOverrun { at_s, factor } = *e {
+                if (at_s / dt_s).round() as usize == k {
+                    dt_meas_s = dt_s * factor;
+                }
+            }
+        }
         let setpoint_rad = scenario.setpoint.at(t_s, &levels);
         let out = tick.step(
             &frame,
             &Setpoint {
                 angle_rad: setpoint_rad as f32,
             },
-            dt_s as f32,
+            dt_meas_s as f32,
         );
+        latch.update(tick.latch_record());
         max_p_set = max_p_set.max(out.p1_set_gauge_pa.max(out.p2_set_gauge_pa) as f64);
         if out.fault.is_some() {
             first_latched.get_or_insert(k);
@@ -290,7 +396,9 @@ pub fn run_with(
             }
         }
         // Infallible pins: the driver cannot fail here.
-        let _ = valves.apply(&out.valves);
+        if let Ok(o) = valves.apply(&out.valves) {
+            tick.valves_applied(&o);
+        }
         let b = |pin: &FakePin| if pin.open() { 1.0 } else { 0.0 };
         let inputs = ValveInputs {
             u_in1: b(&pins[0]),
@@ -305,7 +413,21 @@ pub fn run_with(
             inputs,
             out,
         });
-        integ.advance(inputs, dt_s)?;
+        if let Err(e) = integ.advance(inputs, dt_s) {
+            // Fallback: the tick again from its start state with fixed-step RK4 substeps
+            // (a fault combination can make the adaptive step collapse); a real failure
+            // names the run time and the state.
+            let p_tank = integ.supply_abs_pa();
+            let end = fallback_tick(p, &x, p_tank, &inputs, dt_s).ok_or(ClosedLoopError::SimAt {
+                t_s,
+                state: x,
+                source: e,
+            })?;
+            stats_done.add(&integ.stats());
+            integ = Integrator::new(p, end, opts);
+            integ.set_supply_abs_pa(p_tank);
+            fallback_ticks += 1;
+        }
         if k % 1000 == 0 {
             progress(k as f64 / n_ticks.max(1) as f64);
         }
@@ -316,10 +438,14 @@ pub fn run_with(
         name: scenario.scenario.name.clone(),
         dt_s,
         rows,
-        first_injected_fault_tick: first_injected,
+        first_injected_fault_tick: injected.first().copied(),
+        injected_fault_ticks: injected,
+        reset_ticks: resets,
         first_latched_fault_tick: first_latched,
         expect: scenario.expect.clone(),
         max_p_gauge_pa: max_p,
+        max_abs_angle_rad: max_abs_angle,
+        fallback_ticks,
         max_p_set_gauge_pa: max_p_set,
         sim_stats: stats_done,
     })
@@ -338,7 +464,57 @@ pub struct TrackingStats {
     pub n: usize,
 }
 
+/// One tick of the plant with fixed-step classic RK4 (256 substeps), for when the adaptive
+/// integrator fails: `None` if the state becomes non-finite. A supply reservoir keeps its
+/// pressure over the tick.
+fn fallback_tick(
+    plant: &Plant,
+    x: &PlantState,
+    supply_abs_pa: f64,
+    u: &ValveInputs,
+    dt_s: f64,
+) -> Option<PlantState> {
+    const N: usize = 256;
+    let h = dt_s / N as f64;
+    let f = |y: [f64; 4]| {
+        plant
+            .derivatives_with_supply(&PlantState::from_array(y), supply_abs_pa, u)
+            .0
+            .to_array()
+    };
+    let mut y = x.to_array();
+    let add = |y: [f64; 4], k: [f64; 4], a: f64| -> [f64; 4] {
+        let mut r = y;
+        for i in 0..4 {
+            r[i] += a * k[i];
+        }
+        r
+    };
+    for _ in 0..N {
+        let k1 = f(y);
+        let k2 = f(add(y, k1, 0.5 * h));
+        let k3 = f(add(y, k2, 0.5 * h));
+        let k4 = f(add(y, k3, h));
+        for i in 0..4 {
+            y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+        }
+        if !y.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+    }
+    Some(PlantState::from_array(y))
+}
+
 impl ClosedLoopRun {
+    /// Ticks from the injection of the latched fault's cause to the latch: from the latest
+    /// injection at or before the first latched tick. `None` without a latch or when the
+    /// latch came before any injection.
+    pub fn fault_latency_ticks(&self) -> Option<usize> {
+        let l = self.first_latched_fault_tick?;
+        let i = self.injected_fault_ticks.iter().rev().find(|&&i| i <= l)?;
+        Some(l - i)
+    }
+
     /// Tracking error statistics from `after_s` on, over the ticks without a latched fault.
     pub fn tracking(&self, after_s: f64) -> TrackingStats {
         let mut sum = 0.0;
@@ -384,14 +560,29 @@ impl ClosedLoopRun {
             }
         }
         if let Some(b) = e.fault_within_ticks {
-            match (
-                self.first_injected_fault_tick,
-                self.first_latched_fault_tick,
-            ) {
-                (Some(i), Some(l)) if l >= i && l - i <= b => {}
-                (i, l) => fails.push(format!(
-                    "fault latched at tick {l:?}, injected at {i:?}: not within {b} ticks"
+            match (self.first_latched_fault_tick, self.fault_latency_ticks()) {
+                (Some(_), Some(d)) if d <= b => {}
+                (l, d) => fails.push(format!(
+                    "fault latched at tick {l:?}, {d:?} ticks after the injection of its cause \
+                     (injections at ticks {:?}): not within {b} ticks",
+                    self.injected_fault_ticks
                 )),
+            }
+        }
+        if let Some(b) = e.max_pressure_kpa {
+            if !(self.max_p_gauge_pa <= b * 1e3) {
+                fails.push(format!(
+                    "muscle pressure reached {:.1} kPa > {b} kPa",
+                    self.max_p_gauge_pa / 1e3
+                ));
+            }
+        }
+        if let Some(b) = e.angle_within_rad {
+            if !(self.max_abs_angle_rad <= b) {
+                fails.push(format!(
+                    "|joint angle| reached {:.4} rad > {b} rad",
+                    self.max_abs_angle_rad
+                ));
             }
         }
         if e.no_fault {

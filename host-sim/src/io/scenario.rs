@@ -286,6 +286,43 @@ pub enum Event {
         /// Which sensor.
         channel: SensorChannel,
     },
+    /// A sensor freezes for a while: its value and its sequence counter (DMA transfer count)
+    /// stop, so the firmware's sequence gate sees no new sample.
+    SensorStuck {
+        /// Time [s].
+        at_s: f64,
+        /// Length [s].
+        duration_s: f64,
+        /// Which sensor.
+        channel: SensorChannel,
+    },
+    /// A sensor's reading jumps by `offset` (Pa for pressures, rad for the angle) and stays
+    /// offset.
+    SensorStep {
+        /// Time [s].
+        at_s: f64,
+        /// Which sensor.
+        channel: SensorChannel,
+        /// The offset [Pa or rad].
+        offset: f64,
+    },
+    /// One control tick runs late: the firmware measures a period of `factor` nominal
+    /// periods at `at_s`.
+    TickOverrun {
+        /// Time [s].
+        at_s: f64,
+        /// Measured period / nominal period (> 0).
+        factor: f64,
+    },
+    /// The MCU resets at `at_s`: the control tick restarts from the persistent latch
+    /// (`power_on`: a power-on reset; otherwise a watchdog / brown-out / software reset).
+    FirmwareReset {
+        /// Time [s].
+        at_s: f64,
+        /// A power-on reset (true) or any other reset (false).
+        #[serde(default)]
+        power_on: bool,
+    },
     /// A valve sticks open or closed from `at_s` on.
     StuckValve {
         /// Time [s].
@@ -308,8 +345,15 @@ pub struct Expectations {
     /// Where the error bounds start [s].
     #[serde(default)]
     pub settle_after_s: f64,
-    /// A fault must be latched within this many ticks of the first injected sensor fault.
+    /// A fault must be latched, within this many ticks of the injection of the fault that
+    /// caused it: the latest injected fault (sensor NaN / dropout, stuck valve, supply loss)
+    /// that started at or before the latch. An earlier, harmless injection does not count.
     pub fault_within_ticks: Option<usize>,
+    /// Highest gauge pressure of either muscle over the whole run [kPa] (the plant's
+    /// pressure, not the set-point).
+    pub max_pressure_kpa: Option<f64>,
+    /// The joint angle must stay within `+-angle_within_rad` over the whole run [rad].
+    pub angle_within_rad: Option<f64>,
     /// No fault may be latched during the run.
     #[serde(default)]
     pub no_fault: bool,
@@ -329,6 +373,16 @@ pub enum ClosedLoopError {
     /// The plant integration failed.
     #[error(transparent)]
     Sim(#[from] SimError),
+    /// The plant integration failed at a tick even with the fallback integrator.
+    #[error("plant integration failed at t = {t_s:.6} s of the run, state {state:?}: {source}")]
+    SimAt {
+        /// Run time of the failing tick [s].
+        t_s: f64,
+        /// Plant state at the start of that tick.
+        state: crate::plant::PlantState,
+        /// The integrator's error.
+        source: SimError,
+    },
 }
 
 impl Scenario {
@@ -492,6 +546,17 @@ impl Scenario {
                 format!("{} must be >= 0", se.pressure_lsb_pa),
             ));
         }
+        let ex = &s.expect;
+        if let Some(v) = ex.max_pressure_kpa {
+            if !(v > 0.0 && v.is_finite()) {
+                return Err(bad("expect", "max_pressure_kpa", format!("{v} must be > 0")));
+            }
+        }
+        if let Some(v) = ex.angle_within_rad {
+            if !(v > 0.0 && v.is_finite()) {
+                return Err(bad("expect", "angle_within_rad", format!("{v} must be > 0")));
+            }
+        }
         if se.delay_ticks > 10_000 {
             return Err(bad(
                 "sensors",
@@ -514,7 +579,9 @@ impl Scenario {
                 ev_bad("at_s", format!("{at_s} must be a finite time >= 0"))?;
             }
             match *e {
-                Event::SensorDropout { duration_s, .. } | Event::SensorNan { duration_s, .. } => {
+                Event::SensorDropout { duration_s, .. }
+                | Event::SensorNan { duration_s, .. }
+                | Event::SensorStuck { duration_s, .. } => {
                     if !(duration_s > 0.0 && duration_s.is_finite()) {
                         ev_bad("duration_s", format!("{duration_s} must be > 0"))?;
                     }
@@ -531,7 +598,17 @@ impl Scenario {
                         ev_bad("supply_gauge_pa", format!("{supply_gauge_pa} must be >= 0"))?;
                     }
                 }
-                Event::StuckValve { .. } => {}
+                Event::SensorStep { offset, .. } => {
+                    if !offset.is_finite() {
+                        ev_bad("offset", format!("{offset} must be a finite number"))?;
+                    }
+                }
+                Event::TickOverrun { factor, .. } => {
+                    if !(factor > 0.0 && factor <= 1000.0) {
+                        ev_bad("factor", format!("{factor} must be within (0, 1000]"))?;
+                    }
+                }
+                Event::StuckValve { .. } | Event::FirmwareReset { .. } => {}
             }
         }
         Ok(s)
@@ -586,6 +663,10 @@ pub(crate) fn event_time(e: &Event) -> f64 {
         | Event::SupplyLoss { at_s, .. }
         | Event::SensorDropout { at_s, .. }
         | Event::SensorNan { at_s, .. }
+        | Event::SensorStuck { at_s, .. }
+        | Event::SensorStep { at_s, .. }
+        | Event::TickOverrun { at_s, .. }
+        | Event::FirmwareReset { at_s, .. }
         | Event::StuckValve { at_s, .. } => at_s,
     }
 }

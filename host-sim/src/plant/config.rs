@@ -60,6 +60,20 @@ pub struct JointConfig {
     pub inertia_kgm2: f64,
     /// chi0, contraction of both muscles at angle 0.
     pub initial_contraction: f64,
+    /// Mechanical end stops (optional; see [`crate::plant::joint::EndStops`]). Lower stop
+    /// [rad]; default: the angle at which muscle 1 is stretched back to its rest length
+    /// (`chi1 = 0`, `-chi0 l_n / r`).
+    #[serde(default)]
+    pub angle_min_rad: Option<f64>,
+    /// Upper stop [rad]; default: muscle 2 at its rest length (`chi2 = 0`, `chi0 l_n / r`).
+    #[serde(default)]
+    pub angle_max_rad: Option<f64>,
+    /// Stiffness of the stops [N m/rad] (default 2000).
+    #[serde(default)]
+    pub end_stop_stiffness_nm_per_rad: Option<f64>,
+    /// Damping of the stops [N m s/rad] (default: damping ratio 0.7 with the joint inertia).
+    #[serde(default)]
+    pub end_stop_damping_nms_per_rad: Option<f64>,
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -179,6 +193,42 @@ impl PlantConfig {
         }
         if !(l.is_finite() && l > b && l < 1.0) {
             return Err(bad("valve.laminar_ratio", "must be in (critical_ratio, 1)"));
+        }
+        for (key, v) in [
+            ("joint.angle_min_rad", self.joint.angle_min_rad),
+            ("joint.angle_max_rad", self.joint.angle_max_rad),
+        ] {
+            if let Some(v) = v {
+                if !v.is_finite() {
+                    return Err(bad(key, &format!("must be a finite number, got {v}")));
+                }
+            }
+        }
+        for (key, v) in [
+            (
+                "joint.end_stop_stiffness_nm_per_rad",
+                self.joint.end_stop_stiffness_nm_per_rad,
+            ),
+            (
+                "joint.end_stop_damping_nms_per_rad",
+                self.joint.end_stop_damping_nms_per_rad,
+            ),
+        ] {
+            if let Some(v) = v {
+                if !(v.is_finite() && v >= 0.0) {
+                    return Err(bad(key, &format!("must be a finite number >= 0, got {v}")));
+                }
+            }
+        }
+        let stops = crate::plant::joint::EndStops::from_config(&self.joint, self.muscle.rest_length_m);
+        if !(stops.angle_min_rad < stops.angle_max_rad) {
+            return Err(bad(
+                "joint.angle_max_rad",
+                &format!(
+                    "the end stops must satisfy angle_min_rad < angle_max_rad, got {} and {}",
+                    stops.angle_min_rad, stops.angle_max_rad
+                ),
+            ));
         }
         if self.muscle.volume_poly_m3[0] <= 0.0 {
             return Err(bad(

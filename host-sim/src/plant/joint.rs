@@ -1,7 +1,75 @@
 //! The rotational joint: muscle kinematics over the sprocket and J omega' = T
-//! (PLANT.md "Muscle i" contraction and "Joint").
+//! (PLANT.md "Muscle i" contraction and "Joint"), plus mechanical end stops.
+//!
+//! End stops (not in PLANT.md; they only act beyond the joint's range): a one-sided
+//! spring-damper at each limit,
+//!
+//! ```text
+//! T_stop = -k (beta - beta_max) - c omega    for beta > beta_max (never pulling: <= 0)
+//! T_stop = -k (beta - beta_min) - c omega    for beta < beta_min (never pulling: >= 0)
+//! ```
+//!
+//! The limits come from the plant file (`[joint] angle_min_rad`, `angle_max_rad`); by
+//! default they are where the stretched muscle is back at its rest length (`chi = 0`,
+//! `|beta| = chi0 l_n / r`, 1.4 rad on the reference joint): a braided muscle does not
+//! lengthen past it, so the joint stops there. `k` defaults to 2000 N m/rad (a 40 N m muscle
+//! torque, more than the reference pair gives at 6 bar, pushes 0.02 rad into the stop), `c`
+//! to a damping ratio of 0.7 with the joint inertia (`2 0.7 sqrt(k J)`).
 
 use crate::plant::config::JointConfig;
+
+/// Default end-stop stiffness [N m/rad].
+pub const END_STOP_STIFFNESS_NM_PER_RAD: f64 = 2000.0;
+/// Default end-stop damping ratio.
+pub const END_STOP_DAMPING_RATIO: f64 = 0.7;
+
+/// The joint's mechanical end stops (module documentation).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EndStops {
+    /// Lower limit [rad].
+    pub angle_min_rad: f64,
+    /// Upper limit [rad].
+    pub angle_max_rad: f64,
+    /// k [N m/rad].
+    pub stiffness_nm_per_rad: f64,
+    /// c [N m s/rad].
+    pub damping_nms_per_rad: f64,
+}
+
+impl EndStops {
+    /// The stops of a plant file's `[joint]` table (defaults in the module documentation).
+    pub fn from_config(c: &JointConfig, muscle_rest_length_m: f64) -> Self {
+        let free = c.initial_contraction * muscle_rest_length_m / c.sprocket_radius_m;
+        let k = c
+            .end_stop_stiffness_nm_per_rad
+            .unwrap_or(END_STOP_STIFFNESS_NM_PER_RAD);
+        let damping = c.end_stop_damping_nms_per_rad.unwrap_or_else(|| {
+            2.0 * END_STOP_DAMPING_RATIO * (k * c.inertia_kgm2.max(0.0)).sqrt()
+        });
+        Self {
+            angle_min_rad: c.angle_min_rad.unwrap_or(-free),
+            angle_max_rad: c.angle_max_rad.unwrap_or(free),
+            stiffness_nm_per_rad: k,
+            damping_nms_per_rad: damping,
+        }
+    }
+
+    /// The stop torque [N m] at `angle_rad`, `velocity_rad_s` (0 inside the range).
+    #[inline(always)]
+    pub fn torque_nm(&self, angle_rad: f64, velocity_rad_s: f64) -> f64 {
+        if angle_rad > self.angle_max_rad {
+            (-self.stiffness_nm_per_rad * (angle_rad - self.angle_max_rad)
+                - self.damping_nms_per_rad * velocity_rad_s)
+                .min(0.0)
+        } else if angle_rad < self.angle_min_rad {
+            (-self.stiffness_nm_per_rad * (angle_rad - self.angle_min_rad)
+                - self.damping_nms_per_rad * velocity_rad_s)
+                .max(0.0)
+        } else {
+            0.0
+        }
+    }
+}
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Joint {
@@ -13,6 +81,8 @@ pub struct Joint {
     pub initial_contraction: f64,
     /// r / l_n: contraction per radian.
     pub contraction_per_rad: f64,
+    /// Mechanical end stops.
+    pub stops: EndStops,
 }
 
 impl Joint {
@@ -22,6 +92,7 @@ impl Joint {
             inertia_kgm2: c.inertia_kgm2,
             initial_contraction: c.initial_contraction,
             contraction_per_rad: c.sprocket_radius_m / muscle_rest_length_m,
+            stops: EndStops::from_config(c, muscle_rest_length_m),
         }
     }
 
@@ -45,9 +116,51 @@ impl Joint {
         (tensions_n[0] - tensions_n[1]) * self.sprocket_radius_m
     }
 
+    /// Torque of the end stops [N m] (0 inside the range).
+    #[inline(always)]
+    pub fn end_stop_torque_nm(&self, angle_rad: f64, velocity_rad_s: f64) -> f64 {
+        self.stops.torque_nm(angle_rad, velocity_rad_s)
+    }
+
     /// domega/dt = T / J.
     #[inline(always)]
     pub fn angular_acceleration_rad_s2(&self, torque_nm: f64) -> f64 {
         torque_nm / self.inertia_kgm2
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cfg() -> JointConfig {
+        JointConfig {
+            sprocket_radius_m: 0.025,
+            inertia_kgm2: 0.014,
+            initial_contraction: 0.14,
+            angle_min_rad: None,
+            angle_max_rad: None,
+            end_stop_stiffness_nm_per_rad: None,
+            end_stop_damping_nms_per_rad: None,
+        }
+    }
+
+    #[test]
+    fn default_stops_are_where_the_stretched_muscle_reaches_rest_length() {
+        let s = EndStops::from_config(&cfg(), 0.25);
+        assert!((s.angle_max_rad - 1.4).abs() < 1e-12);
+        assert!((s.angle_min_rad + 1.4).abs() < 1e-12);
+        assert_eq!(s.torque_nm(1.39, 5.0), 0.0);
+        // 0.01 rad into the upper stop, at rest: -k * 0.01.
+        assert!((s.torque_nm(1.41, 0.0) + 20.0).abs() < 1e-9);
+        // Leaving the stop fast: the damper never pulls the joint into the stop.
+        assert_eq!(s.torque_nm(1.41, -100.0), 0.0);
+        assert!(s.torque_nm(-1.45, -1.0) > 0.0);
+        let mut c = cfg();
+        c.angle_max_rad = Some(0.5);
+        c.end_stop_damping_nms_per_rad = Some(0.0);
+        c.end_stop_stiffness_nm_per_rad = Some(100.0);
+        let s = EndStops::from_config(&c, 0.25);
+        assert!((s.torque_nm(0.6, 3.0) + 10.0).abs() < 1e-9);
     }
 }

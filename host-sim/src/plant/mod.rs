@@ -247,7 +247,8 @@ impl Plant {
                 );
         }
         let torque = self.joint.muscle_torque_nm(tension)
-            + self.effects.joint_torque_nm(x.angle_rad, x.velocity_rad_s);
+            + self.effects.joint_torque_nm(x.angle_rad, x.velocity_rad_s)
+            + self.joint.end_stop_torque_nm(x.angle_rad, x.velocity_rad_s);
         let d_reservoir = match &self.effects.supply {
             Supply::Reservoir {
                 tank_volume_m3,

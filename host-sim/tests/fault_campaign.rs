@@ -1,0 +1,267 @@
+//! Fault campaign: the firmware in the loop under a matrix of injected faults x set-point
+//! profiles x plants (nominal and 11x loaded). Every run must:
+//! - simulate to its end (no integration abort, no panic);
+//! - keep the measured pressure of both muscles <= 610 kPa gauge and every pressure
+//!   set-point <= 600 kPa;
+//! - be in the safe state (valves closed, or a muscle vented) in every tick a fault is
+//!   latched, i.e. in the tick of detection;
+//! - detect the fault within the stated latency of its own injection;
+//! - never re-arm (no reset is issued; a watchdog reset mid-run boots into the safe state).
+//!
+//! Short matrix by default (CI). The full matrix (more set-points, two fault times, fast
+//! moves):
+//! `FAULT_CAMPAIGN=full cargo test --release -p host-sim --test fault_campaign -- --nocapture`
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use host_sim::control::closed_loop::{run, Scenario};
+use host_sim::Plant;
+
+fn shared(name: &str) -> Plant {
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant").join(name);
+    Plant::load(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
+/// A fault kind: its `[[events]]` TOML (with `{t}` for the injection time), the longest
+/// detection latency allowed [ticks], and whether it must be detected whatever the
+/// set-point (a stuck-closed valve or a lost supply only shows when the valve is commanded
+/// open, which a held set-point may never do).
+struct Fault {
+    name: &'static str,
+    events: &'static str,
+    max_latency_ticks: usize,
+    always_detected: bool,
+}
+
+const FAULTS: &[Fault] = &[
+    Fault {
+        name: "sensor NaN p1",
+        events: "kind = \"sensor_nan\"\nat_s = {t}\nduration_s = 0.2\nchannel = \"p1\"",
+        max_latency_ticks: 0,
+        always_detected: true,
+    },
+    Fault {
+        name: "sensor NaN angle",
+        events: "kind = \"sensor_nan\"\nat_s = {t}\nduration_s = 0.2\nchannel = \"angle\"",
+        max_latency_ticks: 0,
+        always_detected: true,
+    },
+    Fault {
+        name: "sensor dropout p2",
+        events: "kind = \"sensor_dropout\"\nat_s = {t}\nduration_s = 0.2\nchannel = \"p2\"",
+        max_latency_ticks: 11,
+        always_detected: true,
+    },
+    Fault {
+        name: "sensor stuck angle",
+        events: "kind = \"sensor_stuck\"\nat_s = {t}\nduration_s = 0.2\nchannel = \"angle\"",
+        max_latency_ticks: 11,
+        always_detected: true,
+    },
+    Fault {
+        name: "sensor step p1 +150 kPa",
+        events: "kind = \"sensor_step\"\nat_s = {t}\nchannel = \"p1\"\noffset = 150000.0",
+        max_latency_ticks: 0,
+        always_detected: true,
+    },
+    Fault {
+        name: "sensor step angle +0.15 rad",
+        events: "kind = \"sensor_step\"\nat_s = {t}\nchannel = \"angle\"\noffset = 0.15",
+        max_latency_ticks: 0,
+        always_detected: true,
+    },
+    Fault {
+        name: "inlet 1 stuck open",
+        events: "kind = \"stuck_valve\"\nat_s = {t}\nvalve = \"in1\"\nopen = true",
+        max_latency_ticks: 40,
+        always_detected: true,
+    },
+    Fault {
+        name: "exhaust 2 stuck open",
+        events: "kind = \"stuck_valve\"\nat_s = {t}\nvalve = \"ex2\"\nopen = true",
+        max_latency_ticks: 40,
+        always_detected: true,
+    },
+    Fault {
+        name: "inlet 2 stuck closed",
+        events: "kind = \"stuck_valve\"\nat_s = {t}\nvalve = \"in2\"\nopen = false",
+        max_latency_ticks: 400,
+        always_detected: false,
+    },
+    Fault {
+        name: "exhaust 1 stuck closed",
+        events: "kind = \"stuck_valve\"\nat_s = {t}\nvalve = \"ex1\"\nopen = false",
+        max_latency_ticks: 400,
+        always_detected: false,
+    },
+    Fault {
+        name: "supply loss",
+        events: "kind = \"supply_loss\"\nat_s = {t}\nsupply_gauge_pa = 0.0",
+        max_latency_ticks: 400,
+        always_detected: false,
+    },
+    Fault {
+        name: "tick overrun x8",
+        events: "kind = \"tick_overrun\"\nat_s = {t}\nfactor = 8.0",
+        max_latency_ticks: 0,
+        always_detected: true,
+    },
+    Fault {
+        name: "watchdog reset",
+        events: "kind = \"firmware_reset\"\nat_s = {t}",
+        max_latency_ticks: 0,
+        always_detected: true,
+    },
+    Fault {
+        name: "inlet 1 stuck open + supply loss",
+        events: "kind = \"stuck_valve\"\nat_s = {t}\nvalve = \"in1\"\nopen = true\n\n[[events]]\nkind = \"supply_loss\"\nat_s = {t}\nsupply_gauge_pa = 0.0",
+        max_latency_ticks: 40,
+        always_detected: true,
+    },
+    Fault {
+        name: "NaN p2 + exhaust 1 stuck open",
+        events: "kind = \"sensor_nan\"\nat_s = {t}\nduration_s = 0.1\nchannel = \"p2\"\n\n[[events]]\nkind = \"stuck_valve\"\nat_s = {t}\nvalve = \"ex1\"\nopen = true",
+        max_latency_ticks: 0,
+        always_detected: true,
+    },
+];
+
+/// Set-point profiles: name, `[setpoint]` TOML, in the short matrix.
+const SETPOINTS: &[(&str, &str, bool)] = &[
+    (
+        "step 0.3 rad",
+        "kind = \"step\"\ninitial_rad = 0.0\nfinal_rad = 0.3\nat_s = 0.3",
+        true,
+    ),
+    (
+        "sine 0.3 rad 1 Hz",
+        "kind = \"sine\"\noffset_rad = 0.0\namplitude_rad = 0.3\nfreq_hz = 1.0",
+        true,
+    ),
+    (
+        "sine 0.6 rad 1 Hz",
+        "kind = \"sine\"\noffset_rad = 0.0\namplitude_rad = 0.6\nfreq_hz = 1.0",
+        false,
+    ),
+    (
+        "random 0.4 rad",
+        "kind = \"random\"\namplitude_rad = 0.4\nhold_s = 0.4\nstart_s = 0.2",
+        false,
+    ),
+];
+
+#[derive(Default)]
+struct KindStats {
+    runs: usize,
+    detected: usize,
+    max_latency_ticks: usize,
+    max_p_kpa: f64,
+}
+
+#[test]
+fn fault_campaign() {
+    let full = std::env::var("FAULT_CAMPAIGN").is_ok_and(|v| v == "full");
+    let plants = [
+        ("nominal", shared("reference-1dof.toml")),
+        ("loaded 11x", shared("reference-1dof-loaded.toml")),
+    ];
+    let fault_times: &[f64] = if full { &[0.8, 1.33] } else { &[1.0] };
+    let mut stats: BTreeMap<&str, KindStats> = BTreeMap::new();
+    let mut runs = 0;
+    let mut failures = Vec::new();
+    for (plant_name, plant) in &plants {
+        for &(sp_name, sp, short) in SETPOINTS {
+            if !short && !full {
+                continue;
+            }
+            for &t in fault_times {
+                for f in FAULTS {
+                    let text = format!(
+                        "[scenario]\nname = \"campaign\"\nduration_s = {}\nseed = 3\n\n[setpoint]\n{sp}\n\n[[events]]\n{}\n",
+                        t + 0.8,
+                        f.events.replace("{t}", &format!("{t}"))
+                    );
+                    let s = Scenario::from_toml_str(&text, "campaign").unwrap();
+                    let what = format!("{} / {sp_name} / {plant_name} / t = {t}", f.name);
+                    let r = match run(plant, &s) {
+                        Ok(r) => r,
+                        Err(e) => {
+                            failures.push(format!("{what}: run failed: {e}"));
+                            continue;
+                        }
+                    };
+                    runs += 1;
+                    let st = stats.entry(f.name).or_default();
+                    st.runs += 1;
+                    st.max_p_kpa = st.max_p_kpa.max(r.max_p_gauge_pa / 1e3);
+                    if r.max_p_gauge_pa > 610e3 {
+                        failures.push(format!(
+                            "{what}: measured pressure {:.1} kPa > 610 kPa",
+                            r.max_p_gauge_pa / 1e3
+                        ));
+                    }
+                    if r.max_p_set_gauge_pa > 600e3 {
+                        failures.push(format!(
+                            "{what}: pressure set-point {:.1} kPa > 600 kPa",
+                            r.max_p_set_gauge_pa / 1e3
+                        ));
+                    }
+                    // Safe state in every faulted tick; no re-arm once faulted.
+                    let mut faulted = false;
+                    for row in &r.rows {
+                        let safe = |u: f32| u == 0.0 || u == -1.0;
+                        if row.out.fault.is_some() {
+                            faulted = true;
+                            if row.out.armed
+                                || !safe(row.out.valves.muscle1)
+                                || !safe(row.out.valves.muscle2)
+                            {
+                                failures.push(format!(
+                                    "{what}: not in the safe state at {} s: {:?}",
+                                    row.t_s, row.out.valves
+                                ));
+                                break;
+                            }
+                        } else if faulted {
+                            failures.push(format!("{what}: re-armed at {} s", row.t_s));
+                            break;
+                        }
+                    }
+                    match r.fault_latency_ticks() {
+                        Some(d) => {
+                            st.detected += 1;
+                            st.max_latency_ticks = st.max_latency_ticks.max(d);
+                            if d > f.max_latency_ticks {
+                                failures.push(format!(
+                                    "{what}: detected {d} ticks after injection (> {})",
+                                    f.max_latency_ticks
+                                ));
+                            }
+                        }
+                        None => {
+                            if let Some(l) = r.first_latched_fault_tick {
+                                failures.push(format!(
+                                    "{what}: fault {:?} latched at {} s before the injection",
+                                    r.rows[l].out.fault, r.rows[l].t_s
+                                ));
+                            } else if f.always_detected {
+                                failures.push(format!("{what}: not detected"));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    eprintln!("fault campaign ({}): {runs} runs, {} fault kinds", if full { "full" } else { "short" }, FAULTS.len());
+    eprintln!("| fault | runs | detected | max latency [ticks = ms] | max pressure [kPa] |");
+    eprintln!("|---|---|---|---|---|");
+    for (name, s) in &stats {
+        eprintln!(
+            "| {name} | {} | {} | {} | {:.1} |",
+            s.runs, s.detected, s.max_latency_ticks, s.max_p_kpa
+        );
+    }
+    assert!(failures.is_empty(), "{} failures:\n{}", failures.len(), failures.join("\n"));
+}

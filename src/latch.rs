@@ -1,0 +1,340 @@
+//! The fault latch across resets: a small record in storage that survives a reset (the
+//! STM32F4 backup SRAM on the board, [`crate::latch_bkpsram`]), and the boot decision.
+//!
+//! Boot rule: **every reset but a power-on with a clean record boots into the safe state.**
+//!
+//! | reset cause | stored record | boot |
+//! |---|---|---|
+//! | power-on | valid, no fault | armed (normal start) |
+//! | power-on | valid, with a fault | safe state, the stored fault is the cause |
+//! | power-on | missing or corrupt (checksum) | safe state ([`FaultCode::ResetLatched`]) |
+//! | watchdog, brown-out, software, pin, lock-up, unknown | any | safe state |
+//!
+//! A brown-out (valve inrush), a software reset or a watchdog reset in the middle of a fault
+//! therefore never re-arms the joint by itself: only the operator's explicit reset, with
+//! every cause gone ([`crate::tick::ControlTick::reset`]), writes a clean record again
+//! ([`PersistentLatch::cleared`]). A power-on with a missing record (a board without backup
+//! battery loses the backup SRAM when unpowered) also starts in the safe state: that is the
+//! conservative reading of "clean".
+//!
+//! Record (four 32-bit words): magic, cause code and vent flags, the set of faults seen,
+//! CRC-32 (IEEE 802.3, reflected, the zlib one) of the first three words' little-endian
+//! bytes.
+
+use crate::safety::{FaultCode, FaultSet};
+
+/// Where the record lives (backup SRAM, flash, a host buffer in tests).
+pub trait LatchStorage {
+    /// The stored words (whatever is there: the checksum decides whether it is a record).
+    fn read(&self) -> [u32; RECORD_WORDS];
+    /// Stores the words.
+    fn write(&mut self, words: &[u32; RECORD_WORDS]);
+}
+
+/// Number of 32-bit words of a record.
+pub const RECORD_WORDS: usize = 4;
+
+/// First word of a record ("PAML" in ASCII, version 1 in the low byte of word 1).
+pub const MAGIC: u32 = 0x5041_4D4C;
+const VERSION: u32 = 1;
+
+/// Why the MCU (re)started, from the reset-cause flags of the chip.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ResetCause {
+    /// Power-on / power-down reset.
+    PowerOn,
+    /// Brown-out (supply dip, e.g. valve inrush).
+    BrownOut,
+    /// Independent or window watchdog.
+    Watchdog,
+    /// Software reset (`SYSRESETREQ`).
+    Software,
+    /// The reset pin.
+    Pin,
+    /// Low-power management or lock-up reset.
+    LowPower,
+    /// No flag set or an unknown combination.
+    Unknown,
+}
+
+/// The latch content.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LatchRecord {
+    /// The latched cause (None = armed, a clean record).
+    pub cause: Option<FaultCode>,
+    /// Every fault seen since the last reset.
+    pub seen: FaultSet,
+    /// Muscles vented by the over-pressure escalation.
+    pub vented: [bool; 2],
+}
+
+impl LatchRecord {
+    /// A clean record (no fault).
+    pub const CLEAN: LatchRecord = LatchRecord {
+        cause: None,
+        seen: FaultSet::EMPTY,
+        vented: [false; 2],
+    };
+
+    /// The storage words of the record.
+    pub fn encode(&self) -> [u32; RECORD_WORDS] {
+        let code = self.cause.map_or(0, |c| c.code() as u32);
+        let w1 = VERSION | code << 8 | (self.vented[0] as u32) << 16 | (self.vented[1] as u32) << 17;
+        let w = [MAGIC, w1, self.seen.bits()];
+        [w[0], w[1], w[2], crc32_words(&w)]
+    }
+
+    /// The record stored in `words`, or None when it is not a valid record (wrong magic,
+    /// version or checksum, unknown fault code).
+    pub fn decode(words: &[u32; RECORD_WORDS]) -> Option<LatchRecord> {
+        if words[0] != MAGIC || crc32_words(&[words[0], words[1], words[2]]) != words[3] {
+            return None;
+        }
+        if words[1] & 0xff != VERSION || words[1] >> 18 != 0 {
+            return None;
+        }
+        let code = ((words[1] >> 8) & 0xff) as u8;
+        let cause = match code {
+            0 => None,
+            c => Some(FaultCode::from_code(c)?),
+        };
+        if words[2] != FaultSet::from_bits(words[2]).bits() {
+            return None;
+        }
+        Some(LatchRecord {
+            cause,
+            seen: FaultSet::from_bits(words[2]),
+            vented: [words[1] >> 16 & 1 != 0, words[1] >> 17 & 1 != 0],
+        })
+    }
+}
+
+/// What the firmware does at boot.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum BootDecision {
+    /// Start normally (armed once every channel delivered).
+    Arm,
+    /// Start in the safe state with this cause latched (and these faults seen, these
+    /// muscles vented); the operator's reset re-arms.
+    Safe(LatchRecord),
+}
+
+/// The boot rule of the [module documentation](self).
+pub fn boot_decision(reset: ResetCause, stored: Option<LatchRecord>) -> BootDecision {
+    match (reset, stored) {
+        (ResetCause::PowerOn, Some(r)) if r.cause.is_none() => BootDecision::Arm,
+        (_, Some(r)) if r.cause.is_some() => BootDecision::Safe(r),
+        (_, Some(r)) => BootDecision::Safe(LatchRecord {
+            cause: Some(FaultCode::ResetLatched),
+            seen: r.seen.union(FaultSet::of(FaultCode::ResetLatched)),
+            vented: r.vented,
+        }),
+        (_, None) => BootDecision::Safe(LatchRecord {
+            cause: Some(FaultCode::ResetLatched),
+            seen: FaultSet::of(FaultCode::ResetLatched),
+            vented: [false; 2],
+        }),
+    }
+}
+
+/// The latch over a storage: boot decision at start-up, a write whenever the latched state
+/// changes (one comparison per tick otherwise).
+pub struct PersistentLatch<S: LatchStorage> {
+    storage: S,
+    last: LatchRecord,
+}
+
+impl<S: LatchStorage> PersistentLatch<S> {
+    /// Reads the stored record and decides how to boot. The storage then holds the boot
+    /// state (a safe boot is stored at once, so a second reset before the first tick is
+    /// still safe).
+    pub fn boot(mut storage: S, reset: ResetCause) -> (Self, BootDecision) {
+        let stored = LatchRecord::decode(&storage.read());
+        let decision = boot_decision(reset, stored);
+        let last = match decision {
+            BootDecision::Arm => LatchRecord::CLEAN,
+            BootDecision::Safe(r) => r,
+        };
+        storage.write(&last.encode());
+        (PersistentLatch { storage, last }, decision)
+    }
+
+    /// Stores `now` when it differs from the stored record (call once per tick with the
+    /// tick's latched state, e.g. [`crate::tick::ControlTick::latch_record`]).
+    #[inline]
+    pub fn update(&mut self, now: LatchRecord) {
+        if now != self.last {
+            self.storage.write(&now.encode());
+            self.last = now;
+        }
+    }
+
+    /// Stores a clean record (after the operator's successful reset).
+    pub fn cleared(&mut self) {
+        self.update(LatchRecord::CLEAN);
+    }
+
+    /// The record last stored.
+    pub fn stored(&self) -> LatchRecord {
+        self.last
+    }
+
+    /// The storage back.
+    pub fn release(self) -> S {
+        self.storage
+    }
+}
+
+/// CRC-32 (IEEE, reflected, init and final xor 0xFFFFFFFF) of the words' little-endian
+/// bytes. Bitwise: a few hundred instructions, run only when the record changes.
+pub fn crc32_words(words: &[u32]) -> u32 {
+    let mut crc = 0xFFFF_FFFFu32;
+    for w in words {
+        for b in w.to_le_bytes() {
+            crc ^= b as u32;
+            for _ in 0..8 {
+                let mask = (crc & 1).wrapping_neg();
+                crc = (crc >> 1) ^ (0xEDB8_8320 & mask);
+            }
+        }
+    }
+    !crc
+}
+
+/// A storage in RAM (host tests, and boards without a retained memory: then every boot is
+/// a power-on with a missing record, i.e. safe).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RamStorage(pub [u32; RECORD_WORDS]);
+
+impl LatchStorage for RamStorage {
+    fn read(&self) -> [u32; RECORD_WORDS] {
+        self.0
+    }
+    fn write(&mut self, words: &[u32; RECORD_WORDS]) {
+        self.0 = *words;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crc_matches_the_standard_check_value() {
+        // CRC-32/ISO-HDLC check value of "123456789" (9 bytes: not word aligned, so fold
+        // the reference by hand: bytes "1234" "5678" then the bitwise loop on "9").
+        let mut crc = 0xFFFF_FFFFu32;
+        for b in *b"123456789" {
+            crc ^= b as u32;
+            for _ in 0..8 {
+                let mask = (crc & 1).wrapping_neg();
+                crc = (crc >> 1) ^ (0xEDB8_8320 & mask);
+            }
+        }
+        assert_eq!(!crc, 0xCBF4_3926);
+        // The word version on "1234" equals the byte loop on the same bytes.
+        let w = u32::from_le_bytes(*b"1234");
+        let mut c = 0xFFFF_FFFFu32;
+        for b in *b"1234" {
+            c ^= b as u32;
+            for _ in 0..8 {
+                let mask = (c & 1).wrapping_neg();
+                c = (c >> 1) ^ (0xEDB8_8320 & mask);
+            }
+        }
+        assert_eq!(crc32_words(&[w]), !c);
+        // zlib's crc32(b"1234") = 0x9BE3E0A3.
+        assert_eq!(crc32_words(&[w]), 0x9BE3_E0A3);
+    }
+
+    #[test]
+    fn records_round_trip_and_corruption_is_detected() {
+        let mut seen = FaultSet::EMPTY;
+        seen.insert(FaultCode::InletStuckOpen1);
+        seen.insert(FaultCode::OverPressure2);
+        let r = LatchRecord {
+            cause: Some(FaultCode::InletStuckOpen1),
+            seen,
+            vented: [false, true],
+        };
+        let w = r.encode();
+        assert_eq!(LatchRecord::decode(&w), Some(r));
+        assert_eq!(LatchRecord::decode(&LatchRecord::CLEAN.encode()), Some(LatchRecord::CLEAN));
+        // Every single-bit flip is caught.
+        for i in 0..RECORD_WORDS {
+            for bit in 0..32 {
+                let mut c = w;
+                c[i] ^= 1 << bit;
+                assert_eq!(LatchRecord::decode(&c), None, "word {i} bit {bit}");
+            }
+        }
+        assert_eq!(LatchRecord::decode(&[0; 4]), None);
+        assert_eq!(LatchRecord::decode(&[u32::MAX; 4]), None);
+    }
+
+    #[test]
+    fn only_a_power_on_with_a_clean_record_arms() {
+        let clean = Some(LatchRecord::CLEAN);
+        let faulted = Some(LatchRecord {
+            cause: Some(FaultCode::SupplyLost),
+            seen: FaultSet::of(FaultCode::SupplyLost),
+            vented: [false; 2],
+        });
+        assert_eq!(boot_decision(ResetCause::PowerOn, clean), BootDecision::Arm);
+        for cause in [
+            ResetCause::BrownOut,
+            ResetCause::Watchdog,
+            ResetCause::Software,
+            ResetCause::Pin,
+            ResetCause::LowPower,
+            ResetCause::Unknown,
+        ] {
+            match boot_decision(cause, clean) {
+                BootDecision::Safe(r) => assert_eq!(r.cause, Some(FaultCode::ResetLatched)),
+                d => panic!("{cause:?}: {d:?}"),
+            }
+            assert_eq!(boot_decision(cause, faulted), BootDecision::Safe(faulted.unwrap()));
+        }
+        assert_eq!(
+            boot_decision(ResetCause::PowerOn, faulted),
+            BootDecision::Safe(faulted.unwrap())
+        );
+        match boot_decision(ResetCause::PowerOn, None) {
+            BootDecision::Safe(r) => assert_eq!(r.cause, Some(FaultCode::ResetLatched)),
+            d => panic!("{d:?}"),
+        }
+    }
+
+    #[test]
+    fn latch_survives_a_brown_out_and_clears_only_on_reset() {
+        // Power-on with a clean record: armed; a fault is stored when it happens.
+        let (mut latch, d) =
+            PersistentLatch::boot(RamStorage(LatchRecord::CLEAN.encode()), ResetCause::PowerOn);
+        assert_eq!(d, BootDecision::Arm);
+        let fault = LatchRecord {
+            cause: Some(FaultCode::InletStuckOpen2),
+            seen: FaultSet::of(FaultCode::InletStuckOpen2),
+            vented: [false; 2],
+        };
+        latch.update(fault);
+        // Brown-out: the storage survives; the board boots into the safe state.
+        let (latch2, d) = PersistentLatch::boot(latch.release(), ResetCause::BrownOut);
+        assert_eq!(d, BootDecision::Safe(fault));
+        // Even a power-on afterwards stays safe (the record holds the fault)...
+        let (mut latch3, d) = PersistentLatch::boot(latch2.release(), ResetCause::PowerOn);
+        assert_eq!(d, BootDecision::Safe(fault));
+        // ... until the operator's reset writes a clean record.
+        latch3.cleared();
+        let (_, d) = PersistentLatch::boot(latch3.release(), ResetCause::PowerOn);
+        assert_eq!(d, BootDecision::Arm);
+        // A software reset right after a clean record is still safe.
+        let (_, d) = PersistentLatch::boot(
+            RamStorage(LatchRecord::CLEAN.encode()),
+            ResetCause::Software,
+        );
+        assert!(matches!(d, BootDecision::Safe(_)));
+    }
+}

@@ -1,0 +1,370 @@
+//! Model-based supervision of the valves and the supply: the pressure residual.
+//!
+//! Every `window_ticks` ticks (10 at 1 kHz: one PWM period of the on/off valves) each muscle's
+//! measured pressure change over the window is compared with what the firmware's own model
+//! of that muscle predicts from the valve commands it issued:
+//!
+//! ```text
+//! dp/dt = (p_atm Q - P dV/dt) / V                      (P absolute, V = V(chi), chi from the angle)
+//! Q     = u_in C P_s phi(P / P_s) - u_ex C P phi(p_atm / P)
+//! phi(s) = 1 for s <= b,  sqrt(1 - ((s - b) / (1 - b))^2) above (ISO 6358 ellipse)
+//! ```
+//!
+//! with the window means of the inflate and exhaust duties `u_in`, `u_ex`, the pressure,
+//! angle and volume rate at the window's middle, the nominal supply `P_s`, conductance `C`
+//! and critical ratio `b` of [`ValveModelParams`]. The residual
+//! `e = (p_end - p_start) / T - dp/dt_model` is compared with
+//! `R = residual_abs_pa_s + residual_rel (|inflow term| + |outflow term| + |volume term|)`:
+//! the relative part absorbs model error (polytropic exponent, PWM edges, supply droop).
+//! A residual beyond `R` in `persist_windows` consecutive windows is a fault; which one
+//! follows from the sign and from what the valves were told:
+//!
+//! | residual | valves commanded | pressure | fault |
+//! |---|---|---|---|
+//! | `e > R` | exhaust open | rises | inlet stuck open (only inflow raises it) |
+//! | `e > R` | exhaust open | does not rise | exhaust stuck closed |
+//! | `e > R` | exhaust closed | - | inlet stuck open |
+//! | `e < -R` | inlet open | - | the nearest of: inlet stuck closed (no inflow), supply lost (air flows back through the inlet for its duty), exhaust stuck open (inflow against a fully open exhaust) |
+//! | `e < -R` | inlet closed | - | exhaust stuck open |
+//!
+//! The classes can overlap (a stuck-open exhaust while inflating at a small duty looks like
+//! a lost supply); the fault is still that muscle's air path, and the safe state is the
+//! same. While faulted (valves closed in
+//! Hold) the residual keeps running: a stuck-open inlet or exhaust stays visible, so a reset
+//! is refused while it persists; a stuck-closed valve or a lost supply is only seen again
+//! when the valve is commanded open after a re-arm.
+//!
+//! The openings are what the valve driver actually switched (its PWM latches a duty per
+//! period, so the mean command of a window can differ from it by most of a period): the
+//! caller reports them with [`crate::tick::ControlTick::valves_applied`]; without that
+//! report the tick's command stands in for them (exact for proportional valves).
+//!
+//! Cost on the MCU: a few adds per tick (opening sums); the model runs once per window.
+
+// `!(x > y)` is the deliberate NaN-rejecting comparison (NaN fails every comparison).
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+use crate::geometry::JointGeometry;
+use crate::safety::{FaultCode, FaultSet};
+
+/// The firmware's model of one muscle's pressure dynamics (both muscles are identical) and
+/// the residual thresholds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ValveModelParams {
+    /// Atmospheric pressure [Pa absolute].
+    pub p_atm_pa: f32,
+    /// Nominal supply pressure [Pa gauge].
+    pub supply_gauge_pa: f32,
+    /// ISO 6358 sonic conductance of each valve [m^3 / (s Pa)].
+    pub conductance_m3_per_s_pa: f32,
+    /// ISO 6358 critical pressure ratio.
+    pub critical_ratio: f32,
+    /// Chamber volume `V(chi) = b0 + b1 chi + b2 chi^2 + b3 chi^3` [m^3].
+    pub volume_poly_m3: [f32; 4],
+    /// Absolute part of the residual threshold [Pa/s].
+    pub residual_abs_pa_s: f32,
+    /// Relative part of the residual threshold (of the summed model terms).
+    pub residual_rel: f32,
+    /// Window length [ticks] (>= 1).
+    pub window_ticks: u32,
+    /// Consecutive windows beyond the threshold that make a fault (>= 1).
+    pub persist_windows: u32,
+}
+
+impl ValveModelParams {
+    /// The reference plant (`shared/plant/reference-1dof.toml`): 600 kPa gauge supply,
+    /// C = 8e-9 m^3/(s Pa), b = 0.433, the DMSP-20 volume polynomial; threshold 0.5 MPa/s +
+    /// 50 % of the model terms, two 10-tick windows.
+    ///
+    /// Threshold rationale: a stuck-open inlet at 300 kPa raises the pressure at ~5 MPa/s
+    /// (the model says 0); 500 Pa of sensor noise gives 0.07 MPa/s of noise on a 10 ms
+    /// window; the relative part covers a polytropic exponent up to 1.4 and a supply droop.
+    pub const REFERENCE: ValveModelParams = ValveModelParams {
+        p_atm_pa: 101_325.0,
+        supply_gauge_pa: 600_000.0,
+        conductance_m3_per_s_pa: 8.0e-9,
+        critical_ratio: 0.433,
+        volume_poly_m3: [79.0e-6, 48.0e-5, -18.0e-6, -11.0e-4],
+        residual_abs_pa_s: 500_000.0,
+        residual_rel: 0.5,
+        window_ticks: 10,
+        persist_windows: 2,
+    };
+
+    /// True when every parameter is usable.
+    pub fn is_valid(&self) -> bool {
+        let pos = |x: f32| x.is_finite() && x > 0.0;
+        pos(self.p_atm_pa)
+            && self.supply_gauge_pa.is_finite()
+            && self.supply_gauge_pa >= 0.0
+            && pos(self.conductance_m3_per_s_pa)
+            && self.critical_ratio.is_finite()
+            && self.critical_ratio >= 0.0
+            && self.critical_ratio < 1.0
+            && self.volume_poly_m3.iter().all(|b| b.is_finite())
+            && self.volume_poly_m3[0] > 0.0
+            && pos(self.residual_abs_pa_s)
+            && self.residual_rel.is_finite()
+            && self.residual_rel >= 0.0
+            && self.window_ticks >= 1
+            && self.persist_windows >= 1
+    }
+
+    /// ISO 6358 flow function (ellipse, no laminar patch) of the pressure ratio `s`.
+    #[inline]
+    fn phi(&self, s: f32) -> f32 {
+        let b = self.critical_ratio;
+        if s <= b {
+            1.0
+        } else if s >= 1.0 {
+            0.0
+        } else {
+            let x = (s - b) / (1.0 - b);
+            libm::sqrtf(1.0 - x * x)
+        }
+    }
+
+    /// The model's pressure-rate terms [Pa/s] (inflow, outflow, volume change) of one muscle
+    /// at gauge pressure `p_gauge_pa`, contraction `chi`, contraction rate `chi_rate_per_s`,
+    /// with mean inflate / exhaust duties `u_in`, `u_ex`.
+    pub fn rate_terms_pa_s(
+        &self,
+        p_gauge_pa: f32,
+        chi: f32,
+        chi_rate_per_s: f32,
+        u_in: f32,
+        u_ex: f32,
+    ) -> (f32, f32, f32) {
+        let [b0, b1, b2, b3] = self.volume_poly_m3;
+        let v = b0 + chi * (b1 + chi * (b2 + chi * b3));
+        let dv = (b1 + chi * (2.0 * b2 + chi * 3.0 * b3)) * chi_rate_per_s;
+        // A chamber volume below a tenth of b0 is outside the model: no prediction.
+        let v = if v > 0.1 * b0 { v } else { 0.1 * b0 };
+        let p = p_gauge_pa + self.p_atm_pa;
+        let p = if p > 1.0 { p } else { 1.0 };
+        let ps = self.supply_gauge_pa + self.p_atm_pa;
+        let k = self.p_atm_pa * self.conductance_m3_per_s_pa / v;
+        let q_in = if ps >= p {
+            u_in * k * ps * self.phi(p / ps)
+        } else {
+            -u_in * k * p * self.phi(ps / p)
+        };
+        let q_out = if p >= self.p_atm_pa {
+            -u_ex * k * p * self.phi(self.p_atm_pa / p)
+        } else {
+            u_ex * k * self.p_atm_pa * self.phi(p / self.p_atm_pa)
+        };
+        let q_vol = -p * dv / v;
+        (q_in, q_out, q_vol)
+    }
+}
+
+/// One muscle's window and persistence counters.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+struct MuscleWindow {
+    p_start_pa: f32,
+    /// Sums of the inflate and exhaust openings over the window.
+    sum_in: f32,
+    sum_ex: f32,
+    above: u32,
+    below: u32,
+}
+
+/// The residual monitor of both muscles ([module documentation](self)).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ResidualMonitor {
+    params: ValveModelParams,
+    /// chi0 and r / l_n of the joint geometry.
+    chi0: f32,
+    geometry_ratio: f32,
+    m: [MuscleWindow; 2],
+    angle_start_rad: f32,
+    /// Ticks and time in the window; `open` = a window is running.
+    ticks: u32,
+    elapsed_s: f32,
+    open: bool,
+    /// The faults of the last evaluation (kept until the next one).
+    active: FaultSet,
+}
+
+impl ResidualMonitor {
+    /// A monitor with no window yet.
+    pub fn new(params: ValveModelParams, geometry: &JointGeometry) -> Self {
+        ResidualMonitor {
+            params,
+            chi0: geometry.initial_contraction,
+            geometry_ratio: geometry.sprocket_radius_m / geometry.rest_length_m,
+            m: [MuscleWindow {
+                p_start_pa: 0.0,
+                sum_in: 0.0,
+                sum_ex: 0.0,
+                above: 0,
+                below: 0,
+            }; 2],
+            angle_start_rad: 0.0,
+            ticks: 0,
+            elapsed_s: 0.0,
+            open: false,
+            active: FaultSet::EMPTY,
+        }
+    }
+
+    /// The faults found by the last evaluation (empty when all is well).
+    #[inline]
+    pub fn active(&self) -> FaultSet {
+        self.active
+    }
+
+    /// Forgets the window and the counters (e.g. a sample was missing).
+    pub fn restart(&mut self) {
+        self.open = false;
+        self.m[0].above = 0;
+        self.m[0].below = 0;
+        self.m[1].above = 0;
+        self.m[1].below = 0;
+        self.active = FaultSet::EMPTY;
+    }
+
+    /// Start of a tick: `fresh` = all three channels delivered a valid sample this tick
+    /// (`p1`, `p2`, `angle` are those samples) and `dt_s` is valid. Evaluates the window when
+    /// it is complete. Returns the active residual faults.
+    #[inline]
+    pub fn observe(&mut self, fresh: bool, p1: f32, p2: f32, angle: f32, dt_s: f32) -> FaultSet {
+        if !fresh {
+            // A window needs both its end points; keep the counters (a sensor fault is
+            // handled by the channel checks) but drop the window.
+            self.open = false;
+            return self.active;
+        }
+        if self.open {
+            self.ticks += 1;
+            self.elapsed_s += dt_s;
+            if self.ticks >= self.params.window_ticks {
+                self.evaluate(p1, p2, angle);
+                self.start(p1, p2, angle);
+            }
+        } else {
+            self.start(p1, p2, angle);
+        }
+        self.active
+    }
+
+    /// End of a tick: the valve openings commanded for the next period (inflate 1,
+    /// exhaust 1, inflate 2, exhaust 2, each in [0, 1]).
+    #[inline(always)]
+    pub fn openings(&mut self, in1: f32, ex1: f32, in2: f32, ex2: f32) {
+        let a = &mut self.m[0];
+        a.sum_in += in1;
+        a.sum_ex += ex1;
+        let b = &mut self.m[1];
+        b.sum_in += in2;
+        b.sum_ex += ex2;
+    }
+
+    fn start(&mut self, p1: f32, p2: f32, angle: f32) {
+        self.open = true;
+        self.ticks = 0;
+        self.elapsed_s = 0.0;
+        self.angle_start_rad = angle;
+        for (w, p) in self.m.iter_mut().zip([p1, p2]) {
+            w.p_start_pa = p;
+            w.sum_in = 0.0;
+            w.sum_ex = 0.0;
+        }
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn evaluate(&mut self, p1: f32, p2: f32, angle: f32) {
+        let t = self.elapsed_s;
+        let n = self.ticks as f32;
+        if !(t > 0.0) || !(n > 0.0) {
+            return;
+        }
+        let mut active = FaultSet::EMPTY;
+        for i in 0..2 {
+            let p_end = if i == 0 { p1 } else { p2 };
+            let w = self.m[i];
+            let p_mid = 0.5 * (w.p_start_pa + p_end);
+            let u_in = w.sum_in / n;
+            let u_ex = w.sum_ex / n;
+            let angle_mid = 0.5 * (self.angle_start_rad + angle);
+            let angle_rate = (angle - self.angle_start_rad) / t;
+            let (chi, chi_rate) = self.contraction(i, angle_mid, angle_rate);
+            let (q_in, q_out, q_vol) =
+                self.params
+                    .rate_terms_pa_s(p_mid, chi, chi_rate, u_in, u_ex);
+            let measured = (p_end - w.p_start_pa) / t;
+            let e = measured - (q_in + q_out + q_vol);
+            let r = self.params.residual_abs_pa_s
+                + self.params.residual_rel
+                    * (libm::fabsf(q_in) + libm::fabsf(q_out) + libm::fabsf(q_vol));
+            let w = &mut self.m[i];
+            // NaN residuals count as neither (the channel checks catch NaN samples).
+            w.above = if e > r { w.above.saturating_add(1) } else { 0 };
+            w.below = if e < -r { w.below.saturating_add(1) } else { 0 };
+            let rate_abs = self.params.residual_abs_pa_s;
+            let code = if w.above >= self.params.persist_windows {
+                Some(if -q_out > rate_abs && !(measured - q_vol > rate_abs) {
+                    pick(i, FaultCode::ExhaustStuckClosed1, FaultCode::ExhaustStuckClosed2)
+                } else {
+                    pick(i, FaultCode::InletStuckOpen1, FaultCode::InletStuckOpen2)
+                })
+            } else if w.below >= self.params.persist_windows {
+                Some(if q_in > rate_abs {
+                    // Inflating and the pressure lags: the nearest of three explanations.
+                    // Inlet stuck closed: no inflow. Supply lost: the inlet lets air back
+                    // out (to a supply at atmosphere) for its duty. Exhaust stuck open: the
+                    // inflow against a fully open exhaust.
+                    let (_, full_out, _) =
+                        self.params
+                            .rate_terms_pa_s(p_mid, chi, chi_rate, 0.0, 1.0);
+                    let closed = libm::fabsf(measured - (q_vol + q_out));
+                    let supply = libm::fabsf(measured - (q_vol + q_out + u_in * full_out));
+                    let exhaust = libm::fabsf(measured - (q_vol + q_in + full_out));
+                    if exhaust < supply && exhaust < closed {
+                        pick(i, FaultCode::ExhaustStuckOpen1, FaultCode::ExhaustStuckOpen2)
+                    } else if supply < closed {
+                        FaultCode::SupplyLost
+                    } else {
+                        pick(i, FaultCode::InletStuckClosed1, FaultCode::InletStuckClosed2)
+                    }
+                } else {
+                    pick(i, FaultCode::ExhaustStuckOpen1, FaultCode::ExhaustStuckOpen2)
+                })
+            } else {
+                None
+            };
+            if let Some(c) = code {
+                active.insert(c);
+            }
+        }
+        self.active = active;
+    }
+
+    /// Contraction and contraction rate of muscle `i` (PLANT.md: muscle 1 contracts when
+    /// the angle grows).
+    #[inline]
+    fn contraction(&self, i: usize, angle_rad: f32, angle_rate_rad_s: f32) -> (f32, f32) {
+        let c = self.geometry_ratio;
+        let d = c * angle_rad;
+        let dr = c * angle_rate_rad_s;
+        if i == 0 {
+            (self.chi0 + d, dr)
+        } else {
+            (self.chi0 - d, -dr)
+        }
+    }
+}
+
+#[inline]
+fn pick(i: usize, a: FaultCode, b: FaultCode) -> FaultCode {
+    if i == 0 {
+        a
+    } else {
+        b
+    }
+}
