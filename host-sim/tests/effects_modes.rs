@@ -496,15 +496,18 @@ fn cli_closed_loop_recording_replays_open_loop_on_the_same_plant() {
     let dir = tempfile::tempdir().unwrap();
     let plant = root().join("host-sim/plants/reference-1dof-dead-time-8ms.toml");
     let closed = dir.path().join("closed.csv");
-    let run = |args: &[&std::ffi::OsStr]| {
+    // Exit status 1 is a run whose `[expect]` is not met: the step scenario's bounds are for
+    // the nominal plant, and its reference gains do not settle with an 8 ms dead time.
+    let run = |args: &[&std::ffi::OsStr], codes: &[i32]| {
         let o = std::process::Command::new(env!("CARGO_BIN_EXE_host-sim"))
             .args(args)
             .output()
             .unwrap();
         let out = String::from_utf8_lossy(&o.stdout).into_owned();
         assert!(
-            o.status.success(),
-            "{out}{}",
+            o.status.code().is_some_and(|c| codes.contains(&c)),
+            "{:?}: {out}{}",
+            o.status,
             String::from_utf8_lossy(&o.stderr)
         );
         out
@@ -518,7 +521,7 @@ fn cli_closed_loop_recording_replays_open_loop_on_the_same_plant() {
         scenario.as_os_str(),
         "--out".as_ref(),
         closed.as_os_str(),
-    ]);
+    ], &[0, 1]);
     assert!(
         out.contains("plant effects: valve_dead_time(delay_s = 0.008)"),
         "{out}"
@@ -532,7 +535,7 @@ fn cli_closed_loop_recording_replays_open_loop_on_the_same_plant() {
         closed.as_os_str(),
         "--out".as_ref(),
         replayed.as_os_str(),
-    ]);
+    ], &[0]);
     assert!(out.contains("plant effects: valve_dead_time(delay_s = 0.008)"), "{out}");
     let a = Recording::read(&closed).unwrap();
     let b = Recording::read(&replayed).unwrap();
