@@ -147,11 +147,20 @@ fn closed_loop(plant: &Plant, s: &Scenario) -> ClosedLoopRun {
     run_with(plant, s, cfg, &mut |_| {}).unwrap()
 }
 
-/// How far a closed-loop run may depart from the replay of its own commands: 10 x the
-/// nominal run's own departure (the integration error of the two integrations), plus 1e-9 of
-/// each channel's unit (the nominal departure can be zero on a channel, e.g. while at rest).
-fn replay_bound(nominal_departure: &[f64; 5]) -> [f64; 5] {
-    nominal_departure.map(|d| 10.0 * d + 1e-9)
+/// How far a closed-loop run may depart from the replay of its own commands, per channel:
+/// 10 x the larger of the nominal run's own departure (the integration error of the two
+/// integrations, measured) and the solver's relative tolerance (1e-6) times the channel's
+/// largest magnitude in the nominal run (what the error control allows per step).
+fn replay_bound(nominal_departure: &[f64; 5], nominal: &[Measurement]) -> [f64; 5] {
+    let mut b = [0.0; 5];
+    for (i, bi) in b.iter_mut().enumerate() {
+        let size = nominal
+            .iter()
+            .map(|m| m.to_array()[i].abs())
+            .fold(0.0, f64::max);
+        *bi = 10.0 * nominal_departure[i].max(OPTS.rtol * size);
+    }
+    b
 }
 
 #[test]
@@ -170,7 +179,8 @@ fn every_effect_changes_the_closed_loop_and_matches_its_own_replay() {
         e5(&tol),
         e5(&tol_meas)
     );
-    let bound = replay_bound(&tol);
+    let bound = replay_bound(&tol, &true0);
+    eprintln!("replay bound {}", e5(&bound));
     let st0 = run0.tracking(0.0);
     eprintln!(
         "nominal: rms {:.5} rad, max {:.5} rad",
@@ -408,7 +418,7 @@ fn step_with_dead_time_or_sensor_lag_differs_and_matches_its_replay() {
         let dr = max_diff(&true_channels(&plant, &run), &rep);
         let meas: Vec<Measurement> = run.rows.iter().map(|r| r.measured).collect();
         let dm = max_diff(&meas, &rep_meas);
-        let bound = replay_bound(&tol);
+        let bound = replay_bound(&tol, &true_channels(&nominal, &run0));
         assert!(
             dr.iter().zip(&bound).all(|(d, b)| d <= b) && dm.iter().zip(&bound).all(|(d, b)| d <= b),
             "{toml}: replay departs by {} (true), {} (measured); bound {}",
