@@ -51,6 +51,7 @@ fn run() -> Result<ExitCode> {
         plant_path.display(),
         tuning_path.display()
     );
+    println!("plant effects: {}", plant.effects_summary());
     println!();
     print!("{}", format_table(&rows));
     let cascade = rows[0].score.mse_rad2;

@@ -524,6 +524,11 @@ fn main() -> Result<()> {
         runs: AtomicUsize::new(0),
         cutoff_hz,
     };
+    eprintln!(
+        "tuning on {} (plant effects: {})",
+        plant_path.display(),
+        ctx.plant.effects_summary()
+    );
     // The gains stored in the output file (if it exists and loads) are one more start point
     // of every search.
     let stored = match ControlTuning::load(&out) {

@@ -71,6 +71,8 @@ pub struct ScenarioResult {
 #[derive(Debug, Clone)]
 pub struct DemoReport {
     pub plant: PathBuf,
+    /// The plant's active effects ([`Plant::effects_summary`]), honoured by every run.
+    pub effects: String,
     pub fixture: PathBuf,
     pub scenarios: Vec<ScenarioResult>,
     pub fixture_fits: Vec<ChannelFit>,
@@ -138,7 +140,6 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
         write_firmware_trace(&r, &trace)?;
         run_recording(
             &r,
-            &plant,
             &plant_path.display().to_string(),
             file,
             Some(&trace),
@@ -178,6 +179,7 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
                 "source".into(),
                 "host-sim demo: open-loop replay, ode_solvers Dopri5".into(),
             ),
+            ("effects".into(), plant.effects_summary()),
         ],
         t_s: fixture.t_s.clone(),
         inputs: fixture.inputs.clone(),
@@ -199,6 +201,7 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
     plot_comparison(&replay_png, Some(&fixture), &out)?;
     let duration_s = dt * fixture.len() as f64;
     Ok(DemoReport {
+        effects: plant.effects_summary(),
         plant: plant_path,
         fixture: fixture_path,
         scenarios,
@@ -216,6 +219,7 @@ pub fn format_report(r: &DemoReport, out_dir: &Path) -> String {
         "plant {}: firmware (pam_firmware::tick::ControlTick, reference gains) in the loop",
         r.plant.display()
     );
+    let _ = writeln!(s, "plant effects: {}", r.effects);
     let _ = writeln!(
         s,
         "\n{:<8} {:>6} {:>8} {:>10} {:>10} {:>7} {:>7} {:>10}",

@@ -200,11 +200,14 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
         inputs: rec.inputs.clone(),
         ..Default::default()
     };
+    out.metadata
+        .push(("effects".into(), plant.effects_summary()));
     let meas = plant.measure_series(&sim.states, dt);
     for c in Channel::ALL {
         out.set_channel(c, meas.iter().map(|m| c.of(m)).collect());
     }
     out.write(&a.out)?;
+    println!("plant effects: {}", plant.effects_summary());
     eprintln!(
         "{}: {} samples, {} segments, {} steps ({} rejected), {} rhs evaluations",
         a.out.display(),
@@ -418,6 +421,11 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
     // A closed stdout (`| head`) is not an error of the diagnosis: the JSON is written.
     use std::io::Write as _;
     let mut out = std::io::stdout().lock();
+    let _ = writeln!(
+        out,
+        "nominal plant effects: {}",
+        Plant::from_config(&cfg).effects_summary()
+    );
     let _ = write!(out, "{}wrote {}\n", d.answer(), a.json.display());
     Ok(ExitCode::SUCCESS)
 }

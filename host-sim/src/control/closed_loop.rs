@@ -2,14 +2,23 @@
 //! on the MCU) drives the plant through fake valve pins and fake sensors at the tick rate.
 //!
 //! Per tick `k` (period `dt = 1 / tick_hz`):
-//! 1. the plant state at `t_k` is measured ([`Plant::measure`], with its sensor effects), then
-//!    passed through the [`SensorModel`] (noise, ADC / encoder quantisation, delay) and the
-//!    scenario's injected sensor faults (dropout: no sample; NaN);
+//! 1. the plant state at `t_k` is measured through the plant's [`SensorPath`] (its sensor
+//!    effects: sensor lag, then calibration; the same path open-loop replay writes), then
+//!    passed through the scenario's [`SensorModel`] (noise, ADC / encoder quantisation) and
+//!    injected sensor faults (dropout: no sample; NaN), then the transport delay;
 //! 2. [`ControlTick::step`] turns the sensor frame and the set-point into a valve command;
 //! 3. the firmware's [`OnOffValves`] driver writes the fake pins (tick-level PWM, minimum
-//!    on-time); a stuck valve ignores its pin; the effective openings are the plant inputs
-//!    held over `[t_k, t_k + dt)`;
-//! 4. the plant is integrated over the tick ([`Integrator::advance`]).
+//!    on-time); a stuck valve ignores its pin; the pin states are the valve commands;
+//! 4. the commands pass the plant's [`ActuatorPath`] (its valve dead time; the same path
+//!    open-loop replay applies to recorded commands): the effective openings are the plant
+//!    inputs held over `[t_k, t_k + dt)`;
+//! 5. the plant is integrated over the tick ([`Integrator::advance`]; every other effect is in
+//!    the plant's right-hand side).
+//!
+//! So an open-loop replay ([`crate::sim::simulate`]) of the commands on the same plant gives
+//! the same states and the same measured channels, up to the integration tolerance: the
+//! run's recording ([`ClosedLoopRun::to_recording`]) holds exactly those (commands and
+//! measured channels), and `host-sim simulate --inputs` on it reproduces it.
 //!
 //! Scenario events (load inertia change, supply loss) swap in a modified plant at their time,
 //! carrying the state over.
@@ -30,8 +39,8 @@ pub use crate::io::scenario::{
     SetpointProfile, ValveId,
 };
 use crate::io::scenario::event_time;
-use crate::plant::{Plant, PlantState, ValveInputs};
-use crate::sim::{Integrator, SimStats, SolverOptions};
+use crate::plant::{Measurement, Plant, PlantState, ValveInputs};
+use crate::sim::{ActuatorPath, Integrator, SensorPath, SimStats, SolverOptions};
 
 // ---------------------------------------------------------------------------------------
 // Fake hardware.
@@ -77,7 +86,14 @@ pub struct TickRow {
     pub setpoint_rad: f64,
     /// True plant state at `t_s`.
     pub state: PlantState,
-    /// Effective valve openings over `[t_s, t_s + dt)`.
+    /// What the plant's sensors report at `t_s` (its sensor effects; before the scenario's
+    /// noise, quantisation, faults and transport delay).
+    pub measured: Measurement,
+    /// The valve commands of this tick (the pin states, a stuck valve's included): the
+    /// inputs an open-loop replay of the run takes.
+    pub command: ValveInputs,
+    /// Effective valve openings over `[t_s, t_s + dt)` (the commands after the plant's valve
+    /// dead time): what the plant is integrated with.
     pub inputs: ValveInputs,
     /// The firmware's output.
     pub out: TickOutput,
@@ -113,6 +129,8 @@ pub struct ClosedLoopRun {
     pub max_p_set_gauge_pa: f64,
     /// Integrator work over the run (steps, right-hand-side evaluations).
     pub sim_stats: SimStats,
+    /// The plant's active effects the run honoured ([`Plant::effects_summary`]).
+    pub effects: String,
 }
 
 /// Runs `scenario` with the firmware's reference controller on `plant`.
@@ -202,6 +220,9 @@ pub fn run_with(
     let mut plant_idx = 0;
     let mut stats_done = SimStats::default();
     let mut integ = Integrator::new(&plants[0].1, plant.initial_state(), opts);
+    // The plant's effects outside its right-hand side, kept across plant changes.
+    let mut actuator = ActuatorPath::new(plant, dt_s, "closed loop")?;
+    let mut sensor_path = SensorPath::new(plant, dt_s);
     let p_noise =
         Normal::new(0.0, scenario.sensors.pressure_noise_pa.max(0.0)).expect("finite noise");
     let mut delay: VecDeque<SensorFrame> = VecDeque::new();
@@ -225,7 +246,7 @@ pub fn run_with(
         }
         let p = &plants[plant_idx].1;
         let x = integ.state();
-        let m = p.measure(&x);
+        let m = sensor_path.push(p, &x);
         max_p = max_p.max((x.p1_abs_pa - p.p_atm_pa).max(x.p2_abs_pa - p.p_atm_pa));
         max_abs_angle = max_abs_angle.max(x.angle_rad.abs());
         // Injection ticks of the faults that start at this tick.
@@ -400,16 +421,19 @@ pub fn run_with(
             tick.valves_applied(&o);
         }
         let b = |pin: &FakePin| if pin.open() { 1.0 } else { 0.0 };
-        let inputs = ValveInputs {
+        let command = ValveInputs {
             u_in1: b(&pins[0]),
             u_ex1: b(&pins[1]),
             u_in2: b(&pins[2]),
             u_ex2: b(&pins[3]),
         };
+        let inputs = actuator.push(command);
         rows.push(TickRow {
             t_s,
             setpoint_rad,
             state: x,
+            measured: m,
+            command,
             inputs,
             out,
         });
@@ -448,6 +472,7 @@ pub fn run_with(
         fallback_ticks,
         max_p_set_gauge_pa: max_p_set,
         sim_stats: stats_done,
+        effects: plant.effects_summary(),
     })
 }
 
@@ -602,9 +627,12 @@ impl ClosedLoopRun {
         fails
     }
 
-    /// The run as a recording (RECORDING.md channels from the true plant state) for
-    /// `host-sim fit` / `--plot`.
-    pub fn to_recording(&self, plant: &Plant) -> Recording {
+    /// The run as a recording for `host-sim fit` / `--plot` / `simulate --inputs`: the valve
+    /// commands ([`TickRow::command`]) and the channels the plant's sensors report
+    /// ([`TickRow::measured`]: the true state through the plant's sensor effects, without the
+    /// scenario's noise and quantisation), so that an open-loop replay on `plant` reproduces
+    /// it. The metadata lists the plant's active effects (`# effects = ...`).
+    pub fn to_recording(&self) -> Recording {
         let mut rec = Recording::default();
         rec.metadata.push((
             "source".into(),
@@ -612,11 +640,13 @@ impl ClosedLoopRun {
         ));
         rec.metadata
             .push(("sample_period_s".into(), format!("{}", self.dt_s)));
+        rec.metadata
+            .push(("effects".into(), self.effects.clone()));
         let mut ch: [Vec<f64>; 5] = Default::default();
         for r in &self.rows {
             rec.t_s.push(r.t_s);
-            rec.inputs.push(r.inputs);
-            let m = plant.measure(&r.state).to_array();
+            rec.inputs.push(r.command);
+            let m = r.measured.to_array();
             for (c, v) in ch.iter_mut().zip(m) {
                 c.push(v);
             }

@@ -802,30 +802,36 @@ impl Candidate for SensorOffsetCandidate {
         }
     }
     fn apply(&self, cfg: &mut PlantConfig, p: &[f64], s: &Setup) {
-        let mut cal = SensorCalibration {
-            enabled: true,
-            angle_deg: None,
-            p1_kpa: None,
-            p2_kpa: None,
-            f1_n: None,
-            f2_n: None,
-        };
+        // The offsets are fitted; the gains of a calibration the plant file already has stay.
+        let mut cal = cfg
+            .effects
+            .sensor
+            .clone()
+            .filter(|c| c.enabled)
+            .unwrap_or(SensorCalibration {
+                enabled: true,
+                angle_deg: None,
+                p1_kpa: None,
+                p2_kpa: None,
+                f1_n: None,
+                f2_n: None,
+            });
         let mut it = p.iter();
         for c in Channel::ALL {
             if !s.has(c) {
                 continue;
             }
-            let v = Some(ChannelCalibration {
+            let slot = match c {
+                Channel::AngleDeg => &mut cal.angle_deg,
+                Channel::P1Kpa => &mut cal.p1_kpa,
+                Channel::P2Kpa => &mut cal.p2_kpa,
+                Channel::F1N => &mut cal.f1_n,
+                Channel::F2N => &mut cal.f2_n,
+            };
+            *slot = Some(ChannelCalibration {
                 offset: *it.next().unwrap_or(&0.0),
-                gain: 1.0,
+                gain: slot.map_or(1.0, |k| k.gain),
             });
-            match c {
-                Channel::AngleDeg => cal.angle_deg = v,
-                Channel::P1Kpa => cal.p1_kpa = v,
-                Channel::P2Kpa => cal.p2_kpa = v,
-                Channel::F1N => cal.f1_n = v,
-                Channel::F2N => cal.f2_n = v,
-            }
         }
         cfg.effects.sensor = Some(cal);
     }

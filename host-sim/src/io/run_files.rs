@@ -2,8 +2,10 @@
 //!
 //! A run is written as two CSV files:
 //! - `OUT.csv`, a recording strictly in the `shared/plant/RECORDING.md` format (`t_s`, the
-//!   four valve openings actually applied, and the true plant channels `angle_deg`, `p1_kpa`,
-//!   `p2_kpa`, `f1_n`, `f2_n`). RECORDING.md lists the columns of a recording and says
+//!   four valve commands, and the channels `angle_deg`, `p1_kpa`, `p2_kpa`, `f1_n`, `f2_n`
+//!   as the plant's sensors report them: the true state when the plant has no sensor
+//!   effects), with the plant's active effects in its metadata (`# effects = ...`); an
+//!   open-loop replay of it on the same plant reproduces it. RECORDING.md lists the columns of a recording and says
 //!   nothing about others, so no extra column goes into it: every tool that reads
 //!   recordings can read it (`host-sim fit`, identification, diagnosis).
 //! - `OUT.firmware.csv`, the firmware side of the same ticks (same `t_s`): the angle
@@ -49,12 +51,11 @@ pub fn firmware_trace_path(recording: &Path) -> PathBuf {
 /// The recording of a run with metadata naming the plant, the scenario and the trace file.
 pub fn run_recording(
     run: &ClosedLoopRun,
-    plant: &Plant,
     plant_name: &str,
     scenario_name: &str,
     trace: Option<&Path>,
 ) -> Recording {
-    let mut rec = run.to_recording(plant);
+    let mut rec = run.to_recording();
     rec.metadata.insert(0, ("plant".into(), plant_name.into()));
     rec.metadata
         .insert(1, ("scenario".into(), scenario_name.into()));
@@ -67,7 +68,7 @@ pub fn run_recording(
     }
     rec.metadata.push((
         "notes".into(),
-        "channels are the true plant state at t_s; inputs are the valve openings applied over [t_s, t_s + dt)"
+        "channels are what the plant's sensors report at t_s (its sensor effects, no scenario noise or quantisation); inputs are the valve commands over [t_s, t_s + dt), before the plant's valve dead time: `host-sim simulate --inputs` on this file with the same plant replays the run"
             .into(),
     ));
     rec
@@ -82,6 +83,7 @@ pub fn write_firmware_trace(run: &ClosedLoopRun, path: &Path) -> Result<(), Reco
             run.name
         )?;
         writeln!(w, "# sample_period_s = {}", run.dt_s)?;
+        writeln!(w, "# effects = {}", run.effects)?;
         writeln!(
             w,
             "# fault_code: 0 = none, else pam_firmware::safety::FaultCode numbers"
@@ -165,6 +167,7 @@ pub fn summary(run: &ClosedLoopRun, scenario: &Scenario, fails: &[String]) -> St
         scenario.scenario.tick_hz,
         scenario.scenario.duration_s
     );
+    let _ = writeln!(s, "plant effects: {}", run.effects);
     s += &tracking_line("angle error, whole run", &run.tracking(0.0));
     let settle = scenario.expect.settle_after_s;
     if settle > 0.0 {
@@ -400,7 +403,6 @@ pub fn simulate_scenario(
     let trace_path = firmware_trace_path(out);
     let rec = run_recording(
         &run,
-        &plant,
         &plant_path.display().to_string(),
         &scenario_path.display().to_string(),
         Some(&trace_path),

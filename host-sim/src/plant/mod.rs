@@ -4,6 +4,7 @@
 //! force, damper, tension, volume polynomial), [`joint`] (kinematics, J omega' = T),
 //! [`pressure`] (Boyle-Mariotte), [`effects`] (optional extensions, off in the nominal files).
 
+pub mod active_effects;
 pub mod arm3;
 pub mod config;
 pub mod effects;
@@ -271,27 +272,11 @@ impl Plant {
     }
 
     /// The recorded channels of a sampled run (`states[k]` at `t_k = k dt`), with the
-    /// sensor effects (lag, then calibration) if enabled.
+    /// sensor effects (lag, then calibration) if enabled: the [`crate::sim::SensorPath`] every
+    /// mode uses.
     pub fn measure_series(&self, states: &[PlantState], dt_s: f64) -> Vec<Measurement> {
-        match &self.effects.sensor_lag {
-            None => states.iter().map(|x| self.measure(x)).collect(),
-            Some(lag) => {
-                let mut filter = effects::SensorLagFilter::new(lag, dt_s);
-                states
-                    .iter()
-                    .map(|x| {
-                        let y = filter.push(self.true_channels(x).to_array());
-                        self.calibrate(Measurement {
-                            angle_deg: y[0],
-                            p1_kpa: y[1],
-                            p2_kpa: y[2],
-                            f1_n: y[3],
-                            f2_n: y[4],
-                        })
-                    })
-                    .collect()
-            }
-        }
+        let mut path = crate::sim::SensorPath::new(self, dt_s);
+        states.iter().map(|x| path.push(self, x)).collect()
     }
 
     /// The recorded channels for a state, with the sensor calibration effect if enabled
@@ -312,7 +297,8 @@ impl Plant {
         }
     }
 
-    fn calibrate(&self, m: Measurement) -> Measurement {
+    /// The sensor calibration effect applied to channel values (identity without it).
+    pub fn calibrate(&self, m: Measurement) -> Measurement {
         match &self.effects.sensor {
             None => m,
             Some(c) => Measurement {

@@ -15,8 +15,10 @@
 use nalgebra::SVector;
 use ode_solvers::{Dopri5, OutputType, System};
 
-use crate::plant::effects::DeadTimeLine;
 use crate::plant::{Plant, PlantState, ValveInputs};
+
+pub mod signal_path;
+pub use signal_path::{ActuatorPath, SensorPath};
 
 type Vector4 = SVector<f64, 4>;
 type Vector5 = SVector<f64, 5>;
@@ -71,8 +73,16 @@ pub enum SimError {
     SamplePeriod(f64),
     #[error("invalid valve input at sample {index}: {inputs:?} (openings must be in [0, 1])")]
     Input { index: usize, inputs: ValveInputs },
-    #[error("valve dead time {delay_s} s is not a whole number of sample periods ({dt_s} s)")]
-    DeadTime { delay_s: f64, dt_s: f64 },
+    #[error(
+        "effect valve_dead_time: delay_s = {delay_s} s is not a whole number of the {mode}'s \
+         sample period ({dt_s} s); the {mode} cannot apply it (make it a multiple of {dt_s} s)"
+    )]
+    DeadTime {
+        delay_s: f64,
+        dt_s: f64,
+        /// The run mode that refuses (e.g. "open-loop replay", "closed loop").
+        mode: &'static str,
+    },
     #[error("supply reservoir pressure became non-finite at t = {t_s} s")]
     NonFiniteSupply { t_s: f64 },
 }
@@ -584,15 +594,13 @@ pub fn simulate_with_progress(
     if let Some((index, u)) = inputs.iter().enumerate().find(|(_, u)| !valid_inputs(u)) {
         return Err(SimError::Input { index, inputs: *u });
     }
+    let mut actuator = ActuatorPath::new(plant, dt_s, "open-loop replay")?;
     let delayed: Vec<ValveInputs>;
-    let inputs = match plant.effects.valve_dead_time_s {
-        None => inputs,
-        Some(delay_s) => {
-            let mut line =
-                DeadTimeLine::new(delay_s, dt_s).ok_or(SimError::DeadTime { delay_s, dt_s })?;
-            delayed = inputs.iter().map(|u| line.push(*u)).collect();
-            &delayed
-        }
+    let inputs = if actuator.delay_samples() == 0 {
+        inputs
+    } else {
+        delayed = inputs.iter().map(|u| actuator.push(*u)).collect();
+        &delayed
     };
     let mut integ = Integrator::new(plant, plant.initial_state(), *opts);
     let mut states = Vec::with_capacity(inputs.len());

@@ -1,0 +1,102 @@
+//! The two signal paths of the plant, shared by every mode (open-loop replay, the closed loop
+//! with the firmware, the controller comparison and tuning, identification, the diagnosis
+//! candidates): they are the one place where the plant's effects outside the right-hand side
+//! act.
+//!
+//! - [`ActuatorPath`]: valve command -> valve opening. The actuator-side effect is the valve
+//!   dead time ([`crate::plant::effects::ValveDeadTime`], a whole number of samples through a
+//!   [`DeadTimeLine`]). Open-loop replay feeds it the recorded commands; the closed loop feeds
+//!   it the firmware's pin states, tick by tick.
+//! - [`SensorPath`]: plant state -> reported channels. The sensor-side effects are the sensor
+//!   lag ([`crate::plant::effects::SensorLag`], a sampled first-order low-pass per channel
+//!   group, started at the first sample) and then the calibration of each channel
+//!   ([`crate::plant::effects::SensorCalibration`]). Open-loop replay writes its output; in
+//!   the closed loop the firmware measures it (then the scenario's `[sensors]` noise,
+//!   quantisation, injected faults and transport delay act on top).
+//!
+//! Every other effect (joint friction, gravity, leakage, polytropic process, muscle
+//! hysteresis, supply drop) is part of [`Plant::derivatives`], so every integration honours it.
+//!
+//! A path keeps its memory across a change of plant parameters (the closed loop's load and
+//! supply events swap the plant, not the sensors or the valves).
+
+use crate::plant::effects::{DeadTimeLine, SensorLagFilter};
+use crate::plant::{Measurement, Plant, PlantState, ValveInputs};
+use crate::sim::SimError;
+
+/// Valve command -> valve opening (the valve dead time, if the plant has one).
+#[derive(Debug, Clone)]
+pub struct ActuatorPath {
+    line: Option<DeadTimeLine>,
+}
+
+impl ActuatorPath {
+    /// The path of `plant` at sample period `dt_s`, for the run mode `mode` (named in the
+    /// refusal). Refuses a dead time that is not a whole number of samples: a mode cannot
+    /// delay a zero-order-held command by a fraction of its sample.
+    pub fn new(plant: &Plant, dt_s: f64, mode: &'static str) -> Result<Self, SimError> {
+        let line = match plant.effects.valve_dead_time_s {
+            None => None,
+            Some(delay_s) => Some(DeadTimeLine::new(delay_s, dt_s).ok_or(SimError::DeadTime {
+                delay_s,
+                dt_s,
+                mode,
+            })?),
+        };
+        Ok(Self { line })
+    }
+
+    /// Delay in samples (0 without a dead time).
+    pub fn delay_samples(&self) -> usize {
+        self.line.as_ref().map_or(0, DeadTimeLine::samples)
+    }
+
+    /// Feeds the command of this sample; returns the opening the valves apply over it.
+    #[inline]
+    pub fn push(&mut self, command: ValveInputs) -> ValveInputs {
+        match &mut self.line {
+            None => command,
+            Some(l) => l.push(command),
+        }
+    }
+}
+
+/// Plant state -> reported channels (sensor lag, then calibration, as the plant has them).
+#[derive(Debug, Clone)]
+pub struct SensorPath {
+    lag: Option<SensorLagFilter>,
+}
+
+impl SensorPath {
+    /// The path of `plant` sampled every `dt_s`.
+    pub fn new(plant: &Plant, dt_s: f64) -> Self {
+        Self {
+            lag: plant
+                .effects
+                .sensor_lag
+                .as_ref()
+                .map(|l| SensorLagFilter::new(l, dt_s)),
+        }
+    }
+
+    /// Feeds the state of this sample; returns what the sensors report for it. `plant` gives
+    /// the channels and the calibration (it may be a changed copy of the plant the path was
+    /// made for: only its sensor effects must be the same).
+    pub fn push(&mut self, plant: &Plant, x: &PlantState) -> Measurement {
+        let m = plant.true_channels(x);
+        let m = match &mut self.lag {
+            None => m,
+            Some(f) => {
+                let y = f.push(m.to_array());
+                Measurement {
+                    angle_deg: y[0],
+                    p1_kpa: y[1],
+                    p2_kpa: y[2],
+                    f1_n: y[3],
+                    f2_n: y[4],
+                }
+            }
+        };
+        plant.calibrate(m)
+    }
+}
