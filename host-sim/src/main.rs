@@ -12,6 +12,7 @@ use host_sim::fit::{compare, format_table};
 use host_sim::io::plot::plot_comparison;
 use host_sim::io::recording::Channel;
 use host_sim::sim::{simulate_with_progress, SolverOptions};
+use host_sim::validate::{self, f64_in, usize_in, Range};
 use host_sim::{Plant, Recording};
 
 #[derive(Parser)]
@@ -62,7 +63,7 @@ struct DiagnoseArgs {
     #[arg(long, value_name = "DIR")]
     report: Option<PathBuf>,
     /// Worker threads for the candidate refits.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = 2, value_parser = usize_in(1, 256))]
     threads: usize,
 }
 
@@ -101,14 +102,18 @@ struct SimulateArgs {
     #[arg(long, value_name = "OUT.csv")]
     out: PathBuf,
     /// Also draw the simulated channels (over the measured ones of --inputs) to .png or .svg.
-    #[arg(long, value_name = "out.png|svg")]
+    #[arg(long, value_name = "out.png|svg", value_parser = validate::plot_path)]
     plot: Option<PathBuf>,
     /// Relative tolerance of the integrator.
-    #[arg(long, default_value_t = SolverOptions::default().rtol)]
+    #[arg(long, default_value_t = SolverOptions::default().rtol, value_parser = f64_in(Range::closed(1e-14, 0.1)))]
     rtol: f64,
     /// Absolute tolerance of the integrator.
-    #[arg(long, default_value_t = SolverOptions::default().atol)]
+    #[arg(long, default_value_t = SolverOptions::default().atol, value_parser = f64_in(Range::closed(1e-14, 1e3)))]
     atol: f64,
+    /// Run even when the estimated memory or time of a closed-loop scenario exceeds the limit
+    /// (docs/reliability.md).
+    #[arg(long)]
+    allow_large: bool,
 }
 
 #[derive(Args)]
@@ -118,15 +123,18 @@ struct FitArgs {
     /// Model (simulated) recording.
     b: PathBuf,
     /// Draw B over A for every channel to .png or .svg.
-    #[arg(long, value_name = "out.png|svg")]
+    #[arg(long, value_name = "out.png|svg", value_parser = validate::plot_path)]
     plot: Option<PathBuf>,
-    /// Exit with status 1 if any channel fits below this many percent.
-    #[arg(long, value_name = "PERCENT")]
+    /// Exit with status 1 if any channel fits below this many percent (at most 100).
+    #[arg(long, value_name = "PERCENT", value_parser = f64_in(Range::closed(-1e6, 100.0)))]
     min_fit: Option<f64>,
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // Every output of the command is staged and renamed into place only if it succeeds: a
+    // failed run leaves the user's files as they were and nothing behind.
+    let outputs = host_sim::io::atomic::Transaction::begin();
     let result = match cli.command {
         Command::Simulate(a) => run_simulate(&a),
         Command::Fit(a) => run_fit(&a),
@@ -135,7 +143,10 @@ fn main() -> ExitCode {
         Command::Sweep(a) => run_report(host_sim::identify::cli::run_sweep(&a)),
         Command::Identify(a) => run_report(host_sim::identify::cli::run_identify(&a)),
     };
-    match result {
+    match result.and_then(|code| {
+        outputs.commit().context("cannot write the outputs")?;
+        Ok(code)
+    }) {
         Ok(code) => code,
         Err(e) => {
             eprintln!("error: {e:#}");
@@ -152,6 +163,28 @@ fn run_report(report: Result<String>) -> Result<ExitCode> {
 
 fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
     let plant_path = &a.plant;
+    let mut inputs: Vec<(&str, &Path)> = vec![("--plant", plant_path.as_path())];
+    if let Some(i) = &a.inputs {
+        inputs.push(("--inputs", i));
+    }
+    if let Some(s) = &a.scenario {
+        inputs.push(("--scenario", s));
+    }
+    let mut outputs: Vec<(&str, &Path)> = vec![("--out", a.out.as_path())];
+    let trace = host_sim::io::run_files::firmware_trace_path(&a.out);
+    if a.scenario.is_some() {
+        outputs.push(("the firmware trace", &trace));
+    }
+    if let Some(p) = &a.plot {
+        outputs.push(("--plot", p));
+    }
+    validate::distinct_outputs(&inputs, &outputs).map_err(anyhow::Error::msg)?;
+    if let Some(s) = &a.scenario {
+        let sc = host_sim::io::scenario::Scenario::load(s)?;
+        sc.run_estimate()
+            .check(a.allow_large)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", s.display()))?;
+    }
     if let Some(s) = &a.scenario {
         if host_sim::plant::arm3::is_arm3_file(plant_path)? {
             bail!(
@@ -343,6 +376,10 @@ fn run_demo(a: &DemoArgs) -> Result<ExitCode> {
 }
 
 fn run_fit(a: &FitArgs) -> Result<ExitCode> {
+    if let Some(p) = &a.plot {
+        validate::distinct_outputs(&[("A", &a.a), ("B", &a.b)], &[("--plot", p)])
+            .map_err(anyhow::Error::msg)?;
+    }
     let ra = Recording::read(&a.a)?;
     let rb = Recording::read(&a.b)?;
     let fits = compare(&ra, &rb)
@@ -380,8 +417,17 @@ fn only_common(model: &Recording, reference: &Recording) -> Recording {
 
 fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
     use host_sim::diagnose::{diagnose, report::write_report, DiagnoseOptions};
-    if a.threads == 0 {
-        bail!("--threads must be >= 1");
+    let mut inputs: Vec<(&str, &Path)> = vec![("--plant", &a.plant), ("--recording", &a.recording)];
+    if let Some(c) = &a.check {
+        inputs.push(("--check", c));
+    }
+    validate::distinct_outputs(&inputs, &[("--json", &a.json)]).map_err(anyhow::Error::msg)?;
+    if let Some(dir) = &a.report {
+        validate::output_dir("--report", dir).map_err(anyhow::Error::msg)?;
+        let report_json = dir.join("diagnosis.json");
+        let index = dir.join("index.html");
+        validate::distinct_outputs(&inputs, &[("--report", &report_json), ("--report", &index)])
+            .map_err(anyhow::Error::msg)?;
     }
     let cfg = host_sim::PlantConfig::load(&a.plant)?;
     let train = Recording::read(&a.recording)?;
