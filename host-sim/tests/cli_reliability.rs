@@ -356,7 +356,12 @@ fn plant_values_out_of_their_physical_range_are_refused_at_their_line() {
         (
             "initial_contraction",
             "1.0",
-            vec!["plant.toml:23:", "joint.initial_contraction", "maximum contraction"],
+            vec!["plant.toml:23:", "joint.initial_contraction", "[0, 1)"],
+        ),
+        (
+            "initial_contraction",
+            "0.3",
+            vec!["plant.toml:23:", "joint.initial_contraction", "[0, 0.2499)", "maximum contraction"],
         ),
         (
             "supply_gauge_pa",

@@ -28,13 +28,16 @@ pub struct SweepArgs {
 
 #[derive(Subcommand, Debug)]
 pub enum SweepWhat {
-    /// Isometric force data (columns p_kpa, stretch, f_n[, state]) from the plant's Tondu
-    /// surface: at each L/L0 the pressure is swept from the maximum to 0 (and back up with
-    /// --hysteresis-gap-n), as on seed 002's bench.
+    /// Isometric force data (writes columns p_kpa, stretch, f_n[, state]) from the plant's
+    /// Tondu surface: at each L/L0 the pressure is swept from the maximum to 0 (and back up
+    /// with --hysteresis-gap-n), as on the force-law paper's test bench.
+    #[command(after_help = "Example:\n  host-sim sweep force --plant ../shared/plant/reference-1dof.toml --out force.csv")]
     Force(SweepForceArgs),
-    /// A torque-identification recording (RECORDING.md columns) as in seed 003: the joint is
-    /// driven quasi-statically and at constant speeds through +-amplitude at each activation
-    /// dp (p1 = p0 - dp, p2 = p0 + dp held by regulators); channels from the plant's sensors.
+    /// A torque-identification recording (writes RECORDING.md columns t_s, u_in1..u_ex2,
+    /// angle_deg, p1_kpa, p2_kpa, f1_n, f2_n) as in the torque-model paper: the joint is driven
+    /// quasi-statically and at constant speeds through +-amplitude at each activation dp
+    /// (p1 = p0 - dp, p2 = p0 + dp held by regulators); channels from the plant's sensors.
+    #[command(after_help = "Example:\n  host-sim sweep torque --plant ../shared/plant/reference-1dof.toml --out torque.csv --dt-s 0.001")]
     Torque(SweepTorqueArgs),
 }
 
@@ -134,14 +137,22 @@ pub struct IdentifyArgs {
 
 #[derive(Subcommand, Debug)]
 pub enum IdentifyWhat {
-    /// Fit eq. 6 (seed 002, c1..c10) and the Tondu baseline to isometric data (p_kpa, stretch,
-    /// f_n[, state|direction]); print both models' errors; write the firmware's force-law TOML.
+    /// Fit the static force law (the ten-constant polynomial in pressure and L/L0 of the
+    /// force-law paper, its eq. 6, constants c1..c10) and the Tondu baseline to isometric data
+    /// (CSV columns p_kpa, stretch, f_n[, state|direction]); print both models' errors; write
+    /// the firmware's force-law TOML.
+    #[command(after_help = "Example:\n  host-sim identify force --data force.csv --out force_law.toml")]
     Force(IdentifyForceArgs),
-    /// Fit A, B, C, D of eq. 11 (seed 003) to a recording (angle_deg, p1_kpa, p2_kpa and
-    /// f1_n, f2_n, else tensions from the plant's force model); write the torque-model TOML.
+    /// Fit A, B, C, D of the simplified joint torque model (the torque-model paper's eq. 11:
+    /// stiffness from the activation, viscous and cubic damping) to a recording (columns t_s,
+    /// angle_deg, p1_kpa, p2_kpa and f1_n, f2_n, else tensions from the plant's force model);
+    /// write the torque-model TOML.
+    #[command(after_help = "Example:\n  host-sim identify torque --recording torque.csv --plant ../shared/plant/reference-1dof.toml --out torque_model.toml")]
     Torque(IdentifyTorqueArgs),
-    /// Output-error fit of plant-file parameters by replaying the recording's valve inputs;
-    /// write the plant file with the fitted values.
+    /// Output-error fit of plant-file parameters by replaying the recording's valve inputs
+    /// (columns t_s, u_in1, u_ex1, u_in2, u_ex2 and the measured angle_deg, p1_kpa, p2_kpa,
+    /// f1_n, f2_n that are present); write the plant file with the fitted values.
+    #[command(after_help = "Example:\n  host-sim identify plant --recording ../shared/conformance/pulses_loaded.csv --plant ../shared/plant/reference-1dof.toml --params joint.inertia_kgm2 --out fitted.toml")]
     Plant(IdentifyPlantArgs),
 }
 
@@ -177,7 +188,7 @@ pub struct IdentifyTorqueArgs {
     /// [default: min(p0, supply - p0) - 20 kPa].
     #[arg(long, value_parser = f64_in(Range::positive(2000.0)))]
     pub dp_max_kpa: Option<f64>,
-    /// Fit only the samples of (nearly) constant velocity, as seed 003 does: |acceleration|
+    /// Fit only the samples of (nearly) constant velocity, as the torque-model paper does: |acceleration|
     /// averaged over the velocity window at most this [rad/s^2] [default: all samples].
     #[arg(long, value_parser = f64_in(Range::positive(1e6)))]
     pub max_accel_rad_s2: Option<f64>,
