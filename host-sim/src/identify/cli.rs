@@ -392,6 +392,7 @@ fn identify_force(a: &IdentifyForceArgs) -> Result<String> {
     validate::distinct_outputs(&[("--data", &a.data)], &[("--out", &a.out)])
         .map_err(anyhow::Error::msg)?;
     let data = force::read_force_csv(&a.data)?;
+    let mut id = force::identify(&data)?;
     // The fit needs data spread over both axes: a constant map would give a domain of zero
     // width (stretch_min = stretch_max) and an undetermined law.
     for (what, col, v) in [
@@ -408,7 +409,6 @@ fn identify_force(a: &IdentifyForceArgs) -> Result<String> {
             );
         }
     }
-    let mut id = force::identify(&data)?;
     if let Some(p) = a.p_gauge_max_kpa {
         if !(p > 0.0 && p.is_finite()) {
             bail!("--p-gauge-max-kpa must be > 0");
