@@ -124,7 +124,7 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
         }
     };
     let plant = Plant::load(&plant_path)?;
-    std::fs::create_dir_all(&opts.out_dir)
+    crate::io::atomic::create_dir_all(&opts.out_dir)
         .with_context(|| format!("{}: cannot create the directory", opts.out_dir.display()))?;
 
     let mut scenarios = Vec::new();

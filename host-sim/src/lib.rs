@@ -20,6 +20,7 @@ pub mod identify;
 pub mod io;
 pub mod plant;
 pub mod sim;
+pub mod validate;
 
 pub use io::recording::{Channel, Recording, RecordingError};
 pub use plant::config::{ConfigError, PlantConfig};

@@ -12,6 +12,7 @@ use host_sim::fit::{compare, format_table};
 use host_sim::io::plot::plot_comparison;
 use host_sim::io::recording::Channel;
 use host_sim::sim::{simulate_with_progress, SolverOptions};
+use host_sim::validate::{self, f64_in, usize_in, Range};
 use host_sim::{Plant, Recording};
 
 #[derive(Parser)]
@@ -29,19 +30,45 @@ struct Cli {
 enum Command {
     /// Replay the valve inputs of a recording on the plant (open loop), or run a closed-loop
     /// scenario with the firmware in the loop.
+    ///
+    /// --inputs needs the columns t_s,u_in1,u_ex1,u_in2,u_ex2 (RECORDING.md); the measured
+    /// angle_deg,p1_kpa,p2_kpa,f1_n,f2_n, if present, are drawn under the simulated ones.
+    #[command(after_help = "Examples:\n  host-sim simulate --plant ../shared/plant/reference-1dof.toml --inputs ../shared/conformance/pulses_nominal.csv --out sim.csv --plot sim.png\n  host-sim simulate --plant ../shared/plant/reference-1dof.toml --scenario scenarios/step.toml --out step.csv")]
     Simulate(SimulateArgs),
     /// Per-channel fit (NRMSE %), MAE and MSE of B (model) against A (reference/measured).
+    ///
+    /// Both recordings need t_s (same length) and share at least one of angle_deg, p1_kpa,
+    /// p2_kpa, f1_n, f2_n; the fit is 100 (1 - ||b - a|| / ||a - mean(a)||) % (normalised RMS error), 100 = perfect.
+    #[command(after_help = "Example:\n  host-sim fit ../shared/conformance/pulses_nominal.csv sim.csv --min-fit 99.5 --plot fit.png")]
     Fit(FitArgs),
     /// The main job: the reference plant with the firmware in the loop on the step, sine and
     /// random scenarios (CSV + plots), and the conformance fit of an open-loop replay.
+    ///
+    /// The fixture needs t_s,u_in1,u_ex1,u_in2,u_ex2 and the measured angle_deg,p1_kpa,
+    /// p2_kpa,f1_n,f2_n (RECORDING.md).
+    #[command(after_help = "Example:\n  host-sim demo --out-dir target/demo")]
     Demo(DemoArgs),
-    /// Generate identification data from a plant file (force: isometric sweep; torque: seed 003 sweep).
+    /// Generate identification data from a plant file (force: isometric bench sweep; torque:
+    /// constant-speed passes at fixed activations, the torque-model paper's protocol).
+    #[command(after_help = "Examples:\n  host-sim sweep force --plant ../shared/plant/reference-1dof.toml --out force.csv\n  host-sim sweep torque --plant ../shared/plant/reference-1dof.toml --out torque.csv")]
     Sweep(host_sim::identify::cli::SweepArgs),
     /// Identify the force law, the torque model or plant parameters from data.
+    #[command(after_help = "Examples:\n  host-sim identify force --data force.csv --out force_law.toml\n  host-sim identify torque --recording torque.csv --plant ../shared/plant/reference-1dof.toml --out torque_model.toml\n  host-sim identify plant --recording ../shared/conformance/pulses_loaded.csv --plant ../shared/plant/reference-1dof.toml --params joint.inertia_kgm2 --out fitted.toml")]
     Identify(host_sim::identify::cli::IdentifyArgs),
     /// Diagnosis: locate where a recording departs from the nominal model, name the left-out
-    /// physics, model it and report the fit before/after (issue 6).
+    /// physics, model it and report the fit before/after.
+    ///
+    /// The recording needs t_s,u_in1,u_ex1,u_in2,u_ex2 and the measured angle_deg,p1_kpa,
+    /// p2_kpa (f1_n,f2_n used when present), as in RECORDING.md.
+    #[command(after_help = "Example:\n  host-sim diagnose --plant ../shared/plant/reference-1dof.toml --recording ../shared/conformance/pulses_thermal.csv --json diagnosis.json --report report/")]
     Diagnose(DiagnoseArgs),
+    /// Diagnose every recording (*.csv) of a directory against one plant, in parallel: one
+    /// JSON per recording and a summary table (summary.csv); exit status 1 if any failed.
+    ///
+    /// Each recording needs t_s,u_in1,u_ex1,u_in2,u_ex2 and the measured angle_deg,p1_kpa,
+    /// p2_kpa (f1_n,f2_n used when present), as in RECORDING.md.
+    #[command(after_help = "Example:\n  host-sim diagnose-batch --plant ../shared/plant/reference-1dof.toml --recordings ../shared/conformance --out-dir diagnoses/")]
+    DiagnoseBatch(host_sim::diagnose::batch::BatchArgs),
 }
 
 #[derive(Args)]
@@ -62,7 +89,7 @@ struct DiagnoseArgs {
     #[arg(long, value_name = "DIR")]
     report: Option<PathBuf>,
     /// Worker threads for the candidate refits.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = 2, value_parser = usize_in(1, 256))]
     threads: usize,
 }
 
@@ -101,14 +128,18 @@ struct SimulateArgs {
     #[arg(long, value_name = "OUT.csv")]
     out: PathBuf,
     /// Also draw the simulated channels (over the measured ones of --inputs) to .png or .svg.
-    #[arg(long, value_name = "out.png|svg")]
+    #[arg(long, value_name = "out.png|svg", value_parser = validate::plot_path)]
     plot: Option<PathBuf>,
     /// Relative tolerance of the integrator.
-    #[arg(long, default_value_t = SolverOptions::default().rtol)]
+    #[arg(long, default_value_t = SolverOptions::default().rtol, value_parser = f64_in(Range::closed(1e-14, 0.1)))]
     rtol: f64,
     /// Absolute tolerance of the integrator.
-    #[arg(long, default_value_t = SolverOptions::default().atol)]
+    #[arg(long, default_value_t = SolverOptions::default().atol, value_parser = f64_in(Range::closed(1e-14, 1e3)))]
     atol: f64,
+    /// Run even when the estimated memory or time of a closed-loop scenario exceeds the limit
+    /// (docs/reliability.md).
+    #[arg(long)]
+    allow_large: bool,
 }
 
 #[derive(Args)]
@@ -118,24 +149,34 @@ struct FitArgs {
     /// Model (simulated) recording.
     b: PathBuf,
     /// Draw B over A for every channel to .png or .svg.
-    #[arg(long, value_name = "out.png|svg")]
+    #[arg(long, value_name = "out.png|svg", value_parser = validate::plot_path)]
     plot: Option<PathBuf>,
-    /// Exit with status 1 if any channel fits below this many percent.
-    #[arg(long, value_name = "PERCENT")]
+    /// Exit with status 1 if any channel fits below this many percent (at most 100).
+    #[arg(long, value_name = "PERCENT", value_parser = f64_in(Range::closed(-1e6, 100.0)))]
     min_fit: Option<f64>,
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // Every output of the command is staged and renamed into place only if it succeeds: a
+    // failed run leaves the user's files as they were and nothing behind.
+    let outputs = host_sim::io::atomic::Transaction::begin();
     let result = match cli.command {
         Command::Simulate(a) => run_simulate(&a),
         Command::Fit(a) => run_fit(&a),
         Command::Demo(a) => run_demo(&a),
         Command::Diagnose(a) => run_diagnose(&a),
+        Command::DiagnoseBatch(a) => host_sim::diagnose::batch::run_batch(&a).map(|(table, ok)| {
+            print!("{table}");
+            if ok { ExitCode::SUCCESS } else { ExitCode::from(1) }
+        }),
         Command::Sweep(a) => run_report(host_sim::identify::cli::run_sweep(&a)),
         Command::Identify(a) => run_report(host_sim::identify::cli::run_identify(&a)),
     };
-    match result {
+    match result.and_then(|code| {
+        outputs.commit().context("cannot write the outputs")?;
+        Ok(code)
+    }) {
         Ok(code) => code,
         Err(e) => {
             eprintln!("error: {e:#}");
@@ -152,6 +193,28 @@ fn run_report(report: Result<String>) -> Result<ExitCode> {
 
 fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
     let plant_path = &a.plant;
+    let mut inputs: Vec<(&str, &Path)> = vec![("--plant", plant_path.as_path())];
+    if let Some(i) = &a.inputs {
+        inputs.push(("--inputs", i));
+    }
+    if let Some(s) = &a.scenario {
+        inputs.push(("--scenario", s));
+    }
+    let mut outputs: Vec<(&str, &Path)> = vec![("--out", a.out.as_path())];
+    let trace = host_sim::io::run_files::firmware_trace_path(&a.out);
+    if a.scenario.is_some() {
+        outputs.push(("the firmware trace", &trace));
+    }
+    if let Some(p) = &a.plot {
+        outputs.push(("--plot", p));
+    }
+    validate::distinct_outputs(&inputs, &outputs).map_err(anyhow::Error::msg)?;
+    if let Some(s) = &a.scenario {
+        let sc = host_sim::io::scenario::Scenario::load(s)?;
+        sc.run_estimate()
+            .check(a.allow_large)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", s.display()))?;
+    }
     if let Some(s) = &a.scenario {
         if host_sim::plant::arm3::is_arm3_file(plant_path)? {
             bail!(
@@ -346,6 +409,10 @@ fn run_demo(a: &DemoArgs) -> Result<ExitCode> {
 }
 
 fn run_fit(a: &FitArgs) -> Result<ExitCode> {
+    if let Some(p) = &a.plot {
+        validate::distinct_outputs(&[("A", &a.a), ("B", &a.b)], &[("--plot", p)])
+            .map_err(anyhow::Error::msg)?;
+    }
     let ra = Recording::read(&a.a)?;
     let rb = Recording::read(&a.b)?;
     let fits = compare(&ra, &rb)
@@ -383,8 +450,17 @@ fn only_common(model: &Recording, reference: &Recording) -> Recording {
 
 fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
     use host_sim::diagnose::{diagnose, report::write_report, DiagnoseOptions};
-    if a.threads == 0 {
-        bail!("--threads must be >= 1");
+    let mut inputs: Vec<(&str, &Path)> = vec![("--plant", &a.plant), ("--recording", &a.recording)];
+    if let Some(c) = &a.check {
+        inputs.push(("--check", c));
+    }
+    validate::distinct_outputs(&inputs, &[("--json", &a.json)]).map_err(anyhow::Error::msg)?;
+    if let Some(dir) = &a.report {
+        validate::output_dir("--report", dir).map_err(anyhow::Error::msg)?;
+        let report_json = dir.join("diagnosis.json");
+        let index = dir.join("index.html");
+        validate::distinct_outputs(&inputs, &[("--report", &report_json), ("--report", &index)])
+            .map_err(anyhow::Error::msg)?;
     }
     let cfg = host_sim::PlantConfig::load(&a.plant)?;
     let train = Recording::read(&a.recording)?;

@@ -23,6 +23,7 @@
 //! CHECK.
 
 pub mod baseline;
+pub mod batch;
 pub mod candidates;
 pub mod differentiate;
 pub mod fitting;

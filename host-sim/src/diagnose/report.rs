@@ -161,7 +161,7 @@ pub fn write_report(
     train_name: &str,
     check_name: Option<&str>,
 ) -> Result<(), String> {
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    crate::io::atomic::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     crate::io::plot::ensure_font()?;
     let mut h = String::new();
     let _ = write!(

@@ -16,6 +16,7 @@ use super::plant::{identify_plant_files, PlantFitOptions};
 use super::torque::{self, TorqueSource, TorqueSweep};
 use super::{write_atomic, MeasurementNoise};
 use crate::sim::SolverOptions;
+use crate::validate::{self, f64_in, usize_in, Range, RunEstimate};
 use crate::{Plant, PlantConfig, Recording};
 
 /// `host-sim sweep ...`: synthetic identification data from a plant file.
@@ -27,13 +28,16 @@ pub struct SweepArgs {
 
 #[derive(Subcommand, Debug)]
 pub enum SweepWhat {
-    /// Isometric force data (columns p_kpa, stretch, f_n[, state]) from the plant's Tondu
-    /// surface: at each L/L0 the pressure is swept from the maximum to 0 (and back up with
-    /// --hysteresis-gap-n), as on seed 002's bench.
+    /// Isometric force data (writes columns p_kpa, stretch, f_n[, state]) from the plant's
+    /// Tondu surface: at each L/L0 the pressure is swept from the maximum to 0 (and back up
+    /// with --hysteresis-gap-n), as on the force-law paper's test bench.
+    #[command(after_help = "Example:\n  host-sim sweep force --plant ../shared/plant/reference-1dof.toml --out force.csv")]
     Force(SweepForceArgs),
-    /// A torque-identification recording (RECORDING.md columns) as in seed 003: the joint is
-    /// driven quasi-statically and at constant speeds through +-amplitude at each activation
-    /// dp (p1 = p0 - dp, p2 = p0 + dp held by regulators); channels from the plant's sensors.
+    /// A torque-identification recording (writes RECORDING.md columns t_s, u_in1..u_ex2,
+    /// angle_deg, p1_kpa, p2_kpa, f1_n, f2_n) as in the torque-model paper: the joint is driven
+    /// quasi-statically and at constant speeds through +-amplitude at each activation dp
+    /// (p1 = p0 - dp, p2 = p0 + dp held by regulators); channels from the plant's sensors.
+    #[command(after_help = "Example:\n  host-sim sweep torque --plant ../shared/plant/reference-1dof.toml --out torque.csv --dt-s 0.001")]
     Torque(SweepTorqueArgs),
 }
 
@@ -46,33 +50,36 @@ pub struct SweepForceArgs {
     #[arg(long, value_name = "F.csv")]
     pub out: PathBuf,
     /// Number of L/L0 levels.
-    #[arg(long, default_value_t = 31)]
+    #[arg(long, default_value_t = 31, value_parser = usize_in(2, 100_000))]
     pub n_stretch: usize,
     /// Number of pressure levels per sweep.
-    #[arg(long, default_value_t = 31)]
+    #[arg(long, default_value_t = 31, value_parser = usize_in(2, 100_000))]
     pub n_pressure: usize,
     /// Lowest L/L0.
-    #[arg(long, default_value_t = 0.75)]
+    #[arg(long, default_value_t = 0.75, value_parser = f64_in(Range::closed(0.3, 1.5)))]
     pub stretch_min: f64,
     /// Highest L/L0.
-    #[arg(long, default_value_t = 1.05)]
+    #[arg(long, default_value_t = 1.05, value_parser = f64_in(Range::closed(0.3, 1.5)))]
     pub stretch_max: f64,
     /// Highest gauge pressure [kPa].
-    #[arg(long, default_value_t = 600.0)]
+    #[arg(long, default_value_t = 600.0, value_parser = f64_in(Range::positive(2000.0)))]
     pub p_max_kpa: f64,
     /// Load-cell noise, standard deviation [N].
-    #[arg(long, default_value_t = 3.0)]
+    #[arg(long, default_value_t = 3.0, value_parser = f64_in(Range::closed(0.0, 1e4)))]
     pub force_noise_n: f64,
     /// Pressure-sensor noise, standard deviation [kPa].
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = 0.5, value_parser = f64_in(Range::closed(0.0, 100.0)))]
     pub pressure_noise_kpa: f64,
     /// Gap between the pressurising and depressurising branches at full pressure [N]; > 0
     /// sweeps both branches and writes a `state` column.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, value_parser = f64_in(Range::closed(0.0, 1e4)))]
     pub hysteresis_gap_n: f64,
     /// Random seed of the noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Run even when the estimated memory or time exceeds the limit (docs/reliability.md).
+    #[arg(long)]
+    pub allow_large: bool,
 }
 
 #[derive(Args, Debug)]
@@ -84,37 +91,41 @@ pub struct SweepTorqueArgs {
     #[arg(long, value_name = "R.csv")]
     pub out: PathBuf,
     /// Mid pressure p0, gauge [kPa].
-    #[arg(long, default_value_t = 300.0)]
+    #[arg(long, default_value_t = 300.0, value_parser = f64_in(Range::positive(2000.0)))]
     pub p0_kpa: f64,
     /// Activation levels dp [kPa], comma separated.
     #[arg(
         long,
         value_delimiter = ',',
         allow_hyphen_values = true,
-        default_value = "-200,-100,0,100,200"
+        default_value = "-200,-100,0,100,200",
+        value_parser = f64_in(Range::closed(-2000.0, 2000.0))
     )]
     pub dp_kpa: Vec<f64>,
     /// Angle amplitude of the motion [rad].
-    #[arg(long, default_value_t = 0.35)]
+    #[arg(long, default_value_t = 0.35, value_parser = f64_in(Range::positive(std::f64::consts::PI)))]
     pub amplitude_rad: f64,
     /// Constant speeds of the passes [rad/s], comma separated (the first quasi-static).
-    #[arg(long, value_delimiter = ',', default_value = "0.1,1,2,4")]
+    #[arg(long, value_delimiter = ',', default_value = "0.1,1,2,4", value_parser = f64_in(Range::positive(1000.0)))]
     pub speeds_rad_s: Vec<f64>,
     /// Sample period [s].
-    #[arg(long, default_value_t = 0.005)]
+    #[arg(long, default_value_t = 0.005, value_parser = f64_in(Range::closed(1e-6, 1.0)))]
     pub dt_s: f64,
     /// Encoder counts per turn (0: no angle quantisation).
     #[arg(long, default_value_t = 8000)]
     pub encoder_counts: u32,
     /// Pressure-sensor noise, standard deviation [kPa].
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = 0.5, value_parser = f64_in(Range::closed(0.0, 100.0)))]
     pub pressure_noise_kpa: f64,
     /// Force-sensor noise, standard deviation [N].
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, default_value_t = 2.0, value_parser = f64_in(Range::closed(0.0, 1e4)))]
     pub force_noise_n: f64,
     /// Random seed of the noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Run even when the estimated memory or time exceeds the limit (docs/reliability.md).
+    #[arg(long)]
+    pub allow_large: bool,
 }
 
 /// `host-sim identify ...`.
@@ -126,14 +137,22 @@ pub struct IdentifyArgs {
 
 #[derive(Subcommand, Debug)]
 pub enum IdentifyWhat {
-    /// Fit eq. 6 (seed 002, c1..c10) and the Tondu baseline to isometric data (p_kpa, stretch,
-    /// f_n[, state|direction]); print both models' errors; write the firmware's force-law TOML.
+    /// Fit the static force law (the ten-constant polynomial in pressure and L/L0 of the
+    /// force-law paper, its eq. 6, constants c1..c10) and the Tondu baseline to isometric data
+    /// (CSV columns p_kpa, stretch, f_n[, state|direction]); print both models' errors; write
+    /// the firmware's force-law TOML.
+    #[command(after_help = "Example:\n  host-sim identify force --data force.csv --out force_law.toml")]
     Force(IdentifyForceArgs),
-    /// Fit A, B, C, D of eq. 11 (seed 003) to a recording (angle_deg, p1_kpa, p2_kpa and
-    /// f1_n, f2_n, else tensions from the plant's force model); write the torque-model TOML.
+    /// Fit A, B, C, D of the simplified joint torque model (the torque-model paper's eq. 11:
+    /// stiffness from the activation, viscous and cubic damping) to a recording (columns t_s,
+    /// angle_deg, p1_kpa, p2_kpa and f1_n, f2_n, else tensions from the plant's force model);
+    /// write the torque-model TOML.
+    #[command(after_help = "Example:\n  host-sim identify torque --recording torque.csv --plant ../shared/plant/reference-1dof.toml --out torque_model.toml")]
     Torque(IdentifyTorqueArgs),
-    /// Output-error fit of plant-file parameters by replaying the recording's valve inputs;
-    /// write the plant file with the fitted values.
+    /// Output-error fit of plant-file parameters by replaying the recording's valve inputs
+    /// (columns t_s, u_in1, u_ex1, u_in2, u_ex2 and the measured angle_deg, p1_kpa, p2_kpa,
+    /// f1_n, f2_n that are present); write the plant file with the fitted values.
+    #[command(after_help = "Example:\n  host-sim identify plant --recording ../shared/conformance/pulses_loaded.csv --plant ../shared/plant/reference-1dof.toml --params joint.inertia_kgm2 --out fitted.toml")]
     Plant(IdentifyPlantArgs),
 }
 
@@ -147,7 +166,7 @@ pub struct IdentifyForceArgs {
     pub out: PathBuf,
     /// Upper end of the pressure domain written for the firmware [kPa] [default: the largest
     /// pressure in the data, which sensor noise pushes above the sweep's nominal maximum].
-    #[arg(long)]
+    #[arg(long, value_parser = f64_in(Range::positive(2000.0)))]
     pub p_gauge_max_kpa: Option<f64>,
 }
 
@@ -163,14 +182,15 @@ pub struct IdentifyTorqueArgs {
     #[arg(long, value_name = "torque.toml")]
     pub out: PathBuf,
     /// Half window of the Savitzky-Golay velocity estimate [samples] [default: 25 ms worth].
-    #[arg(long)]
+    #[arg(long, value_parser = usize_in(1, 100_000))]
     pub savgol_half_window: Option<usize>,
-    /// Activation limit the controller may command [kPa] [default: min(p0, supply - p0) - 20 kPa].
-    #[arg(long)]
+    /// Activation limit the controller may command [kPa], at most min(p0, supply - p0)
+    /// [default: min(p0, supply - p0) - 20 kPa].
+    #[arg(long, value_parser = f64_in(Range::positive(2000.0)))]
     pub dp_max_kpa: Option<f64>,
-    /// Fit only the samples of (nearly) constant velocity, as seed 003 does: |acceleration|
+    /// Fit only the samples of (nearly) constant velocity, as the torque-model paper does: |acceleration|
     /// averaged over the velocity window at most this [rad/s^2] [default: all samples].
-    #[arg(long)]
+    #[arg(long, value_parser = f64_in(Range::positive(1e6)))]
     pub max_accel_rad_s2: Option<f64>,
 }
 
@@ -190,13 +210,14 @@ pub struct IdentifyPlantArgs {
     #[arg(long, value_name = "P2.toml")]
     pub out: PathBuf,
     /// Fraction of the recording (its tail) held out for validation.
-    #[arg(long, default_value_t = 0.25)]
+    #[arg(long, default_value_t = 0.25, value_parser = f64_in(Range::half_open(0.0, 0.9)))]
     pub holdout_fraction: f64,
     /// Relative (and absolute) tolerance of the replays.
-    #[arg(long, default_value_t = 1e-9)]
+    #[arg(long, default_value_t = 1e-9, value_parser = f64_in(Range::closed(1e-14, 0.1)))]
     pub rtol: f64,
-    /// Levenberg-Marquardt patience.
-    #[arg(long, default_value_t = 40)]
+    /// Levenberg-Marquardt patience: at most this many model evaluations per fitted
+    /// parameter (plus one).
+    #[arg(long, default_value_t = 40, value_parser = usize_in(1, 100_000))]
     pub patience: usize,
 }
 
@@ -227,6 +248,18 @@ pub fn tondu_of(cfg: &PlantConfig) -> Tondu {
 }
 
 fn sweep_force(a: &SweepForceArgs) -> Result<String> {
+    validate::distinct_outputs(&[("--plant", &a.plant)], &[("--out", &a.out)])
+        .map_err(anyhow::Error::msg)?;
+    let points = a.n_stretch as f64 * a.n_pressure as f64 * if a.hysteresis_gap_n > 0.0 { 2.0 } else { 1.0 };
+    RunEstimate {
+        what: "sweep force".into(),
+        samples: points,
+        // The samples (32 B) and their CSV line (~40 B) at once.
+        bytes: points * 80.0,
+        seconds: points * 1e-6,
+    }
+    .check(a.allow_large)
+    .map_err(anyhow::Error::msg)?;
     let cfg = PlantConfig::load(&a.plant)?;
     if !(a.stretch_min > 0.0 && a.stretch_min < a.stretch_max) {
         bail!("--stretch-min must be > 0 and below --stretch-max");
@@ -284,6 +317,23 @@ fn sweep_force(a: &SweepForceArgs) -> Result<String> {
 }
 
 fn sweep_torque(a: &SweepTorqueArgs) -> Result<String> {
+    validate::distinct_outputs(&[("--plant", &a.plant)], &[("--out", &a.out)])
+        .map_err(anyhow::Error::msg)?;
+    // Each pass -a -> +a -> -a at speed w lasts 4 a / w.
+    let samples = a.dp_kpa.len() as f64
+        * a.speeds_rad_s
+            .iter()
+            .map(|w| (4.0 * a.amplitude_rad / w / a.dt_s).max(2.0))
+            .sum::<f64>();
+    RunEstimate {
+        what: "sweep torque".into(),
+        samples,
+        // Kinematics (40 B), recording (80 B), measurements (40 B), CSV text (~100 B).
+        bytes: samples * 260.0,
+        seconds: samples * 2e-6,
+    }
+    .check(a.allow_large)
+    .map_err(anyhow::Error::msg)?;
     let plant = Plant::load(&a.plant)?;
     if !(a.dt_s > 0.0 && a.amplitude_rad > 0.0) {
         bail!("--dt-s and --amplitude-rad must be > 0");
@@ -339,8 +389,26 @@ fn sweep_torque(a: &SweepTorqueArgs) -> Result<String> {
 }
 
 fn identify_force(a: &IdentifyForceArgs) -> Result<String> {
+    validate::distinct_outputs(&[("--data", &a.data)], &[("--out", &a.out)])
+        .map_err(anyhow::Error::msg)?;
     let data = force::read_force_csv(&a.data)?;
     let mut id = force::identify(&data)?;
+    // The fit needs data spread over both axes: a constant map would give a domain of zero
+    // width (stretch_min = stretch_max) and an undetermined law.
+    for (what, col, v) in [
+        ("L/L0", "stretch", data.iter().map(|s| s.stretch).collect::<Vec<_>>()),
+        ("pressure", "p_kpa", data.iter().map(|s| s.p_gauge_pa).collect()),
+    ] {
+        let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if !(hi - lo > 1e-9 * hi.abs().max(1.0)) {
+            bail!(
+                "{}: column `{col}`: every sample has the same {what} ({lo}); the force law needs \
+                 data over a range of L/L0 and of pressure",
+                a.data.display()
+            );
+        }
+    }
     if let Some(p) = a.p_gauge_max_kpa {
         if !(p > 0.0 && p.is_finite()) {
             bail!("--p-gauge-max-kpa must be > 0");
@@ -390,6 +458,11 @@ fn header_line_of(path: &Path) -> usize {
 }
 
 fn identify_torque(a: &IdentifyTorqueArgs) -> Result<String> {
+    validate::distinct_outputs(
+        &[("--recording", &a.recording), ("--plant", &a.plant)],
+        &[("--out", &a.out)],
+    )
+    .map_err(anyhow::Error::msg)?;
     let plant = Plant::load(&a.plant)?;
     let rec = Recording::read(&a.recording)?;
     let file = a.recording.display().to_string();
@@ -400,6 +473,25 @@ fn identify_torque(a: &IdentifyTorqueArgs) -> Result<String> {
     let (mut samples, source) =
         torque::samples_from_recording(&rec, &plant, hw, &file, header_line_of(&a.recording))?;
     let n_all = samples.len();
+    // A recording without motion or without activation cannot determine the model (the fit
+    // would write zeros and call them a perfect fit).
+    let spread = |f: &dyn Fn(&torque::TorqueSample) -> f64| {
+        let lo = samples.iter().map(f).fold(f64::INFINITY, f64::min);
+        let hi = samples.iter().map(f).fold(f64::NEG_INFINITY, f64::max);
+        hi - lo
+    };
+    if !(spread(&|s| s.angle_rad) > 1e-3) {
+        bail!(
+            "{file}: column `angle_deg`: the joint does not move (angle range below 0.06 degrees); \
+             the torque model needs a recording through a range of angles"
+        );
+    }
+    if !(spread(&|s| s.torque_nm) > 1e-6) {
+        bail!(
+            "{file}: the torque (f1_n - f2_n) r is constant; the torque model needs a recording \
+             with varying torque"
+        );
+    }
     if let Some(max) = a.max_accel_rad_s2 {
         if !(max > 0.0) {
             bail!("--max-accel-rad-s2 must be > 0");
@@ -431,8 +523,15 @@ fn identify_torque(a: &IdentifyTorqueArgs) -> Result<String> {
     let supply_gauge_pa = plant.p_supply_abs_pa - plant.p_atm_pa;
     let dp_max_pa = match a.dp_max_kpa {
         Some(v) => {
-            if !(v > 0.0) {
-                bail!("--dp-max-kpa must be > 0");
+            // p1 = p0 - dp and p2 = p0 + dp must stay between atmosphere and the supply.
+            let limit_kpa = model.p0_gauge_pa.min(supply_gauge_pa - model.p0_gauge_pa) / 1e3;
+            if !(v > 0.0 && v <= limit_kpa) {
+                bail!(
+                    "--dp-max-kpa {v}: must be within (0, {limit_kpa:.1}] kPa: p0 -+ dp must stay \
+                     between atmosphere and the supply ({:.1} kPa gauge, p0 = {:.1} kPa)",
+                    supply_gauge_pa / 1e3,
+                    model.p0_gauge_pa / 1e3
+                );
             }
             v * 1e3
         }
@@ -491,6 +590,11 @@ fn identify_torque(a: &IdentifyTorqueArgs) -> Result<String> {
 }
 
 fn identify_plant(a: &IdentifyPlantArgs) -> Result<String> {
+    validate::distinct_outputs(
+        &[("--recording", &a.recording), ("--plant", &a.plant)],
+        &[("--out", &a.out)],
+    )
+    .map_err(anyhow::Error::msg)?;
     if !(a.rtol > 0.0) {
         bail!("--rtol must be > 0");
     }

@@ -10,7 +10,6 @@ pub mod force;
 pub mod plant;
 pub mod torque;
 
-use std::io::Write;
 use std::path::Path;
 
 /// Errors of the identification tools. File errors name the file, the line and the field.
@@ -52,37 +51,13 @@ impl IdentError {
     }
 }
 
-/// Writes `bytes` to `path` through a temporary file in the same directory and a rename, so
-/// a failed or interrupted write never replaces a good file.
+/// Writes `bytes` to `path` atomically ([`crate::io::atomic`], the one atomic writer): a
+/// failed or interrupted write never replaces a good file.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IdentError> {
-    let file = path.display().to_string();
-    let io = |e: std::io::Error| IdentError::Io {
-        file: file.clone(),
+    crate::io::atomic::write_bytes(path, bytes).map_err(|e| IdentError::Io {
+        file: path.display().to_string(),
         msg: e.to_string(),
-    };
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let name = path.file_name().ok_or_else(|| IdentError::Io {
-        file: file.clone(),
-        msg: "not a file path".into(),
-    })?;
-    let tmp = dir.join(format!(
-        ".{}.tmp{}",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result.map_err(io)
+    })
 }
 
 /// Sensor imperfections added to a generated recording (RECORDING.md: an encoder of 8000

@@ -85,33 +85,28 @@ pub(crate) fn write_plot(
     if ext != "png" && ext != "svg" {
         return Err(PlotError::Format(path.to_owned()));
     }
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
-        _ => PathBuf::from("."),
-    };
     let draw_err = |message: String| PlotError::Draw {
         path: path.to_owned(),
         message,
     };
     ensure_font().map_err(draw_err)?;
-    let tmp = tempfile::Builder::new()
-        .prefix(".plot.")
-        .suffix(&format!(".{ext}"))
-        .tempfile_in(&dir)
-        .map_err(|e| draw_err(e.to_string()))?;
-    if ext == "png" {
-        let root = BitMapBackend::new(tmp.path(), size).into_drawing_area();
-        figure.draw(&root).map_err(draw_err)?;
-        root.present().map_err(|e| draw_err(e.to_string()))?;
-    } else {
-        let root = SVGBackend::new(tmp.path(), size).into_drawing_area();
-        figure.draw(&root).map_err(draw_err)?;
-        root.present().map_err(|e| draw_err(e.to_string()))?;
-    }
-    crate::io::recording::set_output_permissions(tmp.as_file(), path)
-        .map_err(|e| draw_err(e.to_string()))?;
-    tmp.persist(path)
-        .map_err(|e| draw_err(e.error.to_string()))?;
+    // The one atomic writer: drawn into a temporary file with the same extension (the
+    // backend picks the encoder from it), renamed over `path` when complete.
+    crate::io::atomic::write_via_path(path, |tmp| {
+        if ext == "png" {
+            let root = BitMapBackend::new(tmp, size).into_drawing_area();
+            figure.draw(&root)?;
+            root.present().map_err(|e| e.to_string())
+        } else {
+            let root = SVGBackend::new(tmp, size).into_drawing_area();
+            figure.draw(&root)?;
+            root.present().map_err(|e| e.to_string())
+        }
+    })
+    .map_err(|e| match e {
+        crate::io::atomic::ViaPathError::Write(m) => draw_err(m),
+        crate::io::atomic::ViaPathError::Io(e) => draw_err(e.to_string()),
+    })?;
     Ok(())
 }
 

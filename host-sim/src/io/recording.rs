@@ -386,51 +386,13 @@ impl Recording {
     }
 }
 
-/// Writes a file through a temporary file in the same directory, renamed over `path` only
-/// after `fill` succeeded and the data is flushed: a failure never leaves a half-written
-/// target (an existing good file stays as it was).
+/// Writes a file atomically through [`crate::io::atomic::write_with`] (the one atomic
+/// writer): a failure never leaves a half-written target.
 pub fn write_atomically(
     path: &Path,
     fill: impl FnOnce(&mut std::io::BufWriter<&std::fs::File>) -> std::io::Result<()>,
 ) -> std::io::Result<()> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
-        _ => PathBuf::from("."),
-    };
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "out".into());
-    let tmp = tempfile::Builder::new()
-        .prefix(&format!(".{name}."))
-        .suffix(".tmp")
-        .tempfile_in(&dir)?;
-    {
-        let mut w = std::io::BufWriter::new(tmp.as_file());
-        fill(&mut w)?;
-        w.flush()?;
-    }
-    tmp.as_file().sync_all()?;
-    set_output_permissions(tmp.as_file(), path)?;
-    tmp.persist(path).map_err(|e| e.error)?;
-    Ok(())
-}
-
-/// Temporary files are created private (0600); give the output the permissions of the file
-/// it replaces, or ordinary ones (0644) for a new file.
-pub(crate) fn set_output_permissions(file: &std::fs::File, target: &Path) -> std::io::Result<()> {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        let perm = match std::fs::metadata(target) {
-            Ok(m) => m.permissions(),
-            Err(_) => std::fs::Permissions::from_mode(0o644),
-        };
-        file.set_permissions(perm)?;
-    }
-    #[cfg(not(unix))]
-    let _ = (file, target);
-    Ok(())
+    crate::io::atomic::write_with(path, fill)
 }
 
 /// The leading `# key = value` metadata and blank lines of a recording (RECORDING.md).

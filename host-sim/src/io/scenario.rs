@@ -11,6 +11,10 @@ use crate::sim::SimError;
 // ---------------------------------------------------------------------------------------
 // Scenario files.
 
+/// Wall time of one closed-loop tick (plant integration and firmware), an upper figure of
+/// the measurement in docs/reliability.md.
+pub const CLOSED_LOOP_S_PER_TICK: f64 = 20e-6;
+
 /// A closed-loop scenario (TOML). Unknown keys are errors.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -396,6 +400,25 @@ impl Scenario {
         }
     }
 
+    /// The size of a closed-loop run of this scenario, from its length and tick rate (and
+    /// the random set-point levels it draws), for [`crate::validate::RunEstimate::check`].
+    pub fn run_estimate(&self) -> crate::validate::RunEstimate {
+        let ticks = self.scenario.duration_s * self.scenario.tick_hz;
+        let levels = match self.setpoint {
+            SetpointProfile::Random { hold_s, .. } => self.scenario.duration_s / hold_s,
+            _ => 0.0,
+        };
+        // Per tick: the run's row, the recording (t_s, 4 inputs, 5 channels) and the
+        // formatted CSV lines; measured time per tick in docs/reliability.md.
+        let row_bytes = std::mem::size_of::<crate::control::closed_loop::TickRow>() as f64 + 80.0;
+        crate::validate::RunEstimate {
+            what: format!("closed-loop run `{}`", self.scenario.name),
+            samples: ticks + levels,
+            bytes: ticks * row_bytes + levels * 8.0,
+            seconds: ticks * CLOSED_LOOP_S_PER_TICK,
+        }
+    }
+
     /// Reads and validates a scenario TOML file.
     pub fn load(path: impl AsRef<Path>) -> Result<Self, ClosedLoopError> {
         let path = path.as_ref();
@@ -609,6 +632,38 @@ impl Scenario {
                     }
                 }
                 Event::StuckValve { .. } | Event::FirmwareReset { .. } => {}
+            }
+            if at_s >= h.duration_s {
+                ev_bad(
+                    "at_s",
+                    format!(
+                        "{at_s} is not before the end of the run ([scenario] duration_s = {}): \
+                         the event would never happen",
+                        h.duration_s
+                    ),
+                )?;
+            }
+        }
+        let ex = &s.expect;
+        if !(ex.settle_after_s >= 0.0 && ex.settle_after_s < h.duration_s) {
+            return Err(bad(
+                "expect",
+                "settle_after_s",
+                format!(
+                    "{} must be within [0, {}) (before the end of the run, [scenario] duration_s): \
+                     after the end there is nothing to check",
+                    ex.settle_after_s, h.duration_s
+                ),
+            ));
+        }
+        for (key, v) in [
+            ("max_abs_error_rad", ex.max_abs_error_rad),
+            ("rms_error_rad", ex.rms_error_rad),
+        ] {
+            if let Some(v) = v {
+                if !(v > 0.0 && v.is_finite()) {
+                    return Err(bad("expect", key, format!("{v} must be a finite number > 0")));
+                }
             }
         }
         Ok(s)

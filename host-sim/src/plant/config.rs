@@ -113,6 +113,14 @@ pub enum ConfigError {
         key: String,
         message: String,
     },
+    /// An invalid value whose line was found in the file.
+    #[error("{path}:{line}: key `{key}`: {message}")]
+    InvalidAt {
+        path: PathBuf,
+        line: usize,
+        key: String,
+        message: String,
+    },
 }
 
 impl PlantConfig {
@@ -135,7 +143,21 @@ impl PlantConfig {
             // and the line; keep it on one line after the file name.
             message: e.to_string().trim_end().replace('\n', "\n  "),
         })?;
-        cfg.validate(path)?;
+        cfg.validate(path).map_err(|e| match e {
+            ConfigError::Invalid { path, key, message } => {
+                let (table, k) = key.rsplit_once('.').unwrap_or(("", key.as_str()));
+                match crate::validate::toml_key_line(text, table, 0, k) {
+                    Some(line) => ConfigError::InvalidAt {
+                        path,
+                        line,
+                        key,
+                        message,
+                    },
+                    None => ConfigError::Invalid { path, key, message },
+                }
+            }
+            e => e,
+        })?;
         Ok(cfg)
     }
 
@@ -145,46 +167,69 @@ impl PlantConfig {
             key: key.to_owned(),
             message: message.to_owned(),
         };
-        let positive = [
-            ("environment.p_atm_pa", self.environment.p_atm_pa),
-            ("muscle.rest_length_m", self.muscle.rest_length_m),
-            ("muscle.radius_m", self.muscle.radius_m),
-            ("muscle.braid_angle_deg", self.muscle.braid_angle_deg),
-            ("joint.sprocket_radius_m", self.joint.sprocket_radius_m),
-            ("joint.inertia_kgm2", self.joint.inertia_kgm2),
-            (
-                "valve.sonic_conductance_m3_per_s_pa",
-                self.valve.sonic_conductance_m3_per_s_pa,
-            ),
+        // Physical or practical ranges: wide enough for any real rig, narrow enough to catch
+        // a unit typed wrong (kPa in a Pa key) or a value the model cannot run.
+        use crate::validate::Range;
+        let ranges = [
+            ("environment.p_atm_pa", self.environment.p_atm_pa, Range::closed(5.0e4, 1.2e5), "Pa absolute"),
+            ("environment.supply_gauge_pa", self.environment.supply_gauge_pa, Range::closed(1.0e4, 2.0e6), "Pa gauge"),
+            ("muscle.rest_length_m", self.muscle.rest_length_m, Range::positive(5.0), "m"),
+            ("muscle.radius_m", self.muscle.radius_m, Range::positive(0.5), "m"),
+            ("muscle.braid_angle_deg", self.muscle.braid_angle_deg, Range::open(0.0, 54.7), "degrees (below the neutral braid angle 54.7)"),
+            ("muscle.end_factor", self.muscle.end_factor, Range::positive(10.0), ""),
+            ("muscle.damping_m2s", self.muscle.damping_m2s, Range::closed(0.0, 1.0), "m^2 s"),
+            ("joint.sprocket_radius_m", self.joint.sprocket_radius_m, Range::positive(1.0), "m"),
+            ("joint.inertia_kgm2", self.joint.inertia_kgm2, Range::positive(1.0e3), "kg m^2"),
+            ("joint.initial_contraction", self.joint.initial_contraction, Range::half_open(0.0, 1.0), "fraction"),
+            ("valve.sonic_conductance_m3_per_s_pa", self.valve.sonic_conductance_m3_per_s_pa, Range::positive(1.0e-5), "m^3/(s Pa)"),
+            ("initial.angle_rad", self.initial.angle_rad, Range::closed(-std::f64::consts::PI, std::f64::consts::PI), "rad"),
+            ("initial.velocity_rad_s", self.initial.velocity_rad_s, Range::closed(-100.0, 100.0), "rad/s"),
         ];
-        for (key, v) in positive {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(bad(key, &format!("must be a finite number > 0, got {v}")));
+        for (key, v, range, unit) in ranges {
+            if !range.contains(v) {
+                let mut msg = format!("must be within {range} {unit}, got {v}");
+                if key.ends_with("_pa") && v > 0.0 && range.contains(v * 1e3) {
+                    msg.push_str(&format!(
+                        " (kPa typed into a Pa key? {v} kPa is {} Pa)",
+                        v * 1e3
+                    ));
+                }
+                return Err(bad(key, &msg));
             }
         }
-        let finite = [
-            (
-                "environment.supply_gauge_pa",
-                self.environment.supply_gauge_pa,
-            ),
-            ("muscle.end_factor", self.muscle.end_factor),
-            ("muscle.damping_m2s", self.muscle.damping_m2s),
-            ("joint.initial_contraction", self.joint.initial_contraction),
-            ("initial.angle_rad", self.initial.angle_rad),
-            ("initial.velocity_rad_s", self.initial.velocity_rad_s),
+        // Pressures between vacuum and the supply.
+        let p_range = Range::closed(-self.environment.p_atm_pa, self.environment.supply_gauge_pa);
+        for (key, v) in [
             ("initial.p1_gauge_pa", self.initial.p1_gauge_pa),
             ("initial.p2_gauge_pa", self.initial.p2_gauge_pa),
-        ];
-        for (key, v) in finite {
-            if !v.is_finite() {
-                return Err(bad(key, &format!("must be a finite number, got {v}")));
+        ] {
+            if !p_range.contains(v) {
+                let mut msg = format!(
+                    "must be within {p_range} Pa gauge (vacuum .. supply_gauge_pa), got {v}"
+                );
+                if v > 0.0 && p_range.contains(v * 1e3) {
+                    msg.push_str(&format!(" (kPa typed into a Pa key? {v} kPa is {} Pa)", v * 1e3));
+                }
+                return Err(bad(key, &msg));
             }
+        }
+        // The Tondu force vanishes at the maximum contraction
+        // (1 - 1 / (sqrt(3) cos alpha0)) / k: the muscles must start below it.
+        let chi_max = (1.0
+            - 1.0 / (3f64.sqrt() * self.muscle.braid_angle_deg.to_radians().cos()))
+            / self.muscle.end_factor;
+        if !(self.joint.initial_contraction < chi_max) {
+            return Err(bad(
+                "joint.initial_contraction",
+                &format!(
+                    "must be within [0, {chi_max:.4}) (below the muscle's maximum contraction \
+                     (1 - 1/(sqrt(3) cos braid_angle)) / end_factor), got {}",
+                    self.joint.initial_contraction
+                ),
+            ));
         }
         if self.muscle.volume_poly_m3.iter().any(|v| !v.is_finite()) {
             return Err(bad("muscle.volume_poly_m3", "coefficients must be finite"));
-        }
-        if self.muscle.braid_angle_deg >= 90.0 {
-            return Err(bad("muscle.braid_angle_deg", "must be below 90 degrees"));
         }
         let b = self.valve.critical_ratio;
         let l = self.valve.laminar_ratio;
@@ -235,6 +280,21 @@ impl PlantConfig {
                 "muscle.volume_poly_m3",
                 "b0 (volume at zero contraction) must be > 0",
             ));
+        }
+        // The chamber volume must stay positive over the contractions the muscles reach.
+        let v = &self.muscle.volume_poly_m3;
+        for k in 0..=64 {
+            let chi = chi_max * k as f64 / 64.0;
+            let vol = v[0] + chi * (v[1] + chi * (v[2] + chi * v[3]));
+            if !(vol > 0.0) {
+                return Err(bad(
+                    "muscle.volume_poly_m3",
+                    &format!(
+                        "the volume V(chi) = {vol:.3e} m^3 at contraction {chi:.3} is not > 0 \
+                         (it must stay > 0 up to the maximum contraction {chi_max:.3})"
+                    ),
+                ));
+            }
         }
         self.effects.validate(path)
     }

@@ -1,0 +1,261 @@
+//! Batch diagnosis: every recording (`*.csv`) of a directory against one nominal plant, in
+//! parallel (rayon; one recording per worker, each diagnosis single-threaded), one JSON per
+//! recording and a summary table. A recording that cannot be diagnosed is listed in the
+//! summary with its error; the others are still written.
+
+use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
+
+use super::{diagnose, DiagnoseOptions};
+use crate::{PlantConfig, Recording};
+
+/// The outcome for one recording.
+#[derive(Debug, Clone)]
+pub struct BatchRow {
+    /// The recording.
+    pub recording: PathBuf,
+    /// Samples in it (0 if it could not be read).
+    pub samples: usize,
+    /// The diagnosis JSON, or the error.
+    pub result: Result<BatchDiagnosis, String>,
+}
+
+/// What the summary shows of one diagnosis.
+#[derive(Debug, Clone)]
+pub struct BatchDiagnosis {
+    /// Pretty JSON (as `diagnose --json` writes it).
+    pub json: String,
+    /// The recording is explained by the nominal model within its noise.
+    pub nothing_missing: bool,
+    /// Labels of the named effects.
+    pub effects: Vec<String>,
+    /// Lowest channel fit before / after the named effects [%].
+    pub worst_fit_before_pct: f64,
+    /// After.
+    pub worst_fit_after_pct: f64,
+    /// Wall time [s].
+    pub wall_s: f64,
+}
+
+/// The `*.csv` files of `dir`, sorted by name.
+pub fn recordings_in(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.is_file()
+                && p.extension()
+                    .is_some_and(|e| e.eq_ignore_ascii_case("csv"))
+        })
+        .collect();
+    v.sort();
+    Ok(v)
+}
+
+/// The JSON file of `recording` in `out_dir`: `out_dir/<stem>.json`.
+pub fn json_path(out_dir: &Path, recording: &Path) -> PathBuf {
+    let stem = recording
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "recording".into());
+    out_dir.join(format!("{stem}.json"))
+}
+
+/// Diagnoses every recording on `jobs` worker threads; rows in the order of `recordings`.
+/// `done` is called (from the workers) after each recording.
+pub fn diagnose_all(
+    nominal: &PlantConfig,
+    recordings: &[PathBuf],
+    opts: &DiagnoseOptions,
+    jobs: usize,
+    done: &(dyn Fn(&Path) + Sync),
+) -> Result<Vec<BatchRow>, String> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(jobs.max(1))
+        .build()
+        .map_err(|e| format!("cannot start {jobs} worker threads: {e}"))?;
+    let one = DiagnoseOptions {
+        threads: 1,
+        ..opts.clone()
+    };
+    Ok(pool.install(|| {
+        recordings
+            .par_iter()
+            .map(|path| {
+                let row = diagnose_one(nominal, path, &one);
+                done(path);
+                row
+            })
+            .collect()
+    }))
+}
+
+fn diagnose_one(nominal: &PlantConfig, path: &Path, opts: &DiagnoseOptions) -> BatchRow {
+    let t0 = std::time::Instant::now();
+    let rec = match Recording::read(path) {
+        Ok(r) => r,
+        Err(e) => {
+            return BatchRow {
+                recording: path.to_owned(),
+                samples: 0,
+                result: Err(e.to_string()),
+            }
+        }
+    };
+    let samples = rec.len();
+    let result = diagnose(nominal, &rec, None, opts, &|_, _, _| {})
+        .map_err(|e| format!("{}: diagnosis failed: {e}", path.display()))
+        .and_then(|d| {
+            let json = serde_json::to_string_pretty(&d.to_json())
+                .map_err(|e| format!("{}: {e}", path.display()))?
+                + "\n";
+            let worst = |m: &std::collections::BTreeMap<&'static str, f64>| {
+                m.values().copied().fold(f64::INFINITY, f64::min)
+            };
+            Ok(BatchDiagnosis {
+                json,
+                nothing_missing: d.nothing_missing,
+                effects: d.effects.iter().map(|e| e.label.clone()).collect(),
+                worst_fit_before_pct: worst(&d.fit_before),
+                worst_fit_after_pct: worst(&d.fit_after),
+                wall_s: t0.elapsed().as_secs_f64(),
+            })
+        });
+    BatchRow {
+        recording: path.to_owned(),
+        samples,
+        result,
+    }
+}
+
+/// The summary as CSV (`recording,samples,status,effects,worst_fit_before_pct,
+/// worst_fit_after_pct,wall_s`).
+pub fn summary_csv(rows: &[BatchRow]) -> String {
+    let mut s = String::from(
+        "recording,samples,status,effects,worst_fit_before_pct,worst_fit_after_pct,wall_s\n",
+    );
+    for r in rows {
+        let name = r
+            .recording
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        match &r.result {
+            Ok(d) => s.push_str(&format!(
+                "{name},{},{},{},{:.2},{:.2},{:.2}\n",
+                r.samples,
+                if d.nothing_missing { "nominal" } else { "departs" },
+                d.effects.join("+").replace(',', ";"),
+                d.worst_fit_before_pct,
+                d.worst_fit_after_pct,
+                d.wall_s
+            )),
+            Err(e) => s.push_str(&format!(
+                "{name},{},\"error: {}\",,,,\n",
+                r.samples,
+                e.replace('"', "'").replace('\n', " ")
+            )),
+        }
+    }
+    s
+}
+
+/// The summary as an aligned table for the terminal.
+pub fn summary_table(rows: &[BatchRow]) -> String {
+    let w = rows
+        .iter()
+        .map(|r| r.recording.file_name().map_or(0, |n| n.len()))
+        .max()
+        .unwrap_or(9)
+        .max(9);
+    let mut s = format!(
+        "{:<w$}  {:>8}  {:<8}  {:>12}  {:>11}  effects\n",
+        "recording", "samples", "status", "worst fit %", "after %"
+    );
+    for r in rows {
+        let name = r
+            .recording
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        match &r.result {
+            Ok(d) => s.push_str(&format!(
+                "{name:<w$}  {:>8}  {:<8}  {:>12.2}  {:>11.2}  {}\n",
+                r.samples,
+                if d.nothing_missing { "nominal" } else { "departs" },
+                d.worst_fit_before_pct,
+                d.worst_fit_after_pct,
+                if d.effects.is_empty() {
+                    "-".to_string()
+                } else {
+                    d.effects.join(", ")
+                }
+            )),
+            Err(e) => s.push_str(&format!("{name:<w$}  {:>8}  error     {e}\n", r.samples)),
+        }
+    }
+    s
+}
+
+/// `host-sim diagnose-batch`: the arguments.
+#[derive(clap::Args, Debug)]
+pub struct BatchArgs {
+    /// Nominal plant file (TOML) the user believes in.
+    #[arg(long, value_name = "P.toml")]
+    pub plant: PathBuf,
+    /// Directory of recordings (every `*.csv` in it, RECORDING.md columns t_s, u_in1, u_ex1,
+    /// u_in2, u_ex2, angle_deg, p1_kpa, p2_kpa[, f1_n, f2_n]).
+    #[arg(long, value_name = "DIR")]
+    pub recordings: PathBuf,
+    /// Output directory (created if missing): one `<recording>.json` each and `summary.csv`.
+    #[arg(long, value_name = "OUT_DIR")]
+    pub out_dir: PathBuf,
+    /// Recordings diagnosed at once (worker threads).
+    #[arg(long, default_value_t = 2, value_parser = crate::validate::usize_in(1, 256))]
+    pub jobs: usize,
+}
+
+/// Runs the batch: writes the JSON files and the summary (atomically, through the run's
+/// transaction); returns the summary table and whether every recording was diagnosed.
+pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, bool)> {
+    use anyhow::Context as _;
+    crate::validate::output_dir("--out-dir", &a.out_dir).map_err(anyhow::Error::msg)?;
+    let cfg = PlantConfig::load(&a.plant)?;
+    let recs = recordings_in(&a.recordings)
+        .with_context(|| format!("--recordings {}", a.recordings.display()))?;
+    if recs.is_empty() {
+        anyhow::bail!("--recordings {}: no *.csv file in it", a.recordings.display());
+    }
+    // Two recordings with the same stem would write the same JSON.
+    let mut jsons: Vec<PathBuf> = recs.iter().map(|r| json_path(&a.out_dir, r)).collect();
+    jsons.push(a.out_dir.join("summary.csv"));
+    let outs: Vec<(&str, &Path)> = jsons.iter().map(|p| ("--out-dir", p.as_path())).collect();
+    let ins: Vec<(&str, &Path)> = std::iter::once(("--plant", a.plant.as_path()))
+        .chain(recs.iter().map(|p| ("--recordings", p.as_path())))
+        .collect();
+    crate::validate::distinct_outputs(&ins, &outs).map_err(anyhow::Error::msg)?;
+    let n = recs.len();
+    let count = std::sync::atomic::AtomicUsize::new(0);
+    let rows = diagnose_all(&cfg, &recs, &DiagnoseOptions::default(), a.jobs, &|p| {
+        let k = count.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+        eprintln!("[{k}/{n}] {}", p.display());
+    })
+    .map_err(anyhow::Error::msg)?;
+    crate::io::atomic::create_dir_all(&a.out_dir)
+        .with_context(|| format!("{}: cannot create the directory", a.out_dir.display()))?;
+    for r in &rows {
+        if let Ok(d) = &r.result {
+            let p = json_path(&a.out_dir, &r.recording);
+            crate::io::atomic::write_bytes(&p, d.json.as_bytes())
+                .with_context(|| format!("{}", p.display()))?;
+        }
+    }
+    let summary = a.out_dir.join("summary.csv");
+    crate::io::atomic::write_bytes(&summary, summary_csv(&rows).as_bytes())
+        .with_context(|| format!("{}", summary.display()))?;
+    let all_ok = rows.iter().all(|r| r.result.is_ok());
+    Ok((
+        format!("{}wrote {} JSON files and {}\n", summary_table(&rows), rows.iter().filter(|r| r.result.is_ok()).count(), summary.display()),
+        all_ok,
+    ))
+}

@@ -1,0 +1,199 @@
+//! The one atomic file writer of host-sim: every output (CSV, TOML, PNG, SVG, HTML, JSON) goes
+//! through here.
+//!
+//! A file is written to a temporary file in the target's directory (same file system, so the
+//! final rename is atomic), flushed and synced, given the permissions of the file it replaces
+//! (or 0644), then renamed over the target. A failed write never leaves a half-written target.
+//!
+//! A command writing several files opens a [`Transaction`] first: while it is open, finished
+//! files are *staged* (kept as temporary files) instead of renamed, and only
+//! [`Transaction::commit`] renames them all, after the whole run succeeded. Dropping the
+//! transaction without committing (an error anywhere in the run) deletes the staged files and
+//! the directories the run created: a failed run leaves nothing behind and the user's files as
+//! they were. Without a transaction (library use, tests) each write is renamed at once.
+
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+use tempfile::TempPath;
+
+/// Staged files and created directories of the open transaction (`None`: no transaction).
+static STAGE: Mutex<Option<Stage>> = Mutex::new(None);
+
+#[derive(Default)]
+struct Stage {
+    /// (temporary file, target), in write order; one entry per target.
+    files: Vec<(TempPath, PathBuf)>,
+    /// Directories created by the run, outermost first.
+    dirs: Vec<PathBuf>,
+}
+
+fn stage_lock() -> std::sync::MutexGuard<'static, Option<Stage>> {
+    // A panic while holding the lock cannot leave the list inconsistent (pushes only).
+    STAGE.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Writes `bytes` to `path` atomically (staged while a [`Transaction`] is open).
+pub fn write_bytes(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    write_with(path, |w| w.write_all(bytes))
+}
+
+/// Writes `path` atomically with `fill`, which writes the whole content into a buffered
+/// writer; the target is replaced only after `fill` succeeded and the data is on disk.
+pub fn write_with(
+    path: &Path,
+    fill: impl FnOnce(&mut std::io::BufWriter<&std::fs::File>) -> std::io::Result<()>,
+) -> std::io::Result<()> {
+    let tmp = temp_for(path)?;
+    {
+        let mut w = std::io::BufWriter::new(tmp.as_file());
+        fill(&mut w)?;
+        w.flush()?;
+    }
+    finish(tmp, path)
+}
+
+/// Writes `path` atomically through a writer that needs a file *path* (plotters' backends):
+/// `draw` gets the temporary file's path and must write the whole file there.
+pub fn write_via_path<E>(
+    path: &Path,
+    draw: impl FnOnce(&Path) -> Result<(), E>,
+) -> Result<(), ViaPathError<E>> {
+    let tmp = temp_for(path).map_err(ViaPathError::Io)?;
+    draw(tmp.path()).map_err(ViaPathError::Write)?;
+    finish(tmp, path).map_err(ViaPathError::Io)
+}
+
+/// Error of [`write_via_path`]: the writer's own error or an I/O error of the temporary file.
+#[derive(Debug)]
+pub enum ViaPathError<E> {
+    /// The writer failed.
+    Write(E),
+    /// Creating, syncing or renaming the temporary file failed.
+    Io(std::io::Error),
+}
+
+/// `std::fs::create_dir_all` that remembers, inside a [`Transaction`], which directories it
+/// created, so that a failed run removes them again.
+pub fn create_dir_all(dir: &Path) -> std::io::Result<()> {
+    let mut missing = Vec::new();
+    let mut d = Some(dir);
+    while let Some(p) = d {
+        if p.as_os_str().is_empty() || p.exists() {
+            break;
+        }
+        missing.push(p.to_owned());
+        d = p.parent();
+    }
+    std::fs::create_dir_all(dir)?;
+    if let Some(stage) = stage_lock().as_mut() {
+        missing.reverse();
+        stage.dirs.extend(missing);
+    }
+    Ok(())
+}
+
+fn dir_of(path: &Path) -> PathBuf {
+    match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
+        _ => PathBuf::from("."),
+    }
+}
+
+fn temp_for(path: &Path) -> std::io::Result<tempfile::NamedTempFile> {
+    let name = path.file_name().ok_or_else(|| {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            format!("{}: not a file path", path.display()),
+        )
+    })?;
+    let ext = path
+        .extension()
+        .map(|e| format!(".{}", e.to_string_lossy()))
+        .unwrap_or_default();
+    // The target's extension is kept: plotters picks the image encoder from it.
+    tempfile::Builder::new()
+        .prefix(&format!(".{}.", name.to_string_lossy()))
+        .suffix(&format!(".tmp{ext}"))
+        .tempfile_in(dir_of(path))
+}
+
+fn finish(tmp: tempfile::NamedTempFile, path: &Path) -> std::io::Result<()> {
+    tmp.as_file().sync_all()?;
+    set_output_permissions(tmp.as_file(), path)?;
+    let tmp = tmp.into_temp_path();
+    let mut guard = stage_lock();
+    match guard.as_mut() {
+        Some(stage) => {
+            // A second write of the same target replaces the first staged one.
+            stage.files.retain(|(_, t)| t != path);
+            stage.files.push((tmp, path.to_owned()));
+            Ok(())
+        }
+        None => {
+            drop(guard);
+            tmp.persist(path).map_err(|e| e.error)
+        }
+    }
+}
+
+/// Temporary files are created private (0600); give the output the permissions of the file
+/// it replaces, or ordinary ones (0644) for a new file.
+fn set_output_permissions(file: &std::fs::File, target: &Path) -> std::io::Result<()> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let perm = match std::fs::metadata(target) {
+            Ok(m) => m.permissions(),
+            Err(_) => std::fs::Permissions::from_mode(0o644),
+        };
+        file.set_permissions(perm)?;
+    }
+    #[cfg(not(unix))]
+    let _ = (file, target);
+    Ok(())
+}
+
+/// All outputs of one command: staged until [`commit`](Self::commit), discarded on drop.
+/// One transaction at a time per process.
+#[must_use = "dropping a transaction discards every staged output"]
+pub struct Transaction {
+    _private: (),
+}
+
+impl Transaction {
+    /// Opens the transaction; every atomic write from now on is staged.
+    ///
+    /// # Panics
+    /// If a transaction is already open (a programming error).
+    pub fn begin() -> Transaction {
+        let mut guard = stage_lock();
+        assert!(guard.is_none(), "atomic::Transaction::begin: one is already open");
+        *guard = Some(Stage::default());
+        Transaction { _private: () }
+    }
+
+    /// Renames every staged file over its target, in write order.
+    pub fn commit(self) -> std::io::Result<()> {
+        let stage = stage_lock().take().unwrap_or_default();
+        std::mem::forget(self);
+        for (tmp, target) in stage.files {
+            tmp.persist(&target).map_err(|e| {
+                std::io::Error::new(e.error.kind(), format!("{}: {}", target.display(), e.error))
+            })?;
+        }
+        Ok(())
+    }
+}
+
+impl Drop for Transaction {
+    fn drop(&mut self) {
+        if let Some(stage) = stage_lock().take() {
+            drop(stage.files); // TempPath deletes its file
+            for d in stage.dirs.iter().rev() {
+                let _ = std::fs::remove_dir(d); // only if empty
+            }
+        }
+    }
+}

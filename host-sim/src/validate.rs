@@ -1,0 +1,330 @@
+//! One validation layer for what a user types: command-line numbers (clap value parsers with
+//! their allowed range), values in plant and scenario files (key, file, line and the allowed
+//! range), input/output paths (an output may not be one of the inputs) and the size of a run
+//! (estimated memory and time against a documented limit, `--allow-large` to go beyond).
+//!
+//! Ranges are physical or practical bounds, wide enough for any real rig and narrow enough to
+//! catch a unit typed wrong (kPa in a Pa key) or a value that would exhaust the machine.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// A closed or open interval of allowed values.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Range {
+    /// Lower bound.
+    pub lo: f64,
+    /// Lower bound allowed itself.
+    pub lo_incl: bool,
+    /// Upper bound.
+    pub hi: f64,
+    /// Upper bound allowed itself.
+    pub hi_incl: bool,
+}
+
+impl Range {
+    /// `[lo, hi]`.
+    pub const fn closed(lo: f64, hi: f64) -> Range {
+        Range {
+            lo,
+            lo_incl: true,
+            hi,
+            hi_incl: true,
+        }
+    }
+    /// `(0, hi]`.
+    pub const fn positive(hi: f64) -> Range {
+        Range {
+            lo: 0.0,
+            lo_incl: false,
+            hi,
+            hi_incl: true,
+        }
+    }
+    /// `[lo, hi)`.
+    pub const fn half_open(lo: f64, hi: f64) -> Range {
+        Range {
+            lo,
+            lo_incl: true,
+            hi,
+            hi_incl: false,
+        }
+    }
+    /// `(lo, hi)`.
+    pub const fn open(lo: f64, hi: f64) -> Range {
+        Range {
+            lo,
+            lo_incl: false,
+            hi,
+            hi_incl: false,
+        }
+    }
+
+    /// Whether `v` is a finite number inside the range (NaN never is).
+    pub fn contains(&self, v: f64) -> bool {
+        v.is_finite()
+            && (if self.lo_incl { v >= self.lo } else { v > self.lo })
+            && (if self.hi_incl { v <= self.hi } else { v < self.hi })
+    }
+
+    /// `Ok(v)` inside the range, else the message "must be within ..., got v".
+    pub fn check(&self, v: f64) -> Result<f64, String> {
+        if self.contains(v) {
+            Ok(v)
+        } else {
+            Err(format!("must be a number within {self}, got {v}"))
+        }
+    }
+}
+
+impl fmt::Display for Range {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{}{}, {}{}",
+            if self.lo_incl { '[' } else { '(' },
+            self.lo,
+            self.hi,
+            if self.hi_incl { ']' } else { ')' }
+        )
+    }
+}
+
+/// A clap value parser for an `f64` within `range` (NaN and infinities refused).
+pub fn f64_in(range: Range) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync + 'static {
+    move |s: &str| {
+        let v: f64 = s
+            .trim()
+            .parse()
+            .map_err(|_| format!("`{s}` is not a number (allowed: {range})"))?;
+        range.check(v)
+    }
+}
+
+/// A clap value parser for a whole number within `lo..=hi`.
+pub fn usize_in(
+    lo: usize,
+    hi: usize,
+) -> impl Fn(&str) -> Result<usize, String> + Clone + Send + Sync + 'static {
+    move |s: &str| {
+        let v: usize = s
+            .trim()
+            .parse()
+            .map_err(|_| format!("`{s}` is not a whole number (allowed: {lo}..={hi})"))?;
+        if (lo..=hi).contains(&v) {
+            Ok(v)
+        } else {
+            Err(format!("must be within {lo}..={hi}, got {v}"))
+        }
+    }
+}
+
+/// A clap value parser for a plot file: `.png` or `.svg` (checked before any work).
+pub fn plot_path(s: &str) -> Result<PathBuf, String> {
+    let p = PathBuf::from(s);
+    let ext = p
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    if ext == "png" || ext == "svg" {
+        Ok(p)
+    } else {
+        Err(format!("{s}: unsupported plot format (use a .png or .svg file name)"))
+    }
+}
+
+/// A directory output (`--report DIR`, `--out-dir DIR`): absent (created) or a directory.
+pub fn output_dir(flag: &str, dir: &Path) -> Result<(), String> {
+    if dir.exists() && !dir.is_dir() {
+        return Err(format!(
+            "{flag} {}: exists and is not a directory; give a directory (created if missing)",
+            dir.display()
+        ));
+    }
+    Ok(())
+}
+
+/// 1-based line of `key = ...` inside `[table]` (or `[[table]]`, the `index`-th one) of TOML
+/// `text`; `table = ""` is the top level.
+pub fn toml_key_line(text: &str, table: &str, index: usize, key: &str) -> Option<usize> {
+    let mut in_table = table.is_empty();
+    let mut seen = 0usize;
+    for (i, line) in text.lines().enumerate() {
+        let l = line.split('#').next().unwrap_or("").trim();
+        if l.starts_with('[') {
+            let name = l.trim_start_matches('[').trim_end_matches(']').trim();
+            in_table = false;
+            if name == table {
+                in_table = seen == index;
+                seen += 1;
+            }
+            continue;
+        }
+        if in_table
+            && l.strip_prefix(key)
+                .is_some_and(|rest| rest.trim_start().starts_with('='))
+        {
+            return Some(i + 1);
+        }
+    }
+    None
+}
+
+/// "file:line: key `table.key` = v: message" (the line when it is found in `text`).
+pub fn file_value_error(file: &Path, text: &str, dotted: &str, message: &str) -> String {
+    let (table, key) = dotted.rsplit_once('.').unwrap_or(("", dotted));
+    match toml_key_line(text, table, 0, key) {
+        Some(line) => format!("{}:{line}: key `{dotted}`: {message}", file.display()),
+        None => format!("{}: key `{dotted}`: {message}", file.display()),
+    }
+}
+
+fn same_target(input: &Path, output: &Path) -> bool {
+    let Ok(i) = input.canonicalize() else {
+        return false;
+    };
+    if let Ok(o) = output.canonicalize() {
+        return i == o;
+    }
+    // A new output: compare its directory and name.
+    let dir = match output.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
+        _ => PathBuf::from("."),
+    };
+    match (dir.canonicalize(), output.file_name()) {
+        (Ok(d), Some(n)) => d.join(n) == i,
+        _ => false,
+    }
+}
+
+/// Refuses an output that is one of the inputs (the run would replace the user's data) or
+/// two outputs that are the same file. Each path comes with the flag that named it.
+pub fn distinct_outputs(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> Result<(), String> {
+    for (oflag, o) in outputs {
+        for (iflag, i) in inputs {
+            if same_target(i, o) {
+                return Err(format!(
+                    "{oflag} {} is the input {iflag}: refusing to overwrite an input; write to another file",
+                    o.display()
+                ));
+            }
+        }
+    }
+    for (k, (aflag, a)) in outputs.iter().enumerate() {
+        for (bflag, b) in &outputs[k + 1..] {
+            if a == b || (a.exists() && same_target(a, b)) {
+                return Err(format!(
+                    "{aflag} and {bflag} are the same file {}: give two different files",
+                    a.display()
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Largest estimated memory of one run without `--allow-large` [bytes] (docs/reliability.md).
+pub const MAX_RUN_BYTES: f64 = 2.0e9;
+/// Largest estimated run time without `--allow-large` [s] (docs/reliability.md).
+pub const MAX_RUN_S: f64 = 1800.0;
+
+/// The estimated size of a run, from its arguments, before any work.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunEstimate {
+    /// What is estimated ("sweep torque").
+    pub what: String,
+    /// Samples (or ticks, or table points) the run makes.
+    pub samples: f64,
+    /// Memory the run needs [bytes].
+    pub bytes: f64,
+    /// Run time on one core of a laptop [s].
+    pub seconds: f64,
+}
+
+fn human_bytes(b: f64) -> String {
+    if b >= 1e12 {
+        format!("{:.1} TB", b / 1e12)
+    } else if b >= 1e9 {
+        format!("{:.1} GB", b / 1e9)
+    } else {
+        format!("{:.0} MB", b / 1e6)
+    }
+}
+
+fn human_s(s: f64) -> String {
+    if s >= 86400.0 {
+        format!("{:.1} days", s / 86400.0)
+    } else if s >= 3600.0 {
+        format!("{:.1} h", s / 3600.0)
+    } else if s >= 60.0 {
+        format!("{:.0} min", s / 60.0)
+    } else {
+        format!("{s:.1} s")
+    }
+}
+
+impl RunEstimate {
+    /// Refuses (naming the estimate and the limit) a run above [`MAX_RUN_BYTES`] or
+    /// [`MAX_RUN_S`] unless `allow_large`.
+    pub fn check(&self, allow_large: bool) -> Result<(), String> {
+        let too_big = !(self.bytes <= MAX_RUN_BYTES && self.seconds <= MAX_RUN_S);
+        if too_big && !allow_large {
+            return Err(format!(
+                "{}: {:.3e} samples, estimated {} of memory and {} of run time; the limit is {} \
+                 and {} (--allow-large runs it anyway)",
+                self.what,
+                self.samples,
+                human_bytes(self.bytes),
+                human_s(self.seconds),
+                human_bytes(MAX_RUN_BYTES),
+                human_s(MAX_RUN_S)
+            ));
+        }
+        if !(self.samples < 1e15) {
+            // Not even --allow-large: the count does not fit an index.
+            return Err(format!(
+                "{}: {:.3e} samples cannot be indexed; reduce the run",
+                self.what, self.samples
+            ));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ranges_refuse_nan_and_the_bounds_they_exclude() {
+        let p = f64_in(Range::positive(10.0));
+        assert!(p("NaN").is_err());
+        assert!(p("inf").is_err());
+        assert!(p("0").is_err());
+        assert_eq!(p("10").unwrap(), 10.0);
+        assert!(p("10.5").unwrap_err().contains("(0, 10]"));
+        assert!(usize_in(1, 5)("0").is_err());
+        assert_eq!(usize_in(1, 5)("5").unwrap(), 5);
+    }
+
+    #[test]
+    fn key_lines_are_found_in_their_table() {
+        let t = "[a]\nx = 1\n[b]\ny = 2 # c\nx = 3\n[[e]]\nz=1\n[[e]]\nz = 2\n";
+        assert_eq!(toml_key_line(t, "a", 0, "x"), Some(2));
+        assert_eq!(toml_key_line(t, "b", 0, "x"), Some(5));
+        assert_eq!(toml_key_line(t, "e", 1, "z"), Some(9));
+        assert_eq!(toml_key_line(t, "b", 0, "z"), None);
+    }
+
+    #[test]
+    fn an_output_equal_to_an_input_is_refused() {
+        let d = tempfile::tempdir().unwrap();
+        let a = d.path().join("a.csv");
+        std::fs::write(&a, "x").unwrap();
+        let alias = d.path().join(".").join("a.csv");
+        assert!(distinct_outputs(&[("--inputs", &a)], &[("--out", &alias)]).is_err());
+        let b = d.path().join("b.csv");
+        assert!(distinct_outputs(&[("--inputs", &a)], &[("--out", &b)]).is_ok());
+        assert!(distinct_outputs(&[], &[("--out", &b), ("--plot", &b)]).is_err());
+    }
+}

@@ -1,0 +1,394 @@
+//! Nothing a user types crashes, hangs, exhausts memory or loses data: every bad argument or
+//! file value below exits with status 2 and a message naming the argument (or file, line and
+//! key) and its allowed range, and leaves the user's files exactly as they were (an existing
+//! output keeps its content, no new file or directory appears).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn shared() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared")
+}
+
+fn plant() -> PathBuf {
+    shared().join("plant/reference-1dof.toml")
+}
+
+fn fixture() -> PathBuf {
+    shared().join("conformance/pulses_nominal.csv")
+}
+
+fn run(args: &[&dyn AsRef<std::ffi::OsStr>]) -> Output {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_host-sim"));
+    for a in args {
+        c.arg(a);
+    }
+    c.output().unwrap()
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+/// Status 2, every `needles` in stderr, and no panic.
+fn refused(r: &Output, needles: &[&str]) -> String {
+    let err = text(&r.stderr);
+    assert_eq!(
+        r.status.code(),
+        Some(2),
+        "stdout:\n{}\nstderr:\n{err}",
+        text(&r.stdout)
+    );
+    assert!(!err.contains("panicked"), "{err}");
+    for n in needles {
+        assert!(err.contains(n), "`{n}` not in:\n{err}");
+    }
+    err
+}
+
+/// The files of `dir` with their contents.
+fn snapshot(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    let mut v: Vec<_> = walk(dir)
+        .into_iter()
+        .map(|p| {
+            let c = if p.is_file() {
+                std::fs::read(&p).unwrap()
+            } else {
+                Vec::new()
+            };
+            (p, c)
+        })
+        .collect();
+    v.sort();
+    v
+}
+
+fn walk(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            out.extend(walk(&p));
+        }
+        out.push(p);
+    }
+    out
+}
+
+/// A temporary directory with a precious existing output `out.*` in it.
+struct Workspace {
+    dir: tempfile::TempDir,
+}
+
+impl Workspace {
+    fn new() -> Workspace {
+        let dir = tempfile::tempdir().unwrap();
+        for name in ["out.csv", "out.toml", "out.json", "out.png"] {
+            std::fs::write(dir.path().join(name), format!("precious {name}\n")).unwrap();
+        }
+        Workspace { dir }
+    }
+    fn p(&self, name: &str) -> PathBuf {
+        self.dir.path().join(name)
+    }
+    fn write(&self, name: &str, content: &str) -> PathBuf {
+        let p = self.p(name);
+        std::fs::write(&p, content).unwrap();
+        p
+    }
+    fn snapshot(&self) -> Vec<(PathBuf, Vec<u8>)> {
+        snapshot(self.dir.path())
+    }
+}
+
+#[test]
+fn identify_plant_with_zero_patience_is_refused() {
+    let w = Workspace::new();
+    let before = w.snapshot();
+    let r = run(&[
+        &"identify",
+        &"plant",
+        &"--recording",
+        &fixture(),
+        &"--plant",
+        &plant(),
+        &"--params",
+        &"joint.inertia_kgm2",
+        &"--out",
+        &w.p("out.toml"),
+        &"--patience",
+        &"0",
+    ]);
+    refused(&r, &["--patience", "1..=100000"]);
+    assert_eq!(w.snapshot(), before);
+}
+
+#[test]
+fn sweep_torque_sizes_that_would_exhaust_memory_are_refused_with_the_estimate() {
+    let w = Workspace::new();
+    let before = w.snapshot();
+    let r = run(&[
+        &"sweep", &"torque", &"--plant", &plant(), &"--out", &w.p("out.csv"), &"--dt-s", &"1e-7",
+    ]);
+    refused(&r, &["--dt-s", "[0.000001, 1]"]);
+    let r = run(&[
+        &"sweep",
+        &"torque",
+        &"--plant",
+        &plant(),
+        &"--out",
+        &w.p("out.csv"),
+        &"--speeds-rad-s",
+        &"1e-6",
+    ]);
+    refused(&r, &["sweep torque", "of memory", "--allow-large"]);
+    let r = run(&[
+        &"sweep",
+        &"force",
+        &"--plant",
+        &plant(),
+        &"--out",
+        &w.p("out.csv"),
+        &"--n-stretch",
+        &"100000",
+        &"--n-pressure",
+        &"100000",
+    ]);
+    refused(&r, &["sweep force", "1.000e10 samples", "--allow-large"]);
+    assert_eq!(w.snapshot(), before);
+}
+
+const STEP: &str = "[scenario]\nname = \"long\"\nduration_s = 1e9\ntick_hz = 1000.0\n\n\
+[setpoint]\nkind = \"step\"\ninitial_rad = 0.0\nfinal_rad = 0.2\nat_s = 1.0\n";
+
+#[test]
+fn a_scenario_too_long_for_memory_is_refused_with_the_estimate() {
+    let w = Workspace::new();
+    let s = w.write("long.toml", STEP);
+    let before = w.snapshot();
+    let r = run(&[
+        &"simulate",
+        &"--plant",
+        &plant(),
+        &"--scenario",
+        &s,
+        &"--out",
+        &w.p("out.csv"),
+    ]);
+    refused(&r, &["long.toml", "1.000e12 samples", "TB of memory", "--allow-large"]);
+    assert_eq!(w.snapshot(), before);
+}
+
+#[test]
+fn a_scenario_settling_after_its_end_is_refused_at_its_line() {
+    let w = Workspace::new();
+    let s = w.write(
+        "late.toml",
+        &format!(
+            "{}\n[expect]\nsettle_after_s = 10.0\nmax_abs_error_rad = 0.01\n",
+            STEP.replace("1e9", "4.0")
+        ),
+    );
+    let before = w.snapshot();
+    let r = run(&[
+        &"simulate",
+        &"--plant",
+        &plant(),
+        &"--scenario",
+        &s,
+        &"--out",
+        &w.p("out.csv"),
+    ]);
+    refused(&r, &["late.toml", "line 13", "settle_after_s", "[0, 4)"]);
+    assert_eq!(w.snapshot(), before);
+}
+
+#[test]
+fn simulate_refuses_to_write_over_its_input_recording() {
+    let w = Workspace::new();
+    let rec = w.write("rec.csv", &std::fs::read_to_string(fixture()).unwrap());
+    let before = w.snapshot();
+    let r = run(&[
+        &"simulate",
+        &"--plant",
+        &plant(),
+        &"--inputs",
+        &rec,
+        &"--out",
+        &w.dir.path().join(".").join("rec.csv"),
+    ]);
+    refused(&r, &["--out", "is the input --inputs"]);
+    assert_eq!(w.snapshot(), before);
+}
+
+#[test]
+fn an_unsupported_plot_format_is_refused_before_the_recording_is_replaced() {
+    let w = Workspace::new();
+    let before = w.snapshot();
+    let r = run(&[
+        &"simulate",
+        &"--plant",
+        &plant(),
+        &"--inputs",
+        &fixture(),
+        &"--out",
+        &w.p("out.csv"),
+        &"--plot",
+        &w.p("x.jpg"),
+    ]);
+    refused(&r, &["x.jpg", ".png or .svg"]);
+    assert_eq!(w.snapshot(), before);
+}
+
+#[test]
+fn diagnose_with_a_report_path_that_is_a_file_keeps_the_json() {
+    let w = Workspace::new();
+    let before = w.snapshot();
+    let r = run(&[
+        &"diagnose",
+        &"--plant",
+        &plant(),
+        &"--recording",
+        &fixture(),
+        &"--json",
+        &w.p("out.json"),
+        &"--report",
+        &w.p("out.png"),
+    ]);
+    refused(&r, &["--report", "not a directory"]);
+    assert_eq!(w.snapshot(), before);
+}
+
+#[test]
+fn demo_with_a_bad_fixture_leaves_nothing_behind() {
+    let w = Workspace::new();
+    let mut bad = std::fs::read_to_string(fixture()).unwrap();
+    bad.push_str("20.000000,0,0,0,0,abc,550,550,529,529\n");
+    let bad = w.write("bad.csv", &bad);
+    let before = w.snapshot();
+    let r = run(&[&"demo", &"--out-dir", &w.p("demo"), &"--plant", &plant(), &"--fixture", &bad]);
+    refused(&r, &["bad.csv", "angle_deg"]);
+    assert_eq!(w.snapshot(), before, "the demo directory must not appear");
+}
+
+#[test]
+fn identify_force_on_a_constant_map_is_refused() {
+    let w = Workspace::new();
+    let mut csv = String::from("p_kpa,stretch,f_n\n");
+    for _ in 0..50 {
+        csv.push_str("300,0.9,400\n");
+    }
+    let data = w.write("const.csv", &csv);
+    let before = w.snapshot();
+    let r = run(&[&"identify", &"force", &"--data", &data, &"--out", &w.p("out.toml")]);
+    refused(&r, &["const.csv", "stretch", "same"]);
+    assert_eq!(w.snapshot(), before);
+}
+
+#[test]
+fn identify_torque_on_a_constant_recording_is_refused() {
+    let w = Workspace::new();
+    let mut csv = String::from("t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg,p1_kpa,p2_kpa,f1_n,f2_n\n");
+    for k in 0..400 {
+        csv.push_str(&format!("{:.3},0,0,0,0,0,300,300,400,400\n", k as f64 * 0.005));
+    }
+    let rec = w.write("const.csv", &csv);
+    let before = w.snapshot();
+    let r = run(&[
+        &"identify",
+        &"torque",
+        &"--recording",
+        &rec,
+        &"--plant",
+        &plant(),
+        &"--out",
+        &w.p("out.toml"),
+    ]);
+    refused(&r, &["const.csv", "angle_deg", "does not move"]);
+    assert_eq!(w.snapshot(), before);
+}
+
+#[test]
+fn identify_torque_refuses_an_activation_limit_above_the_supply() {
+    let w = Workspace::new();
+    let rec = w.p("sweep.csv");
+    let r = run(&[&"sweep", &"torque", &"--plant", &plant(), &"--out", &rec]);
+    assert!(r.status.success(), "{}", text(&r.stderr));
+    let before = w.snapshot();
+    let r = run(&[
+        &"identify",
+        &"torque",
+        &"--recording",
+        &rec,
+        &"--plant",
+        &plant(),
+        &"--out",
+        &w.p("out.toml"),
+        &"--dp-max-kpa",
+        &"900",
+    ]);
+    refused(&r, &["--dp-max-kpa 900", "(0, 300.0]", "supply"]);
+    assert_eq!(w.snapshot(), before);
+}
+
+fn edited_plant(w: &Workspace, key: &str, value: &str) -> PathBuf {
+    let text = std::fs::read_to_string(plant()).unwrap();
+    let mut found = false;
+    let edited: Vec<String> = text
+        .lines()
+        .map(|l| {
+            if l.starts_with(&format!("{key} =")) {
+                found = true;
+                format!("{key} = {value}")
+            } else {
+                l.to_string()
+            }
+        })
+        .collect();
+    assert!(found, "{key}");
+    w.write("plant.toml", &(edited.join("\n") + "\n"))
+}
+
+#[test]
+fn plant_values_out_of_their_physical_range_are_refused_at_their_line() {
+    let w = Workspace::new();
+    for (key, value, needles) in [
+        (
+            "initial_contraction",
+            "1.0",
+            vec!["plant.toml:23:", "joint.initial_contraction", "[0, 1)"],
+        ),
+        (
+            "initial_contraction",
+            "0.3",
+            vec!["plant.toml:23:", "joint.initial_contraction", "[0, 0.2499)", "maximum contraction"],
+        ),
+        (
+            "supply_gauge_pa",
+            "600.0",
+            vec!["plant.toml:9:", "environment.supply_gauge_pa", "[10000, 2000000]", "kPa typed into a Pa key"],
+        ),
+        (
+            "p1_gauge_pa",
+            "-200000.0",
+            vec!["plant.toml:33:", "initial.p1_gauge_pa", "vacuum"],
+        ),
+    ] {
+        let p = edited_plant(&w, key, value);
+        let before = w.snapshot();
+        let r = run(&[&"simulate", &"--plant", &p, &"--inputs", &fixture(), &"--out", &w.p("out.csv")]);
+        refused(&r, &needles);
+        assert_eq!(w.snapshot(), before, "{key}");
+    }
+}
+
+#[test]
+fn fit_refuses_a_nan_gate() {
+    let w = Workspace::new();
+    let before = w.snapshot();
+    let r = run(&[&"fit", &fixture(), &fixture(), &"--min-fit", &"NaN"]);
+    refused(&r, &["--min-fit", "100"]);
+    let r = run(&[&"fit", &fixture(), &fixture(), &"--min-fit", &"150"]);
+    refused(&r, &["--min-fit", "100"]);
+    assert_eq!(w.snapshot(), before);
+}
