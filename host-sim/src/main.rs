@@ -39,6 +39,9 @@ enum Command {
     Sweep(host_sim::identify::cli::SweepArgs),
     /// Identify the force law, the torque model or plant parameters from data.
     Identify(host_sim::identify::cli::IdentifyArgs),
+    /// Tune the cascade, PD and PID gains on the set-point suite (firmware in the loop) and
+    /// write the gains file (the format of config/control_tuned.toml).
+    Tune(host_sim::control::tune::TuneArgs),
     /// Diagnosis: locate where a recording departs from the nominal model, name the left-out
     /// physics, model it and report the fit before/after (issue 6).
     Diagnose(DiagnoseArgs),
@@ -134,6 +137,7 @@ fn main() -> ExitCode {
         Command::Diagnose(a) => run_diagnose(&a),
         Command::Sweep(a) => run_report(host_sim::identify::cli::run_sweep(&a)),
         Command::Identify(a) => run_report(host_sim::identify::cli::run_identify(&a)),
+        Command::Tune(a) => run_report(host_sim::control::tune::run_tune(&a)),
     };
     match result {
         Ok(code) => code,
