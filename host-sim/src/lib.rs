@@ -8,6 +8,7 @@
 //!   of control laws.
 //! - [`io`]: recordings, scenarios, run outputs, plots.
 //! - [`fit`]: NRMSE fit, MAE, MSE per channel.
+//! - [`optimize`]: Nelder-Mead and pattern search (gain tuning, law comparison).
 //! - [`identify`]: force law, torque model and plant parameters from data.
 //! - [`diagnose`]: where a recording departs from the model, and which physics is missing.
 //! - [`demo`]: the main job (closed-loop scenarios and a conformance replay).
@@ -18,6 +19,7 @@ pub mod diagnose;
 pub mod fit;
 pub mod identify;
 pub mod io;
+pub mod optimize;
 pub mod plant;
 pub mod sim;
 pub mod validate;

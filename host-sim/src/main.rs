@@ -55,6 +55,9 @@ enum Command {
     /// Identify the force law, the torque model or plant parameters from data.
     #[command(after_help = "Examples:\n  host-sim identify force --data force.csv --out force_law.toml\n  host-sim identify torque --recording torque.csv --plant ../shared/plant/reference-1dof.toml --out torque_model.toml\n  host-sim identify plant --recording ../shared/conformance/pulses_loaded.csv --plant ../shared/plant/reference-1dof.toml --params joint.inertia_kgm2 --out fitted.toml")]
     Identify(host_sim::identify::cli::IdentifyArgs),
+    /// Tune the cascade, PD and PID gains on the set-point suite (firmware in the loop) and
+    /// write the gains file (the format of config/control_tuned.toml).
+    Tune(host_sim::control::tune::TuneArgs),
     /// Diagnosis: locate where a recording departs from the nominal model, name the left-out
     /// physics, model it and report the fit before/after.
     ///
@@ -172,6 +175,7 @@ fn main() -> ExitCode {
         }),
         Command::Sweep(a) => run_report(host_sim::identify::cli::run_sweep(&a)),
         Command::Identify(a) => run_report(host_sim::identify::cli::run_identify(&a)),
+        Command::Tune(a) => run_report(host_sim::control::tune::run_tune(&a)),
     };
     match result.and_then(|code| {
         outputs.commit().context("cannot write the outputs")?;

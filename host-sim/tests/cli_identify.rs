@@ -96,7 +96,8 @@ fn sweep_force_then_identify_force_reports_both_models_and_writes_the_firmware_t
     assert_eq!(c.len(), 10);
     assert_eq!(c[7].as_float(), Some(1.0));
     assert_eq!(toml_number(&out, "force_law", "stretch_min"), 0.75);
-    assert!(toml_text.contains("# eq. 6:  MAE") && toml_text.contains("# Tondu:  MAE"));
+    assert!(toml_text.contains("# eq. 6    MAE") && toml_text.contains("# Tondu    MAE"));
+    assert!(toml_text.contains("# global search:") && toml_text.contains("# held out, one length"));
 }
 
 #[test]

@@ -234,7 +234,7 @@ fn the_checked_in_tuning_file_parses_and_names_all_three_laws() {
     assert!(t.cascade.position_kp_nm_per_rad > 0.0);
     assert_eq!(t.pd.ki_pa_per_rad_s, 0.0);
     assert!(t.pid.ki_pa_per_rad_s > 0.0);
-    assert!(text.contains("tune_pid"), "provenance header missing");
+    assert!(text.contains("host-sim tune"), "provenance header missing");
 }
 
 /// Robustness, not part of the criterion: the same gains on the loaded joint

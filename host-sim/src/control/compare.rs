@@ -13,7 +13,7 @@
 //!   of the run (from t = 0, including the transients); the suite MSE is the mean of the three
 //!   scenario MSEs. A run that latches any fault scores infinity.
 //! - The gains of all three laws: `config/control_tuned.toml` ([`ControlTuning`]), written by
-//!   `examples/tune_pid.rs` (restarted [`nelder_mead`] on log-gains from a grid and from
+//!   `host-sim tune` (`control::tune`: restarted [`nelder_mead`] on log-gains from a grid and from
 //!   stored or documented start points, then a polish, minimising [`tuning_cost`], the same
 //!   for every law: the worse of the suite MSE at the gains and at [`GAIN_MARGIN`] x the
 //!   feedback gains, step overshoot <= [`MAX_OVERSHOOT_FRAC`]).
@@ -31,6 +31,8 @@ use serde::{Deserialize, Serialize};
 use crate::control::closed_loop::{run_with, ClosedLoopError, Scenario, SetpointProfile};
 use crate::identify::{write_atomic, IdentError};
 use crate::plant::Plant;
+/// The optimizers live in [`crate::optimize`]; re-exported for the tuner's callers.
+pub use crate::optimize::{nelder_mead, NelderMeadResult};
 
 /// The set-point suite of the comparison: (file name, text) of the step, sine and random
 /// scenarios, every set-point change a minimum-jerk move of 0.15 s (`transition_s`), the
@@ -751,139 +753,9 @@ pub fn format_table(rows: &[Row]) -> String {
     s
 }
 
-/// Result of [`nelder_mead`].
-#[derive(Debug, Clone, PartialEq)]
-pub struct NelderMeadResult {
-    /// Best point.
-    pub x: Vec<f64>,
-    /// Cost at `x`.
-    pub cost: f64,
-    /// Cost evaluations used.
-    pub evaluations: usize,
-}
-
-/// Nelder-Mead simplex minimisation (standard coefficients: reflection 1, expansion 2,
-/// contraction 1/2, shrink 1/2) from `x0` with initial simplex steps `step`, until the
-/// spread of the simplex costs is below `f_tol` or `max_evals` evaluations are used.
-/// Infinite costs (failed runs) are allowed: they are simply never best.
-///
-/// A hand-written 60-line routine rather than a crate: the tuner needs nothing beyond the
-/// textbook method, and it is tested on the Rosenbrock function.
-pub fn nelder_mead(
-    mut f: impl FnMut(&[f64]) -> f64,
-    x0: &[f64],
-    step: &[f64],
-    f_tol: f64,
-    max_evals: usize,
-) -> NelderMeadResult {
-    let n = x0.len();
-    let mut evals = 0;
-    let mut eval = |x: &[f64], evals: &mut usize| {
-        *evals += 1;
-        let c = f(x);
-        if c.is_nan() {
-            f64::INFINITY
-        } else {
-            c
-        }
-    };
-    let mut simplex: Vec<(Vec<f64>, f64)> = Vec::with_capacity(n + 1);
-    let c0 = eval(x0, &mut evals);
-    simplex.push((x0.to_vec(), c0));
-    for i in 0..n {
-        let mut x = x0.to_vec();
-        x[i] += step[i];
-        let c = eval(&x, &mut evals);
-        simplex.push((x, c));
-    }
-    let lerp = |a: &[f64], b: &[f64], t: f64| -> Vec<f64> {
-        a.iter().zip(b).map(|(a, b)| a + t * (b - a)).collect()
-    };
-    while evals < max_evals {
-        simplex.sort_by(|a, b| a.1.total_cmp(&b.1));
-        let (best, worst) = (simplex[0].1, simplex[n].1);
-        if worst.is_finite() && (worst - best).abs() <= f_tol {
-            break;
-        }
-        // Centroid of all but the worst.
-        let mut centroid = vec![0.0; n];
-        for (x, _) in &simplex[..n] {
-            for (c, xi) in centroid.iter_mut().zip(x) {
-                *c += xi / n as f64;
-            }
-        }
-        let xw = simplex[n].0.clone();
-        let xr = lerp(&centroid, &xw, -1.0);
-        let cr = eval(&xr, &mut evals);
-        if cr < simplex[0].1 {
-            let xe = lerp(&centroid, &xw, -2.0);
-            let ce = eval(&xe, &mut evals);
-            simplex[n] = if ce < cr { (xe, ce) } else { (xr, cr) };
-        } else if cr < simplex[n - 1].1 {
-            simplex[n] = (xr, cr);
-        } else {
-            // Contraction: outside if the reflection improved on the worst, else inside.
-            let (xc, cc) = if cr < simplex[n].1 {
-                let xc = lerp(&centroid, &xw, -0.5);
-                let cc = eval(&xc, &mut evals);
-                (xc, cc)
-            } else {
-                let xc = lerp(&centroid, &xw, 0.5);
-                let cc = eval(&xc, &mut evals);
-                (xc, cc)
-            };
-            if cc < simplex[n].1.min(cr) {
-                simplex[n] = (xc, cc);
-            } else {
-                let x0 = simplex[0].0.clone();
-                for v in simplex.iter_mut().skip(1) {
-                    let x = lerp(&x0, &v.0, 0.5);
-                    let c = eval(&x, &mut evals);
-                    *v = (x, c);
-                }
-            }
-        }
-    }
-    simplex.sort_by(|a, b| a.1.total_cmp(&b.1));
-    let (x, cost) = simplex.swap_remove(0);
-    NelderMeadResult {
-        x,
-        cost,
-        evaluations: evals,
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn nelder_mead_finds_the_rosenbrock_minimum() {
-        let rosen = |x: &[f64]| (1.0 - x[0]).powi(2) + 100.0 * (x[1] - x[0] * x[0]).powi(2);
-        let r = nelder_mead(rosen, &[-1.2, 1.0], &[0.5, 0.5], 1e-14, 2000);
-        assert!(
-            (r.x[0] - 1.0).abs() < 1e-3 && (r.x[1] - 1.0).abs() < 1e-3,
-            "{r:?}"
-        );
-        assert!(r.evaluations <= 2000);
-    }
-
-    #[test]
-    fn nelder_mead_avoids_infinite_regions() {
-        // Quadratic bowl at (2, -1) with a forbidden half-plane x0 < 0 (a failed run).
-        let f = |x: &[f64]| {
-            if x[0] < 0.0 {
-                f64::INFINITY
-            } else {
-                (x[0] - 2.0).powi(2) + (x[1] + 1.0).powi(2)
-            }
-        };
-        let r = nelder_mead(f, &[0.1, 0.0], &[-1.0, 1.0], 1e-12, 500);
-        assert!(
-            (r.x[0] - 2.0).abs() < 1e-3 && (r.x[1] + 1.0).abs() < 1e-3,
-            "{r:?}"
-        );
-    }
 
     const GOOD: &str = "[pd]
 kp_pa_per_rad = 500000.0

@@ -12,6 +12,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 
 use super::force::{self, ForceSweep, Tondu};
+use super::force_maps;
 use super::plant::{identify_plant_files, PlantFitOptions};
 use super::torque::{self, TorqueSource, TorqueSweep};
 use super::{write_atomic, MeasurementNoise};
@@ -33,6 +34,11 @@ pub enum SweepWhat {
     /// with --hysteresis-gap-n), as on the force-law paper's test bench.
     #[command(after_help = "Example:\n  host-sim sweep force --plant ../shared/plant/reference-1dof.toml --out force.csv")]
     Force(SweepForceArgs),
+    /// A measured-style isometric force map (columns p_kpa, stretch, f_n[, state]) from an
+    /// independent thick-walled Chou-Hannaford muscle drawn from the seed: 5..9 lengths down to
+    /// L/L0 ~ 0.74, 10..15 pressures up to 600..700 kPa, 60..130 points, exactly 0 N where the
+    /// muscle is slack, noisy readings; --branches adds the falling branch with braid friction.
+    ForceMap(SweepForceMapArgs),
     /// A torque-identification recording (writes RECORDING.md columns t_s, u_in1..u_ex2,
     /// angle_deg, p1_kpa, p2_kpa, f1_n, f2_n) as in the torque-model paper: the joint is driven
     /// quasi-statically and at constant speeds through +-amplitude at each activation dp
@@ -80,6 +86,19 @@ pub struct SweepForceArgs {
     /// Run even when the estimated memory or time exceeds the limit (docs/reliability.md).
     #[arg(long)]
     pub allow_large: bool,
+}
+
+#[derive(Args, Debug)]
+pub struct SweepForceMapArgs {
+    /// Output CSV.
+    #[arg(long, value_name = "F.csv")]
+    pub out: PathBuf,
+    /// Seed: the muscle, the grid and the noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Sweep every length up and down (rising and falling branches, braid friction).
+    #[arg(long)]
+    pub branches: bool,
 }
 
 #[derive(Args, Debug)]
@@ -225,6 +244,7 @@ pub struct IdentifyPlantArgs {
 pub fn run_sweep(a: &SweepArgs) -> Result<String> {
     match &a.what {
         SweepWhat::Force(a) => sweep_force(a),
+        SweepWhat::ForceMap(a) => sweep_force_map(a),
         SweepWhat::Torque(a) => sweep_torque(a),
     }
 }
@@ -313,6 +333,60 @@ fn sweep_force(a: &SweepForceArgs) -> Result<String> {
         } else {
             ""
         }
+    ))
+}
+
+fn sweep_force_map(a: &SweepForceMapArgs) -> Result<String> {
+    let map = force_maps::force_map(&force_maps::MapOptions {
+        seed: a.seed,
+        branches: a.branches,
+    });
+    let m = &map.muscle;
+    let mut meta = BTreeMap::new();
+    meta.insert(
+        "source".to_string(),
+        format!(
+            "host-sim {} sweep force-map --seed {}{} (thick-walled Chou-Hannaford muscle, slack threshold)",
+            env!("CARGO_PKG_VERSION"),
+            a.seed,
+            if a.branches { " --branches" } else { "" }
+        ),
+    );
+    meta.insert(
+        "truth".to_string(),
+        format!(
+            "r0 {:.4} mm, alpha0 {:.3} deg, k {:.4}, wall {:.4} mm, p_th {:.1} kPa + {:.1} kPa (1 - L/L0)^2, swell {:.3e} /Pa, friction {:.4}",
+            m.r0_m * 1e3,
+            m.alpha0_rad.to_degrees(),
+            m.end_factor,
+            m.wall_m * 1e3,
+            m.p_threshold_rest_pa / 1e3,
+            m.p_threshold_growth_pa / 1e3,
+            m.swell_per_pa,
+            m.friction
+        ),
+    );
+    meta.insert(
+        "noise".to_string(),
+        format!(
+            "force sd {:.3} N (0.5 N steps), pressure sd {:.3} kPa",
+            map.force_noise_n,
+            map.pressure_noise_pa / 1e3
+        ),
+    );
+    force::write_force_csv(&a.out, &map.samples, &meta)?;
+    let slack = map.samples.iter().filter(|s| s.force_n == 0.0).count();
+    Ok(format!(
+        "{}: {} samples ({} lengths L/L0 {:.3}..{:.3} x {} pressures 0..{:.0} kPa{}), {} slack (0 N)\n",
+        a.out.display(),
+        map.samples.len(),
+        map.stretches.len(),
+        map.stretches[0],
+        map.stretches[map.stretches.len() - 1],
+        map.pressures_pa.len(),
+        map.pressures_pa[map.pressures_pa.len() - 1] / 1e3,
+        if a.branches { ", both branches" } else { "" },
+        slack
     ))
 }
 

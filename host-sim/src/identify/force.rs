@@ -207,7 +207,35 @@ pub fn error_stats(samples: &[ForceSample], model: impl Fn(f64, f64) -> f64) -> 
 }
 
 // ---------------------------------------------------------------------------------------
-// Eq. 6: variable projection over c7, then Levenberg-Marquardt.
+// Eq. 6: the law the firmware evaluates, F = max(eq. 6, 0), fitted by variable projection over
+// c7 from many starts, each polished by Levenberg-Marquardt.
+//
+// Objective: a sample with a positive force counts with (eq. 6 - F)^2 (the firmware's error
+// there is never larger); a slack sample (F <= 0: the muscle did not pull) counts only where
+// the law would pull, with (max(eq. 6, 0) - F)^2. A law that is negative over the slack
+// region is clamped to 0 N by the firmware and so matches it exactly.
+
+/// True for a slack reading (the muscle did not pull).
+fn is_slack(s: &ForceSample) -> bool {
+    !(s.force_n > 0.0)
+}
+
+/// The residual of one sample under the objective above.
+fn eq6_residual(f: f64, s: &ForceSample) -> f64 {
+    if is_slack(s) {
+        f.max(0.0) - s.force_n
+    } else {
+        f - s.force_n
+    }
+}
+
+/// Sum of squared residuals of `eq` under the firmware-law objective.
+pub fn eq6_cost(eq: &Eq6, samples: &[ForceSample]) -> f64 {
+    samples
+        .iter()
+        .map(|s| eq6_residual(eq.eval(s.p_gauge_pa, s.stretch), s).powi(2))
+        .sum()
+}
 
 /// Basis functions of eq. 6 for a fixed c7 (c8 = 1): the model is
 /// `sum_j theta_j * phi_j(P, e)` with theta = (c1..c6, c9, c10).
@@ -225,19 +253,28 @@ fn eq6_basis(c7: f64, p_mpa: f64, e: f64) -> [f64; 8] {
     ]
 }
 
-/// Linear least squares of eq. 6 for a fixed c7: returns (constants, sum of squared residuals).
-fn eq6_linear(samples: &[ForceSample], c7: f64) -> Option<(Eq6, f64)> {
-    let m = samples.len();
+/// Linear least squares of eq. 6 for a fixed c7 over the samples marked active.
+fn eq6_solve(samples: &[ForceSample], active: &[bool], c7: f64) -> Option<Eq6> {
+    let rows: Vec<&ForceSample> = samples
+        .iter()
+        .zip(active)
+        .filter(|(_, a)| **a)
+        .map(|(s, _)| s)
+        .collect();
+    if rows.len() < 8 {
+        return None;
+    }
+    let m = rows.len();
     let mut a = DMatrix::<f64>::zeros(m, 8);
     let mut y = DVector::<f64>::zeros(m);
-    // Column scaling keeps the SVD well conditioned (the basis spans many decades).
-    for (i, s) in samples.iter().enumerate() {
+    for (i, s) in rows.iter().enumerate() {
         let b = eq6_basis(c7, s.p_gauge_pa * 1e-6, s.stretch);
         for (j, v) in b.iter().enumerate() {
             a[(i, j)] = *v;
         }
         y[i] = s.force_n;
     }
+    // Column scaling keeps the SVD well conditioned (the basis spans many decades).
     let mut scale = [1.0; 8];
     for (j, sc) in scale.iter_mut().enumerate() {
         let norm = a.column(j).norm();
@@ -246,15 +283,41 @@ fn eq6_linear(samples: &[ForceSample], c7: f64) -> Option<(Eq6, f64)> {
             a.column_mut(j).scale_mut(1.0 / norm);
         }
     }
-    let svd = a.clone().svd(true, true);
+    let svd = a.svd(true, true);
     let theta = svd.solve(&y, 1e-12).ok()?;
-    let r = &a * &theta - &y;
     let t: Vec<f64> = theta.iter().zip(scale.iter()).map(|(t, s)| t / s).collect();
     let eq = Eq6 {
         c: [t[0], t[1], t[2], t[3], t[4], t[5], c7, 1.0, t[6], t[7]],
     };
-    let ssr = r.norm_squared();
-    ssr.is_finite().then_some((eq, ssr))
+    eq.c.iter().all(|v| v.is_finite()).then_some(eq)
+}
+
+/// Variable projection at a fixed c7: the positive samples, plus the slack samples where the
+/// law pulls (an active set that grows until no slack sample is violated, or 8 rounds).
+/// Returns (constants, firmware-law cost).
+fn eq6_linear(samples: &[ForceSample], c7: f64) -> Option<(Eq6, f64)> {
+    let mut active: Vec<bool> = samples.iter().map(|s| !is_slack(s)).collect();
+    let mut best: Option<(Eq6, f64)> = None;
+    for _ in 0..8 {
+        let Some(eq) = eq6_solve(samples, &active, c7) else {
+            break;
+        };
+        let cost = eq6_cost(&eq, samples);
+        if cost.is_finite() && best.as_ref().is_none_or(|b| cost < b.1) {
+            best = Some((eq, cost));
+        }
+        let mut grew = false;
+        for (s, a) in samples.iter().zip(active.iter_mut()) {
+            if !*a && eq.eval(s.p_gauge_pa, s.stretch) > 0.0 {
+                *a = true;
+                grew = true;
+            }
+        }
+        if !grew {
+            break;
+        }
+    }
+    best
 }
 
 /// Lowest c7 for which the denominator `c7 P + e` stays positive over the data (with margin).
@@ -274,16 +337,30 @@ fn c7_lower_bound(samples: &[ForceSample]) -> f64 {
     }
 }
 
+/// Levenberg-Marquardt problem of all nine free constants; c7 = lb + exp(u) keeps the
+/// denominator positive over the data.
 struct Eq6Problem<'a> {
     samples: &'a [ForceSample],
-    /// (c1..c7, c9, c10); c8 = 1.
+    c7_lb: f64,
+    /// (c1..c6, u, c9, c10).
     x: DVector<f64>,
 }
 
 impl Eq6Problem<'_> {
-    fn eq6(x: &DVector<f64>) -> Eq6 {
+    fn eq6(&self, x: &DVector<f64>) -> Eq6 {
         Eq6 {
-            c: [x[0], x[1], x[2], x[3], x[4], x[5], x[6], 1.0, x[7], x[8]],
+            c: [
+                x[0],
+                x[1],
+                x[2],
+                x[3],
+                x[4],
+                x[5],
+                self.c7_lb + x[6].exp(),
+                1.0,
+                x[7],
+                x[8],
+            ],
         }
     }
 }
@@ -302,29 +379,33 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Eq6Problem<'_> {
     }
 
     fn residuals(&self) -> Option<DVector<f64>> {
-        let m = Self::eq6(&self.x);
+        let m = self.eq6(&self.x);
         let r = DVector::from_iterator(
             self.samples.len(),
             self.samples
                 .iter()
-                .map(|s| m.eval(s.p_gauge_pa, s.stretch) - s.force_n),
+                .map(|s| eq6_residual(m.eval(s.p_gauge_pa, s.stretch), s)),
         );
         r.iter().all(|v| v.is_finite()).then_some(r)
     }
 
     fn jacobian(&self) -> Option<DMatrix<f64>> {
-        let x = &self.x;
+        let m = self.eq6(&self.x);
+        let c = &m.c;
         let mut j = DMatrix::<f64>::zeros(self.samples.len(), 9);
         for (i, s) in self.samples.iter().enumerate() {
             let p = s.p_gauge_pa * 1e-6;
             let e = s.stretch;
-            let d = x[6] * p + e;
-            let num = x[0] * p * p + x[1] * e * e + x[2] * p + x[3] * e + x[4] * p / e + x[5];
+            if is_slack(s) && m.eval(s.p_gauge_pa, e) <= 0.0 {
+                continue; // clamped: no gradient
+            }
+            let d = c[6] * p + e;
+            let num = c[0] * p * p + c[1] * e * e + c[2] * p + c[3] * e + c[4] * p / e + c[5];
             let basis = [p * p, e * e, p, e, p / e, 1.0];
             for (k, b) in basis.iter().enumerate() {
                 j[(i, k)] = b / d;
             }
-            j[(i, 6)] = -num * p / (d * d);
+            j[(i, 6)] = -num * p / (d * d) * (c[6] - self.c7_lb);
             j[(i, 7)] = 1.0;
             j[(i, 8)] = (e - 0.7).exp();
         }
@@ -332,176 +413,425 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Eq6Problem<'_> {
     }
 }
 
-/// Fits eq. 6 (c8 = 1) to the samples. Deterministic.
-pub fn fit_eq6(samples: &[ForceSample]) -> Result<Eq6, IdentError> {
+/// LM polish of a start; returns the better of the start and the polished law.
+fn eq6_polish(samples: &[ForceSample], c7_lb: f64, start: Eq6, cost0: f64) -> (Eq6, f64) {
+    let c = start.c;
+    let u = (c[6] - c7_lb).max(1e-12).ln();
+    let x0 = DVector::from_vec(vec![c[0], c[1], c[2], c[3], c[4], c[5], u, c[8], c[9]]);
+    let problem = Eq6Problem {
+        samples,
+        c7_lb,
+        x: x0,
+    };
+    let (problem, _report) = LevenbergMarquardt::new()
+        .with_patience(100)
+        .minimize(problem);
+    let polished = problem.eq6(&problem.x);
+    let cost1 = eq6_cost(&polished, samples);
+    if cost1.is_finite() && cost1 < cost0 && polished.c.iter().all(|v| v.is_finite()) {
+        (polished, cost1)
+    } else {
+        (start, cost0)
+    }
+}
+
+/// Result of the multi-start fit of eq. 6.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Eq6Fit {
+    /// The best law found.
+    pub eq6: Eq6,
+    /// Its cost (sum of squared residuals of the firmware law) [N^2].
+    pub cost_n2: f64,
+    /// Number of starts run.
+    pub starts: usize,
+    /// Number of starts whose polished cost is within 0.01 % of the best.
+    pub starts_at_best: usize,
+}
+
+/// Number of c7 starts of a full fit.
+pub const EQ6_STARTS: usize = 24;
+
+/// Starting values of c7: log-spaced above the lower bound, plus the hints (when feasible).
+fn c7_starts(lb: f64, n: usize, hints: &[f64]) -> Vec<f64> {
+    let mut v: Vec<f64> = (0..n)
+        .map(|k| {
+            let t = if n > 1 {
+                k as f64 / (n - 1) as f64
+            } else {
+                0.5
+            };
+            lb + 10f64.powf(-3.0 + 5.0 * t)
+        })
+        .collect();
+    v.extend(hints.iter().copied().filter(|&h| h.is_finite() && h > lb));
+    v
+}
+
+/// Checks that the samples can support eq. 6 at all.
+fn eq6_data_check(samples: &[ForceSample]) -> Result<(), IdentError> {
     if samples.len() < 20 {
         return Err(IdentError::Data(format!(
             "eq. 6 has 9 free constants: need at least 20 samples, got {}",
             samples.len()
         )));
     }
-    let lb = c7_lower_bound(samples);
-    // Coarse scan of c7 on a grid that is dense near the bound and spans large values too.
-    let mut candidates: Vec<f64> = Vec::new();
-    for i in 0..60 {
-        let u = i as f64 / 59.0;
-        candidates.push(lb + (1e-3 + 50.0 * u * u * u));
+    let positive = samples.iter().filter(|s| !is_slack(s)).count();
+    if positive < 10 {
+        return Err(IdentError::Data(format!(
+            "eq. 6 has 9 free constants: need at least 10 samples with a positive force, got {positive}"
+        )));
     }
-    let mut best: Option<(f64, Eq6, f64)> = None;
-    for &c7 in &candidates {
-        if let Some((eq, ssr)) = eq6_linear(samples, c7) {
-            if best.as_ref().is_none_or(|b| ssr < b.2) {
-                best = Some((c7, eq, ssr));
+    Ok(())
+}
+
+/// Fits F = max(eq. 6, 0) (c8 = 1) from `n_starts` log-spaced c7 starts plus `c7_hints`.
+/// Deterministic.
+pub fn fit_eq6_multistart(
+    samples: &[ForceSample],
+    n_starts: usize,
+    c7_hints: &[f64],
+) -> Result<Eq6Fit, IdentError> {
+    eq6_data_check(samples)?;
+    let lb = c7_lower_bound(samples);
+    let mut results: Vec<(Eq6, f64)> = Vec::new();
+    for c7 in c7_starts(lb, n_starts, c7_hints) {
+        if let Some((start, cost0)) = eq6_linear(samples, c7) {
+            results.push(eq6_polish(samples, lb, start, cost0));
+        }
+    }
+    let best = results
+        .iter()
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .cloned()
+        .ok_or_else(|| IdentError::Data("eq. 6: no start gave a solvable fit".into()))?;
+    let tol = best.1 * 1e-4 + 1e-9;
+    Ok(Eq6Fit {
+        eq6: best.0,
+        cost_n2: best.1,
+        starts: results.len(),
+        starts_at_best: results.iter().filter(|r| r.1 <= best.1 + tol).count(),
+    })
+}
+
+/// Fits F = max(eq. 6, 0) (c8 = 1) to the samples ([`EQ6_STARTS`] starts). Deterministic.
+pub fn fit_eq6(samples: &[ForceSample]) -> Result<Eq6, IdentError> {
+    fit_eq6_multistart(samples, EQ6_STARTS, &[]).map(|f| f.eq6)
+}
+
+// ---------------------------------------------------------------------------------------
+// Held-out error: leave-one-length-out and leave-one-pressure-out.
+
+/// Error of eq. 6 on data it was not fitted to.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HeldOut {
+    /// What was held out ("length", "pressure level").
+    pub what: &'static str,
+    /// Distinct groups (lengths or pressure levels) in the data.
+    pub groups: usize,
+    /// Folds (groups are assigned to folds in turn when there are more than 10).
+    pub folds: usize,
+    /// Mean absolute error of the held-out predictions (firmware law) [N].
+    pub mae_n: f64,
+    /// The same as a percentage of the data's force range.
+    pub mae_pct_of_range: f64,
+}
+
+/// Group index of each sample by length L/L0 (to 1e-4).
+pub fn length_groups(samples: &[ForceSample]) -> (Vec<usize>, usize) {
+    let mut keys: Vec<i64> = samples
+        .iter()
+        .map(|s| (s.stretch * 1e4).round() as i64)
+        .collect();
+    let mut uniq = keys.clone();
+    uniq.sort_unstable();
+    uniq.dedup();
+    for k in keys.iter_mut() {
+        *k = uniq.binary_search(k).unwrap() as i64;
+    }
+    (keys.into_iter().map(|k| k as usize).collect(), uniq.len())
+}
+
+/// Group index of each sample by pressure level: sorted pressures split where the gap
+/// exceeds 30 % of the largest gap (sensor noise spreads each nominal level).
+pub fn pressure_groups(samples: &[ForceSample]) -> (Vec<usize>, usize) {
+    let mut idx: Vec<usize> = (0..samples.len()).collect();
+    idx.sort_by(|&a, &b| samples[a].p_gauge_pa.total_cmp(&samples[b].p_gauge_pa));
+    let gaps: Vec<f64> = idx
+        .windows(2)
+        .map(|w| samples[w[1]].p_gauge_pa - samples[w[0]].p_gauge_pa)
+        .collect();
+    let max_gap = gaps.iter().cloned().fold(0.0, f64::max);
+    let mut out = vec![0usize; samples.len()];
+    let mut g = 0;
+    for (k, &i) in idx.iter().enumerate() {
+        if k > 0 && gaps[k - 1] > 0.3 * max_gap && max_gap > 0.0 {
+            g += 1;
+        }
+        out[i] = g;
+    }
+    (out, g + 1)
+}
+
+/// Fits eq. 6 with each fold of groups left out and scores it on the left-out samples.
+/// None when there are fewer than 3 groups.
+pub fn held_out_error(
+    samples: &[ForceSample],
+    what: &'static str,
+    (groups, n_groups): (Vec<usize>, usize),
+    c7_hint: f64,
+) -> Option<HeldOut> {
+    if n_groups < 3 {
+        return None;
+    }
+    let folds = n_groups.min(10);
+    let (fmin, fmax) = samples
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), s| {
+            (a.min(s.force_n), b.max(s.force_n))
+        });
+    let range = (fmax - fmin).max(f64::MIN_POSITIVE);
+    let mut sum = 0.0;
+    let mut n = 0usize;
+    for fold in 0..folds {
+        let train: Vec<ForceSample> = samples
+            .iter()
+            .zip(&groups)
+            .filter(|(_, g)| **g % folds != fold)
+            .map(|(s, _)| *s)
+            .collect();
+        let Ok(fit) = fit_eq6_multistart(&train, 6, &[c7_hint]) else {
+            continue;
+        };
+        for (s, g) in samples.iter().zip(&groups) {
+            if *g % folds == fold {
+                sum += (fit.eq6.force_n(s.p_gauge_pa, s.stretch) - s.force_n).abs();
+                n += 1;
             }
         }
     }
-    let (mut c7, _, _) = best
-        .clone()
-        .ok_or_else(|| IdentError::Data("eq. 6: no c7 gave a solvable fit".into()))?;
-    // Golden-section refinement around the best grid point.
-    let idx = candidates.iter().position(|&c| c == c7).unwrap_or(0);
-    let mut lo = candidates[idx.saturating_sub(1)];
-    let mut hi = candidates[(idx + 1).min(candidates.len() - 1)];
-    let gr = 0.5 * (5f64.sqrt() - 1.0);
-    let f = |c: f64| {
-        eq6_linear(samples, c)
-            .map(|(_, s)| s)
-            .unwrap_or(f64::INFINITY)
-    };
-    for _ in 0..60 {
-        let a = hi - gr * (hi - lo);
-        let b = lo + gr * (hi - lo);
-        if f(a) < f(b) {
-            hi = b;
-        } else {
-            lo = a;
-        }
-    }
-    let mid = 0.5 * (lo + hi);
-    if f(mid) < f(c7) {
-        c7 = mid;
-    }
-    let (start, ssr0) = eq6_linear(samples, c7)
-        .ok_or_else(|| IdentError::Data("eq. 6: linear solve failed".into()))?;
-    // Levenberg-Marquardt polish of all nine constants.
-    let c = start.c;
-    let x0 = DVector::from_vec(vec![c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[8], c[9]]);
-    let problem = Eq6Problem { samples, x: x0 };
-    let (problem, _report) = LevenbergMarquardt::new()
-        .with_patience(200)
-        .minimize(problem);
-    let polished = Eq6Problem::eq6(&problem.x);
-    let ssr1: f64 = samples
-        .iter()
-        .map(|s| (polished.eval(s.p_gauge_pa, s.stretch) - s.force_n).powi(2))
-        .sum();
-    let den_ok = samples
-        .iter()
-        .all(|s| polished.c[6] * s.p_gauge_pa * 1e-6 + s.stretch > 0.0);
-    Ok(if ssr1.is_finite() && ssr1 <= ssr0 && den_ok {
-        polished
-    } else {
-        start
+    (n > 0).then(|| HeldOut {
+        what,
+        groups: n_groups,
+        folds,
+        mae_n: sum / n as f64,
+        mae_pct_of_range: 100.0 * sum / n as f64 / range,
     })
 }
 
 // ---------------------------------------------------------------------------------------
-// Tondu baseline.
+// Physical baselines, fitted with bounds.
 
-struct TonduProblem<'a> {
-    samples: &'a [ForceSample],
-    /// (r0 [mm], alpha0 [deg], k): scaled so the parameters are of order 1..30.
-    x: DVector<f64>,
+/// Chou-Hannaford-type law with Tondu's end effect and a slack threshold pressure:
+/// `F = max(0, pi r0^2 (P - p_th) (a (1 - k chi)^2 - b))`, a, b, chi as in [`Tondu`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ChouHannaford {
+    /// Braid radius at rest [m].
+    pub r0_m: f64,
+    /// Initial braid angle [rad].
+    pub alpha0_rad: f64,
+    /// End-effect factor k.
+    pub k: f64,
+    /// Gauge pressure below which the muscle is slack [Pa].
+    pub p_threshold_pa: f64,
 }
 
-impl TonduProblem<'_> {
-    fn model(x: &DVector<f64>) -> Tondu {
-        Tondu {
-            r0_m: x[0] * 1e-3,
-            alpha0_rad: x[1].to_radians(),
-            k: x[2],
+impl ChouHannaford {
+    /// Force [N] clamped at 0.
+    pub fn force_n(&self, p_gauge_pa: f64, stretch: f64) -> f64 {
+        if p_gauge_pa <= self.p_threshold_pa {
+            return 0.0;
         }
+        Tondu {
+            r0_m: self.r0_m,
+            alpha0_rad: self.alpha0_rad,
+            k: self.k,
+        }
+        .force_n(p_gauge_pa - self.p_threshold_pa, stretch)
     }
 }
 
-impl LeastSquaresProblem<f64, Dyn, Dyn> for TonduProblem<'_> {
+/// Least squares of a clamped physical model in bounded parameters: x = lo + (hi - lo) (1 +
+/// tanh z) / 2, Levenberg-Marquardt on z with a central-difference Jacobian.
+struct BoundedProblem<'a> {
+    samples: &'a [ForceSample],
+    lo: &'a [f64],
+    hi: &'a [f64],
+    model: &'a dyn Fn(&[f64], f64, f64) -> f64,
+    z: DVector<f64>,
+}
+
+impl BoundedProblem<'_> {
+    fn x_of(&self, z: &DVector<f64>) -> Vec<f64> {
+        z.iter()
+            .enumerate()
+            .map(|(i, z)| self.lo[i] + (self.hi[i] - self.lo[i]) * 0.5 * (1.0 + z.tanh()))
+            .collect()
+    }
+    fn z_of(lo: &[f64], hi: &[f64], x: &[f64]) -> DVector<f64> {
+        DVector::from_iterator(
+            x.len(),
+            x.iter().enumerate().map(|(i, x)| {
+                let t = (2.0 * (x - lo[i]) / (hi[i] - lo[i]) - 1.0).clamp(-0.999, 0.999);
+                t.atanh()
+            }),
+        )
+    }
+    fn residuals_at(&self, z: &DVector<f64>) -> DVector<f64> {
+        let x = self.x_of(z);
+        DVector::from_iterator(
+            self.samples.len(),
+            self.samples
+                .iter()
+                .map(|s| (self.model)(&x, s.p_gauge_pa, s.stretch).max(0.0) - s.force_n),
+        )
+    }
+}
+
+impl LeastSquaresProblem<f64, Dyn, Dyn> for BoundedProblem<'_> {
     type ResidualStorage = Owned<f64, Dyn>;
     type JacobianStorage = Owned<f64, Dyn, Dyn>;
     type ParameterStorage = Owned<f64, Dyn>;
 
-    fn set_params(&mut self, x: &DVector<f64>) {
-        self.x.copy_from(x);
+    fn set_params(&mut self, z: &DVector<f64>) {
+        self.z.copy_from(z);
     }
 
     fn params(&self) -> DVector<f64> {
-        self.x.clone()
+        self.z.clone()
     }
 
     fn residuals(&self) -> Option<DVector<f64>> {
-        let m = Self::model(&self.x);
-        let r = DVector::from_iterator(
-            self.samples.len(),
-            self.samples
-                .iter()
-                .map(|s| m.force_n(s.p_gauge_pa, s.stretch) - s.force_n),
-        );
+        let r = self.residuals_at(&self.z);
         r.iter().all(|v| v.is_finite()).then_some(r)
     }
 
     fn jacobian(&self) -> Option<DMatrix<f64>> {
-        // Central differences: three parameters, the clamp makes analytic forms piecewise anyway.
         let n = self.samples.len();
-        let mut j = DMatrix::<f64>::zeros(n, 3);
-        for k in 0..3 {
-            let h = 1e-6 * self.x[k].abs().max(1e-3);
-            let mut xp = self.x.clone();
-            let mut xm = self.x.clone();
-            xp[k] += h;
-            xm[k] -= h;
-            let mp = Self::model(&xp);
-            let mm = Self::model(&xm);
-            for (i, s) in self.samples.iter().enumerate() {
-                j[(i, k)] = (mp.force_n(s.p_gauge_pa, s.stretch)
-                    - mm.force_n(s.p_gauge_pa, s.stretch))
-                    / (2.0 * h);
-            }
+        let mut j = DMatrix::<f64>::zeros(n, self.z.len());
+        for k in 0..self.z.len() {
+            let h = 1e-6;
+            let mut zp = self.z.clone();
+            let mut zm = self.z.clone();
+            zp[k] += h;
+            zm[k] -= h;
+            let d = (self.residuals_at(&zp) - self.residuals_at(&zm)) / (2.0 * h);
+            j.set_column(k, &d);
         }
         j.iter().all(|v| v.is_finite()).then_some(j)
     }
 }
 
-/// Fits the Tondu model (r0, alpha0, k) by Levenberg-Marquardt from a few starting points.
+/// Fits a bounded clamped model from every start; returns (best parameters, cost).
+fn fit_bounded(
+    samples: &[ForceSample],
+    lo: &[f64],
+    hi: &[f64],
+    starts: &[Vec<f64>],
+    model: &dyn Fn(&[f64], f64, f64) -> f64,
+) -> Option<(Vec<f64>, f64)> {
+    let mut best: Option<(Vec<f64>, f64)> = None;
+    for x0 in starts {
+        let problem = BoundedProblem {
+            samples,
+            lo,
+            hi,
+            model,
+            z: BoundedProblem::z_of(lo, hi, x0),
+        };
+        let (problem, _) = LevenbergMarquardt::new()
+            .with_patience(100)
+            .minimize(problem);
+        let cost = problem.residuals_at(&problem.z).norm_squared();
+        if cost.is_finite() && best.as_ref().is_none_or(|b| cost < b.1) {
+            best = Some((problem.x_of(&problem.z), cost));
+        }
+    }
+    best
+}
+
+/// Bounds of the Tondu baseline: r0 [mm], alpha0 [deg], k.
+pub const TONDU_BOUNDS: ([f64; 3], [f64; 3]) = ([1.0, 10.0, 0.5], [40.0, 50.0, 3.0]);
+/// Bounds of the Chou-Hannaford baseline: r0 [mm], alpha0 [deg], k, p_th [kPa].
+pub const CHOU_HANNAFORD_BOUNDS: ([f64; 4], [f64; 4]) =
+    ([1.0, 10.0, 0.5, 0.0], [40.0, 50.0, 3.0, 300.0]);
+
+fn tondu_of_x(x: &[f64]) -> Tondu {
+    Tondu {
+        r0_m: x[0] * 1e-3,
+        alpha0_rad: x[1].to_radians(),
+        k: x[2],
+    }
+}
+
+fn ch_of_x(x: &[f64]) -> ChouHannaford {
+    ChouHannaford {
+        r0_m: x[0] * 1e-3,
+        alpha0_rad: x[1].to_radians(),
+        k: x[2],
+        p_threshold_pa: x[3] * 1e3,
+    }
+}
+
+fn physical_starts(with_threshold: bool) -> Vec<Vec<f64>> {
+    let mut v = Vec::new();
+    for r0 in [5.0, 10.0, 18.0] {
+        for a0 in [20.0, 28.0] {
+            for k in [1.1, 1.5] {
+                if with_threshold {
+                    for p in [10.0, 60.0] {
+                        v.push(vec![r0, a0, k, p]);
+                    }
+                } else {
+                    v.push(vec![r0, a0, k]);
+                }
+            }
+        }
+    }
+    v
+}
+
+/// Fits the Tondu model (r0, alpha0, k) within [`TONDU_BOUNDS`] from 12 starts.
 pub fn fit_tondu(samples: &[ForceSample]) -> Result<Tondu, IdentError> {
     if samples.len() < 3 {
         return Err(IdentError::Data(
             "Tondu model: need at least 3 samples".into(),
         ));
     }
-    let mut best: Option<(Tondu, f64)> = None;
-    for &(r0, a0, k) in &[
-        (10.0, 25.0, 1.3),
-        (8.0, 20.0, 1.0),
-        (12.0, 30.0, 1.6),
-        (10.0, 22.0, 1.8),
-    ] {
-        let problem = TonduProblem {
-            samples,
-            x: DVector::from_vec(vec![r0, a0, k]),
-        };
-        let (problem, _) = LevenbergMarquardt::new()
-            .with_patience(200)
-            .minimize(problem);
-        let m = TonduProblem::model(&problem.x);
-        let ssr: f64 = samples
-            .iter()
-            .map(|s| (m.force_n(s.p_gauge_pa, s.stretch) - s.force_n).powi(2))
-            .sum();
-        if ssr.is_finite() && best.as_ref().is_none_or(|b| ssr < b.1) {
-            best = Some((m, ssr));
-        }
+    let model = |x: &[f64], p: f64, e: f64| tondu_of_x(x).eval(p, e);
+    fit_bounded(
+        samples,
+        &TONDU_BOUNDS.0,
+        &TONDU_BOUNDS.1,
+        &physical_starts(false),
+        &model,
+    )
+    .map(|(x, _)| tondu_of_x(&x))
+    .ok_or_else(|| IdentError::Data("Tondu model: no start converged".into()))
+}
+
+/// Fits the Chou-Hannaford-type baseline within [`CHOU_HANNAFORD_BOUNDS`] from 24 starts.
+pub fn fit_chou_hannaford(samples: &[ForceSample]) -> Result<ChouHannaford, IdentError> {
+    if samples.len() < 4 {
+        return Err(IdentError::Data(
+            "Chou-Hannaford model: need at least 4 samples".into(),
+        ));
     }
-    best.map(|b| b.0)
-        .ok_or_else(|| IdentError::Data("Tondu model: no start converged".into()))
+    let model = |x: &[f64], p: f64, e: f64| ch_of_x(x).force_n(p, e);
+    fit_bounded(
+        samples,
+        &CHOU_HANNAFORD_BOUNDS.0,
+        &CHOU_HANNAFORD_BOUNDS.1,
+        &physical_starts(true),
+        &model,
+    )
+    .map(|(x, _)| ch_of_x(&x))
+    .ok_or_else(|| IdentError::Data("Chou-Hannaford model: no start converged".into()))
+}
+
+/// True when a fitted parameter sits on a bound (within 0.1 % of the range).
+fn at_bound(x: f64, lo: f64, hi: f64) -> bool {
+    let tol = 1e-3 * (hi - lo);
+    x <= lo + tol || x >= hi - tol
 }
 
 // ---------------------------------------------------------------------------------------
@@ -510,13 +840,17 @@ pub fn fit_tondu(samples: &[ForceSample]) -> Result<Tondu, IdentError> {
 /// Hysteresis between the two branches of the sweeps.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Hysteresis {
-    /// Mean |F_pressurising - F_depressurising| over the data's (P, e) points [N], from an
-    /// eq. 6 model fitted to each branch.
+    /// Mean |F_pressurising - F_depressurising| over the data's (P, e) points where either
+    /// branch pulls [N], from an eq. 6 law fitted to each branch.
     pub gap_mean_n: f64,
     /// Largest gap [N].
     pub gap_max_n: f64,
     /// Samples on each branch.
     pub samples: (usize, usize),
+    /// The law fitted to the pressurising branch, with its error on that branch.
+    pub rising: (Eq6Fit, ErrorStats),
+    /// The law fitted to the depressurising branch, with its error on that branch.
+    pub falling: (Eq6Fit, ErrorStats),
 }
 
 /// Everything `identify force` produces.
@@ -524,49 +858,153 @@ pub struct Hysteresis {
 pub struct ForceIdentification {
     /// Eq. 6 fitted to all samples (the mid-curve when both branches are present).
     pub eq6: Eq6,
+    /// The global search behind it.
+    pub eq6_fit: Eq6Fit,
     /// Its errors on the data.
     pub eq6_stats: ErrorStats,
+    /// Its error on lengths left out of the fit.
+    pub leave_length_out: Option<HeldOut>,
+    /// Its error on pressure levels left out of the fit.
+    pub leave_pressure_out: Option<HeldOut>,
     /// Tondu baseline.
     pub tondu: Tondu,
     /// Its errors on the data.
     pub tondu_stats: ErrorStats,
+    /// Chou-Hannaford-type baseline (end effect and slack threshold).
+    pub chou_hannaford: ChouHannaford,
+    /// Its errors on the data.
+    pub chou_hannaford_stats: ErrorStats,
     /// Branch gap, when the data has a branch column with both branches.
     pub hysteresis: Option<Hysteresis>,
     /// Domain of the data: (max gauge pressure [Pa], min stretch, max stretch).
     pub domain: (f64, f64, f64),
     /// Number of samples.
     pub n_samples: usize,
+    /// Number of slack samples (F <= 0).
+    pub n_slack: usize,
+    /// Warnings (over-fitting, baselines on their bounds).
+    pub warnings: Vec<String>,
 }
 
-/// Fits eq. 6 and the Tondu baseline to the samples.
+/// Refuses data eq. 6 cannot be identified from: too few samples, no positive force, a
+/// single length.
+fn check_map(samples: &[ForceSample]) -> Result<(), IdentError> {
+    if samples.len() < 20 {
+        return eq6_data_check(samples);
+    }
+    if !samples.iter().any(|s| s.force_n > 0.0) {
+        return Err(IdentError::Data(format!(
+            "no sample has a positive force (all {} readings <= 0 N): the muscle never pulled, \
+             nothing to identify",
+            samples.len()
+        )));
+    }
+    let (_, n_lengths) = length_groups(samples);
+    if n_lengths < 2 {
+        return Err(IdentError::Data(format!(
+            "all samples are at one length (L/L0 = {:.4}): eq. 6 needs at least 2 lengths \
+             (3 or more for the leave-one-length-out check)",
+            samples[0].stretch
+        )));
+    }
+    let (_, n_levels) = pressure_groups(samples);
+    if n_levels < 2 {
+        return Err(IdentError::Data(
+            "all samples are at one pressure: eq. 6 needs at least 2 pressure levels".into(),
+        ));
+    }
+    eq6_data_check(samples)
+}
+
+/// Fits eq. 6 (multi-start, firmware law), its held-out errors, the two physical baselines and
+/// (when the data has both branches) one law per branch.
 pub fn identify(samples: &[ForceSample]) -> Result<ForceIdentification, IdentError> {
-    let eq6 = fit_eq6(samples)?;
-    let tondu = fit_tondu(samples)?;
+    check_map(samples)?;
+    let eq6_fit = fit_eq6_multistart(samples, EQ6_STARTS, &[])?;
+    let eq6 = eq6_fit.eq6;
     let eq6_stats = error_stats(samples, |p, e| eq6.force_n(p, e));
+    let leave_length_out = held_out_error(samples, "length", length_groups(samples), eq6.c[6]);
+    let leave_pressure_out = held_out_error(
+        samples,
+        "pressure level",
+        pressure_groups(samples),
+        eq6.c[6],
+    );
+    let tondu = fit_tondu(samples)?;
     let tondu_stats = error_stats(samples, |p, e| tondu.force_n(p, e));
-    let up: Vec<ForceSample> = samples
-        .iter()
-        .copied()
-        .filter(|s| s.branch == Some(Branch::Pressurising))
-        .collect();
-    let down: Vec<ForceSample> = samples
-        .iter()
-        .copied()
-        .filter(|s| s.branch == Some(Branch::Depressurising))
-        .collect();
+    let chou_hannaford = fit_chou_hannaford(samples)?;
+    let chou_hannaford_stats = error_stats(samples, |p, e| chou_hannaford.force_n(p, e));
+    let mut warnings = Vec::new();
+    for h in [&leave_length_out, &leave_pressure_out].into_iter().flatten() {
+        if h.mae_n > 2.0 * eq6_stats.mae_n {
+            warnings.push(format!(
+                "eq. 6 errs {:.2}x more on held-out {}s ({:.3} % of range) than on the fitted \
+                 data ({:.3} %): likely over-fitted, use it only inside the measured grid",
+                h.mae_n / eq6_stats.mae_n.max(f64::MIN_POSITIVE),
+                h.what,
+                h.mae_pct_of_range,
+                eq6_stats.mae_pct_of_range
+            ));
+        }
+    }
+    let tx = [
+        tondu.r0_m * 1e3,
+        tondu.alpha0_rad.to_degrees(),
+        tondu.k,
+    ];
+    let cx = [
+        chou_hannaford.r0_m * 1e3,
+        chou_hannaford.alpha0_rad.to_degrees(),
+        chou_hannaford.k,
+        chou_hannaford.p_threshold_pa / 1e3,
+    ];
+    let names = ["r0 [mm]", "alpha0 [deg]", "k", "p_th [kPa]"];
+    for (i, x) in tx.iter().enumerate() {
+        if at_bound(*x, TONDU_BOUNDS.0[i], TONDU_BOUNDS.1[i]) {
+            warnings.push(format!(
+                "Tondu baseline: {} = {x:.6} is on its bound {}..{}",
+                names[i], TONDU_BOUNDS.0[i], TONDU_BOUNDS.1[i]
+            ));
+        }
+    }
+    for (i, x) in cx.iter().enumerate() {
+        if at_bound(*x, CHOU_HANNAFORD_BOUNDS.0[i], CHOU_HANNAFORD_BOUNDS.1[i]) && i != 3 {
+            warnings.push(format!(
+                "Chou-Hannaford baseline: {} = {x:.6} is on its bound {}..{}",
+                names[i], CHOU_HANNAFORD_BOUNDS.0[i], CHOU_HANNAFORD_BOUNDS.1[i]
+            ));
+        }
+    }
+    let branch = |b: Branch| -> Vec<ForceSample> {
+        samples
+            .iter()
+            .copied()
+            .filter(|s| s.branch == Some(b))
+            .collect()
+    };
+    let (up, down) = (branch(Branch::Pressurising), branch(Branch::Depressurising));
     let hysteresis = if up.len() >= 20 && down.len() >= 20 {
-        let mu = fit_eq6(&up)?;
-        let md = fit_eq6(&down)?;
+        let mu = fit_eq6_multistart(&up, EQ6_STARTS, &[eq6.c[6]])?;
+        let md = fit_eq6_multistart(&down, EQ6_STARTS, &[eq6.c[6]])?;
+        let su = error_stats(&up, |p, e| mu.eq6.force_n(p, e));
+        let sd = error_stats(&down, |p, e| md.eq6.force_n(p, e));
         let gaps: Vec<f64> = samples
             .iter()
-            .map(|s| {
-                (mu.force_n(s.p_gauge_pa, s.stretch) - md.force_n(s.p_gauge_pa, s.stretch)).abs()
+            .filter_map(|s| {
+                let (fu, fd) = (
+                    mu.eq6.force_n(s.p_gauge_pa, s.stretch),
+                    md.eq6.force_n(s.p_gauge_pa, s.stretch),
+                );
+                (fu > 0.0 || fd > 0.0).then_some((fu - fd).abs())
             })
             .collect();
+        let n = gaps.len().max(1) as f64;
         Some(Hysteresis {
-            gap_mean_n: gaps.iter().sum::<f64>() / gaps.len() as f64,
+            gap_mean_n: gaps.iter().sum::<f64>() / n,
             gap_max_n: gaps.iter().cloned().fold(0.0, f64::max),
             samples: (up.len(), down.len()),
+            rising: (mu, su),
+            falling: (md, sd),
         })
     } else {
         None
@@ -585,57 +1023,126 @@ pub fn identify(samples: &[ForceSample]) -> Result<ForceIdentification, IdentErr
         .fold(f64::NEG_INFINITY, f64::max);
     Ok(ForceIdentification {
         eq6,
+        eq6_fit,
         eq6_stats,
+        leave_length_out,
+        leave_pressure_out,
         tondu,
         tondu_stats,
+        chou_hannaford,
+        chou_hannaford_stats,
         hysteresis,
         domain: (pmax, emin, emax),
         n_samples: samples.len(),
+        n_slack: samples.iter().filter(|s| is_slack(s)).count(),
+        warnings,
     })
 }
 
+fn stats_line(name: &str, st: &ErrorStats) -> String {
+    format!(
+        "{name:<8} MAE {:8.3} N ({:6.3} % of range)  RMSE {:8.3} N  max {:8.3} N at {:.0} kPa, L/L0 {:.3}\n         largest mean error: {} ({:.3} N)",
+        st.mae_n, st.mae_pct_of_range, st.rmse_n, st.max_abs_n, st.max_at.0, st.max_at.1, st.worst_region, st.worst_region_mae_n
+    )
+}
+
 impl ForceIdentification {
-    /// Human-readable summary.
-    pub fn summary(&self) -> String {
-        let mut s = String::new();
-        let line = |s: &mut String, name: &str, st: &ErrorStats| {
-            let _ = writeln!(
-                s,
-                "{name:<8} MAE {:8.2} N ({:5.2} % of range)  RMSE {:8.2} N  max {:8.2} N at {:.0} kPa, L/L0 {:.3}\n         largest mean error: {} ({:.2} N)",
-                st.mae_n, st.mae_pct_of_range, st.rmse_n, st.max_abs_n, st.max_at.0, st.max_at.1, st.worst_region, st.worst_region_mae_n
-            );
-        };
-        let _ = writeln!(
-            s,
-            "{} samples, P up to {:.0} kPa, L/L0 {:.3}..{:.3}",
+    /// The report lines shared by the summary and the TOML header (without a comment prefix).
+    fn report_lines(&self) -> Vec<String> {
+        let mut v = Vec::new();
+        v.push(format!(
+            "{} samples ({} slack, F <= 0), P up to {:.1} kPa, L/L0 {:.4}..{:.4}",
             self.n_samples,
+            self.n_slack,
             self.domain.0 / 1e3,
             self.domain.1,
             self.domain.2
-        );
-        line(&mut s, "eq. 6", &self.eq6_stats);
-        line(&mut s, "Tondu", &self.tondu_stats);
-        let _ = writeln!(
-            s,
-            "Tondu fit: r0 = {:.3} mm, alpha0 = {:.2} deg, k = {:.4}",
+        ));
+        v.extend(stats_line("eq. 6", &self.eq6_stats).lines().map(String::from));
+        v.push(format!(
+            "global search: {} of {} c7 starts reached the best cost {:.6e} N^2 (firmware law max(eq. 6, 0))",
+            self.eq6_fit.starts_at_best, self.eq6_fit.starts, self.eq6_fit.cost_n2
+        ));
+        for h in [&self.leave_length_out, &self.leave_pressure_out]
+            .into_iter()
+            .flatten()
+        {
+            v.push(format!(
+                "held out, one {} at a time ({} {}s, {} folds): MAE {:.3} N ({:.3} % of range) vs {:.3} N fitted ({:.2}x)",
+                h.what,
+                h.groups,
+                h.what,
+                h.folds,
+                h.mae_n,
+                h.mae_pct_of_range,
+                self.eq6_stats.mae_n,
+                h.mae_n / self.eq6_stats.mae_n.max(f64::MIN_POSITIVE)
+            ));
+        }
+        if self.leave_length_out.is_none() {
+            v.push("held out, one length at a time: fewer than 3 lengths, not assessed".into());
+        }
+        let c = &self.eq6.c;
+        v.push(format!(
+            "constants: c1 = {:.9e}, c2 = {:.9e}, c3 = {:.9e}, c4 = {:.9e}, c5 = {:.9e},",
+            c[0], c[1], c[2], c[3], c[4]
+        ));
+        v.push(format!(
+            "           c6 = {:.9e}, c7 = {:.9e}, c8 = {:.9e}, c9 = {:.9e}, c10 = {:.9e}",
+            c[5], c[6], c[7], c[8], c[9]
+        ));
+        v.extend(stats_line("Tondu", &self.tondu_stats).lines().map(String::from));
+        v.push(format!(
+            "Tondu fit: r0 = {:.5} mm, alpha0 = {:.4} deg, k = {:.5} (bounds r0 {}..{} mm, alpha0 {}..{} deg, k {}..{})",
             self.tondu.r0_m * 1e3,
             self.tondu.alpha0_rad.to_degrees(),
-            self.tondu.k
+            self.tondu.k,
+            TONDU_BOUNDS.0[0],
+            TONDU_BOUNDS.1[0],
+            TONDU_BOUNDS.0[1],
+            TONDU_BOUNDS.1[1],
+            TONDU_BOUNDS.0[2],
+            TONDU_BOUNDS.1[2]
+        ));
+        v.extend(
+            stats_line("Chou-H.", &self.chou_hannaford_stats)
+                .lines()
+                .map(String::from),
         );
+        let ch = &self.chou_hannaford;
+        v.push(format!(
+            "Chou-Hannaford fit (end effect, slack threshold): r0 = {:.5} mm, alpha0 = {:.4} deg, k = {:.5}, p_th = {:.3} kPa",
+            ch.r0_m * 1e3,
+            ch.alpha0_rad.to_degrees(),
+            ch.k,
+            ch.p_threshold_pa / 1e3
+        ));
         match &self.hysteresis {
             Some(h) => {
-                let _ = writeln!(
-                    s,
-                    "hysteresis: branch gap mean {:.2} N, max {:.2} N ({} pressurising / {} depressurising samples)",
+                v.push(format!(
+                    "hysteresis: branch gap mean {:.3} N, max {:.3} N ({} pressurising / {} depressurising samples)",
                     h.gap_mean_n, h.gap_max_n, h.samples.0, h.samples.1
-                );
+                ));
+                for (name, (fit, st)) in [("rising", &h.rising), ("falling", &h.falling)] {
+                    v.push(format!(
+                        "  {name} branch alone: MAE {:.3} N ({:.3} % of range), {} of {} starts at the best cost",
+                        st.mae_n, st.mae_pct_of_range, fit.starts_at_best, fit.starts
+                    ));
+                }
             }
-            None => {
-                let _ = writeln!(
-                    s,
-                    "hysteresis: no branch column with both branches; not assessed"
-                );
-            }
+            None => v.push("hysteresis: no branch column with both branches; not assessed".into()),
+        }
+        for w in &self.warnings {
+            v.push(format!("warning: {w}"));
+        }
+        v
+    }
+
+    /// Human-readable summary.
+    pub fn summary(&self) -> String {
+        let mut s = String::new();
+        for l in self.report_lines() {
+            let _ = writeln!(s, "{l}");
         }
         s
     }
@@ -654,7 +1161,8 @@ impl ForceIdentification {
             "#   F  = muscle tension in N (clamped at 0: the muscle cannot push)",
             "# The scale of the rational part is fixed by c8 = 1. p_gauge_max_pa, stretch_min and",
             "# stretch_max are the domain of the data; outside it the firmware's law returns a",
-            "# flagged, clamped result.",
+            "# flagged, clamped result. Fitted as the firmware evaluates it, F = max(eq. 6, 0):",
+            "# slack readings (F <= 0) constrain the law only where it would pull.",
             "#",
         ] {
             let _ = writeln!(s, "{l}");
@@ -664,31 +1172,8 @@ impl ForceIdentification {
             "# Written by `host-sim identify force` from {source} ({} samples).",
             self.n_samples
         );
-        for (name, st) in [("eq. 6: ", &self.eq6_stats), ("Tondu: ", &self.tondu_stats)] {
-            let _ = writeln!(
-                s,
-                "# {name} MAE {:.3} N = {:.3} % of the force range, RMSE {:.3} N, max {:.3} N at {:.0} kPa, L/L0 {:.3}",
-                st.mae_n, st.mae_pct_of_range, st.rmse_n, st.max_abs_n, st.max_at.0, st.max_at.1
-            );
-            let _ = writeln!(
-                s,
-                "#          largest mean error: {} ({:.3} N)",
-                st.worst_region, st.worst_region_mae_n
-            );
-        }
-        let _ = writeln!(
-            s,
-            "# Tondu fit: r0 = {:.4} mm, alpha0 = {:.3} deg, k = {:.4}",
-            self.tondu.r0_m * 1e3,
-            self.tondu.alpha0_rad.to_degrees(),
-            self.tondu.k
-        );
-        if let Some(h) = &self.hysteresis {
-            let _ = writeln!(
-                s,
-                "# hysteresis: branch gap mean {:.3} N, max {:.3} N",
-                h.gap_mean_n, h.gap_max_n
-            );
+        for l in self.report_lines() {
+            let _ = writeln!(s, "# {l}");
         }
         let _ = writeln!(s, "\n[force_law]\nc = [");
         for c in self.eq6.c {
@@ -704,6 +1189,13 @@ impl ForceIdentification {
 
 // ---------------------------------------------------------------------------------------
 // Data files.
+
+/// Lowest gauge pressure a force map may hold [kPa] (sensor noise around 0 gauge).
+pub const P_KPA_MIN: f64 = -20.0;
+/// Highest gauge pressure a force map may hold [kPa] (no braided muscle runs above 1.5 MPa).
+pub const P_KPA_MAX: f64 = 1500.0;
+/// A force map's largest pressure must reach this [kPa]; below, the column is not in kPa.
+pub const P_KPA_MAX_AT_LEAST: f64 = 20.0;
 
 /// Reads isometric force data: columns `p_kpa` (gauge), `stretch` (L/L0), `f_n`, and
 /// optionally `state` (`pressurising|up|inflate` / `depressurising|down|deflate`) or
@@ -732,6 +1224,9 @@ pub fn read_force_csv(path: &Path) -> Result<Vec<ForceSample>, IdentError> {
     let istate = col("state");
     let idir = col("direction");
     let mut out = Vec::new();
+    // Largest pressure and its line: a map whose largest pressure is a few units is in MPa or
+    // bar, not kPa.
+    let mut max_p = (f64::NEG_INFINITY, 0usize);
     for rec in rdr.records() {
         let rec = rec.map_err(|e| {
             let line = e.position().map(|p| p.line() as usize).unwrap_or(0);
@@ -759,6 +1254,19 @@ pub fn read_force_csv(path: &Path) -> Result<Vec<ForceSample>, IdentError> {
         let f_n = num(iff, "f_n")?;
         if stretch <= 0.0 {
             return Err(IdentError::at(&file, line, "stretch", "L/L0 must be > 0"));
+        }
+        if !(P_KPA_MIN..=P_KPA_MAX).contains(&p_kpa) {
+            return Err(IdentError::at(
+                &file,
+                line,
+                "p_kpa",
+                &format!(
+                    "{p_kpa} is outside {P_KPA_MIN}..{P_KPA_MAX} kPa gauge (a value in Pa? the column is in kPa)"
+                ),
+            ));
+        }
+        if p_kpa > max_p.0 {
+            max_p = (p_kpa, line);
         }
         let branch = if let Some(i) = istate {
             let v = rec.get(i).unwrap_or("").to_ascii_lowercase();
@@ -804,6 +1312,18 @@ pub fn read_force_csv(path: &Path) -> Result<Vec<ForceSample>, IdentError> {
             header_line(&text) + 1,
             "row",
             "no data rows",
+        ));
+    }
+    if max_p.0 < P_KPA_MAX_AT_LEAST {
+        return Err(IdentError::at(
+            &file,
+            max_p.1,
+            "p_kpa",
+            &format!(
+                "the largest pressure is {} kPa: the column is in kPa gauge and a force map reaches \
+                 at least {P_KPA_MAX_AT_LEAST} kPa (values this small look like MPa or bar)",
+                max_p.0
+            ),
         ));
     }
     Ok(out)

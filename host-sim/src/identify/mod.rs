@@ -1,12 +1,15 @@
 //! Identification of model parameters from data (issue "Identification").
 //!
 //! - [`force`]: the static force law (seed 002 eq. 6, and the Tondu baseline) from isometric data.
+//! - [`force_maps`]: measured-style isometric force maps (slack, few points, noise) from an
+//!   independent muscle law, to test the force-law fit against.
 //! - [`torque`]: the simplified torque model (seed 003 eq. 11) from angle, pressures and tensions.
 //! - [`plant`]: output-error fit of plant-file parameters by replaying a recording.
 //! - [`cli`]: the `host-sim sweep` and `host-sim identify` commands.
 
 pub mod cli;
 pub mod force;
+pub mod force_maps;
 pub mod plant;
 pub mod torque;
 

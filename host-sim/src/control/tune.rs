@@ -1,54 +1,96 @@
-//! Tuning procedure of the closed-loop comparison (issue 5 proof): finds, by the same cost
-//! and the same kind of search, the model-based cascade's gains and the model-free PD and PID
-//! (angle -> activation dp, `pam_firmware::pid`) that minimise the suite MSE on the reference
-//! plant with the firmware in the loop, and writes all three to `config/control_tuned.toml`.
+//! `host-sim tune`: finds, by the same cost and the same kind of search, the model-based
+//! cascade's gains and the model-free PD and PID (angle -> activation dp, `pam_firmware::pid`)
+//! that minimise the suite MSE on a plant with the firmware in the loop, and writes all three
+//! to a gains file (`config/control_tuned.toml`, [`ControlTuning`]).
 //!
 //! ```sh
-//! cargo run --release -p host-sim --example tune_pid [-- --plant P.toml --out config/control_tuned.toml
-//!     --threads 2 --setpoint-cutoff-hz 150 --transition-s T --cascade-start KP,KI,KD[,TORQUE_KI]]
+//! cargo run --release -p host-sim -- tune --plant ../shared/plant/reference-1dof.toml \
+//!     --out config/control_tuned.toml [--threads 2] [--warm-start] [--transition-s T]
 //! ```
 //!
-//! Procedure (deterministic: the scenarios carry their noise seeds; ~35 s on 2 cores). Suite =
-//! `control::compare::SUITE` (`--transition-s T` changes the duration of its set-point moves,
-//! for `scripts/suite-transition-sweep.sh`). Suite MSE = the mean over its step, sine and
-//! random scenarios of the MSE of the angle over every tick (a latched fault = infinite).
-//! Cost ([`tuning_cost`]) = the worse of the suite MSE at the gains and with the feedback gains
-//! x [`GAIN_MARGIN`] (2 = 6 dB), infinite if the step overshoots by more than 10 %.
+//! Procedure (deterministic: the scenarios carry their noise seeds). Suite =
+//! `control::compare::SUITE` (`--transition-s T` changes the duration of its set-point moves).
+//! Suite MSE = the mean over its step, sine and random scenarios of the MSE of the angle over
+//! every tick (a latched fault = infinite). Cost ([`tuning_cost`]) = the worse of the suite MSE
+//! at the gains and with the feedback gains x [`GAIN_MARGIN`] (2 = 6 dB), infinite if the step
+//! overshoots by more than 10 %.
 //! 1. Fixed for every law: the set-point differentiators' cut-off (150 Hz); for the PD / PID
 //!    the cascade's actuation limits: p0 = 300 kPa, |dp| <= 280 kPa (the torque model's
 //!    `dp_max_pa`), PID integrator limit 150 kPa (half the usable dp range).
 //! 2. Cascade: from each start (kp, ki, kd, torque-loop ki) = (11, 8, 0.8, 30) (the gains
-//!    before the feed-forward existed), the firmware's default gains, the stored [cascade]
-//!    gains and any `--cascade-start`, each with the feed-forward's inertia term off and on
-//!    (J of the plant): Nelder-Mead on log10 of the four gains, restarted from its result
-//!    while a restart gains > 1 %, then the polish of step 5. The best result is stored.
+//!    before the feed-forward existed), the firmware's default gains, (with `--warm-start`)
+//!    the gains stored in `--out`, and any `--cascade-start`, each with the feed-forward's
+//!    inertia term off and on (J of the plant): Nelder-Mead on log10 of the four gains,
+//!    restarted from its result while a restart gains > 1 %, then the polish of step 5. The
+//!    firmware's step tests ([`STEP_REQUIREMENTS`]: nominal and 11 x inertia) are hard
+//!    constraints of the cascade: a candidate that fails one costs infinity.
 //! 3. PD / PID: coarse grid, every point two suite runs:
 //!    kp in {3e4, 1e5, 2e5, 5e5, 1e6, 2e6, 5e6} Pa/rad, kd in {1e3, 3e3, 1e4, 3e4, 1e5}
 //!    Pa s/rad, for the PID also ki in {3e4, 1e5, 1e6, 3e6, 1e7, 3e7, 1e8} Pa/(rad s), each
-//!    with the derivative on the measurement (w = 0) and on the error (w = 1).
-//! 4. PD / PID: Nelder-Mead ([`nelder_mead`]) on (log10 kp, log10 kd[, log10 ki]) from the
-//!    best grid point (its w) and from the gains stored in the output file (their w), initial
-//!    steps 0.2 decades, until the simplex costs agree within 0.2 % or 120 points; the better
-//!    result is restarted as in step 2.
+//!    with the derivative on the measurement (w = 0) and on the error (w = 1). No PD or PID of
+//!    this grid meets the step tests (the PD never settles into +-0.01 rad, the PID does not
+//!    survive the 11 x load), so for them the tests are reported, not imposed.
+//! 4. PD / PID: Nelder-Mead on (log10 kp, log10 kd[, log10 ki]) from the best grid point (its
+//!    w) and (with `--warm-start`) from the stored gains, initial steps 0.2 decades, until the
+//!    simplex costs agree within 0.2 % or 120 points; the better result is restarted as in
+//!    step 2.
 //! 5. Polish: pattern search, each gain x0.7 / x1.4 (PD / PID: and the derivative's set-point
 //!    weight flipped), any improvement accepted, until no move improves (the local-optimum
 //!    tests of `host-sim/tests/control_compare.rs` check exactly these moves).
-//! 6. The results are written with their suite MSE and their suite MSE at the margin (the
-//!    tests re-measure both) and a provenance header.
+//! 6. The results are written (atomically) with their suite MSE and their suite MSE at the
+//!    margin (the tests re-measure both) and a provenance header.
+
+// `!(x > 0.0)` is deliberate: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use host_sim::control::closed_loop::Scenario;
-use host_sim::control::compare::{
-    config_for, control_tuned_path, nelder_mead, reference_plant_path, suite_scenarios,
-    tuning_cost, CascadeToml, ControlTuning, DpPidToml, GAIN_MARGIN,
-};
-use host_sim::Plant;
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
 use pam_firmware::pid::DpPidGains;
 use pam_firmware::tick::{ControlLaw, ControllerConfig};
+
+use crate::control::closed_loop::Scenario;
+use crate::control::compare::{
+    config_for, meets_step_requirement, suite_scenarios, tuning_cost, CascadeToml, ControlTuning,
+    DpPidToml, GAIN_MARGIN, STEP_REQUIREMENTS,
+};
+use crate::optimize::{nelder_mead, nelder_mead_restarted, pattern_search};
+use crate::Plant;
+
+/// `host-sim tune`.
+#[derive(Args, Debug)]
+pub struct TuneArgs {
+    /// Plant file the gains are tuned on.
+    #[arg(long, value_name = "P.toml")]
+    pub plant: PathBuf,
+    /// Output gains file (the format of config/control_tuned.toml), written atomically.
+    #[arg(long, value_name = "control.toml")]
+    pub out: PathBuf,
+    /// Threads for the PD / PID grids and polish (1..=64).
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+    /// Also start every search from the gains stored in --out (when it loads); without it the
+    /// search is reproducible from scratch.
+    #[arg(long)]
+    pub warm_start: bool,
+    /// Cut-off of every law's set-point differentiators [Hz] (1..=500).
+    #[arg(long, default_value_t = 150.0)]
+    pub setpoint_cutoff_hz: f32,
+    /// Duration of the suite's set-point moves [s] (0..=2, 0 = jumps) [default: the suite's 0.15 s].
+    #[arg(long)]
+    pub transition_s: Option<f64>,
+    /// One more cascade start KP,KI,KD[,TORQUE_KI] (repeatable).
+    #[arg(long, value_name = "KP,KI,KD[,TORQUE_KI]")]
+    pub cascade_start: Vec<String>,
+    /// Do not impose the firmware's step tests on the cascade (report them only).
+    #[arg(long)]
+    pub no_step_constraints: bool,
+}
 
 const KP_GRID: [f64; 7] = [3e4, 1e5, 2e5, 5e5, 1e6, 2e6, 5e6];
 const KD_GRID: [f64; 5] = [1e3, 3e3, 1e4, 3e4, 1e5];
@@ -84,6 +126,12 @@ struct Ctx {
     runs: AtomicUsize,
     /// Cut-off of the set-point differentiators of every law tuned [Hz].
     cutoff_hz: f32,
+    /// Progress (a spinner on a terminal, hidden otherwise) and the log lines.
+    progress: ProgressBar,
+    /// The log of the search (printed above the spinner, returned in the report).
+    log: Mutex<Vec<String>>,
+    /// The cascade must meet the firmware's step tests ([`STEP_REQUIREMENTS`]).
+    cascade_step_constraints: bool,
 }
 
 impl Ctx {
@@ -94,8 +142,32 @@ impl Ctx {
 
     /// (tuning cost, nominal suite MSE, suite MSE at the gain margin) of `cfg`.
     fn cost_cfg(&self, cfg: ControllerConfig) -> (f64, f64, f64) {
-        self.runs.fetch_add(2, Ordering::Relaxed);
+        let n = self.runs.fetch_add(2, Ordering::Relaxed) + 2;
+        self.progress.set_position(n as u64);
         tuning_cost(&self.plant, &self.scenarios, cfg)
+    }
+
+    /// The cascade's cost: [`Ctx::cost_cfg`], infinite when a finite-cost candidate fails one
+    /// of the firmware's step tests (hard constraints).
+    fn cascade_cost(&self, cfg: ControllerConfig) -> (f64, f64, f64) {
+        let c = self.cost_cfg(cfg);
+        if !self.cascade_step_constraints || !c.0.is_finite() {
+            return c;
+        }
+        for req in &STEP_REQUIREMENTS {
+            self.runs.fetch_add(1, Ordering::Relaxed);
+            if !meets_step_requirement(&self.plant, cfg, req).unwrap_or(false) {
+                return (f64::INFINITY, c.1, c.2);
+            }
+        }
+        c
+    }
+
+    /// Logs a line above the progress spinner.
+    fn say(&self, line: String) {
+        self.progress.set_message(line.clone());
+        self.progress.println(&line);
+        self.log.lock().expect("log lock").push(line);
     }
 
     /// Costs of `points`, evaluated on `threads` threads.
@@ -115,67 +187,56 @@ impl Ctx {
     }
 }
 
-/// Nelder-Mead (steps 0.2 in the coordinates of `to_x`) restarted from its own best point
-/// while a restart lowers the cost by more than 1 %, at most 8 restarts; returns the best
-/// point and cost and adds the evaluations to `evaluations`.
+/// Nelder-Mead (steps 0.2 in the coordinates of `to_x`, costs relative to the start's)
+/// restarted from its own best point while a restart lowers the cost by more than 1 %, at most
+/// 8 runs of 160 points; returns the best point and cost and adds the evaluations to
+/// `evaluations`.
 #[allow(clippy::too_many_arguments)]
 fn restarted_nm<T: Copy>(
+    ctx: &Ctx,
     to_x: impl Fn(&T) -> Vec<f64>,
     from_x: impl Fn(&[f64]) -> T,
     cost: impl Fn(&T) -> f64,
-    mut p: T,
-    mut c: f64,
+    p: T,
+    c: f64,
     evaluations: &mut usize,
     name: &str,
 ) -> (T, f64) {
-    for restart in 1..=8 {
-        let x0 = to_x(&p);
-        let r = nelder_mead(
-            |x| cost(&from_x(x)) / c,
-            &x0,
-            &vec![0.2; x0.len()],
-            2e-3,
-            160,
-        );
-        *evaluations += r.evaluations;
-        let c_new = r.cost * c;
-        eprintln!(
-            "{name}: restart {restart} ({} points): cost {:.4e} -> {:.4e} rad^2",
-            r.evaluations, c, c_new
-        );
-        let gain = c_new < c * 0.99;
-        if c_new < c {
-            p = from_x(&r.x);
-            c = c_new;
-        }
-        if !gain {
-            break;
-        }
+    let x0 = to_x(&p);
+    let r = nelder_mead_restarted(
+        |x| cost(&from_x(x)) / c,
+        &x0,
+        &vec![0.2; x0.len()],
+        2e-3,
+        160,
+        8,
+        0.01,
+        |run, n, rc| {
+            ctx.say(format!(
+                "{name}: restart {run} ({n} points): cost {:.4e} rad^2",
+                rc * c
+            ))
+        },
+    );
+    *evaluations += r.evaluations;
+    if r.cost < 1.0 {
+        (from_x(&r.x), r.cost * c)
+    } else {
+        (p, c)
     }
-    (p, c)
 }
 
-/// Pattern search: evaluates `moves_of(p)` (with `costs`), moves to the best if it lowers the
-/// cost, until no move does. Returns the point, its cost and the number of evaluations.
+/// Pattern search ([`pattern_search`]): evaluates `moves_of(p)` (with `costs`), moves to the
+/// best if it lowers the cost, until no move does. Returns the point, its cost and the number
+/// of evaluations.
 fn polish<T: Copy>(
-    mut p: T,
-    mut c: f64,
+    p: T,
+    c: f64,
     moves_of: impl Fn(&T) -> Vec<T>,
-    costs: impl Fn(&[T]) -> Vec<f64>,
+    costs: impl FnMut(&[T]) -> Vec<f64>,
 ) -> (T, f64, usize) {
-    let mut evaluations = 0;
-    loop {
-        let moves = moves_of(&p);
-        let cs = costs(&moves);
-        evaluations += moves.len();
-        match cs.iter().enumerate().min_by(|a, b| a.1.total_cmp(b.1)) {
-            Some((i, &cm)) if cm < c => {
-                p = moves[i];
-                c = cm;
-            }
-            _ => return (p, c, evaluations),
-        }
-    }
+    let r = pattern_search(p, c, moves_of, costs, 10_000);
+    (r.point, r.cost, r.evaluations)
 }
 
 fn tune(
@@ -207,7 +268,7 @@ fn tune(
         .min_by(|a, b| a.1.total_cmp(b.1))
         .expect("non-empty grid");
     let g0 = grid[ibest];
-    eprintln!(
+    ctx.say(format!(
         "{name}: grid of {} points in {:.0} s, best cost {:.3e} rad^2 at kp {:.3e} kd {:.3e} ki {:.3e} w {}",
         grid.len(),
         t0.elapsed().as_secs_f64(),
@@ -216,16 +277,16 @@ fn tune(
         g0.kd_pa_s_per_rad,
         g0.ki_pa_per_rad_s,
         g0.setpoint_rate_weight
-    );
+    ));
     // Nelder-Mead from the best grid point and, when there is one, from the stored gains (the
     // previous tuning: a search from the grid alone once found a PID 1.8x worse than them).
     let mut starts = vec![("grid", g0, cbest)];
     if let Some(gs) = stored {
         let cs = ctx.cost(ControlLaw::DirectPid(gs));
-        eprintln!(
+        ctx.say(format!(
             "{name}: stored gains kp {:.3e} kd {:.3e} ki {:.3e} w {}: cost {:.3e} rad^2",
             gs.kp_pa_per_rad, gs.kd_pa_s_per_rad, gs.ki_pa_per_rad_s, gs.setpoint_rate_weight, cs
-        );
+        ));
         if cs.is_finite() {
             starts.push(("stored gains", gs, cs));
         }
@@ -264,10 +325,10 @@ fn tune(
         } else {
             (gs, cs)
         };
-        eprintln!(
+        ctx.say(format!(
             "{name}: Nelder-Mead from the {label} ({} points): cost {:.4e} rad^2",
             r.evaluations, c
-        );
+        ));
         from.push(format!("{label} {c:.4e}"));
         if best.is_none_or(|(_, cb)| c < cb) {
             best = Some((g, c));
@@ -278,6 +339,7 @@ fn tune(
     // simplex that has collapsed in one direction stalls; a fresh one does not).
     let w = g.setpoint_rate_weight;
     let (g, c) = restarted_nm(
+        ctx,
         |g: &DpPidGains| {
             let mut x = vec![
                 (g.kp_pa_per_rad as f64).log10(),
@@ -335,7 +397,7 @@ fn tune(
     );
     // Re-measure the stored point (f32 rounding of the gains).
     let (c_check, c_nominal, c_margin) = ctx.cost_cfg(config_for(ControlLaw::DirectPid(g), 1000.0));
-    eprintln!(
+    ctx.say(format!(
         "{name}: Nelder-Mead {} points in {:.0} s + polish: cost {:.3e} rad^2 (re-measured {:.3e}) at kp {:.4e} kd {:.4e} ki {:.4e} w {}",
         nm_points,
         t1.elapsed().as_secs_f64(),
@@ -345,7 +407,7 @@ fn tune(
         g.kd_pa_s_per_rad,
         g.ki_pa_per_rad_s,
         g.setpoint_rate_weight
-    );
+    ));
     let note = format!(
         "{name}: grid {} points (best cost {:.4e} rad^2), Nelder-Mead {} points from the best grid\n\
          \x20 point and the stored gains (costs after it: {}),\n\
@@ -368,9 +430,9 @@ fn tune(
 /// from `start`, restarted, then the x0.7 / x1.4 polish. Prints the result; returns (config,
 /// tuning cost).
 fn tune_cascade(ctx: &Ctx, start: ControllerConfig) -> (ControllerConfig, f64) {
-    let cost_cfg = |cfg: ControllerConfig| ctx.cost_cfg(cfg).0;
+    let cost_cfg = |cfg: ControllerConfig| ctx.cascade_cost(cfg).0;
     let c_start = cost_cfg(start);
-    eprintln!(
+    ctx.say(format!(
         "cascade: start kp {} ki {} kd {} torque ki {} feed-forward {:?}: cost {:.4e} rad^2",
         start.position.kp,
         start.position.ki,
@@ -378,7 +440,7 @@ fn tune_cascade(ctx: &Ctx, start: ControllerConfig) -> (ControllerConfig, f64) {
         start.torque.ki,
         start.feedforward,
         c_start
-    );
+    ));
     let with = |x: &[f64]| {
         let mut cfg = start;
         cfg.position.kp = 10f64.powf(x[0]) as f32;
@@ -404,6 +466,7 @@ fn tune_cascade(ctx: &Ctx, start: ControllerConfig) -> (ControllerConfig, f64) {
     let mut evaluations = r.evaluations;
     let (cfg, c) = if c.is_finite() {
         restarted_nm(
+            ctx,
             |cfg: &ControllerConfig| {
                 vec![
                     (cfg.position.kp as f64).log10(),
@@ -445,98 +508,85 @@ fn tune_cascade(ctx: &Ctx, start: ControllerConfig) -> (ControllerConfig, f64) {
         },
         |moves: &[ControllerConfig]| moves.iter().map(|m| cost_cfg(*m)).collect(),
     );
-    let (_, nominal, margin) = ctx.cost_cfg(cfg);
-    eprintln!(
+    let (_, nominal, margin) = ctx.cascade_cost(cfg);
+    ctx.say(format!(
         "cascade: Nelder-Mead {} points + polish: cost {:.4e} rad^2 ({:.3} x start; suite MSE {:.4e}, at the margin {:.4e}) at kp {} ki {} kd {} torque ki {} (J {}, cutoff {} Hz)",
         evaluations, c, c / c_start, nominal, margin, cfg.position.kp, cfg.position.ki, cfg.position.kd,
         cfg.torque.ki, cfg.feedforward.inertia_kgm2, cfg.feedforward.cutoff_hz
-    );
+    ));
     (cfg, c)
 }
 
-fn main() -> Result<()> {
-    let mut plant_path = None;
-    let mut out = control_tuned_path();
-    let mut threads = 2usize;
-    let mut cascade_starts: Vec<(f32, f32, f32, Option<f32>)> = Vec::new();
-    let mut transition_s: Option<f64> = None;
-    // Cut-off of the set-point differentiators of every law tuned [Hz].
-    let mut cutoff_hz = 150.0f32;
-    let mut args = std::env::args().skip(1);
-    while let Some(a) = args.next() {
-        match a.as_str() {
-            "--plant" => plant_path = Some(PathBuf::from(args.next().context("--plant PATH")?)),
-            "--out" => out = PathBuf::from(args.next().context("--out PATH")?),
-            "--threads" => {
-                threads = args
-                    .next()
-                    .context("--threads N")?
-                    .parse()
-                    .context("--threads N")?
-            }
-            "--setpoint-cutoff-hz" => {
-                cutoff_hz = args
-                    .next()
-                    .context("--setpoint-cutoff-hz HZ")?
-                    .parse()
-                    .context("--setpoint-cutoff-hz HZ")?
-            }
-            "--transition-s" => {
-                transition_s = Some(
-                    args.next()
-                        .context("--transition-s T")?
-                        .parse::<f64>()
-                        .context("--transition-s T (seconds)")?,
-                )
-            }
-            "--cascade-start" => {
-                let v: Vec<f32> = args
-                    .next()
-                    .context("--cascade-start KP,KI,KD[,TORQUE_KI]")?
-                    .split(',')
-                    .map(|x| x.trim().parse::<f32>())
-                    .collect::<Result<_, _>>()
-                    .context("--cascade-start KP,KI,KD[,TORQUE_KI]")?;
-                if !(3..=4).contains(&v.len()) {
-                    bail!("--cascade-start takes KP,KI,KD[,TORQUE_KI]");
-                }
-                cascade_starts.push((v[0], v[1], v[2], v.get(3).copied()));
-            }
-            other => bail!("unknown argument {other}"),
+/// Runs `host-sim tune`; returns the report for stdout.
+pub fn run_tune(a: &TuneArgs) -> Result<String> {
+    if !(1..=64).contains(&a.threads) {
+        bail!("--threads {}: allowed 1..=64", a.threads);
+    }
+    if !(a.setpoint_cutoff_hz >= 1.0 && a.setpoint_cutoff_hz <= 500.0) {
+        bail!(
+            "--setpoint-cutoff-hz {}: allowed 1..=500 Hz",
+            a.setpoint_cutoff_hz
+        );
+    }
+    if let Some(t) = a.transition_s {
+        if !(0.0..=2.0).contains(&t) {
+            bail!("--transition-s {t}: allowed 0..=2 s");
         }
     }
-    let plant_path = match plant_path {
-        Some(p) => p,
-        None => reference_plant_path()
-            .context("cannot find ../shared/plant/reference-1dof.toml; pass --plant")?,
-    };
+    let mut cascade_starts: Vec<(f32, f32, f32, Option<f32>)> = Vec::new();
+    for s in &a.cascade_start {
+        let v: Vec<f32> = s
+            .split(',')
+            .map(|x| x.trim().parse::<f32>())
+            .collect::<Result<_, _>>()
+            .with_context(|| format!("--cascade-start {s}: KP,KI,KD[,TORQUE_KI], numbers"))?;
+        if !(3..=4).contains(&v.len()) || v.iter().any(|x| !(*x > 0.0 && x.is_finite())) {
+            bail!("--cascade-start {s}: KP,KI,KD[,TORQUE_KI], each > 0");
+        }
+        cascade_starts.push((v[0], v[1], v[2], v.get(3).copied()));
+    }
+    let cutoff_hz = a.setpoint_cutoff_hz;
+    let plant = Plant::load(&a.plant)?;
     let mut scenarios = suite_scenarios()?;
-    if let Some(t) = transition_s {
-        // A sweep over the suite's move duration (scripts/suite-transition-sweep.sh).
+    if let Some(t) = a.transition_s {
         for s in &mut scenarios {
             s.set_transition_s(t);
         }
-        eprintln!("suite with every set-point move lasting {t} s");
     }
+    let progress = ProgressBar::new_spinner();
+    progress.set_style(
+        ProgressStyle::with_template("{spinner} {elapsed} {pos} runs  {wide_msg}")
+            .expect("static template"),
+    );
+    progress.enable_steady_tick(std::time::Duration::from_millis(200));
     let ctx = Ctx {
-        plant: Plant::load(&plant_path)?,
+        plant,
         scenarios,
         runs: AtomicUsize::new(0),
         cutoff_hz,
+        progress,
+        log: Mutex::new(Vec::new()),
+        cascade_step_constraints: !a.no_step_constraints,
     };
-    eprintln!(
+    ctx.say(format!(
         "tuning on {} (plant effects: {})",
-        plant_path.display(),
+        a.plant.display(),
         ctx.plant.effects_summary()
-    );
-    // The gains stored in the output file (if it exists and loads) are one more start point
-    // of every search.
-    let stored = match ControlTuning::load(&out) {
-        Ok(t) => Some(t),
-        Err(e) => {
-            eprintln!("no stored gains to start from ({e})");
-            None
+    ));
+    if let Some(t) = a.transition_s {
+        ctx.say(format!("suite with every set-point move lasting {t} s"));
+    }
+    // With --warm-start, the gains stored in the output file are one more start of every search.
+    let stored = if a.warm_start {
+        match ControlTuning::load(&a.out) {
+            Ok(t) => Some(t),
+            Err(e) => {
+                ctx.say(format!("no stored gains to start from ({e})"));
+                None
+            }
         }
+    } else {
+        None
     };
     let t0 = Instant::now();
 
@@ -585,13 +635,22 @@ fn main() -> Result<()> {
             }
         }
     }
-    let (cascade, _) = best_cascade.expect("at least one start");
+    let (cascade, c_best) = best_cascade.expect("at least one start");
+    if !c_best.is_finite() {
+        ctx.progress.finish_and_clear();
+        bail!(
+            "{}: no cascade gains found that meet the firmware's step tests and keep the suite \
+             stable; nothing written",
+            a.plant.display()
+        );
+    }
     let (_, c_cascade, c_cascade_margin) = ctx.cost_cfg(cascade);
 
     let with_cutoff = |g: DpPidGains| DpPidGains {
         setpoint_rate_cutoff_hz: cutoff_hz,
         ..g
     };
+    let threads = a.threads;
     let (pd, c_pd, note_pd) = tune(
         &ctx,
         false,
@@ -605,46 +664,82 @@ fn main() -> Result<()> {
         stored.as_ref().map(|t| with_cutoff(t.pid.gains())),
     );
     let (_, c_default, c_default_margin) = ctx.cost_cfg(reference);
+    let mut step_tests = Vec::new();
+    for (name, cfg) in [
+        ("cascade", cascade),
+        ("PD", config_for(ControlLaw::DirectPid(pd), 1000.0)),
+        ("PID", config_for(ControlLaw::DirectPid(pid), 1000.0)),
+    ] {
+        let passed: Vec<String> = STEP_REQUIREMENTS
+            .iter()
+            .map(|r| {
+                let ok = meets_step_requirement(&ctx.plant, cfg, r).unwrap_or(false);
+                format!(
+                    "{} x inertia {}",
+                    r.inertia_factor,
+                    if ok { "pass" } else { "FAIL" }
+                )
+            })
+            .collect();
+        step_tests.push(format!("{name}: {}", passed.join(", ")));
+    }
     let tuning = ControlTuning {
         cascade: CascadeToml::from_config(&cascade, c_cascade, c_cascade_margin),
         pd: DpPidToml::from_gains(&pd, c_pd.0, c_pd.1),
         pid: DpPidToml::from_gains(&pid, c_pid.0, c_pid.1),
     };
     let header = format!(
-        "The three laws of the closed-loop comparison of issue 5, each tuned on the suite\n\
+        "The three laws of the closed-loop comparison, each tuned on the suite\n\
          (host-sim control::compare::SUITE) by the same procedure and cost. Written by\n\
-         \x20 cargo run --release -p host-sim --example tune_pid\n\
-         on {} with the firmware in the loop. Suite MSE = mean over the step_move, sine and\n\
+         \x20 host-sim tune --plant {} --out {}{}\n\
+         with the firmware in the loop. Suite MSE = mean over the step_move, sine and\n\
          random_move scenarios of the MSE of the angle over every tick (a latched fault = infinite);\n\
          cost = the worse of the suite MSE at the gains and with the feedback gains x {}\n\
          (gain margin, 6 dB), infinite if the step overshoots by more than 10 %.\n\
          Set-point differentiators of every law: {cutoff_hz} Hz.\n\
          [cascade]: the model-based cascade (ControllerConfig::reference with these gains);\n\
          \x20 Nelder-Mead (restarted) on log10 (kp, ki, kd, torque ki) + x0.7 / x1.4 polish from\n\
-         \x20 each start (kp, ki, kd, torque ki, feed-forward J) -> cost [rad^2]:\n\
+         \x20 each start (kp, ki, kd, torque ki, feed-forward J) -> cost [rad^2]{}:\n\
          \x20 {}\n\
          [pd] / [pid]: the model-free baselines (pam_firmware::pid::DpPid: angle -> dp,\n\
          \x20 p1 = p0 - dp, p2 = p0 + dp); coarse grid, Nelder-Mead on log10 gains from the best grid\n\
-         \x20 point and from the stored gains, restarted, x0.7 / x1.4 polish.\n\
+         \x20 point{}, restarted, x0.7 / x1.4 polish.\n\
          {note_pd}\n\
          {note_pid}\n\
+         Firmware step tests (settle and overshoot, nominal and 11 x inertia):\n\
+         \x20 {}\n\
          For comparison, the cascade with the firmware's default gains (ControllerConfig::reference,\n\
          tuned for the jump suite and the firmware's step tests) scored {:.4e} rad^2\n\
          ({:.4e} rad^2 at the gain margin).\n\
          Units: SI (Pa, N m, rad, s); suite_mse_rad2 and suite_mse_at_margin_rad2 are what the\n\
          tuner measured (host-sim/tests/control_compare.rs re-measures them).",
-        plant_path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
+        a.plant.display(),
+        a.out.display(),
+        if a.warm_start { " --warm-start" } else { "" },
         GAIN_MARGIN,
+        if ctx.cascade_step_constraints {
+            ", the firmware's step tests imposed"
+        } else {
+            ""
+        },
         cascade_from.join("\n  "),
+        if stored.is_some() {
+            " and from the stored gains"
+        } else {
+            ""
+        },
+        step_tests.join("\n  "),
         c_default,
         c_default_margin
     );
-    tuning.write(&out, &header)?;
-    eprintln!(
-        "wrote {} ({} suite runs, {:.0} s)",
-        out.display(),
+    ctx.progress.finish_and_clear();
+    tuning.write(&a.out, &header)?;
+    let log = ctx.log.lock().expect("log lock").join("\n");
+    Ok(format!(
+        "{log}\n{}\nwrote {} ({} suite runs, {:.0} s)\n",
+        step_tests.join("\n"),
+        a.out.display(),
         ctx.runs.load(Ordering::Relaxed),
         t0.elapsed().as_secs_f64()
-    );
-    Ok(())
+    ))
 }

@@ -1,0 +1,204 @@
+//! Robustness of the stored gains (no re-tuning): the three laws of `config/control_tuned.toml`
+//! scored on set-point sequences the tuner never saw ([`HELD_OUT_SUITE`]) and on plants with
+//! each concealed effect at a realistic size (the sizes of the diagnosis' synthetic truths):
+//! joint friction, muscle (braid) hysteresis, an 8 ms valve dead time, a supply that sags with
+//! the flow, and the joint carrying 11 x its inertia (seed 000's load).
+
+use pam_firmware::tick::ControlLaw;
+
+use crate::control::closed_loop::{ClosedLoopError, Scenario};
+use crate::control::compare::{config_for, score_suite_with, ControlTuning, SuiteScore};
+use crate::plant::config::PlantConfig;
+use crate::plant::Plant;
+
+/// Set-point sequences for scoring only (other seeds, amplitudes and frequencies than the
+/// tuning suite; moves of the same 0.15 s).
+pub const HELD_OUT_SUITE: [(&str, &str); 4] = [
+    (
+        "held-out/random_move_seed11.toml",
+        "[scenario]\nname = \"random_move_seed11\"\nduration_s = 8.0\nseed = 11\n\n\
+         [setpoint]\nkind = \"random\"\namplitude_rad = 0.3\nhold_s = 0.8\nstart_s = 0.5\ntransition_s = 0.15\n\n\
+         [expect]\nsettle_after_s = 0.5\nno_fault = true\n",
+    ),
+    (
+        "held-out/random_move_seed12.toml",
+        "[scenario]\nname = \"random_move_seed12\"\nduration_s = 8.0\nseed = 12\n\n\
+         [setpoint]\nkind = \"random\"\namplitude_rad = 0.35\nhold_s = 1.2\nstart_s = 0.5\ntransition_s = 0.15\n\n\
+         [expect]\nsettle_after_s = 0.5\nno_fault = true\n",
+    ),
+    (
+        "held-out/step_move_down.toml",
+        "[scenario]\nname = \"step_move_down\"\nduration_s = 3.0\nseed = 13\n\n\
+         [setpoint]\nkind = \"step\"\ninitial_rad = 0.1\nfinal_rad = -0.25\nat_s = 0.5\ntransition_s = 0.15\n\n\
+         [expect]\nsettle_after_s = 1.0\nno_fault = true\n",
+    ),
+    (
+        "held-out/sine_0p8hz.toml",
+        "[scenario]\nname = \"sine_0p8hz\"\nduration_s = 5.0\nseed = 14\n\n\
+         [setpoint]\nkind = \"sine\"\noffset_rad = 0.05\namplitude_rad = 0.2\nfreq_hz = 0.8\nstart_s = 0.5\n\n\
+         [expect]\nsettle_after_s = 2.0\nno_fault = true\n",
+    ),
+];
+
+/// The parsed held-out scenarios.
+pub fn held_out_scenarios() -> Result<Vec<Scenario>, ClosedLoopError> {
+    HELD_OUT_SUITE
+        .iter()
+        .map(|(file, text)| Scenario::from_toml_str(text, file))
+        .collect()
+}
+
+/// A plant condition of the robustness table: name and the `[effects]` TOML appended to the
+/// nominal plant file (sizes of `diagnose::synth`'s truths), or an inertia factor.
+pub const CONDITIONS: [(&str, &str, f64); 6] = [
+    ("nominal", "", 1.0),
+    (
+        "joint friction 0.35 N m",
+        "[effects.joint_friction]\ncoulomb_nm = 0.35\nbreakaway_nm = 0.35\nstribeck_velocity_rad_s = 1.0\nviscous_nm_s_per_rad = 0.08\nsmoothing_velocity_rad_s = 0.01\n",
+        1.0,
+    ),
+    (
+        "braid hysteresis 6 N + 20 N/bar",
+        "[effects.muscle_hysteresis]\nbase_force_n = 6.0\npressure_gain_n_per_pa = 2.0e-5\nsmoothing_rate_per_s = 0.02\n",
+        1.0,
+    ),
+    (
+        "valve dead time 8 ms",
+        "[effects.valve_dead_time]\ndelay_s = 0.008\n",
+        1.0,
+    ),
+    (
+        "supply drop (line resistance)",
+        "[effects.supply_drop]\nmodel = \"static\"\nresistance_pa_s_per_m3 = 2.0e7\n",
+        1.0,
+    ),
+    ("11 x inertia load", "", 11.0),
+];
+
+/// The plant of one condition.
+pub fn condition_plant(nominal_toml: &str, effects: &str, inertia_factor: f64) -> Plant {
+    let text = format!("{nominal_toml}\n{effects}");
+    let cfg = PlantConfig::from_toml_str(&text, "robustness.toml")
+        .expect("the conditions' TOML is valid on a valid nominal plant");
+    let mut p = Plant::from_config(&cfg);
+    p.joint.inertia_kgm2 *= inertia_factor;
+    p
+}
+
+/// One cell of the table.
+#[derive(Debug, Clone)]
+pub struct Cell {
+    /// Suite MSE [rad^2] (infinite if a run latched a fault).
+    pub mse_rad2: f64,
+    /// Largest |angle error| over the suite [rad].
+    pub max_abs_rad: f64,
+    /// No fault latched and the error stayed bounded (below 0.5 rad).
+    pub stable: bool,
+}
+
+impl Cell {
+    fn of(s: &Result<SuiteScore, ClosedLoopError>) -> Cell {
+        match s {
+            Ok(s) => {
+                let max_abs = s
+                    .scenarios
+                    .iter()
+                    .map(|c| c.max_abs_rad)
+                    .fold(0.0, f64::max);
+                Cell {
+                    mse_rad2: s.mse_rad2,
+                    max_abs_rad: max_abs,
+                    stable: s.mse_rad2.is_finite()
+                        && s.scenarios.iter().all(|c| c.fault.is_none())
+                        && max_abs < 0.5,
+                }
+            }
+            Err(_) => Cell {
+                mse_rad2: f64::INFINITY,
+                max_abs_rad: f64::INFINITY,
+                stable: false,
+            },
+        }
+    }
+}
+
+/// A row: one plant condition, the three laws.
+#[derive(Debug, Clone)]
+pub struct Row {
+    /// Condition name.
+    pub condition: String,
+    /// Cascade, PD, PID.
+    pub cells: [Cell; 3],
+}
+
+impl Row {
+    /// PID suite MSE / cascade suite MSE (the cascade's lead).
+    pub fn lead_over_pid(&self) -> f64 {
+        self.cells[2].mse_rad2 / self.cells[0].mse_rad2
+    }
+}
+
+/// Scores the stored gains on `scenarios` under every condition of [`CONDITIONS`] whose
+/// index is in `which` (all when empty).
+pub fn table(
+    nominal_toml: &str,
+    tuning: &ControlTuning,
+    scenarios: &[Scenario],
+    which: &[usize],
+) -> Vec<Row> {
+    let laws = [
+        config_for(ControlLaw::Cascade, 1000.0),
+        config_for(ControlLaw::DirectPid(tuning.pd.gains()), 1000.0),
+        config_for(ControlLaw::DirectPid(tuning.pid.gains()), 1000.0),
+    ];
+    let cascade = tuning.cascade.config(1000.0);
+    CONDITIONS
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| which.is_empty() || which.contains(i))
+        .map(|(_, (name, effects, inertia))| {
+            let plant = condition_plant(nominal_toml, effects, *inertia);
+            let cells = [
+                Cell::of(&score_suite_with(&plant, scenarios, cascade)),
+                Cell::of(&score_suite_with(&plant, scenarios, laws[1])),
+                Cell::of(&score_suite_with(&plant, scenarios, laws[2])),
+            ];
+            Row {
+                condition: name.to_string(),
+                cells,
+            }
+        })
+        .collect()
+}
+
+/// The table as Markdown.
+pub fn format_table(rows: &[Row]) -> String {
+    let mut s = String::from(
+        "| plant | cascade MSE [rad^2] | PD MSE [rad^2] | PID MSE [rad^2] | PID / cascade | all stable |\n\
+         |---|---|---|---|---|---|\n",
+    );
+    for r in rows {
+        s += &format!(
+            "| {} | {:.3e} | {:.3e} | {:.3e} | {:.2} | {} |\n",
+            r.condition,
+            r.cells[0].mse_rad2,
+            r.cells[1].mse_rad2,
+            r.cells[2].mse_rad2,
+            r.lead_over_pid(),
+            if r.cells.iter().all(|c| c.stable) {
+                "yes".to_string()
+            } else {
+                let names = ["cascade", "PD", "PID"];
+                let bad: Vec<&str> = r
+                    .cells
+                    .iter()
+                    .zip(names)
+                    .filter(|(c, _)| !c.stable)
+                    .map(|(_, n)| n)
+                    .collect();
+                format!("NO: {}", bad.join(", "))
+            }
+        );
+    }
+    s
+}

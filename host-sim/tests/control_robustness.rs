@@ -1,0 +1,35 @@
+//! The stored gains (no re-tuning) off the tuning suite: held-out set-point sequences and
+//! plants with concealed effects (`control::robustness`). The full table is printed
+//! (`cargo run -p host-sim --example robustness` prints the same); what holds is asserted,
+//! and docs/identification.md says plainly what does not (the cascade's lead over the PID on
+//! the held-out suite is 1.27x, not 2x; on the 11 x load the suite-tuned cascade and PD leave
+//! the 0.5 rad band).
+
+use host_sim::control::compare::{control_tuned_path, reference_plant_path, ControlTuning};
+use host_sim::control::robustness::{format_table, held_out_scenarios, table, CONDITIONS};
+
+#[test]
+fn stored_gains_on_held_out_sequences_and_concealed_effects() {
+    let plant = reference_plant_path().expect("../shared/plant/reference-1dof.toml");
+    let text = std::fs::read_to_string(plant).unwrap();
+    let tuning = ControlTuning::load(&control_tuned_path()).unwrap();
+    let rows = table(&text, &tuning, &held_out_scenarios().unwrap(), &[]);
+    println!("{}", format_table(&rows));
+    assert_eq!(rows.len(), CONDITIONS.len());
+    // Every law stays stable on the held-out sequences under every effect but the 11 x load.
+    for r in rows.iter().filter(|r| !r.condition.starts_with("11 x")) {
+        for c in &r.cells {
+            assert!(c.stable, "{}: {c:?}", r.condition);
+        }
+        // The model-based cascade keeps its lead over the PD everywhere.
+        assert!(
+            r.cells[1].mse_rad2 >= 2.0 * r.cells[0].mse_rad2,
+            "{}: cascade {:.3e} vs PD {:.3e}",
+            r.condition,
+            r.cells[0].mse_rad2,
+            r.cells[1].mse_rad2
+        );
+        // ... and is never worse than the PID on the held-out sequences.
+        assert!(r.lead_over_pid() >= 1.0, "{}: {:.2}", r.condition, r.lead_over_pid());
+    }
+}

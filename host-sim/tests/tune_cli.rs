@@ -1,0 +1,45 @@
+//! `host-sim tune`: argument errors name the argument and its allowed range, exit with
+//! status 2 and leave the output untouched. (The search itself takes minutes; its procedure is
+//! checked by the local-optimum tests of `control_compare.rs` on the file it wrote.)
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn plant() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant/reference-1dof.toml")
+}
+
+#[test]
+fn bad_tune_arguments_are_refused_without_touching_the_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("control.toml");
+    std::fs::write(&out, "previous\n").unwrap();
+    for (args, want) in [
+        (vec!["--threads", "0"], "--threads 0: allowed 1..=64"),
+        (vec!["--transition-s", "5"], "--transition-s 5: allowed 0..=2 s"),
+        (vec!["--setpoint-cutoff-hz", "0"], "--setpoint-cutoff-hz 0: allowed 1..=500 Hz"),
+        (vec!["--cascade-start", "1,2"], "--cascade-start 1,2"),
+    ] {
+        let r = Command::new(env!("CARGO_BIN_EXE_host-sim"))
+            .arg("tune")
+            .arg("--plant")
+            .arg(plant())
+            .arg("--out")
+            .arg(&out)
+            .args(&args)
+            .output()
+            .unwrap();
+        assert_eq!(r.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert!(err.contains(want), "{args:?}: {err}");
+        assert_eq!(std::fs::read_to_string(&out).unwrap(), "previous\n");
+    }
+    // A missing plant file is named.
+    let r = Command::new(env!("CARGO_BIN_EXE_host-sim"))
+        .args(["tune", "--plant", "no/such/plant.toml", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(r.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("no/such/plant.toml"));
+}
