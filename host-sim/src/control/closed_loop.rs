@@ -417,9 +417,8 @@ pub fn run_with(
             }
         }
         // Infallible pins: the driver cannot fail here.
-        if let Ok(o) = valves.apply(&out.valves) {
-            tick.valves_applied(&o);
-        }
+        let Ok(o) = valves.apply(&out.valves);
+        tick.valves_applied(&o);
         let b = |pin: &FakePin| if pin.open() { 1.0 } else { 0.0 };
         let command = ValveInputs {
             u_in1: b(&pins[0]),
