@@ -39,8 +39,10 @@ enum Command {
     Sweep(host_sim::identify::cli::SweepArgs),
     /// Identify the force law, the torque model or plant parameters from data.
     Identify(host_sim::identify::cli::IdentifyArgs),
-    /// Diagnosis: locate where a recording departs from the nominal model, name the left-out
-    /// physics, model it and report the fit before/after (issue 6).
+    /// Diagnosis: locate where a recording departs from the nominal model, tell a mis-set
+    /// parameter (recalibration) from left-out physics (a named effect), model it and report
+    /// the fit before/after. Exit status 0: explained or nothing missing; 3: unexplained or
+    /// not this plant (nothing named, the JSON is written); 2: bad input.
     Diagnose(DiagnoseArgs),
 }
 
@@ -379,7 +381,9 @@ fn only_common(model: &Recording, reference: &Recording) -> Recording {
 }
 
 fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
-    use host_sim::diagnose::{diagnose, report::write_report, DiagnoseOptions};
+    use host_sim::diagnose::{
+        answer::failure_json, diagnose, report::write_report, DiagnoseError, DiagnoseOptions,
+    };
     if a.threads == 0 {
         bail!("--threads must be >= 1");
     }
@@ -396,13 +400,35 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
         threads: a.threads,
         ..DiagnoseOptions::default()
     };
-    let d = diagnose(&cfg, &train, check.as_ref(), &opts, &|done, total, msg| {
+    let result = diagnose(&cfg, &train, check.as_ref(), &opts, &|done, total, msg| {
         bar.set_length(total);
         bar.set_position(done);
         bar.set_message(msg.to_string());
-    })
-    .with_context(|| format!("{}: diagnosis failed", a.recording.display()))?;
+    });
     bar.finish_and_clear();
+    use std::io::Write as _;
+    let d = match result {
+        Ok(d) => d,
+        // The nominal replay failed: still an answer (unexplained, with the time and state
+        // of the failure), the JSON is written and the exit status is 3.
+        Err(DiagnoseError::Sim(e)) => {
+            let msg = e.to_string();
+            let json = serde_json::to_string_pretty(&failure_json(&msg))? + "\n";
+            host_sim::identify::write_atomic(&a.json, json.as_bytes())?;
+            let mut out = std::io::stdout().lock();
+            let _ = write!(
+                out,
+                "Unexplained: the nominal model cannot replay {}: {msg}\nwrote {}\n",
+                a.recording.display(),
+                a.json.display()
+            );
+            return Ok(ExitCode::from(3));
+        }
+        Err(e) => {
+            return Err(anyhow::Error::new(e))
+                .with_context(|| format!("{}: diagnosis failed", a.recording.display()))
+        }
+    };
     let json = serde_json::to_string_pretty(&d.to_json())? + "\n";
     host_sim::identify::write_atomic(&a.json, json.as_bytes())?;
     if let Some(dir) = &a.report {
@@ -416,8 +442,13 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
         .map_err(|e| anyhow::anyhow!("report {}: {e}", dir.display()))?;
     }
     // A closed stdout (`| head`) is not an error of the diagnosis: the JSON is written.
-    use std::io::Write as _;
     let mut out = std::io::stdout().lock();
     let _ = write!(out, "{}wrote {}\n", d.answer(), a.json.display());
-    Ok(ExitCode::SUCCESS)
+    // Exit status 3: the diagnosis names nothing because the recording is unexplained or
+    // not of this plant (the JSON says which).
+    Ok(if d.verdict.is_answer() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(3)
+    })
 }

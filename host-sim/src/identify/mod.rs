@@ -7,6 +7,7 @@
 
 pub mod cli;
 pub mod force;
+pub mod output_error;
 pub mod plant;
 pub mod torque;
 
