@@ -173,6 +173,7 @@ impl Diagnosis {
             "fit": {"before": json_fits(&self.fit_before), "after": json_fits(&self.fit_after)},
             "heldout_fit": {"before": json_fits(&self.heldout_before), "after": json_fits(&self.heldout_after)},
             "best_attempt": self.best_attempt,
+            "lookalikes": self.lookalikes,
             "hints": self.hints,
             "failures": self.failures,
         });

@@ -226,8 +226,11 @@ fn simulate_measure(
 }
 
 /// Look-alike pairs (a, b): effects whose signatures resemble each other.
-const LOOKALIKES: [(&str, &str); 4] = [
+const LOOKALIKES: [(&str, &str); 5] = [
     ("joint_friction", "muscle_hysteresis"),
+    // The isothermal pressure law sees only the ratio of the valve conductance to the
+    // chamber volume.
+    ("valve.sonic_conductance_m3_per_s_pa", "muscle.volume_poly_m3"),
     ("sensor_lag", "valve_delay"),
     ("joint.inertia_kgm2", "gravity"),
     ("leakage", "supply_drop"),
@@ -561,6 +564,10 @@ pub fn diagnose(
             ),
             ("joint_friction", true) => format!(
                 "The force channels tell joint friction from muscle hysteresis (braid friction changes the measured tensions, joint friction does not): {} removes {:.0} % of the held-out error beyond noise, {} {:.0} %.",
+                label_of(e), pct(e), label_of(other), pct(other)
+            ),
+            ("valve.sonic_conductance_m3_per_s_pa", _) => format!(
+                "The valve conductance and the chamber volume cannot be told apart by this recording (the isothermal pressure law sees only their ratio): recalibrating {} removes {:.0} % of the held-out error beyond noise, {} {:.0} %; measure one of them to fix the other.",
                 label_of(e), pct(e), label_of(other), pct(other)
             ),
             ("sensor_lag", _) => {

@@ -348,7 +348,7 @@ pub struct Case {
 /// Sensor noise of the rig (angle: encoder counts per turn; kPa; N).
 pub const ENCODER_COUNTS: f64 = 4096.0;
 pub const PRESSURE_NOISE_KPA: f64 = 0.6;
-pub const FORCE_NOISE_N: f64 = 2.5;
+pub const FORCE_NOISE_N: f64 = 1.0;
 
 /// Runs the rig in closed loop: a proportional position controller with a deadband turns
 /// the measured angle error into valve openings (inflate one muscle, exhaust the other)
