@@ -8,8 +8,8 @@
 //!   `shared/conformance/pulses_thermal.csv` (an independent implementation of seed 004).
 //! - `reduced_matrix` (runs in CI, debug build): a fixed subset of cases on held-out seeds,
 //!   asserting the pass count docs/diagnosis.md reports.
-//! - `full_matrix` (ignored; the documented command, release build):
-//!   `cargo test --release -p host-sim --test diagnose_independent -- --ignored --nocapture`
+//! - `full_matrix` (ignored; the documented command):
+//!   `cargo test -p host-sim --test diagnose_independent -- --ignored --nocapture full_matrix`
 //!   every kind on the tuning seeds and on the held-out seeds, rates printed separately.
 //!
 //! A case passes when its verdict is the expected one (`explained` with exactly the expected
@@ -202,7 +202,7 @@ fn reduced_matrix() {
 }
 
 #[test]
-#[ignore = "release build, several minutes: the documented full matrix (docs/diagnosis.md)"]
+#[ignore = "about 10 minutes: the documented full matrix (docs/diagnosis.md)"]
 fn full_matrix() {
     let (tp, tt) = matrix(&KINDS, &TUNING_SEEDS);
     let (hp, ht) = matrix(&KINDS, &HELD_OUT_SEEDS);
