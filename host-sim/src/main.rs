@@ -58,8 +58,10 @@ enum Command {
     /// Tune the cascade, PD and PID gains on the set-point suite (firmware in the loop) and
     /// write the gains file (the format of config/control_tuned.toml).
     Tune(host_sim::control::tune::TuneArgs),
-    /// Diagnosis: locate where a recording departs from the nominal model, name the left-out
-    /// physics, model it and report the fit before/after.
+    /// Diagnosis: locate where a recording departs from the nominal model, tell a mis-set
+    /// parameter (recalibration) from left-out physics (a named effect), model it and report
+    /// the fit before/after. Exit status 0: explained or nothing missing; 3: unexplained or
+    /// not this plant (nothing named, the JSON is written); 2: bad input.
     ///
     /// The recording needs t_s,u_in1,u_ex1,u_in2,u_ex2 and the measured angle_deg,p1_kpa,
     /// p2_kpa (f1_n,f2_n used when present), as in RECORDING.md.
@@ -453,7 +455,9 @@ fn only_common(model: &Recording, reference: &Recording) -> Recording {
 }
 
 fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
-    use host_sim::diagnose::{diagnose, report::write_report, DiagnoseOptions};
+    use host_sim::diagnose::{
+        answer::failure_json, diagnose, report::write_report, DiagnoseError, DiagnoseOptions,
+    };
     let mut inputs: Vec<(&str, &Path)> = vec![("--plant", &a.plant), ("--recording", &a.recording)];
     if let Some(c) = &a.check {
         inputs.push(("--check", c));
@@ -479,13 +483,35 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
         threads: a.threads,
         ..DiagnoseOptions::default()
     };
-    let d = diagnose(&cfg, &train, check.as_ref(), &opts, &|done, total, msg| {
+    let result = diagnose(&cfg, &train, check.as_ref(), &opts, &|done, total, msg| {
         bar.set_length(total);
         bar.set_position(done);
         bar.set_message(msg.to_string());
-    })
-    .with_context(|| format!("{}: diagnosis failed", a.recording.display()))?;
+    });
     bar.finish_and_clear();
+    use std::io::Write as _;
+    let d = match result {
+        Ok(d) => d,
+        // The nominal replay failed: still an answer (unexplained, with the time and state
+        // of the failure), the JSON is written and the exit status is 3.
+        Err(DiagnoseError::Sim(e)) => {
+            let msg = e.to_string();
+            let json = serde_json::to_string_pretty(&failure_json(&msg))? + "\n";
+            host_sim::identify::write_atomic(&a.json, json.as_bytes())?;
+            let mut out = std::io::stdout().lock();
+            let _ = write!(
+                out,
+                "Unexplained: the nominal model cannot replay {}: {msg}\nwrote {}\n",
+                a.recording.display(),
+                a.json.display()
+            );
+            return Ok(ExitCode::from(3));
+        }
+        Err(e) => {
+            return Err(anyhow::Error::new(e))
+                .with_context(|| format!("{}: diagnosis failed", a.recording.display()))
+        }
+    };
     let json = serde_json::to_string_pretty(&d.to_json())? + "\n";
     host_sim::identify::write_atomic(&a.json, json.as_bytes())?;
     if let Some(dir) = &a.report {
@@ -499,7 +525,6 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
         .map_err(|e| anyhow::anyhow!("report {}: {e}", dir.display()))?;
     }
     // A closed stdout (`| head`) is not an error of the diagnosis: the JSON is written.
-    use std::io::Write as _;
     let mut out = std::io::stdout().lock();
     let _ = writeln!(
         out,
@@ -507,5 +532,11 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
         Plant::from_config(&cfg).effects_summary()
     );
     let _ = write!(out, "{}wrote {}\n", d.answer(), a.json.display());
-    Ok(ExitCode::SUCCESS)
+    // Exit status 3: the diagnosis names nothing because the recording is unexplained or
+    // not of this plant (the JSON says which).
+    Ok(if d.verdict.is_answer() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(3)
+    })
 }

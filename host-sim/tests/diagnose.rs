@@ -1,4 +1,4 @@
-//! Diagnosis (issue 6) on synthetic rig recordings: the null case says nothing is missing,
+//! Diagnosis on synthetic rig recordings: the null case says nothing is missing,
 //! single concealed effects are named exactly with a check fit >= 95 % on every channel, a
 //! Stribeck truth is named by the Coulomb+viscous candidate, a recording without force
 //! channels gets the look-alike statement, and bad input gives clear errors.
@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::process::Command;
 
 use host_sim::diagnose::synth::{expected_id, generate, plant_with, Excitation, SynthSpec};
-use host_sim::diagnose::{diagnose, DiagnoseOptions, Diagnosis};
+use host_sim::diagnose::{diagnose, DiagnoseOptions, Diagnosis, Verdict};
 use host_sim::{PlantConfig, Recording};
 
 fn nominal_path() -> PathBuf {
@@ -283,10 +283,11 @@ fn bad_inputs_give_clear_errors() {
 }
 
 #[test]
-fn independent_loaded_fixture_is_an_inertia_mismatch() {
+fn independent_loaded_fixture_is_an_inertia_recalibration() {
     // shared/conformance/pulses_loaded.csv comes from an independent implementation of the
     // plant with the 3.34 kg load (J = 0.155 kg m^2); diagnosed against the unloaded
-    // nominal file, the answer must be the inertia, refitted to the loaded value.
+    // nominal file, the answer must be the plant file's inertia, recalibrated to the loaded
+    // value (a wrong parameter, not missing physics).
     let rec = Recording::read(
         PathBuf::from(env!("CARGO_MANIFEST_DIR"))
             .join("../../shared/conformance/pulses_loaded.csv"),
@@ -300,16 +301,90 @@ fn independent_loaded_fixture_is_an_inertia_mismatch() {
         &|_, _, _| {},
     )
     .unwrap();
-    assert_eq!(named(&d), vec!["inertia".to_string()], "{}", d.answer());
-    let j = d.effects[0]
-        .params
-        .iter()
-        .find(|(k, _)| k == "inertia_kgm2")
-        .unwrap()
-        .1;
-    assert!((j - 0.155).abs() < 0.155 * 0.02, "J = {j}");
+    assert_eq!(d.verdict, Verdict::Explained, "{}", d.answer());
+    assert!(d.effects.is_empty(), "{}", d.answer());
+    assert_eq!(d.recalibrated.len(), 1, "{}", d.answer());
+    let r = &d.recalibrated[0];
+    assert_eq!(r.key, "joint.inertia_kgm2");
+    assert_eq!(r.nominal, 0.014);
+    assert!((r.fitted - 0.155).abs() < 0.155 * 0.02, "J = {}", r.fitted);
+    assert!(r.ci95[0] <= r.fitted && r.fitted <= r.ci95[1], "{:?}", r.ci95);
     assert!(d.fit_after.values().all(|f| *f > 99.0), "{:?}", d.fit_after);
-    assert!(d.to_json().get("check").is_none());
+    let json = d.to_json();
+    assert!(json.get("check").is_none());
+    assert_eq!(json["verdict"], "explained");
+    assert_eq!(json["recalibrated"][0]["key"], "joint.inertia_kgm2");
+    assert!(json["recalibrated"][0]["ci95"][1].as_f64().unwrap() > 0.15);
+}
+
+#[test]
+fn noise_free_nominal_data_says_nothing_is_missing() {
+    let cfg = nominal();
+    let mk = |excitation, seed| {
+        generate(
+            &cfg,
+            &SynthSpec {
+                excitation,
+                duration_s: 6.0,
+                dt_s: 1e-3,
+                seed,
+                noise: false,
+                channels: [true; 5],
+            },
+            "none",
+        )
+        .unwrap()
+    };
+    let train = mk(Excitation::Pulses, 41);
+    let check = mk(Excitation::ChirpSteps, 42);
+    let d = diagnose(&cfg, &train, Some(&check), &DiagnoseOptions::default(), &|_, _, _| {})
+        .unwrap();
+    assert_eq!(d.verdict, Verdict::NothingMissing, "{}", d.answer());
+    assert!(d.answer().starts_with("Nothing is missing"), "{}", d.answer());
+    assert!(!d.answer().contains("misses something"));
+}
+
+#[test]
+fn pure_noise_names_nothing_and_exits_3_with_the_json_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut train, _) = recordings(&[], 51, 2e-3, [true, true, true, false, false]);
+    // Replace every channel by noise around its mean: nothing this plant does.
+    let mut state = 12345u64;
+    let mut next = || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        ((state >> 11) as f64 / (1u64 << 53) as f64) - 0.5
+    };
+    for y in train.outputs.iter_mut().flatten() {
+        for v in y.iter_mut() {
+            *v = 300.0 * next();
+        }
+    }
+    let tp = dir.path().join("noise.csv");
+    train.write(&tp).unwrap();
+    let out = dir.path().join("out.json");
+    let o = bin()
+        .args(["diagnose", "--plant"])
+        .arg(nominal_path())
+        .arg("--recording")
+        .arg(&tp)
+        .arg("--json")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(
+        o.status.code(),
+        Some(3),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let verdict = v["verdict"].as_str().unwrap();
+    assert!(verdict == "not_this_plant" || verdict == "unexplained", "{verdict}");
+    assert_eq!(v["effects"].as_array().unwrap().len(), 0);
+    assert_eq!(v["recalibrated"].as_array().unwrap().len(), 0);
+    assert!(stdout.contains("no effect is named") && stdout.contains("Likely causes"), "{stdout}");
 }
 
 #[test]

@@ -3,11 +3,8 @@
 //! Levenberg-Marquardt on the simulated-minus-measured channels (each channel divided by its
 //! spread, so the cost is the sum over channels of (1 - fit/100)^2).
 //!
-//! The small Levenberg-Marquardt loop is written out here rather than driven through the
-//! `levenberg-marquardt` crate: every residual evaluation is a whole simulation, and the loop
-//! needs to count, bound and share them (forward-difference Jacobian, at most a few
-//! iterations, failed simulations as rejected steps), which the crate's trait interface
-//! would hide behind separate `residuals`/`jacobian` calls.
+//! The parameters are fitted by the shared output-error fitter of `identify plant`
+//! ([`crate::identify::output_error`]); failed simulations count as large residuals.
 
 use crate::plant::config::PlantConfig;
 use crate::plant::{Measurement, Plant, PlantState, ValveInputs};
@@ -15,6 +12,7 @@ use crate::io::recording::{Channel, Recording};
 use crate::sim::{simulate, SolverOptions};
 
 use super::candidates::{Candidate, Setup};
+use crate::identify::output_error::{self, Differences, OeOptions, OeParam};
 
 /// One effect of a model with its parameter values.
 #[derive(Clone)]
@@ -26,6 +24,8 @@ pub struct Part<'c> {
 /// The output-error problem on one recording.
 pub struct Problem<'a> {
     pub nominal: &'a PlantConfig,
+    /// The recording fitted.
+    pub recording: &'a Recording,
     pub setup: Setup,
     pub inputs: &'a [ValveInputs],
     pub measured: [Option<Vec<f64>>; 5],
@@ -49,6 +49,7 @@ impl<'a> Problem<'a> {
         let base = simulate(&plant, &rec.inputs, dt, &opts)?;
         Ok(Self {
             nominal,
+            recording: rec,
             setup: Setup { dt_s: dt, present },
             inputs: &rec.inputs,
             measured: rec.outputs.clone(),
@@ -132,14 +133,28 @@ impl<'a> Problem<'a> {
     }
 
     /// Fits the parameters of `parts` on `range` starting from their current values: first
-    /// every discrete parameter over its grid (the others held), then Levenberg-Marquardt on
-    /// the continuous ones. Returns the fitted parts and the cost on `range`.
+    /// every discrete parameter over its grid (the others held), then the continuous ones
+    /// with the shared output-error fitter ([`crate::identify::output_error::fit`]). Returns
+    /// the fitted parts and the cost on `range`.
     pub fn fit<'c>(
         &self,
         parts: &[Part<'c>],
         range: std::ops::Range<usize>,
         max_iter: usize,
     ) -> (Vec<Part<'c>>, f64) {
+        let (parts, cost, _) = self.fit_with_ci(parts, range, max_iter, false);
+        (parts, cost)
+    }
+
+    /// [`Self::fit`], also returning (when `ci95`) the 95 % interval of every parameter of
+    /// every part (NaN for grid parameters).
+    pub fn fit_with_ci<'c>(
+        &self,
+        parts: &[Part<'c>],
+        range: std::ops::Range<usize>,
+        max_iter: usize,
+        ci95: bool,
+    ) -> (Vec<Part<'c>>, f64, Vec<Vec<[f64; 2]>>) {
         let mut parts: Vec<Part<'c>> = parts.to_vec();
         for i in 0..parts.len() {
             if let Some(grid) = parts[i].candidate.grid(&parts[i].params, &self.setup) {
@@ -155,95 +170,59 @@ impl<'a> Problem<'a> {
                 parts[i].params = best.1;
             }
         }
-        // Continuous parameters, in units of their typical size.
-        let mut slots: Vec<(usize, usize, f64, f64, f64)> = Vec::new(); // part, index, scale, lo, hi
+        // Continuous parameters: (part, index) and their bounds.
+        let mut slots: Vec<(usize, usize)> = Vec::new();
+        let mut oe: Vec<OeParam> = Vec::new();
         for (i, p) in parts.iter().enumerate() {
             if p.candidate.grid(&p.params, &self.setup).is_some() {
                 continue;
             }
             for (j, spec) in p.candidate.params(&self.setup).iter().enumerate() {
-                slots.push((i, j, spec.scale, spec.lo, spec.hi));
+                slots.push((i, j));
+                oe.push(OeParam {
+                    x0: p.params[j].clamp(spec.lo, spec.hi),
+                    lo: spec.lo,
+                    hi: spec.hi,
+                    scale: spec.scale,
+                });
             }
         }
         let stride = (range.len() / 3000).max(1);
-        let set = |parts: &mut Vec<Part<'c>>, theta: &[f64]| {
-            for (s, t) in slots.iter().zip(theta) {
-                parts[s.0].params[s.1] = (t * s.2).clamp(s.3, s.4);
-            }
-        };
-        let mut theta: Vec<f64> = slots.iter().map(|s| parts[s.0].params[s.1] / s.2).collect();
-        let m = theta.len();
-        let eval = |theta: &[f64]| -> Option<Vec<f64>> {
+        let with = |xs: &[f64]| -> Vec<Part<'c>> {
             let mut trial = parts.clone();
-            set(&mut trial, theta);
-            self.residuals(&trial, &range, stride)
+            for (s, x) in slots.iter().zip(xs) {
+                trial[s.0].params[s.1] = *x;
+            }
+            trial
         };
-        if m > 0 {
-            if let Some(mut r) = eval(&theta) {
-                let mut cost: f64 = r.iter().map(|v| v * v).sum();
-                let mut lambda = 1e-3;
-                for _ in 0..max_iter {
-                    // Forward-difference Jacobian.
-                    let mut jac = nalgebra::DMatrix::<f64>::zeros(r.len(), m);
-                    let mut ok = true;
-                    for j in 0..m {
-                        let h = 1e-3 * theta[j].abs().max(0.05);
-                        let mut t2 = theta.clone();
-                        t2[j] += h;
-                        match eval(&t2) {
-                            Some(r2) => {
-                                for k in 0..r.len() {
-                                    jac[(k, j)] = (r2[k] - r[k]) / h;
-                                }
-                            }
-                            None => ok = false,
-                        }
-                    }
-                    if !ok {
-                        break;
-                    }
-                    let rv = nalgebra::DVector::from_column_slice(&r);
-                    let a = jac.transpose() * &jac;
-                    let g = jac.transpose() * rv;
-                    let mut improved = false;
-                    for _ in 0..6 {
-                        let mut al = a.clone();
-                        for d in 0..m {
-                            al[(d, d)] += lambda * (a[(d, d)] + 1e-12);
-                        }
-                        let Some(step) = al.lu().solve(&(-&g)) else {
-                            lambda *= 10.0;
-                            continue;
-                        };
-                        let t_new: Vec<f64> = theta
-                            .iter()
-                            .zip(step.iter())
-                            .zip(&slots)
-                            .map(|((t, s), sl)| (t + s).clamp(sl.3 / sl.2, sl.4 / sl.2))
-                            .collect();
-                        if let Some(r_new) = eval(&t_new) {
-                            let c_new: f64 = r_new.iter().map(|v| v * v).sum();
-                            if c_new < cost {
-                                let rel = (cost - c_new) / cost.max(1e-300);
-                                theta = t_new;
-                                r = r_new;
-                                cost = c_new;
-                                lambda = (lambda / 5.0).max(1e-7);
-                                improved = rel > 1e-4;
-                                break;
-                            }
-                        }
-                        lambda *= 8.0;
-                    }
-                    if !improved {
-                        break;
-                    }
+        let mut ci: Vec<Vec<[f64; 2]>> = parts
+            .iter()
+            .map(|p| vec![[f64::NAN; 2]; p.params.len()])
+            .collect();
+        if !oe.is_empty() {
+            let residuals = |xs: &[f64]| self.residuals(&with(xs), &range, stride);
+            let n = oe.len();
+            let r = output_error::fit(
+                &residuals,
+                &oe,
+                &OeOptions {
+                    fd_step: 1e-3,
+                    differences: Differences::Forward,
+                    // About `max_iter` accepted steps: the crate counts residual evaluations.
+                    patience: (2 * max_iter).div_ceil(n + 1).max(1),
+                    tol: 1e-4,
+                    ci95,
+                },
+            );
+            if r.cost.1.is_finite() {
+                parts = with(&r.x);
+                for (s, c) in slots.iter().zip(&r.ci95) {
+                    ci[s.0][s.1] = *c;
                 }
-                set(&mut parts, &theta);
             }
         }
         let c = self.cost(&parts, range);
-        (parts, c)
+        (parts, c, ci)
     }
 }
 

@@ -170,6 +170,23 @@ pub fn write_report(
         esc(train_name),
         esc(&d.answer())
     );
+    let _ = writeln!(h, "<p>Verdict: <b>{}</b></p>", d.verdict.as_str());
+    if !d.recalibrated.is_empty() {
+        h += "<h2>Recalibrated keys of the plant file</h2>\n<table><tr><th>key</th><th>nominal</th><th>fitted</th><th>95 % interval</th><th>at bound</th></tr>\n";
+        for r in &d.recalibrated {
+            let _ = writeln!(
+                h,
+                "<tr><td><code>{}</code></td><td>{:.4e}</td><td>{:.4e}</td><td>[{:.4e}, {:.4e}]</td><td>{}</td></tr>",
+                r.key,
+                r.nominal,
+                r.fitted,
+                r.ci95[0],
+                r.ci95[1],
+                r.at_bound.map(|b| format!("{b:.4e}")).unwrap_or_else(|| "-".into())
+            );
+        }
+        h += "</table>\n";
+    }
     h += "<h2>Named effects</h2>\n";
     if d.effects.is_empty() {
         h += "<p>None.</p>\n";

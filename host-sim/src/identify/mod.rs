@@ -10,6 +10,7 @@
 pub mod cli;
 pub mod force;
 pub mod force_maps;
+pub mod output_error;
 pub mod plant;
 pub mod torque;
 

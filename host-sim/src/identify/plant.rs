@@ -4,7 +4,7 @@
 //! `muscle.damping_m2s`, `joint.inertia_kgm2`, or any key of an `[effects.*]` table) are fitted
 //! by replaying the recording's valve inputs open loop on the plant ([`crate::sim::simulate`])
 //! and minimising the difference between the simulated and the recorded channels with the
-//! `levenberg-marquardt` crate (MINPACK's trust-region Levenberg-Marquardt).
+//! shared output-error fitter [`super::output_error::fit`] (the `levenberg-marquardt` crate).
 //!
 //! - Bounds by reparameterisation: a parameter with bounds `(lo, hi)` is `lo + (hi - lo)
 //!   sigmoid(z)`, with only a lower bound `lo + (x0 - lo) e^z`, with only an upper bound
@@ -26,10 +26,9 @@ use std::cell::RefCell;
 use std::fmt::Write as _;
 use std::path::Path;
 
-use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
-use nalgebra::{DMatrix, DVector, Dyn, Owned};
 use toml_edit::{DocumentMut, Item, Value};
 
+use super::output_error::{self, Differences, OeOptions, OeParam};
 use super::{write_atomic, IdentError};
 use crate::fit::fit_percent;
 use crate::io::recording::{Channel, Recording};
@@ -285,23 +284,6 @@ fn set_number(doc: &mut DocumentMut, key: &str, x: f64) {
     *it = Item::Value(v);
 }
 
-impl ParamSpec {
-    /// x(z); z = 0 gives `x0`.
-    fn to_x(&self, z: f64, x0: f64) -> f64 {
-        let (lo, hi) = (self.lower, self.upper);
-        match (lo.is_finite(), hi.is_finite()) {
-            (true, true) => {
-                let s0 = ((x0 - lo) / (hi - lo)).clamp(1e-300, 1.0 - 1e-16);
-                let z0 = (s0 / (1.0 - s0)).ln();
-                lo + (hi - lo) / (1.0 + (-(z + z0)).exp())
-            }
-            (true, false) => lo + (x0 - lo) * z.exp(),
-            (false, true) => hi - (hi - x0) * z.exp(),
-            (false, false) => x0 + z * x0.abs().max(1.0),
-        }
-    }
-}
-
 /// The channels of a recording used by the fit.
 fn channels_of(rec: &Recording) -> Vec<Channel> {
     Channel::ALL
@@ -312,26 +294,15 @@ fn channels_of(rec: &Recording) -> Vec<Channel> {
 
 struct Model<'a> {
     specs: &'a [ParamSpec],
-    x0: Vec<f64>,
     doc: RefCell<DocumentMut>,
     file: String,
 }
 
 impl Model<'_> {
-    fn values(&self, z: &[f64]) -> Vec<f64> {
-        self.specs
-            .iter()
-            .zip(z)
-            .zip(&self.x0)
-            .map(|((s, z), x0)| s.to_x(*z, *x0))
-            .collect()
-    }
-
-    /// The plant with the parameters at z; also returns the file text.
-    fn plant(&self, z: &[f64]) -> Result<(Plant, String), IdentError> {
-        let xs = self.values(z);
+    /// The plant with the parameters at x; also returns the file text.
+    fn plant(&self, xs: &[f64]) -> Result<(Plant, String), IdentError> {
         let mut doc = self.doc.borrow_mut();
-        for (s, x) in self.specs.iter().zip(&xs) {
+        for (s, x) in self.specs.iter().zip(xs) {
             set_number(&mut doc, &s.key, *x);
         }
         let text = doc.to_string();
@@ -353,92 +324,6 @@ fn replay(plant: &Plant, rec: &Recording, n: usize, opts: &SolverOptions) -> Opt
     out.iter()
         .all(|ch| ch.iter().all(|v| v.is_finite()))
         .then_some(out)
-}
-
-struct OeProblem<'a> {
-    model: &'a Model<'a>,
-    rec: &'a Recording,
-    n_train: usize,
-    /// Per channel: 1 / (std * sqrt(n_train * channels)).
-    weights: Vec<f64>,
-    opts: &'a PlantFitOptions,
-    z: DVector<f64>,
-    /// Cached residuals at z.
-    r: Option<DVector<f64>>,
-    evaluations: RefCell<usize>,
-    best: RefCell<(f64, DVector<f64>)>,
-}
-
-impl OeProblem<'_> {
-    fn m(&self) -> usize {
-        self.n_train * self.weights.len()
-    }
-
-    fn eval(&self, z: &DVector<f64>) -> DVector<f64> {
-        *self.evaluations.borrow_mut() += 1;
-        let chans = channels_of(self.rec);
-        let sim = self
-            .model
-            .plant(z.as_slice())
-            .ok()
-            .and_then(|(p, _)| replay(&p, self.rec, self.n_train, &self.opts.solver));
-        let r = match sim {
-            Some(sim) => {
-                let mut r = DVector::zeros(self.m());
-                for (ci, c) in chans.iter().enumerate() {
-                    let y = &self.rec.channel(*c).expect("present")[..self.n_train];
-                    for k in 0..self.n_train {
-                        r[ci * self.n_train + k] = (sim[ci][k] - y[k]) * self.weights[ci];
-                    }
-                }
-                r
-            }
-            // A plant that cannot be simulated: a large finite residual makes the trust region
-            // shrink instead of ending the fit.
-            None => DVector::from_element(self.m(), 10.0),
-        };
-        let cost = 0.5 * r.norm_squared();
-        let mut best = self.best.borrow_mut();
-        if cost < best.0 {
-            *best = (cost, z.clone());
-        }
-        r
-    }
-}
-
-impl LeastSquaresProblem<f64, Dyn, Dyn> for OeProblem<'_> {
-    type ResidualStorage = Owned<f64, Dyn>;
-    type JacobianStorage = Owned<f64, Dyn, Dyn>;
-    type ParameterStorage = Owned<f64, Dyn>;
-
-    fn set_params(&mut self, z: &DVector<f64>) {
-        self.z.copy_from(z);
-        self.r = Some(self.eval(z));
-    }
-
-    fn params(&self) -> DVector<f64> {
-        self.z.clone()
-    }
-
-    fn residuals(&self) -> Option<DVector<f64>> {
-        self.r.clone()
-    }
-
-    fn jacobian(&self) -> Option<DMatrix<f64>> {
-        let p = self.z.len();
-        let mut j = DMatrix::zeros(self.m(), p);
-        let h = self.opts.fd_step;
-        for k in 0..p {
-            let mut zp = self.z.clone();
-            let mut zm = self.z.clone();
-            zp[k] += h;
-            zm[k] -= h;
-            let rp = self.eval(&zp);
-            let rm = self.eval(&zm);
-            j.set_column(k, &((rp - rm) / (2.0 * h)));
-        }
-        Some(j)
-    }
 }
 
 /// Fits `specs` of the plant file `plant_text` (named `plant_file` in messages) to `rec`.
@@ -472,12 +357,16 @@ pub fn fit_plant(
         .collect::<Result<_, _>>()?;
     let model = Model {
         specs,
-        x0: x0.clone(),
         doc: RefCell::new(doc),
         file: plant_file.to_string(),
     };
     // Check the start plant before fitting.
-    let (plant0, _) = model.plant(&vec![0.0; specs.len()])?;
+    let (plant0, _) = model.plant(&x0)?;
+    if replay(&plant0, rec, n_train, &opts.solver).is_none() {
+        return Err(IdentError::Data(format!(
+            "{plant_file}: the start plant cannot replay the recording"
+        )));
+    }
     let weights: Vec<f64> = chans
         .iter()
         .map(|c| {
@@ -489,33 +378,40 @@ pub fn fit_plant(
             1.0 / (sd * ((n_train * chans.len()) as f64).sqrt())
         })
         .collect();
-    let z0 = DVector::zeros(specs.len());
-    let mut problem = OeProblem {
-        model: &model,
-        rec,
-        n_train,
-        weights,
-        opts,
-        z: z0.clone(),
-        r: None,
-        evaluations: RefCell::new(0),
-        best: RefCell::new((f64::INFINITY, z0.clone())),
+    let residuals = |xs: &[f64]| -> Option<Vec<f64>> {
+        let (plant, _) = model.plant(xs).ok()?;
+        let sim = replay(&plant, rec, n_train, &opts.solver)?;
+        let mut r = Vec::with_capacity(n_train * chans.len());
+        for (ci, c) in chans.iter().enumerate() {
+            let y = &rec.channel(*c).expect("present")[..n_train];
+            r.extend((0..n_train).map(|k| (sim[ci][k] - y[k]) * weights[ci]));
+        }
+        Some(r)
     };
-    problem.set_params(&z0);
-    let cost0 = problem.best.borrow().0;
-    if replay(&plant0, rec, n_train, &opts.solver).is_none() {
-        return Err(IdentError::Data(format!(
-            "{plant_file}: the start plant cannot replay the recording"
-        )));
-    }
-    let (problem, report) = LevenbergMarquardt::new()
-        .with_stepbound(1.0)
-        .with_patience(opts.patience)
-        .minimize(problem);
-    let (cost1, z_best) = problem.best.borrow().clone();
-    let evaluations = *problem.evaluations.borrow();
-    let (plant1, toml) = model.plant(z_best.as_slice())?;
-    let x1 = model.values(z_best.as_slice());
+    let params: Vec<OeParam> = specs
+        .iter()
+        .zip(&x0)
+        .map(|(s, x)| OeParam {
+            x0: *x,
+            lo: s.lower,
+            hi: s.upper,
+            scale: x.abs().max(1.0),
+        })
+        .collect();
+    let result = output_error::fit(
+        &residuals,
+        &params,
+        &OeOptions {
+            fd_step: opts.fd_step,
+            differences: Differences::Central,
+            patience: opts.patience,
+            ..OeOptions::default()
+        },
+    );
+    let (cost0, cost1) = result.cost;
+    let evaluations = result.evaluations;
+    let x1 = result.x.clone();
+    let (plant1, toml) = model.plant(&x1)?;
 
     // Validation: whole recording, before and after.
     let full0 = replay(&plant0, rec, n, &opts.solver)
@@ -549,10 +445,7 @@ pub fn fit_plant(
             Vec::new()
         },
         samples: (n_train, n - n_train),
-        termination: format!(
-            "{:?} after {} evaluations",
-            report.termination, report.number_of_evaluations
-        ),
+        termination: result.termination,
         evaluations,
         cost: (cost0, cost1),
         toml,
@@ -600,34 +493,6 @@ pub fn identify_plant_files(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn reparameterisation_starts_at_x0_and_respects_bounds() {
-        let both = ParamSpec {
-            key: "valve.critical_ratio".into(),
-            lower: 0.0,
-            upper: 1.0,
-        };
-        assert!((both.to_x(0.0, 0.433) - 0.433).abs() < 1e-12);
-        for z in [-50.0, -3.0, 3.0, 50.0] {
-            let x = both.to_x(z, 0.433);
-            assert!((0.0..=1.0).contains(&x), "{x}");
-        }
-        let lower = ParamSpec {
-            key: "joint.inertia_kgm2".into(),
-            lower: 0.0,
-            upper: f64::INFINITY,
-        };
-        assert!((lower.to_x(0.0, 0.014) - 0.014).abs() < 1e-15);
-        assert!(lower.to_x(-40.0, 0.014) > 0.0);
-        let upper = ParamSpec {
-            key: "x".into(),
-            lower: f64::NEG_INFINITY,
-            upper: 0.0,
-        };
-        assert!((upper.to_x(0.0, -2.0) + 2.0).abs() < 1e-15);
-        assert!(upper.to_x(5.0, -2.0) < 0.0);
-    }
 
     #[test]
     fn param_specs_parse_bounds_and_reject_bad_keys() {

@@ -1,0 +1,268 @@
+//! The report stage: the diagnosis as JSON (written in every case, with its `verdict`) and
+//! as the short text answer on stdout. The HTML report is [`super::report`].
+
+use std::collections::BTreeMap;
+
+use super::verdict::{Verdict, LIKELY_CAUSES};
+use super::Diagnosis;
+
+fn json_num(v: f64, decimals: i32) -> serde_json::Value {
+    if !v.is_finite() {
+        return serde_json::Value::Null;
+    }
+    let f = 10f64.powi(decimals);
+    serde_json::json!((v * f).round() / f)
+}
+
+fn json_raw(v: f64) -> serde_json::Value {
+    if v.is_finite() {
+        serde_json::json!(v)
+    } else {
+        serde_json::Value::Null
+    }
+}
+
+fn json_fits(m: &BTreeMap<&'static str, f64>) -> serde_json::Value {
+    serde_json::Value::Object(
+        m.iter()
+            .map(|(k, v)| (k.to_string(), json_num(*v, 2)))
+            .collect(),
+    )
+}
+
+fn fits(m: &BTreeMap<&'static str, f64>) -> String {
+    m.iter()
+        .map(|(k, v)| format!("{k} {v:.1} %"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+fn change(b: &BTreeMap<&'static str, f64>, a: &BTreeMap<&'static str, f64>) -> String {
+    b.iter()
+        .map(|(k, v)| {
+            format!(
+                "{k} {v:.1} % -> {:.1} %",
+                a.get(k).copied().unwrap_or(f64::NAN)
+            )
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// The JSON for a diagnosis that could not run past the nominal replay (the replay failed):
+/// verdict `unexplained`, the failure with its time and state.
+pub fn failure_json(message: &str) -> serde_json::Value {
+    serde_json::json!({
+        "verdict": Verdict::Unexplained.as_str(),
+        "message": format!("The nominal model cannot replay the recording: {message}. Nothing is named. {LIKELY_CAUSES}"),
+        "failures": [message],
+        "located": [],
+        "effects": [],
+        "recalibrated": [],
+    })
+}
+
+impl Diagnosis {
+    /// The first line of the answer.
+    pub fn headline(&self) -> String {
+        match self.verdict {
+            Verdict::NothingMissing => format!(
+                "Nothing is missing: the nominal model explains the recording within its noise (fits {}).",
+                fits(&self.fit_before)
+            ),
+            Verdict::Explained => {
+                let names: Vec<&str> = self.effects.iter().map(|e| e.label.as_str()).collect();
+                match (names.is_empty(), self.recalibrated.is_empty()) {
+                    (false, true) => format!("The model leaves out {}.", names.join(" and ")),
+                    (false, false) => format!(
+                        "The model leaves out {}, and {} of the plant file's parameters {} off.",
+                        names.join(" and "),
+                        self.recalibrated.len(),
+                        if self.recalibrated.len() == 1 { "is" } else { "are" }
+                    ),
+                    _ => format!(
+                        "Nothing is missing from the model, but {} of the plant file's parameters {} off (recalibration).",
+                        self.recalibrated.len(),
+                        if self.recalibrated.len() == 1 { "is" } else { "are" }
+                    ),
+                }
+            }
+            Verdict::Unexplained => {
+                let worst = self
+                    .heldout_after
+                    .iter()
+                    .chain(self.check_after.iter().flatten())
+                    .map(|(_, v)| *v)
+                    .fold(f64::INFINITY, f64::min);
+                if self.best_attempt.is_empty() {
+                    format!(
+                        "Unexplained: the nominal model misses something (fits {}), but nothing in the catalogue or among the plant file's keys explains it on the held-out data; no effect is named.",
+                        fits(&self.fit_before)
+                    )
+                } else {
+                    format!(
+                        "Unexplained: the best answer ({}) still leaves a held-out fit of {worst:.1} % (below 50 %); no effect is named.",
+                        self.best_attempt.join(" + ")
+                    )
+                }
+            }
+            Verdict::NotThisPlant => format!(
+                "This recording does not look like this plant (nominal fits {}); no effect is named.",
+                fits(&self.fit_before)
+            ),
+        }
+    }
+
+    /// The JSON of the diagnosis.
+    pub fn to_json(&self) -> serde_json::Value {
+        let located: Vec<serde_json::Value> = self
+            .located
+            .iter()
+            .map(|l| {
+                serde_json::json!({
+                    "channel": l.channel.name(),
+                    "fit_pct": json_num(l.fit_pct, 2),
+                    "windows_s": l.windows_s.iter().map(|w| [json_num(w[0], 4), json_num(w[1], 4)]).collect::<Vec<_>>(),
+                    "regime": l.regime,
+                })
+            })
+            .collect();
+        let effects: Vec<serde_json::Value> = self
+            .effects
+            .iter()
+            .map(|e| {
+                let params: serde_json::Map<String, serde_json::Value> = e
+                    .params
+                    .iter()
+                    .map(|(k, v)| (k.clone(), json_raw(*v)))
+                    .collect();
+                let at_bound: serde_json::Map<String, serde_json::Value> = e
+                    .at_bound
+                    .iter()
+                    .map(|(k, v)| (k.clone(), json_raw(*v)))
+                    .collect();
+                serde_json::json!({
+                    "id": e.id,
+                    "params": params,
+                    "at_bound": at_bound,
+                    "evidence": e.evidence,
+                    "score": json_num(e.score, 3),
+                })
+            })
+            .collect();
+        let recalibrated: Vec<serde_json::Value> = self
+            .recalibrated
+            .iter()
+            .map(|r| {
+                serde_json::json!({
+                    "key": r.key,
+                    "nominal": json_raw(r.nominal),
+                    "fitted": json_raw(r.fitted),
+                    "ci95": [json_raw(r.ci95[0]), json_raw(r.ci95[1])],
+                    "at_bound": r.at_bound.map(json_raw).unwrap_or(serde_json::Value::Null),
+                    "score": json_num(r.score, 3),
+                })
+            })
+            .collect();
+        let mut out = serde_json::json!({
+            "verdict": self.verdict.as_str(),
+            "message": self.headline(),
+            "located": located,
+            "effects": effects,
+            "recalibrated": recalibrated,
+            "fit": {"before": json_fits(&self.fit_before), "after": json_fits(&self.fit_after)},
+            "heldout_fit": {"before": json_fits(&self.heldout_before), "after": json_fits(&self.heldout_after)},
+            "best_attempt": self.best_attempt,
+            "lookalikes": self.lookalikes,
+            "hints": self.hints,
+            "failures": self.failures,
+        });
+        if let (Some(b), Some(a)) = (&self.check_before, &self.check_after) {
+            out["check"] = serde_json::json!({"before": json_fits(b), "after": json_fits(a)});
+        }
+        out
+    }
+
+    /// The short human answer for stdout.
+    pub fn answer(&self) -> String {
+        let mut s = self.headline();
+        s.push('\n');
+        match self.verdict {
+            Verdict::NothingMissing => {
+                if let Some(b) = &self.check_before {
+                    s += &format!("Check recording: {}.\n", fits(b));
+                }
+                return s;
+            }
+            Verdict::Explained => {
+                for e in &self.effects {
+                    s += &format!("  - {} ({}): {}\n", e.label, e.id, e.description);
+                }
+                for r in &self.recalibrated {
+                    let bound = r
+                        .at_bound
+                        .map(|b| format!(", at its bound {b:.4e}: the true value may lie beyond"))
+                        .unwrap_or_default();
+                    s += &format!(
+                        "  - recalibrate {} ({}): {:.4e} -> {:.4e} ({:+.1} %), 95 % interval [{:.4e}, {:.4e}]{bound}\n",
+                        r.key,
+                        r.label,
+                        r.nominal,
+                        r.fitted,
+                        100.0 * (r.fitted / r.nominal - 1.0),
+                        r.ci95[0],
+                        r.ci95[1]
+                    );
+                }
+                s += &format!(
+                    "Fit on the training recording: {}.\n",
+                    change(&self.fit_before, &self.fit_after)
+                );
+                if let (Some(b), Some(a)) = (&self.check_before, &self.check_after) {
+                    s += &format!("Fit on the check recording: {}.\n", change(b, a));
+                }
+            }
+            Verdict::Unexplained | Verdict::NotThisPlant => {
+                for h in &self.hints {
+                    s += &format!("  - {h}\n");
+                }
+                for f in &self.failures {
+                    s += &format!("  - {f}\n");
+                }
+                s += LIKELY_CAUSES;
+                s.push('\n');
+            }
+        }
+        for l in &self.located {
+            let first = l
+                .first_departure_s
+                .map(|t| format!(", first departs at {t:.3} s"))
+                .unwrap_or_default();
+            s += &format!(
+                "Located: {} (fit {:.1} %) in {} window(s), mostly during {}{}.\n",
+                l.channel.name(),
+                l.fit_pct,
+                l.windows_s.len(),
+                l.regime,
+                first
+            );
+        }
+        if let Some(first) = self
+            .located
+            .iter()
+            .filter_map(|l| l.first_departure_s.map(|t| (t, l.channel)))
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+        {
+            s += &format!(
+                "The first channel to depart is {} (at {:.3} s).\n",
+                first.1.name(),
+                first.0
+            );
+        }
+        for l in &self.lookalikes {
+            s += l;
+            s.push('\n');
+        }
+        s
+    }
+}

@@ -1,0 +1,324 @@
+//! Recalibration: a nominal parameter of the plant file that is simply off (a valve
+//! conductance 30 % low, a muscle radius a few % large, a load on the joint) is the most
+//! common mismatch on a real rig. Each refittable key is a [`Candidate`] with one parameter,
+//! the key's value, bounded to a physical range around the nominal value, so recalibration
+//! and missing physics compete in the same selection under the same acceptance rule (and a
+//! recalibration, one parameter of the model the user already has, is preferred when an
+//! effect does not beat it by that rule).
+//!
+//! Also here: [`Bounded`], which narrows a catalogue candidate's parameter bounds to the
+//! physically possible range (a polytropic exponent between isothermal 1 and adiabatic 1.4).
+
+use crate::plant::config::PlantConfig;
+
+use super::candidates::{Candidate, ParamSpec, Screening, Setup};
+use super::screen::Evidence;
+
+/// One refittable key of the plant file.
+pub struct RecalKey {
+    /// Dotted key of the plant file.
+    pub key: &'static str,
+    pub label: &'static str,
+    /// Bounds as factors of the nominal value (for a zero nominal value: absolute).
+    pub lo_factor: f64,
+    pub hi_factor: f64,
+    get: fn(&PlantConfig) -> f64,
+    set: fn(&mut PlantConfig, f64),
+}
+
+/// The keys the diagnosis may recalibrate.
+pub fn keys() -> Vec<RecalKey> {
+    vec![
+        RecalKey {
+            key: "valve.sonic_conductance_m3_per_s_pa",
+            label: "valve sonic conductance",
+            lo_factor: 0.2,
+            hi_factor: 5.0,
+            get: |c| c.valve.sonic_conductance_m3_per_s_pa,
+            set: |c, v| c.valve.sonic_conductance_m3_per_s_pa = v,
+        },
+        RecalKey {
+            key: "muscle.radius_m",
+            label: "muscle radius",
+            lo_factor: 0.7,
+            hi_factor: 1.3,
+            get: |c| c.muscle.radius_m,
+            set: |c, v| c.muscle.radius_m = v,
+        },
+        RecalKey {
+            key: "muscle.braid_angle_deg",
+            label: "braid angle",
+            lo_factor: 0.7,
+            hi_factor: 1.3,
+            get: |c| c.muscle.braid_angle_deg,
+            set: |c, v| c.muscle.braid_angle_deg = v,
+        },
+        RecalKey {
+            // The whole volume polynomial is scaled; reported as its constant term b0.
+            key: "muscle.volume_poly_m3",
+            label: "muscle chamber volume (scale of the volume polynomial)",
+            lo_factor: 0.5,
+            hi_factor: 2.0,
+            get: |c| c.muscle.volume_poly_m3[0],
+            set: |c, v| {
+                let s = v / c.muscle.volume_poly_m3[0];
+                for b in &mut c.muscle.volume_poly_m3 {
+                    *b *= s;
+                }
+            },
+        },
+        RecalKey {
+            key: "muscle.damping_m2s",
+            label: "muscle damping",
+            lo_factor: 0.0,
+            hi_factor: 20.0,
+            get: |c| c.muscle.damping_m2s,
+            set: |c, v| c.muscle.damping_m2s = v.max(0.0),
+        },
+        RecalKey {
+            key: "joint.inertia_kgm2",
+            label: "joint inertia (load)",
+            lo_factor: 0.2,
+            hi_factor: 30.0,
+            get: |c| c.joint.inertia_kgm2,
+            set: |c, v| c.joint.inertia_kgm2 = v,
+        },
+        RecalKey {
+            key: "environment.supply_gauge_pa",
+            label: "supply pressure",
+            lo_factor: 0.5,
+            hi_factor: 1.3,
+            get: |c| c.environment.supply_gauge_pa,
+            set: |c, v| c.environment.supply_gauge_pa = v,
+        },
+    ]
+}
+
+/// A recalibration candidate: one key, its nominal value and bounds.
+pub struct Recal {
+    pub k: RecalKey,
+    pub nominal: f64,
+    /// A catalogue candidate whose screening gives a better start than the nominal value
+    /// (the inertia screening regresses the torque balance on the acceleration).
+    pub screen_with: Option<Box<dyn Candidate>>,
+}
+
+impl Recal {
+    pub fn bounds(&self) -> (f64, f64) {
+        let n = self.nominal.abs().max(1e-300);
+        (self.k.lo_factor * n, self.k.hi_factor * n)
+    }
+}
+
+/// The recalibration candidates for a nominal plant (keys with a zero or non-finite
+/// nominal value are left out: a factor of nothing bounds nothing).
+pub fn candidates(nominal: &PlantConfig) -> Vec<Box<dyn Candidate>> {
+    keys()
+        .into_iter()
+        .filter_map(|k| {
+            let v = (k.get)(nominal);
+            if !(v.is_finite() && v > 0.0) {
+                return None;
+            }
+            let screen_with: Option<Box<dyn Candidate>> = if k.key == "joint.inertia_kgm2" {
+                Some(Box::new(super::candidates::InertiaCandidate))
+            } else {
+                None
+            };
+            Some(Box::new(Recal {
+                k,
+                nominal: v,
+                screen_with,
+            }) as Box<dyn Candidate>)
+        })
+        .collect()
+}
+
+/// Whether a candidate id is a recalibrated plant key (dotted) rather than an effect.
+pub fn is_recal_id(id: &str) -> bool {
+    id.contains('.')
+}
+
+impl Candidate for Recal {
+    fn id(&self) -> &'static str {
+        self.k.key
+    }
+    fn label(&self) -> &'static str {
+        self.k.label
+    }
+    fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
+        let (lo, hi) = self.bounds();
+        vec![ParamSpec {
+            name: self.k.key.to_string(),
+            lo,
+            hi,
+            scale: self.nominal.abs(),
+        }]
+    }
+    fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
+        let (lo, hi) = self.bounds();
+        if let Some(c) = &self.screen_with {
+            let mut sc = c.screen(ev, s);
+            sc.initial = vec![sc.initial.first().copied().unwrap_or(self.nominal).clamp(lo, hi)];
+            return sc;
+        }
+        Screening {
+            score: f64::NAN,
+            initial: vec![self.nominal],
+            note: format!(
+                "the plant file's {} ({}) refitted within [{lo:.4e}, {hi:.4e}]",
+                self.k.label, self.k.key
+            ),
+            scatter: None,
+        }
+    }
+    fn apply(&self, cfg: &mut PlantConfig, params: &[f64], _s: &Setup) {
+        (self.k.set)(cfg, params[0]);
+    }
+    fn describe(&self, params: &[f64], _s: &Setup) -> String {
+        format!(
+            "{} = {:.4e} instead of the nominal {:.4e} ({:+.1} %)",
+            self.k.key,
+            params[0],
+            self.nominal,
+            100.0 * (params[0] / self.nominal - 1.0)
+        )
+    }
+}
+
+/// Physical bounds on catalogue parameters (candidate id, parameter name, lo, hi): the fit
+/// never leaves them, and an answer at one says so.
+pub const PHYSICAL_BOUNDS: [(&str, &str, f64, f64); 1] = [
+    // Between isothermal (1) and adiabatic air (1.4): a chamber that is not heated cannot
+    // go below 1.
+    ("polytropic", "exponent", 1.0, 1.4),
+];
+
+/// A catalogue candidate with its bounds narrowed to [`PHYSICAL_BOUNDS`].
+pub struct Bounded(pub Box<dyn Candidate>);
+
+impl Candidate for Bounded {
+    fn id(&self) -> &'static str {
+        self.0.id()
+    }
+    fn label(&self) -> &'static str {
+        self.0.label()
+    }
+    fn params(&self, s: &Setup) -> Vec<ParamSpec> {
+        let id = self.0.id();
+        self.0
+            .params(s)
+            .into_iter()
+            .map(|mut p| {
+                for (cid, name, lo, hi) in PHYSICAL_BOUNDS {
+                    if cid == id && name == p.name {
+                        p.lo = p.lo.max(lo);
+                        p.hi = p.hi.min(hi);
+                    }
+                }
+                p
+            })
+            .collect()
+    }
+    fn fixed(&self) -> Vec<(&'static str, f64)> {
+        self.0.fixed()
+    }
+    fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
+        let mut sc = self.0.screen(ev, s);
+        let specs = self.params(s);
+        for (v, p) in sc.initial.iter_mut().zip(&specs) {
+            *v = v.clamp(p.lo, p.hi);
+        }
+        sc
+    }
+    fn apply(&self, cfg: &mut PlantConfig, params: &[f64], s: &Setup) {
+        self.0.apply(cfg, params, s)
+    }
+    fn changes_dynamics(&self) -> bool {
+        self.0.changes_dynamics()
+    }
+    fn grid(&self, initial: &[f64], s: &Setup) -> Option<Vec<Vec<f64>>> {
+        self.0.grid(initial, s)
+    }
+    fn describe(&self, params: &[f64], s: &Setup) -> String {
+        self.0.describe(params, s)
+    }
+}
+
+/// Names of the parameters of `c` that ended at a bound (within 0.1 % of their scale).
+pub fn at_bounds(c: &dyn Candidate, params: &[f64], s: &Setup) -> Vec<(String, f64)> {
+    if c.grid(params, s).is_some() {
+        return Vec::new();
+    }
+    c.params(s)
+        .iter()
+        .zip(params)
+        .filter_map(|(p, v)| {
+            let tol = 1e-3 * p.scale.abs().max(1e-300);
+            if p.lo.is_finite() && (v - p.lo).abs() <= tol {
+                Some((p.name.clone(), p.lo))
+            } else if p.hi.is_finite() && (p.hi - v).abs() <= tol {
+                Some((p.name.clone(), p.hi))
+            } else {
+                None
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn nominal() -> PlantConfig {
+        PlantConfig::from_toml_str(
+            &std::fs::read_to_string(
+                std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                    .join("../../shared/plant/reference-1dof.toml"),
+            )
+            .unwrap(),
+            "reference-1dof.toml",
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn every_key_reads_and_writes_its_field() {
+        let cfg = nominal();
+        let s = Setup {
+            dt_s: 1e-3,
+            present: [true; 5],
+        };
+        for c in candidates(&cfg) {
+            let p = c.params(&s);
+            assert_eq!(p.len(), 1);
+            assert!(p[0].lo < p[0].scale && p[0].scale < p[0].hi, "{}", c.id());
+            let mut m = cfg.clone();
+            c.apply(&mut m, &[1.1 * p[0].scale], &s);
+            assert_ne!(m, cfg, "{} changed nothing", c.id());
+            assert!(is_recal_id(c.id()));
+        }
+        let mut m = cfg.clone();
+        let vol = candidates(&cfg)
+            .into_iter()
+            .find(|c| c.id() == "muscle.volume_poly_m3")
+            .unwrap();
+        vol.apply(&mut m, &[2.0 * cfg.muscle.volume_poly_m3[0]], &s);
+        for (a, b) in m.muscle.volume_poly_m3.iter().zip(&cfg.muscle.volume_poly_m3) {
+            assert!((a - 2.0 * b).abs() <= 1e-15 * b.abs().max(1.0));
+        }
+    }
+
+    #[test]
+    fn polytropic_exponent_is_bounded_to_physics() {
+        let s = Setup {
+            dt_s: 1e-3,
+            present: [true; 5],
+        };
+        let b = Bounded(Box::new(super::super::candidates::PolytropicCandidate));
+        let p = b.params(&s);
+        assert_eq!((p[0].lo, p[0].hi), (1.0, 1.4));
+        assert_eq!(at_bounds(&b, &[1.4], &s), vec![("exponent".to_string(), 1.4)]);
+        assert!(at_bounds(&b, &[1.2], &s).is_empty());
+    }
+}
