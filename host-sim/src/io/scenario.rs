@@ -473,11 +473,19 @@ impl Scenario {
                 format!("{} must be > 0", h.duration_s),
             ));
         }
-        if !(h.tick_hz >= 10.0 && h.tick_hz <= 100_000.0) {
+        // The firmware's stable range (pam_firmware::tick::TICK_HZ_MIN / TICK_HZ_MAX).
+        let (lo, hi) = (
+            pam_firmware::tick::TICK_HZ_MIN as f64,
+            pam_firmware::tick::TICK_HZ_MAX as f64,
+        );
+        if !(h.tick_hz >= lo && h.tick_hz <= hi) {
             return Err(bad(
                 "scenario",
                 "tick_hz",
-                format!("{} must be within 10..100000", h.tick_hz),
+                format!(
+                    "{} must be within {lo}..{hi} (the firmware's gains are stable from {lo} Hz)",
+                    h.tick_hz
+                ),
             ));
         }
         let finite = |key: &str, v: f64| -> Result<(), ClosedLoopError> {
