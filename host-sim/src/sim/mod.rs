@@ -74,7 +74,7 @@ pub enum SimError {
     #[error("invalid valve input at sample {index}: {inputs:?} (openings must be in [0, 1])")]
     Input { index: usize, inputs: ValveInputs },
     #[error(
-        "effect valve_dead_time: delay_s = {delay_s} s is not a whole number of the {mode}'s \
+        "effect valve_dead_time (valve dead time): delay_s = {delay_s} s is not a whole number of the {mode}'s \
          sample period ({dt_s} s); the {mode} cannot apply it (make it a multiple of {dt_s} s)"
     )]
     DeadTime {
