@@ -63,8 +63,16 @@ impl Range {
     /// Whether `v` is a finite number inside the range (NaN never is).
     pub fn contains(&self, v: f64) -> bool {
         v.is_finite()
-            && (if self.lo_incl { v >= self.lo } else { v > self.lo })
-            && (if self.hi_incl { v <= self.hi } else { v < self.hi })
+            && (if self.lo_incl {
+                v >= self.lo
+            } else {
+                v > self.lo
+            })
+            && (if self.hi_incl {
+                v <= self.hi
+            } else {
+                v < self.hi
+            })
     }
 
     /// `Ok(v)` inside the range, else the message "must be within ..., got v".
@@ -91,7 +99,9 @@ impl fmt::Display for Range {
 }
 
 /// A clap value parser for an `f64` within `range` (NaN and infinities refused).
-pub fn f64_in(range: Range) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync + 'static {
+pub fn f64_in(
+    range: Range,
+) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync + 'static {
     move |s: &str| {
         let v: f64 = s
             .trim()
@@ -129,7 +139,9 @@ pub fn plot_path(s: &str) -> Result<PathBuf, String> {
     if ext == "png" || ext == "svg" {
         Ok(p)
     } else {
-        Err(format!("{s}: unsupported plot format (use a .png or .svg file name)"))
+        Err(format!(
+            "{s}: unsupported plot format (use a .png or .svg file name)"
+        ))
     }
 }
 

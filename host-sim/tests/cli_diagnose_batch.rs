@@ -32,13 +32,24 @@ fn a_directory_is_diagnosed_in_parallel_with_one_json_each_and_a_summary() {
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&r.stdout);
-    assert_eq!(r.status.code(), Some(1), "{stdout}\n{}", String::from_utf8_lossy(&r.stderr));
+    assert_eq!(
+        r.status.code(),
+        Some(1),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&r.stderr)
+    );
     let summary = std::fs::read_to_string(out.join("summary.csv")).unwrap();
     let lines: Vec<&str> = summary.lines().collect();
     assert_eq!(lines.len(), 3, "{summary}");
-    assert!(lines[1].starts_with("broken.csv,0,\"error:") && lines[1].contains("u_ex1"), "{summary}");
+    assert!(
+        lines[1].starts_with("broken.csv,0,\"error:") && lines[1].contains("u_ex1"),
+        "{summary}"
+    );
     assert!(lines[2].starts_with("nominal.csv,20000,"), "{summary}");
-    assert!(stdout.contains("nominal.csv") && stdout.contains("broken.csv"), "{stdout}");
+    assert!(
+        stdout.contains("nominal.csv") && stdout.contains("broken.csv"),
+        "{stdout}"
+    );
     assert!(!out.join("broken.json").exists());
 
     // The batch JSON is what the single-recording command writes.

@@ -128,7 +128,14 @@ fn sweep_torque_sizes_that_would_exhaust_memory_are_refused_with_the_estimate() 
     let w = Workspace::new();
     let before = w.snapshot();
     let r = run(&[
-        &"sweep", &"torque", &"--plant", &plant(), &"--out", &w.p("out.csv"), &"--dt-s", &"1e-7",
+        &"sweep",
+        &"torque",
+        &"--plant",
+        &plant(),
+        &"--out",
+        &w.p("out.csv"),
+        &"--dt-s",
+        &"1e-7",
     ]);
     refused(&r, &["--dt-s", "[0.000001, 1]"]);
     let r = run(&[
@@ -175,7 +182,15 @@ fn a_scenario_too_long_for_memory_is_refused_with_the_estimate() {
         &"--out",
         &w.p("out.csv"),
     ]);
-    refused(&r, &["long.toml", "1.000e12 samples", "TB of memory", "--allow-large"]);
+    refused(
+        &r,
+        &[
+            "long.toml",
+            "1.000e12 samples",
+            "TB of memory",
+            "--allow-large",
+        ],
+    );
     assert_eq!(w.snapshot(), before);
 }
 
@@ -266,7 +281,15 @@ fn demo_with_a_bad_fixture_leaves_nothing_behind() {
     bad.push_str("20.000000,0,0,0,0,abc,550,550,529,529\n");
     let bad = w.write("bad.csv", &bad);
     let before = w.snapshot();
-    let r = run(&[&"demo", &"--out-dir", &w.p("demo"), &"--plant", &plant(), &"--fixture", &bad]);
+    let r = run(&[
+        &"demo",
+        &"--out-dir",
+        &w.p("demo"),
+        &"--plant",
+        &plant(),
+        &"--fixture",
+        &bad,
+    ]);
     refused(&r, &["bad.csv", "angle_deg"]);
     assert_eq!(w.snapshot(), before, "the demo directory must not appear");
 }
@@ -280,7 +303,14 @@ fn identify_force_on_a_constant_map_is_refused() {
     }
     let data = w.write("const.csv", &csv);
     let before = w.snapshot();
-    let r = run(&[&"identify", &"force", &"--data", &data, &"--out", &w.p("out.toml")]);
+    let r = run(&[
+        &"identify",
+        &"force",
+        &"--data",
+        &data,
+        &"--out",
+        &w.p("out.toml"),
+    ]);
     refused(&r, &["const.csv", "stretch", "same"]);
     assert_eq!(w.snapshot(), before);
 }
@@ -290,7 +320,10 @@ fn identify_torque_on_a_constant_recording_is_refused() {
     let w = Workspace::new();
     let mut csv = String::from("t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg,p1_kpa,p2_kpa,f1_n,f2_n\n");
     for k in 0..400 {
-        csv.push_str(&format!("{:.3},0,0,0,0,0,300,300,400,400\n", k as f64 * 0.005));
+        csv.push_str(&format!(
+            "{:.3},0,0,0,0,0,300,300,400,400\n",
+            k as f64 * 0.005
+        ));
     }
     let rec = w.write("const.csv", &csv);
     let before = w.snapshot();
@@ -361,12 +394,22 @@ fn plant_values_out_of_their_physical_range_are_refused_at_their_line() {
         (
             "initial_contraction",
             "0.3",
-            vec!["plant.toml:23:", "joint.initial_contraction", "[0, 0.2499)", "maximum contraction"],
+            vec![
+                "plant.toml:23:",
+                "joint.initial_contraction",
+                "[0, 0.2499)",
+                "maximum contraction",
+            ],
         ),
         (
             "supply_gauge_pa",
             "600.0",
-            vec!["plant.toml:9:", "environment.supply_gauge_pa", "[10000, 2000000]", "kPa typed into a Pa key"],
+            vec![
+                "plant.toml:9:",
+                "environment.supply_gauge_pa",
+                "[10000, 2000000]",
+                "kPa typed into a Pa key",
+            ],
         ),
         (
             "p1_gauge_pa",
@@ -376,7 +419,15 @@ fn plant_values_out_of_their_physical_range_are_refused_at_their_line() {
     ] {
         let p = edited_plant(&w, key, value);
         let before = w.snapshot();
-        let r = run(&[&"simulate", &"--plant", &p, &"--inputs", &fixture(), &"--out", &w.p("out.csv")]);
+        let r = run(&[
+            &"simulate",
+            &"--plant",
+            &p,
+            &"--inputs",
+            &fixture(),
+            &"--out",
+            &w.p("out.csv"),
+        ]);
         refused(&r, &needles);
         assert_eq!(w.snapshot(), before, "{key}");
     }

@@ -42,12 +42,55 @@ fn cases() -> u32 {
 
 /// Hostile tokens spliced into the seeds.
 const TOKENS: &[&str] = &[
-    "NaN", "nan", "inf", "-inf", "1e309", "-1e309", "1e-320", "-0", "0", "-1", "1e9", "1e18",
-    "18446744073709551616", "9999999999999999999999", ".", "", "\"", "'", "[", "]", "[[",
-    "]]", "=", ",", ",,", "\n", "\r\n", "#", "\u{0}", "\u{feff}", "é", "true", "{", "}",
-    "[[events]]", "[expect]", "[setpoint]", "[effects.gravity]", "kind = \"random\"",
-    "kind = \"sine\"", "duration_s = 1e-9", "hold_s = 1e-12", "0.000001", "1e300",
-    "t_s", "angle_deg", "u_in1", "p1_kpa", "# sample_period_s = 0",
+    "NaN",
+    "nan",
+    "inf",
+    "-inf",
+    "1e309",
+    "-1e309",
+    "1e-320",
+    "-0",
+    "0",
+    "-1",
+    "1e9",
+    "1e18",
+    "18446744073709551616",
+    "9999999999999999999999",
+    ".",
+    "",
+    "\"",
+    "'",
+    "[",
+    "]",
+    "[[",
+    "]]",
+    "=",
+    ",",
+    ",,",
+    "\n",
+    "\r\n",
+    "#",
+    "\u{0}",
+    "\u{feff}",
+    "é",
+    "true",
+    "{",
+    "}",
+    "[[events]]",
+    "[expect]",
+    "[setpoint]",
+    "[effects.gravity]",
+    "kind = \"random\"",
+    "kind = \"sine\"",
+    "duration_s = 1e-9",
+    "hold_s = 1e-12",
+    "0.000001",
+    "1e300",
+    "t_s",
+    "angle_deg",
+    "u_in1",
+    "p1_kpa",
+    "# sample_period_s = 0",
 ];
 
 #[derive(Clone, Debug)]
@@ -95,8 +138,13 @@ fn numbers(s: &str) -> Vec<(usize, usize)> {
     let mut i = 0;
     while i < b.len() {
         if b[i].is_ascii_digit() {
-            let start = if i > 0 && (b[i - 1] == b'-' || b[i - 1] == b'.') { i - 1 } else { i };
-            while i < b.len() && (b[i].is_ascii_alphanumeric() || matches!(b[i], b'.' | b'-' | b'+'))
+            let start = if i > 0 && (b[i - 1] == b'-' || b[i - 1] == b'.') {
+                i - 1
+            } else {
+                i
+            };
+            while i < b.len()
+                && (b[i].is_ascii_alphanumeric() || matches!(b[i], b'.' | b'-' | b'+'))
             {
                 i += 1;
             }
@@ -217,16 +265,18 @@ fn fuzz_recording_csv() {
         })
         .collect();
     seeds.push("# sample_period_s = 0.01\nt_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg\n0,0,0,0,0,0\n0.01,1,0,0,1,0.5\n0.02,1,0,0,1,1.5\n".into());
-    fuzz("recording CSV", seeds, |text| match Recording::parse(text, "fuzz.csv") {
-        Ok(r) => {
-            // What every command does next with a recording.
-            let _ = r.sample_period_s();
-            let _ = r.len();
-            true
-        }
-        Err(e) => {
-            let _ = e.to_string();
-            false
+    fuzz("recording CSV", seeds, |text| {
+        match Recording::parse(text, "fuzz.csv") {
+            Ok(r) => {
+                // What every command does next with a recording.
+                let _ = r.sample_period_s();
+                let _ = r.len();
+                true
+            }
+            Err(e) => {
+                let _ = e.to_string();
+                false
+            }
         }
     });
 }
@@ -269,8 +319,10 @@ fn fuzz_plant_toml() {
 #[test]
 fn fuzz_arm3_plant_toml() {
     let seeds = vec![read(root().join("host-sim/plants/arm3-seed001.toml"))];
-    fuzz("arm3 plant TOML", seeds, |text| {
-        match Arm3Config::from_toml_str(text, "fuzz.toml") {
+    fuzz(
+        "arm3 plant TOML",
+        seeds,
+        |text| match Arm3Config::from_toml_str(text, "fuzz.toml") {
             Ok(cfg) => {
                 let _ = host_sim::plant::arm3::Arm3::from_config(&cfg);
                 true
@@ -279,8 +331,8 @@ fn fuzz_arm3_plant_toml() {
                 let _ = e.to_string();
                 false
             }
-        }
-    });
+        },
+    );
 }
 
 #[test]

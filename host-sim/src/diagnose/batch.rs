@@ -42,11 +42,7 @@ pub struct BatchDiagnosis {
 pub fn recordings_in(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
     let mut v: Vec<PathBuf> = std::fs::read_dir(dir)?
         .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            p.is_file()
-                && p.extension()
-                    .is_some_and(|e| e.eq_ignore_ascii_case("csv"))
-        })
+        .filter(|p| p.is_file() && p.extension().is_some_and(|e| e.eq_ignore_ascii_case("csv")))
         .collect();
     v.sort();
     Ok(v)
@@ -144,7 +140,11 @@ pub fn summary_csv(rows: &[BatchRow]) -> String {
             Ok(d) => s.push_str(&format!(
                 "{name},{},{},{},{:.2},{:.2},{:.2}\n",
                 r.samples,
-                if d.nothing_missing { "nominal" } else { "departs" },
+                if d.nothing_missing {
+                    "nominal"
+                } else {
+                    "departs"
+                },
                 d.effects.join("+").replace(',', ";"),
                 d.worst_fit_before_pct,
                 d.worst_fit_after_pct,
@@ -182,7 +182,11 @@ pub fn summary_table(rows: &[BatchRow]) -> String {
             Ok(d) => s.push_str(&format!(
                 "{name:<w$}  {:>8}  {:<8}  {:>12.2}  {:>11.2}  {}\n",
                 r.samples,
-                if d.nothing_missing { "nominal" } else { "departs" },
+                if d.nothing_missing {
+                    "nominal"
+                } else {
+                    "departs"
+                },
                 d.worst_fit_before_pct,
                 d.worst_fit_after_pct,
                 if d.effects.is_empty() {
@@ -224,7 +228,10 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, bool)> {
     let recs = recordings_in(&a.recordings)
         .with_context(|| format!("--recordings {}", a.recordings.display()))?;
     if recs.is_empty() {
-        anyhow::bail!("--recordings {}: no *.csv file in it", a.recordings.display());
+        anyhow::bail!(
+            "--recordings {}: no *.csv file in it",
+            a.recordings.display()
+        );
     }
     // Two recordings with the same stem would write the same JSON.
     let mut jsons: Vec<PathBuf> = recs.iter().map(|r| json_path(&a.out_dir, r)).collect();
@@ -255,7 +262,12 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, bool)> {
         .with_context(|| format!("{}", summary.display()))?;
     let all_ok = rows.iter().all(|r| r.result.is_ok());
     Ok((
-        format!("{}wrote {} JSON files and {}\n", summary_table(&rows), rows.iter().filter(|r| r.result.is_ok()).count(), summary.display()),
+        format!(
+            "{}wrote {} JSON files and {}\n",
+            summary_table(&rows),
+            rows.iter().filter(|r| r.result.is_ok()).count(),
+            summary.display()
+        ),
         all_ok,
     ))
 }

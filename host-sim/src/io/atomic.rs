@@ -169,7 +169,10 @@ impl Transaction {
     /// If a transaction is already open (a programming error).
     pub fn begin() -> Transaction {
         let mut guard = stage_lock();
-        assert!(guard.is_none(), "atomic::Transaction::begin: one is already open");
+        assert!(
+            guard.is_none(),
+            "atomic::Transaction::begin: one is already open"
+        );
         *guard = Some(Stage::default());
         Transaction { _private: () }
     }
