@@ -11,7 +11,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use host_sim::fit::{compare, format_table};
 use host_sim::io::plot::plot_comparison;
 use host_sim::io::recording::Channel;
-use host_sim::sim::{simulate_with_progress, SolverOptions};
+use host_sim::sim::SolverOptions;
 use host_sim::{Plant, Recording};
 
 #[derive(Parser)]
@@ -42,6 +42,15 @@ enum Command {
     /// Diagnosis: locate where a recording departs from the nominal model, name the left-out
     /// physics, model it and report the fit before/after (issue 6).
     Diagnose(DiagnoseArgs),
+    /// Import a rig logger's CSV (other column names, units, time base) into a recording,
+    /// through a mapping file (docs/rig.md).
+    Import(host_sim::io::import::ImportArgs),
+    /// Processor in the loop: the firmware image under qemu-system-arm against the plant,
+    /// one tick per exchanged frame; compared bit for bit with the in-process loop (exit
+    /// status 1 on a difference).
+    Pil(host_sim::control::pil::PilArgs),
+    /// Turn the firmware's per-tick stream (QEMU image or board) into a recording.
+    Capture(host_sim::io::capture::CaptureArgs),
 }
 
 #[derive(Args)]
@@ -134,6 +143,16 @@ fn main() -> ExitCode {
         Command::Diagnose(a) => run_diagnose(&a),
         Command::Sweep(a) => run_report(host_sim::identify::cli::run_sweep(&a)),
         Command::Identify(a) => run_report(host_sim::identify::cli::run_identify(&a)),
+        Command::Import(a) => run_report(host_sim::io::import::run_import(&a)),
+        Command::Pil(a) => host_sim::control::pil::run_pil(&a).map(|(report, same)| {
+            print!("{report}");
+            if same {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::from(1)
+            }
+        }),
+        Command::Capture(a) => run_report(host_sim::io::capture::run_capture(&a)),
     };
     match result {
         Ok(code) => code,
@@ -188,10 +207,9 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
             .expect("static template")
             .progress_chars("=> "),
     );
-    let sim = simulate_with_progress(&plant, &rec.inputs, dt, &opts, |k| {
-        bar.set_position(k as u64)
-    })
-    .with_context(|| format!("{}: simulation failed", inputs_path.display()))?;
+    let sim =
+        host_sim::sim::simulate_recording(&plant, &rec, &opts, |k| bar.set_position(k as u64))
+            .with_context(|| format!("{}: simulation failed", inputs_path.display()))?;
     bar.finish_and_clear();
 
     let mut out = Recording {

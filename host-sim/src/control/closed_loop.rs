@@ -3,9 +3,12 @@
 //!
 //! Per tick `k` (period `dt = 1 / tick_hz`):
 //! 1. the plant state at `t_k` is measured ([`Plant::measure`], with its sensor effects), then
-//!    passed through the [`SensorModel`] (noise, ADC / encoder quantisation, delay) and the
-//!    scenario's injected sensor faults (dropout: no sample; NaN);
-//! 2. [`ControlTick::step`] turns the sensor frame and the set-point into a valve command;
+//!    passed through the [`SensorModel`] (noise, ADC / encoder quantisation to raw counts,
+//!    delay) and the scenario's injected sensor faults (dropout: no sample; NaN);
+//! 2. the firmware ([`FirmwareLoop`]: [`InProcess`] here, or the QEMU image of
+//!    `control::pil`) scales the raw counts with its own code (`PressureScaling`,
+//!    `counts_to_rad`) and [`ControlTick::step`] turns the sensor frame and the set-point
+//!    into a valve command;
 //! 3. the firmware's [`OnOffValves`] driver writes the fake pins (tick-level PWM, minimum
 //!    on-time); a stuck valve ignores its pin; the effective openings are the plant inputs
 //!    held over `[t_k, t_k + dt)`;
@@ -18,6 +21,7 @@ use std::cell::Cell;
 use std::collections::VecDeque;
 use std::rc::Rc;
 
+use pam_firmware::sensors::PressureScaling;
 use pam_firmware::tick::{ControlTick, ControllerConfig, SensorFrame, Setpoint, TickOutput};
 use pam_firmware::valves::{OnOffPwmConfig, OnOffValves};
 use rand::SeedableRng;
@@ -117,6 +121,174 @@ pub fn run_with(
     cfg: ControllerConfig,
     progress: &mut dyn FnMut(f64),
 ) -> Result<ClosedLoopRun, ClosedLoopError> {
+    let mut fw = InProcess::new(cfg, &scenario.sensors);
+    run_with_firmware(plant, scenario, &mut fw, progress)
+}
+
+/// Fake pressure ADC: zero gauge pressure reads this many counts (the reference wiring's
+/// 0.5 V offset), so noise around atmosphere stays a valid reading.
+pub const ADC_ZERO_COUNTS: u16 = pam_firmware::wiring::PRESSURE_COUNTS_AT_ZERO as u16;
+/// Highest count of the fake ADC's transport (`0xFFFF` marks a missing sample).
+pub const ADC_MAX_COUNTS: u16 = 0xFFFE;
+
+/// The pressure scaling of the fake ADC of a scenario: `pressure_lsb_pa` per count, zero at
+/// [`ADC_ZERO_COUNTS`]; `None` without quantisation (`pressure_lsb_pa = 0`).
+pub fn fake_adc_scaling(sensors: &SensorModel) -> Option<PressureScaling> {
+    (sensors.pressure_lsb_pa > 0.0).then(|| {
+        let lsb = sensors.pressure_lsb_pa as f32;
+        PressureScaling {
+            pa_per_count: lsb,
+            offset_pa: -lsb * ADC_ZERO_COUNTS as f32,
+        }
+    })
+}
+
+/// One pressure reading as the sensor delivers it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PressureReading {
+    /// ADC counts (through [`fake_adc_scaling`]).
+    Counts(u16),
+    /// Unquantised gauge pressure [Pa] (`pressure_lsb_pa = 0`).
+    Pa(f32),
+}
+
+/// One angle reading as the sensor delivers it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum AngleReading {
+    /// Encoder counts (`angle_counts_per_rev` per turn).
+    Counts(i32),
+    /// Unquantised angle [rad] (`angle_counts_per_rev = 0`).
+    Rad(f32),
+}
+
+/// One tick of raw sensor data (before the firmware's scaling), after the scenario's
+/// injected faults: `None` = no sample (dropout), `nan[i]` = the channel reads NaN (p1, p2,
+/// angle).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RawFrame {
+    pub p: [Option<PressureReading>; 2],
+    pub angle: Option<AngleReading>,
+    pub nan: [bool; 3],
+}
+
+impl RawFrame {
+    /// The frame the control tick sees: the firmware's own conversions
+    /// (`PressureScaling::to_gauge_pa`, `sensors::counts_to_rad`).
+    pub fn frame(&self, scaling: Option<&PressureScaling>, counts_per_rev: u32) -> SensorFrame {
+        let p = |i: usize| -> Option<f32> {
+            if self.nan[i] {
+                return Some(f32::NAN);
+            }
+            match self.p[i]? {
+                PressureReading::Counts(c) => Some(match scaling {
+                    Some(s) => s.to_gauge_pa(c as u32),
+                    None => f32::NAN,
+                }),
+                PressureReading::Pa(v) => Some(v),
+            }
+        };
+        let angle = if self.nan[2] {
+            Some(f32::NAN)
+        } else {
+            self.angle.map(|a| match a {
+                AngleReading::Counts(c) => pam_firmware::sensors::counts_to_rad(c, counts_per_rev),
+                AngleReading::Rad(v) => v,
+            })
+        };
+        SensorFrame {
+            p1_gauge_pa: p(0),
+            p2_gauge_pa: p(1),
+            angle_rad: angle,
+        }
+    }
+}
+
+/// What the firmware did in one tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FirmwareTick {
+    /// Valve pin levels in1, ex1, in2, ex2 the driver wrote.
+    pub pins: [bool; 4],
+    /// The control tick's output (a remote firmware reports the fields its stream carries;
+    /// the others are 0).
+    pub out: TickOutput,
+}
+
+/// The firmware side of the loop: the control tick and the valve driver, in this process
+/// ([`InProcess`]) or on an emulated MCU (`control::pil`).
+pub trait FirmwareLoop {
+    /// One control tick on raw sensor data; `k` is the tick index.
+    fn tick(
+        &mut self,
+        k: usize,
+        raw: &RawFrame,
+        setpoint_rad: f32,
+        dt_s: f32,
+    ) -> Result<FirmwareTick, ClosedLoopError>;
+}
+
+/// The firmware library in this process: sensor scaling, [`ControlTick`], [`OnOffValves`]
+/// on fake pins.
+pub struct InProcess {
+    tick: ControlTick,
+    pins: [FakePin; 4],
+    valves: OnOffValves<FakePin, FakePin, FakePin, FakePin>,
+    scaling: Option<PressureScaling>,
+    counts_per_rev: u32,
+}
+
+impl InProcess {
+    pub fn new(cfg: ControllerConfig, sensors: &SensorModel) -> Self {
+        let pins: [FakePin; 4] = Default::default();
+        let valves = OnOffValves::new(
+            pins[0].clone(),
+            pins[1].clone(),
+            pins[2].clone(),
+            pins[3].clone(),
+            OnOffPwmConfig::REFERENCE,
+        );
+        Self {
+            tick: ControlTick::new(cfg),
+            pins,
+            valves,
+            scaling: fake_adc_scaling(sensors),
+            counts_per_rev: sensors.angle_counts_per_rev,
+        }
+    }
+}
+
+impl FirmwareLoop for InProcess {
+    fn tick(
+        &mut self,
+        _k: usize,
+        raw: &RawFrame,
+        setpoint_rad: f32,
+        dt_s: f32,
+    ) -> Result<FirmwareTick, ClosedLoopError> {
+        let frame = raw.frame(self.scaling.as_ref(), self.counts_per_rev);
+        let out = self.tick.step(
+            &frame,
+            &Setpoint {
+                angle_rad: setpoint_rad,
+            },
+            dt_s,
+        );
+        // Infallible pins: the driver cannot fail here.
+        let _ = self.valves.apply(&out.valves);
+        Ok(FirmwareTick {
+            pins: std::array::from_fn(|i| self.pins[i].state.get()),
+            out,
+        })
+    }
+}
+
+/// Runs `scenario` with `fw` as the firmware: the plant, the fake sensors (noise, ADC and
+/// encoder quantisation, delay, injected faults) and stuck valves are on this side.
+pub fn run_with_firmware(
+    plant: &Plant,
+    scenario: &Scenario,
+    fw: &mut dyn FirmwareLoop,
+    progress: &mut dyn FnMut(f64),
+) -> Result<ClosedLoopRun, ClosedLoopError> {
     let dt_s = 1.0 / scenario.scenario.tick_hz;
     let n_ticks = (scenario.scenario.duration_s / dt_s).round() as usize;
     let mut rng = rand::rngs::StdRng::seed_from_u64(scenario.scenario.seed);
@@ -164,15 +336,8 @@ pub fn run_with(
     let mut plants: Vec<(usize, Plant)> = vec![(0, plant.clone())];
     plants.extend(changes);
 
-    let pins: [FakePin; 4] = Default::default();
-    let mut valves = OnOffValves::new(
-        pins[0].clone(),
-        pins[1].clone(),
-        pins[2].clone(),
-        pins[3].clone(),
-        OnOffPwmConfig::REFERENCE,
-    );
-    let mut tick = ControlTick::new(cfg);
+    let mut stuck: [Option<bool>; 4] = [None; 4];
+    let adc = fake_adc_scaling(&scenario.sensors);
     let opts = SolverOptions {
         rtol: 1e-6,
         atol: 1e-6,
@@ -183,7 +348,7 @@ pub fn run_with(
     let mut integ = Integrator::new(&plants[0].1, plant.initial_state(), opts);
     let p_noise =
         Normal::new(0.0, scenario.sensors.pressure_noise_pa.max(0.0)).expect("finite noise");
-    let mut delay: VecDeque<SensorFrame> = VecDeque::new();
+    let mut delay: VecDeque<RawFrame> = VecDeque::new();
     let mut rows = Vec::with_capacity(n_ticks);
     let mut first_injected = None;
     let mut first_latched = None;
@@ -205,15 +370,16 @@ pub fn run_with(
         let m = p.measure(&x);
         max_p = max_p.max((x.p1_abs_pa - p.p_atm_pa).max(x.p2_abs_pa - p.p_atm_pa));
 
-        // Fake sensors: noise, quantisation.
+        // Fake sensors: noise, ADC / encoder quantisation (raw counts; the firmware scales).
         let quant_p = |pa: f64, rng: &mut rand::rngs::StdRng| {
             let v = pa + p_noise.sample(rng);
             let lsb = scenario.sensors.pressure_lsb_pa;
-            (if lsb > 0.0 {
-                (v / lsb).round() * lsb
+            if adc.is_some() {
+                let c = (v / lsb).round() + f64::from(ADC_ZERO_COUNTS);
+                PressureReading::Counts(c.clamp(0.0, f64::from(ADC_MAX_COUNTS)) as u16)
             } else {
-                v
-            }) as f32
+                PressureReading::Pa(v as f32)
+            }
         };
         let p1 = quant_p(m.p1_kpa * 1e3, &mut rng);
         let p2 = quant_p(m.p2_kpa * 1e3, &mut rng);
@@ -221,14 +387,14 @@ pub fn run_with(
         let counts = scenario.sensors.angle_counts_per_rev;
         let angle = if counts > 0 {
             let c = (angle_rad / (2.0 * std::f64::consts::PI) * counts as f64).floor() as i32;
-            pam_firmware::sensors::counts_to_rad(c, counts)
+            AngleReading::Counts(c)
         } else {
-            angle_rad as f32
+            AngleReading::Rad(angle_rad as f32)
         };
-        let mut frame = SensorFrame {
-            p1_gauge_pa: Some(p1),
-            p2_gauge_pa: Some(p2),
-            angle_rad: Some(angle),
+        let mut frame = RawFrame {
+            p: [Some(p1), Some(p2)],
+            angle: Some(angle),
+            nan: [false; 3],
         };
         // Injected sensor faults.
         for e in &scenario.events {
@@ -246,12 +412,20 @@ pub fn run_with(
                 _ => continue,
             };
             if t_s + 0.5 * dt_s >= at_s && t_s < at_s + duration_s {
-                let slot = match channel {
-                    SensorChannel::P1 => &mut frame.p1_gauge_pa,
-                    SensorChannel::P2 => &mut frame.p2_gauge_pa,
-                    SensorChannel::Angle => &mut frame.angle_rad,
+                let i = match channel {
+                    SensorChannel::P1 => 0,
+                    SensorChannel::P2 => 1,
+                    SensorChannel::Angle => 2,
                 };
-                *slot = if nan { Some(f32::NAN) } else { None };
+                if nan {
+                    frame.nan[i] = true;
+                } else {
+                    match i {
+                        0 | 1 => frame.p[i] = None,
+                        _ => frame.angle = None,
+                    }
+                    frame.nan[i] = false;
+                }
                 first_injected.get_or_insert(k);
             }
         }
@@ -260,17 +434,11 @@ pub fn run_with(
         let frame = if delay.len() > scenario.sensors.delay_ticks {
             delay.pop_front().unwrap_or_default()
         } else {
-            SensorFrame::default()
+            RawFrame::default()
         };
 
         let setpoint_rad = scenario.setpoint.at(t_s, &levels);
-        let out = tick.step(
-            &frame,
-            &Setpoint {
-                angle_rad: setpoint_rad as f32,
-            },
-            dt_s as f32,
-        );
+        let FirmwareTick { pins, out } = fw.tick(k, &frame, setpoint_rad as f32, dt_s as f32)?;
         max_p_set = max_p_set.max(out.p1_set_gauge_pa.max(out.p2_set_gauge_pa) as f64);
         if out.fault.is_some() {
             first_latched.get_or_insert(k);
@@ -285,18 +453,23 @@ pub fn run_with(
                         ValveId::In2 => 2,
                         ValveId::Ex2 => 3,
                     };
-                    pins[i].stuck.set(Some(open));
+                    stuck[i] = Some(open);
                 }
             }
         }
-        // Infallible pins: the driver cannot fail here.
-        let _ = valves.apply(&out.valves);
-        let b = |pin: &FakePin| if pin.open() { 1.0 } else { 0.0 };
+        // What each valve does: a stuck valve ignores its pin.
+        let b = |i: usize| {
+            if stuck[i].unwrap_or(pins[i]) {
+                1.0
+            } else {
+                0.0
+            }
+        };
         let inputs = ValveInputs {
-            u_in1: b(&pins[0]),
-            u_ex1: b(&pins[1]),
-            u_in2: b(&pins[2]),
-            u_ex2: b(&pins[3]),
+            u_in1: b(0),
+            u_ex1: b(1),
+            u_in2: b(2),
+            u_ex2: b(3),
         };
         rows.push(TickRow {
             t_s,

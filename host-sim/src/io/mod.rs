@@ -2,6 +2,8 @@
 //! a closed-loop run writes, plots, and the 3-joint arm's recordings.
 
 pub mod arm3;
+pub mod capture;
+pub mod import;
 pub mod plot;
 pub mod recording;
 pub mod run_files;

@@ -329,6 +329,14 @@ pub enum ClosedLoopError {
     /// The plant integration failed.
     #[error(transparent)]
     Sim(#[from] SimError),
+    /// The firmware side of the loop failed (emulator link, timeout, faulting firmware).
+    #[error("tick {tick}: {msg}")]
+    Firmware {
+        /// Tick at which it failed.
+        tick: usize,
+        /// What happened.
+        msg: String,
+    },
 }
 
 impl Scenario {
