@@ -54,6 +54,7 @@ skip_lines = 2
 column = "Zeit [ms]"
 unit = "ms"
 
+[pressure]
 p_atm_pa = 101325.0
 
 [[channel]]
@@ -406,7 +407,8 @@ fn regulator_set_points_become_proportional_openings() {
 [time]
 column = "t"
 unit = "s"
-band_pa = 20000.0
+[pressure]
+regulator_band_pa = 20000.0
 [[channel]]
 column = "p1"
 channel = "p1"

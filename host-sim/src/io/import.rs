@@ -13,8 +13,9 @@
 //! column = "Zeit"
 //! unit = "ms"            # "s" | "ms" | "us"
 //!
-//! p_atm_pa = 101325.0    # atmosphere for absolute pressures (default 101325)
-//! band_pa = 20000.0      # proportional band of the pressure-regulator model (default 20 kPa)
+//! [pressure]
+//! p_atm_pa = 101325.0           # atmosphere for absolute pressures (default 101325)
+//! regulator_band_pa = 20000.0   # proportional band of the regulator model (default 20 kPa)
 //!
 //! [[channel]]
 //! column = "P1"          # or `constant = 0.0` for a channel the rig does not log
@@ -41,8 +42,8 @@
 //! `regulator1` / `regulator2`: the set-point of a proportional pressure regulator feeding
 //! the muscle (a pressure unit). Model (documented in `docs/rig.md`): a relieving regulator
 //! whose main stage is the plant's own ISO 6358 inflate / exhaust valve pair, opened in
-//! proportion to the pressure error over the band `band_pa`:
-//! `u_in = clamp((p_set - p) / band_pa, 0, 1)`, `u_ex = clamp((p - p_set) / band_pa, 0, 1)`,
+//! proportion to the pressure error over the band `b = regulator_band_pa`:
+//! `u_in = clamp((p_set - p) / b, 0, 1)`, `u_ex = clamp((p - p_set) / b, 0, 1)`,
 //! with `p` the muscle's measured gauge pressure at the same time stamp (so the matching
 //! pressure channel must be mapped).
 //!
@@ -67,13 +68,30 @@ pub struct Mapping {
     #[serde(default)]
     pub csv: CsvOptions,
     pub time: TimeColumn,
+    #[serde(default)]
+    pub pressure: PressureOptions,
+    pub channel: Vec<ChannelMap>,
+}
+
+/// `[pressure]`: atmosphere and the regulator model.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PressureOptions {
     /// Atmospheric pressure for absolute pressure columns [Pa].
     #[serde(default = "default_p_atm")]
     pub p_atm_pa: f64,
     /// Proportional band of the regulator model [Pa].
     #[serde(default = "default_band")]
-    pub band_pa: f64,
-    pub channel: Vec<ChannelMap>,
+    pub regulator_band_pa: f64,
+}
+
+impl Default for PressureOptions {
+    fn default() -> Self {
+        Self {
+            p_atm_pa: default_p_atm(),
+            regulator_band_pa: default_band(),
+        }
+    }
 }
 
 fn default_p_atm() -> f64 {
@@ -245,11 +263,15 @@ impl Mapping {
                 format!("{:?}: use \"s\", \"ms\" or \"us\"", self.time.unit),
             )
         })?;
-        if !(self.p_atm_pa > 0.0 && self.p_atm_pa.is_finite()) {
-            return Err(bad("p_atm_pa", format!("{} must be > 0", self.p_atm_pa)));
+        let p = &self.pressure;
+        if !(p.p_atm_pa > 0.0 && p.p_atm_pa.is_finite()) {
+            return Err(bad("pressure.p_atm_pa", format!("{} must be > 0", p.p_atm_pa)));
         }
-        if !(self.band_pa > 0.0 && self.band_pa.is_finite()) {
-            return Err(bad("band_pa", format!("{} must be > 0", self.band_pa)));
+        if !(p.regulator_band_pa > 0.0 && p.regulator_band_pa.is_finite()) {
+            return Err(bad(
+                "pressure.regulator_band_pa",
+                format!("{} must be > 0", p.regulator_band_pa),
+            ));
         }
         Ok(())
     }
@@ -326,7 +348,7 @@ fn plan(
             Convert::Factor {
                 factor: f,
                 minus_pa: if reference == "absolute" {
-                    m.p_atm_pa
+                    m.pressure.p_atm_pa
                 } else {
                     0.0
                 },
@@ -769,7 +791,7 @@ pub fn import(
                         find(Target::Output(p)).expect("checked: regulator needs its pressure");
                     let err = values[i][k] - values[ip][k];
                     let e = if inflate { err } else { -err };
-                    (e / mapping.band_pa).clamp(0.0, 1.0)
+                    (e / mapping.pressure.regulator_band_pa).clamp(0.0, 1.0)
                 };
             }
             rec.inputs.push(ValveInputs {

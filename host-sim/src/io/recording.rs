@@ -4,7 +4,8 @@
 //! - one header line, columns by name in any order;
 //! - required: `t_s` (increasing; uniform steps or stamps that jitter by less than half a
 //!   median step, see [`Recording::is_uniform`]; a gap is refused), `u_in1`, `u_ex1`,
-//!   `u_in2`, `u_ex2` (in [0, 1]) and at least one of `angle_deg`, `p1_kpa`, `p2_kpa`, `f1_n`, `f2_n`; other columns are ignored.
+//!   `u_in2`, `u_ex2` (in [0, 1]) and at least one of `angle_deg`, `p1_kpa`, `p2_kpa`,
+//!   `f1_n`, `f2_n`; other columns are ignored.
 //!
 //! Every error names the file, the line and the field. Writing goes to a temporary file in
 //! the target directory that is renamed over the target only when complete.
