@@ -233,6 +233,7 @@ fn jittered_40hz_bar_and_volts_rig_file_imports_simulates_and_diagnoses() {
     assert_eq!(sim.t_s, rec.t_s);
     let fits = compare(&rec, &sim).unwrap();
     for f in &fits {
+        eprintln!("simulate vs rig: {:?} fit {:.2} %", f.channel, f.fit_percent);
         assert!(f.fit_percent > 90.0, "{:?}: {}", f.channel, f.fit_percent);
     }
 
@@ -255,6 +256,7 @@ fn jittered_40hz_bar_and_volts_rig_file_imports_simulates_and_diagnoses() {
     );
     let d: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    eprintln!("diagnose: {stdout}");
     assert_eq!(d["effects"].as_array().unwrap().len(), 0, "{stdout}\n{d:#}");
 }
 
