@@ -296,6 +296,7 @@ fn stamped_replay_beats_treating_jittered_stamps_as_uniform() {
             .unwrap()
             .fit_percent
     };
+    eprintln!("p1 fit: stamped {:.2} %, stamps taken as uniform {:.2} %", p1(&a), p1(&b));
     assert!(
         p1(&a) > p1(&b) + 2.0,
         "stamped {} vs uniform {}",
