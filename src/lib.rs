@@ -23,6 +23,8 @@
 //! - [`valves`]: on/off and proportional valve drivers over embedded-hal 1.0.
 //! - [`tick`]: the control tick combining all of the above (`tick_contract.md`).
 //! - [`log`]: ring buffer of per-tick records.
+//! - [`stream`]: the per-tick binary stream record (board / QEMU -> host) and the
+//!   processor-in-the-loop sensor frames (host -> firmware).
 #![no_std]
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
@@ -47,6 +49,7 @@ pub mod pid;
 pub mod residual;
 pub mod safety;
 pub mod sensors;
+pub mod stream;
 pub mod tick;
 pub mod torque_model;
 pub mod trace;

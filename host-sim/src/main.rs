@@ -11,7 +11,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use host_sim::fit::{compare, format_table};
 use host_sim::io::plot::plot_comparison;
 use host_sim::io::recording::Channel;
-use host_sim::sim::{simulate_with_progress, SolverOptions};
+use host_sim::sim::SolverOptions;
 use host_sim::validate::{self, f64_in, usize_in, Range};
 use host_sim::{Plant, Recording};
 
@@ -74,6 +74,11 @@ enum Command {
     /// p2_kpa (f1_n,f2_n used when present), as in RECORDING.md.
     #[command(after_help = "Example:\n  host-sim diagnose-batch --plant ../shared/plant/reference-1dof.toml --recordings ../shared/conformance --out-dir diagnoses/")]
     DiagnoseBatch(host_sim::diagnose::batch::BatchArgs),
+    /// Import a rig logger's CSV (other column names, units, time base) into a recording,
+    /// through a mapping file (docs/rig.md).
+    Import(host_sim::io::import::ImportArgs),
+    /// Turn the firmware's per-tick stream (QEMU image or board) into a recording.
+    Capture(host_sim::io::capture::CaptureArgs),
 }
 
 #[derive(Args)]
@@ -178,6 +183,8 @@ fn main() -> ExitCode {
         Command::Sweep(a) => run_report(host_sim::identify::cli::run_sweep(&a)),
         Command::Identify(a) => run_report(host_sim::identify::cli::run_identify(&a)),
         Command::Tune(a) => run_report(host_sim::control::tune::run_tune(&a)),
+        Command::Import(a) => run_report(host_sim::io::import::run_import(&a)),
+        Command::Capture(a) => run_report(host_sim::io::capture::run_capture(&a)),
     };
     match result.and_then(|code| {
         outputs.commit().context("cannot write the outputs")?;
@@ -257,10 +264,9 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
             .expect("static template")
             .progress_chars("=> "),
     );
-    let sim = simulate_with_progress(&plant, &rec.inputs, dt, &opts, |k| {
-        bar.set_position(k as u64)
-    })
-    .with_context(|| format!("{}: simulation failed", inputs_path.display()))?;
+    let sim =
+        host_sim::sim::simulate_recording(&plant, &rec, &opts, |k| bar.set_position(k as u64))
+            .with_context(|| format!("{}: simulation failed", inputs_path.display()))?;
     bar.finish_and_clear();
 
     let mut out = Recording {

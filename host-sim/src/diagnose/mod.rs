@@ -358,6 +358,10 @@ pub fn diagnose(
     opts: &DiagnoseOptions,
     progress: &(dyn Fn(u64, u64, &str) + Sync),
 ) -> Result<Diagnosis, DiagnoseError> {
+    // Derivatives, lags and refits work on a uniform grid: jittered recordings are put on it
+    // (openings time-averaged per cell, outputs interpolated; `Recording::to_uniform`).
+    let (train_u, check_u) = (train.to_uniform(), check.map(Recording::to_uniform));
+    let (train, check) = (&train_u, check_u.as_ref());
     let n = train.len();
     if n < MIN_SAMPLES {
         return Err(DiagnoseError::Data(format!(

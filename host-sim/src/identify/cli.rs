@@ -538,7 +538,8 @@ fn identify_torque(a: &IdentifyTorqueArgs) -> Result<String> {
     )
     .map_err(anyhow::Error::msg)?;
     let plant = Plant::load(&a.plant)?;
-    let rec = Recording::read(&a.recording)?;
+    // Jittered time stamps go on the uniform grid the velocity filter needs.
+    let rec = Recording::read(&a.recording)?.to_uniform();
     let file = a.recording.display().to_string();
     let dt = rec.sample_period_s();
     let hw = a

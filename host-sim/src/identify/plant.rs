@@ -460,7 +460,10 @@ pub fn identify_plant_files(
     out: &Path,
     opts: &PlantFitOptions,
 ) -> Result<PlantFit, IdentError> {
-    let rec = Recording::read(recording).map_err(|e| IdentError::Data(e.to_string()))?;
+    // Jittered time stamps go on the uniform grid the fit simulates on.
+    let rec = Recording::read(recording)
+        .map_err(|e| IdentError::Data(e.to_string()))?
+        .to_uniform();
     let file = plant.display().to_string();
     let text = std::fs::read_to_string(plant).map_err(|e| IdentError::Io {
         file: file.clone(),

@@ -3,6 +3,8 @@
 
 pub mod arm3;
 pub mod atomic;
+pub mod capture;
+pub mod import;
 pub mod plot;
 pub mod recording;
 pub mod run_files;

@@ -2,8 +2,10 @@
 //!
 //! - leading comment lines `# key = value` are metadata, kept in order (unknown keys too);
 //! - one header line, columns by name in any order;
-//! - required: `t_s` (uniform steps), `u_in1`, `u_ex1`, `u_in2`, `u_ex2` (in [0, 1]) and at
-//!   least one of `angle_deg`, `p1_kpa`, `p2_kpa`, `f1_n`, `f2_n`; other columns are ignored.
+//! - required: `t_s` (increasing; uniform steps or stamps that jitter by less than half a
+//!   median step, see [`Recording::is_uniform`]; a gap is refused), `u_in1`, `u_ex1`,
+//!   `u_in2`, `u_ex2` (in [0, 1]) and at least one of `angle_deg`, `p1_kpa`, `p2_kpa`,
+//!   `f1_n`, `f2_n`; other columns are ignored.
 //!
 //! Every error names the file, the line and the field. Writing goes to a temporary file in
 //! the target directory that is renamed over the target only when complete.
@@ -56,6 +58,14 @@ impl Channel {
         m.to_array()[self.index()]
     }
 }
+
+/// Largest accepted step between two time stamps, in median steps: a longer step is a gap.
+pub const MAX_STEP_RATIO: f64 = 1.5;
+/// Smallest accepted step between two time stamps, in median steps.
+pub const MIN_STEP_RATIO: f64 = 0.5;
+/// Steps within this share of the median step (and stamps within it of the uniform grid)
+/// count as uniform: such a recording is used as it is.
+pub const UNIFORM_TOLERANCE: f64 = 0.01;
 
 /// The input columns, in the order of [`ValveInputs`].
 pub const INPUT_COLUMNS: [&str; 4] = ["u_in1", "u_ex1", "u_in2", "u_ex2"];
@@ -114,6 +124,98 @@ impl Recording {
             return f64::NAN;
         }
         (self.t_s[n - 1] - self.t_s[0]) / (n - 1) as f64
+    }
+
+    /// Whether the time stamps are uniform (each step within [`UNIFORM_TOLERANCE`] of the
+    /// median step, each stamp within it of the uniform grid from the first to the last).
+    /// A jittered recording is not: [`crate::sim::simulate_recording`] integrates it between
+    /// its own stamps, and the tools that need a uniform grid take [`Self::to_uniform`].
+    pub fn is_uniform(&self) -> bool {
+        let n = self.t_s.len();
+        if n < 2 {
+            return true;
+        }
+        let dt = self.sample_period_s();
+        let mut steps: Vec<f64> = self.t_s.windows(2).map(|w| w[1] - w[0]).collect();
+        steps.sort_by(f64::total_cmp);
+        let median = steps[steps.len() / 2];
+        steps
+            .iter()
+            .all(|s| (s - median).abs() <= UNIFORM_TOLERANCE * median.abs())
+            && (0..n).all(|k| {
+                (self.t_s[k] - (self.t_s[0] + k as f64 * dt)).abs() <= UNIFORM_TOLERANCE * dt
+            })
+    }
+
+    /// The recording on the uniform grid `t_0 + k dt` (`dt` the mean step, same number of
+    /// samples): each grid cell's valve opening is the time average of the openings held
+    /// between the original stamps over that cell (the opening-time a valve delivers is
+    /// kept; an on/off edge between grid points becomes one fractional opening), and each
+    /// output channel is linearly interpolated between the two stamps around the grid point.
+    /// A uniform recording is returned unchanged.
+    pub fn to_uniform(&self) -> Recording {
+        if self.is_uniform() {
+            return self.clone();
+        }
+        let n = self.t_s.len();
+        let t0 = self.t_s[0];
+        let dt = self.sample_period_s();
+        let grid: Vec<f64> = (0..n).map(|k| t0 + k as f64 * dt).collect();
+        // Input k is held over [t_k, t_{k+1}); the last one over [t_{n-1}, end of the grid).
+        let t_end = (t0 + n as f64 * dt).max(self.t_s[n - 1]);
+        let hold_end = |k: usize| if k + 1 < n { self.t_s[k + 1] } else { t_end };
+        let mut inputs = Vec::with_capacity(n);
+        let mut j = 0usize;
+        for &g in &grid {
+            let (a, b) = (g, g + dt);
+            while j + 1 < n && self.t_s[j + 1] <= a {
+                j += 1;
+            }
+            let mut acc = [0.0f64; 4];
+            let mut i = j;
+            loop {
+                let lo = self.t_s[i].max(a);
+                let hi = hold_end(i).min(b);
+                if hi > lo {
+                    let u = self.inputs[i];
+                    for (s, v) in acc.iter_mut().zip([u.u_in1, u.u_ex1, u.u_in2, u.u_ex2]) {
+                        *s += v * (hi - lo);
+                    }
+                }
+                if i + 1 >= n || self.t_s[i + 1] >= b {
+                    break;
+                }
+                i += 1;
+            }
+            let f = |s: f64| (s / dt).clamp(0.0, 1.0);
+            inputs.push(ValveInputs {
+                u_in1: f(acc[0]),
+                u_ex1: f(acc[1]),
+                u_in2: f(acc[2]),
+                u_ex2: f(acc[3]),
+            });
+        }
+        let mut out = Recording {
+            metadata: self.metadata.clone(),
+            t_s: grid.clone(),
+            inputs,
+            outputs: Default::default(),
+        };
+        out.metadata.retain(|(k, _)| k != "sample_period_s");
+        out.metadata
+            .push(("sample_period_s".into(), format!("{dt}")));
+        out.metadata.push((
+            "resampled".into(),
+            "jittered time stamps put on the uniform grid (openings time-averaged, outputs \
+             linearly interpolated)"
+                .into(),
+        ));
+        for c in Channel::ALL {
+            if let Some(y) = self.channel(c) {
+                out.set_channel(c, interpolate(&self.t_s, y, &grid));
+            }
+        }
+        out
     }
 
     pub fn channel(&self, c: Channel) -> Option<&[f64]> {
@@ -285,32 +387,37 @@ impl Recording {
             ));
         }
         let tol = 0.01 * dt;
-        // Each step against the median step (robust to one bad step), then the time stamps
-        // against the end-to-end period (catches a slow drift).
+        // Each step against the median step: a step outside [0.5, 1.5] median steps is a
+        // gap (or a doubled stamp) and is refused, never filled; steps in between are time
+        // stamp jitter, accepted (the valve inputs are held between the stamps).
         let mut steps: Vec<f64> = rec.t_s.windows(2).map(|w| w[1] - w[0]).collect();
         steps.sort_by(f64::total_cmp);
         let median_step = steps[steps.len() / 2];
-        let non_uniform = |k: usize, period: f64| {
-            field_err(
-                lines[k],
-                "t_s",
-                format!(
-                    "non-uniform time: {} after {} (sample period {period} s)",
-                    rec.t_s[k],
-                    rec.t_s[k - 1]
-                ),
-            )
-        };
         for k in 1..n {
             let step = rec.t_s[k] - rec.t_s[k - 1];
-            if (step - median_step).abs() > 0.01 * median_step.abs() {
-                return Err(non_uniform(k, median_step));
+            if !(step > 0.0) {
+                return Err(field_err(
+                    lines[k],
+                    "t_s",
+                    format!(
+                        "time does not increase: {} after {}",
+                        rec.t_s[k],
+                        rec.t_s[k - 1]
+                    ),
+                ));
             }
-        }
-        for k in 1..n {
-            let drift = rec.t_s[k] - (rec.t_s[0] + k as f64 * dt);
-            if drift.abs() > tol {
-                return Err(non_uniform(k, dt));
+            if step > MAX_STEP_RATIO * median_step || step < MIN_STEP_RATIO * median_step {
+                return Err(field_err(
+                    lines[k],
+                    "t_s",
+                    format!(
+                        "non-uniform time: {} after {} (step {step} s, median step \
+                         {median_step} s; jitter within [{MIN_STEP_RATIO}, {MAX_STEP_RATIO}] \
+                         median steps is accepted, a gap is not filled: split the recording)",
+                        rec.t_s[k],
+                        rec.t_s[k - 1]
+                    ),
+                ));
             }
         }
         for (i, (k, v)) in rec.metadata.iter().enumerate() {
@@ -346,44 +453,69 @@ impl Recording {
                 message: "columns of unequal length".into(),
             });
         }
-        write_atomically(path, |w| {
-            for (k, v) in &self.metadata {
-                if k.is_empty() {
-                    writeln!(w, "# {v}")?;
-                } else {
-                    writeln!(w, "# {k} = {v}")?;
-                }
-            }
-            let mut cw = csv::WriterBuilder::new().from_writer(&mut *w);
-            let mut header: Vec<&str> = vec!["t_s"];
-            header.extend(INPUT_COLUMNS);
-            let present: Vec<Channel> = Channel::ALL
-                .into_iter()
-                .filter(|c| self.outputs[c.index()].is_some())
-                .collect();
-            header.extend(present.iter().map(|c| c.name()));
-            cw.write_record(&header)?;
-            let mut row: Vec<String> = Vec::with_capacity(header.len());
-            for k in 0..n {
-                row.clear();
-                row.push(format!("{}", self.t_s[k]));
-                let u = &self.inputs[k];
-                for v in [u.u_in1, u.u_ex1, u.u_in2, u.u_ex2] {
-                    row.push(format!("{v}"));
-                }
-                for c in &present {
-                    row.push(format!(
-                        "{:.6}",
-                        self.outputs[c.index()].as_ref().unwrap()[k]
-                    ));
-                }
-                cw.write_record(&row)?;
-            }
-            cw.flush()?;
-            Ok(())
-        })
-        .map_err(io)
+        write_atomically(path, |w| self.write_to(w)).map_err(io)
     }
+
+    /// The CSV text of the recording (metadata, header, rows) into `w`.
+    pub fn write_to(&self, w: &mut impl Write) -> std::io::Result<()> {
+        let n = self.t_s.len();
+        for (k, v) in &self.metadata {
+            if k.is_empty() {
+                writeln!(w, "# {v}")?;
+            } else {
+                writeln!(w, "# {k} = {v}")?;
+            }
+        }
+        let mut cw = csv::WriterBuilder::new().from_writer(&mut *w);
+        let mut header: Vec<&str> = vec!["t_s"];
+        header.extend(INPUT_COLUMNS);
+        let present: Vec<Channel> = Channel::ALL
+            .into_iter()
+            .filter(|c| self.outputs[c.index()].is_some())
+            .collect();
+        header.extend(present.iter().map(|c| c.name()));
+        cw.write_record(&header)?;
+        let mut row: Vec<String> = Vec::with_capacity(header.len());
+        for k in 0..n {
+            row.clear();
+            row.push(format!("{}", self.t_s[k]));
+            let u = &self.inputs[k];
+            for v in [u.u_in1, u.u_ex1, u.u_in2, u.u_ex2] {
+                row.push(format!("{v}"));
+            }
+            for c in &present {
+                row.push(format!(
+                    "{:.6}",
+                    self.outputs[c.index()].as_ref().unwrap()[k]
+                ));
+            }
+            cw.write_record(&row)?;
+        }
+        cw.flush()?;
+        Ok(())
+    }
+}
+
+/// Linear interpolation of `(t, y)` (increasing `t`) at `at` (clamped to the end values).
+pub fn interpolate(t: &[f64], y: &[f64], at: &[f64]) -> Vec<f64> {
+    let n = t.len();
+    let mut j = 0usize;
+    at.iter()
+        .map(|&x| {
+            if x <= t[0] {
+                return y[0];
+            }
+            if x >= t[n - 1] {
+                return y[n - 1];
+            }
+            while j + 1 < n && t[j + 1] < x {
+                j += 1;
+            }
+            let (t0, t1) = (t[j], t[j + 1]);
+            let w = (x - t0) / (t1 - t0);
+            y[j] + w * (y[j + 1] - y[j])
+        })
+        .collect()
 }
 
 /// Writes a file atomically through [`crate::io::atomic::write_with`] (the one atomic

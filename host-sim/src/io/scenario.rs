@@ -387,6 +387,14 @@ pub enum ClosedLoopError {
         /// The integrator's error.
         source: SimError,
     },
+    /// The firmware side of the loop failed (emulator link, timeout, faulting firmware).
+    #[error("tick {tick}: {msg}")]
+    Firmware {
+        /// Tick at which it failed.
+        tick: usize,
+        /// What happened.
+        msg: String,
+    },
 }
 
 impl Scenario {

@@ -618,3 +618,108 @@ pub fn simulate_with_progress(
         stats: integ.stats(),
     })
 }
+
+/// Open-loop replay at a recording's own time stamps (uniform or jittered): `inputs[k]` is
+/// held over `[t_s[k], t_s[k + 1])`; returns the state at every stamp (`states[k]` at
+/// `t_s[k]`, the first one the plant's `[initial]` state). The last input is held for the
+/// mean step to give `final_state`. A valve dead time delays every input edge by exactly
+/// `delay_s` (the edges then fall between the stamps).
+pub fn simulate_stamped(
+    plant: &Plant,
+    t_s: &[f64],
+    inputs: &[ValveInputs],
+    opts: &SolverOptions,
+    mut progress: impl FnMut(usize),
+) -> Result<Simulation, SimError> {
+    let n = inputs.len();
+    if let Some((index, u)) = inputs.iter().enumerate().find(|(_, u)| !valid_inputs(u)) {
+        return Err(SimError::Input { index, inputs: *u });
+    }
+    if t_s.len() != n || n == 0 {
+        return Err(SimError::Integration {
+            t_s: 0.0,
+            message: format!("{} time stamps for {n} input samples", t_s.len()),
+        });
+    }
+    let mean_step = if n > 1 {
+        (t_s[n - 1] - t_s[0]) / (n - 1) as f64
+    } else {
+        1.0
+    };
+    let t_end = t_s[n - 1] + mean_step;
+    for k in 1..n {
+        let step = t_s[k] - t_s[k - 1];
+        if !(step.is_finite() && step > 0.0) {
+            return Err(SimError::SamplePeriod(step));
+        }
+    }
+    let delay_s = plant.effects.valve_dead_time_s.unwrap_or(0.0);
+    // The input in force at time t: the sample of the last stamp <= t - delay (all valves
+    // closed before the first delayed edge, as the dead-time line starts).
+    let closed = ValveInputs {
+        u_in1: 0.0,
+        u_ex1: 0.0,
+        u_in2: 0.0,
+        u_ex2: 0.0,
+    };
+    // Breakpoints: the stamps, the delayed stamps, the end.
+    let mut cuts: Vec<f64> = t_s.to_vec();
+    if delay_s > 0.0 {
+        cuts.extend(t_s.iter().map(|t| t + delay_s).filter(|t| *t < t_end));
+        cuts.sort_by(f64::total_cmp);
+        cuts.dedup_by(|a, b| (*a - *b).abs() <= 1e-12 * mean_step);
+    }
+    cuts.push(t_end);
+    let mut integ = Integrator::new(plant, plant.initial_state(), *opts);
+    let mut states = Vec::with_capacity(n);
+    let mut next_stamp = 0usize;
+    let mut src = 0usize; // index into t_s of the input in force (delayed)
+    for w in cuts.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        if next_stamp < n && (t_s[next_stamp] - a).abs() <= 1e-12 * mean_step {
+            states.push(integ.state());
+            next_stamp += 1;
+            if next_stamp % 1000 == 0 {
+                progress(next_stamp);
+            }
+        }
+        let u = if delay_s > 0.0 {
+            let td = a - delay_s;
+            while src + 1 < n && t_s[src + 1] <= td + 1e-12 * mean_step {
+                src += 1;
+            }
+            if t_s[src] <= td + 1e-12 * mean_step {
+                inputs[src]
+            } else {
+                closed
+            }
+        } else {
+            inputs[next_stamp.saturating_sub(1)]
+        };
+        let h = b - a;
+        if h > 0.0 {
+            integ.advance(u, h)?;
+        }
+    }
+    progress(n);
+    Ok(Simulation {
+        states,
+        final_state: integ.state(),
+        stats: integ.stats(),
+    })
+}
+
+/// Replays a recording's valve inputs open loop: [`simulate_with_progress`] on a uniform
+/// recording, [`simulate_stamped`] on a jittered one (inputs held between its stamps).
+pub fn simulate_recording(
+    plant: &Plant,
+    rec: &crate::io::recording::Recording,
+    opts: &SolverOptions,
+    progress: impl FnMut(usize),
+) -> Result<Simulation, SimError> {
+    if rec.is_uniform() {
+        simulate_with_progress(plant, &rec.inputs, rec.sample_period_s(), opts, progress)
+    } else {
+        simulate_stamped(plant, &rec.t_s, &rec.inputs, opts, progress)
+    }
+}

@@ -1,0 +1,921 @@
+//! `host-sim import`: a rig logger's CSV file -> a RECORDING.md recording, through a mapping
+//! file (TOML) that says which column is which channel, in which unit.
+//!
+//! The mapping file (every table `deny_unknown_fields`; `docs/rig.md` has a worked example):
+//!
+//! ```toml
+//! [csv]
+//! delimiter = ";"        # one character (default ",")
+//! decimal = ","          # "." (default) or "," (then the delimiter must not be ",")
+//! skip_lines = 2         # lines before the header line (default 0)
+//!
+//! [time]
+//! column = "Zeit"
+//! unit = "ms"            # "s" | "ms" | "us"
+//!
+//! [pressure]
+//! p_atm_pa = 101325.0           # atmosphere for absolute pressures (default 101325)
+//! regulator_band_pa = 20000.0   # proportional band of the regulator model (default 20 kPa)
+//!
+//! [[channel]]
+//! column = "P1"          # or `constant = 0.0` for a channel the rig does not log
+//! channel = "p1"         # p1 p2 angle f1 f2 u_in1 u_ex1 u_in2 u_ex2 valve1 valve2
+//!                        # regulator1 regulator2
+//! unit = "bar"           # see below
+//! reference = "absolute" # pressures: "gauge" (default) or "absolute"
+//! scale = 1.0            # value = raw * scale + offset, in `unit`, before the unit conversion
+//! offset = 0.0
+//! counts_per_rev = 8000  # angle in "counts"
+//! threshold = 0.5        # u_* in "onoff": open when the value is >= threshold
+//! curve = [[0.0, 0.0], [10.0, 1.0]]  # "V": piecewise-linear (volts, opening) table
+//! ```
+//!
+//! Units: pressures `Pa` `kPa` `bar` `MPa` `psi`; angle `rad` `deg` `counts`; forces `N`
+//! `kN`; valve openings (`u_in1` .. `u_ex2`) `fraction` (0..1), `percent`, `onoff` or `V`
+//! (through `curve`, clamped to [0, 1]).
+//!
+//! `valve1` / `valve2`: one signed command per muscle, as a proportional 5/3 valve (e.g. a
+//! FESTO MPYE at 0..10 V, 5 V closed) takes: `curve` maps volts (or `fraction` / `percent`
+//! values) to a signed opening in [-1, 1]; `s > 0` opens the inflate path (`u_in = s`,
+//! `u_ex = 0`), `s < 0` the exhaust path (`u_ex = -s`).
+//!
+//! `regulator1` / `regulator2`: the set-point of a proportional pressure regulator feeding
+//! the muscle (a pressure unit). Model (documented in `docs/rig.md`): a relieving regulator
+//! whose main stage is the plant's own ISO 6358 inflate / exhaust valve pair, opened in
+//! proportion to the pressure error over the band `b = regulator_band_pa`:
+//! `u_in = clamp((p_set - p) / b, 0, 1)`, `u_ex = clamp((p - p_set) / b, 0, 1)`,
+//! with `p` the muscle's measured gauge pressure at the same time stamp (so the matching
+//! pressure channel must be mapped).
+//!
+//! Time stamps are written as logged (converted to seconds, shifted to start at 0): jitter
+//! is kept (simulate / fit / identify / diagnose accept it, inputs held between stamps). A
+//! step longer than [`MAX_STEP_RATIO`] median steps is a gap: gaps are listed and refused, or
+//! with `--split` written as separate recordings; never filled. An empty cell is an error.
+//! Every error names the file, the line and the column.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use crate::io::recording::{Channel, Recording, MAX_STEP_RATIO, MIN_STEP_RATIO};
+use crate::plant::ValveInputs;
+
+/// The mapping file.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Mapping {
+    #[serde(default)]
+    pub csv: CsvOptions,
+    pub time: TimeColumn,
+    #[serde(default)]
+    pub pressure: PressureOptions,
+    pub channel: Vec<ChannelMap>,
+}
+
+/// `[pressure]`: atmosphere and the regulator model.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PressureOptions {
+    /// Atmospheric pressure for absolute pressure columns [Pa].
+    #[serde(default = "default_p_atm")]
+    pub p_atm_pa: f64,
+    /// Proportional band of the regulator model [Pa].
+    #[serde(default = "default_band")]
+    pub regulator_band_pa: f64,
+}
+
+impl Default for PressureOptions {
+    fn default() -> Self {
+        Self {
+            p_atm_pa: default_p_atm(),
+            regulator_band_pa: default_band(),
+        }
+    }
+}
+
+fn default_p_atm() -> f64 {
+    101_325.0
+}
+fn default_band() -> f64 {
+    20_000.0
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CsvOptions {
+    #[serde(default = "default_delimiter")]
+    pub delimiter: String,
+    #[serde(default = "default_decimal")]
+    pub decimal: String,
+    #[serde(default)]
+    pub skip_lines: usize,
+}
+
+fn default_delimiter() -> String {
+    ",".into()
+}
+fn default_decimal() -> String {
+    ".".into()
+}
+
+impl Default for CsvOptions {
+    fn default() -> Self {
+        Self {
+            delimiter: default_delimiter(),
+            decimal: default_decimal(),
+            skip_lines: 0,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TimeColumn {
+    pub column: String,
+    pub unit: String,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChannelMap {
+    #[serde(default)]
+    pub column: Option<String>,
+    #[serde(default)]
+    pub constant: Option<f64>,
+    pub channel: String,
+    #[serde(default)]
+    pub unit: Option<String>,
+    #[serde(default)]
+    pub reference: Option<String>,
+    #[serde(default = "one")]
+    pub scale: f64,
+    #[serde(default)]
+    pub offset: f64,
+    #[serde(default)]
+    pub counts_per_rev: Option<u32>,
+    #[serde(default)]
+    pub threshold: Option<f64>,
+    #[serde(default)]
+    pub curve: Option<Vec<[f64; 2]>>,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+/// What a mapped column becomes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+enum Target {
+    Output(Channel),
+    /// Index into [`crate::io::recording::INPUT_COLUMNS`].
+    Opening(usize),
+    /// Signed proportional valve of muscle 0 / 1.
+    Signed(usize),
+    /// Regulator set-point of muscle 0 / 1.
+    Regulator(usize),
+}
+
+impl Target {
+    fn parse(s: &str) -> Option<Self> {
+        Some(match s {
+            "p1" => Target::Output(Channel::P1Kpa),
+            "p2" => Target::Output(Channel::P2Kpa),
+            "angle" => Target::Output(Channel::AngleDeg),
+            "f1" => Target::Output(Channel::F1N),
+            "f2" => Target::Output(Channel::F2N),
+            "u_in1" => Target::Opening(0),
+            "u_ex1" => Target::Opening(1),
+            "u_in2" => Target::Opening(2),
+            "u_ex2" => Target::Opening(3),
+            "valve1" => Target::Signed(0),
+            "valve2" => Target::Signed(1),
+            "regulator1" => Target::Regulator(0),
+            "regulator2" => Target::Regulator(1),
+            _ => return None,
+        })
+    }
+}
+
+/// How one column's values become SI (or the recording's unit).
+#[derive(Debug, Clone)]
+enum Convert {
+    /// Multiply by this factor (after scale / offset); pressures: to Pa, minus `p_atm` if
+    /// absolute; angles: to rad; forces: to N; openings: to 0..1.
+    Factor {
+        factor: f64,
+        minus_pa: f64,
+    },
+    Counts {
+        counts_per_rev: u32,
+    },
+    OnOff {
+        threshold: f64,
+    },
+    Curve(Vec<[f64; 2]>),
+}
+
+/// An import that failed: the message names file, line and column (or the mapping key).
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct ImportError(pub String);
+
+/// The result of an import: one recording per gap-free segment.
+#[derive(Debug, Clone)]
+pub struct Imported {
+    pub segments: Vec<Recording>,
+    /// Gaps found: (line of the sample after the gap, time before [s], time after [s]).
+    pub gaps: Vec<(u64, f64, f64)>,
+    /// Largest |step - median step| / median step.
+    pub max_jitter: f64,
+    /// Median step [s].
+    pub median_step_s: f64,
+}
+
+impl Mapping {
+    pub fn load(path: &Path) -> Result<Self, ImportError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| ImportError(format!("{}: {e}", path.display())))?;
+        let m: Mapping =
+            toml::from_str(&text).map_err(|e| ImportError(format!("{}: {e}", path.display())))?;
+        m.check(path)?;
+        Ok(m)
+    }
+
+    fn check(&self, path: &Path) -> Result<(), ImportError> {
+        let bad =
+            |key: &str, msg: String| ImportError(format!("{}: `{key}`: {msg}", path.display()));
+        if self.csv.delimiter.chars().count() != 1 || !self.csv.delimiter.is_ascii() {
+            return Err(bad("csv.delimiter", "must be one ASCII character".into()));
+        }
+        if !matches!(self.csv.decimal.as_str(), "." | ",") {
+            return Err(bad("csv.decimal", "must be \".\" or \",\"".into()));
+        }
+        if self.csv.decimal == "," && self.csv.delimiter == "," {
+            return Err(bad(
+                "csv.decimal",
+                "a decimal comma needs another delimiter (e.g. \";\")".into(),
+            ));
+        }
+        time_factor(&self.time.unit).ok_or_else(|| {
+            bad(
+                "time.unit",
+                format!("{:?}: use \"s\", \"ms\" or \"us\"", self.time.unit),
+            )
+        })?;
+        let p = &self.pressure;
+        if !(p.p_atm_pa > 0.0 && p.p_atm_pa.is_finite()) {
+            return Err(bad("pressure.p_atm_pa", format!("{} must be > 0", p.p_atm_pa)));
+        }
+        if !(p.regulator_band_pa > 0.0 && p.regulator_band_pa.is_finite()) {
+            return Err(bad(
+                "pressure.regulator_band_pa",
+                format!("{} must be > 0", p.regulator_band_pa),
+            ));
+        }
+        Ok(())
+    }
+}
+
+fn time_factor(unit: &str) -> Option<f64> {
+    match unit {
+        "s" => Some(1.0),
+        "ms" => Some(1e-3),
+        "us" => Some(1e-6),
+        _ => None,
+    }
+}
+
+fn pressure_factor(unit: &str) -> Option<f64> {
+    match unit {
+        "Pa" => Some(1.0),
+        "kPa" => Some(1e3),
+        "bar" => Some(1e5),
+        "MPa" => Some(1e6),
+        "psi" => Some(6_894.757_293_168),
+        _ => None,
+    }
+}
+
+/// Checks one channel entry and gives its target and conversion.
+fn plan(
+    m: &Mapping,
+    i: usize,
+    c: &ChannelMap,
+    path: &Path,
+) -> Result<(Target, Convert), ImportError> {
+    let key = |k: &str| format!("{}: channel[{i}] (`{}`): `{k}`", path.display(), c.channel);
+    let target = Target::parse(&c.channel).ok_or_else(|| {
+        ImportError(format!(
+            "{}: {:?} is not a channel (p1 p2 angle f1 f2 u_in1 u_ex1 u_in2 u_ex2 valve1 valve2 \
+             regulator1 regulator2)",
+            key("channel"),
+            c.channel
+        ))
+    })?;
+    match (&c.column, c.constant) {
+        (Some(_), None) | (None, Some(_)) => {}
+        _ => {
+            return Err(ImportError(format!(
+                "{}: give exactly one of `column` and `constant`",
+                key("column")
+            )))
+        }
+    }
+    if !(c.scale.is_finite() && c.offset.is_finite()) {
+        return Err(ImportError(format!("{}: not finite", key("scale"))));
+    }
+    let unit = c.unit.as_deref().unwrap_or(match target {
+        Target::Opening(_) | Target::Signed(_) => "fraction",
+        _ => "",
+    });
+    let unit_err = |allowed: &str| {
+        ImportError(format!(
+            "{}: {unit:?} is not a unit of this channel (use {allowed})",
+            key("unit")
+        ))
+    };
+    let reference = c.reference.as_deref().unwrap_or("gauge");
+    if !matches!(reference, "gauge" | "absolute") {
+        return Err(ImportError(format!(
+            "{}: {reference:?}: use \"gauge\" or \"absolute\"",
+            key("reference")
+        )));
+    }
+    let conv = match target {
+        Target::Output(Channel::P1Kpa | Channel::P2Kpa) | Target::Regulator(_) => {
+            let f = pressure_factor(unit).ok_or_else(|| unit_err("Pa, kPa, bar, MPa, psi"))?;
+            Convert::Factor {
+                factor: f,
+                minus_pa: if reference == "absolute" {
+                    m.pressure.p_atm_pa
+                } else {
+                    0.0
+                },
+            }
+        }
+        Target::Output(Channel::AngleDeg) => match unit {
+            "rad" => Convert::Factor {
+                factor: 1.0,
+                minus_pa: 0.0,
+            },
+            "deg" => Convert::Factor {
+                factor: std::f64::consts::PI / 180.0,
+                minus_pa: 0.0,
+            },
+            "counts" => {
+                let cpr = c.counts_per_rev.filter(|n| *n > 0).ok_or_else(|| {
+                    ImportError(format!(
+                        "{}: angle in counts needs counts_per_rev > 0",
+                        key("counts_per_rev")
+                    ))
+                })?;
+                Convert::Counts {
+                    counts_per_rev: cpr,
+                }
+            }
+            _ => return Err(unit_err("rad, deg, counts")),
+        },
+        Target::Output(_) => match unit {
+            "N" => Convert::Factor {
+                factor: 1.0,
+                minus_pa: 0.0,
+            },
+            "kN" => Convert::Factor {
+                factor: 1e3,
+                minus_pa: 0.0,
+            },
+            _ => return Err(unit_err("N, kN")),
+        },
+        Target::Opening(_) | Target::Signed(_) => {
+            let signed = matches!(target, Target::Signed(_));
+            match unit {
+                "fraction" => Convert::Factor {
+                    factor: 1.0,
+                    minus_pa: 0.0,
+                },
+                "percent" => Convert::Factor {
+                    factor: 0.01,
+                    minus_pa: 0.0,
+                },
+                "onoff" if !signed => Convert::OnOff {
+                    threshold: c.threshold.unwrap_or(0.5),
+                },
+                "V" => {
+                    let curve = c.curve.clone().ok_or_else(|| {
+                        ImportError(format!(
+                            "{}: a valve command in volts needs `curve = [[volts, opening], ...]`",
+                            key("curve")
+                        ))
+                    })?;
+                    let lo = if signed { -1.0 } else { 0.0 };
+                    if curve.len() < 2
+                        || curve.windows(2).any(|w| !(w[1][0] > w[0][0]))
+                        || curve
+                            .iter()
+                            .any(|p| !(p[1] >= lo && p[1] <= 1.0) || !p[0].is_finite())
+                    {
+                        return Err(ImportError(format!(
+                            "{}: needs >= 2 points with increasing volts and openings in [{lo}, 1]",
+                            key("curve")
+                        )));
+                    }
+                    Convert::Curve(curve)
+                }
+                _ => {
+                    return Err(unit_err(if signed {
+                        "fraction, percent, V"
+                    } else {
+                        "fraction, percent, onoff, V"
+                    }))
+                }
+            }
+        }
+    };
+    Ok((target, conv))
+}
+
+fn convert(conv: &Convert, v: f64) -> f64 {
+    match conv {
+        Convert::Factor { factor, minus_pa } => v * factor - minus_pa,
+        Convert::Counts { counts_per_rev } => {
+            v / *counts_per_rev as f64 * 2.0 * std::f64::consts::PI
+        }
+        Convert::OnOff { threshold } => {
+            if v >= *threshold {
+                1.0
+            } else {
+                0.0
+            }
+        }
+        Convert::Curve(pts) => {
+            let n = pts.len();
+            if v <= pts[0][0] {
+                return pts[0][1];
+            }
+            if v >= pts[n - 1][0] {
+                return pts[n - 1][1];
+            }
+            let j = pts.windows(2).position(|w| v <= w[1][0]).unwrap_or(n - 2);
+            let (a, b) = (pts[j], pts[j + 1]);
+            a[1] + (v - a[0]) / (b[0] - a[0]) * (b[1] - a[1])
+        }
+    }
+}
+
+/// Reads `input` through `mapping`; `split`: gaps cut the run into segments instead of
+/// failing.
+pub fn import(
+    mapping: &Mapping,
+    map_path: &Path,
+    input: &Path,
+    split: bool,
+) -> Result<Imported, ImportError> {
+    let plans: Vec<(Target, Convert)> = mapping
+        .channel
+        .iter()
+        .enumerate()
+        .map(|(i, c)| plan(mapping, i, c, map_path))
+        .collect::<Result<_, _>>()?;
+    // Each target once; valve inputs complete; regulators need their pressure.
+    let mut seen: BTreeMap<Target, usize> = BTreeMap::new();
+    for (i, (t, _)) in plans.iter().enumerate() {
+        if let Some(j) = seen.insert(*t, i) {
+            return Err(ImportError(format!(
+                "{}: channel[{i}] and channel[{j}] both map `{}`",
+                map_path.display(),
+                mapping.channel[i].channel
+            )));
+        }
+    }
+    let names = ["u_in1", "u_ex1", "u_in2", "u_ex2"];
+    for (k, name) in names.iter().enumerate() {
+        let m = k / 2;
+        let by = [
+            seen.contains_key(&Target::Opening(k)),
+            seen.contains_key(&Target::Signed(m)),
+            seen.contains_key(&Target::Regulator(m)),
+        ];
+        let count = by.iter().filter(|b| **b).count();
+        if count == 0 {
+            return Err(ImportError(format!(
+                "{}: no channel gives `{name}` (map it, or valve{}, or regulator{}; a valve the \
+                 rig does not log: `constant = 0.0`)",
+                map_path.display(),
+                m + 1,
+                m + 1
+            )));
+        }
+        if count > 1 {
+            return Err(ImportError(format!(
+                "{}: `{name}` is given twice (u_*, valve{} and regulator{} exclude each other)",
+                map_path.display(),
+                m + 1,
+                m + 1
+            )));
+        }
+    }
+    for m in 0..2 {
+        let p = if m == 0 {
+            Channel::P1Kpa
+        } else {
+            Channel::P2Kpa
+        };
+        if seen.contains_key(&Target::Regulator(m)) && !seen.contains_key(&Target::Output(p)) {
+            return Err(ImportError(format!(
+                "{}: regulator{} needs the measured pressure `p{}` mapped (the regulator model \
+                 opens in proportion to set-point minus pressure)",
+                map_path.display(),
+                m + 1,
+                m + 1
+            )));
+        }
+    }
+    if !plans.iter().any(|(t, _)| matches!(t, Target::Output(_))) {
+        return Err(ImportError(format!(
+            "{}: no output channel mapped (need at least one of angle, p1, p2, f1, f2)",
+            map_path.display()
+        )));
+    }
+
+    // Read the CSV.
+    let raw = std::fs::read(input).map_err(|e| ImportError(format!("{}: {e}", input.display())))?;
+    let text_cow = String::from_utf8_lossy(&raw);
+    let text: &str = text_cow.as_ref();
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let mut offset = 0usize;
+    for _ in 0..mapping.csv.skip_lines {
+        match text[offset..].find('\n') {
+            Some(i) => offset += i + 1,
+            None => offset = text.len(),
+        }
+    }
+    let skipped = mapping.csv.skip_lines as u64;
+    let mut rdr = csv::ReaderBuilder::new()
+        .delimiter(mapping.csv.delimiter.as_bytes()[0])
+        .trim(csv::Trim::All)
+        .flexible(false)
+        .from_reader(text[offset..].as_bytes());
+    let at = |line: u64, col: &str, msg: String| {
+        ImportError(format!("{}:{line}: column `{col}`: {msg}", input.display()))
+    };
+    let headers = rdr
+        .headers()
+        .map_err(|e| ImportError(format!("{}:{}: {e}", input.display(), skipped + 1)))?
+        .clone();
+    let header_line = skipped + 1;
+    let col_of = |name: &str| -> Result<usize, ImportError> {
+        let mut it = headers.iter().enumerate().filter(|(_, h)| *h == name);
+        let first = it.next().map(|(i, _)| i);
+        if it.next().is_some() {
+            return Err(at(
+                header_line,
+                name,
+                "column appears twice in the header".into(),
+            ));
+        }
+        first.ok_or_else(|| {
+            at(
+                header_line,
+                name,
+                format!(
+                    "not in the header (columns: {})",
+                    headers.iter().collect::<Vec<_>>().join(", ")
+                ),
+            )
+        })
+    };
+    let t_col = col_of(&mapping.time.column)?;
+    let t_factor = time_factor(&mapping.time.unit).expect("checked");
+    let cols: Vec<Option<usize>> = mapping
+        .channel
+        .iter()
+        .map(|c| c.column.as_deref().map(|n| col_of(n)).transpose())
+        .collect::<Result<_, _>>()?;
+    let comma = mapping.csv.decimal == ",";
+
+    let mut lines: Vec<u64> = Vec::new();
+    let mut t_s: Vec<f64> = Vec::new();
+    let mut values: Vec<Vec<f64>> = vec![Vec::new(); plans.len()];
+    let mut record = csv::StringRecord::new();
+    loop {
+        match rdr.read_record(&mut record) {
+            Ok(false) => break,
+            Ok(true) => {}
+            Err(e) => {
+                let line = e
+                    .position()
+                    .map(|p| p.line() + skipped)
+                    .unwrap_or(header_line);
+                let message = match e.kind() {
+                    csv::ErrorKind::UnequalLengths {
+                        expected_len, len, ..
+                    } => {
+                        format!("{len} fields, the header has {expected_len}")
+                    }
+                    _ => e.to_string(),
+                };
+                return Err(ImportError(format!(
+                    "{}:{line}: {message}",
+                    input.display()
+                )));
+            }
+        }
+        let line = record.position().map(|p| p.line()).unwrap_or(0) + skipped;
+        let num = |col: usize| -> Result<f64, ImportError> {
+            let name = &headers[col];
+            let s = record.get(col).unwrap_or("");
+            if s.is_empty() {
+                return Err(at(
+                    line,
+                    name,
+                    "empty cell (a gap in this channel; import does not fill gaps)".into(),
+                ));
+            }
+            let owned;
+            let s = if comma {
+                owned = s.replace(',', ".");
+                owned.as_str()
+            } else {
+                s
+            };
+            let v: f64 = s
+                .parse()
+                .map_err(|_| at(line, name, format!("not a number: {s:?}")))?;
+            if !v.is_finite() {
+                return Err(at(line, name, format!("not a finite number: {s:?}")));
+            }
+            Ok(v)
+        };
+        t_s.push(num(t_col)? * t_factor);
+        for (i, (c, col)) in mapping.channel.iter().zip(&cols).enumerate() {
+            let raw = match (col, c.constant) {
+                (Some(col), _) => num(*col)?,
+                (None, Some(k)) => k,
+                _ => unreachable!("checked: column or constant"),
+            };
+            let v = convert(&plans[i].1, raw * c.scale + c.offset);
+            // Openings must end up in range: say where they do not.
+            if let Target::Opening(_) = plans[i].0 {
+                if !(0.0..=1.0).contains(&v) {
+                    let name = c.column.as_deref().unwrap_or("constant");
+                    return Err(at(
+                        line,
+                        name,
+                        format!("opening {v} outside [0, 1] after the mapping"),
+                    ));
+                }
+            }
+            if let Target::Signed(_) = plans[i].0 {
+                if !(-1.0..=1.0).contains(&v) {
+                    let name = c.column.as_deref().unwrap_or("constant");
+                    return Err(at(
+                        line,
+                        name,
+                        format!("signed opening {v} outside [-1, 1] after the mapping"),
+                    ));
+                }
+            }
+            values[i].push(v);
+        }
+        lines.push(line);
+    }
+    let n = t_s.len();
+    if n < 2 {
+        return Err(ImportError(format!(
+            "{}: {n} data rows; a recording needs at least 2",
+            input.display()
+        )));
+    }
+    let time_name = mapping.time.column.as_str();
+    for k in 1..n {
+        if !(t_s[k] > t_s[k - 1]) {
+            return Err(at(
+                lines[k],
+                time_name,
+                format!(
+                    "time does not increase: {} s after {} s",
+                    t_s[k],
+                    t_s[k - 1]
+                ),
+            ));
+        }
+    }
+    let mut steps: Vec<f64> = t_s.windows(2).map(|w| w[1] - w[0]).collect();
+    steps.sort_by(f64::total_cmp);
+    let median = steps[steps.len() / 2];
+    let mut gaps = Vec::new();
+    let mut cuts = vec![0usize];
+    let mut max_jitter: f64 = 0.0;
+    for k in 1..n {
+        let step = t_s[k] - t_s[k - 1];
+        if step > MAX_STEP_RATIO * median {
+            gaps.push((lines[k], t_s[k - 1] - t_s[0], t_s[k] - t_s[0]));
+            cuts.push(k);
+        } else if step < MIN_STEP_RATIO * median {
+            return Err(at(
+                lines[k],
+                time_name,
+                format!(
+                "step {step} s is less than {MIN_STEP_RATIO} median steps ({median} s): a doubled \
+                 or misordered time stamp"),
+            ));
+        } else {
+            max_jitter = max_jitter.max((step - median).abs() / median);
+        }
+    }
+    if !gaps.is_empty() && !split {
+        let list: Vec<String> = gaps
+            .iter()
+            .map(|(l, a, b)| {
+                format!(
+                    "  line {l}: {a:.6} s -> {b:.6} s ({:.6} s missing)",
+                    b - a - median
+                )
+            })
+            .collect();
+        return Err(ImportError(format!(
+            "{}: {} gap(s) in column `{time_name}` (steps over {MAX_STEP_RATIO} median steps of \
+             {median} s); gaps are not filled: cut the file, or pass --split to write one \
+             recording per gap-free segment\n{}",
+            input.display(),
+            gaps.len(),
+            list.join("\n")
+        )));
+    }
+    cuts.push(n);
+
+    // Assemble the recordings.
+    let find = |t: Target| plans.iter().position(|(p, _)| *p == t);
+    let mut segments = Vec::new();
+    for w in cuts.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        if b - a < 2 {
+            continue;
+        }
+        let mut rec = Recording::default();
+        let t0 = t_s[a];
+        rec.t_s = t_s[a..b].iter().map(|t| t - t0).collect();
+        for c in Channel::ALL {
+            if let Some(i) = find(Target::Output(c)) {
+                let scale = match c {
+                    Channel::AngleDeg => 180.0 / std::f64::consts::PI,
+                    Channel::P1Kpa | Channel::P2Kpa => 1e-3,
+                    _ => 1.0,
+                };
+                rec.set_channel(c, values[i][a..b].iter().map(|v| v * scale).collect());
+            }
+        }
+        for k in a..b {
+            let mut u = [0.0f64; 4];
+            for (j, uj) in u.iter_mut().enumerate() {
+                let m = j / 2;
+                let inflate = j % 2 == 0;
+                *uj = if let Some(i) = find(Target::Opening(j)) {
+                    values[i][k]
+                } else if let Some(i) = find(Target::Signed(m)) {
+                    let s = values[i][k];
+                    if inflate {
+                        s.max(0.0)
+                    } else {
+                        (-s).max(0.0)
+                    }
+                } else {
+                    let i = find(Target::Regulator(m)).expect("checked: one source per input");
+                    let p = if m == 0 {
+                        Channel::P1Kpa
+                    } else {
+                        Channel::P2Kpa
+                    };
+                    let ip =
+                        find(Target::Output(p)).expect("checked: regulator needs its pressure");
+                    let err = values[i][k] - values[ip][k];
+                    let e = if inflate { err } else { -err };
+                    (e / mapping.pressure.regulator_band_pa).clamp(0.0, 1.0)
+                };
+            }
+            rec.inputs.push(ValveInputs {
+                u_in1: u[0],
+                u_ex1: u[1],
+                u_in2: u[2],
+                u_ex2: u[3],
+            });
+        }
+        rec.metadata = vec![
+            (
+                "source".into(),
+                format!(
+                    "host-sim {} import of {} (lines {}..={}) with {}",
+                    env!("CARGO_PKG_VERSION"),
+                    input.display(),
+                    lines[a],
+                    lines[b - 1],
+                    map_path.display()
+                ),
+            ),
+            (
+                "sample_period_s".into(),
+                format!("{}", rec.sample_period_s()),
+            ),
+            (
+                "time_stamps".into(),
+                format!(
+                    "as logged, max |step - median| = {:.1} % of the median step {median} s",
+                    100.0 * max_jitter
+                ),
+            ),
+        ];
+        segments.push(rec);
+    }
+    if segments.is_empty() {
+        return Err(ImportError(format!(
+            "{}: no gap-free segment of at least 2 samples",
+            input.display()
+        )));
+    }
+    Ok(Imported {
+        segments,
+        gaps,
+        max_jitter,
+        median_step_s: median,
+    })
+}
+
+/// Output path of segment `i` of `n`: `OUT` itself for one segment, else `OUT-1.csv`, ...
+pub fn segment_path(out: &Path, i: usize, n: usize) -> PathBuf {
+    if n == 1 {
+        return out.to_owned();
+    }
+    let stem = out
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let ext = out
+        .extension()
+        .map(|s| format!(".{}", s.to_string_lossy()))
+        .unwrap_or_default();
+    out.with_file_name(format!("{stem}-{}{ext}", i + 1))
+}
+
+/// Arguments of `host-sim import`.
+#[derive(clap::Args, Debug)]
+pub struct ImportArgs {
+    /// Mapping file (TOML): rig columns -> recording channels and units (docs/rig.md).
+    #[arg(long, value_name = "MAP.toml")]
+    pub map: PathBuf,
+    /// The rig logger's CSV file.
+    #[arg(long, value_name = "RAW.csv")]
+    pub input: PathBuf,
+    /// Output recording (RECORDING.md).
+    #[arg(long, value_name = "REC.csv")]
+    pub out: PathBuf,
+    /// Write one recording per gap-free segment (REC-1.csv, REC-2.csv, ...) instead of
+    /// refusing a file with gaps.
+    #[arg(long)]
+    pub split: bool,
+}
+
+/// `host-sim import`: returns the report printed on stdout.
+pub fn run_import(a: &ImportArgs) -> anyhow::Result<String> {
+    let mapping = Mapping::load(&a.map)?;
+    let imp = import(&mapping, &a.map, &a.input, a.split)?;
+    // Every recording must read back (the same checks simulate / diagnose apply).
+    let n = imp.segments.len();
+    let mut report = String::new();
+    use std::fmt::Write as _;
+    for (i, rec) in imp.segments.iter().enumerate() {
+        let p = segment_path(&a.out, i, n);
+        // Validate through the reader before anything is written.
+        let mut text = Vec::new();
+        rec.write_to(&mut text)
+            .map_err(|e| ImportError(format!("{}: {e}", p.display())))?;
+        Recording::parse(&String::from_utf8_lossy(&text), &p)?;
+    }
+    for (i, rec) in imp.segments.iter().enumerate() {
+        let p = segment_path(&a.out, i, n);
+        rec.write(&p)?;
+        let _ = writeln!(
+            report,
+            "wrote {}: {} samples, {:.3} s, median step {} s",
+            p.display(),
+            rec.len(),
+            rec.t_s[rec.len() - 1],
+            imp.median_step_s
+        );
+    }
+    let _ = writeln!(
+        report,
+        "time stamps: max jitter {:.1} % of the median step; {} gap(s){}",
+        100.0 * imp.max_jitter,
+        imp.gaps.len(),
+        if imp.gaps.is_empty() {
+            ""
+        } else {
+            " (split, not filled):"
+        }
+    );
+    for (l, t0, t1) in &imp.gaps {
+        let _ = writeln!(report, "  gap before line {l}: {t0:.6} s -> {t1:.6} s");
+    }
+    Ok(report)
+}

@@ -1,0 +1,450 @@
+//! A rig logger's file (40 Hz with +-15 % time stamp jitter, time in ms, pressures in bar
+//! absolute, a FESTO MPYE-style proportional valve per muscle commanded in volts, the angle
+//! in encoder counts, `;` separated with decimal commas) goes through `host-sim import` and
+//! then `simulate` and `diagnose`.
+//!
+//! The rig data come from the nominal plant through another path than the tools use: a
+//! uniform 0.25 ms open-loop replay (`host_sim::simulate`) with the valve openings held
+//! between the jittered stamps (which lie on that fine grid), sampled at the stamps, then
+//! noise, encoder quantisation and the unit conversions written out here.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use host_sim::fit::compare;
+use host_sim::{simulate, Plant, Recording, SolverOptions, ValveInputs};
+use rand::{Rng, SeedableRng};
+use rand_distr::{Distribution, Normal};
+
+const FINE_DT_S: f64 = 0.000_25;
+const NOMINAL_STEP_S: f64 = 0.025; // 40 Hz
+const P_ATM_PA: f64 = 101_325.0;
+
+fn plant_path() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant/reference-1dof.toml")
+}
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_host-sim"))
+}
+
+fn tmp() -> tempfile::TempDir {
+    tempfile::tempdir().unwrap()
+}
+
+/// The rig's valve amplifier: signed opening -> volts (5 V closed, +-0.2 V dead band).
+fn volts_of(s: f64) -> f64 {
+    if s > 0.0 {
+        5.2 + 4.8 * s
+    } else if s < 0.0 {
+        4.8 + 4.8 * s
+    } else {
+        5.0
+    }
+}
+
+const MAP: &str = r#"
+# A FESTO joint logged by a PC at about 40 Hz: German CSV, two lines of logger header.
+[csv]
+delimiter = ";"
+decimal = ","
+skip_lines = 2
+
+[time]
+column = "Zeit [ms]"
+unit = "ms"
+
+[pressure]
+p_atm_pa = 101325.0
+
+[[channel]]
+column = "P1 [bar abs]"
+channel = "p1"
+unit = "bar"
+reference = "absolute"
+
+[[channel]]
+column = "P2 [bar abs]"
+channel = "p2"
+unit = "bar"
+reference = "absolute"
+
+[[channel]]
+column = "Encoder"
+channel = "angle"
+unit = "counts"
+counts_per_rev = 8000
+
+[[channel]]
+column = "MPYE1 [V]"
+channel = "valve1"
+unit = "V"
+curve = [[0.0, -1.0], [4.8, 0.0], [5.2, 0.0], [10.0, 1.0]]
+
+[[channel]]
+column = "MPYE2 [V]"
+channel = "valve2"
+unit = "V"
+curve = [[0.0, -1.0], [4.8, 0.0], [5.2, 0.0], [10.0, 1.0]]
+"#;
+
+/// Writes the rig file; returns its path and the true gauge pressures at the stamps [Pa].
+fn rig_file(dir: &Path, duration_s: f64, seed: u64, drop_rows: &[usize]) -> (PathBuf, Vec<f64>) {
+    let plant = Plant::load(plant_path()).unwrap();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    // Jittered stamps on the fine grid: k * 25 ms +- 15 % (3.75 ms).
+    let n = (duration_s / NOMINAL_STEP_S) as usize;
+    let jitter_ticks = (0.15 * NOMINAL_STEP_S / FINE_DT_S).round() as i64; // 15
+    let nominal_ticks = (NOMINAL_STEP_S / FINE_DT_S).round() as i64; // 100
+    let stamps: Vec<i64> = (0..n as i64)
+        .map(|k| {
+            if k == 0 {
+                0
+            } else {
+                k * nominal_ticks + rng.random_range(-jitter_ticks..=jitter_ticks)
+            }
+        })
+        .collect();
+    // Signed openings per stamp: held levels of 2..8 samples.
+    let levels = [-1.0, -0.6, -0.3, 0.0, 0.25, 0.5, 1.0];
+    let mut s = vec![[0.0f64; 2]; n];
+    let mut k = 0;
+    while k < n {
+        let hold = rng.random_range(2..=8);
+        let v = [
+            levels[rng.random_range(0..levels.len())],
+            levels[rng.random_range(0..levels.len())],
+        ];
+        for row in s.iter_mut().skip(k).take(hold) {
+            *row = v;
+        }
+        k += hold;
+    }
+    // The fine replay: openings held from each stamp to the next.
+    let fine_n = (stamps[n - 1] + nominal_ticks) as usize;
+    let mut fine = Vec::with_capacity(fine_n);
+    let mut j = 0;
+    for i in 0..fine_n as i64 {
+        while j + 1 < n && stamps[j + 1] <= i {
+            j += 1;
+        }
+        let [a, b] = s[j];
+        fine.push(ValveInputs {
+            u_in1: a.max(0.0),
+            u_ex1: (-a).max(0.0),
+            u_in2: b.max(0.0),
+            u_ex2: (-b).max(0.0),
+        });
+    }
+    let sim = simulate(&plant, &fine, FINE_DT_S, &SolverOptions::default()).unwrap();
+    let noise = Normal::new(0.0, 500.0).unwrap();
+    let mut text = String::from(
+        "Prüfstand Muskelgelenk, Messung 7\nexportiert am 23.11.2026\n\
+         Zeit [ms];P1 [bar abs];P2 [bar abs];Encoder;MPYE1 [V];MPYE2 [V];Temp [C]\n",
+    );
+    let mut p_true = Vec::new();
+    for k in 0..n {
+        if drop_rows.contains(&k) {
+            continue;
+        }
+        let x = sim.states[stamps[k] as usize];
+        let p1 = x.p1_abs_pa + noise.sample(&mut rng);
+        let p2 = x.p2_abs_pa + noise.sample(&mut rng);
+        p_true.push(x.p1_abs_pa - P_ATM_PA);
+        let counts = (x.angle_rad / (2.0 * std::f64::consts::PI) * 8000.0).floor() as i64;
+        let row = format!(
+            "{:.2};{:.5};{:.5};{};{:.4};{:.4};21,5\n",
+            stamps[k] as f64 * FINE_DT_S * 1e3,
+            p1 / 1e5,
+            p2 / 1e5,
+            counts,
+            volts_of(s[k][0]),
+            volts_of(s[k][1]),
+        );
+        // Decimal commas, as the lab's locale writes them.
+        text.push_str(&row.replace('.', ","));
+    }
+    let path = dir.join("rig.csv");
+    std::fs::write(&path, text).unwrap();
+    (path, p_true)
+}
+
+fn write_map(dir: &Path, text: &str) -> PathBuf {
+    let p = dir.join("map.toml");
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn jittered_40hz_bar_and_volts_rig_file_imports_simulates_and_diagnoses() {
+    let dir = tmp();
+    let (raw, p_true) = rig_file(dir.path(), 20.0, 11, &[]);
+    let map = write_map(dir.path(), MAP);
+    let rec_path = dir.path().join("rec.csv");
+    let out = bin()
+        .args(["import", "--map"])
+        .arg(&map)
+        .arg("--input")
+        .arg(&raw)
+        .arg("--out")
+        .arg(&rec_path)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}{}",
+        stdout,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("0 gap(s)"), "{stdout}");
+
+    // The recording: jittered, kPa gauge, openings from the volts.
+    let rec = Recording::read(&rec_path).unwrap();
+    assert_eq!(rec.len(), 800);
+    assert!(!rec.is_uniform(), "the stamps jitter by up to 15 %");
+    let p1 = rec.channel(host_sim::Channel::P1Kpa).unwrap();
+    for (k, (m, t)) in p1.iter().zip(&p_true).enumerate() {
+        assert!(
+            (m * 1e3 - t).abs() < 3_000.0,
+            "sample {k}: {m} kPa vs {t} Pa"
+        );
+    }
+    assert!(rec.inputs.iter().any(|u| u.u_in1 == 1.0) && rec.inputs.iter().any(|u| u.u_ex2 == 1.0));
+    assert!(rec.inputs.iter().any(|u| u.u_in1 > 0.2 && u.u_in1 < 0.3));
+
+    // simulate replays it between its own stamps and fits the rig data closely.
+    let sim_path = dir.path().join("sim.csv");
+    let out = bin()
+        .args(["simulate", "--plant"])
+        .arg(plant_path())
+        .arg("--inputs")
+        .arg(&rec_path)
+        .arg("--out")
+        .arg(&sim_path)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let sim = Recording::read(&sim_path).unwrap();
+    assert_eq!(sim.t_s, rec.t_s);
+    let fits = compare(&rec, &sim).unwrap();
+    for f in &fits {
+        eprintln!("simulate vs rig: {:?} fit {:.2} %", f.channel, f.fit_percent);
+        assert!(f.fit_percent > 90.0, "{:?}: {}", f.channel, f.fit_percent);
+    }
+
+    // diagnose takes the jittered recording and finds nothing missing in a nominal rig.
+    let json = dir.path().join("d.json");
+    let out = bin()
+        .args(["diagnose", "--plant"])
+        .arg(plant_path())
+        .arg("--recording")
+        .arg(&rec_path)
+        .arg("--json")
+        .arg(&json)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let d: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    eprintln!("diagnose: {stdout}");
+    assert_eq!(d["effects"].as_array().unwrap().len(), 0, "{stdout}\n{d:#}");
+}
+
+#[test]
+fn stamped_replay_beats_treating_jittered_stamps_as_uniform() {
+    // The same jittered rig data replayed as if the stamps were uniform fits worse: the
+    // jitter handling matters (a test that fails if `simulate` ignored the stamps).
+    let dir = tmp();
+    let (raw, _) = rig_file(dir.path(), 10.0, 5, &[]);
+    let map = write_map(dir.path(), MAP);
+    let mapping = host_sim::io::import::Mapping::load(&map).unwrap();
+    let imp = host_sim::io::import::import(&mapping, &map, &raw, false).unwrap();
+    let rec = &imp.segments[0];
+    assert!(
+        imp.max_jitter > 0.2 && imp.max_jitter <= 0.31,
+        "{}",
+        imp.max_jitter
+    );
+    let plant = Plant::load(plant_path()).unwrap();
+    let opts = SolverOptions::default();
+    let fit_of = |states: &[host_sim::PlantState]| {
+        let mut m = rec.clone();
+        let meas = plant.measure_series(states, rec.sample_period_s());
+        for c in host_sim::Channel::ALL {
+            if rec.channel(c).is_some() {
+                m.set_channel(c, meas.iter().map(|x| c.of(x)).collect());
+            }
+        }
+        compare(rec, &m).unwrap()
+    };
+    let stamped = host_sim::sim::simulate_recording(&plant, rec, &opts, |_| {}).unwrap();
+    let uniform = simulate(&plant, &rec.inputs, rec.sample_period_s(), &opts).unwrap();
+    let (a, b) = (fit_of(&stamped.states), fit_of(&uniform.states));
+    let p1 = |f: &Vec<host_sim::fit::ChannelFit>| {
+        f.iter()
+            .find(|c| c.channel == host_sim::Channel::P1Kpa)
+            .unwrap()
+            .fit_percent
+    };
+    eprintln!("p1 fit: stamped {:.2} %, stamps taken as uniform {:.2} %", p1(&a), p1(&b));
+    assert!(
+        p1(&a) > p1(&b) + 2.0,
+        "stamped {} vs uniform {}",
+        p1(&a),
+        p1(&b)
+    );
+}
+
+#[test]
+fn gaps_are_listed_and_refused_or_split_never_filled() {
+    let dir = tmp();
+    let (raw, _) = rig_file(dir.path(), 6.0, 3, &[100, 101, 102]);
+    let map = write_map(dir.path(), MAP);
+    let out_path = dir.path().join("rec.csv");
+    let out = bin()
+        .args(["import", "--map"])
+        .arg(&map)
+        .arg("--input")
+        .arg(&raw)
+        .arg("--out")
+        .arg(&out_path)
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{e}");
+    // Row 100 of the data is line 104 (2 skipped, header, 1-based); the first kept row after
+    // the gap is data row 103 -> line 104.
+    assert!(
+        e.contains("rig.csv") && e.contains("1 gap(s)") && e.contains("line 104"),
+        "{e}"
+    );
+    assert!(!out_path.exists());
+    let out = bin()
+        .args(["import", "--split", "--map"])
+        .arg(&map)
+        .arg("--input")
+        .arg(&raw)
+        .arg("--out")
+        .arg(&out_path)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let a = Recording::read(dir.path().join("rec-1.csv")).unwrap();
+    let b = Recording::read(dir.path().join("rec-2.csv")).unwrap();
+    assert_eq!(a.len(), 100);
+    assert_eq!(a.len() + b.len(), 240 - 3);
+}
+
+#[test]
+fn bad_mapping_and_bad_cells_name_file_line_and_column() {
+    let dir = tmp();
+    let (raw, _) = rig_file(dir.path(), 2.0, 1, &[]);
+    let run = |map_text: &str, raw: &Path| {
+        let map = write_map(dir.path(), map_text);
+        let out_path = dir.path().join("never.csv");
+        let out = bin()
+            .args(["import", "--map"])
+            .arg(&map)
+            .arg("--input")
+            .arg(raw)
+            .arg("--out")
+            .arg(&out_path)
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(2));
+        assert!(!out_path.exists());
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let e = run(&MAP.replace("unit = \"bar\"", "unit = \"atm\""), &raw);
+    assert!(
+        e.contains("map.toml") && e.contains("`unit`") && e.contains("atm"),
+        "{e}"
+    );
+    let e = run(&MAP.replace("\"Encoder\"", "\"Enc\""), &raw);
+    assert!(e.contains("rig.csv:3") && e.contains("`Enc`"), "{e}");
+    let e = run(
+        &MAP.replace("channel = \"valve2\"", "channel = \"valve9\""),
+        &raw,
+    );
+    assert!(e.contains("valve9"), "{e}");
+    let text = std::fs::read_to_string(&raw).unwrap();
+    let mut lines: Vec<String> = text.lines().map(String::from).collect();
+    lines[9] = lines[9].replacen(';', ";x", 1);
+    let bad = dir.path().join("bad.csv");
+    std::fs::write(&bad, lines.join("\n")).unwrap();
+    let e = run(MAP, &bad);
+    assert!(
+        e.contains("bad.csv:10") && e.contains("`P1 [bar abs]`"),
+        "{e}"
+    );
+}
+
+#[test]
+fn regulator_set_points_become_proportional_openings() {
+    // A rig with a pressure regulator per muscle: the openings follow the documented
+    // proportional-band model from the set-point and the measured pressure.
+    let dir = tmp();
+    let raw = dir.path().join("reg.csv");
+    std::fs::write(
+        &raw,
+        "t,p1,p2,pset1,pset2,angle\n0,3.0,3.0,3.1,2.0,0\n0.01,3.05,2.5,3.1,2.0,0.01\n0.02,3.1,2.1,3.1,2.0,0.02\n",
+    )
+    .unwrap();
+    let map = write_map(
+        dir.path(),
+        r#"
+[time]
+column = "t"
+unit = "s"
+[pressure]
+regulator_band_pa = 20000.0
+[[channel]]
+column = "p1"
+channel = "p1"
+unit = "bar"
+[[channel]]
+column = "p2"
+channel = "p2"
+unit = "bar"
+[[channel]]
+column = "pset1"
+channel = "regulator1"
+unit = "bar"
+[[channel]]
+column = "pset2"
+channel = "regulator2"
+unit = "bar"
+[[channel]]
+column = "angle"
+channel = "angle"
+unit = "rad"
+"#,
+    );
+    let mapping = host_sim::io::import::Mapping::load(&map).unwrap();
+    let imp = host_sim::io::import::import(&mapping, &map, &raw, false).unwrap();
+    let u = &imp.segments[0].inputs;
+    // 0.1 bar below the set-point: 10 kPa / 20 kPa band = half open inflate.
+    assert!(
+        (u[0].u_in1 - 0.5).abs() < 1e-9 && u[0].u_ex1 == 0.0,
+        "{:?}",
+        u[0]
+    );
+    // 1 bar above: exhaust fully open.
+    assert!(u[0].u_ex2 == 1.0 && u[0].u_in2 == 0.0);
+    assert!(u[2].u_in1 == 0.0 && u[2].u_ex1 == 0.0);
+    assert!((u[2].u_ex2 - 0.5).abs() < 1e-9);
+}
