@@ -58,14 +58,14 @@ const fn parse_hz(s: &str) -> u32 {
     while i < b.len() {
         assert!(
             b[i].is_ascii_digit() && v < 100_000,
-            "PAM_TICK_HZ must be a decimal integer within 50..=10000"
+            "PAM_TICK_HZ must be a decimal integer within 200..=10000"
         );
         v = v * 10 + (b[i] - b'0') as u32;
         i += 1;
     }
     assert!(
-        v >= 50 && v <= 10_000,
-        "PAM_TICK_HZ must be within 50..=10000"
+        v >= 200 && v <= 10_000,
+        "PAM_TICK_HZ must be within 200..=10000 (the gains are not stable below 200 Hz)"
     );
     v
 }
@@ -343,8 +343,12 @@ mod app {
             dt_s,
         );
         // The tick outputs the safe valve command itself while a fault is latched.
-        if l.valves.apply(&out.valves).is_err() {
-            let _ = l.valves.close_all();
+        // The openings the driver actually switched feed the valve / supply residual.
+        match l.valves.apply(&out.valves) {
+            Ok(o) => l.tick.valves_applied(&o),
+            Err(_) => {
+                let _ = l.valves.close_all();
+            }
         }
         if let Some(f) = out.fault {
             if !*l.fault_reported {

@@ -9,15 +9,20 @@
 //! T_stop = -k (beta - beta_min) - c omega    for beta < beta_min (never pulling: >= 0)
 //! ```
 //!
-//! The limits come from the plant file (`[joint] angle_min_rad`, `angle_max_rad`); by
-//! default they are where the stretched muscle is back at its rest length (`chi = 0`,
-//! `|beta| = chi0 l_n / r`, 1.4 rad on the reference joint): a braided muscle does not
-//! lengthen past it, so the joint stops there. `k` defaults to 2000 N m/rad (a 40 N m muscle
+//! The limits come from the plant file (`[joint] angle_min_rad`, `angle_max_rad`). Without
+//! them they sit at +-2.6 rad: beyond every angle PLANT.md's independent conformance
+//! recordings reach (2.42 rad, the loaded joint), so the reference model is untouched there,
+//! and before the muscle law leaves its domain (a fault run that drains both muscles swings
+//! the loaded joint past 3.1 rad, where the integration fails). A real joint usually stops
+//! where the stretched muscle is back at its rest length (`chi = 0`, `|beta| = chi0 l_n / r`,
+//! 1.4 rad on the reference joint): set the keys to that for a rig with hard stops. `k` defaults to 2000 N m/rad (a 40 N m muscle
 //! torque, more than the reference pair gives at 6 bar, pushes 0.02 rad into the stop), `c`
 //! to a damping ratio of 0.7 with the joint inertia (`2 0.7 sqrt(k J)`).
 
 use crate::plant::config::JointConfig;
 
+/// Default end-stop angle [rad] (module documentation).
+pub const DEFAULT_END_STOP_RAD: f64 = 2.6;
 /// Default end-stop stiffness [N m/rad].
 pub const END_STOP_STIFFNESS_NM_PER_RAD: f64 = 2000.0;
 /// Default end-stop damping ratio.
@@ -39,7 +44,7 @@ pub struct EndStops {
 impl EndStops {
     /// The stops of a plant file's `[joint]` table (defaults in the module documentation).
     pub fn from_config(c: &JointConfig, muscle_rest_length_m: f64) -> Self {
-        let free = c.initial_contraction * muscle_rest_length_m / c.sprocket_radius_m;
+        let _ = muscle_rest_length_m;
         let k = c
             .end_stop_stiffness_nm_per_rad
             .unwrap_or(END_STOP_STIFFNESS_NM_PER_RAD);
@@ -47,8 +52,8 @@ impl EndStops {
             2.0 * END_STOP_DAMPING_RATIO * (k * c.inertia_kgm2.max(0.0)).sqrt()
         });
         Self {
-            angle_min_rad: c.angle_min_rad.unwrap_or(-free),
-            angle_max_rad: c.angle_max_rad.unwrap_or(free),
+            angle_min_rad: c.angle_min_rad.unwrap_or(-DEFAULT_END_STOP_RAD),
+            angle_max_rad: c.angle_max_rad.unwrap_or(DEFAULT_END_STOP_RAD),
             stiffness_nm_per_rad: k,
             damping_nms_per_rad: damping,
         }
@@ -146,8 +151,15 @@ mod tests {
     }
 
     #[test]
-    fn default_stops_are_where_the_stretched_muscle_reaches_rest_length() {
-        let s = EndStops::from_config(&cfg(), 0.25);
+    fn default_stops_lie_beyond_the_reference_range_and_configured_ones_act() {
+        let none = EndStops::from_config(&cfg(), 0.25);
+        assert_eq!(none.torque_nm(2.55, 5.0), 0.0);
+        assert_eq!(none.torque_nm(-2.55, -5.0), 0.0);
+        assert!(none.torque_nm(2.7, 0.0) < 0.0);
+        let mut c = cfg();
+        c.angle_min_rad = Some(-1.4);
+        c.angle_max_rad = Some(1.4);
+        let s = EndStops::from_config(&c, 0.25);
         assert!((s.angle_max_rad - 1.4).abs() < 1e-12);
         assert!((s.angle_min_rad + 1.4).abs() < 1e-12);
         assert_eq!(s.torque_nm(1.39, 5.0), 0.0);
