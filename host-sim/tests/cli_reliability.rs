@@ -311,7 +311,7 @@ fn identify_force_on_a_constant_map_is_refused() {
         &"--out",
         &w.p("out.toml"),
     ]);
-    refused(&r, &["const.csv", "stretch", "same"]);
+    refused(&r, &["const.csv", "one length"]);
     assert_eq!(w.snapshot(), before);
 }
 

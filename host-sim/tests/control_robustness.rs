@@ -16,8 +16,19 @@ fn stored_gains_on_held_out_sequences_and_concealed_effects() {
     let rows = table(&text, &tuning, &held_out_scenarios().unwrap(), &[]);
     println!("{}", format_table(&rows));
     assert_eq!(rows.len(), CONDITIONS.len());
-    // Every law stays stable on the held-out sequences under every effect but the 11 x load.
-    for r in rows.iter().filter(|r| !r.condition.starts_with("11 x")) {
+    // With the valve dead time applied in the closed loop, the gains tuned without it go into
+    // a limit cycle (docs/effects.md): stated here, so that a fix shows.
+    let dead_time = rows
+        .iter()
+        .find(|r| r.condition.starts_with("valve dead time"))
+        .expect("a valve dead time row");
+    assert!(!dead_time.cells[0].stable, "{:?}", dead_time.cells[0]);
+    // Every law stays stable on the held-out sequences under every other effect but the
+    // 11 x load.
+    for r in rows
+        .iter()
+        .filter(|r| !r.condition.starts_with("11 x") && !r.condition.starts_with("valve dead time"))
+    {
         for c in &r.cells {
             assert!(c.stable, "{}: {c:?}", r.condition);
         }
