@@ -178,8 +178,8 @@ impl ControllerConfig {
     ///   That gave kp = 11 N m/rad, kd = 0.8 N m s/rad, ki = 8 N m/(rad s), +-1.5 N m, with
     ///   the derivative on the measurement only, which lags a moving set-point by
     ///   `kd r' / kp` (0.06 rad on the 0.5 Hz sine).
-    /// - Trajectory feed-forward ([`crate::feedforward`], added for the closed-loop proof of
-    ///   issue 5): derivative on the error (`w = 1`) and the inertia torque `J r''` of the
+    /// - Trajectory feed-forward ([`crate::feedforward`], added for the closed-loop comparison
+    ///   of the control laws): derivative on the error (`w = 1`) and the inertia torque `J r''` of the
     ///   desired motion (J = 0.014 kg m^2 of the reference joint), limited to +-2 N m
     ///   (tracking at 2 rad/s needs kd r' = 1.8 N m; a larger limit only adds a kick on
     ///   set-point jumps). The position gains were tuned with it on the full reference plant

@@ -1,4 +1,4 @@
-//! Closed-loop proof of issue 5: the model-based cascade (seed 003, identified constants)
+//! Closed-loop comparison of the control laws: the model-based cascade (seed 003, identified constants)
 //! against a tuned model-free PD and PID (seed 004 Table 3: PD 3.61 vs model-based 1.95), on
 //! the same set-point suite, the same reference plant and the same firmware tick (the law is
 //! selected by [`ControlLaw`] in the tick's configuration; pressure loops, valves and safety
