@@ -81,7 +81,8 @@ impl LatchRecord {
     /// The storage words of the record.
     pub fn encode(&self) -> [u32; RECORD_WORDS] {
         let code = self.cause.map_or(0, |c| c.code() as u32);
-        let w1 = VERSION | code << 8 | (self.vented[0] as u32) << 16 | (self.vented[1] as u32) << 17;
+        let w1 =
+            VERSION | code << 8 | (self.vented[0] as u32) << 16 | (self.vented[1] as u32) << 17;
         let w = [MAGIC, w1, self.seen.bits()];
         [w[0], w[1], w[2], crc32_words(&w)]
     }
@@ -262,7 +263,10 @@ mod tests {
         };
         let w = r.encode();
         assert_eq!(LatchRecord::decode(&w), Some(r));
-        assert_eq!(LatchRecord::decode(&LatchRecord::CLEAN.encode()), Some(LatchRecord::CLEAN));
+        assert_eq!(
+            LatchRecord::decode(&LatchRecord::CLEAN.encode()),
+            Some(LatchRecord::CLEAN)
+        );
         // Every single-bit flip is caught.
         for i in 0..RECORD_WORDS {
             for bit in 0..32 {
@@ -296,7 +300,10 @@ mod tests {
                 BootDecision::Safe(r) => assert_eq!(r.cause, Some(FaultCode::ResetLatched)),
                 d => panic!("{cause:?}: {d:?}"),
             }
-            assert_eq!(boot_decision(cause, faulted), BootDecision::Safe(faulted.unwrap()));
+            assert_eq!(
+                boot_decision(cause, faulted),
+                BootDecision::Safe(faulted.unwrap())
+            );
         }
         assert_eq!(
             boot_decision(ResetCause::PowerOn, faulted),

@@ -294,9 +294,9 @@ impl ResidualMonitor {
             let angle_mid = 0.5 * (self.angle_start_rad + angle);
             let angle_rate = (angle - self.angle_start_rad) / t;
             let (chi, chi_rate) = self.contraction(i, angle_mid, angle_rate);
-            let (q_in, q_out, q_vol) =
-                self.params
-                    .rate_terms_pa_s(p_mid, chi, chi_rate, u_in, u_ex);
+            let (q_in, q_out, q_vol) = self
+                .params
+                .rate_terms_pa_s(p_mid, chi, chi_rate, u_in, u_ex);
             let measured = (p_end - w.p_start_pa) / t;
             let e = measured - (q_in + q_out + q_vol);
             let r = self.params.residual_abs_pa_s
@@ -309,7 +309,11 @@ impl ResidualMonitor {
             let rate_abs = self.params.residual_abs_pa_s;
             let code = if w.above >= self.params.persist_windows {
                 Some(if -q_out > rate_abs && !(measured - q_vol > rate_abs) {
-                    pick(i, FaultCode::ExhaustStuckClosed1, FaultCode::ExhaustStuckClosed2)
+                    pick(
+                        i,
+                        FaultCode::ExhaustStuckClosed1,
+                        FaultCode::ExhaustStuckClosed2,
+                    )
                 } else {
                     pick(i, FaultCode::InletStuckOpen1, FaultCode::InletStuckOpen2)
                 })
@@ -320,20 +324,31 @@ impl ResidualMonitor {
                     // out (to a supply at atmosphere) for its duty. Exhaust stuck open: the
                     // inflow against a fully open exhaust.
                     let (_, full_out, _) =
-                        self.params
-                            .rate_terms_pa_s(p_mid, chi, chi_rate, 0.0, 1.0);
+                        self.params.rate_terms_pa_s(p_mid, chi, chi_rate, 0.0, 1.0);
                     let closed = libm::fabsf(measured - (q_vol + q_out));
                     let supply = libm::fabsf(measured - (q_vol + q_out + u_in * full_out));
                     let exhaust = libm::fabsf(measured - (q_vol + q_in + full_out));
                     if exhaust < supply && exhaust < closed {
-                        pick(i, FaultCode::ExhaustStuckOpen1, FaultCode::ExhaustStuckOpen2)
+                        pick(
+                            i,
+                            FaultCode::ExhaustStuckOpen1,
+                            FaultCode::ExhaustStuckOpen2,
+                        )
                     } else if supply < closed {
                         FaultCode::SupplyLost
                     } else {
-                        pick(i, FaultCode::InletStuckClosed1, FaultCode::InletStuckClosed2)
+                        pick(
+                            i,
+                            FaultCode::InletStuckClosed1,
+                            FaultCode::InletStuckClosed2,
+                        )
                     }
                 } else {
-                    pick(i, FaultCode::ExhaustStuckOpen1, FaultCode::ExhaustStuckOpen2)
+                    pick(
+                        i,
+                        FaultCode::ExhaustStuckOpen1,
+                        FaultCode::ExhaustStuckOpen2,
+                    )
                 })
             } else {
                 None

@@ -497,7 +497,8 @@ mod tests {
         assert_eq!(seen, [FaultCode::AngleStale, FaultCode::OverPressure2]);
         assert_eq!(
             s.seen().bits(),
-            (1 << (FaultCode::AngleStale as u32 - 1)) | (1 << (FaultCode::OverPressure2 as u32 - 1))
+            (1 << (FaultCode::AngleStale as u32 - 1))
+                | (1 << (FaultCode::OverPressure2 as u32 - 1))
         );
         assert!(s.reset(true));
         assert!(s.seen().is_empty());
@@ -525,7 +526,10 @@ mod tests {
         f.insert(FaultCode::SupplyLost);
         f.insert(FaultCode::PressureInvalid1);
         assert_eq!(f.bits(), 1 | (1 << 28));
-        assert_eq!(FaultSet::from_bits(u32::MAX).iter().count(), FaultCode::COUNT as usize);
+        assert_eq!(
+            FaultSet::from_bits(u32::MAX).iter().count(),
+            FaultCode::COUNT as usize
+        );
         assert!(f.contains(FaultCode::SupplyLost) && !f.contains(FaultCode::Watchdog));
     }
 

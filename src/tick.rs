@@ -615,7 +615,8 @@ impl ControlTick {
     /// [`crate::latch::BootDecision::Safe`]): the safe state from the first tick, until an
     /// explicit [`ControlTick::reset`].
     pub fn restore_latch(&mut self, record: &crate::latch::LatchRecord) {
-        self.safety.restore(record.cause, record.seen, record.vented);
+        self.safety
+            .restore(record.cause, record.seen, record.vented);
     }
 
     fn reset_laws(&mut self) {
@@ -672,8 +673,20 @@ impl ControlTick {
     #[inline(never)]
     fn residual_fault(&mut self, set: FaultSet) {
         use FaultCode::*;
-        let m1 = [InletStuckOpen1, InletStuckClosed1, ExhaustStuckOpen1, ExhaustStuckClosed1, SupplyLost];
-        let m2 = [InletStuckOpen2, InletStuckClosed2, ExhaustStuckOpen2, ExhaustStuckClosed2, SupplyLost];
+        let m1 = [
+            InletStuckOpen1,
+            InletStuckClosed1,
+            ExhaustStuckOpen1,
+            ExhaustStuckClosed1,
+            SupplyLost,
+        ];
+        let m2 = [
+            InletStuckOpen2,
+            InletStuckClosed2,
+            ExhaustStuckOpen2,
+            ExhaustStuckClosed2,
+            SupplyLost,
+        ];
         let seen = self.safety.seen();
         if m1.iter().any(|&c| set.contains(c)) && seen.contains(PressureTrackingLost1) {
             self.active.insert(PressureTrackingLost1);
@@ -1027,7 +1040,6 @@ mod tests {
     }
 
     const SP0: Setpoint = Setpoint { angle_rad: 0.0 };
-
 
     #[test]
     fn valve_shortfall_maps_full_valves_to_the_blocked_torque_direction() {

@@ -53,7 +53,12 @@ mod tests {
             let fx = FIXED_FORCE_LAW.force(pq, eq);
             let fl = FORCE_LAW.force(pq.to_num::<f32>(), eq.to_num::<f32>());
             let d = fx.force_n.to_num::<f32>() - fl.force_n;
-            defmt::assert!(d.abs() < 0.1, "{=f32} N off at {=i32} Pa", d, pq.to_num::<i32>());
+            defmt::assert!(
+                d.abs() < 0.1,
+                "{=f32} N off at {=i32} Pa",
+                d,
+                pq.to_num::<i32>()
+            );
             n += 1;
         }
         defmt::assert!(n > 100);
@@ -89,7 +94,11 @@ mod tests {
             peak - 1.0
         };
         let (with, without) = (run(true), run(false));
-        defmt::info!("overshoot with {=f32} rad, without {=f32} rad", with, without);
+        defmt::info!(
+            "overshoot with {=f32} rad, without {=f32} rad",
+            with,
+            without
+        );
         defmt::assert!(with < 0.5 * without);
     }
 

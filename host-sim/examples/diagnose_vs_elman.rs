@@ -8,9 +8,9 @@
 
 use std::path::PathBuf;
 
+use host_sim::diagnose::baseline::{train, ElmanOptions};
 use host_sim::diagnose::synth::{generate, plant_with, Excitation, SynthSpec};
 use host_sim::diagnose::{diagnose, DiagnoseOptions};
-use host_sim::diagnose::baseline::{train, ElmanOptions};
 use host_sim::fit::fit_percent;
 use host_sim::sim::{simulate, SolverOptions};
 use host_sim::{Channel, Plant, PlantConfig, Recording};

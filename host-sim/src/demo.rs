@@ -18,10 +18,10 @@ use anyhow::{bail, Context, Result};
 
 use crate::control::closed_loop::{run, Scenario};
 use crate::fit::{compare, ChannelFit};
-use crate::plant::Plant;
 use crate::io::plot::plot_comparison;
 use crate::io::recording::{Channel, Recording};
 use crate::io::run_files::{firmware_trace_path, plot_run, run_recording, write_firmware_trace};
+use crate::plant::Plant;
 use crate::sim::{simulate, SolverOptions};
 
 /// The demo's scenarios: (file name in `scenarios/`, its text).
@@ -138,13 +138,7 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
         let trace = firmware_trace_path(&csv);
         let png = opts.out_dir.join(format!("{name}.png"));
         write_firmware_trace(&r, &trace)?;
-        run_recording(
-            &r,
-            &plant_path.display().to_string(),
-            file,
-            Some(&trace),
-        )
-        .write(&csv)?;
+        run_recording(&r, &plant_path.display().to_string(), file, Some(&trace)).write(&csv)?;
         plot_run(&png, &r, &plant)?;
         let st = r.tracking(s.expect.settle_after_s);
         scenarios.push(ScenarioResult {

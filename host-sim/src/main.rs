@@ -33,13 +33,17 @@ enum Command {
     ///
     /// --inputs needs the columns t_s,u_in1,u_ex1,u_in2,u_ex2 (RECORDING.md); the measured
     /// angle_deg,p1_kpa,p2_kpa,f1_n,f2_n, if present, are drawn under the simulated ones.
-    #[command(after_help = "Examples:\n  host-sim simulate --plant ../shared/plant/reference-1dof.toml --inputs ../shared/conformance/pulses_nominal.csv --out sim.csv --plot sim.png\n  host-sim simulate --plant ../shared/plant/reference-1dof.toml --scenario scenarios/step.toml --out step.csv")]
+    #[command(
+        after_help = "Examples:\n  host-sim simulate --plant ../shared/plant/reference-1dof.toml --inputs ../shared/conformance/pulses_nominal.csv --out sim.csv --plot sim.png\n  host-sim simulate --plant ../shared/plant/reference-1dof.toml --scenario scenarios/step.toml --out step.csv"
+    )]
     Simulate(SimulateArgs),
     /// Per-channel fit (NRMSE %), MAE and MSE of B (model) against A (reference/measured).
     ///
     /// Both recordings need t_s (same length) and share at least one of angle_deg, p1_kpa,
     /// p2_kpa, f1_n, f2_n; the fit is 100 (1 - ||b - a|| / ||a - mean(a)||) % (normalised RMS error), 100 = perfect.
-    #[command(after_help = "Example:\n  host-sim fit ../shared/conformance/pulses_nominal.csv sim.csv --min-fit 99.5 --plot fit.png")]
+    #[command(
+        after_help = "Example:\n  host-sim fit ../shared/conformance/pulses_nominal.csv sim.csv --min-fit 99.5 --plot fit.png"
+    )]
     Fit(FitArgs),
     /// The main job: the reference plant with the firmware in the loop on the step, sine and
     /// random scenarios (CSV + plots), and the conformance fit of an open-loop replay.
@@ -50,10 +54,14 @@ enum Command {
     Demo(DemoArgs),
     /// Generate identification data from a plant file (force: isometric bench sweep; torque:
     /// constant-speed passes at fixed activations, the torque-model paper's protocol).
-    #[command(after_help = "Examples:\n  host-sim sweep force --plant ../shared/plant/reference-1dof.toml --out force.csv\n  host-sim sweep torque --plant ../shared/plant/reference-1dof.toml --out torque.csv")]
+    #[command(
+        after_help = "Examples:\n  host-sim sweep force --plant ../shared/plant/reference-1dof.toml --out force.csv\n  host-sim sweep torque --plant ../shared/plant/reference-1dof.toml --out torque.csv"
+    )]
     Sweep(host_sim::identify::cli::SweepArgs),
     /// Identify the force law, the torque model or plant parameters from data.
-    #[command(after_help = "Examples:\n  host-sim identify force --data force.csv --out force_law.toml\n  host-sim identify torque --recording torque.csv --plant ../shared/plant/reference-1dof.toml --out torque_model.toml\n  host-sim identify plant --recording ../shared/conformance/pulses_loaded.csv --plant ../shared/plant/reference-1dof.toml --params joint.inertia_kgm2 --out fitted.toml")]
+    #[command(
+        after_help = "Examples:\n  host-sim identify force --data force.csv --out force_law.toml\n  host-sim identify torque --recording torque.csv --plant ../shared/plant/reference-1dof.toml --out torque_model.toml\n  host-sim identify plant --recording ../shared/conformance/pulses_loaded.csv --plant ../shared/plant/reference-1dof.toml --params joint.inertia_kgm2 --out fitted.toml"
+    )]
     Identify(host_sim::identify::cli::IdentifyArgs),
     /// Tune the cascade, PD and PID gains on the set-point suite (firmware in the loop) and
     /// write the gains file (the format of config/control_tuned.toml).
@@ -65,14 +73,18 @@ enum Command {
     ///
     /// The recording needs t_s,u_in1,u_ex1,u_in2,u_ex2 and the measured angle_deg,p1_kpa,
     /// p2_kpa (f1_n,f2_n used when present), as in RECORDING.md.
-    #[command(after_help = "Example:\n  host-sim diagnose --plant ../shared/plant/reference-1dof.toml --recording ../shared/conformance/pulses_thermal.csv --json diagnosis.json --report report/")]
+    #[command(
+        after_help = "Example:\n  host-sim diagnose --plant ../shared/plant/reference-1dof.toml --recording ../shared/conformance/pulses_thermal.csv --json diagnosis.json --report report/"
+    )]
     Diagnose(DiagnoseArgs),
     /// Diagnose every recording (*.csv) of a directory against one plant, in parallel: one
     /// JSON per recording and a summary table (summary.csv); exit status 1 if any failed.
     ///
     /// Each recording needs t_s,u_in1,u_ex1,u_in2,u_ex2 and the measured angle_deg,p1_kpa,
     /// p2_kpa (f1_n,f2_n used when present), as in RECORDING.md.
-    #[command(after_help = "Example:\n  host-sim diagnose-batch --plant ../shared/plant/reference-1dof.toml --recordings ../shared/conformance --out-dir diagnoses/")]
+    #[command(
+        after_help = "Example:\n  host-sim diagnose-batch --plant ../shared/plant/reference-1dof.toml --recordings ../shared/conformance --out-dir diagnoses/"
+    )]
     DiagnoseBatch(host_sim::diagnose::batch::BatchArgs),
     /// Import a rig logger's CSV (other column names, units, time base) into a recording,
     /// through a mapping file (docs/rig.md).
@@ -178,7 +190,11 @@ fn main() -> ExitCode {
         Command::Diagnose(a) => run_diagnose(&a),
         Command::DiagnoseBatch(a) => host_sim::diagnose::batch::run_batch(&a).map(|(table, ok)| {
             print!("{table}");
-            if ok { ExitCode::SUCCESS } else { ExitCode::from(1) }
+            if ok {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::from(1)
+            }
         }),
         Command::Sweep(a) => run_report(host_sim::identify::cli::run_sweep(&a)),
         Command::Identify(a) => run_report(host_sim::identify::cli::run_identify(&a)),

@@ -4,12 +4,12 @@
 
 use std::path::PathBuf;
 
-use host_sim::io::arm3::PressureStepScenario;
 use host_sim::fit::fit_percent;
+use host_sim::io::arm3::PressureStepScenario;
+use host_sim::io::recording::Channel;
 use host_sim::plant::arm3::{
     simulate_arm3, Arm3, Arm3Config, Arm3Inputs, Arm3Integrator, Arm3State, Links,
 };
-use host_sim::io::recording::Channel;
 use host_sim::sim::{simulate, SolverOptions};
 use host_sim::{Plant, PlantConfig, Recording, ValveInputs};
 use nalgebra::{Matrix3, SVector, Vector3};

@@ -113,7 +113,10 @@ fn thermal_fixture_is_not_reproduced_by_the_isothermal_plant() {
     for file in &thermal {
         let fits = check(file, &opts);
         let worst = fits.iter().map(|(_, f)| *f).fold(f64::INFINITY, f64::min);
-        println!("{}: worst channel fit {worst:.2} % on the isothermal plant", file.display());
+        println!(
+            "{}: worst channel fit {worst:.2} % on the isothermal plant",
+            file.display()
+        );
         assert!(
             worst < 99.5,
             "{} is now reproduced (worst fit {worst:.3} %): put it back into the conformance claim",

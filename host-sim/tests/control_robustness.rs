@@ -41,6 +41,11 @@ fn stored_gains_on_held_out_sequences_and_concealed_effects() {
             r.cells[1].mse_rad2
         );
         // ... and is never worse than the PID on the held-out sequences.
-        assert!(r.lead_over_pid() >= 1.0, "{}: {:.2}", r.condition, r.lead_over_pid());
+        assert!(
+            r.lead_over_pid() >= 1.0,
+            "{}: {:.2}",
+            r.condition,
+            r.lead_over_pid()
+        );
     }
 }

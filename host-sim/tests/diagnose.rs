@@ -308,7 +308,11 @@ fn independent_loaded_fixture_is_an_inertia_recalibration() {
     assert_eq!(r.key, "joint.inertia_kgm2");
     assert_eq!(r.nominal, 0.014);
     assert!((r.fitted - 0.155).abs() < 0.155 * 0.02, "J = {}", r.fitted);
-    assert!(r.ci95[0] <= r.fitted && r.fitted <= r.ci95[1], "{:?}", r.ci95);
+    assert!(
+        r.ci95[0] <= r.fitted && r.fitted <= r.ci95[1],
+        "{:?}",
+        r.ci95
+    );
     assert!(d.fit_after.values().all(|f| *f > 99.0), "{:?}", d.fit_after);
     let json = d.to_json();
     assert!(json.get("check").is_none());
@@ -337,10 +341,20 @@ fn noise_free_nominal_data_says_nothing_is_missing() {
     };
     let train = mk(Excitation::Pulses, 41);
     let check = mk(Excitation::ChirpSteps, 42);
-    let d = diagnose(&cfg, &train, Some(&check), &DiagnoseOptions::default(), &|_, _, _| {})
-        .unwrap();
+    let d = diagnose(
+        &cfg,
+        &train,
+        Some(&check),
+        &DiagnoseOptions::default(),
+        &|_, _, _| {},
+    )
+    .unwrap();
     assert_eq!(d.verdict, Verdict::NothingMissing, "{}", d.answer());
-    assert!(d.answer().starts_with("Nothing is missing"), "{}", d.answer());
+    assert!(
+        d.answer().starts_with("Nothing is missing"),
+        "{}",
+        d.answer()
+    );
     assert!(!d.answer().contains("misses something"));
 }
 
@@ -351,7 +365,9 @@ fn pure_noise_names_nothing_and_exits_3_with_the_json_written() {
     // Replace every channel by noise around its mean: nothing this plant does.
     let mut state = 12345u64;
     let mut next = || {
-        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         ((state >> 11) as f64 / (1u64 << 53) as f64) - 0.5
     };
     for y in train.outputs.iter_mut().flatten() {
@@ -381,10 +397,16 @@ fn pure_noise_names_nothing_and_exits_3_with_the_json_written() {
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     let verdict = v["verdict"].as_str().unwrap();
-    assert!(verdict == "not_this_plant" || verdict == "unexplained", "{verdict}");
+    assert!(
+        verdict == "not_this_plant" || verdict == "unexplained",
+        "{verdict}"
+    );
     assert_eq!(v["effects"].as_array().unwrap().len(), 0);
     assert_eq!(v["recalibrated"].as_array().unwrap().len(), 0);
-    assert!(stdout.contains("no effect is named") && stdout.contains("Likely causes"), "{stdout}");
+    assert!(
+        stdout.contains("no effect is named") && stdout.contains("Likely causes"),
+        "{stdout}"
+    );
 }
 
 #[test]

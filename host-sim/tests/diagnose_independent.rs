@@ -33,7 +33,9 @@ const TUNING_SEEDS: [u64; 2] = [11, 12];
 const HELD_OUT_SEEDS: [u64; 3] = [9101, 9102, 9103];
 
 fn shared(rel: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared").join(rel)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared")
+        .join(rel)
 }
 
 fn nominal() -> PlantConfig {
@@ -126,7 +128,11 @@ fn run(c: &Case) -> Outcome {
             };
             (
                 pass,
-                if got.is_empty() { "(none)".into() } else { got.join("+") },
+                if got.is_empty() {
+                    "(none)".into()
+                } else {
+                    got.join("+")
+                },
                 d.verdict.as_str(),
                 min_check,
             )
@@ -198,7 +204,10 @@ const REDUCED_PASSES: usize = 6;
 fn reduced_matrix() {
     let (passed, total) = matrix(&REDUCED, &HELD_OUT_SEEDS[..1]);
     println!("reduced matrix: {passed}/{total}");
-    assert!(passed >= REDUCED_PASSES, "{passed}/{total} < {REDUCED_PASSES}");
+    assert!(
+        passed >= REDUCED_PASSES,
+        "{passed}/{total} < {REDUCED_PASSES}"
+    );
 }
 
 #[test]

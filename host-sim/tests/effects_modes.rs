@@ -109,7 +109,10 @@ fn max_diff(a: &[Measurement], b: &[Measurement]) -> [f64; 5] {
 
 /// The channels of the true plant state (no sensor effects).
 fn true_channels(plant: &Plant, run: &ClosedLoopRun) -> Vec<Measurement> {
-    run.rows.iter().map(|r| plant.true_channels(&r.state)).collect()
+    run.rows
+        .iter()
+        .map(|r| plant.true_channels(&r.state))
+        .collect()
 }
 
 /// Five channel values in short exponent form.
@@ -120,15 +123,15 @@ fn e5(v: &[f64; 5]) -> String {
 
 /// Whether `d` exceeds `factor` x the tolerance `tol` on some channel; the report line.
 fn exceeds(d: &[f64; 5], tol: &[f64; 5], factor: f64) -> (bool, String) {
-    let ratio: Vec<f64> = d
-        .iter()
-        .zip(tol)
-        .map(|(d, t)| d / t.max(1e-12))
-        .collect();
+    let ratio: Vec<f64> = d.iter().zip(tol).map(|(d, t)| d / t.max(1e-12)).collect();
     let best = ratio.iter().copied().fold(0.0, f64::max);
     (
         best > factor,
-        format!("max diff {} / tolerance {}: best ratio {best:.3e}", e5(d), e5(tol)),
+        format!(
+            "max diff {} / tolerance {}: best ratio {best:.3e}",
+            e5(d),
+            e5(tol)
+        ),
     )
 }
 
@@ -264,8 +267,16 @@ fn every_effect_changes_the_controller_comparison() {
     // Integration tolerance of the angle in this scenario's closed loop (nominal run against
     // the replay of its commands), and what it allows of the MSE:
     // |mse(x + e) - mse(x)| <= 2 rms e + e^2.
-    let run0 = run_with(&nominal, &s, ControllerConfig { tick_hz: 1000.0, ..cfg }, &mut |_| {})
-        .unwrap();
+    let run0 = run_with(
+        &nominal,
+        &s,
+        ControllerConfig {
+            tick_hz: 1000.0,
+            ..cfg
+        },
+        &mut |_| {},
+    )
+    .unwrap();
     let (rep0, _) = replay(&nominal, &run0);
     let e_rad = max_diff(&true_channels(&nominal, &run0), &rep0)[0].to_radians();
     let mse0 = score0.mse_rad2;
@@ -286,7 +297,10 @@ fn every_effect_changes_the_controller_comparison() {
             failures.push(name);
         }
     }
-    assert!(failures.is_empty(), "no change in the comparison: {failures:?}");
+    assert!(
+        failures.is_empty(),
+        "no change in the comparison: {failures:?}"
+    );
 }
 
 /// The diagnosis simulates the plant file's effects: its nominal prediction and every
@@ -412,15 +426,23 @@ fn step_with_dead_time_or_sensor_lag_differs_and_matches_its_replay() {
             st.rms_rad,
             st0.rms_rad
         );
-        let d = max_diff(&true_channels(&plant, &run), &true_channels(&nominal, &run0));
-        assert!(d[0] > 100.0 * tol[0].max(1e-9), "{toml}: angle differs by {} deg", d[0]);
+        let d = max_diff(
+            &true_channels(&plant, &run),
+            &true_channels(&nominal, &run0),
+        );
+        assert!(
+            d[0] > 100.0 * tol[0].max(1e-9),
+            "{toml}: angle differs by {} deg",
+            d[0]
+        );
         let (rep, rep_meas) = replay(&plant, &run);
         let dr = max_diff(&true_channels(&plant, &run), &rep);
         let meas: Vec<Measurement> = run.rows.iter().map(|r| r.measured).collect();
         let dm = max_diff(&meas, &rep_meas);
         let bound = replay_bound(&tol, &true_channels(&nominal, &run0));
         assert!(
-            dr.iter().zip(&bound).all(|(d, b)| d <= b) && dm.iter().zip(&bound).all(|(d, b)| d <= b),
+            dr.iter().zip(&bound).all(|(d, b)| d <= b)
+                && dm.iter().zip(&bound).all(|(d, b)| d <= b),
             "{toml}: replay departs by {} (true), {} (measured); bound {}",
             e5(&dr),
             e5(&dm),
@@ -523,30 +545,39 @@ fn cli_closed_loop_recording_replays_open_loop_on_the_same_plant() {
         out
     };
     let scenario = root().join("scenarios/step.toml");
-    let out = run(&[
-        "simulate".as_ref(),
-        "--plant".as_ref(),
-        plant.as_os_str(),
-        "--scenario".as_ref(),
-        scenario.as_os_str(),
-        "--out".as_ref(),
-        closed.as_os_str(),
-    ], &[0, 1]);
+    let out = run(
+        &[
+            "simulate".as_ref(),
+            "--plant".as_ref(),
+            plant.as_os_str(),
+            "--scenario".as_ref(),
+            scenario.as_os_str(),
+            "--out".as_ref(),
+            closed.as_os_str(),
+        ],
+        &[0, 1],
+    );
     assert!(
         out.contains("plant effects: valve_dead_time(delay_s = 0.008)"),
         "{out}"
     );
     let replayed = dir.path().join("replayed.csv");
-    let out = run(&[
-        "simulate".as_ref(),
-        "--plant".as_ref(),
-        plant.as_os_str(),
-        "--inputs".as_ref(),
-        closed.as_os_str(),
-        "--out".as_ref(),
-        replayed.as_os_str(),
-    ], &[0]);
-    assert!(out.contains("plant effects: valve_dead_time(delay_s = 0.008)"), "{out}");
+    let out = run(
+        &[
+            "simulate".as_ref(),
+            "--plant".as_ref(),
+            plant.as_os_str(),
+            "--inputs".as_ref(),
+            closed.as_os_str(),
+            "--out".as_ref(),
+            replayed.as_os_str(),
+        ],
+        &[0],
+    );
+    assert!(
+        out.contains("plant effects: valve_dead_time(delay_s = 0.008)"),
+        "{out}"
+    );
     let a = Recording::read(&closed).unwrap();
     let b = Recording::read(&replayed).unwrap();
     for r in [&a, &b] {

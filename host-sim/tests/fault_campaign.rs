@@ -20,7 +20,9 @@ use host_sim::control::closed_loop::{run, Scenario};
 use host_sim::Plant;
 
 fn shared(name: &str) -> Plant {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant").join(name);
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/plant")
+        .join(name);
     Plant::load(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
 
@@ -288,7 +290,11 @@ fn fault_campaign() {
             }
         }
     }
-    eprintln!("fault campaign ({}): {runs} runs, {} fault kinds", if full { "full" } else { "short" }, FAULTS.len());
+    eprintln!(
+        "fault campaign ({}): {runs} runs, {} fault kinds",
+        if full { "full" } else { "short" },
+        FAULTS.len()
+    );
     eprintln!("| fault | runs | detected | max latency [ticks = ms] | max pressure [kPa] |");
     eprintln!("|---|---|---|---|---|");
     for (name, s) in &stats {
@@ -297,5 +303,10 @@ fn fault_campaign() {
             s.runs, s.detected, s.max_latency_ticks, s.max_p_kpa
         );
     }
-    assert!(failures.is_empty(), "{} failures:\n{}", failures.len(), failures.join("\n"));
+    assert!(
+        failures.is_empty(),
+        "{} failures:\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
 }

@@ -242,14 +242,7 @@ fn sweep_force_map_then_identify_force_writes_the_report_into_the_constants_file
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("map.csv");
     let out = dir.path().join("force.toml");
-    let r = host_sim(&[
-        &"sweep",
-        &"force-map",
-        &"--seed",
-        &"7",
-        &"--out",
-        &data,
-    ]);
+    let r = host_sim(&[&"sweep", &"force-map", &"--seed", &"7", &"--out", &data]);
     assert!(r.status.success(), "{}", text(&r.stderr));
     let r = host_sim(&[&"identify", &"force", &"--data", &data, &"--out", &out]);
     assert!(r.status.success(), "{}", text(&r.stderr));

@@ -233,7 +233,10 @@ fn jittered_40hz_bar_and_volts_rig_file_imports_simulates_and_diagnoses() {
     assert_eq!(sim.t_s, rec.t_s);
     let fits = compare(&rec, &sim).unwrap();
     for f in &fits {
-        eprintln!("simulate vs rig: {:?} fit {:.2} %", f.channel, f.fit_percent);
+        eprintln!(
+            "simulate vs rig: {:?} fit {:.2} %",
+            f.channel, f.fit_percent
+        );
         assert!(f.fit_percent > 90.0, "{:?}: {}", f.channel, f.fit_percent);
     }
 
@@ -296,7 +299,11 @@ fn stamped_replay_beats_treating_jittered_stamps_as_uniform() {
             .unwrap()
             .fit_percent
     };
-    eprintln!("p1 fit: stamped {:.2} %, stamps taken as uniform {:.2} %", p1(&a), p1(&b));
+    eprintln!(
+        "p1 fit: stamped {:.2} %, stamps taken as uniform {:.2} %",
+        p1(&a),
+        p1(&b)
+    );
     assert!(
         p1(&a) > p1(&b) + 2.0,
         "stamped {} vs uniform {}",

@@ -16,8 +16,14 @@ fn bad_tune_arguments_are_refused_without_touching_the_output() {
     std::fs::write(&out, "previous\n").unwrap();
     for (args, want) in [
         (vec!["--threads", "0"], "--threads 0: allowed 1..=64"),
-        (vec!["--transition-s", "5"], "--transition-s 5: allowed 0..=2 s"),
-        (vec!["--setpoint-cutoff-hz", "0"], "--setpoint-cutoff-hz 0: allowed 1..=500 Hz"),
+        (
+            vec!["--transition-s", "5"],
+            "--transition-s 5: allowed 0..=2 s",
+        ),
+        (
+            vec!["--setpoint-cutoff-hz", "0"],
+            "--setpoint-cutoff-hz 0: allowed 1..=500 Hz",
+        ),
         (vec!["--cascade-start", "1,2"], "--cascade-start 1,2"),
     ] {
         let r = Command::new(env!("CARGO_BIN_EXE_host-sim"))

@@ -105,8 +105,16 @@ pub fn check_tick_output(
     if o.fault.is_some() {
         *latched = o.fault;
         // The configured safe state, or a muscle vented by the over-pressure escalation.
-        prop_assert!(o.valves.muscle1 == safe_cmd.muscle1 || o.valves.muscle1 == -1.0, "{:?}", o.valves);
-        prop_assert!(o.valves.muscle2 == safe_cmd.muscle2 || o.valves.muscle2 == -1.0, "{:?}", o.valves);
+        prop_assert!(
+            o.valves.muscle1 == safe_cmd.muscle1 || o.valves.muscle1 == -1.0,
+            "{:?}",
+            o.valves
+        );
+        prop_assert!(
+            o.valves.muscle2 == safe_cmd.muscle2 || o.valves.muscle2 == -1.0,
+            "{:?}",
+            o.valves
+        );
         prop_assert!(!o.armed);
     }
     Ok(())

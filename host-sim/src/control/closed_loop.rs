@@ -27,20 +27,20 @@ use std::cell::Cell;
 use std::collections::VecDeque;
 use std::rc::Rc;
 
+use crate::io::recording::{Channel, Recording};
+use crate::io::scenario::event_time;
+pub use crate::io::scenario::{
+    ClosedLoopError, Event, Expectations, Scenario, ScenarioHeader, SensorChannel, SensorModel,
+    SetpointProfile, ValveId,
+};
+use crate::plant::{Measurement, Plant, PlantState, ValveInputs};
+use crate::sim::{ActuatorPath, Integrator, SensorPath, SimStats, SolverOptions};
 use pam_firmware::latch::{BootDecision, PersistentLatch, RamStorage, ResetCause};
 use pam_firmware::sensors::SequenceGate;
 use pam_firmware::tick::{ControlTick, ControllerConfig, SensorFrame, Setpoint, TickOutput};
 use pam_firmware::valves::{OnOffPwmConfig, OnOffValves};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
-use crate::io::recording::{Channel, Recording};
-pub use crate::io::scenario::{
-    ClosedLoopError, Event, Expectations, Scenario, ScenarioHeader, SensorChannel, SensorModel,
-    SetpointProfile, ValveId,
-};
-use crate::io::scenario::event_time;
-use crate::plant::{Measurement, Plant, PlantState, ValveInputs};
-use crate::sim::{ActuatorPath, Integrator, SensorPath, SimStats, SolverOptions};
 
 // ---------------------------------------------------------------------------------------
 // Fake hardware.
@@ -441,11 +441,12 @@ pub fn run_with(
             // (a fault combination can make the adaptive step collapse); a real failure
             // names the run time and the state.
             let p_tank = integ.supply_abs_pa();
-            let end = fallback_tick(p, &x, p_tank, &inputs, dt_s).ok_or(ClosedLoopError::SimAt {
-                t_s,
-                state: x,
-                source: e,
-            })?;
+            let end =
+                fallback_tick(p, &x, p_tank, &inputs, dt_s).ok_or(ClosedLoopError::SimAt {
+                    t_s,
+                    state: x,
+                    source: e,
+                })?;
             stats_done.add(&integ.stats());
             integ = Integrator::new(p, end, opts);
             integ.set_supply_abs_pa(p_tank);
@@ -639,8 +640,7 @@ impl ClosedLoopRun {
         ));
         rec.metadata
             .push(("sample_period_s".into(), format!("{}", self.dt_s)));
-        rec.metadata
-            .push(("effects".into(), self.effects.clone()));
+        rec.metadata.push(("effects".into(), self.effects.clone()));
         let mut ch: [Vec<f64>; 5] = Default::default();
         for r in &self.rows {
             rec.t_s.push(r.t_s);

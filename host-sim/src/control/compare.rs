@@ -30,9 +30,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::control::closed_loop::{run_with, ClosedLoopError, Scenario, SetpointProfile};
 use crate::identify::{write_atomic, IdentError};
-use crate::plant::Plant;
 /// The optimizers live in [`crate::optimize`]; re-exported for the tuner's callers.
 pub use crate::optimize::{nelder_mead, NelderMeadResult};
+use crate::plant::Plant;
 
 /// The set-point suite of the comparison: (file name, text) of the step, sine and random
 /// scenarios, every set-point change a minimum-jerk move of 0.15 s (`transition_s`), the

@@ -3,5 +3,5 @@
 
 pub mod closed_loop;
 pub mod compare;
-pub mod tune;
 pub mod robustness;
+pub mod tune;

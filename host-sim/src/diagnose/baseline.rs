@@ -24,8 +24,8 @@
 
 use rand::{Rng, SeedableRng};
 
-use crate::plant::{Measurement, ValveInputs};
 use crate::io::recording::Channel;
+use crate::plant::{Measurement, ValveInputs};
 
 /// Number of network inputs: 4 valve openings + 5 nominal channels.
 const N_IN: usize = 9;

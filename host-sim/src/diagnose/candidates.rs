@@ -4,12 +4,12 @@
 //! [`PlantConfig`] (the same `[effects]` tables the simulator runs, so the corrected model
 //! is the plant code itself).
 
+use crate::io::recording::Channel;
 use crate::plant::config::PlantConfig;
 use crate::plant::effects::{
     ChannelCalibration, Gravity, JointFriction, Leakage, MuscleHysteresis, Polytropic,
     SensorCalibration, SensorLag, SupplyDrop, SupplyDropModel, ValveDeadTime,
 };
-use crate::io::recording::Channel;
 
 use super::screen::{regress, Evidence, Scatter};
 
@@ -803,19 +803,19 @@ impl Candidate for SensorOffsetCandidate {
     }
     fn apply(&self, cfg: &mut PlantConfig, p: &[f64], s: &Setup) {
         // The offsets are fitted; the gains of a calibration the plant file already has stay.
-        let mut cal = cfg
-            .effects
-            .sensor
-            .clone()
-            .filter(|c| c.enabled)
-            .unwrap_or(SensorCalibration {
-                enabled: true,
-                angle_deg: None,
-                p1_kpa: None,
-                p2_kpa: None,
-                f1_n: None,
-                f2_n: None,
-            });
+        let mut cal =
+            cfg.effects
+                .sensor
+                .clone()
+                .filter(|c| c.enabled)
+                .unwrap_or(SensorCalibration {
+                    enabled: true,
+                    angle_deg: None,
+                    p1_kpa: None,
+                    p2_kpa: None,
+                    f1_n: None,
+                    f2_n: None,
+                });
         let mut it = p.iter();
         for c in Channel::ALL {
             if !s.has(c) {

@@ -6,9 +6,9 @@
 //! The parameters are fitted by the shared output-error fitter of `identify plant`
 //! ([`crate::identify::output_error`]); failed simulations count as large residuals.
 
+use crate::io::recording::{Channel, Recording};
 use crate::plant::config::PlantConfig;
 use crate::plant::{Measurement, Plant, PlantState, ValveInputs};
-use crate::io::recording::{Channel, Recording};
 use crate::sim::{simulate, SolverOptions};
 
 use super::candidates::{Candidate, Setup};

@@ -2,8 +2,8 @@
 //! residual is large, the operating regime those windows share, and when each channel
 //! first departs from the measurement.
 
-use crate::plant::Measurement;
 use crate::io::recording::{Channel, Recording};
+use crate::plant::Measurement;
 
 use super::differentiate::Differentiator;
 

@@ -231,7 +231,10 @@ const LOOKALIKES: [(&str, &str); 5] = [
     ("joint_friction", "muscle_hysteresis"),
     // The isothermal pressure law sees only the ratio of the valve conductance to the
     // chamber volume.
-    ("valve.sonic_conductance_m3_per_s_pa", "muscle.volume_poly_m3"),
+    (
+        "valve.sonic_conductance_m3_per_s_pa",
+        "muscle.volume_poly_m3",
+    ),
     ("sensor_lag", "valve_delay"),
     ("joint.inertia_kgm2", "gravity"),
     ("leakage", "supply_drop"),
@@ -300,7 +303,11 @@ pub fn noise_cost(present: &[bool; 5], noise: &[f64; 5], spread: &[f64; 5]) -> f
     Channel::ALL
         .iter()
         .filter(|c| present[c.index()])
-        .map(|c| (noise[c.index()] / spread[c.index()]).max(verdict::FIT_FLOOR_REL).powi(2))
+        .map(|c| {
+            (noise[c.index()] / spread[c.index()])
+                .max(verdict::FIT_FLOOR_REL)
+                .powi(2)
+        })
         .sum()
 }
 
@@ -392,7 +399,10 @@ pub fn diagnose(
     step("screening");
 
     // 2. Candidates, screened.
-    let screenings: Vec<Screening> = cands.iter().map(|c| c.screen(&g.evidence, &setup)).collect();
+    let screenings: Vec<Screening> = cands
+        .iter()
+        .map(|c| c.screen(&g.evidence, &setup))
+        .collect();
     let n_fit = ((n as f64 * opts.fit_fraction).round() as usize)
         .clamp(MIN_SAMPLES / 2, n - MIN_SAMPLES / 4);
     let fit_range = 0..n_fit;
@@ -508,7 +518,13 @@ pub fn diagnose(
         .values()
         .chain(check_after.iter().flat_map(|m| m.values()))
         .copied()
-        .fold(f64::INFINITY, |a, b| if b.is_nan() { f64::NEG_INFINITY } else { a.min(b) });
+        .fold(f64::INFINITY, |a, b| {
+            if b.is_nan() {
+                f64::NEG_INFINITY
+            } else {
+                a.min(b)
+            }
+        });
     let v = if nothing_missing && hints.is_empty() {
         Verdict::NothingMissing
     } else if !hints.is_empty()
@@ -527,7 +543,12 @@ pub fn diagnose(
         (fin.chosen, fin.ci95, fin.corrected, fin.corrected_meas)
     } else {
         // Name nothing: the corrected model is the nominal one.
-        (Vec::new(), Vec::new(), nominal.clone(), g.nominal_meas.clone())
+        (
+            Vec::new(),
+            Vec::new(),
+            nominal.clone(),
+            g.nominal_meas.clone(),
+        )
     };
     if v != Verdict::Explained {
         if let (Some(b), Some(cs)) = (&check_before, &mut check_series) {
@@ -622,7 +643,11 @@ pub fn diagnose(
                 label: c.label().to_string(),
                 nominal: spec.scale,
                 fitted: p.params[0],
-                ci95: ci95.get(k).and_then(|v| v.first()).copied().unwrap_or([f64::NAN; 2]),
+                ci95: ci95
+                    .get(k)
+                    .and_then(|v| v.first())
+                    .copied()
+                    .unwrap_or([f64::NAN; 2]),
                 score,
                 at_bound: at_bound.first().map(|b| b.1),
             });

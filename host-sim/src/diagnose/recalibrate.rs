@@ -159,7 +159,12 @@ impl Candidate for Recal {
         let (lo, hi) = self.bounds();
         if let Some(c) = &self.screen_with {
             let mut sc = c.screen(ev, s);
-            sc.initial = vec![sc.initial.first().copied().unwrap_or(self.nominal).clamp(lo, hi)];
+            sc.initial = vec![sc
+                .initial
+                .first()
+                .copied()
+                .unwrap_or(self.nominal)
+                .clamp(lo, hi)];
             return sc;
         }
         Screening {
@@ -304,7 +309,12 @@ mod tests {
             .find(|c| c.id() == "muscle.volume_poly_m3")
             .unwrap();
         vol.apply(&mut m, &[2.0 * cfg.muscle.volume_poly_m3[0]], &s);
-        for (a, b) in m.muscle.volume_poly_m3.iter().zip(&cfg.muscle.volume_poly_m3) {
+        for (a, b) in m
+            .muscle
+            .volume_poly_m3
+            .iter()
+            .zip(&cfg.muscle.volume_poly_m3)
+        {
             assert!((a - 2.0 * b).abs() <= 1e-15 * b.abs().max(1.0));
         }
     }
@@ -318,7 +328,10 @@ mod tests {
         let b = Bounded(Box::new(super::super::candidates::PolytropicCandidate));
         let p = b.params(&s);
         assert_eq!((p[0].lo, p[0].hi), (1.0, 1.4));
-        assert_eq!(at_bounds(&b, &[1.4], &s), vec![("exponent".to_string(), 1.4)]);
+        assert_eq!(
+            at_bounds(&b, &[1.4], &s),
+            vec![("exponent".to_string(), 1.4)]
+        );
         assert!(at_bounds(&b, &[1.2], &s).is_empty());
     }
 }

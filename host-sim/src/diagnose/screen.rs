@@ -2,10 +2,10 @@
 //! law, tension law) and output-side evidence (residual lags, offsets), against which every
 //! candidate's signature is regressed to rank it and seed its parameters.
 
+use crate::io::recording::{Channel, Recording};
 use crate::plant::config::PlantConfig;
 use crate::plant::valve::Iso6358Valve;
 use crate::plant::{Measurement, Plant, PlantState, ValveInputs};
-use crate::io::recording::{Channel, Recording};
 
 use super::differentiate::Differentiator;
 

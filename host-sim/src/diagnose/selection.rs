@@ -373,7 +373,12 @@ mod tests {
         let friction: Box<dyn Candidate> = Box::new(JointFrictionCandidate);
         let rc: &dyn Candidate = recal[0].as_ref();
         assert!(rc.id().contains('.'));
-        let r_part = || vec![Part { candidate: rc, params: vec![1.0] }];
+        let r_part = || {
+            vec![Part {
+                candidate: rc,
+                params: vec![1.0],
+            }]
+        };
         let e_part = || {
             vec![Part {
                 candidate: friction.as_ref(),

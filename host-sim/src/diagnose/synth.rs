@@ -5,9 +5,9 @@
 use rand::{rngs::StdRng, Rng, SeedableRng};
 use rand_distr::StandardNormal;
 
+use crate::io::recording::{Channel, Recording};
 use crate::plant::config::{ConfigError, PlantConfig};
 use crate::plant::{Plant, ValveInputs};
-use crate::io::recording::{Channel, Recording};
 use crate::sim::{simulate, SimError, SolverOptions};
 
 /// Valve excitation of a synthetic run.

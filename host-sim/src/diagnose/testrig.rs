@@ -177,7 +177,8 @@ impl RigPhysics {
                         h += rho * q * if q > 0.0 { T_WALL_K } else { t };
                         mdot += rho * q;
                     }
-                    let dp = (kappa * R_AIR * h - kappa * p * dv + (kappa - 1.0) * ha * (T_WALL_K - t))
+                    let dp = (kappa * R_AIR * h - kappa * p * dv
+                        + (kappa - 1.0) * ha * (T_WALL_K - t))
                         / v;
                     dx[2 + i] = dp;
                     dx[4 + i] = t / (p * v) * (dp * v + p * dv - R_AIR * t * mdot);
@@ -429,7 +430,10 @@ fn closed_loop(
     Recording {
         metadata: vec![
             ("sample_period_s".into(), format!("{dt_s}")),
-            ("source".into(), "independent test rig (diagnose::testrig), closed loop".into()),
+            (
+                "source".into(),
+                "independent test rig (diagnose::testrig), closed loop".into(),
+            ),
         ],
         t_s,
         inputs,
@@ -482,7 +486,10 @@ pub fn case(nominal: &PlantConfig, kind: &'static str, seed: u64) -> Case {
             let m = rng.random_range(0..2);
             let c = rng.random_range(4e-10..9e-10);
             p.leak = Some((m, c));
-            (format!("muscle {}, conductance {c:.2e}", m + 1), named(&["leakage"]))
+            (
+                format!("muscle {}, conductance {c:.2e}", m + 1),
+                named(&["leakage"]),
+            )
         }
         "heat_transfer" => {
             let ha = rng.random_range(0.5..3.0);
@@ -492,13 +499,22 @@ pub fn case(nominal: &PlantConfig, kind: &'static str, seed: u64) -> Case {
         "dead_time_fractional" => {
             let d = rng.random_range(5e-3..12e-3);
             p.dead_time_s = d;
-            (format!("{:.2} ms ({:.2} samples)", d * 1e3, d / dt_s), named(&["valve_delay"]))
+            (
+                format!("{:.2} ms ({:.2} samples)", d * 1e3, d / dt_s),
+                named(&["valve_delay"]),
+            )
         }
         "offset_one_sensor" => {
             let (c, o) = if rng.random_bool(0.5) {
-                (Channel::P1Kpa, rng.random_range(6.0..12.0) * if rng.random_bool(0.5) { 1.0 } else { -1.0 })
+                (
+                    Channel::P1Kpa,
+                    rng.random_range(6.0..12.0) * if rng.random_bool(0.5) { 1.0 } else { -1.0 },
+                )
             } else {
-                (Channel::AngleDeg, rng.random_range(1.0..2.5) * if rng.random_bool(0.5) { 1.0 } else { -1.0 })
+                (
+                    Channel::AngleDeg,
+                    rng.random_range(1.0..2.5) * if rng.random_bool(0.5) { 1.0 } else { -1.0 },
+                )
             };
             p.offset = Some((c, o));
             (format!("{} {o:+.2}", c.name()), named(&["sensor_offset"]))
@@ -506,7 +522,10 @@ pub fn case(nominal: &PlantConfig, kind: &'static str, seed: u64) -> Case {
         "conductance_low" => {
             let f = rng.random_range(0.6..0.8);
             p.conductance_m3_per_s_pa *= f;
-            (format!("x{f:.3}"), named(&["valve.sonic_conductance_m3_per_s_pa"]))
+            (
+                format!("x{f:.3}"),
+                named(&["valve.sonic_conductance_m3_per_s_pa"]),
+            )
         }
         "radius_large" => {
             let f = rng.random_range(1.03..1.08);
@@ -552,7 +571,9 @@ fn noise_only(rec: &Recording, rng: &mut StdRng) -> Recording {
         if let Some(y) = r.outputs[c.index()].as_mut() {
             let n = y.len() as f64;
             let mean = y.iter().sum::<f64>() / n;
-            let sd = (y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt().max(1.0);
+            let sd = (y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n)
+                .sqrt()
+                .max(1.0);
             for v in y.iter_mut() {
                 *v = mean + sd * rng.sample::<f64, _>(StandardNormal);
             }

@@ -65,16 +65,17 @@ pub fn fit_vs_spread(
     spread: f64,
 ) -> f64 {
     let n = range.len().max(1) as f64;
-    let mse = range
-        .map(|k| (c.of(&pred[k]) - y[k]).powi(2))
-        .sum::<f64>()
-        / n;
+    let mse = range.map(|k| (c.of(&pred[k]) - y[k]).powi(2)).sum::<f64>() / n;
     100.0 * (1.0 - mse.sqrt() / spread.max(1e-300))
 }
 
 /// Plausibility checks of a recording against the nominal simulation of the same inputs:
 /// each message names a likely cause (units, channel mapping, plant file).
-pub fn plausibility_hints(nominal: &PlantConfig, rec: &Recording, sim: &[Measurement]) -> Vec<String> {
+pub fn plausibility_hints(
+    nominal: &PlantConfig,
+    rec: &Recording,
+    sim: &[Measurement],
+) -> Vec<String> {
     let mut hints = Vec::new();
     let supply_kpa = nominal.environment.supply_gauge_pa / 1000.0;
     let p_atm_kpa = nominal.environment.p_atm_pa / 1000.0;
@@ -97,7 +98,10 @@ pub fn plausibility_hints(nominal: &PlantConfig, rec: &Recording, sim: &[Measure
                 c.name()
             ));
         }
-        let nom_hi = sim.iter().map(|m| c.of(m)).fold(f64::NEG_INFINITY, f64::max);
+        let nom_hi = sim
+            .iter()
+            .map(|m| c.of(m))
+            .fold(f64::NEG_INFINITY, f64::max);
         if nom_hi > 50.0 && hi.abs() < nom_hi / 50.0 && hi - lo < nom_hi / 50.0 {
             hints.push(format!(
                 "{} stays below {hi:.3} kPa where the nominal model reaches {nom_hi:.0} kPa: bar or MPa instead of kPa, or the valve columns are not mapped to the right valves",

@@ -32,7 +32,9 @@ pub enum SweepWhat {
     /// Isometric force data (writes columns p_kpa, stretch, f_n[, state]) from the plant's
     /// Tondu surface: at each L/L0 the pressure is swept from the maximum to 0 (and back up
     /// with --hysteresis-gap-n), as on the force-law paper's test bench.
-    #[command(after_help = "Example:\n  host-sim sweep force --plant ../shared/plant/reference-1dof.toml --out force.csv")]
+    #[command(
+        after_help = "Example:\n  host-sim sweep force --plant ../shared/plant/reference-1dof.toml --out force.csv"
+    )]
     Force(SweepForceArgs),
     /// A measured-style isometric force map (columns p_kpa, stretch, f_n[, state]) from an
     /// independent thick-walled Chou-Hannaford muscle drawn from the seed: 5..9 lengths down to
@@ -43,7 +45,9 @@ pub enum SweepWhat {
     /// angle_deg, p1_kpa, p2_kpa, f1_n, f2_n) as in the torque-model paper: the joint is driven
     /// quasi-statically and at constant speeds through +-amplitude at each activation dp
     /// (p1 = p0 - dp, p2 = p0 + dp held by regulators); channels from the plant's sensors.
-    #[command(after_help = "Example:\n  host-sim sweep torque --plant ../shared/plant/reference-1dof.toml --out torque.csv --dt-s 0.001")]
+    #[command(
+        after_help = "Example:\n  host-sim sweep torque --plant ../shared/plant/reference-1dof.toml --out torque.csv --dt-s 0.001"
+    )]
     Torque(SweepTorqueArgs),
 }
 
@@ -160,18 +164,24 @@ pub enum IdentifyWhat {
     /// force-law paper, its eq. 6, constants c1..c10) and the Tondu baseline to isometric data
     /// (CSV columns p_kpa, stretch, f_n[, state|direction]); print both models' errors; write
     /// the firmware's force-law TOML.
-    #[command(after_help = "Example:\n  host-sim identify force --data force.csv --out force_law.toml")]
+    #[command(
+        after_help = "Example:\n  host-sim identify force --data force.csv --out force_law.toml"
+    )]
     Force(IdentifyForceArgs),
     /// Fit A, B, C, D of the simplified joint torque model (the torque-model paper's eq. 11:
     /// stiffness from the activation, viscous and cubic damping) to a recording (columns t_s,
     /// angle_deg, p1_kpa, p2_kpa and f1_n, f2_n, else tensions from the plant's force model);
     /// write the torque-model TOML.
-    #[command(after_help = "Example:\n  host-sim identify torque --recording torque.csv --plant ../shared/plant/reference-1dof.toml --out torque_model.toml")]
+    #[command(
+        after_help = "Example:\n  host-sim identify torque --recording torque.csv --plant ../shared/plant/reference-1dof.toml --out torque_model.toml"
+    )]
     Torque(IdentifyTorqueArgs),
     /// Output-error fit of plant-file parameters by replaying the recording's valve inputs
     /// (columns t_s, u_in1, u_ex1, u_in2, u_ex2 and the measured angle_deg, p1_kpa, p2_kpa,
     /// f1_n, f2_n that are present); write the plant file with the fitted values.
-    #[command(after_help = "Example:\n  host-sim identify plant --recording ../shared/conformance/pulses_loaded.csv --plant ../shared/plant/reference-1dof.toml --params joint.inertia_kgm2 --out fitted.toml")]
+    #[command(
+        after_help = "Example:\n  host-sim identify plant --recording ../shared/conformance/pulses_loaded.csv --plant ../shared/plant/reference-1dof.toml --params joint.inertia_kgm2 --out fitted.toml"
+    )]
     Plant(IdentifyPlantArgs),
 }
 
@@ -270,7 +280,8 @@ pub fn tondu_of(cfg: &PlantConfig) -> Tondu {
 fn sweep_force(a: &SweepForceArgs) -> Result<String> {
     validate::distinct_outputs(&[("--plant", &a.plant)], &[("--out", &a.out)])
         .map_err(anyhow::Error::msg)?;
-    let points = a.n_stretch as f64 * a.n_pressure as f64 * if a.hysteresis_gap_n > 0.0 { 2.0 } else { 1.0 };
+    let points =
+        a.n_stretch as f64 * a.n_pressure as f64 * if a.hysteresis_gap_n > 0.0 { 2.0 } else { 1.0 };
     RunEstimate {
         what: "sweep force".into(),
         samples: points,

@@ -935,7 +935,10 @@ pub fn identify(samples: &[ForceSample]) -> Result<ForceIdentification, IdentErr
     let chou_hannaford = fit_chou_hannaford(samples)?;
     let chou_hannaford_stats = error_stats(samples, |p, e| chou_hannaford.force_n(p, e));
     let mut warnings = Vec::new();
-    for h in [&leave_length_out, &leave_pressure_out].into_iter().flatten() {
+    for h in [&leave_length_out, &leave_pressure_out]
+        .into_iter()
+        .flatten()
+    {
         if h.mae_n > 2.0 * eq6_stats.mae_n {
             warnings.push(format!(
                 "eq. 6 errs {:.2}x more on held-out {}s ({:.3} % of range) than on the fitted \
@@ -947,11 +950,7 @@ pub fn identify(samples: &[ForceSample]) -> Result<ForceIdentification, IdentErr
             ));
         }
     }
-    let tx = [
-        tondu.r0_m * 1e3,
-        tondu.alpha0_rad.to_degrees(),
-        tondu.k,
-    ];
+    let tx = [tondu.r0_m * 1e3, tondu.alpha0_rad.to_degrees(), tondu.k];
     let cx = [
         chou_hannaford.r0_m * 1e3,
         chou_hannaford.alpha0_rad.to_degrees(),
@@ -1058,7 +1057,11 @@ impl ForceIdentification {
             self.domain.1,
             self.domain.2
         ));
-        v.extend(stats_line("eq. 6", &self.eq6_stats).lines().map(String::from));
+        v.extend(
+            stats_line("eq. 6", &self.eq6_stats)
+                .lines()
+                .map(String::from),
+        );
         v.push(format!(
             "global search: {} of {} c7 starts reached the best cost {:.6e} N^2 (firmware law max(eq. 6, 0))",
             self.eq6_fit.starts_at_best, self.eq6_fit.starts, self.eq6_fit.cost_n2
@@ -1091,7 +1094,11 @@ impl ForceIdentification {
             "           c6 = {:.9e}, c7 = {:.9e}, c8 = {:.9e}, c9 = {:.9e}, c10 = {:.9e}",
             c[5], c[6], c[7], c[8], c[9]
         ));
-        v.extend(stats_line("Tondu", &self.tondu_stats).lines().map(String::from));
+        v.extend(
+            stats_line("Tondu", &self.tondu_stats)
+                .lines()
+                .map(String::from),
+        );
         v.push(format!(
             "Tondu fit: r0 = {:.5} mm, alpha0 = {:.4} deg, k = {:.5} (bounds r0 {}..{} mm, alpha0 {}..{} deg, k {}..{})",
             self.tondu.r0_m * 1e3,

@@ -224,7 +224,10 @@ mod tests {
             assert!(m.stretches[0] < 0.761 && m.stretches[0] > 0.73);
             let slack = m.samples.iter().filter(|s| s.force_n == 0.0).count();
             let pos = m.samples.iter().filter(|s| s.force_n > 0.0).count();
-            assert!(slack >= m.stretches.len(), "seed {seed}: {slack} slack points");
+            assert!(
+                slack >= m.stretches.len(),
+                "seed {seed}: {slack} slack points"
+            );
             assert!(pos > n / 2, "seed {seed}: {pos} positive of {n}");
             // The threshold grows with the contraction: the shortest length is slack at a
             // higher pressure than the rest length.

@@ -143,15 +143,17 @@ struct Problem<'a, 'f> {
 
 impl Problem<'_, '_> {
     fn x(&self, z: &DVector<f64>) -> Vec<f64> {
-        self.params.iter().zip(z.iter()).map(|(p, z)| p.to_x(*z)).collect()
+        self.params
+            .iter()
+            .zip(z.iter())
+            .map(|(p, z)| p.to_x(*z))
+            .collect()
     }
 
     fn eval(&self, z: &DVector<f64>) -> DVector<f64> {
         *self.evaluations.borrow_mut() += 1;
         let r = match (self.f)(&self.x(z)) {
-            Some(r) if r.len() == self.m && r.iter().all(|v| v.is_finite()) => {
-                DVector::from_vec(r)
-            }
+            Some(r) if r.len() == self.m && r.iter().all(|v| v.is_finite()) => DVector::from_vec(r),
             _ => DVector::from_element(self.m, 10.0),
         };
         let cost = 0.5 * r.norm_squared();
@@ -208,8 +210,7 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_, '_> {
 pub fn fit(f: &Residuals<'_>, params: &[OeParam], opts: &OeOptions) -> OeResult {
     let n = params.len();
     let x_start: Vec<f64> = params.iter().map(|p| p.to_x(0.0)).collect();
-    let Some(r0) = f(&x_start).filter(|r| !r.is_empty() && r.iter().all(|v| v.is_finite()))
-    else {
+    let Some(r0) = f(&x_start).filter(|r| !r.is_empty() && r.iter().all(|v| v.is_finite())) else {
         return OeResult {
             x: x_start,
             cost: (f64::INFINITY, f64::INFINITY),
@@ -282,7 +283,9 @@ fn confidence(f: &Residuals<'_>, params: &[OeParam], x: &[f64]) -> (Vec<[f64; 2]
         let h = 1e-4 * params[k].scale.abs().max(x[k].abs()).max(1e-300);
         let mut xp = x.to_vec();
         xp[k] += h;
-        let Some(rp) = f(&xp) else { return (nan, 1 + k + 1) };
+        let Some(rp) = f(&xp) else {
+            return (nan, 1 + k + 1);
+        };
         for i in 0..m {
             jac[(i, k)] = (rp[i] - r[i]) / h;
         }

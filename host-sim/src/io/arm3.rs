@@ -15,9 +15,9 @@
 use std::path::Path;
 
 use crate::fit::fit_percent;
+use crate::io::recording::{write_atomically, Channel, Recording, RecordingError, INPUT_COLUMNS};
 use crate::plant::arm3::{Arm3, Arm3Inputs, Arm3Integrator, Arm3SimError, Arm3State};
 use crate::plant::ValveInputs;
-use crate::io::recording::{write_atomically, Channel, Recording, RecordingError, INPUT_COLUMNS};
 use crate::sim::SolverOptions;
 
 /// Number of joints.

@@ -265,7 +265,10 @@ impl Mapping {
         })?;
         let p = &self.pressure;
         if !(p.p_atm_pa > 0.0 && p.p_atm_pa.is_finite()) {
-            return Err(bad("pressure.p_atm_pa", format!("{} must be > 0", p.p_atm_pa)));
+            return Err(bad(
+                "pressure.p_atm_pa",
+                format!("{} must be > 0", p.p_atm_pa),
+            ));
         }
         if !(p.regulator_band_pa > 0.0 && p.regulator_band_pa.is_finite()) {
             return Err(bad(

@@ -23,9 +23,9 @@ use pam_firmware::safety::FaultCode;
 use plotters::prelude::*;
 
 use crate::control::closed_loop::{ClosedLoopRun, Scenario, TrackingStats};
-use crate::plant::Plant;
 use crate::io::plot::PlotError;
 use crate::io::recording::{write_atomically, Recording, RecordingError};
+use crate::plant::Plant;
 
 /// Header of the firmware trace (the sidecar of a closed-loop recording).
 pub const FIRMWARE_COLUMNS: [&str; 8] = [

@@ -588,12 +588,20 @@ impl Scenario {
         let ex = &s.expect;
         if let Some(v) = ex.max_pressure_kpa {
             if !(v > 0.0 && v.is_finite()) {
-                return Err(bad("expect", "max_pressure_kpa", format!("{v} must be > 0")));
+                return Err(bad(
+                    "expect",
+                    "max_pressure_kpa",
+                    format!("{v} must be > 0"),
+                ));
             }
         }
         if let Some(v) = ex.angle_within_rad {
             if !(v > 0.0 && v.is_finite()) {
-                return Err(bad("expect", "angle_within_rad", format!("{v} must be > 0")));
+                return Err(bad(
+                    "expect",
+                    "angle_within_rad",
+                    format!("{v} must be > 0"),
+                ));
             }
         }
         if se.delay_ticks > 10_000 {
@@ -678,7 +686,11 @@ impl Scenario {
         ] {
             if let Some(v) = v {
                 if !(v > 0.0 && v.is_finite()) {
-                    return Err(bad("expect", key, format!("{v} must be a finite number > 0")));
+                    return Err(bad(
+                        "expect",
+                        key,
+                        format!("{v} must be a finite number > 0"),
+                    ));
                 }
             }
         }

@@ -17,7 +17,10 @@ pub struct ActiveEffect {
 fn effect(name: &'static str, p: &[(&str, f64)]) -> ActiveEffect {
     ActiveEffect {
         name,
-        parameters: p.iter().map(|(k, v)| (k.to_string(), format!("{v}"))).collect(),
+        parameters: p
+            .iter()
+            .map(|(k, v)| (k.to_string(), format!("{v}")))
+            .collect(),
     }
 }
 

@@ -42,7 +42,9 @@ use nalgebra::{Matrix3, SVector, Vector3};
 use ode_solvers::System;
 use serde::Deserialize;
 
-use crate::plant::config::{ConfigError, EnvironmentConfig, InitialConfig, MuscleConfig, ValveConfig};
+use crate::plant::config::{
+    ConfigError, EnvironmentConfig, InitialConfig, MuscleConfig, ValveConfig,
+};
 use crate::plant::muscle::Muscle;
 use crate::plant::pressure;
 use crate::plant::valve::Iso6358Valve;

@@ -171,19 +171,84 @@ impl PlantConfig {
         // a unit typed wrong (kPa in a Pa key) or a value the model cannot run.
         use crate::validate::Range;
         let ranges = [
-            ("environment.p_atm_pa", self.environment.p_atm_pa, Range::closed(5.0e4, 1.2e5), "Pa absolute"),
-            ("environment.supply_gauge_pa", self.environment.supply_gauge_pa, Range::closed(1.0e4, 2.0e6), "Pa gauge"),
-            ("muscle.rest_length_m", self.muscle.rest_length_m, Range::positive(5.0), "m"),
-            ("muscle.radius_m", self.muscle.radius_m, Range::positive(0.5), "m"),
-            ("muscle.braid_angle_deg", self.muscle.braid_angle_deg, Range::open(0.0, 54.7), "degrees (below the neutral braid angle 54.7)"),
-            ("muscle.end_factor", self.muscle.end_factor, Range::positive(10.0), ""),
-            ("muscle.damping_m2s", self.muscle.damping_m2s, Range::closed(0.0, 1.0), "m^2 s"),
-            ("joint.sprocket_radius_m", self.joint.sprocket_radius_m, Range::positive(1.0), "m"),
-            ("joint.inertia_kgm2", self.joint.inertia_kgm2, Range::positive(1.0e3), "kg m^2"),
-            ("joint.initial_contraction", self.joint.initial_contraction, Range::half_open(0.0, 1.0), "fraction"),
-            ("valve.sonic_conductance_m3_per_s_pa", self.valve.sonic_conductance_m3_per_s_pa, Range::positive(1.0e-5), "m^3/(s Pa)"),
-            ("initial.angle_rad", self.initial.angle_rad, Range::closed(-std::f64::consts::PI, std::f64::consts::PI), "rad"),
-            ("initial.velocity_rad_s", self.initial.velocity_rad_s, Range::closed(-100.0, 100.0), "rad/s"),
+            (
+                "environment.p_atm_pa",
+                self.environment.p_atm_pa,
+                Range::closed(5.0e4, 1.2e5),
+                "Pa absolute",
+            ),
+            (
+                "environment.supply_gauge_pa",
+                self.environment.supply_gauge_pa,
+                Range::closed(1.0e4, 2.0e6),
+                "Pa gauge",
+            ),
+            (
+                "muscle.rest_length_m",
+                self.muscle.rest_length_m,
+                Range::positive(5.0),
+                "m",
+            ),
+            (
+                "muscle.radius_m",
+                self.muscle.radius_m,
+                Range::positive(0.5),
+                "m",
+            ),
+            (
+                "muscle.braid_angle_deg",
+                self.muscle.braid_angle_deg,
+                Range::open(0.0, 54.7),
+                "degrees (below the neutral braid angle 54.7)",
+            ),
+            (
+                "muscle.end_factor",
+                self.muscle.end_factor,
+                Range::positive(10.0),
+                "",
+            ),
+            (
+                "muscle.damping_m2s",
+                self.muscle.damping_m2s,
+                Range::closed(0.0, 1.0),
+                "m^2 s",
+            ),
+            (
+                "joint.sprocket_radius_m",
+                self.joint.sprocket_radius_m,
+                Range::positive(1.0),
+                "m",
+            ),
+            (
+                "joint.inertia_kgm2",
+                self.joint.inertia_kgm2,
+                Range::positive(1.0e3),
+                "kg m^2",
+            ),
+            (
+                "joint.initial_contraction",
+                self.joint.initial_contraction,
+                Range::half_open(0.0, 1.0),
+                "fraction",
+            ),
+            (
+                "valve.sonic_conductance_m3_per_s_pa",
+                self.valve.sonic_conductance_m3_per_s_pa,
+                Range::positive(1.0e-5),
+                "m^3/(s Pa)",
+            ),
+            (
+                "initial.angle_rad",
+                self.initial.angle_rad,
+                Range::closed(-std::f64::consts::PI, std::f64::consts::PI),
+                "rad",
+            ),
+            (
+                "initial.velocity_rad_s",
+                self.initial.velocity_rad_s,
+                Range::closed(-100.0, 100.0),
+                "rad/s",
+            ),
         ];
         for (key, v, range, unit) in ranges {
             if !range.contains(v) {
@@ -208,15 +273,17 @@ impl PlantConfig {
                     "must be within {p_range} Pa gauge (vacuum .. supply_gauge_pa), got {v}"
                 );
                 if v > 0.0 && p_range.contains(v * 1e3) {
-                    msg.push_str(&format!(" (kPa typed into a Pa key? {v} kPa is {} Pa)", v * 1e3));
+                    msg.push_str(&format!(
+                        " (kPa typed into a Pa key? {v} kPa is {} Pa)",
+                        v * 1e3
+                    ));
                 }
                 return Err(bad(key, &msg));
             }
         }
         // The Tondu force vanishes at the maximum contraction
         // (1 - 1 / (sqrt(3) cos alpha0)) / k: the muscles must start below it.
-        let chi_max = (1.0
-            - 1.0 / (3f64.sqrt() * self.muscle.braid_angle_deg.to_radians().cos()))
+        let chi_max = (1.0 - 1.0 / (3f64.sqrt() * self.muscle.braid_angle_deg.to_radians().cos()))
             / self.muscle.end_factor;
         if !(self.joint.initial_contraction < chi_max) {
             return Err(bad(
@@ -265,7 +332,8 @@ impl PlantConfig {
                 }
             }
         }
-        let stops = crate::plant::joint::EndStops::from_config(&self.joint, self.muscle.rest_length_m);
+        let stops =
+            crate::plant::joint::EndStops::from_config(&self.joint, self.muscle.rest_length_m);
         if !(stops.angle_min_rad < stops.angle_max_rad) {
             return Err(bad(
                 "joint.angle_max_rad",

@@ -48,9 +48,9 @@ impl EndStops {
         let k = c
             .end_stop_stiffness_nm_per_rad
             .unwrap_or(END_STOP_STIFFNESS_NM_PER_RAD);
-        let damping = c.end_stop_damping_nms_per_rad.unwrap_or_else(|| {
-            2.0 * END_STOP_DAMPING_RATIO * (k * c.inertia_kgm2.max(0.0)).sqrt()
-        });
+        let damping = c
+            .end_stop_damping_nms_per_rad
+            .unwrap_or_else(|| 2.0 * END_STOP_DAMPING_RATIO * (k * c.inertia_kgm2.max(0.0)).sqrt());
         Self {
             angle_min_rad: c.angle_min_rad.unwrap_or(-DEFAULT_END_STOP_RAD),
             angle_max_rad: c.angle_max_rad.unwrap_or(DEFAULT_END_STOP_RAD),
