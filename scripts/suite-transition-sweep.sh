@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 5: how the cascade / PD / PID comparison depends on how fast the set-point moves.
+# How the cascade / PD / PID comparison depends on how fast the set-point moves.
 # For each move duration T (0 = the jumps of scenarios/step.toml and random.toml), all three
 # laws are re-tuned on the suite with that T (tune_pid --transition-s T, the same procedure
 # and cost as config/control_tuned.toml, starting also from its gains) and scored on it

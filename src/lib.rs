@@ -19,7 +19,7 @@
 //! - [`pid`]: model-free PD / PID from the angle to the activation dp (comparison baseline).
 //! - [`safety`]: fault codes, safe valve state, latching state machine.
 //! - [`valves`]: on/off and proportional valve drivers over embedded-hal 1.0.
-//! - [`tick`]: the control tick combining all of the above (`tick_contract.md`).
+//! - [`tick`]: the control tick combining all of the above (`docs/tick-contract.md`).
 //! - [`log`]: ring buffer of per-tick records.
 #![no_std]
 #![deny(unsafe_code)]

@@ -1,4 +1,4 @@
-//! Tuning procedure of the closed-loop comparison (issue 5 proof): finds, by the same cost
+//! Tuning procedure of the closed-loop comparison (cascade vs PD / PID): finds, by the same cost
 //! and the same kind of search, the model-based cascade's gains and the model-free PD and PID
 //! (angle -> activation dp, `pam_firmware::pid`) that minimise the suite MSE on the reference
 //! plant with the firmware in the loop, and writes all three to `config/control_tuned.toml`.
@@ -606,7 +606,7 @@ fn main() -> Result<()> {
         pid: DpPidToml::from_gains(&pid, c_pid.0, c_pid.1),
     };
     let header = format!(
-        "The three laws of the closed-loop comparison of issue 5, each tuned on the suite\n\
+        "The three laws of the closed-loop comparison (cascade vs PD / PID), each tuned on the suite\n\
          (host-sim control::compare::SUITE) by the same procedure and cost. Written by\n\
          \x20 cargo run --release -p host-sim --example tune_pid\n\
          on {} with the firmware in the loop. Suite MSE = mean over the step_move, sine and\n\

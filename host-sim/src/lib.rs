@@ -19,6 +19,7 @@ pub mod fit;
 pub mod identify;
 pub mod io;
 pub mod plant;
+pub mod signal;
 pub mod sim;
 
 pub use io::recording::{Channel, Recording, RecordingError};

@@ -40,7 +40,7 @@ enum Command {
     /// Identify the force law, the torque model or plant parameters from data.
     Identify(host_sim::identify::cli::IdentifyArgs),
     /// Diagnosis: locate where a recording departs from the nominal model, name the left-out
-    /// physics, model it and report the fit before/after (issue 6).
+    /// physics, model it and report the fit before/after.
     Diagnose(DiagnoseArgs),
 }
 

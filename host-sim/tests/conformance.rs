@@ -1,4 +1,6 @@
-//! Every fixture in `shared/conformance/` reproduced with fit >= 99.5 % on every channel.
+//! Every fixture in `../shared/conformance/` reproduced with fit >= 99.5 % on every channel
+//! (this test reads the shared originals, not the in-repo copies), and the in-repo copies in
+//! `tests/fixtures/` equal their shared originals.
 
 use std::path::PathBuf;
 
@@ -79,4 +81,25 @@ fn every_fixture_is_reproduced_with_fit_at_least_99_5_percent() {
         }
     }
     assert!(failures.is_empty(), "fit below 99.5 %: {failures:#?}");
+}
+
+/// The copies the other tests read (`tests/fixtures/README.md` lists where each came from)
+/// are byte for byte the shared originals.
+#[test]
+fn fixture_copies_equal_the_shared_originals() {
+    let fixtures = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures");
+    let copies = [
+        ("reference-1dof.toml", "plant/reference-1dof.toml"),
+        ("reference-1dof-loaded.toml", "plant/reference-1dof-loaded.toml"),
+        ("pulses_nominal.csv", "conformance/pulses_nominal.csv"),
+        ("pulses_loaded.csv", "conformance/pulses_loaded.csv"),
+    ];
+    let readme = std::fs::read_to_string(fixtures.join("README.md")).unwrap();
+    for (copy, original) in copies {
+        let a = std::fs::read(fixtures.join(copy)).unwrap_or_else(|e| panic!("{copy}: {e}"));
+        let b = std::fs::read(shared_dir().join(original))
+            .unwrap_or_else(|e| panic!("../shared/{original}: {e}"));
+        assert!(a == b, "tests/fixtures/{copy} differs from ../shared/{original}");
+        assert!(readme.contains(copy) && readme.contains(original), "README.md: {copy}");
+    }
 }

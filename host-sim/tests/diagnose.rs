@@ -1,4 +1,4 @@
-//! Diagnosis (issue 6) on synthetic rig recordings: the null case says nothing is missing,
+//! Diagnosis on synthetic rig recordings: the null case says nothing is missing,
 //! single concealed effects are named exactly with a check fit >= 95 % on every channel, a
 //! Stribeck truth is named by the Coulomb+viscous candidate, a recording without force
 //! channels gets the look-alike statement, and bad input gives clear errors.
@@ -11,7 +11,7 @@ use host_sim::diagnose::{diagnose, DiagnoseOptions, Diagnosis};
 use host_sim::{PlantConfig, Recording};
 
 fn nominal_path() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant/reference-1dof.toml")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/reference-1dof.toml")
 }
 
 fn nominal_text() -> String {
@@ -284,12 +284,12 @@ fn bad_inputs_give_clear_errors() {
 
 #[test]
 fn independent_loaded_fixture_is_an_inertia_mismatch() {
-    // shared/conformance/pulses_loaded.csv comes from an independent implementation of the
-    // plant with the 3.34 kg load (J = 0.155 kg m^2); diagnosed against the unloaded
+    // pulses_loaded.csv (a copy of ../shared/conformance/pulses_loaded.csv) comes from an
+    // independent implementation of the plant with the 3.34 kg load (J = 0.155 kg m^2); diagnosed against the unloaded
     // nominal file, the answer must be the inertia, refitted to the loaded value.
     let rec = Recording::read(
         PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-            .join("../../shared/conformance/pulses_loaded.csv"),
+            .join("tests/fixtures/pulses_loaded.csv"),
     )
     .unwrap();
     let d = diagnose(

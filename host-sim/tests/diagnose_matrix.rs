@@ -1,4 +1,4 @@
-//! The generated diagnosis matrix of issue 6 (release build, a few minutes):
+//! The generated diagnosis matrix (release build, a few minutes):
 //!
 //! `cargo test --release -p host-sim --test diagnose_matrix -- --ignored --nocapture --test-threads=1`
 //!
@@ -14,7 +14,7 @@
 
 use std::path::PathBuf;
 
-use host_sim::diagnose::synth::{expected_id, generate, plant_with, Excitation, SynthSpec, TRUTHS};
+use host_sim::diagnose::synth::{expected_id, generate, plant_with, truth_names, Excitation, SynthSpec};
 use host_sim::diagnose::{diagnose, DiagnoseOptions};
 use host_sim::PlantConfig;
 
@@ -24,7 +24,7 @@ const HELD_OUT_SEEDS: [u64; 3] = [7001, 7002, 7008];
 
 fn cases() -> Vec<Vec<&'static str>> {
     let mut c: Vec<Vec<&str>> = vec![vec![], vec![]];
-    for t in TRUTHS {
+    for t in truth_names() {
         c.push(vec![t]);
     }
     c.push(vec!["joint_friction", "leakage"]);
@@ -149,7 +149,7 @@ fn run_case(
 #[ignore = "release build, a few minutes: see README"]
 fn diagnosis_matrix() {
     let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant/reference-1dof.toml");
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/reference-1dof.toml");
     let text = std::fs::read_to_string(&path).unwrap();
     let nominal = PlantConfig::load(&path).unwrap();
     let cases = cases();
@@ -195,7 +195,7 @@ fn diagnosis_matrix() {
 #[ignore = "release build, a few minutes: see README"]
 fn diagnosis_matrix_without_force_channels() {
     let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant/reference-1dof.toml");
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/reference-1dof.toml");
     let text = std::fs::read_to_string(&path).unwrap();
     let nominal = PlantConfig::load(&path).unwrap();
     let (mut pass, mut total) = (0, 0);

@@ -1,4 +1,4 @@
-//! Diagnosis (issue 6): locate where a recording departs from the nominal model, name the
+//! Diagnosis: locate where a recording departs from the nominal model, name the
 //! physics the model leaves out, model it with the plant's own effect code, and show the fit
 //! improve on the training and on a check recording.
 //!

@@ -585,7 +585,7 @@ pub fn simulate_with_progress(
         return Err(SimError::Input { index, inputs: *u });
     }
     let delayed: Vec<ValveInputs>;
-    let inputs = match plant.effects.valve_dead_time_s {
+    let inputs = match plant.effects.valve_dead_time_s() {
         None => inputs,
         Some(delay_s) => {
             let mut line =
