@@ -423,6 +423,7 @@ pub fn diagnose(
         min_gain_noise: opts.min_gain_noise,
         noise_cost,
         n_heldout: held.len() as f64,
+        explained_cost: opts.null_ratio * noise_cost,
     };
     let sel = if nothing_missing {
         selection::Selected {
