@@ -361,6 +361,14 @@ fn independent_thermal_fixture_is_the_chamber_thermodynamics() {
         "{:?}",
         d.fit_before
     );
+    // The look-alike (a constant polytropic exponent) is named, with what each removes.
+    assert!(
+        d.lookalikes
+            .iter()
+            .any(|l| l.starts_with("Chamber thermodynamics vs a constant polytropic exponent")),
+        "{:?}",
+        d.lookalikes
+    );
 }
 
 #[test]
