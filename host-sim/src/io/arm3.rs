@@ -51,11 +51,7 @@ impl Arm3Recording {
 
     /// Uniform sample period from the first and last time stamps.
     pub fn sample_period_s(&self) -> f64 {
-        let n = self.t_s.len();
-        if n < 2 {
-            return f64::NAN;
-        }
-        (self.t_s[n - 1] - self.t_s[0]) / (n - 1) as f64
+        crate::io::recording::mean_step_s(&self.t_s)
     }
 
     pub fn channel(&self, joint: usize, c: Channel) -> Option<&[f64]> {
