@@ -1,8 +1,10 @@
 //! End-to-end: the built `host-sim` binary generates identification data (`sweep`) and
 //! identifies the force law, the torque model and plant parameters from it (`identify`).
 
+mod common;
+use common::*;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 fn fixtures() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures")
@@ -10,18 +12,6 @@ fn fixtures() -> PathBuf {
 
 fn plant() -> PathBuf {
     fixtures().join("reference-1dof.toml")
-}
-
-fn host_sim(args: &[&dyn AsRef<std::ffi::OsStr>]) -> Output {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_host-sim"));
-    for a in args {
-        c.arg(a);
-    }
-    c.output().unwrap()
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
 }
 
 fn ok(r: &Output) -> String {

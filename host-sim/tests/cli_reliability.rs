@@ -3,6 +3,8 @@
 //! key) and its allowed range, and leaves the user's files exactly as they were (an existing
 //! output keeps its content, no new file or directory appears).
 
+mod common;
+use common::*;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -16,18 +18,6 @@ fn plant() -> PathBuf {
 
 fn fixture() -> PathBuf {
     shared().join("conformance/pulses_nominal.csv")
-}
-
-fn run(args: &[&dyn AsRef<std::ffi::OsStr>]) -> Output {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_host-sim"));
-    for a in args {
-        c.arg(a);
-    }
-    c.output().unwrap()
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
 }
 
 /// Status 2, every `needles` in stderr, and no panic.
@@ -282,7 +272,7 @@ fn identify_torque_on_a_constant_recording_is_refused() {
 fn identify_torque_refuses_an_activation_limit_above_the_supply() {
     let w = Workspace::new();
     let rec = w.p("sweep.csv");
-    let r = run(&[&"sweep", &"torque", &"--plant", &plant(), &"--out", &rec]);
+    let r = host_sim(&[&"sweep", &"torque", &"--plant", &plant(), &"--out", &rec]);
     assert!(r.status.success(), "{}", text(&r.stderr));
     w.refuses_with(
         "identify torque --recording {rec} --plant {plant} --out {w}/out.toml --dp-max-kpa 900",

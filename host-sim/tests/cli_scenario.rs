@@ -1,19 +1,13 @@
 //! End-to-end: `host-sim simulate --plant P --scenario S --out OUT [--plot F]` (closed loop,
 //! firmware in the loop) through the built binary.
 
-use std::path::{Path, PathBuf};
+mod common;
+use common::*;
+use std::path::Path;
 use std::process::{Command, Output};
 
 use host_sim::io::recording::Recording;
 use host_sim::io::run_files::FIRMWARE_COLUMNS;
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn plant() -> PathBuf {
-    root().join("host-sim/tests/fixtures/reference-1dof.toml")
-}
 
 fn simulate(scenario: &Path, out: &Path, extra: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_host-sim"))
@@ -27,10 +21,6 @@ fn simulate(scenario: &Path, out: &Path, extra: &[&str]) -> Output {
         .args(extra)
         .output()
         .unwrap()
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
 }
 
 /// Data rows (after the comment lines and the header) of a CSV file.

@@ -3,8 +3,9 @@
 //! Stribeck truth is named by the Coulomb+viscous candidate, a recording without force
 //! channels gets the look-alike statement, and bad input gives clear errors.
 
+mod common;
+use common::*;
 use std::path::PathBuf;
-use std::process::Command;
 
 use host_sim::diagnose::synth::{expected_id, generate, plant_with, Excitation, SynthSpec};
 use host_sim::diagnose::{diagnose, DiagnoseOptions, Diagnosis, Verdict};
@@ -154,10 +155,6 @@ fn without_force_channels_the_lookalike_is_stated() {
         d.answer()
     );
     assert!(d.effects[0].evidence.contains("cannot be told apart"));
-}
-
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_host-sim"))
 }
 
 #[test]

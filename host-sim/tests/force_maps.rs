@@ -7,8 +7,9 @@
 //! within 0.77 % of the force range (seed 002's figure) on every map, with the held-out
 //! (leave-one-length-out, leave-one-pressure-out) error reported beside it.
 
+mod common;
+use common::*;
 use std::path::Path;
-use std::process::{Command, Output};
 
 use host_sim::identify::force::{self, ForceSample};
 use host_sim::identify::force_maps::{force_map, ForceMap, MapOptions};
@@ -182,18 +183,6 @@ fn the_physical_baselines_are_fitted_inside_their_bounds() {
             }
         }
     }
-}
-
-fn host_sim(args: &[&dyn AsRef<std::ffi::OsStr>]) -> Output {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_host-sim"));
-    for a in args {
-        c.arg(a);
-    }
-    c.output().unwrap()
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
 }
 
 fn refused(data: &Path, body: &str, want: &str) {

@@ -9,21 +9,15 @@
 //!   absolute error <= 0.77 % of the force range (seed 002's figure) over L/L0 0.75..1.05,
 //!   0..600 kPa.
 
-use std::path::{Path, PathBuf};
+mod common;
+use common::*;
+use std::path::Path;
 use std::process::Command;
 
 use host_sim::identify::cli::tondu_of;
 use host_sim::identify::force::{self, ForceSweep};
 use host_sim::PlantConfig;
 use pam_firmware::constants::{FIXED_FORCE_LAW, FORCE_LAW};
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn plant() -> PathBuf {
-    root().join("host-sim/tests/fixtures/reference-1dof.toml")
-}
 
 fn run(args: &[&dyn AsRef<std::ffi::OsStr>]) {
     let mut c = Command::new(env!("CARGO_BIN_EXE_host-sim"));

@@ -8,8 +8,9 @@
 //! between the jittered stamps (which lie on that fine grid), sampled at the stamps, then
 //! noise, encoder quantisation and the unit conversions written out here.
 
+mod common;
+use common::*;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use host_sim::fit::compare;
 use host_sim::{simulate, Plant, Recording, SolverOptions, ValveInputs};
@@ -22,10 +23,6 @@ const P_ATM_PA: f64 = 101_325.0;
 
 fn plant_path() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant/reference-1dof.toml")
-}
-
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_host-sim"))
 }
 
 fn tmp() -> tempfile::TempDir {

@@ -1,0 +1,48 @@
+//! Helpers shared by the command-line tests (`mod common;` in a test file). Not every test
+//! binary uses every helper.
+#![allow(dead_code)]
+
+use std::ffi::OsStr;
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+/// The workspace root.
+pub fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// A file of `host-sim/tests/fixtures/` (copies of the shared material, see its README).
+pub fn fixture(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures")
+        .join(name)
+}
+
+/// The reference plant file (fixture copy).
+pub fn plant() -> PathBuf {
+    fixture("reference-1dof.toml")
+}
+
+/// The shared, read-only material next to the repository.
+pub fn shared() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared")
+}
+
+/// Runs the `host-sim` binary with `args`.
+pub fn host_sim(args: &[&dyn AsRef<OsStr>]) -> Output {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_host-sim"));
+    for a in args {
+        c.arg(a);
+    }
+    c.output().unwrap()
+}
+
+/// A command for the `host-sim` binary.
+pub fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_host-sim"))
+}
+
+/// Process output as text.
+pub fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
