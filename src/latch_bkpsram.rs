@@ -41,24 +41,7 @@ pub fn init() -> (BackupSram, ResetCause) {
     // other code touches.
     let rcc = unsafe { &*pac::RCC::ptr() };
     let pwr = unsafe { &*pac::PWR::ptr() };
-    let csr = rcc.csr().read();
-    // A power-on sets POR and BOR; every reset pulses the reset pin (PADRSTF): decide in
-    // this order.
-    let reset = if csr.porrstf().bit_is_set() {
-        ResetCause::PowerOn
-    } else if csr.borrstf().bit_is_set() {
-        ResetCause::BrownOut
-    } else if csr.wdgrstf().bit_is_set() || csr.wwdgrstf().bit_is_set() {
-        ResetCause::Watchdog
-    } else if csr.sftrstf().bit_is_set() {
-        ResetCause::Software
-    } else if csr.lpwrrstf().bit_is_set() {
-        ResetCause::LowPower
-    } else if csr.padrstf().bit_is_set() {
-        ResetCause::Pin
-    } else {
-        ResetCause::Unknown
-    };
+    let reset = ResetCause::from_rcc_csr(rcc.csr().read().bits());
     rcc.csr().modify(|_, w| w.rmvf().set_bit());
     rcc.apb1enr().modify(|_, w| w.pwren().set_bit());
     pwr.cr().modify(|_, w| w.dbp().set_bit());
