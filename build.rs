@@ -195,6 +195,7 @@ fn main() {
     fs::write(&out, src).expect("write constants.rs");
 
     sensor_trace("traces/qemu_sensor_trace.csv");
+    board_profile();
 
     // Bare-metal firmware binaries only (the `firmware` feature gates them): linker scripts (cortex-m-rt's link.x, defmt's defmt.x).
     if env::var("CARGO_CFG_TARGET_OS").as_deref() == Ok("none")
@@ -315,4 +316,113 @@ fn sensor_trace(path: &str) {
     );
     let out = PathBuf::from(env::var("OUT_DIR").unwrap()).join("sensor_trace.rs");
     fs::write(&out, src).expect("write sensor_trace.rs");
+}
+
+/// The board's compiled-in set-point (`OUT_DIR/board_profile.rs`, included by
+/// `src/bin/board.rs`): the `[setpoint]` of the scenario TOML named by `PAM_BOARD_SCENARIO`
+/// (a path relative to the crate root), else a hold at 0 rad. Kinds `step`, `ramp`, `sine`;
+/// `random` is refused (its levels come from host-sim's random generator). A bad file stops
+/// the build with the file, the key and the reason.
+fn board_profile() {
+    println!("cargo:rerun-if-env-changed=PAM_BOARD_SCENARIO");
+    let (name, expr) = match env::var("PAM_BOARD_SCENARIO") {
+        Err(_) => (
+            "none (hold 0 rad)".to_string(),
+            "SetpointProfile::Hold { angle_rad: 0.0 }".to_string(),
+        ),
+        Ok(path) => {
+            println!("cargo:rerun-if-changed={path}");
+            let text = fs::read_to_string(&path)
+                .unwrap_or_else(|e| panic!("PAM_BOARD_SCENARIO={path}: cannot read: {e}"));
+            let doc: toml::Table = text
+                .parse()
+                .unwrap_or_else(|e| panic!("{path}: not TOML: {e}"));
+            let sp = doc
+                .get("setpoint")
+                .and_then(|v| v.as_table())
+                .unwrap_or_else(|| panic!("{path}: no [setpoint] table"));
+            let num = |key: &str, default: Option<f64>| -> f64 {
+                match sp.get(key) {
+                    Some(v) => {
+                        let x = v
+                            .as_float()
+                            .or_else(|| v.as_integer().map(|i| i as f64))
+                            .unwrap_or_else(|| panic!("{path}: [setpoint] {key}: not a number"));
+                        assert!(
+                            (x as f32).is_finite(),
+                            "{path}: [setpoint] {key}: not a finite f32"
+                        );
+                        x
+                    }
+                    None => default.unwrap_or_else(|| panic!("{path}: [setpoint] {key}: missing")),
+                }
+            };
+            let kind = sp
+                .get("kind")
+                .and_then(|v| v.as_str())
+                .unwrap_or_else(|| panic!("{path}: [setpoint] kind: missing or not a string"));
+            let known: &[&str] = match kind {
+                "step" => &["kind", "initial_rad", "final_rad", "at_s", "transition_s"],
+                "ramp" => &["kind", "from_rad", "to_rad", "start_s", "end_s"],
+                "sine" => &["kind", "offset_rad", "amplitude_rad", "freq_hz", "start_s"],
+                other => panic!(
+                    "{path}: [setpoint] kind = \"{other}\": the board plays step, ramp or sine"
+                ),
+            };
+            for k in sp.keys() {
+                assert!(
+                    known.contains(&k.as_str()),
+                    "{path}: [setpoint] {k}: unknown key for kind = \"{kind}\" (allowed: {known:?})"
+                );
+            }
+            let expr = match kind {
+                "step" => {
+                    let tr = num("transition_s", Some(0.0));
+                    assert!(tr >= 0.0, "{path}: [setpoint] transition_s: must be >= 0");
+                    format!(
+                        "SetpointProfile::Step {{ initial_rad: {:?}, final_rad: {:?}, at_s: {:?}, transition_s: {:?} }}",
+                        num("initial_rad", None) as f32,
+                        num("final_rad", None) as f32,
+                        num("at_s", None) as f32,
+                        tr as f32
+                    )
+                }
+                "ramp" => {
+                    let (a, b) = (num("start_s", None), num("end_s", None));
+                    assert!(b > a, "{path}: [setpoint] end_s: must be > start_s");
+                    format!(
+                        "SetpointProfile::Ramp {{ from_rad: {:?}, to_rad: {:?}, start_s: {:?}, end_s: {:?} }}",
+                        num("from_rad", None) as f32,
+                        num("to_rad", None) as f32,
+                        a as f32,
+                        b as f32
+                    )
+                }
+                _ => {
+                    let f = num("freq_hz", None);
+                    assert!(f > 0.0, "{path}: [setpoint] freq_hz: must be > 0");
+                    format!(
+                        "SetpointProfile::Sine {{ offset_rad: {:?}, amplitude_rad: {:?}, freq_hz: {:?}, start_s: {:?} }}",
+                        num("offset_rad", None) as f32,
+                        num("amplitude_rad", None) as f32,
+                        f as f32,
+                        num("start_s", Some(0.0)) as f32
+                    )
+                }
+            };
+            (path, expr)
+        }
+    };
+    let src = format!(
+        "// @generated by build.rs from PAM_BOARD_SCENARIO. Do not edit.\n\
+         /// The scenario file the set-point comes from.\n\
+         pub const BOARD_SCENARIO: &str = {name:?};\n\
+         /// The compiled-in angle set-point profile.\n\
+         pub const BOARD_PROFILE: pam_firmware::profile::SetpointProfile = {{\n\
+         \x20   use pam_firmware::profile::SetpointProfile;\n\
+         \x20   {expr}\n\
+         }};\n"
+    );
+    let out = PathBuf::from(env::var("OUT_DIR").unwrap()).join("board_profile.rs");
+    fs::write(&out, src).expect("write board_profile.rs");
 }

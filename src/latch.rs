@@ -410,16 +410,34 @@ mod tests {
         const BOR: u32 = 1 << 25;
         const PIN: u32 = 1 << 26;
         // What the chip sets for each source (every reset pulses the pin).
-        assert_eq!(ResetCause::from_rcc_csr(POR | BOR | PIN), ResetCause::PowerOn);
+        assert_eq!(
+            ResetCause::from_rcc_csr(POR | BOR | PIN),
+            ResetCause::PowerOn
+        );
         assert_eq!(ResetCause::from_rcc_csr(BOR | PIN), ResetCause::BrownOut);
-        assert_eq!(ResetCause::from_rcc_csr(1 << 29 | PIN), ResetCause::Watchdog);
-        assert_eq!(ResetCause::from_rcc_csr(1 << 30 | PIN), ResetCause::Watchdog);
-        assert_eq!(ResetCause::from_rcc_csr(1 << 28 | PIN), ResetCause::Software);
-        assert_eq!(ResetCause::from_rcc_csr(1 << 31 | PIN), ResetCause::LowPower);
+        assert_eq!(
+            ResetCause::from_rcc_csr(1 << 29 | PIN),
+            ResetCause::Watchdog
+        );
+        assert_eq!(
+            ResetCause::from_rcc_csr(1 << 30 | PIN),
+            ResetCause::Watchdog
+        );
+        assert_eq!(
+            ResetCause::from_rcc_csr(1 << 28 | PIN),
+            ResetCause::Software
+        );
+        assert_eq!(
+            ResetCause::from_rcc_csr(1 << 31 | PIN),
+            ResetCause::LowPower
+        );
         assert_eq!(ResetCause::from_rcc_csr(PIN), ResetCause::Pin);
         assert_eq!(ResetCause::from_rcc_csr(0), ResetCause::Unknown);
         // RMVF (bit 24) and the reserved bits do not count.
-        assert_eq!(ResetCause::from_rcc_csr(1 << 24 | 0xff), ResetCause::Unknown);
+        assert_eq!(
+            ResetCause::from_rcc_csr(1 << 24 | 0xff),
+            ResetCause::Unknown
+        );
     }
 
     #[test]

@@ -103,7 +103,8 @@ pub fn take_fresh_counts(buf: &mut [u16; 2]) -> [Option<u16>; 2] {
 /// Largest accepted distance of a calibrated zero from [`PRESSURE_COUNTS_AT_ZERO`] [counts]:
 /// 10 % of the span, about 100 kPa (the transducer's offset tolerance is a few %; more is
 /// a muscle not vented, a broken wire or a wrong sensor).
-pub const PRESSURE_ZERO_TOLERANCE_COUNTS: u32 = (PRESSURE_COUNTS_AT_FULL - PRESSURE_COUNTS_AT_ZERO) / 10;
+pub const PRESSURE_ZERO_TOLERANCE_COUNTS: u32 =
+    (PRESSURE_COUNTS_AT_FULL - PRESSURE_COUNTS_AT_ZERO) / 10;
 
 /// Why a start-up pressure calibration was refused.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -121,22 +122,22 @@ pub enum CalibrationError {
 
 /// The pressure scaling of one channel after the start-up zero calibration: `sum_counts` of
 /// `n` samples taken with the muscle vented to atmosphere (both exhausts open) is 0 Pa gauge;
-/// the slope stays the nominal one (the transducer's span). Rounded mean, no overflow (u64).
+/// the slope stays the nominal one (the transducer's span). 32-bit: 12-bit samples sum
+/// without overflow for a million samples (the board averages at most 5000); a saturated sum
+/// reads as out of range, never as a valid zero.
 pub fn calibrated_pressure_scaling(
-    sum_counts: u64,
+    sum_counts: u32,
     n: u32,
 ) -> Result<PressureScaling, CalibrationError> {
     if n == 0 {
         return Err(CalibrationError::NoSamples);
     }
-    let n64 = n as u64;
-    let mean = sum_counts / n64 + u64::from((sum_counts % n64) * 2 >= n64);
-    let mean_counts = if mean > u32::MAX as u64 { u32::MAX } else { mean as u32 };
+    let mean_counts = sum_counts / n + u32::from(sum_counts % n >= n - n / 2);
     if mean_counts.abs_diff(PRESSURE_COUNTS_AT_ZERO) > PRESSURE_ZERO_TOLERANCE_COUNTS {
         return Err(CalibrationError::ZeroOutOfRange { mean_counts });
     }
     let nominal = pressure_scaling();
-    // Sub-count resolution of the mean: the offset uses the exact mean, not the rounded one.
+    // Sub-count resolution: the offset uses the exact mean, not the rounded one.
     let mean_exact = sum_counts as f32 / n as f32;
     Ok(PressureScaling {
         pa_per_count: nominal.pa_per_count,
@@ -167,7 +168,10 @@ mod tests {
     #[test]
     fn safe_levels_and_register_words() {
         assert_eq!(safe_valve_levels(SafeState::Hold), [false; 4]);
-        assert_eq!(safe_valve_levels(SafeState::Vent), [false, true, false, true]);
+        assert_eq!(
+            safe_valve_levels(SafeState::Vent),
+            [false, true, false, true]
+        );
         // Hold: reset PD12..PD15.
         assert_eq!(valve_bsrr([false; 4]), 0xF000 << 16);
         // Vent: PD13 and PD15 set, PD12 and PD14 reset.
@@ -179,7 +183,10 @@ mod tests {
         let other = 0x00AB_CDEF;
         assert_eq!(valve_moder_output(other | 0xFF00_0000), other | 0x5500_0000);
         assert_eq!(valve_moder_alternate(other), other | 0xAA00_0000);
-        assert_eq!(valve_moder_alternate(valve_moder_output(other)), other | 0xAA00_0000);
+        assert_eq!(
+            valve_moder_alternate(valve_moder_output(other)),
+            other | 0xAA00_0000
+        );
     }
 
     #[test]
@@ -221,13 +228,26 @@ mod tests {
             Err(CalibrationError::ZeroOutOfRange { mean_counts: 0 })
         );
         // The tolerance edges.
-        let t = PRESSURE_ZERO_TOLERANCE_COUNTS as u64;
+        let t = PRESSURE_ZERO_TOLERANCE_COUNTS;
         assert!(calibrated_pressure_scaling(455 + t, 1).is_ok());
         assert!(calibrated_pressure_scaling(455 - t, 1).is_ok());
         assert!(calibrated_pressure_scaling(455 + t + 1, 1).is_err());
         assert!(calibrated_pressure_scaling(455 - t - 1, 1).is_err());
-        // No overflow for any u64 sum.
-        assert!(calibrated_pressure_scaling(u64::MAX, 1).is_err());
-        assert!(calibrated_pressure_scaling(u64::MAX, u32::MAX).is_err());
+        // No overflow for any sum; rounding to the nearest count (half up).
+        assert!(calibrated_pressure_scaling(u32::MAX, 1).is_err());
+        assert!(calibrated_pressure_scaling(u32::MAX, u32::MAX).is_err());
+        assert_eq!(
+            calibrated_pressure_scaling(4 * 455 + 1, 4).map(|s| s.to_gauge_pa(455).abs() < 100.0),
+            Ok(true)
+        );
+        // 818.5 rounds to 819 = 455 + 364 (the edge, accepted), 819.5 to 820 (refused),
+        // 819.33 to 819.
+        assert_eq!(PRESSURE_ZERO_TOLERANCE_COUNTS, 364);
+        assert!(calibrated_pressure_scaling(2 * 818 + 1, 2).is_ok());
+        assert_eq!(
+            calibrated_pressure_scaling(2 * 819 + 1, 2),
+            Err(CalibrationError::ZeroOutOfRange { mean_counts: 820 })
+        );
+        assert!(calibrated_pressure_scaling(3 * 819 + 1, 3).is_ok());
     }
 }
