@@ -1,10 +1,9 @@
 //! The firmware on a real board: STM32F407G-DISC1 (STM32F407 Discovery), `cargo flash`, on
 //! RTIC 2 (hardware tasks; see docs/firmware.md for why RTIC and not embassy).
 //!
-//! Start-up, in this order (docs/firmware.md, "Board start-up"):
-//! 1. Reset cause and the fault-latch record from the backup SRAM (`latch_bkpsram`), still on
-//!    the 16 MHz HSI.
-//! 2. Valve pins driven to the configured safe state (`SAFE_STATE`) as plain outputs.
+//! Start-up, in this order (docs/firmware.md, "Board start-up"), still on the 16 MHz HSI:
+//! 1. Valve pins driven to the configured safe state (`SAFE_STATE`) as plain outputs.
+//! 2. Reset cause and the fault-latch record from the backup SRAM (`latch_bkpsram`).
 //! 3. Independent watchdog started (10 ms, LSI: independent of the clock tree).
 //! 4. Clock tree: 8 MHz HSE crystal, PLL to 168 MHz.
 //! 5. Boot decision (`latch::boot_decision`): every reset but a power-on with a clean record
@@ -242,10 +241,7 @@ mod app {
         let dp: pac::Peripherals = cx.device;
         let mut core = cx.core;
 
-        // 1. Reset cause and latch record first (still on the 16 MHz HSI).
-        let (storage, reset) = latch_bkpsram::init();
-
-        // 2. Valve pins to the safe state before anything else drives them.
+        // 1. Valve pins to the safe state before anything else (still on the 16 MHz HSI).
         let mut rcc = dp.RCC.constrain();
         let gpiod = dp.GPIOD.split(&mut rcc);
         let lv = wiring::safe_valve_levels(SAFE_STATE);
@@ -254,6 +250,10 @@ mod app {
         let pd13 = gpiod.pd13.into_push_pull_output_in_state(st(lv[1]));
         let pd14 = gpiod.pd14.into_push_pull_output_in_state(st(lv[2]));
         let pd15 = gpiod.pd15.into_push_pull_output_in_state(st(lv[3]));
+
+        // 2. Reset cause and latch record (RCC_CSR and the backup SRAM; the HAL does not touch
+        //    the reset flags).
+        let (storage, reset) = latch_bkpsram::init();
 
         // 3. Watchdog (LSI), before the clock tree: a hang in the PLL set-up resets.
         let mut watchdog = IndependentWatchdog::new(dp.IWDG);
