@@ -300,8 +300,8 @@ mod app {
             ),
             &mut rcc,
         );
-        // User button B1 (PA0, high when pressed; the board has the pull-down).
-        let button_pin = gpioa.pa0.into_input();
+        // User button B1 (PA0, high when pressed; pull-down on the board and here).
+        let button_pin = gpioa.pa0.into_pull_down_input();
 
         // ADC1: scan IN11 (PC1), IN12 (PC2) on each TIM3 TRGO, results by DMA.
         let adc_config = AdcConfig::default()
