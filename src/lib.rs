@@ -22,7 +22,7 @@
 //! - [`residual`]: model-based valve and supply supervision (pressure residual).
 //! - [`latch`]: the fault latch across resets (record, checksum, boot decision).
 //! - [`valves`]: on/off and proportional valve drivers over embedded-hal 1.0.
-//! - [`tick`]: the control tick combining all of the above (`tick_contract.md`).
+//! - [`tick`]: the control tick combining all of the above (`docs/tick-contract.md`).
 //! - [`log`]: ring buffer of per-tick records.
 //! - [`stream`]: the per-tick binary stream record (board / QEMU -> host) and the
 //!   processor-in-the-loop sensor frames (host -> firmware).

@@ -1,4 +1,4 @@
-//! The control tick (API contract `tick_contract.md`): sensor validation, the control
+//! The control tick (API contract: `docs/tick-contract.md`): sensor validation, the control
 //! cascade of [`crate::control`], and the safety state machine of [`crate::safety`], in
 //! one pure `step` per tick. Consumed by the QEMU binary, the board binary and host-sim.
 //!
@@ -172,8 +172,9 @@ impl ControllerConfig {
     ///   D = -0.3 N m s/rad are cancelled by the inverse model, so the position loop mostly
     ///   sees the inertia J. Start point: PD for omega_n ~ 25 rad/s (kp = J omega_n^2,
     ///   kd = 2 zeta J omega_n), then a grid search (kp 4..14, kd 0.3..0.9, ki 0..20,
-    ///   torque ki 0..60, pressure kp 1/30..1/15 kPa) in the closed-loop stand-in of
-    ///   `tests/closed_loop_smoke.rs`, also run with the 11x inertia of
+    ///   torque ki 0..60, pressure kp 1/30..1/15 kPa) in an explicit-Euler stand-in of
+    ///   the plant (since replaced by the real plant in
+    ///   `host-sim/tests/closed_loop_smoke.rs`), also run with the 11x inertia of
     ///   `reference-1dof-loaded.toml` to keep that stable.
     ///   That gave kp = 11 N m/rad, kd = 0.8 N m s/rad, ki = 8 N m/(rad s), +-1.5 N m, with
     ///   the derivative on the measurement only, which lags a moving set-point by
@@ -190,14 +191,14 @@ impl ControllerConfig {
     ///   2026-11-23, after the identified `config/` constants and the valve driver's
     ///   immediate full-scale opening). Then the inertia term was switched on and the
     ///   set-point differentiators raised from 20 to 150 Hz (the set-point is noise-free, so
-    ///   the filter only has to round tick-to-tick jumps). On the issue-5 suite of 0.15 s
+    ///   the filter only has to round tick-to-tick jumps). On the comparison suite of 0.15 s
     ///   minimum-jerk moves that tracks 2.6x better (0.0545 -> 0.0206 deg^2). On the jump
-    ///   suite it costs 2 % (1.0375 -> 1.0591 deg^2). The step tests of
-    ///   `tests/closed_loop_smoke.rs` improve (overshoot 0.0156 -> 0.0110 rad; the 11x load
-    ///   is unchanged, 1.0 s). `host-sim/tests/closed_loop.rs` checks that every scenario,
+    ///   suite it costs 2 % (1.0375 -> 1.0591 deg^2). The step tests (then on the
+    ///   Euler stand-in) improved (overshoot 0.0156 -> 0.0110 rad; the 11x load unchanged,
+    ///   1.0 s). `host-sim/tests/closed_loop.rs` checks that every scenario,
     ///   the 11x load change included, still meets its bounds, and
     ///   `host-sim/tests/control_compare.rs` that these gains pass both step requirements.
-    ///   These are the robust defaults. The gains tuned for the tracking suite of the issue-5
+    ///   These are the robust defaults. The gains tuned for the tracking suite of the PD / PID
     ///   comparison (host-sim `control_compare`, 6 dB gain margin) are in
     ///   `config/control_tuned.toml` `[cascade]`: kp 55.7, ki 39.9, kd 0.50, torque ki 2.26,
     ///   inertia term on, 150 Hz. They track 7x better on that suite but fail both step

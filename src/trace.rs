@@ -6,7 +6,7 @@
 //! [`TickRecord::words`]) must be bit-for-bit identical between the Cortex-M4F build and the
 //! host build.
 
-// The control tick driven by the trace: the real one of `tick_contract.md` (src/tick.rs).
+// The control tick driven by the trace: the real one of `docs/tick-contract.md` (src/tick.rs).
 use crate::tick;
 
 pub use tick::{ControlTick, ControllerConfig, SensorFrame, Setpoint, TickOutput};

@@ -1,4 +1,4 @@
-//! The closed-loop comparison of issue 5 (seed 004 Table 3): the model-based cascade with the
+//! The closed-loop comparison (seed 004 Table 3): the model-based cascade with the
 //! identified constants against the tuned PD and PID of `config/control_tuned.toml`, firmware in
 //! the loop on the reference plant, step / sine / random suite (`control::compare::SUITE`:
 //! set-point changes as 0.15 s minimum-jerk moves). Prints the MSE table (the one in README),

@@ -3,18 +3,18 @@
 //!
 //! `cargo run --release -p host-sim --example diagnose_synth -- OUT_DIR [EFFECT[,EFFECT]] [--seconds S] [--dt S] [--seed N] [--no-force]`
 //!
-//! EFFECT is one of `host_sim::diagnose::synth::TRUTHS` (none: the nominal rig). Writes
+//! EFFECT is one of `host_sim::diagnose::synth::truth_names()` (none: the nominal rig). Writes
 //! OUT_DIR/train.csv (valve pulses) and OUT_DIR/check.csv (chirp + steps).
 
 use std::path::PathBuf;
 
-use host_sim::diagnose::synth::{generate, plant_with, Excitation, SynthSpec, TRUTHS};
+use host_sim::diagnose::synth::{generate, plant_with, truth_names, Excitation, SynthSpec};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let usage = format!(
         "usage: diagnose_synth OUT_DIR [EFFECT[,EFFECT]] [--seconds S] [--dt S] [--seed N] [--no-force]\n  effects: {}",
-        TRUTHS.join(", ")
+        truth_names().join(", ")
     );
     let mut positional = Vec::new();
     let (mut seconds, mut dt, mut seed, mut force) = (10.0, 1e-3, 1u64, true);

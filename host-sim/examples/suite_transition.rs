@@ -1,4 +1,4 @@
-//! How the closed-loop comparison of issue 5 depends on how fast the set-point moves: the
+//! How the closed-loop comparison (cascade vs PD / PID) depends on how fast the set-point moves: the
 //! step and random scenarios of the jump suite (`scenarios/step.toml`, `random.toml`) with
 //! each set-point change made a minimum-jerk move of duration T (`transition_s`), T = 0 the
 //! jumps themselves; the sine is unchanged. The cascade with the firmware's default gains

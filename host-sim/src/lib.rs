@@ -21,6 +21,7 @@ pub mod identify;
 pub mod io;
 pub mod optimize;
 pub mod plant;
+pub mod signal;
 pub mod sim;
 pub mod validate;
 

@@ -19,8 +19,8 @@ fn seed_file() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("plants/arm3-seed001.toml")
 }
 
-fn shared() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared")
+fn fixtures() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures")
 }
 
 fn seed_arm() -> Arm3 {
@@ -465,7 +465,7 @@ fn one_dof_arm_toml(c: &PlantConfig) -> String {
 
 #[test]
 fn one_dof_special_case_matches_the_one_dof_plant_and_the_conformance_fixture() {
-    let plant_path = shared().join("plant/reference-1dof.toml");
+    let plant_path = fixtures().join("reference-1dof.toml");
     let cfg = PlantConfig::load(&plant_path).unwrap();
     let plant = Plant::from_config(&cfg);
     let arm_cfg = Arm3Config::from_toml_str(&one_dof_arm_toml(&cfg), "one-dof-arm.toml")
@@ -474,7 +474,7 @@ fn one_dof_special_case_matches_the_one_dof_plant_and_the_conformance_fixture() 
     let m11 = arm.links.mass_matrix(&[0.0, 0.3, -0.4])[(0, 0)];
     assert!((m11 - cfg.joint.inertia_kgm2).abs() < 1e-15);
 
-    let fixture = Recording::read(shared().join("conformance/pulses_nominal.csv")).unwrap();
+    let fixture = Recording::read(fixtures().join("pulses_nominal.csv")).unwrap();
     let dt = fixture.sample_period_s();
     // Both at a tight tolerance: they must converge to the same solution.
     let opts = SolverOptions {
@@ -525,7 +525,7 @@ fn one_dof_special_case_with_friction_matches_the_one_dof_joint_friction_effect(
     // Eq. 7 with f_e = f_g = 0 is the 1-DOF [effects.joint_friction] without a Stribeck dip
     // (breakaway = Coulomb), both with sgn(w) ~ tanh(w / w_eps).
     let (f_c, f_d, w_eps) = (0.15, 0.004, 0.01);
-    let mut cfg = PlantConfig::load(shared().join("plant/reference-1dof.toml")).unwrap();
+    let mut cfg = PlantConfig::load(fixtures().join("reference-1dof.toml")).unwrap();
     cfg.effects.joint_friction = Some(host_sim::plant::effects::JointFriction {
         enabled: true,
         coulomb_nm: f_c,
@@ -544,7 +544,7 @@ fn one_dof_special_case_with_friction_matches_the_one_dof_joint_friction_effect(
         Arm3::from_config(&Arm3Config::from_toml_str(&text, "friction-arm.toml").unwrap()).unwrap();
     assert_eq!(arm.friction[0].f_c, f_c);
     assert_eq!(arm.friction[1].f_c, 0.0);
-    let fixture = Recording::read(shared().join("conformance/pulses_nominal.csv")).unwrap();
+    let fixture = Recording::read(fixtures().join("pulses_nominal.csv")).unwrap();
     let n = 5000; // 5 s
     let dt = fixture.sample_period_s();
     let opts = SolverOptions {
@@ -561,9 +561,7 @@ fn one_dof_special_case_with_friction_matches_the_one_dof_joint_friction_effect(
     let mut max_angle_diff_deg: f64 = 0.0;
     let mut max_effect_deg: f64 = 0.0;
     let frictionless = simulate(
-        &Plant::from_config(
-            &PlantConfig::load(shared().join("plant/reference-1dof.toml")).unwrap(),
-        ),
+        &Plant::from_config(&PlantConfig::load(fixtures().join("reference-1dof.toml")).unwrap()),
         &fixture.inputs[..n],
         dt,
         &opts,

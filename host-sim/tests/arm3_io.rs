@@ -60,7 +60,7 @@ fn invalid_values_name_the_full_key() {
 fn plant_kind_is_recognised() {
     assert!(is_arm3_file(seed_file()).unwrap());
     let one_dof =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant/reference-1dof.toml");
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/reference-1dof.toml");
     assert!(!is_arm3_file(one_dof).unwrap());
     // A misspelt kind is routed to the arm loader, which names it.
     let dir = tempfile::tempdir().unwrap();

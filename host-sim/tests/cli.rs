@@ -3,8 +3,8 @@
 use std::path::PathBuf;
 use std::process::Command;
 
-fn shared() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared")
+fn fixtures() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures")
 }
 
 fn host_sim() -> Command {
@@ -16,11 +16,11 @@ fn simulate_then_fit_a_fixture() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("sim.csv");
     let plot = dir.path().join("sim.svg");
-    let fixture = shared().join("conformance/pulses_nominal.csv");
+    let fixture = fixtures().join("pulses_nominal.csv");
     let r = host_sim()
         .arg("simulate")
         .arg("--plant")
-        .arg(shared().join("plant/reference-1dof.toml"))
+        .arg(fixtures().join("reference-1dof.toml"))
         .arg("--inputs")
         .arg(&fixture)
         .arg("--out")
@@ -102,7 +102,7 @@ fn bad_input_is_reported_with_file_line_and_field_and_keeps_old_output() {
     let r = host_sim()
         .arg("simulate")
         .arg("--plant")
-        .arg(shared().join("plant/reference-1dof.toml"))
+        .arg(fixtures().join("reference-1dof.toml"))
         .arg("--inputs")
         .arg(&inputs)
         .arg("--out")
@@ -140,7 +140,7 @@ fn scenario_needs_a_plant_and_a_readable_file() {
     let r = host_sim()
         .arg("simulate")
         .arg("--plant")
-        .arg(shared().join("plant/reference-1dof.toml"))
+        .arg(fixtures().join("reference-1dof.toml"))
         .arg("--scenario")
         .arg(&missing)
         .arg("--out")

@@ -4,12 +4,12 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-fn shared() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared")
+fn fixtures() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures")
 }
 
 fn plant() -> PathBuf {
-    shared().join("plant/reference-1dof.toml")
+    fixtures().join("reference-1dof.toml")
 }
 
 fn host_sim(args: &[&dyn AsRef<std::ffi::OsStr>]) -> Output {
@@ -376,7 +376,7 @@ fn identify_plant_recovers_perturbed_parameters_from_a_simulated_recording() {
         &"--plant",
         &truth,
         &"--inputs",
-        &shared().join("conformance/pulses_nominal.csv"),
+        &fixtures().join("pulses_nominal.csv"),
         &"--out",
         &rec,
     ]));
@@ -416,7 +416,7 @@ fn identify_plant_recovers_perturbed_parameters_from_a_simulated_recording() {
 fn identify_plant_rejects_unknown_keys_and_bad_bounds_without_writing() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("P2.toml");
-    let fixture = shared().join("conformance/pulses_nominal.csv");
+    let fixture = fixtures().join("pulses_nominal.csv");
     for (params, want) in [
         ("muscle.no_such_key", "`muscle.no_such_key`"),
         ("muscle.damping_m2s=1:2", "inside the bounds"),
@@ -451,7 +451,7 @@ fn identify_torque_warns_when_the_activation_is_not_symmetric() {
         &"identify",
         &"torque",
         &"--recording",
-        &shared().join("conformance/pulses_nominal.csv"),
+        &fixtures().join("pulses_nominal.csv"),
         &"--plant",
         &plant(),
         &"--out",
@@ -472,7 +472,7 @@ fn identify_plant_finds_the_load_inertia_in_the_independent_loaded_fixture() {
         &"identify",
         &"plant",
         &"--recording",
-        &shared().join("conformance/pulses_loaded.csv"),
+        &fixtures().join("pulses_loaded.csv"),
         &"--plant",
         &plant(),
         &"--params",

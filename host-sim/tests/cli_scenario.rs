@@ -12,7 +12,7 @@ fn root() -> PathBuf {
 }
 
 fn plant() -> PathBuf {
-    root().join("../shared/plant/reference-1dof.toml")
+    root().join("host-sim/tests/fixtures/reference-1dof.toml")
 }
 
 fn simulate(scenario: &Path, out: &Path, extra: &[&str]) -> Output {

@@ -12,7 +12,7 @@ fn root() -> PathBuf {
 }
 
 fn reference_plant() -> Plant {
-    let p = root().join("../shared/plant/reference-1dof.toml");
+    let p = root().join("host-sim/tests/fixtures/reference-1dof.toml");
     Plant::load(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
 

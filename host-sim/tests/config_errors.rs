@@ -7,12 +7,12 @@ use host_sim::plant::PlantState;
 use host_sim::{Plant, PlantConfig, ValveInputs};
 
 fn plant_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures")
 }
 
 fn nominal_text() -> String {
     std::fs::read_to_string(plant_dir().join("reference-1dof.toml"))
-        .expect("shared/plant/reference-1dof.toml next to the workspace")
+        .expect("tests/fixtures/reference-1dof.toml")
 }
 
 fn load_err(text: &str) -> String {

@@ -4,6 +4,9 @@
 //! thermodynamic chamber of PLANT.md, `# thermal = ...`) is not part of that claim: it is
 //! listed, and `thermal_fixture_is_not_reproduced_by_the_isothermal_plant` states the gap
 //! (it fails, on purpose, once the plant reproduces it: then move the fixture back in).
+//!
+//! The other tests read in-repo copies (`tests/fixtures/`);
+//! `fixture_copies_equal_the_shared_originals` checks they equal the shared originals.
 
 use std::path::PathBuf;
 
@@ -121,6 +124,36 @@ fn thermal_fixture_is_not_reproduced_by_the_isothermal_plant() {
             worst < 99.5,
             "{} is now reproduced (worst fit {worst:.3} %): put it back into the conformance claim",
             file.display()
+        );
+    }
+}
+
+/// The copies the other tests read (`tests/fixtures/README.md` lists where each came from)
+/// are byte for byte the shared originals.
+#[test]
+fn fixture_copies_equal_the_shared_originals() {
+    let fixtures = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures");
+    let copies = [
+        ("reference-1dof.toml", "plant/reference-1dof.toml"),
+        (
+            "reference-1dof-loaded.toml",
+            "plant/reference-1dof-loaded.toml",
+        ),
+        ("pulses_nominal.csv", "conformance/pulses_nominal.csv"),
+        ("pulses_loaded.csv", "conformance/pulses_loaded.csv"),
+    ];
+    let readme = std::fs::read_to_string(fixtures.join("README.md")).unwrap();
+    for (copy, original) in copies {
+        let a = std::fs::read(fixtures.join(copy)).unwrap_or_else(|e| panic!("{copy}: {e}"));
+        let b = std::fs::read(shared_dir().join(original))
+            .unwrap_or_else(|e| panic!("../shared/{original}: {e}"));
+        assert!(
+            a == b,
+            "tests/fixtures/{copy} differs from ../shared/{original}"
+        );
+        assert!(
+            readme.contains(copy) && readme.contains(original),
+            "README.md: {copy}"
         );
     }
 }

@@ -1,4 +1,4 @@
-//! Issue 5 proof, closed loop: on the reference plant with the firmware in the loop, the
+//! The closed-loop comparison: on the reference plant with the firmware in the loop, the
 //! model-based cascade (identified constants, trajectory feed-forward, torque loop) against the
 //! tuned PD and PID, all three tuned on the suite by the same procedure and cost and stored in
 //! `config/control_tuned.toml` (seed 004 Table 3: PD 3.61 vs model-based 1.95, 1.85x).
@@ -29,8 +29,7 @@ use pam_firmware::pid::DpPidGains;
 use pam_firmware::tick::ControlLaw;
 
 fn reference_plant() -> Plant {
-    let p =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant/reference-1dof.toml");
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/reference-1dof.toml");
     Plant::load(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
 
@@ -246,8 +245,8 @@ fn the_checked_in_tuning_file_parses_and_names_all_three_laws() {
 /// nominal joint limit-cycles there (measured 26x the default cascade's suite MSE, README).
 #[test]
 fn on_the_loaded_joint_the_firmware_default_cascade_stays_stable_and_best() {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/plant/reference-1dof-loaded.toml");
+    let p =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/reference-1dof-loaded.toml");
     let plant = Plant::load(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
     let rows = compare(&plant, &tuning()).unwrap();
     eprintln!("{}", format_table(&rows));

@@ -11,7 +11,7 @@ use host_sim::diagnose::{diagnose, DiagnoseOptions, Diagnosis, Verdict};
 use host_sim::{PlantConfig, Recording};
 
 fn nominal_path() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant/reference-1dof.toml")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/reference-1dof.toml")
 }
 
 fn nominal_text() -> String {
@@ -289,8 +289,7 @@ fn independent_loaded_fixture_is_an_inertia_recalibration() {
     // nominal file, the answer must be the plant file's inertia, recalibrated to the loaded
     // value (a wrong parameter, not missing physics).
     let rec = Recording::read(
-        PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-            .join("../../shared/conformance/pulses_loaded.csv"),
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/pulses_loaded.csv"),
     )
     .unwrap();
     let d = diagnose(

@@ -9,8 +9,7 @@ use host_sim::sim::{simulate, SolverOptions};
 use host_sim::{Measurement, Plant, PlantConfig, ValveInputs};
 
 fn plant_with(extra: &str) -> Plant {
-    let p =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant/reference-1dof.toml");
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/reference-1dof.toml");
     let text = format!("{}\n{extra}\n", std::fs::read_to_string(p).unwrap());
     Plant::from_config(&PlantConfig::from_toml_str(&text, "t.toml").unwrap())
 }

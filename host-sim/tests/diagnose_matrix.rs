@@ -14,7 +14,9 @@
 
 use std::path::PathBuf;
 
-use host_sim::diagnose::synth::{expected_id, generate, plant_with, Excitation, SynthSpec, TRUTHS};
+use host_sim::diagnose::synth::{
+    expected_id, generate, plant_with, truth_names, Excitation, SynthSpec,
+};
 use host_sim::diagnose::{diagnose, DiagnoseOptions};
 use host_sim::PlantConfig;
 
@@ -24,7 +26,7 @@ const HELD_OUT_SEEDS: [u64; 3] = [7001, 7002, 7008];
 
 fn cases() -> Vec<Vec<&'static str>> {
     let mut c: Vec<Vec<&str>> = vec![vec![], vec![]];
-    for t in TRUTHS {
+    for t in truth_names() {
         c.push(vec![t]);
     }
     c.push(vec!["joint_friction", "leakage"]);
@@ -160,8 +162,7 @@ fn run_case(
 #[test]
 #[ignore = "release build, a few minutes: see README"]
 fn diagnosis_matrix() {
-    let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant/reference-1dof.toml");
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/reference-1dof.toml");
     let text = std::fs::read_to_string(&path).unwrap();
     let nominal = PlantConfig::load(&path).unwrap();
     let cases = cases();
@@ -206,8 +207,7 @@ fn diagnosis_matrix() {
 #[test]
 #[ignore = "release build, a few minutes: see README"]
 fn diagnosis_matrix_without_force_channels() {
-    let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant/reference-1dof.toml");
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/reference-1dof.toml");
     let text = std::fs::read_to_string(&path).unwrap();
     let nominal = PlantConfig::load(&path).unwrap();
     let (mut pass, mut total) = (0, 0);

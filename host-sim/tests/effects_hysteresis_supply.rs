@@ -12,9 +12,8 @@ use host_sim::sim::{simulate, Integrator, SolverOptions};
 use host_sim::{Plant, PlantConfig, ValveInputs};
 
 fn nominal_text() -> String {
-    let p =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant/reference-1dof.toml");
-    std::fs::read_to_string(p).expect("shared/plant/reference-1dof.toml next to the workspace")
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/reference-1dof.toml");
+    std::fs::read_to_string(p).expect("tests/fixtures/reference-1dof.toml")
 }
 
 fn plant_with(extra: &str) -> Plant {
@@ -278,9 +277,9 @@ fn static_drop_matches_the_choked_closed_form_and_solves_subsonic_flow() {
     let p = plant_with(STATIC_DROP);
     let Supply::Static {
         resistance_pa_s_per_m3: r,
-    } = p.effects.supply
+    } = *p.effects.supply()
     else {
-        panic!("{:?}", p.effects.supply)
+        panic!("{:?}", p.effects.supply())
     };
     let ps0 = p.p_supply_abs_pa;
     let c = p.valve.sonic_conductance_m3_per_s_pa;

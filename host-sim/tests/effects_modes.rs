@@ -491,18 +491,19 @@ fn active_effects_are_listed_with_their_parameters() {
         .collect();
     let p = plant_with(&all);
     let names: Vec<&str> = p.active_effects().iter().map(|e| e.name).collect();
+    // Registry order (plant/effects/mod.rs), the order of the right-hand side's sums.
     assert_eq!(
         names,
         [
             "joint_friction",
+            "muscle_hysteresis",
+            "sensor_lag",
+            "valve_dead_time",
+            "supply_drop",
+            "polytropic",
             "gravity",
             "leakage",
-            "polytropic",
-            "valve_dead_time",
             "sensor",
-            "sensor_lag",
-            "muscle_hysteresis",
-            "supply_drop"
         ]
     );
     let s = p.effects_summary();

@@ -22,7 +22,7 @@ fn root() -> PathBuf {
 }
 
 fn plant() -> PathBuf {
-    root().join("../shared/plant/reference-1dof.toml")
+    root().join("host-sim/tests/fixtures/reference-1dof.toml")
 }
 
 fn run(args: &[&dyn AsRef<std::ffi::OsStr>]) {

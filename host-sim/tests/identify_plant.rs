@@ -11,13 +11,13 @@ use host_sim::io::recording::Channel;
 use host_sim::sim::{simulate, SolverOptions};
 use host_sim::{Plant, PlantConfig, Recording};
 
-fn shared() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared")
+fn fixtures() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures")
 }
 
 /// `plant` replayed on the first `n` inputs of the fixture, as a noisy recording.
 fn recording(plant_text: &str, n: usize, noise: &MeasurementNoise) -> Recording {
-    let fixture = Recording::read(shared().join("conformance/pulses_nominal.csv")).unwrap();
+    let fixture = Recording::read(fixtures().join("pulses_nominal.csv")).unwrap();
     let plant = Plant::from_config(&PlantConfig::from_toml_str(plant_text, "truth.toml").unwrap());
     let dt = fixture.sample_period_s();
     let inputs = fixture.inputs[..n].to_vec();
@@ -38,7 +38,7 @@ fn recording(plant_text: &str, n: usize, noise: &MeasurementNoise) -> Recording 
 
 #[test]
 fn perturbed_conductance_damping_and_inertia_are_recovered_from_a_noisy_recording() {
-    let reference = std::fs::read_to_string(shared().join("plant/reference-1dof.toml")).unwrap();
+    let reference = std::fs::read_to_string(fixtures().join("reference-1dof.toml")).unwrap();
     let truth = reference
         .replacen(
             "sonic_conductance_m3_per_s_pa = 8.0e-9",
@@ -90,7 +90,7 @@ fn perturbed_conductance_damping_and_inertia_are_recovered_from_a_noisy_recordin
 
 #[test]
 fn a_short_recording_or_a_bad_holdout_is_an_error() {
-    let reference = std::fs::read_to_string(shared().join("plant/reference-1dof.toml")).unwrap();
+    let reference = std::fs::read_to_string(fixtures().join("reference-1dof.toml")).unwrap();
     let rec = recording(&reference, 15, &MeasurementNoise::NONE);
     let specs = parse_param_specs(&["joint.inertia_kgm2".into()], &reference, "r.toml").unwrap();
     let e = fit_plant(
@@ -115,7 +115,7 @@ fn a_short_recording_or_a_bad_holdout_is_an_error() {
 /// `[effects.joint_friction]` are recovered from a noisy recording, starting from guesses.
 #[test]
 fn joint_friction_constants_are_identified() {
-    let reference = std::fs::read_to_string(shared().join("plant/reference-1dof.toml")).unwrap();
+    let reference = std::fs::read_to_string(fixtures().join("reference-1dof.toml")).unwrap();
     let friction = |coulomb: f64, viscous: f64| {
         format!(
             "{reference}\n[effects.joint_friction]\ncoulomb_nm = {coulomb:e}\nbreakaway_nm = 0.5\n\

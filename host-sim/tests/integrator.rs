@@ -6,13 +6,13 @@ use std::path::PathBuf;
 use host_sim::sim::{simulate, Integrator, SolverOptions};
 use host_sim::{Plant, Recording};
 
-fn shared() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared")
+fn fixtures() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures")
 }
 
 fn fixture() -> (Plant, Recording) {
-    let rec = Recording::read(shared().join("conformance/pulses_loaded.csv")).unwrap();
-    let plant = Plant::load(shared().join("plant/reference-1dof-loaded.toml")).unwrap();
+    let rec = Recording::read(fixtures().join("pulses_loaded.csv")).unwrap();
+    let plant = Plant::load(fixtures().join("reference-1dof-loaded.toml")).unwrap();
     (plant, rec)
 }
 
@@ -85,7 +85,7 @@ fn tightening_the_tolerance_changes_the_result_by_little() {
 #[test]
 fn single_step_path_matches_dopri5_per_sample() {
     // The valve commands the firmware issued on the random set-point scenario.
-    let plant = Plant::load(shared().join("plant/reference-1dof.toml")).unwrap();
+    let plant = Plant::load(fixtures().join("reference-1dof.toml")).unwrap();
     let scenario = host_sim::control::closed_loop::Scenario::load(
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenarios/random.toml"),
     )

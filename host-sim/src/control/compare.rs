@@ -389,10 +389,10 @@ pub fn scale_feedback(cfg: ControllerConfig, factor: f32) -> ControllerConfig {
 }
 
 /// Largest step overshoot a tuning may have, as a fraction of the step: the firmware's own
-/// step requirement (`tests/closed_loop_smoke.rs`: 0.02 rad on a 0.2 rad step).
+/// step requirement (`host-sim/tests/closed_loop_smoke.rs`: 0.02 rad on a 0.2 rad step).
 pub const MAX_OVERSHOOT_FRAC: f64 = 0.10;
 
-/// A step requirement every tuning must meet (the firmware's own, `tests/closed_loop_smoke.rs`):
+/// A step requirement every tuning must meet (the firmware's own, `host-sim/tests/closed_loop_smoke.rs`):
 /// on the jump step of `scenarios/step.toml` (0 -> 0.2 rad) with the joint inertia
 /// `inertia_factor` x the plant's, no fault, the angle inside `band_rad` of the target from
 /// `settle_s` after the step to the end of the run, and at most `overshoot_max_rad` past it.
@@ -410,7 +410,7 @@ pub struct StepRequirement {
 
 /// The step requirements of every tuning: the nominal joint (settle within 0.3 s into +-0.01
 /// rad, overshoot <= 0.02 rad) and the joint carrying the 11 x inertia load of seed 000 (settle
-/// within 2 s, overshoot <= 0.12 rad): the two step tests of `tests/closed_loop_smoke.rs`.
+/// within 2 s, overshoot <= 0.12 rad): the two step tests of `host-sim/tests/closed_loop_smoke.rs`.
 pub const STEP_REQUIREMENTS: [StepRequirement; 2] = [
     StepRequirement {
         inertia_factor: 1.0,

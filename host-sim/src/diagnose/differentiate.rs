@@ -7,8 +7,7 @@ pub trait Differentiator: Sync {
     fn derivative(&self, y: &[f64], dt_s: f64) -> Vec<f64>;
 }
 
-/// Savitzky-Golay derivative (local least-squares line, equivalently quadratic, over
-/// `2 half_window + 1` samples; the window shrinks at the ends).
+/// Savitzky-Golay derivative ([`crate::signal::savitzky_golay_derivative`]).
 #[derive(Debug, Clone, Copy)]
 pub struct SavitzkyGolay {
     pub half_window: usize,
@@ -22,31 +21,7 @@ impl Default for SavitzkyGolay {
 
 impl Differentiator for SavitzkyGolay {
     fn derivative(&self, y: &[f64], dt_s: f64) -> Vec<f64> {
-        let n = y.len();
-        let mut out = vec![0.0; n];
-        if n < 2 {
-            return out;
-        }
-        for (k, o) in out.iter_mut().enumerate() {
-            let m = self.half_window.min(k).min(n - 1 - k);
-            if m == 0 {
-                // One-sided difference at the very ends.
-                *o = if k == 0 {
-                    (y[1] - y[0]) / dt_s
-                } else {
-                    (y[n - 1] - y[n - 2]) / dt_s
-                };
-                continue;
-            }
-            let mut num = 0.0;
-            let mut den = 0.0;
-            for j in 1..=m {
-                num += j as f64 * (y[k + j] - y[k - j]);
-                den += 2.0 * (j * j) as f64;
-            }
-            *o = num / (den * dt_s);
-        }
-        out
+        crate::signal::savitzky_golay_derivative(y, dt_s, self.half_window)
     }
 }
 

@@ -121,7 +121,7 @@ pub fn candidates(nominal: &PlantConfig) -> Vec<Box<dyn Candidate>> {
                 return None;
             }
             let screen_with: Option<Box<dyn Candidate>> = if k.key == "joint.inertia_kgm2" {
-                Some(Box::new(super::candidates::InertiaCandidate))
+                Some(Box::new(crate::plant::effects::inertia::InertiaCandidate))
             } else {
                 None
             };
@@ -325,7 +325,9 @@ mod tests {
             dt_s: 1e-3,
             present: [true; 5],
         };
-        let b = Bounded(Box::new(super::super::candidates::PolytropicCandidate));
+        let b = Bounded(Box::new(
+            crate::plant::effects::polytropic::PolytropicCandidate,
+        ));
         let p = b.params(&s);
         assert_eq!((p[0].lo, p[0].hi), (1.0, 1.4));
         assert_eq!(

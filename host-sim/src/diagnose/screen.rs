@@ -4,7 +4,6 @@
 
 use crate::io::recording::{Channel, Recording};
 use crate::plant::config::PlantConfig;
-use crate::plant::valve::Iso6358Valve;
 use crate::plant::{Measurement, Plant, PlantState, ValveInputs};
 
 use super::differentiate::Differentiator;
@@ -88,10 +87,6 @@ pub struct Evidence {
     pub pressure_residual_pa_s: [Option<Vec<f64>>; 2],
     /// Nominal dp/dt at the measured state.
     pub nominal_dp: [Vec<f64>; 2],
-    /// Regressor of a unit leak conductance.
-    pub leak_signature: [Vec<f64>; 2],
-    /// Regressor of a unit supply-line resistance.
-    pub supply_signature: [Vec<f64>; 2],
     /// F measured - F nominal at the measured state (when any force channel was measured).
     pub force_residual_n: Option<[Option<Vec<f64>>; 2]>,
     /// Measured - nominal simulation, per channel present.
@@ -107,6 +102,13 @@ pub struct Evidence {
     pub lag_gain: [f64; 5],
     pub inertia_kgm2: f64,
     pub sprocket_radius_m: f64,
+    /// The nominal plant.
+    pub plant: Plant,
+    /// The measured state at every sample (angle, its smoothed derivative, pressures
+    /// measured else simulated), for candidates that build their own regressors.
+    pub states: Vec<PlantState>,
+    /// The recording's valve inputs.
+    pub inputs: Vec<ValveInputs>,
 }
 
 /// Longest lag searched by cross-correlation.
@@ -155,18 +157,14 @@ impl Evidence {
             meas(Channel::P2Kpa).map(|_| diff.derivative(&p_gauge_pa[1], dt)),
         ];
         let p_atm = plant.p_atm_pa;
-        let unit_leak =
-            Iso6358Valve::new(1.0, plant.valve.critical_ratio, plant.valve.laminar_ratio);
         let r = plant.joint.sprocket_radius_m;
         let both_forces = meas(Channel::F1N).is_some() && meas(Channel::F2N).is_some();
         let any_force = meas(Channel::F1N).is_some() || meas(Channel::F2N).is_some();
         let mut torque_residual = vec![0.0; n];
         let mut nominal_dp = [vec![0.0; n], vec![0.0; n]];
-        let mut leak = [vec![0.0; n], vec![0.0; n]];
-        let mut supply = [vec![0.0; n], vec![0.0; n]];
         let mut force_res = [vec![0.0; n], vec![0.0; n]];
         let mut dchi1 = vec![0.0; n];
-        let p_s0 = plant.p_supply_abs_pa;
+        let mut states = Vec::with_capacity(n);
         for k in 0..n {
             let x = PlantState {
                 angle_rad: angle_rad[k],
@@ -193,23 +191,8 @@ impl Evidence {
             let d = plant.derivatives(&x, &u);
             nominal_dp[0][k] = d.p1_abs_pa;
             nominal_dp[1][k] = d.p2_abs_pa;
-            let chi = plant.joint.contractions(x.angle_rad);
             dchi1[k] = plant.joint.contraction_rates(x.velocity_rad_s)[0];
-            let p = [x.p1_abs_pa, x.p2_abs_pa];
-            let u_in = [u.u_in1, u.u_in2];
-            let q_tot: f64 = (0..2)
-                .map(|j| u_in[j] * plant.valve.flow_m3_s(p_s0, p[j]))
-                .sum();
-            let delta = 1.0; // Pa s/m^3 of line resistance
-            for i in 0..2 {
-                let v = plant.muscle.volume_m3(chi[i]);
-                leak[i][k] = -p_atm * unit_leak.flow_m3_s(p[i], p_atm) / v;
-                if u_in[i] != 0.0 && q_tot > 0.0 {
-                    let dq = plant.valve.flow_m3_s(p_s0 - delta * 1e4 * q_tot, p[i])
-                        - plant.valve.flow_m3_s(p_s0, p[i]);
-                    supply[i][k] = p_atm * u_in[i] * dq / (1e4 * v);
-                }
-            }
+            states.push(x);
         }
         let pressure_residual = [0, 1].map(|i| {
             dp_meas[i]
@@ -258,8 +241,6 @@ impl Evidence {
             torque_residual_nm: torque_residual,
             pressure_residual_pa_s: pressure_residual,
             nominal_dp,
-            leak_signature: leak,
-            supply_signature: supply,
             force_residual_n: any_force.then(|| {
                 let [a, b] = force_res;
                 [meas(Channel::F1N).map(|_| a), meas(Channel::F2N).map(|_| b)]
@@ -271,6 +252,9 @@ impl Evidence {
             lag_gain,
             inertia_kgm2: plant.joint.inertia_kgm2,
             sprocket_radius_m: r,
+            plant,
+            states,
+            inputs: rec.inputs.clone(),
         }
     }
 }

@@ -334,7 +334,7 @@ pub fn set_id(parts: &[Part]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diagnose::candidates::JointFrictionCandidate;
+    use crate::plant::effects::joint_friction::JointFrictionCandidate;
 
     fn rule() -> Rule {
         Rule {

@@ -7,6 +7,7 @@ use rand_distr::StandardNormal;
 
 use crate::io::recording::{Channel, Recording};
 use crate::plant::config::{ConfigError, PlantConfig};
+use crate::plant::effects::{truths, Truth};
 use crate::plant::{Plant, ValveInputs};
 use crate::sim::{simulate, SimError, SolverOptions};
 
@@ -26,66 +27,43 @@ pub const PRESSURE_NOISE_KPA: f64 = 0.5;
 /// Force noise (N, 1 sigma).
 pub const FORCE_NOISE_N: f64 = 2.0;
 
-/// Every effect the synthetic rig can conceal: the catalogue's ids plus two whose true form
-/// differs from the candidate's (`joint_friction_stribeck`, `supply_drop_reservoir`).
-pub const TRUTHS: [&str; 12] = [
-    "joint_friction",
-    "joint_friction_stribeck",
-    "muscle_hysteresis",
-    "sensor_lag",
-    "valve_delay",
-    "supply_drop",
-    "supply_drop_reservoir",
-    "polytropic",
-    "gravity",
-    "inertia",
-    "leakage",
-    "sensor_offset",
-];
+/// Every effect the synthetic rig can conceal, from the effect registry
+/// ([`crate::plant::effects::truths`]): the catalogue's ids plus forms that differ from the
+/// candidate's (`joint_friction_stribeck`, `supply_drop_reservoir`).
+pub fn truth_names() -> Vec<&'static str> {
+    truths().iter().map(|t| t.name).collect()
+}
 
-/// The catalogue id a truth should be named as.
-pub fn expected_id(truth: &str) -> &str {
-    match truth {
-        "joint_friction_stribeck" => "joint_friction",
-        "supply_drop_reservoir" => "supply_drop",
-        t => t,
+fn truth(name: &str) -> Option<Truth> {
+    truths().into_iter().find(|t| t.name == name)
+}
+
+/// The catalogue id a truth should be named as (the name itself when it is not a truth).
+pub fn expected_id(truth_name: &str) -> &str {
+    match truth(truth_name) {
+        Some(t) => t.expected_id,
+        None => truth_name,
     }
 }
 
 /// TOML of a concealed effect at a realistic size (`inertia` becomes a `[joint]` override,
 /// see [`plant_with`]). `None` for an unknown name.
-pub fn effect_toml(truth: &str, dt_s: f64) -> Option<String> {
-    Some(match truth {
-        "joint_friction" => "[effects.joint_friction]\ncoulomb_nm = 0.35\nbreakaway_nm = 0.35\nstribeck_velocity_rad_s = 1.0\nviscous_nm_s_per_rad = 0.08\nsmoothing_velocity_rad_s = 0.01\n".into(),
-        "joint_friction_stribeck" => "[effects.joint_friction]\ncoulomb_nm = 0.25\nbreakaway_nm = 0.5\nstribeck_velocity_rad_s = 0.3\nviscous_nm_s_per_rad = 0.05\nsmoothing_velocity_rad_s = 0.01\n".into(),
-        "muscle_hysteresis" => "[effects.muscle_hysteresis]\nbase_force_n = 6.0\npressure_gain_n_per_pa = 2.0e-5\nsmoothing_rate_per_s = 0.02\n".into(),
-        "sensor_lag" => "[effects.sensor_lag]\nangle_time_constant_s = 0.015\npressure_time_constant_s = 0.008\n".into(),
-        "valve_delay" => format!(
-            "[effects.valve_dead_time]\ndelay_s = {}\n",
-            (0.008 / dt_s).round().max(1.0) * dt_s
-        ),
-        "supply_drop" => "[effects.supply_drop]\nmodel = \"static\"\nresistance_pa_s_per_m3 = 2.0e7\n".into(),
-        "supply_drop_reservoir" => "[effects.supply_drop]\nmodel = \"reservoir\"\ntank_volume_m3 = 5.0e-4\nfeed_conductance_m3_per_s_pa = 6.0e-9\n".into(),
-        "polytropic" => "[effects.polytropic]\nexponent = 1.3\n".into(),
-        "gravity" => "[effects.gravity]\nmass_kg = 1.0\ncom_distance_m = 0.1\nhanging_angle_rad = 0.0\n".into(),
-        "inertia" => "inertia_kgm2 = 0.03\n".into(),
-        "leakage" => "[effects.leakage]\nsonic_conductance_m3_per_s_pa = 4.0e-10\n".into(),
-        "sensor_offset" => "[effects.sensor.angle_deg]\noffset = 1.5\n[effects.sensor.p1_kpa]\noffset = 8.0\n[effects.sensor.p2_kpa]\noffset = -6.0\n".into(),
-        _ => return None,
-    })
+pub fn effect_toml(truth_name: &str, dt_s: f64) -> Option<String> {
+    truth(truth_name).map(|t| (t.toml)(dt_s))
 }
 
 /// The nominal plant text with concealed effects (by truth name) added.
 pub fn plant_with(nominal_toml: &str, truths: &[&str], dt_s: f64) -> Result<PlantConfig, String> {
     let mut text = nominal_toml.to_string();
     let mut effects = String::new();
-    for t in truths {
-        let e = effect_toml(t, dt_s).ok_or_else(|| format!("unknown effect `{t}`"))?;
-        if *t == "inertia" {
-            // Override the [joint] inertia in place.
+    for name in truths {
+        let t = truth(name).ok_or_else(|| format!("unknown effect `{name}`"))?;
+        let e = (t.toml)(dt_s);
+        if let Some(key) = t.replaces_key {
+            // Override the key's line in place.
             let mut out = String::new();
             for line in text.lines() {
-                if line.trim_start().starts_with("inertia_kgm2") {
+                if line.trim_start().starts_with(key) {
                     out += &e;
                 } else {
                     out += line;

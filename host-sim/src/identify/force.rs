@@ -25,6 +25,7 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
 use super::{write_atomic, IdentError};
+use crate::plant::muscle::TonduLaw;
 
 /// Which branch of an isometric pressure sweep a sample was taken on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
@@ -95,16 +96,10 @@ pub struct Tondu {
 }
 
 impl Tondu {
-    /// Unclamped force [N].
+    /// Unclamped force [N] ([`TonduLaw`], the plant's law, at contraction 1 - stretch).
     pub fn eval(&self, p_gauge_pa: f64, stretch: f64) -> f64 {
-        let a = 3.0 / self.alpha0_rad.tan().powi(2);
-        let b = 1.0 / self.alpha0_rad.sin().powi(2);
-        let chi = 1.0 - stretch;
-        std::f64::consts::PI
-            * self.r0_m
-            * self.r0_m
-            * p_gauge_pa
-            * (a * (1.0 - self.k * chi).powi(2) - b)
+        TonduLaw::new(self.r0_m, self.alpha0_rad, self.k)
+            .force_unclamped_n(p_gauge_pa, 1.0 - stretch)
     }
 
     /// Force [N] clamped at 0 (a muscle cannot push).

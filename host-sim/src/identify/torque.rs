@@ -178,38 +178,9 @@ fn nrmse_fit_pct(y: &[f64], y_hat: &[f64]) -> f64 {
 }
 
 /// Velocity from uniformly sampled angles by a Savitzky-Golay first-derivative filter
-/// (quadratic fit over `2 half_window + 1` samples, shrunk at the ends). With
-/// `half_window = 0` it is the plain central difference.
+/// ([`crate::signal::savitzky_golay_derivative`]).
 pub fn savgol_velocity(angle_rad: &[f64], dt_s: f64, half_window: usize) -> Vec<f64> {
-    let n = angle_rad.len();
-    let mut v = vec![0.0; n];
-    if n < 2 || !(dt_s > 0.0) {
-        return v;
-    }
-    for (i, vi) in v.iter_mut().enumerate() {
-        let m = half_window.min(i).min(n - 1 - i);
-        if m == 0 {
-            // One-sided difference at the very ends.
-            *vi = if i == 0 {
-                (angle_rad[1] - angle_rad[0]) / dt_s
-            } else if i == n - 1 {
-                (angle_rad[n - 1] - angle_rad[n - 2]) / dt_s
-            } else {
-                (angle_rad[i + 1] - angle_rad[i - 1]) / (2.0 * dt_s)
-            };
-            continue;
-        }
-        // Quadratic/linear SG derivative weights: k / sum(k^2).
-        let mut num = 0.0;
-        let mut den = 0.0;
-        for k in 1..=m {
-            let kf = k as f64;
-            num += kf * (angle_rad[i + k] - angle_rad[i - k]);
-            den += 2.0 * kf * kf;
-        }
-        *vi = num / (den * dt_s);
-    }
-    v
+    crate::signal::savitzky_golay_derivative(angle_rad, dt_s, half_window)
 }
 
 /// Options of the kinematic identification sweep (seed 003: quasi-static motion at several
@@ -539,23 +510,5 @@ mod tests {
         assert!(kept
             .iter()
             .all(|s| (s.velocity_rad_s.abs() - 1.0).abs() < 1e-9));
-    }
-
-    #[test]
-    fn savgol_velocity_of_a_ramp_is_its_slope() {
-        let a: Vec<f64> = (0..100).map(|k| 0.5 * k as f64 * 0.001).collect();
-        for v in savgol_velocity(&a, 0.001, 5) {
-            assert!((v - 0.5).abs() < 1e-9);
-        }
-    }
-
-    #[test]
-    fn savgol_velocity_of_a_parabola_is_exact_inside() {
-        let dt = 0.01;
-        let a: Vec<f64> = (0..50).map(|k| (k as f64 * dt).powi(2)).collect();
-        let v = savgol_velocity(&a, dt, 3);
-        for (k, vk) in v.iter().enumerate().take(46).skip(4) {
-            assert!((vk - 2.0 * k as f64 * dt).abs() < 1e-9);
-        }
     }
 }

@@ -2,7 +2,7 @@
 //!
 //! Each physics term lives in its own module: [`valve`] (ISO 6358 flow), [`muscle`] (Tondu
 //! force, damper, tension, volume polynomial), [`joint`] (kinematics, J omega' = T),
-//! [`pressure`] (Boyle-Mariotte), [`effects`] (optional extensions, off in the nominal files).
+//! [`pressure`] (Boyle-Mariotte), [`effects`] (optional extensions, one module each, off in the nominal files).
 
 pub mod active_effects;
 pub mod arm3;
@@ -121,11 +121,7 @@ impl Plant {
                 c.valve.critical_ratio,
                 c.valve.laminar_ratio,
             ),
-            effects: Effects::from_config(
-                &c.effects,
-                c.valve.critical_ratio,
-                c.valve.laminar_ratio,
-            ),
+            effects: Effects::from_config(&c.effects, &c.valve),
             initial: PlantState {
                 angle_rad: c.initial.angle_rad,
                 velocity_rad_s: c.initial.velocity_rad_s,
@@ -160,15 +156,18 @@ impl Plant {
     /// Tension of one muscle: the nominal one, minus the braid friction if enabled.
     #[inline(always)]
     fn tension_n(&self, p_gauge_pa: f64, contraction: f64, contraction_rate_per_s: f64) -> f64 {
-        match &self.effects.muscle_hysteresis {
+        match self
+            .effects
+            .muscle_friction_n(p_gauge_pa, contraction_rate_per_s)
+        {
             None => self
                 .muscle
                 .tension_n(p_gauge_pa, contraction, contraction_rate_per_s),
-            Some(h) => self.muscle.tension_with_friction_n(
+            Some(friction_n) => self.muscle.tension_with_friction_n(
                 p_gauge_pa,
                 contraction,
                 contraction_rate_per_s,
-                h.force_n(p_gauge_pa, contraction_rate_per_s),
+                friction_n,
             ),
         }
     }
@@ -176,7 +175,7 @@ impl Plant {
     /// Whether the plant has a state beyond (beta, omega, p1, p2): the supply reservoir's
     /// pressure ([`effects::SupplyDrop`] with `model = "reservoir"`).
     pub fn has_supply_state(&self) -> bool {
-        self.effects.supply.has_state()
+        self.effects.supply().has_state()
     }
 
     /// The supply pressure (absolute) the inlet valves see at the start of a run: p_s0, also
@@ -209,7 +208,8 @@ impl Plant {
         let p = [x.p1_abs_pa, x.p2_abs_pa];
         let u_in = [u.u_in1, u.u_in2];
         let u_ex = [u.u_ex1, u.u_ex2];
-        let p_supply = match &self.effects.supply {
+        let supply = self.effects.supply();
+        let p_supply = match supply {
             Supply::Ideal => self.p_supply_abs_pa,
             Supply::Static {
                 resistance_pa_s_per_m3,
@@ -222,6 +222,7 @@ impl Plant {
             ),
             Supply::Reservoir { .. } => reservoir_abs_pa,
         };
+        let pressure_factor = self.effects.pressure_rate_factor();
         let mut q_supply = 0.0;
         let mut tension = [0.0; 2];
         let mut dp = [0.0; 2];
@@ -238,7 +239,7 @@ impl Plant {
             if u_ex[i] != 0.0 {
                 q -= u_ex[i] * self.valve.flow_m3_s(p[i], self.p_atm_pa);
             }
-            dp[i] = self.effects.pressure_exponent
+            dp[i] = pressure_factor
                 * pressure::pressure_rate_pa_s(
                     self.p_atm_pa,
                     p[i],
@@ -250,7 +251,7 @@ impl Plant {
         let torque = self.joint.muscle_torque_nm(tension)
             + self.effects.joint_torque_nm(x.angle_rad, x.velocity_rad_s)
             + self.joint.end_stop_torque_nm(x.angle_rad, x.velocity_rad_s);
-        let d_reservoir = match &self.effects.supply {
+        let d_reservoir = match supply {
             Supply::Reservoir {
                 tank_volume_m3,
                 feed,
@@ -282,7 +283,7 @@ impl Plant {
     /// The recorded channels for a state, with the sensor calibration effect if enabled
     /// (sensor lag needs the history: see [`Self::measure_series`]).
     pub fn measure(&self, x: &PlantState) -> Measurement {
-        self.calibrate(self.true_channels(x))
+        self.effects.calibrate(self.true_channels(x))
     }
 
     /// The physical values of the recorded channels (PLANT.md "Measured channels").
@@ -294,20 +295,6 @@ impl Plant {
             p2_kpa: (x.p2_abs_pa - self.p_atm_pa) / 1000.0,
             f1_n: f[0],
             f2_n: f[1],
-        }
-    }
-
-    /// The sensor calibration effect applied to channel values (identity without it).
-    pub fn calibrate(&self, m: Measurement) -> Measurement {
-        match &self.effects.sensor {
-            None => m,
-            Some(c) => Measurement {
-                angle_deg: c[0].apply(m.angle_deg),
-                p1_kpa: c[1].apply(m.p1_kpa),
-                p2_kpa: c[2].apply(m.p2_kpa),
-                f1_n: c[3].apply(m.f1_n),
-                f2_n: c[4].apply(m.f2_n),
-            },
         }
     }
 }

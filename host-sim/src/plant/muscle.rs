@@ -3,16 +3,47 @@
 
 use crate::plant::config::MuscleConfig;
 
+/// The Tondu-Lopez static force law with the end-effect factor k (PLANT.md "Muscle i", seed
+/// 002 eq. 1): F = pi r0^2 pg (a (1 - k chi)^2 - b), a = 3 / tan^2(alpha0),
+/// b = 1 / sin^2(alpha0), chi the contraction. The one implementation: the plant's muscles
+/// and the identification's Tondu baseline both evaluate it.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Muscle {
+pub struct TonduLaw {
     /// pi * r0^2.
     pub area_m2: f64,
     /// a = 3 / tan^2(alpha0).
-    pub tondu_a: f64,
+    pub a: f64,
     /// b = 1 / sin^2(alpha0).
-    pub tondu_b: f64,
+    pub b: f64,
     /// k.
     pub end_factor: f64,
+}
+
+impl TonduLaw {
+    /// The law of a braid of radius `radius_m` (r0) and angle `braid_angle_rad` (alpha0).
+    pub fn new(radius_m: f64, braid_angle_rad: f64, end_factor: f64) -> Self {
+        let tan = braid_angle_rad.tan();
+        let sin = braid_angle_rad.sin();
+        Self {
+            area_m2: std::f64::consts::PI * radius_m * radius_m,
+            a: 3.0 / (tan * tan),
+            b: 1.0 / (sin * sin),
+            end_factor,
+        }
+    }
+
+    /// The force before the clamp at 0 (negative where the muscle would have to push).
+    #[inline(always)]
+    pub fn force_unclamped_n(&self, p_gauge_pa: f64, contraction: f64) -> f64 {
+        let e = 1.0 - self.end_factor * contraction;
+        self.area_m2 * p_gauge_pa * (self.a * e * e - self.b)
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Muscle {
+    /// The static force law.
+    pub law: TonduLaw,
     /// gamma [m^2 s].
     pub damping_m2s: f64,
     /// l_n.
@@ -23,14 +54,8 @@ pub struct Muscle {
 
 impl Muscle {
     pub fn from_config(c: &MuscleConfig) -> Self {
-        let alpha0 = c.braid_angle_deg.to_radians();
-        let tan = alpha0.tan();
-        let sin = alpha0.sin();
         Self {
-            area_m2: std::f64::consts::PI * c.radius_m * c.radius_m,
-            tondu_a: 3.0 / (tan * tan),
-            tondu_b: 1.0 / (sin * sin),
-            end_factor: c.end_factor,
+            law: TonduLaw::new(c.radius_m, c.braid_angle_deg.to_radians(), c.end_factor),
             damping_m2s: c.damping_m2s,
             rest_length_m: c.rest_length_m,
             volume_poly_m3: c.volume_poly_m3,
@@ -40,8 +65,7 @@ impl Muscle {
     /// Static (spring) force Fs = max(0, pi r0^2 pg (a (1 - k chi)^2 - b)).
     #[inline(always)]
     pub fn static_force_n(&self, p_gauge_pa: f64, contraction: f64) -> f64 {
-        let e = 1.0 - self.end_factor * contraction;
-        (self.area_m2 * p_gauge_pa * (self.tondu_a * e * e - self.tondu_b)).max(0.0)
+        self.law.force_unclamped_n(p_gauge_pa, contraction).max(0.0)
     }
 
     /// Cable tension F = max(0, Fs - gamma pg dchi/dt): the chain cannot push.

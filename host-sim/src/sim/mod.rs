@@ -653,7 +653,7 @@ pub fn simulate_stamped(
             return Err(SimError::SamplePeriod(step));
         }
     }
-    let delay_s = plant.effects.valve_dead_time_s.unwrap_or(0.0);
+    let delay_s = plant.effects.valve_dead_time_s().unwrap_or(0.0);
     // The input in force at time t: the sample of the last stamp <= t - delay (all valves
     // closed before the first delayed edge, as the dead-time line starts).
     let closed = ValveInputs {

@@ -20,7 +20,7 @@
 //! A path keeps its memory across a change of plant parameters (the closed loop's load and
 //! supply events swap the plant, not the sensors or the valves).
 
-use crate::plant::effects::{DeadTimeLine, SensorLagFilter};
+use crate::plant::effects::{ChannelFilter, DeadTimeLine};
 use crate::plant::{Measurement, Plant, PlantState, ValveInputs};
 use crate::sim::SimError;
 
@@ -35,7 +35,7 @@ impl ActuatorPath {
     /// refusal). Refuses a dead time that is not a whole number of samples: a mode cannot
     /// delay a zero-order-held command by a fraction of its sample.
     pub fn new(plant: &Plant, dt_s: f64, mode: &'static str) -> Result<Self, SimError> {
-        let line = match plant.effects.valve_dead_time_s {
+        let line = match plant.effects.valve_dead_time_s() {
             None => None,
             Some(delay_s) => Some(DeadTimeLine::new(delay_s, dt_s).ok_or(SimError::DeadTime {
                 delay_s,
@@ -61,21 +61,24 @@ impl ActuatorPath {
     }
 }
 
-/// Plant state -> reported channels (sensor lag, then calibration, as the plant has them).
-#[derive(Debug, Clone)]
+/// Plant state -> reported channels (sensor dynamics, then calibration, as the plant has them).
 pub struct SensorPath {
-    lag: Option<SensorLagFilter>,
+    filters: Vec<Box<dyn ChannelFilter>>,
+}
+
+impl std::fmt::Debug for SensorPath {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SensorPath")
+            .field("filters", &self.filters.len())
+            .finish()
+    }
 }
 
 impl SensorPath {
-    /// The path of `plant` sampled every `dt_s`.
+    /// The path of `plant` sampled every `dt_s` (its sensor filters in registry order).
     pub fn new(plant: &Plant, dt_s: f64) -> Self {
         Self {
-            lag: plant
-                .effects
-                .sensor_lag
-                .as_ref()
-                .map(|l| SensorLagFilter::new(l, dt_s)),
+            filters: plant.effects.sensor_filters(dt_s),
         }
     }
 
@@ -84,19 +87,19 @@ impl SensorPath {
     /// made for: only its sensor effects must be the same).
     pub fn push(&mut self, plant: &Plant, x: &PlantState) -> Measurement {
         let m = plant.true_channels(x);
-        let m = match &mut self.lag {
-            None => m,
-            Some(f) => {
-                let y = f.push(m.to_array());
-                Measurement {
-                    angle_deg: y[0],
-                    p1_kpa: y[1],
-                    p2_kpa: y[2],
-                    f1_n: y[3],
-                    f2_n: y[4],
-                }
-            }
-        };
-        plant.calibrate(m)
+        if self.filters.is_empty() {
+            return plant.effects.calibrate(m);
+        }
+        let mut y = m.to_array();
+        for f in self.filters.iter_mut() {
+            y = f.push(y);
+        }
+        plant.effects.calibrate(Measurement {
+            angle_deg: y[0],
+            p1_kpa: y[1],
+            p2_kpa: y[2],
+            f1_n: y[3],
+            f2_n: y[4],
+        })
     }
 }

@@ -1,0 +1,92 @@
+//! Inertia mismatch: not an `[effects]` table (the inertia is `joint.inertia_kgm2`), but an
+//! effect the diagnosis can name: a load that makes the joint heavier or lighter than the
+//! nominal file says.
+//!
+//! Diagnosis: the torque-balance residual proportional to the angular acceleration.
+//! Truth: J = 0.03 kg m^2 (replaces the `[joint]` line).
+
+use serde::{Deserialize, Deserializer};
+
+use super::{Check, Effect, Hooks, Truth};
+use crate::diagnose::candidates::{clamp_to, Candidate, ParamSpec, Screening, Setup};
+use crate::diagnose::screen::{regress, Evidence, Scatter};
+use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
+
+/// Registry entry of the inertia mismatch. There is no `[effects.inertia]` table: giving
+/// one is an error that points at `joint.inertia_kgm2`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct InertiaMismatch;
+
+impl<'de> Deserialize<'de> for InertiaMismatch {
+    fn deserialize<D: Deserializer<'de>>(_d: D) -> Result<Self, D::Error> {
+        Err(serde::de::Error::custom(
+            "there is no [effects.inertia] table: the inertia is `joint.inertia_kgm2`",
+        ))
+    }
+}
+
+impl Hooks for InertiaMismatch {
+    fn parameters(&self) -> Option<Vec<(String, String)>> {
+        None
+    }}
+
+impl Effect for InertiaMismatch {
+    type Active = Self;
+    fn enabled(&self) -> bool {
+        false
+    }
+    fn validate(&self, _c: &Check) -> Result<(), ConfigError> {
+        Ok(())
+    }
+    fn activate(&self, _valve: &ValveConfig) -> Self {
+        Self
+    }
+    fn candidates() -> Vec<Box<dyn Candidate>> {
+        vec![Box::new(InertiaCandidate)]
+    }
+    fn truths() -> Vec<Truth> {
+        vec![Truth {
+            name: "inertia",
+            expected_id: "inertia",
+            toml: |_| "inertia_kgm2 = 0.03\n".into(),
+            replaces_key: Some("inertia_kgm2"),
+        }]
+    }
+}
+
+/// The joint inertia, refitted.
+pub struct InertiaCandidate;
+
+impl Candidate for InertiaCandidate {
+    fn id(&self) -> &'static str {
+        "inertia"
+    }
+    fn label(&self) -> &'static str {
+        "inertia (load) mismatch"
+    }
+    fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
+        vec![ParamSpec::new("inertia_kgm2", 1e-3, 10.0, 0.01)]
+    }
+    fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
+        let (c, r2) = regress(&ev.torque_residual_nm, &[&ev.alpha_rad_s2]);
+        Screening {
+            score: r2,
+            initial: clamp_to(&self.params(s), vec![ev.inertia_kgm2 - c[0]]),
+            note: format!(
+                "the joint torque balance residual is proportional to the angular acceleration (R^2 {r2:.2})"
+            ),
+            scatter: Some(Scatter::new(
+                "angular acceleration [rad/s^2]",
+                "torque balance residual [N m]",
+                &ev.alpha_rad_s2,
+                &ev.torque_residual_nm,
+            )),
+        }
+    }
+    fn apply(&self, cfg: &mut PlantConfig, p: &[f64], _s: &Setup) {
+        cfg.joint.inertia_kgm2 = p[0];
+    }
+    fn describe(&self, p: &[f64], _s: &Setup) -> String {
+        format!("a joint inertia of {:.4} kg m^2", p[0])
+    }
+}

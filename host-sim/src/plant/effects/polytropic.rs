@@ -1,0 +1,92 @@
+//! `[effects.polytropic]`: polytropic instead of isothermal chamber process (seed 004 eq. 3
+//! with the standard flow at the reference temperature): dp/dt = n (p_atm Q - p dV/dt) / V.
+//! `exponent = 1` is the nominal isothermal (Boyle-Mariotte) model, 1.4 adiabatic air.
+//!
+//! Diagnosis: the measured pressure rate is the nominal one scaled by a constant. Truth:
+//! n = 1.3.
+
+use serde::Deserialize;
+
+use super::{enabled_default, params, Check, Effect, Hooks, Truth};
+use crate::diagnose::candidates::{
+    clamp_to, pressure_scatter, regress_pressure, Candidate, ParamSpec, Screening, Setup,
+};
+use crate::diagnose::screen::Evidence;
+use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
+
+/// The `[effects.polytropic]` table.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Polytropic {
+    #[serde(default = "enabled_default")]
+    pub enabled: bool,
+    pub exponent: f64,
+}
+
+impl Hooks for Polytropic {
+    fn parameters(&self) -> Option<Vec<(String, String)>> {
+        // An exponent of 1 is the nominal isothermal law: nothing changes.
+        (self.exponent != 1.0).then(|| params(&[("exponent", self.exponent)]))
+    }
+    #[inline(always)]
+    fn pressure_rate_factor(&self) -> f64 {
+        self.exponent
+    }
+}
+
+impl Effect for Polytropic {
+    type Active = Self;
+    fn enabled(&self) -> bool {
+        self.enabled
+    }
+    fn validate(&self, c: &Check) -> Result<(), ConfigError> {
+        c.positive("exponent", self.exponent)
+    }
+    fn activate(&self, _valve: &ValveConfig) -> Self {
+        self.clone()
+    }
+    fn candidates() -> Vec<Box<dyn Candidate>> {
+        vec![Box::new(PolytropicCandidate)]
+    }
+    fn truths() -> Vec<Truth> {
+        vec![Truth::new("polytropic", "polytropic", |_| "[effects.polytropic]\nexponent = 1.3\n".into())]
+    }
+}
+
+/// A constant polytropic exponent.
+pub struct PolytropicCandidate;
+
+impl Candidate for PolytropicCandidate {
+    fn id(&self) -> &'static str {
+        "polytropic"
+    }
+    fn label(&self) -> &'static str {
+        "polytropic (non-isothermal) chamber process"
+    }
+    fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
+        vec![ParamSpec::new("exponent", 0.5, 2.0, 1.0)]
+    }
+    fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
+        let (c, r2) = regress_pressure(ev, &ev.nominal_dp);
+        Screening {
+            score: r2,
+            initial: clamp_to(&self.params(s), vec![1.0 + c]),
+            note: format!(
+                "the measured pressure rate is the nominal (isothermal) rate scaled by a constant (R^2 {r2:.2})"
+            ),
+            scatter: pressure_scatter(ev, &ev.nominal_dp, "nominal pressure rate dp/dt [Pa/s]"),
+        }
+    }
+    fn apply(&self, cfg: &mut PlantConfig, p: &[f64], _s: &Setup) {
+        cfg.effects.polytropic = Some(Polytropic {
+            enabled: true,
+            exponent: p[0],
+        });
+    }
+    fn describe(&self, p: &[f64], _s: &Setup) -> String {
+        format!(
+            "a polytropic chamber process with exponent {:.3} instead of isothermal (1)",
+            p[0]
+        )
+    }
+}

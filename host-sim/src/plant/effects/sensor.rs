@@ -1,0 +1,227 @@
+//! `[effects.sensor]`: offset and gain of each measured channel, one optional sub-table per
+//! channel, e.g. `[effects.sensor.angle_deg]` `offset = 0.2` `gain = 1.01`:
+//! reported = gain * true + offset (channel units). It changes what the sensors report, not
+//! the plant.
+//!
+//! Diagnosis (candidate `sensor_offset`): a constant share of each channel's residual.
+//! Truth: angle +1.5 deg, p1 +8 kPa, p2 -6 kPa.
+
+use serde::Deserialize;
+
+use super::{enabled_default, Check, Effect, Hooks, Truth};
+use crate::diagnose::candidates::{clamp_to, Candidate, ParamSpec, Screening, Setup};
+use crate::diagnose::screen::Evidence;
+use crate::io::recording::Channel;
+use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
+use crate::plant::Measurement;
+
+/// Offset and gain of one measured channel: reported = gain * true + offset (channel units).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChannelCalibration {
+    #[serde(default)]
+    pub offset: f64,
+    #[serde(default = "unit_gain")]
+    pub gain: f64,
+}
+
+fn unit_gain() -> f64 {
+    1.0
+}
+
+impl ChannelCalibration {
+    pub const IDENTITY: Self = Self {
+        offset: 0.0,
+        gain: 1.0,
+    };
+    #[inline]
+    pub fn apply(&self, v: f64) -> f64 {
+        self.gain * v + self.offset
+    }
+}
+
+/// The `[effects.sensor]` table.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorCalibration {
+    #[serde(default = "enabled_default")]
+    pub enabled: bool,
+    pub angle_deg: Option<ChannelCalibration>,
+    pub p1_kpa: Option<ChannelCalibration>,
+    pub p2_kpa: Option<ChannelCalibration>,
+    pub f1_n: Option<ChannelCalibration>,
+    pub f2_n: Option<ChannelCalibration>,
+}
+
+/// Calibrations of angle_deg, p1_kpa, p2_kpa, f1_n, f2_n (identity when absent): the
+/// run-time form of [`SensorCalibration`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Calibrations(pub [ChannelCalibration; 5]);
+
+impl Hooks for Calibrations {
+    fn parameters(&self) -> Option<Vec<(String, String)>> {
+        // Identity calibrations change nothing and are not listed.
+        let names = ["angle_deg", "p1_kpa", "p2_kpa", "f1_n", "f2_n"];
+        let mut p = Vec::new();
+        for (name, c) in names.iter().zip(&self.0) {
+            if c.offset != 0.0 {
+                p.push((format!("{name}.offset"), format!("{}", c.offset)));
+            }
+            if c.gain != 1.0 {
+                p.push((format!("{name}.gain"), format!("{}", c.gain)));
+            }
+        }
+        (!p.is_empty()).then_some(p)
+    }
+    fn calibrate(&self, m: Measurement) -> Measurement {
+        let c = &self.0;
+        Measurement {
+            angle_deg: c[0].apply(m.angle_deg),
+            p1_kpa: c[1].apply(m.p1_kpa),
+            p2_kpa: c[2].apply(m.p2_kpa),
+            f1_n: c[3].apply(m.f1_n),
+            f2_n: c[4].apply(m.f2_n),
+        }
+    }
+}
+
+impl Effect for SensorCalibration {
+    type Active = Calibrations;
+    fn enabled(&self) -> bool {
+        self.enabled
+    }
+    fn validate(&self, c: &Check) -> Result<(), ConfigError> {
+        for (name, cal) in [
+            ("angle_deg", self.angle_deg),
+            ("p1_kpa", self.p1_kpa),
+            ("p2_kpa", self.p2_kpa),
+            ("f1_n", self.f1_n),
+            ("f2_n", self.f2_n),
+        ] {
+            if let Some(cal) = cal {
+                c.finite(&format!("{name}.offset"), cal.offset)?;
+                c.finite(&format!("{name}.gain"), cal.gain)?;
+            }
+        }
+        Ok(())
+    }
+    fn activate(&self, _valve: &ValveConfig) -> Calibrations {
+        let id = ChannelCalibration::IDENTITY;
+        Calibrations([
+            self.angle_deg.unwrap_or(id),
+            self.p1_kpa.unwrap_or(id),
+            self.p2_kpa.unwrap_or(id),
+            self.f1_n.unwrap_or(id),
+            self.f2_n.unwrap_or(id),
+        ])
+    }
+    fn candidates() -> Vec<Box<dyn Candidate>> {
+        vec![Box::new(SensorOffsetCandidate)]
+    }
+    fn truths() -> Vec<Truth> {
+        vec![Truth::new("sensor_offset", "sensor_offset", |_| "[effects.sensor.angle_deg]\noffset = 1.5\n[effects.sensor.p1_kpa]\noffset = 8.0\n[effects.sensor.p2_kpa]\noffset = -6.0\n".into())]
+    }
+}
+
+/// A constant offset on every measured channel.
+pub struct SensorOffsetCandidate;
+
+const OFFSET_NAMES: [&str; 5] = [
+    "angle_offset_deg",
+    "p1_offset_kpa",
+    "p2_offset_kpa",
+    "f1_offset_n",
+    "f2_offset_n",
+];
+const OFFSET_SCALES: [f64; 5] = [0.5, 5.0, 5.0, 5.0, 5.0];
+
+impl Candidate for SensorOffsetCandidate {
+    fn id(&self) -> &'static str {
+        "sensor_offset"
+    }
+    fn label(&self) -> &'static str {
+        "sensor calibration offset"
+    }
+    fn params(&self, s: &Setup) -> Vec<ParamSpec> {
+        Channel::ALL
+            .iter()
+            .filter(|c| s.has(**c))
+            .map(|c| {
+                let sc = OFFSET_SCALES[c.index()];
+                ParamSpec::new(OFFSET_NAMES[c.index()], -1e3 * sc, 1e3 * sc, sc)
+            })
+            .collect()
+    }
+    fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
+        let mut init = Vec::new();
+        let mut explained = 0.0;
+        let mut total = 0.0;
+        for c in Channel::ALL {
+            if let Some(r) = &ev.residual[c.index()] {
+                let n = r.len() as f64;
+                let mean = r.iter().sum::<f64>() / n;
+                let ss: f64 = r.iter().map(|v| v * v).sum();
+                let w = 1.0 / ev.spread[c.index()].powi(2);
+                explained += w * mean * mean * n;
+                total += w * ss;
+                init.push(mean);
+            }
+        }
+        let score = if total > 0.0 { explained / total } else { 0.0 };
+        Screening {
+            score,
+            initial: clamp_to(&self.params(s), init),
+            note: format!(
+                "a constant share of the residual ({:.0} % of its energy) is a fixed offset",
+                100.0 * score
+            ),
+            scatter: None,
+        }
+    }
+    fn apply(&self, cfg: &mut PlantConfig, p: &[f64], s: &Setup) {
+        // The offsets are fitted; the gains of a calibration the plant file already has stay.
+        let mut cal =
+            cfg.effects
+                .sensor
+                .clone()
+                .filter(|c| c.enabled)
+                .unwrap_or(SensorCalibration {
+                    enabled: true,
+                    angle_deg: None,
+                    p1_kpa: None,
+                    p2_kpa: None,
+                    f1_n: None,
+                    f2_n: None,
+                });
+        let mut it = p.iter();
+        for c in Channel::ALL {
+            if !s.has(c) {
+                continue;
+            }
+            let slot = match c {
+                Channel::AngleDeg => &mut cal.angle_deg,
+                Channel::P1Kpa => &mut cal.p1_kpa,
+                Channel::P2Kpa => &mut cal.p2_kpa,
+                Channel::F1N => &mut cal.f1_n,
+                Channel::F2N => &mut cal.f2_n,
+            };
+            *slot = Some(ChannelCalibration {
+                offset: *it.next().unwrap_or(&0.0),
+                gain: slot.map_or(1.0, |k| k.gain),
+            });
+        }
+        cfg.effects.sensor = Some(cal);
+    }
+    fn changes_dynamics(&self) -> bool {
+        false
+    }
+    fn describe(&self, p: &[f64], s: &Setup) -> String {
+        let parts: Vec<String> = self
+            .params(s)
+            .iter()
+            .zip(p)
+            .map(|(n, v)| format!("{} {:+.3}", n.name, v))
+            .collect();
+        format!("constant sensor offsets ({})", parts.join(", "))
+    }
+}

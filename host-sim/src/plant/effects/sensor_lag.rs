@@ -1,0 +1,236 @@
+//! `[effects.sensor_lag]`: first-order sensor dynamics per channel group, as the sensor's
+//! own sampled low-pass: y_k = y_{k-1} + a (x_k - y_{k-1}), a = 1 - exp(-dt / tau), started
+//! at the first sample. An absent time constant means no lag on that group. It changes what
+//! the sensors report, not the plant.
+//!
+//! Diagnosis: the shift that best aligns each measured channel with the nominal simulation
+//! (cross-correlation of the residuals). Truth: angle 15 ms, pressures 8 ms.
+
+use serde::Deserialize;
+
+use super::{enabled_default, ChannelFilter, Check, Effect, Hooks, Truth};
+use crate::diagnose::candidates::{clamp_to, Candidate, ParamSpec, Screening, Setup};
+use crate::diagnose::screen::Evidence;
+use crate::io::recording::Channel;
+use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
+
+/// The `[effects.sensor_lag]` table.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorLag {
+    #[serde(default = "enabled_default")]
+    pub enabled: bool,
+    /// angle_deg.
+    pub angle_time_constant_s: Option<f64>,
+    /// p1_kpa, p2_kpa.
+    pub pressure_time_constant_s: Option<f64>,
+    /// f1_n, f2_n.
+    pub force_time_constant_s: Option<f64>,
+}
+
+/// The running state of [`SensorLag`] for one sample period.
+#[derive(Debug, Clone)]
+pub struct SensorLagFilter {
+    /// Filter gains of angle, p1, p2, f1, f2 (1 = no lag).
+    gain: [f64; 5],
+    y: Option<[f64; 5]>,
+}
+
+impl SensorLagFilter {
+    pub fn new(lag: &SensorLag, dt_s: f64) -> Self {
+        let a = |tau: Option<f64>| match tau {
+            Some(t) if t > 0.0 => 1.0 - (-dt_s / t).exp(),
+            _ => 1.0,
+        };
+        let (ang, p, f) = (
+            a(lag.angle_time_constant_s),
+            a(lag.pressure_time_constant_s),
+            a(lag.force_time_constant_s),
+        );
+        Self {
+            gain: [ang, p, p, f, f],
+            y: None,
+        }
+    }
+}
+
+impl ChannelFilter for SensorLagFilter {
+    /// Feeds the undelayed channels of one sample (angle, p1, p2, f1, f2); returns the lagged ones.
+    fn push(&mut self, x: [f64; 5]) -> [f64; 5] {
+        let y = match self.y {
+            None => x,
+            Some(mut y) => {
+                for i in 0..5 {
+                    y[i] += self.gain[i] * (x[i] - y[i]);
+                }
+                y
+            }
+        };
+        self.y = Some(y);
+        y
+    }
+}
+
+impl Hooks for SensorLag {
+    fn parameters(&self) -> Option<Vec<(String, String)>> {
+        Some(
+            [
+                ("angle_time_constant_s", self.angle_time_constant_s),
+                ("pressure_time_constant_s", self.pressure_time_constant_s),
+                ("force_time_constant_s", self.force_time_constant_s),
+            ]
+            .into_iter()
+            .filter_map(|(k, v)| v.map(|v| (k.to_string(), format!("{v}"))))
+            .collect(),
+        )
+    }
+    fn sensor_filter(&self, dt_s: f64) -> Option<Box<dyn ChannelFilter>> {
+        Some(Box::new(SensorLagFilter::new(self, dt_s)))
+    }
+}
+
+impl Effect for SensorLag {
+    type Active = Self;
+    fn enabled(&self) -> bool {
+        self.enabled
+    }
+    fn validate(&self, c: &Check) -> Result<(), ConfigError> {
+        for (key, tau) in [
+            ("angle_time_constant_s", self.angle_time_constant_s),
+            ("pressure_time_constant_s", self.pressure_time_constant_s),
+            ("force_time_constant_s", self.force_time_constant_s),
+        ] {
+            if let Some(t) = tau {
+                c.non_negative(key, t)?;
+            }
+        }
+        Ok(())
+    }
+    fn activate(&self, _valve: &ValveConfig) -> Self {
+        self.clone()
+    }
+    fn candidates() -> Vec<Box<dyn Candidate>> {
+        vec![Box::new(SensorLagCandidate)]
+    }
+    fn truths() -> Vec<Truth> {
+        vec![Truth::new("sensor_lag", "sensor_lag", |_| "[effects.sensor_lag]\nangle_time_constant_s = 0.015\npressure_time_constant_s = 0.008\n".into())]
+    }
+}
+
+/// One time constant per measured channel group.
+pub struct SensorLagCandidate;
+
+impl SensorLagCandidate {
+    fn groups(s: &Setup) -> Vec<(&'static str, Channel)> {
+        let mut g = Vec::new();
+        if s.has(Channel::AngleDeg) {
+            g.push(("angle_time_constant_s", Channel::AngleDeg));
+        }
+        if s.has_pressure() {
+            g.push((
+                "pressure_time_constant_s",
+                if s.has(Channel::P1Kpa) {
+                    Channel::P1Kpa
+                } else {
+                    Channel::P2Kpa
+                },
+            ));
+        }
+        if s.has_force() {
+            g.push((
+                "force_time_constant_s",
+                if s.has(Channel::F1N) {
+                    Channel::F1N
+                } else {
+                    Channel::F2N
+                },
+            ));
+        }
+        g
+    }
+}
+
+impl Candidate for SensorLagCandidate {
+    fn id(&self) -> &'static str {
+        "sensor_lag"
+    }
+    fn label(&self) -> &'static str {
+        "sensor lag"
+    }
+    fn params(&self, s: &Setup) -> Vec<ParamSpec> {
+        Self::groups(s)
+            .into_iter()
+            .map(|(n, _)| ParamSpec::new(n, 0.0, 0.5, 0.005))
+            .collect()
+    }
+    fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
+        let groups = Self::groups(s);
+        let initial: Vec<f64> = groups
+            .iter()
+            .map(|(_, c)| ev.lag_samples[c.index()] as f64 * s.dt_s)
+            .collect();
+        let score = groups
+            .iter()
+            .map(|(_, c)| ev.lag_gain[c.index()])
+            .fold(0.0, f64::max);
+        let lagging: Vec<&str> = groups
+            .iter()
+            .filter(|(_, c)| ev.lag_samples[c.index()] > 0)
+            .map(|(_, c)| c.name())
+            .collect();
+        let most = groups
+            .iter()
+            .max_by(|a, b| ev.lag_gain[a.1.index()].total_cmp(&ev.lag_gain[b.1.index()]))
+            .map(|g| g.1);
+        Screening {
+            score,
+            initial: clamp_to(&self.params(s), initial),
+            note: if lagging.is_empty() {
+                "no measured channel lags the nominal simulation".into()
+            } else {
+                format!(
+                    "{} lag(s) the nominal simulation (cross-correlation of the residuals)",
+                    lagging.join(", ")
+                )
+            },
+            scatter: most.and_then(|c| ev.lag_scatter(c)),
+        }
+    }
+    fn apply(&self, cfg: &mut PlantConfig, p: &[f64], s: &Setup) {
+        let mut lag = SensorLag {
+            enabled: true,
+            angle_time_constant_s: None,
+            pressure_time_constant_s: None,
+            force_time_constant_s: None,
+        };
+        for ((name, _), v) in Self::groups(s).iter().zip(p) {
+            let v = Some(v.max(0.0));
+            match *name {
+                "angle_time_constant_s" => lag.angle_time_constant_s = v,
+                "pressure_time_constant_s" => lag.pressure_time_constant_s = v,
+                _ => lag.force_time_constant_s = v,
+            }
+        }
+        cfg.effects.sensor_lag = Some(lag);
+    }
+    fn changes_dynamics(&self) -> bool {
+        false
+    }
+    fn describe(&self, p: &[f64], s: &Setup) -> String {
+        let parts: Vec<String> = Self::groups(s)
+            .iter()
+            .zip(p)
+            .map(|((n, _), v)| {
+                format!(
+                    "{} {:.1} ms",
+                    n.trim_end_matches("_time_constant_s"),
+                    v * 1e3
+                )
+            })
+            .collect();
+        format!(
+            "first-order lag of the sensors ({}), the plant itself on time",
+            parts.join(", ")
+        )
+    }
+}
