@@ -106,7 +106,7 @@ impl SetpointProfile {
 
 /// The minimum-jerk blend of `u = t / duration` clamped to 0..1 (1 for a zero duration).
 fn min_jerk(t_s: f32, duration_s: f32) -> f32 {
-    if !(duration_s > 0.0) || t_s >= duration_s {
+    if duration_s.is_nan() || duration_s <= 0.0 || t_s >= duration_s {
         return 1.0;
     }
     let u = if t_s > 0.0 { t_s / duration_s } else { 0.0 };
