@@ -86,6 +86,27 @@ impl ResetCause {
     }
 }
 
+/// Words of the kept encoder count ([`encoder_words`]).
+pub const ENCODER_WORDS: usize = 2;
+const ENCODER_KEY: u32 = 0xA5A5_5A5A;
+
+/// The encoder count as two words for retained memory (the count, and its complement xor a
+/// key: zeroed or random memory does not pass as a count). Stored every tick, it carries the
+/// joint angle across a reset that is not a power-on (the encoder counter restarts at 0).
+pub const fn encoder_words(count: i32) -> [u32; ENCODER_WORDS] {
+    [count as u32, !(count as u32) ^ ENCODER_KEY]
+}
+
+/// The encoder count to restore at boot: the kept count after any reset but a power-on (the
+/// joint may have been moved while unpowered: the pose at power-on is the zero), None when
+/// the words are not a kept count.
+pub fn encoder_at_boot(words: [u32; ENCODER_WORDS], reset: ResetCause) -> Option<i32> {
+    if reset == ResetCause::PowerOn || words[1] != !words[0] ^ ENCODER_KEY {
+        return None;
+    }
+    Some(words[0] as i32)
+}
+
 /// The operator's reset request from a push button sampled once per tick: a request is made
 /// once, when the button has been held for `hold_ticks` consecutive ticks (a bounce or a
 /// brush does not re-arm the joint), and not again until it was released.
@@ -520,5 +541,34 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn the_encoder_count_survives_every_reset_but_power_on() {
+        for count in [0, 1, -1, 8000, -123_456, i32::MAX, i32::MIN] {
+            let w = encoder_words(count);
+            assert_eq!(encoder_at_boot(w, ResetCause::PowerOn), None);
+            for cause in [
+                ResetCause::BrownOut,
+                ResetCause::Watchdog,
+                ResetCause::Software,
+                ResetCause::Pin,
+                ResetCause::LowPower,
+                ResetCause::Unknown,
+            ] {
+                assert_eq!(encoder_at_boot(w, cause), Some(count));
+            }
+            // Any single-bit flip is refused.
+            for i in 0..ENCODER_WORDS {
+                for bit in 0..32 {
+                    let mut c = w;
+                    c[i] ^= 1 << bit;
+                    assert_eq!(encoder_at_boot(c, ResetCause::Watchdog), None);
+                }
+            }
+        }
+        // Zeroed or erased memory is not a count.
+        assert_eq!(encoder_at_boot([0, 0], ResetCause::Watchdog), None);
+        assert_eq!(encoder_at_boot([u32::MAX; 2], ResetCause::Watchdog), None);
     }
 }

@@ -151,8 +151,8 @@ mod app {
         watchdog::IndependentWatchdog,
     };
 
-    use pam_firmware::latch::{BootDecision, LatchRecord, PersistentLatch, ResetButton};
-    use pam_firmware::latch_bkpsram::{self, BackupSram};
+    use pam_firmware::latch::{self, BootDecision, LatchRecord, PersistentLatch, ResetButton};
+    use pam_firmware::latch_bkpsram::{self, BackupSram, EncoderKeep};
     use pam_firmware::safety::{FaultCode, FaultSet, SafeState};
     use pam_firmware::sensors::{Clock, PressureScaling, TickTimer};
     use pam_firmware::stream::{TickRecord, MISSING_COUNTS, RECORD_LEN};
@@ -222,6 +222,7 @@ mod app {
         valves: Valves,
         tick: ControlTick,
         latch: PersistentLatch<BackupSram>,
+        encoder_keep: EncoderKeep,
         button_pin: PA0<Input>,
         button: ResetButton,
         phase: Phase,
@@ -254,6 +255,7 @@ mod app {
         // 2. Reset cause and latch record (RCC_CSR and the backup SRAM; the HAL does not touch
         //    the reset flags).
         let (storage, reset) = latch_bkpsram::init();
+        let encoder_keep = storage.encoder_keep();
 
         // 3. Watchdog (LSI), before the clock tree: a hang in the PLL set-up resets.
         let mut watchdog = IndependentWatchdog::new(dp.IWDG);
@@ -300,6 +302,13 @@ mod app {
             ),
             &mut rcc,
         );
+        // After a reset that is not a power-on, the angle carries on from the count kept in
+        // the backup SRAM (the joint does not move in the milliseconds of a reset).
+        let kept = latch::encoder_at_boot(encoder_keep.read(), reset);
+        if let Some(c) = kept {
+            // SAFETY: TIM2's counter register, owned by `qei`, written once before it is read.
+            unsafe { (*pac::TIM2::ptr()).cnt().write(|w| w.bits(c as u32)) };
+        }
         // User button B1 (PA0, high when pressed; pull-down on the board and here).
         let button_pin = gpioa.pa0.into_pull_down_input();
 
@@ -345,6 +354,10 @@ mod app {
                 }
             }
             BootDecision::Safe(record) => {
+                match kept {
+                    Some(c) => defmt::info!("encoder count {=i32} kept across the reset", c),
+                    None => defmt::warn!("encoder zero is the pose at this reset"),
+                }
                 defmt::error!(
                     "boot after {} with latch {}: safe state until the reset button",
                     reset,
@@ -390,6 +403,7 @@ mod app {
                 valves,
                 tick,
                 latch,
+                encoder_keep,
                 button_pin,
                 button: ResetButton::new(TICK_HZ / 1000 * RESET_HOLD_MS),
                 phase,
@@ -428,7 +442,7 @@ mod app {
     }
 
     /// The control tick: once per sampling period, when the DMA has delivered both pressures.
-    #[task(binds = DMA2_STREAM0, priority = 2, local = [adc, spare, qei, scaling, clock, period, valves, tick, latch, button_pin, button, phase, watchdog, monitor, pins_forced, fault_reported, ticks])]
+    #[task(binds = DMA2_STREAM0, priority = 2, local = [adc, spare, qei, scaling, clock, period, valves, tick, latch, encoder_keep, button_pin, button, phase, watchdog, monitor, pins_forced, fault_reported, ticks])]
     fn control_tick(cx: control_tick::Context) {
         let mut l = cx.local;
         let start = DWT::cycle_count();
@@ -447,6 +461,7 @@ mod app {
             None => [None; 2],
         };
         let encoder_counts = l.qei.count() as i32;
+        l.encoder_keep.write(latch::encoder_words(encoder_counts));
         // Keep the period measurement current in every phase.
         let dt_s = l.period.dt_s(l.clock);
 
