@@ -14,6 +14,10 @@ use std::{env, fs, path::PathBuf};
 #[path = "src/fixed_point/prescale.rs"]
 mod prescale;
 
+// The board's set-point scenario: parsing shared with tests/board_profile.rs.
+#[path = "build/board_profile.rs"]
+mod board_profile_spec;
+
 #[derive(serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 struct ForceFile {
@@ -320,11 +324,12 @@ fn sensor_trace(path: &str) {
 
 /// The board's compiled-in set-point (`OUT_DIR/board_profile.rs`, included by
 /// `src/bin/board.rs`): the `[setpoint]` of the scenario TOML named by `PAM_BOARD_SCENARIO`
-/// (a path relative to the crate root), else a hold at 0 rad. Kinds `step`, `ramp`, `sine`;
-/// `random` is refused (its levels come from host-sim's random generator). A bad file stops
-/// the build with the file, the key and the reason.
+/// (a path relative to the crate root), else a hold at 0 rad. Parsing and validation:
+/// `build/board_profile.rs` (shared with `tests/board_profile.rs`). A bad file stops the
+/// build with the file, the key and the reason.
 fn board_profile() {
     println!("cargo:rerun-if-env-changed=PAM_BOARD_SCENARIO");
+    println!("cargo:rerun-if-changed=build/board_profile.rs");
     let (name, expr) = match env::var("PAM_BOARD_SCENARIO") {
         Err(_) => (
             "none (hold 0 rad)".to_string(),
@@ -334,83 +339,9 @@ fn board_profile() {
             println!("cargo:rerun-if-changed={path}");
             let text = fs::read_to_string(&path)
                 .unwrap_or_else(|e| panic!("PAM_BOARD_SCENARIO={path}: cannot read: {e}"));
-            let doc: toml::Table = text
-                .parse()
-                .unwrap_or_else(|e| panic!("{path}: not TOML: {e}"));
-            let sp = doc
-                .get("setpoint")
-                .and_then(|v| v.as_table())
-                .unwrap_or_else(|| panic!("{path}: no [setpoint] table"));
-            let num = |key: &str, default: Option<f64>| -> f64 {
-                match sp.get(key) {
-                    Some(v) => {
-                        let x = v
-                            .as_float()
-                            .or_else(|| v.as_integer().map(|i| i as f64))
-                            .unwrap_or_else(|| panic!("{path}: [setpoint] {key}: not a number"));
-                        assert!(
-                            (x as f32).is_finite(),
-                            "{path}: [setpoint] {key}: not a finite f32"
-                        );
-                        x
-                    }
-                    None => default.unwrap_or_else(|| panic!("{path}: [setpoint] {key}: missing")),
-                }
-            };
-            let kind = sp
-                .get("kind")
-                .and_then(|v| v.as_str())
-                .unwrap_or_else(|| panic!("{path}: [setpoint] kind: missing or not a string"));
-            let known: &[&str] = match kind {
-                "step" => &["kind", "initial_rad", "final_rad", "at_s", "transition_s"],
-                "ramp" => &["kind", "from_rad", "to_rad", "start_s", "end_s"],
-                "sine" => &["kind", "offset_rad", "amplitude_rad", "freq_hz", "start_s"],
-                other => panic!(
-                    "{path}: [setpoint] kind = \"{other}\": the board plays step, ramp or sine"
-                ),
-            };
-            for k in sp.keys() {
-                assert!(
-                    known.contains(&k.as_str()),
-                    "{path}: [setpoint] {k}: unknown key for kind = \"{kind}\" (allowed: {known:?})"
-                );
-            }
-            let expr = match kind {
-                "step" => {
-                    let tr = num("transition_s", Some(0.0));
-                    assert!(tr >= 0.0, "{path}: [setpoint] transition_s: must be >= 0");
-                    format!(
-                        "SetpointProfile::Step {{ initial_rad: {:?}, final_rad: {:?}, at_s: {:?}, transition_s: {:?} }}",
-                        num("initial_rad", None) as f32,
-                        num("final_rad", None) as f32,
-                        num("at_s", None) as f32,
-                        tr as f32
-                    )
-                }
-                "ramp" => {
-                    let (a, b) = (num("start_s", None), num("end_s", None));
-                    assert!(b > a, "{path}: [setpoint] end_s: must be > start_s");
-                    format!(
-                        "SetpointProfile::Ramp {{ from_rad: {:?}, to_rad: {:?}, start_s: {:?}, end_s: {:?} }}",
-                        num("from_rad", None) as f32,
-                        num("to_rad", None) as f32,
-                        a as f32,
-                        b as f32
-                    )
-                }
-                _ => {
-                    let f = num("freq_hz", None);
-                    assert!(f > 0.0, "{path}: [setpoint] freq_hz: must be > 0");
-                    format!(
-                        "SetpointProfile::Sine {{ offset_rad: {:?}, amplitude_rad: {:?}, freq_hz: {:?}, start_s: {:?} }}",
-                        num("offset_rad", None) as f32,
-                        num("amplitude_rad", None) as f32,
-                        f as f32,
-                        num("start_s", Some(0.0)) as f32
-                    )
-                }
-            };
-            (path, expr)
+            let spec =
+                board_profile_spec::parse_setpoint(&path, &text).unwrap_or_else(|e| panic!("{e}"));
+            (path, spec.rust_expr())
         }
     };
     let src = format!(
