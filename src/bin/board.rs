@@ -205,8 +205,9 @@ mod app {
 
     /// Tick period [us] (exact for the rates that divide 1 MHz; the stream's time stamps).
     const US_PER_TICK: u32 = 1_000_000 / TICK_HZ;
-    const CAL_VENT_TICKS: u32 = TICK_HZ / 1000 * CAL_VENT_MS;
-    const CAL_TICKS: u32 = CAL_VENT_TICKS + TICK_HZ / 1000 * CAL_AVG_MS;
+    // Milliseconds to ticks at any allowed rate (200..=10000 Hz: no overflow, no zero).
+    const CAL_VENT_TICKS: u32 = TICK_HZ * CAL_VENT_MS / 1000;
+    const CAL_TICKS: u32 = CAL_VENT_TICKS + TICK_HZ * CAL_AVG_MS / 1000;
 
     #[shared]
     struct Shared {}
@@ -405,7 +406,7 @@ mod app {
                 latch,
                 encoder_keep,
                 button_pin,
-                button: ResetButton::new(TICK_HZ / 1000 * RESET_HOLD_MS),
+                button: ResetButton::new(TICK_HZ * RESET_HOLD_MS / 1000),
                 phase,
                 watchdog,
                 monitor,
