@@ -58,6 +58,86 @@ pub enum ResetCause {
     Unknown,
 }
 
+impl ResetCause {
+    /// The reset cause from the STM32F4 `RCC_CSR` flags (RM0090 section 7.3.21: bit 31
+    /// LPWRRSTF, 30 WWDGRSTF, 29 IWDGRSTF, 28 SFTRSTF, 27 PORRSTF, 26 PINRSTF, 25 BORRSTF).
+    ///
+    /// A power-on sets POR and BOR (and PIN: every reset pulses the pin), a brown-out sets BOR
+    /// and PIN, every other source sets its own flag and PIN: decided in the order power-on,
+    /// brown-out, watchdog, software, low-power, pin. No flag (flags cleared and never set
+    /// again) is `Unknown`.
+    pub fn from_rcc_csr(csr: u32) -> ResetCause {
+        let bit = |n: u32| csr >> n & 1 != 0;
+        if bit(27) {
+            ResetCause::PowerOn
+        } else if bit(25) {
+            ResetCause::BrownOut
+        } else if bit(29) || bit(30) {
+            ResetCause::Watchdog
+        } else if bit(28) {
+            ResetCause::Software
+        } else if bit(31) {
+            ResetCause::LowPower
+        } else if bit(26) {
+            ResetCause::Pin
+        } else {
+            ResetCause::Unknown
+        }
+    }
+}
+
+/// Words of the kept encoder count ([`encoder_words`]).
+pub const ENCODER_WORDS: usize = 2;
+const ENCODER_KEY: u32 = 0xA5A5_5A5A;
+
+/// The encoder count as two words for retained memory (the count, and its complement xor a
+/// key: zeroed or random memory does not pass as a count). Stored every tick, it carries the
+/// joint angle across a reset that is not a power-on (the encoder counter restarts at 0).
+pub const fn encoder_words(count: i32) -> [u32; ENCODER_WORDS] {
+    [count as u32, !(count as u32) ^ ENCODER_KEY]
+}
+
+/// The encoder count to restore at boot: the kept count after any reset but a power-on (the
+/// joint may have been moved while unpowered: the pose at power-on is the zero), None when
+/// the words are not a kept count.
+pub fn encoder_at_boot(words: [u32; ENCODER_WORDS], reset: ResetCause) -> Option<i32> {
+    if reset == ResetCause::PowerOn || words[1] != !words[0] ^ ENCODER_KEY {
+        return None;
+    }
+    Some(words[0] as i32)
+}
+
+/// The operator's reset request from a push button sampled once per tick: a request is made
+/// once, when the button has been held for `hold_ticks` consecutive ticks (a bounce or a
+/// brush does not re-arm the joint), and not again until it was released.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ResetButton {
+    hold_ticks: u32,
+    held: u32,
+}
+
+impl ResetButton {
+    /// A button that must be held `hold_ticks` ticks (at least 1).
+    pub const fn new(hold_ticks: u32) -> Self {
+        ResetButton {
+            hold_ticks: if hold_ticks == 0 { 1 } else { hold_ticks },
+            held: 0,
+        }
+    }
+
+    /// One tick's button level; true in the tick the request is made.
+    pub fn update(&mut self, pressed: bool) -> bool {
+        if !pressed {
+            self.held = 0;
+            return false;
+        }
+        if self.held <= self.hold_ticks {
+            self.held += 1;
+        }
+        self.held == self.hold_ticks
+    }
+}
+
 /// The latch content.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -343,5 +423,152 @@ mod tests {
             ResetCause::Software,
         );
         assert!(matches!(d, BootDecision::Safe(_)));
+    }
+
+    #[test]
+    fn reset_cause_from_the_rcc_flags() {
+        const POR: u32 = 1 << 27;
+        const BOR: u32 = 1 << 25;
+        const PIN: u32 = 1 << 26;
+        // What the chip sets for each source (every reset pulses the pin).
+        assert_eq!(
+            ResetCause::from_rcc_csr(POR | BOR | PIN),
+            ResetCause::PowerOn
+        );
+        assert_eq!(ResetCause::from_rcc_csr(BOR | PIN), ResetCause::BrownOut);
+        assert_eq!(
+            ResetCause::from_rcc_csr(1 << 29 | PIN),
+            ResetCause::Watchdog
+        );
+        assert_eq!(
+            ResetCause::from_rcc_csr(1 << 30 | PIN),
+            ResetCause::Watchdog
+        );
+        assert_eq!(
+            ResetCause::from_rcc_csr(1 << 28 | PIN),
+            ResetCause::Software
+        );
+        assert_eq!(
+            ResetCause::from_rcc_csr(1 << 31 | PIN),
+            ResetCause::LowPower
+        );
+        assert_eq!(ResetCause::from_rcc_csr(PIN), ResetCause::Pin);
+        assert_eq!(ResetCause::from_rcc_csr(0), ResetCause::Unknown);
+        // RMVF (bit 24) and the reserved bits do not count.
+        assert_eq!(
+            ResetCause::from_rcc_csr(1 << 24 | 0xff),
+            ResetCause::Unknown
+        );
+    }
+
+    #[test]
+    fn reset_button_requests_once_per_press_after_the_hold_time() {
+        let mut b = ResetButton::new(3);
+        // Bounces shorter than the hold time never request.
+        for level in [true, true, false, true, false, true, true, false] {
+            assert!(!b.update(level));
+        }
+        // Held: the third tick requests, then nothing until released.
+        assert!(!b.update(true));
+        assert!(!b.update(true));
+        assert!(b.update(true));
+        for _ in 0..10 {
+            assert!(!b.update(true));
+        }
+        assert!(!b.update(false));
+        assert!(!b.update(true));
+        assert!(!b.update(true));
+        assert!(b.update(true));
+        // A zero hold time is one tick.
+        let mut b = ResetButton::new(0);
+        assert!(b.update(true));
+        assert!(!b.update(true));
+    }
+
+    /// The boot table of the module documentation, every row, through the storage (the
+    /// path the board takes): encode, decode, decide.
+    #[test]
+    fn boot_table_through_the_storage() {
+        let faulted = LatchRecord {
+            cause: Some(FaultCode::InletStuckOpen1),
+            seen: FaultSet::of(FaultCode::InletStuckOpen1),
+            vented: [true, false],
+        };
+        let causes = [
+            ResetCause::PowerOn,
+            ResetCause::BrownOut,
+            ResetCause::Watchdog,
+            ResetCause::Software,
+            ResetCause::Pin,
+            ResetCause::LowPower,
+            ResetCause::Unknown,
+        ];
+        let stores: [(&str, [u32; RECORD_WORDS]); 4] = [
+            ("clean", LatchRecord::CLEAN.encode()),
+            ("fault", faulted.encode()),
+            ("missing", [0; RECORD_WORDS]),
+            ("corrupt", {
+                let mut w = LatchRecord::CLEAN.encode();
+                w[2] ^= 1;
+                w
+            }),
+        ];
+        for cause in causes {
+            for (name, words) in stores {
+                let (latch, d) = PersistentLatch::boot(RamStorage(words), cause);
+                let armed = d == BootDecision::Arm;
+                assert_eq!(
+                    armed,
+                    cause == ResetCause::PowerOn && name == "clean",
+                    "{cause:?} with a {name} record"
+                );
+                match d {
+                    BootDecision::Arm => assert_eq!(latch.stored(), LatchRecord::CLEAN),
+                    BootDecision::Safe(r) => {
+                        // The stored fault stays the cause; otherwise ResetLatched.
+                        let want = if name == "fault" {
+                            FaultCode::InletStuckOpen1
+                        } else {
+                            FaultCode::ResetLatched
+                        };
+                        assert_eq!(r.cause, Some(want), "{cause:?} with a {name} record");
+                        if name == "fault" {
+                            assert_eq!(r.vented, [true, false]);
+                        }
+                        // The safe boot is stored at once.
+                        assert_eq!(LatchRecord::decode(&latch.release().0), Some(r));
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_encoder_count_survives_every_reset_but_power_on() {
+        for count in [0, 1, -1, 8000, -123_456, i32::MAX, i32::MIN] {
+            let w = encoder_words(count);
+            assert_eq!(encoder_at_boot(w, ResetCause::PowerOn), None);
+            for cause in [
+                ResetCause::BrownOut,
+                ResetCause::Watchdog,
+                ResetCause::Software,
+                ResetCause::Pin,
+                ResetCause::LowPower,
+                ResetCause::Unknown,
+            ] {
+                assert_eq!(encoder_at_boot(w, cause), Some(count));
+            }
+            // Any single-bit flip is refused.
+            for i in 0..ENCODER_WORDS {
+                for bit in 0..32 {
+                    let mut c = w;
+                    c[i] ^= 1 << bit;
+                    assert_eq!(encoder_at_boot(c, ResetCause::Watchdog), None);
+                }
+            }
+        }
+        // Zeroed or erased memory is not a count.
+        assert_eq!(encoder_at_boot([0, 0], ResetCause::Watchdog), None);
+        assert_eq!(encoder_at_boot([u32::MAX; 2], ResetCause::Watchdog), None);
     }
 }

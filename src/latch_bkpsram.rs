@@ -22,7 +22,7 @@
 
 use stm32f4xx_hal::pac;
 
-use crate::latch::{LatchStorage, ResetCause, RECORD_WORDS};
+use crate::latch::{LatchStorage, ResetCause, ENCODER_WORDS, RECORD_WORDS};
 
 /// Base address of the backup SRAM (RM0090 section 2.3, memory map: 0x4002_4000, 4 KiB).
 const BKPSRAM_BASE: usize = 0x4002_4000;
@@ -41,24 +41,7 @@ pub fn init() -> (BackupSram, ResetCause) {
     // other code touches.
     let rcc = unsafe { &*pac::RCC::ptr() };
     let pwr = unsafe { &*pac::PWR::ptr() };
-    let csr = rcc.csr().read();
-    // A power-on sets POR and BOR; every reset pulses the reset pin (PADRSTF): decide in
-    // this order.
-    let reset = if csr.porrstf().bit_is_set() {
-        ResetCause::PowerOn
-    } else if csr.borrstf().bit_is_set() {
-        ResetCause::BrownOut
-    } else if csr.wdgrstf().bit_is_set() || csr.wwdgrstf().bit_is_set() {
-        ResetCause::Watchdog
-    } else if csr.sftrstf().bit_is_set() {
-        ResetCause::Software
-    } else if csr.lpwrrstf().bit_is_set() {
-        ResetCause::LowPower
-    } else if csr.padrstf().bit_is_set() {
-        ResetCause::Pin
-    } else {
-        ResetCause::Unknown
-    };
+    let reset = ResetCause::from_rcc_csr(rcc.csr().read().bits());
     rcc.csr().modify(|_, w| w.rmvf().set_bit());
     rcc.apb1enr().modify(|_, w| w.pwren().set_bit());
     pwr.cr().modify(|_, w| w.dbp().set_bit());
@@ -86,6 +69,43 @@ impl LatchStorage for BackupSram {
         for (i, x) in words.iter().enumerate() {
             // SAFETY: as in `read`; backup-domain write access was enabled by `init`.
             unsafe { core::ptr::write_volatile((BKPSRAM_BASE as *mut u32).add(i), *x) };
+        }
+    }
+}
+
+/// The kept encoder count (`latch::encoder_words`), in the backup SRAM words right after the
+/// latch record.
+pub struct EncoderKeep {
+    _private: (),
+}
+
+impl BackupSram {
+    /// The encoder words' handle (the backup SRAM is enabled: `init` made `self`).
+    pub fn encoder_keep(&self) -> EncoderKeep {
+        EncoderKeep { _private: () }
+    }
+}
+
+impl EncoderKeep {
+    const BASE: *mut u32 = (BKPSRAM_BASE + 4 * RECORD_WORDS) as *mut u32;
+
+    /// The stored words.
+    pub fn read(&self) -> [u32; ENCODER_WORDS] {
+        let mut w = [0u32; ENCODER_WORDS];
+        for (i, x) in w.iter_mut().enumerate() {
+            // SAFETY: word-aligned addresses inside the enabled 4 KiB backup SRAM, after the
+            // record's words.
+            *x = unsafe { core::ptr::read_volatile(Self::BASE.add(i)) };
+        }
+        w
+    }
+
+    /// Stores the words (two volatile stores: call every tick).
+    #[inline]
+    pub fn write(&mut self, words: [u32; ENCODER_WORDS]) {
+        for (i, x) in words.iter().enumerate() {
+            // SAFETY: as in `read`; backup-domain write access was enabled by `init`.
+            unsafe { core::ptr::write_volatile(Self::BASE.add(i), *x) };
         }
     }
 }

@@ -16,6 +16,7 @@
 //! - [`sensors`]: sensor traits, per-channel validation, velocity estimate.
 //! - [`control`]: pure control laws of the cascade (position -> torque -> pressure).
 //! - [`feedforward`]: trajectory feed-forward of the cascade (set-point rate, inertia).
+//! - [`profile`]: angle set-point profiles played by the firmware (the board's scenario).
 //! - [`pid`]: model-free PD / PID from the angle to the activation dp (comparison baseline).
 //! - [`safety`]: fault codes, safe valve state, latching state machine.
 //! - [`residual`]: model-based valve and supply supervision (pressure residual).
@@ -46,6 +47,7 @@ pub mod latch;
 pub mod latch_bkpsram;
 pub mod log;
 pub mod pid;
+pub mod profile;
 pub mod residual;
 pub mod safety;
 pub mod sensors;

@@ -1,36 +1,54 @@
 //! The firmware on a real board: STM32F407G-DISC1 (STM32F407 Discovery), `cargo flash`, on
 //! RTIC 2 (hardware tasks; see docs/firmware.md for why RTIC and not embassy).
 //!
-//! - Sampling: TIM3 runs at `PAM_TICK_HZ` (compile-time environment variable, default
-//!   1000 Hz); its update event (TRGO) triggers ADC1, which converts both pressure transducers
-//!   in one scan (IN11 / IN12 on PC1 / PC2) and DMA2 stream 0 writes them to memory. No CPU
-//!   time is spent waiting for a conversion.
-//! - Control tick: the RTIC hardware task bound to the DMA transfer-complete interrupt, so it
-//!   runs once per TIM3 period with fresh samples: swaps the DMA buffer, reads the joint
-//!   encoder (TIM2 in encoder mode on PA15 / PB3, 32-bit), runs the control tick with the
-//!   measured period (DWT cycle counter: a late tick latches `FaultCode::Watchdog`) and sets
-//!   the four valve duties on TIM4 PWM channels 1..4 (PD12..PD15, `ProportionalValves`).
-//! - Deadline: the tick must end within `DEADLINE_PERCENT` of its period and before the next
-//!   samples arrive. Only a tick that met its deadline feeds the independent watchdog (IWDG,
-//!   10 ms); each miss is counted in `PAM_TICK_OVERRUNS` (exported symbol, readable with a
-//!   probe) and reported in the once-a-second status line. Persistent misses stop feeding:
-//!   the MCU resets; reset leaves every GPIO a floating input and the valve drivers'
-//!   pull-downs close all valves (the safe state). A boot after a watchdog reset stays in
-//!   that safe state (valves off, controller not run) until the next power-on / reset.
-//! - HardFault (a panic ends there too, after logging its location): valves off at register
-//!   level, then wait for the watchdog.
-//! - defmt over RTT (defmt-rtt), read by `probe-rs run` (scripts/flash-run.sh).
+//! Start-up, in this order (docs/firmware.md, "Board start-up"), still on the 16 MHz HSI:
+//! 1. Valve pins driven to the configured safe state (`SAFE_STATE`) as plain outputs.
+//! 2. Reset cause and the fault-latch record from the backup SRAM (`latch_bkpsram`).
+//! 3. Independent watchdog started (10 ms, LSI: independent of the clock tree).
+//! 4. Clock tree: 8 MHz HSE crystal, PLL to 168 MHz.
+//! 5. Boot decision (`latch::boot_decision`): every reset but a power-on with a clean record
+//!    starts with the stored fault (or `ResetLatched`) latched in the tick: the safe state
+//!    from the first tick, checks and escalation running, until the operator's reset request
+//!    (user button B1, held `RESET_HOLD_MS`) is accepted by the tick.
+//! 6. A clean power-on first calibrates the pressure zero: both exhausts open for
+//!    `CAL_VENT_MS`, then the mean of `CAL_AVG_MS` of samples is 0 Pa gauge. The encoder zero
+//!    is the joint's pose at reset (docs/rig.md: the documented pose).
+//!
+//! Each tick:
+//! - Sampling: TIM3 runs at `PAM_TICK_HZ` (compile-time, default 1000 Hz); its update event
+//!   triggers ADC1 (both pressure transducers, IN11 / IN12 on PC1 / PC2, one scan), DMA2
+//!   stream 0 writes them to memory. A buffer entry the DMA did not rewrite since the last
+//!   tick reaches the tick as a missing sample (`wiring::take_fresh_counts`), which ages into a
+//!   `...Stale` fault after 10 ticks.
+//! - Control tick: the RTIC task bound to the DMA transfer-complete interrupt: joint encoder
+//!   (TIM2 in encoder mode on PA15 / PB3), the control tick with the measured period (DWT),
+//!   the set-point from the compiled-in scenario (`PAM_BOARD_SCENARIO`, build.rs), the four
+//!   valve duties on TIM4 PWM CH1..CH4 (PD12..PD15), the latch record stored when it changes,
+//!   and one stream record (`stream::TickRecord`, with its sequence number) over defmt RTT.
+//! - Deadline: a tick must end within `DEADLINE_PERCENT` of its period and before the next
+//!   samples arrive; only then is the watchdog fed; each miss is counted in
+//!   `PAM_TICK_OVERRUNS`. A second timer (TIM5, one interrupt priority above the tick) fires
+//!   if the tick has not ended by the deadline: it forces the valve pins to the safe state at
+//!   register level and counts in `PAM_MONITOR_TRIPS`; the tick, if it ever ends, latches
+//!   `Watchdog` and hands the pins back to the PWM (now carrying the safe command). A tick
+//!   that never ends is not feeding the watchdog: reset, then a latched safe boot.
+//! - HardFault (a panic ends there too, after logging its location): the valve pins to the
+//!   configured safe state at register level, then the watchdog resets into a safe boot.
 //!
 //! Wiring and sensor scaling: `src/wiring.rs`. Not tested on hardware in this repository's
 //! CI: the image is built (`cargo flash-build`), not run.
 #![no_std]
 #![no_main]
 
-use core::sync::atomic::AtomicU32;
+use core::sync::atomic::{AtomicBool, AtomicU32};
 
 use cortex_m_rt::{exception, ExceptionFrame};
 use defmt_rtt as _;
+use pam_firmware::safety::SafeState;
+use pam_firmware::wiring;
 use stm32f4xx_hal::pac;
+
+include!(concat!(env!("OUT_DIR"), "/board_profile.rs"));
 
 /// Control tick rate [Hz]: `PAM_TICK_HZ` at build time, default 1000.
 const TICK_HZ: u32 = match option_env!("PAM_TICK_HZ") {
@@ -48,8 +66,17 @@ const WATCHDOG_MS: u32 = {
 };
 /// Core clock [Hz] (8 MHz HSE crystal of the Discovery board, PLL to 168 MHz).
 const SYSCLK_HZ: u32 = 168_000_000;
-/// Joint angle held by the controller [rad] (no host link on the board yet).
-const SETPOINT_RAD: f32 = 0.0;
+/// The safe valve state of this build: the controller's configuration, the HardFault path
+/// and the tick monitor all use it.
+const SAFE_STATE: SafeState = SafeState::Hold;
+/// `BSRR` word of the safe valve levels (HardFault and tick monitor).
+const SAFE_BSRR: u32 = wiring::valve_bsrr(wiring::safe_valve_levels(SAFE_STATE));
+/// Start-up calibration: both exhausts open this long before averaging [ms].
+const CAL_VENT_MS: u32 = 1500;
+/// Start-up calibration: averaging time of the pressure zero [ms].
+const CAL_AVG_MS: u32 = 500;
+/// The reset button (B1, PA0) must be held this long to request a re-arm [ms].
+const RESET_HOLD_MS: u32 = 500;
 
 const fn parse_hz(s: &str) -> u32 {
     let b = s.as_bytes();
@@ -72,17 +99,39 @@ const fn parse_hz(s: &str) -> u32 {
 
 /// A tick must end within this share of its period [%] to count as on time.
 const DEADLINE_PERCENT: u32 = 80;
+/// The tick deadline [us] (soft check in the tick, hard check by the TIM5 monitor).
+const DEADLINE_US: u32 = 1_000_000 / TICK_HZ * DEADLINE_PERCENT / 100;
 /// Valve PWM frequency [Hz] (on/off solenoid valves: a few times the tick rate's tenth).
 const VALVE_PWM_HZ: u32 = 100;
 
 /// Ticks that missed their deadline since reset (read it with a probe: `PAM_TICK_OVERRUNS`).
 #[no_mangle]
 pub static PAM_TICK_OVERRUNS: AtomicU32 = AtomicU32::new(0);
+/// Times the tick monitor (TIM5) found a tick still running at its deadline and forced the
+/// safe valve state.
+#[no_mangle]
+pub static PAM_MONITOR_TRIPS: AtomicU32 = AtomicU32::new(0);
+/// Set by the tick monitor, taken by the tick.
+static MONITOR_TRIPPED: AtomicBool = AtomicBool::new(false);
+
+/// Drives the valve pins to the safe levels as plain GPIO outputs (away from the timer), at
+/// register level: usable from any context, whatever owns the HAL objects.
+///
+/// # Safety
+/// Writes GPIOD's BSRR (atomic) and read-modify-writes its MODER: call only where no other
+/// code changes GPIOD's MODER concurrently (HardFault, the highest-priority task).
+unsafe fn force_safe_valve_pins() {
+    // SAFETY: see the function's contract; GPIOD's clock is on from the first line of init.
+    let gpiod = unsafe { &*pac::GPIOD::ptr() };
+    gpiod.bsrr().write(|w| unsafe { w.bits(SAFE_BSRR) });
+    gpiod
+        .moder()
+        .modify(|r, w| unsafe { w.bits(wiring::valve_moder_output(r.bits())) });
+}
 
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true)]
 mod app {
     use core::cell::Cell;
-    use core::convert::Infallible;
     use core::sync::atomic::Ordering;
 
     use cortex_m::peripheral::{DWT, NVIC};
@@ -92,44 +141,34 @@ mod app {
             Adc,
         },
         dma::{config::DmaConfig, PeripheralToMemory, Stream0, StreamsTuple, Transfer},
+        gpio::{Input, PinState, PA0},
         hal_02::Qei as _,
-        pac::{self, Interrupt, ADC1, DMA2, TIM2, TIM3, TIM4},
+        pac::{self, Interrupt, ADC1, DMA2, TIM2, TIM3, TIM4, TIM5},
         prelude::*,
         qei::Qei,
         rcc::Config,
-        timer::{CounterHz, ErasedChannel},
+        timer::{CounterHz, CounterUs, ErasedChannel, Event},
         watchdog::IndependentWatchdog,
     };
 
-    use pam_firmware::sensors::{AngleSensor, Clock, PressureScaling, TickTimer};
+    use pam_firmware::latch::{self, BootDecision, LatchRecord, PersistentLatch, ResetButton};
+    use pam_firmware::latch_bkpsram::{self, BackupSram, EncoderKeep};
+    use pam_firmware::safety::{FaultCode, FaultSet, SafeState};
+    use pam_firmware::sensors::{Clock, PressureScaling, TickTimer};
+    use pam_firmware::stream::{TickRecord, MISSING_COUNTS, RECORD_LEN};
     use pam_firmware::tick::{ControlTick, ControllerConfig, SensorFrame, Setpoint};
-    use pam_firmware::valves::ProportionalValves;
+    use pam_firmware::valves::{ProportionalValves, ValveOpenings};
     use pam_firmware::wiring;
 
     use super::{
-        DEADLINE_PERCENT, PAM_TICK_OVERRUNS, SETPOINT_RAD, SYSCLK_HZ, TICK_HZ, VALVE_PWM_HZ,
-        WATCHDOG_MS,
+        BOARD_PROFILE, BOARD_SCENARIO, CAL_AVG_MS, CAL_VENT_MS, DEADLINE_PERCENT, DEADLINE_US,
+        MONITOR_TRIPPED, PAM_MONITOR_TRIPS, PAM_TICK_OVERRUNS, RESET_HOLD_MS, SAFE_STATE,
+        SYSCLK_HZ, TICK_HZ, VALVE_PWM_HZ, WATCHDOG_MS,
     };
 
     type AdcDma = Transfer<Stream0<DMA2>, 0, Adc<ADC1>, PeripheralToMemory, &'static mut [u16; 2]>;
     type Valve = ErasedChannel<TIM4>;
     type Valves = ProportionalValves<Valve, Valve, Valve, Valve>;
-
-    /// [`AngleSensor`] over TIM2 in encoder mode (32-bit counter: the count is the signed
-    /// angle).
-    pub struct QeiAngle {
-        qei: Qei<TIM2>,
-    }
-
-    impl AngleSensor for QeiAngle {
-        type Error = Infallible;
-        fn read_counts(&mut self) -> Result<Option<i32>, Infallible> {
-            Ok(Some(self.qei.count() as i32))
-        }
-        fn counts_per_rev(&self) -> u32 {
-            wiring::ENCODER_COUNTS_PER_REV
-        }
-    }
 
     /// [`Clock`] over the DWT cycle counter, extended to 64 bits (read at least every 25 s:
     /// every tick reads it).
@@ -152,6 +191,24 @@ mod app {
         }
     }
 
+    /// Start-up calibration (clean power-on only) or control.
+    pub enum Phase {
+        /// Both exhausts open; `ticks` so far, sums and counts of the samples averaged.
+        Calibrating {
+            ticks: u32,
+            sum_counts: [u32; 2],
+            n: [u32; 2],
+        },
+        /// The control tick runs.
+        Running,
+    }
+
+    /// Tick period [us] (exact for the rates that divide 1 MHz; the stream's time stamps).
+    const US_PER_TICK: u32 = 1_000_000 / TICK_HZ;
+    // Milliseconds to ticks at any allowed rate (200..=10000 Hz: no overflow, no zero).
+    const CAL_VENT_TICKS: u32 = TICK_HZ * CAL_VENT_MS / 1000;
+    const CAL_TICKS: u32 = CAL_VENT_TICKS + TICK_HZ * CAL_AVG_MS / 1000;
+
     #[shared]
     struct Shared {}
 
@@ -159,18 +216,24 @@ mod app {
     struct Local {
         adc: AdcDma,
         spare: Option<&'static mut [u16; 2]>,
-        angle: QeiAngle,
-        scaling: PressureScaling,
+        qei: Qei<TIM2>,
+        scaling: [PressureScaling; 2],
         clock: DwtClock,
         period: TickTimer,
         valves: Valves,
         tick: ControlTick,
-        /// Fed by the tick (None in the safe hold after a watchdog reset).
-        watchdog: Option<IndependentWatchdog>,
-        /// Fed by idle in the safe hold after a watchdog reset only.
-        hold_watchdog: Option<IndependentWatchdog>,
+        latch: PersistentLatch<BackupSram>,
+        encoder_keep: EncoderKeep,
+        button_pin: PA0<Input>,
+        button: ResetButton,
+        phase: Phase,
+        watchdog: IndependentWatchdog,
+        monitor: CounterUs<TIM5>,
+        /// The monitor forced the pins to GPIO: hand them back to the PWM after the tick
+        /// applied its (now safe) command.
+        pins_forced: bool,
         /// Kept alive: TIM3 paces the ADC (TRGO on update).
-        _sampler: Option<CounterHz<TIM3>>,
+        _sampler: CounterHz<TIM3>,
         fault_reported: bool,
         ticks: u32,
     }
@@ -180,49 +243,75 @@ mod app {
         let dp: pac::Peripherals = cx.device;
         let mut core = cx.core;
 
-        // Reset cause first: after a watchdog reset stay in the safe state.
-        let watchdog_reset = dp.RCC.csr().read().wdgrstf().bit_is_set();
-        dp.RCC.csr().modify(|_, w| w.rmvf().set_bit());
-
-        // 8 MHz HSE crystal of the Discovery board -> 168 MHz.
-        let mut rcc = dp.RCC.freeze(Config::hse(8.MHz()).sysclk(SYSCLK_HZ.Hz()));
-
-        // Valves: TIM4 CH1..CH4 on PD12..PD15, duty 0 (closed) before anything else.
+        // 1. Valve pins to the safe state before anything else (still on the 16 MHz HSI).
+        let mut rcc = dp.RCC.constrain();
         let gpiod = dp.GPIOD.split(&mut rcc);
+        let lv = wiring::safe_valve_levels(SAFE_STATE);
+        let st = |b: bool| if b { PinState::High } else { PinState::Low };
+        let pd12 = gpiod.pd12.into_push_pull_output_in_state(st(lv[0]));
+        let pd13 = gpiod.pd13.into_push_pull_output_in_state(st(lv[1]));
+        let pd14 = gpiod.pd14.into_push_pull_output_in_state(st(lv[2]));
+        let pd15 = gpiod.pd15.into_push_pull_output_in_state(st(lv[3]));
+
+        // 2. Reset cause and latch record (RCC_CSR and the backup SRAM; the HAL does not touch
+        //    the reset flags).
+        let (storage, reset) = latch_bkpsram::init();
+        let encoder_keep = storage.encoder_keep();
+
+        // 3. Watchdog (LSI), before the clock tree: a hang in the PLL set-up resets.
+        let mut watchdog = IndependentWatchdog::new(dp.IWDG);
+        watchdog.stop_on_debug(&dp.DBGMCU, true);
+        watchdog.start(WATCHDOG_MS.millis());
+
+        // 4. Clock tree: 8 MHz HSE crystal of the Discovery board -> 168 MHz.
+        let mut rcc = rcc.freeze(Config::hse(8.MHz()).sysclk(SYSCLK_HZ.Hz()));
+        watchdog.feed();
+
+        // 5. Boot decision.
+        let (latch, boot) = PersistentLatch::boot(storage, reset);
+        let mut cfg = ControllerConfig::reference(TICK_HZ as f32);
+        cfg.safe_state = SAFE_STATE;
+        let mut tick = ControlTick::new(cfg);
+
+        // Valves: TIM4 CH1..CH4 on PD12..PD15 (inflate 1, exhaust 1, inflate 2, exhaust 2),
+        // duties at the safe state before the pins switch to the timer.
         let (_, (c1, c2, c3, c4)) = dp.TIM4.pwm_hz(VALVE_PWM_HZ.Hz(), &mut rcc);
         let mut chans = [
-            c1.with(gpiod.pd12).erase(),
-            c2.with(gpiod.pd13).erase(),
-            c3.with(gpiod.pd14).erase(),
-            c4.with(gpiod.pd15).erase(),
+            c1.with(pd12).erase(),
+            c2.with(pd13).erase(),
+            c3.with(pd14).erase(),
+            c4.with(pd15).erase(),
         ];
         for c in chans.iter_mut() {
-            c.set_duty(0);
             c.enable();
         }
         let [c1, c2, c3, c4] = chans;
         let mut valves: Valves = ProportionalValves::new(c1, c2, c3, c4);
-        let _ = valves.close_all();
-
-        let mut watchdog = IndependentWatchdog::new(dp.IWDG);
-        watchdog.stop_on_debug(&dp.DBGMCU, true);
-        watchdog.start(WATCHDOG_MS.millis());
+        let _ = valves.apply(&SAFE_STATE.command());
 
         let gpioa = dp.GPIOA.split(&mut rcc);
         let gpiob = dp.GPIOB.split(&mut rcc);
         let gpioc = dp.GPIOC.split(&mut rcc);
         // PA15 / PB3 boot as JTAG (AF0); SWD does not need them. Internal pull-ups for
-        // open-collector encoder outputs.
-        let angle = QeiAngle {
-            qei: Qei::new(
-                dp.TIM2,
-                (
-                    gpioa.pa15.into_pull_up_input(),
-                    gpiob.pb3.into_pull_up_input(),
-                ),
-                &mut rcc,
+        // open-collector encoder outputs. The counter starts at 0: the encoder zero is the
+        // pose at reset.
+        let qei = Qei::new(
+            dp.TIM2,
+            (
+                gpioa.pa15.into_pull_up_input(),
+                gpiob.pb3.into_pull_up_input(),
             ),
-        };
+            &mut rcc,
+        );
+        // After a reset that is not a power-on, the angle carries on from the count kept in
+        // the backup SRAM (the joint does not move in the milliseconds of a reset).
+        let kept = latch::encoder_at_boot(encoder_keep.read(), reset);
+        if let Some(c) = kept {
+            // SAFETY: TIM2's counter register, owned by `qei`, written once before it is read.
+            unsafe { (*pac::TIM2::ptr()).cnt().write(|w| w.bits(c as u32)) };
+        }
+        // User button B1 (PA0, high when pressed; pull-down on the board and here).
+        let button_pin = gpioa.pa0.into_pull_down_input();
 
         // ADC1: scan IN11 (PC1), IN12 (PC2) on each TIM3 TRGO, results by DMA.
         let adc_config = AdcConfig::default()
@@ -235,8 +324,13 @@ mod app {
         adc.configure_channel(&p1_pin, Sequence::One, SampleTime::Cycles_84);
         adc.configure_channel(&p2_pin, Sequence::Two, SampleTime::Cycles_84);
         let dma = StreamsTuple::new(dp.DMA2, &mut rcc);
-        let first = cortex_m::singleton!(: [u16; 2] = [0; 2]).unwrap();
-        let spare = cortex_m::singleton!(: [u16; 2] = [0; 2]).unwrap();
+        // Both buffers carry the fill marker: an entry the DMA did not write reads as missing.
+        let first = cortex_m::singleton!(: [u16; 2] = [wiring::ADC_NOT_WRITTEN; 2]);
+        let spare = cortex_m::singleton!(: [u16; 2] = [wiring::ADC_NOT_WRITTEN; 2]);
+        let (Some(first), Some(spare)) = (first, spare) else {
+            // init runs once: not reachable.
+            cortex_m::asm::udf()
+        };
         let dma_config = DmaConfig::default()
             .transfer_complete_interrupt(true)
             .memory_increment(true)
@@ -251,40 +345,72 @@ mod app {
         };
         let mut period = TickTimer::new();
 
-        let (watchdog, hold_watchdog, sampler) = if watchdog_reset {
-            defmt::error!("reset by the watchdog: valves off, control not started");
-            (None, Some(watchdog), None)
-        } else {
-            period.dt_s(&clock); // start the period measurement now
-            adc.start(|_| {});
-            let mut sampler = dp.TIM3.counter_hz(&mut rcc);
-            // TRGO on update: each period starts one ADC scan.
-            // SAFETY: CR2.MMS of TIM3, which `sampler` owns and does not use otherwise.
-            unsafe { (*pac::TIM3::ptr()).cr2().modify(|_, w| w.mms().update()) };
-            sampler.start(TICK_HZ.Hz()).unwrap();
-            defmt::info!(
-                "pam-firmware board (RTIC 2): tick {=u32} Hz from TIM3 -> ADC1 -> DMA2, \
-                 deadline {=u32} %, watchdog {=u32} ms",
-                TICK_HZ,
-                DEADLINE_PERCENT,
-                WATCHDOG_MS
-            );
-            (Some(watchdog), None, Some(sampler))
+        let phase = match boot {
+            BootDecision::Arm => {
+                defmt::info!("power-on with a clean latch: pressure zero calibration");
+                Phase::Calibrating {
+                    ticks: 0,
+                    sum_counts: [0; 2],
+                    n: [0; 2],
+                }
+            }
+            BootDecision::Safe(record) => {
+                match kept {
+                    Some(c) => defmt::info!("encoder count {=i32} kept across the reset", c),
+                    None => defmt::warn!("encoder zero is the pose at this reset"),
+                }
+                defmt::error!(
+                    "boot after {} with latch {}: safe state until the reset button",
+                    reset,
+                    record
+                );
+                tick.restore_latch(&record);
+                Phase::Running
+            }
         };
+
+        // Tick monitor: TIM5 at 1 MHz, started by each tick, stopped when it ends.
+        let mut monitor = dp.TIM5.counter_us(&mut rcc);
+        monitor.listen(Event::Update);
+
+        period.dt_s(&clock); // start the period measurement now
+        adc.start(|_| {});
+        let mut sampler = dp.TIM3.counter_hz(&mut rcc);
+        // TRGO on update: each period starts one ADC scan.
+        // SAFETY: CR2.MMS of TIM3, which `sampler` owns and does not use otherwise.
+        unsafe { (*pac::TIM3::ptr()).cr2().modify(|_, w| w.mms().update()) };
+        if sampler.start(TICK_HZ.Hz()).is_err() {
+            // No ticks: the watchdog is not fed and resets into a latched safe boot.
+            defmt::error!("TIM3 did not start");
+        }
+        defmt::info!(
+            "pam-firmware board (RTIC 2): tick {=u32} Hz from TIM3 -> ADC1 -> DMA2, \
+             deadline {=u32} us, watchdog {=u32} ms, scenario {=str}",
+            TICK_HZ,
+            DEADLINE_US,
+            WATCHDOG_MS,
+            BOARD_SCENARIO
+        );
 
         (
             Shared {},
             Local {
                 adc,
                 spare: Some(spare),
-                angle,
-                scaling: wiring::pressure_scaling(),
+                qei,
+                scaling: [wiring::pressure_scaling(); 2],
                 clock,
                 period,
                 valves,
-                tick: ControlTick::new(ControllerConfig::reference(TICK_HZ as f32)),
+                tick,
+                latch,
+                encoder_keep,
+                button_pin,
+                button: ResetButton::new(TICK_HZ * RESET_HOLD_MS / 1000),
+                phase,
                 watchdog,
-                hold_watchdog,
+                monitor,
+                pins_forced: false,
                 _sampler: sampler,
                 fault_reported: false,
                 ticks: 0,
@@ -292,99 +418,224 @@ mod app {
         )
     }
 
-    #[idle(local = [hold_watchdog])]
-    fn idle(cx: idle::Context) -> ! {
+    #[idle]
+    fn idle(_: idle::Context) -> ! {
         loop {
-            match cx.local.hold_watchdog.as_mut() {
-                // Safe hold after a watchdog reset: valves stay closed, keep the MCU alive.
-                Some(w) => {
-                    w.feed();
-                    cortex_m::asm::delay(SYSCLK_HZ / 1000);
-                }
-                None => cortex_m::asm::wfi(),
-            }
+            cortex_m::asm::wfi();
         }
     }
 
+    /// The tick monitor: the tick did not end by its deadline. Safe valve levels at register
+    /// level (this task preempts the tick), counted; the tick latches the fault when it ends.
+    #[task(binds = TIM5, priority = 3)]
+    fn tick_monitor(_: tick_monitor::Context) {
+        // SAFETY: TIM5's SR and CR1 (stop, clear the update flag): the tick only starts and
+        // stops the counter, it cannot run while this higher-priority task runs. The pins:
+        // the highest-priority code touching GPIOD's MODER (see force_safe_valve_pins).
+        unsafe {
+            let tim5 = &*pac::TIM5::ptr();
+            tim5.cr1().modify(|_, w| w.cen().clear_bit());
+            tim5.sr().write(|w| w.bits(!1u32));
+            super::force_safe_valve_pins();
+        }
+        PAM_MONITOR_TRIPS.fetch_add(1, Ordering::Relaxed);
+        MONITOR_TRIPPED.store(true, Ordering::Release);
+    }
+
     /// The control tick: once per sampling period, when the DMA has delivered both pressures.
-    #[task(binds = DMA2_STREAM0, priority = 2, local = [adc, spare, angle, scaling, clock, period, valves, tick, watchdog, fault_reported, ticks])]
+    #[task(binds = DMA2_STREAM0, priority = 2, local = [adc, spare, qei, scaling, clock, period, valves, tick, latch, encoder_keep, button_pin, button, phase, watchdog, monitor, pins_forced, fault_reported, ticks])]
     fn control_tick(cx: control_tick::Context) {
-        let l = cx.local;
+        let mut l = cx.local;
         let start = DWT::cycle_count();
+        let _ = l.monitor.start(DEADLINE_US.micros());
         l.adc.clear_transfer_complete();
-        let (p1_counts, p2_counts) = match l.spare.take() {
+        let counts = match l.spare.take() {
             Some(buf) => match l.adc.next_transfer(buf) {
                 Ok((done, _)) => {
-                    let c = (done[0], done[1]);
+                    let c = wiring::take_fresh_counts(done);
                     *l.spare = Some(done);
-                    (Some(c.0), Some(c.1))
+                    c
                 }
                 // Not expected (single buffer); no samples this tick: the tick ages them.
-                Err(_) => (None, None),
+                Err(_) => [None; 2],
             },
-            None => (None, None),
+            None => [None; 2],
         };
+        let encoder_counts = l.qei.count() as i32;
+        l.encoder_keep.write(latch::encoder_words(encoder_counts));
+        // Keep the period measurement current in every phase.
+        let dt_s = l.period.dt_s(l.clock);
+
+        match l.phase {
+            Phase::Calibrating {
+                ticks,
+                sum_counts,
+                n,
+            } => {
+                let _ = l.valves.apply(&SafeState::Vent.command());
+                if *ticks >= CAL_VENT_TICKS {
+                    for i in 0..2 {
+                        if let Some(c) = counts[i] {
+                            sum_counts[i] = sum_counts[i].saturating_add(c as u32);
+                            n[i] += 1;
+                        }
+                    }
+                }
+                *ticks += 1;
+                if *ticks >= CAL_TICKS {
+                    let codes = [
+                        FaultCode::PressureImplausible1,
+                        FaultCode::PressureImplausible2,
+                    ];
+                    for i in 0..2 {
+                        match wiring::calibrated_pressure_scaling(sum_counts[i], n[i]) {
+                            Ok(s) => {
+                                l.scaling[i] = s;
+                                defmt::info!(
+                                    "pressure {=usize} zero: {=f32} counts",
+                                    i + 1,
+                                    -s.offset_pa / s.pa_per_count
+                                );
+                            }
+                            Err(e) => {
+                                defmt::error!("pressure {=usize} zero refused: {}", i + 1, e);
+                                l.tick.restore_latch(&LatchRecord {
+                                    cause: Some(codes[i]),
+                                    seen: FaultSet::of(codes[i]),
+                                    vented: [false; 2],
+                                });
+                            }
+                        }
+                    }
+                    *l.phase = Phase::Running;
+                }
+            }
+            Phase::Running => run(&mut l, counts, encoder_counts, dt_s),
+        }
+
+        // Deadline: done within DEADLINE_PERCENT of the period, and the next samples have not
+        // arrived meanwhile (their interrupt would be pending). Only then feed the watchdog.
+        let _ = l.monitor.cancel();
+        let budget = SYSCLK_HZ / TICK_HZ / 100 * DEADLINE_PERCENT;
+        let on_time = DWT::cycle_count().wrapping_sub(start) <= budget
+            && !NVIC::is_pending(Interrupt::DMA2_STREAM0);
+        if on_time {
+            l.watchdog.feed();
+        } else {
+            PAM_TICK_OVERRUNS.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    /// One control tick proper (phase `Running`).
+    fn run(
+        l: &mut control_tick::LocalResources<'_>,
+        counts: [Option<u16>; 2],
+        encoder_counts: i32,
+        dt_s: f32,
+    ) {
         let s = *l.scaling;
         let frame = SensorFrame {
-            p1_gauge_pa: p1_counts.map(|c| s.to_gauge_pa(c as u32)),
-            p2_gauge_pa: p2_counts.map(|c| s.to_gauge_pa(c as u32)),
-            angle_rad: match l.angle.read_angle_rad() {
-                Ok(a) => a,
-                Err(e) => match e {},
-            },
+            p1_gauge_pa: counts[0].map(|c| s[0].to_gauge_pa(c as u32)),
+            p2_gauge_pa: counts[1].map(|c| s[1].to_gauge_pa(c as u32)),
+            angle_rad: Some(wiring::angle_rad(encoder_counts)),
         };
+        let t_s = *l.ticks as f32 / TICK_HZ as f32;
+        let setpoint_rad = BOARD_PROFILE.at(t_s);
         // Measured period: a late tick (> dt_max_s) latches FaultCode::Watchdog in the tick.
-        let dt_s = l.period.dt_s(l.clock);
         let out = l.tick.step(
             &frame,
             &Setpoint {
-                angle_rad: SETPOINT_RAD,
+                angle_rad: setpoint_rad,
             },
             dt_s,
         );
         // The tick outputs the safe valve command itself while a fault is latched.
         // The openings the driver actually switched feed the valve / supply residual.
-        match l.valves.apply(&out.valves) {
-            Ok(o) => l.tick.valves_applied(&o),
+        let applied = match l.valves.apply(&out.valves) {
+            Ok(o) => {
+                l.tick.valves_applied(&o);
+                o
+            }
             Err(_) => {
                 let _ = l.valves.close_all();
+                ValveOpenings::from_command(&SafeState::Hold.command())
+            }
+        };
+        // The tick monitor fired during this tick: latch it; the pins go back to the PWM
+        // once the tick outputs the safe command (from the next tick on).
+        if MONITOR_TRIPPED.swap(false, Ordering::Acquire) {
+            l.tick.restore_latch(&LatchRecord {
+                cause: Some(FaultCode::Watchdog),
+                seen: FaultSet::of(FaultCode::Watchdog),
+                vented: [false; 2],
+            });
+            *l.pins_forced = true;
+        } else if *l.pins_forced && l.tick.fault().is_some() {
+            // SAFETY: MODER of GPIOD; the monitor (the only other writer) is not armed here
+            // (it is started by the tick and has not fired in this tick).
+            unsafe {
+                (*pac::GPIOD::ptr())
+                    .moder()
+                    .modify(|r, w| w.bits(wiring::valve_moder_alternate(r.bits())));
+            }
+            *l.pins_forced = false;
+        }
+        // Operator's reset: accepted by the tick only when every cause is gone.
+        if l.button.update(l.button_pin.is_high()) {
+            if l.tick.reset() {
+                l.latch.cleared();
+                *l.fault_reported = false;
+                defmt::info!("reset accepted: armed");
+            } else {
+                defmt::warn!("reset refused: a cause persists");
             }
         }
+        l.latch.update(l.tick.latch_record());
         if let Some(f) = out.fault {
             if !*l.fault_reported {
                 *l.fault_reported = true;
                 defmt::error!("fault latched: {}; valves in the safe state", f);
             }
         }
+        // The stream record of this tick (docs/rig.md).
+        let rec = TickRecord {
+            seq: *l.ticks,
+            t_us: l.ticks.wrapping_mul(US_PER_TICK),
+            setpoint_rad,
+            openings: [applied.u_in1, applied.u_ex1, applied.u_in2, applied.u_ex2],
+            p_counts: [
+                counts[0].unwrap_or(MISSING_COUNTS),
+                counts[1].unwrap_or(MISSING_COUNTS),
+            ],
+            encoder_counts,
+            p_gauge_pa: [
+                frame.p1_gauge_pa.unwrap_or(f32::NAN),
+                frame.p2_gauge_pa.unwrap_or(f32::NAN),
+            ],
+            angle_rad: frame.angle_rad.unwrap_or(f32::NAN),
+            fault: out.fault.map_or(0, |f| f.code()),
+            armed: out.armed,
+        };
+        let mut buf = [0u8; RECORD_LEN];
+        rec.encode(&mut buf);
+        defmt::info!("stream {=[u8]}", buf[..]);
         *l.ticks = l.ticks.wrapping_add(1);
         if *l.ticks % TICK_HZ == 0 {
             defmt::info!(
-                "t={=u32}s angle={=f32} rad p1={=f32} Pa p2={=f32} Pa T_est={=f32} N m armed={=bool} overruns={=u32}",
+                "t={=u32}s angle={=f32} rad p1={=f32} Pa p2={=f32} Pa armed={=bool} overruns={=u32} monitor={=u32}",
                 *l.ticks / TICK_HZ,
                 out.angle_est_rad,
-                frame.p1_gauge_pa.unwrap_or(f32::NAN),
-                frame.p2_gauge_pa.unwrap_or(f32::NAN),
-                out.torque_est_nm,
+                rec.p_gauge_pa[0],
+                rec.p_gauge_pa[1],
                 out.armed,
-                PAM_TICK_OVERRUNS.load(Ordering::Relaxed)
+                PAM_TICK_OVERRUNS.load(Ordering::Relaxed),
+                PAM_MONITOR_TRIPS.load(Ordering::Relaxed)
             );
-        }
-        // Deadline: done within DEADLINE_PERCENT of the period, and the next samples have not
-        // arrived meanwhile (their interrupt would be pending). Only then feed the watchdog.
-        let budget = SYSCLK_HZ / TICK_HZ / 100 * DEADLINE_PERCENT;
-        let on_time = DWT::cycle_count().wrapping_sub(start) <= budget
-            && !NVIC::is_pending(Interrupt::DMA2_STREAM0);
-        if on_time {
-            if let Some(w) = l.watchdog.as_mut() {
-                w.feed();
-            }
-        } else {
-            PAM_TICK_OVERRUNS.fetch_add(1, Ordering::Relaxed);
         }
     }
 }
 
-/// Panic: log the location (not the message: see Cargo.toml), then fault (valves off below).
+/// Panic: log the location (not the message: see Cargo.toml), then fault (valves safe below).
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
     match info.location() {
@@ -396,19 +647,10 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 
 #[exception]
 unsafe fn HardFault(_ef: &ExceptionFrame) -> ! {
-    // Valves off at register level (the HAL objects may be borrowed): PD12..PD15 low via BSRR.
-    // SAFETY: a single write to GPIOD's set/reset register; nothing else runs any more.
-    let gpiod = unsafe { &*pac::GPIOD::ptr() };
-    gpiod.bsrr().write(|w| {
-        w.br12()
-            .set_bit()
-            .br13()
-            .set_bit()
-            .br14()
-            .set_bit()
-            .br15()
-            .set_bit()
-    });
+    // The valve pins to the configured safe state at register level (the HAL objects may be
+    // borrowed; a BSRR write alone would not reach pins on the timer's alternate function).
+    // SAFETY: nothing else runs any more.
+    unsafe { force_safe_valve_pins() };
     // The watchdog is no longer fed: it resets the MCU, which boots into the safe state.
     loop {
         cortex_m::asm::nop();
