@@ -145,12 +145,18 @@ impl ValveModelParams {
         let p = if p > 1.0 { p } else { 1.0 };
         let ps = self.supply_gauge_pa + self.p_atm_pa;
         let k = self.p_atm_pa * self.conductance_m3_per_s_pa / v;
-        let q_in = if ps >= p {
+        // A valve that stayed closed over the window contributes nothing: its flow function
+        // (a division and a square root) is skipped (same sum: the term would be +-0).
+        let q_in = if u_in == 0.0 {
+            0.0
+        } else if ps >= p {
             u_in * k * ps * self.phi(p / ps)
         } else {
             -u_in * k * p * self.phi(ps / p)
         };
-        let q_out = if p >= self.p_atm_pa {
+        let q_out = if u_ex == 0.0 {
+            0.0
+        } else if p >= self.p_atm_pa {
             -u_ex * k * p * self.phi(self.p_atm_pa / p)
         } else {
             u_ex * k * self.p_atm_pa * self.phi(p / self.p_atm_pa)

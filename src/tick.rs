@@ -698,6 +698,7 @@ impl ControlTick {
         self.safety.raise_all(set);
     }
 
+    #[inline(always)]
     fn step_inner(&mut self, frame: &SensorFrame, setpoint: &Setpoint, dt_s: f32) -> TickOutput {
         // Scalars read once; the configuration (with its force-law and torque-model tables) is
         // not copied: a whole-struct copy cost ~190 instructions per tick on the Cortex-M4.
