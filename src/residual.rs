@@ -27,6 +27,13 @@
 //! | `e < -R` | inlet open | - | the nearest of: inlet stuck closed (no inflow), supply lost (air flows back through the inlet for its duty), exhaust stuck open (inflow against a fully open exhaust) |
 //! | `e < -R` | inlet closed | - | exhaust stuck open |
 //!
+//! A small or short opening leaves a per-window residual below `R`; the integrated check
+//! covers it: per muscle and valve, the change the model expects from that valve and the
+//! change measured net of the other terms are summed over the windows in which it was open;
+//! once `integral_min_pa` is expected, less than `integral_fraction` of it seen is a fault
+//! (inlet: classified as above; exhaust: stuck closed, or inlet stuck open if the pressure
+//! rose), and the sums start over.
+//!
 //! The classes can overlap (a stuck-open exhaust while inflating at a small duty looks like
 //! a lost supply); the fault is still that muscle's air path, and the safe state is the
 //! same. While faulted (valves closed in
