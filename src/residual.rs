@@ -27,6 +27,13 @@
 //! | `e < -R` | inlet open | - | the nearest of: inlet stuck closed (no inflow), supply lost (air flows back through the inlet for its duty), exhaust stuck open (inflow against a fully open exhaust) |
 //! | `e < -R` | inlet closed | - | exhaust stuck open |
 //!
+//! A small or short opening leaves a per-window residual below `R`; the integrated check
+//! covers it: per muscle and valve, the change the model expects from that valve and the
+//! change measured net of the other terms are summed over the windows in which it was open;
+//! once `integral_min_pa` is expected, less than `integral_fraction` of it seen is a fault
+//! (inlet: classified as above; exhaust: stuck closed, or inlet stuck open if the pressure
+//! rose), and the sums start over.
+//!
 //! The classes can overlap (a stuck-open exhaust while inflating at a small duty looks like
 //! a lost supply); the fault is still that muscle's air path, and the safe state is the
 //! same. While faulted (valves closed in
@@ -70,6 +77,12 @@ pub struct ValveModelParams {
     pub window_ticks: u32,
     /// Consecutive windows beyond the threshold that make a fault (>= 1).
     pub persist_windows: u32,
+    /// Integrated check of a valve that should move the pressure: once the model expects at
+    /// least this much change from it over its opening windows [Pa] ...
+    pub integral_min_pa: f32,
+    /// ... and less than this fraction of it was seen, the valve's path is faulty (stuck
+    /// closed, or for the inlet also a lost supply / a stuck-open exhaust).
+    pub integral_fraction: f32,
 }
 
 impl ValveModelParams {
@@ -90,6 +103,10 @@ impl ValveModelParams {
         residual_rel: 0.5,
         window_ticks: 10,
         persist_windows: 2,
+        // 6 kPa: ~9 sigma of the 500 Pa sensor noise on a pressure difference; 25 % leaves
+        // the model a factor of 4 of error (polytropic exponent, supply droop, PWM edges).
+        integral_min_pa: 6_000.0,
+        integral_fraction: 0.25,
     };
 
     /// True when every parameter is usable.
@@ -109,6 +126,10 @@ impl ValveModelParams {
             && self.residual_rel >= 0.0
             && self.window_ticks >= 1
             && self.persist_windows >= 1
+            && pos(self.integral_min_pa)
+            && self.integral_fraction.is_finite()
+            && self.integral_fraction > 0.0
+            && self.integral_fraction < 1.0
     }
 
     /// ISO 6358 flow function (ellipse, no laminar patch) of the pressure ratio `s`.
@@ -145,12 +166,18 @@ impl ValveModelParams {
         let p = if p > 1.0 { p } else { 1.0 };
         let ps = self.supply_gauge_pa + self.p_atm_pa;
         let k = self.p_atm_pa * self.conductance_m3_per_s_pa / v;
-        let q_in = if ps >= p {
+        // A valve that stayed closed over the window contributes nothing: its flow function
+        // (a division and a square root) is skipped (same sum: the term would be +-0).
+        let q_in = if u_in == 0.0 {
+            0.0
+        } else if ps >= p {
             u_in * k * ps * self.phi(p / ps)
         } else {
             -u_in * k * p * self.phi(ps / p)
         };
-        let q_out = if p >= self.p_atm_pa {
+        let q_out = if u_ex == 0.0 {
+            0.0
+        } else if p >= self.p_atm_pa {
             -u_ex * k * p * self.phi(self.p_atm_pa / p)
         } else {
             u_ex * k * self.p_atm_pa * self.phi(p / self.p_atm_pa)
@@ -170,6 +197,13 @@ struct MuscleWindow {
     sum_ex: f32,
     above: u32,
     below: u32,
+    /// Integrals over the consecutive windows with the inlet (exhaust) commanded open: the
+    /// pressure change the model expects from that valve [Pa], and the change measured net
+    /// of every other model term [Pa] (both counted positive in the valve's direction).
+    in_expected_pa: f32,
+    in_seen_pa: f32,
+    ex_expected_pa: f32,
+    ex_seen_pa: f32,
 }
 
 /// The residual monitor of both muscles ([module documentation](self)).
@@ -203,6 +237,10 @@ impl ResidualMonitor {
                 sum_ex: 0.0,
                 above: 0,
                 below: 0,
+                in_expected_pa: 0.0,
+                in_seen_pa: 0.0,
+                ex_expected_pa: 0.0,
+                ex_seen_pa: 0.0,
             }; 2],
             angle_start_rad: 0.0,
             ticks: 0,
@@ -221,6 +259,12 @@ impl ResidualMonitor {
     /// Forgets the window and the counters (e.g. a sample was missing).
     pub fn restart(&mut self) {
         self.open = false;
+        for w in self.m.iter_mut() {
+            w.in_expected_pa = 0.0;
+            w.in_seen_pa = 0.0;
+            w.ex_expected_pa = 0.0;
+            w.ex_seen_pa = 0.0;
+        }
         self.m[0].above = 0;
         self.m[0].below = 0;
         self.m[1].above = 0;
@@ -306,8 +350,46 @@ impl ResidualMonitor {
             // NaN residuals count as neither (the channel checks catch NaN samples).
             w.above = if e > r { w.above.saturating_add(1) } else { 0 };
             w.below = if e < -r { w.below.saturating_add(1) } else { 0 };
+            // The integrated check: a small or short opening gives a per-window residual
+            // below the threshold, but its expected effect adds up over the windows in which
+            // the valve was open (windows with it closed add nothing and clear nothing). Once
+            // the expected change is large enough the path is judged, and the sums start over.
+            if u_in > 0.0 && q_in > 0.0 {
+                w.in_expected_pa += q_in * t;
+                w.in_seen_pa += (measured - q_vol - q_out) * t;
+            }
+            if u_ex > 0.0 && q_out < 0.0 {
+                w.ex_expected_pa -= q_out * t;
+                w.ex_seen_pa -= (measured - q_vol - q_in) * t;
+            }
+            let in_judged = w.in_expected_pa >= self.params.integral_min_pa;
+            let in_lost =
+                in_judged && !(w.in_seen_pa >= self.params.integral_fraction * w.in_expected_pa);
+            if in_judged {
+                w.in_expected_pa = 0.0;
+                w.in_seen_pa = 0.0;
+            }
+            let ex_judged = w.ex_expected_pa >= self.params.integral_min_pa;
+            let ex_lost =
+                ex_judged && !(w.ex_seen_pa >= self.params.integral_fraction * w.ex_expected_pa);
+            // Exhausting and the pressure even rose: air comes in, the inlet is stuck open.
+            let ex_rose = w.ex_seen_pa < -self.params.integral_fraction * w.ex_expected_pa;
+            if ex_judged {
+                w.ex_expected_pa = 0.0;
+                w.ex_seen_pa = 0.0;
+            }
             let rate_abs = self.params.residual_abs_pa_s;
-            let code = if w.above >= self.params.persist_windows {
+            let code = if ex_lost && !in_lost {
+                Some(if ex_rose {
+                    pick(i, FaultCode::InletStuckOpen1, FaultCode::InletStuckOpen2)
+                } else {
+                    pick(
+                        i,
+                        FaultCode::ExhaustStuckClosed1,
+                        FaultCode::ExhaustStuckClosed2,
+                    )
+                })
+            } else if w.above >= self.params.persist_windows {
                 Some(if -q_out > rate_abs && !(measured - q_vol > rate_abs) {
                     pick(
                         i,
@@ -317,8 +399,8 @@ impl ResidualMonitor {
                 } else {
                     pick(i, FaultCode::InletStuckOpen1, FaultCode::InletStuckOpen2)
                 })
-            } else if w.below >= self.params.persist_windows {
-                Some(if q_in > rate_abs {
+            } else if w.below >= self.params.persist_windows || in_lost {
+                Some(if q_in > rate_abs || in_lost {
                     // Inflating and the pressure lags: the nearest of three explanations.
                     // Inlet stuck closed: no inflow. Supply lost: the inlet lets air back
                     // out (to a supply at atmosphere) for its duty. Exhaust stuck open: the
@@ -381,5 +463,59 @@ fn pick(i: usize, a: FaultCode, b: FaultCode) -> FaultCode {
         a
     } else {
         b
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const DT: f32 = 1e-3;
+
+    /// Runs `ticks` ticks with a fixed inflate duty on muscle 1 (muscle 2 closed), the angle
+    /// at 0 and muscle 1's pressure following `p1(k)`; returns the tick of the first fault.
+    fn run(duty: f32, ticks: u32, p1: impl Fn(u32) -> f32) -> Option<(u32, FaultSet)> {
+        let mut m = ResidualMonitor::new(ValveModelParams::REFERENCE, &JointGeometry::REFERENCE);
+        for k in 0..ticks {
+            let f = m.observe(true, p1(k), 300_000.0, 0.0, DT);
+            if !f.is_empty() {
+                return Some((k, f));
+            }
+            m.openings(duty, 0.0, 0.0, 0.0);
+        }
+        None
+    }
+
+    /// The model's expected rate of muscle 1 at 300 kPa, the angle at 0, inlet duty `duty`.
+    fn expected_rate(duty: f32) -> f32 {
+        let g = JointGeometry::REFERENCE;
+        let (q_in, _, _) = ValveModelParams::REFERENCE.rate_terms_pa_s(
+            300_000.0,
+            g.initial_contraction,
+            0.0,
+            duty,
+            0.0,
+        );
+        q_in
+    }
+
+    #[test]
+    fn small_inflate_duty_without_a_rise_is_a_fault_within_50_ms() {
+        // 10 % duty: per window the missing rise is below the rate threshold, but it adds up.
+        let duty = 0.1;
+        assert!(expected_rate(duty) < ValveModelParams::REFERENCE.residual_abs_pa_s);
+        let (k, f) = run(duty, 200, |_| 300_000.0).expect("a stuck-closed inlet is seen");
+        assert!(k <= 50, "seen after {k} ticks");
+        assert!(
+            f.contains(FaultCode::InletStuckClosed1) || f.contains(FaultCode::SupplyLost),
+            "{f:?}"
+        );
+    }
+
+    #[test]
+    fn a_rise_at_half_the_model_rate_is_no_fault() {
+        let duty = 0.1;
+        let rate = 0.5 * expected_rate(duty);
+        assert!(run(duty, 2000, |k| 300_000.0 + rate * k as f32 * DT).is_none());
     }
 }

@@ -211,6 +211,15 @@ impl ControllerConfig {
     /// - On/off PWM ([`crate::valves::OnOffPwmConfig::REFERENCE`]): 10 ticks period, 2 ticks
     ///   minimum on-time.
     pub fn reference(tick_hz: f32) -> Self {
+        let ticks_ceil = |x: f32| -> u32 {
+            // `as` saturates: NaN -> 0, huge -> u32::MAX; at least 1 tick.
+            let t = libm::ceilf(x) as u32;
+            if t < 1 {
+                1
+            } else {
+                t
+            }
+        };
         let ticks = |s: f32| -> u32 {
             // `as` saturates: NaN -> 0, huge -> u32::MAX; at least 1 tick.
             let t = libm::ceilf(s * tick_hz) as u32;
@@ -277,7 +286,12 @@ impl ControllerConfig {
                 cutoff_hz: 150.0,
                 limit_nm: 2.0,
             },
-            valve_model: ValveModelParams::REFERENCE,
+            // The residual window is 10 ms whatever the tick (10 ticks at 1 kHz): a shorter
+            // window at a fast tick would turn the sensor noise into false valve faults.
+            valve_model: ValveModelParams {
+                window_ticks: ticks_ceil(tick_hz / 100.0),
+                ..ValveModelParams::REFERENCE
+            },
         }
     }
 
@@ -698,6 +712,7 @@ impl ControlTick {
         self.safety.raise_all(set);
     }
 
+    #[inline(always)]
     fn step_inner(&mut self, frame: &SensorFrame, setpoint: &Setpoint, dt_s: f32) -> TickOutput {
         // Scalars read once; the configuration (with its force-law and torque-model tables) is
         // not copied: a whole-struct copy cost ~190 instructions per tick on the Cortex-M4.

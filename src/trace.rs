@@ -114,6 +114,10 @@ pub fn output_words(o: &TickOutput) -> [u32; WORDS] {
 pub fn trace_config() -> ControllerConfig {
     let mut cfg = ControllerConfig::reference(TRACE_TICK_HZ);
     cfg.valve_model.residual_abs_pa_s = f32::MAX;
+    // The synthetic trace's pressures do not follow the commands (open loop): the integrated
+    // valve check would see every opening as a stuck-closed valve. It still runs (its cost is
+    // measured) but never judges.
+    cfg.valve_model.integral_min_pa = f32::MAX;
     cfg
 }
 

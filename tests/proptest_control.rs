@@ -244,6 +244,7 @@ proptest! {
         // supply residual would rightly call it faulty, so it may not trip here (it still runs).
         let mut cfg = ControllerConfig::reference(1000.0);
         cfg.valve_model.residual_abs_pa_s = f32::MAX;
+        cfg.valve_model.integral_min_pa = f32::MAX;
         let mut t = ControlTick::new(cfg);
         let (mut p1, mut p2, mut a) = (300_000.0f32, 300_000.0f32, 0.0f32);
         for (d1, d2, da, sp) in steps {

@@ -229,3 +229,41 @@ fn comparison_suite_moves_are_tracked_with_the_default_gains() {
     assert_expectations("suite/step_move");
     assert_expectations("suite/random_move");
 }
+
+/// The reference gains over the board's whole allowed tick range (`PAM_TICK_HZ` 200..10000):
+/// the step scenario at both ends meets its `[expect]` bounds (settled within 0.01 rad, no
+/// fault) and shows no limit cycle: the joint angle's peak-to-peak over the last second stays
+/// within the scenario's own error bound (0.01 rad; a 50 Hz tick, outside the range,
+/// oscillates by +-7 deg = 0.24 rad peak-to-peak). 1 kHz (the default) is run for comparison.
+#[test]
+fn step_is_stable_at_both_ends_of_the_allowed_tick_range() {
+    for tick_hz in [200.0, 1000.0, 10_000.0] {
+        let mut s = Scenario::load(root().join("scenarios/step.toml")).unwrap();
+        s.scenario.tick_hz = tick_hz;
+        let r = run(&reference_plant(), &s).unwrap();
+        let fails = r.check();
+        let tail: Vec<f64> = r
+            .rows
+            .iter()
+            .filter(|row| row.t_s >= s.scenario.duration_s - 1.0)
+            .map(|row| row.state.angle_rad)
+            .collect();
+        let hi = tail.iter().cloned().fold(f64::MIN, f64::max);
+        let lo = tail.iter().cloned().fold(f64::MAX, f64::min);
+        let st = r.tracking(s.expect.settle_after_s);
+        eprintln!(
+            "step at {tick_hz} Hz: max error {:.5} rad after {} s, last-second peak-to-peak {:.5} rad, fault {:?}",
+            st.max_abs_rad, s.expect.settle_after_s, hi - lo, r.first_latched_fault_tick.map(|k| r.rows[k].out.fault)
+        );
+        assert!(fails.is_empty(), "step at {tick_hz} Hz: {fails:?}");
+        assert!(
+            !tail.is_empty()
+                && hi - lo
+                    < s.expect
+                        .max_abs_error_rad
+                        .expect("step.toml bounds the error"),
+            "step at {tick_hz} Hz: limit cycle, peak-to-peak {} rad",
+            hi - lo
+        );
+    }
+}
