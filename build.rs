@@ -213,12 +213,47 @@ fn main() {
     let ctl: ControllerFile = read("config/controller.toml");
     {
         const P: &str = "config/plant_constants.toml";
-        let (j, m, e, v) = (&plant.joint, &plant.muscle, &plant.environment, &plant.valve);
-        check(j.inertia_kgm2 > 0.0, P, "joint.inertia_kgm2", j.inertia_kgm2, "> 0");
-        check(m.p_max_gauge_pa > 0.0, P, "muscle.p_max_gauge_pa", m.p_max_gauge_pa, "> 0");
-        check(m.volume_poly_m3[0] > 0.0, P, "muscle.volume_poly_m3[0]", m.volume_poly_m3[0], "> 0");
-        check(e.p_atm_pa > 0.0, P, "environment.p_atm_pa", e.p_atm_pa, "> 0");
-        check(e.supply_gauge_pa >= 0.0, P, "environment.supply_gauge_pa", e.supply_gauge_pa, ">= 0");
+        let (j, m, e, v) = (
+            &plant.joint,
+            &plant.muscle,
+            &plant.environment,
+            &plant.valve,
+        );
+        check(
+            j.inertia_kgm2 > 0.0,
+            P,
+            "joint.inertia_kgm2",
+            j.inertia_kgm2,
+            "> 0",
+        );
+        check(
+            m.p_max_gauge_pa > 0.0,
+            P,
+            "muscle.p_max_gauge_pa",
+            m.p_max_gauge_pa,
+            "> 0",
+        );
+        check(
+            m.volume_poly_m3[0] > 0.0,
+            P,
+            "muscle.volume_poly_m3[0]",
+            m.volume_poly_m3[0],
+            "> 0",
+        );
+        check(
+            e.p_atm_pa > 0.0,
+            P,
+            "environment.p_atm_pa",
+            e.p_atm_pa,
+            "> 0",
+        );
+        check(
+            e.supply_gauge_pa >= 0.0,
+            P,
+            "environment.supply_gauge_pa",
+            e.supply_gauge_pa,
+            ">= 0",
+        );
         check(
             v.sonic_conductance_m3_per_s_pa > 0.0,
             P,
