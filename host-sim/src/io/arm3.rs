@@ -51,11 +51,7 @@ impl Arm3Recording {
 
     /// Uniform sample period from the first and last time stamps.
     pub fn sample_period_s(&self) -> f64 {
-        let n = self.t_s.len();
-        if n < 2 {
-            return f64::NAN;
-        }
-        (self.t_s[n - 1] - self.t_s[0]) / (n - 1) as f64
+        crate::io::recording::mean_step_s(&self.t_s)
     }
 
     pub fn channel(&self, joint: usize, c: Channel) -> Option<&[f64]> {
@@ -442,18 +438,8 @@ fn draw_arm3<DB: plotters::prelude::DrawingBackend>(
                 .map(|(c, _, _, _)| column(c.name(), j))
                 .collect::<Vec<_>>()
                 .join(", ");
-            let mut chart = ChartBuilder::on(panel)
-                .margin(8)
-                .x_label_area_size(28)
-                .y_label_area_size(60)
-                .caption(caption, ("sans-serif", 16))
-                .build_cartesian_2d(t0..t1, (lo - pad)..(hi + pad))
-                .map_err(|e| e.to_string())?;
-            chart
-                .configure_mesh()
-                .x_desc("t_s")
-                .draw()
-                .map_err(|e| e.to_string())?;
+            let mut chart =
+                crate::io::plot::time_panel(panel, &caption, None, (t0, t1), (lo - pad, hi + pad))?;
             for (c, color, s, r) in &series {
                 let color = *color;
                 if let (Some(r), Some(rr)) = (r, reference) {
@@ -464,21 +450,15 @@ fn draw_arm3<DB: plotters::prelude::DrawingBackend>(
                         ))
                         .map_err(|e| e.to_string())?;
                 }
-                chart
-                    .draw_series(LineSeries::new(
-                        model.t_s.iter().copied().zip(s.iter().copied()),
-                        color.stroke_width(1),
-                    ))
-                    .map_err(|e| e.to_string())?
-                    .label(column(c.name(), j))
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
+                crate::io::plot::labelled_line(
+                    &mut chart,
+                    model.t_s.iter().copied().zip(s.iter().copied()),
+                    color.stroke_width(1),
+                    color,
+                    column(c.name(), j),
+                )?;
             }
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .draw()
-                .map_err(|e| e.to_string())?;
+            crate::io::plot::draw_legend(&mut chart)?;
         }
     }
     Ok(())

@@ -119,11 +119,7 @@ impl Recording {
 
     /// Uniform sample period, from the first and last time stamps.
     pub fn sample_period_s(&self) -> f64 {
-        let n = self.t_s.len();
-        if n < 2 {
-            return f64::NAN;
-        }
-        (self.t_s[n - 1] - self.t_s[0]) / (n - 1) as f64
+        mean_step_s(&self.t_s)
     }
 
     /// Whether the time stamps are uniform (each step within [`UNIFORM_TOLERANCE`] of the
@@ -478,6 +474,15 @@ pub(crate) struct Table<'t> {
     pub line: u64,
 }
 
+/// The mean step of time stamps `t_s` (first to last); NaN with fewer than two.
+pub(crate) fn mean_step_s(t_s: &[f64]) -> f64 {
+    let n = t_s.len();
+    if n < 2 {
+        return f64::NAN;
+    }
+    (t_s[n - 1] - t_s[0]) / (n - 1) as f64
+}
+
 /// The text of a recording file.
 pub(crate) fn read_text(path: &Path) -> Result<String, RecordingError> {
     std::fs::read_to_string(path).map_err(|source| RecordingError::Io {
@@ -631,7 +636,7 @@ impl<'t> Table<'t> {
                 message: format!("{n} data rows; a recording needs at least 2"),
             });
         }
-        let dt = (t_s[n - 1] - t_s[0]) / (n - 1) as f64;
+        let dt = mean_step_s(t_s);
         if dt.is_nan() || dt <= 0.0 {
             return Err(self.field_err(
                 lines[n - 1],

@@ -50,6 +50,17 @@ pub struct SimStats {
     pub rejected_steps: u64,
 }
 
+impl std::fmt::Display for SimStats {
+    /// `S segments, A steps (R rejected), E rhs evaluations`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} segments, {} steps ({} rejected), {} rhs evaluations",
+            self.segments, self.accepted_steps, self.rejected_steps, self.rhs_evaluations
+        )
+    }
+}
+
 impl SimStats {
     /// Adds the counters of `other` (e.g. of an integrator replaced mid-run).
     pub fn add(&mut self, other: &SimStats) {
