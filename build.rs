@@ -1,8 +1,9 @@
 //! Build script of the firmware crate.
 //!
 //! 1. Generates `constants.rs` (in OUT_DIR) from `config/force_law.toml`,
-//!    `config/torque_model.toml` and `config/joint_geometry.toml`, so identified constants flow from the identification
-//!    tools into the firmware without being copied by hand.
+//!    `config/torque_model.toml`, `config/joint_geometry.toml`, `config/plant_constants.toml`
+//!    and `config/controller.toml`, so identified constants flow from the identification
+//!    tools (`host-sim calibrate`) into the firmware without being copied by hand.
 //! 2. For bare-metal targets only (`target_os = "none"`), passes the linker scripts to
 //!    the binaries.
 
@@ -63,6 +64,92 @@ struct Geometry {
     sprocket_radius_m: f64,
     rest_length_m: f64,
     initial_contraction: f64,
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PlantFile {
+    joint: PlantJoint,
+    muscle: PlantMuscle,
+    environment: PlantEnvironment,
+    valve: PlantValve,
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PlantJoint {
+    inertia_kgm2: f64,
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PlantMuscle {
+    p_max_gauge_pa: f64,
+    volume_poly_m3: [f64; 4],
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PlantEnvironment {
+    p_atm_pa: f64,
+    supply_gauge_pa: f64,
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PlantValve {
+    sonic_conductance_m3_per_s_pa: f64,
+    critical_ratio: f64,
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ControllerFile {
+    position: PositionGains,
+    torque: TorqueGains,
+    pressure: PressureGains,
+    feedforward: FeedforwardGains,
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PositionGains {
+    kp_nm_per_rad: f64,
+    ki_nm_per_rad_s: f64,
+    kd_nm_s_per_rad: f64,
+    i_limit_nm: f64,
+    out_limit_nm: f64,
+    velocity_cutoff_hz: f64,
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TorqueGains {
+    kp: f64,
+    ki_per_s: f64,
+    corr_limit_nm: f64,
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PressureGains {
+    full_opening_error_pa: f64,
+    ki_per_pa_s: f64,
+    deadband_pa: f64,
+    i_limit: f64,
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FeedforwardGains {
+    rate_weight: f64,
+    cutoff_hz: f64,
+    limit_nm: f64,
+}
+
+/// Panics with `file: field = value must be ...` unless `ok`.
+fn check(ok: bool, file: &str, field: &str, value: f64, must: &str) {
+    assert!(ok, "{file}: {field} = {value} must be {must}");
 }
 
 fn read<T: serde::de::DeserializeOwned>(path: &str) -> T {
@@ -126,10 +213,99 @@ fn main() {
         "config/torque_model.toml: b_m2 must not be 0 (the model could not be inverted)"
     );
 
+    let plant: PlantFile = read("config/plant_constants.toml");
+    let ctl: ControllerFile = read("config/controller.toml");
+    {
+        const P: &str = "config/plant_constants.toml";
+        let (j, m, e, v) = (
+            &plant.joint,
+            &plant.muscle,
+            &plant.environment,
+            &plant.valve,
+        );
+        check(
+            j.inertia_kgm2 > 0.0,
+            P,
+            "joint.inertia_kgm2",
+            j.inertia_kgm2,
+            "> 0",
+        );
+        check(
+            m.p_max_gauge_pa > 0.0,
+            P,
+            "muscle.p_max_gauge_pa",
+            m.p_max_gauge_pa,
+            "> 0",
+        );
+        check(
+            m.volume_poly_m3[0] > 0.0,
+            P,
+            "muscle.volume_poly_m3[0]",
+            m.volume_poly_m3[0],
+            "> 0",
+        );
+        check(
+            e.p_atm_pa > 0.0,
+            P,
+            "environment.p_atm_pa",
+            e.p_atm_pa,
+            "> 0",
+        );
+        check(
+            e.supply_gauge_pa >= 0.0,
+            P,
+            "environment.supply_gauge_pa",
+            e.supply_gauge_pa,
+            ">= 0",
+        );
+        check(
+            v.sonic_conductance_m3_per_s_pa > 0.0,
+            P,
+            "valve.sonic_conductance_m3_per_s_pa",
+            v.sonic_conductance_m3_per_s_pa,
+            "> 0",
+        );
+        check(
+            (0.0..1.0).contains(&v.critical_ratio),
+            P,
+            "valve.critical_ratio",
+            v.critical_ratio,
+            "in 0..1",
+        );
+        const C: &str = "config/controller.toml";
+        let p = &ctl.position;
+        for (field, x) in [
+            ("position.kp_nm_per_rad", p.kp_nm_per_rad),
+            ("position.ki_nm_per_rad_s", p.ki_nm_per_rad_s),
+            ("position.kd_nm_s_per_rad", p.kd_nm_s_per_rad),
+            ("position.i_limit_nm", p.i_limit_nm),
+            ("position.out_limit_nm", p.out_limit_nm),
+            ("position.velocity_cutoff_hz", p.velocity_cutoff_hz),
+            ("torque.kp", ctl.torque.kp),
+            ("torque.ki_per_s", ctl.torque.ki_per_s),
+            ("torque.corr_limit_nm", ctl.torque.corr_limit_nm),
+            ("pressure.ki_per_pa_s", ctl.pressure.ki_per_pa_s),
+            ("pressure.deadband_pa", ctl.pressure.deadband_pa),
+            ("pressure.i_limit", ctl.pressure.i_limit),
+            ("feedforward.rate_weight", ctl.feedforward.rate_weight),
+            ("feedforward.cutoff_hz", ctl.feedforward.cutoff_hz),
+            ("feedforward.limit_nm", ctl.feedforward.limit_nm),
+        ] {
+            check(x.is_finite() && x >= 0.0, C, field, x, "finite and >= 0");
+        }
+        check(
+            ctl.pressure.full_opening_error_pa > 0.0,
+            C,
+            "pressure.full_opening_error_pa",
+            ctl.pressure.full_opening_error_pa,
+            "> 0",
+        );
+    }
     let c: Vec<String> = f.c.iter().map(|&x| lit(x)).collect();
     let src = format!(
-        "// @generated by build.rs from config/force_law.toml, config/torque_model.toml and\n\
-         // config/joint_geometry.toml. Do not edit.\n\
+        "// @generated by build.rs from config/force_law.toml, config/torque_model.toml,\n\
+         // config/joint_geometry.toml, config/plant_constants.toml and config/controller.toml.\n\
+         // Do not edit: change the config file (each states where its numbers come from).\n\
          /// Joint geometry (config/joint_geometry.toml).\n\
          pub const JOINT_GEOMETRY: crate::geometry::JointGeometry = crate::geometry::JointGeometry {{\n\
          \x20   sprocket_radius_m: {},\n\
@@ -167,6 +343,91 @@ fn main() {
         lit(t.sprocket_radius_m),
         lit(t.p0_gauge_pa),
         lit(t.dp_max_pa),
+    );
+    let (pm, env_, val, pos, tq, pr, ff) = (
+        &plant.muscle,
+        &plant.environment,
+        &plant.valve,
+        &ctl.position,
+        &ctl.torque,
+        &ctl.pressure,
+        &ctl.feedforward,
+    );
+    let vp: Vec<String> = pm.volume_poly_m3.iter().map(|&x| lit(x)).collect();
+    let src = format!(
+        "{src}\
+         // From config/plant_constants.toml.\n\
+         /// Joint inertia [kg m^2] (config/plant_constants.toml [joint]).\n\
+         pub const JOINT_INERTIA_KGM2: f32 = {};\n\
+         /// Upper limit of every muscle pressure set-point, gauge [Pa] (config/plant_constants.toml [muscle]).\n\
+         pub const P_MUSCLE_MAX_GAUGE_PA: f32 = {};\n\
+         /// Atmospheric pressure [Pa] (config/plant_constants.toml [environment]).\n\
+         pub const P_ATM_PA: f32 = {};\n\
+         /// Supply pressure, gauge [Pa] (config/plant_constants.toml [environment]).\n\
+         pub const SUPPLY_GAUGE_PA: f32 = {};\n\
+         /// ISO 6358 sonic conductance [m^3/(s Pa)] (config/plant_constants.toml [valve]).\n\
+         pub const VALVE_CONDUCTANCE_M3_PER_S_PA: f32 = {};\n\
+         /// ISO 6358 critical pressure ratio (config/plant_constants.toml [valve]).\n\
+         pub const VALVE_CRITICAL_RATIO: f32 = {};\n\
+         /// Muscle chamber volume polynomial in the contraction [m^3] (config/plant_constants.toml [muscle]).\n\
+         pub const MUSCLE_VOLUME_POLY_M3: [f32; 4] = [{}];\n\
+         // From config/controller.toml.\n\
+         /// Default position-loop gains of the cascade (config/controller.toml [position]).\n\
+         pub const POSITION_GAINS: crate::control::PidGains = crate::control::PidGains {{\n\
+         \x20   kp: {},\n\
+         \x20   ki: {},\n\
+         \x20   kd: {},\n\
+         \x20   i_limit: {},\n\
+         \x20   out_limit: {},\n\
+         }};\n\
+         /// Velocity filter cut-off of the position loop [Hz] (config/controller.toml [position]).\n\
+         pub const VELOCITY_CUTOFF_HZ: f32 = {};\n\
+         /// Default torque-loop gains (config/controller.toml [torque]); the set-point ceiling is\n\
+         /// [`P_MUSCLE_MAX_GAUGE_PA`].\n\
+         pub const TORQUE_LOOP: crate::control::TorqueLoopGains = crate::control::TorqueLoopGains {{\n\
+         \x20   kp: {},\n\
+         \x20   ki: {},\n\
+         \x20   corr_limit_nm: {},\n\
+         \x20   p_set_max_gauge_pa: P_MUSCLE_MAX_GAUGE_PA,\n\
+         }};\n\
+         /// Default pressure-loop gains (config/controller.toml [pressure]).\n\
+         pub const PRESSURE_LOOP: crate::control::PressureLoopGains = crate::control::PressureLoopGains {{\n\
+         \x20   kp_per_pa: 1.0 / {},\n\
+         \x20   ki_per_pa_s: {},\n\
+         \x20   deadband_pa: {},\n\
+         \x20   i_limit: {},\n\
+         }};\n\
+         /// Default trajectory feed-forward (config/controller.toml [feedforward]; the inertia is\n\
+         /// [`JOINT_INERTIA_KGM2`]).\n\
+         pub const FEEDFORWARD: crate::feedforward::FeedforwardGains = crate::feedforward::FeedforwardGains {{\n\
+         \x20   rate_weight: {},\n\
+         \x20   inertia_kgm2: JOINT_INERTIA_KGM2,\n\
+         \x20   cutoff_hz: {},\n\
+         \x20   limit_nm: {},\n\
+         }};\n",
+        lit(plant.joint.inertia_kgm2),
+        lit(pm.p_max_gauge_pa),
+        lit(env_.p_atm_pa),
+        lit(env_.supply_gauge_pa),
+        lit(val.sonic_conductance_m3_per_s_pa),
+        lit(val.critical_ratio),
+        vp.join(", "),
+        lit(pos.kp_nm_per_rad),
+        lit(pos.ki_nm_per_rad_s),
+        lit(pos.kd_nm_s_per_rad),
+        lit(pos.i_limit_nm),
+        lit(pos.out_limit_nm),
+        lit(pos.velocity_cutoff_hz),
+        lit(tq.kp),
+        lit(tq.ki_per_s),
+        lit(tq.corr_limit_nm),
+        lit(pr.full_opening_error_pa),
+        lit(pr.ki_per_pa_s),
+        lit(pr.deadband_pa),
+        lit(pr.i_limit),
+        lit(ff.rate_weight),
+        lit(ff.cutoff_hz),
+        lit(ff.limit_nm),
     );
     let fb = prescale::force_law_bits(
         f.c.map(f32w),

@@ -88,17 +88,18 @@ pub struct ValveModelParams {
 impl ValveModelParams {
     /// The reference plant (`shared/plant/reference-1dof.toml`): 600 kPa gauge supply,
     /// C = 8e-9 m^3/(s Pa), b = 0.433, the DMSP-20 volume polynomial; threshold 0.5 MPa/s +
-    /// 50 % of the model terms, two 10-tick windows.
+    /// 50 % of the model terms, two 10-tick windows. The plant numbers come from
+    /// `config/plant_constants.toml` (build.rs); the thresholds are design choices.
     ///
     /// Threshold rationale: a stuck-open inlet at 300 kPa raises the pressure at ~5 MPa/s
     /// (the model says 0); 500 Pa of sensor noise gives 0.07 MPa/s of noise on a 10 ms
     /// window; the relative part covers a polytropic exponent up to 1.4 and a supply droop.
     pub const REFERENCE: ValveModelParams = ValveModelParams {
-        p_atm_pa: 101_325.0,
-        supply_gauge_pa: 600_000.0,
-        conductance_m3_per_s_pa: 8.0e-9,
-        critical_ratio: 0.433,
-        volume_poly_m3: [79.0e-6, 48.0e-5, -18.0e-6, -11.0e-4],
+        p_atm_pa: crate::constants::P_ATM_PA,
+        supply_gauge_pa: crate::constants::SUPPLY_GAUGE_PA,
+        conductance_m3_per_s_pa: crate::constants::VALVE_CONDUCTANCE_M3_PER_S_PA,
+        critical_ratio: crate::constants::VALVE_CRITICAL_RATIO,
+        volume_poly_m3: crate::constants::MUSCLE_VOLUME_POLY_M3,
         residual_abs_pa_s: 500_000.0,
         residual_rel: 0.5,
         window_ticks: 10,

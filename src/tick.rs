@@ -210,6 +210,9 @@ impl ControllerConfig {
     ///   flow moves a muscle ~4 kPa per ms), deadband 3 kPa.
     /// - On/off PWM ([`crate::valves::OnOffPwmConfig::REFERENCE`]): 10 ticks period, 2 ticks
     ///   minimum on-time.
+    ///
+    /// The numbers live in `config/controller.toml` (gains) and `config/plant_constants.toml`
+    /// (inertia, pressure ceiling, valve and supply), turned into `crate::constants` by build.rs.
     pub fn reference(tick_hz: f32) -> Self {
         let ticks_ceil = |x: f32| -> u32 {
             // `as` saturates: NaN -> 0, huge -> u32::MAX; at least 1 tick.
@@ -236,26 +239,10 @@ impl ControllerConfig {
             geometry: JointGeometry::REFERENCE,
             force_law: FORCE_LAW,
             torque_model: TORQUE_MODEL,
-            position: PidGains {
-                kp: 29.662365,
-                ki: 4.819047,
-                kd: 0.9451818,
-                i_limit: 1.5,
-                out_limit: 10.0,
-            },
-            torque: TorqueLoopGains {
-                kp: 0.0,
-                ki: 30.0,
-                corr_limit_nm: 1.5,
-                p_set_max_gauge_pa: P_MUSCLE_MAX_GAUGE_PA,
-            },
-            pressure: PressureLoopGains {
-                kp_per_pa: 1.0 / 30_000.0,
-                ki_per_pa_s: 0.0,
-                deadband_pa: 3_000.0,
-                i_limit: 0.0,
-            },
-            velocity_cutoff_hz: 40.0,
+            position: crate::constants::POSITION_GAINS,
+            torque: crate::constants::TORQUE_LOOP,
+            pressure: crate::constants::PRESSURE_LOOP,
+            velocity_cutoff_hz: crate::constants::VELOCITY_CUTOFF_HZ,
             safe_state: SafeState::Hold,
             pressure_limits: ChannelLimits {
                 min: -50_000.0,
@@ -280,12 +267,7 @@ impl ControllerConfig {
             tracking_error_pa: 100_000.0,
             tracking_ticks: ticks(0.3),
             law: ControlLaw::Cascade,
-            feedforward: FeedforwardGains {
-                rate_weight: 1.0,
-                inertia_kgm2: 0.014,
-                cutoff_hz: 150.0,
-                limit_nm: 2.0,
-            },
+            feedforward: crate::constants::FEEDFORWARD,
             // The residual window is 10 ms whatever the tick (10 ticks at 1 kHz): a shorter
             // window at a fast tick would turn the sensor noise into false valve faults.
             valve_model: ValveModelParams {

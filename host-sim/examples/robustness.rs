@@ -5,12 +5,19 @@
 //! ```sh
 //! cargo run --release -p host-sim --example robustness [-- PLANT.toml]
 //! ```
+//!
+//! After the tables: the MSE of every held-out scenario for each law on the nominal plant and
+//! with the valve dead time (where the cascade's lead comes from, or goes).
 
 use anyhow::{Context, Result};
 use host_sim::control::compare::{
-    control_tuned_path, reference_plant_path, suite_scenarios, ControlTuning,
+    config_for, control_tuned_path, reference_plant_path, score_suite_with, suite_scenarios,
+    ControlTuning,
 };
-use host_sim::control::robustness::{format_table, held_out_scenarios, table};
+use host_sim::control::robustness::{
+    condition_plant, format_table, held_out_scenarios, table, CONDITIONS,
+};
+use pam_firmware::tick::ControlLaw;
 
 fn main() -> Result<()> {
     let plant = match std::env::args().nth(1) {
@@ -31,6 +38,50 @@ fn main() -> Result<()> {
             t0.elapsed().as_secs_f64(),
             format_table(&rows)
         );
+    }
+    // Per scenario: cascade, PD, PID MSE [rad^2] and max |error| [rad].
+    let laws = [
+        ("cascade", tuning.cascade.config(1000.0)),
+        (
+            "PD",
+            config_for(ControlLaw::DirectPid(tuning.pd.gains()), 1000.0),
+        ),
+        (
+            "PID",
+            config_for(ControlLaw::DirectPid(tuning.pid.gains()), 1000.0),
+        ),
+    ];
+    let held_out = held_out_scenarios()?;
+    for (name, effects, inertia) in CONDITIONS
+        .iter()
+        .filter(|c| c.0 == "nominal" || c.0.starts_with("valve dead time"))
+    {
+        let plant = condition_plant(&text, effects, *inertia);
+        println!("Held-out scenarios, {name}: MSE [rad^2] (max |error| [rad])\n");
+        println!("| scenario | cascade | PD | PID | PID / cascade |\n|---|---|---|---|---|");
+        let scores: Vec<_> = laws
+            .iter()
+            .map(|(_, c)| score_suite_with(&plant, &held_out, *c))
+            .collect();
+        for (i, sc) in held_out.iter().enumerate() {
+            let cell = |k: usize| match &scores[k] {
+                Ok(s) => (s.scenarios[i].mse_rad2, s.scenarios[i].max_abs_rad),
+                Err(_) => (f64::INFINITY, f64::INFINITY),
+            };
+            let (c, p, d) = (cell(0), cell(1), cell(2));
+            println!(
+                "| {} | {:.3e} ({:.3}) | {:.3e} ({:.3}) | {:.3e} ({:.3}) | {:.2} |",
+                sc.scenario.name,
+                c.0,
+                c.1,
+                p.0,
+                p.1,
+                d.0,
+                d.1,
+                d.0 / c.0
+            );
+        }
+        println!();
     }
     Ok(())
 }

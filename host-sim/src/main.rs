@@ -66,6 +66,14 @@ enum Command {
     /// Tune the cascade, PD and PID gains on the set-point suite (firmware in the loop) and
     /// write the gains file (the format of config/control_tuned.toml).
     Tune(host_sim::control::tune::TuneArgs),
+    /// From a recording to the firmware's constants (config/): refuse degenerate data,
+    /// identify the torque model, take the plant-derived constants from the plant file, (with
+    /// --tune) tune the gains, and replace the files in --out-dir, printing old -> new per key.
+    /// All files or none are written; exit status 2 and nothing written on refused data.
+    #[command(
+        after_help = "Example:\n  host-sim calibrate --recording rec.csv --plant ../shared/plant/reference-1dof.toml --out-dir config/ --tune"
+    )]
+    Calibrate(host_sim::identify::calibrate::CalibrateArgs),
     /// Diagnosis: locate where a recording departs from the nominal model, tell a mis-set
     /// parameter (recalibration) from left-out physics (a named effect), model it and report
     /// the fit before/after. Exit status 0: explained or nothing missing; 3: unexplained or
@@ -201,6 +209,7 @@ fn main() -> ExitCode {
         Command::Tune(a) => run_report(host_sim::control::tune::run_tune(&a)),
         Command::Import(a) => run_report(host_sim::io::import::run_import(&a)),
         Command::Capture(a) => run_report(host_sim::io::capture::run_capture(&a)),
+        Command::Calibrate(a) => run_report(host_sim::identify::calibrate::run_calibrate(&a)),
     };
     match result.and_then(|code| {
         outputs.commit().context("cannot write the outputs")?;

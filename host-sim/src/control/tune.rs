@@ -166,7 +166,11 @@ impl Ctx {
     /// Logs a line above the progress spinner.
     fn say(&self, line: String) {
         self.progress.set_message(line.clone());
-        self.progress.println(&line);
+        if self.progress.is_hidden() {
+            eprintln!("{line}");
+        } else {
+            self.progress.println(&line);
+        }
         self.log.lock().expect("log lock").push(line);
     }
 

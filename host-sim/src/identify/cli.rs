@@ -530,6 +530,23 @@ fn header_line_of(path: &Path) -> usize {
 }
 
 fn identify_torque(a: &IdentifyTorqueArgs) -> Result<String> {
+    let t = torque_model_file(a)?;
+    write_atomic(&a.out, t.toml.as_bytes())?;
+    Ok(t.report)
+}
+
+/// The torque model identified from a recording, not yet written.
+pub struct TorqueModelFile {
+    /// Content of the constants file (provenance header + `[torque_model]`).
+    pub toml: String,
+    /// The report `host-sim identify torque` prints.
+    pub report: String,
+    /// Fit against the force-derived torque [%].
+    pub fit_pct: f64,
+}
+
+/// `host-sim identify torque` without the write: the file content, the report, the fit.
+pub fn torque_model_file(a: &IdentifyTorqueArgs) -> Result<TorqueModelFile> {
     validate::distinct_outputs(
         &[("--recording", &a.recording), ("--plant", &a.plant)],
         &[("--out", &a.out)],
@@ -634,8 +651,7 @@ fn identify_torque(a: &IdentifyTorqueArgs) -> Result<String> {
         &a.recording,
         "\n[torque_model]",
     );
-    write_atomic(&a.out, toml.as_bytes())?;
-    Ok(format!(
+    let report = format!(
         "{} of {n_all} samples fitted, velocity by Savitzky-Golay over {} samples; torque from {}\n\
          A = {:.6e} N/(m rad), B = {:.6e} m^2, C = {:.6e} N m s^3/rad^3, D = {:.6e} N m s/rad \
          (r = {} m, p0 = {:.1} kPa)\n\
@@ -659,7 +675,12 @@ fn identify_torque(a: &IdentifyTorqueArgs) -> Result<String> {
         q.rmse_nm,
         q.max_abs_nm,
         a.out.display()
-    ))
+    );
+    Ok(TorqueModelFile {
+        toml,
+        report,
+        fit_pct: q.fit_pct,
+    })
 }
 
 fn identify_plant(a: &IdentifyPlantArgs) -> Result<String> {

@@ -5,8 +5,10 @@
 //!   independent muscle law, to test the force-law fit against.
 //! - [`torque`]: the simplified torque model (seed 003 eq. 11) from angle, pressures and tensions.
 //! - [`plant`]: output-error fit of plant-file parameters by replaying a recording.
+//! - [`calibrate`]: recording -> torque model -> (gains) -> the firmware's config files.
 //! - [`cli`]: the `host-sim sweep` and `host-sim identify` commands.
 
+pub mod calibrate;
 pub mod cli;
 pub mod force;
 pub mod force_maps;

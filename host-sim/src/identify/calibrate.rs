@@ -1,0 +1,327 @@
+//! `host-sim calibrate`: from a recording of the joint to the firmware's constants in one
+//! command. Stages: refuse degenerate data -> torque model (seed 003 eq. 11) from the recording
+//! -> the plant-derived constants (geometry, inertia, supply, valve, chamber volume) from the
+//! plant file -> (with `--tune`) gains on the plant -> the files in `--out-dir`, each with its
+//! provenance header, printing what changed (old -> new per key) against the files already
+//! there. Every file goes through the one atomic writer inside the command's transaction
+//! (`crate::io::atomic`): all files are replaced or none.
+
+// `!(x > 0.0)` is deliberate: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+
+use super::cli::{torque_model_file, IdentifyTorqueArgs};
+use super::write_atomic;
+use crate::io::recording::Channel;
+use crate::{Plant, Recording};
+
+/// Lowest torque-model fit [%] (against the force-derived torque) from which constants are
+/// written. The reference joint's sweep fits 98.96 %; 90 % leaves room for sensor noise and
+/// refuses a recording eq. 11 does not describe.
+pub const MIN_TORQUE_FIT_PCT: f64 = 90.0;
+/// A joint angle whose standard deviation is below this did not move [deg].
+pub const MIN_ANGLE_SD_DEG: f64 = 0.5;
+/// A pressure whose standard deviation is below this was not activated [kPa].
+pub const MIN_PRESSURE_SD_KPA: f64 = 5.0;
+/// Margin above the supply before a pressure reading is refused [kPa] (sensor noise, droop).
+pub const SUPPLY_MARGIN_KPA: f64 = 20.0;
+
+/// `host-sim calibrate`.
+#[derive(Args, Debug)]
+pub struct CalibrateArgs {
+    /// Recording of the joint (RECORDING.md: angle_deg, p1_kpa, p2_kpa, optionally f1_n, f2_n):
+    /// a motion through a range of angles under varying activation (e.g. `host-sim sweep torque`).
+    #[arg(long, value_name = "REC.csv")]
+    pub recording: PathBuf,
+    /// Plant file (PLANT.md format; e.g. the output of `host-sim identify plant`): geometry,
+    /// inertia, supply, valve, and the force model when the recording has no tensions.
+    #[arg(long, value_name = "P.toml")]
+    pub plant: PathBuf,
+    /// Directory of the firmware's constants (config/): torque_model.toml,
+    /// joint_geometry.toml, plant_constants.toml (and with --tune control_tuned.toml) are
+    /// replaced there.
+    #[arg(long, value_name = "DIR")]
+    pub out_dir: PathBuf,
+    /// Also tune the control gains on the plant file (`host-sim tune`, minutes).
+    #[arg(long)]
+    pub tune: bool,
+    /// Worker threads of the tuner (with --tune).
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+}
+
+fn sd(v: &[f64]) -> f64 {
+    let n = v.len().max(1) as f64;
+    let m = v.iter().sum::<f64>() / n;
+    (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / n).sqrt()
+}
+
+/// The reasons a recording must not give firmware constants (empty: usable).
+pub fn degenerate_reasons(rec: &Recording, plant: &Plant, file: &str) -> Vec<String> {
+    let mut why = Vec::new();
+    match rec.channel(Channel::AngleDeg) {
+        Some(a) if !(sd(a) >= MIN_ANGLE_SD_DEG) => why.push(format!(
+            "{file}: angle_deg is constant (sd {:.3} deg < {MIN_ANGLE_SD_DEG} deg): the joint did not move",
+            sd(a)
+        )),
+        None => why.push(format!("{file}: no angle_deg column")),
+        _ => {}
+    }
+    let supply_kpa = (plant.p_supply_abs_pa - plant.p_atm_pa) / 1e3;
+    let (p1, p2) = (rec.channel(Channel::P1Kpa), rec.channel(Channel::P2Kpa));
+    for (p, name) in [(p1, "p1_kpa"), (p2, "p2_kpa")] {
+        match p {
+            Some(p) => {
+                if !(sd(p) >= MIN_PRESSURE_SD_KPA) {
+                    why.push(format!(
+                        "{file}: {name} is constant (sd {:.3} kPa < {MIN_PRESSURE_SD_KPA} kPa): no activation to identify",
+                        sd(p)
+                    ));
+                }
+                let pmax = p.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+                if !(pmax <= supply_kpa + SUPPLY_MARGIN_KPA) {
+                    why.push(format!(
+                        "{file}: {name} reaches {pmax:.1} kPa, above the supply {supply_kpa:.1} kPa \
+                         (+{SUPPLY_MARGIN_KPA} kPa): wrong unit, wrong plant file or a broken sensor"
+                    ));
+                }
+            }
+            None => why.push(format!("{file}: no {name} column")),
+        }
+    }
+    if let (Some(p1), Some(p2)) = (p1, p2) {
+        // Eq. 11's activation p1 = p0 - dp, p2 = p0 + dp: dp can reach supply / 2 at most.
+        let dp_max = p1
+            .iter()
+            .zip(p2)
+            .map(|(a, b)| 0.5 * (b - a).abs())
+            .fold(0.0, f64::max);
+        if !(dp_max <= 0.5 * supply_kpa + SUPPLY_MARGIN_KPA) {
+            why.push(format!(
+                "{file}: the activation dp = (p2 - p1) / 2 reaches {dp_max:.1} kPa, above half the \
+                 supply ({:.1} kPa): no p0 can give it",
+                0.5 * supply_kpa
+            ));
+        }
+    }
+    why
+}
+
+/// `key = number` pairs of every table of a TOML text (arrays flattened as `key[i]`).
+fn numbers(text: &str) -> Vec<(String, f64)> {
+    let Ok(t) = text.parse::<toml::Table>() else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    fn walk(prefix: &str, v: &toml::Value, out: &mut Vec<(String, f64)>) {
+        match v {
+            toml::Value::Float(x) => out.push((prefix.to_string(), *x)),
+            toml::Value::Integer(i) => out.push((prefix.to_string(), *i as f64)),
+            toml::Value::Array(a) => {
+                for (i, x) in a.iter().enumerate() {
+                    walk(&format!("{prefix}[{i}]"), x, out);
+                }
+            }
+            toml::Value::Table(t) => {
+                for (k, x) in t {
+                    let p = if prefix.is_empty() {
+                        k.clone()
+                    } else {
+                        format!("{prefix}.{k}")
+                    };
+                    walk(&p, x, out);
+                }
+            }
+            _ => {}
+        }
+    }
+    walk("", &toml::Value::Table(t), &mut out);
+    out
+}
+
+/// What changed from the file at `old` (if any) to `new_text`, one line per key.
+fn changes(old: &Path, new_text: &str) -> String {
+    let before = std::fs::read_to_string(old)
+        .map(|t| numbers(&t))
+        .unwrap_or_default();
+    let mut s = String::new();
+    for (k, v) in numbers(new_text) {
+        match before.iter().find(|(kb, _)| *kb == k) {
+            Some((_, b)) if *b == v => {
+                s += &format!("  {k} = {v:e} (unchanged)\n");
+            }
+            Some((_, b)) => s += &format!("  {k}: {b:e} -> {v:e}\n"),
+            None => s += &format!("  {k} = {v:e} (new)\n"),
+        }
+    }
+    for (k, b) in &before {
+        if !s.contains(&format!("  {k} ")) && !s.contains(&format!("  {k}:")) {
+            s += &format!("  {k} = {b:e} (removed)\n");
+        }
+    }
+    s
+}
+
+/// `config/joint_geometry.toml` from the plant file.
+fn geometry_toml(plant: &Plant, plant_path: &Path) -> String {
+    format!(
+        "# Geometry of the antagonistic joint the firmware's torque estimate uses (src/geometry.rs,\n\
+         # PLANT.md convention: chi1 = chi0 + (r / l_n) beta, chi2 = chi0 - (r / l_n) beta, L/L0 = 1 - chi).\n\
+         # SI units. Written by `host-sim calibrate` from {} ([joint] sprocket_radius_m,\n\
+         # initial_contraction; [muscle] rest_length_m). build.rs turns it into\n\
+         # `pam_firmware::constants::JOINT_GEOMETRY` (= JointGeometry::REFERENCE) and checks that\n\
+         # sprocket_radius_m agrees with config/torque_model.toml.\n\n\
+         [joint_geometry]\n\
+         sprocket_radius_m = {:?}\n\
+         rest_length_m = {:?}\n\
+         initial_contraction = {:?}\n",
+        plant_path.display(),
+        plant.joint.sprocket_radius_m,
+        plant.muscle.rest_length_m,
+        plant.joint.initial_contraction,
+    )
+}
+
+/// `config/plant_constants.toml` from the plant file; the muscle's pressure rating (not in a
+/// plant file) is kept from `old` (600 kPa, FESTO DMSP, if there is none).
+fn plant_constants_toml(plant: &Plant, plant_path: &Path, old: &Path) -> String {
+    let p_max = std::fs::read_to_string(old)
+        .ok()
+        .and_then(|t| {
+            numbers(&t)
+                .into_iter()
+                .find(|(k, _)| k == "muscle.p_max_gauge_pa")
+        })
+        .map(|(_, v)| v)
+        .unwrap_or(600_000.0);
+    let v = plant.muscle.volume_poly_m3;
+    format!(
+        "# Plant-derived constants of the firmware: what the firmware knows of the joint beyond the force\n\
+         # law (config/force_law.toml), the torque model (config/torque_model.toml) and the geometry\n\
+         # (config/joint_geometry.toml). SI units. build.rs turns them into\n\
+         # `pam_firmware::constants::{{JOINT_INERTIA_KGM2, P_MUSCLE_MAX_GAUGE_PA, ...}}`:\n\
+         #   inertia_kgm2            -> the inertia torque J r'' of the cascade's trajectory feed-forward\n\
+         #   p_max_gauge_pa          -> the ceiling of every muscle pressure set-point (the muscle's rating,\n\
+         #                              kept from the previous file: a plant file does not state it)\n\
+         #   environment, valve, volume_poly_m3 -> the valve / supply residual (src/residual.rs)\n\
+         #\n\
+         # Written by `host-sim calibrate` from {} ([environment], [muscle] volume_poly_m3,\n\
+         # [joint] inertia_kgm2, [valve] sonic_conductance_m3_per_s_pa, critical_ratio).\n\n\
+         [joint]\n\
+         inertia_kgm2 = {:?}\n\n\
+         [muscle]\n\
+         p_max_gauge_pa = {:?}\n\
+         volume_poly_m3 = [{:e}, {:e}, {:e}, {:e}]\n\n\
+         [environment]\n\
+         p_atm_pa = {:?}\n\
+         supply_gauge_pa = {:?}\n\n\
+         [valve]\n\
+         sonic_conductance_m3_per_s_pa = {:e}\n\
+         critical_ratio = {:?}\n",
+        plant_path.display(),
+        plant.joint.inertia_kgm2,
+        p_max,
+        v[0],
+        v[1],
+        v[2],
+        v[3],
+        plant.p_atm_pa,
+        plant.p_supply_abs_pa - plant.p_atm_pa,
+        plant.valve.sonic_conductance_m3_per_s_pa,
+        plant.valve.critical_ratio,
+    )
+}
+
+/// Runs `host-sim calibrate`; returns the report for stdout. Fails (nothing written) on
+/// degenerate data or a poor torque fit.
+pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
+    if !a.out_dir.is_dir() {
+        bail!("--out-dir {}: not a directory", a.out_dir.display());
+    }
+    let file = a.recording.display().to_string();
+    let plant = Plant::load(&a.plant)?;
+    let rec = Recording::read(&a.recording)?;
+    let why = degenerate_reasons(&rec, &plant, &file);
+    if !why.is_empty() {
+        bail!(
+            "refusing to write firmware constants (nothing written):\n  {}",
+            why.join("\n  ")
+        );
+    }
+    let dest = |name: &str| a.out_dir.join(name);
+    // Stage 1: the torque model.
+    let torque = torque_model_file(&IdentifyTorqueArgs {
+        recording: a.recording.clone(),
+        plant: a.plant.clone(),
+        out: dest("torque_model.toml"),
+        savgol_half_window: None,
+        dp_max_kpa: None,
+        max_accel_rad_s2: None,
+    })
+    .map_err(|e| {
+        anyhow::anyhow!("refusing to write firmware constants (nothing written): {e:#}")
+    })?;
+    if !(torque.fit_pct >= MIN_TORQUE_FIT_PCT) {
+        bail!(
+            "refusing to write firmware constants (nothing written): the torque model fits the \
+             data {:.2} %, below {MIN_TORQUE_FIT_PCT} % (noise, or a joint eq. 11 does not describe)",
+            torque.fit_pct
+        );
+    }
+    let mut out = format!(
+        "torque model: fit {:.3} % (>= {MIN_TORQUE_FIT_PCT} %)\n",
+        torque.fit_pct
+    );
+    // Stage 2: the plant-derived constants.
+    let files = [
+        ("torque_model.toml", torque.toml),
+        ("joint_geometry.toml", geometry_toml(&plant, &a.plant)),
+        (
+            "plant_constants.toml",
+            plant_constants_toml(&plant, &a.plant, &dest("plant_constants.toml")),
+        ),
+    ];
+    for (name, text) in &files {
+        out += &format!("{}:\n{}", dest(name).display(), changes(&dest(name), text));
+    }
+    // Stage 3: the gains (optional, minutes). Written (staged) by the tuner itself.
+    if a.tune {
+        let control = dest("control_tuned.toml");
+        let before = std::fs::read_to_string(&control).unwrap_or_default();
+        let r = crate::control::tune::run_tune(&crate::control::tune::TuneArgs {
+            plant: a.plant.clone(),
+            out: control.clone(),
+            threads: a.threads,
+            warm_start: false,
+            setpoint_cutoff_hz: 150.0,
+            transition_s: None,
+            cascade_start: Vec::new(),
+            no_step_constraints: false,
+        })
+        .context("tuning the gains")?;
+        out += &format!(
+            "{} (previous [cascade]: {}):\n{r}",
+            control.display(),
+            numbers(&before)
+                .iter()
+                .filter(|(k, _)| k.starts_with("cascade."))
+                .map(|(k, v)| format!("{k} = {v:e}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    // Every stage passed: replace the files (staged in the command's transaction: all or none).
+    for (name, text) in &files {
+        write_atomic(&dest(name), text.as_bytes())?;
+    }
+    out += &format!(
+        "wrote {} files in {}; rebuild the firmware (`cargo flash-build` / `cargo flash`) to use them\n",
+        files.len() + usize::from(a.tune),
+        a.out_dir.display()
+    );
+    Ok(out)
+}

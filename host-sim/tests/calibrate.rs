@@ -1,0 +1,185 @@
+//! `host-sim calibrate` on a recording made through the plant (`host-sim sweep torque`) into a
+//! temporary config directory: the torque model, joint geometry and plant constants are
+//! written with what changed, with exactly the keys the firmware's build.rs reads from the
+//! repository's config/; degenerate recordings (a joint that does not move, pressures above the
+//! supply, pure noise in the tensions) are refused with exit status 2 and leave the directory
+//! untouched.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn plant() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant/reference-1dof.toml")
+}
+
+fn host_sim(args: &[&dyn AsRef<std::ffi::OsStr>]) -> Output {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_host-sim"));
+    for a in args {
+        c.arg(a);
+    }
+    c.output().unwrap()
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+fn calibrate(rec: &Path, dir: &Path) -> Output {
+    host_sim(&[
+        &"calibrate",
+        &"--recording",
+        &rec,
+        &"--plant",
+        &plant(),
+        &"--out-dir",
+        &dir,
+    ])
+}
+
+/// Rewrites one column of a recording with `f(row index, old value)`.
+fn edit_column(src: &Path, dst: &Path, col: &str, f: impl Fn(usize, f64) -> f64) {
+    let text = std::fs::read_to_string(src).unwrap();
+    let mut out = String::new();
+    let mut idx = None;
+    let mut row = 0;
+    for line in text.lines() {
+        if line.starts_with('#') || line.trim().is_empty() {
+            out += line;
+        } else if idx.is_none() {
+            idx = line.split(',').position(|h| h.trim() == col);
+            assert!(idx.is_some(), "no column {col}");
+            out += line;
+        } else {
+            let mut fields: Vec<String> = line.split(',').map(String::from).collect();
+            let i = idx.unwrap();
+            let v: f64 = fields[i].trim().parse().unwrap();
+            fields[i] = format!("{:.6}", f(row, v));
+            row += 1;
+            out += &fields.join(",");
+        }
+        out.push('\n');
+    }
+    std::fs::write(dst, out).unwrap();
+}
+
+#[test]
+fn calibrate_writes_the_torque_model_and_refuses_degenerate_data() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("rec.csv");
+    let cfg = dir.path().join("config");
+    std::fs::create_dir(&cfg).unwrap();
+    let r = host_sim(&[&"sweep", &"torque", &"--plant", &plant(), &"--out", &rec]);
+    assert!(r.status.success(), "{}", text(&r.stderr));
+
+    // Degenerate recordings: nothing is written.
+    let bad = dir.path().join("bad.csv");
+    for (col, f, want) in [
+        (
+            "angle_deg",
+            Box::new(|_: usize, _: f64| 3.0) as Box<dyn Fn(usize, f64) -> f64>,
+            "angle_deg is constant",
+        ),
+        ("p1_kpa", Box::new(|_, v| v + 700.0), "above the supply"),
+        (
+            "f1_n",
+            Box::new(|i, _| ((i * 7919) % 1000) as f64),
+            "torque model fits the data",
+        ),
+    ] {
+        edit_column(&rec, &bad, col, f);
+        let r = calibrate(&bad, &cfg);
+        assert_eq!(r.status.code(), Some(2), "{col}: {}", text(&r.stdout));
+        let err = text(&r.stderr);
+        assert!(
+            err.contains(want) && err.contains("nothing written"),
+            "{col}: {err}"
+        );
+        assert_eq!(
+            std::fs::read_dir(&cfg).unwrap().count(),
+            0,
+            "{col}: wrote a file"
+        );
+    }
+
+    // A good recording: the three files are written and reported as new; a second run
+    // reports every constant unchanged.
+    let r = calibrate(&rec, &cfg);
+    let out = text(&r.stdout);
+    assert!(r.status.success(), "{out}\n{}", text(&r.stderr));
+    assert!(
+        out.contains("torque_model.b_m2") && out.contains("(new)"),
+        "{out}"
+    );
+    let written = std::fs::read_to_string(cfg.join("torque_model.toml")).unwrap();
+    assert!(written.contains("[torque_model]") && written.contains("# Data ("));
+    // The firmware's build reads these files with deny_unknown_fields: the written files must
+    // have the same tables and keys as the repository's.
+    let repo_config = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../config");
+    for name in [
+        "torque_model.toml",
+        "joint_geometry.toml",
+        "plant_constants.toml",
+    ] {
+        let ours = keys(&cfg.join(name));
+        let repo = keys(&repo_config.join(name));
+        assert_eq!(ours, repo, "{name}: keys differ from config/{name}");
+    }
+    // The reference plant's geometry and inertia, as the firmware's config has them.
+    let geo: toml::Table = std::fs::read_to_string(cfg.join("joint_geometry.toml"))
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert_eq!(
+        geo["joint_geometry"]["rest_length_m"].as_float(),
+        Some(0.25)
+    );
+    let r = calibrate(&rec, &cfg);
+    let out = text(&r.stdout);
+    assert!(r.status.success(), "{out}\n{}", text(&r.stderr));
+    assert!(
+        out.contains("b_m2 = ") && out.contains("(unchanged)"),
+        "{out}"
+    );
+    assert!(!out.contains(" -> ") && !out.contains("(new)"), "{out}");
+
+    // A changed plant: the inertia change is reported old -> new.
+    let heavy = dir.path().join("heavy.toml");
+    let p = std::fs::read_to_string(plant()).unwrap();
+    assert!(p.contains("inertia_kgm2 = 0.014"));
+    std::fs::write(
+        &heavy,
+        p.replace("inertia_kgm2 = 0.014", "inertia_kgm2 = 0.154"),
+    )
+    .unwrap();
+    let r = host_sim(&[
+        &"calibrate",
+        &"--recording",
+        &rec,
+        &"--plant",
+        &heavy,
+        &"--out-dir",
+        &cfg,
+    ]);
+    let out = text(&r.stdout);
+    assert!(r.status.success(), "{out}\n{}", text(&r.stderr));
+    assert!(
+        out.contains("joint.inertia_kgm2: 1.4e-2 -> 1.54e-1"),
+        "{out}"
+    );
+}
+
+/// `table.key` names of a TOML file (arrays as one key).
+fn keys(path: &Path) -> Vec<String> {
+    let t: toml::Table = std::fs::read_to_string(path).unwrap().parse().unwrap();
+    let mut k: Vec<String> = t
+        .iter()
+        .flat_map(|(name, v)| {
+            v.as_table()
+                .unwrap()
+                .keys()
+                .map(move |k| format!("{name}.{k}"))
+        })
+        .collect();
+    k.sort();
+    k
+}
