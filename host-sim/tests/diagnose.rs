@@ -114,29 +114,24 @@ fn null_case_says_nothing_is_missing() {
     assert!(json["check"]["before"]["angle_deg"].as_f64().unwrap() > 95.0);
 }
 
-#[test]
-fn joint_friction_is_named() {
-    assert_named_and_fits("joint_friction", 21, 1e-3);
+/// One test per concealed truth: `name: (truth, seed, sample period [s])`.
+macro_rules! named_and_fits {
+    ($($test:ident: ($truth:expr, $seed:expr, $dt_s:expr)),* $(,)?) => {
+        $(
+            #[test]
+            fn $test() {
+                assert_named_and_fits($truth, $seed, $dt_s);
+            }
+        )*
+    };
 }
 
-#[test]
-fn leakage_is_named_at_2_ms() {
-    assert_named_and_fits("leakage", 22, 2e-3);
-}
-
-#[test]
-fn sensor_lag_is_named() {
-    assert_named_and_fits("sensor_lag", 23, 1e-3);
-}
-
-#[test]
-fn muscle_hysteresis_is_named() {
-    assert_named_and_fits("muscle_hysteresis", 24, 1e-3);
-}
-
-#[test]
-fn stribeck_truth_is_named_joint_friction() {
-    assert_named_and_fits("joint_friction_stribeck", 25, 1e-3);
+named_and_fits! {
+    joint_friction_is_named: ("joint_friction", 21, 1e-3),
+    leakage_is_named_at_2_ms: ("leakage", 22, 2e-3),
+    sensor_lag_is_named: ("sensor_lag", 23, 1e-3),
+    muscle_hysteresis_is_named: ("muscle_hysteresis", 24, 1e-3),
+    stribeck_truth_is_named_joint_friction: ("joint_friction_stribeck", 25, 1e-3),
 }
 
 #[test]
@@ -318,6 +313,57 @@ fn independent_loaded_fixture_is_an_inertia_recalibration() {
     assert_eq!(json["verdict"], "explained");
     assert_eq!(json["recalibrated"][0]["key"], "joint.inertia_kgm2");
     assert!(json["recalibrated"][0]["ci95"][1].as_f64().unwrap() > 0.15);
+}
+
+#[test]
+fn independent_thermal_fixture_is_the_chamber_thermodynamics() {
+    // pulses_thermal.csv comes from an independent implementation of the plant with the
+    // thermodynamic chamber of PLANT.md (its header states hA and kappa). Diagnosed against
+    // the isothermal nominal file, the answer must be that chamber, with the header's hA,
+    // and nothing else (the data is noise-free: no parameter is off).
+    let rec = Recording::read(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/pulses_thermal.csv"),
+    )
+    .unwrap();
+    let header = rec.meta("thermal").expect("# thermal = ... header");
+    let h_at = header.find("hA_w_per_k = ").unwrap() + "hA_w_per_k = ".len();
+    let h_true: f64 = header[h_at..]
+        .split_whitespace()
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    let d = diagnose(
+        &nominal(),
+        &rec,
+        None,
+        &DiagnoseOptions::default(),
+        &|_, _, _| {},
+    )
+    .unwrap();
+    assert_eq!(d.verdict, Verdict::Explained, "{}", d.answer());
+    assert!(d.recalibrated.is_empty(), "{}", d.answer());
+    assert_eq!(d.effects.len(), 1, "{}", d.answer());
+    assert_eq!(d.effects[0].id, "heat_transfer", "{}", d.answer());
+    let h = d.effects[0].params[0].1;
+    assert!(
+        (h - h_true).abs() < 0.05 * h_true,
+        "hA = {h} W/K, header {h_true}"
+    );
+    assert!(d.fit_after.values().all(|f| *f > 99.5), "{:?}", d.fit_after);
+    assert!(
+        d.fit_before.values().all(|f| *f < 95.0),
+        "{:?}",
+        d.fit_before
+    );
+    // The look-alike (a constant polytropic exponent) is named, with what each removes.
+    assert!(
+        d.lookalikes
+            .iter()
+            .any(|l| l.starts_with("Chamber thermodynamics vs a constant polytropic exponent")),
+        "{:?}",
+        d.lookalikes
+    );
 }
 
 #[test]
