@@ -20,8 +20,8 @@ use embedded_hal::digital::OutputPin;
 use crate::latch::{BootDecision, LatchRecord, PersistentLatch, RamStorage, ResetCause};
 use crate::sensors::{counts_to_rad, PressureScaling, SequenceGate};
 use crate::stream::{
-    SensorInput, FLAG_NAN_SHIFT, FLAG_STALE_SHIFT, MISSING_COUNTS, MISSING_ENCODER,
-    RESET_POWER_ON, RESET_WATCHDOG,
+    SensorInput, FLAG_NAN_SHIFT, FLAG_STALE_SHIFT, MISSING_COUNTS, MISSING_ENCODER, RESET_POWER_ON,
+    RESET_WATCHDOG,
 };
 use crate::tick::{ControlTick, ControllerConfig, SensorFrame, Setpoint, TickOutput};
 use crate::valves::{OnOffPwmConfig, OnOffValves};
