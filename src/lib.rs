@@ -45,6 +45,7 @@ pub mod geometry;
 pub mod latch;
 #[cfg(feature = "board")]
 pub mod latch_bkpsram;
+pub mod lockstep;
 pub mod log;
 pub mod pid;
 pub mod profile;

@@ -29,7 +29,7 @@ pub const RECORD_LEN: usize = 46;
 /// Sync bytes of a [`SensorInput`] frame.
 pub const INPUT_SYNC: [u8; 2] = [0x5A, 0xA5];
 /// Bytes of one encoded [`SensorInput`].
-pub const INPUT_LEN: usize = 22;
+pub const INPUT_LEN: usize = 26;
 /// Sync bytes of a [`RunConfig`] frame.
 pub const CONFIG_SYNC: [u8; 2] = [0x5A, 0xC3];
 /// Bytes of one encoded [`RunConfig`].
@@ -204,12 +204,28 @@ pub struct SensorInput {
     /// Encoder counts ([`MISSING_ENCODER`]: no sample).
     pub encoder_counts: i32,
     /// Bit 0/1/2: p1 / p2 / angle read as NaN (a host-side injected sensor fault);
-    /// bit 7: end of run.
+    /// bit 3/4/5: p1 / p2 / angle delivered no new sample (a frozen sensor: the same value
+    /// with the same sequence number as before); bit 7: end of run.
     pub flags: u8,
+    /// MCU reset before this tick ([`RESET_NONE`], [`RESET_POWER_ON`], [`RESET_WATCHDOG`]).
+    pub reset: u8,
+    /// Tick period the firmware measured for this tick [s] (longer than the configured
+    /// one for a late tick).
+    pub dt_s: f32,
 }
 
 /// [`SensorInput::flags`]: end of the run.
 pub const FLAG_STOP: u8 = 0x80;
+/// [`SensorInput::flags`]: bit of channel `i` (0 = p1, 1 = p2, 2 = angle) read as NaN.
+pub const FLAG_NAN_SHIFT: u8 = 0;
+/// [`SensorInput::flags`]: bit of channel `i` that delivered no new sample.
+pub const FLAG_STALE_SHIFT: u8 = 3;
+/// [`SensorInput::reset`]: no reset.
+pub const RESET_NONE: u8 = 0;
+/// [`SensorInput::reset`]: power-on reset before this tick.
+pub const RESET_POWER_ON: u8 = 1;
+/// [`SensorInput::reset`]: watchdog reset before this tick.
+pub const RESET_WATCHDOG: u8 = 2;
 
 impl SensorInput {
     /// Encodes into `buf`.
@@ -221,9 +237,10 @@ impl SensorInput {
         put(buf, 12, &self.p_counts[1].to_le_bytes());
         put(buf, 14, &self.encoder_counts.to_le_bytes());
         buf[18] = self.flags;
-        buf[19] = 0;
-        let c = fletcher16(&buf[2..20]);
-        put(buf, 20, &c.to_le_bytes());
+        buf[19] = self.reset;
+        put(buf, 20, &self.dt_s.to_le_bytes());
+        let c = fletcher16(&buf[2..24]);
+        put(buf, 24, &c.to_le_bytes());
     }
 
     /// Decodes one frame from the start of `b`.
@@ -234,7 +251,7 @@ impl SensorInput {
         if b[0..2] != INPUT_SYNC {
             return Err(DecodeError::Sync);
         }
-        if fletcher16(&b[2..20]) != u16_at(b, 20) {
+        if fletcher16(&b[2..24]) != u16_at(b, 24) {
             return Err(DecodeError::Checksum);
         }
         Ok(SensorInput {
@@ -243,6 +260,8 @@ impl SensorInput {
             p_counts: [u16_at(b, 10), u16_at(b, 12)],
             encoder_counts: u32_at(b, 14) as i32,
             flags: b[18],
+            reset: b[19],
+            dt_s: f32::from_bits(u32_at(b, 20)),
         })
     }
 }
@@ -415,6 +434,8 @@ mod tests {
             p_counts: [455, 4095],
             encoder_counts: MISSING_ENCODER,
             flags: 2,
+            reset: RESET_WATCHDOG,
+            dt_s: 0.0015,
         };
         let mut b = [0u8; INPUT_LEN];
         i.encode(&mut b);

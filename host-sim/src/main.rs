@@ -99,6 +99,14 @@ enum Command {
     Import(host_sim::io::import::ImportArgs),
     /// Turn the firmware's per-tick stream (QEMU image or board) into a recording.
     Capture(host_sim::io::capture::CaptureArgs),
+    /// Processor in the loop: the firmware image under qemu-system-arm closes the loop with the
+    /// plant, one exchanged sensor frame (board counts) and valve command per tick; writes the
+    /// recording and compares it bit for bit with the in-process loop (exit status 1 on a
+    /// mismatch, named by its first tick and field).
+    #[command(
+        after_help = "Example (build the image first):\n  cargo build -p pam-firmware --bin pil --features pam-firmware/firmware --release --target thumbv7em-none-eabihf\n  host-sim pil --plant ../shared/plant/reference-1dof.toml --scenario scenarios/step.toml --out pil.csv --log pil.stream"
+    )]
+    Pil(host_sim::control::pil::PilArgs),
 }
 
 #[derive(Args)]
@@ -210,6 +218,14 @@ fn main() -> ExitCode {
         Command::Import(a) => run_report(host_sim::io::import::run_import(&a)),
         Command::Capture(a) => run_report(host_sim::io::capture::run_capture(&a)),
         Command::Calibrate(a) => run_report(host_sim::identify::calibrate::run_calibrate(&a)),
+        Command::Pil(a) => host_sim::control::pil::run_pil(&a).map(|(report, same)| {
+            print!("{report}");
+            if same {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::from(1)
+            }
+        }),
     };
     match result.and_then(|code| {
         outputs.commit().context("cannot write the outputs")?;

@@ -35,27 +35,27 @@ pub use crate::io::scenario::{
 };
 use crate::plant::{AuxState, Measurement, Plant, PlantState, ValveInputs};
 use crate::sim::{ActuatorPath, Integrator, SensorPath, SimStats, SolverOptions};
-use pam_firmware::latch::{BootDecision, PersistentLatch, RamStorage, ResetCause};
-use pam_firmware::sensors::SequenceGate;
-use pam_firmware::tick::{ControlTick, ControllerConfig, SensorFrame, Setpoint, TickOutput};
-use pam_firmware::valves::{OnOffPwmConfig, OnOffValves};
+use pam_firmware::latch::ResetCause;
+use pam_firmware::lockstep::{FirmwareNode, PinLevel};
+use pam_firmware::sensors::{PressureScaling, SequenceGate};
+use pam_firmware::stream::SensorInput;
+use pam_firmware::tick::{ControllerConfig, SensorFrame, TickOutput};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
 // ---------------------------------------------------------------------------------------
 // Fake hardware.
 
-/// A fake GPIO pin: the driver writes it, a stuck valve overrides it.
+/// A fake GPIO pin: the driver writes it, the loop reads it back.
 #[derive(Clone, Default)]
 pub struct FakePin {
     state: Rc<Cell<bool>>,
-    stuck: Rc<Cell<Option<bool>>>,
 }
 
 impl FakePin {
-    /// What the valve actually does.
+    /// The level last written (high = open).
     pub fn open(&self) -> bool {
-        self.stuck.get().unwrap_or(self.state.get())
+        self.state.get()
     }
 }
 
@@ -71,6 +71,109 @@ impl embedded_hal::digital::OutputPin for FakePin {
     fn set_high(&mut self) -> Result<(), Self::Error> {
         self.state.set(true);
         Ok(())
+    }
+}
+
+impl PinLevel for FakePin {
+    fn is_high(&self) -> bool {
+        self.state.get()
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// The firmware side.
+
+/// What the firmware gets in one tick.
+#[derive(Debug, Clone, Copy)]
+pub enum FirmwareInput {
+    /// The sensor frame in SI units (the loop did the scaling and gating), the set-point, the
+    /// period the firmware measures and an MCU reset before the tick.
+    Si {
+        /// Sensor frame.
+        frame: SensorFrame,
+        /// Angle set-point [rad].
+        setpoint_rad: f32,
+        /// Measured tick period [s].
+        dt_s: f32,
+        /// Reset before this tick.
+        reset: Option<ResetCause>,
+    },
+    /// The board's raw units (`[sensors] board_counts = true`): the firmware scales and gates.
+    Raw(SensorInput),
+}
+
+/// What the firmware did in one tick.
+#[derive(Debug, Clone, Copy)]
+pub struct FirmwareTick {
+    /// The control tick's output (from an emulated image: the fields its stream carries).
+    pub out: TickOutput,
+    /// Pin levels the valve driver wrote (in1, ex1, in2, ex2; high = open).
+    pub pins: [bool; 4],
+}
+
+/// The firmware side of a closed-loop run: [`FirmwareNode`] in this process, or the
+/// processor-in-the-loop image under QEMU ([`crate::control::pil`]).
+pub trait Firmware {
+    /// Runs tick `k`.
+    fn tick(&mut self, k: usize, input: &FirmwareInput) -> Result<FirmwareTick, ClosedLoopError>;
+}
+
+impl Firmware for FirmwareNode<FakePin> {
+    fn tick(&mut self, _k: usize, input: &FirmwareInput) -> Result<FirmwareTick, ClosedLoopError> {
+        let t = match input {
+            FirmwareInput::Si {
+                frame,
+                setpoint_rad,
+                dt_s,
+                reset,
+            } => {
+                if let Some(cause) = reset {
+                    self.reset(*cause);
+                }
+                self.step(frame, *setpoint_rad, *dt_s)
+            }
+            FirmwareInput::Raw(i) => self.step_raw(i),
+        };
+        Ok(FirmwareTick {
+            out: t.out,
+            pins: t.pins,
+        })
+    }
+}
+
+/// No sample on any channel (the transport delay's first ticks in board units).
+const NO_RAW_SAMPLE: ([u16; 2], i32, u8) = (
+    [
+        pam_firmware::stream::MISSING_COUNTS,
+        pam_firmware::stream::MISSING_COUNTS,
+    ],
+    pam_firmware::stream::MISSING_ENCODER,
+    0,
+);
+
+/// The 12-bit ADC count of a gauge pressure through the board's wiring (rounded,
+/// saturating at 0 and 4095; a non-finite pressure reads 0).
+pub fn pressure_counts(scaling: &PressureScaling, p_gauge_pa: f64) -> u16 {
+    let c = ((p_gauge_pa - scaling.offset_pa as f64) / scaling.pa_per_count as f64).round();
+    if c >= 4095.0 {
+        4095
+    } else if c >= 0.0 {
+        c as u16
+    } else {
+        0
+    }
+}
+
+/// The encoder count of an angle (floor, as a quadrature counter; saturating; a non-finite
+/// angle reads 0; never the missing-sample marker).
+pub fn encoder_counts(angle_rad: f64) -> i32 {
+    let c = (angle_rad / (2.0 * std::f64::consts::PI)
+        * pam_firmware::wiring::ENCODER_COUNTS_PER_REV as f64)
+        .floor();
+    if c.is_nan() {
+        0
+    } else {
+        c.clamp(i32::MIN as f64 + 1.0, i32::MAX as f64) as i32
     }
 }
 
@@ -146,6 +249,27 @@ pub fn run_with(
     cfg: ControllerConfig,
     progress: &mut dyn FnMut(f64),
 ) -> Result<ClosedLoopRun, ClosedLoopError> {
+    let mut node = in_process_firmware(cfg);
+    run_with_firmware(plant, scenario, &mut node, progress)
+}
+
+/// The firmware in this process, on fake pins, with the board's scaling for raw counts.
+pub fn in_process_firmware(cfg: ControllerConfig) -> FirmwareNode<FakePin> {
+    FirmwareNode::new(
+        cfg,
+        Default::default(),
+        pam_firmware::wiring::pressure_scaling(),
+        pam_firmware::wiring::ENCODER_COUNTS_PER_REV,
+    )
+}
+
+/// Runs `scenario` with the given firmware side (in process or under an emulator).
+pub fn run_with_firmware(
+    plant: &Plant,
+    scenario: &Scenario,
+    firmware: &mut dyn Firmware,
+    progress: &mut dyn FnMut(f64),
+) -> Result<ClosedLoopRun, ClosedLoopError> {
     let dt_s = 1.0 / scenario.scenario.tick_hz;
     let n_ticks = (scenario.scenario.duration_s / dt_s).round() as usize;
     let mut rng = rand::rngs::StdRng::seed_from_u64(scenario.scenario.seed);
@@ -193,25 +317,22 @@ pub fn run_with(
     let mut plants: Vec<(usize, Plant)> = vec![(0, plant.clone())];
     plants.extend(changes);
 
-    let pins: [FakePin; 4] = Default::default();
-    let mut valves = OnOffValves::new(
-        pins[0].clone(),
-        pins[1].clone(),
-        pins[2].clone(),
-        pins[3].clone(),
-        OnOffPwmConfig::REFERENCE,
-    );
-    let mut tick = ControlTick::new(cfg);
-    // The persistent latch in simulated retained RAM: the run starts as a power-on with a
-    // clean record.
-    let (mut latch, _) = PersistentLatch::boot(
-        RamStorage(pam_firmware::latch::LatchRecord::CLEAN.encode()),
-        ResetCause::PowerOn,
-    );
     let mut resets: Vec<usize> = Vec::new();
     let mut seq = [0u32; 3];
     let mut last_values = [0.0f32; 3];
     let mut gates = [SequenceGate::new(); 3];
+    // Board units: the last raw reading per channel (a frozen sensor repeats it).
+    let board = scenario.sensors.board_counts;
+    let wiring_scaling = pam_firmware::wiring::pressure_scaling();
+    let mut raw_last: ([u16; 2], i32) = (
+        [
+            pressure_counts(&wiring_scaling, 0.0),
+            pressure_counts(&wiring_scaling, 0.0),
+        ],
+        encoder_counts(0.0),
+    );
+    let mut raw_delay: VecDeque<([u16; 2], i32, u8)> = VecDeque::new();
+    let mut stuck: [Option<bool>; 4] = [None; 4];
     let opts = SolverOptions {
         rtol: 1e-6,
         atol: 1e-6,
@@ -264,30 +385,10 @@ pub fn run_with(
             }
         }
 
-        // Fake sensors: noise, quantisation.
-        let quant_p = |pa: f64, rng: &mut rand::rngs::StdRng| {
-            let v = pa + p_noise.sample(rng);
-            let lsb = scenario.sensors.pressure_lsb_pa;
-            (if lsb > 0.0 {
-                (v / lsb).round() * lsb
-            } else {
-                v
-            }) as f32
-        };
-        let p1 = quant_p(m.p1_kpa * 1e3, &mut rng);
-        let p2 = quant_p(m.p2_kpa * 1e3, &mut rng);
-        let angle_rad = m.angle_deg.to_radians();
-        let counts = scenario.sensors.angle_counts_per_rev;
-        let angle = if counts > 0 {
-            let c = (angle_rad / (2.0 * std::f64::consts::PI) * counts as f64).floor() as i32;
-            pam_firmware::sensors::counts_to_rad(c, counts)
-        } else {
-            angle_rad as f32
-        };
-        let mut values = [p1, p2, angle];
         // Sensor steps (persistent offsets) and frozen sensors: a frozen sensor repeats its
         // value and sequence number; the firmware's sequence gate turns that into "no new
         // sample" as on the board.
+        let mut offsets = [0.0f64; 3];
         let mut frozen = [false; 3];
         for e in &scenario.events {
             match *e {
@@ -296,7 +397,7 @@ pub fn run_with(
                     channel,
                     offset,
                 } if t_s + 0.5 * dt_s >= at_s => {
-                    values[channel as usize] += offset as f32;
+                    offsets[channel as usize] += offset;
                 }
                 Event::SensorStuck {
                     at_s,
@@ -308,22 +409,11 @@ pub fn run_with(
                 _ => {}
             }
         }
-        let mut gated = [None; 3];
-        for i in 0..3 {
-            if !frozen[i] {
-                seq[i] = seq[i].wrapping_add(1);
-                last_values[i] = values[i];
-            }
-            gated[i] = gates[i].gate(seq[i], last_values[i]);
-        }
-        let mut frame = SensorFrame {
-            p1_gauge_pa: gated[0],
-            p2_gauge_pa: gated[1],
-            angle_rad: gated[2],
-        };
-        // Injected sensor faults.
+        // Injected sensor faults (dropout: no sample; NaN).
+        let mut dropped = [false; 3];
+        let mut nan = [false; 3];
         for e in &scenario.events {
-            let (at_s, duration_s, channel, nan) = match *e {
+            let (at_s, duration_s, channel, is_nan) = match *e {
                 Event::SensorDropout {
                     at_s,
                     duration_s,
@@ -337,45 +427,26 @@ pub fn run_with(
                 _ => continue,
             };
             if t_s + 0.5 * dt_s >= at_s && t_s < at_s + duration_s {
-                let slot = match channel {
-                    SensorChannel::P1 => &mut frame.p1_gauge_pa,
-                    SensorChannel::P2 => &mut frame.p2_gauge_pa,
-                    SensorChannel::Angle => &mut frame.angle_rad,
+                let i = match channel {
+                    SensorChannel::P1 => 0,
+                    SensorChannel::P2 => 1,
+                    SensorChannel::Angle => 2,
                 };
-                *slot = if nan { Some(f32::NAN) } else { None };
+                // The later event of a channel wins, as when they overwrote the frame.
+                nan[i] = is_nan;
+                dropped[i] = !is_nan;
             }
         }
-        // Transport delay.
-        delay.push_back(frame);
-        let frame = if delay.len() > scenario.sensors.delay_ticks {
-            delay.pop_front().unwrap_or_default()
-        } else {
-            SensorFrame::default()
-        };
-
-        // MCU resets: the tick and the valve driver restart; the latch decides the boot.
+        // MCU resets: the firmware restarts; its latch decides the boot.
+        let mut reset = None;
         for e in &scenario.events {
             if let Event::FirmwareReset { at_s, power_on } = *e {
                 if (at_s / dt_s).round() as usize == k {
-                    let cause = if power_on {
+                    reset = Some(if power_on {
                         ResetCause::PowerOn
                     } else {
                         ResetCause::Watchdog
-                    };
-                    let storage = latch.release();
-                    let (l, boot) = PersistentLatch::boot(storage, cause);
-                    latch = l;
-                    tick = ControlTick::new(cfg);
-                    if let BootDecision::Safe(rec) = boot {
-                        tick.restore_latch(&rec);
-                    }
-                    valves = OnOffValves::new(
-                        pins[0].clone(),
-                        pins[1].clone(),
-                        pins[2].clone(),
-                        pins[3].clone(),
-                        OnOffPwmConfig::REFERENCE,
-                    );
+                    });
                     resets.push(k);
                 }
             }
@@ -390,19 +461,135 @@ pub fn run_with(
             }
         }
         let setpoint_rad = scenario.setpoint.at(t_s, &levels);
-        let out = tick.step(
-            &frame,
-            &Setpoint {
-                angle_rad: setpoint_rad as f32,
-            },
-            dt_meas_s as f32,
-        );
-        latch.update(tick.latch_record());
+
+        let ft = if !board {
+            // Fake sensors in SI: noise, quantisation, offsets, sequence gates, faults.
+            let quant_p = |pa: f64, rng: &mut rand::rngs::StdRng| {
+                let v = pa + p_noise.sample(rng);
+                let lsb = scenario.sensors.pressure_lsb_pa;
+                (if lsb > 0.0 {
+                    (v / lsb).round() * lsb
+                } else {
+                    v
+                }) as f32
+            };
+            let p1 = quant_p(m.p1_kpa * 1e3, &mut rng);
+            let p2 = quant_p(m.p2_kpa * 1e3, &mut rng);
+            let angle_rad = m.angle_deg.to_radians();
+            let counts = scenario.sensors.angle_counts_per_rev;
+            let angle = if counts > 0 {
+                let c = (angle_rad / (2.0 * std::f64::consts::PI) * counts as f64).floor() as i32;
+                pam_firmware::sensors::counts_to_rad(c, counts)
+            } else {
+                angle_rad as f32
+            };
+            let mut values = [p1, p2, angle];
+            for e in &scenario.events {
+                if let Event::SensorStep {
+                    at_s,
+                    channel,
+                    offset,
+                } = *e
+                {
+                    if t_s + 0.5 * dt_s >= at_s {
+                        values[channel as usize] += offset as f32;
+                    }
+                }
+            }
+            let mut gated = [None; 3];
+            for i in 0..3 {
+                if !frozen[i] {
+                    seq[i] = seq[i].wrapping_add(1);
+                    last_values[i] = values[i];
+                }
+                gated[i] = gates[i].gate(seq[i], last_values[i]);
+                if nan[i] {
+                    gated[i] = Some(f32::NAN);
+                } else if dropped[i] {
+                    gated[i] = None;
+                }
+            }
+            let frame = SensorFrame {
+                p1_gauge_pa: gated[0],
+                p2_gauge_pa: gated[1],
+                angle_rad: gated[2],
+            };
+            // Transport delay.
+            delay.push_back(frame);
+            let frame = if delay.len() > scenario.sensors.delay_ticks {
+                delay.pop_front().unwrap_or_default()
+            } else {
+                SensorFrame::default()
+            };
+            firmware.tick(
+                k,
+                &FirmwareInput::Si {
+                    frame,
+                    setpoint_rad: setpoint_rad as f32,
+                    dt_s: dt_meas_s as f32,
+                    reset,
+                },
+            )?
+        } else {
+            // Board units: ADC and encoder counts; the firmware scales and gates them.
+            let p1 = m.p1_kpa * 1e3 + p_noise.sample(&mut rng) + offsets[0];
+            let p2 = m.p2_kpa * 1e3 + p_noise.sample(&mut rng) + offsets[1];
+            let angle_rad = m.angle_deg.to_radians() + offsets[2];
+            let mut flags = 0u8;
+            for (i, f) in frozen.iter().enumerate() {
+                if *f {
+                    flags |= 1 << (pam_firmware::stream::FLAG_STALE_SHIFT + i as u8);
+                }
+            }
+            if !frozen[0] {
+                raw_last.0[0] = pressure_counts(&wiring_scaling, p1);
+            }
+            if !frozen[1] {
+                raw_last.0[1] = pressure_counts(&wiring_scaling, p2);
+            }
+            if !frozen[2] {
+                raw_last.1 = encoder_counts(angle_rad);
+            }
+            let (mut pc, mut ec) = raw_last;
+            for i in 0..3 {
+                if nan[i] {
+                    flags |= 1 << (pam_firmware::stream::FLAG_NAN_SHIFT + i as u8);
+                } else if dropped[i] {
+                    match i {
+                        0 | 1 => pc[i] = pam_firmware::stream::MISSING_COUNTS,
+                        _ => ec = pam_firmware::stream::MISSING_ENCODER,
+                    }
+                }
+            }
+            // Transport delay (of the sensor data only; set-point, period and reset are the
+            // tick's own).
+            raw_delay.push_back((pc, ec, flags));
+            let (pc, ec, flags) = if raw_delay.len() > scenario.sensors.delay_ticks {
+                raw_delay.pop_front().unwrap_or(NO_RAW_SAMPLE)
+            } else {
+                NO_RAW_SAMPLE
+            };
+            let input = SensorInput {
+                seq: k as u32,
+                setpoint_rad: setpoint_rad as f32,
+                p_counts: pc,
+                encoder_counts: ec,
+                flags,
+                reset: match reset {
+                    None => pam_firmware::stream::RESET_NONE,
+                    Some(ResetCause::PowerOn) => pam_firmware::stream::RESET_POWER_ON,
+                    Some(_) => pam_firmware::stream::RESET_WATCHDOG,
+                },
+                dt_s: dt_meas_s as f32,
+            };
+            firmware.tick(k, &FirmwareInput::Raw(input))?
+        };
+        let out = ft.out;
         max_p_set = max_p_set.max(out.p1_set_gauge_pa.max(out.p2_set_gauge_pa) as f64);
         if out.fault.is_some() {
             first_latched.get_or_insert(k);
         }
-        // Stuck valves from their time on.
+        // Stuck valves from their time on: the valve ignores its pin.
         for e in &scenario.events {
             if let Event::StuckValve { at_s, valve, open } = *e {
                 if t_s + 0.5 * dt_s >= at_s {
@@ -412,19 +599,22 @@ pub fn run_with(
                         ValveId::In2 => 2,
                         ValveId::Ex2 => 3,
                     };
-                    pins[i].stuck.set(Some(open));
+                    stuck[i] = Some(open);
                 }
             }
         }
-        // Infallible pins: the driver cannot fail here.
-        let Ok(o) = valves.apply(&out.valves);
-        tick.valves_applied(&o);
-        let b = |pin: &FakePin| if pin.open() { 1.0 } else { 0.0 };
+        let b = |i: usize| {
+            if stuck[i].unwrap_or(ft.pins[i]) {
+                1.0
+            } else {
+                0.0
+            }
+        };
         let command = ValveInputs {
-            u_in1: b(&pins[0]),
-            u_ex1: b(&pins[1]),
-            u_in2: b(&pins[2]),
-            u_ex2: b(&pins[3]),
+            u_in1: b(0),
+            u_ex1: b(1),
+            u_in2: b(2),
+            u_ex2: b(3),
         };
         let inputs = actuator.push(command);
         rows.push(TickRow {

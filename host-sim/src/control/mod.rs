@@ -3,5 +3,6 @@
 
 pub mod closed_loop;
 pub mod compare;
+pub mod pil;
 pub mod robustness;
 pub mod tune;

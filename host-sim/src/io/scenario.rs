@@ -204,6 +204,13 @@ pub struct SensorModel {
     /// Transport delay of all sensors [ticks].
     #[serde(default)]
     pub delay_ticks: usize,
+    /// Deliver the sensors in the board's raw units (12-bit ADC counts through the board's
+    /// pressure wiring, 8000-count encoder: `pam_firmware::wiring`) and convert them with the
+    /// firmware's own scaling and sequence gates, as the board and the processor-in-the-loop
+    /// image (`host-sim pil`) do. `pressure_lsb_pa` and `angle_counts_per_rev` are then not
+    /// used. Off by default (the stored control scores were measured without it).
+    #[serde(default)]
+    pub board_counts: bool,
 }
 
 fn default_p_noise() -> f64 {
@@ -224,6 +231,7 @@ impl Default for SensorModel {
             pressure_lsb_pa: default_p_lsb(),
             angle_counts_per_rev: default_counts(),
             delay_ticks: 0,
+            board_counts: false,
         }
     }
 }
