@@ -113,6 +113,8 @@ use crate::torque_model::TorqueModelParams;
 
 /// Pre-scaling of the constants into bit patterns (f64), shared with `build.rs`.
 pub mod prescale;
+/// A whole control tick in fixed point (the M0 benchmark and bit-for-bit check).
+pub mod tick;
 
 use prescale::{
     ForceLawBits, TorqueModelBits, SEED_MAX, TM_ANGLE_MAX_Q16, TM_DP_MAX_PA, TM_VELOCITY_MAX_Q16, SEG_AE0, SEG_E20, SEG_GE0, SEG_K0, SEG_M0, SEG_MAX,
