@@ -117,8 +117,8 @@ pub mod prescale;
 pub mod tick;
 
 use prescale::{
-    ForceLawBits, TorqueModelBits, SEED_MAX, TM_ANGLE_MAX_Q16, TM_DP_MAX_PA, TM_VELOCITY_MAX_Q16, SEG_AE0, SEG_E20, SEG_GE0, SEG_K0, SEG_M0, SEG_MAX,
-    SEG_SHIFT,
+    ForceLawBits, TorqueModelBits, SEED_MAX, SEG_AE0, SEG_E20, SEG_GE0, SEG_K0, SEG_M0, SEG_MAX,
+    SEG_SHIFT, TM_ANGLE_MAX_Q16, TM_DP_MAX_PA, TM_VELOCITY_MAX_Q16,
 };
 
 /// Gauge pressure or pressure difference \[Pa\], whole pascal.
@@ -479,7 +479,11 @@ impl FixedTorqueModel {
     /// [`FixedTorqueModel::torque_nm`]): `inverse_at(a, v).activation(t)` is exactly
     /// `activation(t, a, v)`.
     #[inline]
-    pub fn inverse_at(&self, angle_rad: AngleRad, velocity_rad_s: VelocityRadS) -> FixedInverseAt<'_> {
+    pub fn inverse_at(
+        &self,
+        angle_rad: AngleRad,
+        velocity_rad_s: VelocityRadS,
+    ) -> FixedInverseAt<'_> {
         FixedInverseAt {
             m: self,
             passive_qt: self.passive_qt(angle_rad.to_bits(), velocity_rad_s.to_bits()),
@@ -809,7 +813,8 @@ mod tests {
 
     /// The exact inverse (f64) at the quantised inputs, clamped like the fixed one.
     fn inverse_f64_with(p: &TorqueModelParams, lim: f64, t: f64, angle: f64, v: f64) -> f64 {
-        let dp = (t - eq11_f64_with(p, angle, v, 0.0)) / (p.b_m2 as f64 * p.sprocket_radius_m as f64);
+        let dp =
+            (t - eq11_f64_with(p, angle, v, 0.0)) / (p.b_m2 as f64 * p.sprocket_radius_m as f64);
         dp.clamp(-lim, lim)
     }
 
@@ -824,7 +829,10 @@ mod tests {
     }
 
     fn fits(x: i128, what: &str) -> i128 {
-        assert!(x >= i32::MIN as i128 && x <= i32::MAX as i128, "{what} = {x} overflows i32");
+        assert!(
+            x >= i32::MIN as i128 && x <= i32::MAX as i128,
+            "{what} = {x} overflows i32"
+        );
         x
     }
 
@@ -857,7 +865,21 @@ mod tests {
     /// angle, velocity, dp and torque: the wrapping evaluation equals the i128 one.
     fn check_no_overflow_at_edges(m: &FixedTorqueModel) -> usize {
         let b = *m.bits();
-        let edges = |max: i32| [i32::MIN, -max - 1, -max, -max + 1, -1, 0, 1, max - 1, max, max + 1, i32::MAX];
+        let edges = |max: i32| {
+            [
+                i32::MIN,
+                -max - 1,
+                -max,
+                -max + 1,
+                -1,
+                0,
+                1,
+                max - 1,
+                max,
+                max + 1,
+                i32::MAX,
+            ]
+        };
         let mut n = 0;
         for a in edges(TM_ANGLE_MAX_Q16) {
             for v in edges(TM_VELOCITY_MAX_Q16) {
@@ -865,7 +887,10 @@ mod tests {
                     for t in edges(b.t_clamp_q16) {
                         let (fwd, inv) = torque_ref(m, a, v, dp, t);
                         let (aq, vq) = (AngleRad::from_bits(a), VelocityRadS::from_bits(v));
-                        assert_eq!(m.torque_nm(aq, vq, PressurePa::from_bits(dp)).to_bits(), fwd);
+                        assert_eq!(
+                            m.torque_nm(aq, vq, PressurePa::from_bits(dp)).to_bits(),
+                            fwd
+                        );
                         let act = m.activation(TorqueNm::from_bits(t), aq, vq);
                         assert_eq!(act.dp_pa.to_bits(), inv, "a {a} v {v} t {t}");
                         n += 1;
@@ -879,10 +904,16 @@ mod tests {
     /// Worst forward error vs f64 and worst inverse error vs the exact inverse on an
     /// n^3 grid over the whole domain (angle +-4 rad, velocity +-16 rad/s, dp +-dp_range),
     /// checking the i128 re-computation at every point too.
-    fn worst_torque_error(m: &FixedTorqueModel, p: &TorqueModelParams, n: i32, dp_range: i32) -> (f64, f64) {
+    fn worst_torque_error(
+        m: &FixedTorqueModel,
+        p: &TorqueModelParams,
+        n: i32,
+        dp_range: i32,
+    ) -> (f64, f64) {
         let lim = m.dp_limit_pa().to_bits();
         let (mut fwd, mut inv) = (0.0f64, 0.0f64);
-        let at = |max: i32, i: i32| (-max as i64 + 2 * max as i64 * i as i64 / (n - 1) as i64) as i32;
+        let at =
+            |max: i32, i: i32| (-max as i64 + 2 * max as i64 * i as i64 / (n - 1) as i64) as i32;
         for i in 0..n {
             let a = at(TM_ANGLE_MAX_Q16, i);
             for j in 0..n {
@@ -899,7 +930,10 @@ mod tests {
                     let act = inv_at.activation(t);
                     let exact = inverse_f64_with(p, lim as f64, t.to_num::<f64>(), af, vf);
                     inv = inv.max((act.dp_pa.to_num::<f64>() - exact).abs());
-                    assert_eq!((t.to_bits(), act.dp_pa.to_bits()), torque_ref(m, a, v, dp, t.to_bits()));
+                    assert_eq!(
+                        (t.to_bits(), act.dp_pa.to_bits()),
+                        torque_ref(m, a, v, dp, t.to_bits())
+                    );
                 }
             }
         }
@@ -935,7 +969,8 @@ mod tests {
                 let v = q16(-10.0 + 20.0 * j as f64 / 60.0);
                 for k in 0..=60 {
                     let dp = PressurePa::from_num(-lim + (2 * lim / 60) * k);
-                    let (a32, v32, dp32) = (a.to_num::<f32>(), v.to_num::<f32>(), dp.to_num::<f32>());
+                    let (a32, v32, dp32) =
+                        (a.to_num::<f32>(), v.to_num::<f32>(), dp.to_num::<f32>());
                     let t = m.torque_nm(a, v, dp);
                     let t32 = TORQUE_MODEL.torque_nm(a32, v32, dp32);
                     fwd_f32 = fwd_f32.max((t.to_num::<f64>() - t32 as f64).abs());
@@ -967,8 +1002,14 @@ mod tests {
         p.a_n_per_m_rad = 1e12; // A r^2 alpha no longer fits 2^14 N m at Q16
         let m = FixedTorqueModel::from_params(&p);
         assert!(!m.is_valid());
-        assert_eq!(m.torque_nm(q16(0.1), q16(0.0), PressurePa::ZERO), TorqueNm::ZERO);
-        assert_eq!(m.activation(q16(1.0), q16(0.1), q16(0.0)), FixedActivation::INVALID);
+        assert_eq!(
+            m.torque_nm(q16(0.1), q16(0.0), PressurePa::ZERO),
+            TorqueNm::ZERO
+        );
+        assert_eq!(
+            m.activation(q16(1.0), q16(0.1), q16(0.0)),
+            FixedActivation::INVALID
+        );
         p.a_n_per_m_rad = f32::NAN;
         assert!(!FixedTorqueModel::from_params(&p).is_valid());
     }

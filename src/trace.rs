@@ -266,8 +266,9 @@ pub fn fixed_path_digest() -> (u32, u32) {
         );
         n += 1;
     }
-    let mut tick =
-        crate::fixed_point::tick::FixedTick::new(crate::fixed_point::tick::reference_from_params(TRACE_TICK_HZ));
+    let mut tick = crate::fixed_point::tick::FixedTick::new(
+        crate::fixed_point::tick::reference_from_params(TRACE_TICK_HZ),
+    );
     for row in SENSOR_TRACE.iter() {
         let sp = crate::fixed_point::tick::mrad_to_q16(row.angle_set_mrad as i32);
         for w in tick.step(&row.fixed_frame(), sp).words() {

@@ -145,6 +145,10 @@ mod tests {
             }
         }
         let (rows, digest) = pam_firmware::trace::fixed_path_digest();
-        defmt::info!("on-target fixed path rows={=u32} digest={=u32:08x}", rows, digest);
+        defmt::info!(
+            "on-target fixed path rows={=u32} digest={=u32:08x}",
+            rows,
+            digest
+        );
     }
 }

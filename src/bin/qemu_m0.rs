@@ -146,7 +146,9 @@ fn main() -> ! {
         ft_n += 1;
         let a = black_box(AngleRad::from_bits(out.angle_q16));
         let v = black_box(VelocityRadS::from_bits(out.velocity_q16));
-        let dp = black_box(PressurePa::from_bits((out.p_set_pa[1] - out.p_set_pa[0]) / 2));
+        let dp = black_box(PressurePa::from_bits(
+            (out.p_set_pa[1] - out.p_set_pa[0]) / 2,
+        ));
         let (c, t) = measure(|| model.torque_nm(black_box(a), black_box(v), black_box(dp)));
         tf_sum += c;
         tf_max = tf_max.max(c);

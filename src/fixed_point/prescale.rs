@@ -421,7 +421,7 @@ pub struct TorqueModelBits {
 /// per input LSB and |x| <= x_max: the largest s in 16..=47 with |c| (x_max + 1) < 2^47 and
 /// |c| < 2^31. None when even s = 16 does not fit (or v is not finite).
 pub fn term_bits(v: f64, x_max: f64) -> Option<(i32, u32)> {
-    if !(v == v) || v - v != 0.0 {
+    if !v.is_finite() {
         return None;
     }
     if v == 0.0 {
@@ -482,7 +482,7 @@ pub fn torque_model_bits(
         p0_gauge_pa: sat_i32(round_i64(p0_gauge_pa)),
         dp_limit_pa,
     };
-    let fin = |x: f64| x - x == 0.0;
+    let fin = |x: f64| x.is_finite();
     if !(fin(a_r2) && fin(b_r) && fin(c_nms3_per_rad3) && fin(d_nms_per_rad) && fin(p0_gauge_pa)) {
         return b;
     }
@@ -521,7 +521,8 @@ pub fn torque_model_bits(
     ) else {
         return b;
     };
-    (b.a_c, b.a_s, b.b_c, b.b_s, b.c_c, b.c_s, b.d_c, b.d_s) = (a.0, a.1, bb.0, bb.1, c.0, c.1, d.0, d.1);
+    (b.a_c, b.a_s, b.b_c, b.b_s, b.c_c, b.c_s, b.d_c, b.d_s) =
+        (a.0, a.1, bb.0, bb.1, c.0, c.1, d.0, d.1);
     b.qt = qt;
     b.t_clamp_q16 = sat_i32(ceil_i64(t_clamp * Q16));
     if b_r != 0.0 {
@@ -531,8 +532,10 @@ pub fn torque_model_bits(
             k += 1;
         }
         // dp [Q1 Pa] = rest 2^k / 2^qt / (B r) * 2.
-        let Some(inv) = term_bits(2.0 * (1u64 << k) as f64 / (sq * b_r), ((rest_lim >> k) + 1) as f64)
-        else {
+        let Some(inv) = term_bits(
+            2.0 * (1u64 << k) as f64 / (sq * b_r),
+            ((rest_lim >> k) + 1) as f64,
+        ) else {
             return b;
         };
         b.rest_lim = rest_lim as i32;

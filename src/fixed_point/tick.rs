@@ -177,7 +177,7 @@ impl FixedTickConfig {
         let to_q = |x: f64, q: f64| sat_i32(round_i64(x * q));
         let law = FixedForceLaw::from_params(&cfg.force_law);
         let model = FixedTorqueModel::from_params(&cfg.torque_model);
-        ok &= law.is_valid() && model.is_valid() && hz >= 1.0 && hz <= 1.0e5;
+        ok &= law.is_valid() && model.is_valid() && (1.0..=1.0e5).contains(&hz);
         FixedTickConfig {
             adc_zero: adc_zero_counts as i32,
             pa_per_count: Coef::new(pa_per_count, 4096.0, &mut ok),
@@ -189,7 +189,11 @@ impl FixedTickConfig {
             tick_hz: hz as i32,
             vel_alpha: Coef::new(alpha, (1 << 25) as f64, &mut ok),
             e0_q16: to_q(1.0 - f(g.initial_contraction), q16),
-            stretch_per_rad: Coef::new(f(g.sprocket_radius_m) / f(g.rest_length_m), (1 << 20) as f64, &mut ok),
+            stretch_per_rad: Coef::new(
+                f(g.sprocket_radius_m) / f(g.rest_length_m),
+                (1 << 20) as f64,
+                &mut ok,
+            ),
             lever: Coef::new(f(g.sprocket_radius_m), (1 << 27) as f64, &mut ok),
             kp: Coef::new(f(pid.kp), (1 << 21) as f64, &mut ok),
             ki_dt: Coef::new(f(pid.ki) * dt * 256.0, (1 << 21) as f64, &mut ok),
@@ -204,7 +208,10 @@ impl FixedTickConfig {
             angle_min_q16: to_q(f(cfg.angle_limits.min), q16),
             angle_max_q16: to_q(f(cfg.angle_limits.max), q16),
             setpoint_max_q16: to_q(f(cfg.angle_setpoint_max_rad), q16),
-            stale_ticks: cfg.pressure_limits.stale_ticks.min(cfg.angle_limits.stale_ticks),
+            stale_ticks: cfg
+                .pressure_limits
+                .stale_ticks
+                .min(cfg.angle_limits.stale_ticks),
             law,
             model,
             valid: ok
@@ -275,7 +282,6 @@ impl FixedTick {
         self.fault
     }
 
-
     /// One tick: raw sensor samples and the angle set-point (Q16 rad, see [`mrad_to_q16`]).
     /// Never panics, for any input.
     pub fn step(&mut self, frame: &FixedFrame, setpoint_q16: i32) -> FixedTickOutput {
@@ -285,9 +291,10 @@ impl FixedTick {
         // 1. Channels.
         for (i, s) in [frame.p1_adc, frame.p2_adc].into_iter().enumerate() {
             match s {
-                Some(n) if n == 0 || n >= ADC_MAX => {
-                    latch(&mut self.fault, [fault::PRESSURE1_IMPLAUSIBLE, fault::PRESSURE2_IMPLAUSIBLE][i])
-                }
+                Some(n) if n == 0 || n >= ADC_MAX => latch(
+                    &mut self.fault,
+                    [fault::PRESSURE1_IMPLAUSIBLE, fault::PRESSURE2_IMPLAUSIBLE][i],
+                ),
                 Some(n) => {
                     self.p_pa[i] = c.pa_per_count.apply(n as i32 - c.adc_zero);
                     self.p_age[i] = 0;
@@ -342,7 +349,9 @@ impl FixedTick {
         // 2. Position PID -> desired torque (Q16), conditional integration.
         let (a, v) = (self.angle_q16, self.velocity_q16);
         let err = clamp_i32(setpoint_q16.wrapping_sub(a), -(1 << 21), 1 << 21);
-        let pd = c.kp.apply(err).wrapping_sub(c.kd.apply(clamp_i32(v, -(1 << 21), 1 << 21)));
+        let pd =
+            c.kp.apply(err)
+                .wrapping_sub(c.kd.apply(clamp_i32(v, -(1 << 21), 1 << 21)));
         let pd = clamp_i32(pd, -(1 << 30), 1 << 30);
         let integ = clamp_i32(
             self.integ_q24.wrapping_add(c.ki_dt.apply(err)),
@@ -360,9 +369,19 @@ impl FixedTick {
         let de = c.stretch_per_rad.apply(clamp_i32(a, -(1 << 20), 1 << 20));
         let e1 = Stretch::from_bits(c.e0_q16.wrapping_sub(de));
         let e2 = Stretch::from_bits(c.e0_q16.wrapping_add(de));
-        let f1 = c.law.force(PressurePa::from_bits(self.p_pa[0]), e1).force_n.to_bits();
-        let f2 = c.law.force(PressurePa::from_bits(self.p_pa[1]), e2).force_n.to_bits();
-        let t_est = c.lever.apply(clamp_i32(f1.wrapping_sub(f2), -(1 << 27), 1 << 27));
+        let f1 = c
+            .law
+            .force(PressurePa::from_bits(self.p_pa[0]), e1)
+            .force_n
+            .to_bits();
+        let f2 = c
+            .law
+            .force(PressurePa::from_bits(self.p_pa[1]), e2)
+            .force_n
+            .to_bits();
+        let t_est = c
+            .lever
+            .apply(clamp_i32(f1.wrapping_sub(f2), -(1 << 27), 1 << 27));
         // 4. Torque loop (integral correction) and the inverse model.
         let t_err = clamp_i32(t_des.wrapping_sub(t_est), -(1 << 24), 1 << 24);
         let corr = clamp_i32(
@@ -441,7 +460,9 @@ mod tests {
         assert!(out[10].armed);
         // After the set-point step the position loop asks for torque and the valves move.
         assert!(out[60..200].iter().any(|o| o.torque_des_q16 != 0));
-        assert!(out[60..200].iter().any(|o| o.valves_q16[0] != 0 || o.valves_q16[1] != 0));
+        assert!(out[60..200]
+            .iter()
+            .any(|o| o.valves_q16[0] != 0 || o.valves_q16[1] != 0));
         // Missing samples below the stale limit do not fault.
         assert!(out[152].armed && out[202].armed);
         // The shorted muscle 2 transducer (4095 counts) at tick 460 latches: valves hold.
@@ -476,7 +497,9 @@ mod tests {
                 n += 1;
             }
         }
-        std::println!("fixed tick vs f32 tick: torque estimate max diff {worst:.2e} N m over {n} ticks");
+        std::println!(
+            "fixed tick vs f32 tick: torque estimate max diff {worst:.2e} N m over {n} ticks"
+        );
         assert!(n > 400, "{n}");
         assert!(worst < 5e-3, "{worst}");
     }
@@ -485,7 +508,11 @@ mod tests {
     fn position_integrator_stops_while_the_output_saturates() {
         let cfg = reference_from_params(TRACE_TICK_HZ);
         let mut t = FixedTick::new(cfg);
-        let frame = FixedFrame { p1_adc: Some(1500), p2_adc: Some(1500), encoder: Some(0) };
+        let frame = FixedFrame {
+            p1_adc: Some(1500),
+            p2_adc: Some(1500),
+            encoder: Some(0),
+        };
         // 0.8 rad error x kp 29.7 = 23.7 N m > the 10 N m output limit: saturated.
         for _ in 0..50 {
             let o = t.step(&frame, mrad_to_q16(800));
