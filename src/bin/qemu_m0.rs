@@ -71,7 +71,9 @@ fn main() -> ! {
 
     let p = wiring::pressure_scaling();
     let g = JointGeometry::REFERENCE;
-    let law = FIXED_FORCE_LAW;
+    // black_box: the constants are not folded into the measured code (the tick reads them
+    // from its configuration too).
+    let law = black_box(FIXED_FORCE_LAW);
     let (mut fx_sum, mut fx_max, mut fl_sum, mut fl_max, mut n) = (0u32, 0u32, 0u32, 0u32, 0u32);
     for row in SENSOR_TRACE.iter() {
         let f = row.frame(&p);
@@ -131,7 +133,7 @@ fn main() -> ! {
     // (src/fixed_point/tick.rs: raw counts -> valve commands), per armed tick of the trace.
     // The tick's configuration is pre-scaled once here (f64 soft-float, start-up only).
     let mut ftick = FixedTick::new(reference_from_params(TRACE_TICK_HZ));
-    let model = FIXED_TORQUE_MODEL;
+    let model = black_box(FIXED_TORQUE_MODEL);
     let (mut ft_sum, mut ft_max, mut ft_n) = (0u32, 0u32, 0u32);
     let (mut tf_sum, mut tf_max, mut ti_sum, mut ti_max) = (0u32, 0u32, 0u32, 0u32);
     for row in SENSOR_TRACE.iter() {
