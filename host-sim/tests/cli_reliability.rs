@@ -99,70 +99,70 @@ impl Workspace {
     fn snapshot(&self) -> Vec<(PathBuf, Vec<u8>)> {
         snapshot(self.dir.path())
     }
+    /// Runs `host-sim` with `command_line` (split at spaces; then `{plant}`, `{fixture}`,
+    /// `{w}` (this directory) and each `{name}` of `paths` replaced in every argument),
+    /// requires the refusal of [`refused`] with `needles` and this directory unchanged.
+    fn refuses_with(
+        &self,
+        command_line: &str,
+        paths: &[(&str, &Path)],
+        needles: &[&str],
+    ) -> String {
+        let before = self.snapshot();
+        let args: Vec<String> = command_line
+            .split(' ')
+            .map(|a| {
+                let mut a = a
+                    .replace("{plant}", &plant().to_string_lossy())
+                    .replace("{fixture}", &fixture().to_string_lossy())
+                    .replace("{w}", &self.dir.path().to_string_lossy());
+                for (name, p) in paths {
+                    a = a.replace(&format!("{{{name}}}"), &p.to_string_lossy());
+                }
+                a
+            })
+            .collect();
+        let r = Command::new(env!("CARGO_BIN_EXE_host-sim"))
+            .args(&args)
+            .output()
+            .unwrap();
+        let err = refused(&r, needles);
+        assert_eq!(
+            self.snapshot(),
+            before,
+            "{command_line}: the directory changed"
+        );
+        err
+    }
+    fn refuses(&self, command_line: &str, needles: &[&str]) -> String {
+        self.refuses_with(command_line, &[], needles)
+    }
 }
 
 #[test]
 fn identify_plant_with_zero_patience_is_refused() {
     let w = Workspace::new();
-    let before = w.snapshot();
-    let r = run(&[
-        &"identify",
-        &"plant",
-        &"--recording",
-        &fixture(),
-        &"--plant",
-        &plant(),
-        &"--params",
-        &"joint.inertia_kgm2",
-        &"--out",
-        &w.p("out.toml"),
-        &"--patience",
-        &"0",
-    ]);
-    refused(&r, &["--patience", "1..=100000"]);
-    assert_eq!(w.snapshot(), before);
+    w.refuses(
+        "identify plant --recording {fixture} --plant {plant} --params joint.inertia_kgm2 --out {w}/out.toml --patience 0",
+        &["--patience", "1..=100000"],
+    );
 }
 
 #[test]
 fn sweep_torque_sizes_that_would_exhaust_memory_are_refused_with_the_estimate() {
     let w = Workspace::new();
-    let before = w.snapshot();
-    let r = run(&[
-        &"sweep",
-        &"torque",
-        &"--plant",
-        &plant(),
-        &"--out",
-        &w.p("out.csv"),
-        &"--dt-s",
-        &"1e-7",
-    ]);
-    refused(&r, &["--dt-s", "[0.000001, 1]"]);
-    let r = run(&[
-        &"sweep",
-        &"torque",
-        &"--plant",
-        &plant(),
-        &"--out",
-        &w.p("out.csv"),
-        &"--speeds-rad-s",
-        &"1e-6",
-    ]);
-    refused(&r, &["sweep torque", "of memory", "--allow-large"]);
-    let r = run(&[
-        &"sweep",
-        &"force",
-        &"--plant",
-        &plant(),
-        &"--out",
-        &w.p("out.csv"),
-        &"--n-stretch",
-        &"100000",
-        &"--n-pressure",
-        &"100000",
-    ]);
-    refused(&r, &["sweep force", "1.000e10 samples", "--allow-large"]);
-    assert_eq!(w.snapshot(), before);
+    w.refuses(
+        "sweep torque --plant {plant} --out {w}/out.csv --dt-s 1e-7",
+        &["--dt-s", "[0.000001, 1]"],
+    );
+    w.refuses(
+        "sweep torque --plant {plant} --out {w}/out.csv --speeds-rad-s 1e-6",
+        &["sweep torque", "of memory", "--allow-large"],
+    );
+    w.refuses(
+        "sweep force --plant {plant} --out {w}/out.csv --n-stretch 100000 --n-pressure 100000",
+        &["sweep force", "1.000e10 samples", "--allow-large"],
+    );
 }
 
 const STEP: &str = "[scenario]\nname = \"long\"\nduration_s = 1e9\ntick_hz = 1000.0\n\n\
@@ -172,18 +172,9 @@ const STEP: &str = "[scenario]\nname = \"long\"\nduration_s = 1e9\ntick_hz = 100
 fn a_scenario_too_long_for_memory_is_refused_with_the_estimate() {
     let w = Workspace::new();
     let s = w.write("long.toml", STEP);
-    let before = w.snapshot();
-    let r = run(&[
-        &"simulate",
-        &"--plant",
-        &plant(),
-        &"--scenario",
-        &s,
-        &"--out",
-        &w.p("out.csv"),
-    ]);
-    refused(
-        &r,
+    w.refuses_with(
+        "simulate --plant {plant} --scenario {s} --out {w}/out.csv",
+        &[("s", &s)],
         &[
             "long.toml",
             "1.000e12 samples",
@@ -191,7 +182,6 @@ fn a_scenario_too_long_for_memory_is_refused_with_the_estimate() {
             "--allow-large",
         ],
     );
-    assert_eq!(w.snapshot(), before);
 }
 
 #[test]
@@ -204,74 +194,41 @@ fn a_scenario_settling_after_its_end_is_refused_at_its_line() {
             STEP.replace("1e9", "4.0")
         ),
     );
-    let before = w.snapshot();
-    let r = run(&[
-        &"simulate",
-        &"--plant",
-        &plant(),
-        &"--scenario",
-        &s,
-        &"--out",
-        &w.p("out.csv"),
-    ]);
-    refused(&r, &["late.toml", "line 13", "settle_after_s", "[0, 4)"]);
-    assert_eq!(w.snapshot(), before);
+    w.refuses_with(
+        "simulate --plant {plant} --scenario {s} --out {w}/out.csv",
+        &[("s", &s)],
+        &["late.toml", "line 13", "settle_after_s", "[0, 4)"],
+    );
 }
 
 #[test]
 fn simulate_refuses_to_write_over_its_input_recording() {
     let w = Workspace::new();
     let rec = w.write("rec.csv", &std::fs::read_to_string(fixture()).unwrap());
-    let before = w.snapshot();
-    let r = run(&[
-        &"simulate",
-        &"--plant",
-        &plant(),
-        &"--inputs",
-        &rec,
-        &"--out",
-        &w.dir.path().join(".").join("rec.csv"),
-    ]);
-    refused(&r, &["--out", "is the input --inputs"]);
-    assert_eq!(w.snapshot(), before);
+    // The same file under another spelling of its path.
+    w.refuses_with(
+        "simulate --plant {plant} --inputs {rec} --out {w}/./rec.csv",
+        &[("rec", &rec)],
+        &["--out", "is the input --inputs"],
+    );
 }
 
 #[test]
 fn an_unsupported_plot_format_is_refused_before_the_recording_is_replaced() {
     let w = Workspace::new();
-    let before = w.snapshot();
-    let r = run(&[
-        &"simulate",
-        &"--plant",
-        &plant(),
-        &"--inputs",
-        &fixture(),
-        &"--out",
-        &w.p("out.csv"),
-        &"--plot",
-        &w.p("x.jpg"),
-    ]);
-    refused(&r, &["x.jpg", ".png or .svg"]);
-    assert_eq!(w.snapshot(), before);
+    w.refuses(
+        "simulate --plant {plant} --inputs {fixture} --out {w}/out.csv --plot {w}/x.jpg",
+        &["x.jpg", ".png or .svg"],
+    );
 }
 
 #[test]
 fn diagnose_with_a_report_path_that_is_a_file_keeps_the_json() {
     let w = Workspace::new();
-    let before = w.snapshot();
-    let r = run(&[
-        &"diagnose",
-        &"--plant",
-        &plant(),
-        &"--recording",
-        &fixture(),
-        &"--json",
-        &w.p("out.json"),
-        &"--report",
-        &w.p("out.png"),
-    ]);
-    refused(&r, &["--report", "not a directory"]);
-    assert_eq!(w.snapshot(), before);
+    w.refuses(
+        "diagnose --plant {plant} --recording {fixture} --json {w}/out.json --report {w}/out.png",
+        &["--report", "not a directory"],
+    );
 }
 
 #[test]
@@ -280,18 +237,12 @@ fn demo_with_a_bad_fixture_leaves_nothing_behind() {
     let mut bad = std::fs::read_to_string(fixture()).unwrap();
     bad.push_str("20.000000,0,0,0,0,abc,550,550,529,529\n");
     let bad = w.write("bad.csv", &bad);
-    let before = w.snapshot();
-    let r = run(&[
-        &"demo",
-        &"--out-dir",
-        &w.p("demo"),
-        &"--plant",
-        &plant(),
-        &"--fixture",
-        &bad,
-    ]);
-    refused(&r, &["bad.csv", "angle_deg"]);
-    assert_eq!(w.snapshot(), before, "the demo directory must not appear");
+    // The demo directory must not appear.
+    w.refuses_with(
+        "demo --out-dir {w}/demo --plant {plant} --fixture {bad}",
+        &[("bad", &bad)],
+        &["bad.csv", "angle_deg"],
+    );
 }
 
 #[test]
@@ -302,17 +253,11 @@ fn identify_force_on_a_constant_map_is_refused() {
         csv.push_str("300,0.9,400\n");
     }
     let data = w.write("const.csv", &csv);
-    let before = w.snapshot();
-    let r = run(&[
-        &"identify",
-        &"force",
-        &"--data",
-        &data,
-        &"--out",
-        &w.p("out.toml"),
-    ]);
-    refused(&r, &["const.csv", "one length"]);
-    assert_eq!(w.snapshot(), before);
+    w.refuses_with(
+        "identify force --data {data} --out {w}/out.toml",
+        &[("data", &data)],
+        &["const.csv", "one length"],
+    );
 }
 
 #[test]
@@ -326,19 +271,11 @@ fn identify_torque_on_a_constant_recording_is_refused() {
         ));
     }
     let rec = w.write("const.csv", &csv);
-    let before = w.snapshot();
-    let r = run(&[
-        &"identify",
-        &"torque",
-        &"--recording",
-        &rec,
-        &"--plant",
-        &plant(),
-        &"--out",
-        &w.p("out.toml"),
-    ]);
-    refused(&r, &["const.csv", "angle_deg", "does not move"]);
-    assert_eq!(w.snapshot(), before);
+    w.refuses_with(
+        "identify torque --recording {rec} --plant {plant} --out {w}/out.toml",
+        &[("rec", &rec)],
+        &["const.csv", "angle_deg", "does not move"],
+    );
 }
 
 #[test]
@@ -347,21 +284,11 @@ fn identify_torque_refuses_an_activation_limit_above_the_supply() {
     let rec = w.p("sweep.csv");
     let r = run(&[&"sweep", &"torque", &"--plant", &plant(), &"--out", &rec]);
     assert!(r.status.success(), "{}", text(&r.stderr));
-    let before = w.snapshot();
-    let r = run(&[
-        &"identify",
-        &"torque",
-        &"--recording",
-        &rec,
-        &"--plant",
-        &plant(),
-        &"--out",
-        &w.p("out.toml"),
-        &"--dp-max-kpa",
-        &"900",
-    ]);
-    refused(&r, &["--dp-max-kpa 900", "(0, 300.0]", "supply"]);
-    assert_eq!(w.snapshot(), before);
+    w.refuses_with(
+        "identify torque --recording {rec} --plant {plant} --out {w}/out.toml --dp-max-kpa 900",
+        &[("rec", &rec)],
+        &["--dp-max-kpa 900", "(0, 300.0]", "supply"],
+    );
 }
 
 fn edited_plant(w: &Workspace, key: &str, value: &str) -> PathBuf {
@@ -418,28 +345,21 @@ fn plant_values_out_of_their_physical_range_are_refused_at_their_line() {
         ),
     ] {
         let p = edited_plant(&w, key, value);
-        let before = w.snapshot();
-        let r = run(&[
-            &"simulate",
-            &"--plant",
-            &p,
-            &"--inputs",
-            &fixture(),
-            &"--out",
-            &w.p("out.csv"),
-        ]);
-        refused(&r, &needles);
-        assert_eq!(w.snapshot(), before, "{key}");
+        w.refuses_with(
+            "simulate --plant {p} --inputs {fixture} --out {w}/out.csv",
+            &[("p", &p)],
+            &needles,
+        );
     }
 }
 
 #[test]
 fn fit_refuses_a_nan_gate() {
     let w = Workspace::new();
-    let before = w.snapshot();
-    let r = run(&[&"fit", &fixture(), &fixture(), &"--min-fit", &"NaN"]);
-    refused(&r, &["--min-fit", "100"]);
-    let r = run(&[&"fit", &fixture(), &fixture(), &"--min-fit", &"150"]);
-    refused(&r, &["--min-fit", "100"]);
-    assert_eq!(w.snapshot(), before);
+    for gate in ["NaN", "150"] {
+        w.refuses(
+            &format!("fit {{fixture}} {{fixture}} --min-fit {gate}"),
+            &["--min-fit", "100"],
+        );
+    }
 }

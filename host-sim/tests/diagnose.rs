@@ -321,6 +321,57 @@ fn independent_loaded_fixture_is_an_inertia_recalibration() {
 }
 
 #[test]
+fn independent_thermal_fixture_is_the_chamber_thermodynamics() {
+    // pulses_thermal.csv comes from an independent implementation of the plant with the
+    // thermodynamic chamber of PLANT.md (its header states hA and kappa). Diagnosed against
+    // the isothermal nominal file, the answer must be that chamber, with the header's hA,
+    // and nothing else (the data is noise-free: no parameter is off).
+    let rec = Recording::read(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/pulses_thermal.csv"),
+    )
+    .unwrap();
+    let header = rec.meta("thermal").expect("# thermal = ... header");
+    let h_at = header.find("hA_w_per_k = ").unwrap() + "hA_w_per_k = ".len();
+    let h_true: f64 = header[h_at..]
+        .split_whitespace()
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    let d = diagnose(
+        &nominal(),
+        &rec,
+        None,
+        &DiagnoseOptions::default(),
+        &|_, _, _| {},
+    )
+    .unwrap();
+    assert_eq!(d.verdict, Verdict::Explained, "{}", d.answer());
+    assert!(d.recalibrated.is_empty(), "{}", d.answer());
+    assert_eq!(d.effects.len(), 1, "{}", d.answer());
+    assert_eq!(d.effects[0].id, "heat_transfer", "{}", d.answer());
+    let h = d.effects[0].params[0].1;
+    assert!(
+        (h - h_true).abs() < 0.05 * h_true,
+        "hA = {h} W/K, header {h_true}"
+    );
+    assert!(d.fit_after.values().all(|f| *f > 99.5), "{:?}", d.fit_after);
+    assert!(
+        d.fit_before.values().all(|f| *f < 95.0),
+        "{:?}",
+        d.fit_before
+    );
+    // The look-alike (a constant polytropic exponent) is named, with what each removes.
+    assert!(
+        d.lookalikes
+            .iter()
+            .any(|l| l.starts_with("Chamber thermodynamics vs a constant polytropic exponent")),
+        "{:?}",
+        d.lookalikes
+    );
+}
+
+#[test]
 fn noise_free_nominal_data_says_nothing_is_missing() {
     let cfg = nominal();
     let mk = |excitation, seed| {

@@ -38,7 +38,7 @@ fn nominal_toml() -> String {
 /// Each effect at a realistic size: (name, `[effects]` TOML). Sizes as in the diagnosis's
 /// synthetic rig, the dead time and lag of the issue (8 ms, 30 ms), a calibration error on
 /// every channel.
-const EFFECTS: [(&str, &str); 10] = [
+const EFFECTS: [(&str, &str); 11] = [
     (
         "joint_friction",
         "[effects.joint_friction]\ncoulomb_nm = 0.25\nbreakaway_nm = 0.5\nstribeck_velocity_rad_s = 0.3\nviscous_nm_s_per_rad = 0.05\nsmoothing_velocity_rad_s = 0.01\n",
@@ -52,6 +52,10 @@ const EFFECTS: [(&str, &str); 10] = [
         "[effects.leakage]\nsonic_conductance_m3_per_s_pa = 4.0e-10\n",
     ),
     ("polytropic", "[effects.polytropic]\nexponent = 1.3\n"),
+    (
+        "thermal_chamber",
+        "[effects.thermal_chamber]\nheat_transfer_w_per_k = 2.0\nkappa = 1.4\n",
+    ),
     ("valve_dead_time", "[effects.valve_dead_time]\ndelay_s = 0.008\n"),
     (
         "sensor",
@@ -383,6 +387,10 @@ fn same_effect(name: &str, id: &str) -> bool {
             | ("gravity", "gravity")
             | ("leakage", "leakage")
             | ("polytropic", "polytropic")
+            // Both set the chamber's pressure law: either candidate replaces the other.
+            | ("polytropic", "heat_transfer")
+            | ("thermal_chamber", "heat_transfer")
+            | ("thermal_chamber", "polytropic")
             | ("valve_dead_time", "valve_delay")
             | ("sensor_lag", "sensor_lag")
             | ("muscle_hysteresis", "muscle_hysteresis")
@@ -486,7 +494,9 @@ fn active_effects_are_listed_with_their_parameters() {
     assert!(plant_with("").active_effects().is_empty());
     let all: String = EFFECTS
         .iter()
-        .filter(|(n, _)| *n != "supply_drop_reservoir")
+        // The reservoir replaces the static supply drop; the chamber refuses a polytropic
+        // exponent beside it (both set the pressure law).
+        .filter(|(n, _)| *n != "supply_drop_reservoir" && *n != "thermal_chamber")
         .map(|(_, t)| *t)
         .collect();
     let p = plant_with(&all);
@@ -516,6 +526,11 @@ fn active_effects_are_listed_with_their_parameters() {
     ] {
         assert!(s.contains(part), "{part} not in {s}");
     }
+    assert_eq!(
+        plant_with(EFFECTS.iter().find(|(n, _)| *n == "thermal_chamber").unwrap().1)
+            .effects_summary(),
+        "thermal_chamber(heat_transfer_w_per_k = 2, kappa = 1.4, wall_temperature_k = 293.15, initial_temperature_k = 293.15)"
+    );
     // A disabled table is not active.
     let off = plant_with("[effects.valve_dead_time]\nenabled = false\ndelay_s = 0.008\n");
     assert!(off.active_effects().is_empty());

@@ -33,7 +33,7 @@ pub use crate::io::scenario::{
     ClosedLoopError, Event, Expectations, Scenario, ScenarioHeader, SensorChannel, SensorModel,
     SetpointProfile, ValveId,
 };
-use crate::plant::{Measurement, Plant, PlantState, ValveInputs};
+use crate::plant::{AuxState, Measurement, Plant, PlantState, ValveInputs};
 use crate::sim::{ActuatorPath, Integrator, SensorPath, SimStats, SolverOptions};
 use pam_firmware::latch::{BootDecision, PersistentLatch, RamStorage, ResetCause};
 use pam_firmware::sensors::SequenceGate;
@@ -239,10 +239,10 @@ pub fn run_with(
         while plant_idx + 1 < plants.len() && plants[plant_idx + 1].0 <= k {
             plant_idx += 1;
             let x = integ.state();
-            let p_tank = integ.supply_abs_pa();
+            let aux = integ.aux();
             stats_done.add(&integ.stats());
             integ = Integrator::new(&plants[plant_idx].1, x, opts);
-            integ.set_supply_abs_pa(p_tank); // a supply reservoir keeps its pressure
+            integ.set_aux(aux); // a supply reservoir keeps its pressure, the gas its temperature
         }
         let p = &plants[plant_idx].1;
         let x = integ.state();
@@ -440,16 +440,15 @@ pub fn run_with(
             // Fallback: the tick again from its start state with fixed-step RK4 substeps
             // (a fault combination can make the adaptive step collapse); a real failure
             // names the run time and the state.
-            let p_tank = integ.supply_abs_pa();
-            let end =
-                fallback_tick(p, &x, p_tank, &inputs, dt_s).ok_or(ClosedLoopError::SimAt {
-                    t_s,
-                    state: x,
-                    source: e,
-                })?;
+            let aux = integ.aux();
+            let end = fallback_tick(p, &x, &aux, &inputs, dt_s).ok_or(ClosedLoopError::SimAt {
+                t_s,
+                state: x,
+                source: e,
+            })?;
             stats_done.add(&integ.stats());
             integ = Integrator::new(p, end, opts);
-            integ.set_supply_abs_pa(p_tank);
+            integ.set_aux(aux);
             fallback_ticks += 1;
         }
         if k % 1000 == 0 {
@@ -490,12 +489,12 @@ pub struct TrackingStats {
 }
 
 /// One tick of the plant with fixed-step classic RK4 (256 substeps), for when the adaptive
-/// integrator fails: `None` if the state becomes non-finite. A supply reservoir keeps its
-/// pressure over the tick.
+/// integrator fails: `None` if the state becomes non-finite. The auxiliary states (a supply
+/// reservoir's pressure, the gas temperatures) are held over the tick.
 fn fallback_tick(
     plant: &Plant,
     x: &PlantState,
-    supply_abs_pa: f64,
+    aux: &AuxState,
     u: &ValveInputs,
     dt_s: f64,
 ) -> Option<PlantState> {
@@ -503,7 +502,7 @@ fn fallback_tick(
     let h = dt_s / N as f64;
     let f = |y: [f64; 4]| {
         plant
-            .derivatives_with_supply(&PlantState::from_array(y), supply_abs_pa, u)
+            .derivatives_aux(&PlantState::from_array(y), aux, u)
             .0
             .to_array()
     };

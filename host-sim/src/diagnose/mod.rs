@@ -227,7 +227,7 @@ fn simulate_measure(
 }
 
 /// Look-alike pairs (a, b): effects whose signatures resemble each other.
-const LOOKALIKES: [(&str, &str); 5] = [
+const LOOKALIKES: [(&str, &str); 6] = [
     ("joint_friction", "muscle_hysteresis"),
     // The isothermal pressure law sees only the ratio of the valve conductance to the
     // chamber volume.
@@ -238,6 +238,9 @@ const LOOKALIKES: [(&str, &str); 5] = [
     ("sensor_lag", "valve_delay"),
     ("joint.inertia_kgm2", "gravity"),
     ("leakage", "supply_drop"),
+    // Both make the pressure law non-isothermal; only the relaxation after a flow (the
+    // wall heat exchange) tells them apart.
+    ("heat_transfer", "polytropic"),
 ];
 
 /// Output of the evidence stage.
@@ -423,6 +426,7 @@ pub fn diagnose(
         min_gain_noise: opts.min_gain_noise,
         noise_cost,
         n_heldout: held.len() as f64,
+        explained_cost: opts.null_ratio * noise_cost,
     };
     let sel = if nothing_missing {
         selection::Selected {
@@ -595,6 +599,15 @@ pub fn diagnose(
             ("valve.sonic_conductance_m3_per_s_pa", _) => format!(
                 "The valve conductance and the chamber volume cannot be told apart by this recording (the isothermal pressure law sees only their ratio): recalibrating {} removes {:.0} % of the held-out error beyond noise, {} {:.0} %; measure one of them to fix the other.",
                 label_of(e), pct(e), label_of(other), pct(other)
+            ),
+            ("heat_transfer", _) => format!(
+                "Chamber thermodynamics vs a constant polytropic exponent, told apart by the pressure relaxing after each flow (the wall heat exchange): {} removes {:.0} % of the held-out error beyond noise, {} {:.0} %{}.",
+                label_of(e), pct(e), label_of(other), pct(other),
+                if (pct(e) - pct(other)).abs() < 5.0 {
+                    "; this recording cannot tell them apart (hold the valves closed for a few tenths of a second after a fill to show the relaxation)"
+                } else {
+                    ""
+                }
             ),
             ("sensor_lag", _) => {
                 let lags: Vec<String> = Channel::ALL

@@ -10,7 +10,9 @@
 //! judged by ONE rule, [`Rule::judge`]: a trial set is accepted over the current one when it
 //! removes at least `min_explained` of the held-out error beyond noise, lowers the held-out
 //! cost by 2 % and by `min_gain_noise` times the noise's cost, and improves the BIC-like
-//! score (held-out log cost plus ln N per parameter). Among accepted trials the lowest
+//! score (held-out log cost plus ln N per parameter); nothing is added to a set that
+//! already explains the data within its noise, and a last backward pass drops any part the
+//! rest does without (the same rule, the other way round). Among accepted trials the lowest
 //! held-out cost wins, unless a simpler one (fewer named effects: a recalibration counts as
 //! none) is not beaten by it under the same rule.
 
@@ -42,6 +44,9 @@ pub struct Rule {
     pub noise_cost: f64,
     /// Held-out samples.
     pub n_heldout: f64,
+    /// A set whose held-out cost is at or below this explains the data within its noise:
+    /// nothing is added to it (`null_ratio` times the noise cost, the verdict's own bar).
+    pub explained_cost: f64,
 }
 
 /// How a trial set compares with the current one.
@@ -65,6 +70,7 @@ impl Rule {
         let explained = ((j_cur - jh) / excess).clamp(-1.0, 1.0);
         let bic_delta = self.bic(jh, k_new) - self.bic(j_cur, k_cur);
         let accepted = jh.is_finite()
+            && j_cur > self.explained_cost
             && explained >= self.min_explained
             && jh < j_cur * 0.98
             && j_cur - jh >= self.min_gain_noise * self.noise_cost
@@ -313,6 +319,58 @@ pub fn select<'c>(
         current = fitted;
         j_cur = jh;
     }
+    // Backward pass: a part the others do without is dropped. Each part is left out in turn
+    // and the rest refitted from their current values; when the current set does not beat
+    // such a reduced set under the same rule (e.g. the reduced set already explains the
+    // data within its noise), the best reduced set replaces it: the simpler explanation.
+    let round = opts.max_effects + 4;
+    while current.len() > 1 {
+        let trials: Vec<Vec<Part<'c>>> = (0..current.len())
+            .map(|j| {
+                let mut t = current.clone();
+                t.remove(j);
+                t
+            })
+            .collect();
+        let results = par_map(&trials, opts.threads, |parts| trial(parts));
+        let k_cur = n_params(&current);
+        let mut best: Option<(Vec<Part<'c>>, f64)> = None;
+        for (fitted, jh, seconds) in results {
+            let kept = rule.judge(jh, n_params(&fitted), j_cur, k_cur).accepted;
+            scores.push(CandidateScore {
+                id: set_id(&fitted),
+                round,
+                screening: f64::NAN,
+                params: Vec::new(),
+                heldout_cost: jh,
+                explained: f64::NAN,
+                bic_delta: f64::NAN,
+                accepted: false,
+                seconds,
+            });
+            if !kept && jh.is_finite() && best.as_ref().is_none_or(|b| jh < b.1) {
+                best = Some((fitted, jh));
+            }
+        }
+        let Some((fitted, jh)) = best else {
+            break;
+        };
+        let id = set_id(&fitted);
+        if let Some(s) = scores.iter_mut().find(|s| s.round == round && s.id == id) {
+            s.accepted = true;
+        }
+        chosen_explained = fitted
+            .iter()
+            .map(|p| {
+                round1_explained
+                    .get(p.candidate.id())
+                    .copied()
+                    .unwrap_or(0.0)
+            })
+            .collect();
+        current = fitted;
+        j_cur = jh;
+    }
     Selected {
         chosen: current,
         heldout_cost: j_cur,
@@ -342,6 +400,7 @@ mod tests {
             min_gain_noise: 0.5,
             noise_cost: 0.01,
             n_heldout: 1000.0,
+            explained_cost: 0.02,
         }
     }
 
@@ -354,6 +413,9 @@ mod tests {
         assert!(!r.judge(1.0, 0, 0.9, 1).accepted);
         // Removes all of a tiny excess, but less than half the noise cost: not accepted.
         assert!(!r.judge(0.012, 0, 0.0105, 1).accepted);
+        // The current set already explains the data within its noise: nothing is added,
+        // however large the relative gain (noise-free data, numerical residue).
+        assert!(!r.judge(0.019, 0, 0.0001, 1).accepted);
         // A failed simulation is never accepted.
         assert!(!r.judge(1.0, 0, f64::INFINITY, 1).accepted);
     }

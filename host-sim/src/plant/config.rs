@@ -364,6 +364,21 @@ impl PlantConfig {
                 ));
             }
         }
-        self.effects.validate(path)
+        self.effects.validate(path)?;
+        let on = |e: Option<bool>| e.unwrap_or(false);
+        if on(self.effects.thermal_chamber.as_ref().map(|t| t.enabled))
+            && on(self
+                .effects
+                .polytropic
+                .as_ref()
+                .map(|p| p.enabled && p.exponent != 1.0))
+        {
+            return Err(bad(
+                "effects.polytropic",
+                "a polytropic exponent and the thermal chamber both set the pressure law: \
+                 keep one (the thermal chamber models the non-isothermal process itself)",
+            ));
+        }
+        Ok(())
     }
 }

@@ -53,6 +53,71 @@ impl PlantState {
     }
 }
 
+/// The states some effects add to (beta, omega, p1, p2): the supply reservoir's pressure
+/// ([`effects::SupplyDrop`] with `model = "reservoir"`) and the gas temperatures of the two
+/// muscles ([`effects::ThermalChamber`]). Without those effects they stay at their initial
+/// values (p_s0 and the initial temperature) and are not integrated.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AuxState {
+    /// Supply reservoir pressure (absolute).
+    pub supply_abs_pa: f64,
+    /// Gas temperature of muscles 1 and 2.
+    pub gas_temperature_k: [f64; 2],
+}
+
+/// Which [`AuxState`] components a plant integrates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AuxLayout {
+    /// None: (beta, omega, p1, p2) only.
+    None,
+    /// The supply reservoir pressure: 5 states.
+    Supply,
+    /// The two gas temperatures: 6 states.
+    Temperatures,
+    /// Both: 7 states (reservoir, then temperatures).
+    SupplyAndTemperatures,
+}
+
+impl AuxLayout {
+    /// Number of auxiliary states.
+    pub fn len(self) -> usize {
+        match self {
+            AuxLayout::None => 0,
+            AuxLayout::Supply => 1,
+            AuxLayout::Temperatures => 2,
+            AuxLayout::SupplyAndTemperatures => 3,
+        }
+    }
+    /// Whether there is none.
+    pub fn is_empty(self) -> bool {
+        self == AuxLayout::None
+    }
+    /// The integrated components of `a`, in ODE order (the first [`Self::len`] are used).
+    pub fn pack(self, a: &AuxState) -> [f64; 3] {
+        let [t1, t2] = a.gas_temperature_k;
+        match self {
+            AuxLayout::None => [0.0; 3],
+            AuxLayout::Supply => [a.supply_abs_pa, 0.0, 0.0],
+            AuxLayout::Temperatures => [t1, t2, 0.0],
+            AuxLayout::SupplyAndTemperatures => [a.supply_abs_pa, t1, t2],
+        }
+    }
+    /// `base` with the integrated components replaced by `y` (ODE order).
+    pub fn unpack(self, base: &AuxState, y: &[f64]) -> AuxState {
+        let mut a = *base;
+        match self {
+            AuxLayout::None => {}
+            AuxLayout::Supply => a.supply_abs_pa = y[0],
+            AuxLayout::Temperatures => a.gas_temperature_k = [y[0], y[1]],
+            AuxLayout::SupplyAndTemperatures => {
+                a.supply_abs_pa = y[0];
+                a.gas_temperature_k = [y[1], y[2]];
+            }
+        }
+        a
+    }
+}
+
 /// Valve openings in [0, 1], held over one sample period (a PWM duty counts as opening).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct ValveInputs {
@@ -173,9 +238,28 @@ impl Plant {
     }
 
     /// Whether the plant has a state beyond (beta, omega, p1, p2): the supply reservoir's
-    /// pressure ([`effects::SupplyDrop`] with `model = "reservoir"`).
+    /// pressure ([`effects::SupplyDrop`] with `model = "reservoir"`) or the gas temperatures
+    /// ([`effects::ThermalChamber`]).
+    pub fn has_aux_state(&self) -> bool {
+        !self.aux_layout().is_empty()
+    }
+
+    /// Whether the plant has a supply reservoir (its pressure is an ODE state).
     pub fn has_supply_state(&self) -> bool {
         self.effects.supply().has_state()
+    }
+
+    /// Which auxiliary states the plant integrates.
+    pub fn aux_layout(&self) -> AuxLayout {
+        match (
+            self.has_supply_state(),
+            self.effects.thermal_chamber().is_some(),
+        ) {
+            (false, false) => AuxLayout::None,
+            (true, false) => AuxLayout::Supply,
+            (false, true) => AuxLayout::Temperatures,
+            (true, true) => AuxLayout::SupplyAndTemperatures,
+        }
     }
 
     /// The supply pressure (absolute) the inlet valves see at the start of a run: p_s0, also
@@ -184,18 +268,30 @@ impl Plant {
         self.p_supply_abs_pa
     }
 
-    /// Right-hand side: d/dt of (beta, omega, p1, p2) for inputs `u`.
-    ///
-    /// With a supply reservoir this takes its pressure at the full p_s0; use
-    /// [`Self::derivatives_with_supply`] to give it.
-    #[inline(always)]
-    pub fn derivatives(&self, x: &PlantState, u: &ValveInputs) -> PlantState {
-        self.derivatives_with_supply(x, self.p_supply_abs_pa, u).0
+    /// The auxiliary states at the start of a run: the reservoir at p_s0, the gas at the
+    /// thermal chamber's initial temperature (the ANR reference 293.15 K without one).
+    pub fn initial_aux(&self) -> AuxState {
+        let t = self
+            .effects
+            .thermal_chamber()
+            .map_or(effects::thermal_chamber::ANR_REFERENCE_TEMPERATURE_K, |c| {
+                c.initial_temperature_k
+            });
+        AuxState {
+            supply_abs_pa: self.p_supply_abs_pa,
+            gas_temperature_k: [t, t],
+        }
     }
 
-    /// Right-hand side with the supply reservoir state: returns d/dt of (beta, omega, p1, p2)
-    /// and d/dt of the reservoir pressure `reservoir_abs_pa` (0 and ignored unless the plant
-    /// has a reservoir, see [`Self::has_supply_state`]).
+    /// Right-hand side: d/dt of (beta, omega, p1, p2) for inputs `u`, with the auxiliary
+    /// states at their initial values (see [`Self::derivatives_aux`]).
+    #[inline(always)]
+    pub fn derivatives(&self, x: &PlantState, u: &ValveInputs) -> PlantState {
+        self.derivatives_aux(x, &self.initial_aux(), u).0
+    }
+
+    /// Right-hand side with the supply reservoir pressure `reservoir_abs_pa`: returns d/dt of
+    /// (beta, omega, p1, p2) and of the reservoir pressure (0 without a reservoir).
     #[inline(always)]
     pub fn derivatives_with_supply(
         &self,
@@ -203,12 +299,30 @@ impl Plant {
         reservoir_abs_pa: f64,
         u: &ValveInputs,
     ) -> (PlantState, f64) {
+        let aux = AuxState {
+            supply_abs_pa: reservoir_abs_pa,
+            ..self.initial_aux()
+        };
+        let (d, da) = self.derivatives_aux(x, &aux, u);
+        (d, da.supply_abs_pa)
+    }
+
+    /// Right-hand side with the auxiliary states `aux`: returns d/dt of (beta, omega, p1, p2)
+    /// and of the auxiliary states (0 for those the plant does not integrate).
+    #[inline(always)]
+    pub fn derivatives_aux(
+        &self,
+        x: &PlantState,
+        aux: &AuxState,
+        u: &ValveInputs,
+    ) -> (PlantState, AuxState) {
         let chi = self.joint.contractions(x.angle_rad);
         let dchi = self.joint.contraction_rates(x.velocity_rad_s);
         let p = [x.p1_abs_pa, x.p2_abs_pa];
         let u_in = [u.u_in1, u.u_in2];
         let u_ex = [u.u_ex1, u.u_ex2];
         let supply = self.effects.supply();
+        let reservoir_abs_pa = aux.supply_abs_pa;
         let p_supply = match supply {
             Supply::Ideal => self.p_supply_abs_pa,
             Supply::Static {
@@ -223,30 +337,50 @@ impl Plant {
             Supply::Reservoir { .. } => reservoir_abs_pa,
         };
         let pressure_factor = self.effects.pressure_rate_factor();
+        let thermal = self.effects.thermal_chamber();
         let mut q_supply = 0.0;
         let mut tension = [0.0; 2];
         let mut dp = [0.0; 2];
+        let mut dt = [0.0; 2];
         for i in 0..2 {
             let pg = p[i] - self.p_atm_pa;
             tension[i] = self.tension_n(pg, chi[i], dchi[i]);
-            // A closed valve contributes nothing (skip the flow function).
-            let mut q = self.effects.chamber_flow_m3_s(p[i], self.p_atm_pa);
+            // The signed standard flows into the chamber: leak, inlet, exhaust. A closed
+            // valve contributes nothing (skip the flow function).
+            let q_leak = self.effects.chamber_flow_m3_s(p[i], self.p_atm_pa);
+            let mut q_in = 0.0;
+            let mut q_out = 0.0;
             if u_in[i] != 0.0 {
-                let q_in = u_in[i] * self.valve.flow_m3_s(p_supply, p[i]);
+                q_in = u_in[i] * self.valve.flow_m3_s(p_supply, p[i]);
                 q_supply += q_in;
-                q += q_in;
             }
             if u_ex[i] != 0.0 {
-                q -= u_ex[i] * self.valve.flow_m3_s(p[i], self.p_atm_pa);
+                q_out = -u_ex[i] * self.valve.flow_m3_s(p[i], self.p_atm_pa);
             }
-            dp[i] = pressure_factor
-                * pressure::pressure_rate_pa_s(
-                    self.p_atm_pa,
-                    p[i],
-                    q,
-                    self.muscle.volume_m3(chi[i]),
-                    self.muscle.volume_rate_m3_s(chi[i], dchi[i]),
-                );
+            let volume = self.muscle.volume_m3(chi[i]);
+            let volume_rate = self.muscle.volume_rate_m3_s(chi[i], dchi[i]);
+            match thermal {
+                None => {
+                    dp[i] = pressure_factor
+                        * pressure::pressure_rate_pa_s(
+                            self.p_atm_pa,
+                            p[i],
+                            q_leak + q_in + q_out,
+                            volume,
+                            volume_rate,
+                        );
+                }
+                Some(c) => {
+                    (dp[i], dt[i]) = c.rates(
+                        self.p_atm_pa,
+                        p[i],
+                        aux.gas_temperature_k[i],
+                        volume,
+                        volume_rate,
+                        [q_leak, q_in, q_out],
+                    );
+                }
+            }
         }
         let torque = self.joint.muscle_torque_nm(tension)
             + self.effects.joint_torque_nm(x.angle_rad, x.velocity_rad_s)
@@ -268,7 +402,10 @@ impl Plant {
                 p1_abs_pa: dp[0],
                 p2_abs_pa: dp[1],
             },
-            d_reservoir,
+            AuxState {
+                supply_abs_pa: d_reservoir,
+                gas_temperature_k: dt,
+            },
         )
     }
 

@@ -15,13 +15,12 @@
 use nalgebra::SVector;
 use ode_solvers::{Dopri5, OutputType, System};
 
-use crate::plant::{Plant, PlantState, ValveInputs};
+use crate::plant::{AuxLayout, AuxState, Plant, PlantState, ValveInputs};
 
 pub mod signal_path;
 pub use signal_path::{ActuatorPath, SensorPath};
 
 type Vector4 = SVector<f64, 4>;
-type Vector5 = SVector<f64, 5>;
 
 /// Tolerances of the adaptive integrator.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -83,7 +82,7 @@ pub enum SimError {
         /// The run mode that refuses (e.g. "open-loop replay", "closed loop").
         mode: &'static str,
     },
-    #[error("supply reservoir pressure became non-finite at t = {t_s} s")]
+    #[error("an auxiliary state (supply reservoir pressure or gas temperature) became non-finite at t = {t_s} s")]
     NonFiniteSupply { t_s: f64 },
 }
 
@@ -109,27 +108,35 @@ impl System<f64, Vector4> for Rhs<'_> {
     }
 }
 
-/// The plant with a supply reservoir: state (beta, omega, p1, p2, p_tank).
-struct Rhs5<'a> {
+/// The plant with auxiliary states: (beta, omega, p1, p2) then the [`AuxLayout`]'s
+/// components (`N` = 4 + their number).
+struct RhsAux<'a, const N: usize> {
     plant: &'a Plant,
     u: ValveInputs,
+    layout: AuxLayout,
+    /// The values of the components not integrated.
+    base: AuxState,
 }
 
-impl System<f64, Vector5> for Rhs5<'_> {
+impl<const N: usize> System<f64, SVector<f64, N>> for RhsAux<'_, N> {
     #[inline(always)]
-    fn system(&self, _t: f64, y: &Vector5, dy: &mut Vector5) {
+    fn system(&self, _t: f64, y: &SVector<f64, N>, dy: &mut SVector<f64, N>) {
         let x = PlantState {
             angle_rad: y[0],
             velocity_rad_s: y[1],
             p1_abs_pa: y[2],
             p2_abs_pa: y[3],
         };
-        let (d, d_tank) = self.plant.derivatives_with_supply(&x, y[4], &self.u);
+        let aux = self.layout.unpack(&self.base, &y.as_slice()[4..]);
+        let (d, da) = self.plant.derivatives_aux(&x, &aux, &self.u);
         dy[0] = d.angle_rad;
         dy[1] = d.velocity_rad_s;
         dy[2] = d.p1_abs_pa;
         dy[3] = d.p2_abs_pa;
-        dy[4] = d_tank;
+        let a = self.layout.pack(&da);
+        for k in 4..N {
+            dy[k] = a[k - 4];
+        }
     }
 }
 
@@ -234,8 +241,9 @@ pub struct Integrator<'a> {
     opts: SolverOptions,
     stats: SimStats,
     dense: Vec<PlantState>,
-    /// Supply reservoir pressure (absolute; p_s0 and constant without a reservoir).
-    supply_abs_pa: f64,
+    /// The auxiliary states (reservoir pressure, gas temperatures); constant where the
+    /// plant does not integrate them.
+    aux: AuxState,
     /// f(state, inputs) of the last single-sample step (first-same-as-last), with the
     /// inputs it was evaluated under.
     fsal: Option<(ValveInputs, [f64; 4])>,
@@ -253,7 +261,7 @@ impl<'a> Integrator<'a> {
             opts,
             stats: SimStats::default(),
             dense: Vec::new(),
-            supply_abs_pa: plant.initial_supply_abs_pa(),
+            aux: plant.initial_aux(),
             fsal: None,
             single_step_path: true,
         }
@@ -269,12 +277,24 @@ impl<'a> Integrator<'a> {
     /// Sets the supply reservoir pressure (absolute), e.g. to carry it over to an integrator
     /// of another plant. No effect on a plant without a reservoir.
     pub fn set_supply_abs_pa(&mut self, p_abs_pa: f64) {
-        self.supply_abs_pa = p_abs_pa;
+        self.aux.supply_abs_pa = p_abs_pa;
     }
 
     /// The supply reservoir pressure now (absolute); p_s0 for a plant without a reservoir.
     pub fn supply_abs_pa(&self) -> f64 {
-        self.supply_abs_pa
+        self.aux.supply_abs_pa
+    }
+
+    /// The auxiliary states now (reservoir pressure, gas temperatures).
+    pub fn aux(&self) -> AuxState {
+        self.aux
+    }
+
+    /// Sets the auxiliary states, e.g. to carry them over to an integrator of another plant
+    /// (the closed loop's load and supply events): a reservoir keeps its pressure, the gas
+    /// its temperature.
+    pub fn set_aux(&mut self, aux: AuxState) {
+        self.aux = aux;
     }
 
     pub fn state(&self) -> PlantState {
@@ -313,7 +333,7 @@ impl<'a> Integrator<'a> {
         } = SegmentPlan::new(n, dt_s, self.h_s);
         if single
             && self.single_step_path
-            && !self.plant.has_supply_state()
+            && !self.plant.has_aux_state()
             && self.h_s >= 0.5 * duration_s
         {
             if let Some(end) = self.single_step(inputs, duration_s) {
@@ -324,8 +344,17 @@ impl<'a> Integrator<'a> {
             }
         }
         self.fsal = None;
-        if self.plant.has_supply_state() {
-            return self.advance_samples_reservoir(inputs, dt_s, n, x_end, h0, single, on_sample);
+        match self.plant.aux_layout() {
+            AuxLayout::None => {}
+            AuxLayout::Supply => {
+                return self.advance_samples_aux::<5>(inputs, dt_s, n, x_end, h0, single, on_sample)
+            }
+            AuxLayout::Temperatures => {
+                return self.advance_samples_aux::<6>(inputs, dt_s, n, x_end, h0, single, on_sample)
+            }
+            AuxLayout::SupplyAndTemperatures => {
+                return self.advance_samples_aux::<7>(inputs, dt_s, n, x_end, h0, single, on_sample)
+            }
         }
         let y0 = Vector4::from(self.state.to_array());
         let (solver, accepted) = dopri_segment(
@@ -479,9 +508,9 @@ impl<'a> Integrator<'a> {
         Ok(self.dense[n])
     }
 
-    /// [`Self::advance_samples`] for a plant with a supply reservoir (5 states).
+    /// [`Self::advance_samples`] for a plant with auxiliary states (`N` = 4 + their number).
     #[allow(clippy::too_many_arguments)]
-    fn advance_samples_reservoir(
+    fn advance_samples_aux<const N: usize>(
         &mut self,
         inputs: ValveInputs,
         dt_s: f64,
@@ -493,11 +522,18 @@ impl<'a> Integrator<'a> {
     ) -> Result<(), SimError> {
         let duration_s = n as f64 * dt_s;
         let a = self.state.to_array();
-        let y0 = Vector5::from([a[0], a[1], a[2], a[3], self.supply_abs_pa]);
+        let layout = self.plant.aux_layout();
+        let packed = layout.pack(&self.aux);
+        let mut y0 = SVector::<f64, N>::zeros();
+        for k in 0..N {
+            y0[k] = if k < 4 { a[k] } else { packed[k - 4] };
+        }
         let (solver, accepted) = dopri_segment(
-            Rhs5 {
+            RhsAux::<N> {
                 plant: self.plant,
                 u: inputs,
+                layout,
+                base: self.aux,
             },
             y0,
             x_end,
@@ -534,7 +570,7 @@ impl<'a> Integrator<'a> {
                 state: end,
             });
         }
-        if !last[4].is_finite() {
+        if !last.as_slice()[4..].iter().all(|v| v.is_finite()) {
             return Err(SimError::NonFiniteSupply {
                 t_s: self.t_s + duration_s,
             });
@@ -547,7 +583,7 @@ impl<'a> Integrator<'a> {
             }
         }
         self.state = end;
-        self.supply_abs_pa = last[4];
+        self.aux = layout.unpack(&self.aux, &last.as_slice()[4..]);
         self.t_s += duration_s;
         self.h_s = duration_s / f64::from(accepted.max(1));
         Ok(())

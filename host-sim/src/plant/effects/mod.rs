@@ -21,6 +21,7 @@
 //! The effects: [`JointFriction`], [`Gravity`] (joint torque); [`Leakage`], [`Polytropic`]
 //! (chamber flow and pressure law); [`SensorCalibration`], [`SensorLag`] (the measurement);
 //! [`ValveDeadTime`] (the valve command path); [`MuscleHysteresis`] (the muscle tension);
+//! [`ThermalChamber`] (gas temperatures with wall heat transfer, two more ODE states);
 //! [`SupplyDrop`] (the supply pressure, either a static flow-dependent drop or a reservoir
 //! with its own pressure state, the fifth ODE state, see [`crate::sim::Integrator`]);
 //! [`InertiaMismatch`] (not a table: the diagnosis candidate for a wrong `joint.inertia_kgm2`).
@@ -88,6 +89,11 @@ pub trait Hooks: Debug + Clone + PartialEq {
     /// The supply the inlet valves see, if this effect models it.
     #[inline(always)]
     fn supply(&self) -> Option<&Supply> {
+        None
+    }
+    /// The chamber thermodynamics (gas temperatures as states), if this effect models them.
+    #[inline(always)]
+    fn thermal_chamber(&self) -> Option<&ThermalChamber> {
         None
     }
     /// Delay (s) between a valve command and the valve opening.
@@ -298,6 +304,7 @@ registry! {
     inertia::InertiaMismatch,
     leakage::Leakage,
     sensor::SensorCalibration,
+    thermal_chamber::ThermalChamber,
     #[cfg(test)]
     toy_spring::ToySpring,
 }
@@ -381,6 +388,23 @@ impl Effects {
         let mut f = First(None);
         self.visit(&mut f);
         f.0.unwrap_or(&Supply::Ideal)
+    }
+
+    /// The chamber thermodynamics, if enabled (then the gas temperatures are ODE states).
+    #[inline(always)]
+    pub fn thermal_chamber(&self) -> Option<&ThermalChamber> {
+        struct First<'e>(Option<&'e ThermalChamber>);
+        impl<'e> Visit<'e> for First<'e> {
+            #[inline(always)]
+            fn visit<A: Hooks>(&mut self, a: &'e A) {
+                if self.0.is_none() {
+                    self.0 = a.thermal_chamber();
+                }
+            }
+        }
+        let mut f = First(None);
+        self.visit(&mut f);
+        f.0
     }
 
     /// Total delay between a valve command and the valve opening; `None`: no delay effect.

@@ -78,6 +78,8 @@ impl Candidate for PolytropicCandidate {
         }
     }
     fn apply(&self, cfg: &mut PlantConfig, p: &[f64], _s: &Setup) {
+        // The exponent replaces the file's pressure law (a thermal chamber).
+        cfg.effects.thermal_chamber = None;
         cfg.effects.polytropic = Some(Polytropic {
             enabled: true,
             exponent: p[0],
