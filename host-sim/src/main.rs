@@ -299,15 +299,7 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
     }
     out.write(&a.out)?;
     println!("plant effects: {}", plant.effects_summary());
-    eprintln!(
-        "{}: {} samples, {} segments, {} steps ({} rejected), {} rhs evaluations",
-        a.out.display(),
-        out.len(),
-        sim.stats.segments,
-        sim.stats.accepted_steps,
-        sim.stats.rejected_steps,
-        sim.stats.rhs_evaluations
-    );
+    eprintln!("{}: {} samples, {}", a.out.display(), out.len(), sim.stats);
     if let Some(p) = &a.plot {
         plot_comparison(p, Some(&rec), &out)?;
     }
@@ -381,15 +373,7 @@ fn run_simulate_arm3(a: &SimulateArgs, inputs_path: &Path) -> Result<ExitCode> {
     };
     out.set_outputs_from_states(&arm, &sim.states);
     out.write(&a.out)?;
-    eprintln!(
-        "{}: {} samples, {} segments, {} steps ({} rejected), {} rhs evaluations",
-        a.out.display(),
-        out.len(),
-        sim.stats.segments,
-        sim.stats.accepted_steps,
-        sim.stats.rejected_steps,
-        sim.stats.rhs_evaluations
-    );
+    eprintln!("{}: {} samples, {}", a.out.display(), out.len(), sim.stats);
     for (name, fit) in fits(&rec, &out) {
         println!("{name:<14} fit {fit:9.4} %");
     }

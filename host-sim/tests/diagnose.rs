@@ -114,29 +114,24 @@ fn null_case_says_nothing_is_missing() {
     assert!(json["check"]["before"]["angle_deg"].as_f64().unwrap() > 95.0);
 }
 
-#[test]
-fn joint_friction_is_named() {
-    assert_named_and_fits("joint_friction", 21, 1e-3);
+/// One test per concealed truth: `name: (truth, seed, sample period [s])`.
+macro_rules! named_and_fits {
+    ($($test:ident: ($truth:expr, $seed:expr, $dt_s:expr)),* $(,)?) => {
+        $(
+            #[test]
+            fn $test() {
+                assert_named_and_fits($truth, $seed, $dt_s);
+            }
+        )*
+    };
 }
 
-#[test]
-fn leakage_is_named_at_2_ms() {
-    assert_named_and_fits("leakage", 22, 2e-3);
-}
-
-#[test]
-fn sensor_lag_is_named() {
-    assert_named_and_fits("sensor_lag", 23, 1e-3);
-}
-
-#[test]
-fn muscle_hysteresis_is_named() {
-    assert_named_and_fits("muscle_hysteresis", 24, 1e-3);
-}
-
-#[test]
-fn stribeck_truth_is_named_joint_friction() {
-    assert_named_and_fits("joint_friction_stribeck", 25, 1e-3);
+named_and_fits! {
+    joint_friction_is_named: ("joint_friction", 21, 1e-3),
+    leakage_is_named_at_2_ms: ("leakage", 22, 2e-3),
+    sensor_lag_is_named: ("sensor_lag", 23, 1e-3),
+    muscle_hysteresis_is_named: ("muscle_hysteresis", 24, 1e-3),
+    stribeck_truth_is_named_joint_friction: ("joint_friction_stribeck", 25, 1e-3),
 }
 
 #[test]

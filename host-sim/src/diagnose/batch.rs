@@ -124,6 +124,27 @@ fn diagnose_one(nominal: &PlantConfig, path: &Path, opts: &DiagnoseOptions) -> B
     }
 }
 
+impl BatchDiagnosis {
+    /// `nominal` (nothing missing) or `departs`.
+    fn status(&self) -> &'static str {
+        if self.nothing_missing {
+            "nominal"
+        } else {
+            "departs"
+        }
+    }
+}
+
+impl BatchRow {
+    /// The recording's file name.
+    fn name(&self) -> String {
+        self.recording
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    }
+}
+
 /// The summary as CSV (`recording,samples,status,effects,worst_fit_before_pct,
 /// worst_fit_after_pct,wall_s`).
 pub fn summary_csv(rows: &[BatchRow]) -> String {
@@ -131,20 +152,12 @@ pub fn summary_csv(rows: &[BatchRow]) -> String {
         "recording,samples,status,effects,worst_fit_before_pct,worst_fit_after_pct,wall_s\n",
     );
     for r in rows {
-        let name = r
-            .recording
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
+        let name = r.name();
         match &r.result {
             Ok(d) => s.push_str(&format!(
                 "{name},{},{},{},{:.2},{:.2},{:.2}\n",
                 r.samples,
-                if d.nothing_missing {
-                    "nominal"
-                } else {
-                    "departs"
-                },
+                d.status(),
                 d.effects.join("+").replace(',', ";"),
                 d.worst_fit_before_pct,
                 d.worst_fit_after_pct,
@@ -173,20 +186,12 @@ pub fn summary_table(rows: &[BatchRow]) -> String {
         "recording", "samples", "status", "worst fit %", "after %"
     );
     for r in rows {
-        let name = r
-            .recording
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
+        let name = r.name();
         match &r.result {
             Ok(d) => s.push_str(&format!(
                 "{name:<w$}  {:>8}  {:<8}  {:>12.2}  {:>11.2}  {}\n",
                 r.samples,
-                if d.nothing_missing {
-                    "nominal"
-                } else {
-                    "departs"
-                },
+                d.status(),
                 d.worst_fit_before_pct,
                 d.worst_fit_after_pct,
                 if d.effects.is_empty() {

@@ -26,33 +26,31 @@ pub struct RecalKey {
     set: fn(&mut PlantConfig, f64),
 }
 
+/// A [`RecalKey`] for a plain field `table.key` of the plant file.
+macro_rules! field_key {
+    ($table:ident . $field:ident, $label:expr, $lo:expr, $hi:expr) => {
+        RecalKey {
+            key: concat!(stringify!($table), ".", stringify!($field)),
+            label: $label,
+            lo_factor: $lo,
+            hi_factor: $hi,
+            get: |c| c.$table.$field,
+            set: |c, v| c.$table.$field = v,
+        }
+    };
+}
+
 /// The keys the diagnosis may recalibrate.
 pub fn keys() -> Vec<RecalKey> {
     vec![
-        RecalKey {
-            key: "valve.sonic_conductance_m3_per_s_pa",
-            label: "valve sonic conductance",
-            lo_factor: 0.2,
-            hi_factor: 5.0,
-            get: |c| c.valve.sonic_conductance_m3_per_s_pa,
-            set: |c, v| c.valve.sonic_conductance_m3_per_s_pa = v,
-        },
-        RecalKey {
-            key: "muscle.radius_m",
-            label: "muscle radius",
-            lo_factor: 0.7,
-            hi_factor: 1.3,
-            get: |c| c.muscle.radius_m,
-            set: |c, v| c.muscle.radius_m = v,
-        },
-        RecalKey {
-            key: "muscle.braid_angle_deg",
-            label: "braid angle",
-            lo_factor: 0.7,
-            hi_factor: 1.3,
-            get: |c| c.muscle.braid_angle_deg,
-            set: |c, v| c.muscle.braid_angle_deg = v,
-        },
+        field_key!(
+            valve.sonic_conductance_m3_per_s_pa,
+            "valve sonic conductance",
+            0.2,
+            5.0
+        ),
+        field_key!(muscle.radius_m, "muscle radius", 0.7, 1.3),
+        field_key!(muscle.braid_angle_deg, "braid angle", 0.7, 1.3),
         RecalKey {
             // The whole volume polynomial is scaled; reported as its constant term b0.
             key: "muscle.volume_poly_m3",
@@ -75,22 +73,8 @@ pub fn keys() -> Vec<RecalKey> {
             get: |c| c.muscle.damping_m2s,
             set: |c, v| c.muscle.damping_m2s = v.max(0.0),
         },
-        RecalKey {
-            key: "joint.inertia_kgm2",
-            label: "joint inertia (load)",
-            lo_factor: 0.2,
-            hi_factor: 30.0,
-            get: |c| c.joint.inertia_kgm2,
-            set: |c, v| c.joint.inertia_kgm2 = v,
-        },
-        RecalKey {
-            key: "environment.supply_gauge_pa",
-            label: "supply pressure",
-            lo_factor: 0.5,
-            hi_factor: 1.3,
-            get: |c| c.environment.supply_gauge_pa,
-            set: |c, v| c.environment.supply_gauge_pa = v,
-        },
+        field_key!(joint.inertia_kgm2, "joint inertia (load)", 0.2, 30.0),
+        field_key!(environment.supply_gauge_pa, "supply pressure", 0.5, 1.3),
     ]
 }
 

@@ -53,19 +53,13 @@ fn channel_svg(
     {
         let root = SVGBackend::with_string(&mut svg, (1100, 280)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| e.to_string())?;
-        let mut chart = ChartBuilder::on(&root)
-            .margin(8)
-            .x_label_area_size(30)
-            .y_label_area_size(70)
-            .caption(title, ("sans-serif", 16))
-            .build_cartesian_2d(t0..t1, (lo - pad)..(hi + pad))
-            .map_err(|e| e.to_string())?;
-        chart
-            .configure_mesh()
-            .x_desc("t_s")
-            .y_desc(c.name())
-            .draw()
-            .map_err(|e| e.to_string())?;
+        let mut chart = crate::io::plot::time_panel(
+            &root,
+            &title,
+            Some(c.name()),
+            (t0, t1),
+            (lo - pad, hi + pad),
+        )?;
         chart
             .draw_series(windows.iter().map(|w| {
                 Rectangle::new(
@@ -80,27 +74,29 @@ fn channel_svg(
                 .map(|k| (series.t_s[k], v[k]))
                 .collect()
         };
-        chart
-            .draw_series(LineSeries::new(pts(meas), BLACK.mix(0.6).stroke_width(2)))
-            .map_err(|e| e.to_string())?
-            .label("measured")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
-        chart
-            .draw_series(LineSeries::new(pts(&nom), RED.stroke_width(1)))
-            .map_err(|e| e.to_string())?
-            .label("nominal model")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
-        chart
-            .draw_series(LineSeries::new(pts(&cor), BLUE.stroke_width(1)))
-            .map_err(|e| e.to_string())?
-            .label("corrected model")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| e.to_string())?;
+        use crate::io::plot::{draw_legend, labelled_line};
+        labelled_line(
+            &mut chart,
+            pts(meas),
+            BLACK.mix(0.6).stroke_width(2),
+            BLACK,
+            "measured",
+        )?;
+        labelled_line(
+            &mut chart,
+            pts(&nom),
+            RED.stroke_width(1),
+            RED,
+            "nominal model",
+        )?;
+        labelled_line(
+            &mut chart,
+            pts(&cor),
+            BLUE.stroke_width(1),
+            BLUE,
+            "corrected model",
+        )?;
+        draw_legend(&mut chart)?;
         root.present().map_err(|e| e.to_string())?;
     }
     Ok(svg)

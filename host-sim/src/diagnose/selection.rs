@@ -284,17 +284,7 @@ pub fn select<'c>(
         let mut accepted: Vec<(Vec<Part<'c>>, f64)> = Vec::new();
         for (fitted, jh, seconds) in results {
             let j = rule.judge(j_cur, k_cur, jh, n_params(&fitted));
-            scores.push(CandidateScore {
-                id: set_id(&fitted),
-                round,
-                screening: f64::NAN,
-                params: Vec::new(),
-                heldout_cost: jh,
-                explained: j.explained,
-                bic_delta: j.bic_delta,
-                accepted: false,
-                seconds,
-            });
+            scores.push(set_score(&fitted, round, jh, Some(j), seconds));
             if j.accepted {
                 accepted.push((fitted, jh));
             }
@@ -302,20 +292,8 @@ pub fn select<'c>(
         let Some((fitted, jh)) = pick(rule, accepted) else {
             break;
         };
-        let id = set_id(&fitted);
-        if let Some(s) = scores.iter_mut().find(|s| s.round == round && s.id == id) {
-            s.accepted = true;
-        }
-        // Each part's share: what it removed alone in round 1.
-        chosen_explained = fitted
-            .iter()
-            .map(|p| {
-                round1_explained
-                    .get(p.candidate.id())
-                    .copied()
-                    .unwrap_or(0.0)
-            })
-            .collect();
+        mark_accepted(&mut scores, round, &set_id(&fitted));
+        chosen_explained = round1_shares(&fitted, &round1_explained);
         current = fitted;
         j_cur = jh;
     }
@@ -337,17 +315,7 @@ pub fn select<'c>(
         let mut best: Option<(Vec<Part<'c>>, f64)> = None;
         for (fitted, jh, seconds) in results {
             let kept = rule.judge(jh, n_params(&fitted), j_cur, k_cur).accepted;
-            scores.push(CandidateScore {
-                id: set_id(&fitted),
-                round,
-                screening: f64::NAN,
-                params: Vec::new(),
-                heldout_cost: jh,
-                explained: f64::NAN,
-                bic_delta: f64::NAN,
-                accepted: false,
-                seconds,
-            });
+            scores.push(set_score(&fitted, round, jh, None, seconds));
             if !kept && jh.is_finite() && best.as_ref().is_none_or(|b| jh < b.1) {
                 best = Some((fitted, jh));
             }
@@ -355,19 +323,8 @@ pub fn select<'c>(
         let Some((fitted, jh)) = best else {
             break;
         };
-        let id = set_id(&fitted);
-        if let Some(s) = scores.iter_mut().find(|s| s.round == round && s.id == id) {
-            s.accepted = true;
-        }
-        chosen_explained = fitted
-            .iter()
-            .map(|p| {
-                round1_explained
-                    .get(p.candidate.id())
-                    .copied()
-                    .unwrap_or(0.0)
-            })
-            .collect();
+        mark_accepted(&mut scores, round, &set_id(&fitted));
+        chosen_explained = round1_shares(&fitted, &round1_explained);
         current = fitted;
         j_cur = jh;
     }
@@ -378,6 +335,47 @@ pub fn select<'c>(
         round1_explained,
         scores,
     }
+}
+
+/// The score row of a trial set (swap and backward passes), not yet accepted.
+fn set_score(
+    parts: &[Part],
+    round: usize,
+    jh: f64,
+    j: Option<Judgement>,
+    seconds: f64,
+) -> CandidateScore {
+    CandidateScore {
+        id: set_id(parts),
+        round,
+        screening: f64::NAN,
+        params: Vec::new(),
+        heldout_cost: jh,
+        explained: j.map_or(f64::NAN, |j| j.explained),
+        bic_delta: j.map_or(f64::NAN, |j| j.bic_delta),
+        accepted: false,
+        seconds,
+    }
+}
+
+/// Marks the row of `id` in `round` accepted.
+fn mark_accepted(scores: &mut [CandidateScore], round: usize, id: &str) {
+    if let Some(s) = scores.iter_mut().find(|s| s.round == round && s.id == id) {
+        s.accepted = true;
+    }
+}
+
+/// Each part's share of a chosen set: what it removed alone in round 1.
+fn round1_shares(parts: &[Part], round1_explained: &BTreeMap<&'static str, f64>) -> Vec<f64> {
+    parts
+        .iter()
+        .map(|p| {
+            round1_explained
+                .get(p.candidate.id())
+                .copied()
+                .unwrap_or(0.0)
+        })
+        .collect()
 }
 
 /// `a+b` for a trial set.

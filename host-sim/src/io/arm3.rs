@@ -15,7 +15,9 @@
 use std::path::Path;
 
 use crate::fit::fit_percent;
-use crate::io::recording::{write_atomically, Channel, Recording, RecordingError, INPUT_COLUMNS};
+use crate::io::recording::{
+    read_text, write_atomically, Channel, Recording, RecordingError, Table, INPUT_COLUMNS,
+};
 use crate::plant::arm3::{Arm3, Arm3Inputs, Arm3Integrator, Arm3SimError, Arm3State};
 use crate::plant::ValveInputs;
 use crate::sim::SolverOptions;
@@ -49,11 +51,7 @@ impl Arm3Recording {
 
     /// Uniform sample period from the first and last time stamps.
     pub fn sample_period_s(&self) -> f64 {
-        let n = self.t_s.len();
-        if n < 2 {
-            return f64::NAN;
-        }
-        (self.t_s[n - 1] - self.t_s[0]) / (n - 1) as f64
+        crate::io::recording::mean_step_s(&self.t_s)
     }
 
     pub fn channel(&self, joint: usize, c: Channel) -> Option<&[f64]> {
@@ -91,54 +89,22 @@ impl Arm3Recording {
     /// Reads and validates a 3-joint recording.
     pub fn read(path: impl AsRef<Path>) -> Result<Self, RecordingError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| RecordingError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
-        Self::parse(&text, path)
+        Self::parse(&read_text(path)?, path)
     }
 
     /// Parses 3-joint recording text; `path` is used in error messages.
     pub fn parse(text: &str, path: impl AsRef<Path>) -> Result<Self, RecordingError> {
         let path = path.as_ref();
-        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-        let field_err = |line: u64, field: &str, message: String| RecordingError::Field {
-            path: path.to_owned(),
-            line,
-            field: field.to_owned(),
-            message,
-        };
-        let crate::io::recording::Preamble {
-            metadata,
-            meta_line_of,
-            lines: meta_lines,
-            offset,
-        } = crate::io::recording::Preamble::of(text);
-        let (mut rdr, header_line, headers) =
-            crate::io::recording::csv_body(text, offset, meta_lines, path)?;
-        let find = |name: &str| -> Result<Option<usize>, RecordingError> {
-            let mut it = headers.iter().enumerate().filter(|(_, h)| *h == name);
-            let first = it.next().map(|(i, _)| i);
-            if it.next().is_some() {
-                return Err(field_err(header_line, name, "column appears twice".into()));
-            }
-            Ok(first)
-        };
-        let t_col = find("t_s")?
-            .ok_or_else(|| field_err(header_line, "t_s", "required column is missing".into()))?;
+        let mut table = Table::parse(text, path)?;
+        let t_col = table.required("t_s", "")?;
         let mut u_cols: [[(usize, String); 4]; JOINTS] = Default::default();
         for (j, cols) in u_cols.iter_mut().enumerate() {
             for (i, base) in INPUT_COLUMNS.iter().enumerate() {
                 let name = column(base, j);
-                let c = find(&name)?.ok_or_else(|| {
-                    field_err(
-                        header_line,
-                        &name,
-                        "required column is missing (a 3-joint recording names every valve \
-                         column with a _j1.._j3 suffix)"
-                            .into(),
-                    )
-                })?;
+                let c = table.required(
+                    &name,
+                    " (a 3-joint recording names every valve column with a _j1.._j3 suffix)",
+                )?;
                 cols[i] = (c, name);
             }
         }
@@ -146,69 +112,34 @@ impl Arm3Recording {
         for j in 0..JOINTS {
             for c in Channel::ALL {
                 let name = column(c.name(), j);
-                if let Some(col) = find(&name)? {
+                if let Some(col) = table.find(&name)? {
                     out_cols.push((j, c.index(), col, name));
                 }
             }
         }
         if out_cols.is_empty() {
-            return Err(field_err(
-                header_line,
+            return Err(table.field_err(
+                table.header_line,
                 "angle_deg_j1",
                 "no output column (need at least one of angle_deg_jN, p1_kpa_jN, p2_kpa_jN, \
-                 f1_n_jN, f2_n_jN)"
-                    .into(),
+                 f1_n_jN, f2_n_jN)",
             ));
         }
         let mut rec = Arm3Recording {
-            metadata,
+            metadata: table.metadata.clone(),
             ..Default::default()
         };
         for (j, c, _, _) in &out_cols {
             rec.outputs[*j][*c] = Some(Vec::new());
         }
         let mut lines = Vec::new();
-        let mut record = csv::StringRecord::new();
-        loop {
-            match rdr.read_record(&mut record) {
-                Ok(false) => break,
-                Ok(true) => {}
-                Err(e) => {
-                    let line = e
-                        .position()
-                        .map(|p| p.line() + meta_lines)
-                        .unwrap_or(header_line);
-                    return Err(RecordingError::Line {
-                        path: path.to_owned(),
-                        line,
-                        message: e.to_string(),
-                    });
-                }
-            }
-            let line = record.position().map(|p| p.line()).unwrap_or(0) + meta_lines;
-            let num = |col: usize, name: &str| -> Result<f64, RecordingError> {
-                let s = record.get(col).unwrap_or("");
-                let v: f64 = s
-                    .parse()
-                    .map_err(|_| field_err(line, name, format!("not a number: {s:?}")))?;
-                if !v.is_finite() {
-                    return Err(field_err(line, name, format!("not a finite number: {s:?}")));
-                }
-                Ok(v)
-            };
-            rec.t_s.push(num(t_col, "t_s")?);
+        while table.next_row()? {
+            rec.t_s.push(table.num(t_col, "t_s")?);
             let mut u = [ValveInputs::CLOSED; JOINTS];
             for (j, cols) in u_cols.iter().enumerate() {
                 let mut v = [0.0; 4];
                 for (i, (col, name)) in cols.iter().enumerate() {
-                    v[i] = num(*col, name)?;
-                    if !(0.0..=1.0).contains(&v[i]) {
-                        return Err(field_err(
-                            line,
-                            name,
-                            format!("valve opening {} outside [0, 1]", v[i]),
-                        ));
-                    }
+                    v[i] = table.opening(*col, name)?;
                 }
                 u[j] = ValveInputs {
                     u_in1: v[0],
@@ -219,26 +150,14 @@ impl Arm3Recording {
             }
             rec.inputs.push(u);
             for (j, c, col, name) in &out_cols {
-                let v = num(*col, name)?;
+                let v = table.num(*col, name)?;
                 rec.outputs[*j][*c].as_mut().unwrap().push(v);
             }
-            lines.push(line);
+            lines.push(table.line);
         }
-        let n = rec.t_s.len();
-        if n < 2 {
-            return Err(RecordingError::Invalid {
-                path: path.to_owned(),
-                message: format!("{n} data rows; a recording needs at least 2"),
-            });
-        }
-        let dt = rec.sample_period_s();
-        if dt.is_nan() || dt <= 0.0 {
-            return Err(field_err(
-                lines[n - 1],
-                "t_s",
-                "time does not increase (last time <= first time)".into(),
-            ));
-        }
+        let dt = table.sample_period_s(&rec.t_s, &lines)?;
+        let field_err =
+            |line: u64, field: &str, message: String| table.field_err(line, field, message);
         for (k, line) in lines.iter().enumerate().skip(1) {
             let step = rec.t_s[k] - rec.t_s[k - 1];
             let drift = rec.t_s[k] - (rec.t_s[0] + k as f64 * dt);
@@ -254,22 +173,7 @@ impl Arm3Recording {
                 ));
             }
         }
-        for (i, (k, v)) in rec.metadata.iter().enumerate() {
-            if k == "sample_period_s" {
-                let line = meta_line_of[i];
-                let declared: f64 = v.parse().map_err(|_| {
-                    field_err(line, "sample_period_s", format!("not a number: {v:?}"))
-                })?;
-                let d = (declared - dt).abs();
-                if d.is_nan() || d > 0.01 * dt {
-                    return Err(field_err(
-                        line,
-                        "sample_period_s",
-                        format!("declares {declared} s but the time column steps by {dt} s"),
-                    ));
-                }
-            }
-        }
+        table.check_declared_period(dt, 0.01 * dt)?;
         Ok(rec)
     }
 
@@ -534,18 +438,8 @@ fn draw_arm3<DB: plotters::prelude::DrawingBackend>(
                 .map(|(c, _, _, _)| column(c.name(), j))
                 .collect::<Vec<_>>()
                 .join(", ");
-            let mut chart = ChartBuilder::on(panel)
-                .margin(8)
-                .x_label_area_size(28)
-                .y_label_area_size(60)
-                .caption(caption, ("sans-serif", 16))
-                .build_cartesian_2d(t0..t1, (lo - pad)..(hi + pad))
-                .map_err(|e| e.to_string())?;
-            chart
-                .configure_mesh()
-                .x_desc("t_s")
-                .draw()
-                .map_err(|e| e.to_string())?;
+            let mut chart =
+                crate::io::plot::time_panel(panel, &caption, None, (t0, t1), (lo - pad, hi + pad))?;
             for (c, color, s, r) in &series {
                 let color = *color;
                 if let (Some(r), Some(rr)) = (r, reference) {
@@ -556,21 +450,15 @@ fn draw_arm3<DB: plotters::prelude::DrawingBackend>(
                         ))
                         .map_err(|e| e.to_string())?;
                 }
-                chart
-                    .draw_series(LineSeries::new(
-                        model.t_s.iter().copied().zip(s.iter().copied()),
-                        color.stroke_width(1),
-                    ))
-                    .map_err(|e| e.to_string())?
-                    .label(column(c.name(), j))
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
+                crate::io::plot::labelled_line(
+                    &mut chart,
+                    model.t_s.iter().copied().zip(s.iter().copied()),
+                    color.stroke_width(1),
+                    color,
+                    column(c.name(), j),
+                )?;
             }
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .draw()
-                .map_err(|e| e.to_string())?;
+            crate::io::plot::draw_legend(&mut chart)?;
         }
     }
     Ok(())

@@ -165,43 +165,90 @@ fn draw<DB: DrawingBackend>(
             hi = hi.max(*v);
         }
         let pad = ((hi - lo) * 0.05).max(1e-6);
-        let mut chart = ChartBuilder::on(panel)
-            .margin(8)
-            .x_label_area_size(28)
-            .y_label_area_size(70)
-            .caption(c.name(), ("sans-serif", 16))
-            .build_cartesian_2d(t0..t1, (lo - pad)..(hi + pad))
-            .map_err(|e| e.to_string())?;
-        chart
-            .configure_mesh()
-            .x_desc("t_s")
-            .y_desc(c.name())
-            .draw()
-            .map_err(|e| e.to_string())?;
+        let mut chart = time_panel(
+            panel,
+            c.name(),
+            Some(c.name()),
+            (t0, t1),
+            (lo - pad, hi + pad),
+        )?;
         if let Some((r, m)) = meas {
-            chart
-                .draw_series(LineSeries::new(
-                    r.t_s.iter().copied().zip(m.iter().copied()),
-                    BLUE.stroke_width(2),
-                ))
-                .map_err(|e| e.to_string())?
-                .label("measured")
-                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));
+            labelled_line(
+                &mut chart,
+                r.t_s.iter().copied().zip(m.iter().copied()),
+                BLUE.stroke_width(2),
+                BLUE,
+                "measured",
+            )?;
         }
-        chart
-            .draw_series(LineSeries::new(
-                model.t_s.iter().copied().zip(sim.iter().copied()),
-                RED.stroke_width(1),
-            ))
-            .map_err(|e| e.to_string())?
-            .label("simulated")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| e.to_string())?;
+        labelled_line(
+            &mut chart,
+            model.t_s.iter().copied().zip(sim.iter().copied()),
+            RED.stroke_width(1),
+            RED,
+            "simulated",
+        )?;
+        draw_legend(&mut chart)?;
     }
     Ok(())
+}
+
+/// A chart of values over time.
+pub(crate) type TimeChart<'a, DB> = ChartContext<
+    'a,
+    DB,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
+
+/// A panel of values over time `t_s.0..t_s.1` and `y.0..y.1` on `area`: caption, axes and
+/// mesh drawn (the x axis is `t_s`; the y axis is labelled `y_desc` when given).
+pub(crate) fn time_panel<'a, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, Shift>,
+    caption: &str,
+    y_desc: Option<&str>,
+    t_s: (f64, f64),
+    y: (f64, f64),
+) -> Result<TimeChart<'a, DB>, String> {
+    let mut chart = ChartBuilder::on(area)
+        .margin(8)
+        .x_label_area_size(28)
+        .y_label_area_size(70)
+        .caption(caption, ("sans-serif", 16))
+        .build_cartesian_2d(t_s.0..t_s.1, y.0..y.1)
+        .map_err(|e| e.to_string())?;
+    let mut mesh = chart.configure_mesh();
+    mesh.x_desc("t_s");
+    if let Some(d) = y_desc {
+        mesh.y_desc(d);
+    }
+    mesh.draw().map_err(|e| e.to_string())?;
+    Ok(chart)
+}
+
+/// Draws `points` with `style` and a legend entry `label` in `color`.
+pub(crate) fn labelled_line<'a, DB: DrawingBackend + 'a>(
+    chart: &mut TimeChart<'a, DB>,
+    points: impl IntoIterator<Item = (f64, f64)>,
+    style: ShapeStyle,
+    color: RGBColor,
+    label: impl Into<String>,
+) -> Result<(), String> {
+    chart
+        .draw_series(LineSeries::new(points, style))
+        .map_err(|e| e.to_string())?
+        .label(label)
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
+    Ok(())
+}
+
+/// Draws the legend of the labelled lines.
+pub(crate) fn draw_legend<'a, DB: DrawingBackend + 'a>(
+    chart: &mut TimeChart<'a, DB>,
+) -> Result<(), String> {
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|e| e.to_string())
 }

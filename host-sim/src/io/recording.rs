@@ -119,11 +119,7 @@ impl Recording {
 
     /// Uniform sample period, from the first and last time stamps.
     pub fn sample_period_s(&self) -> f64 {
-        let n = self.t_s.len();
-        if n < 2 {
-            return f64::NAN;
-        }
-        (self.t_s[n - 1] - self.t_s[0]) / (n - 1) as f64
+        mean_step_s(&self.t_s)
     }
 
     /// Whether the time stamps are uniform (each step within [`UNIFORM_TOLERANCE`] of the
@@ -237,71 +233,32 @@ impl Recording {
     /// Reads and validates a recording file.
     pub fn read(path: impl AsRef<Path>) -> Result<Self, RecordingError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| RecordingError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
-        Self::parse(&text, path)
+        Self::parse(&read_text(path)?, path)
     }
 
     /// Parses recording text; `path` is used in error messages.
     pub fn parse(text: &str, path: impl AsRef<Path>) -> Result<Self, RecordingError> {
         let path = path.as_ref();
-        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-        let field_err = |line: u64, field: &str, message: String| RecordingError::Field {
-            path: path.to_owned(),
-            line,
-            field: field.to_owned(),
-            message,
-        };
-
-        // Leading metadata / blank lines.
-        let Preamble {
-            metadata,
-            meta_line_of,
-            lines: meta_lines,
-            offset,
-        } = Preamble::of(text);
-        let (mut rdr, header_line, headers) = csv_body(text, offset, meta_lines, path)?;
-        if headers.is_empty() || (headers.len() == 1 && headers[0].is_empty()) {
-            return Err(RecordingError::Line {
-                path: path.to_owned(),
-                line: header_line,
-                message: "no header line (expected t_s,u_in1,u_ex1,u_in2,u_ex2,...)".into(),
-            });
-        }
-        let find = |name: &str| -> Result<Option<usize>, RecordingError> {
-            let mut it = headers.iter().enumerate().filter(|(_, h)| *h == name);
-            let first = it.next().map(|(i, _)| i);
-            if it.next().is_some() {
-                return Err(field_err(header_line, name, "column appears twice".into()));
-            }
-            Ok(first)
-        };
-        let required = |name: &str| -> Result<usize, RecordingError> {
-            find(name)?
-                .ok_or_else(|| field_err(header_line, name, "required column is missing".into()))
-        };
-        let t_col = required("t_s")?;
+        let mut table = Table::parse(text, path)?;
+        let t_col = table.required("t_s", "")?;
         let mut u_cols = [0usize; 4];
         for (i, name) in INPUT_COLUMNS.iter().enumerate() {
-            u_cols[i] = required(name)?;
+            u_cols[i] = table.required(name, "")?;
         }
         let mut out_cols: [Option<usize>; 5] = [None; 5];
         for c in Channel::ALL {
-            out_cols[c.index()] = find(c.name())?;
+            out_cols[c.index()] = table.find(c.name())?;
         }
         if out_cols.iter().all(|c| c.is_none()) {
-            return Err(field_err(
-                header_line,
+            return Err(table.field_err(
+                table.header_line,
                 "angle_deg",
-                "no output column (need at least one of angle_deg, p1_kpa, p2_kpa, f1_n, f2_n)"
-                    .into(),
+                "no output column (need at least one of angle_deg, p1_kpa, p2_kpa, f1_n, f2_n)",
             ));
         }
 
         let mut rec = Recording {
-            metadata,
+            metadata: table.metadata.clone(),
             ..Default::default()
         };
         for c in Channel::ALL {
@@ -310,51 +267,11 @@ impl Recording {
             }
         }
         let mut lines = Vec::new();
-        let mut record = csv::StringRecord::new();
-        loop {
-            match rdr.read_record(&mut record) {
-                Ok(false) => break,
-                Ok(true) => {}
-                Err(e) => {
-                    let line = e
-                        .position()
-                        .map(|p| p.line() + meta_lines)
-                        .unwrap_or(header_line);
-                    let message = match e.kind() {
-                        csv::ErrorKind::UnequalLengths {
-                            expected_len, len, ..
-                        } => format!("{len} fields, the header has {expected_len}"),
-                        _ => e.to_string(),
-                    };
-                    return Err(RecordingError::Line {
-                        path: path.to_owned(),
-                        line,
-                        message,
-                    });
-                }
-            }
-            let line = record.position().map(|p| p.line()).unwrap_or(0) + meta_lines;
-            let num = |col: usize, name: &str| -> Result<f64, RecordingError> {
-                let s = record.get(col).unwrap_or("");
-                let v: f64 = s
-                    .parse()
-                    .map_err(|_| field_err(line, name, format!("not a number: {s:?}")))?;
-                if !v.is_finite() {
-                    return Err(field_err(line, name, format!("not a finite number: {s:?}")));
-                }
-                Ok(v)
-            };
-            rec.t_s.push(num(t_col, "t_s")?);
+        while table.next_row()? {
+            rec.t_s.push(table.num(t_col, "t_s")?);
             let mut u = [0.0; 4];
             for i in 0..4 {
-                u[i] = num(u_cols[i], INPUT_COLUMNS[i])?;
-                if !(0.0..=1.0).contains(&u[i]) {
-                    return Err(field_err(
-                        line,
-                        INPUT_COLUMNS[i],
-                        format!("valve opening {} outside [0, 1]", u[i]),
-                    ));
-                }
+                u[i] = table.opening(u_cols[i], INPUT_COLUMNS[i])?;
             }
             rec.inputs.push(ValveInputs {
                 u_in1: u[0],
@@ -364,28 +281,17 @@ impl Recording {
             });
             for c in Channel::ALL {
                 if let Some(col) = out_cols[c.index()] {
-                    let v = num(col, c.name())?;
+                    let v = table.num(col, c.name())?;
                     rec.outputs[c.index()].as_mut().unwrap().push(v);
                 }
             }
-            lines.push(line);
+            lines.push(table.line);
         }
 
         let n = rec.t_s.len();
-        if n < 2 {
-            return Err(RecordingError::Invalid {
-                path: path.to_owned(),
-                message: format!("{n} data rows; a recording needs at least 2"),
-            });
-        }
-        let dt = rec.sample_period_s();
-        if dt.is_nan() || dt <= 0.0 {
-            return Err(field_err(
-                lines[n - 1],
-                "t_s",
-                "time does not increase (last time <= first time)".into(),
-            ));
-        }
+        let dt = table.sample_period_s(&rec.t_s, &lines)?;
+        let field_err =
+            |line: u64, field: &str, message: String| table.field_err(line, field, message);
         let tol = 0.01 * dt;
         // Each step against the median step: a step outside [0.5, 1.5] median steps is a
         // gap (or a doubled stamp) and is refused, never filled; steps in between are time
@@ -420,22 +326,7 @@ impl Recording {
                 ));
             }
         }
-        for (i, (k, v)) in rec.metadata.iter().enumerate() {
-            if k == "sample_period_s" {
-                let line = meta_line_of[i];
-                let declared: f64 = v.parse().map_err(|_| {
-                    field_err(line, "sample_period_s", format!("not a number: {v:?}"))
-                })?;
-                let d = (declared - dt).abs();
-                if d.is_nan() || d > tol {
-                    return Err(field_err(
-                        line,
-                        "sample_period_s",
-                        format!("declares {declared} s but the time column steps by {dt} s"),
-                    ));
-                }
-            }
-        }
+        table.check_declared_period(dt, tol)?;
         Ok(rec)
     }
 
@@ -566,26 +457,219 @@ impl Preamble {
     }
 }
 
-/// The CSV part of a recording from byte `offset` (after `preamble_lines` lines): its
-/// reader, the header's 1-based line and the header record.
-pub(crate) fn csv_body<'t>(
-    text: &'t str,
-    offset: usize,
-    preamble_lines: u64,
-    path: &Path,
-) -> Result<(csv::Reader<&'t [u8]>, u64, csv::StringRecord), RecordingError> {
-    let mut rdr = csv::ReaderBuilder::new()
-        .has_headers(true)
-        .trim(csv::Trim::All)
-        .from_reader(&text.as_bytes()[offset..]);
-    let header_line = preamble_lines + 1;
-    let headers = rdr
-        .headers()
-        .map_err(|e| RecordingError::Line {
-            path: path.to_owned(),
+/// A recording file being read: its metadata and the CSV rows after it, with the errors
+/// naming the file, line and field. Shared by the 1-DOF and the 3-joint readers.
+pub(crate) struct Table<'t> {
+    path: &'t Path,
+    pub metadata: Vec<(String, String)>,
+    /// 1-based line of each metadata entry.
+    pub meta_line_of: Vec<u64>,
+    meta_lines: u64,
+    /// 1-based line of the CSV header.
+    pub header_line: u64,
+    headers: csv::StringRecord,
+    rdr: csv::Reader<&'t [u8]>,
+    record: csv::StringRecord,
+    /// 1-based line of the current row (after [`Self::next_row`]).
+    pub line: u64,
+}
+
+/// The mean step of time stamps `t_s` (first to last); NaN with fewer than two.
+pub(crate) fn mean_step_s(t_s: &[f64]) -> f64 {
+    let n = t_s.len();
+    if n < 2 {
+        return f64::NAN;
+    }
+    (t_s[n - 1] - t_s[0]) / (n - 1) as f64
+}
+
+/// The text of a recording file.
+pub(crate) fn read_text(path: &Path) -> Result<String, RecordingError> {
+    std::fs::read_to_string(path).map_err(|source| RecordingError::Io {
+        path: path.to_owned(),
+        source,
+    })
+}
+
+impl<'t> Table<'t> {
+    /// The metadata and the CSV header of `text` (a leading byte-order mark is skipped).
+    pub(crate) fn parse(text: &'t str, path: &'t Path) -> Result<Self, RecordingError> {
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+        let Preamble {
+            metadata,
+            meta_line_of,
+            lines: meta_lines,
+            offset,
+        } = Preamble::of(text);
+        let mut rdr = csv::ReaderBuilder::new()
+            .has_headers(true)
+            .trim(csv::Trim::All)
+            .from_reader(&text.as_bytes()[offset..]);
+        let header_line = meta_lines + 1;
+        let headers = rdr
+            .headers()
+            .map_err(|e| RecordingError::Line {
+                path: path.to_owned(),
+                line: header_line,
+                message: format!("cannot read the header: {e}"),
+            })?
+            .clone();
+        if headers.is_empty() || (headers.len() == 1 && headers[0].is_empty()) {
+            return Err(RecordingError::Line {
+                path: path.to_owned(),
+                line: header_line,
+                message: "no header line (expected t_s,u_in1,u_ex1,u_in2,u_ex2,...)".into(),
+            });
+        }
+        Ok(Self {
+            path,
+            metadata,
+            meta_line_of,
+            meta_lines,
+            header_line,
+            headers,
+            rdr,
+            record: csv::StringRecord::new(),
             line: header_line,
-            message: format!("cannot read the header: {e}"),
-        })?
-        .clone();
-    Ok((rdr, header_line, headers))
+        })
+    }
+
+    /// An error about `field` at `line`.
+    pub(crate) fn field_err(
+        &self,
+        line: u64,
+        field: &str,
+        message: impl Into<String>,
+    ) -> RecordingError {
+        RecordingError::Field {
+            path: self.path.to_owned(),
+            line,
+            field: field.to_owned(),
+            message: message.into(),
+        }
+    }
+
+    /// The column named `name`, if present (twice is an error).
+    pub(crate) fn find(&self, name: &str) -> Result<Option<usize>, RecordingError> {
+        let mut it = self.headers.iter().enumerate().filter(|(_, h)| *h == name);
+        let first = it.next().map(|(i, _)| i);
+        if it.next().is_some() {
+            return Err(self.field_err(self.header_line, name, "column appears twice"));
+        }
+        Ok(first)
+    }
+
+    /// The column named `name`; missing is an error saying `why` (may be empty).
+    pub(crate) fn required(&self, name: &str, why: &str) -> Result<usize, RecordingError> {
+        self.find(name)?.ok_or_else(|| {
+            self.field_err(
+                self.header_line,
+                name,
+                format!("required column is missing{why}"),
+            )
+        })
+    }
+
+    /// Reads the next row; `false` at the end.
+    pub(crate) fn next_row(&mut self) -> Result<bool, RecordingError> {
+        match self.rdr.read_record(&mut self.record) {
+            Ok(false) => Ok(false),
+            Ok(true) => {
+                self.line = self.record.position().map(|p| p.line()).unwrap_or(0) + self.meta_lines;
+                Ok(true)
+            }
+            Err(e) => {
+                let line = e
+                    .position()
+                    .map(|p| p.line() + self.meta_lines)
+                    .unwrap_or(self.header_line);
+                let message = match e.kind() {
+                    csv::ErrorKind::UnequalLengths {
+                        expected_len, len, ..
+                    } => format!("{len} fields, the header has {expected_len}"),
+                    _ => e.to_string(),
+                };
+                Err(RecordingError::Line {
+                    path: self.path.to_owned(),
+                    line,
+                    message,
+                })
+            }
+        }
+    }
+
+    /// The finite number in column `col` (named `name`) of the current row.
+    pub(crate) fn num(&self, col: usize, name: &str) -> Result<f64, RecordingError> {
+        let s = self.record.get(col).unwrap_or("");
+        let v: f64 = s
+            .parse()
+            .map_err(|_| self.field_err(self.line, name, format!("not a number: {s:?}")))?;
+        if !v.is_finite() {
+            return Err(self.field_err(self.line, name, format!("not a finite number: {s:?}")));
+        }
+        Ok(v)
+    }
+
+    /// The valve opening in [0, 1] in column `col` (named `name`) of the current row.
+    pub(crate) fn opening(&self, col: usize, name: &str) -> Result<f64, RecordingError> {
+        let v = self.num(col, name)?;
+        if !(0.0..=1.0).contains(&v) {
+            return Err(self.field_err(
+                self.line,
+                name,
+                format!("valve opening {v} outside [0, 1]"),
+            ));
+        }
+        Ok(v)
+    }
+
+    /// At least two rows (`t_s`, their `lines`) and increasing time: the mean sample period.
+    pub(crate) fn sample_period_s(
+        &self,
+        t_s: &[f64],
+        lines: &[u64],
+    ) -> Result<f64, RecordingError> {
+        let n = t_s.len();
+        if n < 2 {
+            return Err(RecordingError::Invalid {
+                path: self.path.to_owned(),
+                message: format!("{n} data rows; a recording needs at least 2"),
+            });
+        }
+        let dt = mean_step_s(t_s);
+        if dt.is_nan() || dt <= 0.0 {
+            return Err(self.field_err(
+                lines[n - 1],
+                "t_s",
+                "time does not increase (last time <= first time)",
+            ));
+        }
+        Ok(dt)
+    }
+
+    /// A `# sample_period_s = ...` metadata entry must agree with the time column's `dt_s`
+    /// within `tol_s`.
+    pub(crate) fn check_declared_period(
+        &self,
+        dt_s: f64,
+        tol_s: f64,
+    ) -> Result<(), RecordingError> {
+        for (i, (k, v)) in self.metadata.iter().enumerate() {
+            if k == "sample_period_s" {
+                let line = self.meta_line_of[i];
+                let declared: f64 = v.parse().map_err(|_| {
+                    self.field_err(line, "sample_period_s", format!("not a number: {v:?}"))
+                })?;
+                let d = (declared - dt_s).abs();
+                if d.is_nan() || d > tol_s {
+                    return Err(self.field_err(
+                        line,
+                        "sample_period_s",
+                        format!("declares {declared} s but the time column steps by {dt_s} s"),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
 }

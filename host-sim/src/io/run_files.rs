@@ -314,19 +314,13 @@ fn draw_run<DB: DrawingBackend>(
         }
         let pad = ((hi - lo) * 0.05).max(1e-6);
         let (lo, hi) = (lo - pad, hi + pad);
-        let mut chart = ChartBuilder::on(area)
-            .margin(8)
-            .x_label_area_size(28)
-            .y_label_area_size(70)
-            .caption(format!("{} / {name}", run.name), ("sans-serif", 16))
-            .build_cartesian_2d(t0..t1, lo..hi)
-            .map_err(|e| e.to_string())?;
-        chart
-            .configure_mesh()
-            .x_desc("t_s")
-            .y_desc(name)
-            .draw()
-            .map_err(|e| e.to_string())?;
+        let mut chart = crate::io::plot::time_panel(
+            area,
+            &format!("{} / {name}", run.name),
+            Some(name),
+            (t0, t1),
+            (lo, hi),
+        )?;
         // Shade the ticks with a latched fault.
         let mut k = 0;
         while k < faulted.len() {
@@ -347,21 +341,15 @@ fn draw_run<DB: DrawingBackend>(
                 .map_err(|e| e.to_string())?;
         }
         for (label, color, v) in series {
-            chart
-                .draw_series(LineSeries::new(
-                    t.iter().copied().zip(v.iter().copied()),
-                    color.stroke_width(1),
-                ))
-                .map_err(|e| e.to_string())?
-                .label(label)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
+            crate::io::plot::labelled_line(
+                &mut chart,
+                t.iter().copied().zip(v.iter().copied()),
+                color.stroke_width(1),
+                color,
+                label,
+            )?;
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| e.to_string())?;
+        crate::io::plot::draw_legend(&mut chart)?;
     }
     Ok(())
 }

@@ -20,8 +20,6 @@ use crate::plant::{AuxLayout, AuxState, Plant, PlantState, ValveInputs};
 pub mod signal_path;
 pub use signal_path::{ActuatorPath, SensorPath};
 
-type Vector4 = SVector<f64, 4>;
-
 /// Tolerances of the adaptive integrator.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SolverOptions {
@@ -50,6 +48,17 @@ pub struct SimStats {
     pub rhs_evaluations: u64,
     pub accepted_steps: u64,
     pub rejected_steps: u64,
+}
+
+impl std::fmt::Display for SimStats {
+    /// `S segments, A steps (R rejected), E rhs evaluations`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} segments, {} steps ({} rejected), {} rhs evaluations",
+            self.segments, self.accepted_steps, self.rejected_steps, self.rhs_evaluations
+        )
+    }
 }
 
 impl SimStats {
@@ -84,28 +93,6 @@ pub enum SimError {
     },
     #[error("an auxiliary state (supply reservoir pressure or gas temperature) became non-finite at t = {t_s} s")]
     NonFiniteSupply { t_s: f64 },
-}
-
-struct Rhs<'a> {
-    plant: &'a Plant,
-    u: ValveInputs,
-}
-
-impl System<f64, Vector4> for Rhs<'_> {
-    #[inline(always)]
-    fn system(&self, _t: f64, y: &Vector4, dy: &mut Vector4) {
-        let x = PlantState {
-            angle_rad: y[0],
-            velocity_rad_s: y[1],
-            p1_abs_pa: y[2],
-            p2_abs_pa: y[3],
-        };
-        let d = self.plant.derivatives(&x, &self.u);
-        dy[0] = d.angle_rad;
-        dy[1] = d.velocity_rad_s;
-        dy[2] = d.p1_abs_pa;
-        dy[3] = d.p2_abs_pa;
-    }
 }
 
 /// The plant with auxiliary states: (beta, omega, p1, p2) then the [`AuxLayout`]'s
@@ -240,7 +227,6 @@ pub struct Integrator<'a> {
     h_s: f64,
     opts: SolverOptions,
     stats: SimStats,
-    dense: Vec<PlantState>,
     /// The auxiliary states (reservoir pressure, gas temperatures); constant where the
     /// plant does not integrate them.
     aux: AuxState,
@@ -260,7 +246,6 @@ impl<'a> Integrator<'a> {
             h_s: 0.0,
             opts,
             stats: SimStats::default(),
-            dense: Vec::new(),
             aux: plant.initial_aux(),
             fsal: None,
             single_step_path: true,
@@ -345,55 +330,19 @@ impl<'a> Integrator<'a> {
         }
         self.fsal = None;
         match self.plant.aux_layout() {
-            AuxLayout::None => {}
+            AuxLayout::None => {
+                self.advance_samples_n::<4>(inputs, dt_s, n, x_end, h0, single, on_sample)
+            }
             AuxLayout::Supply => {
-                return self.advance_samples_aux::<5>(inputs, dt_s, n, x_end, h0, single, on_sample)
+                self.advance_samples_n::<5>(inputs, dt_s, n, x_end, h0, single, on_sample)
             }
             AuxLayout::Temperatures => {
-                return self.advance_samples_aux::<6>(inputs, dt_s, n, x_end, h0, single, on_sample)
+                self.advance_samples_n::<6>(inputs, dt_s, n, x_end, h0, single, on_sample)
             }
             AuxLayout::SupplyAndTemperatures => {
-                return self.advance_samples_aux::<7>(inputs, dt_s, n, x_end, h0, single, on_sample)
+                self.advance_samples_n::<7>(inputs, dt_s, n, x_end, h0, single, on_sample)
             }
         }
-        let y0 = Vector4::from(self.state.to_array());
-        let (solver, accepted) = dopri_segment(
-            Rhs {
-                plant: self.plant,
-                u: inputs,
-            },
-            y0,
-            x_end,
-            dt_s,
-            h0,
-            &self.opts,
-            single,
-            &mut self.stats,
-        )
-        .map_err(|message| SimError::Integration {
-            t_s: self.t_s,
-            message,
-        })?;
-        let ys = solver.y_out();
-        let end = if single {
-            let y = ys.last().expect("sparse output holds the start point");
-            let end = PlantState::from_array([y[0], y[1], y[2], y[3]]);
-            on_sample(&self.state);
-            end
-        } else {
-            self.dense_samples(ys, n, &mut on_sample)?
-        };
-        if !end.to_array().iter().all(|v| v.is_finite()) {
-            return Err(SimError::NonFinite {
-                t_s: self.t_s + duration_s,
-                state: end,
-            });
-        }
-        self.state = end;
-        self.t_s += duration_s;
-        // Mean accepted step of this segment, as the first step of the next one.
-        self.h_s = duration_s / f64::from(accepted.max(1));
-        Ok(())
     }
 
     /// One Dormand-Prince 5(4) step over the whole sample, the step `Dopri5` takes first when
@@ -480,37 +429,10 @@ impl<'a> Integrator<'a> {
         Some(PlantState::from_array(y1))
     }
 
-    /// Sample states 0..n from the dense output (n + 1 points); returns point n.
-    fn dense_samples(
-        &mut self,
-        ys: &[Vector4],
-        n: usize,
-        on_sample: &mut impl FnMut(&PlantState),
-    ) -> Result<PlantState, SimError> {
-        if ys.len() < n + 1 {
-            return Err(SimError::Integration {
-                t_s: self.t_s,
-                message: format!(
-                    "dense output gave {} points for {} samples",
-                    ys.len(),
-                    n + 1
-                ),
-            });
-        }
-        self.dense.clear();
-        for y in &ys[..=n] {
-            self.dense
-                .push(PlantState::from_array([y[0], y[1], y[2], y[3]]));
-        }
-        for x in &self.dense[..n] {
-            on_sample(x);
-        }
-        Ok(self.dense[n])
-    }
-
-    /// [`Self::advance_samples`] for a plant with auxiliary states (`N` = 4 + their number).
+    /// [`Self::advance_samples`] with `Dopri5` over (beta, omega, p1, p2) and the plant's
+    /// auxiliary states (`N` = 4 + their number).
     #[allow(clippy::too_many_arguments)]
-    fn advance_samples_aux<const N: usize>(
+    fn advance_samples_n<const N: usize>(
         &mut self,
         inputs: ValveInputs,
         dt_s: f64,
@@ -585,6 +507,7 @@ impl<'a> Integrator<'a> {
         self.state = end;
         self.aux = layout.unpack(&self.aux, &last.as_slice()[4..]);
         self.t_s += duration_s;
+        // Mean accepted step of this segment, as the first step of the next one.
         self.h_s = duration_s / f64::from(accepted.max(1));
         Ok(())
     }
