@@ -1,6 +1,6 @@
 //! Fixed-point build of the force law (seed 002, eq. 6) and of the torque model (seed 003,
-//! eq. 11) for FPU-less cores (Cortex-M0/M0+/M3): the force law in plain 32-bit integers,
-//! the torque model on the [`fixed`] crate.
+//! eq. 11) for FPU-less cores (Cortex-M0/M0+/M3): both in plain 32-bit integer arithmetic
+//! (no 64-bit product, no division); the [`fixed`] crate's types at the interface.
 //!
 //! Same API shape and the same flag semantics as the f32 versions in [`crate::force_law`]
 //! and [`crate::torque_model`]; no floating-point operation on the evaluation path (only the
@@ -67,19 +67,37 @@
 //!   larger) and, as a regression guard, < 0.05 N. On the wider domain L/L0 0.7..1.1 x
 //!   0..700 kPa: 3.4e-2 N. Against the f32 law at the same inputs: < 1.9e-2 N (the f32 law's
 //!   own rounding is 1.7e-2 N).
-//! - torque, 101^3 grid, angle +-1.5 rad, velocity +-10 rad/s, dp +-dp_limit (280 kPa):
-//!   forward max |fixed - f64| = 7.6e-6 N m (asserted < 1e-4 N m), |fixed - f32| = 1.1e-5 N m;
-//!   inverse at the same torque max |dp_fixed - dp_f32| = 0.23 Pa (dp is rounded to whole
-//!   pascal; asserted <= 1 Pa); fixed round trip dp -> T -> dp exact on the grid (asserted
-//!   <= 1 Pa, also by a property test).
+//! - torque, 129^3 grid over the whole domain (angle +-4 rad, velocity +-16 rad/s, dp
+//!   +-600 kPa), with the identified constants (internal format Q22): forward max
+//!   |fixed - f64| = 8.5e-6 N m (asserted <= 1e-5 N m: half a Q16 LSB of the output rounding
+//!   plus the floors); inverse at the same torque max |dp_fixed - dp_f64| = 0.18 Pa (asserted
+//!   <= 0.55 Pa: half a pascal of the rounding plus the reciprocal's). Against the f32 model
+//!   (61^3 grid inside +-1.5 rad, +-10 rad/s, +-dp_limit): forward 1.1e-5 N m, inverse 0.23 Pa,
+//!   fixed round trip dp -> T -> dp exact (asserted <= 1 Pa, also by a property test).
 //!
 //! Clamping goes to the inward-rounded bounds, so an out-of-domain stretch is evaluated at
 //! most one input LSB (1.5e-5) inside the f32 law's bound.
 //!
-//! # Torque model
+//! # Torque model: 32-bit products, no division
 //!
-//! `A r^2`, `C`, `D` and `1/(B r)` in `I32F32`; `B r` (~5e-5 N m/Pa) in `I16F48`; `B r dp`
-//! formed in i128 and narrowed to `I32F32`; saturating throughout.
+//! `T = (A r^2) alpha + (B r) dp + C v^3 + D v` on the domain angle +-4 rad (past the end
+//! stops), velocity +-16 rad/s, dp +-2^20 Pa (inputs beyond it are clamped to it). Every
+//! term is `floor(c x / 2^s)` with a coefficient word `c` and shift `s` chosen per term by
+//! the pre-scaling so that `c` keeps as many bits as the input's range allows (22..29 bits
+//! here) while `c x / 2^16` fits 31 bits: three 32-bit `muls`, no 64-bit product. v^2 and
+//! v^3 are Q16. The terms add up in an internal torque format Q(qt), qt the largest of
+//! 16..=28 for which the proven bound of every sum fits 2^30 (Q22 for the identified
+//! constants, +-256 N m); the result is rounded to Q16. The inverse has no run-time division:
+//! the torque rest `T - passive` (clamped to what `dp_limit` can reach, so the product
+//! cannot overflow) times the pre-scaled `1/(B r)`, rounded to whole pascal.
+//!
+//! **No overflow, proven by construction and checked:** `prescale::torque_model_bits` bounds
+//! every sum over the domain and refuses constants that do not fit (`is_valid` false: 0 N m,
+//! dp = 0 saturated). The tests re-compute the model in i128 and require every intermediate
+//! to fit 32 bits and the wrapping evaluation to be equal: on every combination of the edge
+//! values (11^4, including `i32::MIN` / `MAX` inputs), at every point of the 129^3 error
+//! grid, and by a property test on identified-like models (constants x 0.5..2, p0 and dp_max
+//! moved) at random edges and interior points.
 //!
 //! # Cost and float-freedom
 //!
@@ -88,17 +106,19 @@
 //! measures the force law on the Cortex-M0 (QEMU `microbit`) against the f32 law in
 //! soft-float; `docs/firmware.md` has the figures.
 
-use fixed::types::{I16F16, I16F48, I32F0, I32F32};
+use fixed::types::{I16F16, I32F0};
 
 use crate::force_law::{ForceFlags, ForceLawParams};
 use crate::torque_model::TorqueModelParams;
 
 /// Pre-scaling of the constants into bit patterns (f64), shared with `build.rs`.
 pub mod prescale;
+/// A whole control tick in fixed point (the M0 benchmark and bit-for-bit check).
+pub mod tick;
 
 use prescale::{
     ForceLawBits, TorqueModelBits, SEED_MAX, SEG_AE0, SEG_E20, SEG_GE0, SEG_K0, SEG_M0, SEG_MAX,
-    SEG_SHIFT,
+    SEG_SHIFT, TM_ANGLE_MAX_Q16, TM_DP_MAX_PA, TM_VELOCITY_MAX_Q16,
 };
 
 /// Gauge pressure or pressure difference \[Pa\], whole pascal.
@@ -114,11 +134,6 @@ pub type VelocityRadS = I16F16;
 /// Joint torque \[N m\].
 pub type TorqueNm = I16F16;
 
-/// Internal format of every intermediate.
-type Wide = I32F32;
-
-/// Half an LSB of `I16F16`, in `I32F32` bits: added before narrowing to round to nearest.
-const HALF_Q16_IN_Q32: i64 = 1 << 15;
 /// Upper limit for any muscle pressure set-point \[Pa\] (= [`crate::P_MUSCLE_MAX_GAUGE_PA`]).
 pub const P_MUSCLE_MAX_GAUGE_PA_FIXED: PressurePa = PressurePa::from_bits(600_000);
 
@@ -166,18 +181,6 @@ pub fn q16_from_f32(x: f32) -> Option<I16F16> {
     } else {
         None
     }
-}
-
-/// `I16F16` -> `I32F32`, exact.
-#[inline]
-const fn widen(x: I16F16) -> Wide {
-    Wide::from_bits((x.to_bits() as i64) << 16)
-}
-
-/// `I32F32` -> `I16F16`, rounded to nearest, saturating.
-#[inline]
-fn narrow_sat(x: Wide) -> I16F16 {
-    I16F16::saturating_from_num(x.saturating_add(Wide::from_bits(HALF_Q16_IN_Q32)))
 }
 
 /// `floor(a b / 2^S)` for any `a` and `0 <= b < 2^16`, from two 32-bit products (the
@@ -339,16 +342,34 @@ impl FixedForceLaw {
     }
 }
 
-/// Fixed-point torque model (eq. 11) and its inverse; see the [module docs](self).
+/// `floor(c x / 2^s)` for `16 <= s <= 47`: `c x / 2^16` from three 32-bit products
+/// (`c (x >> 16)` and [`mul_u16`] on the low half), then shifted. Exact whenever
+/// |c| (|x| + 1) < 2^47, which `prescale::term_bits` guarantees for every coefficient over its
+/// input's domain. Wrapping arithmetic: no overflow check, no panic path.
+#[inline(always)]
+fn term(c: i32, s: u32, x: i32) -> i32 {
+    let hi = c.wrapping_mul(x >> 16);
+    let lo = mul_u16::<16>(c, (x & 0xffff) as u32);
+    hi.wrapping_add(lo).wrapping_shr(s.wrapping_sub(16))
+}
+
+/// Clamp without a panic path (`i32::clamp` asserts `lo <= hi`).
+#[inline(always)]
+fn clamp_i32(x: i32, lo: i32, hi: i32) -> i32 {
+    if x < lo {
+        lo
+    } else if x > hi {
+        hi
+    } else {
+        x
+    }
+}
+
+/// Fixed-point torque model (eq. 11) and its inverse for a 32-bit core without FPU or
+/// divider: 32-bit integer products only, no division; see the [module docs](self).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct FixedTorqueModel {
-    a_r2: Wide,
-    b_r: I16F48,
-    c: Wide,
-    d: Wide,
-    inv_b_r: Wide,
-    p0_gauge_pa: PressurePa,
-    dp_limit_pa: PressurePa,
+    b: TorqueModelBits,
 }
 
 /// Result of inverting the fixed-point torque model (as [`crate::torque_model::Activation`]).
@@ -363,24 +384,30 @@ pub struct FixedActivation {
 }
 
 impl FixedActivation {
-    const INVALID: FixedActivation = FixedActivation {
+    /// dp = 0, saturated: a missing input or a model that cannot be inverted.
+    pub const INVALID: FixedActivation = FixedActivation {
         dp_pa: PressurePa::ZERO,
         saturated: true,
     };
 }
 
+/// [`FixedTorqueModel::inverse_at`]: the inverse model at one angle and velocity (the passive
+/// torque computed once for several torques).
+#[derive(Clone, Copy, Debug)]
+pub struct FixedInverseAt<'a> {
+    m: &'a FixedTorqueModel,
+    passive_qt: i32,
+}
+
 impl FixedTorqueModel {
     /// Builds the model from pre-scaled bit patterns (what `build.rs` emits).
     pub const fn from_bits(b: TorqueModelBits) -> Self {
-        FixedTorqueModel {
-            a_r2: Wide::from_bits(b.a_r2_q32),
-            b_r: I16F48::from_bits(b.b_r_q48),
-            c: Wide::from_bits(b.c_q32),
-            d: Wide::from_bits(b.d_q32),
-            inv_b_r: Wide::from_bits(b.inv_b_r_q32),
-            p0_gauge_pa: PressurePa::from_bits(b.p0_gauge_pa),
-            dp_limit_pa: PressurePa::from_bits(b.dp_limit_pa),
-        }
+        FixedTorqueModel { b }
+    }
+
+    /// The pre-scaled bit patterns.
+    pub const fn bits(&self) -> &TorqueModelBits {
+        &self.b
     }
 
     /// Pre-scales f32 parameters at run time (host, or once at start-up).
@@ -396,76 +423,84 @@ impl FixedTorqueModel {
         ))
     }
 
+    /// False when the constants do not fit the fixed formats: the forward model is then 0 N m
+    /// and every activation dp = 0, saturated.
+    pub const fn is_valid(&self) -> bool {
+        self.b.valid
+    }
+
     /// Mid pressure p0 of the symmetric activation \[Pa\].
     pub const fn p0_gauge_pa(&self) -> PressurePa {
-        self.p0_gauge_pa
+        PressurePa::from_bits(self.b.p0_gauge_pa)
     }
 
     /// The usable |dp| \[Pa\] (as [`TorqueModelParams::dp_limit_pa`], rounded down).
     pub const fn dp_limit_pa(&self) -> PressurePa {
-        self.dp_limit_pa
+        PressurePa::from_bits(self.b.dp_limit_pa)
     }
 
-    /// Torque not depending on the activation, saturating.
-    #[inline]
-    fn passive(&self, angle: Wide, v: Wide) -> Wide {
-        let v3 = v.saturating_mul(v).saturating_mul(v);
-        self.a_r2
-            .saturating_mul(angle)
-            .saturating_add(self.c.saturating_mul(v3))
-            .saturating_add(self.d.saturating_mul(v))
+    /// Passive torque (A r^2 alpha + C v^3 + D v) in Q(qt) at the clamped angle and velocity.
+    #[inline(always)]
+    fn passive_qt(&self, angle_q16: i32, v_q16: i32) -> i32 {
+        let b = &self.b;
+        let a = clamp_i32(angle_q16, -TM_ANGLE_MAX_Q16, TM_ANGLE_MAX_Q16);
+        let v = clamp_i32(v_q16, -TM_VELOCITY_MAX_Q16, TM_VELOCITY_MAX_Q16);
+        let v2 = term(v, 16, v);
+        let v3 = term(v2, 16, v);
+        term(b.a_c, b.a_s, a)
+            .wrapping_add(term(b.c_c, b.c_s, v3))
+            .wrapping_add(term(b.d_c, b.d_s, v))
     }
 
-    /// Forward model: joint torque \[N m\] at the angle, velocity and activation. Saturates at
-    /// the range of [`TorqueNm`]; never panics.
+    /// Forward model: joint torque \[N m\] at the angle, velocity and activation, rounded to
+    /// Q16. The angle is clamped to +-4 rad, the velocity to +-16 rad/s and dp to +-2^20 Pa
+    /// (the domain over which the formats are proven); a model that does not fit gives 0.
+    /// Never panics.
     pub fn torque_nm(
         &self,
         angle_rad: AngleRad,
         velocity_rad_s: VelocityRadS,
         dp_pa: PressurePa,
     ) -> TorqueNm {
-        // B r dp: Q48 x Q0 in i128 (|.| < 2^94), shifted to Q32 and saturated.
-        let prod = (self.b_r.to_bits() as i128) * (dp_pa.to_bits() as i128);
-        let active = sat_i128_to_i64(prod >> 16);
+        let b = &self.b;
+        if !b.valid {
+            return TorqueNm::ZERO;
+        }
+        let dp = clamp_i32(dp_pa.to_bits(), -TM_DP_MAX_PA, TM_DP_MAX_PA);
         let t = self
-            .passive(widen(angle_rad), widen(velocity_rad_s))
-            .saturating_add(Wide::from_bits(active));
-        narrow_sat(t)
+            .passive_qt(angle_rad.to_bits(), velocity_rad_s.to_bits())
+            .wrapping_add(term(b.b_c, b.b_s, dp));
+        let sh = b.qt.wrapping_sub(16);
+        let half = (1i32.wrapping_shl(sh)) >> 1;
+        TorqueNm::from_bits(t.wrapping_add(half).wrapping_shr(sh))
+    }
+
+    /// The inverse model at one joint state (angle and velocity clamped as in
+    /// [`FixedTorqueModel::torque_nm`]): `inverse_at(a, v).activation(t)` is exactly
+    /// `activation(t, a, v)`.
+    #[inline]
+    pub fn inverse_at(
+        &self,
+        angle_rad: AngleRad,
+        velocity_rad_s: VelocityRadS,
+    ) -> FixedInverseAt<'_> {
+        FixedInverseAt {
+            m: self,
+            passive_qt: self.passive_qt(angle_rad.to_bits(), velocity_rad_s.to_bits()),
+        }
     }
 
     /// Inverse model: the activation dp \[Pa\] that yields `torque_nm` at the angle and
     /// velocity, rounded to whole pascal and clamped to `+-dp_limit_pa` (then `saturated`).
-    /// A model with `B r = 0` gives dp = 0, saturated. Never panics.
+    /// A model with `B r = 0` (or one that does not fit) gives dp = 0, saturated. Never panics.
     pub fn activation(
         &self,
         torque_nm: TorqueNm,
         angle_rad: AngleRad,
         velocity_rad_s: VelocityRadS,
     ) -> FixedActivation {
-        if self.inv_b_r == Wide::ZERO {
-            return FixedActivation::INVALID;
-        }
-        let rest =
-            widen(torque_nm).saturating_sub(self.passive(widen(angle_rad), widen(velocity_rad_s)));
-        let dp = rest.saturating_mul(self.inv_b_r).saturating_round();
-        let dp = prescale::sat_i32(dp.to_bits() >> 32);
-        let lim = self.dp_limit_pa.to_bits();
-        if dp > lim {
-            FixedActivation {
-                dp_pa: PressurePa::from_bits(lim),
-                saturated: true,
-            }
-        } else if dp < -lim {
-            FixedActivation {
-                dp_pa: PressurePa::from_bits(-lim),
-                saturated: true,
-            }
-        } else {
-            FixedActivation {
-                dp_pa: PressurePa::from_bits(dp),
-                saturated: false,
-            }
-        }
+        self.inverse_at(angle_rad, velocity_rad_s)
+            .activation(torque_nm)
     }
 
     /// As [`FixedTorqueModel::activation`] for inputs that may be missing: any `None` gives
@@ -509,22 +544,47 @@ impl FixedTorqueModel {
                 p
             }
         };
+        let p0 = self.p0_gauge_pa();
         (
-            clamp(self.p0_gauge_pa.saturating_sub(dp_pa)),
-            clamp(self.p0_gauge_pa.saturating_add(dp_pa)),
+            clamp(p0.saturating_sub(dp_pa)),
+            clamp(p0.saturating_add(dp_pa)),
         )
     }
 }
 
-/// Saturating i128 -> i64.
-#[inline]
-fn sat_i128_to_i64(x: i128) -> i64 {
-    if x > i64::MAX as i128 {
-        i64::MAX
-    } else if x < i64::MIN as i128 {
-        i64::MIN
-    } else {
-        x as i64
+impl FixedInverseAt<'_> {
+    /// The activation dp \[Pa\] that yields `torque_nm` here, rounded to whole pascal and
+    /// clamped to the usable range. No division: the torque rest times the pre-scaled 1/(B r).
+    #[inline]
+    pub fn activation(&self, torque_nm: TorqueNm) -> FixedActivation {
+        let b = &self.m.b;
+        if b.inv_c == 0 || !b.valid {
+            return FixedActivation::INVALID;
+        }
+        let t = clamp_i32(torque_nm.to_bits(), -b.t_clamp_q16, b.t_clamp_q16);
+        let rest = t
+            .wrapping_shl(b.qt.wrapping_sub(16))
+            .wrapping_sub(self.passive_qt);
+        let rest = clamp_i32(rest, -b.rest_lim, b.rest_lim);
+        let dp2 = term(b.inv_c, b.inv_s, rest >> b.rest_shift);
+        let dp = dp2.wrapping_add(1) >> 1;
+        let lim = b.dp_limit_pa;
+        if dp > lim {
+            FixedActivation {
+                dp_pa: PressurePa::from_bits(lim),
+                saturated: true,
+            }
+        } else if dp < -lim {
+            FixedActivation {
+                dp_pa: PressurePa::from_bits(-lim),
+                saturated: true,
+            }
+        } else {
+            FixedActivation {
+                dp_pa: PressurePa::from_bits(dp),
+                saturated: false,
+            }
+        }
     }
 }
 
@@ -545,16 +605,6 @@ mod tests {
             + c[8]
             + c[9] * (e - 0.7).exp();
         f.max(0.0)
-    }
-
-    /// Eq. 11 in f64 with the f32 constants.
-    fn eq11_f64(angle: f64, v: f64, dp: f64) -> f64 {
-        let m = &TORQUE_MODEL;
-        let r = m.sprocket_radius_m as f64;
-        m.a_n_per_m_rad as f64 * r * r * angle
-            + m.b_m2 as f64 * r * dp
-            + m.c_nms3_per_rad3 as f64 * v * v * v
-            + m.d_nms_per_rad as f64 * v
     }
 
     fn q16(x: f64) -> I16F16 {
@@ -744,27 +794,186 @@ mod tests {
     }
 
     /// Worst-case error of the fixed torque model (forward and inverse) on a 101^3 grid.
+    /// Stated error bound of the fixed torque model against eq. 11 in f64 at the same
+    /// (quantised) inputs, over the whole domain: half a Q16 LSB of the output rounding
+    /// (7.6e-6 N m) plus the coefficient and floor errors, asserted <= 1e-5 N m.
+    const TORQUE_BOUND_NM: f64 = 1e-5;
+    /// ... and of its inverse against the exact (f64) inverse: half a pascal of the output
+    /// rounding plus the reciprocal's rounding, asserted <= 0.55 Pa.
+    const INVERSE_BOUND_PA: f64 = 0.55;
+
+    /// Eq. 11 in f64 with the constants of `p`.
+    fn eq11_f64_with(p: &TorqueModelParams, angle: f64, v: f64, dp: f64) -> f64 {
+        let r = p.sprocket_radius_m as f64;
+        p.a_n_per_m_rad as f64 * r * r * angle
+            + p.b_m2 as f64 * r * dp
+            + p.c_nms3_per_rad3 as f64 * v * v * v
+            + p.d_nms_per_rad as f64 * v
+    }
+
+    /// The exact inverse (f64) at the quantised inputs, clamped like the fixed one.
+    fn inverse_f64_with(p: &TorqueModelParams, lim: f64, t: f64, angle: f64, v: f64) -> f64 {
+        let dp =
+            (t - eq11_f64_with(p, angle, v, 0.0)) / (p.b_m2 as f64 * p.sprocket_radius_m as f64);
+        dp.clamp(-lim, lim)
+    }
+
+    /// `term` in unbounded integers, checking that the 31-bit intermediate fits.
+    fn term_ref(c: i32, s: u32, x: i32) -> i128 {
+        let mid = (c as i128 * x as i128).div_euclid(1 << 16);
+        assert!(
+            mid >= i32::MIN as i128 && mid <= i32::MAX as i128,
+            "term intermediate {mid} overflows i32 (c {c}, s {s}, x {x})"
+        );
+        (c as i128 * x as i128).div_euclid(1i128 << s)
+    }
+
+    fn fits(x: i128, what: &str) -> i128 {
+        assert!(
+            x >= i32::MIN as i128 && x <= i32::MAX as i128,
+            "{what} = {x} overflows i32"
+        );
+        x
+    }
+
+    /// The fixed torque model re-computed in i128 (no wrapping), asserting that every
+    /// intermediate fits 32 bits: (forward Q16 bits, inverse dp). Equality with the
+    /// wrapping evaluation at a point proves that no intermediate overflowed there.
+    fn torque_ref(m: &FixedTorqueModel, a: i32, v: i32, dp: i32, t: i32) -> (i32, i32) {
+        let b = m.bits();
+        let a = a.clamp(-TM_ANGLE_MAX_Q16, TM_ANGLE_MAX_Q16);
+        let v = v.clamp(-TM_VELOCITY_MAX_Q16, TM_VELOCITY_MAX_Q16);
+        let dp = dp.clamp(-TM_DP_MAX_PA, TM_DP_MAX_PA);
+        let v2 = fits(term_ref(v, 16, v), "v2") as i32;
+        let v3 = fits(term_ref(v2, 16, v), "v3") as i32;
+        let passive = fits(
+            term_ref(b.a_c, b.a_s, a) + term_ref(b.c_c, b.c_s, v3) + term_ref(b.d_c, b.d_s, v),
+            "passive",
+        );
+        let sh = b.qt - 16;
+        let sum = fits(passive + term_ref(b.b_c, b.b_s, dp), "forward sum");
+        let fwd = fits((sum + ((1i128 << sh) >> 1)) >> sh, "forward");
+        let tc = t.clamp(-b.t_clamp_q16, b.t_clamp_q16) as i128;
+        let rest = fits(fits(tc << sh, "torque in Q(qt)") - passive, "rest");
+        let rest = rest.clamp(-b.rest_lim as i128, b.rest_lim as i128) as i32;
+        let dp2 = fits(term_ref(b.inv_c, b.inv_s, rest >> b.rest_shift), "dp2");
+        let dp = ((dp2 + 1) >> 1).clamp(-b.dp_limit_pa as i128, b.dp_limit_pa as i128);
+        (fwd as i32, dp as i32)
+    }
+
+    /// Every combination of the domain's edge values (and one LSB inside / outside) for
+    /// angle, velocity, dp and torque: the wrapping evaluation equals the i128 one.
+    fn check_no_overflow_at_edges(m: &FixedTorqueModel) -> usize {
+        let b = *m.bits();
+        let edges = |max: i32| {
+            [
+                i32::MIN,
+                -max - 1,
+                -max,
+                -max + 1,
+                -1,
+                0,
+                1,
+                max - 1,
+                max,
+                max + 1,
+                i32::MAX,
+            ]
+        };
+        let mut n = 0;
+        for a in edges(TM_ANGLE_MAX_Q16) {
+            for v in edges(TM_VELOCITY_MAX_Q16) {
+                for dp in edges(TM_DP_MAX_PA) {
+                    for t in edges(b.t_clamp_q16) {
+                        let (fwd, inv) = torque_ref(m, a, v, dp, t);
+                        let (aq, vq) = (AngleRad::from_bits(a), VelocityRadS::from_bits(v));
+                        assert_eq!(
+                            m.torque_nm(aq, vq, PressurePa::from_bits(dp)).to_bits(),
+                            fwd
+                        );
+                        let act = m.activation(TorqueNm::from_bits(t), aq, vq);
+                        assert_eq!(act.dp_pa.to_bits(), inv, "a {a} v {v} t {t}");
+                        n += 1;
+                    }
+                }
+            }
+        }
+        n
+    }
+
+    /// Worst forward error vs f64 and worst inverse error vs the exact inverse on an
+    /// n^3 grid over the whole domain (angle +-4 rad, velocity +-16 rad/s, dp +-dp_range),
+    /// checking the i128 re-computation at every point too.
+    fn worst_torque_error(
+        m: &FixedTorqueModel,
+        p: &TorqueModelParams,
+        n: i32,
+        dp_range: i32,
+    ) -> (f64, f64) {
+        let lim = m.dp_limit_pa().to_bits();
+        let (mut fwd, mut inv) = (0.0f64, 0.0f64);
+        let at =
+            |max: i32, i: i32| (-max as i64 + 2 * max as i64 * i as i64 / (n - 1) as i64) as i32;
+        for i in 0..n {
+            let a = at(TM_ANGLE_MAX_Q16, i);
+            for j in 0..n {
+                let v = at(TM_VELOCITY_MAX_Q16, j);
+                let (aq, vq) = (AngleRad::from_bits(a), VelocityRadS::from_bits(v));
+                let (af, vf) = (aq.to_num::<f64>(), vq.to_num::<f64>());
+                let inv_at = m.inverse_at(aq, vq);
+                for k in 0..n {
+                    let dp = at(dp_range, k);
+                    let t = m.torque_nm(aq, vq, PressurePa::from_bits(dp));
+                    let want = eq11_f64_with(p, af, vf, dp as f64);
+                    fwd = fwd.max((t.to_num::<f64>() - want).abs());
+                    // Inverse at the (quantised) torque against the exact inverse.
+                    let act = inv_at.activation(t);
+                    let exact = inverse_f64_with(p, lim as f64, t.to_num::<f64>(), af, vf);
+                    inv = inv.max((act.dp_pa.to_num::<f64>() - exact).abs());
+                    assert_eq!(
+                        (t.to_bits(), act.dp_pa.to_bits()),
+                        torque_ref(m, a, v, dp, t.to_bits())
+                    );
+                }
+            }
+        }
+        (fwd, inv)
+    }
+
     #[test]
-    fn worst_case_torque_error_on_101_cubed_grid() {
+    fn worst_case_torque_error_on_dense_grid() {
         let m = &FIXED_TORQUE_MODEL;
         let lim = m.dp_limit_pa().to_num::<i32>();
         assert_eq!(lim as f32, TORQUE_MODEL.dp_limit_pa());
-        let (mut fwd_f64, mut fwd_f32, mut inv_f32, mut round_trip) =
-            (0.0f64, 0.0f64, 0.0f32, 0i32);
-        for i in 0..=100 {
-            let a = q16(-1.5 + 3.0 * i as f64 / 100.0);
-            for j in 0..=100 {
-                let v = q16(-10.0 + 20.0 * j as f64 / 100.0);
-                for k in 0..=100 {
-                    let dp = PressurePa::from_num(-lim + (2 * lim / 100) * k);
+        assert!(m.is_valid());
+        let (fwd, inv) = worst_torque_error(m, &TORQUE_MODEL, 129, 600_000);
+        let b = m.bits();
+        println!(
+            "torque model, 129^3 grid, angle +-4 rad, velocity +-16 rad/s, dp +-600 kPa \
+             (internal Q{}): forward max |fixed - f64| = {fwd:.3e} N m (bound {TORQUE_BOUND_NM:.0e}), \
+             inverse max |dp_fixed - dp_f64| = {inv:.3} Pa (bound {INVERSE_BOUND_PA})",
+            b.qt
+        );
+        assert!(fwd <= TORQUE_BOUND_NM, "{fwd}");
+        assert!(inv <= INVERSE_BOUND_PA, "{inv}");
+    }
+
+    #[test]
+    fn fixed_torque_tracks_f32_and_round_trips_on_grid() {
+        let m = &FIXED_TORQUE_MODEL;
+        let lim = m.dp_limit_pa().to_num::<i32>();
+        let (mut fwd_f32, mut inv_f32, mut round_trip) = (0.0f64, 0.0f32, 0i32);
+        for i in 0..=60 {
+            let a = q16(-1.5 + 3.0 * i as f64 / 60.0);
+            for j in 0..=60 {
+                let v = q16(-10.0 + 20.0 * j as f64 / 60.0);
+                for k in 0..=60 {
+                    let dp = PressurePa::from_num(-lim + (2 * lim / 60) * k);
                     let (a32, v32, dp32) =
                         (a.to_num::<f32>(), v.to_num::<f32>(), dp.to_num::<f32>());
                     let t = m.torque_nm(a, v, dp);
-                    let want = eq11_f64(a32 as f64, v32 as f64, dp32 as f64);
-                    fwd_f64 = fwd_f64.max((t.to_num::<f64>() - want).abs());
                     let t32 = TORQUE_MODEL.torque_nm(a32, v32, dp32);
                     fwd_f32 = fwd_f32.max((t.to_num::<f64>() - t32 as f64).abs());
-                    // Inverse at the same (quantised) torque: fixed vs f32.
                     let act = m.activation(t, a, v);
                     let act32 = TORQUE_MODEL.activation(t.to_num::<f32>(), a32, v32);
                     inv_f32 = inv_f32.max((act.dp_pa.to_num::<f32>() - act32.dp_pa).abs());
@@ -773,14 +982,36 @@ mod tests {
             }
         }
         println!(
-            "torque model, 101^3 grid, angle +-1.5 rad, velocity +-10 rad/s, dp +-{lim} Pa:\n  \
-             forward max |fixed - f64| = {fwd_f64:.3e} N m, max |fixed - f32| = {fwd_f32:.3e} N m\n  \
-             inverse max |dp_fixed - dp_f32| = {inv_f32:.3} Pa, \
-             round trip max |dp' - dp| = {round_trip} Pa"
+            "torque model vs f32, 61^3 grid, angle +-1.5 rad, velocity +-10 rad/s, dp +-{lim} Pa: \
+             forward {fwd_f32:.3e} N m, inverse {inv_f32:.3} Pa, round trip {round_trip} Pa"
         );
-        assert!(fwd_f64 < 1e-4, "{fwd_f64}");
+        assert!(fwd_f32 < 3e-5, "{fwd_f32}");
         assert!(inv_f32 <= 1.0, "{inv_f32}");
         assert!(round_trip <= 1, "{round_trip}");
+    }
+
+    #[test]
+    fn torque_model_never_overflows_at_the_domain_edges() {
+        let n = check_no_overflow_at_edges(&FIXED_TORQUE_MODEL);
+        assert_eq!(n, 11usize.pow(4));
+    }
+
+    #[test]
+    fn torque_models_that_do_not_fit_are_refused() {
+        let mut p = TORQUE_MODEL;
+        p.a_n_per_m_rad = 1e12; // A r^2 alpha no longer fits 2^14 N m at Q16
+        let m = FixedTorqueModel::from_params(&p);
+        assert!(!m.is_valid());
+        assert_eq!(
+            m.torque_nm(q16(0.1), q16(0.0), PressurePa::ZERO),
+            TorqueNm::ZERO
+        );
+        assert_eq!(
+            m.activation(q16(1.0), q16(0.1), q16(0.0)),
+            FixedActivation::INVALID
+        );
+        p.a_n_per_m_rad = f32::NAN;
+        assert!(!FixedTorqueModel::from_params(&p).is_valid());
     }
 
     #[test]
@@ -1040,6 +1271,58 @@ mod tests {
             for p in [p1, p2] {
                 prop_assert!(p >= 0 && p.to_num::<f32>() <= P_MUSCLE_MAX_GAUGE_PA);
             }
+        }
+
+        /// Identified-like torque models (every constant scaled by 0.5..2, p0 and dp_max
+        /// moved): every accepted model never overflows (i128 re-computation) at random points
+        /// of the domain edges and inside it, and stays within the stated error bounds.
+        #[test]
+        fn accepted_torque_models_never_overflow(
+            scale in proptest::array::uniform5(0.5f32..2.0),
+            p0 in 100_000f32..500_000.0, dp_max in 50_000f32..400_000.0,
+            a in any::<i32>(), v in any::<i32>(), dp in any::<i32>(), t in any::<i32>(),
+            edge in 0usize..16, u in 0.0f64..1.0, w in 0.0f64..1.0, z in 0.0f64..1.0,
+        ) {
+            let base = TORQUE_MODEL;
+            let p = TorqueModelParams {
+                a_n_per_m_rad: base.a_n_per_m_rad * scale[0],
+                b_m2: base.b_m2 * scale[1],
+                c_nms3_per_rad3: base.c_nms3_per_rad3 * scale[2],
+                d_nms_per_rad: base.d_nms_per_rad * scale[3],
+                sprocket_radius_m: base.sprocket_radius_m * scale[4],
+                p0_gauge_pa: p0,
+                dp_max_pa: dp_max,
+            };
+            let m = FixedTorqueModel::from_params(&p);
+            prop_assert!(m.is_valid());
+            // Any bits, then a point on the domain's edges (edge picks which inputs sit at
+            // +-max), then an interior point: wrapping == i128 everywhere.
+            let pick = |bit: usize, max: i32, f: f64| {
+                if edge & bit != 0 { if f < 0.5 { -max } else { max } }
+                else { (-max as f64 + 2.0 * max as f64 * f) as i32 }
+            };
+            let pts = [
+                (a, v, dp, t),
+                (pick(1, TM_ANGLE_MAX_Q16, u), pick(2, TM_VELOCITY_MAX_Q16, w), pick(4, TM_DP_MAX_PA, z),
+                 pick(8, m.bits().t_clamp_q16, u)),
+            ];
+            for (a, v, dp, t) in pts {
+                let (aq, vq) = (AngleRad::from_bits(a), VelocityRadS::from_bits(v));
+                let fwd = m.torque_nm(aq, vq, PressurePa::from_bits(dp));
+                let act = m.activation(TorqueNm::from_bits(t), aq, vq);
+                prop_assert_eq!((fwd.to_bits(), act.dp_pa.to_bits()), torque_ref(&m, a, v, dp, t));
+            }
+            // Error bounds at the interior / edge point (inputs inside the domain there).
+            let (a, v, dp, _) = pts[1];
+            let (aq, vq) = (AngleRad::from_bits(a), VelocityRadS::from_bits(v));
+            let (af, vf) = (aq.to_num::<f64>(), vq.to_num::<f64>());
+            let fwd = m.torque_nm(aq, vq, PressurePa::from_bits(dp));
+            let want = eq11_f64_with(&p, af, vf, dp as f64);
+            prop_assert!((fwd.to_num::<f64>() - want).abs() <= TORQUE_BOUND_NM, "{} vs {}", fwd, want);
+            let lim = m.dp_limit_pa().to_bits() as f64;
+            let act = m.activation(fwd, aq, vq);
+            let exact = inverse_f64_with(&p, lim, fwd.to_num::<f64>(), af, vf);
+            prop_assert!((act.dp_pa.to_num::<f64>() - exact).abs() <= INVERSE_BOUND_PA, "{} vs {}", act.dp_pa, exact);
         }
 
         /// Inside the range the inverse undoes the forward model to within 1 Pa.

@@ -64,6 +64,16 @@ impl TraceRow {
         }
     }
 
+    /// The raw samples of this row for the fixed-point tick (`fixed_point::tick`).
+    #[inline]
+    pub fn fixed_frame(&self) -> crate::fixed_point::tick::FixedFrame {
+        crate::fixed_point::tick::FixedFrame {
+            p1_adc: (self.p1_adc != MISSING_ADC).then_some(self.p1_adc),
+            p2_adc: (self.p2_adc != MISSING_ADC).then_some(self.p2_adc),
+            encoder: (self.encoder != MISSING_ENCODER).then_some(self.encoder as i32),
+        }
+    }
+
     /// The set-point of this row.
     #[inline]
     pub fn setpoint(&self) -> Setpoint {
@@ -220,7 +230,8 @@ mod tests {
 /// The fixed-point path (src/fixed_point.rs) over the trace, as the FPU-less image runs it:
 /// for every row with both pressures and the angle, the fixed force law on both muscles
 /// (force bits and flags) and the fixed torque model (forward at half the pressure
-/// difference, then inverted), FNV-1a hashed. Returns (rows evaluated, hash). The Cortex-M0
+/// difference, then inverted), then the whole fixed-point tick (`fixed_point::tick`, all
+/// output words of every row), FNV-1a hashed. Returns (rows evaluated, hash). The Cortex-M0
 /// image (`src/bin/qemu_m0.rs`) prints it; `tests/qemu_trace.rs` compares it with this host
 /// run bit for bit.
 pub fn fixed_path_digest() -> (u32, u32) {
@@ -258,6 +269,15 @@ pub fn fixed_path_digest() -> (u32, u32) {
             act.dp_pa.to_bits() as u32 ^ ((act.saturated as u32) << 31),
         );
         n += 1;
+    }
+    let mut tick = crate::fixed_point::tick::FixedTick::new(
+        crate::fixed_point::tick::reference_from_params(TRACE_TICK_HZ),
+    );
+    for row in SENSOR_TRACE.iter() {
+        let sp = crate::fixed_point::tick::mrad_to_q16(row.angle_set_mrad as i32);
+        for w in tick.step(&row.fixed_frame(), sp).words() {
+            h = fnv1a(h, w);
+        }
     }
     (n, h)
 }

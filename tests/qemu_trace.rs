@@ -1,5 +1,8 @@
 //! The QEMU firmware run (`cargo qemu`: Cortex-M4F, hardware FPU) and a native run of the same
-//! code (`pam_firmware::trace::TraceRunner`) must produce bit-for-bit identical per-tick outputs.
+//! code (`pam_firmware::trace::TraceRunner`) must produce bit-for-bit identical per-tick outputs;
+//! the Cortex-M0 image's fixed-point path (force law, torque model, whole fixed tick over the
+//! trace) must equal the host's bit for bit; the on-target tests (defmt-test) must pass under
+//! QEMU.
 //!
 //! Needs `qemu-system-arm` and `defmt-print` (scripts/setup.sh installs both). Without them the
 //! test fails when `CI=true` and is skipped with a message otherwise.
@@ -160,6 +163,43 @@ fn qemu_m0_fixed_path_matches_host_bit_for_bit() {
     let want = format!("fixed path rows={rows} digest={hash:08x}");
     assert!(line.contains(&want), "M0: `{line}`, host: `{want}`");
     eprintln!("qemu_m0: fixed path over {rows} rows identical, digest {hash:08x}");
+}
+
+/// The on-target tests (src/bin/on_target.rs, defmt-test) under QEMU netduinoplus2 through
+/// `scripts/on-target.sh`: every test passes (exit status 0), and the fixed-point path's digest
+/// computed on the Cortex-M4F equals the host's.
+#[test]
+fn on_target_tests_pass_under_qemu() {
+    let (rows, hash) = pam_firmware::trace::fixed_path_digest();
+    if !qemu_available() {
+        return;
+    }
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut cmd = Command::new("bash");
+    cmd.arg("scripts/on-target.sh")
+        .current_dir(root)
+        .env("DEFMT_PRINT_ARGS", "--log-format {s}")
+        .env("QEMU_TIMEOUT_S", "120");
+    if let Ok(cargo) = std::env::var("CARGO") {
+        // The script calls `cargo`: the same one as this test run.
+        let dir = Path::new(&cargo).parent().unwrap().to_owned();
+        let path = std::env::var_os("PATH").unwrap_or_default();
+        let mut paths = vec![dir];
+        paths.extend(std::env::split_paths(&path));
+        cmd.env("PATH", std::env::join_paths(paths).unwrap());
+    }
+    let out = cmd.output().expect("cannot start scripts/on-target.sh");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "on-target tests failed ({}):\n{}\n{stdout}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("all tests passed!"), "{stdout}");
+    let want = format!("on-target fixed path rows={rows} digest={hash:08x}");
+    assert!(stdout.contains(&want), "want `{want}`:\n{stdout}");
+    eprintln!("on_target: all passed under QEMU, {want}");
 }
 
 #[test]

@@ -1,6 +1,7 @@
 //! FPU-less benchmark image (`thumbv6m-none-eabi`, QEMU `microbit` = nRF51822, Cortex-M0):
-//! the cost of the fixed-point force law (src/fixed_point.rs) where it is meant to run, next to
-//! the f32 law in soft-float. Same method as src/bin/qemu.rs (SysTick around each call under
+//! the cost of the fixed-point force law, torque model and whole fixed-point tick
+//! (src/fixed_point.rs, src/fixed_point/tick.rs) where they are meant to run, next to the f32
+//! law and tick in soft-float. Same method as src/bin/qemu.rs (SysTick around each call under
 //! `-icount`, calibrated on a loop of known instruction count); `scripts/bench-mcu.sh` runs it.
 //!
 //! `cargo run -p pam-firmware --bin qemu_m0 --features pam-firmware/firmware --release
@@ -15,8 +16,11 @@ use cortex_m_rt::{entry, exception, ExceptionFrame};
 use cortex_m_semihosting::debug;
 use defmt_semihosting as _;
 
-use pam_firmware::constants::{FIXED_FORCE_LAW, FORCE_LAW};
-use pam_firmware::fixed_point::{pressure_pa_from_f32, q16_from_f32};
+use pam_firmware::constants::{FIXED_FORCE_LAW, FIXED_TORQUE_MODEL, FORCE_LAW};
+use pam_firmware::fixed_point::tick::{mrad_to_q16, reference_from_params, FixedTick};
+use pam_firmware::fixed_point::{
+    pressure_pa_from_f32, q16_from_f32, AngleRad, PressurePa, VelocityRadS,
+};
 use pam_firmware::geometry::JointGeometry;
 use pam_firmware::trace::{ControlTick, SENSOR_TRACE, TRACE_TICK_HZ};
 use pam_firmware::wiring;
@@ -67,7 +71,9 @@ fn main() -> ! {
 
     let p = wiring::pressure_scaling();
     let g = JointGeometry::REFERENCE;
-    let law = FIXED_FORCE_LAW;
+    // black_box: the constants are not folded into the measured code (the tick reads them
+    // from its configuration too).
+    let law = black_box(FIXED_FORCE_LAW);
     let (mut fx_sum, mut fx_max, mut fl_sum, mut fl_max, mut n) = (0u32, 0u32, 0u32, 0u32, 0u32);
     for row in SENSOR_TRACE.iter() {
         let f = row.frame(&p);
@@ -122,6 +128,55 @@ fn main() -> ! {
         t_n,
         t_sum,
         t_max
+    );
+    // The fixed-point torque model (forward and inverse) and the whole fixed-point tick
+    // (src/fixed_point/tick.rs: raw counts -> valve commands), per armed tick of the trace.
+    // The tick's configuration is pre-scaled once here (f64 soft-float, start-up only).
+    let mut ftick = FixedTick::new(reference_from_params(TRACE_TICK_HZ));
+    let model = black_box(FIXED_TORQUE_MODEL);
+    let (mut ft_sum, mut ft_max, mut ft_n) = (0u32, 0u32, 0u32);
+    let (mut tf_sum, mut tf_max, mut ti_sum, mut ti_max) = (0u32, 0u32, 0u32, 0u32);
+    for row in SENSOR_TRACE.iter() {
+        let frame = black_box(row.fixed_frame());
+        let sp = black_box(mrad_to_q16(row.angle_set_mrad as i32));
+        let (c, out) = measure(|| ftick.step(&frame, sp));
+        if !out.armed {
+            continue;
+        }
+        ft_sum += c;
+        ft_max = ft_max.max(c);
+        ft_n += 1;
+        let a = black_box(AngleRad::from_bits(out.angle_q16));
+        let v = black_box(VelocityRadS::from_bits(out.velocity_q16));
+        let dp = black_box(PressurePa::from_bits(
+            (out.p_set_pa[1] - out.p_set_pa[0]) / 2,
+        ));
+        let (c, t) = measure(|| model.torque_nm(black_box(a), black_box(v), black_box(dp)));
+        tf_sum += c;
+        tf_max = tf_max.max(c);
+        let t = black_box(t);
+        let (c, r) = measure(|| model.activation(black_box(t), black_box(a), black_box(v)));
+        black_box(r);
+        ti_sum += c;
+        ti_max = ti_max.max(c);
+    }
+    defmt::info!(
+        "bench m0 tick_fixed n={=u32} sum_counts={=u32} max_counts={=u32}",
+        ft_n,
+        ft_sum,
+        ft_max
+    );
+    defmt::info!(
+        "bench m0 torque_fixed_forward n={=u32} sum_counts={=u32} max_counts={=u32}",
+        ft_n,
+        tf_sum,
+        tf_max
+    );
+    defmt::info!(
+        "bench m0 torque_fixed_inverse n={=u32} sum_counts={=u32} max_counts={=u32}",
+        ft_n,
+        ti_sum,
+        ti_max
     );
     // The fixed-point path over the whole trace, hashed: tests/qemu_trace.rs compares it with
     // the host run of the same function bit for bit.

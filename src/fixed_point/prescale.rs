@@ -352,23 +352,93 @@ fn fill_force_law(b: &mut ForceLawBits, c: [f64; 10], exp: fn(f64) -> f64) -> Op
     Some(true)
 }
 
+// ---------------------------------------------------------------------------------------------
+// Torque model (eq. 11) for a 32-bit core without FPU or divider.
+//
+//   T = (A r^2) alpha + (B r) dp + C v^3 + D v
+//
+// Inputs in their interface formats (alpha, v in Q16, dp in whole pascal), clamped to the
+// domain below. Every term is one `term(c, s, x) = floor(c x / 2^s)`: a coefficient word `c`
+// and shift `s` chosen here per term so that `c` keeps as many bits as the input's range
+// allows while the intermediate floor(c x / 2^16) fits 31 bits (run time: three 32-bit
+// `muls`, no 64-bit product). The terms add up in an internal torque format Q(qt), with qt
+// the largest of 16..=28 for which the sum's proven bound fits 2^30. The inverse needs no
+// division: 1/(B r) is a coefficient of the same kind, applied to the torque rest clamped to
+// what dp_limit can reach.
+// ---------------------------------------------------------------------------------------------
+
+/// Angle domain of the fixed torque model: +-4 rad (Q16 bits), past the end stops (+-2.6 rad).
+pub const TM_ANGLE_MAX_Q16: i32 = 4 << 16;
+/// Velocity domain: +-16 rad/s (Q16 bits).
+pub const TM_VELOCITY_MAX_Q16: i32 = 16 << 16;
+/// dp domain of the forward model: +-2^20 Pa (beyond any gauge pressure of the muscles).
+pub const TM_DP_MAX_PA: i32 = 1 << 20;
+/// The scaled torque rest of the inverse stays below 2^24 (its coefficient keeps >= 22 bits).
+pub const TM_REST_BITS: u32 = 24;
+
 /// Bit patterns of the fixed-point torque model.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct TorqueModelBits {
-    /// A r^2 \[N m/rad\] in Q32.
-    pub a_r2_q32: i64,
-    /// B r \[N m/Pa\] in Q48 (I16F48): B r is ~1e-5, Q32 would keep only ~5 digits.
-    pub b_r_q48: i64,
-    /// C \[N m s^3/rad^3\] in Q32.
-    pub c_q32: i64,
-    /// D \[N m s/rad\] in Q32.
-    pub d_q32: i64,
-    /// 1 / (B r) \[Pa/(N m)\] in Q32; 0 when B r is 0 (the model cannot be inverted).
-    pub inv_b_r_q32: i64,
+    /// False when the constants are not finite or their bounds do not fit the formats: the
+    /// forward model then gives 0 N m and the inverse dp = 0, saturated.
+    pub valid: bool,
+    /// Internal torque format Q(qt), 16..=28.
+    pub qt: u32,
+    /// A r^2 term: coefficient word and shift (alpha in Q16 -> Q(qt)).
+    pub a_c: i32,
+    /// See [`TorqueModelBits::a_c`].
+    pub a_s: u32,
+    /// B r term (dp in Pa -> Q(qt)).
+    pub b_c: i32,
+    /// See [`TorqueModelBits::b_c`].
+    pub b_s: u32,
+    /// C term (v^3 in Q16 -> Q(qt)).
+    pub c_c: i32,
+    /// See [`TorqueModelBits::c_c`].
+    pub c_s: u32,
+    /// D term (v in Q16 -> Q(qt)).
+    pub d_c: i32,
+    /// See [`TorqueModelBits::d_c`].
+    pub d_s: u32,
+    /// 1/(B r): (rest >> rest_shift) in Q(qt - rest_shift) -> dp in Q1 (half pascal, for
+    /// rounding). 0 when B r is 0 (the model cannot be inverted).
+    pub inv_c: i32,
+    /// See [`TorqueModelBits::inv_c`].
+    pub inv_s: u32,
+    /// See [`TorqueModelBits::inv_c`].
+    pub rest_shift: u32,
+    /// The inverse clamps the desired torque to +-t_clamp (Q16): past it dp saturates anyway.
+    pub t_clamp_q16: i32,
+    /// ... and the rest (torque minus passive torque, Q(qt)) to +-rest_lim = |B r| (dp_limit + 2).
+    pub rest_lim: i32,
     /// p0 \[Pa\], rounded.
     pub p0_gauge_pa: i32,
     /// Usable |dp| \[Pa\], rounded down: `min(dp_max, p0, P_MAX - p0)`, at least 0.
     pub dp_limit_pa: i32,
+}
+
+/// The coefficient word and shift of `term(c, s, x) = floor(c x / 2^s)` for `v` output LSB
+/// per input LSB and |x| <= x_max: the largest s in 16..=47 with |c| (x_max + 1) < 2^47 and
+/// |c| < 2^31. None when even s = 16 does not fit (or v is not finite).
+pub fn term_bits(v: f64, x_max: f64) -> Option<(i32, u32)> {
+    if !v.is_finite() {
+        return None;
+    }
+    if v == 0.0 {
+        return Some((0, 16));
+    }
+    let mut s = 47u32;
+    loop {
+        let c = round_i64(v * (1u64 << s) as f64);
+        let ca = abs(c as f64);
+        if ca * (x_max + 1.0) < 140_737_488_355_328.0 && ca < 2_147_483_647.0 {
+            return Some((c as i32, s));
+        }
+        if s == 16 {
+            return None;
+        }
+        s -= 1;
+    }
 }
 
 /// Pre-scales the torque-model constants (SI units, see `TorqueModelParams`).
@@ -382,6 +452,7 @@ pub fn torque_model_bits(
     dp_max_pa: f64,
 ) -> TorqueModelBits {
     let r = sprocket_radius_m;
+    let a_r2 = a_n_per_m_rad * r * r;
     let b_r = b_m2 * r;
     let room = if p0_gauge_pa < P_MAX_PA - p0_gauge_pa {
         p0_gauge_pa
@@ -391,13 +462,86 @@ pub fn torque_model_bits(
     let room = if room > 0.0 { room } else { 0.0 };
     let lim = if dp_max_pa < room { dp_max_pa } else { room };
     let lim = if lim > 0.0 { lim } else { 0.0 };
-    TorqueModelBits {
-        a_r2_q32: round_i64(a_n_per_m_rad * r * r * Q32),
-        b_r_q48: round_i64(b_r * Q48),
-        c_q32: round_i64(c_nms3_per_rad3 * Q32),
-        d_q32: round_i64(d_nms_per_rad * Q32),
-        inv_b_r_q32: if b_r != 0.0 { round_i64(Q32 / b_r) } else { 0 },
+    let dp_limit_pa = sat_i32(floor_i64(lim));
+    let mut b = TorqueModelBits {
+        valid: false,
+        qt: 16,
+        a_c: 0,
+        a_s: 16,
+        b_c: 0,
+        b_s: 16,
+        c_c: 0,
+        c_s: 16,
+        d_c: 0,
+        d_s: 16,
+        inv_c: 0,
+        inv_s: 16,
+        rest_shift: 0,
+        t_clamp_q16: 0,
+        rest_lim: 0,
         p0_gauge_pa: sat_i32(round_i64(p0_gauge_pa)),
-        dp_limit_pa: sat_i32(floor_i64(lim)),
+        dp_limit_pa,
+    };
+    let fin = |x: f64| x.is_finite();
+    if !(fin(a_r2) && fin(b_r) && fin(c_nms3_per_rad3) && fin(d_nms_per_rad) && fin(p0_gauge_pa)) {
+        return b;
     }
+    // Bounds [N m] over the domain.
+    let am = TM_ANGLE_MAX_Q16 as f64 / Q16;
+    let vm = TM_VELOCITY_MAX_Q16 as f64 / Q16;
+    let passive = abs(a_r2) * am + abs(c_nms3_per_rad3) * vm * vm * vm + abs(d_nms_per_rad) * vm;
+    let active = abs(b_r) * TM_DP_MAX_PA as f64;
+    let t_clamp = passive + abs(b_r) * (dp_limit_pa as f64 + 2.0) + 1.0;
+    let bound = {
+        let fwd = passive + active;
+        let inv = t_clamp + passive;
+        if fwd > inv {
+            fwd
+        } else {
+            inv
+        }
+    };
+    // Largest qt with bound 2^qt (+ a few LSB of floors) below 2^30.
+    let mut qt = 28u32;
+    while bound * (1u64 << qt) as f64 + 64.0 >= 1_073_741_824.0 {
+        if qt == 16 {
+            return b;
+        }
+        qt -= 1;
+    }
+    let sq = (1u64 << qt) as f64;
+    let q16_to_qt = sq / Q16;
+    // Inputs: alpha, v, v^3 in Q16 (|v^3| <= 16^3 2^16 + a few LSB), dp in Pa.
+    let v3_max = vm * vm * vm * Q16 + 64.0;
+    let (Some(a), Some(bb), Some(c), Some(d)) = (
+        term_bits(a_r2 * q16_to_qt, TM_ANGLE_MAX_Q16 as f64),
+        term_bits(b_r * sq, TM_DP_MAX_PA as f64),
+        term_bits(c_nms3_per_rad3 * q16_to_qt, v3_max),
+        term_bits(d_nms_per_rad * q16_to_qt, TM_VELOCITY_MAX_Q16 as f64),
+    ) else {
+        return b;
+    };
+    (b.a_c, b.a_s, b.b_c, b.b_s, b.c_c, b.c_s, b.d_c, b.d_s) =
+        (a.0, a.1, bb.0, bb.1, c.0, c.1, d.0, d.1);
+    b.qt = qt;
+    b.t_clamp_q16 = sat_i32(ceil_i64(t_clamp * Q16));
+    if b_r != 0.0 {
+        let rest_lim = ceil_i64(abs(b_r) * (dp_limit_pa as f64 + 2.0) * sq);
+        let mut k = 0u32;
+        while (rest_lim >> k) >= (1i64 << TM_REST_BITS) {
+            k += 1;
+        }
+        // dp [Q1 Pa] = rest 2^k / 2^qt / (B r) * 2.
+        let Some(inv) = term_bits(
+            2.0 * (1u64 << k) as f64 / (sq * b_r),
+            ((rest_lim >> k) + 1) as f64,
+        ) else {
+            return b;
+        };
+        b.rest_lim = rest_lim as i32;
+        b.rest_shift = k;
+        (b.inv_c, b.inv_s) = inv;
+    }
+    b.valid = true;
+    b
 }

@@ -1,15 +1,21 @@
-//! On-target tests (defmt-test) for the Cortex-M4F build: run under QEMU's netduinoplus2
-//! (STM32F405) through the cargo runner, or on a board with a probe:
-//!
-//! `cargo test -p pam-firmware --test on_target --features pam-firmware/on-target-tests
-//! --target thumbv7em-none-eabihf`
+//! On-target tests (defmt-test) for the Cortex-M4F build, run under QEMU's netduinoplus2
+//! (STM32F405) through the cargo runner: `cargo on-target` (alias for `cargo run -p
+//! pam-firmware --bin on_target --features pam-firmware/on-target-tests --release --target
+//! thumbv7em-none-eabihf`). Exit status 0 when all passed, 1 at the first failure.
+//! `tests/qemu_trace.rs` runs it in CI. A binary, not a `[[test]]` target in `tests/`: a test
+//! target would build the std-only dev-dependencies for the bare-metal target.
 //!
 //! They check on the target, with its FPU and its code generation, what the host tests check
 //! on the host: the fixed-point force law against the f32 law, the anti-windup of a saturated
-//! step, and the valve commands of the control tick over the embedded sensor trace.
+//! step, the valve commands of the control tick over the embedded sensor trace, and the
+//! fixed-point tick over the trace (its digest is compared with the host's by
+//! `tests/qemu_trace.rs`).
 #![no_std]
 #![no_main]
 
+// The runtime (vector table, reset handler, default handlers): defmt-test's entry does not
+// name the crate, so it is linked in here.
+use cortex_m_rt as _;
 use defmt_semihosting as _;
 
 /// A failed assertion panics: log the location and exit with status 1 (semihosting).
@@ -115,5 +121,34 @@ mod tests {
             n += 1;
         }
         defmt::assert_eq!(n as usize, TraceRunner::len());
+    }
+
+    /// The fixed-point tick over the trace: armed after start-up, valves within [-1, 1], the
+    /// shorted transducer latched at tick 460; the whole fixed path's digest is logged for
+    /// the host comparison.
+    #[test]
+    fn fixed_tick_over_the_trace() {
+        use pam_firmware::fixed_point::tick::{
+            fault, mrad_to_q16, reference_from_params, FixedTick,
+        };
+        let mut t = FixedTick::new(reference_from_params(pam_firmware::trace::TRACE_TICK_HZ));
+        for (i, row) in SENSOR_TRACE.iter().enumerate() {
+            let o = t.step(&row.fixed_frame(), mrad_to_q16(row.angle_set_mrad as i32));
+            for u in o.valves_q16 {
+                defmt::assert!((-65_536..=65_536).contains(&u));
+            }
+            if (10..460).contains(&i) {
+                defmt::assert!(o.armed, "tick {=usize} not armed", i);
+            }
+            if i >= 460 {
+                defmt::assert_eq!(o.fault, fault::PRESSURE2_IMPLAUSIBLE);
+            }
+        }
+        let (rows, digest) = pam_firmware::trace::fixed_path_digest();
+        defmt::info!(
+            "on-target fixed path rows={=u32} digest={=u32:08x}",
+            rows,
+            digest
+        );
     }
 }
