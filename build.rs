@@ -374,11 +374,11 @@ fn main() {
          // From config/controller.toml.\n\
          /// Default position-loop gains of the cascade (config/controller.toml [position]).\n\
          pub const POSITION_GAINS: crate::control::PidGains = crate::control::PidGains {{\n\
-         \x20   kp: {},\n\
-         \x20   ki: {},\n\
-         \x20   kd: {},\n\
-         \x20   i_limit: {},\n\
-         \x20   out_limit: {},\n\
+         \x20   kp_nm_per_rad: {},\n\
+         \x20   ki_nm_per_rad_s: {},\n\
+         \x20   kd_nm_s_per_rad: {},\n\
+         \x20   i_limit_nm: {},\n\
+         \x20   out_limit_nm: {},\n\
          }};\n\
          /// Velocity filter cut-off of the position loop [Hz] (config/controller.toml [position]).\n\
          pub const VELOCITY_CUTOFF_HZ: f32 = {};\n\
@@ -386,7 +386,7 @@ fn main() {
          /// [`P_MUSCLE_MAX_GAUGE_PA`].\n\
          pub const TORQUE_LOOP: crate::control::TorqueLoopGains = crate::control::TorqueLoopGains {{\n\
          \x20   kp: {},\n\
-         \x20   ki: {},\n\
+         \x20   ki_per_s: {},\n\
          \x20   corr_limit_nm: {},\n\
          \x20   p_set_max_gauge_pa: P_MUSCLE_MAX_GAUGE_PA,\n\
          }};\n\

@@ -96,20 +96,20 @@ fn clamp_setpoint_to(p_gauge_pa: f32, hi: f32) -> f32 {
     }
 }
 
-/// Gains of the position PID. Units: `kp` [N m/rad], `ki` [N m/(rad s)], `kd` [N m s/rad].
+/// Gains of the position PID (angle error -> joint torque).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct PidGains {
-    /// Proportional gain.
-    pub kp: f32,
-    /// Integral gain.
-    pub ki: f32,
-    /// Derivative gain (acts on the measured velocity, not on the error).
-    pub kd: f32,
+    /// Proportional gain [N m/rad].
+    pub kp_nm_per_rad: f32,
+    /// Integral gain [N m/(rad s)].
+    pub ki_nm_per_rad_s: f32,
+    /// Derivative gain [N m s/rad] (acts on the measured velocity, not on the error).
+    pub kd_nm_s_per_rad: f32,
     /// |integral term| limit [N m].
-    pub i_limit: f32,
+    pub i_limit_nm: f32,
     /// |output| limit [N m].
-    pub out_limit: f32,
+    pub out_limit_nm: f32,
 }
 
 /// What the position loop measures.
@@ -194,19 +194,19 @@ impl PositionController {
     ) -> Result<f32, ControlError> {
         let g = &self.gains;
         let e = setpoint_rad - meas.angle_rad;
-        let pd = g.kp * e - g.kd * meas.velocity_rad_s;
+        let pd = g.kp_nm_per_rad * e - g.kd_nm_s_per_rad * meas.velocity_rad_s;
         let unsat = pd + self.integral_nm;
-        let lim = libm::fabsf(g.out_limit);
+        let lim = libm::fabsf(g.out_limit_nm);
         let saturated_high = unsat > lim;
         let saturated_low = unsat < -lim;
-        let di = g.ki * e * dt_s;
+        let di = g.ki_nm_per_rad_s * e * dt_s;
         // Conditional integration: do not integrate further into saturation. (Unsaturated
         // - the usual case - is decided by one comparison; NaN takes the full test.)
         let within = libm::fabsf(unsat) <= lim;
         if (within || !((saturated_high && di > 0.0) || (saturated_low && di < 0.0)))
             && !blocks(downstream, di)
         {
-            self.integral_nm = clampf(self.integral_nm + di, g.i_limit);
+            self.integral_nm = clampf(self.integral_nm + di, g.i_limit_nm);
         }
         let out = clampf(pd + self.integral_nm, lim);
         if !finite(&[out, self.integral_nm]) {
@@ -224,7 +224,7 @@ pub struct TorqueLoopGains {
     /// Proportional gain on the torque error [N m / N m].
     pub kp: f32,
     /// Integral gain on the torque error [1/s].
-    pub ki: f32,
+    pub ki_per_s: f32,
     /// |correction| limit [N m] (integrator and total correction).
     pub corr_limit_nm: f32,
     /// Ceiling of the pressure set-points [Pa gauge] (further capped at 600 kPa).
@@ -432,7 +432,7 @@ impl TorqueController {
         // Anti-windup: conditional integration on the command actually applied. The
         // integrator does not move the way the last command fell short (dp at its limit or a
         // pressure set-point clamped) or the way the valves could not follow (`downstream`).
-        let di = g.ki * t_err * dt_s;
+        let di = g.ki_per_s * t_err * dt_s;
         if !blocks(self.shortfall_nm + downstream, di) {
             self.integral_nm = clampf(self.integral_nm + di, lim);
         }
@@ -565,11 +565,11 @@ mod tests {
 
     fn pid() -> PositionController {
         PositionController::new(PidGains {
-            kp: 4.0,
-            ki: 10.0,
-            kd: 0.3,
-            i_limit: 2.0,
-            out_limit: 10.0,
+            kp_nm_per_rad: 4.0,
+            ki_nm_per_rad_s: 10.0,
+            kd_nm_s_per_rad: 0.3,
+            i_limit_nm: 2.0,
+            out_limit_nm: 10.0,
         })
     }
 
@@ -723,7 +723,7 @@ mod tests {
         TorqueController::new(
             TorqueLoopGains {
                 kp: 0.0,
-                ki: 20.0,
+                ki_per_s: 20.0,
                 corr_limit_nm: 2.0,
                 p_set_max_gauge_pa: 600_000.0,
             },

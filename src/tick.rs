@@ -312,10 +312,16 @@ impl ControllerConfig {
             && nonneg(self.torque_model.p0_gauge_pa)
             && self.torque_model.p0_gauge_pa <= P_MUSCLE_MAX_GAUGE_PA
             && nonneg(self.torque_model.dp_max_pa)
-            && [p.kp, p.ki, p.kd, p.i_limit, p.out_limit]
-                .iter()
-                .all(|&x| nonneg(x))
-            && [t.kp, t.ki, t.corr_limit_nm, t.p_set_max_gauge_pa]
+            && [
+                p.kp_nm_per_rad,
+                p.ki_nm_per_rad_s,
+                p.kd_nm_s_per_rad,
+                p.i_limit_nm,
+                p.out_limit_nm,
+            ]
+            .iter()
+            .all(|&x| nonneg(x))
+            && [t.kp, t.ki_per_s, t.corr_limit_nm, t.p_set_max_gauge_pa]
                 .iter()
                 .all(|&x| nonneg(x))
             && [pr.kp_per_pa, pr.ki_per_pa_s, pr.deadband_pa, pr.i_limit]
@@ -884,8 +890,8 @@ impl ControlTick {
             )?;
             // Trajectory feed-forward (derivative on the error, inertia of the desired
             // motion), within the position loop's output limit.
-            let t_ff = feedforward_torque_nm(ff, self.cfg.position.kd, rate, accel);
-            let t_lim = libm::fabsf(self.cfg.position.out_limit);
+            let t_ff = feedforward_torque_nm(ff, self.cfg.position.kd_nm_s_per_rad, rate, accel);
+            let t_lim = libm::fabsf(self.cfg.position.out_limit_nm);
             let t_sum = t_pid + t_ff;
             // In range (the usual case, one comparison; NaN fails it) or the full clamp.
             let t_des = if libm::fabsf(t_sum) <= t_lim {
@@ -1258,7 +1264,7 @@ mod tests {
     #[test]
     fn invalid_config_latches_config_fault_forever() {
         let mut cfg = ControllerConfig::reference(1000.0);
-        cfg.position.kp = f32::NAN;
+        cfg.position.kp_nm_per_rad = f32::NAN;
         let mut t = ControlTick::new(cfg);
         let o = t.step(&frame(300e3, 300e3, 0.0), &SP0, DT);
         assert_eq!(o.fault, Some(FaultCode::ConfigInvalid));

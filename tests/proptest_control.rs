@@ -99,7 +99,7 @@ proptest! {
     fn position_loop_output_is_finite_bounded_or_error(
         a in angle(), v in f32_any_or(-20.0, 20.0), sp in angle(), dt in dt(), n in 1usize..20
     ) {
-        let mut c = PositionController::new(PidGains { kp: 11.0, ki: 8.0, kd: 0.8, i_limit: 1.5, out_limit: 10.0 });
+        let mut c = PositionController::new(PidGains { kp_nm_per_rad: 11.0, ki_nm_per_rad_s: 8.0, kd_nm_s_per_rad: 0.8, i_limit_nm: 1.5, out_limit_nm: 10.0 });
         let inputs_ok = [a, v, sp, dt].iter().all(|x| x.is_finite()) && dt > 0.0;
         for _ in 0..n {
             let r = c.step(JointState { angle_rad: a, velocity_rad_s: v }, sp, dt);
@@ -121,7 +121,7 @@ proptest! {
         t in f32_any_or(-50.0, 50.0), dt in dt(), n in 1usize..20
     ) {
         let mut c = TorqueController::new(
-            TorqueLoopGains { kp: 0.2, ki: 30.0, corr_limit_nm: 1.5, p_set_max_gauge_pa: 600_000.0 },
+            TorqueLoopGains { kp: 0.2, ki_per_s: 30.0, corr_limit_nm: 1.5, p_set_max_gauge_pa: 600_000.0 },
             FORCE_LAW, JointGeometry::REFERENCE, TORQUE_MODEL);
         let all_finite = [p1, p2, a, v, t, dt].iter().all(|x| x.is_finite()) && dt > 0.0;
         let m = TorqueMeasurement { p1_gauge_pa: p1, p2_gauge_pa: p2, angle_rad: a, velocity_rad_s: v };

@@ -230,7 +230,7 @@ fn cascade_feedforward_adds_kd_times_setpoint_rate_on_a_ramp() {
         // valve / supply residual may not trip on this synthetic input.
         cfg.valve_model.residual_abs_pa_s = f32::MAX;
         cfg.valve_model.integral_min_pa = f32::MAX;
-        let kd = cfg.position.kd;
+        let kd = cfg.position.kd_nm_s_per_rad;
         let mut t = ControlTick::new(cfg);
         let mut last = None;
         for k in 0..400 {

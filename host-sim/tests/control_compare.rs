@@ -127,10 +127,10 @@ fn stored_cascade_gains_are_a_local_optimum_of_the_tuning_cost() {
         for what in ["kp", "ki", "kd", "torque ki"] {
             let mut cfg = base;
             match what {
-                "kp" => cfg.position.kp *= f,
-                "ki" => cfg.position.ki *= f,
-                "kd" => cfg.position.kd *= f,
-                _ => cfg.torque.ki *= f,
+                "kp" => cfg.position.kp_nm_per_rad *= f,
+                "ki" => cfg.position.ki_nm_per_rad_s *= f,
+                "kd" => cfg.position.kd_nm_s_per_rad *= f,
+                _ => cfg.torque.ki_per_s *= f,
             }
             let (c, ..) = tuning_cost(&plant, &sc, cfg);
             eprintln!("cascade {what} x{f}: cost {c:.4e} rad^2 (stored {c0:.4e})");

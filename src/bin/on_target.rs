@@ -76,11 +76,11 @@ mod tests {
     fn anti_windup_cuts_the_overshoot_of_a_saturated_step() {
         let run = |anti_windup: bool| {
             let mut c = PositionController::new(PidGains {
-                kp: 4.0,
-                ki: 10.0,
-                kd: 0.3,
-                i_limit: 2.0,
-                out_limit: 10.0,
+                kp_nm_per_rad: 4.0,
+                ki_nm_per_rad_s: 10.0,
+                kd_nm_s_per_rad: 0.3,
+                i_limit_nm: 2.0,
+                out_limit_nm: 10.0,
             });
             let (j, b, t_sat, dt) = (0.01f32, 0.05f32, 0.8f32, 1e-3f32);
             let (mut a, mut w, mut short, mut peak) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);

@@ -195,12 +195,20 @@ impl FixedTickConfig {
                 &mut ok,
             ),
             lever: Coef::new(f(g.sprocket_radius_m), (1 << 27) as f64, &mut ok),
-            kp: Coef::new(f(pid.kp), (1 << 21) as f64, &mut ok),
-            ki_dt: Coef::new(f(pid.ki) * dt * 256.0, (1 << 21) as f64, &mut ok),
-            kd: Coef::new(f(pid.kd), (1 << 21) as f64, &mut ok),
-            i_limit_q24: to_q(f(pid.i_limit), q24),
-            out_limit_q16: to_q(f(pid.out_limit), q16),
-            kt_dt: Coef::new(f(cfg.torque.ki) * dt * 256.0, (1 << 24) as f64, &mut ok),
+            kp: Coef::new(f(pid.kp_nm_per_rad), (1 << 21) as f64, &mut ok),
+            ki_dt: Coef::new(
+                f(pid.ki_nm_per_rad_s) * dt * 256.0,
+                (1 << 21) as f64,
+                &mut ok,
+            ),
+            kd: Coef::new(f(pid.kd_nm_s_per_rad), (1 << 21) as f64, &mut ok),
+            i_limit_q24: to_q(f(pid.i_limit_nm), q24),
+            out_limit_q16: to_q(f(pid.out_limit_nm), q16),
+            kt_dt: Coef::new(
+                f(cfg.torque.ki_per_s) * dt * 256.0,
+                (1 << 24) as f64,
+                &mut ok,
+            ),
             corr_limit_q24: to_q(f(cfg.torque.corr_limit_nm), q24),
             kpp: Coef::new(f(cfg.pressure.kp_per_pa) * q16, (1 << 21) as f64, &mut ok),
             deadband_pa: to_q(f(cfg.pressure.deadband_pa), 1.0),
@@ -215,8 +223,8 @@ impl FixedTickConfig {
             law,
             model,
             valid: ok
-                && f(pid.i_limit) * q24 < 2.0e9
-                && f(pid.out_limit) * q16 < 2.0e9
+                && f(pid.i_limit_nm) * q24 < 2.0e9
+                && f(pid.out_limit_nm) * q16 < 2.0e9
                 && f(cfg.torque.corr_limit_nm) * q24 < 2.0e9
                 && f(g.initial_contraction).abs() < 1.0,
         }

@@ -181,10 +181,10 @@ impl CascadeToml {
     /// The tick configuration at `tick_hz`: the reference with these gains.
     pub fn config(&self, tick_hz: f32) -> ControllerConfig {
         let mut c = ControllerConfig::reference(tick_hz);
-        c.position.kp = self.position_kp_nm_per_rad as f32;
-        c.position.ki = self.position_ki_nm_per_rad_s as f32;
-        c.position.kd = self.position_kd_nm_s_per_rad as f32;
-        c.torque.ki = self.torque_ki_per_s as f32;
+        c.position.kp_nm_per_rad = self.position_kp_nm_per_rad as f32;
+        c.position.ki_nm_per_rad_s = self.position_ki_nm_per_rad_s as f32;
+        c.position.kd_nm_s_per_rad = self.position_kd_nm_s_per_rad as f32;
+        c.torque.ki_per_s = self.torque_ki_per_s as f32;
         c.feedforward.inertia_kgm2 = self.feedforward_inertia_kgm2 as f32;
         c.feedforward.cutoff_hz = self.setpoint_rate_cutoff_hz as f32;
         c
@@ -197,10 +197,10 @@ impl CascadeToml {
         suite_mse_at_margin_rad2: f64,
     ) -> Self {
         CascadeToml {
-            position_kp_nm_per_rad: c.position.kp as f64,
-            position_ki_nm_per_rad_s: c.position.ki as f64,
-            position_kd_nm_s_per_rad: c.position.kd as f64,
-            torque_ki_per_s: c.torque.ki as f64,
+            position_kp_nm_per_rad: c.position.kp_nm_per_rad as f64,
+            position_ki_nm_per_rad_s: c.position.ki_nm_per_rad_s as f64,
+            position_kd_nm_s_per_rad: c.position.kd_nm_s_per_rad as f64,
+            torque_ki_per_s: c.torque.ki_per_s as f64,
             feedforward_inertia_kgm2: c.feedforward.inertia_kgm2 as f64,
             setpoint_rate_cutoff_hz: c.feedforward.cutoff_hz as f64,
             suite_mse_rad2,
@@ -375,9 +375,9 @@ pub fn scale_feedback(cfg: ControllerConfig, factor: f32) -> ControllerConfig {
     let mut c = cfg;
     match &mut c.law {
         ControlLaw::Cascade => {
-            c.position.kp *= factor;
-            c.position.ki *= factor;
-            c.position.kd *= factor;
+            c.position.kp_nm_per_rad *= factor;
+            c.position.ki_nm_per_rad_s *= factor;
+            c.position.kd_nm_s_per_rad *= factor;
         }
         ControlLaw::DirectPid(g) => {
             g.kp_pa_per_rad *= factor;
@@ -797,7 +797,7 @@ suite_mse_at_margin_rad2 = 0.000001
         let t = ControlTuning::from_toml_str(GOOD, "t.toml").unwrap();
         assert_eq!(t.pid.gains().ki_pa_per_rad_s, 100_000.0);
         let c = t.cascade.config(1000.0);
-        assert_eq!((c.position.kp, c.torque.ki), (55.0, 2.0));
+        assert_eq!((c.position.kp_nm_per_rad, c.torque.ki_per_s), (55.0, 2.0));
         assert_eq!(
             (c.feedforward.inertia_kgm2, c.feedforward.cutoff_hz),
             (0.015625, 150.0)

@@ -438,26 +438,26 @@ fn tune_cascade(ctx: &Ctx, start: ControllerConfig) -> (ControllerConfig, f64) {
     let c_start = cost_cfg(start);
     ctx.say(format!(
         "cascade: start kp {} ki {} kd {} torque ki {} feed-forward {:?}: cost {:.4e} rad^2",
-        start.position.kp,
-        start.position.ki,
-        start.position.kd,
-        start.torque.ki,
+        start.position.kp_nm_per_rad,
+        start.position.ki_nm_per_rad_s,
+        start.position.kd_nm_s_per_rad,
+        start.torque.ki_per_s,
         start.feedforward,
         c_start
     ));
     let with = |x: &[f64]| {
         let mut cfg = start;
-        cfg.position.kp = 10f64.powf(x[0]) as f32;
-        cfg.position.ki = 10f64.powf(x[1]) as f32;
-        cfg.position.kd = 10f64.powf(x[2]) as f32;
-        cfg.torque.ki = 10f64.powf(x[3]) as f32;
+        cfg.position.kp_nm_per_rad = 10f64.powf(x[0]) as f32;
+        cfg.position.ki_nm_per_rad_s = 10f64.powf(x[1]) as f32;
+        cfg.position.kd_nm_s_per_rad = 10f64.powf(x[2]) as f32;
+        cfg.torque.ki_per_s = 10f64.powf(x[3]) as f32;
         cfg
     };
     let x0 = [
-        (start.position.kp as f64).log10(),
-        (start.position.ki as f64).log10(),
-        (start.position.kd as f64).log10(),
-        (start.torque.ki as f64).log10(),
+        (start.position.kp_nm_per_rad as f64).log10(),
+        (start.position.ki_nm_per_rad_s as f64).log10(),
+        (start.position.kd_nm_s_per_rad as f64).log10(),
+        (start.torque.ki_per_s as f64).log10(),
     ];
     // Costs relative to the start's (absolute when the start fails or overshoots).
     let scale = if c_start.is_finite() { c_start } else { 1.0 };
@@ -473,10 +473,10 @@ fn tune_cascade(ctx: &Ctx, start: ControllerConfig) -> (ControllerConfig, f64) {
             ctx,
             |cfg: &ControllerConfig| {
                 vec![
-                    (cfg.position.kp as f64).log10(),
-                    (cfg.position.ki as f64).log10(),
-                    (cfg.position.kd as f64).log10(),
-                    (cfg.torque.ki as f64).log10(),
+                    (cfg.position.kp_nm_per_rad as f64).log10(),
+                    (cfg.position.ki_nm_per_rad_s as f64).log10(),
+                    (cfg.position.kd_nm_s_per_rad as f64).log10(),
+                    (cfg.torque.ki_per_s as f64).log10(),
                 ]
             },
             |x: &[f64]| with(x),
@@ -496,16 +496,16 @@ fn tune_cascade(ctx: &Ctx, start: ControllerConfig) -> (ControllerConfig, f64) {
             let mut moves = Vec::new();
             for f in [0.7f32, 1.4] {
                 let mut m = *cfg;
-                m.position.kp *= f;
+                m.position.kp_nm_per_rad *= f;
                 moves.push(m);
                 let mut m = *cfg;
-                m.position.ki *= f;
+                m.position.ki_nm_per_rad_s *= f;
                 moves.push(m);
                 let mut m = *cfg;
-                m.position.kd *= f;
+                m.position.kd_nm_s_per_rad *= f;
                 moves.push(m);
                 let mut m = *cfg;
-                m.torque.ki *= f;
+                m.torque.ki_per_s *= f;
                 moves.push(m);
             }
             moves
@@ -515,8 +515,8 @@ fn tune_cascade(ctx: &Ctx, start: ControllerConfig) -> (ControllerConfig, f64) {
     let (_, nominal, margin) = ctx.cascade_cost(cfg);
     ctx.say(format!(
         "cascade: Nelder-Mead {} points + polish: cost {:.4e} rad^2 ({:.3} x start; suite MSE {:.4e}, at the margin {:.4e}) at kp {} ki {} kd {} torque ki {} (J {}, cutoff {} Hz)",
-        evaluations, c, c / c_start, nominal, margin, cfg.position.kp, cfg.position.ki, cfg.position.kd,
-        cfg.torque.ki, cfg.feedforward.inertia_kgm2, cfg.feedforward.cutoff_hz
+        evaluations, c, c / c_start, nominal, margin, cfg.position.kp_nm_per_rad, cfg.position.ki_nm_per_rad_s, cfg.position.kd_nm_s_per_rad,
+        cfg.torque.ki_per_s, cfg.feedforward.inertia_kgm2, cfg.feedforward.cutoff_hz
     ));
     (cfg, c)
 }
@@ -601,19 +601,19 @@ pub fn run_tune(a: &TuneArgs) -> Result<String> {
     let mut starts = vec![
         (11.0, 8.0, 0.8, None),
         (
-            reference.position.kp,
-            reference.position.ki,
-            reference.position.kd,
-            Some(reference.torque.ki),
+            reference.position.kp_nm_per_rad,
+            reference.position.ki_nm_per_rad_s,
+            reference.position.kd_nm_s_per_rad,
+            Some(reference.torque.ki_per_s),
         ),
     ];
     if let Some(t) = &stored {
         let c = t.cascade.config(1000.0);
         starts.push((
-            c.position.kp,
-            c.position.ki,
-            c.position.kd,
-            Some(c.torque.ki),
+            c.position.kp_nm_per_rad,
+            c.position.ki_nm_per_rad_s,
+            c.position.kd_nm_s_per_rad,
+            Some(c.torque.ki_per_s),
         ));
     }
     starts.extend(cascade_starts);
@@ -623,16 +623,16 @@ pub fn run_tune(a: &TuneArgs) -> Result<String> {
     for (kp, ki, kd, torque_ki) in starts {
         for j_kgm2 in [0.0f32, j_plant] {
             let mut start = reference;
-            start.position.kp = kp;
-            start.position.ki = ki;
-            start.position.kd = kd;
-            start.torque.ki = torque_ki.unwrap_or(reference.torque.ki);
+            start.position.kp_nm_per_rad = kp;
+            start.position.ki_nm_per_rad_s = ki;
+            start.position.kd_nm_s_per_rad = kd;
+            start.torque.ki_per_s = torque_ki.unwrap_or(reference.torque.ki_per_s);
             start.feedforward.inertia_kgm2 = j_kgm2;
             start.feedforward.cutoff_hz = cutoff_hz;
             let (cfg, c) = tune_cascade(&ctx, start);
             cascade_from.push(format!(
                 "({kp:.4}, {ki:.4}, {kd:.4}, {:.4}, J {j_kgm2}) -> {c:.4e}",
-                start.torque.ki
+                start.torque.ki_per_s
             ));
             if best_cascade.is_none_or(|(_, cb)| c < cb) {
                 best_cascade = Some((cfg, c));
