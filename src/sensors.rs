@@ -133,7 +133,13 @@ impl TickTimer {
         }
         match prev {
             None => 1.0 / hz as f32,
-            Some(p) if now >= p => ((now - p) as f64 / hz as f64) as f32,
+            // Whole seconds and the remainder in 32-bit integers, then f32: no f64 (soft-float
+            // on the M4F) and no 64-bit division. A gap beyond 2^32 clock ticks (25 s at
+            // 168 MHz) is infinitely late for a control tick.
+            Some(p) if now >= p => match u32::try_from(now - p) {
+                Ok(d) => (d / hz) as f32 + (d % hz) as f32 / hz as f32,
+                Err(_) => f32::INFINITY,
+            },
             Some(_) => f32::NAN,
         }
     }
@@ -505,6 +511,23 @@ mod tests {
         assert!(t.dt_s(&c).is_nan());
         let z = FakeClock(core::cell::Cell::new(0), 0);
         assert!(TickTimer::new().dt_s(&z).is_nan());
+        // 168 MHz cycle counter: 1 ms and 2.5 s exactly as f64 would give them (to f32),
+        // a gap beyond 2^32 cycles is infinitely late.
+        let c = FakeClock(core::cell::Cell::new(10), 168_000_000);
+        let mut t = TickTimer::new();
+        t.dt_s(&c);
+        for d in [168_000u64, 420_000_000, 1, 167_999_999] {
+            let now = c.0.get() + d;
+            c.0.set(now);
+            let want = (d as f64 / 168e6) as f32;
+            let got = t.dt_s(&c);
+            assert!(
+                (got - want).abs() <= 2.0 * f32::EPSILON * want,
+                "{d}: {got} vs {want}"
+            );
+        }
+        c.0.set(c.0.get() + (1u64 << 32));
+        assert_eq!(t.dt_s(&c), f32::INFINITY);
     }
 
     #[test]
