@@ -494,7 +494,12 @@ pub fn case(nominal: &PlantConfig, kind: &'static str, seed: u64) -> Case {
         "heat_transfer" => {
             let ha = rng.random_range(0.5..3.0);
             p.thermal = Some([ha, 1.4]);
-            (format!("hA {ha:.2} W/K, kappa 1.4"), named(&["polytropic"]))
+            // The catalogue's physical form of it (the polytropic exponent is its look-alike,
+            // the accepted answer only while the catalogue had no heat-transfer candidate).
+            (
+                format!("hA {ha:.2} W/K, kappa 1.4"),
+                named(&["heat_transfer"]),
+            )
         }
         "dead_time_fractional" => {
             let d = rng.random_range(5e-3..12e-3);
