@@ -15,7 +15,7 @@ for t in "${need_targets[@]}"; do
   fi
 done
 
-# --- Targets (issue "Targets"): QEMU, defmt decoder, flip-link, size tool ---------------------
+# --- Targets: QEMU, defmt decoder, flip-link, size tool ---------------------
 # Versions: defmt-print 1.2.0 decodes the defmt 1.x wire format (versions 3, 4) the firmware
 # uses; flip-link 0.1.12 (latest, links with rustc's rust-lld).
 as_root() { if [ "$(id -u)" -eq 0 ]; then "$@"; else sudo "$@"; fi; }

@@ -274,24 +274,26 @@ fn bad_inputs_give_clear_errors() {
     );
 }
 
+/// The diagnosis of `rec` against the nominal file, default options, no check recording.
+fn diagnose_default(rec: &Recording) -> Diagnosis {
+    diagnose(
+        &nominal(),
+        rec,
+        None,
+        &DiagnoseOptions::default(),
+        &|_, _, _| {},
+    )
+    .unwrap()
+}
+
 #[test]
 fn independent_loaded_fixture_is_an_inertia_recalibration() {
     // shared/conformance/pulses_loaded.csv comes from an independent implementation of the
     // plant with the 3.34 kg load (J = 0.155 kg m^2); diagnosed against the unloaded
     // nominal file, the answer must be the plant file's inertia, recalibrated to the loaded
     // value (a wrong parameter, not missing physics).
-    let rec = Recording::read(
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/pulses_loaded.csv"),
-    )
-    .unwrap();
-    let d = diagnose(
-        &nominal(),
-        &rec,
-        None,
-        &DiagnoseOptions::default(),
-        &|_, _, _| {},
-    )
-    .unwrap();
+    let rec = Recording::read(fixture("pulses_loaded.csv")).unwrap();
+    let d = diagnose_default(&rec);
     assert_eq!(d.verdict, Verdict::Explained, "{}", d.answer());
     assert!(d.effects.is_empty(), "{}", d.answer());
     assert_eq!(d.recalibrated.len(), 1, "{}", d.answer());
@@ -318,10 +320,7 @@ fn independent_thermal_fixture_is_the_chamber_thermodynamics() {
     // thermodynamic chamber of PLANT.md (its header states hA and kappa). Diagnosed against
     // the isothermal nominal file, the answer must be that chamber, with the header's hA,
     // and nothing else (the data is noise-free: no parameter is off).
-    let rec = Recording::read(
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/pulses_thermal.csv"),
-    )
-    .unwrap();
+    let rec = Recording::read(fixture("pulses_thermal.csv")).unwrap();
     let header = rec.meta("thermal").expect("# thermal = ... header");
     let h_at = header.find("hA_w_per_k = ").unwrap() + "hA_w_per_k = ".len();
     let h_true: f64 = header[h_at..]
@@ -330,14 +329,7 @@ fn independent_thermal_fixture_is_the_chamber_thermodynamics() {
         .unwrap()
         .parse()
         .unwrap();
-    let d = diagnose(
-        &nominal(),
-        &rec,
-        None,
-        &DiagnoseOptions::default(),
-        &|_, _, _| {},
-    )
-    .unwrap();
+    let d = diagnose_default(&rec);
     assert_eq!(d.verdict, Verdict::Explained, "{}", d.answer());
     assert!(d.recalibrated.is_empty(), "{}", d.answer());
     assert_eq!(d.effects.len(), 1, "{}", d.answer());

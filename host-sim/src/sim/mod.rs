@@ -354,9 +354,12 @@ impl<'a> Integrator<'a> {
     /// `None` when the step is rejected or not finite; the
     /// caller then integrates the sample adaptively.
     fn single_step(&mut self, inputs: ValveInputs, h: f64) -> Option<PlantState> {
+        let aux = self.aux;
         let f = |y: &[f64; 4]| {
+            // The plant has no auxiliary states on this path: the stored ones are constants.
             self.plant
-                .derivatives(&PlantState::from_array(*y), &inputs)
+                .derivatives_aux(&PlantState::from_array(*y), &aux, &inputs)
+                .0
                 .to_array()
         };
         let y0 = self.state.to_array();
