@@ -2,7 +2,8 @@
 //! energy conservation, static equilibrium under gravity and friction, seed 001's stated
 //! numbers, and the 1-DOF special case against the 1-DOF plant.
 
-use std::path::PathBuf;
+mod common;
+use common::*;
 
 use host_sim::fit::fit_percent;
 use host_sim::io::arm3::PressureStepScenario;
@@ -15,16 +16,8 @@ use host_sim::{Plant, PlantConfig, Recording, ValveInputs};
 use nalgebra::{Matrix3, SVector, Vector3};
 use ode_solvers::{Dopri5, System};
 
-fn seed_file() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("plants/arm3-seed001.toml")
-}
-
-fn fixtures() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures")
-}
-
 fn seed_arm() -> Arm3 {
-    Arm3::load(seed_file()).unwrap_or_else(|e| panic!("{e}"))
+    Arm3::load(arm3_plant()).unwrap_or_else(|e| panic!("{e}"))
 }
 
 fn grid() -> Vec<[f64; 3]> {
@@ -44,7 +37,7 @@ const CLOSED: Arm3Inputs = [ValveInputs::CLOSED; 3];
 
 #[test]
 fn seed_file_has_the_paper_values() {
-    let c = Arm3Config::load(seed_file()).unwrap();
+    let c = Arm3Config::load(arm3_plant()).unwrap();
     assert_eq!(c.links.inertia_x2_kgm2, 0.0514);
     assert_eq!(c.links.mass2_kg, 11.7805);
     assert_eq!(c.links.length2_m, 0.8099);
@@ -465,7 +458,7 @@ fn one_dof_arm_toml(c: &PlantConfig) -> String {
 
 #[test]
 fn one_dof_special_case_matches_the_one_dof_plant_and_the_conformance_fixture() {
-    let plant_path = fixtures().join("reference-1dof.toml");
+    let plant_path = fixture("reference-1dof.toml");
     let cfg = PlantConfig::load(&plant_path).unwrap();
     let plant = Plant::from_config(&cfg);
     let arm_cfg = Arm3Config::from_toml_str(&one_dof_arm_toml(&cfg), "one-dof-arm.toml")
@@ -474,16 +467,16 @@ fn one_dof_special_case_matches_the_one_dof_plant_and_the_conformance_fixture() 
     let m11 = arm.links.mass_matrix(&[0.0, 0.3, -0.4])[(0, 0)];
     assert!((m11 - cfg.joint.inertia_kgm2).abs() < 1e-15);
 
-    let fixture = Recording::read(fixtures().join("pulses_nominal.csv")).unwrap();
-    let dt = fixture.sample_period_s();
+    let pulses = Recording::read(fixture("pulses_nominal.csv")).unwrap();
+    let dt = pulses.sample_period_s();
     // Both at a tight tolerance: they must converge to the same solution.
     let opts = SolverOptions {
         rtol: 1e-9,
         atol: 1e-9,
         ..SolverOptions::default()
     };
-    let one = simulate(&plant, &fixture.inputs, dt, &opts).unwrap();
-    let inputs: Vec<Arm3Inputs> = fixture
+    let one = simulate(&plant, &pulses.inputs, dt, &opts).unwrap();
+    let inputs: Vec<Arm3Inputs> = pulses
         .inputs
         .iter()
         .map(|u| [*u, ValveInputs::CLOSED, ValveInputs::CLOSED])
@@ -511,7 +504,7 @@ fn one_dof_special_case_matches_the_one_dof_plant_and_the_conformance_fixture() 
     assert!(max_diff[1] < 0.05 && max_diff[2] < 0.05, "{max_diff:?}");
     assert!(max_diff[3] < 0.5 && max_diff[4] < 0.5, "{max_diff:?}");
     for c in Channel::ALL {
-        let fit = fit_percent(fixture.channel(c).unwrap(), &chans[c.index()]);
+        let fit = fit_percent(pulses.channel(c).unwrap(), &chans[c.index()]);
         println!(
             "{}: fit {fit:.4} % against the conformance fixture",
             c.name()
@@ -525,7 +518,7 @@ fn one_dof_special_case_with_friction_matches_the_one_dof_joint_friction_effect(
     // Eq. 7 with f_e = f_g = 0 is the 1-DOF [effects.joint_friction] without a Stribeck dip
     // (breakaway = Coulomb), both with sgn(w) ~ tanh(w / w_eps).
     let (f_c, f_d, w_eps) = (0.15, 0.004, 0.01);
-    let mut cfg = PlantConfig::load(fixtures().join("reference-1dof.toml")).unwrap();
+    let mut cfg = PlantConfig::load(fixture("reference-1dof.toml")).unwrap();
     cfg.effects.joint_friction = Some(host_sim::plant::effects::JointFriction {
         enabled: true,
         coulomb_nm: f_c,
@@ -544,16 +537,16 @@ fn one_dof_special_case_with_friction_matches_the_one_dof_joint_friction_effect(
         Arm3::from_config(&Arm3Config::from_toml_str(&text, "friction-arm.toml").unwrap()).unwrap();
     assert_eq!(arm.friction[0].f_c, f_c);
     assert_eq!(arm.friction[1].f_c, 0.0);
-    let fixture = Recording::read(fixtures().join("pulses_nominal.csv")).unwrap();
+    let pulses = Recording::read(fixture("pulses_nominal.csv")).unwrap();
     let n = 5000; // 5 s
-    let dt = fixture.sample_period_s();
+    let dt = pulses.sample_period_s();
     let opts = SolverOptions {
         rtol: 1e-9,
         atol: 1e-9,
         ..SolverOptions::default()
     };
-    let one = simulate(&plant, &fixture.inputs[..n], dt, &opts).unwrap();
-    let inputs: Vec<Arm3Inputs> = fixture.inputs[..n]
+    let one = simulate(&plant, &pulses.inputs[..n], dt, &opts).unwrap();
+    let inputs: Vec<Arm3Inputs> = pulses.inputs[..n]
         .iter()
         .map(|u| [*u, ValveInputs::CLOSED, ValveInputs::CLOSED])
         .collect();
@@ -561,8 +554,8 @@ fn one_dof_special_case_with_friction_matches_the_one_dof_joint_friction_effect(
     let mut max_angle_diff_deg: f64 = 0.0;
     let mut max_effect_deg: f64 = 0.0;
     let frictionless = simulate(
-        &Plant::from_config(&PlantConfig::load(fixtures().join("reference-1dof.toml")).unwrap()),
-        &fixture.inputs[..n],
+        &Plant::from_config(&PlantConfig::load(fixture("reference-1dof.toml")).unwrap()),
+        &pulses.inputs[..n],
         dt,
         &opts,
     )

@@ -1,19 +1,16 @@
 //! The 3-DOF arm's plant file errors, its 3-joint recording format, and
 //! `host-sim simulate` dispatching on an arm plant file.
 
-use std::path::PathBuf;
-use std::process::Command;
+mod common;
+use common::*;
+
 
 use host_sim::io::arm3::{fits, Arm3Recording, PressureStepScenario};
 use host_sim::plant::arm3::{is_arm3_file, Arm3, Arm3Config};
 use host_sim::sim::SolverOptions;
 
-fn seed_file() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("plants/arm3-seed001.toml")
-}
-
 fn seed_text() -> String {
-    std::fs::read_to_string(seed_file()).unwrap()
+    std::fs::read_to_string(arm3_plant()).unwrap()
 }
 
 fn load_err(text: &str) -> String {
@@ -58,9 +55,8 @@ fn invalid_values_name_the_full_key() {
 
 #[test]
 fn plant_kind_is_recognised() {
-    assert!(is_arm3_file(seed_file()).unwrap());
-    let one_dof =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/reference-1dof.toml");
+    assert!(is_arm3_file(arm3_plant()).unwrap());
+    let one_dof = plant();
     assert!(!is_arm3_file(one_dof).unwrap());
     // A misspelt kind is routed to the arm loader, which names it.
     let dir = tempfile::tempdir().unwrap();
@@ -79,7 +75,7 @@ fn plant_kind_is_recognised() {
 }
 
 fn short_run() -> (Arm3, Arm3Recording) {
-    let arm = Arm3::load(seed_file()).unwrap();
+    let arm = Arm3::load(arm3_plant()).unwrap();
     let sc = PressureStepScenario {
         switch_times_s: [0.1, 0.6, 0.7, 1.2],
         duration_s: 1.3,
@@ -156,24 +152,18 @@ fn cli_simulate_dispatches_on_an_arm_plant_and_reproduces_the_scenario() {
     let out = dir.path().join("sim.csv");
     let plot = dir.path().join("sim.svg");
     rec.write(&inputs).unwrap();
-    let r = Command::new(env!("CARGO_BIN_EXE_host-sim"))
-        .arg("simulate")
-        .arg("--plant")
-        .arg(seed_file())
-        .arg("--inputs")
-        .arg(&inputs)
-        .arg("--out")
-        .arg(&out)
-        .arg("--plot")
-        .arg(&plot)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&r.stdout);
-    assert!(
-        r.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&r.stderr)
-    );
+    let r = host_sim(&[
+        &"simulate",
+        &"--plant",
+        &arm3_plant(),
+        &"--inputs",
+        &inputs,
+        &"--out",
+        &out,
+        &"--plot",
+        &plot,
+    ]);
+    let stdout = ok(&r);
     println!("{stdout}");
     let sim = Arm3Recording::read(&out).unwrap();
     assert_eq!(sim.t_s, rec.t_s);
@@ -194,17 +184,16 @@ fn cli_simulate_dispatches_on_an_arm_plant_and_reproduces_the_scenario() {
         "t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg\n0,0,0,0,0,0\n0.1,0,0,0,0,1\n",
     )
     .unwrap();
-    let r = Command::new(env!("CARGO_BIN_EXE_host-sim"))
-        .args(["simulate", "--plant"])
-        .arg(seed_file())
-        .arg("--inputs")
-        .arg(&one)
-        .arg("--out")
-        .arg(dir.path().join("x.csv"))
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&r.stderr);
-    assert_eq!(r.status.code(), Some(2), "{stderr}");
+    let r = host_sim(&[
+        &"simulate",
+        &"--plant",
+        &arm3_plant(),
+        &"--inputs",
+        &one,
+        &"--out",
+        &dir.path().join("x.csv"),
+    ]);
+    let stderr = exits(2, &r);
     assert!(
         stderr.contains("one.csv:1") && stderr.contains("u_in1_j1"),
         "{stderr}"

@@ -5,24 +5,11 @@
 //! supply, pure noise in the tensions) are refused with exit status 2 and leave the directory
 //! untouched.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
+use common::*;
 
-fn plant() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant/reference-1dof.toml")
-}
-
-fn host_sim(args: &[&dyn AsRef<std::ffi::OsStr>]) -> Output {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_host-sim"));
-    for a in args {
-        c.arg(a);
-    }
-    c.output().unwrap()
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
-}
+use std::path::Path;
+use std::process::Output;
 
 fn calibrate(rec: &Path, dir: &Path) -> Output {
     host_sim(&[
@@ -114,7 +101,7 @@ fn calibrate_writes_the_torque_model_and_refuses_degenerate_data() {
     assert!(written.contains("[torque_model]") && written.contains("# Data ("));
     // The firmware's build reads these files with deny_unknown_fields: the written files must
     // have the same tables and keys as the repository's.
-    let repo_config = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../config");
+    let repo_config = root().join("config");
     for name in [
         "torque_model.toml",
         "joint_geometry.toml",

@@ -1,35 +1,27 @@
 //! End-to-end: the built `host-sim` binary simulates a fixture and fits it.
 
-use std::path::PathBuf;
-use std::process::Command;
+mod common;
+use common::*;
 
-fn fixtures() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures")
-}
-
-fn host_sim() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_host-sim"))
-}
 
 #[test]
 fn simulate_then_fit_a_fixture() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("sim.csv");
     let plot = dir.path().join("sim.svg");
-    let fixture = fixtures().join("pulses_nominal.csv");
-    let r = host_sim()
-        .arg("simulate")
-        .arg("--plant")
-        .arg(fixtures().join("reference-1dof.toml"))
-        .arg("--inputs")
-        .arg(&fixture)
-        .arg("--out")
-        .arg(&out)
-        .arg("--plot")
-        .arg(&plot)
-        .output()
-        .unwrap();
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let pulses = fixture("pulses_nominal.csv");
+    let r = host_sim(&[
+        &"simulate",
+        &"--plant",
+        &fixture("reference-1dof.toml"),
+        &"--inputs",
+        &pulses,
+        &"--out",
+        &out,
+        &"--plot",
+        &plot,
+    ]);
+    ok(&r);
     let text = std::fs::read_to_string(&out).unwrap();
     let header = text.lines().find(|l| !l.starts_with('#')).unwrap();
     assert_eq!(
@@ -40,14 +32,7 @@ fn simulate_then_fit_a_fixture() {
     assert_eq!(rows, 20_000);
     assert!(std::fs::metadata(&plot).unwrap().len() > 1000);
 
-    let r = host_sim()
-        .arg("fit")
-        .arg(&fixture)
-        .arg(&out)
-        .arg("--min-fit")
-        .arg("99.5")
-        .output()
-        .unwrap();
+    let r = host_sim(&[&"fit", &pulses, &out, &"--min-fit", &"99.5"]);
     let stdout = String::from_utf8_lossy(&r.stdout);
     println!("{stdout}");
     assert!(
@@ -77,14 +62,7 @@ fn fit_fails_with_status_1_below_min_fit() {
         "t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg\n0,0,0,0,0,0\n0.1,0,0,0,0,1\n0.2,0,0,0,0,1\n",
     )
     .unwrap();
-    let r = host_sim()
-        .arg("fit")
-        .arg(&a)
-        .arg(&b)
-        .arg("--min-fit")
-        .arg("99")
-        .output()
-        .unwrap();
+    let r = host_sim(&[&"fit", &a, &b, &"--min-fit", &"99"]);
     assert_eq!(r.status.code(), Some(1));
 }
 
@@ -99,16 +77,15 @@ fn bad_input_is_reported_with_file_line_and_field_and_keeps_old_output() {
         "t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg\n0,0,0,0,0,0\n0.001,0,oops,0,0,0\n",
     )
     .unwrap();
-    let r = host_sim()
-        .arg("simulate")
-        .arg("--plant")
-        .arg(fixtures().join("reference-1dof.toml"))
-        .arg("--inputs")
-        .arg(&inputs)
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .unwrap();
+    let r = host_sim(&[
+        &"simulate",
+        &"--plant",
+        &fixture("reference-1dof.toml"),
+        &"--inputs",
+        &inputs,
+        &"--out",
+        &out,
+    ]);
     assert_eq!(r.status.code(), Some(2));
     let err = String::from_utf8_lossy(&r.stderr);
     assert!(
@@ -123,30 +100,26 @@ fn bad_input_is_reported_with_file_line_and_field_and_keeps_old_output() {
 
 #[test]
 fn scenario_needs_a_plant_and_a_readable_file() {
-    let r = host_sim()
-        .args([
-            "simulate",
-            "--scenario",
-            "s.toml",
-            "--out",
-            "/tmp/never-written.csv",
-        ])
-        .output()
-        .unwrap();
+    let r = host_sim(&[
+        &"simulate",
+        &"--scenario",
+        &"s.toml",
+        &"--out",
+        &"/tmp/never-written.csv",
+    ]);
     assert_eq!(r.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&r.stderr).contains("--plant"));
     let dir = tempfile::tempdir().unwrap();
     let missing = dir.path().join("missing.toml");
-    let r = host_sim()
-        .arg("simulate")
-        .arg("--plant")
-        .arg(fixtures().join("reference-1dof.toml"))
-        .arg("--scenario")
-        .arg(&missing)
-        .arg("--out")
-        .arg(dir.path().join("o.csv"))
-        .output()
-        .unwrap();
+    let r = host_sim(&[
+        &"simulate",
+        &"--plant",
+        &fixture("reference-1dof.toml"),
+        &"--scenario",
+        &missing,
+        &"--out",
+        &dir.path().join("o.csv"),
+    ]);
     assert_eq!(r.status.code(), Some(2));
     let err = String::from_utf8_lossy(&r.stderr);
     assert!(err.contains(&missing.display().to_string()), "{err}");

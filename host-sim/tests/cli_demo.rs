@@ -1,21 +1,18 @@
 //! End-to-end: `host-sim demo --out-dir DIR`, the README's first command, through the built
 //! binary (run from the repository root, as `cargo run -p host-sim -- demo` does).
 
-use std::path::PathBuf;
-use std::process::Command;
+mod common;
+use common::*;
+
 
 use host_sim::io::recording::Recording;
-
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
-}
 
 #[test]
 fn demo_writes_every_file_and_reports_tracking_and_conformance() {
     let dir = tempfile::tempdir().unwrap();
     let out_dir = dir.path().join("demo"); // does not exist yet: the demo creates it
-    let r = Command::new(env!("CARGO_BIN_EXE_host-sim"))
-        .current_dir(repo())
+    let r = bin()
+        .current_dir(root())
         .arg("demo")
         .arg("--out-dir")
         .arg(&out_dir)
@@ -85,14 +82,13 @@ fn demo_writes_every_file_and_reports_tracking_and_conformance() {
 fn demo_with_a_missing_plant_says_where_it_looked() {
     let dir = tempfile::tempdir().unwrap();
     let missing = dir.path().join("nope.toml");
-    let r = Command::new(env!("CARGO_BIN_EXE_host-sim"))
-        .arg("demo")
-        .arg("--out-dir")
-        .arg(dir.path().join("d"))
-        .arg("--plant")
-        .arg(&missing)
-        .output()
-        .unwrap();
+    let r = host_sim(&[
+        &"demo",
+        &"--out-dir",
+        &dir.path().join("d"),
+        &"--plant",
+        &missing,
+    ]);
     assert_eq!(r.status.code(), Some(2));
     let err = String::from_utf8_lossy(&r.stderr);
     assert!(err.contains(&missing.display().to_string()), "{err}");

@@ -2,12 +2,9 @@
 //! each (the same as `diagnose --json` writes) and a summary; a bad recording is listed with
 //! its error (status 1) without stopping the others.
 
-use std::path::PathBuf;
-use std::process::Command;
+mod common;
+use common::*;
 
-fn shared() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared")
-}
 
 #[test]
 fn a_directory_is_diagnosed_in_parallel_with_one_json_each_and_a_summary() {
@@ -22,15 +19,17 @@ fn a_directory_is_diagnosed_in_parallel_with_one_json_each_and_a_summary() {
     std::fs::write(recs.join("broken.csv"), "t_s,u_in1\n0,0\n").unwrap();
     let out = dir.path().join("out");
     let plant = shared().join("plant/reference-1dof.toml");
-    let r = Command::new(env!("CARGO_BIN_EXE_host-sim"))
-        .args(["diagnose-batch", "--jobs", "2", "--plant"])
-        .arg(&plant)
-        .arg("--recordings")
-        .arg(&recs)
-        .arg("--out-dir")
-        .arg(&out)
-        .output()
-        .unwrap();
+    let r = host_sim(&[
+        &"diagnose-batch",
+        &"--jobs",
+        &"2",
+        &"--plant",
+        &plant,
+        &"--recordings",
+        &recs,
+        &"--out-dir",
+        &out,
+    ]);
     let stdout = String::from_utf8_lossy(&r.stdout);
     assert_eq!(
         r.status.code(),
@@ -54,16 +53,16 @@ fn a_directory_is_diagnosed_in_parallel_with_one_json_each_and_a_summary() {
 
     // The batch JSON is what the single-recording command writes.
     let single = dir.path().join("single.json");
-    let r = Command::new(env!("CARGO_BIN_EXE_host-sim"))
-        .args(["diagnose", "--plant"])
-        .arg(&plant)
-        .arg("--recording")
-        .arg(recs.join("nominal.csv"))
-        .arg("--json")
-        .arg(&single)
-        .output()
-        .unwrap();
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let r = host_sim(&[
+        &"diagnose",
+        &"--plant",
+        &plant,
+        &"--recording",
+        &recs.join("nominal.csv"),
+        &"--json",
+        &single,
+    ]);
+    ok(&r);
     assert_eq!(
         std::fs::read_to_string(out.join("nominal.json")).unwrap(),
         std::fs::read_to_string(&single).unwrap()

@@ -4,26 +4,6 @@
 mod common;
 use common::*;
 use std::path::{Path, PathBuf};
-use std::process::Output;
-
-fn fixtures() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures")
-}
-
-fn plant() -> PathBuf {
-    fixtures().join("reference-1dof.toml")
-}
-
-fn ok(r: &Output) -> String {
-    assert!(
-        r.status.success(),
-        "status {:?}\nstdout:\n{}\nstderr:\n{}",
-        r.status,
-        text(&r.stdout),
-        text(&r.stderr)
-    );
-    text(&r.stdout)
-}
 
 /// A `key = value` number of a TOML table (top-level scalar keys only).
 fn toml_number(path: &Path, table: &str, key: &str) -> f64 {
@@ -366,7 +346,7 @@ fn identify_plant_recovers_perturbed_parameters_from_a_simulated_recording() {
         &"--plant",
         &truth,
         &"--inputs",
-        &fixtures().join("pulses_nominal.csv"),
+        &fixture("pulses_nominal.csv"),
         &"--out",
         &rec,
     ]));
@@ -406,7 +386,7 @@ fn identify_plant_recovers_perturbed_parameters_from_a_simulated_recording() {
 fn identify_plant_rejects_unknown_keys_and_bad_bounds_without_writing() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("P2.toml");
-    let fixture = fixtures().join("pulses_nominal.csv");
+    let pulses = fixture("pulses_nominal.csv");
     for (params, want) in [
         ("muscle.no_such_key", "`muscle.no_such_key`"),
         ("muscle.damping_m2s=1:2", "inside the bounds"),
@@ -416,7 +396,7 @@ fn identify_plant_rejects_unknown_keys_and_bad_bounds_without_writing() {
             &"identify",
             &"plant",
             &"--recording",
-            &fixture,
+            &pulses,
             &"--plant",
             &plant(),
             &"--params",
@@ -441,7 +421,7 @@ fn identify_torque_warns_when_the_activation_is_not_symmetric() {
         &"identify",
         &"torque",
         &"--recording",
-        &fixtures().join("pulses_nominal.csv"),
+        &fixture("pulses_nominal.csv"),
         &"--plant",
         &plant(),
         &"--out",
@@ -462,7 +442,7 @@ fn identify_plant_finds_the_load_inertia_in_the_independent_loaded_fixture() {
         &"identify",
         &"plant",
         &"--recording",
-        &fixtures().join("pulses_loaded.csv"),
+        &fixture("pulses_loaded.csv"),
         &"--plant",
         &plant(),
         &"--params",

@@ -6,19 +6,7 @@
 mod common;
 use common::*;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn shared() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared")
-}
-
-fn plant() -> PathBuf {
-    shared().join("plant/reference-1dof.toml")
-}
-
-fn fixture() -> PathBuf {
-    shared().join("conformance/pulses_nominal.csv")
-}
+use std::process::Output;
 
 /// Status 2, every `needles` in stderr, and no panic.
 fn refused(r: &Output, needles: &[&str]) -> String {
@@ -104,7 +92,10 @@ impl Workspace {
             .map(|a| {
                 let mut a = a
                     .replace("{plant}", &plant().to_string_lossy())
-                    .replace("{fixture}", &fixture().to_string_lossy())
+                    .replace(
+                        "{fixture}",
+                        &fixture("pulses_nominal.csv").to_string_lossy(),
+                    )
                     .replace("{w}", &self.dir.path().to_string_lossy());
                 for (name, p) in paths {
                     a = a.replace(&format!("{{{name}}}"), &p.to_string_lossy());
@@ -112,10 +103,7 @@ impl Workspace {
                 a
             })
             .collect();
-        let r = Command::new(env!("CARGO_BIN_EXE_host-sim"))
-            .args(&args)
-            .output()
-            .unwrap();
+        let r = bin().args(&args).output().unwrap();
         let err = refused(&r, needles);
         assert_eq!(
             self.snapshot(),
@@ -194,7 +182,10 @@ fn a_scenario_settling_after_its_end_is_refused_at_its_line() {
 #[test]
 fn simulate_refuses_to_write_over_its_input_recording() {
     let w = Workspace::new();
-    let rec = w.write("rec.csv", &std::fs::read_to_string(fixture()).unwrap());
+    let rec = w.write(
+        "rec.csv",
+        &std::fs::read_to_string(fixture("pulses_nominal.csv")).unwrap(),
+    );
     // The same file under another spelling of its path.
     w.refuses_with(
         "simulate --plant {plant} --inputs {rec} --out {w}/./rec.csv",
@@ -224,7 +215,7 @@ fn diagnose_with_a_report_path_that_is_a_file_keeps_the_json() {
 #[test]
 fn demo_with_a_bad_fixture_leaves_nothing_behind() {
     let w = Workspace::new();
-    let mut bad = std::fs::read_to_string(fixture()).unwrap();
+    let mut bad = std::fs::read_to_string(fixture("pulses_nominal.csv")).unwrap();
     bad.push_str("20.000000,0,0,0,0,abc,550,550,529,529\n");
     let bad = w.write("bad.csv", &bad);
     // The demo directory must not appear.

@@ -4,13 +4,13 @@
 mod common;
 use common::*;
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 use host_sim::io::recording::Recording;
 use host_sim::io::run_files::FIRMWARE_COLUMNS;
 
 fn simulate(scenario: &Path, out: &Path, extra: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_host-sim"))
+    bin()
         .arg("simulate")
         .arg("--plant")
         .arg(plant())

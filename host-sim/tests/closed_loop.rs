@@ -2,14 +2,11 @@
 //! with the firmware's reference controller and must meet its `[expect]` bounds; pressure
 //! set-points never exceed the muscle limit.
 
-use std::path::PathBuf;
+mod common;
+use common::*;
 
 use host_sim::control::closed_loop::{run, Scenario};
 use host_sim::Plant;
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
-}
 
 fn reference_plant() -> Plant {
     let p = root().join("host-sim/tests/fixtures/reference-1dof.toml");

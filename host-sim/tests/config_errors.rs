@@ -1,17 +1,14 @@
 //! Plant TOML: the nominal files load unchanged; unknown or missing keys are errors naming
 //! the key and the file; effects tables switch on model extensions.
 
-use std::path::PathBuf;
+mod common;
+use common::*;
 
 use host_sim::plant::PlantState;
 use host_sim::{Plant, PlantConfig, ValveInputs};
 
-fn plant_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures")
-}
-
 fn nominal_text() -> String {
-    std::fs::read_to_string(plant_dir().join("reference-1dof.toml"))
+    std::fs::read_to_string(fixture("reference-1dof.toml"))
         .expect("tests/fixtures/reference-1dof.toml")
 }
 
@@ -25,11 +22,11 @@ fn load_err(text: &str) -> String {
 #[test]
 fn both_reference_files_load_unchanged_without_effects() {
     for f in ["reference-1dof.toml", "reference-1dof-loaded.toml"] {
-        let cfg = PlantConfig::load(plant_dir().join(f)).unwrap_or_else(|e| panic!("{e}"));
+        let cfg = PlantConfig::load(fixture(f)).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(cfg.effects, Default::default(), "{f}");
     }
-    let n = PlantConfig::load(plant_dir().join("reference-1dof.toml")).unwrap();
-    let l = PlantConfig::load(plant_dir().join("reference-1dof-loaded.toml")).unwrap();
+    let n = PlantConfig::load(fixture("reference-1dof.toml")).unwrap();
+    let l = PlantConfig::load(fixture("reference-1dof-loaded.toml")).unwrap();
     assert!(l.joint.inertia_kgm2 > 10.0 * n.joint.inertia_kgm2);
 }
 
@@ -81,7 +78,7 @@ fn invalid_value_names_key() {
 
 #[test]
 fn initial_state_is_an_equilibrium_with_the_fixture_tension() {
-    let plant = Plant::load(plant_dir().join("reference-1dof.toml")).unwrap();
+    let plant = Plant::load(fixture("reference-1dof.toml")).unwrap();
     let x = plant.initial_state();
     let d = plant.derivatives(&x, &ValveInputs::CLOSED);
     assert_eq!(d, PlantState::default());

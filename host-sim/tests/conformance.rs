@@ -9,6 +9,9 @@
 //! The other tests read in-repo copies (`tests/fixtures/`);
 //! `fixture_copies_equal_the_shared_originals` checks they equal the shared originals.
 
+mod common;
+use common::*;
+
 use std::path::PathBuf;
 
 use host_sim::fit::{compare, format_table};
@@ -17,12 +20,8 @@ use host_sim::plant::config::PlantConfig;
 use host_sim::sim::{simulate, SolverOptions};
 use host_sim::{Plant, Recording};
 
-fn shared_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared")
-}
-
 fn conformance_files() -> Vec<PathBuf> {
-    let dir = shared_dir().join("conformance");
+    let dir = shared().join("conformance");
     let entries = std::fs::read_dir(&dir).unwrap_or_else(|e| {
         panic!(
             "conformance fixtures not found at {} ({e}); the shared directory must sit next to the workspace",
@@ -74,7 +73,7 @@ fn check(file: &PathBuf, opts: &SolverOptions, with_options: bool) -> Vec<(Chann
     let plant_name = reference
         .meta("plant")
         .unwrap_or_else(|| panic!("{}: no `# plant = ...` metadata", file.display()));
-    let plant_path = shared_dir().join("plant").join(plant_name);
+    let plant_path = shared().join("plant").join(plant_name);
     let plant = match reference.meta("thermal") {
         Some(t) if with_options => {
             let mut text = std::fs::read_to_string(&plant_path).unwrap();
@@ -176,7 +175,7 @@ fn fixture_copies_equal_the_shared_originals() {
     let readme = std::fs::read_to_string(fixtures.join("README.md")).unwrap();
     for (copy, original) in copies {
         let a = std::fs::read(fixtures.join(copy)).unwrap_or_else(|e| panic!("{copy}: {e}"));
-        let b = std::fs::read(shared_dir().join(original))
+        let b = std::fs::read(shared().join(original))
             .unwrap_or_else(|e| panic!("../shared/{original}: {e}"));
         assert!(
             a == b,

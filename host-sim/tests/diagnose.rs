@@ -5,22 +5,18 @@
 
 mod common;
 use common::*;
-use std::path::PathBuf;
+use std::path::Path;
 
 use host_sim::diagnose::synth::{expected_id, generate, plant_with, Excitation, SynthSpec};
 use host_sim::diagnose::{diagnose, DiagnoseOptions, Diagnosis, Verdict};
 use host_sim::{PlantConfig, Recording};
 
-fn nominal_path() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/reference-1dof.toml")
-}
-
 fn nominal_text() -> String {
-    std::fs::read_to_string(nominal_path()).unwrap()
+    std::fs::read_to_string(plant()).unwrap()
 }
 
 fn nominal() -> PlantConfig {
-    PlantConfig::load(nominal_path()).unwrap()
+    PlantConfig::load(plant()).unwrap()
 }
 
 /// TRAIN (pulses) and CHECK (chirp + steps) recordings of the rig with `truths` concealed.
@@ -167,25 +163,19 @@ fn cli_end_to_end_writes_json_and_report() {
     check.write(&cp).unwrap();
     let out = dir.path().join("out.json");
     let rep = dir.path().join("report");
-    let o = bin()
-        .args(["diagnose", "--plant"])
-        .arg(nominal_path())
-        .arg("--recording")
-        .arg(&tp)
-        .arg("--check")
-        .arg(&cp)
-        .arg("--json")
-        .arg(&out)
-        .arg("--report")
-        .arg(&rep)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        o.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let stdout = run_ok(&[
+        &"diagnose",
+        &"--plant",
+        &plant(),
+        &"--recording",
+        &tp,
+        &"--check",
+        &cp,
+        &"--json",
+        &out,
+        &"--report",
+        &rep,
+    ]);
     assert!(stdout.contains("The model leaves out leakage"), "{stdout}");
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
@@ -208,6 +198,21 @@ fn cli_end_to_end_writes_json_and_report() {
 #[test]
 fn bad_inputs_give_clear_errors() {
     let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("o.json");
+    let diagnose_fails = |plant: &Path, recording: &Path| {
+        run_exits(
+            2,
+            &[
+                &"diagnose",
+                &"--plant",
+                &plant,
+                &"--recording",
+                &recording,
+                &"--json",
+                &out,
+            ],
+        )
+    };
     // A recording with a non-number on line 4 (2 comment lines, header, then data).
     let bad = dir.path().join("bad.csv");
     std::fs::write(
@@ -215,37 +220,20 @@ fn bad_inputs_give_clear_errors() {
         "# sample_period_s = 0.001\n# x = y\nt_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg\n0,0,0,0,0,zero\n0.001,0,0,0,0,0\n",
     )
     .unwrap();
-    let out = dir.path().join("o.json");
-    let o = bin()
-        .args(["diagnose", "--plant"])
-        .arg(nominal_path())
-        .arg("--recording")
-        .arg(&bad)
-        .arg("--json")
-        .arg(&out)
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(2), "{err}");
+    let err = diagnose_fails(&plant(), &bad);
     assert!(
         err.contains("bad.csv:4") && err.contains("angle_deg"),
         "{err}"
     );
     assert!(!out.exists());
     // A plant file with a misspelt key.
-    let plant = dir.path().join("p.toml");
-    std::fs::write(&plant, nominal_text().replace("inertia_kgm2", "inertia_kg")).unwrap();
-    let o = bin()
-        .args(["diagnose", "--plant"])
-        .arg(&plant)
-        .arg("--recording")
-        .arg(&bad)
-        .arg("--json")
-        .arg(&out)
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(2), "{err}");
+    let misspelt = dir.path().join("p.toml");
+    std::fs::write(
+        &misspelt,
+        nominal_text().replace("inertia_kgm2", "inertia_kg"),
+    )
+    .unwrap();
+    let err = diagnose_fails(&misspelt, &bad);
     assert!(
         err.contains("p.toml") && err.contains("inertia_kg"),
         "{err}"
@@ -257,21 +245,12 @@ fn bad_inputs_give_clear_errors() {
         "t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg\n0,0,0,0,0,0\n0.001,0,0,0,0,0\n0.002,0,0,0,0,0\n",
     )
     .unwrap();
-    let o = bin()
-        .args(["diagnose", "--plant"])
-        .arg(nominal_path())
-        .arg("--recording")
-        .arg(&short)
-        .arg("--json")
-        .arg(&out)
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(2), "{err}");
+    let err = diagnose_fails(&plant(), &short);
     assert!(
         err.contains("short.csv") && err.contains("at least"),
         "{err}"
     );
+    assert!(!out.exists());
 }
 
 /// The diagnosis of `rec` against the nominal file, default options, no check recording.
@@ -412,22 +391,17 @@ fn pure_noise_names_nothing_and_exits_3_with_the_json_written() {
     let tp = dir.path().join("noise.csv");
     train.write(&tp).unwrap();
     let out = dir.path().join("out.json");
-    let o = bin()
-        .args(["diagnose", "--plant"])
-        .arg(nominal_path())
-        .arg("--recording")
-        .arg(&tp)
-        .arg("--json")
-        .arg(&out)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    assert_eq!(
-        o.status.code(),
-        Some(3),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let o = host_sim(&[
+        &"diagnose",
+        &"--plant",
+        &plant(),
+        &"--recording",
+        &tp,
+        &"--json",
+        &out,
+    ]);
+    exits(3, &o);
+    let stdout = text(&o.stdout);
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     let verdict = v["verdict"].as_str().unwrap();

@@ -15,7 +15,8 @@
 //! (the same inputs integrated in other segments, so the whole integration error of both).
 //! "Differs" is more than 10 times that on at least one channel.
 
-use std::path::PathBuf;
+mod common;
+use common::*;
 
 use host_sim::control::closed_loop::{run_with, ClosedLoopRun, Scenario};
 use host_sim::control::compare::{control_tuned_path, score_suite_with, ControlTuning};
@@ -26,10 +27,6 @@ use host_sim::io::recording::{Channel, Recording};
 use host_sim::sim::{simulate, SolverOptions};
 use host_sim::{Measurement, Plant, PlantConfig};
 use pam_firmware::tick::ControllerConfig;
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
-}
 
 fn nominal_toml() -> String {
     std::fs::read_to_string(root().join("../shared/plant/reference-1dof.toml")).unwrap()
@@ -547,10 +544,7 @@ fn cli_closed_loop_recording_replays_open_loop_on_the_same_plant() {
     // Exit status 1 is a run whose `[expect]` is not met: the step scenario's bounds are for
     // the nominal plant, and its reference gains do not settle with an 8 ms dead time.
     let run = |args: &[&std::ffi::OsStr], codes: &[i32]| {
-        let o = std::process::Command::new(env!("CARGO_BIN_EXE_host-sim"))
-            .args(args)
-            .output()
-            .unwrap();
+        let o = bin().args(args).output().unwrap();
         let out = String::from_utf8_lossy(&o.stdout).into_owned();
         assert!(
             o.status.code().is_some_and(|c| codes.contains(&c)),

@@ -16,6 +16,9 @@
 //!
 //! Each test prints how many inputs it ran and how many the parser accepted / rejected.
 
+mod common;
+use common::*;
+
 use std::cell::Cell;
 use std::path::PathBuf;
 
@@ -24,14 +27,6 @@ use host_sim::plant::arm3::Arm3Config;
 use host_sim::{Plant, PlantConfig, Recording};
 use proptest::prelude::*;
 use proptest::test_runner::{Config, TestRunner};
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn shared() -> PathBuf {
-    root().join("../shared")
-}
 
 fn cases() -> u32 {
     std::env::var("FUZZ_CASES")

@@ -12,26 +12,11 @@
 mod common;
 use common::*;
 use std::path::Path;
-use std::process::Command;
 
 use host_sim::identify::cli::tondu_of;
 use host_sim::identify::force::{self, ForceSweep};
 use host_sim::PlantConfig;
 use pam_firmware::constants::{FIXED_FORCE_LAW, FORCE_LAW};
-
-fn run(args: &[&dyn AsRef<std::ffi::OsStr>]) {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_host-sim"));
-    for a in args {
-        c.arg(a);
-    }
-    let r = c.output().unwrap();
-    assert!(
-        r.status.success(),
-        "{}\n{}",
-        String::from_utf8_lossy(&r.stdout),
-        String::from_utf8_lossy(&r.stderr)
-    );
-}
 
 fn table(path: &Path, name: &str) -> toml::Table {
     let t: toml::Table = std::fs::read_to_string(path)
@@ -50,8 +35,8 @@ fn checked_in_force_law_is_what_identify_gives_from_the_generated_sweep() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("force_sweep.csv");
     let out = dir.path().join("force_law.toml");
-    run(&[&"sweep", &"force", &"--plant", &plant(), &"--out", &data]);
-    run(&[
+    run_ok(&[&"sweep", &"force", &"--plant", &plant(), &"--out", &data]);
+    run_ok(&[
         &"identify",
         &"force",
         &"--data",
@@ -117,8 +102,8 @@ fn checked_in_torque_model_is_what_identify_gives_from_the_generated_sweep() {
     let dir = tempfile::tempdir().unwrap();
     let rec = dir.path().join("torque_sweep.csv");
     let out = dir.path().join("torque_model.toml");
-    run(&[&"sweep", &"torque", &"--plant", &plant(), &"--out", &rec]);
-    run(&[
+    run_ok(&[&"sweep", &"torque", &"--plant", &plant(), &"--out", &rec]);
+    run_ok(&[
         &"identify",
         &"torque",
         &"--recording",

@@ -3,7 +3,8 @@
 //! sensor noise, is fitted starting from the reference plant; the true values come back and the
 //! held-out fit improves.
 
-use std::path::PathBuf;
+mod common;
+use common::*;
 
 use host_sim::identify::plant::{fit_plant, parse_param_specs, PlantFitOptions};
 use host_sim::identify::MeasurementNoise;
@@ -11,21 +12,17 @@ use host_sim::io::recording::Channel;
 use host_sim::sim::{simulate, SolverOptions};
 use host_sim::{Plant, PlantConfig, Recording};
 
-fn fixtures() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures")
-}
-
 /// `plant` replayed on the first `n` inputs of the fixture, as a noisy recording.
 fn recording(plant_text: &str, n: usize, noise: &MeasurementNoise) -> Recording {
-    let fixture = Recording::read(fixtures().join("pulses_nominal.csv")).unwrap();
+    let pulses = Recording::read(fixture("pulses_nominal.csv")).unwrap();
     let plant = Plant::from_config(&PlantConfig::from_toml_str(plant_text, "truth.toml").unwrap());
-    let dt = fixture.sample_period_s();
-    let inputs = fixture.inputs[..n].to_vec();
+    let dt = pulses.sample_period_s();
+    let inputs = pulses.inputs[..n].to_vec();
     let sim = simulate(&plant, &inputs, dt, &SolverOptions::default()).unwrap();
     let meas = plant.measure_series(&sim.states, dt);
     let mut rec = Recording {
         metadata: vec![("sample_period_s".into(), format!("{dt}"))],
-        t_s: fixture.t_s[..n].to_vec(),
+        t_s: pulses.t_s[..n].to_vec(),
         inputs,
         ..Default::default()
     };
@@ -38,7 +35,7 @@ fn recording(plant_text: &str, n: usize, noise: &MeasurementNoise) -> Recording 
 
 #[test]
 fn perturbed_conductance_damping_and_inertia_are_recovered_from_a_noisy_recording() {
-    let reference = std::fs::read_to_string(fixtures().join("reference-1dof.toml")).unwrap();
+    let reference = std::fs::read_to_string(fixture("reference-1dof.toml")).unwrap();
     let truth = reference
         .replacen(
             "sonic_conductance_m3_per_s_pa = 8.0e-9",
@@ -90,7 +87,7 @@ fn perturbed_conductance_damping_and_inertia_are_recovered_from_a_noisy_recordin
 
 #[test]
 fn a_short_recording_or_a_bad_holdout_is_an_error() {
-    let reference = std::fs::read_to_string(fixtures().join("reference-1dof.toml")).unwrap();
+    let reference = std::fs::read_to_string(fixture("reference-1dof.toml")).unwrap();
     let rec = recording(&reference, 15, &MeasurementNoise::NONE);
     let specs = parse_param_specs(&["joint.inertia_kgm2".into()], &reference, "r.toml").unwrap();
     let e = fit_plant(
@@ -115,7 +112,7 @@ fn a_short_recording_or_a_bad_holdout_is_an_error() {
 /// `[effects.joint_friction]` are recovered from a noisy recording, starting from guesses.
 #[test]
 fn joint_friction_constants_are_identified() {
-    let reference = std::fs::read_to_string(fixtures().join("reference-1dof.toml")).unwrap();
+    let reference = std::fs::read_to_string(fixture("reference-1dof.toml")).unwrap();
     let friction = |coulomb: f64, viscous: f64| {
         format!(
             "{reference}\n[effects.joint_friction]\ncoulomb_nm = {coulomb:e}\nbreakaway_nm = 0.5\n\

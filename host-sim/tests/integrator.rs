@@ -1,18 +1,15 @@
 //! The integration strategy: spanning runs of identical inputs with dense output agrees with
 //! restarting at every sample (the closed-loop pattern), and tolerances converge.
 
-use std::path::PathBuf;
+mod common;
+use common::*;
 
 use host_sim::sim::{simulate, Integrator, SolverOptions};
 use host_sim::{Plant, Recording};
 
-fn fixtures() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures")
-}
-
-fn fixture() -> (Plant, Recording) {
-    let rec = Recording::read(fixtures().join("pulses_loaded.csv")).unwrap();
-    let plant = Plant::load(fixtures().join("reference-1dof-loaded.toml")).unwrap();
+fn loaded() -> (Plant, Recording) {
+    let rec = Recording::read(fixture("pulses_loaded.csv")).unwrap();
+    let plant = Plant::load(fixture("reference-1dof-loaded.toml")).unwrap();
     (plant, rec)
 }
 
@@ -34,7 +31,7 @@ fn max_rel_diff(a: &[[f64; 4]], b: &[[f64; 4]]) -> [f64; 4] {
 
 #[test]
 fn segment_spanning_matches_per_sample_restarts() {
-    let (plant, rec) = fixture();
+    let (plant, rec) = loaded();
     let dt = rec.sample_period_s();
     let opts = SolverOptions::default();
     let spanned: Vec<[f64; 4]> = simulate(&plant, &rec.inputs, dt, &opts)
@@ -56,7 +53,7 @@ fn segment_spanning_matches_per_sample_restarts() {
 
 #[test]
 fn tightening_the_tolerance_changes_the_result_by_little() {
-    let (plant, rec) = fixture();
+    let (plant, rec) = loaded();
     let dt = rec.sample_period_s();
     let run = |rtol: f64| -> Vec<[f64; 4]> {
         let opts = SolverOptions {
@@ -85,11 +82,10 @@ fn tightening_the_tolerance_changes_the_result_by_little() {
 #[test]
 fn single_step_path_matches_dopri5_per_sample() {
     // The valve commands the firmware issued on the random set-point scenario.
-    let plant = Plant::load(fixtures().join("reference-1dof.toml")).unwrap();
-    let scenario = host_sim::control::closed_loop::Scenario::load(
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenarios/random.toml"),
-    )
-    .unwrap();
+    let plant = Plant::load(fixture("reference-1dof.toml")).unwrap();
+    let scenario =
+        host_sim::control::closed_loop::Scenario::load(root().join("scenarios/random.toml"))
+            .unwrap();
     let run = host_sim::control::closed_loop::run(&plant, &scenario).unwrap();
     let inputs: Vec<_> = run.rows.iter().map(|r| r.inputs).collect();
     let dt = run.dt_s;

@@ -6,6 +6,9 @@
 //! Needs `qemu-system-arm` and the thumbv7em-none-eabihf target: without them the QEMU tests
 //! fail when `CI=true` and are skipped with a message otherwise.
 
+mod common;
+use common::*;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
@@ -13,18 +16,6 @@ use std::time::Duration;
 use host_sim::control::closed_loop::{run_with, Scenario};
 use host_sim::control::pil::{first_difference, run_scenario, PilOptions};
 use host_sim::{Plant, Recording};
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn plant_path() -> PathBuf {
-    root().join("../shared/plant/reference-1dof.toml")
-}
-
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_host-sim"))
-}
 
 /// The step scenario, shortened to 1.5 s (1500 ticks), sensors in board counts.
 fn scenario(dir: &Path) -> PathBuf {
@@ -86,40 +77,35 @@ fn pil_matches_the_in_process_loop_bit_for_bit_and_capture_replays() {
     let out = dir.path().join("pil.csv");
     let log = dir.path().join("pil.stream");
     let t0 = std::time::Instant::now();
-    let r = bin()
-        .args(["pil", "--plant"])
-        .arg(plant_path())
-        .arg("--scenario")
-        .arg(&s)
-        .arg("--out")
-        .arg(&out)
-        .arg("--log")
-        .arg(&log)
-        .arg("--elf")
-        .arg(&elf)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&r.stdout);
-    assert!(
-        r.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&r.stderr)
-    );
+    let r = host_sim(&[
+        &"pil",
+        &"--plant",
+        &plant(),
+        &"--scenario",
+        &s,
+        &"--out",
+        &out,
+        &"--log",
+        &log,
+        &"--elf",
+        &elf,
+    ]);
+    let stdout = ok(&r);
     assert!(stdout.contains("bit for bit on all 1500 ticks"), "{stdout}");
     eprintln!("pil: 1500 ticks in {:.2} s", t0.elapsed().as_secs_f64());
 
     // The recording equals `simulate --scenario`'s on the valve columns and the angle.
     let sim = dir.path().join("sim.csv");
-    let r = bin()
-        .args(["simulate", "--plant"])
-        .arg(plant_path())
-        .arg("--scenario")
-        .arg(&s)
-        .arg("--out")
-        .arg(&sim)
-        .output()
-        .unwrap();
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let r = host_sim(&[
+        &"simulate",
+        &"--plant",
+        &plant(),
+        &"--scenario",
+        &s,
+        &"--out",
+        &sim,
+    ]);
+    ok(&r);
     let (a, b) = (
         Recording::read(&out).unwrap(),
         Recording::read(&sim).unwrap(),
@@ -134,14 +120,8 @@ fn pil_matches_the_in_process_loop_bit_for_bit_and_capture_replays() {
     // The stream: 46 bytes per tick, captured into a recording simulate replays.
     assert_eq!(std::fs::metadata(&log).unwrap().len(), 1500 * 46);
     let cap = dir.path().join("cap.csv");
-    let r = bin()
-        .args(["capture", "--log"])
-        .arg(&log)
-        .arg("--out")
-        .arg(&cap)
-        .output()
-        .unwrap();
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let r = host_sim(&[&"capture", &"--log", &log, &"--out", &cap]);
+    ok(&r);
     let c = Recording::read(&cap).unwrap();
     assert_eq!(c.len(), 1500);
     assert_eq!(c.inputs, a.inputs, "captured openings = applied openings");
@@ -158,16 +138,16 @@ fn pil_matches_the_in_process_loop_bit_for_bit_and_capture_replays() {
         );
     }
     let rep = dir.path().join("rep.csv");
-    let r = bin()
-        .args(["simulate", "--plant"])
-        .arg(plant_path())
-        .arg("--inputs")
-        .arg(&cap)
-        .arg("--out")
-        .arg(&rep)
-        .output()
-        .unwrap();
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let r = host_sim(&[
+        &"simulate",
+        &"--plant",
+        &plant(),
+        &"--inputs",
+        &cap,
+        &"--out",
+        &rep,
+    ]);
+    ok(&r);
     // Replaying the captured openings open loop reproduces the closed-loop angle.
     let rr = Recording::read(&rep).unwrap();
     let fit = host_sim::fit::fit_percent(aa, rr.channel(host_sim::Channel::AngleDeg).unwrap());
@@ -182,15 +162,14 @@ fn pil_matches_the_in_process_loop_bit_for_bit_and_capture_replays() {
     cut.extend_from_slice(&bytes[101 * 46..]);
     let lossy = dir.path().join("lossy.stream");
     std::fs::write(&lossy, cut).unwrap();
-    let r = bin()
-        .args(["capture", "--log"])
-        .arg(&lossy)
-        .arg("--out")
-        .arg(dir.path().join("never.csv"))
-        .output()
-        .unwrap();
-    let e = String::from_utf8_lossy(&r.stderr);
-    assert_eq!(r.status.code(), Some(2), "{e}");
+    let r = host_sim(&[
+        &"capture",
+        &"--log",
+        &lossy,
+        &"--out",
+        &dir.path().join("never.csv"),
+    ]);
+    let e = exits(2, &r);
     assert!(
         e.contains("sequence 101 after 99") && e.contains("1 record(s) lost"),
         "{e}"
@@ -202,7 +181,7 @@ fn pil_matches_the_in_process_loop_bit_for_bit_and_capture_replays() {
 fn a_faulting_firmware_and_a_missing_qemu_are_clear_bounded_errors() {
     let Some(elf) = pil_elf() else { return };
     let dir = tempfile::tempdir().unwrap();
-    let plant = Plant::load(plant_path()).unwrap();
+    let plant = Plant::load(plant()).unwrap();
     let sc = Scenario::load(scenario(dir.path())).unwrap();
 
     let mut opts = PilOptions::new(elf.clone());
@@ -257,7 +236,7 @@ fn a_faulting_firmware_and_a_missing_qemu_are_clear_bounded_errors() {
 #[test]
 fn a_difference_names_the_first_tick_and_field() {
     let dir = tempfile::tempdir().unwrap();
-    let plant = Plant::load(plant_path()).unwrap();
+    let plant = Plant::load(plant()).unwrap();
     let sc = Scenario::load(scenario(dir.path())).unwrap();
     let cfg = pam_firmware::tick::ControllerConfig::reference(1000.0);
     let a = run_with(&plant, &sc, cfg, &mut |_| {}).unwrap();
@@ -300,14 +279,8 @@ fn capture_reads_defmt_print_text_lines_and_refuses_a_missing_sample() {
     let log = dir.path().join("rtt.txt");
     std::fs::write(&log, &text).unwrap();
     let out = dir.path().join("c.csv");
-    let r = bin()
-        .args(["capture", "--log"])
-        .arg(&log)
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let r = host_sim(&[&"capture", &"--log", &log, &"--out", &out]);
+    ok(&r);
     let c = Recording::read(&out).unwrap();
     assert_eq!(c.len(), 5);
     assert_eq!(c.inputs[1].u_in2, 1.0);
@@ -319,15 +292,14 @@ fn capture_reads_defmt_print_text_lines_and_refuses_a_missing_sample() {
 
     text += &line(&rec(5, f32::NAN));
     std::fs::write(&log, &text).unwrap();
-    let r = bin()
-        .args(["capture", "--log"])
-        .arg(&log)
-        .arg("--out")
-        .arg(dir.path().join("n.csv"))
-        .output()
-        .unwrap();
-    let e = String::from_utf8_lossy(&r.stderr);
-    assert_eq!(r.status.code(), Some(2), "{e}");
+    let r = host_sim(&[
+        &"capture",
+        &"--log",
+        &log,
+        &"--out",
+        &dir.path().join("n.csv"),
+    ]);
+    let e = exits(2, &r);
     assert!(
         e.contains("rtt.txt: line 7") && e.contains("no angle sample"),
         "{e}"

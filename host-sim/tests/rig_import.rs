@@ -21,10 +21,6 @@ const FINE_DT_S: f64 = 0.000_25;
 const NOMINAL_STEP_S: f64 = 0.025; // 40 Hz
 const P_ATM_PA: f64 = 101_325.0;
 
-fn plant_path() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant/reference-1dof.toml")
-}
-
 fn tmp() -> tempfile::TempDir {
     tempfile::tempdir().unwrap()
 }
@@ -87,7 +83,7 @@ curve = [[0.0, -1.0], [4.8, 0.0], [5.2, 0.0], [10.0, 1.0]]
 
 /// Writes the rig file; returns its path and the true gauge pressures at the stamps [Pa].
 fn rig_file(dir: &Path, duration_s: f64, seed: u64, drop_rows: &[usize]) -> (PathBuf, Vec<f64>) {
-    let plant = Plant::load(plant_path()).unwrap();
+    let plant = Plant::load(plant()).unwrap();
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
     // Jittered stamps on the fine grid: k * 25 ms +- 15 % (3.75 ms).
     let n = (duration_s / NOMINAL_STEP_S) as usize;
@@ -178,15 +174,9 @@ fn jittered_40hz_bar_and_volts_rig_file_imports_simulates_and_diagnoses() {
     let (raw, p_true) = rig_file(dir.path(), 20.0, 11, &[]);
     let map = write_map(dir.path(), MAP);
     let rec_path = dir.path().join("rec.csv");
-    let out = bin()
-        .args(["import", "--map"])
-        .arg(&map)
-        .arg("--input")
-        .arg(&raw)
-        .arg("--out")
-        .arg(&rec_path)
-        .output()
-        .unwrap();
+    let out = host_sim(&[
+        &"import", &"--map", &map, &"--input", &raw, &"--out", &rec_path,
+    ]);
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
         out.status.success(),
@@ -212,20 +202,16 @@ fn jittered_40hz_bar_and_volts_rig_file_imports_simulates_and_diagnoses() {
 
     // simulate replays it between its own stamps and fits the rig data closely.
     let sim_path = dir.path().join("sim.csv");
-    let out = bin()
-        .args(["simulate", "--plant"])
-        .arg(plant_path())
-        .arg("--inputs")
-        .arg(&rec_path)
-        .arg("--out")
-        .arg(&sim_path)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = host_sim(&[
+        &"simulate",
+        &"--plant",
+        &plant(),
+        &"--inputs",
+        &rec_path,
+        &"--out",
+        &sim_path,
+    ]);
+    ok(&out);
     let sim = Recording::read(&sim_path).unwrap();
     assert_eq!(sim.t_s, rec.t_s);
     let fits = compare(&rec, &sim).unwrap();
@@ -239,21 +225,16 @@ fn jittered_40hz_bar_and_volts_rig_file_imports_simulates_and_diagnoses() {
 
     // diagnose takes the jittered recording and finds nothing missing in a nominal rig.
     let json = dir.path().join("d.json");
-    let out = bin()
-        .args(["diagnose", "--plant"])
-        .arg(plant_path())
-        .arg("--recording")
-        .arg(&rec_path)
-        .arg("--json")
-        .arg(&json)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = host_sim(&[
+        &"diagnose",
+        &"--plant",
+        &plant(),
+        &"--recording",
+        &rec_path,
+        &"--json",
+        &json,
+    ]);
+    let stdout = ok(&out);
     let d: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     eprintln!("diagnose: {stdout}");
@@ -275,7 +256,7 @@ fn stamped_replay_beats_treating_jittered_stamps_as_uniform() {
         "{}",
         imp.max_jitter
     );
-    let plant = Plant::load(plant_path()).unwrap();
+    let plant = Plant::load(plant()).unwrap();
     let opts = SolverOptions::default();
     let fit_of = |states: &[host_sim::PlantState]| {
         let mut m = rec.clone();
@@ -315,17 +296,10 @@ fn gaps_are_listed_and_refused_or_split_never_filled() {
     let (raw, _) = rig_file(dir.path(), 6.0, 3, &[100, 101, 102]);
     let map = write_map(dir.path(), MAP);
     let out_path = dir.path().join("rec.csv");
-    let out = bin()
-        .args(["import", "--map"])
-        .arg(&map)
-        .arg("--input")
-        .arg(&raw)
-        .arg("--out")
-        .arg(&out_path)
-        .output()
-        .unwrap();
-    let e = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{e}");
+    let out = host_sim(&[
+        &"import", &"--map", &map, &"--input", &raw, &"--out", &out_path,
+    ]);
+    let e = exits(2, &out);
     // Row 100 of the data is line 104 (2 skipped, header, 1-based); the first kept row after
     // the gap is data row 103 -> line 104.
     assert!(
@@ -333,20 +307,10 @@ fn gaps_are_listed_and_refused_or_split_never_filled() {
         "{e}"
     );
     assert!(!out_path.exists());
-    let out = bin()
-        .args(["import", "--split", "--map"])
-        .arg(&map)
-        .arg("--input")
-        .arg(&raw)
-        .arg("--out")
-        .arg(&out_path)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = host_sim(&[
+        &"import", &"--split", &"--map", &map, &"--input", &raw, &"--out", &out_path,
+    ]);
+    ok(&out);
     let a = Recording::read(dir.path().join("rec-1.csv")).unwrap();
     let b = Recording::read(dir.path().join("rec-2.csv")).unwrap();
     assert_eq!(a.len(), 100);
@@ -360,15 +324,9 @@ fn bad_mapping_and_bad_cells_name_file_line_and_column() {
     let run = |map_text: &str, raw: &Path| {
         let map = write_map(dir.path(), map_text);
         let out_path = dir.path().join("never.csv");
-        let out = bin()
-            .args(["import", "--map"])
-            .arg(&map)
-            .arg("--input")
-            .arg(raw)
-            .arg("--out")
-            .arg(&out_path)
-            .output()
-            .unwrap();
+        let out = host_sim(&[
+            &"import", &"--map", &map, &"--input", &raw, &"--out", &out_path,
+        ]);
         assert_eq!(out.status.code(), Some(2));
         assert!(!out_path.exists());
         String::from_utf8_lossy(&out.stderr).into_owned()

@@ -2,12 +2,9 @@
 //! status 2 and leave the output untouched. (The search itself takes minutes; its procedure is
 //! checked by the local-optimum tests of `control_compare.rs` on the file it wrote.)
 
-use std::path::PathBuf;
-use std::process::Command;
+mod common;
+use common::*;
 
-fn plant() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant/reference-1dof.toml")
-}
 
 #[test]
 fn bad_tune_arguments_are_refused_without_touching_the_output() {
@@ -26,7 +23,7 @@ fn bad_tune_arguments_are_refused_without_touching_the_output() {
         ),
         (vec!["--cascade-start", "1,2"], "--cascade-start 1,2"),
     ] {
-        let r = Command::new(env!("CARGO_BIN_EXE_host-sim"))
+        let r = bin()
             .arg("tune")
             .arg("--plant")
             .arg(plant())
@@ -41,11 +38,7 @@ fn bad_tune_arguments_are_refused_without_touching_the_output() {
         assert_eq!(std::fs::read_to_string(&out).unwrap(), "previous\n");
     }
     // A missing plant file is named.
-    let r = Command::new(env!("CARGO_BIN_EXE_host-sim"))
-        .args(["tune", "--plant", "no/such/plant.toml", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
+    let r = host_sim(&[&"tune", &"--plant", &"no/such/plant.toml", &"--out", &out]);
     assert_eq!(r.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&r.stderr).contains("no/such/plant.toml"));
 }

@@ -46,3 +46,43 @@ pub fn bin() -> Command {
 pub fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
 }
+
+/// Asserts that the run succeeded (status, stdout and stderr shown otherwise); its stdout.
+pub fn ok(r: &Output) -> String {
+    assert!(
+        r.status.success(),
+        "status {:?}\nstdout:\n{}\nstderr:\n{}",
+        r.status,
+        text(&r.stdout),
+        text(&r.stderr)
+    );
+    text(&r.stdout)
+}
+
+/// Asserts that the run exited with status `code` (stdout and stderr shown otherwise); its
+/// stderr.
+pub fn exits(code: i32, r: &Output) -> String {
+    assert_eq!(
+        r.status.code(),
+        Some(code),
+        "stdout:\n{}\nstderr:\n{}",
+        text(&r.stdout),
+        text(&r.stderr)
+    );
+    text(&r.stderr)
+}
+
+/// Runs `host-sim` with `args` and asserts success; its stdout.
+pub fn run_ok(args: &[&dyn AsRef<OsStr>]) -> String {
+    ok(&host_sim(args))
+}
+
+/// Runs `host-sim` with `args` and asserts the exit status `code`; its stderr.
+pub fn run_exits(code: i32, args: &[&dyn AsRef<OsStr>]) -> String {
+    exits(code, &host_sim(args))
+}
+
+/// Seed 001's three-joint arm (the plant file shipped with host-sim).
+pub fn arm3_plant() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("plants/arm3-seed001.toml")
+}
