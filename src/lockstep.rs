@@ -93,6 +93,24 @@ pub struct NodeTick {
     pub pins: [bool; 4],
 }
 
+/// A valve output wired to nothing: writes are dropped. For runs that need only the openings
+/// the valve driver computes (host tests, benchmarks of the control law), never for a board.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct UnwiredPin;
+
+impl embedded_hal::digital::ErrorType for UnwiredPin {
+    type Error = Infallible;
+}
+
+impl OutputPin for UnwiredPin {
+    fn set_low(&mut self) -> Result<(), Infallible> {
+        Ok(())
+    }
+    fn set_high(&mut self) -> Result<(), Infallible> {
+        Ok(())
+    }
+}
+
 /// Reads a pin level back (the fake pins of the host, the image's pin latches).
 pub trait PinLevel {
     /// The level last written.

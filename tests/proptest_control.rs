@@ -3,15 +3,12 @@
 //! laws, valve drivers and the control tick never panic, never emit NaN in a command,
 //! raise a fault for bad inputs, and never ask for more than 600 kPa.
 
-use core::convert::Infallible;
-
 use pam_firmware::constants::{FORCE_LAW, TORQUE_MODEL};
 use pam_firmware::control::{
     JointState, PidGains, PositionController, PressureController, PressureLoopGains,
     TorqueController, TorqueLoopGains, TorqueMeasurement,
 };
 use pam_firmware::geometry::JointGeometry;
-use pam_firmware::safety::SafeState;
 use pam_firmware::sensors::{
     counts_to_rad, ChannelFault, ChannelLimits, ChannelStatus, ChannelValidator, PressureScaling,
     VelocityEstimator,
@@ -23,6 +20,7 @@ use proptest::prelude::*;
 
 mod common;
 use common::{angle, dt, f32_any_or, frame, opt, outputs_finite, pressure};
+use pam_firmware::lockstep::UnwiredPin;
 
 /// Any f32 (all classes), or a value in a realistic range, or a special value.
 fn limits() -> ChannelLimits {
@@ -32,19 +30,6 @@ fn limits() -> ChannelLimits {
         max_rate_per_s: 2e7,
         jump_margin: 2e4,
         stale_ticks: 10,
-    }
-}
-
-struct FakePin;
-impl embedded_hal::digital::ErrorType for FakePin {
-    type Error = Infallible;
-}
-impl embedded_hal::digital::OutputPin for FakePin {
-    fn set_low(&mut self) -> Result<(), Infallible> {
-        Ok(())
-    }
-    fn set_high(&mut self) -> Result<(), Infallible> {
-        Ok(())
     }
 }
 
@@ -165,7 +150,7 @@ proptest! {
         cmds in prop::collection::vec((f32_any_or(-1.5, 1.5), f32_any_or(-1.5, 1.5)), 1..100),
         period in 0u16..20, min_on in 0u16..20
     ) {
-        let mut v = OnOffValves::new(FakePin, FakePin, FakePin, FakePin,
+        let mut v = OnOffValves::new(UnwiredPin, UnwiredPin, UnwiredPin, UnwiredPin,
             OnOffPwmConfig { period_ticks: period, min_on_ticks: min_on });
         for (m1, m2) in cmds {
             let o = v.apply(&ValveCommand { muscle1: m1, muscle2: m2 }).unwrap();
@@ -195,16 +180,7 @@ proptest! {
         steps in prop::collection::vec((frame(), angle(), dt()), 1..80),
         vent in any::<bool>(),
     ) {
-        let mut cfg = ControllerConfig::reference(1000.0);
-        cfg.safe_state = if vent { SafeState::Vent } else { SafeState::Hold };
-        let safe_cmd = cfg.safe_state.command();
-        let mut t = ControlTick::new(cfg);
-        let mut latched = None;
-        for (f, sp, dt) in steps {
-            let o = t.step(&f, &Setpoint { angle_rad: sp }, dt);
-            // Finite, bounded, a fault in the tick of a bad input, latched, safe valves.
-            common::check_tick_output(&o, &f, sp, dt, &mut latched, safe_cmd)?;
-        }
+        common::run_checked(ControllerConfig::reference(1000.0), vent, steps, |_| Ok(()))?;
     }
 
     #[test]

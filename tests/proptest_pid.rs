@@ -7,7 +7,6 @@
 
 use pam_firmware::control::{ControlError, JointState};
 use pam_firmware::pid::{DpPid, DpPidGains};
-use pam_firmware::safety::SafeState;
 use pam_firmware::tick::{ControlLaw, ControlTick, ControllerConfig, SensorFrame, Setpoint};
 use pam_firmware::P_MUSCLE_MAX_GAUGE_PA;
 use proptest::prelude::*;
@@ -26,16 +25,21 @@ fn realistic_gains() -> impl Strategy<Value = DpPidGains> {
         0.0f32..6e5,
         0.0f32..=6e5,
     )
-        .prop_map(|(kp, ki, kd, w, fc, il, dpm, p0)| DpPidGains {
-            kp_pa_per_rad: kp,
-            ki_pa_per_rad_s: ki,
-            kd_pa_s_per_rad: kd,
-            setpoint_rate_weight: w,
-            setpoint_rate_cutoff_hz: fc,
-            i_limit_pa: il,
-            dp_max_pa: dpm,
-            p0_gauge_pa: p0,
-        })
+        .prop_map(gains)
+}
+
+/// The gains of a drawn tuple (kp, ki, kd, w, fc, i_limit, dp_max, p0).
+fn gains((kp, ki, kd, w, fc, il, dpm, p0): (f32, f32, f32, f32, f32, f32, f32, f32)) -> DpPidGains {
+    DpPidGains {
+        kp_pa_per_rad: kp,
+        ki_pa_per_rad_s: ki,
+        kd_pa_s_per_rad: kd,
+        setpoint_rate_weight: w,
+        setpoint_rate_cutoff_hz: fc,
+        i_limit_pa: il,
+        dp_max_pa: dpm,
+        p0_gauge_pa: p0,
+    }
 }
 
 fn any_gains() -> impl Strategy<Value = DpPidGains> {
@@ -51,16 +55,7 @@ fn any_gains() -> impl Strategy<Value = DpPidGains> {
             f32_any_or(0.0, 6e5),
             f32_any_or(0.0, 6e5),
         )
-            .prop_map(|(kp, ki, kd, w, fc, il, dpm, p0)| DpPidGains {
-                kp_pa_per_rad: kp,
-                ki_pa_per_rad_s: ki,
-                kd_pa_s_per_rad: kd,
-                setpoint_rate_weight: w,
-                setpoint_rate_cutoff_hz: fc,
-                i_limit_pa: il,
-                dp_max_pa: dpm,
-                p0_gauge_pa: p0,
-            }),
+            .prop_map(gains),
     ]
 }
 
@@ -126,17 +121,11 @@ proptest! {
     ) {
         let mut cfg = ControllerConfig::reference(1000.0);
         cfg.law = ControlLaw::DirectPid(tuned_like());
-        cfg.safe_state = if vent { SafeState::Vent } else { SafeState::Hold };
-        let safe_cmd = cfg.safe_state.command();
-        let mut t = ControlTick::new(cfg);
-        let mut latched = None;
-        for (f, sp, dt) in steps {
-            let o = t.step(&f, &Setpoint { angle_rad: sp }, dt);
-            common::check_tick_output(&o, &f, sp, dt, &mut latched, safe_cmd)?;
-            if o.armed {
-                prop_assert_eq!(o.torque_des_nm, 0.0);
-            }
-        }
+        // The PID drives dp directly: no joint torque is ever asked for.
+        common::run_checked(cfg, vent, steps, |o| {
+            prop_assert_eq!(o.torque_des_nm, 0.0);
+            Ok(())
+        })?;
     }
 
     #[test]

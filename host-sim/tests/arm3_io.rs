@@ -4,7 +4,6 @@
 mod common;
 use common::*;
 
-
 use host_sim::io::arm3::{fits, Arm3Recording, PressureStepScenario};
 use host_sim::plant::arm3::{is_arm3_file, Arm3, Arm3Config};
 use host_sim::sim::SolverOptions;

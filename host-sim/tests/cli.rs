@@ -3,7 +3,6 @@
 mod common;
 use common::*;
 
-
 #[test]
 fn simulate_then_fit_a_fixture() {
     let dir = tempfile::tempdir().unwrap();

@@ -4,7 +4,6 @@
 mod common;
 use common::*;
 
-
 use host_sim::io::recording::Recording;
 
 #[test]

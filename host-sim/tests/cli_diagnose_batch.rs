@@ -5,7 +5,6 @@
 mod common;
 use common::*;
 
-
 #[test]
 fn a_directory_is_diagnosed_in_parallel_with_one_json_each_and_a_summary() {
     let dir = tempfile::tempdir().unwrap();

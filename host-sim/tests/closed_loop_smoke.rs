@@ -8,12 +8,12 @@
 //! Run with `cargo test -p host-sim --test closed_loop_smoke -- --nocapture` to see the
 //! measured step-response figures.
 
-use core::convert::Infallible;
 use core::f64::consts::PI;
 use std::path::PathBuf;
 
 use host_sim::sim::{Integrator, SolverOptions};
 use host_sim::{Plant, PlantConfig, ValveInputs};
+use pam_firmware::lockstep::UnwiredPin;
 use pam_firmware::log::{TickLog, TickRecord};
 use pam_firmware::safety::SafeState;
 use pam_firmware::sensors::{counts_to_rad, PressureScaling};
@@ -32,19 +32,6 @@ fn plant(inertia_kgm2: f64) -> Plant {
 
 /// J_n of reference-1dof.toml; reference-1dof-loaded.toml has 11 x J_n.
 const J_NOMINAL: f64 = 0.014;
-
-struct FakePin;
-impl embedded_hal::digital::ErrorType for FakePin {
-    type Error = Infallible;
-}
-impl embedded_hal::digital::OutputPin for FakePin {
-    fn set_low(&mut self) -> Result<(), Infallible> {
-        Ok(())
-    }
-    fn set_high(&mut self) -> Result<(), Infallible> {
-        Ok(())
-    }
-}
 
 const TICK_HZ: f32 = 1000.0;
 const DT: f64 = 1.0 / TICK_HZ as f64;
@@ -105,10 +92,10 @@ fn simulate(
     let mut integ = Integrator::new(&plant, plant.initial_state(), opts);
     let mut tick = ControlTick::new(cfg);
     let mut valves = OnOffValves::new(
-        FakePin,
-        FakePin,
-        FakePin,
-        FakePin,
+        UnwiredPin,
+        UnwiredPin,
+        UnwiredPin,
+        UnwiredPin,
         OnOffPwmConfig::REFERENCE,
     );
     let n = (seconds / DT).round() as usize;

@@ -10,29 +10,16 @@
 //! to +-0.02 rad within 0.3 s, overshoot below 0.02 rad, residual below 5 mrad.
 //! `cargo test -p host-sim --test fixed_tick_closed_loop -- --nocapture` prints the figures.
 
-use core::convert::Infallible;
 use core::f64::consts::PI;
 use std::path::PathBuf;
 
 use host_sim::sim::{Integrator, SolverOptions};
 use host_sim::{Plant, PlantConfig, ValveInputs};
 use pam_firmware::fixed_point::tick::{mrad_to_q16, reference_from_params, FixedFrame, FixedTick};
+use pam_firmware::lockstep::UnwiredPin;
 use pam_firmware::tick::ValveCommand;
 use pam_firmware::valves::{OnOffPwmConfig, OnOffValves};
 use pam_firmware::wiring;
-
-struct FakePin;
-impl embedded_hal::digital::ErrorType for FakePin {
-    type Error = Infallible;
-}
-impl embedded_hal::digital::OutputPin for FakePin {
-    fn set_low(&mut self) -> Result<(), Infallible> {
-        Ok(())
-    }
-    fn set_high(&mut self) -> Result<(), Infallible> {
-        Ok(())
-    }
-}
 
 const DT: f64 = 1e-3;
 
@@ -68,10 +55,10 @@ fn step(target_mrad: i32, seconds: f64) -> (Vec<f64>, Vec<f64>, u8, usize) {
     let mut integ = Integrator::new(&plant, plant.initial_state(), opts);
     let mut tick = FixedTick::new(reference_from_params(1000.0));
     let mut valves = OnOffValves::new(
-        FakePin,
-        FakePin,
-        FakePin,
-        FakePin,
+        UnwiredPin,
+        UnwiredPin,
+        UnwiredPin,
+        UnwiredPin,
         OnOffPwmConfig::REFERENCE,
     );
     let (mut t, mut beta, mut armed) = (Vec::new(), Vec::new(), 0);

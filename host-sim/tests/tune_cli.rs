@@ -5,7 +5,6 @@
 mod common;
 use common::*;
 
-
 #[test]
 fn bad_tune_arguments_are_refused_without_touching_the_output() {
     let dir = tempfile::tempdir().unwrap();

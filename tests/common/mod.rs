@@ -3,8 +3,10 @@
 
 #![allow(dead_code)] // each test crate uses its own subset
 
-use pam_firmware::safety::FaultCode;
-use pam_firmware::tick::{SensorFrame, TickOutput, ValveCommand};
+use pam_firmware::safety::{FaultCode, SafeState};
+use pam_firmware::tick::{
+    ControlTick, ControllerConfig, SensorFrame, Setpoint, TickOutput, ValveCommand,
+};
 use pam_firmware::P_MUSCLE_MAX_GAUGE_PA;
 use proptest::prelude::*;
 use proptest::test_runner::TestCaseError;
@@ -116,6 +118,34 @@ pub fn check_tick_output(
             o.valves
         );
         prop_assert!(!o.armed);
+    }
+    Ok(())
+}
+
+/// Runs `steps` (frame, angle set-point, dt) through a control tick configured by `cfg` with
+/// the safe state `Vent` (`vent`) or `Hold`, checks every output with [`check_tick_output`] and
+/// hands the armed ones to `armed`.
+pub fn run_checked(
+    mut cfg: ControllerConfig,
+    vent: bool,
+    steps: Vec<(SensorFrame, f32, f32)>,
+    mut armed: impl FnMut(&TickOutput) -> Result<(), TestCaseError>,
+) -> Result<(), TestCaseError> {
+    cfg.safe_state = if vent {
+        SafeState::Vent
+    } else {
+        SafeState::Hold
+    };
+    let safe_cmd = cfg.safe_state.command();
+    let mut t = ControlTick::new(cfg);
+    let mut latched = None;
+    for (f, sp, dt) in steps {
+        let o = t.step(&f, &Setpoint { angle_rad: sp }, dt);
+        // Finite, bounded, a fault in the tick of a bad input, latched, safe valves.
+        check_tick_output(&o, &f, sp, dt, &mut latched, safe_cmd)?;
+        if o.armed {
+            armed(&o)?;
+        }
     }
     Ok(())
 }
