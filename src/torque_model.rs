@@ -110,17 +110,16 @@ impl TorqueModelParams {
     /// `inverse_at(a, v).activation(t)` is exactly `activation(t, a, v)`.
     #[inline]
     pub fn inverse_at(&self, angle_rad: f32, velocity_rad_s: f32) -> InverseAt {
-        let gain = self.b_m2 * self.sprocket_radius_m;
-        let valid = angle_rad.is_finite() && velocity_rad_s.is_finite() && gain != 0.0;
-        InverseAt {
-            passive_nm: if valid {
-                self.passive_nm(angle_rad, velocity_rad_s)
-            } else {
-                0.0
-            },
-            gain_m3: gain,
-            dp_limit_pa: self.dp_limit_pa(),
-            valid,
+        let dp_limit_pa = self.dp_limit_pa();
+        if angle_rad.is_finite() && velocity_rad_s.is_finite() {
+            self.inverse_at_finite(angle_rad, velocity_rad_s, dp_limit_pa)
+        } else {
+            InverseAt {
+                passive_nm: 0.0,
+                gain_m3: self.b_m2 * self.sprocket_radius_m,
+                dp_limit_pa,
+                valid: false,
+            }
         }
     }
 

@@ -31,19 +31,9 @@ fn simulate_then_fit_a_fixture() {
     assert_eq!(rows, 20_000);
     assert!(std::fs::metadata(&plot).unwrap().len() > 1000);
 
-    let r = host_sim(&[&"fit", &pulses, &out, &"--min-fit", &"99.5"]);
-    let stdout = String::from_utf8_lossy(&r.stdout);
+    let stdout = run_ok(&[&"fit", &pulses, &out, &"--min-fit", &"99.5"]);
     println!("{stdout}");
-    assert!(
-        r.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&r.stderr)
-    );
-    for c in ["angle_deg", "p1_kpa", "p2_kpa", "f1_n", "f2_n"] {
-        let line = stdout.lines().find(|l| l.starts_with(c)).unwrap();
-        let fit: f64 = line.split_whitespace().nth(1).unwrap().parse().unwrap();
-        assert!(fit >= 99.5, "{line}");
-    }
+    assert_channel_fits(&stdout, 99.5);
 }
 
 #[test]

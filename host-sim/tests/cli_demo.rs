@@ -67,14 +67,7 @@ fn demo_writes_every_file_and_reports_tracking_and_conformance() {
             > 10_000
     );
     // Conformance fit lines: every channel >= 99.5 %.
-    for c in ["angle_deg", "p1_kpa", "p2_kpa", "f1_n", "f2_n"] {
-        let line = stdout
-            .lines()
-            .find(|l| l.trim_start().starts_with(c))
-            .unwrap_or_else(|| panic!("no fit line for {c}"));
-        let fit: f64 = line.split_whitespace().nth(1).unwrap().parse().unwrap();
-        assert!(fit >= 99.5, "{line}");
-    }
+    assert_channel_fits(&stdout, 99.5);
 }
 
 #[test]

@@ -7,11 +7,6 @@ use common::*;
 use host_sim::plant::PlantState;
 use host_sim::{Plant, PlantConfig, ValveInputs};
 
-fn nominal_text() -> String {
-    std::fs::read_to_string(fixture("reference-1dof.toml"))
-        .expect("tests/fixtures/reference-1dof.toml")
-}
-
 fn load_err(text: &str) -> String {
     match PlantConfig::from_toml_str(text, "custom-plant.toml") {
         Ok(_) => panic!("expected an error for:\n{text}"),

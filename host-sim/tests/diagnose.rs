@@ -11,10 +11,6 @@ use host_sim::diagnose::synth::{expected_id, generate, plant_with, Excitation, S
 use host_sim::diagnose::{diagnose, DiagnoseOptions, Diagnosis, Verdict};
 use host_sim::{PlantConfig, Recording};
 
-fn nominal_text() -> String {
-    std::fs::read_to_string(plant()).unwrap()
-}
-
 fn nominal() -> PlantConfig {
     PlantConfig::load(plant()).unwrap()
 }

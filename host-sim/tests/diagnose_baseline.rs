@@ -2,33 +2,13 @@
 //! thread count), reduces the residual of a concealed effect on the data it was trained on,
 //! rejects bad input.
 
-use std::path::PathBuf;
+mod common;
+use common::*;
+
 
 use host_sim::diagnose::baseline::{train, BaselineError, ElmanOptions};
 use host_sim::sim::{simulate, SolverOptions};
-use host_sim::{Measurement, Plant, PlantConfig, ValveInputs};
-
-fn plant_with(extra: &str) -> Plant {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/reference-1dof.toml");
-    let text = format!("{}\n{extra}\n", std::fs::read_to_string(p).unwrap());
-    Plant::from_config(&PlantConfig::from_toml_str(&text, "t.toml").unwrap())
-}
-
-/// Valve pulses of varying length, both directions (deterministic).
-fn inputs(n: usize, period: usize) -> Vec<ValveInputs> {
-    (0..n)
-        .map(|k| {
-            let phase = (k / period) % 4;
-            let on = |b: bool| if b { 1.0 } else { 0.0 };
-            ValveInputs {
-                u_in1: on(phase == 0),
-                u_ex2: on(phase == 0),
-                u_ex1: on(phase == 2),
-                u_in2: on(phase == 2),
-            }
-        })
-        .collect()
-}
+use host_sim::{Measurement, Plant, ValveInputs};
 
 fn channels(m: &[Measurement]) -> [Option<Vec<f64>>; 5] {
     std::array::from_fn(|c| Some(m.iter().map(|x| x.to_array()[c]).collect()))
@@ -50,7 +30,7 @@ fn quick() -> ElmanOptions {
 
 #[test]
 fn training_is_deterministic_for_a_seed_and_thread_count_independent() {
-    let u = inputs(3000, 300);
+    let u = pulse_inputs(3000, 300);
     let nominal = run(&plant_with(""), &u);
     let real = run(&plant_with("[effects.polytropic]\nexponent = 1.3\n"), &u);
     let measured = channels(&real);
@@ -84,7 +64,7 @@ fn training_is_deterministic_for_a_seed_and_thread_count_independent() {
 
 #[test]
 fn learns_the_residual_of_a_concealed_supply_drop_on_its_training_data() {
-    let u = inputs(6000, 250);
+    let u = pulse_inputs(6000, 250);
     let nominal = run(&plant_with(""), &u);
     let real = run(
         &plant_with("[effects.supply_drop]\nmodel = \"static\"\nresistance_pa_s_per_m3 = 1.5e7\n"),
@@ -121,7 +101,7 @@ fn learns_the_residual_of_a_concealed_supply_drop_on_its_training_data() {
 
 #[test]
 fn bad_input_is_an_error() {
-    let u = inputs(500, 50);
+    let u = pulse_inputs(500, 50);
     let nominal = run(&plant_with(""), &u);
     let mut measured = channels(&nominal);
     assert!(matches!(

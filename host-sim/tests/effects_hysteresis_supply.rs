@@ -4,24 +4,14 @@
 //! TOML errors name the key, hysteresis dissipates, a supply drop slows inflation and
 //! recovers at rest.
 
-use std::path::PathBuf;
+mod common;
+use common::*;
+
 
 use host_sim::plant::effects::{static_supply_pressure_pa, Supply};
 use host_sim::plant::PlantState;
 use host_sim::sim::{simulate, Integrator, SolverOptions};
 use host_sim::{Plant, PlantConfig, ValveInputs};
-
-fn nominal_text() -> String {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/reference-1dof.toml");
-    std::fs::read_to_string(p).expect("tests/fixtures/reference-1dof.toml")
-}
-
-fn plant_with(extra: &str) -> Plant {
-    let text = format!("{}\n{extra}\n", nominal_text());
-    Plant::from_config(
-        &PlantConfig::from_toml_str(&text, "effects-test.toml").unwrap_or_else(|e| panic!("{e}")),
-    )
-}
 
 fn nominal() -> Plant {
     plant_with("")
@@ -42,26 +32,15 @@ const STATIC_DROP: &str =
 const RESERVOIR: &str = "[effects.supply_drop]\nmodel = \"reservoir\"\n\
     tank_volume_m3 = 5.0e-4\nfeed_conductance_m3_per_s_pa = 1.5e-8\n";
 
-/// 6 s of on/off valve pulses (1 kHz) that swing the joint both ways, as in the fixtures.
-fn pulse_inputs() -> Vec<ValveInputs> {
-    (0..6000)
-        .map(|k| {
-            let phase = (k / 500) % 4;
-            let on = |b: bool| if b { 1.0 } else { 0.0 };
-            ValveInputs {
-                u_in1: on(phase == 0),
-                u_ex2: on(phase == 0),
-                u_ex1: on(phase == 2),
-                u_in2: on(phase == 2),
-            }
-        })
-        .collect()
-}
-
 fn run(plant: &Plant) -> Vec<PlantState> {
-    simulate(plant, &pulse_inputs(), 1e-3, &SolverOptions::default())
-        .unwrap_or_else(|e| panic!("{e}"))
-        .states
+    simulate(
+        plant,
+        &pulse_inputs(6000, 500),
+        1e-3,
+        &SolverOptions::default(),
+    )
+    .unwrap_or_else(|e| panic!("{e}"))
+    .states
 }
 
 #[test]

@@ -25,12 +25,8 @@ use host_sim::diagnose::fitting::{Part, Problem};
 use host_sim::diagnose::synth::{excitation, Excitation};
 use host_sim::io::recording::{Channel, Recording};
 use host_sim::sim::{simulate, SolverOptions};
-use host_sim::{Measurement, Plant, PlantConfig};
+use host_sim::{Measurement, Plant};
 use pam_firmware::tick::ControllerConfig;
-
-fn nominal_toml() -> String {
-    std::fs::read_to_string(root().join("../shared/plant/reference-1dof.toml")).unwrap()
-}
 
 /// Each effect at a realistic size: (name, `[effects]` TOML). Sizes as in the diagnosis's
 /// synthetic rig, the dead time and lag of the issue (8 ms, 30 ms), a calibration error on
@@ -75,15 +71,6 @@ const EFFECTS: [(&str, &str); 11] = [
         "[effects.supply_drop]\nmodel = \"reservoir\"\ntank_volume_m3 = 5.0e-4\nfeed_conductance_m3_per_s_pa = 6.0e-9\n",
     ),
 ];
-
-fn config_with(effect_toml: &str) -> PlantConfig {
-    let text = format!("{}\n{effect_toml}", nominal_toml());
-    PlantConfig::from_toml_str(&text, "test.toml").unwrap()
-}
-
-fn plant_with(effect_toml: &str) -> Plant {
-    Plant::from_config(&config_with(effect_toml))
-}
 
 fn step_scenario() -> Scenario {
     Scenario::load(root().join("scenarios/step.toml")).unwrap()

@@ -86,3 +86,49 @@ pub fn run_exits(code: i32, args: &[&dyn AsRef<OsStr>]) -> String {
 pub fn arm3_plant() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("plants/arm3-seed001.toml")
 }
+
+/// Asserts that every channel's fit line of `stdout` ("<channel> <fit %> ...", as `fit` and
+/// `demo` print them) reads at least `min_percent`.
+pub fn assert_channel_fits(stdout: &str, min_percent: f64) {
+    for c in ["angle_deg", "p1_kpa", "p2_kpa", "f1_n", "f2_n"] {
+        let line = stdout
+            .lines()
+            .find(|l| l.trim_start().starts_with(c))
+            .unwrap_or_else(|| panic!("no fit line for {c}:\n{stdout}"));
+        let fit: f64 = line.split_whitespace().nth(1).unwrap().parse().unwrap();
+        assert!(fit >= min_percent, "{line}");
+    }
+}
+
+/// The text of the reference plant file (fixture copy).
+pub fn nominal_text() -> String {
+    std::fs::read_to_string(plant()).expect("tests/fixtures/reference-1dof.toml")
+}
+
+/// The reference plant file with the TOML `extra` (e.g. an `[effects.*]` table) appended.
+pub fn config_with(extra: &str) -> host_sim::PlantConfig {
+    let text = format!("{}\n{extra}\n", nominal_text());
+    host_sim::PlantConfig::from_toml_str(&text, "test-plant.toml").unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// [`config_with`] as a plant.
+pub fn plant_with(extra: &str) -> host_sim::Plant {
+    host_sim::Plant::from_config(&config_with(extra))
+}
+
+/// `n` samples of on/off valve pulses that swing the joint both ways: fill muscle 1 and vent
+/// muscle 2, hold, vent 1 and fill 2, hold; each phase `period` samples long.
+pub fn pulse_inputs(n: usize, period: usize) -> Vec<host_sim::ValveInputs> {
+    (0..n)
+        .map(|k| {
+            let phase = (k / period) % 4;
+            let on = |b: bool| if b { 1.0 } else { 0.0 };
+            host_sim::ValveInputs {
+                u_in1: on(phase == 0),
+                u_ex2: on(phase == 0),
+                u_ex1: on(phase == 2),
+                u_in2: on(phase == 2),
+            }
+        })
+        .collect()
+}
