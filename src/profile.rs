@@ -63,54 +63,127 @@ impl SetpointProfile {
                 final_rad,
                 at_s,
                 transition_s,
-            } => {
-                if t_s < at_s {
-                    initial_rad
-                } else {
-                    initial_rad + (final_rad - initial_rad) * min_jerk(t_s - at_s, transition_s)
-                }
-            }
+            } => step_at(t_s, initial_rad, final_rad, at_s, transition_s),
             SetpointProfile::Ramp {
                 from_rad,
                 to_rad,
                 start_s,
                 end_s,
-            } => {
-                if t_s <= start_s {
-                    from_rad
-                } else if t_s >= end_s {
-                    to_rad
-                } else {
-                    from_rad + (to_rad - from_rad) * (t_s - start_s) / (end_s - start_s)
-                }
-            }
+            } => ramp_at(t_s, from_rad, to_rad, start_s, end_s),
             SetpointProfile::Sine {
                 offset_rad,
                 amplitude_rad,
                 freq_hz,
                 start_s,
-            } => {
-                if t_s < start_s {
-                    offset_rad
-                } else {
-                    // The phase in turns, wrapped to [0, 1) before the sine (keeps the
-                    // argument small for libm).
-                    let turns = freq_hz * (t_s - start_s);
-                    let frac = turns - libm::floorf(turns);
-                    offset_rad + amplitude_rad * libm::sinf(2.0 * core::f32::consts::PI * frac)
-                }
-            }
+            } => sine_at(t_s, offset_rad, amplitude_rad, freq_hz, start_s),
         }
     }
 }
 
-/// The minimum-jerk blend of `u = t / duration` clamped to 0..1 (1 for a zero duration).
-fn min_jerk(t_s: f32, duration_s: f32) -> f32 {
-    if duration_s.is_nan() || duration_s <= 0.0 || t_s >= duration_s {
-        return 1.0;
+/// The float types the shapes are evaluated in: f32 on the MCU, f64 in host-sim (its
+/// scenarios use the same shapes, so a simulated run and a board playing the profile agree).
+pub trait ProfileFloat:
+    Copy
+    + PartialOrd
+    + core::ops::Add<Output = Self>
+    + core::ops::Sub<Output = Self>
+    + core::ops::Mul<Output = Self>
+    + core::ops::Div<Output = Self>
+{
+    /// 0.
+    const ZERO: Self;
+    /// 1.
+    const ONE: Self;
+    /// 2 pi.
+    const TWO_PI: Self;
+    /// The minimum-jerk coefficients 10, -15, 6.
+    const MIN_JERK: [Self; 3];
+    /// Largest integer not above `self` (libm).
+    fn floor(self) -> Self;
+    /// Sine (libm).
+    fn sin(self) -> Self;
+    /// Not a number.
+    fn is_nan(self) -> bool;
+}
+
+impl ProfileFloat for f32 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+    const TWO_PI: Self = 2.0 * core::f32::consts::PI;
+    const MIN_JERK: [Self; 3] = [10.0, -15.0, 6.0];
+    fn floor(self) -> Self {
+        libm::floorf(self)
     }
-    let u = if t_s > 0.0 { t_s / duration_s } else { 0.0 };
-    u * u * u * (10.0 + u * (-15.0 + 6.0 * u))
+    fn sin(self) -> Self {
+        libm::sinf(self)
+    }
+    fn is_nan(self) -> bool {
+        f32::is_nan(self)
+    }
+}
+
+impl ProfileFloat for f64 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+    const TWO_PI: Self = 2.0 * core::f64::consts::PI;
+    const MIN_JERK: [Self; 3] = [10.0, -15.0, 6.0];
+    fn floor(self) -> Self {
+        libm::floor(self)
+    }
+    fn sin(self) -> Self {
+        libm::sin(self)
+    }
+    fn is_nan(self) -> bool {
+        f64::is_nan(self)
+    }
+}
+
+/// `initial` until `at_s`, then `final`; with `transition_s > 0` a minimum-jerk move over
+/// `transition_s` from `at_s`.
+pub fn step_at<T: ProfileFloat>(t_s: T, initial: T, final_: T, at_s: T, transition_s: T) -> T {
+    if t_s < at_s {
+        initial
+    } else {
+        initial + (final_ - initial) * min_jerk(t_s - at_s, transition_s)
+    }
+}
+
+/// Linear from `from` at `start_s` to `to` at `end_s`, constant outside.
+pub fn ramp_at<T: ProfileFloat>(t_s: T, from: T, to: T, start_s: T, end_s: T) -> T {
+    if t_s <= start_s {
+        from
+    } else if t_s >= end_s {
+        to
+    } else {
+        from + (to - from) * (t_s - start_s) / (end_s - start_s)
+    }
+}
+
+/// `offset + amplitude sin(2 pi f (t - start))` from `start_s`, `offset` before. The phase in
+/// turns is wrapped to [0, 1) before the sine (keeps the argument small for libm).
+pub fn sine_at<T: ProfileFloat>(t_s: T, offset: T, amplitude: T, freq_hz: T, start_s: T) -> T {
+    if t_s < start_s {
+        offset
+    } else {
+        let turns = freq_hz * (t_s - start_s);
+        let frac = turns - turns.floor();
+        offset + amplitude * (T::TWO_PI * frac).sin()
+    }
+}
+
+/// The minimum-jerk blend `10 u^3 - 15 u^4 + 6 u^5` of `u = t / duration` clamped to 0..1
+/// (1, a jump, for a zero, negative or NaN duration).
+pub fn min_jerk<T: ProfileFloat>(t_s: T, duration_s: T) -> T {
+    if duration_s.is_nan() || duration_s <= T::ZERO || t_s >= duration_s {
+        return T::ONE;
+    }
+    let u = if t_s > T::ZERO {
+        t_s / duration_s
+    } else {
+        T::ZERO
+    };
+    let [c3, c4, c5] = T::MIN_JERK;
+    u * u * u * (c3 + u * (c4 + c5 * u))
 }
 
 #[cfg(test)]

@@ -5,7 +5,6 @@
 mod common;
 use common::*;
 
-
 use host_sim::diagnose::baseline::{train, BaselineError, ElmanOptions};
 use host_sim::sim::{simulate, SolverOptions};
 use host_sim::{Measurement, Plant, ValveInputs};

@@ -7,7 +7,6 @@
 mod common;
 use common::*;
 
-
 use host_sim::plant::effects::{static_supply_pressure_pa, Supply};
 use host_sim::plant::PlantState;
 use host_sim::sim::{simulate, Integrator, SolverOptions};

@@ -4,6 +4,7 @@
 
 use std::path::Path;
 
+use pam_firmware::profile;
 use serde::Deserialize;
 
 use crate::sim::SimError;
@@ -118,47 +119,26 @@ pub enum SetpointProfile {
 impl SetpointProfile {
     /// The set-point [rad] at time `t_s`; `levels` are the pre-drawn random levels.
     pub(crate) fn at(&self, t_s: f64, levels: &[f64]) -> f64 {
+        // The shapes are the firmware's (`pam_firmware::profile`), evaluated in f64.
         match *self {
             SetpointProfile::Step {
                 initial_rad,
                 final_rad,
                 at_s,
                 transition_s,
-            } => {
-                if t_s < at_s {
-                    initial_rad
-                } else {
-                    initial_rad + (final_rad - initial_rad) * min_jerk(t_s - at_s, transition_s)
-                }
-            }
+            } => profile::step_at(t_s, initial_rad, final_rad, at_s, transition_s),
             SetpointProfile::Ramp {
                 from_rad,
                 to_rad,
                 start_s,
                 end_s,
-            } => {
-                if t_s <= start_s {
-                    from_rad
-                } else if t_s >= end_s {
-                    to_rad
-                } else {
-                    from_rad + (to_rad - from_rad) * (t_s - start_s) / (end_s - start_s)
-                }
-            }
+            } => profile::ramp_at(t_s, from_rad, to_rad, start_s, end_s),
             SetpointProfile::Sine {
                 offset_rad,
                 amplitude_rad,
                 freq_hz,
                 start_s,
-            } => {
-                if t_s < start_s {
-                    offset_rad
-                } else {
-                    offset_rad
-                        + amplitude_rad
-                            * (2.0 * std::f64::consts::PI * freq_hz * (t_s - start_s)).sin()
-                }
-            }
+            } => profile::sine_at(t_s, offset_rad, amplitude_rad, freq_hz, start_s),
             SetpointProfile::Random {
                 hold_s,
                 start_s,
@@ -171,21 +151,11 @@ impl SetpointProfile {
                     let i = (((t_s - start_s) / hold_s).floor() as usize).min(levels.len() - 1);
                     let from = if i == 0 { 0.0 } else { levels[i - 1] };
                     let since_s = t_s - start_s - i as f64 * hold_s;
-                    from + (levels[i] - from) * min_jerk(since_s, transition_s)
+                    profile::step_at(since_s, from, levels[i], 0.0, transition_s)
                 }
             }
         }
     }
-}
-
-/// The minimum-jerk blend `10 u^3 - 15 u^4 + 6 u^5` of `u = t / duration`, clamped to 0..1
-/// (a jump, 1 for every `t >= 0`, when `duration_s <= 0`).
-fn min_jerk(t_s: f64, duration_s: f64) -> f64 {
-    if duration_s <= 0.0 || t_s >= duration_s {
-        return 1.0;
-    }
-    let u = (t_s / duration_s).max(0.0);
-    u * u * u * (10.0 + u * (-15.0 + 6.0 * u))
 }
 
 /// The fake sensors.
