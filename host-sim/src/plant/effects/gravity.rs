@@ -5,7 +5,7 @@
 
 use serde::Deserialize;
 
-use super::{enabled_default, params, Check, Effect, Hooks, Truth};
+use super::{Check, Effect, enabled_default, Hooks, params, Truth};
 use crate::diagnose::candidates::{clamp_to, Candidate, ParamSpec, Screening, Setup};
 use crate::diagnose::screen::{regress, Evidence, Scatter};
 use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
@@ -58,21 +58,12 @@ impl Hooks for Gravity {
 }
 
 impl Effect for Gravity {
-    type Active = Self;
-    fn enabled(&self) -> bool {
-        self.enabled
-    }
+    table_effect!(GravityCandidate);
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
         c.finite("mass_kg", self.mass_kg)?;
         c.finite("com_distance_m", self.com_distance_m)?;
         c.finite("hanging_angle_rad", self.hanging_angle_rad)?;
         c.finite("g_m_s2", self.g_m_s2)
-    }
-    fn activate(&self, _valve: &ValveConfig) -> Self {
-        self.clone()
-    }
-    fn candidates() -> Vec<Box<dyn Candidate>> {
-        vec![Box::new(GravityCandidate)]
     }
     fn truths() -> Vec<Truth> {
         vec![Truth::new("gravity", "gravity", |_| "[effects.gravity]\nmass_kg = 1.0\ncom_distance_m = 0.1\nhanging_angle_rad = 0.0\n".into())]

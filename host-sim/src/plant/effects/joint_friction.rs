@@ -10,7 +10,7 @@
 
 use serde::Deserialize;
 
-use super::{enabled_default, params, Check, Effect, Hooks, Truth};
+use super::{Check, Effect, enabled_default, Hooks, params, Truth};
 use crate::diagnose::candidates::{clamp_to, Candidate, ParamSpec, Screening, Setup};
 use crate::diagnose::screen::{regress, Evidence, Scatter};
 use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
@@ -61,10 +61,7 @@ impl Hooks for JointFriction {
 }
 
 impl Effect for JointFriction {
-    type Active = Self;
-    fn enabled(&self) -> bool {
-        self.enabled
-    }
+    table_effect!(JointFrictionCandidate);
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
         c.finite("coulomb_nm", self.coulomb_nm)?;
         c.finite("breakaway_nm", self.breakaway_nm)?;
@@ -78,12 +75,6 @@ impl Effect for JointFriction {
             ));
         }
         Ok(())
-    }
-    fn activate(&self, _valve: &ValveConfig) -> Self {
-        self.clone()
-    }
-    fn candidates() -> Vec<Box<dyn Candidate>> {
-        vec![Box::new(JointFrictionCandidate)]
     }
     fn truths() -> Vec<Truth> {
         vec![

@@ -57,6 +57,25 @@ pub trait Effect: Debug + Clone + PartialEq + DeserializeOwned {
     fn truths() -> Vec<Truth>;
 }
 
+/// The [`Effect`] items of an effect whose run-time form is its own table (`Active = Self`,
+/// activated by a copy), switched by its `enabled` key, with one diagnosis candidate: write
+/// `table_effect!(TheCandidate);` inside `impl Effect for TheTable`, then `validate` and
+/// `truths`.
+macro_rules! table_effect {
+    ($candidate:expr) => {
+        type Active = Self;
+        fn enabled(&self) -> bool {
+            self.enabled
+        }
+        fn activate(&self, _valve: &ValveConfig) -> Self {
+            self.clone()
+        }
+        fn candidates() -> Vec<Box<dyn Candidate>> {
+            vec![Box::new($candidate)]
+        }
+    };
+}
+
 /// How an enabled effect acts on the plant. Every hook defaults to "no change"; an effect
 /// overrides the ones it acts through.
 pub trait Hooks: Debug + Clone + PartialEq {

@@ -19,7 +19,7 @@
 
 use serde::Deserialize;
 
-use super::{enabled_default, params, Check, Effect, Hooks, Truth};
+use super::{Check, Effect, enabled_default, Hooks, params, Truth};
 use crate::diagnose::candidates::{clamp_to, Candidate, ParamSpec, Screening, Setup};
 use crate::diagnose::screen::{regress, Evidence, Scatter};
 use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
@@ -64,20 +64,11 @@ impl Hooks for MuscleHysteresis {
 }
 
 impl Effect for MuscleHysteresis {
-    type Active = Self;
-    fn enabled(&self) -> bool {
-        self.enabled
-    }
+    table_effect!(MuscleHysteresisCandidate);
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
         c.non_negative("base_force_n", self.base_force_n)?;
         c.non_negative("pressure_gain_n_per_pa", self.pressure_gain_n_per_pa)?;
         c.positive("smoothing_rate_per_s", self.smoothing_rate_per_s)
-    }
-    fn activate(&self, _valve: &ValveConfig) -> Self {
-        self.clone()
-    }
-    fn candidates() -> Vec<Box<dyn Candidate>> {
-        vec![Box::new(MuscleHysteresisCandidate)]
     }
     fn truths() -> Vec<Truth> {
         vec![Truth::new("muscle_hysteresis", "muscle_hysteresis", |_| "[effects.muscle_hysteresis]\nbase_force_n = 6.0\npressure_gain_n_per_pa = 2.0e-5\nsmoothing_rate_per_s = 0.02\n".into())]

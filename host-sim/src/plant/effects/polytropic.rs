@@ -7,7 +7,7 @@
 
 use serde::Deserialize;
 
-use super::{enabled_default, params, Check, Effect, Hooks, Truth};
+use super::{Check, Effect, enabled_default, Hooks, params, Truth};
 use crate::diagnose::candidates::{
     clamp_to, pressure_scatter, regress_pressure, Candidate, ParamSpec, Screening, Setup,
 };
@@ -35,18 +35,9 @@ impl Hooks for Polytropic {
 }
 
 impl Effect for Polytropic {
-    type Active = Self;
-    fn enabled(&self) -> bool {
-        self.enabled
-    }
+    table_effect!(PolytropicCandidate);
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
         c.positive("exponent", self.exponent)
-    }
-    fn activate(&self, _valve: &ValveConfig) -> Self {
-        self.clone()
-    }
-    fn candidates() -> Vec<Box<dyn Candidate>> {
-        vec![Box::new(PolytropicCandidate)]
     }
     fn truths() -> Vec<Truth> {
         vec![Truth::new("polytropic", "polytropic", |_| "[effects.polytropic]\nexponent = 1.3\n".into())]

@@ -8,7 +8,7 @@
 
 use serde::Deserialize;
 
-use super::{enabled_default, ChannelFilter, Check, Effect, Hooks, Truth};
+use super::{ChannelFilter, Check, Effect, enabled_default, Hooks, Truth};
 use crate::diagnose::candidates::{clamp_to, Candidate, ParamSpec, Screening, Setup};
 use crate::diagnose::screen::Evidence;
 use crate::io::recording::Channel;
@@ -90,10 +90,7 @@ impl Hooks for SensorLag {
 }
 
 impl Effect for SensorLag {
-    type Active = Self;
-    fn enabled(&self) -> bool {
-        self.enabled
-    }
+    table_effect!(SensorLagCandidate);
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
         for (key, tau) in [
             ("angle_time_constant_s", self.angle_time_constant_s),
@@ -105,12 +102,6 @@ impl Effect for SensorLag {
             }
         }
         Ok(())
-    }
-    fn activate(&self, _valve: &ValveConfig) -> Self {
-        self.clone()
-    }
-    fn candidates() -> Vec<Box<dyn Candidate>> {
-        vec![Box::new(SensorLagCandidate)]
     }
     fn truths() -> Vec<Truth> {
         vec![Truth::new("sensor_lag", "sensor_lag", |_| "[effects.sensor_lag]\nangle_time_constant_s = 0.015\npressure_time_constant_s = 0.008\n".into())]

@@ -23,7 +23,7 @@
 
 use serde::Deserialize;
 
-use super::{enabled_default, params, Check, Effect, Hooks, Truth};
+use super::{Check, Effect, enabled_default, Hooks, params, Truth};
 use crate::diagnose::candidates::{
     clamp_to, pressure_scatter, regress_pressure, Candidate, ParamSpec, Screening, Setup,
 };
@@ -109,10 +109,7 @@ impl Hooks for ThermalChamber {
 }
 
 impl Effect for ThermalChamber {
-    type Active = Self;
-    fn enabled(&self) -> bool {
-        self.enabled
-    }
+    table_effect!(HeatTransferCandidate);
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
         c.non_negative("heat_transfer_w_per_k", self.heat_transfer_w_per_k)?;
         c.finite("kappa", self.kappa)?;
@@ -135,12 +132,6 @@ impl Effect for ThermalChamber {
             }
         }
         Ok(())
-    }
-    fn activate(&self, _valve: &ValveConfig) -> Self {
-        self.clone()
-    }
-    fn candidates() -> Vec<Box<dyn Candidate>> {
-        vec![Box::new(HeatTransferCandidate)]
     }
     fn truths() -> Vec<Truth> {
         vec![Truth::new("thermal_chamber", "heat_transfer", |_| {

@@ -7,7 +7,7 @@
 
 use serde::Deserialize;
 
-use super::{enabled_default, params, Check, Effect, Hooks, Truth};
+use super::{Check, Effect, enabled_default, Hooks, params, Truth};
 use crate::diagnose::candidates::{clamp_to, Candidate, ParamSpec, Screening, Setup};
 use crate::diagnose::screen::{regress, Evidence, Scatter};
 use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
@@ -37,19 +37,10 @@ impl Hooks for ToySpring {
 }
 
 impl Effect for ToySpring {
-    type Active = Self;
-    fn enabled(&self) -> bool {
-        self.enabled
-    }
+    table_effect!(ToySpringCandidate);
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
         c.non_negative("stiffness_nm_per_rad", self.stiffness_nm_per_rad)?;
         c.finite("rest_angle_rad", self.rest_angle_rad)
-    }
-    fn activate(&self, _valve: &ValveConfig) -> Self {
-        self.clone()
-    }
-    fn candidates() -> Vec<Box<dyn Candidate>> {
-        vec![Box::new(ToySpringCandidate)]
     }
     fn truths() -> Vec<Truth> {
         vec![Truth::new("toy_spring", "toy_spring", |_| "[effects.toy_spring]\nstiffness_nm_per_rad = 2.0\nrest_angle_rad = 0.0\n".into())]

@@ -7,7 +7,7 @@
 
 use serde::Deserialize;
 
-use super::{enabled_default, params, Check, Effect, Hooks, Truth};
+use super::{Check, Effect, enabled_default, Hooks, params, Truth};
 use crate::diagnose::candidates::{Candidate, ParamSpec, Screening, Setup};
 use crate::diagnose::screen::Evidence;
 use crate::io::recording::Channel;
@@ -68,18 +68,9 @@ impl Hooks for ValveDeadTime {
 }
 
 impl Effect for ValveDeadTime {
-    type Active = Self;
-    fn enabled(&self) -> bool {
-        self.enabled
-    }
+    table_effect!(ValveDelayCandidate);
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
         c.non_negative("delay_s", self.delay_s)
-    }
-    fn activate(&self, _valve: &ValveConfig) -> Self {
-        self.clone()
-    }
-    fn candidates() -> Vec<Box<dyn Candidate>> {
-        vec![Box::new(ValveDelayCandidate)]
     }
     fn truths() -> Vec<Truth> {
         vec![Truth::new("valve_delay", "valve_delay", |dt_s| {
