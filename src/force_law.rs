@@ -134,7 +134,8 @@ impl ForceLawParams {
     #[inline(always)]
     #[allow(clippy::neg_cmp_op_on_partial_ord)]
     pub(crate) fn force_inline(&self, p_gauge_pa: f32, stretch: f32) -> ForceEstimate {
-        if !p_gauge_pa.is_finite() || !stretch.is_finite() {
+        // Both finite, in one test: `x * 0` is +-0 for finite x, NaN for NaN and +-inf.
+        if !(p_gauge_pa * 0.0 + stretch * 0.0 == 0.0) {
             return ForceEstimate {
                 force_n: 0.0,
                 flags: ForceFlags::INVALID_INPUT,

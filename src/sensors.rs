@@ -218,8 +218,16 @@ pub struct ChannelValidator {
 }
 
 impl ChannelValidator {
-    /// A validator with no sample yet.
+    /// A validator with no sample yet. An infinite bound is replaced by the largest finite
+    /// f32 (the one range test then also rejects infinite samples).
     pub const fn new(limits: ChannelLimits) -> Self {
+        let mut limits = limits;
+        if limits.min == f32::NEG_INFINITY {
+            limits.min = -f32::MAX;
+        }
+        if limits.max == f32::INFINITY {
+            limits.max = f32::MAX;
+        }
         ChannelValidator {
             limits,
             last: None,
@@ -231,6 +239,12 @@ impl ChannelValidator {
     /// The limits.
     pub fn limits(&self) -> &ChannelLimits {
         &self.limits
+    }
+
+    /// The last accepted sample (what a held `Valid` status reports), `None` before the first.
+    #[inline(always)]
+    pub fn last(&self) -> Option<f32> {
+        self.last
     }
 
     /// Ticks since the last accepted sample (or since start).
@@ -260,24 +274,39 @@ impl ChannelValidator {
         dt_s: f32,
         dt_good: bool,
     ) -> ChannelStatus {
-        self.age_ticks = self.age_ticks.saturating_add(1);
-        if dt_good {
-            self.elapsed_s += dt_s;
-        }
-        let l = self.limits;
+        // The aged counters, stored only where the sample is not accepted (an accepted
+        // sample resets them).
+        let age_ticks = self.age_ticks.saturating_add(1);
+        let elapsed_s = if dt_good {
+            self.elapsed_s + dt_s
+        } else {
+            self.elapsed_s
+        };
+        let l = &self.limits;
         if let Some(x) = sample {
-            if !x.is_finite() {
-                return ChannelStatus::Fault(ChannelFault::NotFinite);
-            }
-            if !(x >= l.min && x <= l.max) {
-                return ChannelStatus::Fault(ChannelFault::OutOfRange);
-            }
-            if let Some(prev) = self.last {
-                let allowed = l.max_rate_per_s * self.elapsed_s + l.jump_margin;
-                // `!(a <= b)` also rejects a NaN limit.
-                if !(libm::fabsf(x - prev) <= allowed) {
-                    return ChannelStatus::Fault(ChannelFault::Implausible);
+            // One range test on the hot path (NaN fails it too); the cause only on a fault.
+            let fault = if !(x >= l.min && x <= l.max) {
+                Some(if x.is_finite() {
+                    ChannelFault::OutOfRange
+                } else {
+                    ChannelFault::NotFinite
+                })
+            } else {
+                match self.last {
+                    // `!(a <= b)` also rejects a NaN limit.
+                    Some(prev)
+                        if !(libm::fabsf(x - prev)
+                            <= l.max_rate_per_s * elapsed_s + l.jump_margin) =>
+                    {
+                        Some(ChannelFault::Implausible)
+                    }
+                    _ => None,
                 }
+            };
+            if let Some(f) = fault {
+                self.age_ticks = age_ticks;
+                self.elapsed_s = elapsed_s;
+                return ChannelStatus::Fault(f);
             }
             self.last = Some(x);
             self.age_ticks = 0;
@@ -287,6 +316,8 @@ impl ChannelValidator {
                 age_ticks: 0,
             };
         }
+        self.age_ticks = age_ticks;
+        self.elapsed_s = elapsed_s;
         if self.age_ticks > l.stale_ticks {
             return ChannelStatus::Fault(ChannelFault::Stale);
         }
@@ -388,21 +419,27 @@ impl VelocityEstimator {
     /// One tick of `dt_s`; `angle_rad` is a new *validated* sample or `None`.
     /// Non-finite inputs are ignored (the estimate holds). Returns the estimate.
     pub fn update(&mut self, angle_rad: Option<f32>, dt_s: f32) -> f32 {
-        self.update_with(angle_rad, dt_s, dt_s.is_finite() && dt_s > 0.0)
+        self.update_with(
+            angle_rad.filter(|a| a.is_finite()),
+            dt_s,
+            dt_s.is_finite() && dt_s > 0.0,
+        )
     }
 
-    /// [`Self::update`] with `dt_good = dt_s.is_finite() && dt_s > 0.0` known to the caller.
+    /// [`Self::update`] with `dt_good = dt_s.is_finite() && dt_s > 0.0` known to the caller
+    /// and `angle_rad` finite when `Some` (the control tick passes validated samples).
     #[inline(always)]
     pub(crate) fn update_with(&mut self, angle_rad: Option<f32>, dt_s: f32, dt_good: bool) -> f32 {
         if !dt_good {
             return self.velocity_rad_s;
         }
-        self.since_last_s += dt_s;
-        let Some(theta) = angle_rad.filter(|a| a.is_finite()) else {
+        let since_last_s = self.since_last_s + dt_s;
+        let Some(theta) = angle_rad else {
+            self.since_last_s = since_last_s;
             return self.velocity_rad_s;
         };
         if let Some(prev) = self.last_angle_rad {
-            let h = self.since_last_s;
+            let h = since_last_s;
             let v_raw = (theta - prev) / h;
             let a = h / (self.tau_s + h);
             let v = self.velocity_rad_s + a * (v_raw - self.velocity_rad_s);

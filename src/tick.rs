@@ -387,9 +387,7 @@ pub struct ControlTick {
     safety: SafetyMonitor,
     /// The fault conditions that held in the last tick (empty = all clear).
     active: FaultSet,
-    last_p1_pa: Option<f32>,
-    last_p2_pa: Option<f32>,
-    last_angle_rad: Option<f32>,
+
     tracking1: TrackingMonitor,
     tracking2: TrackingMonitor,
     residual: ResidualMonitor,
@@ -570,9 +568,6 @@ impl ControlTick {
             } else {
                 FaultSet::of(FaultCode::ConfigInvalid)
             },
-            last_p1_pa: None,
-            last_p2_pa: None,
-            last_angle_rad: None,
             tracking1: TrackingMonitor::default(),
             tracking2: TrackingMonitor::default(),
             residual: ResidualMonitor::new(cfg.valve_model, &cfg.geometry),
@@ -716,15 +711,6 @@ impl ControlTick {
         let s1 = self.p1.update_with(frame.p1_gauge_pa, dt_age, dt_age_good);
         let s2 = self.p2.update_with(frame.p2_gauge_pa, dt_age, dt_age_good);
         let sa = self.angle.update_with(frame.angle_rad, dt_age, dt_age_good);
-        if let Some(v) = s1.value() {
-            self.last_p1_pa = Some(v);
-        }
-        if let Some(v) = s2.value() {
-            self.last_p2_pa = Some(v);
-        }
-        if let Some(v) = sa.value() {
-            self.last_angle_rad = Some(v);
-        }
         let new_angle = match sa {
             ChannelStatus::Valid {
                 value,
@@ -783,11 +769,11 @@ impl ControlTick {
             }
         }
 
-        let angle_est = self.last_angle_rad.unwrap_or(0.0);
+        let angle_est = self.angle.last().unwrap_or(0.0);
         // The force-law torque estimate, computed once per tick: it is both the logged
         // `torque_est_nm` and, when all channels are fresh this tick (then `last_*` are this
         // tick's values), the torque loop's feedback.
-        let estimate = match (self.last_p1_pa, self.last_p2_pa, self.last_angle_rad) {
+        let estimate = match (self.p1.last(), self.p2.last(), self.angle.last()) {
             (Some(p1), Some(p2), Some(a)) => Some(torque_estimate_nm(
                 &self.cfg.force_law,
                 &self.cfg.geometry,
@@ -999,8 +985,8 @@ impl ControlTick {
         out.valves = self.safety.safe_command();
         let (h1, h2) = match self.safety.safe_state() {
             SafeState::Hold => (
-                clamp_pressure_setpoint_pa(self.last_p1_pa.unwrap_or(0.0), P_MUSCLE_MAX_GAUGE_PA),
-                clamp_pressure_setpoint_pa(self.last_p2_pa.unwrap_or(0.0), P_MUSCLE_MAX_GAUGE_PA),
+                clamp_pressure_setpoint_pa(self.p1.last().unwrap_or(0.0), P_MUSCLE_MAX_GAUGE_PA),
+                clamp_pressure_setpoint_pa(self.p2.last().unwrap_or(0.0), P_MUSCLE_MAX_GAUGE_PA),
             ),
             SafeState::Vent => (0.0, 0.0),
         };
