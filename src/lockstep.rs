@@ -190,8 +190,8 @@ impl<P: OutputPin<Error = Infallible> + PinLevel + Clone> FirmwareNode<P> {
             dt_s,
         );
         self.latch.update(self.tick.latch_record());
-        let Ok(o) = self.valves.apply(&out.valves);
-        self.tick.valves_applied(&o);
+        let Ok(o) = self.valves.apply_switched(&out.valves);
+        self.tick.valves_switched(o);
         NodeTick {
             frame: *frame,
             out,

@@ -43,7 +43,8 @@
 //!
 //! The openings are what the valve driver actually switched (its PWM latches a duty per
 //! period, so the mean command of a window can differ from it by most of a period): the
-//! caller reports them with [`crate::tick::ControlTick::valves_applied`]; without that
+//! caller reports them with [`crate::tick::ControlTick::valves_applied`] (or, for on/off
+//! valves, [`crate::tick::ControlTick::valves_switched`]: integer counts); without that
 //! report the tick's command stands in for them (exact for proportional valves).
 //!
 //! Cost on the MCU: a few adds per tick (opening sums); the model runs once per window.
@@ -217,6 +218,9 @@ pub struct ResidualMonitor {
     geometry_ratio: f32,
     m: [MuscleWindow; 2],
     angle_start_rad: f32,
+    /// Ticks each on/off valve was switched open in the window, one 16-bit lane per valve
+    /// (inflate 1, exhaust 1, inflate 2, exhaust 2 from the low end): one 64-bit add a tick.
+    switched_ticks: u64,
     /// Ticks and time in the window; `open` = a window is running.
     ticks: u32,
     elapsed_s: f32,
@@ -244,6 +248,7 @@ impl ResidualMonitor {
                 ex_seen_pa: 0.0,
             }; 2],
             angle_start_rad: 0.0,
+            switched_ticks: 0,
             ticks: 0,
             elapsed_s: 0.0,
             open: false,
@@ -309,8 +314,16 @@ impl ResidualMonitor {
         b.sum_ex += ex2;
     }
 
+    /// End of a tick, for on/off valves: which valves the driver switched open (the lanes
+    /// of [`crate::valves::SwitchedValves`]). Counts like [`Self::openings`] with 0 / 1.
+    #[inline(always)]
+    pub fn switched(&mut self, lanes: u64) {
+        self.switched_ticks += lanes;
+    }
+
     fn start(&mut self, p1: f32, p2: f32, angle: f32) {
         self.open = true;
+        self.switched_ticks = 0;
         self.ticks = 0;
         self.elapsed_s = 0.0;
         self.angle_start_rad = angle;
@@ -334,8 +347,9 @@ impl ResidualMonitor {
             let p_end = if i == 0 { p1 } else { p2 };
             let w = self.m[i];
             let p_mid = 0.5 * (w.p_start_pa + p_end);
-            let u_in = w.sum_in / n;
-            let u_ex = w.sum_ex / n;
+            let lanes = self.switched_ticks >> (32 * i);
+            let u_in = (w.sum_in + (lanes & 0xffff) as u16 as f32) / n;
+            let u_ex = (w.sum_ex + (lanes >> 16) as u16 as f32) / n;
             let angle_mid = 0.5 * (self.angle_start_rad + angle);
             let angle_rate = (angle - self.angle_start_rad) / t;
             let (chi, chi_rate) = self.contraction(i, angle_mid, angle_rate);
@@ -511,6 +525,34 @@ mod tests {
             f.contains(FaultCode::InletStuckClosed1) || f.contains(FaultCode::SupplyLost),
             "{f:?}"
         );
+    }
+
+    #[test]
+    fn switched_counts_and_reported_openings_judge_alike() {
+        // An on/off inlet at 3 of every 10 ticks against a pressure that does not rise: the
+        // integer counts and the 0 / 1 openings give the same faults at the same tick.
+        let first_fault = |switched: bool| {
+            let mut m =
+                ResidualMonitor::new(ValveModelParams::REFERENCE, &JointGeometry::REFERENCE);
+            for k in 0..400u32 {
+                let f = m.observe(true, 300_000.0, 300_000.0, 0.0, DT);
+                if !f.is_empty() {
+                    return Some((k, f));
+                }
+                let open = k % 10 < 3;
+                if switched {
+                    m.switched(
+                        crate::valves::SwitchedValves::new(open, false, false, true).lanes(),
+                    );
+                } else {
+                    m.openings(open as u8 as f32, 0.0, 0.0, 1.0);
+                }
+            }
+            None
+        };
+        let a = first_fault(false);
+        assert!(a.is_some());
+        assert_eq!(a, first_fault(true));
     }
 
     #[test]

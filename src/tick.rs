@@ -665,6 +665,14 @@ impl ControlTick {
         self.pending_command = false;
     }
 
+    /// [`Self::valves_applied`] for on/off valves: what
+    /// [`crate::valves::OnOffValves::apply_switched`] returns.
+    #[inline]
+    pub fn valves_switched(&mut self, s: crate::valves::SwitchedValves) {
+        self.residual.switched(s.lanes());
+        self.pending_command = false;
+    }
+
     /// A residual (valve / supply) fault: raised, and a tracking-lost cause of the same
     /// muscle stays active while it persists.
     #[cold]
@@ -789,7 +797,9 @@ impl ControlTick {
         };
         // `vel` is finite: the estimator stores only finite velocities (starts at 0).
 
-        let mut out = TickOutput {
+        // The output of a tick that does not arm; the armed path builds its own (no field
+        // written twice on the hot path).
+        let out = TickOutput {
             valves: ValveCommand::default(),
             p1_set_gauge_pa: 0.0,
             p2_set_gauge_pa: 0.0,
@@ -942,7 +952,6 @@ impl ControlTick {
                         self.active.insert(FaultCode::PressureTrackingLost2);
                         self.safety.raise(FaultCode::PressureTrackingLost2);
                     }
-                    out.torque_des_nm = t_des;
                     return self.safe_output(out);
                 }
                 // What `self.safety.gate(cmd)` and `clamp_pressure_setpoint_pa(p, P_MAX)` return
@@ -950,15 +959,18 @@ impl ControlTick {
                 // returned early), u1/u2 are finite and in [-1, 1] (pressure loop output),
                 // and both laws' set-points are already in [0, P_MUSCLE_MAX] (the torque loop's
                 // clamp, `DpPid::step`'s `clamp_pressure_setpoint_pa`).
-                out.valves = ValveCommand {
-                    muscle1: u1,
-                    muscle2: u2,
+                let armed = TickOutput {
+                    valves: ValveCommand {
+                        muscle1: u1,
+                        muscle2: u2,
+                    },
+                    p1_set_gauge_pa: p1_set,
+                    p2_set_gauge_pa: p2_set,
+                    torque_des_nm: t_des,
+                    torque_est_nm: t_est,
+                    armed: true,
+                    ..out
                 };
-                out.p1_set_gauge_pa = p1_set;
-                out.p2_set_gauge_pa = p2_set;
-                out.torque_des_nm = t_des;
-                out.torque_est_nm = t_est;
-                out.armed = true;
                 trace!(
                     "tick sp={} a={} T*={} p*=({}, {}) u=({}, {})",
                     sp,
@@ -969,7 +981,7 @@ impl ControlTick {
                     u1,
                     u2
                 );
-                out
+                armed
             }
             Err(e) => {
                 warn!("control law error: {}", e);

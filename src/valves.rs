@@ -59,6 +59,38 @@ impl ValveOpenings {
     }
 }
 
+/// The on/off valves switched open in one tick: one 16-bit lane per valve (inflate 1,
+/// exhaust 1, inflate 2, exhaust 2 from the low end), each 0 or 1, so that the valve
+/// supervision counts a window's open ticks with one 64-bit add per tick.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SwitchedValves(u64);
+
+impl SwitchedValves {
+    /// From the four valve states.
+    #[inline(always)]
+    pub fn new(in1: bool, ex1: bool, in2: bool, ex2: bool) -> Self {
+        SwitchedValves(in1 as u64 | (ex1 as u64) << 16 | (in2 as u64) << 32 | (ex2 as u64) << 48)
+    }
+
+    /// The lanes (see the type).
+    #[inline(always)]
+    pub fn lanes(self) -> u64 {
+        self.0
+    }
+
+    /// As openings (1 open, 0 closed).
+    pub fn openings(self) -> ValveOpenings {
+        let on = |k: u32| ((self.0 >> (16 * k)) & 1) as u8 as f32;
+        ValveOpenings {
+            u_in1: on(0),
+            u_ex1: on(1),
+            u_in2: on(2),
+            u_ex2: on(3),
+        }
+    }
+}
+
 /// A pin / channel error, naming which valve failed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -291,16 +323,22 @@ where
         &mut self,
         cmd: &ValveCommand,
     ) -> Result<ValveOpenings, Error<I1::Error, E1::Error, I2::Error, E2::Error>> {
+        self.apply_switched(cmd).map(SwitchedValves::openings)
+    }
+
+    /// [`Self::apply`], returning which valves it switched open (what the control
+    /// tick's valve supervision counts: [`crate::tick::ControlTick::valves_switched`]).
+    #[allow(clippy::type_complexity)]
+    #[inline(never)]
+    pub fn apply_switched(
+        &mut self,
+        cmd: &ValveCommand,
+    ) -> Result<SwitchedValves, Error<I1::Error, E1::Error, I2::Error, E2::Error>> {
         let (in1, ex1) = self.ch1.tick(sanitize(cmd.muscle1), self.n, self.min_on);
         let (in2, ex2) = self.ch2.tick(sanitize(cmd.muscle2), self.n, self.min_on);
         debug_assert!(!(in1 && ex1 || in2 && ex2));
         match self.write(in1, ex1, in2, ex2) {
-            Ok(()) => Ok(ValveOpenings {
-                u_in1: in1 as u8 as f32,
-                u_ex1: ex1 as u8 as f32,
-                u_in2: in2 as u8 as f32,
-                u_ex2: ex2 as u8 as f32,
-            }),
+            Ok(()) => Ok(SwitchedValves::new(in1, ex1, in2, ex2)),
             Err(e) => {
                 let _ = self.close_all();
                 Err(e)
@@ -532,6 +570,21 @@ mod tests {
         fn set_high(&mut self) -> Result<(), Self::Error> {
             self.log.borrow_mut().push((self.id, true));
             Ok(())
+        }
+    }
+
+    #[test]
+    fn switched_valves_read_back_as_openings() {
+        for bits in 0u8..16 {
+            let b = |k: u8| bits & (1 << k) != 0;
+            let s = SwitchedValves::new(b(0), b(1), b(2), b(3));
+            let o = s.openings();
+            assert_eq!(
+                [o.u_in1, o.u_ex1, o.u_in2, o.u_ex2],
+                [0, 1, 2, 3].map(|k| b(k) as u8 as f32)
+            );
+            // One count per open valve, each in its own 16-bit lane.
+            assert_eq!(s.lanes().count_ones(), bits.count_ones());
         }
     }
 

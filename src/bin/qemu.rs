@@ -178,10 +178,10 @@ mod bench {
         // The valve update is part of the measured tick: the reference on/off driver (tick-level
         // PWM, minimum on-time) writing four pins, each a volatile store like a GPIO BSRR write.
         let mut valves = OnOffValves::new(
-            BenchPin(0),
-            BenchPin(1),
-            BenchPin(2),
-            BenchPin(3),
+            BenchPin::<0>,
+            BenchPin::<1>,
+            BenchPin::<2>,
+            BenchPin::<3>,
             OnOffPwmConfig::REFERENCE,
         );
         let (mut sum_armed, mut n_armed, mut max_any) = (0u32, 0u32, 0u32);
@@ -193,8 +193,8 @@ mod bench {
             let (c, out) = measure_effectful(|| {
                 let out = tick.step(&frame, &sp, black_box(dt));
                 // The bench pins cannot fail (`Infallible`).
-                let Ok(o) = valves.apply(&out.valves);
-                tick.valves_applied(&o);
+                let Ok(o) = valves.apply_switched(&out.valves);
+                tick.valves_switched(o);
                 out
             });
             let out = black_box(out);
@@ -212,23 +212,24 @@ mod bench {
         );
     }
 
-    /// A valve output for the tick benchmark: set/reset are single volatile stores (as a GPIO
-    /// BSRR write on the board).
-    struct BenchPin(u32);
+    /// A valve output for the tick benchmark: set/reset are single volatile stores of a
+    /// constant mask, as a GPIO BSRR write through the HAL's typed pins (one type per pin, the
+    /// mask known at compile time).
+    struct BenchPin<const K: u32>;
 
     static BENCH_GPIO: AtomicU32 = AtomicU32::new(0);
 
-    impl embedded_hal::digital::ErrorType for BenchPin {
+    impl<const K: u32> embedded_hal::digital::ErrorType for BenchPin<K> {
         type Error = core::convert::Infallible;
     }
 
-    impl embedded_hal::digital::OutputPin for BenchPin {
+    impl<const K: u32> embedded_hal::digital::OutputPin for BenchPin<K> {
         fn set_low(&mut self) -> Result<(), Self::Error> {
-            BENCH_GPIO.store(1 << (self.0 + 16), Ordering::Relaxed);
+            BENCH_GPIO.store(1 << (K + 16), Ordering::Relaxed);
             Ok(())
         }
         fn set_high(&mut self) -> Result<(), Self::Error> {
-            BENCH_GPIO.store(1 << self.0, Ordering::Relaxed);
+            BENCH_GPIO.store(1 << K, Ordering::Relaxed);
             Ok(())
         }
     }
