@@ -44,6 +44,19 @@ fn columns_in_any_order_and_metadata_kept() {
 }
 
 #[test]
+fn blanks_around_names_and_numbers_are_ignored() {
+    // As spreadsheets and rig loggers write them: ", " separators, padded header names.
+    let padded = GOOD
+        .replace("angle_deg,u_ex2,t_s,", " angle_deg , u_ex2,t_s ,")
+        .replace("0.6,0.25,0.001,", "0.6 , 0.25, 0.001,");
+    let a = Recording::parse(GOOD, "run-42.csv").unwrap();
+    let b = Recording::parse(&padded, "run-42.csv").unwrap();
+    assert_eq!(a.inputs, b.inputs);
+    assert_eq!(a.t_s, b.t_s);
+    assert_eq!(a.channel(Channel::AngleDeg), b.channel(Channel::AngleDeg));
+}
+
+#[test]
 fn missing_required_column_names_the_header_line_and_column() {
     let e = err(&GOOD.replace("u_in2", "u_inX"));
     assert_names(&e, 4, "u_in2");

@@ -366,23 +366,23 @@ impl Recording {
             .collect();
         header.extend(present.iter().map(|c| c.name()));
         cw.write_record(&header)?;
-        let mut row: Vec<String> = Vec::with_capacity(header.len());
+        cw.flush()?;
+        drop(cw);
+        // The rows: numbers only (nothing to quote), formatted into one reused line buffer.
+        let mut line: Vec<u8> = Vec::with_capacity(160);
         for k in 0..n {
-            row.clear();
-            row.push(format!("{}", self.t_s[k]));
+            line.clear();
+            write!(line, "{}", self.t_s[k])?;
             let u = &self.inputs[k];
             for v in [u.u_in1, u.u_ex1, u.u_in2, u.u_ex2] {
-                row.push(format!("{v}"));
+                write!(line, ",{v}")?;
             }
             for c in &present {
-                row.push(format!(
-                    "{:.6}",
-                    self.outputs[c.index()].as_ref().unwrap()[k]
-                ));
+                write!(line, ",{:.6}", self.outputs[c.index()].as_ref().unwrap()[k])?;
             }
-            cw.write_record(&row)?;
+            line.push(b'\n');
+            w.write_all(&line)?;
         }
-        cw.flush()?;
         Ok(())
     }
 }
@@ -501,9 +501,10 @@ impl<'t> Table<'t> {
             lines: meta_lines,
             offset,
         } = Preamble::of(text);
+        // Fields are trimmed where they are read (`num`), not by the reader: its trimming
+        // builds a new record per row.
         let mut rdr = csv::ReaderBuilder::new()
             .has_headers(true)
-            .trim(csv::Trim::All)
             .from_reader(&text.as_bytes()[offset..]);
         let header_line = meta_lines + 1;
         let headers = rdr
@@ -513,7 +514,9 @@ impl<'t> Table<'t> {
                 line: header_line,
                 message: format!("cannot read the header: {e}"),
             })?
-            .clone();
+            .iter()
+            .map(str::trim)
+            .collect::<csv::StringRecord>();
         if headers.is_empty() || (headers.len() == 1 && headers[0].is_empty()) {
             return Err(RecordingError::Line {
                 path: path.to_owned(),
@@ -600,7 +603,7 @@ impl<'t> Table<'t> {
 
     /// The finite number in column `col` (named `name`) of the current row.
     pub(crate) fn num(&self, col: usize, name: &str) -> Result<f64, RecordingError> {
-        let s = self.record.get(col).unwrap_or("");
+        let s = self.record.get(col).unwrap_or("").trim();
         let v: f64 = s
             .parse()
             .map_err(|_| self.field_err(self.line, name, format!("not a number: {s:?}")))?;
