@@ -423,3 +423,38 @@ fn valve_delay_is_told_from_sensor_lag() {
     let delay = d.effects[0].params[0].1;
     assert!((delay - 9e-3).abs() < 1e-9, "delay {delay}");
 }
+
+#[test]
+fn a_recording_longer_than_the_fit_budget_is_fitted_on_its_head_with_the_same_answer() {
+    // 8 s of TRAIN against a 2 s budget: the fits replay only the head, the held-out scoring
+    // and the final replay all of it. The answer and the parameter stay those of the full
+    // fits (within the solver tolerance's effect on a refit).
+    let (train, check) = recordings(&["leakage"], 77, 1e-3, [true; 5]);
+    let full = diagnose(
+        &nominal(),
+        &train,
+        Some(&check),
+        &DiagnoseOptions::default(),
+        &|_, _, _| {},
+    )
+    .unwrap();
+    let budget = DiagnoseOptions {
+        fit_budget_s: 2.0,
+        ..DiagnoseOptions::default()
+    };
+    let head = diagnose(&nominal(), &train, Some(&check), &budget, &|_, _, _| {}).unwrap();
+    assert_eq!(
+        named(&full),
+        vec!["leakage".to_string()],
+        "{}",
+        full.answer()
+    );
+    assert_eq!(named(&head), named(&full), "{}", head.answer());
+    let c = |d: &Diagnosis| d.effects[0].params[0].1;
+    assert!(
+        (c(&head) / c(&full) - 1.0).abs() < 0.05,
+        "{} vs {}",
+        c(&head),
+        c(&full)
+    );
+}

@@ -34,6 +34,10 @@ pub struct Problem<'a> {
     /// States of the nominal simulation (reused when only sensor effects change).
     pub base_states: Vec<PlantState>,
     pub opts: SolverOptions,
+    /// Fits over a head of the recording replay only that head (set for recordings longer
+    /// than the fit budget; a replay of a head can differ from the same samples of a full
+    /// replay within the solver tolerance, so short recordings keep full replays).
+    pub replay_heads: bool,
 }
 
 impl<'a> Problem<'a> {
@@ -56,6 +60,7 @@ impl<'a> Problem<'a> {
             scale,
             base_states: base.states,
             opts,
+            replay_heads: false,
         })
     }
 
@@ -70,13 +75,24 @@ impl<'a> Problem<'a> {
 
     /// The simulated channels of the model `parts`; `None` if the simulation fails.
     pub fn predict(&self, parts: &[Part]) -> Option<Vec<Measurement>> {
+        self.predict_until(parts, self.inputs.len())
+    }
+
+    /// [`Self::predict`] for the samples `0..end` a cost over a range ending at `end`
+    /// reads: with [`Self::replay_heads`] only those are replayed, else all.
+    fn predict_until(&self, parts: &[Part], end: usize) -> Option<Vec<Measurement>> {
+        let end = if self.replay_heads {
+            end.clamp(1, self.inputs.len())
+        } else {
+            self.inputs.len()
+        };
         let cfg = self.config(parts);
         let plant = Plant::from_config(&cfg);
         let dt = self.setup.dt_s;
         if parts.iter().all(|p| !p.candidate.changes_dynamics()) {
-            return Some(plant.measure_series(&self.base_states, dt));
+            return Some(plant.measure_series(&self.base_states[..end], dt));
         }
-        let sim = simulate(&plant, self.inputs, dt, &self.opts).ok()?;
+        let sim = simulate(&plant, &self.inputs[..end], dt, &self.opts).ok()?;
         Some(plant.measure_series(&sim.states, dt))
     }
 
@@ -99,7 +115,7 @@ impl<'a> Problem<'a> {
 
     /// Total cost over `range` (sum of [`Self::channel_costs`]); infinite if the simulation fails.
     pub fn cost(&self, parts: &[Part], range: std::ops::Range<usize>) -> f64 {
-        match self.predict(parts) {
+        match self.predict_until(parts, range.end) {
             Some(p) => self.channel_costs(&p, range).iter().sum(),
             None => f64::INFINITY,
         }
@@ -113,7 +129,7 @@ impl<'a> Problem<'a> {
         range: &std::ops::Range<usize>,
         stride: usize,
     ) -> Option<Vec<f64>> {
-        let pred = self.predict(parts)?;
+        let pred = self.predict_until(parts, range.end)?;
         let idx: Vec<usize> = range.clone().step_by(stride).collect();
         let w = 1.0 / (idx.len() as f64).sqrt();
         let mut r = Vec::with_capacity(idx.len() * 5);

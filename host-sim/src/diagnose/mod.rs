@@ -54,6 +54,10 @@ pub use verdict::Verdict;
 pub struct DiagnoseOptions {
     /// Share of TRAIN (from its start) the candidates are fitted on; the rest scores them.
     pub fit_fraction: f64,
+    /// At most this many seconds of TRAIN (its head) are replayed by a fit: a long recording
+    /// is fitted on its head and scored on all the rest (held-out fits and the final replay
+    /// use the whole recording).
+    pub fit_budget_s: f64,
     /// Levenberg-Marquardt iterations per fit (about; the fitter counts replays).
     pub max_iter: usize,
     /// At most this many effects and recalibrations are named.
@@ -77,6 +81,7 @@ impl Default for DiagnoseOptions {
     fn default() -> Self {
         Self {
             fit_fraction: 0.7,
+            fit_budget_s: 120.0,
             max_iter: 8,
             max_effects: 2,
             threads: 2,
@@ -252,6 +257,8 @@ pub struct Gathered<'a> {
     pub noise: [f64; 5],
     pub evidence: Evidence,
     pub located: Vec<Located>,
+    /// Samples a fit replays at most ([`DiagnoseOptions::fit_budget_s`]).
+    pub fit_budget_n: usize,
 }
 
 /// Stage 1, evidence: replays the nominal plant (the only replay whose failure stops the
@@ -274,7 +281,14 @@ pub fn gather_evidence<'a>(
             noise[c.index()] = noise_level(y);
         }
     }
-    let problem = Problem::new(nominal, train, present, spread, opts.solver)?;
+    let mut problem = Problem::new(nominal, train, present, spread, opts.solver)?;
+    let fit_budget_n = if opts.fit_budget_s.is_finite() && opts.fit_budget_s > 0.0 {
+        ((opts.fit_budget_s / problem.setup.dt_s).round() as usize).max(MIN_SAMPLES)
+    } else {
+        usize::MAX
+    };
+    // A recording longer than the budget: fits replay only the head they are scored on.
+    problem.replay_heads = n > fit_budget_n;
     let nominal_meas =
         Plant::from_config(nominal).measure_series(&problem.base_states, problem.setup.dt_s);
     let diff = SavitzkyGolay::default();
@@ -296,6 +310,7 @@ pub fn gather_evidence<'a>(
         noise,
         evidence,
         located,
+        fit_budget_n,
     })
 }
 
@@ -336,7 +351,9 @@ pub fn final_refit<'c>(
     let (chosen, ci95) = if chosen.is_empty() {
         (chosen, Vec::new())
     } else {
-        let (fitted, _, ci) = g.problem.fit_with_ci(&chosen, 0..n, opts.max_iter, true);
+        let (fitted, _, ci) =
+            g.problem
+                .fit_with_ci(&chosen, 0..n.min(g.fit_budget_n), opts.max_iter, true);
         (fitted, ci)
     };
     let corrected = g.problem.config(&chosen);
@@ -407,6 +424,7 @@ pub fn diagnose(
         .map(|c| c.screen(&g.evidence, &setup))
         .collect();
     let n_fit = ((n as f64 * opts.fit_fraction).round() as usize)
+        .min(g.fit_budget_n)
         .clamp(MIN_SAMPLES / 2, n - MIN_SAMPLES / 4);
     let fit_range = 0..n_fit;
     let held = n_fit..n;
