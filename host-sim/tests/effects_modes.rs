@@ -25,7 +25,7 @@ use host_sim::diagnose::fitting::{Part, Problem};
 use host_sim::diagnose::synth::{excitation, Excitation};
 use host_sim::io::recording::{Channel, Recording};
 use host_sim::sim::{simulate, SolverOptions};
-use host_sim::{Measurement, Plant};
+use host_sim::{Measurement, Plant, PlantState, ValveInputs};
 use pam_firmware::tick::ControllerConfig;
 
 /// Each effect at a realistic size: (name, `[effects]` TOML). Sizes as in the diagnosis's
@@ -370,6 +370,8 @@ fn same_effect(name: &str, id: &str) -> bool {
         ("joint_friction", "joint_friction")
             | ("gravity", "gravity")
             | ("leakage", "leakage")
+            | ("leakage", "leakage_muscle1")
+            | ("leakage", "leakage_muscle2")
             | ("polytropic", "polytropic")
             // Both set the chamber's pressure law: either candidate replaces the other.
             | ("polytropic", "heat_transfer")
@@ -591,4 +593,38 @@ fn cli_closed_loop_recording_replays_open_loop_on_the_same_plant() {
             .fold(0.0, f64::max);
         assert!(d < 1e-4, "{}: replay departs by {d}", c.name());
     }
+}
+
+#[test]
+fn a_leak_in_one_muscle_drains_that_chamber_only() {
+    let leak = |muscle: &str| {
+        plant_with(&format!(
+            "[effects.leakage]\nsonic_conductance_m3_per_s_pa = 6.0e-10\n{muscle}"
+        ))
+    };
+    let nominal = plant_with("");
+    let x = PlantState {
+        p1_abs_pa: 400e3,
+        p2_abs_pa: 450e3,
+        ..nominal.initial_state()
+    };
+    let u = ValveInputs::CLOSED;
+    let d0 = nominal.derivatives(&x, &u);
+    let both = leak("").derivatives(&x, &u);
+    let only2 = leak("muscle = 2\n").derivatives(&x, &u);
+    assert!(both.p1_abs_pa < d0.p1_abs_pa && both.p2_abs_pa < d0.p2_abs_pa);
+    assert_eq!(only2.p1_abs_pa, d0.p1_abs_pa);
+    assert_eq!(only2.p2_abs_pa, both.p2_abs_pa);
+    // The muscle is 1 or 2, named in the error with the file and key.
+    let text = format!(
+        "{}\n[effects.leakage]\nsonic_conductance_m3_per_s_pa = 6.0e-10\nmuscle = 3\n",
+        nominal_text()
+    );
+    let e = host_sim::PlantConfig::from_toml_str(&text, "leaky.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("leaky.toml") && e.contains("effects.leakage.muscle"),
+        "{e}"
+    );
 }

@@ -347,7 +347,7 @@ impl Plant {
             tension[i] = self.tension_n(pg, chi[i], dchi[i]);
             // The signed standard flows into the chamber: leak, inlet, exhaust. A closed
             // valve contributes nothing (skip the flow function).
-            let q_leak = self.effects.chamber_flow_m3_s(p[i], self.p_atm_pa);
+            let q_leak = self.effects.chamber_flow_m3_s(i, p[i], self.p_atm_pa);
             let mut q_in = 0.0;
             let mut q_out = 0.0;
             if u_in[i] != 0.0 {

@@ -88,10 +88,10 @@ pub trait Hooks: Debug + Clone + PartialEq {
     fn joint_torque_nm(&self, _angle_rad: f64, _velocity_rad_s: f64) -> f64 {
         0.0
     }
-    /// Extra standard volume flow into a chamber at absolute pressure `p_abs_pa`
-    /// (m^3/s, negative: out of it).
+    /// Extra standard volume flow into the chamber of `muscle` (0 or 1) at absolute pressure
+    /// `p_abs_pa` (m^3/s, negative: out of it).
     #[inline(always)]
-    fn chamber_flow_m3_s(&self, _p_abs_pa: f64, _p_atm_pa: f64) -> f64 {
+    fn chamber_flow_m3_s(&self, _muscle: usize, _p_abs_pa: f64, _p_atm_pa: f64) -> f64 {
         0.0
     }
     /// Factor on the isothermal pressure rate (the polytropic exponent).
@@ -344,17 +344,17 @@ impl Effects {
         s.0
     }
 
-    /// Extra standard volume flow into a chamber (negative: out).
+    /// Extra standard volume flow into the chamber of `muscle` (0 or 1; negative: out).
     #[inline(always)]
-    pub fn chamber_flow_m3_s(&self, p_abs_pa: f64, p_atm_pa: f64) -> f64 {
-        struct Sum(f64, f64, f64);
+    pub fn chamber_flow_m3_s(&self, muscle: usize, p_abs_pa: f64, p_atm_pa: f64) -> f64 {
+        struct Sum(f64, usize, f64, f64);
         impl Visit<'_> for Sum {
             #[inline(always)]
             fn visit<A: Hooks>(&mut self, a: &A) {
-                self.0 += a.chamber_flow_m3_s(self.1, self.2);
+                self.0 += a.chamber_flow_m3_s(self.1, self.2, self.3);
             }
         }
-        let mut s = Sum(0.0, p_abs_pa, p_atm_pa);
+        let mut s = Sum(0.0, muscle, p_abs_pa, p_atm_pa);
         self.visit(&mut s);
         s.0
     }
