@@ -179,7 +179,14 @@ impl PositionController {
             self.reset();
             return Err(ControlError::NonFiniteInput);
         }
-        self.step_finite(meas, setpoint_rad, dt_s, downstream)
+        let out = self.step_finite(meas, setpoint_rad, dt_s, downstream)?;
+        // `step_finite` relies on finite limits (a validated configuration) to tell a
+        // non-finite result by NaN alone; gains given here directly may have infinite ones.
+        if !finite(&[out, self.integral_nm]) {
+            self.reset();
+            return Err(ControlError::NonFiniteOutput);
+        }
+        Ok(out)
     }
 
     /// [`Self::step`] without its input check, for a caller that has validated the inputs
@@ -209,7 +216,10 @@ impl PositionController {
             self.integral_nm = clampf(self.integral_nm + di, g.i_limit_nm);
         }
         let out = clampf(pd + self.integral_nm, lim);
-        if !finite(&[out, self.integral_nm]) {
+        // Both are clamped to the limits, which the control tick's validated configuration
+        // makes finite: each is then finite or NaN, and their sum is NaN exactly when one of
+        // them is (`step_limited` checks the general case).
+        if (out + self.integral_nm).is_nan() {
             self.reset();
             return Err(ControlError::NonFiniteOutput);
         }
@@ -549,7 +559,8 @@ impl PressureController {
             }
         }
         let u = clampf(p + self.integral, 1.0);
-        if !u.is_finite() {
+        // Clamped to [-1, 1]: finite unless NaN.
+        if u.is_nan() {
             self.reset();
             return Err(ControlError::NonFiniteOutput);
         }
@@ -571,6 +582,26 @@ mod tests {
             i_limit_nm: 2.0,
             out_limit_nm: 10.0,
         })
+    }
+
+    #[test]
+    fn position_loop_with_infinite_limits_refuses_an_infinite_output() {
+        // Gains given directly (not through a validated tick configuration) may have
+        // infinite limits; an overflowing output is still an error, never +-inf.
+        let mut p = PositionController::new(PidGains {
+            kp_nm_per_rad: f32::MAX,
+            ki_nm_per_rad_s: 0.0,
+            kd_nm_s_per_rad: 0.0,
+            i_limit_nm: f32::INFINITY,
+            out_limit_nm: f32::INFINITY,
+        });
+        let meas = JointState {
+            angle_rad: 0.0,
+            velocity_rad_s: 0.0,
+        };
+        assert_eq!(p.step(meas, 2.0, 1e-3), Err(ControlError::NonFiniteOutput));
+        // Within range the same gains work.
+        assert_eq!(p.step(meas, 0.0, 1e-3), Ok(0.0));
     }
 
     const EDGE_VALUES: [f32; 14] = [

@@ -798,6 +798,11 @@ mod tests {
     /// (quantised) inputs, over the whole domain: half a Q16 LSB of the output rounding
     /// (7.6e-6 N m) plus the coefficient and floor errors, asserted <= 1e-5 N m.
     const TORQUE_BOUND_NM: f64 = 1e-5;
+    /// The same bound for any accepted model with coefficients up to 2x the reference's
+    /// (`accepted_torque_models_never_overflow`): the coefficient quantisation error grows
+    /// with the coefficients' size (a model with coefficients at 1.4-1.9x exceeded 1e-5 N m:
+    /// `proptest-regressions/fixed_point.txt`), the output rounding does not.
+    const ACCEPTED_TORQUE_BOUND_NM: f64 = 2e-5;
     /// ... and of its inverse against the exact (f64) inverse: half a pascal of the output
     /// rounding plus the reciprocal's rounding, asserted <= 0.55 Pa.
     const INVERSE_BOUND_PA: f64 = 0.55;
@@ -1318,7 +1323,7 @@ mod tests {
             let (af, vf) = (aq.to_num::<f64>(), vq.to_num::<f64>());
             let fwd = m.torque_nm(aq, vq, PressurePa::from_bits(dp));
             let want = eq11_f64_with(&p, af, vf, dp as f64);
-            prop_assert!((fwd.to_num::<f64>() - want).abs() <= TORQUE_BOUND_NM, "{} vs {}", fwd, want);
+            prop_assert!((fwd.to_num::<f64>() - want).abs() <= ACCEPTED_TORQUE_BOUND_NM, "{} vs {}", fwd, want);
             let lim = m.dp_limit_pa().to_bits() as f64;
             let act = m.activation(fwd, aq, vq);
             let exact = inverse_f64_with(&p, lim, fwd.to_num::<f64>(), af, vf);
