@@ -387,8 +387,13 @@ pub fn diagnose(
 ) -> Result<Diagnosis, DiagnoseError> {
     // Derivatives, lags and refits work on a uniform grid: jittered recordings are put on it
     // (openings time-averaged per cell, outputs interpolated; `Recording::to_uniform`).
-    let (train_u, check_u) = (train.to_uniform(), check.map(Recording::to_uniform));
-    let (train, check) = (&train_u, check_u.as_ref());
+    // A recording already on its grid is used as it is (no copy of a long recording).
+    let uniform = |r: &Recording| -> Option<Recording> {
+        (!r.is_uniform()).then(|| r.to_uniform())
+    };
+    let (train_u, check_u) = (uniform(train), check.and_then(uniform));
+    let train = train_u.as_ref().unwrap_or(train);
+    let check = check.map(|c| check_u.as_ref().unwrap_or(c));
     let n = train.len();
     if n < MIN_SAMPLES {
         return Err(DiagnoseError::Data(format!(
