@@ -95,6 +95,9 @@ empty=$(field "bench calib" empty_counts)
 tick_n=$(field "bench tick" n)
 tick_sum=$(field "bench tick" sum_counts)
 tick_max=$(field "bench tick" max_counts)
+st_n=$(field "bench start tick" n)
+st_sum=$(field "bench start tick" sum_counts)
+st_max=$(field "bench start tick" max_counts)
 fl_n=$(field "bench force_law_f32" n)
 fl_sum=$(field "bench force_law_f32" sum_counts)
 fl_max=$(field "bench force_law_f32" max_counts)
@@ -105,7 +108,7 @@ fx_off=$(field "bench force_law_fixed" off_by_more_than_0.1N)
 stack=$(grep -o 'stack_used_bytes=[0-9]*' <<<"$log" | cut -d= -f2)
 unpainted=$(grep -o 'unpainted_top_bytes=[0-9]*' <<<"$log" | cut -d= -f2)
 if [ "${stack:-0}" -le "${unpainted:-0}" ]; then stack="<= $unpainted"; fi
-for v in cal_insns cal_counts empty tick_n tick_sum tick_max fl_n fl_sum fl_max fx_n fx_sum fx_max stack; do
+for v in cal_insns cal_counts empty tick_n tick_sum tick_max st_n st_sum st_max fl_n fl_sum fl_max fx_n fx_sum fx_max stack; do
   [ -n "${!v}" ] || { echo "bench-mcu.sh: no '$v' in the QEMU output:" >&2; echo "$log" >&2; exit 2; }
 done
 
@@ -115,6 +118,10 @@ read -r tick_mean tick_worst fl_mean fl_worst fx_mean fx_worst k < <(awk -v ci="
     k = ci / (cc - e);
     printf "%.0f %.0f %.0f %.0f %.0f %.0f %.5f\n", (ts / tn - e) * k, (tm - e) * k,
       (fs / fn - e) * k, (fm - e) * k, (xs / xn - e) * k, (xm - e) * k, k }')
+
+read -r st_mean st_worst < <(awk -v ci="$cal_insns" -v cc="$cal_counts" -v e="$empty" \
+  -v n="$st_n" -v s="$st_sum" -v m="$st_max" 'BEGIN {
+    k = ci / (cc - e); printf "%.0f %.0f\n", (s / n - e) * k, (m - e) * k }')
 
 read -r board_flash board_ram < <(sizes "$board_elf")
 
@@ -131,6 +138,7 @@ calibration: $cal_insns instructions = $((cal_counts - empty)) SysTick counts (k
 |---|---|---|---|
 | full f32 control tick, mean over $tick_n armed ticks | $tick_mean instructions | <= 1000 | $(check "$tick_mean" 1000) |
 | full f32 control tick, worst tick of the trace | $tick_worst instructions | | |
+| the same trace with the reference start phase (ramped set-point and pressure ceiling for up to ~1 s after arming), mean / worst over $st_n armed ticks | $st_mean / $st_worst instructions | | |
 | force law alone (f32, one muscle), mean over $fl_n calls | $fl_mean instructions | | |
 | force law alone (f32), worst call | $fl_worst instructions | | |
 | force law fixed point (32-bit integers, same inputs quantised), mean over $fx_n calls ($fx_off off the f32 law by > 0.1 N) | $fx_mean instructions | | |

@@ -105,9 +105,9 @@ impl ValveModelParams {
         residual_rel: 0.5,
         window_ticks: 10,
         persist_windows: 2,
-        // 6 kPa: ~9 sigma of the 500 Pa sensor noise on a pressure difference; 25 % leaves
+        // 5 kPa: ~7 sigma of the 500 Pa sensor noise on a pressure difference; 25 % leaves
         // the model a factor of 4 of error (polytropic exponent, supply droop, PWM edges).
-        integral_min_pa: 6_000.0,
+        integral_min_pa: 5_000.0,
         integral_fraction: 0.25,
     };
 

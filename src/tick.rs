@@ -160,6 +160,67 @@ pub struct ControllerConfig {
     /// The muscle pressure model and thresholds of the valve / supply supervision
     /// ([`crate::residual`]).
     pub valve_model: ValveModelParams,
+    /// Bumpless take-over at power-up and after every accepted reset.
+    pub start: StartRamp,
+}
+
+/// How the tick takes over the joint at power-up and after every accepted
+/// [`ControlTick::reset`] (the start phase): the position set-point starts at the measured
+/// angle and moves to the requested one at a limited rate, and the muscles are pre-charged
+/// at a limited rate to the co-contraction level before the loops get their full pressure
+/// range. A joint that is already where it is asked to be, with charged muscles, leaves the
+/// start phase in its first tick (the output is then exactly that of the plain cascade).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StartRamp {
+    /// Fastest move of the position set-point from the measured angle to the requested one
+    /// [rad/s].
+    pub setpoint_rate_rad_s: f32,
+    /// A joint within this distance of the requested set-point at the first tick is taken
+    /// as being there (no ramp) [rad]: the angle sensor's resolution and noise.
+    pub catch_rad: f32,
+    /// Within `setpoint_rate_rad_s * approach_s` of the requested set-point the ramp slows
+    /// down exponentially with this time constant [s] (down to 5 % of the rate limit, at
+    /// which it ends on the set-point).
+    pub approach_s: f32,
+    /// The torque loop's pressure ceiling starts at the higher measured muscle pressure and
+    /// rises this fast [Pa/s] to the configured ceiling: vented muscles are pre-charged to
+    /// the co-contraction level, and no set-point jumps.
+    pub precharge_rate_pa_s: f32,
+}
+
+impl StartRamp {
+    /// 1 rad/s, slowing down over the last 0.2 rad (a 0.6 rad error is taken up in ~1 s),
+    /// no ramp within 0.01 rad; 1 MPa/s (a vented muscle reaches the 294 kPa co-contraction
+    /// level in 0.3 s, the 600 kPa ceiling in 0.6 s; the pressure loop lags the ramp by
+    /// ~8 kPa, a quarter of its full-opening error).
+    pub const REFERENCE: StartRamp = StartRamp {
+        setpoint_rate_rad_s: 1.0,
+        catch_rad: 0.01,
+        approach_s: 0.2,
+        precharge_rate_pa_s: 1.0e6,
+    };
+
+    /// No ramp: the start phase ends in the first armed tick whatever the joint's state
+    /// (the plain cascade from the first tick: replays of recorded traces, tests that look
+    /// at one tick).
+    pub const INSTANT: StartRamp = StartRamp {
+        setpoint_rate_rad_s: f32::MAX,
+        catch_rad: f32::MAX,
+        approach_s: 0.0,
+        precharge_rate_pa_s: f32::MAX,
+    };
+
+    /// True when every parameter is usable.
+    pub fn is_valid(&self) -> bool {
+        let pos = |x: f32| x.is_finite() && x > 0.0;
+        pos(self.setpoint_rate_rad_s)
+            && self.approach_s.is_finite()
+            && self.approach_s >= 0.0
+            && self.catch_rad.is_finite()
+            && self.catch_rad >= 0.0
+            && pos(self.precharge_rate_pa_s)
+    }
 }
 
 impl ControllerConfig {
@@ -274,6 +335,7 @@ impl ControllerConfig {
                 window_ticks: ticks_ceil(tick_hz / 100.0),
                 ..ValveModelParams::REFERENCE
             },
+            start: StartRamp::REFERENCE,
         }
     }
 
@@ -337,6 +399,7 @@ impl ControllerConfig {
             && self.tracking_ticks > 0
             && self.feedforward.is_valid()
             && self.valve_model.is_valid()
+            && self.start.is_valid()
             && match self.law {
                 ControlLaw::Cascade => true,
                 ControlLaw::DirectPid(g) => g.is_valid(),
@@ -365,6 +428,20 @@ pub struct ControlTick {
     /// `clamp_pressure_setpoint_pa(f32::INFINITY, cfg.torque.p_set_max_gauge_pa)`: the
     /// torque loop's upper set-point bound (a configuration constant).
     p_set_hi_pa: f32,
+    /// The configured value of `p_set_hi_pa` (which the start phase lowers while it
+    /// pre-charges the muscles).
+    p_set_hi_cfg_pa: f32,
+    /// `cfg.angle_setpoint_max_rad` when the start phase is over, -1 while it runs: the
+    /// set-point's one in-range comparison then fails and the start phase runs on the cold
+    /// path, at no cost to the armed tick.
+    sp_fast_max_rad: f32,
+    /// Start phase: the ramped set-point [rad] and pressure ceiling [Pa]; `start_init` once
+    /// they hold the values of the first armed tick.
+    start_sp_rad: f32,
+    /// The requested set-point of the last start-phase tick [rad].
+    start_sp_prev_rad: f32,
+    start_p_hi_pa: f32,
+    start_init: bool,
     /// `SetpointDerivatives::tau_s(cfg.feedforward.cutoff_hz)` (a configuration constant).
     ff_tau_s: f32,
     p1: ChannelValidator,
@@ -537,6 +614,15 @@ impl ControlTick {
             dt_floor_s,
             dp_limit_pa: cfg.torque_model.dp_limit_pa(),
             p_set_hi_pa: clamp_pressure_setpoint_pa(f32::INFINITY, cfg.torque.p_set_max_gauge_pa),
+            p_set_hi_cfg_pa: clamp_pressure_setpoint_pa(
+                f32::INFINITY,
+                cfg.torque.p_set_max_gauge_pa,
+            ),
+            sp_fast_max_rad: -1.0,
+            start_sp_rad: 0.0,
+            start_sp_prev_rad: 0.0,
+            start_p_hi_pa: 0.0,
+            start_init: false,
             ff_tau_s: SetpointDerivatives::tau_s(cfg.feedforward.cutoff_hz),
             p1: ChannelValidator::new(cfg.pressure_limits),
             p2: ChannelValidator::new(cfg.pressure_limits),
@@ -629,6 +715,88 @@ impl ControlTick {
         self.pressure1.reset();
         self.pressure2.reset();
         self.valve_shortfall = 0.0;
+        // The next armed tick starts a new start phase.
+        self.sp_fast_max_rad = -1.0;
+        self.start_init = false;
+        self.p_set_hi_pa = self.p_set_hi_cfg_pa;
+    }
+
+    /// The set-point of an armed tick when the fast in-range test failed: the clamp to
+    /// `+-sp_max`, and the start phase (see [`StartRamp`]) while it runs. Inputs are finite
+    /// (validated channels, a finite set-point, `dt_ok`).
+    #[cold]
+    #[inline(never)]
+    fn setpoint_slow(
+        &mut self,
+        requested_rad: f32,
+        angle_rad: f32,
+        p1_gauge_pa: f32,
+        p2_gauge_pa: f32,
+        dt_s: f32,
+    ) -> f32 {
+        let sp_max = self.cfg.angle_setpoint_max_rad;
+        let sp = if requested_rad > sp_max {
+            sp_max
+        } else if requested_rad < -sp_max {
+            -sp_max
+        } else {
+            requested_rad
+        };
+        if self.sp_fast_max_rad >= 0.0 {
+            return sp;
+        }
+        let r = self.cfg.start;
+        let hi = self.p_set_hi_cfg_pa;
+        if !self.start_init {
+            self.start_init = true;
+            // Within `catch_rad` (the angle sensor's resolution and noise) the joint is where
+            // it is asked to be: no ramp.
+            self.start_sp_rad = if libm::fabsf(sp - angle_rad) <= r.catch_rad {
+                sp
+            } else {
+                angle_rad
+            };
+            self.start_p_hi_pa =
+                libm::fminf(libm::fmaxf(libm::fmaxf(p1_gauge_pa, p2_gauge_pa), 0.0), hi);
+            self.start_sp_prev_rad = sp;
+        }
+        let d = sp - self.start_sp_rad;
+        // The set-point's own motion this tick: the ramp chases a moving set-point at its
+        // speed plus the approach term, so the distance decays whatever the set-point does
+        // (unless it moves faster than the rate limit).
+        let sp_move_rad = libm::fabsf(sp - self.start_sp_prev_rad);
+        self.start_sp_prev_rad = sp;
+        // The rate limit, and near the end an exponential approach (rate |d| / approach_s)
+        // that keeps 5 % of the rate limit so that it ends.
+        let full_rad = r.setpoint_rate_rad_s * dt_s;
+        let step_rad = libm::fminf(
+            full_rad,
+            libm::fmaxf(
+                libm::fabsf(d) * dt_s / libm::fmaxf(r.approach_s, dt_s) + sp_move_rad,
+                0.05 * full_rad,
+            ),
+        );
+        // Caught once the rest is within one tick at the full rate: the set-point then
+        // moves by at most that much, and a moving set-point is followed from there.
+        let caught = libm::fabsf(d) <= full_rad;
+        self.start_sp_rad = if caught {
+            sp
+        } else if d > 0.0 {
+            self.start_sp_rad + step_rad
+        } else {
+            self.start_sp_rad - step_rad
+        };
+        let charged = self.start_p_hi_pa >= hi;
+        if caught && charged {
+            // The start phase is over: from here on the plain cascade.
+            self.sp_fast_max_rad = sp_max;
+            self.p_set_hi_pa = hi;
+            return sp;
+        }
+        let p = libm::fminf(self.start_p_hi_pa + r.precharge_rate_pa_s * dt_s, hi);
+        self.start_p_hi_pa = p;
+        self.p_set_hi_pa = p;
+        self.start_sp_rad
     }
 
     /// Explicit re-arm after a fault. Returns false (and stays faulted) when any fault
@@ -708,7 +876,6 @@ impl ControlTick {
         // Scalars read once; the configuration (with its force-law and torque-model tables) is
         // not copied: a whole-struct copy cost ~190 instructions per tick on the Cortex-M4.
         let p_over_gauge_pa = self.cfg.p_over_gauge_pa;
-        let sp_max = self.cfg.angle_setpoint_max_rad;
         // `dt_s.is_finite() && dt_s >= dt_min_s && dt_s <= dt_max_s` (see `dt_limit_s`).
         let dt_ok = dt_s >= self.dt_floor_s && dt_s <= self.dt_limit_s;
         // Channels are aged by the nominal period when dt itself is bad.
@@ -832,15 +999,14 @@ impl ControlTick {
         // Same result as `f32::clamp`, but without its (unreachable: the configuration is
         // validated) panic, whose message would link core::fmt's float formatting (~20 KiB of
         // MCU flash).
-        let sp = if libm::fabsf(setpoint.angle_rad) <= sp_max {
-            // In range: one comparison (NaN fails it; a NaN set-point has faulted anyway).
+        // One comparison in the usual case (NaN fails it; a NaN set-point has faulted
+        // anyway). Out of range, and during the start phase (`sp_fast_max_rad` < 0), the cold
+        // path clamps or ramps. (`f32::clamp` is avoided: its unreachable panic message would
+        // link core::fmt's float formatting, ~20 KiB of MCU flash.)
+        let sp = if libm::fabsf(setpoint.angle_rad) <= self.sp_fast_max_rad {
             setpoint.angle_rad
-        } else if setpoint.angle_rad > sp_max {
-            sp_max
-        } else if setpoint.angle_rad < -sp_max {
-            -sp_max
         } else {
-            setpoint.angle_rad
+            self.setpoint_slow(setpoint.angle_rad, angle, p1, p2, dt_s)
         };
         // Every input of the control laws below is finite and `dt_s > 0` here (validated
         // channels, sanitised velocity, finite set-point, `dt_ok`; `t_des` is the clamped sum
@@ -1272,9 +1438,159 @@ mod tests {
     #[test]
     fn positive_step_inflates_muscle_one_and_deflates_muscle_two() {
         let mut t = tick();
+        // The joint is where it is asked to be; the start phase ends once the pressure
+        // ceiling has risen from 300 to 600 kPa (0.3 s).
+        for _ in 0..301 {
+            t.step(&frame(300e3, 300e3, 0.0), &SP0, DT);
+        }
         let o = t.step(&frame(300e3, 300e3, 0.0), &Setpoint { angle_rad: 0.2 }, DT);
         assert!(o.torque_des_nm > 0.0);
         assert!(o.p1_set_gauge_pa > 300e3 && o.p2_set_gauge_pa < 300e3);
         assert!(o.valves.muscle1 > 0.0 && o.valves.muscle2 < 0.0);
+    }
+
+    /// The reference tick with the valve / supply residual off: the start-phase tests feed
+    /// frames whose pressures do not follow the valves.
+    fn cfg_no_residual() -> ControllerConfig {
+        let mut c = ControllerConfig::reference(1000.0);
+        c.valve_model.residual_abs_pa_s = 1e30;
+        c.valve_model.integral_min_pa = 1e30;
+        c
+    }
+
+    fn tick_no_residual() -> ControlTick {
+        ControlTick::new(cfg_no_residual())
+    }
+
+    /// An instant start: rates so high that the start phase ends in its first tick.
+    fn instant_start() -> ControllerConfig {
+        ControllerConfig {
+            start: StartRamp::INSTANT,
+            ..cfg_no_residual()
+        }
+    }
+
+    #[test]
+    fn start_phase_ramps_the_setpoint_from_the_measured_angle() {
+        let mut t = tick_no_residual();
+        let far = Setpoint { angle_rad: 0.6 };
+        for k in 0..100 {
+            let o = t.step(&frame(300e3, 300e3, 0.0), &far, DT);
+            assert!(o.armed && o.fault.is_none());
+            if k == 0 {
+                // 1 mrad of ramp: a small torque, not the saturated 0.6 rad step.
+                assert!(o.torque_des_nm > 0.0 && o.torque_des_nm < 1.0, "{}", o.torque_des_nm);
+            }
+            // 1 mrad per tick: after 0.1 s a 0.1 rad error, far from saturating.
+            assert!(o.torque_des_nm.abs() < 5.0, "tick {k}: {}", o.torque_des_nm);
+        }
+        assert!(t.sp_fast_max_rad < 0.0, "still ramping after 0.1 s");
+        // The same request without the start phase saturates the position loop at once.
+        let mut instant = ControlTick::new(instant_start());
+        let o = instant.step(&frame(300e3, 300e3, 0.0), &far, DT);
+        assert!(o.torque_des_nm > 5.0, "{}", o.torque_des_nm);
+    }
+
+    #[test]
+    fn start_phase_ends_when_the_ramp_has_caught_up() {
+        // 0.05 rad away: inside the 0.2 rad approach zone, the distance decays with 0.2 s
+        // down to 0.01 rad (0.2 s ln(5) = 0.32 s), then 0.05 rad/s to the last 1 mrad (0.18 s).
+        let mut t = tick_no_residual();
+        let near = Setpoint { angle_rad: 0.05 };
+        for _ in 0..470 {
+            t.step(&frame(300e3, 300e3, 0.0), &near, DT);
+        }
+        assert!(t.sp_fast_max_rad < 0.0);
+        for _ in 0..60 {
+            t.step(&frame(300e3, 300e3, 0.0), &near, DT);
+        }
+        assert!(t.sp_fast_max_rad > 0.0);
+    }
+
+    #[test]
+    fn start_phase_catches_a_moving_setpoint() {
+        // Armed 0.3 rad away from a set-point moving at 0.5 rad/s: the ramp closes the gap
+        // and the start phase ends (the distance decays with 0.2 s, whatever the motion).
+        let mut t = tick_no_residual();
+        let mut over_at = None;
+        for k in 0..2000 {
+            let sp = Setpoint {
+                angle_rad: -0.3 + 0.5 * DT * k as f32,
+            };
+            if sp.angle_rad > 0.7 {
+                break;
+            }
+            t.step(&frame(300e3, 300e3, 0.0), &sp, DT);
+            if t.sp_fast_max_rad > 0.0 {
+                over_at = Some(k);
+                break;
+            }
+        }
+        let k = over_at.expect("the start phase never ended");
+        assert!(k < 1500, "{k}");
+    }
+
+    #[test]
+    fn start_phase_precharges_vented_muscles_at_the_limited_rate() {
+        let mut t = tick_no_residual();
+        for k in 1..=700u32 {
+            let o = t.step(&frame(0.0, 0.0, 0.0), &SP0, DT);
+            let ceiling = 1.0e6 * DT * k as f32 + 1.0;
+            assert!(
+                o.p1_set_gauge_pa <= ceiling && o.p2_set_gauge_pa <= ceiling,
+                "tick {k}: {} / {} > {ceiling}",
+                o.p1_set_gauge_pa,
+                o.p2_set_gauge_pa
+            );
+        }
+    }
+
+    #[test]
+    fn a_joint_in_place_with_charged_muscles_starts_exactly_like_an_instant_start() {
+        let mut t = tick_no_residual();
+        let mut instant = ControlTick::new(instant_start());
+        for k in 0..300 {
+            let a = 0.001 * k as f32;
+            let f = frame(550e3, 540e3, a);
+            let sp = Setpoint { angle_rad: 0.3 * libm::sinf(a) };
+            let (o, oi) = (t.step(&f, &sp, DT), instant.step(&f, &sp, DT));
+            assert_eq!(o.valves, oi.valves, "tick {k}: {:?} {:?}", o, oi);
+            assert_eq!(o.p1_set_gauge_pa.to_bits(), oi.p1_set_gauge_pa.to_bits());
+            assert_eq!(o.torque_des_nm.to_bits(), oi.torque_des_nm.to_bits());
+        }
+    }
+
+    #[test]
+    fn an_accepted_reset_starts_a_new_start_phase() {
+        let mut t = tick_no_residual();
+        for _ in 0..301 {
+            t.step(&frame(300e3, 300e3, 0.0), &SP0, DT);
+        }
+        assert!(t.sp_fast_max_rad > 0.0);
+        let o = t.step(&frame(f32::NAN, 300e3, 0.0), &SP0, DT);
+        assert!(o.fault.is_some());
+        // While faulted the joint is moved 0.4 rad by hand, then held still.
+        for k in 1..=500 {
+            let a = 0.001 * (k.min(400)) as f32;
+            t.step(&frame(300e3, 300e3, a), &SP0, DT);
+        }
+        assert!(t.reset(), "{:?}", t.active);
+        // Re-armed 0.4 rad away from the set-point: the ramp starts at the measured angle.
+        let o = t.step(&frame(300e3, 300e3, 0.4), &SP0, DT);
+        assert!(o.armed);
+        assert!(o.torque_des_nm.abs() < 1.0, "{}", o.torque_des_nm);
+        assert!(t.sp_fast_max_rad < 0.0);
+    }
+
+    #[test]
+    fn start_ramp_rates_must_be_positive() {
+        for bad in [0.0, -1.0, f32::NAN, f32::INFINITY] {
+            let mut c = ControllerConfig::reference(1000.0);
+            c.start.setpoint_rate_rad_s = bad;
+            assert!(!c.is_valid());
+            let mut c = ControllerConfig::reference(1000.0);
+            c.start.precharge_rate_pa_s = bad;
+            assert!(!c.is_valid());
+        }
     }
 }

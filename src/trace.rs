@@ -128,6 +128,9 @@ pub fn trace_config() -> ControllerConfig {
     // valve check would see every opening as a stuck-closed valve. It still runs (its cost is
     // measured) but never judges.
     cfg.valve_model.integral_min_pa = f32::MAX;
+    // Nor does its angle follow a ramped set-point: the start phase (a transient of at most
+    // ~1 s after arming, measured on its own by `bench-mcu.sh`) is skipped.
+    cfg.start = crate::tick::StartRamp::INSTANT;
     cfg
 }
 

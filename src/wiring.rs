@@ -38,6 +38,37 @@ pub fn angle_rad(counts: i32) -> f32 {
 /// i.e. any reset, closes the valve).
 pub const VALVE_PINS_GPIOD: [u32; 4] = [12, 13, 14, 15];
 
+/// GPIOD pin of the valve-driver enable line (PD11): high powers the four valve drivers
+/// (e.g. the gate of a high-side switch in their supply). The driver board pulls it down: a
+/// floating pin (any reset, and the start-up until `init` drives it low) leaves every driver
+/// unpowered, which closes normally-closed valves whatever their PWM pins do.
+pub const VALVE_ENABLE_PIN_GPIOD: u32 = 11;
+
+/// Level of the valve-enable line: high while armed, and while faulted only when the safe
+/// command opens a valve (`Vent`, or a muscle vented by escalation). In `Hold` the drivers
+/// are unpowered, so a shorted driver or a pin stuck high cannot open a valve.
+#[inline]
+pub fn valve_enable(armed: bool, command: &crate::valves::ValveCommand) -> bool {
+    armed || command.muscle1 != 0.0 || command.muscle2 != 0.0
+}
+
+/// The enable level of a safe state (HardFault and the tick monitor): low unless a valve is
+/// to be held open.
+pub const fn safe_valve_enable(safe: SafeState) -> bool {
+    let l = safe_valve_levels(safe);
+    l[0] || l[1] || l[2] || l[3]
+}
+
+/// The GPIOD `BSRR` word of a safe state: the four valve pins and the enable line.
+pub const fn safe_bsrr(safe: SafeState) -> u32 {
+    let en = if safe_valve_enable(safe) {
+        1 << VALVE_ENABLE_PIN_GPIOD
+    } else {
+        1 << (VALVE_ENABLE_PIN_GPIOD + 16)
+    };
+    valve_bsrr(safe_valve_levels(safe)) | en
+}
+
 /// Pin levels (inflate 1, exhaust 1, inflate 2, exhaust 2; high = open) of a safe state:
 /// every valve closed (`Hold`) or both exhausts open (`Vent`).
 pub const fn safe_valve_levels(safe: SafeState) -> [bool; 4] {
@@ -249,5 +280,30 @@ mod tests {
             Err(CalibrationError::ZeroOutOfRange { mean_counts: 820 })
         );
         assert!(calibrated_pressure_scaling(3 * 819 + 1, 3).is_ok());
+    }
+
+    #[test]
+    fn the_valve_enable_line_is_low_in_hold_and_high_when_a_valve_must_open() {
+        use crate::valves::ValveCommand;
+        let closed = ValveCommand::default();
+        assert!(!valve_enable(false, &closed));
+        assert!(valve_enable(true, &closed));
+        let vent1 = ValveCommand {
+            muscle1: -1.0,
+            muscle2: 0.0,
+        };
+        assert!(valve_enable(false, &vent1));
+        assert!(!safe_valve_enable(SafeState::Hold));
+        assert!(safe_valve_enable(SafeState::Vent));
+        // Hold: the four valve pins and the enable line reset (BSRR bits 16+).
+        assert_eq!(
+            safe_bsrr(SafeState::Hold),
+            (1 << (12 + 16)) | (1 << (13 + 16)) | (1 << (14 + 16)) | (1 << (15 + 16)) | (1 << (11 + 16))
+        );
+        // Vent: exhausts and the enable line set.
+        assert_eq!(
+            safe_bsrr(SafeState::Vent) & 0xffff,
+            (1 << 13) | (1 << 15) | (1 << 11)
+        );
     }
 }

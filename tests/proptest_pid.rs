@@ -7,7 +7,9 @@
 
 use pam_firmware::control::{ControlError, JointState};
 use pam_firmware::pid::{DpPid, DpPidGains};
-use pam_firmware::tick::{ControlLaw, ControlTick, ControllerConfig, SensorFrame, Setpoint};
+use pam_firmware::tick::{
+    ControlLaw, ControlTick, ControllerConfig, SensorFrame, Setpoint, StartRamp,
+};
 use pam_firmware::P_MUSCLE_MAX_GAUGE_PA;
 use proptest::prelude::*;
 
@@ -147,10 +149,16 @@ proptest! {
 fn tick_with_pid_drives_a_positive_step_like_the_cascade() {
     // Same sign convention as the cascade: a positive angle error raises muscle 1 and lowers
     // muscle 2, through the same pressure loops.
+    // An instant start (no start-phase ramp): the step acts in the first tick.
+    let instant = StartRamp::INSTANT;
     let mut cfg = ControllerConfig::reference(1000.0);
     cfg.law = ControlLaw::DirectPid(tuned_like());
+    cfg.start = instant;
     let mut pid = ControlTick::new(cfg);
-    let mut cascade = ControlTick::new(ControllerConfig::reference(1000.0));
+    let mut cascade = ControlTick::new(ControllerConfig {
+        start: instant,
+        ..ControllerConfig::reference(1000.0)
+    });
     let f = SensorFrame {
         p1_gauge_pa: Some(300e3),
         p2_gauge_pa: Some(300e3),

@@ -69,8 +69,8 @@ const SYSCLK_HZ: u32 = 168_000_000;
 /// The safe valve state of this build: the controller's configuration, the HardFault path
 /// and the tick monitor all use it.
 const SAFE_STATE: SafeState = SafeState::Hold;
-/// `BSRR` word of the safe valve levels (HardFault and tick monitor).
-const SAFE_BSRR: u32 = wiring::valve_bsrr(wiring::safe_valve_levels(SAFE_STATE));
+/// `BSRR` word of the safe valve levels and valve-enable line (HardFault and tick monitor).
+const SAFE_BSRR: u32 = wiring::safe_bsrr(SAFE_STATE);
 /// Start-up calibration: both exhausts open this long before averaging [ms].
 const CAL_VENT_MS: u32 = 1500;
 /// Start-up calibration: averaging time of the pressure zero [ms].
@@ -141,7 +141,7 @@ mod app {
             Adc,
         },
         dma::{config::DmaConfig, PeripheralToMemory, Stream0, StreamsTuple, Transfer},
-        gpio::{Input, PinState, PA0},
+        gpio::{Input, Output, PinState, PushPull, PA0, PD11},
         hal_02::Qei as _,
         pac::{self, Interrupt, ADC1, DMA2, TIM2, TIM3, TIM4, TIM5},
         prelude::*,
@@ -221,6 +221,8 @@ mod app {
         clock: DwtClock,
         period: TickTimer,
         valves: Valves,
+        /// The valve-driver enable line (PD11, `wiring::valve_enable`).
+        valve_enable: PD11<Output<PushPull>>,
         tick: ControlTick,
         latch: PersistentLatch<BackupSram>,
         encoder_keep: EncoderKeep,
@@ -248,6 +250,10 @@ mod app {
         let gpiod = dp.GPIOD.split(&mut rcc);
         let lv = wiring::safe_valve_levels(SAFE_STATE);
         let st = |b: bool| if b { PinState::High } else { PinState::Low };
+        // The valve-driver supply first: off unless the safe state holds a valve open.
+        let valve_enable = gpiod
+            .pd11
+            .into_push_pull_output_in_state(st(wiring::safe_valve_enable(SAFE_STATE)));
         let pd12 = gpiod.pd12.into_push_pull_output_in_state(st(lv[0]));
         let pd13 = gpiod.pd13.into_push_pull_output_in_state(st(lv[1]));
         let pd14 = gpiod.pd14.into_push_pull_output_in_state(st(lv[2]));
@@ -402,6 +408,7 @@ mod app {
                 clock,
                 period,
                 valves,
+                valve_enable,
                 tick,
                 latch,
                 encoder_keep,
@@ -443,7 +450,7 @@ mod app {
     }
 
     /// The control tick: once per sampling period, when the DMA has delivered both pressures.
-    #[task(binds = DMA2_STREAM0, priority = 2, local = [adc, spare, qei, scaling, clock, period, valves, tick, latch, encoder_keep, button_pin, button, phase, watchdog, monitor, pins_forced, fault_reported, ticks])]
+    #[task(binds = DMA2_STREAM0, priority = 2, local = [adc, spare, qei, scaling, clock, period, valves, valve_enable, tick, latch, encoder_keep, button_pin, button, phase, watchdog, monitor, pins_forced, fault_reported, ticks])]
     fn control_tick(cx: control_tick::Context) {
         let mut l = cx.local;
         let start = DWT::cycle_count();
@@ -473,6 +480,7 @@ mod app {
                 n,
             } => {
                 let _ = l.valves.apply(&SafeState::Vent.command());
+                l.valve_enable.set_high();
                 if *ticks >= CAL_VENT_TICKS {
                     for i in 0..2 {
                         if let Some(c) = counts[i] {
@@ -579,6 +587,18 @@ mod app {
                     .modify(|r, w| w.bits(wiring::valve_moder_alternate(r.bits())));
             }
             *l.pins_forced = false;
+        }
+        // The drivers' supply: on while armed, and while faulted only if the safe command
+        // opens a valve; with the pins forced by the monitor, that of the safe state.
+        let enable = if *l.pins_forced {
+            wiring::safe_valve_enable(SAFE_STATE)
+        } else {
+            wiring::valve_enable(out.armed, &out.valves)
+        };
+        if enable {
+            l.valve_enable.set_high();
+        } else {
+            l.valve_enable.set_low();
         }
         // Operator's reset: accepted by the tick only when every cause is gone.
         if l.button.update(l.button_pin.is_high()) {

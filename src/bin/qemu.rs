@@ -106,6 +106,7 @@ mod bench {
     use pam_firmware::constants::{FIXED_FORCE_LAW, FORCE_LAW};
     use pam_firmware::fixed_point::{pressure_pa_from_f32, q16_from_f32};
     use pam_firmware::geometry::JointGeometry;
+    use pam_firmware::tick::{ControllerConfig, StartRamp};
     use pam_firmware::trace::{ControlTick, SENSOR_TRACE, TRACE_TICK_HZ};
     use pam_firmware::valves::{OnOffPwmConfig, OnOffValves};
     use pam_firmware::wiring;
@@ -162,7 +163,16 @@ mod bench {
             empty
         );
 
-        bench_ticks();
+        bench_ticks("bench tick", pam_firmware::trace::trace_config());
+        // The same trace with the reference start phase: its first ~300 armed ticks ramp the
+        // pressure ceiling from the trace's pressures to 600 kPa.
+        bench_ticks(
+            "bench start tick",
+            ControllerConfig {
+                start: StartRamp::REFERENCE,
+                ..pam_firmware::trace::trace_config()
+            },
+        );
         bench_force_law();
         bench_force_law_fixed();
     }
@@ -171,10 +181,10 @@ mod bench {
     /// Not inlined: `scripts/bench-mcu.sh --breakdown` attributes the instructions executed
     /// between this function's entry and `bench_force_law`'s to symbols.
     #[inline(never)]
-    fn bench_ticks() {
+    fn bench_ticks(label: &str, cfg: ControllerConfig) {
         let p = wiring::pressure_scaling();
         let dt = 1.0 / TRACE_TICK_HZ;
-        let mut tick = ControlTick::new(pam_firmware::trace::trace_config());
+        let mut tick = ControlTick::new(cfg);
         // The valve update is part of the measured tick: the reference on/off driver (tick-level
         // PWM, minimum on-time) writing four pins, each a volatile store like a GPIO BSRR write.
         let mut valves = OnOffValves::new(
@@ -205,7 +215,8 @@ mod bench {
             max_any = max_any.max(c);
         }
         defmt::info!(
-            "bench tick n={=u32} sum_counts={=u32} max_counts={=u32}",
+            "{=str} n={=u32} sum_counts={=u32} max_counts={=u32}",
+            label,
             n_armed,
             sum_armed,
             max_any

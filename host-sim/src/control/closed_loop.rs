@@ -192,6 +192,9 @@ pub struct TickRow {
     /// What the plant's sensors report at `t_s` (its sensor effects; before the scenario's
     /// noise, quantisation, faults and transport delay).
     pub measured: Measurement,
+    /// The pin levels the firmware's valve driver wrote this tick (in1, ex1, in2, ex2; high =
+    /// open), before any stuck valve overrides them.
+    pub pins: [bool; 4],
     /// The valve commands of this tick (the pin states, a stuck valve's included): the
     /// inputs an open-loop replay of the run takes.
     pub command: ValveInputs,
@@ -622,6 +625,7 @@ pub fn run_with_firmware(
             setpoint_rad,
             state: x,
             measured: m,
+            pins: ft.pins,
             command,
             inputs,
             out,
