@@ -419,9 +419,10 @@ fn valve_delay_is_told_from_sensor_lag() {
     let d = run(&["valve_delay"], 27, 3e-3, [true; 5]);
     let a = d.answer();
     assert!(a.contains("Sensor lag vs valve delay"), "{a}");
-    // 8 ms rounded to whole 3 ms samples: 9 ms.
+    // 8 ms rounded to whole 3 ms samples (the truth's generator): 9 ms, found within 0.1 %
+    // by the continuous refinement.
     let delay = d.effects[0].params[0].1;
-    assert!((delay - 9e-3).abs() < 1e-9, "delay {delay}");
+    assert!((delay - 9e-3).abs() < 1e-5, "delay {delay}");
 }
 
 #[test]

@@ -92,6 +92,12 @@ pub trait Candidate: Sync + Send {
     fn grid(&self, _initial: &[f64], _s: &Setup) -> Option<Vec<Vec<f64>>> {
         None
     }
+    /// For a gridded parameter that is continuous in truth (a dead time that need not be a
+    /// whole number of samples): after the grid, refine it continuously within one grid
+    /// step (its `ParamSpec::scale`) of the best grid value.
+    fn refine_after_grid(&self) -> bool {
+        false
+    }
     /// One sentence saying what the fitted effect is.
     fn describe(&self, params: &[f64], s: &Setup) -> String;
 }

@@ -163,7 +163,7 @@ impl<'a> Problem<'a> {
     }
 
     /// [`Self::fit`], also returning (when `ci95`) the 95 % interval of every parameter of
-    /// every part (NaN for grid parameters).
+    /// every part (NaN for grid parameters that are not refined).
     pub fn fit_with_ci<'c>(
         &self,
         parts: &[Part<'c>],
@@ -190,15 +190,25 @@ impl<'a> Problem<'a> {
         let mut slots: Vec<(usize, usize)> = Vec::new();
         let mut oe: Vec<OeParam> = Vec::new();
         for (i, p) in parts.iter().enumerate() {
-            if p.candidate.grid(&p.params, &self.setup).is_some() {
+            let gridded = p.candidate.grid(&p.params, &self.setup).is_some();
+            if gridded && !p.candidate.refine_after_grid() {
                 continue;
             }
             for (j, spec) in p.candidate.params(&self.setup).iter().enumerate() {
+                // A refined grid parameter stays within one grid step of its grid value.
+                let (lo, hi) = if gridded {
+                    (
+                        (p.params[j] - spec.scale).max(spec.lo),
+                        (p.params[j] + spec.scale).min(spec.hi),
+                    )
+                } else {
+                    (spec.lo, spec.hi)
+                };
                 slots.push((i, j));
                 oe.push(OeParam {
-                    x0: p.params[j].clamp(spec.lo, spec.hi),
-                    lo: spec.lo,
-                    hi: spec.hi,
+                    x0: p.params[j].clamp(lo, hi),
+                    lo,
+                    hi,
                     scale: spec.scale,
                 });
             }

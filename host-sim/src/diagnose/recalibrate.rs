@@ -229,6 +229,9 @@ impl Candidate for Bounded {
     fn grid(&self, initial: &[f64], s: &Setup) -> Option<Vec<Vec<f64>>> {
         self.0.grid(initial, s)
     }
+    fn refine_after_grid(&self) -> bool {
+        self.0.refine_after_grid()
+    }
     fn describe(&self, params: &[f64], s: &Setup) -> String {
         self.0.describe(params, s)
     }

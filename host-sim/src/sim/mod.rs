@@ -82,8 +82,8 @@ pub enum SimError {
     #[error("invalid valve input at sample {index}: {inputs:?} (openings must be in [0, 1])")]
     Input { index: usize, inputs: ValveInputs },
     #[error(
-        "effect valve_dead_time (valve dead time): delay_s = {delay_s} s is not a whole number of the {mode}'s \
-         sample period ({dt_s} s); the {mode} cannot apply it (make it a multiple of {dt_s} s)"
+        "effect valve_dead_time (valve dead time): delay_s = {delay_s} s cannot be applied by the {mode} at a \
+         sample period of {dt_s} s (allowed: 0 <= delay_s < 1e9 sample periods)"
     )]
     DeadTime {
         delay_s: f64,

@@ -4,8 +4,8 @@
 //! act.
 //!
 //! - [`ActuatorPath`]: valve command -> valve opening. The actuator-side effect is the valve
-//!   dead time ([`crate::plant::effects::ValveDeadTime`], a whole number of samples through a
-//!   [`DeadTimeLine`]). Open-loop replay feeds it the recorded commands; the closed loop feeds
+//!   dead time ([`crate::plant::effects::ValveDeadTime`], whole samples and a fraction of one
+//!   through a [`DeadTimeLine`]). Open-loop replay feeds it the recorded commands; the closed loop feeds
 //!   it the firmware's pin states, tick by tick.
 //! - [`SensorPath`]: plant state -> reported channels. The sensor-side effects are the sensor
 //!   lag ([`crate::plant::effects::SensorLag`], a sampled first-order low-pass per channel
@@ -32,8 +32,8 @@ pub struct ActuatorPath {
 
 impl ActuatorPath {
     /// The path of `plant` at sample period `dt_s`, for the run mode `mode` (named in the
-    /// refusal). Refuses a dead time that is not a whole number of samples: a mode cannot
-    /// delay a zero-order-held command by a fraction of its sample.
+    /// refusal). Refuses a dead time the line cannot hold (negative, not finite, absurdly long
+    /// for the sample period).
     pub fn new(plant: &Plant, dt_s: f64, mode: &'static str) -> Result<Self, SimError> {
         let line = match plant.effects.valve_dead_time_s() {
             None => None,

@@ -1,9 +1,12 @@
 //! `[effects.valve_dead_time]`: every valve applies a command `delay_s` later (valves closed
-//! before the first delayed command arrives). The delay must be a whole number of sample
-//! periods of the run it is used with.
+//! before the first delayed command arrives). A delay of `k + f` samples (`0 <= f < 1`)
+//! opens each valve, over a sample period, for the `1 - f` of it that the command of `k`
+//! samples ago covers and for the `f` of it that the command before covers: the opening
+//! held over the period is their time average (openings count as duty, as for PWM).
 //!
 //! Diagnosis (candidate `valve_delay`): every measured channel lags the nominal simulation
-//! by the same shift; fitted on a grid of whole samples. Truth: 8 ms (rounded to samples).
+//! by the same shift; fitted on a grid of whole samples, then refined continuously within a
+//! sample of the best. Truth: 8 ms (rounded to samples).
 
 use serde::Deserialize;
 
@@ -23,38 +26,95 @@ pub struct ValveDeadTime {
     pub delay_s: f64,
 }
 
-/// A delay line of whole samples between valve commands and valve openings.
+/// A delay line between valve commands and valve openings: `whole` samples and a fraction
+/// `frac` of one.
 #[derive(Debug, Clone)]
 pub struct DeadTimeLine {
+    /// The last `whole + 1` commands, oldest first.
     fifo: std::collections::VecDeque<ValveInputs>,
+    whole: usize,
+    frac: f64,
 }
 
 impl DeadTimeLine {
-    /// A line for `delay_s` at sample period `dt_s`; `None` when the delay is not a whole
-    /// number of samples (within 1e-6 of a sample).
+    /// A line for `delay_s` at sample period `dt_s`; `None` when the delay is negative, not
+    /// finite or absurdly long (1e9 samples). A fraction within 1e-6 of a whole sample is
+    /// rounded to it.
     pub fn new(delay_s: f64, dt_s: f64) -> Option<Self> {
         let samples = delay_s / dt_s;
-        let n = samples.round();
-        if !(n >= 0.0 && (samples - n).abs() <= 1e-6 && n < 1e9) {
+        if !(samples >= 0.0 && samples < 1e9) {
             return None;
         }
+        let mut whole = samples.floor();
+        let mut frac = samples - whole;
+        if frac <= 1e-6 {
+            frac = 0.0;
+        } else if frac >= 1.0 - 1e-6 {
+            whole += 1.0;
+            frac = 0.0;
+        }
         Some(Self {
-            fifo: std::iter::repeat_n(ValveInputs::CLOSED, n as usize).collect(),
+            fifo: std::iter::repeat_n(ValveInputs::CLOSED, whole as usize + 1).collect(),
+            whole: whole as usize,
+            frac,
         })
     }
 
-    /// Delay in samples.
+    /// Whole samples of the delay (its fraction not counted).
     pub fn samples(&self) -> usize {
-        self.fifo.len()
+        self.whole
     }
 
     /// Feeds the command of this sample; returns the opening the valves apply over it.
     pub fn push(&mut self, command: ValveInputs) -> ValveInputs {
-        if self.fifo.is_empty() {
-            return command;
-        }
         self.fifo.push_back(command);
-        self.fifo.pop_front().expect("non-empty")
+        // `whole + 2` entries now: the command of `whole + 1` samples ago, then that of `whole`.
+        let older = self.fifo.pop_front().unwrap_or(ValveInputs::CLOSED);
+        let newer = *self.fifo.front().unwrap_or(&command);
+        if self.frac == 0.0 {
+            return newer;
+        }
+        let (a, b) = (1.0 - self.frac, self.frac);
+        ValveInputs {
+            u_in1: a * newer.u_in1 + b * older.u_in1,
+            u_ex1: a * newer.u_ex1 + b * older.u_ex1,
+            u_in2: a * newer.u_in2 + b * older.u_in2,
+            u_ex2: a * newer.u_ex2 + b * older.u_ex2,
+        }
+    }
+}
+
+#[cfg(test)]
+mod line_tests {
+    use super::*;
+
+    fn pulse(k: usize) -> ValveInputs {
+        ValveInputs {
+            u_in1: if k == 3 { 1.0 } else { 0.0 },
+            ..ValveInputs::CLOSED
+        }
+    }
+
+    #[test]
+    fn a_whole_sample_delay_shifts_the_commands() {
+        let mut l = DeadTimeLine::new(0.002, 0.001).expect("line");
+        let out: Vec<f64> = (0..8).map(|k| l.push(pulse(k)).u_in1).collect();
+        assert_eq!(out, vec![0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0]);
+        let mut l = DeadTimeLine::new(0.0, 0.001).expect("line");
+        assert_eq!(l.push(pulse(3)).u_in1, 1.0);
+    }
+
+    #[test]
+    fn a_fractional_delay_splits_each_opening_over_two_periods() {
+        // 2.25 samples: the pulse of sample 3 covers 0.75 of period 5 and 0.25 of period 6.
+        let mut l = DeadTimeLine::new(0.00225, 0.001).expect("line");
+        let out: Vec<f64> = (0..8).map(|k| l.push(pulse(k)).u_in1).collect();
+        let want = [0.0, 0.0, 0.0, 0.0, 0.0, 0.75, 0.25, 0.0];
+        for (o, w) in out.iter().zip(want) {
+            assert!((o - w).abs() < 1e-12, "{out:?}");
+        }
+        assert!(DeadTimeLine::new(-0.001, 0.001).is_none());
+        assert!(DeadTimeLine::new(f64::NAN, 0.001).is_none());
     }
 }
 
@@ -85,7 +145,7 @@ impl Effect for ValveDeadTime {
 /// Longest valve dead time tried.
 pub const MAX_VALVE_DELAY_S: f64 = 0.05;
 
-/// A dead time of whole samples in front of every valve.
+/// A dead time in front of every valve.
 pub struct ValveDelayCandidate;
 
 impl Candidate for ValveDelayCandidate {
@@ -132,12 +192,14 @@ impl Candidate for ValveDelayCandidate {
             scatter: ev.lag_scatter(ch),
         }
     }
-    fn apply(&self, cfg: &mut PlantConfig, p: &[f64], s: &Setup) {
-        let n = (p[0] / s.dt_s).round().max(0.0);
+    fn apply(&self, cfg: &mut PlantConfig, p: &[f64], _s: &Setup) {
         cfg.effects.valve_dead_time = Some(ValveDeadTime {
             enabled: true,
-            delay_s: n * s.dt_s,
+            delay_s: p[0].max(0.0),
         });
+    }
+    fn refine_after_grid(&self) -> bool {
+        true
     }
     fn grid(&self, initial: &[f64], s: &Setup) -> Option<Vec<Vec<f64>>> {
         let max_n = (MAX_VALVE_DELAY_S / s.dt_s).floor() as i64;
@@ -153,7 +215,7 @@ impl Candidate for ValveDelayCandidate {
     }
     fn describe(&self, p: &[f64], _s: &Setup) -> String {
         format!(
-            "a dead time of {:.1} ms between a valve command and the valve opening",
+            "a dead time of {:.2} ms between a valve command and the valve opening",
             p[0] * 1e3
         )
     }
