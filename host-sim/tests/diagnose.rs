@@ -459,3 +459,55 @@ fn a_recording_longer_than_the_fit_budget_is_fitted_on_its_head_with_the_same_an
         c(&full)
     );
 }
+
+/// Adds what no catalogue effect has to the angle channel: electrical cross-talk of the valve
+/// drivers onto the angle sensor (a slow response to the inlet of muscle 1 minus that of
+/// muscle 2, time constant 80 ms), as large as the angle's own spread. A code path of its
+/// own (not the candidates'): the recordings come from the nominal plant, the cross-talk is
+/// added here.
+fn with_crosstalk(mut rec: Recording) -> Recording {
+    let dt = rec.sample_period_s();
+    let a = (-dt / 0.08f64).exp();
+    let angle = rec.channel(host_sim::io::recording::Channel::AngleDeg).unwrap().to_vec();
+    let (lo, hi) = angle
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
+    let mut slow = 0.0;
+    let out: Vec<f64> = angle
+        .iter()
+        .zip(&rec.inputs)
+        .map(|(y, u)| {
+            slow = a * slow + (1.0 - a) * (u.u_in1 - u.u_in2);
+            y + (hi - lo) * slow
+        })
+        .collect();
+    rec.set_channel(host_sim::io::recording::Channel::AngleDeg, out);
+    rec
+}
+
+#[test]
+fn an_effect_outside_the_catalogue_gets_an_unnamed_black_box_correction() {
+    let (train, check) = recordings(&[], 41, 1e-3, [true; 5]);
+    let (train, check) = (with_crosstalk(train), with_crosstalk(check));
+    let d = diagnose(
+        &nominal(),
+        &train,
+        Some(&check),
+        &DiagnoseOptions::default(),
+        &|_, _, _| {},
+    )
+    .unwrap();
+    assert_eq!(d.verdict, Verdict::Unexplained, "{}", d.answer());
+    assert!(d.effects.is_empty() && d.recalibrated.is_empty());
+    let b = d.black_box.as_ref().expect("a black-box fallback");
+    let (before, after) = b.heldout["angle_deg"];
+    let (cb, ca) = b.check.as_ref().expect("check fits")["angle_deg"];
+    eprintln!("{}\nheld-out angle {before:.1} -> {after:.1} %, check {cb:.1} -> {ca:.1} %", d.answer());
+    assert!(after > before + 20.0, "held-out {before} -> {after}");
+    assert!(ca > cb + 20.0, "check {cb} -> {ca}");
+    let a = d.answer();
+    assert!(a.contains("Unnamed black-box correction"), "{a}");
+    let j = d.to_json();
+    assert_eq!(j["black_box"]["named"], serde_json::json!(false));
+    assert!(j["effects"].as_array().unwrap().is_empty());
+}

@@ -180,6 +180,11 @@ impl Diagnosis {
         if let (Some(b), Some(a)) = (&self.check_before, &self.check_after) {
             out["check"] = serde_json::json!({"before": json_fits(b), "after": json_fits(a)});
         }
+        out["black_box"] = self
+            .black_box
+            .as_ref()
+            .map(|b| b.to_json())
+            .unwrap_or(serde_json::Value::Null);
         out
     }
 
@@ -228,6 +233,10 @@ impl Diagnosis {
                 }
                 for f in &self.failures {
                     s += &format!("  - {f}\n");
+                }
+                if let Some(b) = &self.black_box {
+                    s += &b.describe();
+                    s.push('\n');
                 }
                 s += LIKELY_CAUSES;
                 s.push('\n');

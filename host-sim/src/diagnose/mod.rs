@@ -20,6 +20,7 @@
 
 pub mod answer;
 pub mod baseline;
+pub mod black_box;
 pub mod batch;
 pub mod candidates;
 pub mod differentiate;
@@ -196,6 +197,8 @@ pub struct Diagnosis {
     pub check: Option<Series>,
     /// Residual vs regressor of the named effects (id, scatter).
     pub scatters: Vec<(String, Scatter)>,
+    /// The unnamed black-box correction (verdict `unexplained` only).
+    pub black_box: Option<black_box::BlackBox>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -584,6 +587,20 @@ pub fn diagnose(
         }
     }
     let fit_after = fits_of(train, &corrected_meas);
+    // The unnamed fallback when nothing explains the residual.
+    let black_box = if v == Verdict::Unexplained {
+        black_box::fit(
+            train,
+            &g.nominal_meas,
+            0..n_fit,
+            n_fit..n,
+            check
+                .zip(check_series.as_ref())
+                .map(|(r, cs)| (r, cs.nominal.as_slice())),
+        )
+    } else {
+        None
+    };
 
     // Look-alikes.
     let has_force = setup.has_force();
@@ -750,6 +767,7 @@ pub fn diagnose(
         hints,
         failures,
         nothing_missing: v == Verdict::NothingMissing,
+        black_box,
         noise: g.noise,
         nominal_cost,
         noise_cost,
