@@ -65,6 +65,9 @@ enum Command {
     Identify(host_sim::identify::cli::IdentifyArgs),
     /// Tune the cascade, PD and PID gains on the set-point suite (firmware in the loop) and
     /// write the gains file (the format of config/control_tuned.toml).
+    #[command(
+        after_help = "Example:\n  host-sim tune --plant ../shared/plant/reference-1dof.toml --out control_tuned.toml"
+    )]
     Tune(host_sim::control::tune::TuneArgs),
     /// From a recording to the firmware's constants (config/): refuse degenerate data,
     /// identify the torque model, take the plant-derived constants from the plant file, (with
@@ -96,8 +99,14 @@ enum Command {
     DiagnoseBatch(host_sim::diagnose::batch::BatchArgs),
     /// Import a rig logger's CSV (other column names, units, time base) into a recording,
     /// through a mapping file (docs/rig.md).
+    #[command(
+        after_help = "Example (docs/rig.md has the mapping file):\n  host-sim import --map festo-joint.toml --input messung7.csv --out messung7.rec.csv"
+    )]
     Import(host_sim::io::import::ImportArgs),
     /// Turn the firmware's per-tick stream (QEMU image or board) into a recording.
+    #[command(
+        after_help = "Example (a stream written by `host-sim pil --log`):\n  host-sim capture --log pil.stream --out captured.csv"
+    )]
     Capture(host_sim::io::capture::CaptureArgs),
     /// Processor in the loop: the firmware image under qemu-system-arm closes the loop with the
     /// plant, one exchanged sensor frame (board counts) and valve command per tick; writes the

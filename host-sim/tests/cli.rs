@@ -114,3 +114,59 @@ fn scenario_needs_a_plant_and_a_readable_file() {
     assert!(err.contains(&missing.display().to_string()), "{err}");
     assert!(!dir.path().join("o.csv").exists());
 }
+
+/// Every subcommand's help (found by walking `host-sim --help`, so a new one is covered) has
+/// a usage example that starts with `host-sim <subcommand>`, and names the paper jargon only
+/// with a plain-words gloss.
+#[test]
+fn every_subcommand_help_has_an_example_and_no_bare_jargon() {
+    let top = run_ok(&[&"--help"]);
+    let mut commands: Vec<Vec<String>> = Vec::new();
+    let list = |help: &str| -> Vec<String> {
+        help.split("Commands:")
+            .nth(1)
+            .map(|t| {
+                t.lines()
+                    .skip(1)
+                    .take_while(|l| !l.trim().is_empty())
+                    .filter_map(|l| l.split_whitespace().next())
+                    .filter(|c| *c != "help")
+                    .map(str::to_string)
+                    .collect()
+            })
+            .unwrap_or_default()
+    };
+    for c in list(&top) {
+        let help = run_ok(&[&c, &"--help"]);
+        let subs = list(&help);
+        if subs.is_empty() {
+            commands.push(vec![c]);
+        } else {
+            // A command with subcommands: its own help or each subcommand's has the example.
+            for s in subs {
+                commands.push(vec![c.clone(), s]);
+            }
+        }
+    }
+    assert!(commands.len() >= 14, "{commands:?}");
+    for cmd in &commands {
+        let mut args: Vec<&dyn AsRef<std::ffi::OsStr>> = cmd.iter().map(|s| s as _).collect();
+        args.push(&"--help");
+        let help = run_ok(&args);
+        let parent_help = run_ok(&[&cmd[0], &"--help"]);
+        let example = format!("host-sim {}", cmd.join(" "));
+        assert!(
+            (help.contains("Example") && help.contains(&example))
+                || (parent_help.contains("Example") && parent_help.contains(&example)),
+            "`{example} --help` has no example:\n{help}"
+        );
+        for jargon in ["eq. 6", "eq. 11", "seed 00"] {
+            for line in help.lines().filter(|l| l.contains(jargon)) {
+                assert!(
+                    line.contains('(') || line.contains(':'),
+                    "`{example} --help`: '{jargon}' without a gloss: {line}"
+                );
+            }
+        }
+    }
+}
