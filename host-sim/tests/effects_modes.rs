@@ -379,6 +379,8 @@ fn same_effect(name: &str, id: &str) -> bool {
             | ("thermal_chamber", "polytropic")
             | ("valve_dead_time", "valve_delay")
             | ("sensor_lag", "sensor_lag")
+            | ("sensor_lag", "sensor_lag_p1")
+            | ("sensor_lag", "sensor_lag_p2")
             | ("muscle_hysteresis", "muscle_hysteresis")
             | ("supply_drop_static", "supply_drop")
             | ("supply_drop_static", "supply_reservoir")

@@ -91,6 +91,8 @@ pub struct Evidence {
     pub force_residual_n: Option<[Option<Vec<f64>>; 2]>,
     /// Measured - nominal simulation, per channel present.
     pub residual: [Option<Vec<f64>>; 5],
+    /// The nominal simulation of each channel present.
+    pub nominal: [Option<Vec<f64>>; 5],
     /// d/dt of the nominal simulation of each measured channel (a lag tau leaves a
     /// residual of about -tau times it).
     pub nominal_rate: [Option<Vec<f64>>; 5],
@@ -200,6 +202,7 @@ impl Evidence {
                 .map(|d| d.iter().zip(&nominal_dp[i]).map(|(a, b)| a - b).collect())
         });
         let mut residual: [Option<Vec<f64>>; 5] = Default::default();
+        let mut nominal_ch: [Option<Vec<f64>>; 5] = Default::default();
         let mut nominal_rate: [Option<Vec<f64>>; 5] = Default::default();
         let mut spread = [1.0; 5];
         let mut lag_samples = [0usize; 5];
@@ -209,6 +212,7 @@ impl Evidence {
             if let Some(y) = meas(c) {
                 let yn = nom(c);
                 residual[c.index()] = Some(y.iter().zip(&yn).map(|(a, b)| a - b).collect());
+                nominal_ch[c.index()] = Some(yn.clone());
                 nominal_rate[c.index()] = Some(diff.derivative(&yn, dt));
                 let mean = y.iter().sum::<f64>() / n as f64;
                 let sd = (y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n as f64).sqrt();
@@ -246,6 +250,7 @@ impl Evidence {
                 [meas(Channel::F1N).map(|_| a), meas(Channel::F2N).map(|_| b)]
             }),
             residual,
+            nominal: nominal_ch,
             nominal_rate,
             spread,
             lag_samples,

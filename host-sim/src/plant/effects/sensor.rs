@@ -3,8 +3,10 @@
 //! reported = gain * true + offset (channel units). It changes what the sensors report, not
 //! the plant.
 //!
-//! Diagnosis (candidate `sensor_offset`): a constant share of each channel's residual.
-//! Truth: angle +1.5 deg, p1 +8 kPa, p2 -6 kPa.
+//! Diagnosis: candidate `sensor_offset`, a constant share of each channel's residual (truth:
+//! angle +1.5 deg, p1 +8 kPa, p2 -6 kPa); candidate `sensor_gain`, a share of each channel's
+//! residual proportional to the channel itself, one gain per channel (truth: p1 reads 6 %
+//! high, the other channels right).
 
 use serde::Deserialize;
 
@@ -116,10 +118,20 @@ impl Effect for SensorCalibration {
         ])
     }
     fn candidates() -> Vec<Box<dyn Candidate>> {
-        vec![Box::new(SensorOffsetCandidate)]
+        vec![
+            Box::new(SensorOffsetCandidate),
+            Box::new(SensorGainCandidate),
+        ]
     }
     fn truths() -> Vec<Truth> {
-        vec![Truth::new("sensor_offset", "sensor_offset", |_| "[effects.sensor.angle_deg]\noffset = 1.5\n[effects.sensor.p1_kpa]\noffset = 8.0\n[effects.sensor.p2_kpa]\noffset = -6.0\n".into())]
+        vec![
+            Truth::new("sensor_offset", "sensor_offset", |_| {
+                "[effects.sensor.angle_deg]\noffset = 1.5\n[effects.sensor.p1_kpa]\noffset = 8.0\n[effects.sensor.p2_kpa]\noffset = -6.0\n".into()
+            }),
+            Truth::new("sensor_gain_one_channel", "sensor_gain", |_| {
+                "[effects.sensor.p1_kpa]\ngain = 1.06\n".into()
+            }),
+        ]
     }
 }
 
@@ -180,37 +192,10 @@ impl Candidate for SensorOffsetCandidate {
     }
     fn apply(&self, cfg: &mut PlantConfig, p: &[f64], s: &Setup) {
         // The offsets are fitted; the gains of a calibration the plant file already has stay.
-        let mut cal =
-            cfg.effects
-                .sensor
-                .clone()
-                .filter(|c| c.enabled)
-                .unwrap_or(SensorCalibration {
-                    enabled: true,
-                    angle_deg: None,
-                    p1_kpa: None,
-                    p2_kpa: None,
-                    f1_n: None,
-                    f2_n: None,
-                });
-        let mut it = p.iter();
-        for c in Channel::ALL {
-            if !s.has(c) {
-                continue;
-            }
-            let slot = match c {
-                Channel::AngleDeg => &mut cal.angle_deg,
-                Channel::P1Kpa => &mut cal.p1_kpa,
-                Channel::P2Kpa => &mut cal.p2_kpa,
-                Channel::F1N => &mut cal.f1_n,
-                Channel::F2N => &mut cal.f2_n,
-            };
-            *slot = Some(ChannelCalibration {
-                offset: *it.next().unwrap_or(&0.0),
-                gain: slot.map_or(1.0, |k| k.gain),
-            });
-        }
-        cfg.effects.sensor = Some(cal);
+        set_calibration(cfg, p, s, |old, v| ChannelCalibration {
+            offset: v,
+            gain: old.map_or(1.0, |k| k.gain),
+        });
     }
     fn changes_dynamics(&self) -> bool {
         false
@@ -223,5 +208,120 @@ impl Candidate for SensorOffsetCandidate {
             .map(|(n, v)| format!("{} {:+.3}", n.name, v))
             .collect();
         format!("constant sensor offsets ({})", parts.join(", "))
+    }
+}
+
+/// Writes one fitted value per present channel (`p`, in channel order) into the plant's
+/// sensor calibration through `set(old calibration, value)`.
+fn set_calibration(
+    cfg: &mut PlantConfig,
+    p: &[f64],
+    s: &Setup,
+    set: impl Fn(Option<ChannelCalibration>, f64) -> ChannelCalibration,
+) {
+    let mut cal = cfg
+        .effects
+        .sensor
+        .clone()
+        .filter(|c| c.enabled)
+        .unwrap_or(SensorCalibration {
+            enabled: true,
+            angle_deg: None,
+            p1_kpa: None,
+            p2_kpa: None,
+            f1_n: None,
+            f2_n: None,
+        });
+    let mut it = p.iter();
+    for c in Channel::ALL {
+        if !s.has(c) {
+            continue;
+        }
+        let slot = match c {
+            Channel::AngleDeg => &mut cal.angle_deg,
+            Channel::P1Kpa => &mut cal.p1_kpa,
+            Channel::P2Kpa => &mut cal.p2_kpa,
+            Channel::F1N => &mut cal.f1_n,
+            Channel::F2N => &mut cal.f2_n,
+        };
+        *slot = Some(set(*slot, *it.next().unwrap_or(&0.0)));
+    }
+    cfg.effects.sensor = Some(cal);
+}
+
+/// A gain on each measured channel: reported = gain * true (a transducer that reads a fixed
+/// share high or low). One gain per channel, so one wrong sensor is fitted alone.
+pub struct SensorGainCandidate;
+
+const GAIN_NAMES: [&str; 5] = ["angle_gain", "p1_gain", "p2_gain", "f1_gain", "f2_gain"];
+
+impl Candidate for SensorGainCandidate {
+    fn id(&self) -> &'static str {
+        "sensor_gain"
+    }
+    fn label(&self) -> &'static str {
+        "sensor calibration gain"
+    }
+    fn params(&self, s: &Setup) -> Vec<ParamSpec> {
+        Channel::ALL
+            .iter()
+            .filter(|c| s.has(**c))
+            .map(|c| ParamSpec::new(GAIN_NAMES[c.index()], 0.5, 2.0, 0.05))
+            .collect()
+    }
+    fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
+        // Per channel, the residual's projection on the nominal channel: r = (g - 1) y.
+        let mut init = Vec::new();
+        let mut explained = 0.0;
+        let mut total = 0.0;
+        for c in Channel::ALL {
+            if let (Some(r), Some(y)) = (&ev.residual[c.index()], &ev.nominal[c.index()]) {
+                let yy: f64 = y.iter().map(|v| v * v).sum();
+                let ry: f64 = r.iter().zip(y).map(|(a, b)| a * b).sum();
+                let ss: f64 = r.iter().map(|v| v * v).sum();
+                let w = 1.0 / ev.spread[c.index()].powi(2);
+                let k = if yy > 0.0 { ry / yy } else { 0.0 };
+                explained += w * k * ry;
+                total += w * ss;
+                init.push(1.0 + k);
+            }
+        }
+        let score = if total > 0.0 { explained / total } else { 0.0 };
+        Screening {
+            score,
+            initial: clamp_to(&self.params(s), init),
+            note: format!(
+                "a share of the residual proportional to the channel itself ({:.0} % of its energy) is a gain",
+                100.0 * score
+            ),
+            scatter: None,
+        }
+    }
+    fn apply(&self, cfg: &mut PlantConfig, p: &[f64], s: &Setup) {
+        // The gains are fitted; the offsets of a calibration the plant file already has stay.
+        set_calibration(cfg, p, s, |old, v| ChannelCalibration {
+            offset: old.map_or(0.0, |k| k.offset),
+            gain: v,
+        });
+    }
+    fn changes_dynamics(&self) -> bool {
+        false
+    }
+    fn describe(&self, p: &[f64], s: &Setup) -> String {
+        let parts: Vec<String> = self
+            .params(s)
+            .iter()
+            .zip(p)
+            .filter(|(_, v)| (**v - 1.0).abs() >= 0.005)
+            .map(|(n, v)| format!("{} {:.3}", n.name, v))
+            .collect();
+        format!(
+            "sensor gains off 1 ({})",
+            if parts.is_empty() {
+                "none above 0.5 %".to_string()
+            } else {
+                parts.join(", ")
+            }
+        )
     }
 }

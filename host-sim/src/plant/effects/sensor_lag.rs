@@ -3,8 +3,13 @@
 //! at the first sample. An absent time constant means no lag on that group. It changes what
 //! the sensors report, not the plant.
 //!
+//! `p1_time_constant_s` / `p2_time_constant_s` give one pressure sensor its own lag (they
+//! override `pressure_time_constant_s` for that channel).
+//!
 //! Diagnosis: the shift that best aligns each measured channel with the nominal simulation
-//! (cross-correlation of the residuals). Truth: angle 15 ms, pressures 8 ms.
+//! (cross-correlation of the residuals). Candidates `sensor_lag` (one time constant per
+//! channel group) and `sensor_lag_p1` / `sensor_lag_p2` (one pressure sensor alone). Truths:
+//! angle 15 ms, pressures 8 ms; the p2 sensor alone 20 ms.
 
 use serde::Deserialize;
 
@@ -24,6 +29,12 @@ pub struct SensorLag {
     pub angle_time_constant_s: Option<f64>,
     /// p1_kpa, p2_kpa.
     pub pressure_time_constant_s: Option<f64>,
+    /// p1_kpa alone (overrides `pressure_time_constant_s` for it).
+    #[serde(default)]
+    pub p1_time_constant_s: Option<f64>,
+    /// p2_kpa alone (overrides `pressure_time_constant_s` for it).
+    #[serde(default)]
+    pub p2_time_constant_s: Option<f64>,
     /// f1_n, f2_n.
     pub force_time_constant_s: Option<f64>,
 }
@@ -42,13 +53,14 @@ impl SensorLagFilter {
             Some(t) if t > 0.0 => 1.0 - (-dt_s / t).exp(),
             _ => 1.0,
         };
-        let (ang, p, f) = (
+        let (ang, p1, p2, f) = (
             a(lag.angle_time_constant_s),
-            a(lag.pressure_time_constant_s),
+            a(lag.p1_time_constant_s.or(lag.pressure_time_constant_s)),
+            a(lag.p2_time_constant_s.or(lag.pressure_time_constant_s)),
             a(lag.force_time_constant_s),
         );
         Self {
-            gain: [ang, p, p, f, f],
+            gain: [ang, p1, p2, f, f],
             y: None,
         }
     }
@@ -77,6 +89,8 @@ impl Hooks for SensorLag {
             [
                 ("angle_time_constant_s", self.angle_time_constant_s),
                 ("pressure_time_constant_s", self.pressure_time_constant_s),
+                ("p1_time_constant_s", self.p1_time_constant_s),
+                ("p2_time_constant_s", self.p2_time_constant_s),
                 ("force_time_constant_s", self.force_time_constant_s),
             ]
             .into_iter()
@@ -90,11 +104,26 @@ impl Hooks for SensorLag {
 }
 
 impl Effect for SensorLag {
-    table_effect!(SensorLagCandidate);
+    type Active = Self;
+    fn enabled(&self) -> bool {
+        self.enabled
+    }
+    fn activate(&self, _valve: &ValveConfig) -> Self {
+        self.clone()
+    }
+    fn candidates() -> Vec<Box<dyn Candidate>> {
+        vec![
+            Box::new(SensorLagCandidate),
+            Box::new(PressureSensorLagCandidate { channel: Channel::P1Kpa }),
+            Box::new(PressureSensorLagCandidate { channel: Channel::P2Kpa }),
+        ]
+    }
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
         for (key, tau) in [
             ("angle_time_constant_s", self.angle_time_constant_s),
             ("pressure_time_constant_s", self.pressure_time_constant_s),
+            ("p1_time_constant_s", self.p1_time_constant_s),
+            ("p2_time_constant_s", self.p2_time_constant_s),
             ("force_time_constant_s", self.force_time_constant_s),
         ] {
             if let Some(t) = tau {
@@ -104,7 +133,12 @@ impl Effect for SensorLag {
         Ok(())
     }
     fn truths() -> Vec<Truth> {
-        vec![Truth::new("sensor_lag", "sensor_lag", |_| "[effects.sensor_lag]\nangle_time_constant_s = 0.015\npressure_time_constant_s = 0.008\n".into())]
+        vec![
+            Truth::new("sensor_lag", "sensor_lag", |_| "[effects.sensor_lag]\nangle_time_constant_s = 0.015\npressure_time_constant_s = 0.008\n".into()),
+            Truth::new("sensor_lag_one_pressure", "sensor_lag_p2", |_| {
+                "[effects.sensor_lag]\np2_time_constant_s = 0.02\n".into()
+            }),
+        ]
     }
 }
 
@@ -192,6 +226,8 @@ impl Candidate for SensorLagCandidate {
             enabled: true,
             angle_time_constant_s: None,
             pressure_time_constant_s: None,
+            p1_time_constant_s: None,
+            p2_time_constant_s: None,
             force_time_constant_s: None,
         };
         for ((name, _), v) in Self::groups(s).iter().zip(p) {
@@ -222,6 +258,95 @@ impl Candidate for SensorLagCandidate {
         format!(
             "first-order lag of the sensors ({}), the plant itself on time",
             parts.join(", ")
+        )
+    }
+}
+
+/// The lag of one pressure sensor alone (the other channels on time).
+pub struct PressureSensorLagCandidate {
+    pub channel: Channel,
+}
+
+impl PressureSensorLagCandidate {
+    fn key(&self) -> &'static str {
+        if self.channel == Channel::P1Kpa {
+            "p1_time_constant_s"
+        } else {
+            "p2_time_constant_s"
+        }
+    }
+}
+
+impl Candidate for PressureSensorLagCandidate {
+    fn id(&self) -> &'static str {
+        if self.channel == Channel::P1Kpa {
+            "sensor_lag_p1"
+        } else {
+            "sensor_lag_p2"
+        }
+    }
+    fn label(&self) -> &'static str {
+        if self.channel == Channel::P1Kpa {
+            "lag of the p1 sensor"
+        } else {
+            "lag of the p2 sensor"
+        }
+    }
+    fn params(&self, s: &Setup) -> Vec<ParamSpec> {
+        if s.has(self.channel) {
+            vec![ParamSpec::new(self.key(), 0.0, 0.5, 0.005)]
+        } else {
+            Vec::new()
+        }
+    }
+    fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
+        let i = self.channel.index();
+        let lags = ev.lag_samples[i] > 0;
+        // The channel lags and the others do not.
+        let others_lag = Channel::ALL
+            .iter()
+            .filter(|c| **c != self.channel && s.has(**c))
+            .any(|c| ev.lag_samples[c.index()] > 0);
+        Screening {
+            score: if s.has(self.channel) && !others_lag {
+                ev.lag_gain[i]
+            } else {
+                0.0
+            },
+            initial: clamp_to(&self.params(s), vec![ev.lag_samples[i] as f64 * s.dt_s]),
+            note: if lags && !others_lag {
+                format!("{} alone lags the nominal simulation", self.channel.name())
+            } else {
+                format!("{} does not lag alone", self.channel.name())
+            },
+            scatter: ev.lag_scatter(self.channel),
+        }
+    }
+    fn apply(&self, cfg: &mut PlantConfig, p: &[f64], _s: &Setup) {
+        let tau = p.first().map(|v| v.max(0.0));
+        let mut lag = SensorLag {
+            enabled: true,
+            angle_time_constant_s: None,
+            pressure_time_constant_s: None,
+            p1_time_constant_s: None,
+            p2_time_constant_s: None,
+            force_time_constant_s: None,
+        };
+        if self.channel == Channel::P1Kpa {
+            lag.p1_time_constant_s = tau;
+        } else {
+            lag.p2_time_constant_s = tau;
+        }
+        cfg.effects.sensor_lag = Some(lag);
+    }
+    fn changes_dynamics(&self) -> bool {
+        false
+    }
+    fn describe(&self, p: &[f64], _s: &Setup) -> String {
+        format!(
+            "first-order lag of the {} sensor alone ({:.1} ms), the plant and the other sensors on time",
+            self.channel.name(),
+            p.first().copied().unwrap_or(0.0) * 1e3
         )
     }
 }
