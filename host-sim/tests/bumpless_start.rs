@@ -88,7 +88,11 @@ fn a_vented_joint_far_from_its_setpoint_is_taken_over_without_a_bump() {
     assert!(ramped.both_full_ticks <= 3, "{}", ramped.both_full_ticks);
     assert!(ramped.any_full_ticks <= 10, "{}", ramped.any_full_ticks);
     assert!(ramped.overshoot_rad <= 0.005, "{}", ramped.overshoot_rad);
-    assert!(ramped.final_error_rad < 0.015, "not settled: {}", ramped.final_error_rad);
+    assert!(
+        ramped.final_error_rad < 0.015,
+        "not settled: {}",
+        ramped.final_error_rad
+    );
     // The same take-over without the start phase is what the start phase prevents.
     assert!(instant.both_full_ticks >= 20, "{}", instant.both_full_ticks);
     assert!(instant.overshoot_rad > ramped.overshoot_rad);

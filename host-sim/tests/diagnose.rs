@@ -468,10 +468,15 @@ fn a_recording_longer_than_the_fit_budget_is_fitted_on_its_head_with_the_same_an
 fn with_crosstalk(mut rec: Recording) -> Recording {
     let dt = rec.sample_period_s();
     let a = (-dt / 0.08f64).exp();
-    let angle = rec.channel(host_sim::io::recording::Channel::AngleDeg).unwrap().to_vec();
+    let angle = rec
+        .channel(host_sim::io::recording::Channel::AngleDeg)
+        .unwrap()
+        .to_vec();
     let (lo, hi) = angle
         .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
+            (l.min(*v), h.max(*v))
+        });
     let mut slow = 0.0;
     let out: Vec<f64> = angle
         .iter()
@@ -502,7 +507,10 @@ fn an_effect_outside_the_catalogue_gets_an_unnamed_black_box_correction() {
     let b = d.black_box.as_ref().expect("a black-box fallback");
     let (before, after) = b.heldout["angle_deg"];
     let (cb, ca) = b.check.as_ref().expect("check fits")["angle_deg"];
-    eprintln!("{}\nheld-out angle {before:.1} -> {after:.1} %, check {cb:.1} -> {ca:.1} %", d.answer());
+    eprintln!(
+        "{}\nheld-out angle {before:.1} -> {after:.1} %, check {cb:.1} -> {ca:.1} %",
+        d.answer()
+    );
     assert!(after > before + 20.0, "held-out {before} -> {after}");
     assert!(ca > cb + 20.0, "check {cb} -> {ca}");
     let a = d.answer();

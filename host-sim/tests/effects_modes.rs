@@ -468,12 +468,19 @@ fn a_fractional_dead_time_runs_in_every_mode_between_its_whole_neighbours() {
     };
     let (a, m, b) = (p1(0.008), p1(0.0085), p1(0.009));
     let dist = |x: &[f64], y: &[f64]| -> f64 {
-        x.iter().zip(y).map(|(u, v)| (u - v).powi(2)).sum::<f64>().sqrt()
+        x.iter()
+            .zip(y)
+            .map(|(u, v)| (u - v).powi(2))
+            .sum::<f64>()
+            .sqrt()
     };
     let ab = dist(&a, &b);
     assert!(ab > 0.0);
     for (name, d) in [("8 ms", dist(&m, &a)), ("9 ms", dist(&m, &b))] {
-        assert!(d > 0.2 * ab && d < 0.8 * ab, "8.5 ms vs {name}: {d} of {ab}");
+        assert!(
+            d > 0.2 * ab && d < 0.8 * ab,
+            "8.5 ms vs {name}: {d} of {ab}"
+        );
     }
     // Closed loop: the same dead time runs to the end.
     let plant = plant_with("[effects.valve_dead_time]\ndelay_s = 0.0085\n");

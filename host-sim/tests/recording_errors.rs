@@ -147,3 +147,59 @@ fn utf8_bom_and_crlf_are_accepted() {
     assert_eq!(r.len(), 3);
     assert_eq!(r.meta("plant"), Some("reference-1dof.toml"));
 }
+
+/// A recording long enough to be read in two chunks on two threads (> 256 KB of rows),
+/// with `bad(k)` replacing row `k` when it returns `Some`.
+fn long_recording(bad: impl Fn(usize) -> Option<String>) -> String {
+    let mut text =
+        String::from("# sample_period_s = 0.001\nt_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg,p1_kpa\n");
+    for k in 0..12_000 {
+        match bad(k) {
+            Some(row) => text.push_str(&row),
+            None => text.push_str(&format!(
+                "{},1,0,0.25,0,{:.6},{:.6}",
+                k as f64 * 0.001,
+                (k as f64 * 0.01).sin(),
+                300.0 + k as f64 * 0.001
+            )),
+        }
+        text.push('\n');
+    }
+    assert!(text.len() > 300_000);
+    text
+}
+
+#[test]
+fn a_long_recording_reads_the_same_as_row_by_row_and_names_lines_past_the_split() {
+    let text = long_recording(|_| None);
+    let r = Recording::parse(&text, "run-42.csv").unwrap();
+    assert_eq!(r.len(), 12_000);
+    for (k, &t) in r.t_s.iter().enumerate() {
+        assert_eq!(t, format!("{}", k as f64 * 0.001).parse::<f64>().unwrap());
+    }
+    let p1 = r.channel(Channel::P1Kpa).unwrap();
+    assert_eq!(
+        p1[11_999],
+        format!("{:.6}", 300.0 + 11_999.0 * 0.001)
+            .parse::<f64>()
+            .unwrap()
+    );
+    // Row k sits on line k + 3 (one metadata line, the header). A bad row late in the file
+    // (in the second chunk) is named by its own line.
+    let e = err(&long_recording(|k| {
+        (k == 11_000).then(|| "11,1,0,0,0,oops,1".into())
+    }));
+    assert_names(&e, 11_003, "angle_deg");
+    let e = err(&long_recording(|k| (k == 9_000).then(|| "9,1,0".into())));
+    assert!(
+        e.contains(":9003:") && e.contains("3 fields, the header has 7"),
+        "{e}"
+    );
+    // With errors in both halves, the first in the file is reported.
+    let e = err(&long_recording(|k| match k {
+        100 => Some("0.1,2,0,0,0,0,0".into()),
+        11_000 => Some("11,1,0,0,0,oops,1".into()),
+        _ => None,
+    }));
+    assert_names(&e, 103, "u_in1");
+}

@@ -79,8 +79,8 @@ impl Basis {
             }
             let s = Self::signal(rec, nominal, which);
             let mean = s.iter().sum::<f64>() / s.len().max(1) as f64;
-            let sd = (s.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / s.len().max(1) as f64)
-                .sqrt();
+            let sd =
+                (s.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / s.len().max(1) as f64).sqrt();
             if sd > 0.0 && sd.is_finite() {
                 signals.push((which, sd));
             }
@@ -96,7 +96,12 @@ impl Basis {
     }
 
     /// Rows `range` of the regressor matrix (the filters run from the start of the run).
-    fn matrix(&self, rec: &Recording, nominal: &[Measurement], range: Range<usize>) -> DMatrix<f64> {
+    fn matrix(
+        &self,
+        rec: &Recording,
+        nominal: &[Measurement],
+        range: Range<usize>,
+    ) -> DMatrix<f64> {
         let n = range.len();
         let w = self.width();
         let mut x = DMatrix::<f64>::zeros(n, w);
@@ -185,8 +190,10 @@ pub fn fit(
         let Some(y) = train.channel(c) else {
             continue;
         };
-        let r: DVector<f64> =
-            DVector::from_iterator(fit.len(), fit.clone().map(|k| y[k] - c.of(&train_nominal[k])));
+        let r: DVector<f64> = DVector::from_iterator(
+            fit.len(),
+            fit.clone().map(|k| y[k] - c.of(&train_nominal[k])),
+        );
         let score = |beta: &DVector<f64>,
                      x: &DMatrix<f64>,
                      y: &[f64],
@@ -215,7 +222,11 @@ pub fn fit(
                 }
             }
             if let Some(o) = own {
-                let gain = if best.is_some() { LARGER_BASIS_GAIN_PCT } else { 0.0 };
+                let gain = if best.is_some() {
+                    LARGER_BASIS_GAIN_PCT
+                } else {
+                    0.0
+                };
                 if best.as_ref().is_none_or(|b| o.3 .1 > b.3 .1 + gain) {
                     best = Some(o);
                 }

@@ -20,8 +20,8 @@
 
 pub mod answer;
 pub mod baseline;
-pub mod black_box;
 pub mod batch;
+pub mod black_box;
 pub mod candidates;
 pub mod differentiate;
 pub mod fitting;
@@ -391,9 +391,8 @@ pub fn diagnose(
     // Derivatives, lags and refits work on a uniform grid: jittered recordings are put on it
     // (openings time-averaged per cell, outputs interpolated; `Recording::to_uniform`).
     // A recording already on its grid is used as it is (no copy of a long recording).
-    let uniform = |r: &Recording| -> Option<Recording> {
-        (!r.is_uniform()).then(|| r.to_uniform())
-    };
+    let uniform =
+        |r: &Recording| -> Option<Recording> { (!r.is_uniform()).then(|| r.to_uniform()) };
     let (train_u, check_u) = (uniform(train), check.and_then(uniform));
     let train = train_u.as_ref().unwrap_or(train);
     let check = check.map(|c| check_u.as_ref().unwrap_or(c));

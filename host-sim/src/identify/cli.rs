@@ -40,7 +40,9 @@ pub enum SweepWhat {
     /// independent thick-walled Chou-Hannaford muscle drawn from the seed: 5..9 lengths down to
     /// L/L0 ~ 0.74, 10..15 pressures up to 600..700 kPa, 60..130 points, exactly 0 N where the
     /// muscle is slack, noisy readings; --branches adds the falling branch with braid friction.
-    #[command(after_help = "Example:\n  host-sim sweep force-map --seed 3 --branches --out map.csv")]
+    #[command(
+        after_help = "Example:\n  host-sim sweep force-map --seed 3 --branches --out map.csv"
+    )]
     ForceMap(SweepForceMapArgs),
     /// A torque-identification recording (writes RECORDING.md columns t_s, u_in1..u_ex2,
     /// angle_deg, p1_kpa, p2_kpa, f1_n, f2_n) as in the torque-model paper: the joint is driven

@@ -95,7 +95,7 @@ impl Arm3Recording {
     /// Parses 3-joint recording text; `path` is used in error messages.
     pub fn parse(text: &str, path: impl AsRef<Path>) -> Result<Self, RecordingError> {
         let path = path.as_ref();
-        let mut table = Table::parse(text, path)?;
+        let table = Table::parse(text, path)?;
         let t_col = table.required("t_s", "")?;
         let mut u_cols: [[(usize, String); 4]; JOINTS] = Default::default();
         for (j, cols) in u_cols.iter_mut().enumerate() {
@@ -125,21 +125,13 @@ impl Arm3Recording {
                  f1_n_jN, f2_n_jN)",
             ));
         }
-        let mut rec = Arm3Recording {
-            metadata: table.metadata.clone(),
-            ..Default::default()
-        };
-        for (j, c, _, _) in &out_cols {
-            rec.outputs[*j][*c] = Some(Vec::new());
-        }
-        let mut lines = Vec::new();
-        while table.next_row()? {
-            rec.t_s.push(table.num(t_col, "t_s")?);
+        let (rows, lines) = table.rows(|row| {
+            let t_s = row.num(t_col, "t_s")?;
             let mut u = [ValveInputs::CLOSED; JOINTS];
             for (j, cols) in u_cols.iter().enumerate() {
                 let mut v = [0.0; 4];
                 for (i, (col, name)) in cols.iter().enumerate() {
-                    v[i] = table.opening(*col, name)?;
+                    v[i] = row.opening(*col, name)?;
                 }
                 u[j] = ValveInputs {
                     u_in1: v[0],
@@ -148,13 +140,22 @@ impl Arm3Recording {
                     u_ex2: v[3],
                 };
             }
-            rec.inputs.push(u);
-            for (j, c, col, name) in &out_cols {
-                let v = table.num(*col, name)?;
-                rec.outputs[*j][*c].as_mut().unwrap().push(v);
-            }
-            lines.push(table.line);
+            let y = out_cols
+                .iter()
+                .map(|(_, _, col, name)| row.num(*col, name))
+                .collect::<Result<Vec<f64>, _>>()?;
+            Ok((t_s, u, y))
+        })?;
+        let mut rec = Arm3Recording {
+            metadata: table.metadata.clone(),
+            t_s: rows.iter().map(|r| r.0).collect(),
+            inputs: rows.iter().map(|r| r.1).collect(),
+            ..Default::default()
+        };
+        for (i, (j, c, _, _)) in out_cols.iter().enumerate() {
+            rec.outputs[*j][*c] = Some(rows.iter().map(|r| r.2[i]).collect());
         }
+        drop(rows);
         let dt = table.sample_period_s(&rec.t_s, &lines)?;
         let field_err =
             |line: u64, field: &str, message: String| table.field_err(line, field, message);

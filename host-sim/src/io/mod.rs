@@ -5,6 +5,7 @@ pub mod arm3;
 pub mod atomic;
 pub mod capture;
 pub mod import;
+pub mod numfmt;
 pub mod plot;
 pub mod recording;
 pub mod run_files;

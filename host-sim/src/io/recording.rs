@@ -13,6 +13,7 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use crate::io::numfmt;
 use crate::plant::{Measurement, ValveInputs};
 
 /// A measured (or simulated) output channel.
@@ -239,7 +240,7 @@ impl Recording {
     /// Parses recording text; `path` is used in error messages.
     pub fn parse(text: &str, path: impl AsRef<Path>) -> Result<Self, RecordingError> {
         let path = path.as_ref();
-        let mut table = Table::parse(text, path)?;
+        let table = Table::parse(text, path)?;
         let t_col = table.required("t_s", "")?;
         let mut u_cols = [0usize; 4];
         for (i, name) in INPUT_COLUMNS.iter().enumerate() {
@@ -256,37 +257,40 @@ impl Recording {
                 "no output column (need at least one of angle_deg, p1_kpa, p2_kpa, f1_n, f2_n)",
             ));
         }
-
+        let (rows, lines) = table.rows(|row| {
+            let t_s = row.num(t_col, "t_s")?;
+            let mut u = [0.0; 4];
+            for i in 0..4 {
+                u[i] = row.opening(u_cols[i], INPUT_COLUMNS[i])?;
+            }
+            let mut y = [0.0; 5];
+            for c in Channel::ALL {
+                if let Some(col) = out_cols[c.index()] {
+                    y[c.index()] = row.num(col, c.name())?;
+                }
+            }
+            Ok((t_s, u, y))
+        })?;
         let mut rec = Recording {
             metadata: table.metadata.clone(),
+            t_s: rows.iter().map(|r| r.0).collect(),
+            inputs: rows
+                .iter()
+                .map(|&(_, u, _)| ValveInputs {
+                    u_in1: u[0],
+                    u_ex1: u[1],
+                    u_in2: u[2],
+                    u_ex2: u[3],
+                })
+                .collect(),
             ..Default::default()
         };
         for c in Channel::ALL {
             if out_cols[c.index()].is_some() {
-                rec.outputs[c.index()] = Some(Vec::new());
+                rec.outputs[c.index()] = Some(rows.iter().map(|r| r.2[c.index()]).collect());
             }
         }
-        let mut lines = Vec::new();
-        while table.next_row()? {
-            rec.t_s.push(table.num(t_col, "t_s")?);
-            let mut u = [0.0; 4];
-            for i in 0..4 {
-                u[i] = table.opening(u_cols[i], INPUT_COLUMNS[i])?;
-            }
-            rec.inputs.push(ValveInputs {
-                u_in1: u[0],
-                u_ex1: u[1],
-                u_in2: u[2],
-                u_ex2: u[3],
-            });
-            for c in Channel::ALL {
-                if let Some(col) = out_cols[c.index()] {
-                    let v = table.num(col, c.name())?;
-                    rec.outputs[c.index()].as_mut().unwrap().push(v);
-                }
-            }
-            lines.push(table.line);
-        }
+        drop(rows);
 
         let n = rec.t_s.len();
         let dt = table.sample_period_s(&rec.t_s, &lines)?;
@@ -297,8 +301,8 @@ impl Recording {
         // gap (or a doubled stamp) and is refused, never filled; steps in between are time
         // stamp jitter, accepted (the valve inputs are held between the stamps).
         let mut steps: Vec<f64> = rec.t_s.windows(2).map(|w| w[1] - w[0]).collect();
-        steps.sort_by(f64::total_cmp);
-        let median_step = steps[steps.len() / 2];
+        let half = steps.len() / 2;
+        let median_step = *steps.select_nth_unstable_by(half, f64::total_cmp).1;
         for k in 1..n {
             let step = rec.t_s[k] - rec.t_s[k - 1];
             if !(step > 0.0) {
@@ -368,23 +372,61 @@ impl Recording {
         cw.write_record(&header)?;
         cw.flush()?;
         drop(cw);
-        // The rows: numbers only (nothing to quote), formatted into one reused line buffer.
-        let mut line: Vec<u8> = Vec::with_capacity(160);
-        for k in 0..n {
-            line.clear();
-            write!(line, "{}", self.t_s[k])?;
-            let u = &self.inputs[k];
-            for v in [u.u_in1, u.u_ex1, u.u_in2, u.u_ex2] {
-                write!(line, ",{v}")?;
+        // The rows: numbers only (nothing to quote), formatted by `numfmt` (byte-identical
+        // to `{}` for time and openings, `{:.6}` for the readings) in blocks, each block's
+        // two halves on two threads, so memory stays one block whatever the length.
+        let outputs: Vec<&[f64]> = present
+            .iter()
+            .map(|c| self.outputs[c.index()].as_deref().unwrap_or(&[]))
+            .collect();
+        let rows = |range: std::ops::Range<usize>| -> Vec<u8> {
+            let mut buf = Vec::with_capacity(range.len() * (16 + 8 * outputs.len()));
+            for k in range {
+                numfmt::push_shortest(&mut buf, self.t_s[k]);
+                let u = &self.inputs[k];
+                for v in [u.u_in1, u.u_ex1, u.u_in2, u.u_ex2] {
+                    buf.push(b',');
+                    numfmt::push_shortest(&mut buf, v);
+                }
+                for col in &outputs {
+                    buf.push(b',');
+                    numfmt::push_fixed(&mut buf, col[k], 6);
+                }
+                buf.push(b'\n');
             }
-            for c in &present {
-                write!(line, ",{:.6}", self.outputs[c.index()].as_ref().unwrap()[k])?;
-            }
-            line.push(b'\n');
-            w.write_all(&line)?;
-        }
-        Ok(())
+            buf
+        };
+        write_rows_in_blocks(n, rows, w)
     }
+}
+
+/// Formats rows `0..n` with `rows` block by block (each block's halves on two threads when
+/// it is large enough to pay for the thread) and writes them to `w` in order.
+pub(crate) fn write_rows_in_blocks(
+    n: usize,
+    rows: impl Fn(std::ops::Range<usize>) -> Vec<u8> + Sync,
+    w: &mut impl Write,
+) -> std::io::Result<()> {
+    const BLOCK_ROWS: usize = 16_384;
+    const PARALLEL_MIN_ROWS: usize = 4_096;
+    let mut start = 0;
+    while start < n {
+        let end = (start + BLOCK_ROWS).min(n);
+        if end - start >= PARALLEL_MIN_ROWS {
+            let mid = start + (end - start) / 2;
+            let (a, b) = std::thread::scope(|s| {
+                let second = s.spawn(|| rows(mid..end));
+                (rows(start..mid), second.join())
+            });
+            let b = b.map_err(|_| std::io::Error::other("a formatting thread failed"))?;
+            w.write_all(&a)?;
+            w.write_all(&b)?;
+        } else {
+            w.write_all(&rows(start..end))?;
+        }
+        start = end;
+    }
+    Ok(())
 }
 
 /// Linear interpolation of `(t, y)` (increasing `t`) at `at` (clamped to the end values).
@@ -464,15 +506,66 @@ pub(crate) struct Table<'t> {
     pub metadata: Vec<(String, String)>,
     /// 1-based line of each metadata entry.
     pub meta_line_of: Vec<u64>,
-    meta_lines: u64,
     /// 1-based line of the CSV header.
     pub header_line: u64,
     headers: csv::StringRecord,
-    rdr: csv::Reader<&'t [u8]>,
-    record: csv::StringRecord,
-    /// 1-based line of the current row (after [`Self::next_row`]).
+    /// The bytes after the header line: the data rows.
+    data: &'t [u8],
+    /// 1-based line of the first byte of `data`.
+    data_line: u64,
+}
+
+/// One data row of a [`Table`]: its fields, read with errors naming file, line and field.
+pub(crate) struct Row<'r> {
+    record: &'r csv::ByteRecord,
+    path: &'r Path,
+    /// 1-based line of the row in the file.
     pub line: u64,
 }
+
+impl Row<'_> {
+    /// An error about `field` of this row.
+    pub(crate) fn field_err(&self, field: &str, message: impl Into<String>) -> RecordingError {
+        RecordingError::Field {
+            path: self.path.to_owned(),
+            line: self.line,
+            field: field.to_owned(),
+            message: message.into(),
+        }
+    }
+
+    /// The finite number in column `col` (named `name`).
+    pub(crate) fn num(&self, col: usize, name: &str) -> Result<f64, RecordingError> {
+        let raw = self.record.get(col).unwrap_or(b"");
+        if let Some(v) = numfmt::parse_plain_decimal(raw) {
+            return Ok(v);
+        }
+        let bytes = raw.trim_ascii();
+        let s = std::str::from_utf8(bytes).unwrap_or("");
+        let v: f64 = s.parse().map_err(|_| {
+            self.field_err(
+                name,
+                format!("not a number: {:?}", String::from_utf8_lossy(bytes)),
+            )
+        })?;
+        if !v.is_finite() {
+            return Err(self.field_err(name, format!("not a finite number: {s:?}")));
+        }
+        Ok(v)
+    }
+
+    /// The valve opening in [0, 1] in column `col` (named `name`).
+    pub(crate) fn opening(&self, col: usize, name: &str) -> Result<f64, RecordingError> {
+        let v = self.num(col, name)?;
+        if !(0.0..=1.0).contains(&v) {
+            return Err(self.field_err(name, format!("valve opening {v} outside [0, 1]")));
+        }
+        Ok(v)
+    }
+}
+
+/// Data of at least this many bytes is read in two chunks on two threads.
+const PARALLEL_READ_MIN_BYTES: usize = 256 * 1024;
 
 /// The mean step of time stamps `t_s` (first to last); NaN with fewer than two.
 pub(crate) fn mean_step_s(t_s: &[f64]) -> f64 {
@@ -501,11 +594,10 @@ impl<'t> Table<'t> {
             lines: meta_lines,
             offset,
         } = Preamble::of(text);
-        // Fields are trimmed where they are read (`num`), not by the reader: its trimming
-        // builds a new record per row.
+        let after_meta = &text.as_bytes()[offset..];
         let mut rdr = csv::ReaderBuilder::new()
             .has_headers(true)
-            .from_reader(&text.as_bytes()[offset..]);
+            .from_reader(after_meta);
         let header_line = meta_lines + 1;
         let headers = rdr
             .headers()
@@ -524,17 +616,111 @@ impl<'t> Table<'t> {
                 message: "no header line (expected t_s,u_in1,u_ex1,u_in2,u_ex2,...)".into(),
             });
         }
+        let pos = rdr.position();
+        let data_start = (pos.byte() as usize).min(after_meta.len());
         Ok(Self {
             path,
             metadata,
             meta_line_of,
-            meta_lines,
             header_line,
             headers,
-            rdr,
-            record: csv::StringRecord::new(),
-            line: header_line,
+            data: &after_meta[data_start..],
+            data_line: pos.line() + meta_lines,
         })
+    }
+
+    /// Every data row through `f`, in file order, with the row's 1-based line. The first
+    /// error in file order is returned. Large files (without quoted fields) are read in two
+    /// chunks, split at a line end, on two threads.
+    pub(crate) fn rows<T: Send>(
+        &self,
+        f: impl Fn(&Row) -> Result<T, RecordingError> + Sync,
+    ) -> Result<(Vec<T>, Vec<u64>), RecordingError> {
+        let data = self.data;
+        let split = if data.len() >= PARALLEL_READ_MIN_BYTES && !data.contains(&b'"') {
+            data[data.len() / 2..]
+                .iter()
+                .position(|&b| b == b'\n')
+                .map(|i| data.len() / 2 + i + 1)
+        } else {
+            None
+        };
+        let Some(mid) = split else {
+            return self.read_chunk(data, self.data_line, &f);
+        };
+        let second_line =
+            self.data_line + data[..mid].iter().filter(|&&b| b == b'\n').count() as u64;
+        let (first, second) = std::thread::scope(|s| {
+            let second = s.spawn(|| self.read_chunk(&data[mid..], second_line, &f));
+            (
+                self.read_chunk(&data[..mid], self.data_line, &f),
+                second.join(),
+            )
+        });
+        let (mut values, mut lines) = first?;
+        let (v2, l2) = second.map_err(|_| RecordingError::Invalid {
+            path: self.path.to_owned(),
+            message: "a reading thread failed".into(),
+        })??;
+        values.extend(v2);
+        lines.extend(l2);
+        Ok((values, lines))
+    }
+
+    /// The rows of `bytes` (whose first byte is on line `first_line`) through `f`.
+    fn read_chunk<T>(
+        &self,
+        bytes: &[u8],
+        first_line: u64,
+        f: &impl Fn(&Row) -> Result<T, RecordingError>,
+    ) -> Result<(Vec<T>, Vec<u64>), RecordingError> {
+        // Fields are trimmed where they are read (`Row::num`), not by the reader: its
+        // trimming builds a new record per row.
+        let mut rdr = csv::ReaderBuilder::new()
+            .has_headers(false)
+            .flexible(true)
+            .from_reader(bytes);
+        let mut record = csv::ByteRecord::new();
+        let rows_guess = bytes.len() / (8 * self.headers.len().max(1)) + 1;
+        let mut values = Vec::with_capacity(rows_guess);
+        let mut lines = Vec::with_capacity(rows_guess);
+        loop {
+            match rdr.read_byte_record(&mut record) {
+                Ok(false) => return Ok((values, lines)),
+                Ok(true) => {
+                    let line = record.position().map(|p| p.line()).unwrap_or(1) - 1 + first_line;
+                    if record.len() != self.headers.len() {
+                        return Err(RecordingError::Line {
+                            path: self.path.to_owned(),
+                            line,
+                            message: format!(
+                                "{} fields, the header has {}",
+                                record.len(),
+                                self.headers.len()
+                            ),
+                        });
+                    }
+                    let row = Row {
+                        record: &record,
+                        path: self.path,
+                        line,
+                    };
+                    values.push(f(&row)?);
+                    lines.push(line);
+                }
+                Err(e) => {
+                    let line = e
+                        .position()
+                        .map(|p| p.line() - 1 + first_line)
+                        .unwrap_or(first_line);
+                    return Err(RecordingError::Line {
+                        path: self.path.to_owned(),
+                        line,
+                        message: e.to_string(),
+                    });
+                }
+            }
+        }
     }
 
     /// An error about `field` at `line`.
@@ -571,59 +757,6 @@ impl<'t> Table<'t> {
                 format!("required column is missing{why}"),
             )
         })
-    }
-
-    /// Reads the next row; `false` at the end.
-    pub(crate) fn next_row(&mut self) -> Result<bool, RecordingError> {
-        match self.rdr.read_record(&mut self.record) {
-            Ok(false) => Ok(false),
-            Ok(true) => {
-                self.line = self.record.position().map(|p| p.line()).unwrap_or(0) + self.meta_lines;
-                Ok(true)
-            }
-            Err(e) => {
-                let line = e
-                    .position()
-                    .map(|p| p.line() + self.meta_lines)
-                    .unwrap_or(self.header_line);
-                let message = match e.kind() {
-                    csv::ErrorKind::UnequalLengths {
-                        expected_len, len, ..
-                    } => format!("{len} fields, the header has {expected_len}"),
-                    _ => e.to_string(),
-                };
-                Err(RecordingError::Line {
-                    path: self.path.to_owned(),
-                    line,
-                    message,
-                })
-            }
-        }
-    }
-
-    /// The finite number in column `col` (named `name`) of the current row.
-    pub(crate) fn num(&self, col: usize, name: &str) -> Result<f64, RecordingError> {
-        let s = self.record.get(col).unwrap_or("").trim();
-        let v: f64 = s
-            .parse()
-            .map_err(|_| self.field_err(self.line, name, format!("not a number: {s:?}")))?;
-        if !v.is_finite() {
-            return Err(self.field_err(self.line, name, format!("not a finite number: {s:?}")));
-        }
-        Ok(v)
-    }
-
-    /// The valve opening in [0, 1] in column `col` (named `name`) of the current row.
-    pub(crate) fn opening(&self, col: usize, name: &str) -> Result<f64, RecordingError> {
-        let v = self.num(col, name)?;
-        if !(0.0..=1.0).contains(&v) {
-            return Err(self.field_err(
-                self.line,
-                name,
-                format!("valve opening {v} outside [0, 1]"),
-            ));
-        }
-        Ok(v)
     }
 
     /// At least two rows (`t_s`, their `lines`) and increasing time: the mean sample period.
