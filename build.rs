@@ -19,6 +19,10 @@ mod prescale;
 #[path = "build/board_profile.rs"]
 mod board_profile_spec;
 
+// The 3-DOF arm's per-joint constants (config/arm3.toml).
+#[path = "build/arm3.rs"]
+mod arm3;
+
 #[derive(serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 struct ForceFile {
@@ -458,8 +462,27 @@ fn main() {
     );
     let out = PathBuf::from(env::var("OUT_DIR").unwrap()).join("constants.rs");
     fs::write(&out, src).expect("write constants.rs");
+    let arm = arm3::constants(&arm3::Reference {
+        c: f.c,
+        abcd: [t.a_n_per_m_rad, t.b_m2, t.c_nms3_per_rad3, t.d_nms_per_rad],
+        r_m: g.sprocket_radius_m,
+        l_m: g.rest_length_m,
+    });
+    let out = PathBuf::from(env::var("OUT_DIR").unwrap()).join("arm3_constants.rs");
+    fs::write(&out, arm).expect("write arm3_constants.rs");
 
-    sensor_trace("traces/qemu_sensor_trace.csv");
+    sensor_trace(
+        "traces/qemu_sensor_trace.csv",
+        1,
+        "SENSOR_TRACE",
+        "sensor_trace.rs",
+    );
+    sensor_trace(
+        "traces/arm3_sensor_trace.csv",
+        3,
+        "ARM3_SENSOR_TRACE",
+        "arm3_sensor_trace.rs",
+    );
     board_profile();
 
     // Bare-metal firmware binaries only (the `firmware` feature gates them): linker scripts (cortex-m-rt's link.x, defmt's defmt.x).
@@ -501,16 +524,26 @@ fn main() {
 /// Generates `sensor_trace.rs` (OUT_DIR) from the raw sensor trace CSV that the QEMU firmware
 /// and `tests/qemu_trace.rs` replay (see `scripts/gen-qemu-trace.py` for the columns). Errors
 /// name the file, line and field.
-fn sensor_trace(path: &str) {
+fn sensor_trace(path: &str, joints: usize, name: &str, out_file: &str) {
     println!("cargo:rerun-if-changed={path}");
     let text = fs::read_to_string(path).unwrap_or_else(|e| panic!("{path}: cannot read: {e}"));
-    const COLS: [&str; 5] = [
-        "tick",
+    const GROUP: [&str; 4] = [
         "angle_set_mrad",
         "p1_adc_counts",
         "p2_adc_counts",
         "encoder_counts",
     ];
+    // One joint: `tick` and the four columns; several: each group with a `_jN` suffix.
+    let mut cols = vec!["tick".to_string()];
+    for j in 1..=joints {
+        for c in GROUP {
+            cols.push(if joints == 1 {
+                c.to_string()
+            } else {
+                format!("{c}_j{j}")
+            });
+        }
+    }
     let mut header_seen = false;
     let mut rows = String::new();
     let mut n = 0usize;
@@ -523,17 +556,17 @@ fn sensor_trace(path: &str) {
         let fields: Vec<&str> = line.split(',').map(str::trim).collect();
         if !header_seen {
             assert!(
-                fields == COLS,
+                fields == cols,
                 "{path}:{line_no}: header must be `{}`, found `{line}`",
-                COLS.join(",")
+                cols.join(",")
             );
             header_seen = true;
             continue;
         }
         assert!(
-            fields.len() == COLS.len(),
+            fields.len() == cols.len(),
             "{path}:{line_no}: expected {} fields, found {}",
-            COLS.len(),
+            cols.len(),
             fields.len()
         );
         let int = |j: usize, lo: i64, hi: i64, optional: bool| -> Option<i64> {
@@ -542,20 +575,20 @@ fn sensor_trace(path: &str) {
                 assert!(
                     optional,
                     "{path}:{line_no}: field `{}` is required",
-                    COLS[j]
+                    cols[j]
                 );
                 return None;
             }
             let v: i64 = f.parse().unwrap_or_else(|e| {
                 panic!(
                     "{path}:{line_no}: field `{}`: `{f}` is not an integer: {e}",
-                    COLS[j]
+                    cols[j]
                 )
             });
             assert!(
                 (lo..=hi).contains(&v),
                 "{path}:{line_no}: field `{}` = {v} outside {lo}..={hi}",
-                COLS[j]
+                cols[j]
             );
             Some(v)
         };
@@ -564,23 +597,38 @@ fn sensor_trace(path: &str) {
             tick == n as i64,
             "{path}:{line_no}: field `tick` = {tick}, expected {n} (one row per tick, in order)"
         );
-        let sp = int(1, i16::MIN as i64, i16::MAX as i64, false).unwrap();
-        let p1 = int(2, 0, 4095, true).unwrap_or(0xFFFF);
-        let p2 = int(3, 0, 4095, true).unwrap_or(0xFFFF);
-        let enc = int(4, i16::MIN as i64 + 1, i16::MAX as i64, true).unwrap_or(i16::MIN as i64);
-        rows.push_str(&format!(
-            "    TraceRow {{ angle_set_mrad: {sp}, p1_adc: {p1}, p2_adc: {p2}, encoder: {enc} }},\n"
-        ));
+        let mut group_rows = Vec::new();
+        for j in 0..joints {
+            let b = 1 + 4 * j;
+            let sp = int(b, i16::MIN as i64, i16::MAX as i64, false).unwrap();
+            let p1 = int(b + 1, 0, 4095, true).unwrap_or(0xFFFF);
+            let p2 = int(b + 2, 0, 4095, true).unwrap_or(0xFFFF);
+            let enc =
+                int(b + 3, i16::MIN as i64 + 1, i16::MAX as i64, true).unwrap_or(i16::MIN as i64);
+            group_rows.push(format!(
+                "TraceRow {{ angle_set_mrad: {sp}, p1_adc: {p1}, p2_adc: {p2}, encoder: {enc} }}"
+            ));
+        }
+        if joints == 1 {
+            rows.push_str(&format!("    {},\n", group_rows[0]));
+        } else {
+            rows.push_str(&format!("    [{}],\n", group_rows.join(", ")));
+        }
         n += 1;
     }
     assert!(header_seen && n > 0, "{path}: no header or no rows");
+    let ty = if joints == 1 {
+        format!("[TraceRow; {n}]")
+    } else {
+        format!("[[TraceRow; {joints}]; {n}]")
+    };
     let src = format!(
         "// @generated by build.rs from {path}. Do not edit.\n\
          /// The raw sensor trace ({path}), one row per control tick.\n\
-         pub const SENSOR_TRACE: [TraceRow; {n}] = [\n{rows}];\n"
+         pub const {name}: {ty} = [\n{rows}];\n"
     );
-    let out = PathBuf::from(env::var("OUT_DIR").unwrap()).join("sensor_trace.rs");
-    fs::write(&out, src).expect("write sensor_trace.rs");
+    let out = PathBuf::from(env::var("OUT_DIR").unwrap()).join(out_file);
+    fs::write(&out, src).unwrap_or_else(|e| panic!("write {out_file}: {e}"));
 }
 
 /// The board's compiled-in set-point (`OUT_DIR/board_profile.rs`, included by

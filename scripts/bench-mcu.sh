@@ -54,6 +54,13 @@ board_elf=target/board/thumbv7em-none-eabihf/release/board
 
 log=$(QEMU_EXTRA_ARGS="-icount shift=0" DEFMT_PRINT_ARGS="--log-format {s}" \
   scripts/qemu-run.sh "$qemu_elf" | grep -v '^tick=')
+# The 3-DOF arm tick: the same image with the arm benchmark instead of the 1-DOF rows (feature
+# mcu-bench-arm; its own target directory, so the 1-DOF image above stays as it is).
+arm_dir=${CARGO_TARGET_DIR:-target}/bench-arm
+cargo build -q -p pam-firmware --bin qemu --features pam-firmware/mcu-bench-arm --release \
+  --target thumbv7em-none-eabihf --target-dir "$arm_dir"
+arm_log=$(QEMU_EXTRA_ARGS="-icount shift=0" DEFMT_PRINT_ARGS="--log-format {s}" \
+  scripts/qemu-run.sh "$arm_dir/thumbv7em-none-eabihf/release/qemu" | grep -v '^tick=')
 # Cortex-M0 (no FPU) image on QEMU microbit: SysTick runs at 16 MHz there, so 64 ns per
 # instruction (-icount shift=6) keeps about one count per instruction.
 m0_elf=${CARGO_TARGET_DIR:-target}/thumbv6m-none-eabi/release/qemu_m0
@@ -98,6 +105,16 @@ tick_max=$(field "bench tick" max_counts)
 st_n=$(field "bench start tick" n)
 st_sum=$(field "bench start tick" sum_counts)
 st_max=$(field "bench start tick" max_counts)
+arm_field() { # arm_field <line-prefix> <key>: from the arm image's output
+  grep "^$1" <<<"$arm_log" | tr ' ' '\n' | sed -n "s/^$2=//p" | head -1
+}
+arm_n=$(arm_field "bench arm tick" n)
+arm_sum=$(arm_field "bench arm tick" sum_counts)
+arm_max=$(arm_field "bench arm tick" max_counts)
+arm_ticks=$(arm_field "bench arm tick" ticks)
+arm_cal_insns=$(arm_field "bench calib" insns)
+arm_cal_counts=$(arm_field "bench calib" counts)
+arm_empty=$(arm_field "bench calib" empty_counts)
 fl_n=$(field "bench force_law_f32" n)
 fl_sum=$(field "bench force_law_f32" sum_counts)
 fl_max=$(field "bench force_law_f32" max_counts)
@@ -108,7 +125,7 @@ fx_off=$(field "bench force_law_fixed" off_by_more_than_0.1N)
 stack=$(grep -o 'stack_used_bytes=[0-9]*' <<<"$log" | cut -d= -f2)
 unpainted=$(grep -o 'unpainted_top_bytes=[0-9]*' <<<"$log" | cut -d= -f2)
 if [ "${stack:-0}" -le "${unpainted:-0}" ]; then stack="<= $unpainted"; fi
-for v in cal_insns cal_counts empty tick_n tick_sum tick_max st_n st_sum st_max fl_n fl_sum fl_max fx_n fx_sum fx_max stack; do
+for v in cal_insns cal_counts empty tick_n tick_sum tick_max st_n st_sum st_max arm_n arm_sum arm_max arm_ticks arm_cal_insns arm_cal_counts arm_empty fl_n fl_sum fl_max fx_n fx_sum fx_max stack; do
   [ -n "${!v}" ] || { echo "bench-mcu.sh: no '$v' in the QEMU output:" >&2; echo "$log" >&2; exit 2; }
 done
 
@@ -121,6 +138,11 @@ read -r tick_mean tick_worst fl_mean fl_worst fx_mean fx_worst k < <(awk -v ci="
 
 read -r st_mean st_worst < <(awk -v ci="$cal_insns" -v cc="$cal_counts" -v e="$empty" \
   -v n="$st_n" -v s="$st_sum" -v m="$st_max" 'BEGIN {
+    k = ci / (cc - e); printf "%.0f %.0f\n", (s / n - e) * k, (m - e) * k }')
+
+read -r arm_mean arm_worst < <(awk -v ci="$arm_cal_insns" -v cc="$arm_cal_counts" -v e="$arm_empty" \
+  -v n="$arm_n" -v s="$arm_sum" -v m="$arm_max" 'BEGIN {
+    if (n == 0) { print "? ?"; exit }
     k = ci / (cc - e); printf "%.0f %.0f\n", (s / n - e) * k, (m - e) * k }')
 
 read -r board_flash board_ram < <(sizes "$board_elf")
@@ -139,6 +161,7 @@ calibration: $cal_insns instructions = $((cal_counts - empty)) SysTick counts (k
 | full f32 control tick, mean over $tick_n armed ticks | $tick_mean instructions | <= 1000 | $(check "$tick_mean" 1000) |
 | full f32 control tick, worst tick of the trace | $tick_worst instructions | | |
 | the same trace with the reference start phase (ramped set-point and pressure ceiling for up to ~1 s after arming), mean / worst over $st_n armed ticks | $st_mean / $st_worst instructions | | |
+| 3-DOF arm tick (three joint ticks, rigid-body gravity and inertia feed-forward, three valve drivers; traces/arm3_sensor_trace.csv), mean / worst over $arm_n of $arm_ticks ticks with all joints armed | $arm_mean / $arm_worst instructions | | |
 | force law alone (f32, one muscle), mean over $fl_n calls | $fl_mean instructions | | |
 | force law alone (f32), worst call | $fl_worst instructions | | |
 | force law fixed point (32-bit integers, same inputs quantised), mean over $fx_n calls ($fx_off off the f32 law by > 0.1 N) | $fx_mean instructions | | |

@@ -37,6 +37,7 @@ extern crate std;
 #[macro_use]
 mod fmt;
 
+pub mod arm;
 pub mod control;
 pub mod feedforward;
 pub mod fixed_point;

@@ -818,7 +818,36 @@ impl ControlTick {
             let c = crate::valves::ValveOpenings::from_command(&self.last_command);
             self.residual.openings(c.u_in1, c.u_ex1, c.u_in2, c.u_ex2);
         }
-        let out = self.step_inner(frame, setpoint, dt_s);
+        // Without the external torque: a separate instantiation, so the 1-DOF tick's code is
+        // what it was before the torque input existed.
+        let out = self.step_inner::<false>(frame, setpoint, 0.0, dt_s);
+        self.last_command = out.valves;
+        self.pending_command = true;
+        out
+    }
+
+    /// [`Self::step`] with an extra joint torque `torque_ff_nm` [N m] added to the position
+    /// loop's (clamped) output before the torque loop inverts the torque model: a
+    /// feed-forward computed outside this joint (the arm's gravity and coupling torques,
+    /// [`crate::arm`]). A non-finite value counts as 0.
+    #[inline(never)]
+    pub fn step_with_torque(
+        &mut self,
+        frame: &SensorFrame,
+        setpoint: &Setpoint,
+        torque_ff_nm: f32,
+        dt_s: f32,
+    ) -> TickOutput {
+        let t = if torque_ff_nm.is_finite() {
+            torque_ff_nm
+        } else {
+            0.0
+        };
+        if self.pending_command {
+            let c = crate::valves::ValveOpenings::from_command(&self.last_command);
+            self.residual.openings(c.u_in1, c.u_ex1, c.u_in2, c.u_ex2);
+        }
+        let out = self.step_inner::<true>(frame, setpoint, t, dt_s);
         self.last_command = out.valves;
         self.pending_command = true;
         out
@@ -872,7 +901,13 @@ impl ControlTick {
     }
 
     #[inline(always)]
-    fn step_inner(&mut self, frame: &SensorFrame, setpoint: &Setpoint, dt_s: f32) -> TickOutput {
+    fn step_inner<const EXTERNAL_TORQUE: bool>(
+        &mut self,
+        frame: &SensorFrame,
+        setpoint: &Setpoint,
+        torque_ff_nm: f32,
+        dt_s: f32,
+    ) -> TickOutput {
         // Scalars read once; the configuration (with its force-law and torque-model tables) is
         // not copied: a whole-struct copy cost ~190 instructions per tick on the Cortex-M4.
         let p_over_gauge_pa = self.cfg.p_over_gauge_pa;
@@ -1064,6 +1099,12 @@ impl ControlTick {
                 -t_lim
             } else {
                 t_sum
+            };
+            // The external feed-forward (finite), only in `step_with_torque`.
+            let t_des = if EXTERNAL_TORQUE {
+                t_des + torque_ff_nm
+            } else {
+                t_des
             };
             let meas = TorqueMeasurement {
                 p1_gauge_pa: p1,
@@ -1479,7 +1520,11 @@ mod tests {
             assert!(o.armed && o.fault.is_none());
             if k == 0 {
                 // 1 mrad of ramp: a small torque, not the saturated 0.6 rad step.
-                assert!(o.torque_des_nm > 0.0 && o.torque_des_nm < 1.0, "{}", o.torque_des_nm);
+                assert!(
+                    o.torque_des_nm > 0.0 && o.torque_des_nm < 1.0,
+                    "{}",
+                    o.torque_des_nm
+                );
             }
             // 1 mrad per tick: after 0.1 s a 0.1 rad error, far from saturating.
             assert!(o.torque_des_nm.abs() < 5.0, "tick {k}: {}", o.torque_des_nm);
@@ -1552,7 +1597,9 @@ mod tests {
         for k in 0..300 {
             let a = 0.001 * k as f32;
             let f = frame(550e3, 540e3, a);
-            let sp = Setpoint { angle_rad: 0.3 * libm::sinf(a) };
+            let sp = Setpoint {
+                angle_rad: 0.3 * libm::sinf(a),
+            };
             let (o, oi) = (t.step(&f, &sp, DT), instant.step(&f, &sp, DT));
             assert_eq!(o.valves, oi.valves, "tick {k}: {:?} {:?}", o, oi);
             assert_eq!(o.p1_set_gauge_pa.to_bits(), oi.p1_set_gauge_pa.to_bits());

@@ -34,6 +34,11 @@ pub const MISSING_ENCODER: i16 = i16::MIN;
 
 include!(concat!(env!("OUT_DIR"), "/sensor_trace.rs"));
 
+// `ARM3_SENSOR_TRACE`: the 3-DOF arm's raw sensor trace (traces/arm3_sensor_trace.csv, made
+// by host-sim/examples/gen_arm3_trace.rs), one row of three joints per tick, for the arm
+// tick's MCU benchmark. A `const`: it takes flash only in an image that uses it.
+include!(concat!(env!("OUT_DIR"), "/arm3_sensor_trace.rs"));
+
 /// Tick rate of the trace [Hz].
 pub const TRACE_TICK_HZ: f32 = 1000.0;
 
@@ -123,15 +128,30 @@ pub fn output_words(o: &TickOutput) -> [u32; WORDS] {
 /// cost is in the MCU figures.
 pub fn trace_config() -> ControllerConfig {
     let mut cfg = ControllerConfig::reference(TRACE_TICK_HZ);
+    open_loop_replay(&mut cfg);
+    cfg
+}
+
+/// The 3-DOF arm's reference configuration with every joint set up as [`trace_config`] is
+/// for an open-loop replay of [`ARM3_SENSOR_TRACE`].
+pub fn arm3_trace_config() -> crate::arm::ArmConfig {
+    let mut cfg = crate::arm::ArmConfig::reference(TRACE_TICK_HZ);
+    for j in cfg.joints.iter_mut() {
+        open_loop_replay(j);
+    }
+    cfg
+}
+
+/// A configuration for replaying a recorded trace open loop.
+fn open_loop_replay(cfg: &mut ControllerConfig) {
     cfg.valve_model.residual_abs_pa_s = f32::MAX;
-    // The synthetic trace's pressures do not follow the commands (open loop): the integrated
-    // valve check would see every opening as a stuck-closed valve. It still runs (its cost is
+    // The trace's pressures do not follow the commands (open loop): the integrated valve
+    // check would see every opening as a stuck-closed valve. It still runs (its cost is
     // measured) but never judges.
     cfg.valve_model.integral_min_pa = f32::MAX;
     // Nor does its angle follow a ramped set-point: the start phase (a transient of at most
     // ~1 s after arming, measured on its own by `bench-mcu.sh`) is skipped.
     cfg.start = crate::tick::StartRamp::INSTANT;
-    cfg
 }
 
 /// Steps a control tick through [`SENSOR_TRACE`].

@@ -298,7 +298,11 @@ mod tests {
         // Hold: the four valve pins and the enable line reset (BSRR bits 16+).
         assert_eq!(
             safe_bsrr(SafeState::Hold),
-            (1 << (12 + 16)) | (1 << (13 + 16)) | (1 << (14 + 16)) | (1 << (15 + 16)) | (1 << (11 + 16))
+            (1 << (12 + 16))
+                | (1 << (13 + 16))
+                | (1 << (14 + 16))
+                | (1 << (15 + 16))
+                | (1 << (11 + 16))
         );
         // Vent: exhausts and the enable line set.
         assert_eq!(

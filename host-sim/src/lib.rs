@@ -15,6 +15,7 @@
 
 pub mod control;
 pub mod demo;
+pub mod demo_arm3;
 pub mod diagnose;
 pub mod fit;
 pub mod identify;

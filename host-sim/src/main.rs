@@ -145,12 +145,17 @@ struct DemoArgs {
     /// Output directory (created if missing).
     #[arg(long, value_name = "DIR", default_value = "target/demo")]
     out_dir: PathBuf,
-    /// Plant file [default: ../shared/plant/reference-1dof.toml].
+    /// Plant file [default: ../shared/plant/reference-1dof.toml]; a 3-DOF arm file
+    /// (`kind = "arm3"`) runs the arm tick on the arm scenarios (scenarios/arm3/).
     #[arg(long, value_name = "P.toml")]
     plant: Option<PathBuf>,
     /// Conformance fixture replayed open loop [default: pulses_nominal.csv in shared/conformance].
     #[arg(long, value_name = "REC.csv")]
     fixture: Option<PathBuf>,
+    /// Arm plants only: run these arm scenario files (scenarios/arm3/ format) instead of the
+    /// built-in ones (repeatable).
+    #[arg(long, value_name = "S.toml")]
+    scenario: Vec<PathBuf>,
 }
 
 #[derive(Args)]
@@ -453,6 +458,66 @@ fn run_closed_loop(
 
 fn run_demo(a: &DemoArgs) -> Result<ExitCode> {
     let t0 = std::time::Instant::now();
+    // A 3-DOF arm plant file: the arm tick on the arm scenarios (no 1-DOF fixture replay).
+    let arm_plant = match &a.plant {
+        Some(p) => host_sim::plant::arm3::is_arm3_file(p)?,
+        None => false,
+    };
+    if !arm_plant && !a.scenario.is_empty() {
+        eprintln!("error: --scenario: arm plants only (a plant file with kind = \"arm3\")");
+        return Ok(ExitCode::from(2));
+    }
+    if let Some(p) = &a.plant {
+        if host_sim::plant::arm3::is_arm3_file(p)? {
+            if a.fixture.is_some() {
+                eprintln!(
+                    "error: --fixture: the conformance fixture is a 1-DOF recording; an arm \
+                     plant ({}) runs the arm scenarios only",
+                    p.display()
+                );
+                return Ok(ExitCode::from(2));
+            }
+            let texts = a
+                .scenario
+                .iter()
+                .map(|f| {
+                    std::fs::read_to_string(f)
+                        .map(|t| (f.display().to_string(), t))
+                        .map_err(|e| (f.clone(), e))
+                })
+                .collect::<Result<Vec<_>, _>>();
+            let texts = match texts {
+                Ok(t) => t,
+                Err((f, e)) => {
+                    eprintln!("error: --scenario {}: cannot read: {e}", f.display());
+                    return Ok(ExitCode::from(2));
+                }
+            };
+            // Every file parses before anything runs or is written.
+            for (f, t) in &texts {
+                if let Err(e) = host_sim::control::arm3_loop::ArmScenario::from_toml_str(t, f) {
+                    eprintln!("error: {e}");
+                    return Ok(ExitCode::from(2));
+                }
+            }
+            let r = if texts.is_empty() {
+                host_sim::demo_arm3::run_arm_demo(p, &a.out_dir)?
+            } else {
+                let refs: Vec<(&str, &str)> = texts
+                    .iter()
+                    .map(|(f, t)| (f.as_str(), t.as_str()))
+                    .collect();
+                host_sim::demo_arm3::run_arm_demo_with(p, &a.out_dir, &refs)?
+            };
+            print!("{}", host_sim::demo_arm3::format_arm_report(&r, &a.out_dir));
+            println!("done in {:.2} s", t0.elapsed().as_secs_f64());
+            return Ok(if r.ok() {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::from(1)
+            });
+        }
+    }
     let opts = host_sim::demo::DemoOptions {
         out_dir: a.out_dir.clone(),
         plant: a.plant.clone(),

@@ -97,6 +97,7 @@ fn injected_fault() -> Option<&'static str> {
 /// The benchmarks (`scripts/bench-mcu.sh`): built only with the `mcu-bench` feature, so the
 /// shipped image carries the trace replay and the stack report only.
 #[cfg(feature = "mcu-bench")]
+#[cfg_attr(feature = "mcu-bench-arm", allow(dead_code, unused_imports))]
 mod bench {
     use core::hint::black_box;
     use core::sync::atomic::{AtomicU32, Ordering};
@@ -163,6 +164,18 @@ mod bench {
             empty
         );
 
+        #[cfg(feature = "mcu-bench-arm")]
+        {
+            bench_arm_ticks();
+            return;
+        }
+        #[cfg(not(feature = "mcu-bench-arm"))]
+        bench_one_dof();
+    }
+
+    /// The 1-DOF rows: the f32 tick with and without the start phase, the force laws.
+    #[cfg(not(feature = "mcu-bench-arm"))]
+    fn bench_one_dof() {
         bench_ticks("bench tick", pam_firmware::trace::trace_config());
         // The same trace with the reference start phase: its first ~300 armed ticks ramp the
         // pressure ceiling from the trace's pressures to 600 kPa.
@@ -175,6 +188,72 @@ mod bench {
         );
         bench_force_law();
         bench_force_law_fixed();
+    }
+
+    #[cfg(feature = "mcu-bench-arm")]
+    /// The 3-DOF arm's tick (three joint ticks, the rigid-body feed-forward and three on/off
+    /// valve drivers) on the arm's sensor trace, each tick measured alone.
+    #[inline(never)]
+    fn bench_arm_ticks() {
+        use pam_firmware::arm::{ArmFrame, ArmSetpoint, ArmTick};
+        use pam_firmware::trace::ARM3_SENSOR_TRACE;
+        let p = wiring::pressure_scaling();
+        let dt = 1.0 / TRACE_TICK_HZ;
+        let mut arm = ArmTick::new(pam_firmware::trace::arm3_trace_config());
+        let pwm = OnOffPwmConfig::REFERENCE;
+        let mut v1 = OnOffValves::new(
+            BenchPin::<0>,
+            BenchPin::<1>,
+            BenchPin::<2>,
+            BenchPin::<3>,
+            pwm,
+        );
+        let mut v2 = OnOffValves::new(
+            BenchPin::<4>,
+            BenchPin::<5>,
+            BenchPin::<6>,
+            BenchPin::<7>,
+            pwm,
+        );
+        let mut v3 = OnOffValves::new(
+            BenchPin::<8>,
+            BenchPin::<9>,
+            BenchPin::<10>,
+            BenchPin::<11>,
+            pwm,
+        );
+        let (mut sum_armed, mut n_armed, mut max_any) = (0u32, 0u32, 0u32);
+        for row in ARM3_SENSOR_TRACE.iter() {
+            let frame = black_box(ArmFrame {
+                joints: [row[0].frame(&p), row[1].frame(&p), row[2].frame(&p)],
+            });
+            let sp = black_box(ArmSetpoint {
+                angles_rad: [0, 1, 2].map(|j| row[j].setpoint().angle_rad),
+            });
+            let (c, out) = measure_effectful(|| {
+                let out = arm.step(&frame, &sp, black_box(dt));
+                let Ok(o) = v1.apply_switched(&out.joints[0].valves);
+                arm.valves_switched(0, o);
+                let Ok(o) = v2.apply_switched(&out.joints[1].valves);
+                arm.valves_switched(1, o);
+                let Ok(o) = v3.apply_switched(&out.joints[2].valves);
+                arm.valves_switched(2, o);
+                out
+            });
+            let out = black_box(out);
+            if out.fault.is_none() && out.joints.iter().all(|j| j.armed) {
+                sum_armed += c;
+                n_armed += 1;
+            }
+            max_any = max_any.max(c);
+        }
+        defmt::info!(
+            "bench arm tick n={=u32} sum_counts={=u32} max_counts={=u32} ticks={=u32}",
+            n_armed,
+            sum_armed,
+            max_any,
+            ARM3_SENSOR_TRACE.len() as u32
+        );
     }
 
     /// Full control tick, each tick measured alone (frame built before the measurement).

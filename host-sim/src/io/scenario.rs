@@ -677,7 +677,7 @@ impl Scenario {
 }
 
 /// 1-based line of `key = ...` inside `[table]` of TOML `text`, if it is there.
-fn key_line(text: &str, table: &str, key: &str) -> Option<usize> {
+pub(crate) fn key_line(text: &str, table: &str, key: &str) -> Option<usize> {
     let mut in_table = false;
     for (i, line) in text.lines().enumerate() {
         let l = line.trim();

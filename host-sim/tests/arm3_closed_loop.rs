@@ -1,0 +1,212 @@
+//! The firmware's arm tick (`pam_firmware::arm::ArmTick`) in the loop on seed 001's arm:
+//! `host-sim demo --plant host-sim/plants/arm3-seed001.toml` meets every arm scenario's
+//! `[expect]` bounds (exit 0), a missed bound exits 1, a bad scenario exits 2; the recording
+//! of a run replays open loop to the same channels; the gravity feed-forward is what holds
+//! the arm up.
+
+mod common;
+use common::*;
+
+use host_sim::control::arm3_loop::{run_arm, ArmScenario};
+use host_sim::io::arm3::Arm3Recording;
+use host_sim::plant::arm3::{simulate_arm3, Arm3};
+use host_sim::sim::SolverOptions;
+use pam_firmware::arm::ArmConfig;
+
+fn scenario(name: &str) -> std::path::PathBuf {
+    root().join("scenarios/arm3").join(name)
+}
+
+#[test]
+fn arm_demo_meets_every_expectation_and_writes_its_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("arm");
+    let stdout = run_ok(&[&"demo", &"--plant", &arm3_plant(), &"--out-dir", &out]);
+    println!("{stdout}");
+    for (name, ticks) in [
+        ("arm_step", 9000),
+        ("arm_sine", 12000),
+        ("arm_pick_place", 20000),
+    ] {
+        let row = stdout
+            .lines()
+            .find(|l| l.split_whitespace().next() == Some(name))
+            .unwrap_or_else(|| panic!("no table row for {name}"));
+        assert_eq!(row.split_whitespace().nth(6), Some("met"), "{row}");
+        let rec = Arm3Recording::read(out.join(format!("{name}.csv"))).unwrap();
+        assert_eq!(rec.len(), ticks, "{name}");
+        let trace = std::fs::read_to_string(out.join(format!("{name}.firmware.csv"))).unwrap();
+        assert_eq!(
+            trace.lines().count(),
+            ticks + 1,
+            "{name}: header + one row per tick"
+        );
+        let png = std::fs::read(out.join(format!("{name}.png"))).unwrap();
+        assert!(
+            png.starts_with(b"\x89PNG") && png.len() > 10_000,
+            "{name}.png"
+        );
+    }
+}
+
+#[test]
+fn a_missed_expectation_exits_1_and_a_bad_scenario_exits_2() {
+    let dir = tempfile::tempdir().unwrap();
+    // The step scenario with a bound its run cannot meet (0.01 deg on joint 2).
+    let tight_text = std::fs::read_to_string(scenario("step.toml"))
+        .unwrap()
+        .replace(
+            "max_abs_error_rad = [0.01, 0.015, 0.01]",
+            "max_abs_error_rad = [0.01, 0.0002, 0.01]",
+        );
+    assert!(
+        tight_text.contains("0.0002"),
+        "the step scenario's bound line changed"
+    );
+    let tight = dir.path().join("tight.toml");
+    std::fs::write(&tight, tight_text).unwrap();
+    let out = dir.path().join("out");
+    let r = host_sim(&[
+        &"demo",
+        &"--plant",
+        &arm3_plant(),
+        &"--scenario",
+        &tight,
+        &"--out-dir",
+        &out,
+    ]);
+    exits(1, &r);
+    let stdout = text(&r.stdout);
+    assert!(
+        stdout.contains("joint 2: max |error|") && stdout.contains("FAILED"),
+        "{stdout}"
+    );
+
+    // An unknown key: exit 2, naming the file and the key, nothing written.
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(
+        &bad,
+        std::fs::read_to_string(scenario("sine.toml"))
+            .unwrap()
+            .replace("seed = 2", "seed = 2\nspeed = 3"),
+    )
+    .unwrap();
+    let out2 = dir.path().join("out2");
+    let err = exits(
+        2,
+        &host_sim(&[
+            &"demo",
+            &"--plant",
+            &arm3_plant(),
+            &"--scenario",
+            &bad,
+            &"--out-dir",
+            &out2,
+        ]),
+    );
+    assert!(err.contains("bad.toml") && err.contains("speed"), "{err}");
+    assert!(!out2.exists());
+
+    // A bad value names the line and the key.
+    let e = ArmScenario::from_toml_str(
+        &std::fs::read_to_string(scenario("pick_place.toml"))
+            .unwrap()
+            .replace("move_s = 2.0", "move_s = 5.0"),
+        "pp.toml",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("pp.toml") && e.contains("line") && e.contains("move_s"),
+        "{e}"
+    );
+}
+
+#[test]
+fn the_run_recording_replays_open_loop_to_the_same_channels() {
+    let arm = Arm3::load(arm3_plant()).unwrap();
+    let s = ArmScenario::load(scenario("sine.toml")).unwrap();
+    let mut short = s.clone();
+    short.scenario.duration_s = 3.0;
+    let run = run_arm(&arm, &short, ArmConfig::reference(1000.0)).unwrap();
+    let rec = run.to_recording(&arm, "arm", "sine");
+    let sim = simulate_arm3(
+        &arm,
+        &rec.inputs,
+        run.dt_s,
+        &SolverOptions::default(),
+        |_| {},
+    )
+    .unwrap();
+    // Up to the integration tolerance (the replay integrates runs of equal openings in one
+    // segment, the loop tick by tick).
+    let mut worst = 0.0f64;
+    for (k, x) in sim.states.iter().enumerate() {
+        for j in 0..3 {
+            worst = worst.max((x.angles_rad[j] - run.rows[k].state.angles_rad[j]).abs());
+        }
+    }
+    println!("largest angle difference {worst:.3e} rad");
+    assert!(worst < 1e-5, "{worst}");
+}
+
+#[test]
+fn without_the_gravity_feed_forward_the_arm_sags_out_of_range_and_all_joints_go_safe() {
+    let arm = Arm3::load(arm3_plant()).unwrap();
+    let mut s = ArmScenario::load(scenario("step.toml")).unwrap();
+    s.scenario.duration_s = 2.0;
+    let mut cfg = ArmConfig::reference(1000.0);
+    cfg.gravity = false;
+    let run = run_arm(&arm, &s, cfg).unwrap();
+    let (t, code, joint) = run.first_fault().expect("the unsupported joint 2 faults");
+    assert_eq!(joint, 2, "joint 2 carries the arm");
+    assert_eq!(
+        code,
+        pam_firmware::safety::FaultCode::AngleOutOfRange.code(),
+        "at {t} s"
+    );
+    // From the fault on, every joint's valves are closed (the Hold safe state).
+    for r in run.rows.iter().filter(|r| r.t_s > t + 0.002) {
+        for u in r.inputs {
+            assert_eq!(
+                [u.u_in1, u.u_ex1, u.u_in2, u.u_ex2],
+                [0.0; 4],
+                "t = {}",
+                r.t_s
+            );
+        }
+    }
+    // With it, the same run holds every joint within 1 deg after 1.5 s.
+    let ok = run_arm(&arm, &s, ArmConfig::reference(1000.0)).unwrap();
+    assert!(ok.first_fault().is_none());
+    for st in ok.tracking(1.5) {
+        assert!(st.max_abs_rad < 1f64.to_radians(), "{st:?}");
+    }
+}
+
+#[test]
+fn the_mcu_rigid_body_model_matches_the_plant_over_the_workspace() {
+    // The firmware's f32 feed-forward (config/arm3.toml through build.rs) against the
+    // plant's own f64 mass matrix and gravity (host-sim/plants/arm3-seed001.toml).
+    use rand::{Rng, SeedableRng};
+    let arm = Arm3::load(arm3_plant()).unwrap();
+    let links = pam_firmware::arm::constants::ARM3_LINKS;
+    let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+    let mut worst = 0.0f64;
+    for _ in 0..2000 {
+        let q: [f64; 3] = std::array::from_fn(|_| rng.gen_range(-1.2..1.2));
+        let a: [f64; 3] = std::array::from_fn(|_| rng.gen_range(-5.0..5.0));
+        let m = arm.links.mass_matrix(&q);
+        let g = arm.links.gravity_torques_nm(&q);
+        let (inertia, grav) =
+            links.inertia_and_gravity_nm(&q.map(|x| x as f32), &a.map(|x| x as f32));
+        for i in 0..3 {
+            let want = (0..3).map(|j| m[(i, j)] * a[j]).sum::<f64>() + g[i];
+            let got = (inertia[i] + grav[i]) as f64;
+            let scale = 1.0 + want.abs();
+            worst = worst.max((got - want).abs() / scale);
+        }
+    }
+    println!("largest relative difference {worst:.2e}");
+    assert!(worst < 1e-4, "{worst}");
+}
