@@ -23,6 +23,10 @@ mod board_profile_spec;
 #[path = "build/arm3.rs"]
 mod arm3;
 
+// The pressure loop's inverse thermodynamic feed-forward (config/pressure_ff.toml).
+#[path = "build/pressure_ff.rs"]
+mod pressure_ff;
+
 #[derive(serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 struct ForceFile {
@@ -176,6 +180,7 @@ fn lit(x: f64) -> String {
 
 fn main() {
     println!("cargo:rerun-if-changed=src/fixed_point/prescale.rs");
+    println!("cargo:rerun-if-changed=build/pressure_ff.rs");
     let force: ForceFile = read("config/force_law.toml");
     let torque: TorqueFile = read("config/torque_model.toml");
     let geometry: GeometryFile = read("config/joint_geometry.toml");
@@ -460,6 +465,7 @@ fn main() {
          pub const FIXED_TORQUE_MODEL: crate::fixed_point::FixedTorqueModel = crate::fixed_point::FixedTorqueModel::from_bits(\n\
          \x20   crate::fixed_point::prescale::{tb:?});\n"
     );
+    let src = src + &pressure_ff::constants();
     let out = PathBuf::from(env::var("OUT_DIR").unwrap()).join("constants.rs");
     fs::write(&out, src).expect("write constants.rs");
     let arm = arm3::constants(&arm3::Reference {

@@ -17,6 +17,7 @@
 //! - [`control`]: pure control laws of the cascade (position -> torque -> pressure).
 //! - [`feedforward`]: trajectory feed-forward of the cascade (set-point rate, inertia).
 //! - [`profile`]: angle set-point profiles played by the firmware (the board's scenario).
+//! - [`pressure_ff`]: inverse thermodynamic feed-forward of the pressure loop (seed 004 eq. 7).
 //! - [`pid`]: model-free PD / PID from the angle to the activation dp (comparison baseline).
 //! - [`safety`]: fault codes, safe valve state, latching state machine.
 //! - [`residual`]: model-based valve and supply supervision (pressure residual).
@@ -49,6 +50,7 @@ pub mod latch_bkpsram;
 pub mod lockstep;
 pub mod log;
 pub mod pid;
+pub mod pressure_ff;
 pub mod profile;
 pub mod residual;
 pub mod safety;

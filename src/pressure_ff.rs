@@ -1,0 +1,484 @@
+//! Inverse thermodynamic feed-forward of the pressure loop (seed 004, eq. 7).
+//!
+//! From the desired pressure trajectory of one muscle (the pressure set-point `P` and its rate
+//! `P'`), the chamber volume `V` and its rate `V'` (the firmware's volume polynomial at the
+//! measured angle and velocity), the mass flow that produces it is
+//!
+//! ```text
+//! m' = P' V / (k R T) + P V' / (R T)                                  (seed 004, eq. 7)
+//! ```
+//!
+//! (`P` absolute; `k = 1` isothermal, `k = 1.4` adiabatic; `R`, `T` and `k` from
+//! `config/pressure_ff.toml`). The valve that delivers it is inverted through its ISO 6358
+//! flow model (sonic conductance `C`, critical ratio `b`, from `config/plant_constants.toml`):
+//! the mass flow of a fully open valve from `p_up` to `p_down` is
+//! `rho_ANR C p_up phi(p_down / p_up)`, `phi(s) = 1` for `s <= b` (choked) and
+//! `sqrt(1 - ((s - b) / (1 - b))^2)` above (subsonic), with `rho_ANR = p_atm / (R 293.15 K)`.
+//! Inflow (`m' > 0`) runs from the supply to the measured muscle pressure, outflow from the
+//! muscle to the atmosphere; the duty is `m' / (rho_ANR C p_up phi)`, signed like the valve
+//! command (> 0 inflate, < 0 exhaust) and clamped to [-1, 1]: a PWM duty for on/off valves
+//! ([`crate::valves::OnOffValves`]), the opening for proportional ones.
+//!
+//! The P loop stays on top: the tick adds this duty to the pressure loop's command and clamps
+//! the sum to [-1, 1]. The duty is never NaN (non-finite inputs give 0), never inflates a
+//! muscle at or above the pressure ceiling, and is 0 when the flow cannot go the wanted way
+//! (muscle at or above the supply, or at or below the atmosphere). With `k = 1` and
+//! `T = 293.15 K` it is the exact inverse of the plant's isothermal pressure equation
+//! (`../shared/plant/PLANT.md`), so on the nominal plant the feedback only corrects errors.
+//!
+//! Cost: the volume polynomial and its slope (shared by both muscles up to the sign of the
+//! contraction offset), per muscle one division for an inflow (two for an outflow) and one
+//! square root when the flow is not choked. All reciprocals are precomputed.
+
+use crate::geometry::JointGeometry;
+use crate::residual::ValveModelParams;
+
+/// ANR reference temperature of the sonic conductance [K] (ISO 8778).
+pub const T_ANR_K: f32 = 293.15;
+
+/// Constants of the feed-forward (`config/pressure_ff.toml`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PressureFfParams {
+    /// On in the tick.
+    pub enabled: bool,
+    /// Polytropic index `k` of eq. 7 (1 = isothermal, 1.4 = adiabatic air), in [1, 1.67].
+    pub polytropic_index: f32,
+    /// Gas constant `R` [J/(kg K)].
+    pub gas_constant_j_per_kg_k: f32,
+    /// Gas temperature `T` [K].
+    pub temperature_k: f32,
+    /// Cut-off of the low-pass on the set-point's finite difference [Hz].
+    pub rate_cutoff_hz: f32,
+    /// Scale of the duty (1 = the model's), in [0, 2].
+    pub gain: f32,
+}
+
+impl PressureFfParams {
+    /// Off (the tick's pressure loop is P only).
+    pub const OFF: PressureFfParams = PressureFfParams {
+        enabled: false,
+        polytropic_index: 1.0,
+        gas_constant_j_per_kg_k: 287.05,
+        temperature_k: T_ANR_K,
+        rate_cutoff_hz: 40.0,
+        gain: 1.0,
+    };
+
+    /// Every constant finite and in its range (checked also when off).
+    pub fn is_valid(&self) -> bool {
+        let k = self.polytropic_index;
+        (1.0..=1.67).contains(&k)
+            && self.gas_constant_j_per_kg_k.is_finite()
+            && self.gas_constant_j_per_kg_k > 0.0
+            && self.temperature_k.is_finite()
+            && self.temperature_k > 0.0
+            && self.rate_cutoff_hz.is_finite()
+            && self.rate_cutoff_hz > 0.0
+            && (0.0..=2.0).contains(&self.gain)
+    }
+}
+
+/// The inverse model with its reciprocals precomputed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct InverseModel {
+    inv_k: f32,
+    inv_rt: f32,
+    /// `gain / (rho_ANR C)` [s Pa m^3 / (kg m^3)]: mass flow -> `p_up phi duty`.
+    gain_over_rho_c: f32,
+    p_atm_pa: f32,
+    ps_abs_pa: f32,
+    inv_ps_abs: f32,
+    critical_ratio: f32,
+    inv_one_minus_b: f32,
+    /// Ceiling of the muscle gauge pressure for an inflow [Pa].
+    p_hi_gauge_pa: f32,
+}
+
+/// Smallest `p_up phi` the duty divides by, as a fraction of `p_up`: below it (flow function
+/// near 0, pressures almost equal) the valve cannot deliver, the duty is its limit.
+const PHI_MIN: f32 = 1e-3;
+
+impl InverseModel {
+    /// From the feed-forward constants, the valve model and the pressure ceiling.
+    pub fn new(ff: &PressureFfParams, valve: &ValveModelParams, p_hi_gauge_pa: f32) -> Self {
+        let rho_anr = valve.p_atm_pa / (ff.gas_constant_j_per_kg_k * T_ANR_K);
+        let ps = valve.supply_gauge_pa + valve.p_atm_pa;
+        InverseModel {
+            inv_k: 1.0 / ff.polytropic_index,
+            inv_rt: 1.0 / (ff.gas_constant_j_per_kg_k * ff.temperature_k),
+            gain_over_rho_c: ff.gain / (rho_anr * valve.conductance_m3_per_s_pa),
+            p_atm_pa: valve.p_atm_pa,
+            ps_abs_pa: ps,
+            inv_ps_abs: 1.0 / ps,
+            critical_ratio: valve.critical_ratio,
+            inv_one_minus_b: 1.0 / (1.0 - valve.critical_ratio),
+            p_hi_gauge_pa,
+        }
+    }
+
+    /// Eq. 7: mass flow [kg/s] for absolute pressure `p_abs_pa`, its rate `p_rate_pa_s`, the
+    /// volume `v_m3` and its rate `v_rate_m3_s`.
+    #[inline(always)]
+    pub fn mass_flow_kg_s(
+        &self,
+        p_abs_pa: f32,
+        p_rate_pa_s: f32,
+        v_m3: f32,
+        v_rate_m3_s: f32,
+    ) -> f32 {
+        (p_rate_pa_s * v_m3 * self.inv_k + p_abs_pa * v_rate_m3_s) * self.inv_rt
+    }
+
+    /// ISO 6358 flow function `phi(s)` (1 choked, the ellipse above the critical ratio, 0 at
+    /// and above 1).
+    #[inline(always)]
+    fn phi(&self, s: f32) -> f32 {
+        if s <= self.critical_ratio {
+            1.0
+        } else if s < 1.0 {
+            let x = (s - self.critical_ratio) * self.inv_one_minus_b;
+            libm::sqrtf(1.0 - x * x)
+        } else {
+            0.0
+        }
+    }
+
+    /// The valve command in [-1, 1] (> 0 inflate, < 0 exhaust) that delivers `m_dot_kg_s` at
+    /// the measured gauge pressure `p_meas_gauge_pa`. Never NaN: non-finite inputs give 0.
+    #[inline(always)]
+    pub fn duty(&self, m_dot_kg_s: f32, p_meas_gauge_pa: f32) -> f32 {
+        let p = p_meas_gauge_pa + self.p_atm_pa;
+        let d = if m_dot_kg_s > 0.0 {
+            // Inflate: supply -> muscle; none at or above the ceiling or the supply.
+            if !(p_meas_gauge_pa < self.p_hi_gauge_pa) || !(p < self.ps_abs_pa) {
+                return 0.0;
+            }
+            let phi = self.phi(p * self.inv_ps_abs);
+            let q = self.ps_abs_pa * if phi > PHI_MIN { phi } else { PHI_MIN };
+            m_dot_kg_s * self.gain_over_rho_c / q
+        } else if m_dot_kg_s < 0.0 {
+            // Exhaust: muscle -> atmosphere; none at or below the atmosphere.
+            if !(p > self.p_atm_pa) {
+                return 0.0;
+            }
+            let phi = self.phi(self.p_atm_pa / p);
+            let q = p * if phi > PHI_MIN { phi } else { PHI_MIN };
+            m_dot_kg_s * self.gain_over_rho_c / q
+        } else {
+            // 0, or NaN.
+            return 0.0;
+        };
+        // In [-1, 1]; NaN (an infinite flow over an infinite pressure) gives 0.
+        if d >= 1.0 {
+            1.0
+        } else if d <= -1.0 {
+            -1.0
+        } else if d == d {
+            d
+        } else {
+            0.0
+        }
+    }
+}
+
+/// The feed-forward of both muscles with its state (the set-points' previous values and
+/// filtered rates).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PressureFeedforward {
+    model: InverseModel,
+    /// Volume polynomial `b0..b3` [m^3], and its floor `0.1 b0`.
+    poly: [f32; 4],
+    v_floor_m3: f32,
+    chi0: f32,
+    geometry_ratio: f32,
+    /// Low-pass weight per tick and nominal tick rate [Hz].
+    alpha: f32,
+    alpha_tick_hz: f32,
+    prev_set_pa: [f32; 2],
+    rate_pa_s: [f32; 2],
+    init: bool,
+}
+
+impl PressureFeedforward {
+    /// From the tick's constants: feed-forward, valve model (volume, conductance), joint
+    /// geometry, pressure ceiling, nominal tick rate.
+    pub fn new(
+        ff: &PressureFfParams,
+        valve: &ValveModelParams,
+        geometry: &JointGeometry,
+        p_hi_gauge_pa: f32,
+        tick_hz: f32,
+    ) -> Self {
+        let tau = 1.0 / (2.0 * core::f32::consts::PI * ff.rate_cutoff_hz);
+        let alpha = 1.0 / (1.0 + tau * tick_hz);
+        let alpha = if alpha.is_finite() && alpha > 0.0 && alpha <= 1.0 {
+            alpha
+        } else {
+            1.0
+        };
+        PressureFeedforward {
+            model: InverseModel::new(ff, valve, p_hi_gauge_pa),
+            poly: valve.volume_poly_m3,
+            v_floor_m3: 0.1 * valve.volume_poly_m3[0],
+            chi0: geometry.initial_contraction,
+            geometry_ratio: geometry.sprocket_radius_m / geometry.rest_length_m,
+            alpha,
+            alpha_tick_hz: alpha * tick_hz,
+            prev_set_pa: [0.0; 2],
+            rate_pa_s: [0.0; 2],
+            init: false,
+        }
+    }
+
+    /// Forgets the set-point history (the next step starts at rate 0).
+    pub fn reset(&mut self) {
+        self.init = false;
+        self.rate_pa_s = [0.0; 2];
+    }
+
+    /// The filtered set-point rates [Pa/s].
+    pub fn rates_pa_s(&self) -> [f32; 2] {
+        self.rate_pa_s
+    }
+
+    /// One tick: the feed-forward duties of both muscles for the pressure set-points `set_pa`
+    /// and measured pressures `meas_pa` (gauge), the angle and velocity. Each in [-1, 1],
+    /// never NaN; non-finite inputs give 0 and reset the history.
+    pub fn step(
+        &mut self,
+        set_pa: [f32; 2],
+        meas_pa: [f32; 2],
+        angle_rad: f32,
+        velocity_rad_s: f32,
+    ) -> [f32; 2] {
+        let sum = set_pa[0] + set_pa[1] + meas_pa[0] + meas_pa[1] + angle_rad + velocity_rad_s;
+        if !sum.is_finite() {
+            self.reset();
+            return [0.0; 2];
+        }
+        if !self.init {
+            self.prev_set_pa = set_pa;
+            self.init = true;
+        }
+        let [b0, b1, b2, b3] = self.poly;
+        let dchi = self.geometry_ratio * angle_rad;
+        let dchi_rate = self.geometry_ratio * velocity_rad_s;
+        let mut out = [0.0; 2];
+        // Muscle 1 contracts with the angle, muscle 2 the other way.
+        let signs = [1.0f32, -1.0];
+        for i in 0..2 {
+            let r = &mut self.rate_pa_s[i];
+            *r += self.alpha_tick_hz * (set_pa[i] - self.prev_set_pa[i]) - self.alpha * *r;
+            self.prev_set_pa[i] = set_pa[i];
+            let chi = self.chi0 + signs[i] * dchi;
+            let v = b0 + chi * (b1 + chi * (b2 + chi * b3));
+            let v = if v > self.v_floor_m3 {
+                v
+            } else {
+                self.v_floor_m3
+            };
+            let v_rate = (b1 + chi * (2.0 * b2 + chi * 3.0 * b3)) * signs[i] * dchi_rate;
+            let m = self
+                .model
+                .mass_flow_kg_s(set_pa[i] + self.model.p_atm_pa, *r, v, v_rate);
+            out[i] = self.model.duty(m, meas_pa[i]);
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn params() -> ValveModelParams {
+        ValveModelParams::REFERENCE
+    }
+
+    fn model() -> InverseModel {
+        InverseModel::new(&PressureFfParams::OFF, &params(), 600_000.0)
+    }
+
+    /// The plant's isothermal pressure rate (PLANT.md) for an inflow duty `u`, written from
+    /// the plant equations (ANR volume flow), not from the kernel.
+    fn plant_rate_in(u: f64, p_gauge: f64, v: f64) -> f64 {
+        let p = params();
+        let (pa, c, b) = (
+            p.p_atm_pa as f64,
+            p.conductance_m3_per_s_pa as f64,
+            p.critical_ratio as f64,
+        );
+        let ps = p.supply_gauge_pa as f64 + pa;
+        let pm = p_gauge + pa;
+        let s = pm / ps;
+        let phi = if s <= b {
+            1.0
+        } else {
+            (1.0 - ((s - b) / (1.0 - b)).powi(2)).sqrt()
+        };
+        pa * u * c * ps * phi / v
+    }
+
+    #[test]
+    fn isothermal_duty_inverts_the_plant_choked_and_unchoked() {
+        let m = model();
+        let v = 1.0e-4;
+        for &(p_gauge, rate) in &[
+            (100_000.0f32, 2.0e6f32),
+            (300_000.0, 1.0e6),
+            (550_000.0, 2.0e5),
+        ] {
+            // Choked below b (p/ps <= 0.433 <=> p_gauge <= ~202 kPa), subsonic above.
+            let mdot = m.mass_flow_kg_s(p_gauge + 101_325.0, rate, v, 0.0);
+            let u = m.duty(mdot, p_gauge);
+            assert!(u > 0.0 && u < 1.0, "{p_gauge} {rate} -> {u}");
+            let got = plant_rate_in(u as f64, p_gauge as f64, v as f64);
+            assert!(
+                (got / rate as f64 - 1.0).abs() < 1e-3,
+                "{p_gauge}: {got} vs {rate}"
+            );
+        }
+    }
+
+    #[test]
+    fn duty_is_continuous_across_the_critical_ratio() {
+        let m = model();
+        let ps = 701_325.0f32;
+        let p_crit = 0.433 * ps - 101_325.0;
+        let mdot = 1e-4;
+        let below = m.duty(mdot, p_crit - 1.0);
+        let above = m.duty(mdot, p_crit + 1.0);
+        assert!((below - above).abs() < 1e-4, "{below} {above}");
+    }
+
+    #[test]
+    fn zero_pressure_difference_and_edges_give_bounded_duty() {
+        let m = model();
+        // Muscle at the supply: no inflow possible.
+        assert_eq!(m.duty(1e-3, 600_000.0), 0.0);
+        // At the ceiling: no inflow.
+        let m2 = InverseModel::new(&PressureFfParams::OFF, &params(), 500_000.0);
+        assert_eq!(m2.duty(1e-3, 500_000.0), 0.0);
+        // Just below the supply: flow function ~0, duty at its limit, not infinite.
+        assert_eq!(m.duty(1e-3, 599_999.0), 1.0);
+        // Muscle at the atmosphere: no outflow.
+        assert_eq!(m.duty(-1e-3, 0.0), 0.0);
+        assert_eq!(m.duty(-1e-3, -10_000.0), 0.0);
+        // Just above the atmosphere: the exhaust limit.
+        assert_eq!(m.duty(-1e-3, 1.0), -1.0);
+        assert_eq!(m.duty(0.0, 300_000.0), 0.0);
+        assert_eq!(m.duty(f32::MAX, 100_000.0), 1.0);
+        assert_eq!(m.duty(-f32::MAX, 100_000.0), -1.0);
+    }
+
+    #[test]
+    fn nan_and_infinite_inputs_never_give_nan() {
+        let m = model();
+        let vals = [
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            0.0,
+            -0.0,
+            1e-30,
+            1e30,
+            -1e30,
+            3e5,
+        ];
+        for &a in &vals {
+            for &b in &vals {
+                let d = m.duty(a, b);
+                assert!(
+                    d.is_finite() && (-1.0..=1.0).contains(&d),
+                    "duty({a}, {b}) = {d}"
+                );
+            }
+        }
+        let mut ff = PressureFeedforward::new(
+            &PressureFfParams::OFF,
+            &params(),
+            &JointGeometry::REFERENCE,
+            600_000.0,
+            1000.0,
+        );
+        for &a in &vals {
+            let o = ff.step([a, 3e5], [3e5, a], a, 0.1);
+            assert!(
+                o.iter().all(|x| x.is_finite() && (-1.0..=1.0).contains(x)),
+                "{a}: {o:?}"
+            );
+        }
+        // After a non-finite input the history restarts: a steady set-point gives no duty.
+        ff.step([f32::NAN, 0.0], [0.0; 2], 0.0, 0.0);
+        let o = ff.step([3e5, 3e5], [3e5, 3e5], 0.0, 0.0);
+        assert_eq!(o, [0.0, 0.0]);
+    }
+
+    #[test]
+    fn rising_setpoint_inflates_falling_exhausts_and_the_rate_filter_converges() {
+        let mut ff = PressureFeedforward::new(
+            &PressureFfParams::OFF,
+            &params(),
+            &JointGeometry::REFERENCE,
+            600_000.0,
+            1000.0,
+        );
+        let mut o = [0.0; 2];
+        for k in 0..200 {
+            let s = k as f32 * 1000.0; // 1 MPa/s up on muscle 1, down on muscle 2
+            o = ff.step(
+                [200_000.0 + s, 500_000.0 - s],
+                [200_000.0 + s, 500_000.0 - s],
+                0.0,
+                0.0,
+            );
+        }
+        let r = ff.rates_pa_s();
+        assert!(
+            (r[0] - 1.0e6).abs() < 1e3 && (r[1] + 1.0e6).abs() < 1e3,
+            "{r:?}"
+        );
+        assert!(o[0] > 0.0 && o[1] < 0.0, "{o:?}");
+        // A muscle contracting (its volume rising: muscle 1 at a positive velocity) at a steady
+        // set-point needs inflow, the other one (lengthening) outflow.
+        let mut ff2 = ff;
+        ff2.reset();
+        let o = ff2.step([300_000.0; 2], [300_000.0; 2], 0.0, 1.0);
+        assert!(o[0] > 0.0 && o[1] < 0.0, "{o:?}");
+    }
+
+    #[test]
+    fn adiabatic_index_asks_for_less_flow() {
+        let iso = model();
+        let adi = InverseModel::new(
+            &PressureFfParams {
+                polytropic_index: 1.4,
+                ..PressureFfParams::OFF
+            },
+            &params(),
+            600_000.0,
+        );
+        let a = iso.mass_flow_kg_s(3e5, 1e6, 1e-4, 0.0);
+        let b = adi.mass_flow_kg_s(3e5, 1e6, 1e-4, 0.0);
+        assert!((a / b - 1.4).abs() < 1e-5);
+    }
+
+    #[test]
+    fn generated_constants_are_valid() {
+        assert!(crate::constants::PRESSURE_FF.is_valid());
+        assert!(PressureFfParams::OFF.is_valid());
+        assert!(!PressureFfParams {
+            polytropic_index: f32::NAN,
+            ..PressureFfParams::OFF
+        }
+        .is_valid());
+        assert!(!PressureFfParams {
+            gain: -1.0,
+            ..PressureFfParams::OFF
+        }
+        .is_valid());
+    }
+}
