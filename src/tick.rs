@@ -162,6 +162,9 @@ pub struct ControllerConfig {
     pub valve_model: ValveModelParams,
     /// Bumpless take-over at power-up and after every accepted reset.
     pub start: StartRamp,
+    /// Inverse thermodynamic feed-forward of the pressure loops ([`crate::pressure_ff`];
+    /// cascade only), added to the P loop's valve command when `enabled`.
+    pub pressure_ff: crate::pressure_ff::PressureFfParams,
 }
 
 /// How the tick takes over the joint at power-up and after every accepted
@@ -329,6 +332,7 @@ impl ControllerConfig {
             tracking_ticks: ticks(0.3),
             law: ControlLaw::Cascade,
             feedforward: crate::constants::FEEDFORWARD,
+            pressure_ff: crate::constants::PRESSURE_FF,
             // The residual window is 10 ms whatever the tick (10 ticks at 1 kHz): a shorter
             // window at a fast tick would turn the sensor noise into false valve faults.
             valve_model: ValveModelParams {
@@ -393,6 +397,7 @@ impl ControllerConfig {
             && lim_ok(&self.pressure_limits)
             && lim_ok(&self.angle_limits)
             && pos(self.p_over_gauge_pa)
+            && self.pressure_ff.is_valid()
             && self.p_over_gauge_pa <= P_MUSCLE_MAX_GAUGE_PA
             && nonneg(self.angle_setpoint_max_rad)
             && pos(self.tracking_error_pa)
@@ -456,6 +461,9 @@ pub struct ControlTick {
     setpoint_derivatives: SetpointDerivatives,
     pressure1: PressureController,
     pressure2: PressureController,
+    /// `cfg.pressure_ff.enabled` and the feed-forward's state.
+    pressure_ff_on: bool,
+    pressure_ff: crate::pressure_ff::PressureFeedforward,
     /// Anti-windup state: which way the valves were fully open last tick, as a joint-torque
     /// [`crate::control::Shortfall`] (see [`valve_shortfall`]).
     valve_shortfall: f32,
@@ -642,6 +650,14 @@ impl ControlTick {
             setpoint_derivatives: SetpointDerivatives::new(),
             pressure1: PressureController::new(cfg.pressure),
             pressure2: PressureController::new(cfg.pressure),
+            pressure_ff_on: cfg.pressure_ff.enabled,
+            pressure_ff: crate::pressure_ff::PressureFeedforward::new(
+                &cfg.pressure_ff,
+                &cfg.valve_model,
+                &cfg.geometry,
+                clamp_pressure_setpoint_pa(f32::INFINITY, cfg.torque.p_set_max_gauge_pa),
+                cfg.tick_hz,
+            ),
             valve_shortfall: 0.0,
             torque_sign: if cfg.torque_model.b_m2 * cfg.torque_model.sprocket_radius_m < 0.0 {
                 -1.0
@@ -703,6 +719,33 @@ impl ControlTick {
             .restore(record.cause, record.seen, record.vented);
     }
 
+    /// The P loops' commands plus the inverse thermodynamic feed-forward, each clamped to
+    /// [-1, 1] (both terms are finite and in [-1, 1]).
+    #[inline(never)]
+    fn add_pressure_ff(
+        &mut self,
+        u1: f32,
+        u2: f32,
+        set_pa: [f32; 2],
+        meas_pa: [f32; 2],
+        angle_rad: f32,
+        velocity_rad_s: f32,
+    ) -> (f32, f32) {
+        let [f1, f2] = self
+            .pressure_ff
+            .step(set_pa, meas_pa, angle_rad, velocity_rad_s);
+        let c = |u: f32| {
+            if u > 1.0 {
+                1.0
+            } else if u < -1.0 {
+                -1.0
+            } else {
+                u
+            }
+        };
+        (c(u1 + f1), c(u2 + f2))
+    }
+
     fn reset_laws(&mut self) {
         self.tracking1.reset();
         self.tracking2.reset();
@@ -714,6 +757,7 @@ impl ControlTick {
         self.setpoint_derivatives.reset();
         self.pressure1.reset();
         self.pressure2.reset();
+        self.pressure_ff.reset();
         self.valve_shortfall = 0.0;
         // The next armed tick starts a new start phase.
         self.sp_fast_max_rad = -1.0;
@@ -1129,6 +1173,18 @@ impl ControlTick {
             };
             let u1 = self.pressure1.step_finite(p1, ps.p1_gauge_pa, dt_s)?;
             let u2 = self.pressure2.step_finite(p2, ps.p2_gauge_pa, dt_s)?;
+            let (u1, u2) = if self.pressure_ff_on {
+                self.add_pressure_ff(
+                    u1,
+                    u2,
+                    [ps.p1_gauge_pa, ps.p2_gauge_pa],
+                    [p1, p2],
+                    angle,
+                    vel,
+                )
+            } else {
+                (u1, u2)
+            };
             self.valve_shortfall = valve_shortfall(u1, u2, self.torque_sign);
             Ok((
                 t_des,

@@ -116,6 +116,15 @@ enum Command {
         after_help = "Example (build the image first):\n  cargo build -p pam-firmware --bin pil --features pam-firmware/firmware --release --target thumbv7em-none-eabihf\n  host-sim pil --plant ../shared/plant/reference-1dof.toml --scenario scenarios/step.toml --out pil.csv --log pil.stream"
     )]
     Pil(host_sim::control::pil::PilArgs),
+    /// The pressure loop with and without the firmware's inverse thermodynamic feed-forward
+    /// (seed 004 eq. 7), firmware in the loop: position MSE and pressure tracking error on the
+    /// controller suite and held-out set-points, on the plant and on it with a thermodynamic
+    /// chamber, a leak and a supply drop. Exit status 1 when the feed-forward does not improve
+    /// the nominal plant's suite position MSE by >= 1.85x.
+    #[command(
+        after_help = "Example:\n  host-sim compare-control --plant ../shared/plant/reference-1dof.toml"
+    )]
+    CompareControl(host_sim::control::compare_ff::CompareControlArgs),
 }
 
 #[derive(Args)]
@@ -232,6 +241,16 @@ fn main() -> ExitCode {
         Command::Import(a) => run_report(host_sim::io::import::run_import(&a)),
         Command::Capture(a) => run_report(host_sim::io::capture::run_capture(&a)),
         Command::Calibrate(a) => run_report(host_sim::identify::calibrate::run_calibrate(&a)),
+        Command::CompareControl(a) => {
+            host_sim::control::compare_ff::run_compare_control(&a).map(|(report, ok)| {
+                print!("{report}");
+                if ok {
+                    ExitCode::SUCCESS
+                } else {
+                    ExitCode::from(1)
+                }
+            })
+        }
         Command::Pil(a) => host_sim::control::pil::run_pil(&a).map(|(report, same)| {
             print!("{report}");
             if same {

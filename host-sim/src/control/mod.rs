@@ -4,6 +4,7 @@
 pub mod arm3_loop;
 pub mod closed_loop;
 pub mod compare;
+pub mod compare_ff;
 pub mod pil;
 pub mod robustness;
 pub mod tune;

@@ -1,0 +1,238 @@
+//! `host-sim compare-control`: the pressure loop with and without the firmware's inverse
+//! thermodynamic feed-forward (`pam_firmware::pressure_ff`, seed 004 eq. 7), firmware in the
+//! loop, on the controller suite ([`super::compare::SUITE`], the set-points the gains were
+//! tuned on) and on held-out set-points (the jump suite [`super::compare::JUMP_SUITE`],
+//! never tuned on), on the given plant and on the same plant with a thermodynamic chamber,
+//! a leak and a supply drop added.
+//!
+//! Rows: the tuned cascade (`config/control_tuned.toml`) with the P-only pressure loops, and
+//! the same cascade + the analytical inverse model (isothermal, k = 1, and polytropic,
+//! k = 1.4). Columns: position MSE [rad^2] (angle error over every tick; infinite when a fault
+//! latched), its ratio to the P-only row, and the RMS pressure tracking error [kPa] (set-point
+//! minus measured gauge pressure, both muscles, every armed tick).
+//!
+//! Exit status 1 when, on the given (nominal) plant and the suite, the analytical feed-forward
+//! does not improve the position MSE by at least [`REQUIRED_RATIO`] over the same cascade
+//! without it (seed 004: 3.61 -> 1.95 with its hybrid model, 1.85x).
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use anyhow::Context;
+use pam_firmware::pressure_ff::PressureFfParams;
+use pam_firmware::tick::ControllerConfig;
+
+use super::closed_loop::{run_with, Scenario};
+use super::compare::{control_tuned_path, jump_suite_scenarios, suite_scenarios, ControlTuning};
+use crate::plant::config::PlantConfig;
+use crate::plant::Plant;
+
+/// Position-MSE improvement the analytical feed-forward must reach on the nominal plant.
+pub const REQUIRED_RATIO: f64 = 1.85;
+
+/// Arguments of `host-sim compare-control`.
+#[derive(clap::Args, Debug)]
+pub struct CompareControlArgs {
+    /// Plant parameter file (TOML): the nominal plant; the effect variants are added to it.
+    #[arg(long, value_name = "P.toml")]
+    pub plant: PathBuf,
+    /// Tuned gains [default: config/control_tuned.toml].
+    #[arg(long, value_name = "CONTROL_TUNED.toml")]
+    pub gains: Option<PathBuf>,
+    /// Scale of the feed-forward duty (0..=2) [default: config/pressure_ff.toml gain].
+    #[arg(long, value_name = "G")]
+    pub ff_gain: Option<f32>,
+    /// Cut-off of the set-point rate filter [Hz] (1..=500) [default: config/pressure_ff.toml].
+    #[arg(long, value_name = "HZ")]
+    pub ff_cutoff_hz: Option<f32>,
+    /// Only the nominal plant and the suite's first scenario of each set (the CI run).
+    #[arg(long)]
+    pub quick: bool,
+}
+
+/// The effect variants of the plant: name and the TOML table added to the plant file.
+pub const VARIANTS: [(&str, &str); 4] = [
+    ("nominal", ""),
+    (
+        "thermal chamber (hA 2 W/K, kappa 1.4)",
+        "[effects.thermal_chamber]\nheat_transfer_w_per_k = 2.0\nkappa = 1.4\n",
+    ),
+    (
+        "leakage (C 4e-10 m^3/(s Pa))",
+        "[effects.leakage]\nsonic_conductance_m3_per_s_pa = 4.0e-10\n",
+    ),
+    (
+        "supply drop (static, 2e7 Pa s/m^3)",
+        "[effects.supply_drop]\nmodel = \"static\"\nresistance_pa_s_per_m3 = 2.0e7\n",
+    ),
+];
+
+/// One controller's figures on one scenario set.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FfScore {
+    /// Mean over the scenarios of the position MSE [rad^2] (infinite when a fault latched).
+    pub position_mse_rad2: f64,
+    /// RMS pressure tracking error over both muscles and all armed ticks [Pa].
+    pub pressure_rms_pa: f64,
+}
+
+/// Runs `cfg` on `scenarios` and scores position and pressure tracking.
+pub fn score(
+    plant: &Plant,
+    scenarios: &[Scenario],
+    cfg: ControllerConfig,
+) -> anyhow::Result<FfScore> {
+    let mut mse_sum = 0.0;
+    let (mut p_sq, mut p_n) = (0.0f64, 0usize);
+    for s in scenarios {
+        let tick_hz = s.scenario.tick_hz as f32;
+        let reference = ControllerConfig::reference(tick_hz);
+        let cfg = ControllerConfig {
+            tick_hz,
+            dt_max_s: reference.dt_max_s,
+            pressure_limits: reference.pressure_limits,
+            angle_limits: reference.angle_limits,
+            tracking_ticks: reference.tracking_ticks,
+            ..cfg
+        };
+        let run = run_with(plant, s, cfg, &mut |_| {})?;
+        let st = run.tracking(0.0);
+        mse_sum += if run.first_latched_fault_tick.is_some() || st.n == 0 {
+            f64::INFINITY
+        } else {
+            st.mse_rad2
+        };
+        for r in run.rows.iter().filter(|r| r.out.armed) {
+            let e1 = r.out.p1_set_gauge_pa as f64 - r.measured.p1_kpa * 1e3;
+            let e2 = r.out.p2_set_gauge_pa as f64 - r.measured.p2_kpa * 1e3;
+            p_sq += e1 * e1 + e2 * e2;
+            p_n += 2;
+        }
+    }
+    Ok(FfScore {
+        position_mse_rad2: mse_sum / scenarios.len().max(1) as f64,
+        pressure_rms_pa: if p_n == 0 {
+            f64::INFINITY
+        } else {
+            (p_sq / p_n as f64).sqrt()
+        },
+    })
+}
+
+/// The controllers compared: P-only, + analytical isothermal, + analytical polytropic.
+pub fn controllers(base: ControllerConfig) -> Vec<(&'static str, ControllerConfig)> {
+    let with = |k: f32| ControllerConfig {
+        pressure_ff: PressureFfParams {
+            enabled: true,
+            polytropic_index: k,
+            ..base.pressure_ff
+        },
+        ..base
+    };
+    let off = ControllerConfig {
+        pressure_ff: PressureFfParams {
+            enabled: false,
+            ..base.pressure_ff
+        },
+        ..base
+    };
+    vec![
+        ("P only", off),
+        ("+ analytical inverse model, k = 1 (isothermal)", with(1.0)),
+        (
+            "+ analytical inverse model, k = 1.4 (polytropic)",
+            with(1.4),
+        ),
+    ]
+}
+
+/// `host-sim compare-control`: the report and whether the nominal-plant requirement holds.
+pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bool)> {
+    // Arguments first: a bad one touches nothing and costs no run.
+    let text = std::fs::read_to_string(&a.plant)
+        .with_context(|| format!("--plant {}: cannot read", a.plant.display()))?;
+    let gains = a.gains.clone().unwrap_or_else(control_tuned_path);
+    let tuning = ControlTuning::load(&gains)?;
+    let mut base = tuning.cascade.config(1000.0);
+    if let Some(g) = a.ff_gain {
+        anyhow::ensure!(
+            (0.0..=2.0).contains(&g),
+            "--ff-gain {g}: outside the allowed range 0..=2"
+        );
+        base.pressure_ff.gain = g;
+    }
+    if let Some(f) = a.ff_cutoff_hz {
+        anyhow::ensure!(
+            (1.0..=500.0).contains(&f),
+            "--ff-cutoff-hz {f}: outside the allowed range 1..=500"
+        );
+        base.pressure_ff.rate_cutoff_hz = f;
+    }
+    let mut suite = suite_scenarios()?;
+    let mut held_out = jump_suite_scenarios()?;
+    let variants: &[(&str, &str)] = if a.quick {
+        suite.truncate(1);
+        held_out.truncate(1);
+        &VARIANTS[..1]
+    } else {
+        &VARIANTS
+    };
+    let sets = [("suite", &suite), ("held-out", &held_out)];
+    let mut out = String::new();
+    writeln!(
+        out,
+        "plant {}, gains {} (tuned cascade), suite: {}; held-out: {}",
+        a.plant.display(),
+        gains.display(),
+        suite
+            .iter()
+            .map(|s| s.scenario.name.as_str())
+            .collect::<Vec<_>>()
+            .join(", "),
+        held_out
+            .iter()
+            .map(|s| s.scenario.name.as_str())
+            .collect::<Vec<_>>()
+            .join(", "),
+    )?;
+    writeln!(out, "hybrid model (learned volume): not in this build")?;
+    let mut nominal_ratio = f64::NAN;
+    for (vname, table) in variants {
+        let cfg = PlantConfig::from_toml_str(&format!("{text}\n{table}"), &a.plant)
+            .with_context(|| format!("--plant {} with the {vname} variant", a.plant.display()))?;
+        let plant = Plant::from_config(&cfg);
+        writeln!(out, "\n### {vname}\n")?;
+        writeln!(
+            out,
+            "| controller | set | position MSE [rad^2] | vs P only | pressure RMS error [kPa] |"
+        )?;
+        writeln!(out, "|---|---|---:|---:|---:|")?;
+        for (set_name, sc) in &sets {
+            let mut p_only = f64::NAN;
+            for (i, (cname, c)) in controllers(base).into_iter().enumerate() {
+                let s = score(&plant, sc, c)?;
+                if i == 0 {
+                    p_only = s.position_mse_rad2;
+                }
+                let ratio = p_only / s.position_mse_rad2;
+                if *vname == "nominal" && *set_name == "suite" && i == 1 {
+                    nominal_ratio = ratio;
+                }
+                writeln!(
+                    out,
+                    "| {cname} | {set_name} | {:.3e} | {:.2}x | {:.1} |",
+                    s.position_mse_rad2,
+                    ratio,
+                    s.pressure_rms_pa / 1e3
+                )?;
+            }
+        }
+    }
+    let ok = nominal_ratio >= REQUIRED_RATIO;
+    writeln!(
+        out,
+        "\nnominal plant, suite: P-only position MSE / with the analytical feed-forward (k = 1) = {nominal_ratio:.2} (required >= {REQUIRED_RATIO}): {}",
+        if ok { "met" } else { "NOT met" }
+    )?;
+    Ok((out, ok))
+}
