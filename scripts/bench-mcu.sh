@@ -21,6 +21,8 @@
 # instructions of a 1 kHz tick on a 48 MHz M0, <= 28 KiB flash = 4 KiB headroom in 32 KiB,
 # <= 8 KiB static RAM).
 set -euo pipefail
+# BENCH_EXTRA_FEATURES=pam-firmware/pressure-ff: the benchmark image with extra firmware features
+# (e.g. the pressure loop's feed-forward, with config/pressure_ff.toml enabled = true).
 cd "$(dirname "$0")/.."
 breakdown=0
 [ "${1:-}" = "--breakdown" ] && breakdown=1
@@ -44,7 +46,7 @@ sizes() { # sizes <elf> -> "flash ram"
 # the same binary with the benchmarks (feature mcu-bench) for the instruction counts.
 cargo build -q -p pam-firmware --bin qemu --features pam-firmware/firmware --release --target thumbv7em-none-eabihf
 read -r qemu_flash qemu_ram < <(sizes "${CARGO_TARGET_DIR:-target}/thumbv7em-none-eabihf/release/qemu")
-cargo build -q -p pam-firmware --bin qemu --features pam-firmware/mcu-bench --release --target thumbv7em-none-eabihf
+cargo build -q -p pam-firmware --bin qemu --features pam-firmware/mcu-bench${BENCH_EXTRA_FEATURES:+,$BENCH_EXTRA_FEATURES} --release --target thumbv7em-none-eabihf
 cargo flash-build -q
 cargo build -q -p pam-firmware --bin qemu_m0 --features pam-firmware/firmware --release --target thumbv6m-none-eabi
 # The QEMU image honours CARGO_TARGET_DIR; the board image is always in target/board (the

@@ -1173,7 +1173,9 @@ impl ControlTick {
             };
             let u1 = self.pressure1.step_finite(p1, ps.p1_gauge_pa, dt_s)?;
             let u2 = self.pressure2.step_finite(p2, ps.p2_gauge_pa, dt_s)?;
-            let (u1, u2) = if self.pressure_ff_on {
+            // Compiled in with the `pressure-ff` feature only (the default MCU tick has none of
+            // it), and run when the configuration enables it.
+            let (u1, u2) = if cfg!(feature = "pressure-ff") && self.pressure_ff_on {
                 self.add_pressure_ff(
                     u1,
                     u2,

@@ -1,0 +1,108 @@
+//! `host-sim compare-control`: the pressure loop with and without the firmware's inverse
+//! thermodynamic feed-forward. The CI run is `--quick` (nominal plant, first scenario of the
+//! suite and of the held-out set); the full run is documented in docs/control.md.
+
+mod common;
+
+use common::*;
+
+/// The verdict line's ratio.
+fn ratio(stdout: &str) -> f64 {
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("nominal plant, suite:"))
+        .unwrap_or_else(|| panic!("no verdict line in\n{stdout}"));
+    let after = line.rsplit(" = ").next().unwrap();
+    after.split_whitespace().next().unwrap().parse().unwrap()
+}
+
+/// The position MSE column of the row starting with `controller` on `set`.
+fn mse(stdout: &str, controller: &str, set: &str) -> f64 {
+    let row = stdout
+        .lines()
+        .find(|l| l.starts_with(&format!("| {controller}")) && l.contains(&format!("| {set} |")))
+        .unwrap_or_else(|| panic!("no row {controller} / {set} in\n{stdout}"));
+    row.split('|').nth(3).unwrap().trim().parse().unwrap()
+}
+
+#[test]
+fn compare_control_prints_the_tables_and_exits_by_its_verdict() {
+    let r = host_sim(&[&"compare-control", &"--plant", &plant(), &"--quick"]);
+    let out = text(&r.stdout);
+    let code = r.status.code();
+    assert!(
+        code == Some(0) || code == Some(1),
+        "status {code:?}\n{out}\n{}",
+        text(&r.stderr)
+    );
+    let q = ratio(&out);
+    assert_eq!(
+        code == Some(0),
+        q >= 1.85,
+        "verdict and status disagree: {q}\n{out}"
+    );
+    for set in ["suite", "held-out"] {
+        let p_only = mse(&out, "P only", set);
+        let am = mse(&out, "+ analytical inverse model, k = 1 (isothermal)", set);
+        let poly = mse(
+            &out,
+            "+ analytical inverse model, k = 1.4 (polytropic)",
+            set,
+        );
+        assert!(
+            p_only.is_finite() && am.is_finite() && poly.is_finite(),
+            "{out}"
+        );
+        // The feed-forward reaches the valves: the runs differ.
+        assert!(
+            p_only != am && am != poly,
+            "{set}: {p_only} {am} {poly}\n{out}"
+        );
+    }
+    // The verdict is the table's ratio.
+    let table = mse(&out, "P only", "suite")
+        / mse(
+            &out,
+            "+ analytical inverse model, k = 1 (isothermal)",
+            "suite",
+        );
+    assert!((table / q - 1.0).abs() < 0.01, "{table} vs {q}");
+}
+
+#[test]
+fn compare_control_refuses_bad_arguments_with_status_2() {
+    let e = run_exits(
+        2,
+        &[
+            &"compare-control",
+            &"--plant",
+            &plant(),
+            &"--quick",
+            &"--ff-gain",
+            &"5",
+        ],
+    );
+    assert!(e.contains("--ff-gain 5") && e.contains("0..=2"), "{e}");
+    let e = run_exits(
+        2,
+        &[
+            &"compare-control",
+            &"--plant",
+            &plant(),
+            &"--quick",
+            &"--ff-cutoff-hz",
+            &"0",
+        ],
+    );
+    assert!(e.contains("--ff-cutoff-hz"), "{e}");
+    let e = run_exits(
+        2,
+        &[
+            &"compare-control",
+            &"--plant",
+            &"/nonexistent/p.toml",
+            &"--quick",
+        ],
+    );
+    assert!(e.contains("/nonexistent/p.toml"), "{e}");
+}
