@@ -61,7 +61,7 @@ impl PressureFfParams {
         polytropic_index: 1.0,
         gas_constant_j_per_kg_k: 287.05,
         temperature_k: T_ANR_K,
-        rate_cutoff_hz: 40.0,
+        rate_cutoff_hz: 150.0,
         gain: 1.0,
     };
 

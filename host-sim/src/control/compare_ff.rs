@@ -74,6 +74,8 @@ pub struct FfScore {
     pub position_mse_rad2: f64,
     /// RMS pressure tracking error over both muscles and all armed ticks [Pa].
     pub pressure_rms_pa: f64,
+    /// The first latched fault of each scenario that latched one (scenario name, fault).
+    pub faults: Vec<(String, String)>,
 }
 
 /// Runs `cfg` on `scenarios` and scores position and pressure tracking.
@@ -84,6 +86,7 @@ pub fn score(
 ) -> anyhow::Result<FfScore> {
     let mut mse_sum = 0.0;
     let (mut p_sq, mut p_n) = (0.0f64, 0usize);
+    let mut faults = Vec::new();
     for s in scenarios {
         let tick_hz = s.scenario.tick_hz as f32;
         let reference = ControllerConfig::reference(tick_hz);
@@ -97,6 +100,12 @@ pub fn score(
         };
         let run = run_with(plant, s, cfg, &mut |_| {})?;
         let st = run.tracking(0.0);
+        if let Some(f) = run
+            .first_latched_fault_tick
+            .and_then(|k| run.rows[k].out.fault)
+        {
+            faults.push((run.name.clone(), format!("{f:?}")));
+        }
         mse_sum += if run.first_latched_fault_tick.is_some() || st.n == 0 {
             f64::INFINITY
         } else {
@@ -116,6 +125,7 @@ pub fn score(
         } else {
             (p_sq / p_n as f64).sqrt()
         },
+        faults,
     })
 }
 
@@ -204,9 +214,9 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
         writeln!(out, "\n### {vname}\n")?;
         writeln!(
             out,
-            "| controller | set | position MSE [rad^2] | vs P only | pressure RMS error [kPa] |"
+            "| controller | set | position MSE [rad^2] | vs P only | pressure RMS error [kPa] | latched faults |"
         )?;
-        writeln!(out, "|---|---|---:|---:|---:|")?;
+        writeln!(out, "|---|---|---:|---:|---:|---|")?;
         for (set_name, sc) in &sets {
             let mut p_only = f64::NAN;
             for (i, (cname, c)) in controllers(base).into_iter().enumerate() {
@@ -220,10 +230,23 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
                 }
                 writeln!(
                     out,
-                    "| {cname} | {set_name} | {:.3e} | {:.2}x | {:.1} |",
+                    "| {cname} | {set_name} | {:.3e} | {} | {:.1} | {} |",
                     s.position_mse_rad2,
-                    ratio,
-                    s.pressure_rms_pa / 1e3
+                    if ratio.is_finite() {
+                        format!("{ratio:.2}x")
+                    } else {
+                        "-".to_string()
+                    },
+                    s.pressure_rms_pa / 1e3,
+                    if s.faults.is_empty() {
+                        "none".to_string()
+                    } else {
+                        s.faults
+                            .iter()
+                            .map(|(n, f)| format!("{n}: {f}"))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    }
                 )?;
             }
         }
