@@ -482,3 +482,71 @@ mod tests {
         .is_valid());
     }
 }
+
+/// The feed-forward inside the control tick (compiled in with the `pressure-ff` feature:
+/// `cargo test -p pam-firmware --lib --features pressure-ff`).
+#[cfg(all(test, feature = "pressure-ff"))]
+mod tick_tests {
+    use super::*;
+    use crate::tick::{ControlTick, ControllerConfig, SensorFrame, Setpoint};
+
+    fn cfg(enabled: bool) -> ControllerConfig {
+        let mut c = ControllerConfig::reference(1000.0);
+        c.pressure_ff.enabled = enabled;
+        c
+    }
+
+    fn frame(p1: f32, p2: f32, a: f32) -> SensorFrame {
+        SensorFrame {
+            p1_gauge_pa: Some(p1),
+            p2_gauge_pa: Some(p2),
+            angle_rad: Some(a),
+        }
+    }
+
+    #[test]
+    fn the_feed_forward_reaches_the_valves_and_stays_in_range() {
+        let (mut off, mut on) = (ControlTick::new(cfg(false)), ControlTick::new(cfg(true)));
+        let mut differ = 0;
+        for k in 0..400 {
+            let sp = Setpoint {
+                angle_rad: 0.3 * libm::sinf(k as f32 * 0.02),
+            };
+            let f = frame(550e3 + 100.0 * k as f32, 550e3 - 100.0 * k as f32, 0.0);
+            let a = off.step(&f, &sp, 1e-3);
+            let b = on.step(&f, &sp, 1e-3);
+            for u in [b.valves.muscle1, b.valves.muscle2] {
+                assert!(u.is_finite() && (-1.0..=1.0).contains(&u), "{k}: {u}");
+            }
+            if a.valves != b.valves {
+                differ += 1;
+            }
+        }
+        // The frames do not follow the commands (the supervision faults both ticks after a
+        // while, then both hold the safe state); before that the feed-forward shows.
+        assert!(differ > 0, "the feed-forward never changed a valve command");
+    }
+
+    #[test]
+    fn a_bad_sensor_still_gives_the_safe_state_and_a_bad_constant_is_a_config_fault() {
+        let mut t = ControlTick::new(cfg(true));
+        let sp = Setpoint { angle_rad: 0.2 };
+        t.step(&frame(550e3, 550e3, 0.0), &sp, 1e-3);
+        for bad in [f32::NAN, f32::INFINITY, -1e9] {
+            let o = t.step(&frame(bad, 550e3, 0.0), &sp, 1e-3);
+            assert!(o.valves.muscle1.is_finite() && o.valves.muscle2.is_finite());
+        }
+        let mut c = cfg(true);
+        c.pressure_ff.polytropic_index = f32::NAN;
+        assert!(!c.is_valid());
+        let mut t = ControlTick::new(c);
+        let o = t.step(&frame(550e3, 550e3, 0.0), &sp, 1e-3);
+        assert!(!o.armed);
+        assert_eq!(
+            o.valves,
+            ControlTick::new(cfg(false))
+                .step(&frame(f32::NAN, 0.0, 0.0), &sp, 1e-3)
+                .valves
+        );
+    }
+}
