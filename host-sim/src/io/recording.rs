@@ -701,13 +701,15 @@ impl<'t> Table<'t> {
             None
         };
         let Some(mid) = split else {
-            return self.read_chunk(data, self.data_line, &f);
+            return self.read_chunk(data, self.data_line, 0, &f);
         };
         let second_line = self.data_line + memchr::memchr_iter(b'\n', &data[..mid]).count() as u64;
+        let rows_after_mid = memchr::memchr_iter(b'\n', &data[mid..]).count() + 1;
         let (first, second) = std::thread::scope(|s| {
-            let second = s.spawn(|| self.read_chunk(&data[mid..], second_line, &f));
+            let second = s.spawn(|| self.read_chunk(&data[mid..], second_line, 0, &f));
             (
-                self.read_chunk(&data[..mid], self.data_line, &f),
+                // Room for the second chunk's rows too: appending them copies nothing.
+                self.read_chunk(&data[..mid], self.data_line, rows_after_mid, &f),
                 second.join(),
             )
         });
@@ -722,13 +724,15 @@ impl<'t> Table<'t> {
     }
 
     /// The rows of `bytes` (whose first byte is on line `first_line`) through `f`.
+    /// `extra_rows`: room reserved for rows appended later.
     fn read_chunk<T, S: RowSink<T>>(
         &self,
         bytes: &[u8],
         first_line: u64,
+        extra_rows: usize,
         f: &impl Fn(&Row) -> Result<T, RecordingError>,
     ) -> Result<(S, Vec<u64>), RecordingError> {
-        let rows_guess = memchr::memchr_iter(b'\n', bytes).count() + 1;
+        let rows_guess = memchr::memchr_iter(b'\n', bytes).count() + 1 + extra_rows;
         let mut values = S::default();
         values.reserve(rows_guess);
         let mut lines = Vec::with_capacity(rows_guess);
