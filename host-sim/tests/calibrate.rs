@@ -170,3 +170,107 @@ fn keys(path: &Path) -> Vec<String> {
     k.sort();
     k
 }
+
+#[test]
+fn calibrate_identifies_two_mis_set_plant_keys_before_the_firmware_constants() {
+    // The truth: the reference plant. The user's plant file: inertia 1.5x, valve conductance
+    // 0.7x. A valve-driven recording of the true plant (the firmware in the loop on random
+    // set-points) identifies both; the torque sweep gives the torque model as before.
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = dir.path().join("config");
+    std::fs::create_dir(&cfg).unwrap();
+    let sweep = dir.path().join("sweep.csv");
+    let valves = dir.path().join("valves.csv");
+    let r = host_sim(&[&"sweep", &"torque", &"--plant", &plant(), &"--out", &sweep]);
+    assert!(r.status.success(), "{}", text(&r.stderr));
+    let scenario = root().join("scenarios/random.toml");
+    let r = host_sim(&[
+        &"simulate",
+        &"--plant",
+        &plant(),
+        &"--scenario",
+        &scenario,
+        &"--out",
+        &valves,
+    ]);
+    assert!(r.status.success(), "{}", text(&r.stderr));
+    let truth = std::fs::read_to_string(plant()).unwrap();
+    let mis = truth
+        .replace("inertia_kgm2 = 0.014 ", "inertia_kgm2 = 0.021 ")
+        .replace(
+            "sonic_conductance_m3_per_s_pa = 8.0e-9 ",
+            "sonic_conductance_m3_per_s_pa = 5.6e-9 ",
+        );
+    assert_ne!(mis, truth, "the reference plant file's key lines changed");
+    let mis_path = dir.path().join("mis.toml");
+    std::fs::write(&mis_path, &mis).unwrap();
+    let r = host_sim(&[
+        &"calibrate",
+        &"--recording",
+        &sweep,
+        &"--plant",
+        &mis_path,
+        &"--out-dir",
+        &cfg,
+        &"--identify-plant",
+        &"joint.inertia_kgm2,valve.sonic_conductance_m3_per_s_pa",
+        &"--plant-recording",
+        &valves,
+    ]);
+    let out = text(&r.stdout);
+    assert!(r.status.success(), "{out}\n{}", text(&r.stderr));
+    println!("{out}");
+    assert!(
+        out.contains("joint.inertia_kgm2: 2.1e-2 -> 1.3999"),
+        "{out}"
+    );
+    assert!(
+        out.contains("valve.sonic_conductance_m3_per_s_pa: 5.6e-9 -> 8.0000"),
+        "{out}"
+    );
+    // The identified plant file is written beside the config and feeds the constants.
+    let identified: toml::Table = std::fs::read_to_string(cfg.join("plant_identified.toml"))
+        .unwrap()
+        .parse()
+        .unwrap();
+    let inertia = identified["joint"]["inertia_kgm2"].as_float().unwrap();
+    assert!((inertia / 0.014 - 1.0).abs() < 1e-3, "{inertia}");
+    let constants: toml::Table = std::fs::read_to_string(cfg.join("plant_constants.toml"))
+        .unwrap()
+        .parse()
+        .unwrap();
+    let c = constants["valve"]["sonic_conductance_m3_per_s_pa"]
+        .as_float()
+        .unwrap();
+    assert!((c / 8.0e-9 - 1.0).abs() < 1e-3, "{c}");
+    // No temporary plant file is left behind.
+    let names: Vec<String> = std::fs::read_dir(&cfg)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(names.iter().all(|n| !n.starts_with('.')), "{names:?}");
+
+    // A key the plant file does not have: refused, nothing written.
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let r = host_sim(&[
+        &"calibrate",
+        &"--recording",
+        &sweep,
+        &"--plant",
+        &mis_path,
+        &"--out-dir",
+        &empty,
+        &"--identify-plant",
+        &"joint.no_such_key",
+        &"--plant-recording",
+        &valves,
+    ]);
+    assert_eq!(r.status.code(), Some(2), "{}", text(&r.stderr));
+    assert!(
+        text(&r.stderr).contains("joint.no_such_key"),
+        "{}",
+        text(&r.stderr)
+    );
+    assert_eq!(std::fs::read_dir(&empty).unwrap().count(), 0);
+}

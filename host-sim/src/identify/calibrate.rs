@@ -52,6 +52,15 @@ pub struct CalibrateArgs {
     /// Worker threads of the tuner (with --tune).
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
+    /// First identify these plant-file keys (comma separated, `key` or `key=lo:hi`, as
+    /// `host-sim identify plant --params`) by replaying a valve-driven recording; the
+    /// identified plant file (plant_identified.toml in --out-dir) then feeds every later stage.
+    #[arg(long, value_name = "KEYS", value_delimiter = ',')]
+    pub identify_plant: Vec<String>,
+    /// The valve-driven recording of --identify-plant (columns t_s, u_in1, u_ex1, u_in2,
+    /// u_ex2 and the measured channels) [default: --recording].
+    #[arg(long, value_name = "R.csv", requires = "identify_plant")]
+    pub plant_recording: Option<PathBuf>,
 }
 
 fn sd(v: &[f64]) -> f64 {
@@ -243,7 +252,46 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
         bail!("--out-dir {}: not a directory", a.out_dir.display());
     }
     let file = a.recording.display().to_string();
-    let plant = Plant::load(&a.plant)?;
+    let dest = |name: &str| a.out_dir.join(name);
+    // Stage 0 (optional): identify plant-file keys; the identified file is staged in a
+    // temporary file beside the config for the later stages, and written at the end.
+    let mut out = String::new();
+    let identified = if a.identify_plant.is_empty() {
+        None
+    } else {
+        let valve_rec = a.plant_recording.as_ref().unwrap_or(&a.recording);
+        let (fit, body) = super::plant::identify_plant_text(
+            valve_rec,
+            &a.plant,
+            &a.identify_plant,
+            &super::plant::PlantFitOptions::default(),
+        )
+        .map_err(|e| {
+            anyhow::anyhow!("refusing to write firmware constants (nothing written): {e:#}")
+        })?;
+        let (hb, ha) = fit.holdout_mean_pct();
+        out += &format!(
+            "plant identified from {} (held-out fit {hb:.3} % -> {ha:.3} %):\n",
+            valve_rec.display()
+        );
+        for (k, old, new) in &fit.params {
+            out += &format!("  {k}: {old:e} -> {new:e}\n");
+        }
+        let tmp = tempfile::Builder::new()
+            .prefix(".plant_identified.")
+            .suffix(".toml")
+            .tempfile_in(&a.out_dir)
+            .with_context(|| format!("--out-dir {}", a.out_dir.display()))?;
+        std::fs::write(tmp.path(), &body).with_context(|| format!("{}", tmp.path().display()))?;
+        Some((tmp, body))
+    };
+    let final_plant = dest("plant_identified.toml");
+    // The plant file of the later stages, and the name their provenance headers give it.
+    let (plant_path, plant_name) = match &identified {
+        Some((tmp, _)) => (tmp.path().to_owned(), final_plant.clone()),
+        None => (a.plant.clone(), a.plant.clone()),
+    };
+    let plant = Plant::load(&plant_path)?;
     let rec = Recording::read(&a.recording)?;
     let why = degenerate_reasons(&rec, &plant, &file);
     if !why.is_empty() {
@@ -252,11 +300,10 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
             why.join("\n  ")
         );
     }
-    let dest = |name: &str| a.out_dir.join(name);
     // Stage 1: the torque model.
-    let torque = torque_model_file(&IdentifyTorqueArgs {
+    let mut torque = torque_model_file(&IdentifyTorqueArgs {
         recording: a.recording.clone(),
-        plant: a.plant.clone(),
+        plant: plant_path.clone(),
         out: dest("torque_model.toml"),
         savgol_half_window: None,
         dp_max_kpa: None,
@@ -272,17 +319,21 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
             torque.fit_pct
         );
     }
-    let mut out = format!(
+    torque.toml = torque.toml.replace(
+        &plant_path.display().to_string(),
+        &plant_name.display().to_string(),
+    );
+    out += &format!(
         "torque model: fit {:.3} % (>= {MIN_TORQUE_FIT_PCT} %)\n",
         torque.fit_pct
     );
     // Stage 2: the plant-derived constants.
     let files = [
         ("torque_model.toml", torque.toml),
-        ("joint_geometry.toml", geometry_toml(&plant, &a.plant)),
+        ("joint_geometry.toml", geometry_toml(&plant, &plant_name)),
         (
             "plant_constants.toml",
-            plant_constants_toml(&plant, &a.plant, &dest("plant_constants.toml")),
+            plant_constants_toml(&plant, &plant_name, &dest("plant_constants.toml")),
         ),
     ];
     for (name, text) in &files {
@@ -293,7 +344,7 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
         let control = dest("control_tuned.toml");
         let before = std::fs::read_to_string(&control).unwrap_or_default();
         let r = crate::control::tune::run_tune(&crate::control::tune::TuneArgs {
-            plant: a.plant.clone(),
+            plant: plant_path.clone(),
             out: control.clone(),
             threads: a.threads,
             warm_start: false,
@@ -318,9 +369,12 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
     for (name, text) in &files {
         write_atomic(&dest(name), text.as_bytes())?;
     }
+    if let Some((_, body)) = &identified {
+        write_atomic(&final_plant, body.as_bytes())?;
+    }
     out += &format!(
         "wrote {} files in {}; rebuild the firmware (`cargo flash-build` / `cargo flash`) to use them\n",
-        files.len() + usize::from(a.tune),
+        files.len() + usize::from(a.tune) + usize::from(identified.is_some()),
         a.out_dir.display()
     );
     Ok(out)
