@@ -163,7 +163,9 @@ pub struct ControllerConfig {
     /// Bumpless take-over at power-up and after every accepted reset.
     pub start: StartRamp,
     /// Inverse thermodynamic feed-forward of the pressure loops ([`crate::pressure_ff`];
-    /// cascade only), added to the P loop's valve command when `enabled`.
+    /// cascade only), added to the P loop's valve command when `enabled`. Only with the
+    /// `pressure-ff` feature: the default MCU tick carries none of it.
+    #[cfg(feature = "pressure-ff")]
     pub pressure_ff: crate::pressure_ff::PressureFfParams,
 }
 
@@ -227,6 +229,14 @@ impl StartRamp {
 }
 
 impl ControllerConfig {
+    /// The feed-forward's constants are valid (always without the `pressure-ff` feature).
+    fn pressure_ff_valid(&self) -> bool {
+        #[cfg(feature = "pressure-ff")]
+        return self.pressure_ff.is_valid();
+        #[cfg(not(feature = "pressure-ff"))]
+        return true;
+    }
+
     /// Configuration tuned for the reference joint (`shared/plant/reference-1dof.toml`:
     /// J = 0.014 kg m^2, r = 25 mm, supply 600 kPa gauge, on/off valves C = 8e-9) with the
     /// cascade running at `tick_hz` (tuned at 1 kHz).
@@ -332,6 +342,7 @@ impl ControllerConfig {
             tracking_ticks: ticks(0.3),
             law: ControlLaw::Cascade,
             feedforward: crate::constants::FEEDFORWARD,
+            #[cfg(feature = "pressure-ff")]
             pressure_ff: crate::constants::PRESSURE_FF,
             // The residual window is 10 ms whatever the tick (10 ticks at 1 kHz): a shorter
             // window at a fast tick would turn the sensor noise into false valve faults.
@@ -397,7 +408,7 @@ impl ControllerConfig {
             && lim_ok(&self.pressure_limits)
             && lim_ok(&self.angle_limits)
             && pos(self.p_over_gauge_pa)
-            && self.pressure_ff.is_valid()
+            && self.pressure_ff_valid()
             && self.p_over_gauge_pa <= P_MUSCLE_MAX_GAUGE_PA
             && nonneg(self.angle_setpoint_max_rad)
             && pos(self.tracking_error_pa)
@@ -462,7 +473,9 @@ pub struct ControlTick {
     pressure1: PressureController,
     pressure2: PressureController,
     /// `cfg.pressure_ff.enabled` and the feed-forward's state.
+    #[cfg(feature = "pressure-ff")]
     pressure_ff_on: bool,
+    #[cfg(feature = "pressure-ff")]
     pressure_ff: crate::pressure_ff::PressureFeedforward,
     /// Anti-windup state: which way the valves were fully open last tick, as a joint-torque
     /// [`crate::control::Shortfall`] (see [`valve_shortfall`]).
@@ -650,7 +663,9 @@ impl ControlTick {
             setpoint_derivatives: SetpointDerivatives::new(),
             pressure1: PressureController::new(cfg.pressure),
             pressure2: PressureController::new(cfg.pressure),
+            #[cfg(feature = "pressure-ff")]
             pressure_ff_on: cfg.pressure_ff.enabled,
+            #[cfg(feature = "pressure-ff")]
             pressure_ff: crate::pressure_ff::PressureFeedforward::new(
                 &cfg.pressure_ff,
                 &cfg.valve_model,
@@ -721,6 +736,7 @@ impl ControlTick {
 
     /// The P loops' commands plus the inverse thermodynamic feed-forward, each clamped to
     /// [-1, 1] (both terms are finite and in [-1, 1]).
+    #[cfg(feature = "pressure-ff")]
     #[inline(never)]
     fn add_pressure_ff(
         &mut self,
@@ -757,6 +773,7 @@ impl ControlTick {
         self.setpoint_derivatives.reset();
         self.pressure1.reset();
         self.pressure2.reset();
+        #[cfg(feature = "pressure-ff")]
         self.pressure_ff.reset();
         self.valve_shortfall = 0.0;
         // The next armed tick starts a new start phase.
@@ -1175,7 +1192,8 @@ impl ControlTick {
             let u2 = self.pressure2.step_finite(p2, ps.p2_gauge_pa, dt_s)?;
             // Compiled in with the `pressure-ff` feature only (the default MCU tick has none of
             // it), and run when the configuration enables it.
-            let (u1, u2) = if cfg!(feature = "pressure-ff") && self.pressure_ff_on {
+            #[cfg(feature = "pressure-ff")]
+            let (u1, u2) = if self.pressure_ff_on {
                 self.add_pressure_ff(
                     u1,
                     u2,
