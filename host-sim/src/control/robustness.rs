@@ -4,7 +4,7 @@
 //! joint friction, muscle (braid) hysteresis, an 8 ms valve dead time, a supply that sags with
 //! the flow, and the joint carrying 11 x its inertia (seed 000's load).
 
-use pam_firmware::tick::ControlLaw;
+use pam_firmware::tick::{ControlLaw, ControllerConfig};
 
 use crate::control::closed_loop::{ClosedLoopError, Scenario};
 use crate::control::compare::{config_for, score_suite_with, ControlTuning, SuiteScore};
@@ -77,12 +77,37 @@ pub const CONDITIONS: [(&str, &str, f64); 6] = [
 
 /// The plant of one condition.
 pub fn condition_plant(nominal_toml: &str, effects: &str, inertia_factor: f64) -> Plant {
+    try_condition_plant(nominal_toml, effects, inertia_factor, "robustness.toml")
+        .expect("the conditions' TOML is valid on a valid nominal plant")
+}
+
+/// The plant of one condition, or the plant file's error (e.g. a plant file that already has
+/// the effect); `file` names the plant file in the error.
+pub fn try_condition_plant(
+    nominal_toml: &str,
+    effects: &str,
+    inertia_factor: f64,
+    file: &str,
+) -> Result<Plant, crate::plant::config::ConfigError> {
     let text = format!("{nominal_toml}\n{effects}");
-    let cfg = PlantConfig::from_toml_str(&text, "robustness.toml")
-        .expect("the conditions' TOML is valid on a valid nominal plant");
+    let cfg = PlantConfig::from_toml_str(&text, file)?;
     let mut p = Plant::from_config(&cfg);
     p.joint.inertia_kgm2 *= inertia_factor;
-    p
+    Ok(p)
+}
+
+/// The robust tuner's plants (`host-sim tune --robust`): the cost is the worst over
+/// [`ROBUST_COST_CONDITIONS`] (indices into [`CONDITIONS`]: nominal, 8 ms valve dead time) and
+/// the suite must stay stable ([`Cell`]'s criterion) under [`ROBUST_STABLE_CONDITIONS`]
+/// (11 x inertia load).
+pub const ROBUST_COST_CONDITIONS: [usize; 2] = [0, 3];
+/// See [`ROBUST_COST_CONDITIONS`].
+pub const ROBUST_STABLE_CONDITIONS: [usize; 1] = [5];
+
+/// True when `cfg` runs the suite on `plant` with no fault and every |angle error| below
+/// 0.5 rad (the table's "stable").
+pub fn stable_on(plant: &Plant, scenarios: &[Scenario], cfg: ControllerConfig) -> bool {
+    Cell::of(&score_suite_with(plant, scenarios, cfg)).stable
 }
 
 /// One cell of the table.

@@ -301,6 +301,7 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
             transition_s: None,
             cascade_start: Vec::new(),
             no_step_constraints: false,
+            robust: false,
         })
         .context("tuning the gains")?;
         out += &format!(
