@@ -60,14 +60,15 @@ use crate::control::compare::{
     DpPidToml, GAIN_MARGIN, STEP_REQUIREMENTS,
 };
 use crate::control::robustness::{
-    stable_on, try_condition_plant, CONDITIONS, ROBUST_COST_CONDITIONS, ROBUST_STABLE_CONDITIONS,
+    condition_config, stable_on, try_condition_plant, CONDITIONS, ROBUST_COST_CONDITIONS, ROBUST_STABLE_CONDITIONS,
 };
 use crate::optimize::{nelder_mead, nelder_mead_restarted, pattern_search};
 use crate::Plant;
 
 /// What `--robust` does, for the log and the gains file's header.
 const ROBUST_NOTE: &str = "Robust cost (--robust), every law: the worst of this cost on the plant and on the\n\
-plant with an 8 ms valve dead time; infinite unless the suite stays stable (no fault,\n\
+plant with an 8 ms valve dead time (valve supervision off: its residual window reads the\n\
+delay as a stuck exhaust whatever the law); infinite unless the suite stays stable (no fault,\n\
 |error| < 0.5 rad) on the plant with 11 x its inertia.";
 
 /// `host-sim tune`.
@@ -99,7 +100,7 @@ pub struct TuneArgs {
     #[arg(long)]
     pub no_step_constraints: bool,
     /// Robustness term in every law's cost: the worse of the cost on the plant and on the
-    /// plant with an 8 ms valve dead time, and infinite unless the suite stays stable (no
+    /// plant with an 8 ms valve dead time (valve supervision off), and infinite unless the suite stays stable (no
     /// fault, |error| < 0.5 rad) on the plant with 11 x its inertia.
     #[arg(long)]
     pub robust: bool,
@@ -145,10 +146,11 @@ struct Ctx {
     log: Mutex<Vec<String>>,
     /// The cascade must meet the firmware's step tests ([`STEP_REQUIREMENTS`]).
     cascade_step_constraints: bool,
-    /// `--robust`: plants whose tuning cost is also taken (the cost is the worst).
-    robust_cost: Vec<Plant>,
+    /// `--robust`: plants (and their condition names) whose tuning cost is also taken (the
+    /// cost is the worst).
+    robust_cost: Vec<(Plant, &'static str)>,
     /// `--robust`: plants on which the suite must stay stable (else the cost is infinite).
-    robust_stable: Vec<Plant>,
+    robust_stable: Vec<(Plant, &'static str)>,
 }
 
 impl Ctx {
@@ -169,14 +171,14 @@ impl Ctx {
                 break;
             }
             self.runs.fetch_add(2, Ordering::Relaxed);
-            cost = cost.max(tuning_cost(p, &self.scenarios, cfg).0);
+            cost = cost.max(tuning_cost(&p.0, &self.scenarios, condition_config(p.1, cfg)).0);
         }
         for p in &self.robust_stable {
             if !cost.is_finite() {
                 break;
             }
             self.runs.fetch_add(1, Ordering::Relaxed);
-            if !stable_on(p, &self.scenarios, cfg) {
+            if !stable_on(&p.0, &self.scenarios, condition_config(p.1, cfg)) {
                 cost = f64::INFINITY;
             }
         }
@@ -610,9 +612,11 @@ pub fn run_tune(a: &TuneArgs) -> Result<String> {
         ] {
             for &i in which.iter().filter(|&&i| i != 0) {
                 let (name, effects, inertia) = CONDITIONS[i];
-                out.push(try_condition_plant(&text, effects, inertia, &file).with_context(
-                    || format!("--robust: {file} with {name}"),
-                )?);
+                out.push((
+                    try_condition_plant(&text, effects, inertia, &file)
+                        .with_context(|| format!("--robust: {file} with {name}"))?,
+                    name,
+                ));
             }
         }
     }
