@@ -87,11 +87,12 @@ pub const CONDITIONS: [(&str, &str, f64); 7] = [
 /// the control.
 pub const SUPERVISION_OFF_DEAD_TIME: &str = "valve dead time 8 ms, valve supervision off";
 
-/// `cfg` with the valve / supply residual never judging (infinite thresholds): for measuring
+/// `cfg` with the valve / supply residual never judging (thresholds 1e30: the configuration
+/// check refuses infinite ones): for measuring
 /// a control law on a plant whose valves the supervision's model does not describe.
 pub fn without_valve_supervision(mut cfg: ControllerConfig) -> ControllerConfig {
-    cfg.valve_model.residual_abs_pa_s = f32::INFINITY;
-    cfg.valve_model.integral_min_pa = f32::INFINITY;
+    cfg.valve_model.residual_abs_pa_s = 1e30;
+    cfg.valve_model.integral_min_pa = 1e30;
     cfg
 }
 
