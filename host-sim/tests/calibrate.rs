@@ -170,3 +170,94 @@ fn keys(path: &Path) -> Vec<String> {
     k.sort();
     k
 }
+
+/// `--identify-plant`: the joint was built with two keys other than the plant file says
+/// (muscle damping 3.0e-4 instead of 2.0e-4, valve conductance 6.5e-9 instead of 8.0e-9). The
+/// recordings (a valve-driven one for the plant keys, a torque sweep for the torque model) come
+/// from that plant; calibrate starts from the reference plant file, identifies the two keys,
+/// writes plant_identified.toml beside the constants, prints old -> new, and the constants
+/// (plant_constants.toml's conductance) come from the identified plant.
+#[test]
+fn calibrate_identifies_the_plant_first_when_asked() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut text = std::fs::read_to_string(plant()).unwrap();
+    for (from, to) in [
+        ("damping_m2s = 2.0e-4", "damping_m2s = 3.0e-4"),
+        (
+            "sonic_conductance_m3_per_s_pa = 8.0e-9",
+            "sonic_conductance_m3_per_s_pa = 6.5e-9",
+        ),
+    ] {
+        assert!(text.contains(from), "{from}");
+        text = text.replacen(from, to, 1);
+    }
+    let truth = dir.path().join("truth.toml");
+    std::fs::write(&truth, text).unwrap();
+    let valves = dir.path().join("valves.csv");
+    ok(&host_sim(&[
+        &"simulate",
+        &"--plant",
+        &truth,
+        &"--inputs",
+        &fixture("pulses_nominal.csv"),
+        &"--out",
+        &valves,
+    ]));
+    let rec = dir.path().join("rec.csv");
+    ok(&host_sim(&[&"sweep", &"torque", &"--plant", &truth, &"--out", &rec]));
+    let cfg = dir.path().join("config");
+    std::fs::create_dir(&cfg).unwrap();
+    let s = ok(&host_sim(&[
+        &"calibrate",
+        &"--recording",
+        &rec,
+        &"--plant",
+        &plant(),
+        &"--out-dir",
+        &cfg,
+        &"--identify-plant",
+        &"muscle.damping_m2s,valve.sonic_conductance_m3_per_s_pa",
+        &"--valve-recording",
+        &valves,
+    ]));
+    println!("{s}");
+    assert!(s.contains("muscle.damping_m2s: 2e-4 -> "), "{s}");
+    assert!(
+        s.contains("valve.sonic_conductance_m3_per_s_pa: 8e-9 -> "),
+        "{s}"
+    );
+    let fitted = host_sim::PlantConfig::load(cfg.join("plant_identified.toml")).unwrap();
+    assert!((fitted.muscle.damping_m2s / 3.0e-4 - 1.0).abs() < 0.01, "{fitted:?}");
+    let c = fitted.valve.sonic_conductance_m3_per_s_pa;
+    assert!((c / 6.5e-9 - 1.0).abs() < 0.01, "{c}");
+    // The firmware's valve constant is the identified one, and the headers name the file.
+    let constants = std::fs::read_to_string(cfg.join("plant_constants.toml")).unwrap();
+    let line = constants
+        .lines()
+        .find(|l| l.starts_with("sonic_conductance_m3_per_s_pa"))
+        .expect("conductance key");
+    let written: f64 = line.split('=').nth(1).unwrap().trim().parse().unwrap();
+    assert!((written / 6.5e-9 - 1.0).abs() < 0.01, "{line}");
+    assert!(constants.contains("plant_identified.toml"), "{constants}");
+    // An unknown key: exit 2, nothing written.
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let e = run_exits(
+        2,
+        &[
+            &"calibrate",
+            &"--recording",
+            &rec,
+            &"--plant",
+            &plant(),
+            &"--out-dir",
+            &empty,
+            &"--identify-plant",
+            &"muscle.no_such_key",
+            &"--valve-recording",
+            &valves,
+        ],
+    );
+    assert!(e.contains("muscle.no_such_key"), "{e}");
+    assert_eq!(std::fs::read_dir(&empty).unwrap().count(), 0);
+}

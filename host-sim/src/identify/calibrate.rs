@@ -15,6 +15,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 
 use super::cli::{torque_model_file, IdentifyTorqueArgs};
+use super::plant::{identify_plant_text, PlantFitOptions};
 use super::write_atomic;
 use crate::io::recording::Channel;
 use crate::{Plant, Recording};
@@ -23,6 +24,8 @@ use crate::{Plant, Recording};
 /// written. The reference joint's sweep fits 98.96 %; 90 % leaves room for sensor noise and
 /// refuses a recording eq. 11 does not describe.
 pub const MIN_TORQUE_FIT_PCT: f64 = 90.0;
+/// The plant file `--identify-plant` writes into --out-dir.
+pub const PLANT_IDENTIFIED_TOML: &str = "plant_identified.toml";
 /// A joint angle whose standard deviation is below this did not move [deg].
 pub const MIN_ANGLE_SD_DEG: f64 = 0.5;
 /// A pressure whose standard deviation is below this was not activated [kPa].
@@ -52,6 +55,15 @@ pub struct CalibrateArgs {
     /// Worker threads of the tuner (with --tune).
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
+    /// First identify these plant-file keys (comma separated, optionally `key=lo:hi`, as
+    /// `host-sim identify plant --params`) by output error from --valve-recording; the fitted
+    /// plant file is written to --out-dir as plant_identified.toml and every later stage uses it.
+    #[arg(long, value_delimiter = ',', value_name = "KEY[,KEY...]")]
+    pub identify_plant: Vec<String>,
+    /// Valve-driven recording (valve input columns, RECORDING.md) for --identify-plant
+    /// [default: --recording].
+    #[arg(long, value_name = "VALVES.csv", requires = "identify_plant")]
+    pub valve_recording: Option<PathBuf>,
 }
 
 fn sd(v: &[f64]) -> f64 {
@@ -243,7 +255,51 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
         bail!("--out-dir {}: not a directory", a.out_dir.display());
     }
     let file = a.recording.display().to_string();
-    let plant = Plant::load(&a.plant)?;
+    let dest = |name: &str| a.out_dir.join(name);
+    // Stage 0 (with --identify-plant): the plant file's keys from a valve-driven recording;
+    // the later stages read the identified plant (a temporary copy: the output is staged).
+    let mut out = String::new();
+    let mut identified: Option<(tempfile::NamedTempFile, String)> = None;
+    if !a.identify_plant.is_empty() {
+        let valves = a.valve_recording.as_ref().unwrap_or(&a.recording);
+        let t0 = std::time::Instant::now();
+        let (fit, body) =
+            identify_plant_text(valves, &a.plant, &a.identify_plant, &PlantFitOptions::default())
+                .map_err(|e| {
+                    anyhow::anyhow!(
+                        "refusing to write firmware constants (nothing written): identifying the plant from {}: {e}",
+                        valves.display()
+                    )
+                })?;
+        let target = dest(PLANT_IDENTIFIED_TOML);
+        out += &format!(
+            "plant identified from {} ({:.1} s) -> {}:\n",
+            valves.display(),
+            t0.elapsed().as_secs_f64(),
+            target.display()
+        );
+        for (k, before, after) in &fit.params {
+            out += &format!("  {k}: {before:e} -> {after:e}\n");
+        }
+        let (hb, ha) = fit.holdout_mean_pct();
+        out += &format!(
+            "  held-out tail ({} samples): mean fit {hb:.3} % -> {ha:.3} %\n",
+            fit.samples.1
+        );
+        let mut tmp = tempfile::Builder::new()
+            .prefix("plant_identified")
+            .suffix(".toml")
+            .tempfile()
+            .context("temporary plant file")?;
+        std::io::Write::write_all(&mut tmp, body.as_bytes()).context("temporary plant file")?;
+        identified = Some((tmp, body));
+    }
+    // The plant every later stage reads, and the name its outputs' headers give it.
+    let (plant_path, plant_name) = match &identified {
+        Some((tmp, _)) => (tmp.path().to_path_buf(), dest(PLANT_IDENTIFIED_TOML)),
+        None => (a.plant.clone(), a.plant.clone()),
+    };
+    let plant = Plant::load(&plant_path)?;
     let rec = Recording::read(&a.recording)?;
     let why = degenerate_reasons(&rec, &plant, &file);
     if !why.is_empty() {
@@ -252,11 +308,10 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
             why.join("\n  ")
         );
     }
-    let dest = |name: &str| a.out_dir.join(name);
     // Stage 1: the torque model.
     let torque = torque_model_file(&IdentifyTorqueArgs {
         recording: a.recording.clone(),
-        plant: a.plant.clone(),
+        plant: plant_path.clone(),
         out: dest("torque_model.toml"),
         savgol_half_window: None,
         dp_max_kpa: None,
@@ -272,17 +327,23 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
             torque.fit_pct
         );
     }
-    let mut out = format!(
+    out += &format!(
         "torque model: fit {:.3} % (>= {MIN_TORQUE_FIT_PCT} %)\n",
         torque.fit_pct
     );
     // Stage 2: the plant-derived constants.
     let files = [
-        ("torque_model.toml", torque.toml),
-        ("joint_geometry.toml", geometry_toml(&plant, &a.plant)),
+        (
+            "torque_model.toml",
+            torque.toml.replace(
+                &plant_path.display().to_string(),
+                &plant_name.display().to_string(),
+            ),
+        ),
+        ("joint_geometry.toml", geometry_toml(&plant, &plant_name)),
         (
             "plant_constants.toml",
-            plant_constants_toml(&plant, &a.plant, &dest("plant_constants.toml")),
+            plant_constants_toml(&plant, &plant_name, &dest("plant_constants.toml")),
         ),
     ];
     for (name, text) in &files {
@@ -293,7 +354,7 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
         let control = dest("control_tuned.toml");
         let before = std::fs::read_to_string(&control).unwrap_or_default();
         let r = crate::control::tune::run_tune(&crate::control::tune::TuneArgs {
-            plant: a.plant.clone(),
+            plant: plant_path.clone(),
             out: control.clone(),
             threads: a.threads,
             warm_start: false,
@@ -319,9 +380,12 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
     for (name, text) in &files {
         write_atomic(&dest(name), text.as_bytes())?;
     }
+    if let Some((_, body)) = &identified {
+        write_atomic(&dest(PLANT_IDENTIFIED_TOML), body.as_bytes())?;
+    }
     out += &format!(
         "wrote {} files in {}; rebuild the firmware (`cargo flash-build` / `cargo flash`) to use them\n",
-        files.len() + usize::from(a.tune),
+        files.len() + usize::from(a.tune) + usize::from(identified.is_some()),
         a.out_dir.display()
     );
     Ok(out)

@@ -460,6 +460,19 @@ pub fn identify_plant_files(
     out: &Path,
     opts: &PlantFitOptions,
 ) -> Result<PlantFit, IdentError> {
+    let (fit, body) = identify_plant_text(recording, plant, params, opts)?;
+    write_atomic(out, body.as_bytes())?;
+    Ok(fit)
+}
+
+/// Reads the recording and the plant file and fits; returns the fit and the fitted plant
+/// file's text (the input with the fitted values replaced, under a provenance comment).
+pub fn identify_plant_text(
+    recording: &Path,
+    plant: &Path,
+    params: &[String],
+    opts: &PlantFitOptions,
+) -> Result<(PlantFit, String), IdentError> {
     // Jittered time stamps go on the uniform grid the fit simulates on.
     let rec = Recording::read(recording)
         .map_err(|e| IdentError::Data(e.to_string()))?
@@ -489,8 +502,7 @@ pub fn identify_plant_files(
         fit.samples.1
     );
     body.push_str(&fit.toml);
-    write_atomic(out, body.as_bytes())?;
-    Ok(fit)
+    Ok((fit, body))
 }
 
 #[cfg(test)]
