@@ -561,6 +561,11 @@ fn tune_cascade(ctx: &Ctx, start: ControllerConfig) -> (ControllerConfig, f64) {
 
 /// Runs `host-sim tune`; returns the report for stdout.
 pub fn run_tune(a: &TuneArgs) -> Result<String> {
+    run_tune_text(a).map(|(report, _)| report)
+}
+
+/// [`run_tune`], also returning the text of the gains file it wrote.
+pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
     if !(1..=64).contains(&a.threads) {
         bail!("--threads {}: allowed 1..=64", a.threads);
     }
@@ -806,12 +811,14 @@ pub fn run_tune(a: &TuneArgs) -> Result<String> {
     );
     ctx.progress.finish_and_clear();
     tuning.write(&a.out, &header)?;
+    let text = tuning.to_toml_string(&header);
     let log = ctx.log.lock().expect("log lock").join("\n");
-    Ok(format!(
+    let report = format!(
         "{log}\n{}\nwrote {} ({} suite runs, {:.0} s)\n",
         step_tests.join("\n"),
         a.out.display(),
         ctx.runs.load(Ordering::Relaxed),
         t0.elapsed().as_secs_f64()
-    ))
+    );
+    Ok((report, text))
 }

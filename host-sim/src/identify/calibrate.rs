@@ -352,8 +352,7 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
     // Stage 3: the gains (optional, minutes). Written (staged) by the tuner itself.
     if a.tune {
         let control = dest("control_tuned.toml");
-        let before = std::fs::read_to_string(&control).unwrap_or_default();
-        let r = crate::control::tune::run_tune(&crate::control::tune::TuneArgs {
+        let (r, text) = crate::control::tune::run_tune_text(&crate::control::tune::TuneArgs {
             plant: plant_path.clone(),
             out: control.clone(),
             threads: a.threads,
@@ -366,14 +365,9 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
         })
         .context("tuning the gains")?;
         out += &format!(
-            "{} (previous [cascade]: {}):\n{r}",
+            "{r}{}:\n{}",
             control.display(),
-            numbers(&before)
-                .iter()
-                .filter(|(k, _)| k.starts_with("cascade."))
-                .map(|(k, v)| format!("{k} = {v:e}"))
-                .collect::<Vec<_>>()
-                .join(", ")
+            changes(&control, &text)
         );
     }
     // Every stage passed: replace the files (staged in the command's transaction: all or none).
