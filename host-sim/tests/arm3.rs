@@ -338,6 +338,7 @@ fn static_force_difference_matches_seed001_eqs_21_22() {
             angles_rad: q,
             velocities_rad_s: [0.0; 3],
             p_abs_pa: p,
+            friction_z_rad: [0.0; 3],
         };
         let m = arm.measure(&x);
         let (c2, c23) = (q[1].cos(), (q[1] + q[2]).cos());
@@ -614,4 +615,88 @@ fn muscle_driven_arm_obeys_the_power_balance() {
     println!("max |E - E0| = {max_change} J, max |E - E0 - work| = {max_err} J");
     assert!(max_change > 1.0, "{max_change}");
     assert!(max_err < 1e-5 * max_change, "{max_err} J vs {max_change} J");
+}
+
+/// Joint 1 (vertical axis, no gravity) released `delta_rad` away from its muscle
+/// equilibrium with closed valves: (travel from release to 10 s, drift from 5 s to 10 s, the
+/// muscle torque at release).
+fn joint1_travel(arm: &Arm3, delta_rad: f64) -> (f64, f64, f64) {
+    let mut x = arm.initial;
+    x.angles_rad[0] += delta_rad;
+    let tau = arm.muscle_torques_nm(&x)[0];
+    let mut it = host_sim::plant::arm3::Arm3Integrator::new(arm, x, SolverOptions::default());
+    let closed = [ValveInputs::CLOSED; 3];
+    it.advance_samples(closed, 1e-3, 5_000, |_| {}).unwrap();
+    let q5 = it.state().angles_rad[0];
+    it.advance_samples(closed, 1e-3, 5_000, |_| {}).unwrap();
+    let q10 = it.state().angles_rad[0];
+    ((q10 - x.angles_rad[0]).abs(), (q10 - q5).abs(), tau)
+}
+
+#[test]
+fn lugre_friction_sticks_below_the_breakaway_torque_where_the_regularised_sign_creeps() {
+    use host_sim::plant::arm3::LuGreConfig;
+    let regularised = seed_arm();
+    let f_c = regularised.friction[0].f_c;
+    let mut lugre = seed_arm();
+    lugre.friction[0].lugre = Some(LuGreConfig {
+        static_nm: 1.5 * f_c,
+        stribeck_velocity_rad_s: 0.01,
+        stiffness_nm_per_rad: 1000.0,
+        damping_nm_s_per_rad: 60.0,
+    });
+    // A release whose muscle torque is 80 % of the Coulomb level: a hold phase.
+    let (_, _, tau_per_mrad) = joint1_travel(&regularised, 1e-3);
+    let delta = 0.8 * f_c / tau_per_mrad.abs() * 1e-3;
+    let (creep, creep_late, tau) = joint1_travel(&regularised, delta);
+    let (stick, stick_late, _) = joint1_travel(&lugre, delta);
+    println!(
+        "released {:.3} deg away, muscle torque {tau:.4} N m (f_c {f_c:.4}): the regularised \
+         sign creeps {:.3} deg back ({:.2e} deg from 5 s to 10 s), LuGre moves {:.2e} deg \
+         ({:.2e} deg from 5 s to 10 s)",
+        delta.to_degrees(),
+        creep.to_degrees(),
+        creep_late.to_degrees(),
+        stick.to_degrees(),
+        stick_late.to_degrees(),
+    );
+    assert!((tau.abs() / f_c - 0.8).abs() < 0.05, "{tau}");
+    // The regularised sign creeps back towards the muscle equilibrium; LuGre deflects its
+    // bristles and holds.
+    assert!(creep > 0.5 * delta, "{creep} of {delta}");
+    assert!(stick < 0.1 * delta, "{stick} of {delta}");
+    assert!(stick_late < 1e-3 * delta, "{stick_late} of {delta}");
+    // Released further (the muscle torque 3x the Coulomb level, above the breakaway torque),
+    // the LuGre joint slides back.
+    let (slid, _, _) = joint1_travel(&lugre, 3.0 * delta);
+    assert!(slid > 0.5 * delta, "{slid} of {}", 3.0 * delta);
+}
+
+#[test]
+fn the_lugre_table_is_read_from_the_plant_file_and_checked() {
+    let text = std::fs::read_to_string(arm3_plant()).unwrap();
+    let with = |table: &str| {
+        text.replacen(
+            "[joint1.friction]",
+            &format!("{table}\n[joint1.friction]"),
+            1,
+        )
+    };
+    let ok = with(
+        "[joint1.friction.lugre]\nstatic_nm = 0.3\nstribeck_velocity_rad_s = 0.01\n\
+         stiffness_nm_per_rad = 1000.0\ndamping_nm_s_per_rad = 60.0\n",
+    );
+    let c = Arm3Config::from_toml_str(&ok, "arm.toml").unwrap();
+    assert_eq!(c.joint1.friction.lugre.unwrap().static_nm, 0.3);
+    let bad = ok.replace(
+        "stiffness_nm_per_rad = 1000.0",
+        "stiffness_nm_per_rad = -1.0",
+    );
+    let e = Arm3Config::from_toml_str(&bad, "arm.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("arm.toml") && e.contains("friction.lugre.stiffness_nm_per_rad"),
+        "{e}"
+    );
 }

@@ -194,8 +194,8 @@ fn the_mcu_rigid_body_model_matches_the_plant_over_the_workspace() {
     let mut rng = rand::rngs::StdRng::seed_from_u64(11);
     let mut worst = 0.0f64;
     for _ in 0..2000 {
-        let q: [f64; 3] = std::array::from_fn(|_| rng.gen_range(-1.2..1.2));
-        let a: [f64; 3] = std::array::from_fn(|_| rng.gen_range(-5.0..5.0));
+        let q: [f64; 3] = std::array::from_fn(|_| rng.random_range(-1.2..1.2));
+        let a: [f64; 3] = std::array::from_fn(|_| rng.random_range(-5.0..5.0));
         let m = arm.links.mass_matrix(&q);
         let g = arm.links.gravity_torques_nm(&q);
         let (inertia, grav) =

@@ -171,93 +171,106 @@ fn keys(path: &Path) -> Vec<String> {
     k
 }
 
-/// `--identify-plant`: the joint was built with two keys other than the plant file says
-/// (muscle damping 3.0e-4 instead of 2.0e-4, valve conductance 6.5e-9 instead of 8.0e-9). The
-/// recordings (a valve-driven one for the plant keys, a torque sweep for the torque model) come
-/// from that plant; calibrate starts from the reference plant file, identifies the two keys,
-/// writes plant_identified.toml beside the constants, prints old -> new, and the constants
-/// (plant_constants.toml's conductance) come from the identified plant.
 #[test]
-fn calibrate_identifies_the_plant_first_when_asked() {
+fn calibrate_identifies_two_mis_set_plant_keys_before_the_firmware_constants() {
+    // The truth: the reference plant. The user's plant file: inertia 1.5x, valve conductance
+    // 0.7x. A valve-driven recording of the true plant (the firmware in the loop on random
+    // set-points) identifies both; the torque sweep gives the torque model as before.
     let dir = tempfile::tempdir().unwrap();
-    let mut text = std::fs::read_to_string(plant()).unwrap();
-    for (from, to) in [
-        ("damping_m2s = 2.0e-4", "damping_m2s = 3.0e-4"),
-        (
-            "sonic_conductance_m3_per_s_pa = 8.0e-9",
-            "sonic_conductance_m3_per_s_pa = 6.5e-9",
-        ),
-    ] {
-        assert!(text.contains(from), "{from}");
-        text = text.replacen(from, to, 1);
-    }
-    let truth = dir.path().join("truth.toml");
-    std::fs::write(&truth, text).unwrap();
-    let valves = dir.path().join("valves.csv");
-    ok(&host_sim(&[
-        &"simulate",
-        &"--plant",
-        &truth,
-        &"--inputs",
-        &fixture("pulses_nominal.csv"),
-        &"--out",
-        &valves,
-    ]));
-    let rec = dir.path().join("rec.csv");
-    ok(&host_sim(&[&"sweep", &"torque", &"--plant", &truth, &"--out", &rec]));
     let cfg = dir.path().join("config");
     std::fs::create_dir(&cfg).unwrap();
-    let s = ok(&host_sim(&[
-        &"calibrate",
-        &"--recording",
-        &rec,
+    let sweep = dir.path().join("sweep.csv");
+    let valves = dir.path().join("valves.csv");
+    let r = host_sim(&[&"sweep", &"torque", &"--plant", &plant(), &"--out", &sweep]);
+    assert!(r.status.success(), "{}", text(&r.stderr));
+    let scenario = root().join("scenarios/random.toml");
+    let r = host_sim(&[
+        &"simulate",
         &"--plant",
         &plant(),
+        &"--scenario",
+        &scenario,
+        &"--out",
+        &valves,
+    ]);
+    assert!(r.status.success(), "{}", text(&r.stderr));
+    let truth = std::fs::read_to_string(plant()).unwrap();
+    let mis = truth
+        .replace("inertia_kgm2 = 0.014 ", "inertia_kgm2 = 0.021 ")
+        .replace(
+            "sonic_conductance_m3_per_s_pa = 8.0e-9 ",
+            "sonic_conductance_m3_per_s_pa = 5.6e-9 ",
+        );
+    assert_ne!(mis, truth, "the reference plant file's key lines changed");
+    let mis_path = dir.path().join("mis.toml");
+    std::fs::write(&mis_path, &mis).unwrap();
+    let r = host_sim(&[
+        &"calibrate",
+        &"--recording",
+        &sweep,
+        &"--plant",
+        &mis_path,
         &"--out-dir",
         &cfg,
         &"--identify-plant",
-        &"muscle.damping_m2s,valve.sonic_conductance_m3_per_s_pa",
-        &"--valve-recording",
+        &"joint.inertia_kgm2,valve.sonic_conductance_m3_per_s_pa",
+        &"--plant-recording",
         &valves,
-    ]));
-    println!("{s}");
-    assert!(s.contains("muscle.damping_m2s: 2e-4 -> "), "{s}");
+    ]);
+    let out = text(&r.stdout);
+    assert!(r.status.success(), "{out}\n{}", text(&r.stderr));
+    println!("{out}");
     assert!(
-        s.contains("valve.sonic_conductance_m3_per_s_pa: 8e-9 -> "),
-        "{s}"
+        out.contains("joint.inertia_kgm2: 2.1e-2 -> 1.3999"),
+        "{out}"
     );
-    let fitted = host_sim::PlantConfig::load(cfg.join("plant_identified.toml")).unwrap();
-    assert!((fitted.muscle.damping_m2s / 3.0e-4 - 1.0).abs() < 0.01, "{fitted:?}");
-    let c = fitted.valve.sonic_conductance_m3_per_s_pa;
-    assert!((c / 6.5e-9 - 1.0).abs() < 0.01, "{c}");
-    // The firmware's valve constant is the identified one, and the headers name the file.
-    let constants = std::fs::read_to_string(cfg.join("plant_constants.toml")).unwrap();
-    let line = constants
-        .lines()
-        .find(|l| l.starts_with("sonic_conductance_m3_per_s_pa"))
-        .expect("conductance key");
-    let written: f64 = line.split('=').nth(1).unwrap().trim().parse().unwrap();
-    assert!((written / 6.5e-9 - 1.0).abs() < 0.01, "{line}");
-    assert!(constants.contains("plant_identified.toml"), "{constants}");
-    // An unknown key: exit 2, nothing written.
+    assert!(
+        out.contains("valve.sonic_conductance_m3_per_s_pa: 5.6e-9 -> 8.0000"),
+        "{out}"
+    );
+    // The identified plant file is written beside the config and feeds the constants.
+    let identified: toml::Table = std::fs::read_to_string(cfg.join("plant_identified.toml"))
+        .unwrap()
+        .parse()
+        .unwrap();
+    let inertia = identified["joint"]["inertia_kgm2"].as_float().unwrap();
+    assert!((inertia / 0.014 - 1.0).abs() < 1e-3, "{inertia}");
+    let constants: toml::Table = std::fs::read_to_string(cfg.join("plant_constants.toml"))
+        .unwrap()
+        .parse()
+        .unwrap();
+    let c = constants["valve"]["sonic_conductance_m3_per_s_pa"]
+        .as_float()
+        .unwrap();
+    assert!((c / 8.0e-9 - 1.0).abs() < 1e-3, "{c}");
+    // No temporary plant file is left behind.
+    let names: Vec<String> = std::fs::read_dir(&cfg)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(names.iter().all(|n| !n.starts_with('.')), "{names:?}");
+
+    // A key the plant file does not have: refused, nothing written.
     let empty = dir.path().join("empty");
     std::fs::create_dir(&empty).unwrap();
-    let e = run_exits(
-        2,
-        &[
-            &"calibrate",
-            &"--recording",
-            &rec,
-            &"--plant",
-            &plant(),
-            &"--out-dir",
-            &empty,
-            &"--identify-plant",
-            &"muscle.no_such_key",
-            &"--valve-recording",
-            &valves,
-        ],
+    let r = host_sim(&[
+        &"calibrate",
+        &"--recording",
+        &sweep,
+        &"--plant",
+        &mis_path,
+        &"--out-dir",
+        &empty,
+        &"--identify-plant",
+        &"joint.no_such_key",
+        &"--plant-recording",
+        &valves,
+    ]);
+    assert_eq!(r.status.code(), Some(2), "{}", text(&r.stderr));
+    assert!(
+        text(&r.stderr).contains("joint.no_such_key"),
+        "{}",
+        text(&r.stderr)
     );
-    assert!(e.contains("muscle.no_such_key"), "{e}");
     assert_eq!(std::fs::read_dir(&empty).unwrap().count(), 0);
 }

@@ -184,6 +184,15 @@ fn a_long_recording_reads_the_same_as_row_by_row_and_names_lines_past_the_split(
             .parse::<f64>()
             .unwrap()
     );
+    // Windows line ends and padded fields read the same.
+    let crlf = Recording::parse(
+        &text.replace('\n', "\r\n").replace(",1,0,", ", 1 ,0,"),
+        "run-42.csv",
+    )
+    .unwrap();
+    assert_eq!(crlf.t_s, r.t_s);
+    assert_eq!(crlf.inputs, r.inputs);
+    assert_eq!(crlf.channel(Channel::P1Kpa), r.channel(Channel::P1Kpa));
     // Row k sits on line k + 3 (one metadata line, the header). A bad row late in the file
     // (in the second chunk) is named by its own line.
     let e = err(&long_recording(|k| {

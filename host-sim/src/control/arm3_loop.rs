@@ -32,7 +32,7 @@ use serde::Deserialize;
 use crate::control::closed_loop::{FakePin, TrackingStats};
 use crate::io::arm3::Arm3Recording;
 use crate::io::scenario::{
-    key_line, ClosedLoopError, ScenarioHeader, SensorModel, SetpointProfile,
+    key_error, ClosedLoopError, ScenarioHeader, SensorModel, SetpointProfile,
 };
 use crate::plant::arm3::{Arm3, Arm3Inputs, Arm3Integrator, Arm3State};
 use crate::plant::ValveInputs;
@@ -111,34 +111,8 @@ impl ArmScenario {
             file: file.to_string(),
             msg: e.to_string().trim_end().to_string(),
         })?;
-        let bad = |table: &str, key: &str, msg: String| {
-            let at = key_line(text, table, key)
-                .map(|l| format!("line {l}: "))
-                .unwrap_or_default();
-            ClosedLoopError::Scenario {
-                file: file.to_string(),
-                msg: format!("{at}[{table}] {key}: {msg}"),
-            }
-        };
-        let h = &s.scenario;
-        if !(h.duration_s > 0.0 && h.duration_s.is_finite()) {
-            return Err(bad(
-                "scenario",
-                "duration_s",
-                format!("{} must be > 0", h.duration_s),
-            ));
-        }
-        let (lo, hi) = (
-            pam_firmware::tick::TICK_HZ_MIN as f64,
-            pam_firmware::tick::TICK_HZ_MAX as f64,
-        );
-        if !(h.tick_hz >= lo && h.tick_hz <= hi) {
-            return Err(bad(
-                "scenario",
-                "tick_hz",
-                format!("{} must be within {lo}..{hi}", h.tick_hz),
-            ));
-        }
+        let bad = key_error(text, file);
+        s.scenario.check(&bad)?;
         if s.sensors.delay_ticks != 0 {
             return Err(bad(
                 "sensors",
@@ -408,23 +382,12 @@ impl ArmRun {
     /// fault.
     pub fn tracking(&self, after_s: f64) -> [TrackingStats; JOINTS] {
         std::array::from_fn(|j| {
-            let (mut sum, mut max, mut n) = (0.0, 0.0f64, 0usize);
-            for r in &self.rows {
-                if r.t_s < after_s || r.fault.0 != 0 {
-                    continue;
-                }
-                let e = r.state.angles_rad[j] - r.setpoint_rad[j];
-                sum += e * e;
-                max = max.max(e.abs());
-                n += 1;
-            }
-            let mse = if n > 0 { sum / n as f64 } else { f64::NAN };
-            TrackingStats {
-                mse_rad2: mse,
-                rms_rad: mse.sqrt(),
-                max_abs_rad: max,
-                n,
-            }
+            TrackingStats::of_errors(
+                self.rows
+                    .iter()
+                    .filter(|r| r.t_s >= after_s && r.fault.0 == 0)
+                    .map(|r| r.state.angles_rad[j] - r.setpoint_rad[j]),
+            )
         })
     }
 

@@ -682,6 +682,25 @@ pub struct TrackingStats {
     pub n: usize,
 }
 
+impl TrackingStats {
+    /// The statistics of the angle errors `errors_rad` (NaN mean square when empty).
+    pub fn of_errors(errors_rad: impl Iterator<Item = f64>) -> Self {
+        let (mut sum, mut max, mut n) = (0.0, 0.0f64, 0usize);
+        for e in errors_rad {
+            sum += e * e;
+            max = max.max(e.abs());
+            n += 1;
+        }
+        let mse = if n > 0 { sum / n as f64 } else { f64::NAN };
+        TrackingStats {
+            mse_rad2: mse,
+            rms_rad: mse.sqrt(),
+            max_abs_rad: max,
+            n,
+        }
+    }
+}
+
 /// One tick of the plant with fixed-step classic RK4 (256 substeps), for when the adaptive
 /// integrator fails: `None` if the state becomes non-finite. The auxiliary states (a supply
 /// reservoir's pressure, the gas temperatures) are held over the tick.
@@ -735,25 +754,12 @@ impl ClosedLoopRun {
 
     /// Tracking error statistics from `after_s` on, over the ticks without a latched fault.
     pub fn tracking(&self, after_s: f64) -> TrackingStats {
-        let mut sum = 0.0;
-        let mut max: f64 = 0.0;
-        let mut n = 0;
-        for r in &self.rows {
-            if r.t_s < after_s || r.out.fault.is_some() {
-                continue;
-            }
-            let e = r.state.angle_rad - r.setpoint_rad;
-            sum += e * e;
-            max = max.max(e.abs());
-            n += 1;
-        }
-        let mse = if n > 0 { sum / n as f64 } else { f64::NAN };
-        TrackingStats {
-            mse_rad2: mse,
-            rms_rad: mse.sqrt(),
-            max_abs_rad: max,
-            n,
-        }
+        TrackingStats::of_errors(
+            self.rows
+                .iter()
+                .filter(|r| r.t_s >= after_s && r.out.fault.is_none())
+                .map(|r| r.state.angle_rad - r.setpoint_rad),
+        )
     }
 
     /// Checks the scenario's expectations; returns the failures as sentences.

@@ -15,7 +15,6 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 
 use super::cli::{torque_model_file, IdentifyTorqueArgs};
-use super::plant::{identify_plant_text, PlantFitOptions};
 use super::write_atomic;
 use crate::io::recording::Channel;
 use crate::{Plant, Recording};
@@ -24,8 +23,6 @@ use crate::{Plant, Recording};
 /// written. The reference joint's sweep fits 98.96 %; 90 % leaves room for sensor noise and
 /// refuses a recording eq. 11 does not describe.
 pub const MIN_TORQUE_FIT_PCT: f64 = 90.0;
-/// The plant file `--identify-plant` writes into --out-dir.
-pub const PLANT_IDENTIFIED_TOML: &str = "plant_identified.toml";
 /// A joint angle whose standard deviation is below this did not move [deg].
 pub const MIN_ANGLE_SD_DEG: f64 = 0.5;
 /// A pressure whose standard deviation is below this was not activated [kPa].
@@ -55,15 +52,15 @@ pub struct CalibrateArgs {
     /// Worker threads of the tuner (with --tune).
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
-    /// First identify these plant-file keys (comma separated, optionally `key=lo:hi`, as
-    /// `host-sim identify plant --params`) by output error from --valve-recording; the fitted
-    /// plant file is written to --out-dir as plant_identified.toml and every later stage uses it.
-    #[arg(long, value_delimiter = ',', value_name = "KEY[,KEY...]")]
+    /// First identify these plant-file keys (comma separated, `key` or `key=lo:hi`, as
+    /// `host-sim identify plant --params`) by replaying a valve-driven recording; the
+    /// identified plant file (plant_identified.toml in --out-dir) then feeds every later stage.
+    #[arg(long, value_name = "KEYS", value_delimiter = ',')]
     pub identify_plant: Vec<String>,
-    /// Valve-driven recording (valve input columns, RECORDING.md) for --identify-plant
-    /// [default: --recording].
-    #[arg(long, value_name = "VALVES.csv", requires = "identify_plant")]
-    pub valve_recording: Option<PathBuf>,
+    /// The valve-driven recording of --identify-plant (columns t_s, u_in1, u_ex1, u_in2,
+    /// u_ex2 and the measured channels) [default: --recording].
+    #[arg(long, value_name = "R.csv", requires = "identify_plant")]
+    pub plant_recording: Option<PathBuf>,
 }
 
 fn sd(v: &[f64]) -> f64 {
@@ -256,47 +253,42 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
     }
     let file = a.recording.display().to_string();
     let dest = |name: &str| a.out_dir.join(name);
-    // Stage 0 (with --identify-plant): the plant file's keys from a valve-driven recording;
-    // the later stages read the identified plant (a temporary copy: the output is staged).
+    // Stage 0 (optional): identify plant-file keys; the identified file is staged in a
+    // temporary file beside the config for the later stages, and written at the end.
     let mut out = String::new();
-    let mut identified: Option<(tempfile::NamedTempFile, String)> = None;
-    if !a.identify_plant.is_empty() {
-        let valves = a.valve_recording.as_ref().unwrap_or(&a.recording);
-        let t0 = std::time::Instant::now();
-        let (fit, body) =
-            identify_plant_text(valves, &a.plant, &a.identify_plant, &PlantFitOptions::default())
-                .map_err(|e| {
-                    anyhow::anyhow!(
-                        "refusing to write firmware constants (nothing written): identifying the plant from {}: {e}",
-                        valves.display()
-                    )
-                })?;
-        let target = dest(PLANT_IDENTIFIED_TOML);
-        out += &format!(
-            "plant identified from {} ({:.1} s) -> {}:\n",
-            valves.display(),
-            t0.elapsed().as_secs_f64(),
-            target.display()
-        );
-        for (k, before, after) in &fit.params {
-            out += &format!("  {k}: {before:e} -> {after:e}\n");
-        }
+    let identified = if a.identify_plant.is_empty() {
+        None
+    } else {
+        let valve_rec = a.plant_recording.as_ref().unwrap_or(&a.recording);
+        let (fit, body) = super::plant::identify_plant_text(
+            valve_rec,
+            &a.plant,
+            &a.identify_plant,
+            &super::plant::PlantFitOptions::default(),
+        )
+        .map_err(|e| {
+            anyhow::anyhow!("refusing to write firmware constants (nothing written): {e:#}")
+        })?;
         let (hb, ha) = fit.holdout_mean_pct();
         out += &format!(
-            "  held-out tail ({} samples): mean fit {hb:.3} % -> {ha:.3} %\n",
-            fit.samples.1
+            "plant identified from {} (held-out fit {hb:.3} % -> {ha:.3} %):\n",
+            valve_rec.display()
         );
-        let mut tmp = tempfile::Builder::new()
-            .prefix("plant_identified")
+        for (k, old, new) in &fit.params {
+            out += &format!("  {k}: {old:e} -> {new:e}\n");
+        }
+        let tmp = tempfile::Builder::new()
+            .prefix(".plant_identified.")
             .suffix(".toml")
-            .tempfile()
-            .context("temporary plant file")?;
-        std::io::Write::write_all(&mut tmp, body.as_bytes()).context("temporary plant file")?;
-        identified = Some((tmp, body));
-    }
-    // The plant every later stage reads, and the name its outputs' headers give it.
+            .tempfile_in(&a.out_dir)
+            .with_context(|| format!("--out-dir {}", a.out_dir.display()))?;
+        std::fs::write(tmp.path(), &body).with_context(|| format!("{}", tmp.path().display()))?;
+        Some((tmp, body))
+    };
+    let final_plant = dest("plant_identified.toml");
+    // The plant file of the later stages, and the name their provenance headers give it.
     let (plant_path, plant_name) = match &identified {
-        Some((tmp, _)) => (tmp.path().to_path_buf(), dest(PLANT_IDENTIFIED_TOML)),
+        Some((tmp, _)) => (tmp.path().to_owned(), final_plant.clone()),
         None => (a.plant.clone(), a.plant.clone()),
     };
     let plant = Plant::load(&plant_path)?;
@@ -309,7 +301,7 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
         );
     }
     // Stage 1: the torque model.
-    let torque = torque_model_file(&IdentifyTorqueArgs {
+    let mut torque = torque_model_file(&IdentifyTorqueArgs {
         recording: a.recording.clone(),
         plant: plant_path.clone(),
         out: dest("torque_model.toml"),
@@ -327,19 +319,17 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
             torque.fit_pct
         );
     }
+    torque.toml = torque.toml.replace(
+        &plant_path.display().to_string(),
+        &plant_name.display().to_string(),
+    );
     out += &format!(
         "torque model: fit {:.3} % (>= {MIN_TORQUE_FIT_PCT} %)\n",
         torque.fit_pct
     );
     // Stage 2: the plant-derived constants.
     let files = [
-        (
-            "torque_model.toml",
-            torque.toml.replace(
-                &plant_path.display().to_string(),
-                &plant_name.display().to_string(),
-            ),
-        ),
+        ("torque_model.toml", torque.toml),
         ("joint_geometry.toml", geometry_toml(&plant, &plant_name)),
         (
             "plant_constants.toml",
@@ -364,18 +354,14 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
             robust: false,
         })
         .context("tuning the gains")?;
-        out += &format!(
-            "{r}{}:\n{}",
-            control.display(),
-            changes(&control, &text)
-        );
+        out += &format!("{r}{}:\n{}", control.display(), changes(&control, &text));
     }
     // Every stage passed: replace the files (staged in the command's transaction: all or none).
     for (name, text) in &files {
         write_atomic(&dest(name), text.as_bytes())?;
     }
     if let Some((_, body)) = &identified {
-        write_atomic(&dest(PLANT_IDENTIFIED_TOML), body.as_bytes())?;
+        write_atomic(&final_plant, body.as_bytes())?;
     }
     out += &format!(
         "wrote {} files in {}; rebuild the firmware (`cargo flash-build` / `cargo flash`) to use them\n",

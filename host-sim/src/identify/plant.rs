@@ -465,8 +465,8 @@ pub fn identify_plant_files(
     Ok(fit)
 }
 
-/// Reads the recording and the plant file and fits; returns the fit and the fitted plant
-/// file's text (the input with the fitted values replaced, under a provenance comment).
+/// Reads the recording and the plant file and fits: the fit and the fitted plant file's text
+/// (the input with the fitted values replaced, under a header saying what changed).
 pub fn identify_plant_text(
     recording: &Path,
     plant: &Path,

@@ -125,7 +125,7 @@ impl Arm3Recording {
                  f1_n_jN, f2_n_jN)",
             ));
         }
-        let (rows, lines) = table.rows(|row| {
+        let (rows, lines): (Vec<_>, _) = table.rows(|row| {
             let t_s = row.num(t_col, "t_s")?;
             let mut u = [ValveInputs::CLOSED; JOINTS];
             for (j, cols) in u_cols.iter().enumerate() {

@@ -440,40 +440,9 @@ impl Scenario {
                 msg,
             }
         })?;
-        // Validation errors name the line of the offending key (the first line that sets
-        // it inside its table) as the TOML parser's own errors do.
-        let bad = |table: &str, key: &str, msg: String| {
-            let at = key_line(text, table, key)
-                .map(|l| format!("line {l}: "))
-                .unwrap_or_default();
-            ClosedLoopError::Scenario {
-                file: file.to_string(),
-                msg: format!("{at}[{table}] {key}: {msg}"),
-            }
-        };
+        let bad = key_error(text, file);
+        s.scenario.check(&bad)?;
         let h = &s.scenario;
-        if !(h.duration_s > 0.0 && h.duration_s.is_finite()) {
-            return Err(bad(
-                "scenario",
-                "duration_s",
-                format!("{} must be > 0", h.duration_s),
-            ));
-        }
-        // The firmware's stable range (pam_firmware::tick::TICK_HZ_MIN / TICK_HZ_MAX).
-        let (lo, hi) = (
-            pam_firmware::tick::TICK_HZ_MIN as f64,
-            pam_firmware::tick::TICK_HZ_MAX as f64,
-        );
-        if !(h.tick_hz >= lo && h.tick_hz <= hi) {
-            return Err(bad(
-                "scenario",
-                "tick_hz",
-                format!(
-                    "{} must be within {lo}..{hi} (the firmware's gains are stable from {lo} Hz)",
-                    h.tick_hz
-                ),
-            ));
-        }
         let finite = |key: &str, v: f64| -> Result<(), ClosedLoopError> {
             if v.is_finite() {
                 Ok(())
@@ -676,8 +645,57 @@ impl Scenario {
     }
 }
 
+/// The error of a scenario value: it names the file and the line of the offending key (the
+/// first line that sets it inside its table) as the TOML parser's own errors do.
+pub(crate) fn key_error<'a>(
+    text: &'a str,
+    file: &'a str,
+) -> impl Fn(&str, &str, String) -> ClosedLoopError + 'a {
+    move |table: &str, key: &str, msg: String| {
+        let at = key_line(text, table, key)
+            .map(|l| format!("line {l}: "))
+            .unwrap_or_default();
+        ClosedLoopError::Scenario {
+            file: file.to_string(),
+            msg: format!("{at}[{table}] {key}: {msg}"),
+        }
+    }
+}
+
+impl ScenarioHeader {
+    /// The `[scenario]` table's ranges: a positive finite length, a tick rate within the
+    /// firmware's stable range (`pam_firmware::tick::TICK_HZ_MIN` / `TICK_HZ_MAX`).
+    pub(crate) fn check(
+        &self,
+        bad: &impl Fn(&str, &str, String) -> ClosedLoopError,
+    ) -> Result<(), ClosedLoopError> {
+        if !(self.duration_s > 0.0 && self.duration_s.is_finite()) {
+            return Err(bad(
+                "scenario",
+                "duration_s",
+                format!("{} must be > 0", self.duration_s),
+            ));
+        }
+        let (lo, hi) = (
+            pam_firmware::tick::TICK_HZ_MIN as f64,
+            pam_firmware::tick::TICK_HZ_MAX as f64,
+        );
+        if !(self.tick_hz >= lo && self.tick_hz <= hi) {
+            return Err(bad(
+                "scenario",
+                "tick_hz",
+                format!(
+                    "{} must be within {lo}..{hi} (the firmware's gains are stable from {lo} Hz)",
+                    self.tick_hz
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// 1-based line of `key = ...` inside `[table]` of TOML `text`, if it is there.
-pub(crate) fn key_line(text: &str, table: &str, key: &str) -> Option<usize> {
+fn key_line(text: &str, table: &str, key: &str) -> Option<usize> {
     let mut in_table = false;
     for (i, line) in text.lines().enumerate() {
         let l = line.trim();

@@ -52,7 +52,8 @@ use crate::plant::ValveInputs;
 use crate::sim::SolverOptions;
 
 /// The 12-element ODE state vector.
-pub type Vector12 = SVector<f64, 12>;
+/// The arm's state vector: angles, velocities, pressures, LuGre bristle deflections.
+pub type Vector15 = SVector<f64, 15>;
 
 /// The value of the top-level `kind` key of a 3-DOF arm plant file.
 pub const KIND: &str = "arm3";
@@ -145,6 +146,28 @@ pub struct FrictionConfig {
     pub cubic_nm_s3_per_rad3: f64,
     /// w_eps of sgn(w) ~ tanh(w / w_eps) (not in seed 001; small, > 0).
     pub sign_smoothing_velocity_rad_s: f64,
+    /// `[jointN.friction.lugre]`: a true stick-slip model in place of the regularised sign
+    /// (not in seed 001; absent: the regularised eq. 7).
+    #[serde(default)]
+    pub lugre: Option<LuGreConfig>,
+}
+
+/// LuGre friction (Canudas de Wit, Olsson, Astrom, Lischinsky 1995): bristle deflection `z`
+/// [rad] with `z' = w - sigma0 |w| z / g(w)`, `g(w) = f_c + (f_s - f_c) exp(-(w / w_s)^2)`,
+/// friction torque `sigma0 z + sigma1 z'` plus eq. 7's viscous, quadratic and cubic terms.
+/// At rest under a torque below `f_s` the bristles deflect by `torque / sigma0` and the
+/// joint sticks; above it, it slides (the Coulomb level `f_c` of eq. 7 while sliding).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LuGreConfig {
+    /// f_s: breakaway (static) torque [N m], >= f_c.
+    pub static_nm: f64,
+    /// w_s: Stribeck velocity [rad/s], > 0.
+    pub stribeck_velocity_rad_s: f64,
+    /// sigma0: bristle stiffness [N m/rad], > 0.
+    pub stiffness_nm_per_rad: f64,
+    /// sigma1: bristle damping [N m s/rad], >= 0.
+    pub damping_nm_s_per_rad: f64,
 }
 
 impl Arm3Config {
@@ -310,6 +333,26 @@ impl Arm3Config {
                     format!("{k}friction.sign_smoothing_velocity_rad_s"),
                     f.sign_smoothing_velocity_rad_s,
                     Bound::Positive,
+                ),
+                (
+                    format!("{k}friction.lugre.static_nm"),
+                    f.lugre.map_or(f.coulomb_nm, |l| l.static_nm - f.coulomb_nm),
+                    Bound::NonNegative,
+                ),
+                (
+                    format!("{k}friction.lugre.stribeck_velocity_rad_s"),
+                    f.lugre.map_or(1.0, |l| l.stribeck_velocity_rad_s),
+                    Bound::Positive,
+                ),
+                (
+                    format!("{k}friction.lugre.stiffness_nm_per_rad"),
+                    f.lugre.map_or(1.0, |l| l.stiffness_nm_per_rad),
+                    Bound::Positive,
+                ),
+                (
+                    format!("{k}friction.lugre.damping_nm_s_per_rad"),
+                    f.lugre.map_or(0.0, |l| l.damping_nm_s_per_rad),
+                    Bound::NonNegative,
                 ),
                 (format!("{k}initial.angle_rad"), n.angle_rad, Bound::Finite),
                 (
@@ -561,6 +604,8 @@ pub struct Eq7Friction {
     pub f_e: f64,
     pub f_g: f64,
     pub w_eps: f64,
+    /// The stick-slip model in place of `f_c tanh(w / w_eps)`.
+    pub lugre: Option<LuGreConfig>,
 }
 
 impl Eq7Friction {
@@ -571,6 +616,26 @@ impl Eq7Friction {
             f_e: c.quadratic_nm_s2_per_rad2,
             f_g: c.cubic_nm_s3_per_rad3,
             w_eps: c.sign_smoothing_velocity_rad_s,
+            lugre: c.lugre,
+        }
+    }
+
+    /// Friction torque [N m] and bristle deflection rate `z'` [rad/s] at velocity `w` and
+    /// deflection `z` (without the LuGre model: eq. 7 regularised, `z' = 0`).
+    #[inline(always)]
+    pub fn torque_and_rate(&self, w: f64, z: f64) -> (f64, f64) {
+        let rest = self.f_d * w + self.f_e * w * w.abs() + self.f_g * w * w * w;
+        match &self.lugre {
+            None => (self.f_c * (w / self.w_eps).tanh() + rest, 0.0),
+            Some(l) => {
+                let r = w / l.stribeck_velocity_rad_s;
+                let g = self.f_c + (l.static_nm - self.f_c) * (-r * r).exp();
+                let dz = w - l.stiffness_nm_per_rad * w.abs() * z / g;
+                (
+                    l.stiffness_nm_per_rad * z + l.damping_nm_s_per_rad * dz + rest,
+                    dz,
+                )
+            }
         }
     }
 
@@ -639,26 +704,30 @@ pub struct Arm3State {
     pub velocities_rad_s: [f64; 3],
     /// (p1, p2) of joints 1..3, absolute.
     pub p_abs_pa: [[f64; 2]; 3],
+    /// LuGre bristle deflection of joints 1..3 [rad] (0 without the LuGre model).
+    pub friction_z_rad: [f64; 3],
 }
 
 impl Arm3State {
-    pub fn to_vector(&self) -> Vector12 {
-        let mut y = Vector12::zeros();
+    pub fn to_vector(&self) -> Vector15 {
+        let mut y = Vector15::zeros();
         for i in 0..3 {
             y[i] = self.angles_rad[i];
             y[3 + i] = self.velocities_rad_s[i];
             y[6 + 2 * i] = self.p_abs_pa[i][0];
             y[7 + 2 * i] = self.p_abs_pa[i][1];
+            y[12 + i] = self.friction_z_rad[i];
         }
         y
     }
 
-    pub fn from_vector(y: &Vector12) -> Self {
+    pub fn from_vector(y: &Vector15) -> Self {
         let mut s = Self::default();
         for i in 0..3 {
             s.angles_rad[i] = y[i];
             s.velocities_rad_s[i] = y[3 + i];
             s.p_abs_pa[i] = [y[6 + 2 * i], y[7 + 2 * i]];
+            s.friction_z_rad[i] = y[12 + i];
         }
         s
     }
@@ -771,7 +840,8 @@ impl Arm3 {
         tau
     }
 
-    /// Friction torques F(q') of eq. 7.
+    /// Friction torques F(q') of eq. 7 (regularised sign; the LuGre model needs the state:
+    /// [`Eq7Friction::torque_and_rate`]).
     pub fn friction_torques_nm(&self, qd: &[f64; 3]) -> [f64; 3] {
         [
             self.friction[0].torque_nm(qd[0]),
@@ -813,7 +883,13 @@ impl Arm3 {
             }
             tau[i] = (f[0] - f[1]) * pair.sprocket_radius_m;
         }
-        let fr = self.friction_torques_nm(&x.velocities_rad_s);
+        let mut fr = [0.0; 3];
+        for i in 0..3 {
+            let (f, dz) =
+                self.friction[i].torque_and_rate(x.velocities_rad_s[i], x.friction_z_rad[i]);
+            fr[i] = f;
+            d.friction_z_rad[i] = dz;
+        }
         d.velocities_rad_s = self
             .links
             .acceleration(&x.angles_rad, &x.velocities_rad_s, &tau, &fr);
@@ -845,6 +921,7 @@ impl Arm3 {
             angles_rad: *q,
             velocities_rad_s: [0.0; 3],
             p_abs_pa: *p_abs_pa,
+            friction_z_rad: [0.0; 3],
         };
         Vector3::from(self.muscle_torques_nm(&x)) - self.links.gravity_torques_nm(q)
     }
@@ -942,8 +1019,8 @@ struct Rhs<'a> {
     u: Arm3Inputs,
 }
 
-impl System<f64, Vector12> for Rhs<'_> {
-    fn system(&self, _t: f64, y: &Vector12, dy: &mut Vector12) {
+impl System<f64, Vector15> for Rhs<'_> {
+    fn system(&self, _t: f64, y: &Vector15, dy: &mut Vector15) {
         let d = self.arm.derivatives(&Arm3State::from_vector(y), &self.u);
         *dy = d.to_vector();
     }
