@@ -3,7 +3,7 @@
 //! nominal plant and every concealed effect of `control::robustness::CONDITIONS`.
 //!
 //! ```sh
-//! cargo run --release -p host-sim --example robustness [-- PLANT.toml]
+//! cargo run --release -p host-sim --example robustness [-- PLANT.toml [GAINS.toml]]
 //! ```
 //!
 //! After the tables: the MSE of every held-out scenario for each law on the nominal plant and
@@ -15,7 +15,7 @@ use host_sim::control::compare::{
     ControlTuning,
 };
 use host_sim::control::robustness::{
-    condition_plant, format_table, held_out_scenarios, table, CONDITIONS,
+    condition_config, condition_plant, format_table, held_out_scenarios, table, CONDITIONS,
 };
 use pam_firmware::tick::ControlLaw;
 
@@ -25,7 +25,14 @@ fn main() -> Result<()> {
         None => reference_plant_path().context("pass the plant file")?,
     };
     let text = std::fs::read_to_string(&plant).with_context(|| plant.display().to_string())?;
-    let tuning = ControlTuning::load(&control_tuned_path())?;
+    // The gains file scored: config/control_tuned.toml unless given (e.g.
+    // config/control_robust.toml, the gains of `host-sim tune --robust`).
+    let gains = match std::env::args().nth(2) {
+        Some(g) => g.into(),
+        None => control_tuned_path(),
+    };
+    let tuning = ControlTuning::load(&gains)?;
+    println!("gains: {}\n", gains.display());
     for (title, scenarios) in [
         ("Held-out set-point suite", held_out_scenarios()?),
         ("Tuning suite", suite_scenarios()?),
@@ -61,7 +68,7 @@ fn main() -> Result<()> {
         println!("| scenario | cascade | PD | PID | PID / cascade |\n|---|---|---|---|---|");
         let scores: Vec<_> = laws
             .iter()
-            .map(|(_, c)| score_suite_with(&plant, &held_out, *c))
+            .map(|(_, c)| score_suite_with(&plant, &held_out, condition_config(name, *c)))
             .collect();
         for (i, sc) in held_out.iter().enumerate() {
             let cell = |k: usize| match &scores[k] {

@@ -4,7 +4,7 @@
 //! joint friction, muscle (braid) hysteresis, an 8 ms valve dead time, a supply that sags with
 //! the flow, and the joint carrying 11 x its inertia (seed 000's load).
 
-use pam_firmware::tick::ControlLaw;
+use pam_firmware::tick::{ControlLaw, ControllerConfig};
 
 use crate::control::closed_loop::{ClosedLoopError, Scenario};
 use crate::control::compare::{config_for, score_suite_with, ControlTuning, SuiteScore};
@@ -50,7 +50,7 @@ pub fn held_out_scenarios() -> Result<Vec<Scenario>, ClosedLoopError> {
 
 /// A plant condition of the robustness table: name and the `[effects]` TOML appended to the
 /// nominal plant file (sizes of `diagnose::synth`'s truths), or an inertia factor.
-pub const CONDITIONS: [(&str, &str, f64); 6] = [
+pub const CONDITIONS: [(&str, &str, f64); 7] = [
     ("nominal", "", 1.0),
     (
         "joint friction 0.35 N m",
@@ -73,16 +73,73 @@ pub const CONDITIONS: [(&str, &str, f64); 6] = [
         1.0,
     ),
     ("11 x inertia load", "", 11.0),
+    (
+        SUPERVISION_OFF_DEAD_TIME,
+        "[effects.valve_dead_time]\ndelay_s = 0.008\n",
+        1.0,
+    ),
 ];
+
+/// The 8 ms valve dead time with the firmware's valve / supply supervision off
+/// ([`without_valve_supervision`]) for every law: the supervision's 10 ms residual window
+/// reads the delayed pressure response as a stuck exhaust and latches a fault at the start
+/// of every run whatever the law, so the row with it on measures the supervision, this one
+/// the control.
+pub const SUPERVISION_OFF_DEAD_TIME: &str = "valve dead time 8 ms, valve supervision off";
+
+/// `cfg` with the valve / supply residual never judging (thresholds 1e30: the configuration
+/// check refuses infinite ones): for measuring
+/// a control law on a plant whose valves the supervision's model does not describe.
+pub fn without_valve_supervision(mut cfg: ControllerConfig) -> ControllerConfig {
+    cfg.valve_model.residual_abs_pa_s = 1e30;
+    cfg.valve_model.integral_min_pa = 1e30;
+    cfg
+}
 
 /// The plant of one condition.
 pub fn condition_plant(nominal_toml: &str, effects: &str, inertia_factor: f64) -> Plant {
+    try_condition_plant(nominal_toml, effects, inertia_factor, "robustness.toml")
+        .expect("the conditions' TOML is valid on a valid nominal plant")
+}
+
+/// The plant of one condition, or the plant file's error (e.g. a plant file that already has
+/// the effect); `file` names the plant file in the error.
+pub fn try_condition_plant(
+    nominal_toml: &str,
+    effects: &str,
+    inertia_factor: f64,
+    file: &str,
+) -> Result<Plant, crate::plant::config::ConfigError> {
     let text = format!("{nominal_toml}\n{effects}");
-    let cfg = PlantConfig::from_toml_str(&text, "robustness.toml")
-        .expect("the conditions' TOML is valid on a valid nominal plant");
+    let cfg = PlantConfig::from_toml_str(&text, file)?;
     let mut p = Plant::from_config(&cfg);
     p.joint.inertia_kgm2 *= inertia_factor;
-    p
+    Ok(p)
+}
+
+/// The robust tuner's plants (`host-sim tune --robust`): the cost is the worst over
+/// [`ROBUST_COST_CONDITIONS`] (indices into [`CONDITIONS`]: nominal, 8 ms valve dead time
+/// with the valve supervision off) and
+/// the suite must stay stable ([`Cell`]'s criterion) under [`ROBUST_STABLE_CONDITIONS`]
+/// (11 x inertia load).
+pub const ROBUST_COST_CONDITIONS: [usize; 2] = [0, 6];
+/// See [`ROBUST_COST_CONDITIONS`].
+pub const ROBUST_STABLE_CONDITIONS: [usize; 1] = [5];
+
+/// The controller configuration a law runs with under the condition `name` (the valve
+/// supervision off for [`SUPERVISION_OFF_DEAD_TIME`], else `cfg`).
+pub fn condition_config(name: &str, cfg: ControllerConfig) -> ControllerConfig {
+    if name == SUPERVISION_OFF_DEAD_TIME {
+        without_valve_supervision(cfg)
+    } else {
+        cfg
+    }
+}
+
+/// True when `cfg` runs the suite on `plant` with no fault and every |angle error| below
+/// 0.5 rad (the table's "stable").
+pub fn stable_on(plant: &Plant, scenarios: &[Scenario], cfg: ControllerConfig) -> bool {
+    Cell::of(&score_suite_with(plant, scenarios, cfg)).stable
 }
 
 /// One cell of the table.
@@ -158,10 +215,11 @@ pub fn table(
         .filter(|(i, _)| which.is_empty() || which.contains(i))
         .map(|(_, (name, effects, inertia))| {
             let plant = condition_plant(nominal_toml, effects, *inertia);
+            let cfg = |c: ControllerConfig| condition_config(name, c);
             let cells = [
-                Cell::of(&score_suite_with(&plant, scenarios, cascade)),
-                Cell::of(&score_suite_with(&plant, scenarios, laws[1])),
-                Cell::of(&score_suite_with(&plant, scenarios, laws[2])),
+                Cell::of(&score_suite_with(&plant, scenarios, cfg(cascade))),
+                Cell::of(&score_suite_with(&plant, scenarios, cfg(laws[1]))),
+                Cell::of(&score_suite_with(&plant, scenarios, cfg(laws[2]))),
             ];
             Row {
                 condition: name.to_string(),

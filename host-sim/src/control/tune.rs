@@ -59,8 +59,17 @@ use crate::control::compare::{
     config_for, meets_step_requirement, suite_scenarios, tuning_cost, CascadeToml, ControlTuning,
     DpPidToml, GAIN_MARGIN, STEP_REQUIREMENTS,
 };
+use crate::control::robustness::{
+    condition_config, stable_on, try_condition_plant, CONDITIONS, ROBUST_COST_CONDITIONS, ROBUST_STABLE_CONDITIONS,
+};
 use crate::optimize::{nelder_mead, nelder_mead_restarted, pattern_search};
 use crate::Plant;
+
+/// What `--robust` does, for the log and the gains file's header.
+const ROBUST_NOTE: &str = "Robust cost (--robust), every law: the worst of this cost on the plant and on the\n\
+plant with an 8 ms valve dead time (valve supervision off: its residual window reads the\n\
+delay as a stuck exhaust whatever the law); infinite unless the suite stays stable (no fault,\n\
+|error| < 0.5 rad) on the plant with 11 x its inertia.";
 
 /// `host-sim tune`.
 #[derive(Args, Debug)]
@@ -90,6 +99,11 @@ pub struct TuneArgs {
     /// Do not impose the firmware's step tests on the cascade (report them only).
     #[arg(long)]
     pub no_step_constraints: bool,
+    /// Robustness term in every law's cost: the worse of the cost on the plant and on the
+    /// plant with an 8 ms valve dead time (valve supervision off), and infinite unless the suite stays stable (no
+    /// fault, |error| < 0.5 rad) on the plant with 11 x its inertia.
+    #[arg(long)]
+    pub robust: bool,
 }
 
 const KP_GRID: [f64; 7] = [3e4, 1e5, 2e5, 5e5, 1e6, 2e6, 5e6];
@@ -132,6 +146,11 @@ struct Ctx {
     log: Mutex<Vec<String>>,
     /// The cascade must meet the firmware's step tests ([`STEP_REQUIREMENTS`]).
     cascade_step_constraints: bool,
+    /// `--robust`: plants (and their condition names) whose tuning cost is also taken (the
+    /// cost is the worst).
+    robust_cost: Vec<(Plant, &'static str)>,
+    /// `--robust`: plants on which the suite must stay stable (else the cost is infinite).
+    robust_stable: Vec<(Plant, &'static str)>,
 }
 
 impl Ctx {
@@ -140,11 +159,30 @@ impl Ctx {
         self.cost_cfg(config_for(law, 1000.0)).0
     }
 
-    /// (tuning cost, nominal suite MSE, suite MSE at the gain margin) of `cfg`.
+    /// (tuning cost, nominal suite MSE, suite MSE at the gain margin) of `cfg`; with
+    /// `--robust` the cost is the worst over the robust plants too, and infinite when the suite
+    /// is not stable on one of the stability plants (the MSEs are the plant's own).
     fn cost_cfg(&self, cfg: ControllerConfig) -> (f64, f64, f64) {
         let n = self.runs.fetch_add(2, Ordering::Relaxed) + 2;
         self.progress.set_position(n as u64);
-        tuning_cost(&self.plant, &self.scenarios, cfg)
+        let (mut cost, mse, margin) = tuning_cost(&self.plant, &self.scenarios, cfg);
+        for p in &self.robust_cost {
+            if !cost.is_finite() {
+                break;
+            }
+            self.runs.fetch_add(2, Ordering::Relaxed);
+            cost = cost.max(tuning_cost(&p.0, &self.scenarios, condition_config(p.1, cfg)).0);
+        }
+        for p in &self.robust_stable {
+            if !cost.is_finite() {
+                break;
+            }
+            self.runs.fetch_add(1, Ordering::Relaxed);
+            if !stable_on(&p.0, &self.scenarios, condition_config(p.1, cfg)) {
+                cost = f64::INFINITY;
+            }
+        }
+        (cost, mse, margin)
     }
 
     /// The cascade's cost: [`Ctx::cost_cfg`], infinite when a finite-cost candidate fails one
@@ -523,6 +561,11 @@ fn tune_cascade(ctx: &Ctx, start: ControllerConfig) -> (ControllerConfig, f64) {
 
 /// Runs `host-sim tune`; returns the report for stdout.
 pub fn run_tune(a: &TuneArgs) -> Result<String> {
+    run_tune_text(a).map(|(report, _)| report)
+}
+
+/// [`run_tune`], also returning the text of the gains file it wrote.
+pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
     if !(1..=64).contains(&a.threads) {
         bail!("--threads {}: allowed 1..=64", a.threads);
     }
@@ -563,6 +606,25 @@ pub fn run_tune(a: &TuneArgs) -> Result<String> {
             .expect("static template"),
     );
     progress.enable_steady_tick(std::time::Duration::from_millis(200));
+    let (mut robust_cost, mut robust_stable) = (Vec::new(), Vec::new());
+    if a.robust {
+        let text = std::fs::read_to_string(&a.plant)
+            .with_context(|| format!("reading {}", a.plant.display()))?;
+        let file = a.plant.display().to_string();
+        for (which, out) in [
+            (&ROBUST_COST_CONDITIONS[..], &mut robust_cost),
+            (&ROBUST_STABLE_CONDITIONS[..], &mut robust_stable),
+        ] {
+            for &i in which.iter().filter(|&&i| i != 0) {
+                let (name, effects, inertia) = CONDITIONS[i];
+                out.push((
+                    try_condition_plant(&text, effects, inertia, &file)
+                        .with_context(|| format!("--robust: {file} with {name}"))?,
+                    name,
+                ));
+            }
+        }
+    }
     let ctx = Ctx {
         plant,
         scenarios,
@@ -571,6 +633,8 @@ pub fn run_tune(a: &TuneArgs) -> Result<String> {
         progress,
         log: Mutex::new(Vec::new()),
         cascade_step_constraints: !a.no_step_constraints,
+        robust_cost,
+        robust_stable,
     };
     ctx.say(format!(
         "tuning on {} (plant effects: {})",
@@ -579,6 +643,9 @@ pub fn run_tune(a: &TuneArgs) -> Result<String> {
     ));
     if let Some(t) = a.transition_s {
         ctx.say(format!("suite with every set-point move lasting {t} s"));
+    }
+    if a.robust {
+        ctx.say(ROBUST_NOTE.replace('\n', " "));
     }
     // With --warm-start, the gains stored in the output file are one more start of every search.
     let stored = if a.warm_start {
@@ -695,11 +762,11 @@ pub fn run_tune(a: &TuneArgs) -> Result<String> {
     let header = format!(
         "The three laws of the closed-loop comparison, each tuned on the suite\n\
          (host-sim control::compare::SUITE) by the same procedure and cost. Written by\n\
-         \x20 host-sim tune --plant {} --out {}{}\n\
+         \x20 host-sim tune --plant {} --out {}{}{}\n\
          with the firmware in the loop. Suite MSE = mean over the step_move, sine and\n\
          random_move scenarios of the MSE of the angle over every tick (a latched fault = infinite);\n\
          cost = the worse of the suite MSE at the gains and with the feedback gains x {}\n\
-         (gain margin, 6 dB), infinite if the step overshoots by more than 10 %.\n\
+         (gain margin, 6 dB), infinite if the step overshoots by more than 10 %.{}\n\
          Set-point differentiators of every law: {cutoff_hz} Hz.\n\
          [cascade]: the model-based cascade (ControllerConfig::reference with these gains);\n\
          \x20 Nelder-Mead (restarted) on log10 (kp, ki, kd, torque ki) + x0.7 / x1.4 polish from\n\
@@ -720,7 +787,13 @@ pub fn run_tune(a: &TuneArgs) -> Result<String> {
         a.plant.display(),
         a.out.display(),
         if a.warm_start { " --warm-start" } else { "" },
+        if a.robust { " --robust" } else { "" },
         GAIN_MARGIN,
+        if a.robust {
+            format!("\n{ROBUST_NOTE}")
+        } else {
+            String::new()
+        },
         if ctx.cascade_step_constraints {
             ", the firmware's step tests imposed"
         } else {
@@ -738,12 +811,14 @@ pub fn run_tune(a: &TuneArgs) -> Result<String> {
     );
     ctx.progress.finish_and_clear();
     tuning.write(&a.out, &header)?;
+    let text = tuning.to_toml_string(&header);
     let log = ctx.log.lock().expect("log lock").join("\n");
-    Ok(format!(
+    let report = format!(
         "{log}\n{}\nwrote {} ({} suite runs, {:.0} s)\n",
         step_tests.join("\n"),
         a.out.display(),
         ctx.runs.load(Ordering::Relaxed),
         t0.elapsed().as_secs_f64()
-    ))
+    );
+    Ok((report, text))
 }

@@ -342,8 +342,7 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
     // Stage 3: the gains (optional, minutes). Written (staged) by the tuner itself.
     if a.tune {
         let control = dest("control_tuned.toml");
-        let before = std::fs::read_to_string(&control).unwrap_or_default();
-        let r = crate::control::tune::run_tune(&crate::control::tune::TuneArgs {
+        let (r, text) = crate::control::tune::run_tune_text(&crate::control::tune::TuneArgs {
             plant: plant_path.clone(),
             out: control.clone(),
             threads: a.threads,
@@ -352,18 +351,10 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
             transition_s: None,
             cascade_start: Vec::new(),
             no_step_constraints: false,
+            robust: false,
         })
         .context("tuning the gains")?;
-        out += &format!(
-            "{} (previous [cascade]: {}):\n{r}",
-            control.display(),
-            numbers(&before)
-                .iter()
-                .filter(|(k, _)| k.starts_with("cascade."))
-                .map(|(k, v)| format!("{k} = {v:e}"))
-                .collect::<Vec<_>>()
-                .join(", ")
-        );
+        out += &format!("{r}{}:\n{}", control.display(), changes(&control, &text));
     }
     // Every stage passed: replace the files (staged in the command's transaction: all or none).
     for (name, text) in &files {
