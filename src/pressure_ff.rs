@@ -487,7 +487,6 @@ mod tests {
 /// `cargo test -p pam-firmware --lib --features pressure-ff`).
 #[cfg(all(test, feature = "pressure-ff"))]
 mod tick_tests {
-    use super::*;
     use crate::tick::{ControlTick, ControllerConfig, SensorFrame, Setpoint};
 
     fn cfg(enabled: bool) -> ControllerConfig {
