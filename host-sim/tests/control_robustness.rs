@@ -69,10 +69,19 @@ fn robust_gains_hold_the_lead_on_held_out_sequences() {
     for r in &rows {
         if r.condition.starts_with("valve dead time") && r.condition != SUPERVISION_OFF_DEAD_TIME {
             // The supervision, not the control: every law faults.
-            assert!(r.cells.iter().all(|c| !c.stable), "{}: {:?}", r.condition, r.cells);
+            assert!(
+                r.cells.iter().all(|c| !c.stable),
+                "{}: {:?}",
+                r.condition,
+                r.cells
+            );
             continue;
         }
-        assert!(r.cells[0].stable, "{}: cascade {:?}", r.condition, r.cells[0]);
+        assert!(
+            r.cells[0].stable,
+            "{}: cascade {:?}",
+            r.condition, r.cells[0]
+        );
         assert!(
             r.lead_over_pid() >= 2.0,
             "{}: lead {:.2}",

@@ -60,13 +60,15 @@ use crate::control::compare::{
     DpPidToml, GAIN_MARGIN, STEP_REQUIREMENTS,
 };
 use crate::control::robustness::{
-    condition_config, stable_on, try_condition_plant, CONDITIONS, ROBUST_COST_CONDITIONS, ROBUST_STABLE_CONDITIONS,
+    condition_config, stable_on, try_condition_plant, CONDITIONS, ROBUST_COST_CONDITIONS,
+    ROBUST_STABLE_CONDITIONS,
 };
 use crate::optimize::{nelder_mead, nelder_mead_restarted, pattern_search};
 use crate::Plant;
 
 /// What `--robust` does, for the log and the gains file's header.
-const ROBUST_NOTE: &str = "Robust cost (--robust), every law: the worst of this cost on the plant and on the\n\
+const ROBUST_NOTE: &str =
+    "Robust cost (--robust), every law: the worst of this cost on the plant and on the\n\
 plant with an 8 ms valve dead time (valve supervision off: its residual window reads the\n\
 delay as a stuck exhaust whatever the law); infinite unless the suite stays stable (no fault,\n\
 |error| < 0.5 rad) on the plant with 11 x its inertia.";
