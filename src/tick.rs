@@ -874,11 +874,7 @@ impl ControlTick {
     /// output is finite.
     #[inline]
     pub fn step(&mut self, frame: &SensorFrame, setpoint: &Setpoint, dt_s: f32) -> TickOutput {
-        if self.pending_command {
-            // The caller did not report the driver's openings: the command stands in.
-            let c = crate::valves::ValveOpenings::from_command(&self.last_command);
-            self.residual.openings(c.u_in1, c.u_ex1, c.u_in2, c.u_ex2);
-        }
+        self.command_stands_in();
         // Without the external torque: a separate instantiation, so the 1-DOF tick's code is
         // what it was before the torque input existed.
         let out = self.step_inner::<false>(frame, setpoint, 0.0, dt_s);
@@ -904,14 +900,21 @@ impl ControlTick {
         } else {
             0.0
         };
-        if self.pending_command {
-            let c = crate::valves::ValveOpenings::from_command(&self.last_command);
-            self.residual.openings(c.u_in1, c.u_ex1, c.u_in2, c.u_ex2);
-        }
+        self.command_stands_in();
         let out = self.step_inner::<true>(frame, setpoint, t, dt_s);
         self.last_command = out.valves;
         self.pending_command = true;
         out
+    }
+
+    /// When the caller did not report the driver's openings of the last command, the
+    /// command stands in for them in the valve / supply residual.
+    #[inline(always)]
+    fn command_stands_in(&mut self) {
+        if self.pending_command {
+            let c = crate::valves::ValveOpenings::from_command(&self.last_command);
+            self.residual.openings(c.u_in1, c.u_ex1, c.u_in2, c.u_ex2);
+        }
     }
 
     /// Reports what the valve driver switched for this tick's command (the return of

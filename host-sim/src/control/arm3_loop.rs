@@ -32,7 +32,7 @@ use serde::Deserialize;
 use crate::control::closed_loop::{FakePin, TrackingStats};
 use crate::io::arm3::Arm3Recording;
 use crate::io::scenario::{
-    key_error, ClosedLoopError, ScenarioHeader, SensorModel, SetpointProfile,
+    key_error, read_scenario_text, ClosedLoopError, ScenarioHeader, SensorModel, SetpointProfile,
 };
 use crate::plant::arm3::{Arm3, Arm3Inputs, Arm3Integrator, Arm3State};
 use crate::plant::ValveInputs;
@@ -96,12 +96,7 @@ pub struct ArmExpectations {
 impl ArmScenario {
     /// Reads and validates an arm scenario file.
     pub fn load(path: impl AsRef<Path>) -> Result<Self, ClosedLoopError> {
-        let path = path.as_ref();
-        let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| ClosedLoopError::Scenario {
-            file: file.clone(),
-            msg: e.to_string(),
-        })?;
+        let (text, file) = read_scenario_text(path.as_ref())?;
         Self::from_toml_str(&text, &file)
     }
 

@@ -407,12 +407,7 @@ impl Scenario {
 
     /// Reads and validates a scenario TOML file.
     pub fn load(path: impl AsRef<Path>) -> Result<Self, ClosedLoopError> {
-        let path = path.as_ref();
-        let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| ClosedLoopError::Scenario {
-            file: file.clone(),
-            msg: e.to_string(),
-        })?;
+        let (text, file) = read_scenario_text(path.as_ref())?;
         Self::from_toml_str(&text, &file)
     }
 
@@ -642,6 +637,18 @@ impl Scenario {
             }
         }
         Ok(s)
+    }
+}
+
+/// The text of a scenario file and the name its errors give it.
+pub(crate) fn read_scenario_text(path: &Path) -> Result<(String, String), ClosedLoopError> {
+    let file = path.display().to_string();
+    match std::fs::read_to_string(path) {
+        Ok(text) => Ok((text, file)),
+        Err(e) => Err(ClosedLoopError::Scenario {
+            file,
+            msg: e.to_string(),
+        }),
     }
 }
 

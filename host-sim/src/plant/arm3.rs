@@ -335,11 +335,6 @@ impl Arm3Config {
                     Bound::Positive,
                 ),
                 (
-                    format!("{k}friction.lugre.static_nm"),
-                    f.lugre.map_or(f.coulomb_nm, |l| l.static_nm - f.coulomb_nm),
-                    Bound::NonNegative,
-                ),
-                (
                     format!("{k}friction.lugre.stribeck_velocity_rad_s"),
                     f.lugre.map_or(1.0, |l| l.stribeck_velocity_rad_s),
                     Bound::Positive,
@@ -408,6 +403,19 @@ impl Arm3Config {
                     Bound::NonNegative => "a finite number >= 0",
                 };
                 return Err(bad(key, format!("must be {need}, got {v}")));
+            }
+        }
+        for (i, j) in self.joints().iter().enumerate() {
+            if let Some(l) = &j.friction.lugre {
+                if !(l.static_nm.is_finite() && l.static_nm >= j.friction.coulomb_nm) {
+                    return Err(bad(
+                        &format!("joint{}.friction.lugre.static_nm", i + 1),
+                        format!(
+                            "must be a finite number >= coulomb_nm ({}), got {}",
+                            j.friction.coulomb_nm, l.static_nm
+                        ),
+                    ));
+                }
             }
         }
         let b = self.valve.critical_ratio;
