@@ -34,6 +34,17 @@
 //! (inlet: classified as above; exhaust: stuck closed, or inlet stuck open if the pressure
 //! rose), and the sums start over.
 //!
+//! A valve dead time (command to flow) up to `dead_time_max_s` (at most one window) is no
+//! fault although the firmware does not know it: the per-window threshold widens by the
+//! share `dead_time_max_s / T` of the change of the inflow and outflow terms since the last
+//! window (the late flow of the last one lands in this one); the integrated check also counts
+//! what the window after an opening sees (only in the valve's favour: the gas returning to
+//! the wall temperature after a fast fill or vent runs the other way, by a few hundred kPa/s
+//! that the isothermal model does not know), takes the other valve's term with or without
+//! its late flow, whichever leaves more to the valve judged, and leaves the last
+//! `dead_time_max_s` of expected change for the next judgement. The price: a fresh opening
+//! is judged up to one window later.
+//!
 //! The classes can overlap (a stuck-open exhaust while inflating at a small duty looks like
 //! a lost supply); the fault is still that muscle's air path, and the safe state is the
 //! same. While faulted (valves closed in
@@ -84,6 +95,10 @@ pub struct ValveModelParams {
     /// ... and less than this fraction of it was seen, the valve's path is faulty (stuck
     /// closed, or for the inlet also a lost supply / a stuck-open exhaust).
     pub integral_fraction: f32,
+    /// The longest valve dead time (command to flow) the supervision tolerates without
+    /// knowing it [s], at most one window: a valve that answers up to this late is no fault
+    /// (see [the module documentation](self)). 0 = the valves answer within the tick.
+    pub dead_time_max_s: f32,
 }
 
 impl ValveModelParams {
@@ -109,6 +124,9 @@ impl ValveModelParams {
         // the model a factor of 4 of error (polytropic exponent, supply droop, PWM edges).
         integral_min_pa: 5_000.0,
         integral_fraction: 0.25,
+        // One window: solenoid valves of this size answer in 2-10 ms. It delays the
+        // judgement of a fresh opening by as much (a stuck-closed valve: <= 30 ms).
+        dead_time_max_s: 0.010,
     };
 
     /// True when every parameter is usable.
@@ -132,6 +150,9 @@ impl ValveModelParams {
             && self.integral_fraction.is_finite()
             && self.integral_fraction > 0.0
             && self.integral_fraction < 1.0
+            && self.dead_time_max_s.is_finite()
+            && self.dead_time_max_s >= 0.0
+            && self.dead_time_max_s <= 0.1
     }
 
     /// ISO 6358 flow function (ellipse, no laminar patch) of the pressure ratio `s`.
@@ -206,6 +227,12 @@ struct MuscleWindow {
     in_seen_pa: f32,
     ex_expected_pa: f32,
     ex_seen_pa: f32,
+    /// The last window's inflow and outflow terms [Pa/s], and whether its inlet (exhaust)
+    /// was open: with a valve dead time, a window still sees part of the last one's flow.
+    q_in_last_pa_s: f32,
+    q_out_last_pa_s: f32,
+    in_was_open: bool,
+    ex_was_open: bool,
 }
 
 /// The residual monitor of both muscles ([module documentation](self)).
@@ -246,6 +273,10 @@ impl ResidualMonitor {
                 in_seen_pa: 0.0,
                 ex_expected_pa: 0.0,
                 ex_seen_pa: 0.0,
+                q_in_last_pa_s: 0.0,
+                q_out_last_pa_s: 0.0,
+                in_was_open: false,
+                ex_was_open: false,
             }; 2],
             angle_start_rad: 0.0,
             switched_ticks: 0,
@@ -270,6 +301,10 @@ impl ResidualMonitor {
             w.in_seen_pa = 0.0;
             w.ex_expected_pa = 0.0;
             w.ex_seen_pa = 0.0;
+            w.q_in_last_pa_s = 0.0;
+            w.q_out_last_pa_s = 0.0;
+            w.in_was_open = false;
+            w.ex_was_open = false;
         }
         self.m[0].above = 0;
         self.m[0].below = 0;
@@ -358,10 +393,28 @@ impl ResidualMonitor {
                 .rate_terms_pa_s(p_mid, chi, chi_rate, u_in, u_ex);
             let measured = (p_end - w.p_start_pa) / t;
             let e = measured - (q_in + q_out + q_vol);
+            // A valve answering up to `dead_time_max_s` late moves the flow of the last
+            // `lag_s` of the previous window into this one: the threshold widens by that
+            // part of the change of the flow terms between the two windows.
+            let lag_s = if self.params.dead_time_max_s < t {
+                self.params.dead_time_max_s
+            } else {
+                t
+            };
+            let lag = lag_s / t;
             let r = self.params.residual_abs_pa_s
                 + self.params.residual_rel
-                    * (libm::fabsf(q_in) + libm::fabsf(q_out) + libm::fabsf(q_vol));
+                    * (libm::fabsf(q_in) + libm::fabsf(q_out) + libm::fabsf(q_vol))
+                + lag
+                    * (libm::fabsf(q_in - w.q_in_last_pa_s)
+                        + libm::fabsf(q_out - w.q_out_last_pa_s));
+            // The inflow / outflow terms had the valves answered `lag_s` late: the last
+            // window's flow goes on for that long.
+            let q_in_late = q_in + lag * (w.q_in_last_pa_s - q_in);
+            let q_out_late = q_out + lag * (w.q_out_last_pa_s - q_out);
             let w = &mut self.m[i];
+            w.q_in_last_pa_s = q_in;
+            w.q_out_last_pa_s = q_out;
             // NaN residuals count as neither (the channel checks catch NaN samples).
             w.above = if e > r { w.above.saturating_add(1) } else { 0 };
             w.below = if e < -r { w.below.saturating_add(1) } else { 0 };
@@ -369,26 +422,55 @@ impl ResidualMonitor {
             // below the threshold, but its expected effect adds up over the windows in which
             // the valve was open (windows with it closed add nothing and clear nothing). Once
             // the expected change is large enough the path is judged, and the sums start over.
-            if u_in > 0.0 && q_in > 0.0 {
-                w.in_expected_pa += q_in * t;
-                w.in_seen_pa += (measured - q_vol - q_out) * t;
+            // With a tolerated dead time, the window after an opening still counts what it
+            // sees (the late part of the flow), and the last `lag_s` of expected change is
+            // not judged yet (it may not have arrived).
+            // What one valve is seen doing is the measured change net of the other terms;
+            // the other valve's term is taken with or without the late flow, whichever
+            // leaves more to this valve (an exhaust still venting while the inlet opens must
+            // not count against the inlet). A window after an opening (the valve closed
+            // again) adds what it sees only in the valve's favour: it holds the late flow of
+            // a slow valve, but also the gas returning to the wall temperature after a fast
+            // fill or vent (a few hundred kPa/s the isothermal model does not know), which
+            // runs the other way.
+            let in_open = u_in > 0.0 && q_in > 0.0;
+            if in_open || w.in_was_open {
+                let q = if in_open { q_in } else { 0.0 };
+                let q_out_other = if q_out_late < q_out {
+                    q_out_late
+                } else {
+                    q_out
+                };
+                let seen_pa = (measured - q_vol - q_out_other) * t;
+                w.in_expected_pa += q * t;
+                if in_open || seen_pa > 0.0 {
+                    w.in_seen_pa += seen_pa;
+                }
             }
-            if u_ex > 0.0 && q_out < 0.0 {
-                w.ex_expected_pa -= q_out * t;
-                w.ex_seen_pa -= (measured - q_vol - q_in) * t;
+            w.in_was_open = in_open && lag_s > 0.0;
+            let ex_open = u_ex > 0.0 && q_out < 0.0;
+            if ex_open || w.ex_was_open {
+                let q = if ex_open { q_out } else { 0.0 };
+                let q_in_other = if q_in_late > q_in { q_in_late } else { q_in };
+                let seen_pa = -(measured - q_vol - q_in_other) * t;
+                w.ex_expected_pa -= q * t;
+                if ex_open || seen_pa > 0.0 {
+                    w.ex_seen_pa += seen_pa;
+                }
             }
-            let in_judged = w.in_expected_pa >= self.params.integral_min_pa;
-            let in_lost =
-                in_judged && !(w.in_seen_pa >= self.params.integral_fraction * w.in_expected_pa);
+            w.ex_was_open = ex_open && lag_s > 0.0;
+            let in_due_pa = w.in_expected_pa - if in_open { q_in * lag_s } else { 0.0 };
+            let in_judged = in_due_pa >= self.params.integral_min_pa;
+            let in_lost = in_judged && !(w.in_seen_pa >= self.params.integral_fraction * in_due_pa);
             if in_judged {
                 w.in_expected_pa = 0.0;
                 w.in_seen_pa = 0.0;
             }
-            let ex_judged = w.ex_expected_pa >= self.params.integral_min_pa;
-            let ex_lost =
-                ex_judged && !(w.ex_seen_pa >= self.params.integral_fraction * w.ex_expected_pa);
+            let ex_due_pa = w.ex_expected_pa + if ex_open { q_out * lag_s } else { 0.0 };
+            let ex_judged = ex_due_pa >= self.params.integral_min_pa;
+            let ex_lost = ex_judged && !(w.ex_seen_pa >= self.params.integral_fraction * ex_due_pa);
             // Exhausting and the pressure even rose: air comes in, the inlet is stuck open.
-            let ex_rose = w.ex_seen_pa < -self.params.integral_fraction * w.ex_expected_pa;
+            let ex_rose = w.ex_seen_pa < -self.params.integral_fraction * ex_due_pa;
             if ex_judged {
                 w.ex_expected_pa = 0.0;
                 w.ex_seen_pa = 0.0;
@@ -490,7 +572,16 @@ mod tests {
     /// Runs `ticks` ticks with a fixed inflate duty on muscle 1 (muscle 2 closed), the angle
     /// at 0 and muscle 1's pressure following `p1(k)`; returns the tick of the first fault.
     fn run(duty: f32, ticks: u32, p1: impl Fn(u32) -> f32) -> Option<(u32, FaultSet)> {
-        let mut m = ResidualMonitor::new(ValveModelParams::REFERENCE, &JointGeometry::REFERENCE);
+        run_with(ValveModelParams::REFERENCE, duty, ticks, p1)
+    }
+
+    fn run_with(
+        params: ValveModelParams,
+        duty: f32,
+        ticks: u32,
+        p1: impl Fn(u32) -> f32,
+    ) -> Option<(u32, FaultSet)> {
+        let mut m = ResidualMonitor::new(params, &JointGeometry::REFERENCE);
         for k in 0..ticks {
             let f = m.observe(true, p1(k), 300_000.0, 0.0, DT);
             if !f.is_empty() {
@@ -553,6 +644,106 @@ mod tests {
         let a = first_fault(false);
         assert!(a.is_some());
         assert_eq!(a, first_fault(true));
+    }
+
+    /// Muscle 1's pressure when the inlet opens at tick 0 at full duty and the air arrives
+    /// `delay_ticks` later, rising at the model's rate (linearised at 300 kPa).
+    fn delayed_rise(delay_ticks: u32) -> impl Fn(u32) -> f32 {
+        let rate = expected_rate(1.0);
+        move |k| 300_000.0 + rate * k.saturating_sub(delay_ticks) as f32 * DT
+    }
+
+    #[test]
+    fn a_valve_answering_8_ms_late_is_no_fault() {
+        // 60 ticks: the linearised rise stays below the supply.
+        assert!(run(1.0, 60, delayed_rise(8)).is_none());
+        // ... and the same response is a fault when no dead time is tolerated (the
+        // tolerance is what makes it pass).
+        let strict = ValveModelParams {
+            dead_time_max_s: 0.0,
+            ..ValveModelParams::REFERENCE
+        };
+        assert!(run_with(strict, 1.0, 60, delayed_rise(8)).is_some());
+    }
+
+    #[test]
+    fn a_pulse_answering_late_after_its_window_is_no_fault() {
+        // One 1-tick inlet pulse at the end of every other window, the air arriving 8 ticks
+        // later, in the window after it, when the inlet is closed again.
+        let rate = expected_rate(1.0);
+        let pulse_pa = rate * DT;
+        let mut m = ResidualMonitor::new(ValveModelParams::REFERENCE, &JointGeometry::REFERENCE);
+        let mut p = 300_000.0f32;
+        for k in 0..2000u32 {
+            // pulse at ticks 9, 29, 49, ... arrives at 17, 37, ...
+            if k >= 17 && (k - 17) % 20 == 0 {
+                p += pulse_pa;
+            }
+            let f = m.observe(true, p, 300_000.0, 0.0, DT);
+            assert!(f.is_empty(), "tick {k}: {f:?}");
+            let duty = if k % 20 == 9 { 1.0 } else { 0.0 };
+            m.openings(duty, 0.0, 0.0, 0.0);
+        }
+    }
+
+    #[test]
+    fn exhaust_pulses_on_a_chamber_warming_back_are_no_fault() {
+        // Muscle 2 at 300 kPa, a 1-tick exhaust pulse every 17 ticks dropping the pressure
+        // by the model's amount, and between the pulses the pressure rising back at
+        // 180 kPa/s (the gas warming to the wall temperature after the vent), as a chamber
+        // with heat transfer does; the isothermal model expects no rise.
+        let g = JointGeometry::REFERENCE;
+        let (_, q_out, _) = ValveModelParams::REFERENCE.rate_terms_pa_s(
+            300_000.0,
+            g.initial_contraction,
+            0.0,
+            0.0,
+            1.0,
+        );
+        let drop_pa = -q_out * DT;
+        let run = |rise_pa_s: f32| {
+            let mut m = ResidualMonitor::new(ValveModelParams::REFERENCE, &g);
+            let mut p = 300_000.0f32;
+            for k in 0..1000u32 {
+                let f = m.observe(true, 300_000.0, p, 0.0, DT);
+                if !f.is_empty() {
+                    return Some((k, f));
+                }
+                let pulse = k % 17 == 0;
+                m.openings(0.0, 0.0, 0.0, if pulse { 1.0 } else { 0.0 });
+                p += if pulse { -drop_pa } else { rise_pa_s * DT };
+            }
+            None
+        };
+        assert_eq!(run(180_000.0), None);
+        // ... while the same pulses with no drop at all are a stuck-closed exhaust.
+        let stuck = {
+            let mut m = ResidualMonitor::new(ValveModelParams::REFERENCE, &g);
+            let mut first = None;
+            for k in 0..1000u32 {
+                let f = m.observe(true, 300_000.0, 300_000.0, 0.0, DT);
+                if !f.is_empty() {
+                    first = Some(f);
+                    break;
+                }
+                m.openings(0.0, 0.0, 0.0, if k % 17 == 0 { 1.0 } else { 0.0 });
+            }
+            first
+        };
+        assert!(
+            stuck.is_some_and(|f| f.contains(FaultCode::ExhaustStuckClosed2)),
+            "{stuck:?}"
+        );
+    }
+
+    #[test]
+    fn a_stuck_closed_inlet_is_still_seen_within_30_ms() {
+        let (k, f) = run(1.0, 200, |_| 300_000.0).expect("a stuck-closed inlet is seen");
+        assert!(k <= 30, "seen after {k} ticks");
+        assert!(
+            f.contains(FaultCode::InletStuckClosed1) || f.contains(FaultCode::SupplyLost),
+            "{f:?}"
+        );
     }
 
     #[test]

@@ -83,9 +83,10 @@ enum Command {
     /// not this plant (nothing named, the JSON is written); 2: bad input.
     ///
     /// The recording needs t_s,u_in1,u_ex1,u_in2,u_ex2 and the measured angle_deg,p1_kpa,
-    /// p2_kpa (f1_n,f2_n used when present), as in RECORDING.md.
+    /// p2_kpa (f1_n,f2_n used when present), as in RECORDING.md; with an arm plant, the same
+    /// columns per joint with a _j1, _j2, _j3 suffix.
     #[command(
-        after_help = "Example:\n  host-sim diagnose --plant ../shared/plant/reference-1dof.toml --recording ../shared/conformance/pulses_thermal.csv --json diagnosis.json --report report/"
+        after_help = "Examples:\n  host-sim diagnose --plant ../shared/plant/reference-1dof.toml --recording ../shared/conformance/pulses_thermal.csv --json diagnosis.json --report report/\n  host-sim diagnose --plant host-sim/plants/arm3-seed001.toml --recording target/demo/arm_sine.csv --json arm.json"
     )]
     Diagnose(DiagnoseArgs),
     /// Diagnose every recording (*.csv) of a directory against one plant, in parallel: one
@@ -129,7 +130,9 @@ enum Command {
 
 #[derive(Args)]
 struct DiagnoseArgs {
-    /// Nominal plant file (TOML) the user believes in.
+    /// Nominal plant file (TOML) the user believes in. A 3-DOF arm file (`kind = "arm3"`)
+    /// diagnoses each joint of a 3-joint recording (`_j1`.. `_j3` columns, every angle
+    /// recorded): which joint departs and what.
     #[arg(long, value_name = "P.toml")]
     plant: PathBuf,
     /// Training recording of the real rig (RECORDING.md).
@@ -592,6 +595,56 @@ fn only_common(model: &Recording, reference: &Recording) -> Recording {
     r
 }
 
+/// `diagnose` with a 3-DOF arm plant file: every joint through the 1-DOF pipeline
+/// (`host_sim::diagnose::arm3`); one JSON for the arm, a report per joint (DIR/jointN/).
+fn run_diagnose_arm(
+    a: &DiagnoseArgs,
+    opts: &host_sim::diagnose::DiagnoseOptions,
+    bar: &ProgressBar,
+) -> Result<ExitCode> {
+    use host_sim::diagnose::arm3::diagnose_arm;
+    use host_sim::diagnose::report::write_report;
+    use host_sim::io::arm3::Arm3Recording;
+    if a.check.is_some() {
+        anyhow::bail!(
+            "--check: not supported with an arm plant (the held-out part is the tail of --recording)"
+        );
+    }
+    let cfg = host_sim::plant::arm3::Arm3Config::load(&a.plant)?;
+    let rec = Arm3Recording::read(&a.recording)?;
+    let result = diagnose_arm(&cfg, &rec, opts, &|done, total, msg| {
+        bar.set_length(total);
+        bar.set_position(done);
+        bar.set_message(msg.to_string());
+    });
+    bar.finish_and_clear();
+    let d = result.with_context(|| format!("{}: diagnosis failed", a.recording.display()))?;
+    let json = serde_json::to_string_pretty(&d.to_json())? + "\n";
+    if let Some(dir) = &a.report {
+        for (i, j) in d.joints.iter().enumerate() {
+            let sub = dir.join(format!("joint{}", i + 1));
+            let joint_json = serde_json::to_string_pretty(&j.to_json())? + "\n";
+            write_report(
+                &sub,
+                j,
+                &joint_json,
+                &format!("{} (joint {})", a.recording.display(), i + 1),
+                None,
+            )
+            .map_err(|e| anyhow::anyhow!("report {}: {e}", sub.display()))?;
+        }
+    }
+    host_sim::identify::write_atomic(&a.json, json.as_bytes())?;
+    use std::io::Write as _;
+    let mut out = std::io::stdout().lock();
+    let _ = write!(out, "{}wrote {}\n", d.answer(), a.json.display());
+    Ok(if d.joints.iter().all(|j| j.verdict.is_answer()) {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(3)
+    })
+}
+
 fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
     use host_sim::diagnose::{
         answer::failure_json, diagnose, report::write_report, DiagnoseError, DiagnoseOptions,
@@ -608,9 +661,6 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
         validate::distinct_outputs(&inputs, &[("--report", &report_json), ("--report", &index)])
             .map_err(anyhow::Error::msg)?;
     }
-    let cfg = host_sim::PlantConfig::load(&a.plant)?;
-    let train = Recording::read(&a.recording)?;
-    let check = a.check.as_ref().map(Recording::read).transpose()?;
     let bar = ProgressBar::with_draw_target(Some(100), ProgressDrawTarget::stderr());
     bar.set_style(
         ProgressStyle::with_template("{spinner} diagnose [{bar:40}] {pos}/{len} {msg} {elapsed}")
@@ -621,6 +671,12 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
         threads: a.threads,
         ..DiagnoseOptions::default()
     };
+    if host_sim::plant::arm3::is_arm3_file(&a.plant)? {
+        return run_diagnose_arm(a, &opts, &bar);
+    }
+    let cfg = host_sim::PlantConfig::load(&a.plant)?;
+    let train = Recording::read(&a.recording)?;
+    let check = a.check.as_ref().map(Recording::read).transpose()?;
     let result = diagnose(&cfg, &train, check.as_ref(), &opts, &|done, total, msg| {
         bar.set_length(total);
         bar.set_position(done);

@@ -81,10 +81,9 @@ pub const CONDITIONS: [(&str, &str, f64); 7] = [
 ];
 
 /// The 8 ms valve dead time with the firmware's valve / supply supervision off
-/// ([`without_valve_supervision`]) for every law: the supervision's 10 ms residual window
-/// reads the delayed pressure response as a stuck exhaust and latches a fault at the start
-/// of every run whatever the law, so the row with it on measures the supervision, this one
-/// the control.
+/// ([`without_valve_supervision`]) for every law: the control alone. The supervision
+/// tolerates a dead time up to one residual window, so the row with it on must give the
+/// same runs (asserted in the tests).
 pub const SUPERVISION_OFF_DEAD_TIME: &str = "valve dead time 8 ms, valve supervision off";
 
 /// `cfg` with the valve / supply residual never judging (thresholds 1e30: the configuration

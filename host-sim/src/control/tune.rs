@@ -142,9 +142,9 @@ struct Ctx {
     runs: AtomicUsize,
     /// Cut-off of the set-point differentiators of every law tuned [Hz].
     cutoff_hz: f32,
-    /// Progress (a spinner on a terminal, hidden otherwise) and the log lines.
+    /// Progress (a bar over the searches on a terminal, hidden otherwise) and the log lines.
     progress: ProgressBar,
-    /// The log of the search (printed above the spinner, returned in the report).
+    /// The log of the search (printed above the bar, returned in the report).
     log: Mutex<Vec<String>>,
     /// The cascade must meet the firmware's step tests ([`STEP_REQUIREMENTS`]).
     cascade_step_constraints: bool,
@@ -166,7 +166,7 @@ impl Ctx {
     /// is not stable on one of the stability plants (the MSEs are the plant's own).
     fn cost_cfg(&self, cfg: ControllerConfig) -> (f64, f64, f64) {
         let n = self.runs.fetch_add(2, Ordering::Relaxed) + 2;
-        self.progress.set_position(n as u64);
+        self.progress.set_prefix(format!("{n} runs"));
         let (mut cost, mse, margin) = tuning_cost(&self.plant, &self.scenarios, cfg);
         for p in &self.robust_cost {
             if !cost.is_finite() {
@@ -203,7 +203,7 @@ impl Ctx {
         c
     }
 
-    /// Logs a line above the progress spinner.
+    /// Logs a line above the progress bar.
     fn say(&self, line: String) {
         self.progress.set_message(line.clone());
         if self.progress.is_hidden() {
@@ -602,10 +602,15 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
             s.set_transition_s(t);
         }
     }
-    let progress = ProgressBar::new_spinner();
+    // A bar over the searches (each cascade start twice, the PD, the PID), the closed-loop
+    // runs so far beside it; the total is set once the cascade's starts are known.
+    let progress = ProgressBar::new(0);
     progress.set_style(
-        ProgressStyle::with_template("{spinner} {elapsed} {pos} runs  {wide_msg}")
-            .expect("static template"),
+        ProgressStyle::with_template(
+            "{spinner} tune [{bar:30}] {pos}/{len} searches, {prefix} {elapsed}  {wide_msg}",
+        )
+        .expect("static template")
+        .progress_chars("=> "),
     );
     progress.enable_steady_tick(std::time::Duration::from_millis(200));
     let (mut robust_cost, mut robust_stable) = (Vec::new(), Vec::new());
@@ -686,6 +691,7 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
         ));
     }
     starts.extend(cascade_starts);
+    ctx.progress.set_length(2 * starts.len() as u64 + 2);
     let j_plant = ctx.plant.joint.inertia_kgm2 as f32;
     let mut best_cascade: Option<(ControllerConfig, f64)> = None;
     let mut cascade_from = Vec::new();
@@ -699,6 +705,7 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
             start.feedforward.inertia_kgm2 = j_kgm2;
             start.feedforward.cutoff_hz = cutoff_hz;
             let (cfg, c) = tune_cascade(&ctx, start);
+            ctx.progress.inc(1);
             cascade_from.push(format!(
                 "({kp:.4}, {ki:.4}, {kd:.4}, {:.4}, J {j_kgm2}) -> {c:.4e}",
                 start.torque.ki_per_s
@@ -730,12 +737,14 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
         threads,
         stored.as_ref().map(|t| with_cutoff(t.pd.gains())),
     );
+    ctx.progress.inc(1);
     let (pid, c_pid, note_pid) = tune(
         &ctx,
         true,
         threads,
         stored.as_ref().map(|t| with_cutoff(t.pid.gains())),
     );
+    ctx.progress.inc(1);
     let (_, c_default, c_default_margin) = ctx.cost_cfg(reference);
     let mut step_tests = Vec::new();
     for (name, cfg) in [

@@ -19,6 +19,7 @@
 //!    `nothing_missing`, `unexplained` or `not_this_plant`, the JSON and the text.
 
 pub mod answer;
+pub mod arm3;
 pub mod baseline;
 pub mod batch;
 pub mod black_box;

@@ -184,7 +184,9 @@ impl Evidence {
             } else {
                 f_model
             };
-            torque_residual[k] = plant.joint.inertia_kgm2 * alpha[k] - r * (f_used[0] - f_used[1]);
+            let load_nm = plant.load.as_ref().map_or(0.0, |l| l.at(k));
+            torque_residual[k] =
+                plant.joint.inertia_kgm2 * alpha[k] - r * (f_used[0] - f_used[1]) - load_nm;
             for (i, c) in [Channel::F1N, Channel::F2N].into_iter().enumerate() {
                 if let Some(f) = meas(c) {
                     force_res[i][k] = f[k] - f_model[i];

@@ -45,9 +45,11 @@ use serde::Deserialize;
 use crate::plant::config::{
     ConfigError, EnvironmentConfig, InitialConfig, MuscleConfig, ValveConfig,
 };
+use crate::plant::effects::{Effects, EffectsConfig, Supply};
 use crate::plant::muscle::Muscle;
 use crate::plant::pressure;
 use crate::plant::valve::Iso6358Valve;
+use crate::plant::Measurement;
 use crate::plant::ValveInputs;
 use crate::sim::SolverOptions;
 
@@ -130,6 +132,13 @@ pub struct ArmJointConfig {
     pub friction: FrictionConfig,
     /// `angle_rad`, `velocity_rad_s`, `p1_gauge_pa`, `p2_gauge_pa` (the 1-DOF `[initial]`).
     pub initial: InitialConfig,
+    /// `[jointN.effects.*]`: the 1-DOF effects catalogue on this joint and its two muscles
+    /// (the same tables as a 1-DOF plant file's `[effects]`; angles in the joint's own frame,
+    /// 0 at `neutral_angle_rad`). On the arm: the joint-torque, chamber-flow, pressure-law,
+    /// muscle-friction and sensor-calibration effects; a valve dead time, sensor lag, supply
+    /// model or thermal chamber is refused (not modelled on the arm).
+    #[serde(default)]
+    pub effects: EffectsConfig,
 }
 
 /// `[jointN.friction]`: seed 001 eq. 7, f_c sgn(w) + f_d w + f_e w^2 sgn(w) + f_g w^3.
@@ -416,6 +425,32 @@ impl Arm3Config {
                         ),
                     ));
                 }
+            }
+        }
+        for (i, j) in self.joints().iter().enumerate() {
+            let prefix = format!("joint{}.", i + 1);
+            j.effects.validate(path).map_err(|e| match e {
+                ConfigError::Invalid { path, key, message } => ConfigError::Invalid {
+                    path,
+                    key: format!("{prefix}{key}"),
+                    message,
+                },
+                other => other,
+            })?;
+            let active = Effects::from_config(&j.effects, &self.valve);
+            let unsupported = [
+                ("valve_dead_time", active.valve_dead_time_s().is_some()),
+                ("sensor_lag", !active.sensor_filters(1e-3).is_empty()),
+                ("supply_drop", !matches!(active.supply(), Supply::Ideal)),
+                ("thermal_chamber", active.thermal_chamber().is_some()),
+            ];
+            if let Some((name, _)) = unsupported.iter().find(|(_, on)| *on) {
+                return Err(bad(
+                    &format!("{prefix}effects.{name}"),
+                    "is not modelled on the 3-DOF arm (joint torque, chamber flow, pressure \
+                     law, muscle friction and sensor calibration effects are)"
+                        .into(),
+                ));
             }
         }
         let b = self.valve.critical_ratio;
@@ -770,6 +805,8 @@ pub struct Arm3 {
     pub links: Links,
     pub pairs: [MusclePair; 3],
     pub friction: [Eq7Friction; 3],
+    /// The enabled `[jointN.effects]` of each joint.
+    pub effects: [Effects; 3],
     pub initial: Arm3State,
 }
 
@@ -814,6 +851,7 @@ impl Arm3 {
             links: Links::from_config(&c.links),
             pairs: joints.map(pair),
             friction: joints.map(|j| Eq7Friction::from_config(&j.friction)),
+            effects: joints.map(|j| Effects::from_config(&j.effects, &c.valve)),
             initial,
         };
         if c.settle_initial_angles {
@@ -837,15 +875,33 @@ impl Arm3 {
     pub fn muscle_torques_nm(&self, x: &Arm3State) -> [f64; 3] {
         let mut tau = [0.0; 3];
         for (i, pair) in self.pairs.iter().enumerate() {
-            let f = pair.tensions_n(
-                self.p_atm_pa,
-                x.p_abs_pa[i],
-                x.angles_rad[i],
-                x.velocities_rad_s[i],
-            );
+            let f = self.tensions_n(i, x);
             tau[i] = (f[0] - f[1]) * pair.sprocket_radius_m;
         }
         tau
+    }
+
+    /// Tension of muscle `m` of joint `i`: the pair's, with that joint's muscle-friction
+    /// effect if enabled (as the 1-DOF plant's).
+    #[inline(always)]
+    fn tension_n(&self, i: usize, p_gauge_pa: f64, chi: f64, dchi: f64) -> f64 {
+        let muscle = &self.pairs[i].muscle;
+        match self.effects[i].muscle_friction_n(p_gauge_pa, dchi) {
+            None => muscle.tension_n(p_gauge_pa, chi, dchi),
+            Some(friction_n) => muscle.tension_with_friction_n(p_gauge_pa, chi, dchi, friction_n),
+        }
+    }
+
+    /// (F1, F2) of joint `i` in state `x`.
+    pub fn tensions_n(&self, i: usize, x: &Arm3State) -> [f64; 2] {
+        let pair = &self.pairs[i];
+        let chi = pair.contractions(x.angles_rad[i]);
+        let dchi = pair.contraction_rates(x.velocities_rad_s[i]);
+        let p = x.p_abs_pa[i];
+        [
+            self.tension_n(i, p[0] - self.p_atm_pa, chi[0], dchi[0]),
+            self.tension_n(i, p[1] - self.p_atm_pa, chi[1], dchi[1]),
+        ]
     }
 
     /// Friction torques F(q') of eq. 7 (regularised sign; the LuGre model needs the state:
@@ -870,26 +926,33 @@ impl Arm3 {
             let dchi = pair.contraction_rates(x.velocities_rad_s[i]);
             let u_in = [u[i].u_in1, u[i].u_in2];
             let u_ex = [u[i].u_ex1, u[i].u_ex2];
+            let effects = &self.effects[i];
+            let pressure_factor = effects.pressure_rate_factor();
             let mut f = [0.0; 2];
             for m in 0..2 {
                 let p = x.p_abs_pa[i][m];
-                f[m] = pair.muscle.tension_n(p - self.p_atm_pa, chi[m], dchi[m]);
-                let mut q = 0.0;
+                f[m] = self.tension_n(i, p - self.p_atm_pa, chi[m], dchi[m]);
+                let mut q = effects.chamber_flow_m3_s(m, p, self.p_atm_pa);
                 if u_in[m] != 0.0 {
                     q += u_in[m] * self.valve.flow_m3_s(self.p_supply_abs_pa, p);
                 }
                 if u_ex[m] != 0.0 {
                     q -= u_ex[m] * self.valve.flow_m3_s(p, self.p_atm_pa);
                 }
-                d.p_abs_pa[i][m] = pressure::pressure_rate_pa_s(
-                    self.p_atm_pa,
-                    p,
-                    q,
-                    pair.muscle.volume_m3(chi[m]),
-                    pair.muscle.volume_rate_m3_s(chi[m], dchi[m]),
-                );
+                d.p_abs_pa[i][m] = pressure_factor
+                    * pressure::pressure_rate_pa_s(
+                        self.p_atm_pa,
+                        p,
+                        q,
+                        pair.muscle.volume_m3(chi[m]),
+                        pair.muscle.volume_rate_m3_s(chi[m], dchi[m]),
+                    );
             }
-            tau[i] = (f[0] - f[1]) * pair.sprocket_radius_m;
+            tau[i] = (f[0] - f[1]) * pair.sprocket_radius_m
+                + effects.joint_torque_nm(
+                    x.angles_rad[i] - pair.neutral_angle_rad,
+                    x.velocities_rad_s[i],
+                );
         }
         let mut fr = [0.0; 3];
         for i in 0..3 {
@@ -907,18 +970,20 @@ impl Arm3 {
     /// The recorded channels of each joint.
     pub fn measure(&self, x: &Arm3State) -> [JointMeasurement; 3] {
         std::array::from_fn(|i| {
-            let f = self.pairs[i].tensions_n(
-                self.p_atm_pa,
-                x.p_abs_pa[i],
-                x.angles_rad[i],
-                x.velocities_rad_s[i],
-            );
-            JointMeasurement {
+            let f = self.tensions_n(i, x);
+            let m = self.effects[i].calibrate(Measurement {
                 angle_deg: x.angles_rad[i].to_degrees(),
                 p1_kpa: (x.p_abs_pa[i][0] - self.p_atm_pa) / 1000.0,
                 p2_kpa: (x.p_abs_pa[i][1] - self.p_atm_pa) / 1000.0,
                 f1_n: f[0],
                 f2_n: f[1],
+            });
+            JointMeasurement {
+                angle_deg: m.angle_deg,
+                p1_kpa: m.p1_kpa,
+                p2_kpa: m.p2_kpa,
+                f1_n: m.f1_n,
+                f2_n: m.f2_n,
             }
         })
     }

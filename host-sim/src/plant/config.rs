@@ -22,6 +22,10 @@ pub struct PlantConfig {
     /// Optional, switchable model extensions; absent in the nominal reference files.
     #[serde(default)]
     pub effects: EffectsConfig,
+    /// An external torque series for open-loop replays (not in a plant file: set in code,
+    /// e.g. by the arm's diagnosis for one joint).
+    #[serde(skip)]
+    pub load: Option<crate::plant::LoadTorque>,
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]

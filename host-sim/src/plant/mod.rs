@@ -63,6 +63,30 @@ pub struct AuxState {
     pub supply_abs_pa: f64,
     /// Gas temperature of muscles 1 and 2.
     pub gas_temperature_k: [f64; 2],
+    /// An external torque on the joint [N m], held over the sample (never integrated: its
+    /// rate is 0). From the plant's [`LoadTorque`] series in an open-loop replay, else 0.
+    pub load_torque_nm: f64,
+}
+
+/// An external torque on the joint, one value per sample of a replay, held over the sample:
+/// a load a rig measures (a torque sensor, a motor applying it), or, for one joint of an
+/// arm, what the other joints and gravity do to it (`crate::diagnose::arm3`). Not part of a
+/// plant file: set by the code that builds the plant for a replay.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoadTorque {
+    /// Torque at sample k [N m]; past the end, the last value.
+    pub torque_nm: std::sync::Arc<[f64]>,
+}
+
+impl LoadTorque {
+    /// The torque held over sample `k`.
+    #[inline]
+    pub fn at(&self, k: usize) -> f64 {
+        match self.torque_nm.get(k) {
+            Some(v) => *v,
+            None => self.torque_nm.last().copied().unwrap_or(0.0),
+        }
+    }
 }
 
 /// Which [`AuxState`] components a plant integrates.
@@ -171,6 +195,8 @@ pub struct Plant {
     pub valve: Iso6358Valve,
     pub effects: Effects,
     pub initial: PlantState,
+    /// An external torque series an open-loop replay applies ([`LoadTorque`]); `None`: none.
+    pub load: Option<LoadTorque>,
 }
 
 impl Plant {
@@ -193,6 +219,7 @@ impl Plant {
                 p1_abs_pa: c.initial.p1_gauge_pa + p_atm_pa,
                 p2_abs_pa: c.initial.p2_gauge_pa + p_atm_pa,
             },
+            load: c.load.clone(),
         }
     }
 
@@ -280,6 +307,7 @@ impl Plant {
         AuxState {
             supply_abs_pa: self.p_supply_abs_pa,
             gas_temperature_k: [t, t],
+            load_torque_nm: self.load.as_ref().map_or(0.0, |l| l.at(0)),
         }
     }
 
@@ -384,7 +412,8 @@ impl Plant {
         }
         let torque = self.joint.muscle_torque_nm(tension)
             + self.effects.joint_torque_nm(x.angle_rad, x.velocity_rad_s)
-            + self.joint.end_stop_torque_nm(x.angle_rad, x.velocity_rad_s);
+            + self.joint.end_stop_torque_nm(x.angle_rad, x.velocity_rad_s)
+            + aux.load_torque_nm;
         let d_reservoir = match supply {
             Supply::Reservoir {
                 tank_volume_m3,
@@ -405,6 +434,7 @@ impl Plant {
             AuxState {
                 supply_abs_pa: d_reservoir,
                 gas_temperature_k: dt,
+                load_torque_nm: 0.0,
             },
         )
     }

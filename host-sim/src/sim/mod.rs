@@ -265,6 +265,16 @@ impl<'a> Integrator<'a> {
         self.aux.supply_abs_pa = p_abs_pa;
     }
 
+    /// Sets the external torque on the joint held from now on [N m] (see
+    /// [`crate::plant::LoadTorque`]).
+    pub fn set_load_torque_nm(&mut self, torque_nm: f64) {
+        if torque_nm != self.aux.load_torque_nm {
+            self.aux.load_torque_nm = torque_nm;
+            // The stored f(state, inputs) was evaluated under the old torque.
+            self.fsal = None;
+        }
+    }
+
     /// The supply reservoir pressure now (absolute); p_s0 for a plant without a reservoir.
     pub fn supply_abs_pa(&self) -> f64 {
         self.aux.supply_abs_pa
@@ -569,7 +579,14 @@ pub fn simulate_with_progress(
     let mut k = 0;
     while k < inputs.len() {
         let u = inputs[k];
-        let run = inputs[k..].iter().take_while(|v| **v == u).count();
+        // An external torque series changes every sample: one segment per sample.
+        let run = match &plant.load {
+            None => inputs[k..].iter().take_while(|v| **v == u).count(),
+            Some(load) => {
+                integ.set_load_torque_nm(load.at(k));
+                1
+            }
+        };
         integ.advance_samples(u, dt_s, run, |x| states.push(*x))?;
         k += run;
         progress(k);
@@ -596,6 +613,12 @@ pub fn simulate_stamped(
     let n = inputs.len();
     if let Some((index, u)) = inputs.iter().enumerate().find(|(_, u)| !valid_inputs(u)) {
         return Err(SimError::Input { index, inputs: *u });
+    }
+    if plant.load.is_some() {
+        return Err(SimError::Integration {
+            t_s: 0.0,
+            message: "an external torque series is replayed at uniform samples only".into(),
+        });
     }
     if t_s.len() != n || n == 0 {
         return Err(SimError::Integration {

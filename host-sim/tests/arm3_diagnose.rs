@@ -1,0 +1,276 @@
+//! The arm's diagnosis (`host_sim::diagnose::arm3`, `host-sim diagnose --plant arm3.toml`):
+//! recordings of seed 001's arm with the firmware in the loop, made by the arm's own
+//! right-hand side (not the 1-DOF plant the diagnosis replays), with encoder quantisation and
+//! pressure noise added here; the diagnosis must say which joint departs and name what
+//! departs there, and nothing on a nominal arm.
+
+mod common;
+use common::*;
+
+use host_sim::control::arm3_loop::{run_arm, ArmScenario};
+use host_sim::diagnose::arm3::diagnose_arm;
+use host_sim::diagnose::DiagnoseOptions;
+use host_sim::io::arm3::{Arm3Recording, JOINTS};
+use host_sim::io::recording::Channel;
+use host_sim::plant::arm3::{Arm3, Arm3Config};
+use pam_firmware::arm::ArmConfig;
+use rand::{rngs::StdRng, Rng, SeedableRng};
+use rand_distr::StandardNormal;
+
+/// The arm's sine scenario, shortened to `duration_s`.
+fn scenario(duration_s: f64) -> ArmScenario {
+    let text = std::fs::read_to_string(root().join("scenarios/arm3/sine.toml"))
+        .unwrap()
+        .replace("duration_s = 12.0", &format!("duration_s = {duration_s}"))
+        .replace("start_s = 2.0", "start_s = 0.5");
+    ArmScenario::from_toml_str(&text, "sine.toml").unwrap()
+}
+
+/// The nominal arm file with `extra` appended (concealed effects).
+fn truth_config(extra: &str) -> Arm3Config {
+    let text = std::fs::read_to_string(arm3_plant()).unwrap() + "\n" + extra;
+    Arm3Config::from_toml_str(&text, "truth.toml").unwrap()
+}
+
+/// A closed-loop recording of the truth arm: angles quantised like an 8000-count encoder,
+/// pressures with 0.5 kPa of white noise, no force channels.
+fn recording(truth: &Arm3Config, seed: u64) -> Arm3Recording {
+    recording_with(truth, seed, false)
+}
+
+/// [`recording`], with the muscle tensions (2 N of white noise) when `forces`.
+fn recording_with(truth: &Arm3Config, seed: u64, forces: bool) -> Arm3Recording {
+    let arm = Arm3::from_config(truth).unwrap();
+    let run = run_arm(&arm, &scenario(8.0), ArmConfig::reference(1000.0)).unwrap();
+    let mut rec = run.to_recording(&arm, "truth", "sine");
+    let mut rng = StdRng::seed_from_u64(seed);
+    let q_deg = 360.0 / 8000.0;
+    for j in 0..JOINTS {
+        for c in Channel::ALL {
+            let Some(v) = rec.outputs[j][c.index()].as_mut() else {
+                continue;
+            };
+            match c {
+                Channel::AngleDeg => v.iter_mut().for_each(|x| *x = (*x / q_deg).round() * q_deg),
+                Channel::P1Kpa | Channel::P2Kpa => v.iter_mut().for_each(|x| {
+                    let g: f64 = rng.sample(StandardNormal);
+                    *x += 0.5 * g
+                }),
+                Channel::F1N | Channel::F2N if forces => v.iter_mut().for_each(|x| {
+                    let g: f64 = rng.sample(StandardNormal);
+                    *x += 2.0 * g
+                }),
+                Channel::F1N | Channel::F2N => rec.outputs[j][c.index()] = None,
+            }
+        }
+    }
+    rec
+}
+
+fn diagnose(truth_extra: &str, seed: u64) -> host_sim::diagnose::arm3::ArmDiagnosis {
+    let nominal = Arm3Config::load(arm3_plant()).unwrap();
+    let rec = recording(&truth_config(truth_extra), seed);
+    let d = diagnose_arm(&nominal, &rec, &DiagnoseOptions::default(), &|_, _, _| {}).unwrap();
+    println!("{}", d.answer());
+    d
+}
+
+fn named(d: &host_sim::diagnose::arm3::ArmDiagnosis, joint: usize) -> Vec<String> {
+    d.joints[joint - 1]
+        .effects
+        .iter()
+        .map(|e| e.id.clone())
+        .chain(
+            d.joints[joint - 1]
+                .recalibrated
+                .iter()
+                .map(|r| r.key.clone()),
+        )
+        .collect()
+}
+
+#[test]
+fn a_nominal_arm_departs_nowhere() {
+    let d = diagnose("", 5);
+    assert_eq!(d.departing_joints(), Vec::<usize>::new());
+}
+
+#[test]
+fn a_leak_in_one_muscle_of_joint_2_is_named_there_and_nowhere_else() {
+    let d = diagnose(
+        "[joint2.effects.leakage]\nsonic_conductance_m3_per_s_pa = 6.0e-10\nmuscle = 2\n",
+        6,
+    );
+    assert_eq!(d.departing_joints(), vec![2]);
+    assert_eq!(named(&d, 2), vec!["leakage_muscle2".to_string()]);
+    let j = &d.joints[1];
+    for (ch, before) in &j.heldout_before {
+        let after = j.heldout_after[ch];
+        assert!(
+            after >= *before - 0.5,
+            "{ch}: held-out fit {before} -> {after}"
+        );
+    }
+}
+
+#[test]
+fn the_cli_diagnoses_an_arm_recording_and_refuses_a_check_recording() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec_path = dir.path().join("arm.csv");
+    let truth = truth_config(
+        "[joint3.effects.joint_friction]\ncoulomb_nm = 0.35\nbreakaway_nm = 0.35\n\
+         stribeck_velocity_rad_s = 1.0\nviscous_nm_s_per_rad = 0.08\nsmoothing_velocity_rad_s = 0.01\n",
+    );
+    recording(&truth, 7).write(&rec_path).unwrap();
+    let json = dir.path().join("arm.json");
+    let stdout = run_ok(&[
+        &"diagnose",
+        &"--plant",
+        &arm3_plant(),
+        &"--recording",
+        &rec_path,
+        &"--json",
+        &json,
+    ]);
+    println!("{stdout}");
+    assert!(stdout.contains("Arm: joint 3 departs"), "{stdout}");
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(v["departing_joints"], serde_json::json!([3]));
+    assert_eq!(v["joints"][2]["joint"], serde_json::json!(3));
+    // A check recording is not supported with an arm plant: exit 2, no JSON written.
+    let json2 = dir.path().join("arm2.json");
+    let err = run_exits(
+        2,
+        &[
+            &"diagnose",
+            &"--plant",
+            &arm3_plant(),
+            &"--recording",
+            &rec_path,
+            &"--check",
+            &rec_path,
+            &"--json",
+            &json2,
+        ],
+    );
+    assert!(err.contains("--check"), "{err}");
+    assert!(!json2.exists());
+}
+
+/// The concealed truths of the effect registry that act on an arm joint (the arm refuses
+/// valve dead time, sensor lag, supply models and the thermal chamber per joint), each on
+/// each joint, plus eq. 7's own friction terms three times larger than the file says (a
+/// mis-set value of another functional form than the candidate's Coulomb + viscous).
+/// Prints the table and the rates (`cargo test --release -p host-sim --test arm3_diagnose
+/// -- --ignored --nocapture`, about 5 minutes each).
+#[test]
+#[ignore]
+fn every_arm_truth_on_every_joint_from_angles_and_pressures() {
+    let (joints, effects, n) = matrix(false);
+    assert!(joints * 10 >= n * 9, "{joints}/{n}");
+    assert!(effects * 10 >= n * 6, "{effects}/{n}");
+}
+
+/// [`every_arm_truth_on_every_joint_from_angles_and_pressures`] with force sensors on every
+/// muscle.
+#[test]
+#[ignore]
+fn every_arm_truth_on_every_joint_with_force_sensors() {
+    let (joints, effects, n) = matrix(true);
+    assert!(joints * 10 >= n * 9, "{joints}/{n}");
+    assert!(effects * 10 >= n * 8, "{effects}/{n}");
+}
+
+/// Runs the matrix; returns (cases with the right joint, with the right effect, cases).
+fn matrix(forces: bool) -> (usize, usize, usize) {
+    let registry = [
+        "joint_friction",
+        "joint_friction_stribeck",
+        "leakage",
+        "leakage_one_muscle",
+        "muscle_hysteresis",
+        "polytropic",
+        "sensor_offset",
+        "sensor_gain_one_channel",
+    ];
+    let nominal_text = std::fs::read_to_string(arm3_plant()).unwrap();
+    let nominal = Arm3Config::from_toml_str(&nominal_text, "arm3-seed001.toml").unwrap();
+    let mut rows = Vec::new();
+    let mut seed = 100;
+    for joint in 1..=JOINTS {
+        let mut cases: Vec<(String, String, Arm3Config)> = registry
+            .iter()
+            .map(|name| {
+                let toml = host_sim::diagnose::synth::effect_toml(name, 1e-3)
+                    .unwrap()
+                    .replace("[effects.", &format!("[joint{joint}.effects."));
+                (
+                    name.to_string(),
+                    host_sim::diagnose::synth::expected_id(name).to_string(),
+                    truth_config(&toml),
+                )
+            })
+            .collect();
+        // eq. 7 x3 on this joint: scale f_c and f_d in its [jointN.friction] table.
+        let mut text = String::new();
+        let mut in_table = false;
+        for line in nominal_text.lines() {
+            if line.starts_with('[') {
+                in_table = line.starts_with(&format!("[joint{joint}.friction]"));
+            }
+            let key = line.split('=').next().unwrap_or("").trim();
+            if in_table && (key == "coulomb_nm" || key == "viscous_nm_s_per_rad") {
+                let v: f64 = line
+                    .split('=')
+                    .nth(1)
+                    .unwrap()
+                    .split('#')
+                    .next()
+                    .unwrap()
+                    .trim()
+                    .parse()
+                    .unwrap();
+                text.push_str(&format!("{key} = {}\n", 3.0 * v));
+            } else {
+                text.push_str(line);
+                text.push('\n');
+            }
+        }
+        cases.push((
+            "eq7_friction_x3".into(),
+            "joint_friction".into(),
+            Arm3Config::from_toml_str(&text, "truth.toml").unwrap(),
+        ));
+        for (name, expected, truth) in cases {
+            seed += 1;
+            let rec = recording_with(&truth, seed, forces);
+            let d =
+                diagnose_arm(&nominal, &rec, &DiagnoseOptions::default(), &|_, _, _| {}).unwrap();
+            let departing = d.departing_joints();
+            let got = named(&d, joint);
+            let joint_ok = departing == vec![joint];
+            let effect_ok = joint_ok && got.first().map(String::as_str) == Some(expected.as_str());
+            rows.push((joint, name, expected, departing, got, joint_ok, effect_ok));
+        }
+    }
+    println!(
+        "| joint | truth | expected | departing joints | named on the joint | joint | effect |"
+    );
+    println!("|---|---|---|---|---|---|---|");
+    for (j, name, exp, dep, got, jo, eo) in &rows {
+        println!(
+            "| {j} | {name} | {exp} | {dep:?} | {} | {} | {} |",
+            got.join(", "),
+            if *jo { "right" } else { "WRONG" },
+            if *eo { "right" } else { "WRONG" }
+        );
+    }
+    let n = rows.len();
+    let joints_right = rows.iter().filter(|r| r.5).count();
+    let effects_right = rows.iter().filter(|r| r.6).count();
+    println!(
+        "force channels: {forces}; joint right {joints_right}/{n}, effect right {effects_right}/{n}"
+    );
+    (joints_right, effects_right, n)
+}
