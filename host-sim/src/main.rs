@@ -331,20 +331,22 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
         return run_simulate_arm3(a, inputs_path);
     }
     let plant = Plant::load(plant_path)?;
-    let rec = Recording::read(inputs_path)?;
-    if let Some(named) = rec.meta("plant") {
-        let given = plant_path
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned());
-        if given.as_deref() != Path::new(named).file_name().and_then(|n| n.to_str()) {
+    let opts = a.solver_options()?;
+    if a.plot.is_none() {
+        if let Some(done) = simulate_streaming(a, &plant, inputs_path, &opts)? {
+            warn_other_plant(&done.metadata, plant_path, inputs_path);
+            println!("plant effects: {}", plant.effects_summary());
             eprintln!(
-                "warning: {} was recorded on plant `{named}`, simulating {}",
-                inputs_path.display(),
-                plant_path.display()
+                "{}: {} samples, {}",
+                a.out.display(),
+                done.samples,
+                done.stats
             );
+            return Ok(ExitCode::SUCCESS);
         }
     }
-    let opts = a.solver_options()?;
+    let rec = Recording::read(inputs_path)?;
+    warn_other_plant(&rec.metadata, plant_path, inputs_path);
     let dt = rec.sample_period_s();
     let bar = ProgressBar::with_draw_target(Some(rec.len() as u64), ProgressDrawTarget::stderr());
     bar.set_style(
@@ -376,6 +378,65 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
         plot_comparison(p, Some(&rec), &out)?;
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// `simulate --inputs` through the streaming pipeline (`io::replay_stream`): read,
+/// simulate and write overlap, memory stays bounded. `None` when the stream leaves the run to
+/// the whole-recording path (a jittered recording, or any error, which that path reports).
+fn simulate_streaming(
+    a: &SimulateArgs,
+    plant: &Plant,
+    inputs_path: &Path,
+    opts: &SolverOptions,
+) -> Result<Option<host_sim::io::replay_stream::StreamedReplay>> {
+    let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr());
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} simulate {pos} samples {elapsed}")
+            .expect("static template"),
+    );
+    let mut done = None;
+    let written = host_sim::io::atomic::write_with(&a.out, |w| {
+        let metadata = |dt_s: f64| {
+            let mut m = simulate_metadata(&a.plant, inputs_path, dt_s, opts, "simulate");
+            m.push(("effects".into(), plant.effects_summary()));
+            m
+        };
+        done = host_sim::io::replay_stream::replay_file(
+            plant,
+            inputs_path,
+            opts,
+            metadata,
+            w,
+            &|k| bar.set_position(k as u64),
+        )?;
+        match done {
+            Some(_) => Ok(()),
+            None => Err(std::io::Error::other("left to the whole-recording path")),
+        }
+    });
+    bar.finish_and_clear();
+    match (written, done) {
+        (Ok(()), done) => Ok(done),
+        (Err(_), None) => Ok(None),
+        (Err(e), Some(_)) => Err(anyhow::anyhow!("{}: {e}", a.out.display())),
+    }
+}
+
+/// Warns when the recording's `plant` metadata names another plant file than `plant_path`.
+fn warn_other_plant(metadata: &[(String, String)], plant_path: &Path, inputs_path: &Path) {
+    let Some((_, named)) = metadata.iter().find(|(k, _)| k == "plant") else {
+        return;
+    };
+    let given = plant_path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned());
+    if given.as_deref() != Path::new(named).file_name().and_then(|n| n.to_str()) {
+        eprintln!(
+            "warning: {} was recorded on plant `{named}`, simulating {}",
+            inputs_path.display(),
+            plant_path.display()
+        );
+    }
 }
 
 impl SimulateArgs {
