@@ -618,15 +618,28 @@ fn run_fit(a: &FitArgs) -> Result<ExitCode> {
         validate::distinct_outputs(&[("A", &a.a), ("B", &a.b)], &[("--plot", p)])
             .map_err(anyhow::Error::msg)?;
     }
-    let ra = Recording::read(&a.a)?;
-    let rb = Recording::read(&a.b)?;
-    let fits = compare(&ra, &rb)
-        .with_context(|| format!("cannot compare {} with {}", a.a.display(), a.b.display()))?;
+    // Without a plot the files are compared streaming (memory: their time columns); the
+    // whole recordings are read for a plot, or to report an error.
+    let streamed = match a.plot {
+        None => host_sim::fit::compare_files(&a.a, &a.b),
+        Some(_) => None,
+    };
+    let fits = match streamed {
+        Some(fits) => fits,
+        None => {
+            let ra = Recording::read(&a.a)?;
+            let rb = Recording::read(&a.b)?;
+            let fits = compare(&ra, &rb).with_context(|| {
+                format!("cannot compare {} with {}", a.a.display(), a.b.display())
+            })?;
+            if let Some(p) = &a.plot {
+                plot_comparison(p, Some(&ra), &only_common(&rb, &ra))?;
+            }
+            fits
+        }
+    };
     println!("reference: {}\nmodel:     {}", a.a.display(), a.b.display());
     print!("{}", format_table(&fits));
-    if let Some(p) = &a.plot {
-        plot_comparison(p, Some(&ra), &only_common(&rb, &ra))?;
-    }
     if let Some(min) = a.min_fit {
         let bad: Vec<_> = fits
             .iter()

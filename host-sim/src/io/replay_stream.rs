@@ -298,6 +298,97 @@ fn simulate_chunks(
     Ok(integ.stats())
 }
 
+/// The rows of a recording file one at a time, read block by block (memory: one block and
+/// one chunk of parsed rows), for the streaming commands that need every column (`fit`).
+/// Only plain rows are taken ([`RowParser::parse_plain_rows`]); anything else is `Err(())`,
+/// and the caller leaves the file to [`Recording::read`](super::recording::Recording::read),
+/// which words the error.
+pub(crate) struct RowStream {
+    path: std::path::PathBuf,
+    /// The metadata and header lines (for [`Self::check_time`]).
+    head: String,
+    parser: RowParser,
+    blocks: Blocks,
+    /// The unparsed rest of the current block.
+    block: Vec<u8>,
+    block_pos: usize,
+    rows: Vec<(f64, [f64; 4], [f64; 5])>,
+    row_pos: usize,
+}
+
+/// A parsed row: time, openings, output channels by [`Channel::index`] (absent ones 0).
+pub(crate) type ParsedRow = (f64, [f64; 4], [f64; 5]);
+
+impl RowStream {
+    /// Opens `path` and reads its metadata and header; `None` if the stream cannot take it.
+    pub(crate) fn open(path: &Path) -> Option<Self> {
+        let mut blocks = Blocks::new(std::fs::File::open(path).ok()?);
+        let first = blocks.next_block().ok()??;
+        let text = std::str::from_utf8(&first).ok()?;
+        let table = Table::parse(text, path).ok()?;
+        let parser = RowParser::of(&table).ok()?;
+        let (data, _) = table.data();
+        let data_offset = data.as_ptr() as usize - first.as_ptr() as usize;
+        let head = text[..data_offset].to_owned();
+        drop(table);
+        Some(Self {
+            path: path.to_owned(),
+            head,
+            parser,
+            blocks,
+            block: first,
+            block_pos: data_offset,
+            rows: Vec::new(),
+            row_pos: 0,
+        })
+    }
+
+    /// The output channels the file has, by [`Channel::index`].
+    pub(crate) fn channels(&self) -> [bool; 5] {
+        self.parser.out_cols.map(|c| c.is_some())
+    }
+
+    /// The next row; `Ok(None)` at the end of the file, `Err(())` if a row is not plain.
+    pub(crate) fn next_row(&mut self) -> Result<Option<ParsedRow>, ()> {
+        while self.row_pos == self.rows.len() {
+            self.rows.clear();
+            self.row_pos = 0;
+            if self.block_pos == self.block.len() {
+                match self.blocks.next_block() {
+                    Ok(Some(b)) => {
+                        if std::str::from_utf8(&b).is_err() {
+                            return Err(());
+                        }
+                        self.block = b;
+                        self.block_pos = 0;
+                    }
+                    Ok(None) => return Ok(None),
+                    Err(_) => return Err(()),
+                }
+            }
+            let rest = &self.block[self.block_pos..];
+            let end = memchr::memchr_iter(b'\n', rest)
+                .nth(CHUNK_ROWS - 1)
+                .map_or(rest.len(), |i| i + 1);
+            if memchr::memchr(b'"', &rest[..end]).is_some()
+                || !self.parser.parse_plain_rows(&rest[..end], &mut self.rows)
+            {
+                return Err(());
+            }
+            self.block_pos += end;
+        }
+        self.row_pos += 1;
+        Ok(Some(self.rows[self.row_pos - 1]))
+    }
+
+    /// Whether the whole time column `t_s` passes the checks of
+    /// [`Recording::read`](super::recording::Recording::read) (at least two rows, increasing,
+    /// no gap, the declared sample period).
+    pub(crate) fn check_time(&self, t_s: &[f64]) -> bool {
+        Table::parse(&self.head, &self.path).is_ok_and(|t| t.check_time(t_s, |_| 0).is_ok())
+    }
+}
+
 /// Rows as the reader passes them on: time stamps and valve openings.
 #[derive(Default)]
 struct RowChunk {
