@@ -35,7 +35,7 @@ const MAX_SCALED: f64 = 1e15;
 /// x86-64 target has no rounding instruction): truncation is the floor of a non-negative
 /// value, and `x - floor` is exact below 2^52, so comparing it with 0.5 rounds half away
 /// from zero as `f64::round` does.
-#[inline]
+#[inline(always)]
 fn floor_round(x: f64) -> (f64, f64) {
     debug_assert!((0.0..4_503_599_627_370_496.0).contains(&x));
     let floor = x as u64 as f64;
@@ -63,11 +63,29 @@ pub fn push_fixed(buf: &mut Vec<u8>, v: f64, decimals: usize) {
 /// can prove its result; `None` otherwise (then [`push_fixed`] takes the exact algorithm).
 #[inline]
 pub fn fixed_into(out: &mut [u8], v: f64, decimals: usize) -> Option<usize> {
-    debug_assert!(decimals < POW10.len());
-    if !(decimals < POW10.len() && v.is_finite()) {
+    // One instance per number of decimals: the divisions by 10^decimals are by constants.
+    match decimals {
+        0 => fixed_into_const::<0>(out, v),
+        1 => fixed_into_const::<1>(out, v),
+        2 => fixed_into_const::<2>(out, v),
+        3 => fixed_into_const::<3>(out, v),
+        4 => fixed_into_const::<4>(out, v),
+        5 => fixed_into_const::<5>(out, v),
+        6 => fixed_into_const::<6>(out, v),
+        7 => fixed_into_const::<7>(out, v),
+        8 => fixed_into_const::<8>(out, v),
+        9 => fixed_into_const::<9>(out, v),
+        _ => None,
+    }
+}
+
+/// [`fixed_into`] with `D` decimals.
+#[inline(always)]
+fn fixed_into_const<const D: usize>(out: &mut [u8], v: f64) -> Option<usize> {
+    if !v.is_finite() {
         return None;
     }
-    let scale = POW10[decimals];
+    let scale = POW10[D];
     let x = v.abs() * scale as f64;
     if !(x < MAX_SCALED) {
         return None;
@@ -85,11 +103,12 @@ pub fn fixed_into(out: &mut [u8], v: f64, decimals: usize) -> Option<usize> {
         out[0] = b'-';
         k = 1;
     }
-    k += put_u64(&mut out[k..], n / scale);
-    if decimals > 0 {
+    let int = n / scale;
+    k += put_u64(&mut out[k..], int);
+    if D > 0 {
         out[k] = b'.';
-        put_padded(&mut out[k + 1..k + 1 + decimals], n % scale);
-        k += 1 + decimals;
+        put_padded(&mut out[k + 1..k + 1 + D], n - int * scale);
+        k += 1 + D;
     }
     Some(k)
 }
@@ -119,39 +138,57 @@ pub fn shortest_into(out: &mut [u8], v: f64) -> Option<usize> {
         return None;
     }
     let a = v.abs();
-    for decimals in [0usize, 3, 6, 9] {
-        let scale = POW10[decimals];
-        let x = a * scale as f64;
-        if x >= MAX_SCALED {
-            return None;
-        }
-        let n = floor_round(x).1;
-        // `n` and `scale` are exact, so the quotient is the correctly rounded value of the
-        // decimal n / 10^decimals: exactly what parsing that decimal gives.
-        if n / scale as f64 == a {
-            let n = n as u64;
-            let mut k = 0;
-            if v < 0.0 {
-                out[0] = b'-';
-                k = 1;
-            }
-            k += put_u64(&mut out[k..], n / scale);
-            let mut frac = n % scale;
-            if frac != 0 {
-                // Without the trailing zeros.
-                let mut width = decimals;
-                while frac % 10 == 0 {
-                    frac /= 10;
-                    width -= 1;
-                }
-                out[k] = b'.';
-                put_padded(&mut out[k + 1..k + 1 + width], frac);
-                k += 1 + width;
-            }
-            return Some(k);
-        }
+    let r = shortest_with::<0>(out, v, a)?;
+    if r.is_some() {
+        return r;
     }
-    None
+    let r = shortest_with::<3>(out, v, a)?;
+    if r.is_some() {
+        return r;
+    }
+    let r = shortest_with::<6>(out, v, a)?;
+    if r.is_some() {
+        return r;
+    }
+    shortest_with::<9>(out, v, a)?
+}
+
+/// One step of [`shortest_into`]: `|v| = a` as a decimal of `D` fractional digits.
+/// `None`: too large for the integer path (give up); `Some(None)`: not with `D` digits.
+#[inline(always)]
+fn shortest_with<const D: usize>(out: &mut [u8], v: f64, a: f64) -> Option<Option<usize>> {
+    let scale = POW10[D];
+    let x = a * scale as f64;
+    if x >= MAX_SCALED {
+        return None;
+    }
+    let n = floor_round(x).1;
+    // `n` and `scale` are exact, so the quotient is the correctly rounded value of the
+    // decimal n / 10^D: exactly what parsing that decimal gives.
+    if n / scale as f64 != a {
+        return Some(None);
+    }
+    let n = n as u64;
+    let mut k = 0;
+    if v < 0.0 {
+        out[0] = b'-';
+        k = 1;
+    }
+    let int = n / scale;
+    k += put_u64(&mut out[k..], int);
+    let mut frac = n - int * scale;
+    if frac != 0 {
+        // Without the trailing zeros.
+        let mut width = D;
+        while frac % 10 == 0 {
+            frac /= 10;
+            width -= 1;
+        }
+        out[k] = b'.';
+        put_padded(&mut out[k + 1..k + 1 + width], frac);
+        k += 1 + width;
+    }
+    Some(Some(k))
 }
 
 /// The value of a plain decimal field (`[-]digits[.digits]`, at most 15 digits, nothing
@@ -196,7 +233,7 @@ pub fn parse_plain_decimal(field: &[u8]) -> Option<f64> {
 }
 
 /// Writes the decimal digits of `n` at the start of `out`; the number of digits.
-#[inline]
+#[inline(always)]
 fn put_u64(out: &mut [u8], n: u64) -> usize {
     let mut digits = 1;
     while digits < 20 && n >= POW10_U64[digits] {
@@ -218,7 +255,7 @@ const POW10_U64: [u64; 20] = {
 };
 
 /// Writes `n` (< 10^out.len()) into all of `out` as digits, zero-padded on the left.
-#[inline]
+#[inline(always)]
 fn put_padded(out: &mut [u8], mut n: u64) {
     for d in out.iter_mut().rev() {
         *d = b'0' + (n % 10) as u8;
