@@ -1,7 +1,7 @@
 //! Streaming open-loop replay of a recording file (`simulate --inputs`): a pipeline of three
 //! threads over chunks of rows,
 //!
-//! reader (file blocks -> rows) -> simulator (integration + sensor path) -> formatter/writer,
+//! reader (file blocks -> rows) -> simulator (integration, sensor path, formatting) -> writer,
 //!
 //! so reading, simulating and writing overlap, and memory does not grow with the recording
 //! beyond its time column (kept for the checks that need every stamp: the median step, the
@@ -28,7 +28,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
 
 use crate::io::recording::{self, Channel, RowParser, RowSink, Table};
-use crate::plant::{Measurement, Plant, ValveInputs};
+use crate::plant::{Plant, ValveInputs};
 use crate::sim::{ActuatorPath, Integrator, SensorPath, SimStats, SolverOptions};
 
 /// Bytes read from the file at a time (whole lines).
@@ -194,25 +194,15 @@ pub fn replay_file(
                 }
                 r
             })?;
-        let mut buf = Vec::with_capacity(CHUNK_ROWS * 96);
         let mut written = 0usize;
         let mut write_result = Ok(());
         for chunk in rx_out {
-            buf.clear();
-            for k in 0..chunk.t_s.len() {
-                recording::push_row(
-                    &mut buf,
-                    chunk.t_s[k],
-                    &chunk.inputs[k],
-                    chunk.meas[k].to_array().into_iter(),
-                );
-            }
-            if let Err(e) = w.write_all(&buf) {
+            if let Err(e) = w.write_all(&chunk.bytes) {
                 abort.store(true, Ordering::Relaxed);
                 write_result = Err(e);
                 break;
             }
-            written += chunk.t_s.len();
+            written += chunk.rows;
             progress(written);
         }
         let valid = reader.join().unwrap_or(false);
@@ -257,9 +247,9 @@ fn simulate_chunks(
         integ
             .advance_samples(u, dt_s, len, |x| {
                 let (t, u) = pending.pop_front().unwrap_or_default();
-                out.t_s.push(t);
-                out.inputs.push(u);
-                out.meas.push(sensor.push(plant, x));
+                let m = sensor.push(plant, x);
+                recording::push_row(&mut out.bytes, t, &u, m.to_array().into_iter());
+                out.rows += 1;
             })
             .map_err(|_| ())
     };
@@ -280,7 +270,7 @@ fn simulate_chunks(
                 }
             }
         }
-        if out.t_s.len() >= CHUNK_ROWS {
+        if out.rows >= CHUNK_ROWS {
             let full = std::mem::replace(&mut out, OutChunk::with_capacity(CHUNK_ROWS));
             tx.send(full).map_err(|_| ())?;
         }
@@ -292,7 +282,7 @@ fn simulate_chunks(
         return Err(());
     }
     drop(advance);
-    if !out.t_s.is_empty() {
+    if out.rows > 0 {
         tx.send(out).map_err(|_| ())?;
     }
     Ok(integ.stats())
@@ -416,19 +406,17 @@ impl RowSink<(f64, [f64; 4], [f64; 5])> for RowChunk {
     }
 }
 
-/// Finished rows: the input's time and openings with the simulated channels.
+/// Finished rows, formatted: the input's time and openings with the simulated channels.
 struct OutChunk {
-    t_s: Vec<f64>,
-    inputs: Vec<ValveInputs>,
-    meas: Vec<Measurement>,
+    bytes: Vec<u8>,
+    rows: usize,
 }
 
 impl OutChunk {
-    fn with_capacity(n: usize) -> Self {
+    fn with_capacity(rows: usize) -> Self {
         Self {
-            t_s: Vec::with_capacity(n),
-            inputs: Vec::with_capacity(n),
-            meas: Vec::with_capacity(n),
+            bytes: Vec::with_capacity(rows * 80),
+            rows: 0,
         }
     }
 }
