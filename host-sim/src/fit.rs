@@ -1,6 +1,8 @@
 //! Goodness of fit per channel: NRMSE fit in % (Cakurda et al. eq. 23, PLANT.md "Fit"),
 //! MAE (eq. 24) and MSE.
 
+use std::path::Path;
+
 use crate::io::recording::{Channel, Recording};
 
 /// fit = 100 (1 - ||y - y_hat|| / ||y - mean(y)||).
@@ -22,6 +24,11 @@ pub fn fit_percent(y: &[f64], y_hat: &[f64]) -> f64 {
         .map(|a| (a - mean) * (a - mean))
         .sum::<f64>()
         .sqrt();
+    fit_from_norms(err, spread)
+}
+
+/// 100 (1 - err / spread) from `err = ||y - y_hat||` and `spread = ||y - mean(y)||`.
+fn fit_from_norms(err: f64, spread: f64) -> f64 {
     if spread == 0.0 {
         return if err == 0.0 { 100.0 } else { f64::NEG_INFINITY };
     }
@@ -98,6 +105,87 @@ pub fn compare(reference: &Recording, model: &Recording) -> Result<Vec<ChannelFi
         return Err(FitError::NoCommonChannel);
     }
     Ok(fits)
+}
+
+/// [`compare`] of two recording files without holding them: two passes over both files,
+/// row by row (the first for the time columns and the means, the second for the errors),
+/// with the same sums in the same order, so the figures are [`compare`]'s to the bit.
+/// Memory: the two time columns (8 bytes a row each, for the checks of
+/// [`Recording::read`](crate::io::recording::Recording::read) and the time comparison).
+///
+/// `None` when the stream does not decide: an error in a file (or a row it does not take,
+/// e.g. quoted fields), recordings of different lengths or times, no common channel. Then
+/// read both files and call [`compare`], which reports the error.
+pub fn compare_files(reference: &Path, model: &Path) -> Option<Vec<ChannelFit>> {
+    use crate::io::replay_stream::RowStream;
+    let (mut a, mut b) = (RowStream::open(reference)?, RowStream::open(model)?);
+    let common: Vec<Channel> = Channel::ALL
+        .into_iter()
+        .filter(|c| a.channels()[c.index()] && b.channels()[c.index()])
+        .collect();
+    if common.is_empty() {
+        return None;
+    }
+    let (mut ta, mut tb) = (Vec::new(), Vec::new());
+    let mut sum_y = [0.0f64; 5];
+    loop {
+        match (a.next_row().ok()?, b.next_row().ok()?) {
+            (Some(ra), Some(rb)) => {
+                ta.push(ra.0);
+                tb.push(rb.0);
+                for c in &common {
+                    sum_y[c.index()] += ra.2[c.index()];
+                }
+            }
+            (None, None) => break,
+            _ => return None,
+        }
+    }
+    if !(a.check_time(&ta) && b.check_time(&tb)) {
+        return None;
+    }
+    let n = ta.len();
+    let tol = 0.01 * crate::io::recording::mean_step_s(&ta).abs();
+    if ta.iter().zip(&tb).any(|(x, y)| {
+        let d = (x - y).abs();
+        d.is_nan() || d > tol
+    }) {
+        return None;
+    }
+    drop((ta, tb));
+    let mean = sum_y.map(|s| s / n as f64);
+    let (mut a, mut b) = (RowStream::open(reference)?, RowStream::open(model)?);
+    let (mut err2, mut spread2, mut abs_err) = ([0.0f64; 5], [0.0f64; 5], [0.0f64; 5]);
+    loop {
+        match (a.next_row().ok()?, b.next_row().ok()?) {
+            (Some(ra), Some(rb)) => {
+                for c in &common {
+                    let i = c.index();
+                    let (y, y_hat) = (ra.2[i], rb.2[i]);
+                    err2[i] += (y - y_hat) * (y - y_hat);
+                    spread2[i] += (y - mean[i]) * (y - mean[i]);
+                    abs_err[i] += (y - y_hat).abs();
+                }
+            }
+            (None, None) => break,
+            _ => return None,
+        }
+    }
+    Some(
+        common
+            .into_iter()
+            .map(|c| {
+                let i = c.index();
+                ChannelFit {
+                    channel: c,
+                    fit_percent: fit_from_norms(err2[i].sqrt(), spread2[i].sqrt()),
+                    mae: abs_err[i] / n as f64,
+                    mse: err2[i] / n as f64,
+                    samples: n,
+                }
+            })
+            .collect(),
+    )
 }
 
 /// A plain-text table of fits.

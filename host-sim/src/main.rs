@@ -334,20 +334,22 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
         return run_simulate_arm3(a, inputs_path);
     }
     let plant = Plant::load(plant_path)?;
-    let rec = Recording::read(inputs_path)?;
-    if let Some(named) = rec.meta("plant") {
-        let given = plant_path
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned());
-        if given.as_deref() != Path::new(named).file_name().and_then(|n| n.to_str()) {
+    let opts = a.solver_options()?;
+    if a.plot.is_none() {
+        if let Some(done) = simulate_streaming(a, &plant, inputs_path, &opts)? {
+            warn_other_plant(&done.metadata, plant_path, inputs_path);
+            println!("plant effects: {}", plant.effects_summary());
             eprintln!(
-                "warning: {} was recorded on plant `{named}`, simulating {}",
-                inputs_path.display(),
-                plant_path.display()
+                "{}: {} samples, {}",
+                a.out.display(),
+                done.samples,
+                done.stats
             );
+            return Ok(ExitCode::SUCCESS);
         }
     }
-    let opts = a.solver_options()?;
+    let rec = Recording::read(inputs_path)?;
+    warn_other_plant(&rec.metadata, plant_path, inputs_path);
     let dt = rec.sample_period_s();
     let bar = ProgressBar::with_draw_target(Some(rec.len() as u64), ProgressDrawTarget::stderr());
     bar.set_style(
@@ -379,6 +381,65 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
         plot_comparison(p, Some(&rec), &out)?;
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// `simulate --inputs` through the streaming pipeline (`io::replay_stream`): read,
+/// simulate and write overlap, memory stays bounded. `None` when the stream leaves the run to
+/// the whole-recording path (a jittered recording, or any error, which that path reports).
+fn simulate_streaming(
+    a: &SimulateArgs,
+    plant: &Plant,
+    inputs_path: &Path,
+    opts: &SolverOptions,
+) -> Result<Option<host_sim::io::replay_stream::StreamedReplay>> {
+    let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr());
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} simulate {pos} samples {elapsed}")
+            .expect("static template"),
+    );
+    let mut done = None;
+    let written = host_sim::io::atomic::write_with(&a.out, |w| {
+        let metadata = |dt_s: f64| {
+            let mut m = simulate_metadata(&a.plant, inputs_path, dt_s, opts, "simulate");
+            m.push(("effects".into(), plant.effects_summary()));
+            m
+        };
+        done = host_sim::io::replay_stream::replay_file(
+            plant,
+            inputs_path,
+            opts,
+            metadata,
+            w,
+            &|k| bar.set_position(k as u64),
+        )?;
+        match done {
+            Some(_) => Ok(()),
+            None => Err(std::io::Error::other("left to the whole-recording path")),
+        }
+    });
+    bar.finish_and_clear();
+    match (written, done) {
+        (Ok(()), done) => Ok(done),
+        (Err(_), None) => Ok(None),
+        (Err(e), Some(_)) => Err(anyhow::anyhow!("{}: {e}", a.out.display())),
+    }
+}
+
+/// Warns when the recording's `plant` metadata names another plant file than `plant_path`.
+fn warn_other_plant(metadata: &[(String, String)], plant_path: &Path, inputs_path: &Path) {
+    let Some((_, named)) = metadata.iter().find(|(k, _)| k == "plant") else {
+        return;
+    };
+    let given = plant_path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned());
+    if given.as_deref() != Path::new(named).file_name().and_then(|n| n.to_str()) {
+        eprintln!(
+            "warning: {} was recorded on plant `{named}`, simulating {}",
+            inputs_path.display(),
+            plant_path.display()
+        );
+    }
 }
 
 impl SimulateArgs {
@@ -560,15 +621,28 @@ fn run_fit(a: &FitArgs) -> Result<ExitCode> {
         validate::distinct_outputs(&[("A", &a.a), ("B", &a.b)], &[("--plot", p)])
             .map_err(anyhow::Error::msg)?;
     }
-    let ra = Recording::read(&a.a)?;
-    let rb = Recording::read(&a.b)?;
-    let fits = compare(&ra, &rb)
-        .with_context(|| format!("cannot compare {} with {}", a.a.display(), a.b.display()))?;
+    // Without a plot the files are compared streaming (memory: their time columns); the
+    // whole recordings are read for a plot, or to report an error.
+    let streamed = match a.plot {
+        None => host_sim::fit::compare_files(&a.a, &a.b),
+        Some(_) => None,
+    };
+    let fits = match streamed {
+        Some(fits) => fits,
+        None => {
+            let ra = Recording::read(&a.a)?;
+            let rb = Recording::read(&a.b)?;
+            let fits = compare(&ra, &rb).with_context(|| {
+                format!("cannot compare {} with {}", a.a.display(), a.b.display())
+            })?;
+            if let Some(p) = &a.plot {
+                plot_comparison(p, Some(&ra), &only_common(&rb, &ra))?;
+            }
+            fits
+        }
+    };
     println!("reference: {}\nmodel:     {}", a.a.display(), a.b.display());
     print!("{}", format_table(&fits));
-    if let Some(p) = &a.plot {
-        plot_comparison(p, Some(&ra), &only_common(&rb, &ra))?;
-    }
     if let Some(min) = a.min_fit {
         let bad: Vec<_> = fits
             .iter()

@@ -59,3 +59,99 @@ fn compare_rejects_different_lengths_and_times() {
         Err(FitError::Time { index: 0, .. })
     ));
 }
+
+/// Rows of a recording file written with `format!` (not the crate's writer).
+fn write_file(path: &std::path::Path, header: &str, rows: impl Iterator<Item = String>) {
+    let mut s = format!("# source = fit_metrics test\n{header}\n");
+    for r in rows {
+        s += &r;
+        s += "\n";
+    }
+    std::fs::write(path, s).unwrap();
+}
+
+#[test]
+fn streamed_file_comparison_equals_compare_to_the_bit() {
+    use host_sim::fit::compare_files;
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b, c) = (
+        dir.path().join("a.csv"),
+        dir.path().join("b.csv"),
+        dir.path().join("c.csv"),
+    );
+    let n = 9_000;
+    let wave = |k: usize, f: f64| (k as f64 * f).sin() * 40.0 + (k % 7) as f64 * 0.37;
+    write_file(
+        &a,
+        "t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg,p1_kpa,f2_n",
+        (0..n).map(|k| {
+            format!(
+                "{:.3},0,1,0,0.5,{:.6},{:.4},{:.2}",
+                k as f64 * 1e-3,
+                wave(k, 0.01),
+                wave(k, 0.003) + 300.0,
+                wave(k, 0.02)
+            )
+        }),
+    );
+    // Other column order, p1 missing, p2 extra, the time within the tolerance.
+    write_file(
+        &b,
+        "p2_kpa,angle_deg,t_s,u_in1,u_ex1,u_in2,u_ex2,f2_n",
+        (0..n).map(|k| {
+            format!(
+                "1,{:.6},{:.6},0,0,0,0,{:.3}",
+                wave(k, 0.0101),
+                k as f64 * 1e-3 + 2e-6,
+                wave(k, 0.019) * 1.01
+            )
+        }),
+    );
+    let streamed = compare_files(&a, &b).expect("streamed");
+    let whole = compare(&Recording::read(&a).unwrap(), &Recording::read(&b).unwrap()).unwrap();
+    assert_eq!(streamed.len(), 2);
+    for (s, w) in streamed.iter().zip(&whole) {
+        assert_eq!(s.channel, w.channel);
+        assert_eq!(s.samples, w.samples);
+        for (x, y) in [
+            (s.fit_percent, w.fit_percent),
+            (s.mae, w.mae),
+            (s.mse, w.mse),
+        ] {
+            assert_eq!(x.to_bits(), y.to_bits(), "{:?}", s.channel);
+        }
+    }
+    assert_eq!(streamed.len(), whole.len());
+
+    // Different lengths, then different times: left to `compare`, which reports them.
+    write_file(
+        &c,
+        "t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg",
+        (0..n - 1).map(|k| format!("{:.3},0,0,0,0,1", k as f64 * 1e-3)),
+    );
+    assert!(compare_files(&a, &c).is_none());
+    write_file(
+        &c,
+        "t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg",
+        (0..n).map(|k| format!("{:.3},0,0,0,0,1", 0.5 + k as f64 * 1e-3)),
+    );
+    assert!(compare_files(&a, &c).is_none());
+    assert!(matches!(
+        compare(&Recording::read(&a).unwrap(), &Recording::read(&c).unwrap()),
+        Err(FitError::Time { .. })
+    ));
+    // An error in a file: left to `Recording::read`.
+    write_file(
+        &c,
+        "t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg",
+        (0..n).map(|k| {
+            format!(
+                "{:.3},0,0,0,0,{}",
+                k as f64 * 1e-3,
+                if k == 8000 { "x" } else { "1" }
+            )
+        }),
+    );
+    assert!(compare_files(&a, &c).is_none());
+    assert!(Recording::read(&c).is_err());
+}

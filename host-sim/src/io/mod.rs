@@ -8,5 +8,6 @@ pub mod import;
 pub mod numfmt;
 pub mod plot;
 pub mod recording;
+pub mod replay_stream;
 pub mod run_files;
 pub mod scenario;

@@ -31,72 +31,164 @@ const POW10: [u64; 10] = [
 /// at most 15 significant digits (below f64's 15.95 digits of precision).
 const MAX_SCALED: f64 = 1e15;
 
+/// `(x.floor(), x.round())` for `0 <= x < 2^52`, without a call into libm (the baseline
+/// x86-64 target has no rounding instruction): truncation is the floor of a non-negative
+/// value, and `x - floor` is exact below 2^52, so comparing it with 0.5 rounds half away
+/// from zero as `f64::round` does.
+#[inline(always)]
+fn floor_round(x: f64) -> (f64, f64) {
+    debug_assert!((0.0..4_503_599_627_370_496.0).contains(&x));
+    let floor = x as u64 as f64;
+    let round = if x - floor >= 0.5 { floor + 1.0 } else { floor };
+    (floor, round)
+}
+
+/// Room [`fixed_into`] and [`shortest_into`] need: a sign, 15 digits, a point, 9 decimals.
+pub const NUMBER_BYTES: usize = 32;
+
 /// Appends `v` as `format!("{v:.decimals$}")` would (`decimals` <= 9).
 pub fn push_fixed(buf: &mut Vec<u8>, v: f64, decimals: usize) {
-    debug_assert!(decimals < POW10.len());
-    if decimals < POW10.len() && v.is_finite() {
-        let scale = POW10[decimals];
-        let x = v.abs() * scale as f64;
-        if x < MAX_SCALED {
-            let r = x.round();
-            // `x` carries at most half an ulp of error from the multiplication; away from a
-            // tie by more than that, rounding `x` and rounding the exact product agree.
-            let ulp = f64::from_bits(x.to_bits() + 1) - x;
-            if ((x - x.floor()) - 0.5).abs() > ulp {
-                let n = r as u64;
-                if v.is_sign_negative() {
-                    buf.push(b'-');
-                }
-                push_u64(buf, n / scale);
-                if decimals > 0 {
-                    buf.push(b'.');
-                    push_padded(buf, n % scale, decimals);
-                }
-                return;
-            }
+    let mut tmp = [0u8; NUMBER_BYTES];
+    match fixed_into(&mut tmp, v, decimals) {
+        Some(k) => buf.extend_from_slice(&tmp[..k]),
+        // The standard library's exact algorithm (ties, huge values, non-finite).
+        None => {
+            let _ = write!(buf, "{v:.decimals$}");
         }
     }
-    // The standard library's exact algorithm (ties, huge values, non-finite).
-    let _ = write!(buf, "{v:.decimals$}");
+}
+
+/// Writes `v` as `format!("{v:.decimals$}")` would (`decimals` <= 9) at the start of `out`
+/// (at least [`NUMBER_BYTES`] long) and returns the number of bytes, when the integer path
+/// can prove its result; `None` otherwise (then [`push_fixed`] takes the exact algorithm).
+#[inline]
+pub fn fixed_into(out: &mut [u8], v: f64, decimals: usize) -> Option<usize> {
+    // One instance per number of decimals: the divisions by 10^decimals are by constants.
+    match decimals {
+        0 => fixed_into_const::<0>(out, v),
+        1 => fixed_into_const::<1>(out, v),
+        2 => fixed_into_const::<2>(out, v),
+        3 => fixed_into_const::<3>(out, v),
+        4 => fixed_into_const::<4>(out, v),
+        5 => fixed_into_const::<5>(out, v),
+        6 => fixed_into_const::<6>(out, v),
+        7 => fixed_into_const::<7>(out, v),
+        8 => fixed_into_const::<8>(out, v),
+        9 => fixed_into_const::<9>(out, v),
+        _ => None,
+    }
+}
+
+/// [`fixed_into`] with `D` decimals.
+#[inline(always)]
+fn fixed_into_const<const D: usize>(out: &mut [u8], v: f64) -> Option<usize> {
+    if !v.is_finite() {
+        return None;
+    }
+    let scale = POW10[D];
+    let x = v.abs() * scale as f64;
+    if !(x < MAX_SCALED) {
+        return None;
+    }
+    let (floor, r) = floor_round(x);
+    // `x` carries at most half an ulp of error from the multiplication; away from a tie by
+    // more than that, rounding `x` and rounding the exact product agree.
+    let ulp = f64::from_bits(x.to_bits() + 1) - x;
+    if !(((x - floor) - 0.5).abs() > ulp) {
+        return None;
+    }
+    let n = r as u64;
+    let mut k = 0;
+    if v.is_sign_negative() {
+        out[0] = b'-';
+        k = 1;
+    }
+    let int = n / scale;
+    k += put_u64(&mut out[k..], int);
+    if D > 0 {
+        out[k] = b'.';
+        put_padded(&mut out[k + 1..k + 1 + D], n - int * scale);
+        k += 1 + D;
+    }
+    Some(k)
 }
 
 /// Appends `v` as `format!("{v}")` would (the shortest decimal that reads back as `v`).
 pub fn push_shortest(buf: &mut Vec<u8>, v: f64) {
+    let mut tmp = [0u8; NUMBER_BYTES];
+    match shortest_into(&mut tmp, v) {
+        Some(k) => buf.extend_from_slice(&tmp[..k]),
+        None => {
+            let _ = write!(buf, "{v}");
+        }
+    }
+}
+
+/// Writes `v` as `format!("{v}")` would at the start of `out` (at least [`NUMBER_BYTES`]
+/// long) and returns the number of bytes, when `v` is a decimal of at most 9 fractional
+/// digits and 15 significant ones; `None` otherwise (then [`push_shortest`] takes the
+/// standard formatter).
+#[inline]
+pub fn shortest_into(out: &mut [u8], v: f64) -> Option<usize> {
     // A decimal with at most 9 fractional digits and 15 significant digits that reads back
     // as `v` is the shortest one: two different decimals of at most 15 significant digits
     // never read back as the same f64, so the standard library's shortest output has the
     // same value, and `{}` prints it without exponent and without trailing zeros.
-    if v.is_finite() && !(v == 0.0 && v.is_sign_negative()) {
-        let a = v.abs();
-        for decimals in [0usize, 3, 6, 9] {
-            let scale = POW10[decimals];
-            let x = a * scale as f64;
-            if x >= MAX_SCALED {
-                break;
-            }
-            let n = x.round();
-            // `n` and `scale` are exact, so the quotient is the correctly rounded value of
-            // the decimal n / 10^decimals: exactly what parsing that decimal gives.
-            if n / scale as f64 == a {
-                let n = n as u64;
-                if v < 0.0 {
-                    buf.push(b'-');
-                }
-                push_u64(buf, n / scale);
-                let frac = n % scale;
-                if frac != 0 {
-                    buf.push(b'.');
-                    let start = buf.len();
-                    push_padded(buf, frac, decimals);
-                    while buf.len() > start && buf[buf.len() - 1] == b'0' {
-                        buf.pop();
-                    }
-                }
-                return;
-            }
-        }
+    if !v.is_finite() || (v == 0.0 && v.is_sign_negative()) {
+        return None;
     }
-    let _ = write!(buf, "{v}");
+    let a = v.abs();
+    let r = shortest_with::<0>(out, v, a)?;
+    if r.is_some() {
+        return r;
+    }
+    let r = shortest_with::<3>(out, v, a)?;
+    if r.is_some() {
+        return r;
+    }
+    let r = shortest_with::<6>(out, v, a)?;
+    if r.is_some() {
+        return r;
+    }
+    shortest_with::<9>(out, v, a)?
+}
+
+/// One step of [`shortest_into`]: `|v| = a` as a decimal of `D` fractional digits.
+/// `None`: too large for the integer path (give up); `Some(None)`: not with `D` digits.
+#[inline(always)]
+fn shortest_with<const D: usize>(out: &mut [u8], v: f64, a: f64) -> Option<Option<usize>> {
+    let scale = POW10[D];
+    let x = a * scale as f64;
+    if x >= MAX_SCALED {
+        return None;
+    }
+    let n = floor_round(x).1;
+    // `n` and `scale` are exact, so the quotient is the correctly rounded value of the
+    // decimal n / 10^D: exactly what parsing that decimal gives.
+    if n / scale as f64 != a {
+        return Some(None);
+    }
+    let n = n as u64;
+    let mut k = 0;
+    if v < 0.0 {
+        out[0] = b'-';
+        k = 1;
+    }
+    let int = n / scale;
+    k += put_u64(&mut out[k..], int);
+    let mut frac = n - int * scale;
+    if frac != 0 {
+        // Without the trailing zeros.
+        let mut width = D;
+        while frac % 10 == 0 {
+            frac /= 10;
+            width -= 1;
+        }
+        out[k] = b'.';
+        put_padded(&mut out[k + 1..k + 1 + width], frac);
+        k += 1 + width;
+    }
+    Some(Some(k))
 }
 
 /// The value of a plain decimal field (`[-]digits[.digits]`, at most 15 digits, nothing
@@ -140,27 +232,33 @@ pub fn parse_plain_decimal(field: &[u8]) -> Option<f64> {
     Some(if negative { -v } else { v })
 }
 
-/// Appends the decimal digits of `n`.
-fn push_u64(buf: &mut Vec<u8>, mut n: u64) {
-    let mut tmp = [0u8; 20];
-    let mut i = tmp.len();
-    loop {
-        i -= 1;
-        tmp[i] = b'0' + (n % 10) as u8;
-        n /= 10;
-        if n == 0 {
-            break;
-        }
+/// Writes the decimal digits of `n` at the start of `out`; the number of digits.
+#[inline(always)]
+fn put_u64(out: &mut [u8], n: u64) -> usize {
+    let mut digits = 1;
+    while digits < 20 && n >= POW10_U64[digits] {
+        digits += 1;
     }
-    buf.extend_from_slice(&tmp[i..]);
+    put_padded(&mut out[..digits], n);
+    digits
 }
 
-/// Appends `n` (< 10^width) as exactly `width` digits, zero-padded on the left.
-fn push_padded(buf: &mut Vec<u8>, mut n: u64, width: usize) {
-    let start = buf.len();
-    buf.resize(start + width, b'0');
-    for i in (0..width).rev() {
-        buf[start + i] = b'0' + (n % 10) as u8;
+/// Powers of ten up to 10^19.
+const POW10_U64: [u64; 20] = {
+    let mut p = [1u64; 20];
+    let mut i = 1;
+    while i < 20 {
+        p[i] = p[i - 1] * 10;
+        i += 1;
+    }
+    p
+};
+
+/// Writes `n` (< 10^out.len()) into all of `out` as digits, zero-padded on the left.
+#[inline(always)]
+fn put_padded(out: &mut [u8], mut n: u64) {
+    for d in out.iter_mut().rev() {
+        *d = b'0' + (n % 10) as u8;
         n /= 10;
     }
 }

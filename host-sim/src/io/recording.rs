@@ -128,20 +128,7 @@ impl Recording {
     /// A jittered recording is not: [`crate::sim::simulate_recording`] integrates it between
     /// its own stamps, and the tools that need a uniform grid take [`Self::to_uniform`].
     pub fn is_uniform(&self) -> bool {
-        let n = self.t_s.len();
-        if n < 2 {
-            return true;
-        }
-        let dt = self.sample_period_s();
-        let mut steps: Vec<f64> = self.t_s.windows(2).map(|w| w[1] - w[0]).collect();
-        steps.sort_by(f64::total_cmp);
-        let median = steps[steps.len() / 2];
-        steps
-            .iter()
-            .all(|s| (s - median).abs() <= UNIFORM_TOLERANCE * median.abs())
-            && (0..n).all(|k| {
-                (self.t_s[k] - (self.t_s[0] + k as f64 * dt)).abs() <= UNIFORM_TOLERANCE * dt
-            })
+        stamps_uniform(&self.t_s)
     }
 
     /// The recording on the uniform grid `t_0 + k dt` (`dt` the mean step, same number of
@@ -241,36 +228,9 @@ impl Recording {
     pub fn parse(text: &str, path: impl AsRef<Path>) -> Result<Self, RecordingError> {
         let path = path.as_ref();
         let table = Table::parse(text, path)?;
-        let t_col = table.required("t_s", "")?;
-        let mut u_cols = [0usize; 4];
-        for (i, name) in INPUT_COLUMNS.iter().enumerate() {
-            u_cols[i] = table.required(name, "")?;
-        }
-        let mut out_cols: [Option<usize>; 5] = [None; 5];
-        for c in Channel::ALL {
-            out_cols[c.index()] = table.find(c.name())?;
-        }
-        if out_cols.iter().all(|c| c.is_none()) {
-            return Err(table.field_err(
-                table.header_line,
-                "angle_deg",
-                "no output column (need at least one of angle_deg, p1_kpa, p2_kpa, f1_n, f2_n)",
-            ));
-        }
-        let (cols, lines): (RecordingColumns, _) = table.rows(|row| {
-            let t_s = row.num(t_col, "t_s")?;
-            let mut u = [0.0; 4];
-            for i in 0..4 {
-                u[i] = row.opening(u_cols[i], INPUT_COLUMNS[i])?;
-            }
-            let mut y = [0.0; 5];
-            for c in Channel::ALL {
-                if let Some(col) = out_cols[c.index()] {
-                    y[c.index()] = row.num(col, c.name())?;
-                }
-            }
-            Ok((t_s, u, y))
-        })?;
+        let parser = RowParser::of(&table)?;
+        let (cols, lines): (RecordingColumns, _) = table.rows(|row| parser.parse(row))?;
+        let out_cols = parser.out_cols;
         let mut rec = Recording {
             metadata: table.metadata.clone(),
             t_s: cols.t_s,
@@ -283,45 +243,7 @@ impl Recording {
             }
         }
 
-        let n = rec.t_s.len();
-        let dt = table.sample_period_s(&rec.t_s, &lines)?;
-        let field_err =
-            |line: u64, field: &str, message: String| table.field_err(line, field, message);
-        let tol = 0.01 * dt;
-        // Each step against the median step: a step outside [0.5, 1.5] median steps is a
-        // gap (or a doubled stamp) and is refused, never filled; steps in between are time
-        // stamp jitter, accepted (the valve inputs are held between the stamps).
-        let mut steps: Vec<f64> = rec.t_s.windows(2).map(|w| w[1] - w[0]).collect();
-        let half = steps.len() / 2;
-        let median_step = *steps.select_nth_unstable_by(half, f64::total_cmp).1;
-        for k in 1..n {
-            let step = rec.t_s[k] - rec.t_s[k - 1];
-            if !(step > 0.0) {
-                return Err(field_err(
-                    lines[k],
-                    "t_s",
-                    format!(
-                        "time does not increase: {} after {}",
-                        rec.t_s[k],
-                        rec.t_s[k - 1]
-                    ),
-                ));
-            }
-            if step > MAX_STEP_RATIO * median_step || step < MIN_STEP_RATIO * median_step {
-                return Err(field_err(
-                    lines[k],
-                    "t_s",
-                    format!(
-                        "non-uniform time: {} after {} (step {step} s, median step \
-                         {median_step} s; jitter within [{MIN_STEP_RATIO}, {MAX_STEP_RATIO}] \
-                         median steps is accepted, a gap is not filled: split the recording)",
-                        rec.t_s[k],
-                        rec.t_s[k - 1]
-                    ),
-                ));
-            }
-        }
-        table.check_declared_period(dt, tol)?;
+        table.check_time(&rec.t_s, |k| lines[k])?;
         Ok(rec)
     }
 
@@ -345,24 +267,11 @@ impl Recording {
     /// The CSV text of the recording (metadata, header, rows) into `w`.
     pub fn write_to(&self, w: &mut impl Write) -> std::io::Result<()> {
         let n = self.t_s.len();
-        for (k, v) in &self.metadata {
-            if k.is_empty() {
-                writeln!(w, "# {v}")?;
-            } else {
-                writeln!(w, "# {k} = {v}")?;
-            }
-        }
-        let mut cw = csv::WriterBuilder::new().from_writer(&mut *w);
-        let mut header: Vec<&str> = vec!["t_s"];
-        header.extend(INPUT_COLUMNS);
         let present: Vec<Channel> = Channel::ALL
             .into_iter()
             .filter(|c| self.outputs[c.index()].is_some())
             .collect();
-        header.extend(present.iter().map(|c| c.name()));
-        cw.write_record(&header)?;
-        cw.flush()?;
-        drop(cw);
+        write_head(&self.metadata, &present, w)?;
         // The rows: numbers only (nothing to quote), formatted by `numfmt` (byte-identical
         // to `{}` for time and openings, `{:.6}` for the readings) in blocks, each block's
         // two halves on two threads, so memory stays one block whatever the length.
@@ -373,22 +282,85 @@ impl Recording {
         let rows = |range: std::ops::Range<usize>| -> Vec<u8> {
             let mut buf = Vec::with_capacity(range.len() * (16 + 8 * outputs.len()));
             for k in range {
-                numfmt::push_shortest(&mut buf, self.t_s[k]);
-                let u = &self.inputs[k];
-                for v in [u.u_in1, u.u_ex1, u.u_in2, u.u_ex2] {
-                    buf.push(b',');
-                    numfmt::push_shortest(&mut buf, v);
-                }
-                for col in &outputs {
-                    buf.push(b',');
-                    numfmt::push_fixed(&mut buf, col[k], 6);
-                }
-                buf.push(b'\n');
+                push_row(
+                    &mut buf,
+                    self.t_s[k],
+                    &self.inputs[k],
+                    outputs.iter().map(|col| col[k]),
+                );
             }
             buf
         };
         write_rows_in_blocks(n, rows, w)
     }
+}
+
+/// The metadata lines and the CSV header (`t_s`, the valve openings, the `present` channels).
+pub(crate) fn write_head(
+    metadata: &[(String, String)],
+    present: &[Channel],
+    w: &mut impl Write,
+) -> std::io::Result<()> {
+    for (k, v) in metadata {
+        if k.is_empty() {
+            writeln!(w, "# {v}")?;
+        } else {
+            writeln!(w, "# {k} = {v}")?;
+        }
+    }
+    let mut cw = csv::WriterBuilder::new().from_writer(&mut *w);
+    let mut header: Vec<&str> = vec!["t_s"];
+    header.extend(INPUT_COLUMNS);
+    header.extend(present.iter().map(|c| c.name()));
+    cw.write_record(&header)?;
+    cw.flush()?;
+    Ok(())
+}
+
+/// One data row: numbers only (nothing to quote), formatted by `numfmt` (byte-identical to
+/// `{}` for time and openings, `{:.6}` for the readings), at most 5 readings. The row is
+/// built on the stack and appended at once; a number the integer path cannot prove (a
+/// rounding tie, a huge value) sends the row through the standard formatter.
+#[inline]
+pub(crate) fn push_row(
+    buf: &mut Vec<u8>,
+    t_s: f64,
+    u: &ValveInputs,
+    outputs: impl Iterator<Item = f64> + Clone,
+) {
+    const ROW_BYTES: usize = 10 * (numfmt::NUMBER_BYTES + 1);
+    let mut row = [0u8; ROW_BYTES];
+    let openings = [u.u_in1, u.u_ex1, u.u_in2, u.u_ex2];
+    let fast = (|| {
+        let mut k = numfmt::shortest_into(&mut row, t_s)?;
+        for v in openings {
+            row[k] = b',';
+            k += 1 + numfmt::shortest_into(&mut row[k + 1..], v)?;
+        }
+        for (i, y) in outputs.clone().enumerate() {
+            if i >= 5 {
+                return None;
+            }
+            row[k] = b',';
+            k += 1 + numfmt::fixed_into(&mut row[k + 1..], y, 6)?;
+        }
+        row[k] = b'\n';
+        Some(k + 1)
+    })();
+    if let Some(k) = fast {
+        buf.extend_from_slice(&row[..k]);
+        return;
+    }
+    numfmt::push_shortest(buf, t_s);
+    for v in openings {
+        buf.push(b',');
+        numfmt::push_shortest(buf, v);
+    }
+    for y in outputs {
+        buf.push(b',');
+        numfmt::push_fixed(buf, y, 6);
+    }
+    buf.push(b'\n');
 }
 
 /// Formats rows `0..n` with `rows` block by block (each block's halves on two threads when
@@ -420,6 +392,22 @@ pub(crate) fn write_rows_in_blocks(
     Ok(())
 }
 
+/// [`Recording::is_uniform`] of the time stamps `t_s`.
+pub(crate) fn stamps_uniform(t_s: &[f64]) -> bool {
+    let n = t_s.len();
+    if n < 2 {
+        return true;
+    }
+    let dt = mean_step_s(t_s);
+    let mut steps: Vec<f64> = t_s.windows(2).map(|w| w[1] - w[0]).collect();
+    steps.sort_by(f64::total_cmp);
+    let median = steps[steps.len() / 2];
+    steps
+        .iter()
+        .all(|s| (s - median).abs() <= UNIFORM_TOLERANCE * median.abs())
+        && (0..n).all(|k| (t_s[k] - (t_s[0] + k as f64 * dt)).abs() <= UNIFORM_TOLERANCE * dt)
+}
+
 /// Linear interpolation of `(t, y)` (increasing `t`) at `at` (clamped to the end values).
 pub fn interpolate(t: &[f64], y: &[f64], at: &[f64]) -> Vec<f64> {
     let n = t.len();
@@ -446,9 +434,147 @@ pub fn interpolate(t: &[f64], y: &[f64], at: &[f64]) -> Vec<f64> {
 /// writer): a failure never leaves a half-written target.
 pub fn write_atomically(
     path: &Path,
-    fill: impl FnOnce(&mut std::io::BufWriter<&std::fs::File>) -> std::io::Result<()>,
+    fill: impl FnOnce(&mut crate::io::atomic::Output<'_>) -> std::io::Result<()>,
 ) -> std::io::Result<()> {
     crate::io::atomic::write_with(path, fill)
+}
+
+/// The columns of a 1-DOF recording's table and the reading of one row: time, the four
+/// valve openings, the output channels present (absent ones 0). Shared by
+/// [`Recording::parse`] and the streaming replay (`io::replay_stream`).
+pub(crate) struct RowParser {
+    t_col: usize,
+    u_cols: [usize; 4],
+    /// Column of each output channel, by [`Channel::index`].
+    pub out_cols: [Option<usize>; 5],
+    /// What each column of the header is, for [`Self::parse_plain_rows`].
+    roles: Vec<Role>,
+}
+
+/// What a column holds for [`RowParser`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Role {
+    Ignored,
+    Time,
+    Opening(usize),
+    Output(usize),
+}
+
+impl RowParser {
+    /// The columns of `table`; a missing required column or no output column is an error.
+    pub(crate) fn of(table: &Table) -> Result<Self, RecordingError> {
+        let t_col = table.required("t_s", "")?;
+        let mut u_cols = [0usize; 4];
+        for (i, name) in INPUT_COLUMNS.iter().enumerate() {
+            u_cols[i] = table.required(name, "")?;
+        }
+        let mut out_cols: [Option<usize>; 5] = [None; 5];
+        for c in Channel::ALL {
+            out_cols[c.index()] = table.find(c.name())?;
+        }
+        if out_cols.iter().all(|c| c.is_none()) {
+            return Err(table.field_err(
+                table.header_line,
+                "angle_deg",
+                "no output column (need at least one of angle_deg, p1_kpa, p2_kpa, f1_n, f2_n)",
+            ));
+        }
+        let mut roles = vec![Role::Ignored; table.headers.len()];
+        roles[t_col] = Role::Time;
+        for (i, &c) in u_cols.iter().enumerate() {
+            roles[c] = Role::Opening(i);
+        }
+        for (i, c) in out_cols.iter().enumerate() {
+            if let Some(c) = *c {
+                roles[c] = Role::Output(i);
+            }
+        }
+        Ok(Self {
+            t_col,
+            u_cols,
+            out_cols,
+            roles,
+        })
+    }
+
+    /// The rows of `bytes` (whole lines) into `sink`, if every row is plain: the header's
+    /// number of fields, each number a plain decimal ([`numfmt::parse_plain_decimal`]),
+    /// openings in [0, 1], lines ending in `\n` or `\r\n` (empty lines skipped). Then the
+    /// values are those of [`Table::read_chunk`] with [`Self::parse`]; `false` as soon as a row
+    /// is not plain (what was pushed must be discarded: the general reader reads the bytes
+    /// and words any error).
+    pub(crate) fn parse_plain_rows<S: RowSink<(f64, [f64; 4], [f64; 5])>>(
+        &self,
+        bytes: &[u8],
+        sink: &mut S,
+    ) -> bool {
+        let len = bytes.len();
+        let n_fields = self.roles.len();
+        let mut i = 0;
+        while i < len {
+            match bytes[i] {
+                b'\n' => {
+                    i += 1;
+                    continue;
+                }
+                b'\r' if bytes.get(i + 1) == Some(&b'\n') => {
+                    i += 2;
+                    continue;
+                }
+                _ => {}
+            }
+            let (mut t_s, mut u, mut y) = (0.0, [0.0; 4], [0.0; 5]);
+            for (f, role) in self.roles.iter().enumerate() {
+                let start = i;
+                while i < len && !matches!(bytes[i], b',' | b'\n' | b'\r') {
+                    i += 1;
+                }
+                if *role != Role::Ignored {
+                    let Some(v) = numfmt::parse_plain_decimal(&bytes[start..i]) else {
+                        return false;
+                    };
+                    match *role {
+                        Role::Time => t_s = v,
+                        Role::Opening(k) if (0.0..=1.0).contains(&v) => u[k] = v,
+                        Role::Output(k) => y[k] = v,
+                        _ => return false,
+                    }
+                }
+                if f + 1 < n_fields {
+                    if bytes.get(i) != Some(&b',') {
+                        return false;
+                    }
+                    i += 1;
+                } else {
+                    match bytes.get(i) {
+                        None => {}
+                        Some(b'\n') => i += 1,
+                        Some(b'\r') if bytes.get(i + 1) == Some(&b'\n') => i += 2,
+                        _ => return false,
+                    }
+                }
+            }
+            sink.push((t_s, u, y));
+        }
+        true
+    }
+
+    /// One row: (t_s, openings, outputs).
+    #[inline]
+    pub(crate) fn parse(&self, row: &Row) -> Result<(f64, [f64; 4], [f64; 5]), RecordingError> {
+        let t_s = row.num(self.t_col, "t_s")?;
+        let mut u = [0.0; 4];
+        for i in 0..4 {
+            u[i] = row.opening(self.u_cols[i], INPUT_COLUMNS[i])?;
+        }
+        let mut y = [0.0; 5];
+        for c in Channel::ALL {
+            if let Some(col) = self.out_cols[c.index()] {
+                y[c.index()] = row.num(col, c.name())?;
+            }
+        }
+        Ok((t_s, u, y))
+    }
 }
 
 /// The columns of a recording as [`Recording::parse`] reads them (absent outputs stay empty).
@@ -686,6 +812,12 @@ impl<'t> Table<'t> {
         })
     }
 
+    /// The bytes after the header line (the data rows) and the 1-based line of their first
+    /// byte.
+    pub(crate) fn data(&self) -> (&'t [u8], u64) {
+        (self.data, self.data_line)
+    }
+
     /// Every data row through `f`, in file order, with the row's 1-based line. The first
     /// error in file order is returned. Large files (without quoted fields) are read in two
     /// chunks, split at a line end, on two threads.
@@ -725,7 +857,7 @@ impl<'t> Table<'t> {
 
     /// The rows of `bytes` (whose first byte is on line `first_line`) through `f`.
     /// `extra_rows`: room reserved for rows appended later.
-    fn read_chunk<T, S: RowSink<T>>(
+    pub(crate) fn read_chunk<T, S: RowSink<T>>(
         &self,
         bytes: &[u8],
         first_line: u64,
@@ -897,12 +1029,59 @@ impl<'t> Table<'t> {
         let dt = mean_step_s(t_s);
         if dt.is_nan() || dt <= 0.0 {
             return Err(self.field_err(
-                lines[n - 1],
+                *lines.last().unwrap_or(&self.header_line),
                 "t_s",
                 "time does not increase (last time <= first time)",
             ));
         }
         Ok(dt)
+    }
+
+    /// The time column `t_s` of a 1-DOF recording (`line_of(k)`: the file line of row `k`):
+    /// at least two rows, increasing, each step within [[`MIN_STEP_RATIO`],
+    /// [`MAX_STEP_RATIO`]] median steps (jitter is accepted, a gap is refused, never filled),
+    /// and a declared `sample_period_s` that agrees with the mean step.
+    pub(crate) fn check_time(
+        &self,
+        t_s: &[f64],
+        line_of: impl Fn(usize) -> u64,
+    ) -> Result<(), RecordingError> {
+        let n = t_s.len();
+        let last_line = if n == 0 {
+            self.header_line
+        } else {
+            line_of(n - 1)
+        };
+        let dt = self.sample_period_s(t_s, &[last_line])?;
+        let tol = 0.01 * dt;
+        let mut steps: Vec<f64> = t_s.windows(2).map(|w| w[1] - w[0]).collect();
+        let half = steps.len() / 2;
+        let median_step = *steps.select_nth_unstable_by(half, f64::total_cmp).1;
+        drop(steps);
+        for k in 1..n {
+            let step = t_s[k] - t_s[k - 1];
+            if !(step > 0.0) {
+                return Err(self.field_err(
+                    line_of(k),
+                    "t_s",
+                    format!("time does not increase: {} after {}", t_s[k], t_s[k - 1]),
+                ));
+            }
+            if step > MAX_STEP_RATIO * median_step || step < MIN_STEP_RATIO * median_step {
+                return Err(self.field_err(
+                    line_of(k),
+                    "t_s",
+                    format!(
+                        "non-uniform time: {} after {} (step {step} s, median step \
+                         {median_step} s; jitter within [{MIN_STEP_RATIO}, {MAX_STEP_RATIO}] \
+                         median steps is accepted, a gap is not filled: split the recording)",
+                        t_s[k],
+                        t_s[k - 1]
+                    ),
+                ));
+            }
+        }
+        self.check_declared_period(dt, tol)
     }
 
     /// A `# sample_period_s = ...` metadata entry must agree with the time column's `dt_s`

@@ -1,0 +1,548 @@
+//! Streaming open-loop replay of a recording file (`simulate --inputs`): a pipeline of three
+//! threads over chunks of rows,
+//!
+//! reader (file blocks -> rows) -> simulator (integration, sensor path, formatting) -> writer,
+//!
+//! so reading, simulating and writing overlap, and memory does not grow with the recording
+//! beyond its time column (kept for the checks that need every stamp: the median step, the
+//! uniform grid). The output is byte-identical to [`Recording::read`](super::recording::Recording::read)
+//! + [`simulate_recording`](crate::sim::simulate_recording) + [`Recording::write`](super::recording::Recording::write):
+//! the same row parser, the same integrator calls (runs of identical inputs are integrated
+//! as one segment, also across chunk boundaries), the same sensor path and number formatting.
+//!
+//! The mean sample period (first to last stamp over the number of rows) is needed before the
+//! first integration step: a first pass over the file counts the rows and reads the last one
+//! (for a file of at most one block, 4 MiB, that pass runs on the block in memory).
+//!
+//! The stream only takes the ordinary case: a plain (quote-free) UTF-8 file whose rows all
+//! parse, whose time stamps are uniform and pass the recording checks, and a simulation that
+//! succeeds. Anything else — a jittered recording, any error in the file or in the
+//! simulation — makes [`replay_file`] answer `None`, and the caller runs the whole-recording
+//! path, which reports the error with its file, line and field exactly as before (the
+//! caller discards what was written).
+
+use std::collections::VecDeque;
+use std::io::{Read as _, Seek as _, Write};
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc;
+
+use crate::io::recording::{self, Channel, RowParser, RowSink, Table};
+use crate::plant::{Plant, ValveInputs};
+use crate::sim::{ActuatorPath, Integrator, SensorPath, SimStats, SolverOptions};
+
+/// Bytes read from the file at a time (whole lines).
+const BLOCK_BYTES: usize = 4 << 20;
+/// Rows per chunk passed between the threads.
+const CHUNK_ROWS: usize = 1024;
+/// Chunks in flight between two threads (bounds the memory of the pipeline).
+const CHANNEL_CHUNKS: usize = 8;
+
+/// What a streamed replay did.
+#[derive(Debug, Clone)]
+pub struct StreamedReplay {
+    /// Rows read and written.
+    pub samples: usize,
+    /// The mean sample period (first to last stamp).
+    pub dt_s: f64,
+    /// The integrator's counters (the same as the whole-recording path's).
+    pub stats: SimStats,
+    /// The input recording's metadata.
+    pub metadata: Vec<(String, String)>,
+}
+
+/// Replays the valve inputs of the recording file `input` open loop on `plant` and writes
+/// the output recording (metadata `out_metadata(dt_s)`, header, the input's `t_s` and
+/// openings, the five simulated channels) to `w`, streaming. `progress(k)`: rows written.
+///
+/// `Ok(None)`: not done by the stream (see the module documentation); what was written to
+/// `w` must be discarded and the whole-recording path run instead. `Err`: writing `w` failed.
+pub fn replay_file(
+    plant: &Plant,
+    input: &Path,
+    opts: &SolverOptions,
+    out_metadata: impl FnOnce(f64) -> Vec<(String, String)>,
+    w: &mut impl Write,
+    progress: &(dyn Fn(usize) + Sync),
+) -> std::io::Result<Option<StreamedReplay>> {
+    let Ok(file) = std::fs::File::open(input) else {
+        return Ok(None);
+    };
+    let mut blocks = Blocks::new(file);
+    let Ok(Some(first)) = blocks.next_block() else {
+        return Ok(None);
+    };
+    let Ok(first_text) = std::str::from_utf8(&first) else {
+        return Ok(None);
+    };
+    let Ok(table) = Table::parse(first_text, input) else {
+        return Ok(None);
+    };
+    let Ok(parser) = RowParser::of(&table) else {
+        return Ok(None);
+    };
+    let (data, data_line) = table.data();
+    let data_offset = data.as_ptr() as usize - first.as_ptr() as usize;
+    let single_block = blocks.at_end();
+
+    // First pass: the number of rows and the first and last row.
+    let mut count = RowCount::default();
+    count.add(data);
+    if !single_block {
+        while let Ok(Some(b)) = blocks.next_block() {
+            count.add(&b);
+        }
+        if !blocks.at_end() {
+            return Ok(None);
+        }
+    }
+    let n = count.rows;
+    let time_of = |line: &[u8]| -> Option<f64> {
+        let (v, _): (Vec<_>, _) = table.read_chunk(line, 1, 0, &|r| parser.parse(r)).ok()?;
+        (v.len() == 1).then(|| v[0].0)
+    };
+    let (Some(t_first), Some(t_last)) = (
+        count.first.as_deref().and_then(time_of),
+        count.last.as_deref().and_then(time_of),
+    ) else {
+        return Ok(None);
+    };
+    if n < 2 {
+        return Ok(None);
+    }
+    // `recording::mean_step_s` of the whole column, from its two ends.
+    let dt_s = (t_last - t_first) / (n - 1) as f64;
+    if !(dt_s > 0.0) {
+        return Ok(None);
+    }
+
+    recording::write_head(&out_metadata(dt_s), &Channel::ALL, w)?;
+
+    let abort = AtomicBool::new(false);
+    let (valid, sim, written, write_result) = std::thread::scope(|s| -> std::io::Result<_> {
+        let (tx_rows, rx_rows) = mpsc::sync_channel::<RowChunk>(CHANNEL_CHUNKS);
+        let (tx_out, rx_out) = mpsc::sync_channel::<OutChunk>(CHANNEL_CHUNKS);
+        let abort = &abort;
+        let table = &table;
+        let parser = &parser;
+        let first = &first;
+        let reader = std::thread::Builder::new()
+            .name("replay-reader".into())
+            .spawn_scoped(s, move || {
+                let mut t_all: Vec<f64> = Vec::with_capacity(n);
+                let mut line = data_line;
+                // The first block is UTF-8 (checked for the table); the others are checked here.
+                let mut checked = single_block;
+                let mut feed = |bytes: &[u8]| -> bool {
+                    if memchr::memchr(b'"', bytes).is_some()
+                        || (!checked && std::str::from_utf8(bytes).is_err())
+                    {
+                        return false;
+                    }
+                    checked = false;
+                    let mut start = 0;
+                    while start < bytes.len() {
+                        if abort.load(Ordering::Relaxed) {
+                            return false;
+                        }
+                        let rest = &bytes[start..];
+                        let (end, lines) = match memchr::memchr_iter(b'\n', rest)
+                            .nth(CHUNK_ROWS - 1)
+                        {
+                            Some(i) => (start + i + 1, CHUNK_ROWS as u64),
+                            None => (bytes.len(), memchr::memchr_iter(b'\n', rest).count() as u64),
+                        };
+                        let piece = &bytes[start..end];
+                        let mut chunk = RowChunk::default();
+                        chunk.reserve(CHUNK_ROWS);
+                        if !parser.parse_plain_rows(piece, &mut chunk) {
+                            match table
+                                .read_chunk::<_, RowChunk>(piece, line, 0, &|r| parser.parse(r))
+                            {
+                                Ok((c, _)) => chunk = c,
+                                Err(_) => return false,
+                            }
+                        }
+                        line += lines;
+                        t_all.extend_from_slice(&chunk.t_s);
+                        if tx_rows.send(chunk).is_err() {
+                            return false;
+                        }
+                        start = end;
+                    }
+                    true
+                };
+                let fed = if single_block {
+                    feed(&first[data_offset..])
+                } else {
+                    stream_blocks(input, data_offset as u64, &mut feed)
+                };
+                drop(tx_rows);
+                // The checks of `Recording::parse` that need the whole time column, and the
+                // uniform grid the replay assumed.
+                fed && t_all.len() == n
+                    && recording::mean_step_s(&t_all) == dt_s
+                    && table.check_time(&t_all, |_| 0).is_ok()
+                    && recording::stamps_uniform(&t_all)
+            })?;
+        let simulator = std::thread::Builder::new()
+            .name("replay-simulator".into())
+            .spawn_scoped(s, move || {
+                let r = simulate_chunks(plant, dt_s, opts, rx_rows, &tx_out, abort);
+                if r.is_err() {
+                    abort.store(true, Ordering::Relaxed);
+                }
+                r
+            })?;
+        let mut written = 0usize;
+        let mut write_result = Ok(());
+        for chunk in rx_out {
+            if let Err(e) = w.write_all(&chunk.bytes) {
+                abort.store(true, Ordering::Relaxed);
+                write_result = Err(e);
+                break;
+            }
+            written += chunk.rows;
+            progress(written);
+        }
+        let valid = reader.join().unwrap_or(false);
+        let sim = simulator.join().unwrap_or(Err(()));
+        Ok((valid, sim, written, write_result))
+    })?;
+    write_result?;
+    match sim {
+        Ok(stats) if valid && written == n => Ok(Some(StreamedReplay {
+            samples: n,
+            dt_s,
+            stats,
+            metadata: table.metadata.clone(),
+        })),
+        _ => Ok(None),
+    }
+}
+
+/// The simulator stage: [`crate::sim::simulate_with_progress`] over the rows as they come,
+/// then the sensor path, sending the finished rows on.
+fn simulate_chunks(
+    plant: &Plant,
+    dt_s: f64,
+    opts: &SolverOptions,
+    rx: mpsc::Receiver<RowChunk>,
+    tx: &mpsc::SyncSender<OutChunk>,
+    abort: &AtomicBool,
+) -> Result<SimStats, ()> {
+    let mut actuator = ActuatorPath::new(plant, dt_s, "open-loop replay").map_err(|_| ())?;
+    let delayed = actuator.delay_samples() != 0;
+    let mut integ = Integrator::new(plant, plant.initial_state(), *opts);
+    let mut sensor = SensorPath::new(plant, dt_s);
+    // Rows read but not yet simulated (the current run of identical inputs).
+    let mut pending: VecDeque<(f64, ValveInputs)> = VecDeque::new();
+    let mut run: Option<(ValveInputs, usize)> = None;
+    let mut out = OutChunk::with_capacity(CHUNK_ROWS);
+    let mut advance = |u: ValveInputs,
+                       len: usize,
+                       pending: &mut VecDeque<(f64, ValveInputs)>,
+                       out: &mut OutChunk|
+     -> Result<(), ()> {
+        integ
+            .advance_samples(u, dt_s, len, |x| {
+                let (t, u) = pending.pop_front().unwrap_or_default();
+                let m = sensor.push(plant, x);
+                recording::push_row(&mut out.bytes, t, &u, m.to_array().into_iter());
+                out.rows += 1;
+            })
+            .map_err(|_| ())
+    };
+    for chunk in rx {
+        if abort.load(Ordering::Relaxed) {
+            return Err(());
+        }
+        for (&t, &u) in chunk.t_s.iter().zip(&chunk.inputs) {
+            pending.push_back((t, u));
+            let d = if delayed { actuator.push(u) } else { u };
+            match &mut run {
+                Some((ru, len)) if *ru == d => *len += 1,
+                _ => {
+                    if let Some((ru, len)) = run.take() {
+                        advance(ru, len, &mut pending, &mut out)?;
+                    }
+                    run = Some((d, 1));
+                }
+            }
+        }
+        if out.rows >= CHUNK_ROWS {
+            let full = std::mem::replace(&mut out, OutChunk::with_capacity(CHUNK_ROWS));
+            tx.send(full).map_err(|_| ())?;
+        }
+    }
+    if let Some((ru, len)) = run.take() {
+        advance(ru, len, &mut pending, &mut out)?;
+    }
+    if !pending.is_empty() {
+        return Err(());
+    }
+    drop(advance);
+    if out.rows > 0 {
+        tx.send(out).map_err(|_| ())?;
+    }
+    Ok(integ.stats())
+}
+
+/// The rows of a recording file one at a time, read block by block (memory: one block and
+/// one chunk of parsed rows), for the streaming commands that need every column (`fit`).
+/// Only plain rows are taken ([`RowParser::parse_plain_rows`]); anything else is `Err(())`,
+/// and the caller leaves the file to [`Recording::read`](super::recording::Recording::read),
+/// which words the error.
+pub(crate) struct RowStream {
+    path: std::path::PathBuf,
+    /// The metadata and header lines (for [`Self::check_time`]).
+    head: String,
+    parser: RowParser,
+    blocks: Blocks,
+    /// The unparsed rest of the current block.
+    block: Vec<u8>,
+    block_pos: usize,
+    rows: Vec<(f64, [f64; 4], [f64; 5])>,
+    row_pos: usize,
+}
+
+/// A parsed row: time, openings, output channels by [`Channel::index`] (absent ones 0).
+pub(crate) type ParsedRow = (f64, [f64; 4], [f64; 5]);
+
+impl RowStream {
+    /// Opens `path` and reads its metadata and header; `None` if the stream cannot take it.
+    pub(crate) fn open(path: &Path) -> Option<Self> {
+        let mut blocks = Blocks::new(std::fs::File::open(path).ok()?);
+        let first = blocks.next_block().ok()??;
+        let text = std::str::from_utf8(&first).ok()?;
+        let table = Table::parse(text, path).ok()?;
+        let parser = RowParser::of(&table).ok()?;
+        let (data, _) = table.data();
+        let data_offset = data.as_ptr() as usize - first.as_ptr() as usize;
+        let head = text[..data_offset].to_owned();
+        drop(table);
+        Some(Self {
+            path: path.to_owned(),
+            head,
+            parser,
+            blocks,
+            block: first,
+            block_pos: data_offset,
+            rows: Vec::new(),
+            row_pos: 0,
+        })
+    }
+
+    /// The output channels the file has, by [`Channel::index`].
+    pub(crate) fn channels(&self) -> [bool; 5] {
+        self.parser.out_cols.map(|c| c.is_some())
+    }
+
+    /// The next row; `Ok(None)` at the end of the file, `Err(())` if a row is not plain.
+    pub(crate) fn next_row(&mut self) -> Result<Option<ParsedRow>, ()> {
+        while self.row_pos == self.rows.len() {
+            self.rows.clear();
+            self.row_pos = 0;
+            if self.block_pos == self.block.len() {
+                match self.blocks.next_block() {
+                    Ok(Some(b)) => {
+                        if std::str::from_utf8(&b).is_err() {
+                            return Err(());
+                        }
+                        self.block = b;
+                        self.block_pos = 0;
+                    }
+                    Ok(None) => return Ok(None),
+                    Err(_) => return Err(()),
+                }
+            }
+            let rest = &self.block[self.block_pos..];
+            let end = memchr::memchr_iter(b'\n', rest)
+                .nth(CHUNK_ROWS - 1)
+                .map_or(rest.len(), |i| i + 1);
+            if memchr::memchr(b'"', &rest[..end]).is_some()
+                || !self.parser.parse_plain_rows(&rest[..end], &mut self.rows)
+            {
+                return Err(());
+            }
+            self.block_pos += end;
+        }
+        self.row_pos += 1;
+        Ok(Some(self.rows[self.row_pos - 1]))
+    }
+
+    /// Whether the whole time column `t_s` passes the checks of
+    /// [`Recording::read`](super::recording::Recording::read) (at least two rows, increasing,
+    /// no gap, the declared sample period).
+    pub(crate) fn check_time(&self, t_s: &[f64]) -> bool {
+        Table::parse(&self.head, &self.path).is_ok_and(|t| t.check_time(t_s, |_| 0).is_ok())
+    }
+}
+
+/// Rows as the reader passes them on: time stamps and valve openings.
+#[derive(Default)]
+struct RowChunk {
+    t_s: Vec<f64>,
+    inputs: Vec<ValveInputs>,
+}
+
+impl RowSink<(f64, [f64; 4], [f64; 5])> for RowChunk {
+    fn reserve(&mut self, n: usize) {
+        self.t_s.reserve(n);
+        self.inputs.reserve(n);
+    }
+    fn push(&mut self, (t_s, u, _): (f64, [f64; 4], [f64; 5])) {
+        self.t_s.push(t_s);
+        self.inputs.push(ValveInputs {
+            u_in1: u[0],
+            u_ex1: u[1],
+            u_in2: u[2],
+            u_ex2: u[3],
+        });
+    }
+    fn append(&mut self, mut other: Self) {
+        self.t_s.append(&mut other.t_s);
+        self.inputs.append(&mut other.inputs);
+    }
+}
+
+/// Finished rows, formatted: the input's time and openings with the simulated channels.
+struct OutChunk {
+    bytes: Vec<u8>,
+    rows: usize,
+}
+
+impl OutChunk {
+    fn with_capacity(rows: usize) -> Self {
+        Self {
+            bytes: Vec::with_capacity(rows * 80),
+            rows: 0,
+        }
+    }
+}
+
+/// The rows of the data part as `Table::read_chunk` sees them (lines that are not empty once
+/// a trailing `\r` is removed), with the first and the last one.
+#[derive(Default)]
+struct RowCount {
+    rows: usize,
+    first: Option<Vec<u8>>,
+    last: Option<Vec<u8>>,
+}
+
+impl RowCount {
+    /// Counts the lines of `bytes` (whole lines, or the file's tail).
+    fn add(&mut self, bytes: &[u8]) {
+        let mut last: Option<&[u8]> = None;
+        let ends = memchr::memchr_iter(b'\n', bytes).chain(std::iter::once(bytes.len()));
+        let mut start = 0;
+        for end in ends {
+            if start > bytes.len() {
+                break;
+            }
+            let raw = &bytes[start..end];
+            start = end + 1;
+            let row = raw.strip_suffix(b"\r").unwrap_or(raw);
+            if !row.is_empty() {
+                self.rows += 1;
+                if self.first.is_none() {
+                    self.first = Some(row.to_vec());
+                }
+                last = Some(row);
+            }
+        }
+        if let Some(l) = last {
+            self.last = Some(l.to_vec());
+        }
+    }
+}
+
+/// A file read in blocks of whole lines.
+struct Blocks {
+    file: std::fs::File,
+    /// The bytes after the last line end of the previous read.
+    carry: Vec<u8>,
+    eof: bool,
+    /// Bytes left in the file by its size (a hint: the file may change).
+    left_hint: u64,
+}
+
+impl Blocks {
+    /// The blocks of `file` from its current position.
+    fn new(mut file: std::fs::File) -> Self {
+        let size = file.metadata().map_or(0, |m| m.len());
+        let pos = file.stream_position().unwrap_or(0);
+        Self {
+            file,
+            carry: Vec::new(),
+            eof: false,
+            left_hint: size.saturating_sub(pos),
+        }
+    }
+
+    /// Whether the whole file has been handed out.
+    fn at_end(&self) -> bool {
+        self.eof && self.carry.is_empty()
+    }
+
+    /// The next block: whole lines (ending with `\n`), or the rest of the file at its end;
+    /// `None` after the end.
+    fn next_block(&mut self) -> std::io::Result<Option<Vec<u8>>> {
+        let mut buf = std::mem::take(&mut self.carry);
+        loop {
+            if self.eof {
+                return Ok((!buf.is_empty()).then_some(buf));
+            }
+            // One read call for a block (asking one byte more than a file of at most one
+            // block holds finds its end in the same call).
+            let before = buf.len();
+            let left = usize::try_from(self.left_hint).unwrap_or(usize::MAX);
+            let want = before + BLOCK_BYTES.min(left.saturating_add(1)).max(1);
+            buf.resize(want, 0);
+            let mut filled = before;
+            while filled < want {
+                match self.file.read(&mut buf[filled..]) {
+                    Ok(0) => {
+                        self.eof = true;
+                        break;
+                    }
+                    Ok(k) => filled += k,
+                    Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                    Err(e) => return Err(e),
+                }
+            }
+            buf.truncate(filled);
+            self.left_hint = self.left_hint.saturating_sub((filled - before) as u64);
+            if self.eof {
+                continue;
+            }
+            if let Some(i) = memchr::memrchr(b'\n', &buf[before..]) {
+                self.carry = buf.split_off(before + i + 1);
+                return Ok(Some(buf));
+            }
+        }
+    }
+}
+
+/// Reads `path` from byte `offset` in blocks of whole lines through `feed` until it answers
+/// false or the file ends; whether every block was fed.
+fn stream_blocks(path: &Path, offset: u64, feed: &mut impl FnMut(&[u8]) -> bool) -> bool {
+    let Ok(mut file) = std::fs::File::open(path) else {
+        return false;
+    };
+    if file.seek(std::io::SeekFrom::Start(offset)).is_err() {
+        return false;
+    }
+    let mut blocks = Blocks::new(file);
+    loop {
+        match blocks.next_block() {
+            Ok(Some(b)) => {
+                if !feed(&b) {
+                    return false;
+                }
+            }
+            Ok(None) => return true,
+            Err(_) => return false,
+        }
+    }
+}
