@@ -200,6 +200,9 @@ pub struct PressureFeedforward {
     prev_set_pa: [f32; 2],
     rate_pa_s: [f32; 2],
     init: bool,
+    /// The learned volume in place of the polynomial (feature `volume-fnn`).
+    #[cfg(feature = "volume-fnn")]
+    fnn: Option<&'static crate::volume_fnn::VolumeFnn>,
 }
 
 impl PressureFeedforward {
@@ -230,7 +233,17 @@ impl PressureFeedforward {
             prev_set_pa: [0.0; 2],
             rate_pa_s: [0.0; 2],
             init: false,
+            #[cfg(feature = "volume-fnn")]
+            fnn: None,
         }
+    }
+
+    /// With the hybrid model's learned volume ([`crate::volume_fnn`], seed 004 eq. 12) in
+    /// place of the polynomial (`None`: the polynomial).
+    #[cfg(feature = "volume-fnn")]
+    pub fn with_volume_fnn(mut self, fnn: Option<&'static crate::volume_fnn::VolumeFnn>) -> Self {
+        self.fnn = fnn;
+        self
     }
 
     /// Forgets the set-point history (the next step starts at rate 0).
@@ -274,16 +287,27 @@ impl PressureFeedforward {
             *r += self.alpha_tick_hz * (set_pa[i] - self.prev_set_pa[i]) - self.alpha * *r;
             self.prev_set_pa[i] = set_pa[i];
             let chi = self.chi0 + signs[i] * dchi;
-            let v = b0 + chi * (b1 + chi * (b2 + chi * b3));
-            let v = if v > self.v_floor_m3 {
-                v
-            } else {
-                self.v_floor_m3
+            let p_abs = set_pa[i] + self.model.p_atm_pa;
+            #[cfg(feature = "volume-fnn")]
+            let learned = self
+                .fnn
+                .map(|n| n.volume_and_rate(chi, signs[i] * dchi_rate, p_abs, *r));
+            #[cfg(not(feature = "volume-fnn"))]
+            let learned: Option<(f32, f32)> = None;
+            let (v, v_rate) = match learned {
+                Some(vr) => vr,
+                None => {
+                    let v = b0 + chi * (b1 + chi * (b2 + chi * b3));
+                    let v = if v > self.v_floor_m3 {
+                        v
+                    } else {
+                        self.v_floor_m3
+                    };
+                    let v_rate = (b1 + chi * (2.0 * b2 + chi * 3.0 * b3)) * signs[i] * dchi_rate;
+                    (v, v_rate)
+                }
             };
-            let v_rate = (b1 + chi * (2.0 * b2 + chi * 3.0 * b3)) * signs[i] * dchi_rate;
-            let m = self
-                .model
-                .mass_flow_kg_s(set_pa[i] + self.model.p_atm_pa, *r, v, v_rate);
+            let m = self.model.mass_flow_kg_s(p_abs, *r, v, v_rate);
             out[i] = self.model.duty(m, meas_pa[i]);
         }
         out

@@ -5,7 +5,9 @@
 //! - required: `t_s` (increasing; uniform steps or stamps that jitter by less than half a
 //!   median step, see [`Recording::is_uniform`]; a gap is refused), `u_in1`, `u_ex1`,
 //!   `u_in2`, `u_ex2` (in [0, 1]) and at least one of `angle_deg`, `p1_kpa`, `p2_kpa`,
-//!   `f1_n`, `f2_n`; other columns are ignored.
+//!   `f1_n`, `f2_n`; optional `m_dot_1_kg_s`, `m_dot_2_kg_s` (both or neither: the net mass
+//!   flow into each muscle, a flow sensor's reading on a rig, the plant's true flow in
+//!   host-sim's recordings); other columns are ignored.
 //!
 //! Every error names the file, the line and the field. Writing goes to a temporary file in
 //! the target directory that is renamed over the target only when complete.
@@ -68,6 +70,9 @@ pub const MIN_STEP_RATIO: f64 = 0.5;
 /// count as uniform: such a recording is used as it is.
 pub const UNIFORM_TOLERANCE: f64 = 0.01;
 
+/// The optional mass-flow columns (muscle 1, muscle 2) [kg/s].
+pub const MASS_FLOW_COLUMNS: [&str; 2] = ["m_dot_1_kg_s", "m_dot_2_kg_s"];
+
 /// The input columns, in the order of [`ValveInputs`].
 pub const INPUT_COLUMNS: [&str; 4] = ["u_in1", "u_ex1", "u_in2", "u_ex2"];
 
@@ -80,6 +85,9 @@ pub struct Recording {
     pub inputs: Vec<ValveInputs>,
     /// Output channels present, indexed by [`Channel::index`].
     pub outputs: [Option<Vec<f64>>; 5],
+    /// Net mass flow into muscle 1 and 2 at `t_s` with the openings of the sample [kg/s]
+    /// (columns [`MASS_FLOW_COLUMNS`]), when recorded.
+    pub mass_flow_kg_s: Option<[Vec<f64>; 2]>,
 }
 
 /// A recording that could not be read or written.
@@ -197,6 +205,12 @@ impl Recording {
             t_s: grid.clone(),
             inputs,
             outputs: Default::default(),
+            mass_flow_kg_s: self.mass_flow_kg_s.as_ref().map(|[a, b]| {
+                [
+                    interpolate(&self.t_s, a, &grid),
+                    interpolate(&self.t_s, b, &grid),
+                ]
+            }),
         };
         out.metadata.retain(|(k, _)| k != "sample_period_s");
         out.metadata
@@ -250,6 +264,25 @@ impl Recording {
         for c in Channel::ALL {
             out_cols[c.index()] = table.find(c.name())?;
         }
+        let flow_cols = [
+            table.find(MASS_FLOW_COLUMNS[0])?,
+            table.find(MASS_FLOW_COLUMNS[1])?,
+        ];
+        let flow_cols = match flow_cols {
+            [Some(a), Some(b)] => Some([a, b]),
+            [None, None] => None,
+            [a, _] => {
+                let (has, lacks) = if a.is_some() { (0, 1) } else { (1, 0) };
+                return Err(table.field_err(
+                    table.header_line,
+                    MASS_FLOW_COLUMNS[lacks],
+                    format!(
+                        "missing: the mass-flow columns come in pairs ({} is present)",
+                        MASS_FLOW_COLUMNS[has]
+                    ),
+                ));
+            }
+        };
         if out_cols.iter().all(|c| c.is_none()) {
             return Err(table.field_err(
                 table.header_line,
@@ -269,12 +302,19 @@ impl Recording {
                     y[c.index()] = row.num(col, c.name())?;
                 }
             }
-            Ok((t_s, u, y))
+            let mut m = [0.0; 2];
+            if let Some(cols) = flow_cols {
+                for i in 0..2 {
+                    m[i] = row.num(cols[i], MASS_FLOW_COLUMNS[i])?;
+                }
+            }
+            Ok((t_s, u, y, m))
         })?;
         let mut rec = Recording {
             metadata: table.metadata.clone(),
             t_s: cols.t_s,
             inputs: cols.inputs,
+            mass_flow_kg_s: flow_cols.map(|_| cols.mass_flows),
             ..Default::default()
         };
         for (c, y) in Channel::ALL.into_iter().zip(cols.outputs) {
@@ -333,7 +373,10 @@ impl Recording {
             source,
         };
         let n = self.t_s.len();
-        if self.inputs.len() != n || self.outputs.iter().flatten().any(|c| c.len() != n) {
+        if self.inputs.len() != n
+            || self.outputs.iter().flatten().any(|c| c.len() != n)
+            || self.mass_flow_kg_s.iter().flatten().any(|c| c.len() != n)
+        {
             return Err(RecordingError::Invalid {
                 path: path.to_owned(),
                 message: "columns of unequal length".into(),
@@ -360,6 +403,9 @@ impl Recording {
             .filter(|c| self.outputs[c.index()].is_some())
             .collect();
         header.extend(present.iter().map(|c| c.name()));
+        if self.mass_flow_kg_s.is_some() {
+            header.extend(MASS_FLOW_COLUMNS);
+        }
         cw.write_record(&header)?;
         cw.flush()?;
         drop(cw);
@@ -382,6 +428,10 @@ impl Recording {
                 for col in &outputs {
                     buf.push(b',');
                     numfmt::push_fixed(&mut buf, col[k], 6);
+                }
+                for col in self.mass_flow_kg_s.iter().flatten() {
+                    buf.push(b',');
+                    numfmt::push_shortest(&mut buf, col[k]);
                 }
                 buf.push(b'\n');
             }
@@ -457,17 +507,18 @@ struct RecordingColumns {
     t_s: Vec<f64>,
     inputs: Vec<ValveInputs>,
     outputs: [Vec<f64>; 5],
+    mass_flows: [Vec<f64>; 2],
 }
 
-impl RowSink<(f64, [f64; 4], [f64; 5])> for RecordingColumns {
+impl RowSink<(f64, [f64; 4], [f64; 5], [f64; 2])> for RecordingColumns {
     fn reserve(&mut self, n: usize) {
         self.t_s.reserve(n);
         self.inputs.reserve(n);
-        for y in &mut self.outputs {
+        for y in self.outputs.iter_mut().chain(self.mass_flows.iter_mut()) {
             y.reserve(n);
         }
     }
-    fn push(&mut self, (t_s, u, y): (f64, [f64; 4], [f64; 5])) {
+    fn push(&mut self, (t_s, u, y, m): (f64, [f64; 4], [f64; 5], [f64; 2])) {
         self.t_s.push(t_s);
         self.inputs.push(ValveInputs {
             u_in1: u[0],
@@ -478,11 +529,19 @@ impl RowSink<(f64, [f64; 4], [f64; 5])> for RecordingColumns {
         for (col, v) in self.outputs.iter_mut().zip(y) {
             col.push(v);
         }
+        for (col, v) in self.mass_flows.iter_mut().zip(m) {
+            col.push(v);
+        }
     }
     fn append(&mut self, mut other: Self) {
         self.t_s.append(&mut other.t_s);
         self.inputs.append(&mut other.inputs);
-        for (a, b) in self.outputs.iter_mut().zip(other.outputs.iter_mut()) {
+        for (a, b) in self
+            .outputs
+            .iter_mut()
+            .zip(other.outputs.iter_mut())
+            .chain(self.mass_flows.iter_mut().zip(other.mass_flows.iter_mut()))
+        {
             a.append(b);
         }
     }
