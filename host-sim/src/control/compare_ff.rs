@@ -125,6 +125,31 @@ pub const VARIANTS: [(&str, &str); 4] = [
     ),
 ];
 
+/// The variant whose chamber volume law differs from the firmware's polynomial (the
+/// hybrid model's case): `b0` x 1.3 (dead volume of a longer tube to the valve), `b1..b3` x 0.7
+/// (a flatter volume-contraction curve). On the reference plant: V +3 % at the working
+/// contraction 0.14, dV/de -30 %.
+pub const VOLUME_VARIANT: &str = "volume law differs (b0 x 1.3, b1..b3 x 0.7)";
+
+/// The plant file `text` with its `[muscle] volume_poly_m3` changed as [`VOLUME_VARIANT`]
+/// says (the other keys and comments kept).
+pub fn with_volume_mismatch(text: &str) -> anyhow::Result<String> {
+    let mut doc: toml_edit::DocumentMut = text.parse()?;
+    let arr = doc["muscle"]["volume_poly_m3"]
+        .as_array_mut()
+        .ok_or_else(|| anyhow::anyhow!("[muscle] volume_poly_m3: not an array"))?;
+    let b: Vec<f64> = arr
+        .iter()
+        .map(|v| v.as_float().or_else(|| v.as_integer().map(|i| i as f64)))
+        .collect::<Option<_>>()
+        .ok_or_else(|| anyhow::anyhow!("[muscle] volume_poly_m3: not numbers"))?;
+    arr.clear();
+    for (i, c) in b.iter().enumerate() {
+        arr.push(c * if i == 0 { 1.3 } else { 0.7 });
+    }
+    Ok(doc.to_string())
+}
+
 /// One controller's figures on one scenario set.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FfScore {
@@ -253,13 +278,19 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
     }
     let mut suite = suite_scenarios()?;
     let mut held_out = jump_suite_scenarios()?;
-    let variants: &[(&str, &str)] = if a.quick {
+    let mut variants: Vec<(&str, String)> = VARIANTS
+        .iter()
+        .map(|(n, t)| (*n, format!("{text}\n{t}")))
+        .collect();
+    variants.push((
+        VOLUME_VARIANT,
+        with_volume_mismatch(&text).with_context(|| a.plant.display().to_string())?,
+    ));
+    if a.quick {
         suite.truncate(1);
         held_out.truncate(1);
-        &VARIANTS[..1]
-    } else {
-        &VARIANTS
-    };
+        variants.truncate(1);
+    }
     let sets = [("suite", &suite), ("held-out", &held_out)];
     let mut out = String::new();
     writeln!(
@@ -284,8 +315,8 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
         TRAINING_SCENARIO.0
     )?;
     let mut nominal_ratio = f64::NAN;
-    for (vname, table) in variants {
-        let cfg = PlantConfig::from_toml_str(&format!("{text}\n{table}"), &a.plant)
+    for (vname, plant_text) in &variants {
+        let cfg = PlantConfig::from_toml_str(plant_text, &a.plant)
             .with_context(|| format!("--plant {} with the {vname} variant", a.plant.display()))?;
         let plant = Plant::from_config(&cfg);
         writeln!(out, "\n### {vname}\n")?;

@@ -515,6 +515,11 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
     }
 }
 
+/// Relative loss reduction below which the Levenberg-Marquardt iteration stops (the
+/// crate's default, 1.5e-8, lets it creep on for thousands of evaluations at no gain on
+/// held-out data).
+pub const FTOL: f64 = 1e-6;
+
 /// Trains the network on `samples` (eq. 10) from a random start (`opt.seed`); the output
 /// scale and offset and the input normalisation come from the samples and the polynomial
 /// volume `poly` (the offset its mean, the scale its spread, the floor its `0.1 b0`).
@@ -601,6 +606,7 @@ pub fn train(
     let patience = opt.max_evaluations.div_ceil(PARAMETERS + 1).max(1);
     let (problem, report) = LevenbergMarquardt::new()
         .with_patience(patience)
+        .with_ftol(FTOL)
         .minimize(problem);
     let loss_end = problem.loss();
     if !loss_end.is_finite() || problem.net.theta.iter().any(|t| !t.is_finite()) {
@@ -841,6 +847,7 @@ pub fn run_identify_volume(a: &IdentifyVolumeArgs) -> anyhow::Result<String> {
         ("held out (recording tail)".to_string(), &held),
     ];
     sets.extend(validation.iter().map(|(n, s)| (n.clone(), s)));
+    sets.retain(|(_, s)| !s.is_empty());
     let figures: Vec<String> = sets.into_iter().map(|(name, s)| {
         let a = mse_kg2_s2(s, poly_flow);
         let h = mse_kg2_s2(s, hm);
