@@ -573,3 +573,70 @@ mod tick_tests {
         );
     }
 }
+
+/// The hybrid model's learned volume in the tick's feed-forward (compiled in with the
+/// `volume-fnn` feature: `cargo test -p pam-firmware --lib --features volume-fnn`).
+#[cfg(all(test, feature = "volume-fnn"))]
+mod hybrid_tick_tests {
+    use crate::tick::{ControlTick, ControllerConfig, SensorFrame, Setpoint};
+
+    fn cfg(fnn: Option<&'static crate::volume_fnn::VolumeFnn>) -> ControllerConfig {
+        let mut c = ControllerConfig::reference(1000.0);
+        c.pressure_ff.enabled = true;
+        c.volume_fnn = fnn;
+        c
+    }
+
+    #[test]
+    fn the_learned_volume_changes_the_duty_and_stays_in_range() {
+        let net = &crate::constants::VOLUME_FNN;
+        let (mut poly, mut hybrid) = (
+            ControlTick::new(cfg(None)),
+            ControlTick::new(cfg(Some(net))),
+        );
+        let mut differ = 0;
+        for k in 0..400 {
+            let sp = Setpoint {
+                angle_rad: 0.3 * libm::sinf(k as f32 * 0.02),
+            };
+            let a = 0.1 * libm::sinf(k as f32 * 0.01);
+            let f = SensorFrame {
+                p1_gauge_pa: Some(300e3 + 50.0 * k as f32),
+                p2_gauge_pa: Some(300e3 - 50.0 * k as f32),
+                angle_rad: Some(a),
+            };
+            let x = poly.step(&f, &sp, 1e-3);
+            let y = hybrid.step(&f, &sp, 1e-3);
+            for u in [y.valves.muscle1, y.valves.muscle2] {
+                assert!(u.is_finite() && (-1.0..=1.0).contains(&u), "{k}: {u}");
+            }
+            if x.valves != y.valves {
+                differ += 1;
+            }
+        }
+        assert!(
+            differ > 0,
+            "the learned volume never changed a valve command"
+        );
+    }
+
+    #[test]
+    fn bad_weights_are_a_config_fault() {
+        static BAD: crate::volume_fnn::VolumeFnn = {
+            let mut n = crate::constants::VOLUME_FNN;
+            n.volume_floor_m3 = -1.0;
+            n
+        };
+        let c = cfg(Some(&BAD));
+        assert!(!c.is_valid());
+        let mut t = ControlTick::new(c);
+        let f = SensorFrame {
+            p1_gauge_pa: Some(300e3),
+            p2_gauge_pa: Some(300e3),
+            angle_rad: Some(0.0),
+        };
+        let o = t.step(&f, &Setpoint { angle_rad: 0.1 }, 1e-3);
+        assert!(!o.armed);
+        assert!(cfg(Some(&crate::constants::VOLUME_FNN)).is_valid());
+    }
+}
