@@ -27,6 +27,10 @@ mod arm3;
 #[path = "build/pressure_ff.rs"]
 mod pressure_ff;
 
+// The hybrid model's learned volume (config/volume.toml).
+#[path = "build/volume_fnn.rs"]
+mod volume_fnn;
+
 #[derive(serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 struct ForceFile {
@@ -181,6 +185,7 @@ fn lit(x: f64) -> String {
 fn main() {
     println!("cargo:rerun-if-changed=src/fixed_point/prescale.rs");
     println!("cargo:rerun-if-changed=build/pressure_ff.rs");
+    println!("cargo:rerun-if-changed=build/volume_fnn.rs");
     let force: ForceFile = read("config/force_law.toml");
     let torque: TorqueFile = read("config/torque_model.toml");
     let geometry: GeometryFile = read("config/joint_geometry.toml");
@@ -465,7 +470,7 @@ fn main() {
          pub const FIXED_TORQUE_MODEL: crate::fixed_point::FixedTorqueModel = crate::fixed_point::FixedTorqueModel::from_bits(\n\
          \x20   crate::fixed_point::prescale::{tb:?});\n"
     );
-    let src = src + &pressure_ff::constants();
+    let src = src + &pressure_ff::constants() + &volume_fnn::constants();
     let out = PathBuf::from(env::var("OUT_DIR").unwrap()).join("constants.rs");
     fs::write(&out, src).expect("write constants.rs");
     let arm = arm3::constants(&arm3::Reference {

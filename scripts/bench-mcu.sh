@@ -63,6 +63,28 @@ cargo build -q -p pam-firmware --bin qemu --features pam-firmware/mcu-bench-arm 
   --target thumbv7em-none-eabihf --target-dir "$arm_dir"
 arm_log=$(QEMU_EXTRA_ARGS="-icount shift=0" DEFMT_PRINT_ARGS="--log-format {s}" \
   scripts/qemu-run.sh "$arm_dir/thumbv7em-none-eabihf/release/qemu" | grep -v '^tick=')
+# The hybrid volume's rows (seed 004 eq. 12): the benchmark image with the feature volume-fnn
+# (the pressure feed-forward switched on in its tick rows, analytical and hybrid, and the
+# network alone), in its own target directory so the default image above stays as it is.
+fnn_dir=${CARGO_TARGET_DIR:-target}/bench-fnn
+cargo build -q -p pam-firmware --bin qemu --features pam-firmware/mcu-bench,pam-firmware/volume-fnn \
+  --release --target thumbv7em-none-eabihf --target-dir "$fnn_dir"
+fnn_log=$(QEMU_EXTRA_ARGS="-icount shift=0" DEFMT_PRINT_ARGS="--log-format {s}" \
+  scripts/qemu-run.sh "$fnn_dir/thumbv7em-none-eabihf/release/qemu" | grep -v '^tick=')
+fnn_stat() { # fnn_stat <bench name> -> "mean worst n" in instructions (calibrated)
+  local line calib
+  line=$(grep "^bench $1 " <<<"$fnn_log" | tr ' ' '\n')
+  calib=$(grep "^bench calib" <<<"$fnn_log" | tr ' ' '\n')
+  awk -v ci="$(sed -n 's/^insns=//p' <<<"$calib")" -v cc="$(sed -n 's/^counts=//p' <<<"$calib")" \
+    -v e="$(sed -n 's/^empty_counts=//p' <<<"$calib")" -v n="$(sed -n 's/^n=//p' <<<"$line")" \
+    -v s="$(sed -n 's/^sum_counts=//p' <<<"$line")" -v m="$(sed -n 's/^max_counts=//p' <<<"$line")" 'BEGIN {
+    if (n == "" || n == 0 || cc == "") { print "? ? 0"; exit }
+    k = ci / (cc - e); printf "%.0f %.0f %d\n", (s / n - e) * k, (m - e) * k, n }'
+}
+read -r fnn_tick0_mean fnn_tick0_worst _ < <(fnn_stat tick)
+read -r ff_tick_mean ff_tick_worst ff_tick_n < <(fnn_stat "ff tick")
+read -r hm_tick_mean hm_tick_worst hm_tick_n < <(fnn_stat "hybrid tick")
+read -r fnn_mean fnn_worst fnn_n < <(fnn_stat volume_fnn)
 # Cortex-M0 (no FPU) image on QEMU microbit: SysTick runs at 16 MHz there, so 64 ns per
 # instruction (-icount shift=6) keeps about one count per instruction.
 m0_elf=${CARGO_TARGET_DIR:-target}/thumbv6m-none-eabi/release/qemu_m0
@@ -164,6 +186,10 @@ calibration: $cal_insns instructions = $((cal_counts - empty)) SysTick counts (k
 | full f32 control tick, worst tick of the trace | $tick_worst instructions | | |
 | the same trace with the reference start phase (ramped set-point and pressure ceiling for up to ~1 s after arming), mean / worst over $st_n armed ticks | $st_mean / $st_worst instructions | | |
 | 3-DOF arm tick (three joint ticks, rigid-body gravity and inertia feed-forward, three valve drivers; traces/arm3_sensor_trace.csv), mean / worst over $arm_n of $arm_ticks ticks with all joints armed | $arm_mean / $arm_worst instructions | | |
+| image with the feature volume-fnn, pressure feed-forward off (as the default), mean / worst | $fnn_tick0_mean / $fnn_tick0_worst instructions | | |
+| the same image, pressure feed-forward on, analytical (volume polynomial, seed 004 eq. 7), mean / worst over $ff_tick_n armed ticks | $ff_tick_mean / $ff_tick_worst instructions | | |
+| the same image, pressure feed-forward on, hybrid (learned volume, 2 x 8 units, seed 004 eq. 12), mean / worst over $hm_tick_n armed ticks | $hm_tick_mean / $hm_tick_worst instructions | reported separately | |
+| hybrid volume network alone (one muscle: V and its eq. 9 rate), mean / worst over $fnn_n calls | $fnn_mean / $fnn_worst instructions | | |
 | force law alone (f32, one muscle), mean over $fl_n calls | $fl_mean instructions | | |
 | force law alone (f32), worst call | $fl_worst instructions | | |
 | force law fixed point (32-bit integers, same inputs quantised), mean over $fx_n calls ($fx_off off the f32 law by > 0.1 N) | $fx_mean instructions | | |

@@ -200,6 +200,9 @@ pub struct PressureFeedforward {
     prev_set_pa: [f32; 2],
     rate_pa_s: [f32; 2],
     init: bool,
+    /// The learned volume in place of the polynomial (feature `volume-fnn`).
+    #[cfg(feature = "volume-fnn")]
+    fnn: Option<&'static crate::volume_fnn::VolumeFnn>,
 }
 
 impl PressureFeedforward {
@@ -230,7 +233,17 @@ impl PressureFeedforward {
             prev_set_pa: [0.0; 2],
             rate_pa_s: [0.0; 2],
             init: false,
+            #[cfg(feature = "volume-fnn")]
+            fnn: None,
         }
+    }
+
+    /// With the hybrid model's learned volume ([`crate::volume_fnn`], seed 004 eq. 12) in
+    /// place of the polynomial (`None`: the polynomial).
+    #[cfg(feature = "volume-fnn")]
+    pub fn with_volume_fnn(mut self, fnn: Option<&'static crate::volume_fnn::VolumeFnn>) -> Self {
+        self.fnn = fnn;
+        self
     }
 
     /// Forgets the set-point history (the next step starts at rate 0).
@@ -274,16 +287,27 @@ impl PressureFeedforward {
             *r += self.alpha_tick_hz * (set_pa[i] - self.prev_set_pa[i]) - self.alpha * *r;
             self.prev_set_pa[i] = set_pa[i];
             let chi = self.chi0 + signs[i] * dchi;
-            let v = b0 + chi * (b1 + chi * (b2 + chi * b3));
-            let v = if v > self.v_floor_m3 {
-                v
-            } else {
-                self.v_floor_m3
+            let p_abs = set_pa[i] + self.model.p_atm_pa;
+            #[cfg(feature = "volume-fnn")]
+            let learned = self
+                .fnn
+                .map(|n| n.volume_and_rate(chi, signs[i] * dchi_rate, p_abs, *r));
+            #[cfg(not(feature = "volume-fnn"))]
+            let learned: Option<(f32, f32)> = None;
+            let (v, v_rate) = match learned {
+                Some(vr) => vr,
+                None => {
+                    let v = b0 + chi * (b1 + chi * (b2 + chi * b3));
+                    let v = if v > self.v_floor_m3 {
+                        v
+                    } else {
+                        self.v_floor_m3
+                    };
+                    let v_rate = (b1 + chi * (2.0 * b2 + chi * 3.0 * b3)) * signs[i] * dchi_rate;
+                    (v, v_rate)
+                }
             };
-            let v_rate = (b1 + chi * (2.0 * b2 + chi * 3.0 * b3)) * signs[i] * dchi_rate;
-            let m = self
-                .model
-                .mass_flow_kg_s(set_pa[i] + self.model.p_atm_pa, *r, v, v_rate);
+            let m = self.model.mass_flow_kg_s(p_abs, *r, v, v_rate);
             out[i] = self.model.duty(m, meas_pa[i]);
         }
         out
@@ -547,5 +571,72 @@ mod tick_tests {
                 .step(&frame(f32::NAN, 0.0, 0.0), &sp, 1e-3)
                 .valves
         );
+    }
+}
+
+/// The hybrid model's learned volume in the tick's feed-forward (compiled in with the
+/// `volume-fnn` feature: `cargo test -p pam-firmware --lib --features volume-fnn`).
+#[cfg(all(test, feature = "volume-fnn"))]
+mod hybrid_tick_tests {
+    use crate::tick::{ControlTick, ControllerConfig, SensorFrame, Setpoint};
+
+    fn cfg(fnn: Option<&'static crate::volume_fnn::VolumeFnn>) -> ControllerConfig {
+        let mut c = ControllerConfig::reference(1000.0);
+        c.pressure_ff.enabled = true;
+        c.volume_fnn = fnn;
+        c
+    }
+
+    #[test]
+    fn the_learned_volume_changes_the_duty_and_stays_in_range() {
+        let net = &crate::constants::VOLUME_FNN;
+        let (mut poly, mut hybrid) = (
+            ControlTick::new(cfg(None)),
+            ControlTick::new(cfg(Some(net))),
+        );
+        let mut differ = 0;
+        for k in 0..400 {
+            let sp = Setpoint {
+                angle_rad: 0.3 * libm::sinf(k as f32 * 0.02),
+            };
+            let a = 0.1 * libm::sinf(k as f32 * 0.01);
+            let f = SensorFrame {
+                p1_gauge_pa: Some(300e3 + 50.0 * k as f32),
+                p2_gauge_pa: Some(300e3 - 50.0 * k as f32),
+                angle_rad: Some(a),
+            };
+            let x = poly.step(&f, &sp, 1e-3);
+            let y = hybrid.step(&f, &sp, 1e-3);
+            for u in [y.valves.muscle1, y.valves.muscle2] {
+                assert!(u.is_finite() && (-1.0..=1.0).contains(&u), "{k}: {u}");
+            }
+            if x.valves != y.valves {
+                differ += 1;
+            }
+        }
+        assert!(
+            differ > 0,
+            "the learned volume never changed a valve command"
+        );
+    }
+
+    #[test]
+    fn bad_weights_are_a_config_fault() {
+        static BAD: crate::volume_fnn::VolumeFnn = {
+            let mut n = crate::constants::VOLUME_FNN;
+            n.volume_floor_m3 = -1.0;
+            n
+        };
+        let c = cfg(Some(&BAD));
+        assert!(!c.is_valid());
+        let mut t = ControlTick::new(c);
+        let f = SensorFrame {
+            p1_gauge_pa: Some(300e3),
+            p2_gauge_pa: Some(300e3),
+            angle_rad: Some(0.0),
+        };
+        let o = t.step(&f, &Setpoint { angle_rad: 0.1 }, 1e-3);
+        assert!(!o.armed);
+        assert!(cfg(Some(&crate::constants::VOLUME_FNN)).is_valid());
     }
 }

@@ -167,6 +167,12 @@ pub struct ControllerConfig {
     /// `pressure-ff` feature: the default MCU tick carries none of it.
     #[cfg(feature = "pressure-ff")]
     pub pressure_ff: crate::pressure_ff::PressureFfParams,
+    /// The hybrid model's learned volume ([`crate::volume_fnn`], seed 004 eq. 8-12) in the
+    /// pressure feed-forward instead of the volume polynomial (`None`: the polynomial). Only
+    /// with the `volume-fnn` feature; [`ControllerConfig::reference`] selects
+    /// [`crate::constants::VOLUME_FNN`] (`config/volume.toml`).
+    #[cfg(feature = "volume-fnn")]
+    pub volume_fnn: Option<&'static crate::volume_fnn::VolumeFnn>,
 }
 
 /// How the tick takes over the joint at power-up and after every accepted
@@ -231,6 +237,10 @@ impl StartRamp {
 impl ControllerConfig {
     /// The feed-forward's constants are valid (always without the `pressure-ff` feature).
     fn pressure_ff_valid(&self) -> bool {
+        #[cfg(feature = "volume-fnn")]
+        if self.volume_fnn.is_some_and(|n| !n.is_valid()) {
+            return false;
+        }
         #[cfg(feature = "pressure-ff")]
         return self.pressure_ff.is_valid();
         #[cfg(not(feature = "pressure-ff"))]
@@ -344,6 +354,8 @@ impl ControllerConfig {
             feedforward: crate::constants::FEEDFORWARD,
             #[cfg(feature = "pressure-ff")]
             pressure_ff: crate::constants::PRESSURE_FF,
+            #[cfg(feature = "volume-fnn")]
+            volume_fnn: Some(&crate::constants::VOLUME_FNN),
             // The residual window is 10 ms whatever the tick (10 ticks at 1 kHz): a shorter
             // window at a fast tick would turn the sensor noise into false valve faults.
             valve_model: ValveModelParams {
@@ -666,13 +678,18 @@ impl ControlTick {
             #[cfg(feature = "pressure-ff")]
             pressure_ff_on: cfg.pressure_ff.enabled,
             #[cfg(feature = "pressure-ff")]
-            pressure_ff: crate::pressure_ff::PressureFeedforward::new(
-                &cfg.pressure_ff,
-                &cfg.valve_model,
-                &cfg.geometry,
-                clamp_pressure_setpoint_pa(f32::INFINITY, cfg.torque.p_set_max_gauge_pa),
-                cfg.tick_hz,
-            ),
+            pressure_ff: {
+                let ff = crate::pressure_ff::PressureFeedforward::new(
+                    &cfg.pressure_ff,
+                    &cfg.valve_model,
+                    &cfg.geometry,
+                    clamp_pressure_setpoint_pa(f32::INFINITY, cfg.torque.p_set_max_gauge_pa),
+                    cfg.tick_hz,
+                );
+                #[cfg(feature = "volume-fnn")]
+                let ff = ff.with_volume_fnn(cfg.volume_fnn);
+                ff
+            },
             valve_shortfall: 0.0,
             torque_sign: if cfg.torque_model.b_m2 * cfg.torque_model.sprocket_radius_m < 0.0 {
                 -1.0

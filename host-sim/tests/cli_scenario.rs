@@ -44,11 +44,12 @@ fn step_scenario_writes_recording_trace_plot_and_summary() {
     let stdout = text(&r.stdout);
     assert!(r.status.success(), "{stdout}\n{}", text(&r.stderr));
 
-    // The recording is strictly RECORDING.md and reads back; one row per 1 ms tick over 4 s.
+    // The recording is RECORDING.md plus the plant's true mass flows (the optional
+    // flow-sensor columns) and reads back; one row per 1 ms tick over 4 s.
     let (header, rows) = data_rows(&out);
     assert_eq!(
         header,
-        "t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg,p1_kpa,p2_kpa,f1_n,f2_n"
+        "t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg,p1_kpa,p2_kpa,f1_n,f2_n,m_dot_1_kg_s,m_dot_2_kg_s"
     );
     assert_eq!(rows.len(), 4000);
     let rec = Recording::read(&out).unwrap();

@@ -41,6 +41,18 @@ fn compare_control_prints_the_tables_and_exits_by_its_verdict() {
         q >= 1.85,
         "verdict and status disagree: {q}\n{out}"
     );
+    // The hybrid row (its volume trained on the plant's own training run) is there and runs
+    // its own volume: on one of the two sets at least it differs from the analytical row.
+    assert!(
+        out.contains("hybrid volume training run: mass-flow MSE"),
+        "{out}"
+    );
+    let hybrid =
+        ["suite", "held-out"].map(|set| mse(&out, "+ hybrid model (learned volume), k = 1", set));
+    let analytical = ["suite", "held-out"]
+        .map(|set| mse(&out, "+ analytical inverse model, k = 1 (isothermal)", set));
+    assert!(hybrid.iter().all(|m| m.is_finite()), "{out}");
+    assert!(hybrid != analytical, "{out}");
     for set in ["suite", "held-out"] {
         let p_only = mse(&out, "P only", set);
         let am = mse(&out, "+ analytical inverse model, k = 1 (isothermal)", set);

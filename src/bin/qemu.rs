@@ -188,6 +188,59 @@ mod bench {
         );
         bench_force_law();
         bench_force_law_fixed();
+        // With the hybrid volume compiled in (`volume-fnn`, its own image): the tick with the
+        // pressure feed-forward on, analytical (polynomial volume) and hybrid (learned
+        // volume), and the network's inference alone.
+        #[cfg(feature = "volume-fnn")]
+        {
+            let ff_on = |fnn| {
+                let mut c = pam_firmware::trace::trace_config();
+                c.pressure_ff.enabled = true;
+                c.volume_fnn = fnn;
+                c
+            };
+            bench_ticks("bench ff tick", ff_on(None));
+            bench_ticks(
+                "bench hybrid tick",
+                ff_on(Some(&pam_firmware::constants::VOLUME_FNN)),
+            );
+            bench_volume_fnn();
+        }
+    }
+
+    /// The hybrid volume network alone (one muscle: value and eq. 9 rate), at the trace's
+    /// contractions and pressures, rates from the trace's differences.
+    #[cfg(feature = "volume-fnn")]
+    #[inline(never)]
+    fn bench_volume_fnn() {
+        let p = wiring::pressure_scaling();
+        let g = JointGeometry::REFERENCE;
+        let net = &pam_firmware::constants::VOLUME_FNN;
+        let (mut sum, mut n, mut max) = (0u32, 0u32, 0u32);
+        let (mut e_prev, mut p_prev) = (g.initial_contraction, 0.0f32);
+        for row in SENSOR_TRACE.iter() {
+            let f = row.frame(&p);
+            let (Some(p1), Some(a)) = (f.p1_gauge_pa, f.angle_rad) else {
+                continue;
+            };
+            let (e1, _) = g.contractions(a);
+            let p_abs = p1 + pam_firmware::constants::P_ATM_PA;
+            let e_rate = (e1 - e_prev) * TRACE_TICK_HZ;
+            let p_rate = (p_abs - p_prev) * TRACE_TICK_HZ;
+            (e_prev, p_prev) = (e1, p_abs);
+            let x = black_box((e1, e_rate, p_abs, p_rate));
+            let (c, r) = measure(|| net.volume_and_rate(x.0, x.1, x.2, x.3));
+            black_box(r);
+            sum += c;
+            n += 1;
+            max = max.max(c);
+        }
+        defmt::info!(
+            "bench volume_fnn n={=u32} sum_counts={=u32} max_counts={=u32}",
+            n,
+            sum,
+            max
+        );
     }
 
     #[cfg(feature = "mcu-bench-arm")]

@@ -201,6 +201,9 @@ pub struct TickRow {
     /// Effective valve openings over `[t_s, t_s + dt)` (the commands after the plant's valve
     /// dead time): what the plant is integrated with.
     pub inputs: ValveInputs,
+    /// The true net mass flow into muscle 1 and 2 at `t_s` with [`Self::inputs`] [kg/s]
+    /// ([`Plant::chamber_mass_flows_kg_s`]).
+    pub mass_flow_kg_s: [f64; 2],
     /// The firmware's output.
     pub out: TickOutput,
 }
@@ -620,6 +623,7 @@ pub fn run_with_firmware(
             u_ex2: b(3),
         };
         let inputs = actuator.push(command);
+        let mass_flow_kg_s = p.chamber_mass_flows_kg_s(&x, &integ.aux(), &inputs);
         rows.push(TickRow {
             t_s,
             setpoint_rad,
@@ -628,6 +632,7 @@ pub fn run_with_firmware(
             pins: ft.pins,
             command,
             inputs,
+            mass_flow_kg_s,
             out,
         });
         if let Err(e) = integ.advance(inputs, dt_s) {
@@ -841,9 +846,13 @@ impl ClosedLoopRun {
             .push(("sample_period_s".into(), format!("{}", self.dt_s)));
         rec.metadata.push(("effects".into(), self.effects.clone()));
         let mut ch: [Vec<f64>; 5] = Default::default();
+        let mut flows: [Vec<f64>; 2] = Default::default();
         for r in &self.rows {
             rec.t_s.push(r.t_s);
             rec.inputs.push(r.command);
+            for (f, v) in flows.iter_mut().zip(r.mass_flow_kg_s) {
+                f.push(v);
+            }
             let m = r.measured.to_array();
             for (c, v) in ch.iter_mut().zip(m) {
                 c.push(v);
@@ -861,6 +870,7 @@ impl ClosedLoopRun {
         {
             rec.set_channel(c, v);
         }
+        rec.mass_flow_kg_s = Some(flows);
         rec
     }
 }

@@ -5,9 +5,13 @@
 //! never tuned on), on the given plant and on the same plant with a thermodynamic chamber,
 //! a leak and a supply drop added.
 //!
-//! Rows: the tuned cascade (`config/control_tuned.toml`) with the P-only pressure loops, and
-//! the same cascade + the analytical inverse model (isothermal, k = 1, and polytropic,
-//! k = 1.4). Columns: position MSE [rad^2] (angle error over every tick; infinite when a fault
+//! Rows: the tuned cascade (`config/control_tuned.toml`) with the P-only pressure loops, the
+//! same cascade + the analytical inverse model (isothermal, k = 1, and polytropic, k = 1.4),
+//! and + seed 004's hybrid model (eq. 12: the learned volume of [`pam_firmware::volume_fnn`]
+//! in place of the polynomial, k = 1). The hybrid volume is trained per plant, as the seed
+//! trains on its rig: `identify volume`'s trainer ([`crate::identify::volume::train`], seed 1,
+//! default options) on a closed-loop run of the P-only cascade on that plant with
+//! [`TRAINING_SCENARIO`] (random set-points, none of the compared scenarios). Columns: position MSE [rad^2] (angle error over every tick; infinite when a fault
 //! latched), its ratio to the P-only row, and the RMS pressure tracking error [kPa] (set-point
 //! minus measured gauge pressure, both muscles, every armed tick).
 //!
@@ -24,8 +28,62 @@ use pam_firmware::tick::ControllerConfig;
 
 use super::closed_loop::{run_with, Scenario};
 use super::compare::{control_tuned_path, jump_suite_scenarios, suite_scenarios, ControlTuning};
+use crate::identify::volume::{
+    samples_from_recording, split_samples, train, Thermo, TrainOptions, VolumePoly,
+};
 use crate::plant::config::PlantConfig;
 use crate::plant::Plant;
+use pam_firmware::volume_fnn::VolumeFnn;
+
+/// The training run of the hybrid volume (not one of the compared scenarios).
+pub const TRAINING_SCENARIO: (&str, &str) = (
+    "scenarios/volume_training.toml",
+    include_str!("../../../scenarios/volume_training.toml"),
+);
+
+/// The hybrid volume of `plant`: trained on the P-only cascade's closed-loop run of
+/// [`TRAINING_SCENARIO`] (its true mass flows), seed 1, the firmware's geometry, polynomial
+/// and eq. 7 constants. Returns the network (leaked: the tick keeps a `&'static`) and the
+/// training recording's mass-flow MSE of the polynomial and of the hybrid [(kg/s)^2].
+pub fn train_hybrid(
+    plant: &Plant,
+    base: ControllerConfig,
+) -> anyhow::Result<(&'static VolumeFnn, f64, f64)> {
+    let sc = Scenario::from_toml_str(TRAINING_SCENARIO.1, TRAINING_SCENARIO.0)?;
+    let off = ControllerConfig {
+        pressure_ff: PressureFfParams {
+            enabled: false,
+            ..base.pressure_ff
+        },
+        ..base
+    };
+    let run = run_with(plant, &sc, off, &mut |_| {})?;
+    let rec = run.to_recording();
+    let hw = ((0.010 / run.dt_s).round() as usize).max(1);
+    let per = samples_from_recording(
+        &rec,
+        &base.geometry,
+        pam_firmware::constants::P_ATM_PA as f64,
+        hw,
+    )
+    .map_err(anyhow::Error::msg)?;
+    let (samples, _) = split_samples(&per, 0.0, TrainOptions::default().max_evaluations * 2);
+    let (poly, thermo) = (VolumePoly::firmware(), Thermo::firmware());
+    let t = train(&samples, &poly, &thermo, &TrainOptions::default(), &|_| {})
+        .map_err(anyhow::Error::msg)?;
+    let mse_poly = crate::identify::volume::mse_kg2_s2(&samples, |s| {
+        let (v, vr) = poly.volume_and_rate(s);
+        thermo.mass_flow_kg_s(s, v, vr)
+    });
+    let mse_hybrid =
+        crate::identify::volume::mse_kg2_s2(&samples, |s| t.net.mass_flow_kg_s(s, &thermo));
+    let fw = t.net.to_firmware();
+    anyhow::ensure!(
+        fw.is_valid(),
+        "the trained hybrid volume is not valid in f32"
+    );
+    Ok((Box::leak(Box::new(fw)), mse_poly, mse_hybrid))
+}
 
 /// Position-MSE improvement the analytical feed-forward must reach on the nominal plant.
 pub const REQUIRED_RATIO: f64 = 1.85;
@@ -66,6 +124,31 @@ pub const VARIANTS: [(&str, &str); 4] = [
         "[effects.supply_drop]\nmodel = \"static\"\nresistance_pa_s_per_m3 = 2.0e7\n",
     ),
 ];
+
+/// The variant whose chamber volume law differs from the firmware's polynomial (the
+/// hybrid model's case): `b0` x 1.3 (dead volume of a longer tube to the valve), `b1..b3` x 0.7
+/// (a flatter volume-contraction curve). On the reference plant: V +3 % at the working
+/// contraction 0.14, dV/de -30 %.
+pub const VOLUME_VARIANT: &str = "volume law differs (b0 x 1.3, b1..b3 x 0.7)";
+
+/// The plant file `text` with its `[muscle] volume_poly_m3` changed as [`VOLUME_VARIANT`]
+/// says (the other keys and comments kept).
+pub fn with_volume_mismatch(text: &str) -> anyhow::Result<String> {
+    let mut doc: toml_edit::DocumentMut = text.parse()?;
+    let arr = doc["muscle"]["volume_poly_m3"]
+        .as_array_mut()
+        .ok_or_else(|| anyhow::anyhow!("[muscle] volume_poly_m3: not an array"))?;
+    let b: Vec<f64> = arr
+        .iter()
+        .map(|v| v.as_float().or_else(|| v.as_integer().map(|i| i as f64)))
+        .collect::<Option<_>>()
+        .ok_or_else(|| anyhow::anyhow!("[muscle] volume_poly_m3: not numbers"))?;
+    arr.clear();
+    for (i, c) in b.iter().enumerate() {
+        arr.push(c * if i == 0 { 1.3 } else { 0.7 });
+    }
+    Ok(doc.to_string())
+}
 
 /// One controller's figures on one scenario set.
 #[derive(Debug, Clone, PartialEq)]
@@ -129,14 +212,19 @@ pub fn score(
     })
 }
 
-/// The controllers compared: P-only, + analytical isothermal, + analytical polytropic.
-pub fn controllers(base: ControllerConfig) -> Vec<(&'static str, ControllerConfig)> {
+/// The controllers compared: P-only, + analytical isothermal, + analytical polytropic, and
+/// with `hybrid`, + the hybrid model (its learned volume, isothermal).
+pub fn controllers(
+    base: ControllerConfig,
+    hybrid: Option<&'static VolumeFnn>,
+) -> Vec<(&'static str, ControllerConfig)> {
     let with = |k: f32| ControllerConfig {
         pressure_ff: PressureFfParams {
             enabled: true,
             polytropic_index: k,
             ..base.pressure_ff
         },
+        volume_fnn: None,
         ..base
     };
     let off = ControllerConfig {
@@ -146,14 +234,24 @@ pub fn controllers(base: ControllerConfig) -> Vec<(&'static str, ControllerConfi
         },
         ..base
     };
-    vec![
+    let mut v = vec![
         ("P only", off),
         ("+ analytical inverse model, k = 1 (isothermal)", with(1.0)),
         (
             "+ analytical inverse model, k = 1.4 (polytropic)",
             with(1.4),
         ),
-    ]
+    ];
+    if let Some(n) = hybrid {
+        v.push((
+            "+ hybrid model (learned volume), k = 1",
+            ControllerConfig {
+                volume_fnn: Some(n),
+                ..with(1.0)
+            },
+        ));
+    }
+    v
 }
 
 /// `host-sim compare-control`: the report and whether the nominal-plant requirement holds.
@@ -180,13 +278,19 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
     }
     let mut suite = suite_scenarios()?;
     let mut held_out = jump_suite_scenarios()?;
-    let variants: &[(&str, &str)] = if a.quick {
+    let mut variants: Vec<(&str, String)> = VARIANTS
+        .iter()
+        .map(|(n, t)| (*n, format!("{text}\n{t}")))
+        .collect();
+    variants.push((
+        VOLUME_VARIANT,
+        with_volume_mismatch(&text).with_context(|| a.plant.display().to_string())?,
+    ));
+    if a.quick {
         suite.truncate(1);
         held_out.truncate(1);
-        &VARIANTS[..1]
-    } else {
-        &VARIANTS
-    };
+        variants.truncate(1);
+    }
     let sets = [("suite", &suite), ("held-out", &held_out)];
     let mut out = String::new();
     writeln!(
@@ -205,13 +309,23 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
             .collect::<Vec<_>>()
             .join(", "),
     )?;
-    writeln!(out, "hybrid model (learned volume): not in this build")?;
+    writeln!(
+        out,
+        "hybrid model: volume network trained per plant on the P-only cascade's run of {} (seed 1)",
+        TRAINING_SCENARIO.0
+    )?;
     let mut nominal_ratio = f64::NAN;
-    for (vname, table) in variants {
-        let cfg = PlantConfig::from_toml_str(&format!("{text}\n{table}"), &a.plant)
+    for (vname, plant_text) in &variants {
+        let cfg = PlantConfig::from_toml_str(plant_text, &a.plant)
             .with_context(|| format!("--plant {} with the {vname} variant", a.plant.display()))?;
         let plant = Plant::from_config(&cfg);
         writeln!(out, "\n### {vname}\n")?;
+        let (hybrid, mse_poly, mse_hybrid) = train_hybrid(&plant, base)
+            .with_context(|| format!("training the hybrid volume on the {vname} plant"))?;
+        writeln!(
+            out,
+            "hybrid volume training run: mass-flow MSE polynomial volume {mse_poly:.3e}, hybrid {mse_hybrid:.3e} (kg/s)^2\n"
+        )?;
         writeln!(
             out,
             "| controller | set | position MSE [rad^2] | vs P only | pressure RMS error [kPa] | latched faults |"
@@ -219,7 +333,7 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
         writeln!(out, "|---|---|---:|---:|---:|---|")?;
         for (set_name, sc) in &sets {
             let mut p_only = f64::NAN;
-            for (i, (cname, c)) in controllers(base).into_iter().enumerate() {
+            for (i, (cname, c)) in controllers(base, Some(hybrid)).into_iter().enumerate() {
                 let s = score(&plant, sc, c)?;
                 if i == 0 {
                     p_only = s.position_mse_rad2;

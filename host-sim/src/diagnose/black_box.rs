@@ -326,6 +326,7 @@ mod tests {
             t_s: (0..n).map(|k| k as f64 * dt).collect(),
             inputs: vec![ValveInputs::CLOSED; n],
             outputs: Default::default(),
+            mass_flow_kg_s: None,
         };
         let mut nominal = Vec::with_capacity(n);
         let mut slow = 0.0;

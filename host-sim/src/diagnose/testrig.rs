@@ -438,6 +438,7 @@ fn closed_loop(
         t_s,
         inputs,
         outputs,
+        mass_flow_kg_s: None,
     }
 }
 

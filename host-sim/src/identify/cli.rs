@@ -186,6 +186,13 @@ pub enum IdentifyWhat {
         after_help = "Example:\n  host-sim identify plant --recording ../shared/conformance/pulses_loaded.csv --plant ../shared/plant/reference-1dof.toml --params joint.inertia_kgm2 --out fitted.toml"
     )]
     Plant(IdentifyPlantArgs),
+    /// Train the hybrid model's chamber volume (seed 004 eq. 8-12: a network of two hidden
+    /// layers V(e, e', P, P'), loss = mass-flow error + weight decay) on a recording with the
+    /// mass-flow columns m_dot_1_kg_s, m_dot_2_kg_s; write the firmware's config/volume.toml.
+    #[command(
+        after_help = "Example:\n  host-sim simulate --plant ../shared/plant/reference-1dof.toml --scenario scenarios/random.toml --out random.csv\n  host-sim identify volume --recording random.csv --out config/volume.toml"
+    )]
+    Volume(super::volume::IdentifyVolumeArgs),
 }
 
 #[derive(Args, Debug)]
@@ -268,6 +275,7 @@ pub fn run_identify(a: &IdentifyArgs) -> Result<String> {
         IdentifyWhat::Force(a) => identify_force(a),
         IdentifyWhat::Torque(a) => identify_torque(a),
         IdentifyWhat::Plant(a) => identify_plant(a),
+        IdentifyWhat::Volume(a) => super::volume::run_identify_volume(a),
     }
 }
 

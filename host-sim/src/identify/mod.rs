@@ -6,6 +6,7 @@
 //! - [`torque`]: the simplified torque model (seed 003 eq. 11) from angle, pressures and tensions.
 //! - [`plant`]: output-error fit of plant-file parameters by replaying a recording.
 //! - [`calibrate`]: recording -> torque model -> (gains) -> the firmware's config files.
+//! - [`volume`]: seed 004's hybrid model, the chamber volume as a network trained on the mass flow.
 //! - [`cli`]: the `host-sim sweep` and `host-sim identify` commands.
 
 pub mod calibrate;
@@ -15,6 +16,7 @@ pub mod force_maps;
 pub mod output_error;
 pub mod plant;
 pub mod torque;
+pub mod volume;
 
 use std::path::Path;
 

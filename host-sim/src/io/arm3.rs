@@ -66,6 +66,7 @@ impl Arm3Recording {
             t_s: self.t_s.clone(),
             inputs: self.inputs.iter().map(|u| u[joint]).collect(),
             outputs: self.outputs[joint].clone(),
+            mass_flow_kg_s: None,
         }
     }
 

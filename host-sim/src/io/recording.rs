@@ -5,7 +5,9 @@
 //! - required: `t_s` (increasing; uniform steps or stamps that jitter by less than half a
 //!   median step, see [`Recording::is_uniform`]; a gap is refused), `u_in1`, `u_ex1`,
 //!   `u_in2`, `u_ex2` (in [0, 1]) and at least one of `angle_deg`, `p1_kpa`, `p2_kpa`,
-//!   `f1_n`, `f2_n`; other columns are ignored.
+//!   `f1_n`, `f2_n`; optional `m_dot_1_kg_s`, `m_dot_2_kg_s` (both or neither: the net mass
+//!   flow into each muscle, a flow sensor's reading on a rig, the plant's true flow in
+//!   host-sim's recordings); other columns are ignored.
 //!
 //! Every error names the file, the line and the field. Writing goes to a temporary file in
 //! the target directory that is renamed over the target only when complete.
@@ -68,6 +70,9 @@ pub const MIN_STEP_RATIO: f64 = 0.5;
 /// count as uniform: such a recording is used as it is.
 pub const UNIFORM_TOLERANCE: f64 = 0.01;
 
+/// The optional mass-flow columns (muscle 1, muscle 2) [kg/s].
+pub const MASS_FLOW_COLUMNS: [&str; 2] = ["m_dot_1_kg_s", "m_dot_2_kg_s"];
+
 /// The input columns, in the order of [`ValveInputs`].
 pub const INPUT_COLUMNS: [&str; 4] = ["u_in1", "u_ex1", "u_in2", "u_ex2"];
 
@@ -80,6 +85,9 @@ pub struct Recording {
     pub inputs: Vec<ValveInputs>,
     /// Output channels present, indexed by [`Channel::index`].
     pub outputs: [Option<Vec<f64>>; 5],
+    /// Net mass flow into muscle 1 and 2 at `t_s` with the openings of the sample [kg/s]
+    /// (columns [`MASS_FLOW_COLUMNS`]), when recorded.
+    pub mass_flow_kg_s: Option<[Vec<f64>; 2]>,
 }
 
 /// A recording that could not be read or written.
@@ -184,6 +192,12 @@ impl Recording {
             t_s: grid.clone(),
             inputs,
             outputs: Default::default(),
+            mass_flow_kg_s: self.mass_flow_kg_s.as_ref().map(|[a, b]| {
+                [
+                    interpolate(&self.t_s, a, &grid),
+                    interpolate(&self.t_s, b, &grid),
+                ]
+            }),
         };
         out.metadata.retain(|(k, _)| k != "sample_period_s");
         out.metadata
@@ -229,12 +243,41 @@ impl Recording {
         let path = path.as_ref();
         let table = Table::parse(text, path)?;
         let parser = RowParser::of(&table)?;
-        let (cols, lines): (RecordingColumns, _) = table.rows(|row| parser.parse(row))?;
+        let flow_cols = [
+            table.find(MASS_FLOW_COLUMNS[0])?,
+            table.find(MASS_FLOW_COLUMNS[1])?,
+        ];
+        let flow_cols = match flow_cols {
+            [Some(a), Some(b)] => Some([a, b]),
+            [None, None] => None,
+            [a, _] => {
+                let (has, lacks) = if a.is_some() { (0, 1) } else { (1, 0) };
+                return Err(table.field_err(
+                    table.header_line,
+                    MASS_FLOW_COLUMNS[lacks],
+                    format!(
+                        "missing: the mass-flow columns come in pairs ({} is present)",
+                        MASS_FLOW_COLUMNS[has]
+                    ),
+                ));
+            }
+        };
+        let (cols, lines): (RecordingColumns, _) = table.rows(|row| {
+            let (t_s, u, y) = parser.parse(row)?;
+            let mut m = [0.0; 2];
+            if let Some(cols) = flow_cols {
+                for i in 0..2 {
+                    m[i] = row.num(cols[i], MASS_FLOW_COLUMNS[i])?;
+                }
+            }
+            Ok((t_s, u, y, m))
+        })?;
         let out_cols = parser.out_cols;
         let mut rec = Recording {
             metadata: table.metadata.clone(),
             t_s: cols.t_s,
             inputs: cols.inputs,
+            mass_flow_kg_s: flow_cols.map(|_| cols.mass_flows),
             ..Default::default()
         };
         for (c, y) in Channel::ALL.into_iter().zip(cols.outputs) {
@@ -255,7 +298,10 @@ impl Recording {
             source,
         };
         let n = self.t_s.len();
-        if self.inputs.len() != n || self.outputs.iter().flatten().any(|c| c.len() != n) {
+        if self.inputs.len() != n
+            || self.outputs.iter().flatten().any(|c| c.len() != n)
+            || self.mass_flow_kg_s.iter().flatten().any(|c| c.len() != n)
+        {
             return Err(RecordingError::Invalid {
                 path: path.to_owned(),
                 message: "columns of unequal length".into(),
@@ -271,7 +317,12 @@ impl Recording {
             .into_iter()
             .filter(|c| self.outputs[c.index()].is_some())
             .collect();
-        write_head(&self.metadata, &present, w)?;
+        let flow_names: &[&str] = if self.mass_flow_kg_s.is_some() {
+            &MASS_FLOW_COLUMNS
+        } else {
+            &[]
+        };
+        write_head(&self.metadata, &present, flow_names, w)?;
         // The rows: numbers only (nothing to quote), formatted by `numfmt` (byte-identical
         // to `{}` for time and openings, `{:.6}` for the readings) in blocks, each block's
         // two halves on two threads, so memory stays one block whatever the length.
@@ -288,6 +339,15 @@ impl Recording {
                     &self.inputs[k],
                     outputs.iter().map(|col| col[k]),
                 );
+                if let Some(flows) = &self.mass_flow_kg_s {
+                    // The mass flows after the channels, before the row's end.
+                    buf.pop();
+                    for col in flows {
+                        buf.push(b',');
+                        numfmt::push_shortest(&mut buf, col[k]);
+                    }
+                    buf.push(b'\n');
+                }
             }
             buf
         };
@@ -295,10 +355,12 @@ impl Recording {
     }
 }
 
-/// The metadata lines and the CSV header (`t_s`, the valve openings, the `present` channels).
+/// The metadata lines and the CSV header (`t_s`, the valve openings, the `present` channels,
+/// then `extra` columns).
 pub(crate) fn write_head(
     metadata: &[(String, String)],
     present: &[Channel],
+    extra: &[&str],
     w: &mut impl Write,
 ) -> std::io::Result<()> {
     for (k, v) in metadata {
@@ -312,6 +374,7 @@ pub(crate) fn write_head(
     let mut header: Vec<&str> = vec!["t_s"];
     header.extend(INPUT_COLUMNS);
     header.extend(present.iter().map(|c| c.name()));
+    header.extend(extra);
     cw.write_record(&header)?;
     cw.flush()?;
     Ok(())
@@ -583,17 +646,18 @@ struct RecordingColumns {
     t_s: Vec<f64>,
     inputs: Vec<ValveInputs>,
     outputs: [Vec<f64>; 5],
+    mass_flows: [Vec<f64>; 2],
 }
 
-impl RowSink<(f64, [f64; 4], [f64; 5])> for RecordingColumns {
+impl RowSink<(f64, [f64; 4], [f64; 5], [f64; 2])> for RecordingColumns {
     fn reserve(&mut self, n: usize) {
         self.t_s.reserve(n);
         self.inputs.reserve(n);
-        for y in &mut self.outputs {
+        for y in self.outputs.iter_mut().chain(self.mass_flows.iter_mut()) {
             y.reserve(n);
         }
     }
-    fn push(&mut self, (t_s, u, y): (f64, [f64; 4], [f64; 5])) {
+    fn push(&mut self, (t_s, u, y, m): (f64, [f64; 4], [f64; 5], [f64; 2])) {
         self.t_s.push(t_s);
         self.inputs.push(ValveInputs {
             u_in1: u[0],
@@ -604,11 +668,19 @@ impl RowSink<(f64, [f64; 4], [f64; 5])> for RecordingColumns {
         for (col, v) in self.outputs.iter_mut().zip(y) {
             col.push(v);
         }
+        for (col, v) in self.mass_flows.iter_mut().zip(m) {
+            col.push(v);
+        }
     }
     fn append(&mut self, mut other: Self) {
         self.t_s.append(&mut other.t_s);
         self.inputs.append(&mut other.inputs);
-        for (a, b) in self.outputs.iter_mut().zip(other.outputs.iter_mut()) {
+        for (a, b) in self
+            .outputs
+            .iter_mut()
+            .zip(other.outputs.iter_mut())
+            .chain(self.mass_flows.iter_mut().zip(other.mass_flows.iter_mut()))
+        {
             a.append(b);
         }
     }

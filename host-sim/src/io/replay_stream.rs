@@ -116,7 +116,7 @@ pub fn replay_file(
         return Ok(None);
     }
 
-    recording::write_head(&out_metadata(dt_s), &Channel::ALL, w)?;
+    recording::write_head(&out_metadata(dt_s), &Channel::ALL, &[], w)?;
 
     let abort = AtomicBool::new(false);
     let (valid, sim, written, write_result) = std::thread::scope(|s| -> std::io::Result<_> {

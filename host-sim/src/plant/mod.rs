@@ -335,6 +335,75 @@ impl Plant {
         (d, da.supply_abs_pa)
     }
 
+    /// The supply pressure the inlet valves see [Pa abs] (ideal, static drop or reservoir).
+    #[inline(always)]
+    fn supply_abs_pa(&self, p_abs_pa: [f64; 2], aux: &AuxState, u: &ValveInputs) -> f64 {
+        match self.effects.supply() {
+            Supply::Ideal => self.p_supply_abs_pa,
+            Supply::Static {
+                resistance_pa_s_per_m3,
+            } => effects::static_supply_pressure_pa(
+                &self.valve,
+                self.p_supply_abs_pa,
+                *resistance_pa_s_per_m3,
+                p_abs_pa,
+                [u.u_in1, u.u_in2],
+            ),
+            Supply::Reservoir { .. } => aux.supply_abs_pa,
+        }
+    }
+
+    /// The signed standard (ANR) volume flows into chamber `i` [m^3/s]: leak, inlet valve
+    /// (from `p_supply_abs_pa`), exhaust valve (to the atmosphere). A closed valve
+    /// contributes nothing (the flow function is skipped).
+    #[inline(always)]
+    fn chamber_flows_m3_s(
+        &self,
+        i: usize,
+        p_abs_pa: f64,
+        p_supply_abs_pa: f64,
+        u: &ValveInputs,
+    ) -> [f64; 3] {
+        let (u_in, u_ex) = if i == 0 {
+            (u.u_in1, u.u_ex1)
+        } else {
+            (u.u_in2, u.u_ex2)
+        };
+        let q_leak = self.effects.chamber_flow_m3_s(i, p_abs_pa, self.p_atm_pa);
+        let mut q_in = 0.0;
+        let mut q_out = 0.0;
+        if u_in != 0.0 {
+            q_in = u_in * self.valve.flow_m3_s(p_supply_abs_pa, p_abs_pa);
+        }
+        if u_ex != 0.0 {
+            q_out = -u_ex * self.valve.flow_m3_s(p_abs_pa, self.p_atm_pa);
+        }
+        [q_leak, q_in, q_out]
+    }
+
+    /// The true net mass flow into each muscle [kg/s] at state `x` with the valve openings
+    /// `u`: `rho_ANR (Q_leak + Q_in + Q_out)` with `rho_ANR = p_atm / (R 293.15 K)` (the
+    /// standard flows of PLANT.md are at the ANR density). What a mass-flow sensor in the
+    /// muscle's port would read (the recording columns `m_dot_1_kg_s`, `m_dot_2_kg_s`).
+    pub fn chamber_mass_flows_kg_s(
+        &self,
+        x: &PlantState,
+        aux: &AuxState,
+        u: &ValveInputs,
+    ) -> [f64; 2] {
+        let p = [x.p1_abs_pa, x.p2_abs_pa];
+        let p_supply = self.supply_abs_pa(p, aux, u);
+        let rho_anr = self.p_atm_pa
+            / (effects::thermal_chamber::GAS_CONSTANT_AIR_J_PER_KG_K
+                * effects::thermal_chamber::ANR_REFERENCE_TEMPERATURE_K);
+        let mut out = [0.0; 2];
+        for (i, o) in out.iter_mut().enumerate() {
+            let q = self.chamber_flows_m3_s(i, p[i], p_supply, u);
+            *o = rho_anr * (q[0] + q[1] + q[2]);
+        }
+        out
+    }
+
     /// Right-hand side with the auxiliary states `aux`: returns d/dt of (beta, omega, p1, p2)
     /// and of the auxiliary states (0 for those the plant does not integrate).
     #[inline(always)]
@@ -347,23 +416,9 @@ impl Plant {
         let chi = self.joint.contractions(x.angle_rad);
         let dchi = self.joint.contraction_rates(x.velocity_rad_s);
         let p = [x.p1_abs_pa, x.p2_abs_pa];
-        let u_in = [u.u_in1, u.u_in2];
-        let u_ex = [u.u_ex1, u.u_ex2];
         let supply = self.effects.supply();
         let reservoir_abs_pa = aux.supply_abs_pa;
-        let p_supply = match supply {
-            Supply::Ideal => self.p_supply_abs_pa,
-            Supply::Static {
-                resistance_pa_s_per_m3,
-            } => effects::static_supply_pressure_pa(
-                &self.valve,
-                self.p_supply_abs_pa,
-                *resistance_pa_s_per_m3,
-                p,
-                u_in,
-            ),
-            Supply::Reservoir { .. } => reservoir_abs_pa,
-        };
+        let p_supply = self.supply_abs_pa(p, aux, u);
         let pressure_factor = self.effects.pressure_rate_factor();
         let thermal = self.effects.thermal_chamber();
         let mut q_supply = 0.0;
@@ -375,16 +430,8 @@ impl Plant {
             tension[i] = self.tension_n(pg, chi[i], dchi[i]);
             // The signed standard flows into the chamber: leak, inlet, exhaust. A closed
             // valve contributes nothing (skip the flow function).
-            let q_leak = self.effects.chamber_flow_m3_s(i, p[i], self.p_atm_pa);
-            let mut q_in = 0.0;
-            let mut q_out = 0.0;
-            if u_in[i] != 0.0 {
-                q_in = u_in[i] * self.valve.flow_m3_s(p_supply, p[i]);
-                q_supply += q_in;
-            }
-            if u_ex[i] != 0.0 {
-                q_out = -u_ex[i] * self.valve.flow_m3_s(p[i], self.p_atm_pa);
-            }
+            let [q_leak, q_in, q_out] = self.chamber_flows_m3_s(i, p[i], p_supply, u);
+            q_supply += q_in;
             let volume = self.muscle.volume_m3(chi[i]);
             let volume_rate = self.muscle.volume_rate_m3_s(chi[i], dchi[i]);
             match thermal {

@@ -1,0 +1,917 @@
+//! `host-sim identify volume`: seed 004's hybrid model (HM, eq. 8-12), the muscle's chamber
+//! volume `V(e, e', P, P')` as a feed-forward network trained on the mass flow.
+//!
+//! The network is the firmware's kernel ([`pam_firmware::volume_fnn`]: two hidden layers of
+//! [`HIDDEN`] softsign units, normalised inputs, linear output scaled to m^3); here it runs in
+//! f64 with its gradients. The hybrid mass flow is eq. 12,
+//!
+//! ```text
+//! m' = (P/(R T) dV/dP + V/(k R T)) P' + P/(R T) dV/de e' = V P'/(k R T) + P/(R T) V'
+//! ```
+//!
+//! with `V' = dV/de e' + dV/dP P'` (eq. 9), the network's directional derivative along
+//! `(e', 0, P', 0)` (forward mode, one tangent pass), and `k`, `R`, `T` of
+//! `config/pressure_ff.toml` (the firmware's). The loss is eq. 10,
+//!
+//! ```text
+//! L = 1/N sum_n ((m'_HM,n - m'_n) / s_m)^2 + lambda/2 |theta|^2
+//! ```
+//!
+//! (`s_m` = the target's standard deviation, so that `lambda` does not depend on the flow's
+//! unit), minimised by the `levenberg-marquardt` crate (already the output-error and force-law
+//! fitter: the loss is a sum of squares, residuals `(m'_HM,n - m'_n) / (s_m sqrt N)` and
+//! `sqrt(lambda/2) theta_j`) with the analytic Jacobian (reverse mode through the value and
+//! tangent passes). Random start from `--seed` (StdRng), so a run is reproducible.
+//!
+//! Samples from a recording: per muscle and per sample, `e` = the firmware geometry's
+//! contraction at the recorded angle, `e'` and `P'` = Savitzky-Golay derivatives of the angle
+//! and the pressure ([`crate::signal::savitzky_golay_derivative`]), `P` absolute, and the
+//! target = the same Savitzky-Golay derivative of the integrated recorded mass flow
+//! (`m_dot_1_kg_s`, `m_dot_2_kg_s`: a flow sensor on a rig, the plant's true net flow in
+//! host-sim's recordings), so target and `P'` average over the same window.
+
+use std::cell::Cell;
+use std::fmt::Write as _;
+
+use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
+use nalgebra::{DMatrix, DVector, Dyn, Owned};
+use pam_firmware::geometry::JointGeometry;
+use pam_firmware::volume_fnn::VolumeFnn;
+use rand::{Rng, SeedableRng};
+
+use crate::io::recording::{Channel, MASS_FLOW_COLUMNS};
+use crate::Recording;
+
+/// Units per hidden layer (the firmware kernel's).
+pub const HIDDEN: usize = pam_firmware::volume_fnn::HIDDEN;
+/// Weights and biases of the network.
+pub const PARAMETERS: usize = pam_firmware::volume_fnn::PARAMETERS;
+
+/// One training sample of one muscle.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VolumeSample {
+    /// Contraction `e` [-].
+    pub contraction: f64,
+    /// Contraction rate `e'` [1/s].
+    pub contraction_rate_per_s: f64,
+    /// Absolute pressure `P` [Pa].
+    pub p_abs_pa: f64,
+    /// Pressure rate `P'` [Pa/s].
+    pub p_rate_pa_s: f64,
+    /// Net mass flow into the muscle [kg/s] (the target).
+    pub m_dot_kg_s: f64,
+}
+
+/// The thermodynamic constants of eq. 7 / 12.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Thermo {
+    /// Polytropic index `k`.
+    pub polytropic_index: f64,
+    /// `R T` [J/kg].
+    pub rt_j_per_kg: f64,
+}
+
+impl Thermo {
+    /// The firmware's (`config/pressure_ff.toml`).
+    pub fn firmware() -> Self {
+        let c = pam_firmware::constants::PRESSURE_FF;
+        Thermo {
+            polytropic_index: c.polytropic_index as f64,
+            rt_j_per_kg: c.gas_constant_j_per_kg_k as f64 * c.temperature_k as f64,
+        }
+    }
+
+    /// Eq. 7 / 12: the mass flow [kg/s] of a sample for the volume `v_m3` and its rate.
+    pub fn mass_flow_kg_s(&self, s: &VolumeSample, v_m3: f64, v_rate_m3_s: f64) -> f64 {
+        (s.p_rate_pa_s * v_m3 / self.polytropic_index + s.p_abs_pa * v_rate_m3_s) / self.rt_j_per_kg
+    }
+}
+
+/// The firmware's volume polynomial (eq. 7 with it is the analytical model).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VolumePoly {
+    /// `b0..b3` [m^3].
+    pub coefficients_m3: [f64; 4],
+}
+
+impl VolumePoly {
+    /// `config/plant_constants.toml`'s.
+    pub fn firmware() -> Self {
+        VolumePoly {
+            coefficients_m3: pam_firmware::constants::MUSCLE_VOLUME_POLY_M3.map(|c| c as f64),
+        }
+    }
+
+    /// `V(e)` floored at `0.1 b0` (as the firmware) and `V' = dV/de e'`.
+    pub fn volume_and_rate(&self, s: &VolumeSample) -> (f64, f64) {
+        let [b0, b1, b2, b3] = self.coefficients_m3;
+        let e = s.contraction;
+        let v = (b0 + e * (b1 + e * (b2 + e * b3))).max(0.1 * b0);
+        (
+            v,
+            (b1 + e * (2.0 * b2 + e * 3.0 * b3)) * s.contraction_rate_per_s,
+        )
+    }
+}
+
+/// The samples of both muscles of a recording (angle_deg, p1_kpa, p2_kpa and the mass-flow
+/// columns required), in time order per muscle (muscle 1's, then muscle 2's), leaving out the
+/// `half_window` samples at each end where the derivative window is cut. Errors name the
+/// missing column.
+pub fn samples_from_recording(
+    rec: &Recording,
+    geometry: &JointGeometry,
+    p_atm_pa: f64,
+    half_window: usize,
+) -> Result<[Vec<VolumeSample>; 2], String> {
+    let need = |c: Channel| {
+        rec.channel(c)
+            .ok_or_else(|| format!("no `{}` column (needed by the volume fit)", c.name()))
+    };
+    let angle_deg = need(Channel::AngleDeg)?;
+    let p_kpa = [need(Channel::P1Kpa)?, need(Channel::P2Kpa)?];
+    let flows = rec.mass_flow_kg_s.as_ref().ok_or_else(|| {
+        format!(
+            "no `{}` / `{}` columns (the net mass flow into each muscle: a flow sensor's \
+             reading; `host-sim simulate --scenario` writes the plant's)",
+            MASS_FLOW_COLUMNS[0], MASS_FLOW_COLUMNS[1]
+        )
+    })?;
+    let n = rec.len();
+    if n < 2 * half_window + 3 {
+        return Err(format!(
+            "{n} samples: fewer than the {} the derivative window needs",
+            2 * half_window + 3
+        ));
+    }
+    let dt = rec.sample_period_s();
+    let ratio = geometry.sprocket_radius_m as f64 / geometry.rest_length_m as f64;
+    let chi0 = geometry.initial_contraction as f64;
+    let angle_rad: Vec<f64> = angle_deg.iter().map(|a| a.to_radians()).collect();
+    let omega = crate::signal::savitzky_golay_derivative(&angle_rad, dt, half_window);
+    let mut out: [Vec<VolumeSample>; 2] = Default::default();
+    for (i, o) in out.iter_mut().enumerate() {
+        let sign = if i == 0 { 1.0 } else { -1.0 };
+        let p_pa: Vec<f64> = p_kpa[i].iter().map(|p| p * 1e3 + p_atm_pa).collect();
+        let p_rate = crate::signal::savitzky_golay_derivative(&p_pa, dt, half_window);
+        // Mass added up to t_k (the flow of sample k held over [t_k, t_k+1)).
+        let mut mass = Vec::with_capacity(n);
+        let mut acc = 0.0;
+        for f in &flows[i] {
+            mass.push(acc);
+            acc += f * dt;
+        }
+        let m_dot = crate::signal::savitzky_golay_derivative(&mass, dt, half_window);
+        for k in half_window..n - half_window - 1 {
+            let s = VolumeSample {
+                contraction: chi0 + sign * ratio * angle_rad[k],
+                contraction_rate_per_s: sign * ratio * omega[k],
+                p_abs_pa: p_pa[k],
+                p_rate_pa_s: p_rate[k],
+                m_dot_kg_s: m_dot[k],
+            };
+            if [
+                s.contraction,
+                s.contraction_rate_per_s,
+                s.p_abs_pa,
+                s.p_rate_pa_s,
+                s.m_dot_kg_s,
+            ]
+            .iter()
+            .any(|v| !v.is_finite())
+            {
+                return Err(format!("sample {k}: a non-finite value"));
+            }
+            o.push(s);
+        }
+    }
+    Ok(out)
+}
+
+/// The network in f64 (the firmware kernel's structure).
+#[derive(Clone, Debug, PartialEq)]
+pub struct VolumeNet {
+    /// Input means (e, e', P, P').
+    pub input_mean: [f64; 4],
+    /// Input standard deviations.
+    pub input_std: [f64; 4],
+    /// `w1` (row-major, H x 4), `b1`, `w2` (H x H), `b2`, `w3`, `b3`.
+    pub theta: Vec<f64>,
+    /// `V = volume_offset_m3 + volume_scale_m3 y`.
+    pub volume_offset_m3: f64,
+    pub volume_scale_m3: f64,
+    /// Smallest volume the firmware returns [m^3].
+    pub volume_floor_m3: f64,
+}
+
+/// `s(z)`, `s'(z)`, `s''(z)` of the softsign `z / (1 + |z|)`.
+fn softsign(z: f64) -> (f64, f64, f64) {
+    let d = 1.0 / (1.0 + z.abs());
+    (z * d, d * d, -2.0 * z.signum() * d * d * d)
+}
+
+impl VolumeNet {
+    /// The normalised inputs and the eq. 9 direction of a sample.
+    fn inputs(&self, s: &VolumeSample) -> ([f64; 4], [f64; 4]) {
+        let raw = [
+            s.contraction,
+            s.contraction_rate_per_s,
+            s.p_abs_pa,
+            s.p_rate_pa_s,
+        ];
+        let x = std::array::from_fn(|i| (raw[i] - self.input_mean[i]) / self.input_std[i]);
+        let d = [
+            s.contraction_rate_per_s / self.input_std[0],
+            0.0,
+            s.p_rate_pa_s / self.input_std[2],
+            0.0,
+        ];
+        (x, d)
+    }
+
+    /// `(y, y')`: the output and its directional derivative along `d`; with `grad`, adds
+    /// `g_y dy/dtheta + g_t dy'/dtheta` to `grad.0` (reverse mode through both passes).
+    fn eval(
+        theta: &[f64],
+        x: &[f64; 4],
+        d: &[f64; 4],
+        grad: Option<(&mut [f64], f64, f64)>,
+    ) -> (f64, f64) {
+        const H: usize = HIDDEN;
+        let (w1, rest) = theta.split_at(4 * H);
+        let (b1, rest) = rest.split_at(H);
+        let (w2, rest) = rest.split_at(H * H);
+        let (b2, rest) = rest.split_at(H);
+        let (w3, b3) = rest.split_at(H);
+        let mut a1 = [0.0; H];
+        let mut ad1 = [0.0; H];
+        let mut s1 = [(0.0, 0.0, 0.0); H];
+        let mut zd1 = [0.0; H];
+        for j in 0..H {
+            let mut z = b1[j];
+            let mut zd = 0.0;
+            for i in 0..4 {
+                z += w1[j * 4 + i] * x[i];
+                zd += w1[j * 4 + i] * d[i];
+            }
+            s1[j] = softsign(z);
+            zd1[j] = zd;
+            a1[j] = s1[j].0;
+            ad1[j] = s1[j].1 * zd;
+        }
+        let mut a2 = [0.0; H];
+        let mut ad2 = [0.0; H];
+        let mut s2 = [(0.0, 0.0, 0.0); H];
+        let mut zd2 = [0.0; H];
+        for j in 0..H {
+            let mut z = b2[j];
+            let mut zd = 0.0;
+            for i in 0..H {
+                z += w2[j * H + i] * a1[i];
+                zd += w2[j * H + i] * ad1[i];
+            }
+            s2[j] = softsign(z);
+            zd2[j] = zd;
+            a2[j] = s2[j].0;
+            ad2[j] = s2[j].1 * zd;
+        }
+        let mut y = b3[0];
+        let mut yd = 0.0;
+        for j in 0..H {
+            y += w3[j] * a2[j];
+            yd += w3[j] * ad2[j];
+        }
+        if let Some((g, gy, gt)) = grad {
+            let (gw1, rest) = g.split_at_mut(4 * H);
+            let (gb1, rest) = rest.split_at_mut(H);
+            let (gw2, rest) = rest.split_at_mut(H * H);
+            let (gb2, rest) = rest.split_at_mut(H);
+            let (gw3, gb3) = rest.split_at_mut(H);
+            gb3[0] += gy;
+            let mut gz2 = [0.0; H];
+            let mut gzd2 = [0.0; H];
+            for j in 0..H {
+                gw3[j] += gy * a2[j] + gt * ad2[j];
+                let (ga, gad) = (gy * w3[j], gt * w3[j]);
+                let (_, sp, spp) = s2[j];
+                gzd2[j] = gad * sp;
+                gz2[j] = ga * sp + gad * spp * zd2[j];
+            }
+            let mut ga1 = [0.0; H];
+            let mut gad1 = [0.0; H];
+            for j in 0..H {
+                gb2[j] += gz2[j];
+                for i in 0..H {
+                    gw2[j * H + i] += gz2[j] * a1[i] + gzd2[j] * ad1[i];
+                    ga1[i] += w2[j * H + i] * gz2[j];
+                    gad1[i] += w2[j * H + i] * gzd2[j];
+                }
+            }
+            for j in 0..H {
+                let (_, sp, spp) = s1[j];
+                let gzd = gad1[j] * sp;
+                let gz = ga1[j] * sp + gad1[j] * spp * zd1[j];
+                gb1[j] += gz;
+                for i in 0..4 {
+                    gw1[j * 4 + i] += gz * x[i] + gzd * d[i];
+                }
+            }
+        }
+        (y, yd)
+    }
+
+    /// Eq. 8 and 9: the volume [m^3] and its rate [m^3/s] (unfloored).
+    pub fn volume_and_rate(&self, s: &VolumeSample) -> (f64, f64) {
+        let (x, d) = self.inputs(s);
+        let (y, yd) = Self::eval(&self.theta, &x, &d, None);
+        (
+            self.volume_offset_m3 + self.volume_scale_m3 * y,
+            self.volume_scale_m3 * yd,
+        )
+    }
+
+    /// Eq. 12: the hybrid model's mass flow [kg/s].
+    pub fn mass_flow_kg_s(&self, s: &VolumeSample, thermo: &Thermo) -> f64 {
+        let (v, vr) = self.volume_and_rate(s);
+        thermo.mass_flow_kg_s(s, v, vr)
+    }
+
+    /// The firmware's form (f32; the standard deviations as reciprocals).
+    pub fn to_firmware(&self) -> VolumeFnn {
+        const H: usize = HIDDEN;
+        let t = &self.theta;
+        let f = |x: f64| x as f32;
+        VolumeFnn {
+            input_mean: self.input_mean.map(f),
+            input_inv_std: self.input_std.map(|s| (1.0 / s) as f32),
+            w1: std::array::from_fn(|j| std::array::from_fn(|i| f(t[j * 4 + i]))),
+            b1: std::array::from_fn(|j| f(t[4 * H + j])),
+            w2: std::array::from_fn(|j| std::array::from_fn(|i| f(t[5 * H + j * H + i]))),
+            b2: std::array::from_fn(|j| f(t[5 * H + H * H + j])),
+            w3: std::array::from_fn(|j| f(t[6 * H + H * H + j])),
+            b3: f(t[7 * H + H * H]),
+            volume_offset_m3: f(self.volume_offset_m3),
+            volume_scale_m3: f(self.volume_scale_m3),
+            volume_floor_m3: f(self.volume_floor_m3),
+        }
+    }
+
+    /// The `[volume_fnn]` table of `config/volume.toml` (build.rs reads it).
+    pub fn toml_table(&self) -> String {
+        const H: usize = HIDDEN;
+        let t = &self.theta;
+        let list = |v: &[f64]| {
+            format!(
+                "[{}]",
+                v.iter()
+                    .map(|x| format!("{x:e}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        };
+        let rows = |v: &[f64], w: usize| {
+            format!(
+                "[\n{}]",
+                v.chunks(w)
+                    .map(|r| format!("  {},\n", list(r)))
+                    .collect::<String>()
+            )
+        };
+        let mut s = String::new();
+        let _ = writeln!(s, "[volume_fnn]");
+        let _ = writeln!(s, "hidden_units = [{H}, {H}]");
+        let _ = writeln!(s, "activation = \"softsign\"");
+        let _ = writeln!(s, "input_mean = {}", list(&self.input_mean));
+        let _ = writeln!(s, "input_std = {}", list(&self.input_std));
+        let _ = writeln!(s, "volume_offset_m3 = {:e}", self.volume_offset_m3);
+        let _ = writeln!(s, "volume_scale_m3 = {:e}", self.volume_scale_m3);
+        let _ = writeln!(s, "volume_floor_m3 = {:e}", self.volume_floor_m3);
+        let _ = writeln!(s, "w1 = {}", rows(&t[..4 * H], 4));
+        let _ = writeln!(s, "b1 = {}", list(&t[4 * H..5 * H]));
+        let _ = writeln!(s, "w2 = {}", rows(&t[5 * H..5 * H + H * H], H));
+        let _ = writeln!(s, "b2 = {}", list(&t[5 * H + H * H..6 * H + H * H]));
+        let _ = writeln!(s, "w3 = {}", list(&t[6 * H + H * H..7 * H + H * H]));
+        let _ = writeln!(s, "b3 = {:e}", t[7 * H + H * H]);
+        s
+    }
+}
+
+/// Training options.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrainOptions {
+    /// Weight decay `lambda` of eq. 10.
+    pub weight_decay: f64,
+    /// Seed of the random start.
+    pub seed: u64,
+    /// Levenberg-Marquardt budget: at most this many loss evaluations.
+    pub max_evaluations: usize,
+}
+
+impl Default for TrainOptions {
+    /// Seed 004's weight decay (1e-5); 2000 evaluations.
+    fn default() -> Self {
+        TrainOptions {
+            weight_decay: 1e-5,
+            seed: 1,
+            max_evaluations: 2000,
+        }
+    }
+}
+
+/// A trained network and its figures.
+#[derive(Clone, Debug)]
+pub struct Trained {
+    pub net: VolumeNet,
+    /// Loss of eq. 10 at the start and at the end.
+    pub loss_start: f64,
+    pub loss_end: f64,
+    /// Loss evaluations used.
+    pub evaluations: usize,
+    /// Why the optimiser stopped.
+    pub termination: String,
+}
+
+/// Mean squared mass-flow error [(kg/s)^2] of `model` over `samples`.
+pub fn mse_kg2_s2(samples: &[VolumeSample], model: impl Fn(&VolumeSample) -> f64) -> f64 {
+    samples
+        .iter()
+        .map(|s| (model(s) - s.m_dot_kg_s).powi(2))
+        .sum::<f64>()
+        / samples.len().max(1) as f64
+}
+
+struct Problem<'a> {
+    samples: &'a [VolumeSample],
+    net: VolumeNet,
+    thermo: Thermo,
+    inv_sm_sqrt_n: f64,
+    sqrt_half_lambda: f64,
+    evaluations: Cell<usize>,
+    progress: &'a dyn Fn(usize),
+}
+
+impl Problem<'_> {
+    /// Residual of sample `s` and its `(g_y, g_t)` (d residual / d y, d residual / d y').
+    fn factors(&self, s: &VolumeSample) -> (f64, f64) {
+        let a = s.p_rate_pa_s / (self.thermo.polytropic_index * self.thermo.rt_j_per_kg);
+        let b = s.p_abs_pa / self.thermo.rt_j_per_kg;
+        let k = self.inv_sm_sqrt_n * self.net.volume_scale_m3;
+        (a * k, b * k)
+    }
+
+    fn loss(&self) -> f64 {
+        self.residuals_vec().iter().map(|r| r * r).sum()
+    }
+
+    fn residuals_vec(&self) -> Vec<f64> {
+        let mut r = Vec::with_capacity(self.samples.len() + PARAMETERS);
+        for s in self.samples {
+            let m = self.net.mass_flow_kg_s(s, &self.thermo);
+            r.push((m - s.m_dot_kg_s) * self.inv_sm_sqrt_n);
+        }
+        r.extend(self.net.theta.iter().map(|t| t * self.sqrt_half_lambda));
+        r
+    }
+}
+
+impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
+    type ResidualStorage = Owned<f64, Dyn>;
+    type JacobianStorage = Owned<f64, Dyn, Dyn>;
+    type ParameterStorage = Owned<f64, Dyn>;
+
+    fn set_params(&mut self, x: &DVector<f64>) {
+        self.net.theta.copy_from_slice(x.as_slice());
+    }
+
+    fn params(&self) -> DVector<f64> {
+        DVector::from_column_slice(&self.net.theta)
+    }
+
+    fn residuals(&self) -> Option<DVector<f64>> {
+        let n = self.evaluations.get() + 1;
+        self.evaluations.set(n);
+        (self.progress)(n);
+        let r = DVector::from_vec(self.residuals_vec());
+        r.iter().all(|v| v.is_finite()).then_some(r)
+    }
+
+    fn jacobian(&self) -> Option<DMatrix<f64>> {
+        let n = self.samples.len();
+        let mut j = DMatrix::<f64>::zeros(n + PARAMETERS, PARAMETERS);
+        let mut row = vec![0.0; PARAMETERS];
+        for (k, s) in self.samples.iter().enumerate() {
+            row.iter_mut().for_each(|v| *v = 0.0);
+            let (x, d) = self.net.inputs(s);
+            let (gy, gt) = self.factors(s);
+            VolumeNet::eval(&self.net.theta, &x, &d, Some((&mut row, gy, gt)));
+            for (c, v) in row.iter().enumerate() {
+                j[(k, c)] = *v;
+            }
+        }
+        for c in 0..PARAMETERS {
+            j[(n + c, c)] = self.sqrt_half_lambda;
+        }
+        j.iter().all(|v| v.is_finite()).then_some(j)
+    }
+}
+
+/// Relative loss reduction below which the Levenberg-Marquardt iteration stops (the
+/// crate's default, 1.5e-8, lets it creep on for thousands of evaluations at no gain on
+/// held-out data).
+pub const FTOL: f64 = 1e-6;
+
+/// Trains the network on `samples` (eq. 10) from a random start (`opt.seed`); the output
+/// scale and offset and the input normalisation come from the samples and the polynomial
+/// volume `poly` (the offset its mean, the scale its spread, the floor its `0.1 b0`).
+/// `progress` gets the number of loss evaluations so far.
+pub fn train(
+    samples: &[VolumeSample],
+    poly: &VolumePoly,
+    thermo: &Thermo,
+    opt: &TrainOptions,
+    progress: &dyn Fn(usize),
+) -> Result<Trained, String> {
+    if samples.len() < 2 * PARAMETERS {
+        return Err(format!(
+            "{} samples: at least {} needed for {PARAMETERS} weights",
+            samples.len(),
+            2 * PARAMETERS
+        ));
+    }
+    let nf = samples.len() as f64;
+    let stat = |f: &dyn Fn(&VolumeSample) -> f64| {
+        let mean = samples.iter().map(f).sum::<f64>() / nf;
+        let var = samples.iter().map(|s| (f(s) - mean).powi(2)).sum::<f64>() / nf;
+        (mean, var.sqrt())
+    };
+    let cols: [&dyn Fn(&VolumeSample) -> f64; 4] = [
+        &|s| s.contraction,
+        &|s| s.contraction_rate_per_s,
+        &|s| s.p_abs_pa,
+        &|s| s.p_rate_pa_s,
+    ];
+    let mut input_mean = [0.0; 4];
+    let mut input_std = [0.0; 4];
+    for (i, c) in cols.iter().enumerate() {
+        let (m, s) = stat(*c);
+        input_mean[i] = m;
+        if !(s > 0.0 && s.is_finite()) {
+            return Err(format!(
+                "input {} ({}) does not vary over the samples",
+                i,
+                ["e", "e'", "P", "P'"][i]
+            ));
+        }
+        input_std[i] = s;
+    }
+    let (_, sm) = stat(&|s| s.m_dot_kg_s);
+    if !(sm > 0.0 && sm.is_finite()) {
+        return Err("the mass flow does not vary over the samples".into());
+    }
+    let (v_mean, v_std) = stat(&|s| poly.volume_and_rate(s).0);
+    let b0 = poly.coefficients_m3[0];
+    // Xavier-uniform start, reproducible from the seed.
+    let mut rng = rand::rngs::StdRng::seed_from_u64(opt.seed);
+    let mut theta = vec![0.0; PARAMETERS];
+    let h = HIDDEN;
+    let layers = [
+        (0, 4 * h, 4, h),
+        (5 * h, h * h, h, h),
+        (6 * h + h * h, h, h, 1),
+    ];
+    for (start, len, fan_in, fan_out) in layers {
+        let lim = (6.0 / (fan_in + fan_out) as f64).sqrt();
+        for t in &mut theta[start..start + len] {
+            *t = rng.random_range(-lim..lim);
+        }
+    }
+    let net = VolumeNet {
+        input_mean,
+        input_std,
+        theta,
+        volume_offset_m3: v_mean,
+        volume_scale_m3: v_std.max(0.05 * v_mean.abs()).max(1e-9),
+        volume_floor_m3: 0.1 * b0,
+    };
+    let problem = Problem {
+        samples,
+        net,
+        thermo: *thermo,
+        inv_sm_sqrt_n: 1.0 / (sm * nf.sqrt()),
+        sqrt_half_lambda: (opt.weight_decay / 2.0).sqrt(),
+        evaluations: Cell::new(0),
+        progress,
+    };
+    let loss_start = problem.loss();
+    let patience = opt.max_evaluations.div_ceil(PARAMETERS + 1).max(1);
+    let (problem, report) = LevenbergMarquardt::new()
+        .with_patience(patience)
+        .with_ftol(FTOL)
+        .minimize(problem);
+    let loss_end = problem.loss();
+    if !loss_end.is_finite() || problem.net.theta.iter().any(|t| !t.is_finite()) {
+        return Err(format!(
+            "the fit diverged ({:?}); try another --seed",
+            report.termination
+        ));
+    }
+    Ok(Trained {
+        evaluations: problem.evaluations.get(),
+        net: problem.net,
+        loss_start,
+        loss_end,
+        termination: format!("{:?}", report.termination),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn net() -> VolumeNet {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+        VolumeNet {
+            input_mean: [0.14, 0.0, 4.0e5, 0.0],
+            input_std: [0.05, 0.5, 1.5e5, 1.0e6],
+            theta: (0..PARAMETERS)
+                .map(|_| rng.random_range(-0.9..0.9))
+                .collect(),
+            volume_offset_m3: 1.0e-4,
+            volume_scale_m3: 2.0e-5,
+            volume_floor_m3: 1.0e-6,
+        }
+    }
+
+    fn sample() -> VolumeSample {
+        VolumeSample {
+            contraction: 0.16,
+            contraction_rate_per_s: -0.3,
+            p_abs_pa: 3.5e5,
+            p_rate_pa_s: 4.0e5,
+            m_dot_kg_s: 0.0,
+        }
+    }
+
+    #[test]
+    fn the_gradient_matches_finite_differences() {
+        let n = net();
+        let s = sample();
+        let (x, d) = n.inputs(&s);
+        let (gy, gt) = (0.7, -1.3);
+        let mut g = vec![0.0; PARAMETERS];
+        VolumeNet::eval(&n.theta, &x, &d, Some((&mut g, gy, gt)));
+        let f = |th: &[f64]| {
+            let (y, yd) = VolumeNet::eval(th, &x, &d, None);
+            gy * y + gt * yd
+        };
+        for c in 0..PARAMETERS {
+            let h = 1e-6;
+            let mut p = n.theta.clone();
+            p[c] += h;
+            let mut m = n.theta.clone();
+            m[c] -= h;
+            let fd = (f(&p) - f(&m)) / (2.0 * h);
+            assert!(
+                (g[c] - fd).abs() < 1e-6 * (1.0 + fd.abs()),
+                "{c}: {} vs {fd}",
+                g[c]
+            );
+        }
+    }
+
+    #[test]
+    fn the_tangent_is_the_volume_rate_along_the_motion() {
+        let n = net();
+        let s = sample();
+        let (_, rate) = n.volume_and_rate(&s);
+        let h = 1e-5;
+        let at = |t: f64| {
+            n.volume_and_rate(&VolumeSample {
+                contraction: s.contraction + s.contraction_rate_per_s * t,
+                p_abs_pa: s.p_abs_pa + s.p_rate_pa_s * t,
+                ..s
+            })
+            .0
+        };
+        let fd = (at(h) - at(-h)) / (2.0 * h);
+        assert!(
+            (rate - fd).abs() < 1e-6 * fd.abs().max(1e-12),
+            "{rate} vs {fd}"
+        );
+    }
+
+    #[test]
+    fn the_firmware_kernel_agrees_with_the_f64_network() {
+        let n = net();
+        let fw = n.to_firmware();
+        for s in [
+            sample(),
+            VolumeSample {
+                contraction: 0.10,
+                contraction_rate_per_s: 0.8,
+                p_abs_pa: 5.5e5,
+                p_rate_pa_s: -1.0e6,
+                m_dot_kg_s: 0.0,
+            },
+        ] {
+            let (v, r) = n.volume_and_rate(&s);
+            let (vf, rf) = fw.volume_and_rate(
+                s.contraction as f32,
+                s.contraction_rate_per_s as f32,
+                s.p_abs_pa as f32,
+                s.p_rate_pa_s as f32,
+            );
+            assert!(((vf as f64) - v).abs() < 1e-5 * v.abs(), "{v} {vf}");
+            assert!(
+                ((rf as f64) - r).abs() < 1e-3 * r.abs().max(1e-9),
+                "{r} {rf}"
+            );
+        }
+    }
+}
+
+/// Arguments of `host-sim identify volume`.
+#[derive(clap::Args, Debug)]
+pub struct IdentifyVolumeArgs {
+    /// Recording with angle_deg, p1_kpa, p2_kpa and the mass-flow columns m_dot_1_kg_s,
+    /// m_dot_2_kg_s (RECORDING.md; `host-sim simulate --scenario` writes them).
+    #[arg(long, value_name = "R.csv")]
+    pub recording: std::path::PathBuf,
+    /// Output TOML (the format of config/volume.toml).
+    #[arg(long, value_name = "volume.toml")]
+    pub out: std::path::PathBuf,
+    /// Seed of the random start (the same seed and recording give the same file).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Weight decay lambda of seed 004 eq. 10.
+    #[arg(long, default_value_t = 1e-5, value_parser = crate::validate::f64_in(crate::validate::Range::closed(0.0, 1.0)))]
+    pub weight_decay: f64,
+    /// Levenberg-Marquardt budget [loss evaluations].
+    #[arg(long, default_value_t = 2000, value_parser = crate::validate::usize_in(10, 1_000_000))]
+    pub max_evals: usize,
+    /// Half window of the Savitzky-Golay derivatives [samples] [default: 10 ms worth].
+    #[arg(long, value_parser = crate::validate::usize_in(1, 100_000))]
+    pub savgol_half_window: Option<usize>,
+    /// Fraction of the recording (its tail) held out for the validation figures.
+    #[arg(long, default_value_t = 0.25, value_parser = crate::validate::f64_in(crate::validate::Range::half_open(0.0, 0.9)))]
+    pub holdout_fraction: f64,
+    /// Also report the mass-flow errors on these recordings (not trained on; comma
+    /// separated).
+    #[arg(long, value_name = "R2.csv", value_delimiter = ',')]
+    pub validate: Vec<std::path::PathBuf>,
+    /// At most this many training samples (both muscles; evenly thinned).
+    #[arg(long, default_value_t = 4000, value_parser = crate::validate::usize_in(100, 1_000_000))]
+    pub max_samples: usize,
+}
+
+/// Training and hold-out samples of a recording, thinned to at most `max_samples` training
+/// samples: the tail `holdout_fraction` of each muscle's samples is held out.
+pub fn split_samples(
+    per_muscle: &[Vec<VolumeSample>; 2],
+    holdout_fraction: f64,
+    max_samples: usize,
+) -> (Vec<VolumeSample>, Vec<VolumeSample>) {
+    let mut train = Vec::new();
+    let mut held = Vec::new();
+    for m in per_muscle {
+        let cut = ((m.len() as f64) * (1.0 - holdout_fraction)).round() as usize;
+        train.extend_from_slice(&m[..cut]);
+        held.extend_from_slice(&m[cut..]);
+    }
+    let stride = train.len().div_ceil(max_samples.max(1)).max(1);
+    let train = train.into_iter().step_by(stride).collect();
+    (train, held)
+}
+
+/// `host-sim identify volume`: trains, writes the TOML, returns the report.
+pub fn run_identify_volume(a: &IdentifyVolumeArgs) -> anyhow::Result<String> {
+    use anyhow::Context;
+    let mut inputs = vec![("--recording", a.recording.as_path())];
+    inputs.extend(a.validate.iter().map(|v| ("--validate", v.as_path())));
+    crate::validate::distinct_outputs(&inputs, &[("--out", &a.out)]).map_err(anyhow::Error::msg)?;
+    let rec = Recording::read(&a.recording)?.to_uniform();
+    let file = a.recording.display().to_string();
+    let dt = rec.sample_period_s();
+    let hw = a
+        .savgol_half_window
+        .unwrap_or_else(|| ((0.010 / dt).round() as usize).max(1));
+    let geometry = pam_firmware::constants::JOINT_GEOMETRY;
+    let p_atm = pam_firmware::constants::P_ATM_PA as f64;
+    let per_muscle = samples_from_recording(&rec, &geometry, p_atm, hw)
+        .map_err(|e| anyhow::anyhow!("{file}: {e}"))?;
+    // The validation recordings are read (and refused) before any training.
+    let mut validation = Vec::new();
+    for v in &a.validate {
+        let r = Recording::read(v)?.to_uniform();
+        let hw_v = a
+            .savgol_half_window
+            .unwrap_or_else(|| ((0.010 / r.sample_period_s()).round() as usize).max(1));
+        let [m1, m2] = samples_from_recording(&r, &geometry, p_atm, hw_v)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", v.display()))?;
+        validation.push((
+            format!("{} (not trained on)", v.display()),
+            [m1, m2].concat(),
+        ));
+    }
+    let (train_s, held) = split_samples(&per_muscle, a.holdout_fraction, a.max_samples);
+    let thermo = Thermo::firmware();
+    let poly = VolumePoly::firmware();
+    let opt = TrainOptions {
+        weight_decay: a.weight_decay,
+        seed: a.seed,
+        max_evaluations: a.max_evals,
+    };
+    let bar = indicatif::ProgressBar::with_draw_target(
+        Some(a.max_evals as u64),
+        indicatif::ProgressDrawTarget::stderr(),
+    );
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} identify volume [{bar:40}] {pos}/{len} loss evaluations {elapsed}",
+        )
+        .expect("static template")
+        .progress_chars("=> "),
+    );
+    let t = train(&train_s, &poly, &thermo, &opt, &|n| {
+        bar.set_position(n as u64)
+    })
+    .map_err(|e| anyhow::anyhow!("{file}: {e}"))?;
+    bar.finish_and_clear();
+    let poly_flow = |s: &VolumeSample| {
+        let (v, vr) = poly.volume_and_rate(s);
+        thermo.mass_flow_kg_s(s, v, vr)
+    };
+    let hm = |s: &VolumeSample| t.net.mass_flow_kg_s(s, &thermo);
+    let mut sets = vec![
+        ("training".to_string(), &train_s),
+        ("held out (recording tail)".to_string(), &held),
+    ];
+    sets.extend(validation.iter().map(|(n, s)| (n.clone(), s)));
+    sets.retain(|(_, s)| !s.is_empty());
+    let figures: Vec<String> = sets.into_iter().map(|(name, s)| {
+        let a = mse_kg2_s2(s, poly_flow);
+        let h = mse_kg2_s2(s, hm);
+        format!(
+            "{name}: {} samples, mass-flow MSE polynomial volume {a:.3e}, hybrid {h:.3e} (kg/s)^2 ({:.2}x)",
+            s.len(),
+            a / h
+        )
+    }).collect();
+    let fw = t.net.to_firmware();
+    anyhow::ensure!(
+        fw.is_valid(),
+        "{file}: the trained weights do not fit the firmware's f32 (try another --seed)"
+    );
+    let mut header = String::new();
+    let _ = writeln!(
+        header,
+        "# Hybrid-model chamber volume of the pressure feed-forward (seed 004 eq. 8-12;\n\
+         # src/volume_fnn.rs): V(e, e', P, P') by a network of two hidden layers of {HIDDEN} softsign\n\
+         # units ({PARAMETERS} weights), inputs normalised by the means / standard deviations below,\n\
+         # V = volume_offset_m3 + volume_scale_m3 y, floored at volume_floor_m3. build.rs turns it\n\
+         # into `pam_firmware::constants::VOLUME_FNN` (used with the crate feature `volume-fnn`).\n\
+         # Inputs: e = contraction (config/joint_geometry.toml at the angle), e' [1/s], P [Pa abs],\n\
+         # P' [Pa/s]; eq. 12 with k = {}, R T = {} J/kg (config/pressure_ff.toml).\n\
+         #\n\
+         # Written by `host-sim identify volume --recording {file} --seed {} --weight-decay {}\n\
+         #   --max-evals {} --holdout-fraction {} --max-samples {}` (Savitzky-Golay half window {hw}).\n\
+         # Levenberg-Marquardt: loss (eq. 10) {:.4e} -> {:.4e} in {} evaluations ({}).",
+        thermo.polytropic_index,
+        thermo.rt_j_per_kg,
+        a.seed,
+        a.weight_decay,
+        a.max_evals,
+        a.holdout_fraction,
+        a.max_samples,
+        t.loss_start,
+        t.loss_end,
+        t.evaluations,
+        t.termination,
+    );
+    let meta: Vec<String> = ["plant", "scenario", "source"]
+        .iter()
+        .filter_map(|k| rec.meta(k).map(|v| format!("{k} = {v}")))
+        .collect();
+    if !meta.is_empty() {
+        let _ = writeln!(header, "# The recording's {}.", meta.join(", "));
+    }
+    for f in &figures {
+        let _ = writeln!(header, "# {f}");
+    }
+    let text = format!("{header}\n{}", t.net.toml_table());
+    super::write_atomic(&a.out, text.as_bytes()).context("--out")?;
+    let mut report = String::new();
+    let _ = writeln!(
+        report,
+        "{}: hybrid volume, 2 x {HIDDEN} softsign units, {PARAMETERS} weights; loss {:.4e} -> {:.4e} in {} evaluations ({})",
+        a.out.display(),
+        t.loss_start,
+        t.loss_end,
+        t.evaluations,
+        t.termination
+    );
+    for f in &figures {
+        let _ = writeln!(report, "{f}");
+    }
+    Ok(report)
+}
