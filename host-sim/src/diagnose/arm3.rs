@@ -28,7 +28,6 @@
 //! regularised sign (no bristle state); a separate check recording is not supported (the
 //! held-out part is the tail of the recording).
 
-use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use crate::diagnose::{diagnose, DiagnoseError, DiagnoseOptions, Diagnosis, Differentiator};
@@ -290,20 +289,4 @@ pub fn diagnose_arm(
         inertia_kgm2: inertia,
         angle_corrected,
     })
-}
-
-/// Per joint and channel, the fits (%) before and after on the held-out tail.
-pub fn heldout_table(d: &ArmDiagnosis) -> Vec<(usize, BTreeMap<&'static str, (f64, f64)>)> {
-    d.joints
-        .iter()
-        .enumerate()
-        .map(|(i, j)| {
-            let m = j
-                .heldout_before
-                .iter()
-                .map(|(k, b)| (*k, (*b, j.heldout_after.get(k).copied().unwrap_or(*b))))
-                .collect();
-            (i + 1, m)
-        })
-        .collect()
 }

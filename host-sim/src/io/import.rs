@@ -797,12 +797,7 @@ pub fn import(
                     (e / mapping.pressure.regulator_band_pa).clamp(0.0, 1.0)
                 };
             }
-            rec.inputs.push(ValveInputs {
-                u_in1: u[0],
-                u_ex1: u[1],
-                u_in2: u[2],
-                u_ex2: u[3],
-            });
+            rec.inputs.push(ValveInputs::from_openings(u));
         }
         rec.metadata = vec![
             (

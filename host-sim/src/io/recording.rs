@@ -659,12 +659,7 @@ impl RowSink<(f64, [f64; 4], [f64; 5], [f64; 2])> for RecordingColumns {
     }
     fn push(&mut self, (t_s, u, y, m): (f64, [f64; 4], [f64; 5], [f64; 2])) {
         self.t_s.push(t_s);
-        self.inputs.push(ValveInputs {
-            u_in1: u[0],
-            u_ex1: u[1],
-            u_in2: u[2],
-            u_ex2: u[3],
-        });
+        self.inputs.push(ValveInputs::from_openings(u));
         for (col, v) in self.outputs.iter_mut().zip(y) {
             col.push(v);
         }

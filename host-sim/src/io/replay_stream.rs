@@ -393,12 +393,7 @@ impl RowSink<(f64, [f64; 4], [f64; 5])> for RowChunk {
     }
     fn push(&mut self, (t_s, u, _): (f64, [f64; 4], [f64; 5])) {
         self.t_s.push(t_s);
-        self.inputs.push(ValveInputs {
-            u_in1: u[0],
-            u_ex1: u[1],
-            u_in2: u[2],
-            u_ex2: u[3],
-        });
+        self.inputs.push(ValveInputs::from_openings(u));
     }
     fn append(&mut self, mut other: Self) {
         self.t_s.append(&mut other.t_s);

@@ -725,19 +725,6 @@ impl MusclePair {
         let d = self.contraction_per_rad * qd_rad_s;
         [d, -d]
     }
-
-    /// Tensions (F1, F2) at absolute pressures `p_abs`.
-    #[inline(always)]
-    pub fn tensions_n(&self, p_atm_pa: f64, p_abs_pa: [f64; 2], q: f64, qd: f64) -> [f64; 2] {
-        let chi = self.contractions(q);
-        let dchi = self.contraction_rates(qd);
-        [
-            self.muscle
-                .tension_n(p_abs_pa[0] - p_atm_pa, chi[0], dchi[0]),
-            self.muscle
-                .tension_n(p_abs_pa[1] - p_atm_pa, chi[1], dchi[1]),
-        ]
-    }
 }
 
 /// Arm state (SI, absolute pressures).

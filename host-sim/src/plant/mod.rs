@@ -158,6 +158,17 @@ impl ValveInputs {
         u_in2: 0.0,
         u_ex2: 0.0,
     };
+
+    /// From the openings in column order (u_in1, u_ex1, u_in2, u_ex2).
+    #[inline]
+    pub fn from_openings(u: [f64; 4]) -> Self {
+        Self {
+            u_in1: u[0],
+            u_ex1: u[1],
+            u_in2: u[2],
+            u_ex2: u[3],
+        }
+    }
 }
 
 /// What the sensors of a recording report (PLANT.md "Measured channels").
