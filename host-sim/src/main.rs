@@ -507,7 +507,7 @@ fn run_simulate_arm3(a: &SimulateArgs, inputs_path: &Path) -> Result<ExitCode> {
         inputs: rec.inputs.clone(),
         ..Default::default()
     };
-    out.set_outputs_from_states(&arm, &sim.states);
+    out.set_outputs_from_states(&arm, &sim.states, dt);
     out.write(&a.out)?;
     eprintln!("{}: {} samples, {}", a.out.display(), out.len(), sim.stats);
     for (name, fit) in fits(&rec, &out) {

@@ -339,6 +339,7 @@ fn static_force_difference_matches_seed001_eqs_21_22() {
             velocities_rad_s: [0.0; 3],
             p_abs_pa: p,
             friction_z_rad: [0.0; 3],
+            supply_abs_pa: arm.p_supply_abs_pa,
         };
         let m = arm.measure(&x);
         let (c2, c23) = (q[1].cos(), (q[1] + q[2]).cos());
@@ -699,4 +700,153 @@ fn the_lugre_table_is_read_from_the_plant_file_and_checked() {
         e.contains("arm.toml") && e.contains("friction.lugre.stiffness_nm_per_rad"),
         "{e}"
     );
+}
+
+/// Joint 1 of the 1-DOF special case with `joint_effect` in `[joint1.effects]` (or
+/// `arm_effect` in the arm's `[effects]`) against the 1-DOF plant with the same table in its
+/// `[effects]`, over the first 4 s of the conformance pulses: every recorded channel.
+/// Returns the largest difference per channel and the largest change the effect makes.
+fn arm_joint1_against_one_dof(one_dof_effect: &str, arm_effect: &str) -> ([f64; 5], [f64; 5]) {
+    let base = std::fs::read_to_string(fixture("reference-1dof.toml")).unwrap();
+    let cfg = PlantConfig::from_toml_str(&format!("{base}\n{one_dof_effect}"), "one-dof.toml")
+        .unwrap_or_else(|e| panic!("{e}"));
+    let nominal = Plant::from_config(&PlantConfig::load(fixture("reference-1dof.toml")).unwrap());
+    let plant = Plant::from_config(&cfg);
+    let text = format!("{}\n{arm_effect}", one_dof_arm_toml(&cfg));
+    let arm = Arm3::from_config(
+        &Arm3Config::from_toml_str(&text, "effect-arm.toml").unwrap_or_else(|e| panic!("{e}")),
+    )
+    .unwrap();
+    let pulses = Recording::read(fixture("pulses_nominal.csv")).unwrap();
+    let n = 4000;
+    let dt = pulses.sample_period_s();
+    let opts = SolverOptions {
+        rtol: 1e-9,
+        atol: 1e-9,
+        ..SolverOptions::default()
+    };
+    let one = simulate(&plant, &pulses.inputs[..n], dt, &opts).unwrap();
+    let one = plant.measure_series(&one.states, dt);
+    let none = simulate(&nominal, &pulses.inputs[..n], dt, &opts).unwrap();
+    let none = nominal.measure_series(&none.states, dt);
+    let inputs: Vec<Arm3Inputs> = pulses.inputs[..n]
+        .iter()
+        .map(|u| [*u, ValveInputs::CLOSED, ValveInputs::CLOSED])
+        .collect();
+    let three = simulate_arm3(&arm, &inputs, dt, &opts, |_| {}).unwrap();
+    let three = arm.measure_run(&three.states, dt);
+    let (mut diff, mut effect) = ([0.0f64; 5], [0.0f64; 5]);
+    for k in 0..n {
+        let a = three[k][0];
+        let a = [a.angle_deg, a.p1_kpa, a.p2_kpa, a.f1_n, a.f2_n];
+        let b = one[k].to_array();
+        let c = none[k].to_array();
+        for i in 0..5 {
+            diff[i] = diff[i].max((a[i] - b[i]).abs());
+            effect[i] = effect[i].max((b[i] - c[i]).abs());
+        }
+    }
+    (diff, effect)
+}
+
+#[test]
+fn valve_dead_time_sensor_lag_and_supply_drop_on_the_arm_match_the_one_dof_plant() {
+    // (1-DOF table, the same on the arm): a dead time of 8.5 samples, sensor lags on every
+    // channel group, both supply-drop forms (joints 2 and 3 draw nothing here).
+    let cases = [
+        (
+            "[effects.valve_dead_time]\ndelay_s = 0.0085\n",
+            "[joint1.effects.valve_dead_time]\ndelay_s = 0.0085\n",
+        ),
+        (
+            "[effects.sensor_lag]\nangle_time_constant_s = 0.015\npressure_time_constant_s = 0.008\nforce_time_constant_s = 0.004\n",
+            "[joint1.effects.sensor_lag]\nangle_time_constant_s = 0.015\npressure_time_constant_s = 0.008\nforce_time_constant_s = 0.004\n",
+        ),
+        (
+            "[effects.supply_drop]\nmodel = \"static\"\nresistance_pa_s_per_m3 = 2.0e7\n",
+            "[effects.supply_drop]\nmodel = \"static\"\nresistance_pa_s_per_m3 = 2.0e7\n",
+        ),
+        (
+            "[effects.supply_drop]\nmodel = \"reservoir\"\ntank_volume_m3 = 5.0e-4\nfeed_conductance_m3_per_s_pa = 6.0e-9\n",
+            "[effects.supply_drop]\nmodel = \"reservoir\"\ntank_volume_m3 = 5.0e-4\nfeed_conductance_m3_per_s_pa = 6.0e-9\n",
+        ),
+    ];
+    for (one_dof, arm) in cases {
+        let (diff, effect) = arm_joint1_against_one_dof(one_dof, arm);
+        println!(
+            "{}: effect {effect:.3?}, arm - 1-DOF {diff:?}",
+            arm.lines().next().unwrap()
+        );
+        // The effect changes the pressures by kPa; the two implementations agree to within
+        // the integrators' tolerance.
+        assert!(
+            effect[1] > 2.0 || effect[0] > 0.5,
+            "{arm}: effect too small {effect:?}"
+        );
+        assert!(diff[0] < 1e-3, "{arm}: {diff:?}");
+        assert!(diff[1] < 0.05 && diff[2] < 0.05, "{arm}: {diff:?}");
+        assert!(diff[3] < 0.5 && diff[4] < 0.5, "{arm}: {diff:?}");
+    }
+}
+
+#[test]
+fn the_supply_is_shared_a_joint_fills_slower_while_another_draws() {
+    // Static line resistance on the arm's supply: joint 1's muscle 1 inflating alone, and
+    // the same while joint 2's and joint 3's muscle 1 inflate too. Without the drop the other
+    // joints change joint 1's pressure only through the arm's motion (below 0.1 %).
+    let run = |supply: &str, others: bool| -> f64 {
+        let text = std::fs::read_to_string(arm3_plant()).unwrap();
+        let arm = Arm3::from_config(
+            &Arm3Config::from_toml_str(&format!("{text}\n{supply}"), "arm.toml").unwrap(),
+        )
+        .unwrap();
+        let inflate = ValveInputs {
+            u_in1: 1.0,
+            ..ValveInputs::CLOSED
+        };
+        let u = [
+            inflate,
+            if others { inflate } else { ValveInputs::CLOSED },
+            if others { inflate } else { ValveInputs::CLOSED },
+        ];
+        let sim =
+            simulate_arm3(&arm, &vec![u; 50], 1e-3, &SolverOptions::default(), |_| {}).unwrap();
+        sim.final_state.p_abs_pa[0][0] - arm.initial.p_abs_pa[0][0]
+    };
+    let drop = "[effects.supply_drop]\nmodel = \"static\"\nresistance_pa_s_per_m3 = 2.0e7\n";
+    let (alone, shared) = (run(drop, false), run(drop, true));
+    let (ideal_alone, ideal_shared) = (run("", false), run("", true));
+    println!("joint 1 muscle 1 rise in 50 ms [Pa]: ideal {ideal_alone:.0} / {ideal_shared:.0}, drop alone {alone:.0}, with the other joints drawing {shared:.0}");
+    assert!((ideal_alone - ideal_shared).abs() < 1e-3 * ideal_alone);
+    assert!(alone < 0.99 * ideal_alone, "{alone} vs {ideal_alone}");
+    assert!(shared < 0.97 * alone, "{shared} vs {alone}");
+}
+
+#[test]
+fn a_joint_supply_drop_is_refused_the_arm_supply_is_checked() {
+    let text = std::fs::read_to_string(arm3_plant()).unwrap();
+    let e = Arm3Config::from_toml_str(
+        &format!("{text}\n[joint2.effects.supply_drop]\nmodel = \"static\"\nresistance_pa_s_per_m3 = 2.0e7\n"),
+        "arm.toml",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("arm.toml") && e.contains("joint2.effects.supply_drop") && e.contains("share"),
+        "{e}"
+    );
+    let e = Arm3Config::from_toml_str(
+        &format!("{text}\n[effects.supply_drop]\nmodel = \"static\"\ntank_volume_m3 = 1.0e-3\n"),
+        "arm.toml",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("effects.supply_drop.tank_volume_m3"), "{e}");
+    let e = Arm3Config::from_toml_str(
+        &format!("{text}\n[joint1.effects.valve_dead_time]\ndelay_s = -0.01\n"),
+        "arm.toml",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("joint1.effects.valve_dead_time.delay_s"), "{e}");
 }

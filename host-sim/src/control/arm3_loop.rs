@@ -3,17 +3,21 @@
 //! drives the six muscles of the arm plant, one control period per tick.
 //!
 //! Per tick `k` (period `dt = 1 / tick_hz`):
-//! 1. every joint's angle and pressures at `t_k` pass the scenario's [`SensorModel`] (the
-//!    1-DOF loop's: pressure noise and ADC resolution, encoder quantisation);
+//! 1. every joint's angle and pressures at `t_k` pass the joint's sensor path (its
+//!    `[jointN.effects]` sensor lag and calibration, [`Arm3::sensor_paths`]), then the
+//!    scenario's [`SensorModel`] (the 1-DOF loop's: pressure noise and ADC resolution,
+//!    encoder quantisation);
 //! 2. [`ArmTick::step`] turns the three frames and set-points into three valve commands;
 //! 3. each joint's command goes through the firmware's on/off valve driver
 //!    ([`OnOffValves`], tick-level PWM, as the 1-DOF loop) on fake pins; the switched valves
-//!    are reported back to the tick ([`ArmTick::valves_switched`]) and are the plant's
-//!    openings over `[t_k, t_k + dt)`;
+//!    are reported back to the tick ([`ArmTick::valves_switched`]); they reach the plant
+//!    through the joint's valve dead time ([`Arm3::actuator_paths`]) and are held over
+//!    `[t_k, t_k + dt)`;
 //! 4. the arm is integrated over the tick ([`Arm3Integrator`], Dopri5).
 //!
-//! The run's recording ([`ArmRun::to_recording`]) holds the applied openings and the plant's
-//! channels, so `host-sim simulate --plant arm3.toml --inputs` on it reproduces it.
+//! The run's recording ([`ArmRun::to_recording`]) holds the switched valves (the commands,
+//! before any dead time, as a rig logs them) and the sensors' channels, so `host-sim simulate
+//! --plant arm3.toml --inputs` on it reproduces it.
 //!
 //! Scenario files (`scenarios/arm3/*.toml`) reuse the 1-DOF scenario's `[scenario]` and
 //! `[sensors]` tables and set-point shapes ([`SetpointProfile`], one per joint, or a
@@ -289,14 +293,24 @@ pub fn run_arm(
         });
     let opts = SolverOptions::default();
     let mut integ = Arm3Integrator::new(arm, arm.initial, opts);
+    let mut valves =
+        arm.actuator_paths(dt_s, "closed loop")
+            .map_err(|e| ClosedLoopError::Firmware {
+                tick: 0,
+                msg: e.to_string(),
+            })?;
+    let mut sensor_paths = arm.sensor_paths(dt_s);
     let mut rows = Vec::with_capacity(n);
     for k in 0..n {
         let t_s = k as f64 * dt_s;
         let x = integ.state();
+        // What the joints' sensors report (their lag and calibration), then the scenario's
+        // noise and quantisation.
+        let reported = arm.measure_with(&mut sensor_paths, &x);
         let mut frame = ArmFrame::default();
         for j in 0..JOINTS {
-            let mut p = |abs_pa: f64| {
-                let v = abs_pa - arm.p_atm_pa + p_noise.sample(&mut rng);
+            let mut p = |gauge_kpa: f64| {
+                let v = gauge_kpa * 1000.0 + p_noise.sample(&mut rng);
                 let lsb = sensors.pressure_lsb_pa;
                 (if lsb > 0.0 {
                     (v / lsb).round() * lsb
@@ -304,9 +318,9 @@ pub fn run_arm(
                     v
                 }) as f32
             };
-            let p1 = p(x.p_abs_pa[j][0]);
-            let p2 = p(x.p_abs_pa[j][1]);
-            let q = x.angles_rad[j];
+            let p1 = p(reported[j].p1_kpa);
+            let p2 = p(reported[j].p2_kpa);
+            let q = reported[j].angle_deg.to_radians();
             let counts = sensors.angle_counts_per_rev;
             let angle = if counts > 0 {
                 let c = (q / std::f64::consts::TAU * counts as f64).floor() as i32;
@@ -344,8 +358,9 @@ pub fn run_arm(
                 u_ex2: f64::from(o.u_ex2),
             }
         });
+        let applied: Arm3Inputs = std::array::from_fn(|j| valves[j].push(inputs[j]));
         integ
-            .advance_samples(inputs, dt_s, 1, |_| {})
+            .advance_samples(applied, dt_s, 1, |_| {})
             .map_err(|e| ClosedLoopError::Firmware {
                 tick: k,
                 msg: format!("arm plant integration failed: {e}"),
@@ -455,7 +470,7 @@ impl ArmRun {
         fails
     }
 
-    /// The run as a 3-joint recording: applied openings and the plant's channels.
+    /// The run as a 3-joint recording: the switched valves and the sensors' channels.
     pub fn to_recording(&self, arm: &Arm3, plant: &str, scenario: &str) -> Arm3Recording {
         let mut rec = Arm3Recording {
             metadata: vec![
@@ -472,7 +487,7 @@ impl ArmRun {
             ..Default::default()
         };
         let states: Vec<Arm3State> = self.rows.iter().map(|r| r.state).collect();
-        rec.set_outputs_from_states(arm, &states);
+        rec.set_outputs_from_states(arm, &states, self.dt_s);
         rec
     }
 

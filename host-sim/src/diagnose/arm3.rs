@@ -35,7 +35,7 @@ use crate::io::arm3::{Arm3Recording, JOINTS};
 use crate::io::recording::{Channel, Recording};
 use crate::plant::arm3::{Arm3, Arm3Config, ArmJointConfig};
 use crate::plant::config::{InitialConfig, JointConfig, PlantConfig};
-use crate::plant::effects::ChannelCalibration;
+use crate::plant::effects::{ChannelCalibration, EffectsConfig};
 use crate::plant::LoadTorque;
 
 /// The diagnosis of each joint of an arm recording.
@@ -145,7 +145,13 @@ pub fn joint_plant_config(
             p1_gauge_pa: initial.p_abs_pa[joint][0] - p_atm,
             p2_gauge_pa: initial.p_abs_pa[joint][1] - p_atm,
         },
-        effects: j.effects.clone(),
+        // The arm's shared supply drop, if the nominal arm has one, as the joint's own: the
+        // joint then sees the drop of its own inlet flow only (the other joints' draw is
+        // not in the 1-DOF plant).
+        effects: EffectsConfig {
+            supply_drop: cfg.effects.supply_drop.clone(),
+            ..j.effects.clone()
+        },
         load: None,
     }
 }

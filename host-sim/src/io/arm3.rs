@@ -70,9 +70,10 @@ impl Arm3Recording {
         }
     }
 
-    /// The recorded channels of simulated states (all five channels of every joint).
-    pub fn set_outputs_from_states(&mut self, arm: &Arm3, states: &[Arm3State]) {
-        let meas: Vec<_> = states.iter().map(|x| arm.measure(x)).collect();
+    /// The recorded channels of simulated states sampled every `dt_s` (all five channels of
+    /// every joint, through each joint's sensor lag and calibration).
+    pub fn set_outputs_from_states(&mut self, arm: &Arm3, states: &[Arm3State], dt_s: f64) {
+        let meas = arm.measure_run(states, dt_s);
         for j in 0..JOINTS {
             let col = |f: fn(&crate::plant::arm3::JointMeasurement) -> f64| {
                 Some(meas.iter().map(|m| f(&m[j])).collect())
@@ -321,6 +322,7 @@ impl PressureStepScenario {
     ) -> Result<(Arm3Recording, Vec<Arm3State>), Arm3SimError> {
         let n = (self.duration_s / self.dt_s).round() as usize;
         let mut integ = Arm3Integrator::new(arm, arm.initial, *opts);
+        let mut valves = arm.actuator_paths(self.dt_s, "pressure-step scenario")?;
         let mut rec = Arm3Recording {
             metadata: vec![
                 (
@@ -350,7 +352,8 @@ impl PressureStepScenario {
                     u_ex2: open(-e(1)),
                 }
             });
-            integ.advance_samples(u, self.dt_s, 1, |s| states.push(*s))?;
+            let applied: Arm3Inputs = std::array::from_fn(|j| valves[j].push(u[j]));
+            integ.advance_samples(applied, self.dt_s, 1, |s| states.push(*s))?;
             rec.t_s.push(t);
             rec.inputs.push(u);
             k += 1;
@@ -358,7 +361,7 @@ impl PressureStepScenario {
                 progress(k as f64 / n as f64);
             }
         }
-        rec.set_outputs_from_states(arm, &states);
+        rec.set_outputs_from_states(arm, &states, self.dt_s);
         Ok((rec, states))
     }
 }

@@ -30,8 +30,17 @@
 //!   contracts when q_i grows: chi1 = chi0 + (r / l_n)(q_i - q_i,n), chi2 = chi0 - (r / l_n)
 //!   (q_i - q_i,n), q_i,n the joint's neutral angle; tau_i = (F1 - F2) r (seed 001 eq. 20).
 //!
-//! State (12): q1..q3 [rad], q1'..q3' [rad/s], absolute pressures (p1, p2) of joints 1..3.
+//! State (16): q1..q3 [rad], q1'..q3' [rad/s], absolute pressures (p1, p2) of joints 1..3,
+//! the LuGre bristle deflections (0 without LuGre) and the supply tank pressure (p_s0 and
+//! constant without a tank).
 //! Inputs: four valve openings per joint ([`ValveInputs`]), zero-order held over each sample.
+//!
+//! Effects: each joint has the 1-DOF catalogue in `[jointN.effects]` (in the right-hand side:
+//! joint torques, chamber flows, pressure law, muscle friction; outside it, in the joint's
+//! signal paths: its valve dead time and its sensors' lag and calibration, see
+//! [`Arm3::actuator_paths`] and [`Arm3::sensor_paths`]). The supply is the arm's: one
+//! `[effects.supply_drop]` (static line resistance or tank) feeds all twelve valves, so the
+//! supply sags with the inlet flow of all six muscles.
 //!
 //! Integration: [`Arm3Integrator`], `ode_solvers::Dopri5` (adaptive, error controlled, dense
 //! output) restarted at every input change, exactly as the 1-DOF [`crate::sim`].
@@ -45,17 +54,18 @@ use serde::Deserialize;
 use crate::plant::config::{
     ConfigError, EnvironmentConfig, InitialConfig, MuscleConfig, ValveConfig,
 };
-use crate::plant::effects::{Effects, EffectsConfig, Supply};
+use crate::plant::effects::{Check, Effect, Effects, EffectsConfig, Supply, SupplyDrop};
 use crate::plant::muscle::Muscle;
 use crate::plant::pressure;
 use crate::plant::valve::Iso6358Valve;
 use crate::plant::Measurement;
 use crate::plant::ValveInputs;
+use crate::sim::signal_path::{ActuatorPath, SensorPath};
 use crate::sim::SolverOptions;
 
-/// The 12-element ODE state vector.
-/// The arm's state vector: angles, velocities, pressures, LuGre bristle deflections.
-pub type Vector15 = SVector<f64, 15>;
+/// The arm's state vector: angles, velocities, pressures, LuGre bristle deflections and the
+/// supply tank pressure.
+pub type ArmVector = SVector<f64, 16>;
 
 /// The value of the top-level `kind` key of a 3-DOF arm plant file.
 pub const KIND: &str = "arm3";
@@ -82,6 +92,19 @@ pub struct Arm3Config {
     pub joint1: ArmJointConfig,
     pub joint2: ArmJointConfig,
     pub joint3: ArmJointConfig,
+    /// `[effects]`: what the whole arm shares (the supply).
+    #[serde(default)]
+    pub effects: ArmEffectsConfig,
+}
+
+/// `[effects]` of the whole arm: the effects every muscle shares.
+#[derive(Debug, Clone, PartialEq, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ArmEffectsConfig {
+    /// `[effects.supply_drop]`: the 1-DOF table (static line resistance or tank), here one
+    /// supply for all twelve valves: the six inlet flows draw on it together.
+    #[serde(default)]
+    pub supply_drop: Option<SupplyDrop>,
 }
 
 /// `[links]`: the rigid-body parameters of seed 001 tables 3-4 (names of its table 1).
@@ -134,9 +157,8 @@ pub struct ArmJointConfig {
     pub initial: InitialConfig,
     /// `[jointN.effects.*]`: the 1-DOF effects catalogue on this joint and its two muscles
     /// (the same tables as a 1-DOF plant file's `[effects]`; angles in the joint's own frame,
-    /// 0 at `neutral_angle_rad`). On the arm: the joint-torque, chamber-flow, pressure-law,
-    /// muscle-friction and sensor-calibration effects; a valve dead time, sensor lag, supply
-    /// model or thermal chamber is refused (not modelled on the arm).
+    /// 0 at `neutral_angle_rad`). On the arm: every effect but the supply (the arm's
+    /// `[effects.supply_drop]`, shared by all joints) and the thermal chamber (refused).
     #[serde(default)]
     pub effects: EffectsConfig,
 }
@@ -438,20 +460,23 @@ impl Arm3Config {
                 other => other,
             })?;
             let active = Effects::from_config(&j.effects, &self.valve);
-            let unsupported = [
-                ("valve_dead_time", active.valve_dead_time_s().is_some()),
-                ("sensor_lag", !active.sensor_filters(1e-3).is_empty()),
-                ("supply_drop", !matches!(active.supply(), Supply::Ideal)),
-                ("thermal_chamber", active.thermal_chamber().is_some()),
-            ];
-            if let Some((name, _)) = unsupported.iter().find(|(_, on)| *on) {
+            if !matches!(active.supply(), Supply::Ideal) {
                 return Err(bad(
-                    &format!("{prefix}effects.{name}"),
-                    "is not modelled on the 3-DOF arm (joint torque, chamber flow, pressure \
-                     law, muscle friction and sensor calibration effects are)"
+                    &format!("{prefix}effects.supply_drop"),
+                    "the arm's six muscles share one supply: give the supply drop once, as \
+                     the arm's [effects.supply_drop]"
                         .into(),
                 ));
             }
+            if active.thermal_chamber().is_some() {
+                return Err(bad(
+                    &format!("{prefix}effects.thermal_chamber"),
+                    "is not modelled on the 3-DOF arm (every other effect is)".into(),
+                ));
+            }
+        }
+        if let Some(sd) = &self.effects.supply_drop {
+            sd.validate(&Check::new(path, "supply_drop"))?;
         }
         let b = self.valve.critical_ratio;
         let lr = self.valve.laminar_ratio;
@@ -736,11 +761,14 @@ pub struct Arm3State {
     pub p_abs_pa: [[f64; 2]; 3],
     /// LuGre bristle deflection of joints 1..3 [rad] (0 without the LuGre model).
     pub friction_z_rad: [f64; 3],
+    /// Supply tank pressure [Pa abs] (with a `model = "reservoir"` supply drop; otherwise
+    /// unused and constant).
+    pub supply_abs_pa: f64,
 }
 
 impl Arm3State {
-    pub fn to_vector(&self) -> Vector15 {
-        let mut y = Vector15::zeros();
+    pub fn to_vector(&self) -> ArmVector {
+        let mut y = ArmVector::zeros();
         for i in 0..3 {
             y[i] = self.angles_rad[i];
             y[3 + i] = self.velocities_rad_s[i];
@@ -748,10 +776,11 @@ impl Arm3State {
             y[7 + 2 * i] = self.p_abs_pa[i][1];
             y[12 + i] = self.friction_z_rad[i];
         }
+        y[15] = self.supply_abs_pa;
         y
     }
 
-    pub fn from_vector(y: &Vector15) -> Self {
+    pub fn from_vector(y: &ArmVector) -> Self {
         let mut s = Self::default();
         for i in 0..3 {
             s.angles_rad[i] = y[i];
@@ -759,6 +788,7 @@ impl Arm3State {
             s.p_abs_pa[i] = [y[6 + 2 * i], y[7 + 2 * i]];
             s.friction_z_rad[i] = y[12 + i];
         }
+        s.supply_abs_pa = y[15];
         s
     }
 
@@ -783,6 +813,18 @@ pub struct JointMeasurement {
     pub f2_n: f64,
 }
 
+impl From<Measurement> for JointMeasurement {
+    fn from(m: Measurement) -> Self {
+        Self {
+            angle_deg: m.angle_deg,
+            p1_kpa: m.p1_kpa,
+            p2_kpa: m.p2_kpa,
+            f1_n: m.f1_n,
+            f2_n: m.f2_n,
+        }
+    }
+}
+
 /// The 3-DOF arm plant with its derived constants.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Arm3 {
@@ -794,6 +836,8 @@ pub struct Arm3 {
     pub friction: [Eq7Friction; 3],
     /// The enabled `[jointN.effects]` of each joint.
     pub effects: [Effects; 3],
+    /// The supply of all twelve valves (the arm's `[effects.supply_drop]`).
+    pub supply: Supply,
     pub initial: Arm3State,
 }
 
@@ -818,7 +862,10 @@ impl Arm3 {
             neutral_angle_rad: j.neutral_angle_rad,
             contraction_per_rad: j.sprocket_radius_m / j.muscle.rest_length_m,
         };
-        let mut initial = Arm3State::default();
+        let mut initial = Arm3State {
+            supply_abs_pa: c.environment.supply_gauge_pa + p_atm_pa,
+            ..Default::default()
+        };
         for (i, j) in joints.iter().enumerate() {
             initial.angles_rad[i] = j.initial.angle_rad;
             initial.velocities_rad_s[i] = j.initial.velocity_rad_s;
@@ -839,6 +886,10 @@ impl Arm3 {
             pairs: joints.map(pair),
             friction: joints.map(|j| Eq7Friction::from_config(&j.friction)),
             effects: joints.map(|j| Effects::from_config(&j.effects, &c.valve)),
+            supply: match &c.effects.supply_drop {
+                Some(sd) if sd.enabled() => sd.activate(&c.valve),
+                _ => Supply::Ideal,
+            },
             initial,
         };
         if c.settle_initial_angles {
@@ -908,6 +959,23 @@ impl Arm3 {
             ..Default::default()
         };
         let mut tau = [0.0; 3];
+        let p_supply = self.supply.pressure_abs_pa(
+            &self.valve,
+            self.p_supply_abs_pa,
+            x.supply_abs_pa,
+            [
+                x.p_abs_pa[0][0],
+                x.p_abs_pa[0][1],
+                x.p_abs_pa[1][0],
+                x.p_abs_pa[1][1],
+                x.p_abs_pa[2][0],
+                x.p_abs_pa[2][1],
+            ],
+            [
+                u[0].u_in1, u[0].u_in2, u[1].u_in1, u[1].u_in2, u[2].u_in1, u[2].u_in2,
+            ],
+        );
+        let mut q_inlet = 0.0;
         for (i, pair) in self.pairs.iter().enumerate() {
             let chi = pair.contractions(x.angles_rad[i]);
             let dchi = pair.contraction_rates(x.velocities_rad_s[i]);
@@ -921,7 +989,9 @@ impl Arm3 {
                 f[m] = self.tension_n(i, p - self.p_atm_pa, chi[m], dchi[m]);
                 let mut q = effects.chamber_flow_m3_s(m, p, self.p_atm_pa);
                 if u_in[m] != 0.0 {
-                    q += u_in[m] * self.valve.flow_m3_s(self.p_supply_abs_pa, p);
+                    let q_in = u_in[m] * self.valve.flow_m3_s(p_supply, p);
+                    q += q_in;
+                    q_inlet += q_in;
                 }
                 if u_ex[m] != 0.0 {
                     q -= u_ex[m] * self.valve.flow_m3_s(p, self.p_atm_pa);
@@ -951,28 +1021,93 @@ impl Arm3 {
         d.velocities_rad_s = self
             .links
             .acceleration(&x.angles_rad, &x.velocities_rad_s, &tau, &fr);
+        d.supply_abs_pa = self.supply.tank_rate_pa_s(
+            self.p_atm_pa,
+            self.p_supply_abs_pa,
+            x.supply_abs_pa,
+            q_inlet,
+        );
         d
     }
 
-    /// The recorded channels of each joint.
+    /// The true channels of joint `i` (what ideal sensors would report).
+    pub fn true_channels(&self, i: usize, x: &Arm3State) -> Measurement {
+        let f = self.tensions_n(i, x);
+        Measurement {
+            angle_deg: x.angles_rad[i].to_degrees(),
+            p1_kpa: (x.p_abs_pa[i][0] - self.p_atm_pa) / 1000.0,
+            p2_kpa: (x.p_abs_pa[i][1] - self.p_atm_pa) / 1000.0,
+            f1_n: f[0],
+            f2_n: f[1],
+        }
+    }
+
+    /// The recorded channels of each joint in state `x` with the joints' sensor calibration
+    /// (no sensor lag: a lag needs the run, see [`Self::sensor_paths`]).
     pub fn measure(&self, x: &Arm3State) -> [JointMeasurement; 3] {
+        std::array::from_fn(|i| self.effects[i].calibrate(self.true_channels(i, x)).into())
+    }
+
+    /// Valve command -> valve opening of each joint (its `[jointN.effects.valve_dead_time]`)
+    /// at sample period `dt_s`; `mode` names the run in a refusal.
+    pub fn actuator_paths(
+        &self,
+        dt_s: f64,
+        mode: &'static str,
+    ) -> Result<[ActuatorPath; 3], Arm3SimError> {
+        let mut paths = Vec::with_capacity(3);
+        for (j, e) in self.effects.iter().enumerate() {
+            paths.push(ActuatorPath::for_effects(e, dt_s, mode).map_err(|e| {
+                Arm3SimError::Joint {
+                    joint: j + 1,
+                    message: e.to_string(),
+                }
+            })?);
+        }
+        Ok(paths.try_into().expect("three joints"))
+    }
+
+    /// Plant state -> reported channels of each joint (its sensor lag and calibration),
+    /// sampled every `dt_s`.
+    pub fn sensor_paths(&self, dt_s: f64) -> [SensorPath; 3] {
+        std::array::from_fn(|i| SensorPath::for_effects(&self.effects[i], dt_s))
+    }
+
+    /// The channels the sensors of every joint report over a sampled run (`states[k]` at
+    /// `t_k = k dt_s`): lag, then calibration.
+    pub fn measure_run(&self, states: &[Arm3State], dt_s: f64) -> Vec<[JointMeasurement; 3]> {
+        let mut paths = self.sensor_paths(dt_s);
+        states
+            .iter()
+            .map(|x| self.measure_with(&mut paths, x))
+            .collect()
+    }
+
+    /// What the sensors of `paths` report for the next sample `x`.
+    pub fn measure_with(
+        &self,
+        paths: &mut [SensorPath; 3],
+        x: &Arm3State,
+    ) -> [JointMeasurement; 3] {
         std::array::from_fn(|i| {
-            let f = self.tensions_n(i, x);
-            let m = self.effects[i].calibrate(Measurement {
-                angle_deg: x.angles_rad[i].to_degrees(),
-                p1_kpa: (x.p_abs_pa[i][0] - self.p_atm_pa) / 1000.0,
-                p2_kpa: (x.p_abs_pa[i][1] - self.p_atm_pa) / 1000.0,
-                f1_n: f[0],
-                f2_n: f[1],
-            });
-            JointMeasurement {
-                angle_deg: m.angle_deg,
-                p1_kpa: m.p1_kpa,
-                p2_kpa: m.p2_kpa,
-                f1_n: m.f1_n,
-                f2_n: m.f2_n,
-            }
+            paths[i]
+                .push_channels(&self.effects[i], self.true_channels(i, x))
+                .into()
         })
+    }
+
+    /// The valve openings applied over each sample for the commands `commands` (each joint's
+    /// valve dead time).
+    pub fn applied_inputs(
+        &self,
+        commands: &[Arm3Inputs],
+        dt_s: f64,
+    ) -> Result<Vec<Arm3Inputs>, Arm3SimError> {
+        let mut paths = self.actuator_paths(dt_s, "open-loop replay")?;
+        Ok(commands
+            .iter()
+            .map(|u| std::array::from_fn(|j| paths[j].push(u[j])))
+            .collect())
     }
 
     /// Static torque balance at rest: tau_muscle(q, p) - G(q) (friction is zero at rest).
@@ -982,6 +1117,7 @@ impl Arm3 {
             velocities_rad_s: [0.0; 3],
             p_abs_pa: *p_abs_pa,
             friction_z_rad: [0.0; 3],
+            supply_abs_pa: self.p_supply_abs_pa,
         };
         Vector3::from(self.muscle_torques_nm(&x)) - self.links.gravity_torques_nm(q)
     }
@@ -1066,6 +1202,8 @@ pub enum Arm3SimError {
     NonFinite { t_s: f64, state: Arm3State },
     #[error("invalid sample period {0} s (must be finite and > 0)")]
     SamplePeriod(f64),
+    #[error("joint {joint}: {message}")]
+    Joint { joint: usize, message: String },
     #[error("invalid valve input at sample {index}, joint {joint}: {inputs:?} (openings must be in [0, 1])")]
     Input {
         index: usize,
@@ -1079,8 +1217,8 @@ struct Rhs<'a> {
     u: Arm3Inputs,
 }
 
-impl System<f64, Vector15> for Rhs<'_> {
-    fn system(&self, _t: f64, y: &Vector15, dy: &mut Vector15) {
+impl System<f64, ArmVector> for Rhs<'_> {
+    fn system(&self, _t: f64, y: &ArmVector, dy: &mut ArmVector) {
         let d = self.arm.derivatives(&Arm3State::from_vector(y), &self.u);
         *dy = d.to_vector();
     }
@@ -1218,8 +1356,9 @@ pub struct Arm3Simulation {
     pub stats: Arm3Stats,
 }
 
-/// Open-loop replay from the arm's initial state: `inputs[k]` held over `[t_k, t_k + dt)`;
-/// `progress` gets the number of samples done.
+/// Open-loop replay from the arm's initial state: the valve commands `inputs[k]` of
+/// `[t_k, t_k + dt)` through each joint's valve dead time; `progress` gets the number of
+/// samples done.
 pub fn simulate_arm3(
     arm: &Arm3,
     inputs: &[Arm3Inputs],
@@ -1230,6 +1369,8 @@ pub fn simulate_arm3(
     for (k, u) in inputs.iter().enumerate() {
         check_inputs(k, u)?;
     }
+    let applied = arm.applied_inputs(inputs, dt_s)?;
+    let inputs = &applied[..];
     let mut integ = Arm3Integrator::new(arm, arm.initial, *opts);
     let mut states = Vec::with_capacity(inputs.len());
     let mut k = 0;

@@ -16,7 +16,7 @@ pub mod valve;
 use std::path::Path;
 
 use crate::plant::config::{ConfigError, PlantConfig};
-use effects::{Effects, Supply};
+use effects::Effects;
 use joint::Joint;
 use muscle::Muscle;
 use valve::Iso6358Valve;
@@ -349,19 +349,13 @@ impl Plant {
     /// The supply pressure the inlet valves see [Pa abs] (ideal, static drop or reservoir).
     #[inline(always)]
     fn supply_abs_pa(&self, p_abs_pa: [f64; 2], aux: &AuxState, u: &ValveInputs) -> f64 {
-        match self.effects.supply() {
-            Supply::Ideal => self.p_supply_abs_pa,
-            Supply::Static {
-                resistance_pa_s_per_m3,
-            } => effects::static_supply_pressure_pa(
-                &self.valve,
-                self.p_supply_abs_pa,
-                *resistance_pa_s_per_m3,
-                p_abs_pa,
-                [u.u_in1, u.u_in2],
-            ),
-            Supply::Reservoir { .. } => aux.supply_abs_pa,
-        }
+        self.effects.supply().pressure_abs_pa(
+            &self.valve,
+            self.p_supply_abs_pa,
+            aux.supply_abs_pa,
+            p_abs_pa,
+            [u.u_in1, u.u_in2],
+        )
     }
 
     /// The signed standard (ANR) volume flows into chamber `i` [m^3/s]: leak, inlet valve
@@ -472,16 +466,12 @@ impl Plant {
             + self.effects.joint_torque_nm(x.angle_rad, x.velocity_rad_s)
             + self.joint.end_stop_torque_nm(x.angle_rad, x.velocity_rad_s)
             + aux.load_torque_nm;
-        let d_reservoir = match supply {
-            Supply::Reservoir {
-                tank_volume_m3,
-                feed,
-            } => {
-                let q_feed = feed.flow_m3_s(self.p_supply_abs_pa, reservoir_abs_pa);
-                self.p_atm_pa * (q_feed - q_supply) / tank_volume_m3
-            }
-            _ => 0.0,
-        };
+        let d_reservoir = supply.tank_rate_pa_s(
+            self.p_atm_pa,
+            self.p_supply_abs_pa,
+            reservoir_abs_pa,
+            q_supply,
+        );
         (
             PlantState {
                 angle_rad: x.velocity_rad_s,

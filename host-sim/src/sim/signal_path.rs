@@ -20,7 +20,7 @@
 //! A path keeps its memory across a change of plant parameters (the closed loop's load and
 //! supply events swap the plant, not the sensors or the valves).
 
-use crate::plant::effects::{ChannelFilter, DeadTimeLine};
+use crate::plant::effects::{ChannelFilter, DeadTimeLine, Effects};
 use crate::plant::{Measurement, Plant, PlantState, ValveInputs};
 use crate::sim::SimError;
 
@@ -35,7 +35,12 @@ impl ActuatorPath {
     /// refusal). Refuses a dead time the line cannot hold (negative, not finite, absurdly long
     /// for the sample period).
     pub fn new(plant: &Plant, dt_s: f64, mode: &'static str) -> Result<Self, SimError> {
-        let line = match plant.effects.valve_dead_time_s() {
+        Self::for_effects(&plant.effects, dt_s, mode)
+    }
+
+    /// The path of a set of effects (one joint of the arm has its own).
+    pub fn for_effects(effects: &Effects, dt_s: f64, mode: &'static str) -> Result<Self, SimError> {
+        let line = match effects.valve_dead_time_s() {
             None => None,
             Some(delay_s) => Some(DeadTimeLine::new(delay_s, dt_s).ok_or(SimError::DeadTime {
                 delay_s,
@@ -77,8 +82,13 @@ impl std::fmt::Debug for SensorPath {
 impl SensorPath {
     /// The path of `plant` sampled every `dt_s` (its sensor filters in registry order).
     pub fn new(plant: &Plant, dt_s: f64) -> Self {
+        Self::for_effects(&plant.effects, dt_s)
+    }
+
+    /// The path of a set of effects (one joint of the arm has its own).
+    pub fn for_effects(effects: &Effects, dt_s: f64) -> Self {
         Self {
-            filters: plant.effects.sensor_filters(dt_s),
+            filters: effects.sensor_filters(dt_s),
         }
     }
 
@@ -86,15 +96,20 @@ impl SensorPath {
     /// the channels and the calibration (it may be a changed copy of the plant the path was
     /// made for: only its sensor effects must be the same).
     pub fn push(&mut self, plant: &Plant, x: &PlantState) -> Measurement {
-        let m = plant.true_channels(x);
+        self.push_channels(&plant.effects, plant.true_channels(x))
+    }
+
+    /// Feeds the true channels `m` of this sample; returns what sensors with `effects`'
+    /// lag and calibration report for it.
+    pub fn push_channels(&mut self, effects: &Effects, m: Measurement) -> Measurement {
         if self.filters.is_empty() {
-            return plant.effects.calibrate(m);
+            return effects.calibrate(m);
         }
         let mut y = m.to_array();
         for f in self.filters.iter_mut() {
             y = f.push(y);
         }
-        plant.effects.calibrate(Measurement {
+        effects.calibrate(Measurement {
             angle_deg: y[0],
             p1_kpa: y[1],
             p2_kpa: y[2],

@@ -75,6 +75,56 @@ impl Supply {
     pub fn has_state(&self) -> bool {
         matches!(self, Supply::Reservoir { .. })
     }
+
+    /// The supply pressure the inlet valves see [Pa abs]: p_s0 (ideal), the static drop's
+    /// root for the `N` chambers at `p_chamber_pa` drawing through inlet openings `u_in`,
+    /// or the tank pressure `p_tank_abs_pa` (reservoir).
+    #[inline(always)]
+    pub fn pressure_abs_pa<const N: usize>(
+        &self,
+        valve: &Iso6358Valve,
+        p_s0_pa: f64,
+        p_tank_abs_pa: f64,
+        p_chamber_pa: [f64; N],
+        u_in: [f64; N],
+    ) -> f64 {
+        match self {
+            Supply::Ideal => p_s0_pa,
+            Supply::Static {
+                resistance_pa_s_per_m3,
+            } => static_supply_pressure_pa(
+                valve,
+                p_s0_pa,
+                *resistance_pa_s_per_m3,
+                p_chamber_pa,
+                u_in,
+            ),
+            Supply::Reservoir { .. } => p_tank_abs_pa,
+        }
+    }
+
+    /// d/dt of the tank pressure [Pa/s] (0 without a tank): fed from p_s0 through the feed
+    /// conductance, drained by the total standard inlet flow `q_inlet_m3_s` of every
+    /// chamber on the supply (isothermal).
+    #[inline(always)]
+    pub fn tank_rate_pa_s(
+        &self,
+        p_atm_pa: f64,
+        p_s0_pa: f64,
+        p_tank_abs_pa: f64,
+        q_inlet_m3_s: f64,
+    ) -> f64 {
+        match self {
+            Supply::Reservoir {
+                tank_volume_m3,
+                feed,
+            } => {
+                let q_feed = feed.flow_m3_s(p_s0_pa, p_tank_abs_pa);
+                p_atm_pa * (q_feed - q_inlet_m3_s) / tank_volume_m3
+            }
+            _ => 0.0,
+        }
+    }
 }
 
 impl Hooks for Supply {
@@ -113,19 +163,22 @@ impl Hooks for Supply {
 /// inlet flow at supply pressure p). g(p) = p - p_s0 + R q(p) is increasing in p (each Q(p,
 /// p_i) is), negative at min(p_s0, p_i) and positive at max(p_s0, p_i), so the root is
 /// bracketed; Illinois regula falsi to |g| <= 1e-7 Pa (g' >= 1, so that is the error in p).
-pub fn static_supply_pressure_pa(
+///
+/// `N` chambers draw from the line: the 1-DOF plant's two muscles, or all six of the arm's
+/// (one supply shared by every joint).
+pub fn static_supply_pressure_pa<const N: usize>(
     valve: &Iso6358Valve,
     p_s0_pa: f64,
     resistance_pa_s_per_m3: f64,
-    p_chamber_pa: [f64; 2],
-    u_in: [f64; 2],
+    p_chamber_pa: [f64; N],
+    u_in: [f64; N],
 ) -> f64 {
-    if resistance_pa_s_per_m3 == 0.0 || (u_in[0] == 0.0 && u_in[1] == 0.0) {
+    if resistance_pa_s_per_m3 == 0.0 || u_in.iter().all(|u| *u == 0.0) {
         return p_s0_pa;
     }
     let g = |p: f64| {
         let mut q = 0.0;
-        for i in 0..2 {
+        for i in 0..N {
             if u_in[i] != 0.0 {
                 q += u_in[i] * valve.flow_m3_s(p, p_chamber_pa[i]);
             }
@@ -133,7 +186,7 @@ pub fn static_supply_pressure_pa(
         p - p_s0_pa + resistance_pa_s_per_m3 * q
     };
     let (mut lo, mut hi) = (p_s0_pa, p_s0_pa);
-    for i in 0..2 {
+    for i in 0..N {
         if u_in[i] != 0.0 {
             lo = lo.min(p_chamber_pa[i]);
             hi = hi.max(p_chamber_pa[i]);
