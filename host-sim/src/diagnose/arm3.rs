@@ -31,11 +31,13 @@
 use std::sync::Arc;
 
 use crate::diagnose::{diagnose, DiagnoseError, DiagnoseOptions, Diagnosis, Differentiator};
+use crate::fit::fit_percent;
 use crate::io::arm3::{Arm3Recording, JOINTS};
 use crate::io::recording::{Channel, Recording};
-use crate::plant::arm3::{Arm3, Arm3Config, ArmJointConfig};
+use crate::plant::arm3::{simulate_arm3, Arm3, Arm3Config, ArmJointConfig};
 use crate::plant::config::{InitialConfig, JointConfig, PlantConfig};
 use crate::plant::effects::{ChannelCalibration, EffectsConfig};
+use crate::plant::effects::{SupplyDrop, SupplyDropModel};
 use crate::plant::LoadTorque;
 
 /// The diagnosis of each joint of an arm recording.
@@ -48,6 +50,138 @@ pub struct ArmDiagnosis {
     /// Joints (1-based) whose angle sensor the diagnosis found off; the departing joints
     /// were diagnosed again with the loads of the corrected angles.
     pub angle_corrected: Vec<usize>,
+    /// The arm's shared supply, when two or more joints name it and a supply line
+    /// resistance on the whole arm explains the recording ([`shared_supply`]).
+    pub shared_supply: Option<SharedSupply>,
+}
+
+/// The arm-level supply stage: the six muscles draw on one supply, so a supply that sags
+/// shows on every joint that inflates, each joint's 1-DOF view seeing only its own share of
+/// the draw (it names a supply drop or a lower supply pressure). When two or more joints
+/// name the supply, the whole arm is replayed open loop (the recorded valve commands, every
+/// joint's own effects) with one `[effects.supply_drop]` for the arm in both its forms (a
+/// static line resistance, a tank behind a feed conductance), the parameters fitted
+/// (log-scale Nelder-Mead) to the mean fit of every recorded channel on the head of the
+/// recording (the 1-DOF diagnosis' `fit_fraction`); the form with the better fit there is
+/// kept and judged on the tail.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SharedSupply {
+    /// The fitted `[effects.supply_drop]` table of the arm.
+    pub supply_drop: SupplyDrop,
+    /// The joints (1-based) that named the supply.
+    pub named_by: Vec<usize>,
+    /// Per channel (column name): held-out fit of the whole-arm replay without and with the
+    /// shared drop [%].
+    pub heldout_fits: Vec<(String, f64, f64)>,
+    /// Arm replays used by the fit.
+    pub evaluations: usize,
+}
+
+/// Whether a joint's diagnosis names the supply (a supply drop or a lower supply pressure).
+fn names_the_supply(d: &Diagnosis) -> bool {
+    !d.nothing_missing
+        && (d.effects.iter().any(|e| e.id == "supply_drop")
+            || d.recalibrated
+                .iter()
+                .any(|r| r.key == "environment.supply_gauge_pa"))
+}
+
+/// The shared-supply stage (see [`SharedSupply`]): `None` when fewer than two joints name
+/// the supply, or when the fitted resistance does not improve the mean held-out fit of the
+/// whole-arm replay by at least one point, or lowers any channel's by more than half a point.
+pub fn shared_supply(
+    cfg: &Arm3Config,
+    rec: &Arm3Recording,
+    joints: &[Diagnosis],
+    opts: &DiagnoseOptions,
+) -> Result<Option<SharedSupply>, DiagnoseError> {
+    let named_by: Vec<usize> = joints
+        .iter()
+        .enumerate()
+        .filter(|(_, d)| names_the_supply(d))
+        .map(|(i, _)| i + 1)
+        .collect();
+    if named_by.len() < 2 {
+        return Ok(None);
+    }
+    let n = rec.len();
+    let n_fit = ((n as f64 * opts.fit_fraction).round() as usize).clamp(2, n.saturating_sub(2));
+    let dt = rec.sample_period_s();
+    let solver = crate::sim::SolverOptions::default();
+    // Per channel: (column, head fit, tail fit) of the replay with resistance `r`.
+    let replay = |table: Option<SupplyDrop>| -> Option<Vec<(String, f64, f64)>> {
+        let mut c = cfg.clone();
+        c.effects.supply_drop = table;
+        let arm = Arm3::from_config(&c).ok()?;
+        let sim = simulate_arm3(&arm, &rec.inputs, dt, &solver, |_| {}).ok()?;
+        let meas = arm.measure_run(&sim.states, dt);
+        let mut out = Vec::new();
+        for j in 0..JOINTS {
+            for ch in Channel::ALL {
+                let Some(y) = rec.channel(j, ch) else {
+                    continue;
+                };
+                let m: Vec<f64> = meas.iter().map(|m| m[j].channel(ch)).collect();
+                out.push((
+                    crate::io::arm3::column(ch.name(), j),
+                    fit_percent(&y[..n_fit], &m[..n_fit]),
+                    fit_percent(&y[n_fit..], &m[n_fit..]),
+                ));
+            }
+        }
+        Some(out)
+    };
+    let mean = |v: &[(String, f64, f64)], tail: bool| {
+        v.iter().map(|c| if tail { c.2 } else { c.1 }).sum::<f64>() / v.len().max(1) as f64
+    };
+    let Some(before) = replay(None) else {
+        return Ok(None);
+    };
+    // log10 of the parameters -> the table.
+    let static_form = |x: &[f64]| SupplyDrop {
+        enabled: true,
+        model: SupplyDropModel::Static,
+        resistance_pa_s_per_m3: Some(10f64.powf(x[0])),
+        tank_volume_m3: None,
+        feed_conductance_m3_per_s_pa: None,
+    };
+    let tank_form = |x: &[f64]| SupplyDrop {
+        enabled: true,
+        model: SupplyDropModel::Reservoir,
+        resistance_pa_s_per_m3: None,
+        tank_volume_m3: Some(10f64.powf(x[0])),
+        feed_conductance_m3_per_s_pa: Some(10f64.powf(x[1])),
+    };
+    let cost = |t: SupplyDrop| match replay(Some(t)) {
+        Some(v) => -mean(&v, false),
+        None => f64::INFINITY,
+    };
+    // Starts: 3e6 Pa s/m^3; a 1 L tank fed through 3e-8 m^3/(s Pa).
+    let fit_static =
+        crate::optimize::nelder_mead(|x| cost(static_form(x)), &[6.5], &[0.5], 1e-3, 40);
+    let fit_tank =
+        crate::optimize::nelder_mead(|x| cost(tank_form(x)), &[-3.0, -7.5], &[0.5, 0.5], 1e-3, 60);
+    let evaluations = 1 + fit_static.evaluations + fit_tank.evaluations;
+    let table = if fit_tank.cost < fit_static.cost {
+        tank_form(&fit_tank.x)
+    } else {
+        static_form(&fit_static.x)
+    };
+    let Some(after) = replay(Some(table.clone())) else {
+        return Ok(None);
+    };
+    let improves = mean(&after, true) >= mean(&before, true) + 1.0
+        && after.iter().zip(&before).all(|(a, b)| a.2 >= b.2 - 0.5);
+    Ok(improves.then(|| SharedSupply {
+        supply_drop: table,
+        named_by,
+        heldout_fits: before
+            .iter()
+            .zip(&after)
+            .map(|(b, a)| (b.0.clone(), b.2, a.2))
+            .collect(),
+        evaluations,
+    }))
 }
 
 impl ArmDiagnosis {
@@ -79,6 +213,32 @@ impl ArmDiagnosis {
                 if departing.len() > 1 { "" } else { "s" },
             )
         };
+        if let Some(sup) = &self.shared_supply {
+            let mean = |f: fn(&(String, f64, f64)) -> f64| {
+                sup.heldout_fits.iter().map(f).sum::<f64>() / sup.heldout_fits.len().max(1) as f64
+            };
+            let t = &sup.supply_drop;
+            let form = match t.model {
+                SupplyDropModel::Static => format!(
+                    "a supply line of resistance {:.3e} Pa s/m^3 ([effects.supply_drop] model = \"static\")",
+                    t.resistance_pa_s_per_m3.unwrap_or(f64::NAN)
+                ),
+                SupplyDropModel::Reservoir => format!(
+                    "a {:.3} L tank fed through {:.3e} m^3/(s Pa) ([effects.supply_drop] model = \"reservoir\")",
+                    t.tank_volume_m3.unwrap_or(f64::NAN) * 1e3,
+                    t.feed_conductance_m3_per_s_pa.unwrap_or(f64::NAN)
+                ),
+            };
+            s.push_str(&format!(
+                "The shared supply departs: joints {:?} each name the supply, and one supply \
+                 for all six muscles explains the arm: it sags while the inlet valves draw \
+                 air, as {form}. Whole-arm replay, mean held-out fit {:.1} % -> {:.1} %. The \
+                 joint answers below see only their own share of the draw.\n",
+                sup.named_by,
+                mean(|c| c.1),
+                mean(|c| c.2),
+            ));
+        }
         if !self.angle_corrected.is_empty() {
             s.push_str(&format!(
                 "The angle sensor of joint(s) {:?} reads off: the departing joints were \
@@ -103,6 +263,20 @@ impl ArmDiagnosis {
             "kind": "arm3",
             "departing_joints": self.departing_joints(),
             "angle_corrected_joints": self.angle_corrected,
+            "shared_supply": self.shared_supply.as_ref().map(|sup| serde_json::json!({
+                "model": match sup.supply_drop.model {
+                    SupplyDropModel::Static => "static",
+                    SupplyDropModel::Reservoir => "reservoir",
+                },
+                "resistance_pa_s_per_m3": sup.supply_drop.resistance_pa_s_per_m3,
+                "tank_volume_m3": sup.supply_drop.tank_volume_m3,
+                "feed_conductance_m3_per_s_pa": sup.supply_drop.feed_conductance_m3_per_s_pa,
+                "named_by_joints": sup.named_by,
+                "evaluations": sup.evaluations,
+                "heldout_fits_pct": sup.heldout_fits.iter().map(|(c, b, a)| serde_json::json!({
+                    "channel": c, "before": b, "after": a,
+                })).collect::<Vec<_>>(),
+            })),
             "joints": self.joints.iter().enumerate().map(|(i, d)| {
                 let mut j = d.to_json();
                 if let Some(o) = j.as_object_mut() {
@@ -290,9 +464,11 @@ pub fn diagnose_arm(
             }
         }
     }
+    let shared_supply = shared_supply(cfg, rec, &joints, opts)?;
     Ok(ArmDiagnosis {
         joints,
         inertia_kgm2: inertia,
         angle_corrected,
+        shared_supply,
     })
 }

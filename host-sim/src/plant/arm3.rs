@@ -813,6 +813,19 @@ pub struct JointMeasurement {
     pub f2_n: f64,
 }
 
+impl JointMeasurement {
+    /// The channel `c` (RECORDING.md's order: angle, p1, p2, f1, f2).
+    pub fn channel(&self, c: crate::io::recording::Channel) -> f64 {
+        [
+            self.angle_deg,
+            self.p1_kpa,
+            self.p2_kpa,
+            self.f1_n,
+            self.f2_n,
+        ][c.index()]
+    }
+}
+
 impl From<Measurement> for JointMeasurement {
     fn from(m: Measurement) -> Self {
         Self {
