@@ -64,8 +64,17 @@ pub fn fit_vs_spread(
     range: std::ops::Range<usize>,
     spread: f64,
 ) -> f64 {
-    let n = range.len().max(1) as f64;
-    let mse = range.map(|k| (c.of(&pred[k]) - y[k]).powi(2)).sum::<f64>() / n;
+    let sum_sq = range
+        .clone()
+        .map(|k| (c.of(&pred[k]) - y[k]).powi(2))
+        .sum::<f64>();
+    fit_vs_spread_of_sum(sum_sq, range.len(), spread)
+}
+
+/// [`fit_vs_spread`] from the sum, in sample order, of `(predicted - y)^2` over `samples`
+/// samples (for a prediction that is not held; the same value to the bit).
+pub fn fit_vs_spread_of_sum(sum_sq: f64, samples: usize, spread: f64) -> f64 {
+    let mse = sum_sq / samples.max(1) as f64;
     100.0 * (1.0 - mse.sqrt() / spread.max(1e-300))
 }
 
