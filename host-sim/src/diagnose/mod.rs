@@ -38,7 +38,7 @@ pub mod verdict;
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use crate::fit::{fit_percent, fit_percent_of_err2};
+use crate::fit::fit_percent_of_err2;
 use crate::io::recording::{Channel, Recording};
 use crate::plant::config::PlantConfig;
 use crate::plant::{Measurement, Plant};
@@ -284,11 +284,24 @@ fn fits_of(rec: &Recording, pred: &[Measurement]) -> BTreeMap<&'static str, f64>
     let mut m = BTreeMap::new();
     for c in Channel::ALL {
         if let Some(y) = rec.channel(c) {
-            let yh: Vec<f64> = pred.iter().map(|p| c.of(p)).collect();
-            m.insert(c.name(), fit_percent(y, &yh));
+            m.insert(c.name(), fit_of_channel(y, pred, c));
         }
     }
     m
+}
+
+/// `fit_percent(y, channel c of pred)` without a copy of the channel (the same sums).
+fn fit_of_channel(y: &[f64], pred: &[Measurement], c: Channel) -> f64 {
+    assert_eq!(y.len(), pred.len(), "fit_percent: lengths differ");
+    let err2 = y
+        .iter()
+        .zip(pred)
+        .map(|(a, m)| {
+            let b = c.of(m);
+            (a - b) * (a - b)
+        })
+        .sum::<f64>();
+    fit_percent_of_err2(y, err2)
 }
 
 fn simulate_measure(
@@ -386,8 +399,7 @@ pub fn gather_evidence<'a>(
         // The fits of the located channels over the whole recording, in locate's order.
         for l in &mut located {
             if let Some(y) = train.channel(l.channel) {
-                let yn: Vec<f64> = nominal_meas.iter().map(|m| l.channel.of(m)).collect();
-                l.fit_pct = fit_percent(y, &yn);
+                l.fit_pct = fit_of_channel(y, &nominal_meas, l.channel);
             }
         }
         located.sort_by(|a, b| a.fit_pct.total_cmp(&b.fit_pct));
