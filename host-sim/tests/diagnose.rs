@@ -578,3 +578,33 @@ fn streamed_read_matches_whole_text() {
         .channel(host_sim::io::recording::Channel::F1N)
         .is_none());
 }
+
+/// TRAIN longer than the fit budget (3 s of 8 s): the nominal states are kept for the head
+/// only, the evidence and the error location are built on it, the candidates are scored on
+/// the rest by replays that are not held (a sensor effect past the head on the nominal
+/// plant replayed again). A dynamic and a sensor truth are still named, with check fits of
+/// at least 95 %, and the report series is thinned to the plot.
+#[test]
+fn fit_budget_shorter_than_train_names_the_truth() {
+    for (truth, seed) in [("leakage", 3), ("sensor_lag", 5)] {
+        let (train, check) = recordings(&[truth], seed, 1e-3, [true; 5]);
+        let opts = DiagnoseOptions {
+            fit_budget_s: 3.0,
+            ..DiagnoseOptions::default()
+        };
+        let d = diagnose(&nominal(), &train, Some(&check), &opts, &|_, _, _| {}).unwrap();
+        assert_eq!(
+            named(&d),
+            vec![expected_id(truth).to_string()],
+            "{truth}: {}",
+            d.answer()
+        );
+        for (k, v) in d.check_after.as_ref().unwrap() {
+            assert!(*v >= 95.0, "{truth}: check fit of {k} {v:.2} %");
+        }
+        assert_eq!(d.train.len, train.len());
+        assert_eq!(d.train.stride, train.len() / 2500);
+        assert_eq!(d.train.t_s.len(), train.len().div_ceil(d.train.stride));
+        assert_eq!(d.train.corrected.len(), d.train.t_s.len());
+    }
+}
