@@ -173,7 +173,7 @@ pub struct Series {
     pub range: [[f64; 2]; 5],
 }
 
-/// The smallest and largest finite values of channel `c` in `m` folded into `r`.
+/// Widens the range `r` (smallest, largest) to take in `v` if it is finite.
 fn widen(r: &mut [f64; 2], v: f64) {
     if v.is_finite() {
         r[0] = r[0].min(v);
