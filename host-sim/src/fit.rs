@@ -11,20 +11,27 @@ use crate::io::recording::{Channel, Recording};
 /// exactly and -infinity otherwise. Panics if the lengths differ.
 pub fn fit_percent(y: &[f64], y_hat: &[f64]) -> f64 {
     assert_eq!(y.len(), y_hat.len(), "fit_percent: lengths differ");
-    let n = y.len() as f64;
-    let mean = y.iter().sum::<f64>() / n;
-    let err: f64 = y
+    let err2: f64 = y
         .iter()
         .zip(y_hat)
         .map(|(a, b)| (a - b) * (a - b))
-        .sum::<f64>()
-        .sqrt();
-    let spread: f64 = y
-        .iter()
-        .map(|a| (a - mean) * (a - mean))
-        .sum::<f64>()
-        .sqrt();
-    fit_from_norms(err, spread)
+        .sum::<f64>();
+    fit_percent_of_err2(y, err2)
+}
+
+/// [`fit_percent`] of `y` against a prediction that is not held: `err2` is the sum over the
+/// samples, in order, of `(y_k - y_hat_k)^2` (then the same value to the bit).
+pub fn fit_percent_of_err2(y: &[f64], err2: f64) -> f64 {
+    fit_percent_by(|| y.iter().copied(), err2)
+}
+
+/// [`fit_percent_of_err2`] of a reference that is not held either: `y()` yields its samples
+/// in order (called three times).
+pub fn fit_percent_by<I: Iterator<Item = f64>>(y: impl Fn() -> I, err2: f64) -> f64 {
+    let n = y().count() as f64;
+    let mean = y().sum::<f64>() / n;
+    let spread: f64 = y().map(|a| (a - mean) * (a - mean)).sum::<f64>().sqrt();
+    fit_from_norms(err2.sqrt(), spread)
 }
 
 /// 100 (1 - err / spread) from `err = ||y - y_hat||` and `spread = ||y - mean(y)||`.

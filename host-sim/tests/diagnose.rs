@@ -519,3 +519,92 @@ fn an_effect_outside_the_catalogue_gets_an_unnamed_black_box_correction() {
     assert_eq!(j["black_box"]["named"], serde_json::json!(false));
     assert!(j["effects"].as_array().unwrap().is_empty());
 }
+
+/// The replays the diagnosis scores without holding them (`Problem::replay_costs`, on a
+/// problem that keeps the nominal states of a head only) give the costs of the held replays
+/// of `Problem::new` + `predict` + `channel_costs` to the bit: a dynamic effect, a sensor
+/// effect (replayed on the nominal plant past the kept head) and the two together.
+#[test]
+fn streamed_replay_costs_match_held_replays() {
+    use host_sim::diagnose::fitting::{Part, Problem};
+    use host_sim::diagnose::selection::candidate_pool;
+    let nominal = nominal();
+    let (train, _) = recordings(&["leakage"], 11, 1e-3, [true, true, true, true, true]);
+    let n = train.len();
+    let present = [true; 5];
+    let scale = [2.0, 50.0, 60.0, 40.0, 45.0];
+    let opts = DiagnoseOptions::default().solver;
+    let held = Problem::new(&nominal, &train, present, scale, opts).unwrap();
+    let (streamed, nominal_meas) =
+        Problem::with_nominal(&nominal, &train, present, scale, opts, n / 4).unwrap();
+    assert!(streamed.replay_heads && streamed.base_states.len() == n / 4);
+    assert_eq!(nominal_meas, held.predict(&[]).unwrap());
+    let pool = candidate_pool(&nominal);
+    let part = |id: &str| -> Part {
+        let c = pool.iter().find(|c| c.id() == id).expect(id).as_ref();
+        let params = c.params(&held.setup).iter().map(|s| s.scale).collect();
+        Part {
+            candidate: c,
+            params,
+        }
+    };
+    for parts in [
+        vec![part("leakage")],
+        vec![part("sensor_lag")],
+        vec![part("sensor_lag"), part("leakage")],
+    ] {
+        let range = n / 2..n;
+        let want = held.channel_costs(&held.predict(&parts).unwrap(), range.clone());
+        let got = streamed.replay_costs(&parts, range).unwrap();
+        assert_eq!(got.map(f64::to_bits), want.map(f64::to_bits));
+        assert!(got.iter().sum::<f64>() > 0.0);
+    }
+}
+
+/// A recording read from its file block by block is the one parsed from the whole text,
+/// also when its time stamps have more digits than the fast row reader takes.
+#[test]
+fn streamed_read_matches_whole_text() {
+    let (train, _) = recordings(&["leakage"], 12, 1e-3, [true, true, true, false, false]);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("train.csv");
+    train.write(&path).unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(text.contains("0.009000000000000001,"), "a long stamp");
+    let whole = Recording::parse(&text, &path).unwrap();
+    let read = Recording::read(&path).unwrap();
+    assert_eq!(read, whole);
+    assert!(read
+        .channel(host_sim::io::recording::Channel::F1N)
+        .is_none());
+}
+
+/// TRAIN longer than the fit budget (3 s of 8 s): the nominal states are kept for the head
+/// only, the evidence and the error location are built on it, the candidates are scored on
+/// the rest by replays that are not held (a sensor effect past the head on the nominal
+/// plant replayed again). A dynamic and a sensor truth are still named, with check fits of
+/// at least 95 %, and the report series is thinned to the plot.
+#[test]
+fn fit_budget_shorter_than_train_names_the_truth() {
+    for (truth, seed) in [("leakage", 3), ("sensor_lag", 5)] {
+        let (train, check) = recordings(&[truth], seed, 1e-3, [true; 5]);
+        let opts = DiagnoseOptions {
+            fit_budget_s: 3.0,
+            ..DiagnoseOptions::default()
+        };
+        let d = diagnose(&nominal(), &train, Some(&check), &opts, &|_, _, _| {}).unwrap();
+        assert_eq!(
+            named(&d),
+            vec![expected_id(truth).to_string()],
+            "{truth}: {}",
+            d.answer()
+        );
+        for (k, v) in d.check_after.as_ref().unwrap() {
+            assert!(*v >= 95.0, "{truth}: check fit of {k} {v:.2} %");
+        }
+        assert_eq!(d.train.len, train.len());
+        assert_eq!(d.train.stride, train.len() / 2500);
+        assert_eq!(d.train.t_s.len(), train.len().div_ceil(d.train.stride));
+        assert_eq!(d.train.corrected.len(), d.train.t_s.len());
+    }
+}

@@ -39,6 +39,7 @@ pub fn noise_level(y: &[f64]) -> f64 {
         .collect();
     d2.sort_by(f64::total_cmp);
     let mad = d2[d2.len() / 2];
+    drop(d2);
     let sigma_mad = 1.4826 * mad / 6f64.sqrt();
     let mut steps: Vec<f64> = y
         .windows(2)

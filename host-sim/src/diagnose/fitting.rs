@@ -9,7 +9,7 @@
 use crate::io::recording::{Channel, Recording};
 use crate::plant::config::PlantConfig;
 use crate::plant::{Measurement, Plant, PlantState, ValveInputs};
-use crate::sim::{simulate, SolverOptions};
+use crate::sim::{simulate, simulate_each, SensorPath, SolverOptions};
 
 use super::candidates::{Candidate, Setup};
 use crate::identify::output_error::{self, Differences, OeOptions, OeParam};
@@ -28,10 +28,13 @@ pub struct Problem<'a> {
     pub recording: &'a Recording,
     pub setup: Setup,
     pub inputs: &'a [ValveInputs],
-    pub measured: [Option<Vec<f64>>; 5],
+    /// The recording's output channels (borrowed: no copy of a long recording).
+    pub measured: [Option<&'a [f64]>; 5],
     /// Per-channel normalisation (the measured channel's standard deviation).
     pub scale: [f64; 5],
-    /// States of the nominal simulation (reused when only sensor effects change).
+    /// States of the nominal simulation (reused when only sensor effects change): of every
+    /// sample, or of the head a fit replays ([`Self::replay_heads`], built by
+    /// [`Self::with_nominal`]); longer replays of sensor effects replay the nominal plant.
     pub base_states: Vec<PlantState>,
     pub opts: SolverOptions,
     /// Fits over a head of the recording replay only that head (set for recordings longer
@@ -56,12 +59,59 @@ impl<'a> Problem<'a> {
             recording: rec,
             setup: Setup { dt_s: dt, present },
             inputs: &rec.inputs,
-            measured: rec.outputs.clone(),
+            measured: std::array::from_fn(|i| rec.outputs[i].as_deref()),
             scale,
             base_states: base.states,
             opts,
             replay_heads: false,
         })
+    }
+
+    /// [`Self::new`] for a recording whose fits replay only its first `head` samples
+    /// ([`Self::replay_heads`] set when `head` is shorter than it): the nominal replay keeps
+    /// the states of the head alone and returns the nominal channels of every sample (the
+    /// same integrator calls and sensor path as [`Self::new`] + `Plant::measure_series`, so
+    /// the same values to the bit).
+    pub fn with_nominal(
+        nominal: &'a PlantConfig,
+        rec: &'a Recording,
+        present: [bool; 5],
+        scale: [f64; 5],
+        opts: SolverOptions,
+        head: usize,
+    ) -> Result<(Self, Vec<Measurement>), crate::sim::SimError> {
+        let dt = rec.sample_period_s();
+        let plant = Plant::from_config(nominal);
+        let n = rec.inputs.len();
+        let keep = head.min(n);
+        let mut states = Vec::with_capacity(keep);
+        let mut meas = Vec::with_capacity(n);
+        let mut sensor = SensorPath::new(&plant, dt);
+        simulate_each(
+            &plant,
+            &rec.inputs,
+            dt,
+            &opts,
+            |_| {},
+            |x| {
+                if states.len() < keep {
+                    states.push(*x);
+                }
+                meas.push(sensor.push(&plant, x));
+            },
+        )?;
+        let problem = Self {
+            nominal,
+            recording: rec,
+            setup: Setup { dt_s: dt, present },
+            inputs: &rec.inputs,
+            measured: std::array::from_fn(|i| rec.outputs[i].as_deref()),
+            scale,
+            base_states: states,
+            opts,
+            replay_heads: keep < n,
+        };
+        Ok((problem, meas))
     }
 
     /// The plant configuration with `parts` switched on.
@@ -89,11 +139,65 @@ impl<'a> Problem<'a> {
         let cfg = self.config(parts);
         let plant = Plant::from_config(&cfg);
         let dt = self.setup.dt_s;
-        if parts.iter().all(|p| !p.candidate.changes_dynamics()) {
+        if parts.iter().all(|p| !p.candidate.changes_dynamics()) && end <= self.base_states.len() {
             return Some(plant.measure_series(&self.base_states[..end], dt));
         }
-        let sim = simulate(&plant, &self.inputs[..end], dt, &self.opts).ok()?;
-        Some(plant.measure_series(&sim.states, dt))
+        let mut out = Vec::with_capacity(end);
+        self.replay_each(parts, end, |_, m| out.push(*m))
+            .then_some(out)
+    }
+
+    /// Replays the model `parts` over samples `0..end` and hands the simulated channels of
+    /// every sample to `f(k, channels)` in order, holding no series: the values of
+    /// [`Self::predict`] to the bit when `end` is the recording's length. `false` if the
+    /// simulation fails (`f` may then have seen a part of the samples).
+    pub fn replay_each(
+        &self,
+        parts: &[Part],
+        end: usize,
+        mut f: impl FnMut(usize, &Measurement),
+    ) -> bool {
+        let cfg = self.config(parts);
+        let plant = Plant::from_config(&cfg);
+        let dt = self.setup.dt_s;
+        let mut sensor = SensorPath::new(&plant, dt);
+        let mut k = 0;
+        let visit = |x: &PlantState| {
+            let m = sensor.push(&plant, x);
+            f(k, &m);
+            k += 1;
+        };
+        let end = end.min(self.inputs.len());
+        if parts.iter().all(|p| !p.candidate.changes_dynamics()) {
+            // Sensor effects alone: the nominal states, measured by this model's sensors.
+            if end <= self.base_states.len() {
+                self.base_states[..end].iter().for_each(visit);
+                return true;
+            }
+            let nominal = Plant::from_config(self.nominal);
+            return simulate_each(&nominal, &self.inputs[..end], dt, &self.opts, |_| {}, visit)
+                .is_ok();
+        }
+        simulate_each(&plant, &self.inputs[..end], dt, &self.opts, |_| {}, visit).is_ok()
+    }
+
+    /// Per-channel costs ([`Self::channel_costs`]) of the model `parts` over `range`, from a
+    /// replay of the whole recording that holds no series (the same sums in the same order,
+    /// so the same values to the bit as [`Self::predict`] + [`Self::channel_costs`]); `None`
+    /// if the simulation fails.
+    pub fn replay_costs(&self, parts: &[Part], range: std::ops::Range<usize>) -> Option<[f64; 5]> {
+        let mut sums = [0.0f64; 5];
+        let ok = self.replay_each(parts, self.inputs.len(), |k, m| {
+            if range.contains(&k) {
+                for c in Channel::ALL {
+                    if let Some(y) = self.measured[c.index()] {
+                        sums[c.index()] += ((c.of(m) - y[k]) / self.scale[c.index()]).powi(2);
+                    }
+                }
+            }
+        });
+        let n = range.len().max(1) as f64;
+        ok.then(|| sums.map(|s| s / n))
     }
 
     /// Per-channel mean squared normalised error over `range` (0 for absent channels).
@@ -101,7 +205,7 @@ impl<'a> Problem<'a> {
         let mut out = [0.0; 5];
         let n = range.len().max(1) as f64;
         for c in Channel::ALL {
-            if let Some(y) = &self.measured[c.index()] {
+            if let Some(y) = self.measured[c.index()] {
                 let s = self.scale[c.index()];
                 out[c.index()] = range
                     .clone()
@@ -134,7 +238,7 @@ impl<'a> Problem<'a> {
         let w = 1.0 / (idx.len() as f64).sqrt();
         let mut r = Vec::with_capacity(idx.len() * 5);
         for c in Channel::ALL {
-            if let Some(y) = &self.measured[c.index()] {
+            if let Some(y) = self.measured[c.index()] {
                 let s = self.scale[c.index()];
                 for &k in &idx {
                     let e = w * (c.of(&pred[k]) - y[k]) / s;

@@ -38,7 +38,7 @@ pub mod verdict;
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use crate::fit::fit_percent;
+use crate::fit::fit_percent_of_err2;
 use crate::io::recording::{Channel, Recording};
 use crate::plant::config::PlantConfig;
 use crate::plant::{Measurement, Plant};
@@ -153,13 +153,80 @@ pub struct CandidateScore {
     pub seconds: f64,
 }
 
-/// Channels of one recording for the report.
+/// Channels of one recording for the report: every `stride`-th sample (TRAIN keeps what its
+/// plots draw, [`report::MAX_POINTS`] points, so the diagnosis holds no full-length series;
+/// CHECK keeps every sample) and each channel's range over all samples.
 #[derive(Debug, Clone)]
 pub struct Series {
+    /// Samples of the recording.
+    pub len: usize,
+    /// Kept samples: 0, `stride`, 2 `stride`, ...
+    pub stride: usize,
     pub t_s: Vec<f64>,
+    /// Time of the recording's last sample.
+    pub t_end_s: f64,
     pub measured: [Option<Vec<f64>>; 5],
     pub nominal: Vec<Measurement>,
     pub corrected: Vec<Measurement>,
+    /// Per measured channel, the smallest and the largest finite value of the measured,
+    /// nominal and corrected series over all samples (`[inf, -inf]` when there is none).
+    pub range: [[f64; 2]; 5],
+}
+
+/// Widens the range `r` (smallest, largest) to take in `v` if it is finite.
+fn widen(r: &mut [f64; 2], v: f64) {
+    if v.is_finite() {
+        r[0] = r[0].min(v);
+        r[1] = r[1].max(v);
+    }
+}
+
+impl Series {
+    /// Every `stride`-th sample of `rec`, `nominal` and `corrected` (the corrected series given
+    /// already thinned, with its range per channel).
+    fn thinned(
+        rec: &Recording,
+        stride: usize,
+        nominal: &[Measurement],
+        corrected: Vec<Measurement>,
+        corrected_range: [[f64; 2]; 5],
+    ) -> Self {
+        let n = rec.len();
+        let mut range = corrected_range;
+        for c in Channel::ALL {
+            if let Some(y) = rec.channel(c) {
+                let r = &mut range[c.index()];
+                y.iter().for_each(|v| widen(r, *v));
+                nominal.iter().for_each(|m| widen(r, c.of(m)));
+            }
+        }
+        let thin = |v: &[f64]| -> Vec<f64> { v.iter().step_by(stride).copied().collect() };
+        Self {
+            len: n,
+            stride,
+            t_s: thin(&rec.t_s),
+            t_end_s: rec.t_s[n - 1],
+            measured: std::array::from_fn(|i| rec.outputs[i].as_deref().map(thin)),
+            nominal: nominal.iter().step_by(stride).copied().collect(),
+            corrected,
+            range,
+        }
+    }
+
+    /// Every sample of `rec` with its nominal and corrected series.
+    fn full(rec: &Recording, nominal: Vec<Measurement>, corrected: Vec<Measurement>) -> Self {
+        let mut range = [[f64::INFINITY, f64::NEG_INFINITY]; 5];
+        for c in Channel::ALL {
+            if rec.channel(c).is_some() {
+                corrected
+                    .iter()
+                    .for_each(|m| widen(&mut range[c.index()], c.of(m)));
+            }
+        }
+        let mut s = Self::thinned(rec, 1, &nominal, corrected, range);
+        s.nominal = nominal;
+        s
+    }
 }
 
 /// Everything the diagnosis found.
@@ -217,11 +284,24 @@ fn fits_of(rec: &Recording, pred: &[Measurement]) -> BTreeMap<&'static str, f64>
     let mut m = BTreeMap::new();
     for c in Channel::ALL {
         if let Some(y) = rec.channel(c) {
-            let yh: Vec<f64> = pred.iter().map(|p| c.of(p)).collect();
-            m.insert(c.name(), fit_percent(y, &yh));
+            m.insert(c.name(), fit_of_channel(y, pred, c));
         }
     }
     m
+}
+
+/// `fit_percent(y, channel c of pred)` without a copy of the channel (the same sums).
+fn fit_of_channel(y: &[f64], pred: &[Measurement], c: Channel) -> f64 {
+    assert_eq!(y.len(), pred.len(), "fit_percent: lengths differ");
+    let err2 = y
+        .iter()
+        .zip(pred)
+        .map(|(a, m)| {
+            let b = c.of(m);
+            (a - b) * (a - b)
+        })
+        .sum::<f64>();
+    fit_percent_of_err2(y, err2)
 }
 
 fn simulate_measure(
@@ -285,27 +365,45 @@ pub fn gather_evidence<'a>(
             noise[c.index()] = noise_level(y);
         }
     }
-    let mut problem = Problem::new(nominal, train, present, spread, opts.solver)?;
     let fit_budget_n = if opts.fit_budget_s.is_finite() && opts.fit_budget_s > 0.0 {
-        ((opts.fit_budget_s / problem.setup.dt_s).round() as usize).max(MIN_SAMPLES)
+        ((opts.fit_budget_s / train.sample_period_s()).round() as usize).max(MIN_SAMPLES)
     } else {
         usize::MAX
     };
-    // A recording longer than the budget: fits replay only the head they are scored on.
-    problem.replay_heads = n > fit_budget_n;
-    let nominal_meas =
-        Plant::from_config(nominal).measure_series(&problem.base_states, problem.setup.dt_s);
+    // A recording longer than the budget: fits replay only the head they are scored on
+    // (`replay_heads`), so the nominal states are kept for that head alone.
+    let (problem, nominal_meas) =
+        Problem::with_nominal(nominal, train, present, spread, opts.solver, fit_budget_n)?;
+    // The equation-error evidence and the error windows of that head too (a recording
+    // within the budget: all of it), so their memory does not grow with the recording.
+    let head_rec;
+    let ev_rec = if n > fit_budget_n {
+        head_rec = train.head(fit_budget_n);
+        &head_rec
+    } else {
+        train
+    };
+    let ev_nominal = &nominal_meas[..ev_rec.len()];
     let diff = SavitzkyGolay::default();
-    let evidence = Evidence::build(nominal, train, &nominal_meas, &diff);
-    let located = locate::locate(
-        train,
-        &nominal_meas,
+    let evidence = Evidence::build(nominal, ev_rec, ev_nominal, &diff);
+    let mut located = locate::locate(
+        ev_rec,
+        ev_nominal,
         &noise,
         &evidence.angle_rad,
         &evidence.omega_rad_s,
         &evidence.p_gauge_pa,
         &diff,
     );
+    if ev_rec.len() < n {
+        // The fits of the located channels over the whole recording, in locate's order.
+        for l in &mut located {
+            if let Some(y) = train.channel(l.channel) {
+                l.fit_pct = fit_of_channel(y, &nominal_meas, l.channel);
+            }
+        }
+        located.sort_by(|a, b| a.fit_pct.total_cmp(&b.fit_pct));
+    }
     Ok(Gathered {
         problem,
         nominal_meas,
@@ -339,8 +437,73 @@ pub struct Final<'c> {
     /// 95 % interval of every parameter of every part.
     pub ci95: Vec<Vec<[f64; 2]>>,
     pub corrected: PlantConfig,
-    pub corrected_meas: Vec<Measurement>,
+    /// The corrected model's replay of TRAIN (the nominal one's if it failed).
+    pub replay: Replayed,
     pub failures: Vec<String>,
+}
+
+/// What the diagnosis keeps of a replay of TRAIN: the fit of every channel and what the
+/// report plots (every `stride`-th sample, each channel's range).
+#[derive(Debug, Clone)]
+pub struct Replayed {
+    pub fits: BTreeMap<&'static str, f64>,
+    pub thinned: Vec<Measurement>,
+    pub range: [[f64; 2]; 5],
+}
+
+impl Replayed {
+    /// Of a replay that is held.
+    pub fn of(rec: &Recording, pred: &[Measurement], stride: usize) -> Self {
+        let mut range = [[f64::INFINITY, f64::NEG_INFINITY]; 5];
+        for c in Channel::ALL {
+            if rec.channel(c).is_some() {
+                pred.iter()
+                    .for_each(|m| widen(&mut range[c.index()], c.of(m)));
+            }
+        }
+        Self {
+            fits: fits_of(rec, pred),
+            thinned: pred.iter().step_by(stride).copied().collect(),
+            range,
+        }
+    }
+
+    /// Of the model `parts` replayed without holding its series (the fits are those of
+    /// [`Self::of`] to the bit); `None` if the simulation fails.
+    pub fn stream(problem: &Problem, parts: &[Part], stride: usize) -> Option<Self> {
+        let rec = problem.recording;
+        let mut err2 = [0.0f64; 5];
+        let mut range = [[f64::INFINITY, f64::NEG_INFINITY]; 5];
+        let mut thinned = Vec::with_capacity(rec.len() / stride + 1);
+        let ok = problem.replay_each(parts, rec.len(), |k, m| {
+            for c in Channel::ALL {
+                if let Some(y) = rec.channel(c) {
+                    let (a, b) = (y[k], c.of(m));
+                    err2[c.index()] += (a - b) * (a - b);
+                    widen(&mut range[c.index()], b);
+                }
+            }
+            if k % stride == 0 {
+                thinned.push(*m);
+            }
+        });
+        ok.then(|| Self {
+            fits: Channel::ALL
+                .iter()
+                .filter_map(|c| {
+                    let y = rec.channel(*c)?;
+                    Some((c.name(), fit_percent_of_err2(y, err2[c.index()])))
+                })
+                .collect(),
+            thinned,
+            range,
+        })
+    }
+}
+
+/// The plot stride of a recording of `n` samples (what the report draws).
+pub fn plot_stride(n: usize) -> usize {
+    (n / report::MAX_POINTS).max(1)
 }
 
 /// Stage 4: refits the chosen set on all of TRAIN (with confidence intervals) and replays
@@ -361,22 +524,39 @@ pub fn final_refit<'c>(
         (fitted, ci)
     };
     let corrected = g.problem.config(&chosen);
-    let corrected_meas = match g.problem.predict(&chosen) {
-        Some(m) => m,
+    let rec = g.problem.recording;
+    let stride = plot_stride(rec.len());
+    let nominal_replay = || Replayed::of(rec, &g.nominal_meas, stride);
+    // No part: the corrected model is the nominal one, whose replay is held.
+    let replayed = if chosen.is_empty() {
+        Some(nominal_replay())
+    } else {
+        Replayed::stream(&g.problem, &chosen, stride)
+    };
+    let replay = match replayed {
+        Some(r) => r,
         None => {
-            let why = simulate_measure(&corrected, g.problem.recording, &opts.solver)
-                .err()
-                .map(|e| e.to_string())
-                .unwrap_or_else(|| "non-finite channels".into());
+            let plant = Plant::from_config(&corrected);
+            let why = crate::sim::simulate_each(
+                &plant,
+                &rec.inputs,
+                rec.sample_period_s(),
+                &opts.solver,
+                |_| {},
+                |_| {},
+            )
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_else(|| "non-finite channels".into());
             failures.push(format!("the corrected model could not replay TRAIN: {why}"));
-            g.nominal_meas.clone()
+            nominal_replay()
         }
     };
     Final {
         chosen,
         ci95,
         corrected,
-        corrected_meas,
+        replay,
         failures,
     }
 }
@@ -490,9 +670,37 @@ pub fn diagnose(
         m
     };
     let heldout_before = heldout_of(&g.nominal_meas);
-    let heldout_after = match g.problem.predict(&sel.chosen) {
-        Some(p) => heldout_of(&p),
-        None => heldout_before.clone(),
+    // The same sums as `heldout_of`, from a replay that is not held (no part: the nominal
+    // replay, whose fits are `heldout_before`).
+    let heldout_after = if sel.chosen.is_empty() {
+        heldout_before.clone()
+    } else {
+        let mut sum_sq = [0.0f64; 5];
+        let ok = g.problem.replay_each(&sel.chosen, n, |k, m| {
+            if held.contains(&k) {
+                for c in Channel::ALL {
+                    if let Some(y) = train.channel(c) {
+                        sum_sq[c.index()] += (c.of(m) - y[k]).powi(2);
+                    }
+                }
+            }
+        });
+        if ok {
+            Channel::ALL
+                .iter()
+                .filter(|c| train.channel(**c).is_some())
+                .map(|c| {
+                    let fit = verdict::fit_vs_spread_of_sum(
+                        sum_sq[c.index()],
+                        held.len(),
+                        g.spread[c.index()],
+                    );
+                    (c.name(), fit)
+                })
+                .collect()
+        } else {
+            heldout_before.clone()
+        }
     };
     let best_attempt: Vec<String> = sel
         .chosen
@@ -524,12 +732,7 @@ pub fn diagnose(
             (Ok(before), Ok(after)) => {
                 check_before = Some(fits_of(rec, &before));
                 check_after = Some(fits_of(rec, &after));
-                check_series = Some(Series {
-                    t_s: rec.t_s.clone(),
-                    measured: rec.outputs.clone(),
-                    nominal: before,
-                    corrected: after,
-                });
+                check_series = Some(Series::full(rec, before, after));
             }
             (b, a) => {
                 for (which, r) in [("nominal", b.err()), ("corrected", a.err())] {
@@ -569,24 +772,27 @@ pub fn diagnose(
     } else {
         Verdict::Explained
     };
-    let (chosen, ci95, corrected, corrected_meas) = if v == Verdict::Explained {
-        (fin.chosen, fin.ci95, fin.corrected, fin.corrected_meas)
+    let (chosen, ci95, corrected, corrected_replay) = if v == Verdict::Explained {
+        (fin.chosen, fin.ci95, fin.corrected, fin.replay)
     } else {
         // Name nothing: the corrected model is the nominal one.
         (
             Vec::new(),
             Vec::new(),
             nominal.clone(),
-            g.nominal_meas.clone(),
+            Replayed::of(train, &g.nominal_meas, plot_stride(n)),
         )
     };
     if v != Verdict::Explained {
         if let (Some(b), Some(cs)) = (&check_before, &mut check_series) {
             check_after = Some(b.clone());
-            cs.corrected = cs.nominal.clone();
+            if let Some(rec) = check {
+                let nominal = std::mem::take(&mut cs.nominal);
+                *cs = Series::full(rec, nominal.clone(), nominal);
+            }
         }
     }
-    let fit_after = fits_of(train, &corrected_meas);
+    let fit_after = corrected_replay.fits.clone();
     // The unnamed fallback when nothing explains the residual.
     let black_box = if v == Verdict::Unexplained {
         black_box::fit(
@@ -772,12 +978,13 @@ pub fn diagnose(
         nominal_cost,
         noise_cost,
         corrected,
-        train: Series {
-            t_s: train.t_s.clone(),
-            measured: train.outputs.clone(),
-            nominal: g.nominal_meas,
-            corrected: corrected_meas,
-        },
+        train: Series::thinned(
+            train,
+            plot_stride(n),
+            &g.nominal_meas,
+            corrected_replay.thinned,
+            corrected_replay.range,
+        ),
         check: check_series,
         scatters,
     })

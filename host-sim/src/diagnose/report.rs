@@ -14,7 +14,7 @@ use super::screen::Scatter;
 use super::{Diagnosis, Series};
 
 /// Most points drawn per line.
-const MAX_POINTS: usize = 2500;
+pub const MAX_POINTS: usize = 2500;
 
 fn esc(s: &str) -> String {
     s.replace('&', "&amp;")
@@ -31,24 +31,19 @@ fn channel_svg(
     let Some(meas) = &series.measured[c.index()] else {
         return Ok(String::new());
     };
+    // The series keeps every `series.stride`-th sample; a line draws every `stride`-th
+    // sample of the recording.
     let n = meas.len().min(series.t_s.len());
-    let stride = (n / MAX_POINTS).max(1);
+    let stride = ((series.len / MAX_POINTS).max(1) / series.stride.max(1)).max(1);
     let nom: Vec<f64> = series.nominal.iter().map(|m| c.of(m)).collect();
     let cor: Vec<f64> = series.corrected.iter().map(|m| c.of(m)).collect();
-    let mut lo = f64::INFINITY;
-    let mut hi = f64::NEG_INFINITY;
-    for v in meas.iter().chain(&nom).chain(&cor) {
-        if v.is_finite() {
-            lo = lo.min(*v);
-            hi = hi.max(*v);
-        }
-    }
+    let [lo, hi] = series.range[c.index()];
     if !lo.is_finite() {
         return Ok(String::new());
     }
     let pad = ((hi - lo) * 0.05).max(1e-6);
     let t0 = series.t_s[0];
-    let t1 = series.t_s[n - 1].max(t0 + 1e-9);
+    let t1 = series.t_end_s.max(t0 + 1e-9);
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (1100, 280)).into_drawing_area();

@@ -148,8 +148,9 @@ pub fn select<'c>(
     let trial = |parts: &[Part<'c>]| -> (Vec<Part<'c>>, f64, f64) {
         let t0 = std::time::Instant::now();
         let (fitted, _) = problem.fit(parts, fit_range.clone(), opts.max_iter);
-        let jh = match problem.predict(&fitted) {
-            Some(p) => problem.channel_costs(&p, held.clone()).iter().sum(),
+        // Scored on the held-out tail by a replay that is not held.
+        let jh = match problem.replay_costs(&fitted, held.clone()) {
+            Some(c) => c.iter().sum(),
             None => f64::INFINITY,
         };
         (fitted, jh, t0.elapsed().as_secs_f64())

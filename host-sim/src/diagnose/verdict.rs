@@ -15,7 +15,7 @@
 //!
 //! The CLI exits with status 3 on `unexplained` and `not_this_plant` (the JSON is written).
 
-use crate::fit::fit_percent;
+use crate::fit::fit_percent_by;
 use crate::io::recording::{Channel, Recording};
 use crate::plant::config::PlantConfig;
 use crate::plant::Measurement;
@@ -64,9 +64,35 @@ pub fn fit_vs_spread(
     range: std::ops::Range<usize>,
     spread: f64,
 ) -> f64 {
-    let n = range.len().max(1) as f64;
-    let mse = range.map(|k| (c.of(&pred[k]) - y[k]).powi(2)).sum::<f64>() / n;
+    let sum_sq = range
+        .clone()
+        .map(|k| (c.of(&pred[k]) - y[k]).powi(2))
+        .sum::<f64>();
+    fit_vs_spread_of_sum(sum_sq, range.len(), spread)
+}
+
+/// [`fit_vs_spread`] from the sum, in sample order, of `(predicted - y)^2` over `samples`
+/// samples (for a prediction that is not held; the same value to the bit).
+pub fn fit_vs_spread_of_sum(sum_sq: f64, samples: usize, spread: f64) -> f64 {
+    let mse = sum_sq / samples.max(1) as f64;
     100.0 * (1.0 - mse.sqrt() / spread.max(1e-300))
+}
+
+/// `fit_percent(y, sign * channel c of sim)` with neither series copied (the same sums).
+fn fit_to_sim<I: Iterator<Item = f64>>(
+    y: impl Fn() -> I,
+    sim: &[Measurement],
+    c: Channel,
+    sign: f64,
+) -> f64 {
+    let err2 = y()
+        .zip(sim)
+        .map(|(a, m)| {
+            let b = sign * c.of(m);
+            (a - b) * (a - b)
+        })
+        .sum::<f64>();
+    fit_percent_by(y, err2)
 }
 
 /// Plausibility checks of a recording against the nominal simulation of the same inputs:
@@ -79,10 +105,7 @@ pub fn plausibility_hints(
     let mut hints = Vec::new();
     let supply_kpa = nominal.environment.supply_gauge_pa / 1000.0;
     let p_atm_kpa = nominal.environment.p_atm_pa / 1000.0;
-    let fit_of = |y: &[f64], c: Channel, sign: f64| -> f64 {
-        let yh: Vec<f64> = sim.iter().map(|m| sign * c.of(m)).collect();
-        fit_percent(y, &yh)
-    };
+    let fit_of = |y: &[f64], c: Channel, sign: f64| fit_to_sim(|| y.iter().copied(), sim, c, sign);
     for c in [Channel::P1Kpa, Channel::P2Kpa] {
         let Some(y) = rec.channel(c) else { continue };
         let hi = y.iter().copied().fold(f64::NEG_INFINITY, f64::max);
@@ -137,8 +160,8 @@ pub fn plausibility_hints(
                 "angle_deg fits the model {flipped:.0} % with its sign flipped and {straight:.0} % as recorded: check the angle sign convention (muscle 1 contracts when the angle grows)"
             ));
         }
-        let radians: Vec<f64> = y.iter().map(|v| v.to_degrees()).collect();
-        let as_rad = fit_of(&radians, Channel::AngleDeg, 1.0);
+        let radians = || y.iter().map(|v| v.to_degrees());
+        let as_rad = fit_to_sim(radians, sim, Channel::AngleDeg, 1.0);
         if as_rad > straight + 30.0 && as_rad > 30.0 {
             hints.push(format!(
                 "angle_deg fits the model {as_rad:.0} % read as radians and {straight:.0} % as degrees: check the angle unit"

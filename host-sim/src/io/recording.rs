@@ -224,6 +224,21 @@ impl Recording {
         self.outputs[c.index()] = Some(values);
     }
 
+    /// A copy of the first `n` samples (all of them if there are fewer).
+    pub fn head(&self, n: usize) -> Recording {
+        let n = n.min(self.len());
+        Recording {
+            metadata: self.metadata.clone(),
+            t_s: self.t_s[..n].to_vec(),
+            inputs: self.inputs[..n].to_vec(),
+            outputs: std::array::from_fn(|i| self.outputs[i].as_ref().map(|y| y[..n].to_vec())),
+            mass_flow_kg_s: self
+                .mass_flow_kg_s
+                .as_ref()
+                .map(|m| [m[0][..n].to_vec(), m[1][..n].to_vec()]),
+        }
+    }
+
     /// The value of a metadata key, if present.
     pub fn meta(&self, key: &str) -> Option<&str> {
         self.metadata
@@ -233,8 +248,14 @@ impl Recording {
     }
 
     /// Reads and validates a recording file.
+    ///
+    /// Memory: the columns the file has; a plain file is parsed block by block without its
+    /// text (`replay_stream::read_recording`), anything else is read whole.
     pub fn read(path: impl AsRef<Path>) -> Result<Self, RecordingError> {
         let path = path.as_ref();
+        if let Some(rec) = super::replay_stream::read_recording(path) {
+            return Ok(rec);
+        }
         Self::parse(&read_text(path)?, path)
     }
 

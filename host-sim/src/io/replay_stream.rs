@@ -290,9 +290,10 @@ fn simulate_chunks(
 
 /// The rows of a recording file one at a time, read block by block (memory: one block and
 /// one chunk of parsed rows), for the streaming commands that need every column (`fit`).
-/// Only plain rows are taken ([`RowParser::parse_plain_rows`]); anything else is `Err(())`,
-/// and the caller leaves the file to [`Recording::read`](super::recording::Recording::read),
-/// which words the error.
+/// Rows are parsed by the fast path ([`RowParser::parse_plain_rows`]), a chunk it does not
+/// take by the general row reader; quoted fields or any error is `Err(())`, and the caller
+/// leaves the file to [`Recording::parse`](super::recording::Recording::parse), which words
+/// the error.
 pub(crate) struct RowStream {
     path: std::path::PathBuf,
     /// The metadata and header lines (for [`Self::check_time`]).
@@ -360,10 +361,17 @@ impl RowStream {
             let end = memchr::memchr_iter(b'\n', rest)
                 .nth(CHUNK_ROWS - 1)
                 .map_or(rest.len(), |i| i + 1);
-            if memchr::memchr(b'"', &rest[..end]).is_some()
-                || !self.parser.parse_plain_rows(&rest[..end], &mut self.rows)
-            {
+            if memchr::memchr(b'"', &rest[..end]).is_some() {
                 return Err(());
+            }
+            if !self.parser.parse_plain_rows(&rest[..end], &mut self.rows) {
+                // Rows the fast path does not take (e.g. a time stamp with more digits than
+                // it reads): the general row reader, as `Recording::read` has it.
+                let table = Table::parse(&self.head, &self.path).map_err(|_| ())?;
+                let (rows, _) = table
+                    .read_chunk::<_, Vec<ParsedRow>>(&rest[..end], 1, 0, &|r| self.parser.parse(r))
+                    .map_err(|_| ())?;
+                self.rows = rows;
             }
             self.block_pos += end;
         }
@@ -377,6 +385,56 @@ impl RowStream {
     pub(crate) fn check_time(&self, t_s: &[f64]) -> bool {
         Table::parse(&self.head, &self.path).is_ok_and(|t| t.check_time(t_s, |_| 0).is_ok())
     }
+}
+
+/// [`Recording::read`](super::recording::Recording::read) of a file without holding its
+/// text: the rows are parsed block by block ([`RowStream`]) into the columns the file has
+/// (time, openings and the output channels present: 8 + 32 + 8 per channel bytes a row).
+/// The same row parser and the same time checks, so the recording is `read`'s to the bit.
+/// `None` when the stream does not take the file (quoted fields, mass-flow columns, a time
+/// column the checks refuse, any error): the caller reads it whole, which words the error.
+pub(crate) fn read_recording(path: &Path) -> Option<recording::Recording> {
+    let mut rows = RowStream::open(path)?;
+    let table = Table::parse(&rows.head, path).ok()?;
+    for name in recording::MASS_FLOW_COLUMNS {
+        if table.find(name).ok()?.is_some() {
+            return None;
+        }
+    }
+    let metadata = table.metadata.clone();
+    drop(table);
+    let present = rows.channels();
+    let mut t_s = Vec::new();
+    let mut inputs = Vec::new();
+    let mut outputs: [Vec<f64>; 5] = Default::default();
+    while let Some((t, u, y)) = rows.next_row().ok()? {
+        t_s.push(t);
+        inputs.push(ValveInputs::from_openings(u));
+        for (i, col) in outputs.iter_mut().enumerate() {
+            if present[i] {
+                col.push(y[i]);
+            }
+        }
+    }
+    if !rows.check_time(&t_s) {
+        return None;
+    }
+    // The columns grew by doubling: give back what they did not use.
+    t_s.shrink_to_fit();
+    inputs.shrink_to_fit();
+    outputs.iter_mut().for_each(Vec::shrink_to_fit);
+    let mut rec = recording::Recording {
+        metadata,
+        t_s,
+        inputs,
+        ..Default::default()
+    };
+    for (i, col) in outputs.into_iter().enumerate() {
+        if present[i] {
+            rec.outputs[i] = Some(col);
+        }
+    }
+    Some(rec)
 }
 
 /// Rows as the reader passes them on: time stamps and valve openings.

@@ -561,41 +561,65 @@ pub fn simulate_with_progress(
     inputs: &[ValveInputs],
     dt_s: f64,
     opts: &SolverOptions,
-    mut progress: impl FnMut(usize),
+    progress: impl FnMut(usize),
 ) -> Result<Simulation, SimError> {
+    let mut states = Vec::with_capacity(inputs.len());
+    let (final_state, stats) =
+        simulate_each(plant, inputs, dt_s, opts, progress, |x| states.push(*x))?;
+    Ok(Simulation {
+        states,
+        final_state,
+        stats,
+    })
+}
+
+/// [`simulate_with_progress`] without the state series: `on_state` is called with the state
+/// of every sample in order (the same integrator calls, so the same states to the bit), and
+/// the final state and the counters are returned. Memory does not grow with the inputs (the
+/// valve dead time, if any, is applied sample by sample while the runs of identical
+/// openings are collected).
+pub fn simulate_each(
+    plant: &Plant,
+    inputs: &[ValveInputs],
+    dt_s: f64,
+    opts: &SolverOptions,
+    mut progress: impl FnMut(usize),
+    mut on_state: impl FnMut(&PlantState),
+) -> Result<(PlantState, SimStats), SimError> {
     if let Some((index, u)) = inputs.iter().enumerate().find(|(_, u)| !valid_inputs(u)) {
         return Err(SimError::Input { index, inputs: *u });
     }
     let mut actuator = ActuatorPath::new(plant, dt_s, "open-loop replay")?;
-    let delayed: Vec<ValveInputs>;
-    let inputs = if actuator.delay_samples() == 0 {
-        inputs
-    } else {
-        delayed = inputs.iter().map(|u| actuator.push(*u)).collect();
-        &delayed
-    };
+    // A dead time shorter than a sample leaves the openings as they are.
+    let delayed = actuator.delay_samples() != 0;
     let mut integ = Integrator::new(plant, plant.initial_state(), *opts);
-    let mut states = Vec::with_capacity(inputs.len());
-    let mut k = 0;
-    while k < inputs.len() {
-        let u = inputs[k];
+    // The current run of identical (delayed) openings: (openings, samples).
+    let mut run: Option<(ValveInputs, usize)> = None;
+    for (k, u) in inputs.iter().enumerate() {
+        let u = if delayed { actuator.push(*u) } else { *u };
         // An external torque series changes every sample: one segment per sample.
-        let run = match &plant.load {
-            None => inputs[k..].iter().take_while(|v| **v == u).count(),
-            Some(load) => {
-                integ.set_load_torque_nm(load.at(k));
-                1
+        if let Some(load) = &plant.load {
+            integ.set_load_torque_nm(load.at(k));
+            integ.advance_samples(u, dt_s, 1, &mut on_state)?;
+            progress(k + 1);
+            continue;
+        }
+        match &mut run {
+            Some((ru, len)) if *ru == u => *len += 1,
+            _ => {
+                if let Some((ru, len)) = run.take() {
+                    integ.advance_samples(ru, dt_s, len, &mut on_state)?;
+                    progress(k);
+                }
+                run = Some((u, 1));
             }
-        };
-        integ.advance_samples(u, dt_s, run, |x| states.push(*x))?;
-        k += run;
-        progress(k);
+        }
     }
-    Ok(Simulation {
-        states,
-        final_state: integ.state(),
-        stats: integ.stats(),
-    })
+    if let Some((ru, len)) = run {
+        integ.advance_samples(ru, dt_s, len, &mut on_state)?;
+        progress(inputs.len());
+    }
+    Ok((integ.state(), integ.stats()))
 }
 
 /// Open-loop replay at a recording's own time stamps (uniform or jittered): `inputs[k]` is
