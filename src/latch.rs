@@ -303,6 +303,25 @@ impl LatchStorage for RamStorage {
 mod tests {
     use super::*;
 
+    /// Every reset cause but a power-on.
+    const NOT_POWER_ON: [ResetCause; 6] = [
+        ResetCause::BrownOut,
+        ResetCause::Watchdog,
+        ResetCause::Software,
+        ResetCause::Pin,
+        ResetCause::LowPower,
+        ResetCause::Unknown,
+    ];
+
+    /// The record of a latched `cause` (the only fault seen), with the vent state `vented`.
+    fn faulted(cause: FaultCode, vented: [bool; 2]) -> LatchRecord {
+        LatchRecord {
+            cause: Some(cause),
+            seen: FaultSet::of(cause),
+            vented,
+        }
+    }
+
     #[test]
     fn crc_matches_the_standard_check_value() {
         // CRC-32/ISO-HDLC check value of "123456789" (9 bytes: not word aligned, so fold
@@ -362,20 +381,9 @@ mod tests {
     #[test]
     fn only_a_power_on_with_a_clean_record_arms() {
         let clean = Some(LatchRecord::CLEAN);
-        let faulted = Some(LatchRecord {
-            cause: Some(FaultCode::SupplyLost),
-            seen: FaultSet::of(FaultCode::SupplyLost),
-            vented: [false; 2],
-        });
+        let faulted = Some(faulted(FaultCode::SupplyLost, [false; 2]));
         assert_eq!(boot_decision(ResetCause::PowerOn, clean), BootDecision::Arm);
-        for cause in [
-            ResetCause::BrownOut,
-            ResetCause::Watchdog,
-            ResetCause::Software,
-            ResetCause::Pin,
-            ResetCause::LowPower,
-            ResetCause::Unknown,
-        ] {
+        for cause in NOT_POWER_ON {
             match boot_decision(cause, clean) {
                 BootDecision::Safe(r) => assert_eq!(r.cause, Some(FaultCode::ResetLatched)),
                 d => panic!("{cause:?}: {d:?}"),
@@ -401,11 +409,7 @@ mod tests {
         let (mut latch, d) =
             PersistentLatch::boot(RamStorage(LatchRecord::CLEAN.encode()), ResetCause::PowerOn);
         assert_eq!(d, BootDecision::Arm);
-        let fault = LatchRecord {
-            cause: Some(FaultCode::InletStuckOpen2),
-            seen: FaultSet::of(FaultCode::InletStuckOpen2),
-            vented: [false; 2],
-        };
+        let fault = faulted(FaultCode::InletStuckOpen2, [false; 2]);
         latch.update(fault);
         // Brown-out: the storage survives; the board boots into the safe state.
         let (latch2, d) = PersistentLatch::boot(latch.release(), ResetCause::BrownOut);
@@ -489,20 +493,7 @@ mod tests {
     /// path the board takes): encode, decode, decide.
     #[test]
     fn boot_table_through_the_storage() {
-        let faulted = LatchRecord {
-            cause: Some(FaultCode::InletStuckOpen1),
-            seen: FaultSet::of(FaultCode::InletStuckOpen1),
-            vented: [true, false],
-        };
-        let causes = [
-            ResetCause::PowerOn,
-            ResetCause::BrownOut,
-            ResetCause::Watchdog,
-            ResetCause::Software,
-            ResetCause::Pin,
-            ResetCause::LowPower,
-            ResetCause::Unknown,
-        ];
+        let faulted = faulted(FaultCode::InletStuckOpen1, [true, false]);
         let stores: [(&str, [u32; RECORD_WORDS]); 4] = [
             ("clean", LatchRecord::CLEAN.encode()),
             ("fault", faulted.encode()),
@@ -513,7 +504,7 @@ mod tests {
                 w
             }),
         ];
-        for cause in causes {
+        for cause in core::iter::once(ResetCause::PowerOn).chain(NOT_POWER_ON) {
             for (name, words) in stores {
                 let (latch, d) = PersistentLatch::boot(RamStorage(words), cause);
                 let armed = d == BootDecision::Arm;
@@ -548,14 +539,7 @@ mod tests {
         for count in [0, 1, -1, 8000, -123_456, i32::MAX, i32::MIN] {
             let w = encoder_words(count);
             assert_eq!(encoder_at_boot(w, ResetCause::PowerOn), None);
-            for cause in [
-                ResetCause::BrownOut,
-                ResetCause::Watchdog,
-                ResetCause::Software,
-                ResetCause::Pin,
-                ResetCause::LowPower,
-                ResetCause::Unknown,
-            ] {
+            for cause in NOT_POWER_ON {
                 assert_eq!(encoder_at_boot(w, cause), Some(count));
             }
             // Any single-bit flip is refused.
