@@ -291,15 +291,11 @@ fn identify_plant_recovers_perturbed_parameters_from_a_simulated_recording() {
         ],
     );
     let rec = dir.path().join("rec.csv");
-    ok(&host_sim(&[
-        &"simulate",
-        &"--plant",
+    ok(&on_plant(
+        "simulate",
         &truth,
-        &"--inputs",
-        &fixture("pulses_nominal.csv"),
-        &"--out",
-        &rec,
-    ]));
+        &[&"--inputs", &fixture("pulses_nominal.csv"), &"--out", &rec],
+    ));
     let out = dir.path().join("P2.toml");
     let s = ok(&identify(
         "plant",
