@@ -91,12 +91,18 @@ fn missing_file_names_the_file() {
     assert!(e.to_string().contains("rec-77.csv"));
 }
 
-#[test]
-fn write_then_read_round_trips_and_keeps_metadata() {
+/// [`GOOD`] written to `out.csv` in a new temporary directory: (directory, path, recording).
+fn good_written() -> (tempfile::TempDir, std::path::PathBuf, Recording) {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("out.csv");
     let r = Recording::parse(GOOD, "run-42.csv").unwrap();
     r.write(&path).unwrap();
+    (dir, path, r)
+}
+
+#[test]
+fn write_then_read_round_trips_and_keeps_metadata() {
+    let (dir, path, r) = good_written();
     let back = Recording::read(&path).unwrap();
     assert_eq!(back, r);
     // No temporary file is left behind.
@@ -105,10 +111,7 @@ fn write_then_read_round_trips_and_keeps_metadata() {
 
 #[test]
 fn failed_write_keeps_the_previous_good_file() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("out.csv");
-    let good = Recording::parse(GOOD, "run-42.csv").unwrap();
-    good.write(&path).unwrap();
+    let (dir, path, good) = good_written();
     let before = std::fs::read(&path).unwrap();
     let mut bad = good.clone();
     bad.inputs.pop(); // unequal column lengths: refused before anything is written
