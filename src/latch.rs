@@ -324,28 +324,23 @@ mod tests {
 
     #[test]
     fn crc_matches_the_standard_check_value() {
-        // CRC-32/ISO-HDLC check value of "123456789" (9 bytes: not word aligned, so fold
-        // the reference by hand: bytes "1234" "5678" then the bitwise loop on "9").
-        let mut crc = 0xFFFF_FFFFu32;
-        for b in *b"123456789" {
-            crc ^= b as u32;
-            for _ in 0..8 {
-                let mask = (crc & 1).wrapping_neg();
-                crc = (crc >> 1) ^ (0xEDB8_8320 & mask);
+        // The bitwise reference (CRC-32/ISO-HDLC, byte at a time), apart from the word version.
+        let crc32_bytes = |bytes: &[u8]| {
+            let mut crc = 0xFFFF_FFFFu32;
+            for &b in bytes {
+                crc ^= b as u32;
+                for _ in 0..8 {
+                    let mask = (crc & 1).wrapping_neg();
+                    crc = (crc >> 1) ^ (0xEDB8_8320 & mask);
+                }
             }
-        }
-        assert_eq!(!crc, 0xCBF4_3926);
+            !crc
+        };
+        // The check value of "123456789" (9 bytes: not word aligned).
+        assert_eq!(crc32_bytes(b"123456789"), 0xCBF4_3926);
         // The word version on "1234" equals the byte loop on the same bytes.
         let w = u32::from_le_bytes(*b"1234");
-        let mut c = 0xFFFF_FFFFu32;
-        for b in *b"1234" {
-            c ^= b as u32;
-            for _ in 0..8 {
-                let mask = (c & 1).wrapping_neg();
-                c = (c >> 1) ^ (0xEDB8_8320 & mask);
-            }
-        }
-        assert_eq!(crc32_words(&[w]), !c);
+        assert_eq!(crc32_words(&[w]), crc32_bytes(b"1234"));
         // zlib's crc32(b"1234") = 0x9BE3E0A3.
         assert_eq!(crc32_words(&[w]), 0x9BE3_E0A3);
     }
@@ -434,35 +429,21 @@ mod tests {
         const POR: u32 = 1 << 27;
         const BOR: u32 = 1 << 25;
         const PIN: u32 = 1 << 26;
-        // What the chip sets for each source (every reset pulses the pin).
-        assert_eq!(
-            ResetCause::from_rcc_csr(POR | BOR | PIN),
-            ResetCause::PowerOn
-        );
-        assert_eq!(ResetCause::from_rcc_csr(BOR | PIN), ResetCause::BrownOut);
-        assert_eq!(
-            ResetCause::from_rcc_csr(1 << 29 | PIN),
-            ResetCause::Watchdog
-        );
-        assert_eq!(
-            ResetCause::from_rcc_csr(1 << 30 | PIN),
-            ResetCause::Watchdog
-        );
-        assert_eq!(
-            ResetCause::from_rcc_csr(1 << 28 | PIN),
-            ResetCause::Software
-        );
-        assert_eq!(
-            ResetCause::from_rcc_csr(1 << 31 | PIN),
-            ResetCause::LowPower
-        );
-        assert_eq!(ResetCause::from_rcc_csr(PIN), ResetCause::Pin);
-        assert_eq!(ResetCause::from_rcc_csr(0), ResetCause::Unknown);
-        // RMVF (bit 24) and the reserved bits do not count.
-        assert_eq!(
-            ResetCause::from_rcc_csr(1 << 24 | 0xff),
-            ResetCause::Unknown
-        );
+        // What the chip sets for each source (every reset pulses the pin); RMVF (bit 24) and
+        // the reserved bits do not count.
+        for (csr, cause) in [
+            (POR | BOR | PIN, ResetCause::PowerOn),
+            (BOR | PIN, ResetCause::BrownOut),
+            (1 << 29 | PIN, ResetCause::Watchdog),
+            (1 << 30 | PIN, ResetCause::Watchdog),
+            (1 << 28 | PIN, ResetCause::Software),
+            (1 << 31 | PIN, ResetCause::LowPower),
+            (PIN, ResetCause::Pin),
+            (0, ResetCause::Unknown),
+            (1 << 24 | 0xff, ResetCause::Unknown),
+        ] {
+            assert_eq!(ResetCause::from_rcc_csr(csr), cause, "{csr:#x}");
+        }
     }
 
     #[test]

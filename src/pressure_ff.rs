@@ -398,6 +398,17 @@ mod tests {
         assert_eq!(m.duty(-f32::MAX, 100_000.0), -1.0);
     }
 
+    /// The feed-forward of the test parameters on the reference joint, 600 kPa supply, 1 kHz.
+    fn reference_ff() -> PressureFeedforward {
+        PressureFeedforward::new(
+            &PressureFfParams::OFF,
+            &params(),
+            &JointGeometry::REFERENCE,
+            600_000.0,
+            1000.0,
+        )
+    }
+
     #[test]
     fn nan_and_infinite_inputs_never_give_nan() {
         let m = model();
@@ -421,13 +432,7 @@ mod tests {
                 );
             }
         }
-        let mut ff = PressureFeedforward::new(
-            &PressureFfParams::OFF,
-            &params(),
-            &JointGeometry::REFERENCE,
-            600_000.0,
-            1000.0,
-        );
+        let mut ff = reference_ff();
         for &a in &vals {
             let o = ff.step([a, 3e5], [3e5, a], a, 0.1);
             assert!(
@@ -443,13 +448,7 @@ mod tests {
 
     #[test]
     fn rising_setpoint_inflates_falling_exhausts_and_the_rate_filter_converges() {
-        let mut ff = PressureFeedforward::new(
-            &PressureFfParams::OFF,
-            &params(),
-            &JointGeometry::REFERENCE,
-            600_000.0,
-            1000.0,
-        );
+        let mut ff = reference_ff();
         let mut o = [0.0; 2];
         for k in 0..200 {
             let s = k as f32 * 1000.0; // 1 MPa/s up on muscle 1, down on muscle 2
