@@ -19,7 +19,7 @@
 
 use crate::force_law::{ForceFlags, ForceLawParams};
 use crate::geometry::JointGeometry;
-use crate::safety::clamp_pressure_setpoint_pa;
+use crate::safety::{clamp_pressure_setpoint_pa, clamp_setpoint_to};
 use crate::torque_model::TorqueModelParams;
 
 /// Why a control law refused to produce a command.
@@ -78,21 +78,6 @@ fn clampf(x: f32, lim: f32) -> f32 {
         -lim
     } else {
         x
-    }
-}
-
-/// Clamp of a pressure set-point to `[0, hi]` (`hi` from [`clamp_pressure_setpoint_pa`]
-/// with an infinite pressure, so `0 <= hi <= P_MUSCLE_MAX_GAUGE_PA`); NaN and p <= 0 give +0.
-#[inline(always)]
-// `!(p > 0.0)` is deliberate: it is also true for NaN.
-#[allow(clippy::neg_cmp_op_on_partial_ord)]
-fn clamp_setpoint_to(p_gauge_pa: f32, hi: f32) -> f32 {
-    if !(p_gauge_pa > 0.0) {
-        0.0
-    } else if p_gauge_pa > hi {
-        hi
-    } else {
-        p_gauge_pa
     }
 }
 
@@ -568,6 +553,46 @@ impl PressureController {
     }
 }
 
+/// A saturated step, with and without anti-windup from downstream: the joint (inertia
+/// 0.01 kg m^2, damping 0.05 N m s/rad) only receives +-0.8 N m (the torque the
+/// pressures can give), far below the position loop's own 10 N m limit, so the loop's
+/// conditional integration alone never sees saturation. Step 0 -> 1 rad, 4 s at 1 kHz.
+/// Returns (overshoot [rad], largest integrator [N m], settling time to +-0.02 rad [s]).
+/// A test scenario: the host tests and the on-target tests (src/bin/on_target.rs) run it.
+#[cfg(any(test, feature = "on-target-tests"))]
+#[doc(hidden)]
+pub fn saturated_step(anti_windup: bool) -> (f32, f32, f32) {
+    let mut c = PositionController::new(PidGains {
+        kp_nm_per_rad: 4.0,
+        ki_nm_per_rad_s: 10.0,
+        kd_nm_s_per_rad: 0.3,
+        i_limit_nm: 2.0,
+        out_limit_nm: 10.0,
+    });
+    let (j, b, t_sat, dt) = (0.01f32, 0.05f32, 0.8f32, 1e-3f32);
+    let (mut a, mut w) = (0.0f32, 0.0f32);
+    let mut short = 0.0f32;
+    let (mut peak, mut i_max, mut settled_at) = (0.0f32, 0.0f32, 0.0f32);
+    for k in 0..4000 {
+        let meas = JointState {
+            angle_rad: a,
+            velocity_rad_s: w,
+        };
+        let down = if anti_windup { short } else { 0.0 };
+        let t_cmd = c.step_limited(meas, 1.0, dt, down).unwrap();
+        let t_applied = t_cmd.clamp(-t_sat, t_sat);
+        short = t_cmd - t_applied;
+        w += (t_applied - b * w) / j * dt;
+        a += w * dt;
+        peak = peak.max(a);
+        i_max = i_max.max(c.integral_nm().abs());
+        if (a - 1.0).abs() > 0.02 {
+            settled_at = (k + 1) as f32 * dt;
+        }
+    }
+    (peak - 1.0, i_max, settled_at)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -802,37 +827,6 @@ mod tests {
         assert!((t + 0.6).abs() < 1e-6);
     }
 
-    /// A saturated step, with and without anti-windup from downstream: the joint (inertia
-    /// 0.01 kg m^2, damping 0.05 N m s/rad) only receives +-0.8 N m (the torque the
-    /// pressures can give), far below the position loop's own 10 N m limit, so the loop's
-    /// conditional integration alone never sees saturation. Step 0 -> 1 rad, 4 s at 1 kHz.
-    /// Returns (overshoot [rad], largest integrator [N m], settling time to +-0.02 rad [s]).
-    fn saturated_step(anti_windup: bool) -> (f32, f32, f32) {
-        let mut c = pid();
-        let (j, b, t_sat, dt) = (0.01f32, 0.05f32, 0.8f32, 1e-3f32);
-        let (mut a, mut w) = (0.0f32, 0.0f32);
-        let mut short = 0.0f32;
-        let (mut peak, mut i_max, mut settled_at) = (0.0f32, 0.0f32, 0.0f32);
-        for k in 0..4000 {
-            let meas = JointState {
-                angle_rad: a,
-                velocity_rad_s: w,
-            };
-            let down = if anti_windup { short } else { 0.0 };
-            let t_cmd = c.step_limited(meas, 1.0, dt, down).unwrap();
-            let t_applied = t_cmd.clamp(-t_sat, t_sat);
-            short = t_cmd - t_applied;
-            w += (t_applied - b * w) / j * dt;
-            a += w * dt;
-            peak = peak.max(a);
-            i_max = i_max.max(c.integral_nm().abs());
-            if (a - 1.0).abs() > 0.02 {
-                settled_at = (k + 1) as f32 * dt;
-            }
-        }
-        (peak - 1.0, i_max, settled_at)
-    }
-
     #[test]
     fn anti_windup_from_downstream_saturation_cuts_the_overshoot_of_a_saturated_step() {
         let (os_with, i_with, ts_with) = saturated_step(true);
@@ -980,14 +974,20 @@ mod tests {
         assert!(t > 0.0, "{t}");
     }
 
+    /// Both muscles at 300 kPa gauge, the joint at rest at `angle_rad`.
+    fn both_at_300_kpa(angle_rad: f32) -> TorqueMeasurement {
+        TorqueMeasurement {
+            p1_gauge_pa: 300_000.0,
+            p2_gauge_pa: 300_000.0,
+            angle_rad,
+            velocity_rad_s: 0.0,
+        }
+    }
+
     #[test]
     fn torque_loop_positive_torque_inflates_muscle_one() {
         let mut c = torque_loop();
-        let m = TorqueMeasurement {
-            p1_gauge_pa: 300_000.0,
-            p2_gauge_pa: 300_000.0,
-            ..Default::default()
-        };
+        let m = both_at_300_kpa(0.0);
         let s = c.step(m, 2.0, 1e-3).unwrap();
         assert!(s.p1_gauge_pa > 300_000.0 && s.p2_gauge_pa < 300_000.0);
         assert!((s.p1_gauge_pa + s.p2_gauge_pa - 600_000.0).abs() < 1.0);
@@ -999,12 +999,7 @@ mod tests {
     #[test]
     fn torque_loop_holds_angle_against_passive_stiffness() {
         let mut c = torque_loop();
-        let m = TorqueMeasurement {
-            p1_gauge_pa: 300_000.0,
-            p2_gauge_pa: 300_000.0,
-            angle_rad: 0.2,
-            velocity_rad_s: 0.0,
-        };
+        let m = both_at_300_kpa(0.2);
         let s = c.step(m, 0.0, 1e-3).unwrap();
         // Holding +0.2 rad needs muscle 1 above muscle 2.
         assert!(s.p1_gauge_pa > s.p2_gauge_pa);
@@ -1015,11 +1010,7 @@ mod tests {
         // Measured pressures fixed at p0: T_est ~ 0 while 1 N m is wanted; the integrator
         // must push the set-points further over time, bounded by corr_limit.
         let mut c = torque_loop();
-        let m = TorqueMeasurement {
-            p1_gauge_pa: 300_000.0,
-            p2_gauge_pa: 300_000.0,
-            ..Default::default()
-        };
+        let m = both_at_300_kpa(0.0);
         let first = c.step(m, 1.0, 1e-3).unwrap();
         let mut last = first;
         for _ in 0..2000 {

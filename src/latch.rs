@@ -303,30 +303,44 @@ impl LatchStorage for RamStorage {
 mod tests {
     use super::*;
 
+    /// Every reset cause but a power-on.
+    const NOT_POWER_ON: [ResetCause; 6] = [
+        ResetCause::BrownOut,
+        ResetCause::Watchdog,
+        ResetCause::Software,
+        ResetCause::Pin,
+        ResetCause::LowPower,
+        ResetCause::Unknown,
+    ];
+
+    /// The record of a latched `cause` (the only fault seen), with the vent state `vented`.
+    fn faulted(cause: FaultCode, vented: [bool; 2]) -> LatchRecord {
+        LatchRecord {
+            cause: Some(cause),
+            seen: FaultSet::of(cause),
+            vented,
+        }
+    }
+
     #[test]
     fn crc_matches_the_standard_check_value() {
-        // CRC-32/ISO-HDLC check value of "123456789" (9 bytes: not word aligned, so fold
-        // the reference by hand: bytes "1234" "5678" then the bitwise loop on "9").
-        let mut crc = 0xFFFF_FFFFu32;
-        for b in *b"123456789" {
-            crc ^= b as u32;
-            for _ in 0..8 {
-                let mask = (crc & 1).wrapping_neg();
-                crc = (crc >> 1) ^ (0xEDB8_8320 & mask);
+        // The bitwise reference (CRC-32/ISO-HDLC, byte at a time), apart from the word version.
+        let crc32_bytes = |bytes: &[u8]| {
+            let mut crc = 0xFFFF_FFFFu32;
+            for &b in bytes {
+                crc ^= b as u32;
+                for _ in 0..8 {
+                    let mask = (crc & 1).wrapping_neg();
+                    crc = (crc >> 1) ^ (0xEDB8_8320 & mask);
+                }
             }
-        }
-        assert_eq!(!crc, 0xCBF4_3926);
+            !crc
+        };
+        // The check value of "123456789" (9 bytes: not word aligned).
+        assert_eq!(crc32_bytes(b"123456789"), 0xCBF4_3926);
         // The word version on "1234" equals the byte loop on the same bytes.
         let w = u32::from_le_bytes(*b"1234");
-        let mut c = 0xFFFF_FFFFu32;
-        for b in *b"1234" {
-            c ^= b as u32;
-            for _ in 0..8 {
-                let mask = (c & 1).wrapping_neg();
-                c = (c >> 1) ^ (0xEDB8_8320 & mask);
-            }
-        }
-        assert_eq!(crc32_words(&[w]), !c);
+        assert_eq!(crc32_words(&[w]), crc32_bytes(b"1234"));
         // zlib's crc32(b"1234") = 0x9BE3E0A3.
         assert_eq!(crc32_words(&[w]), 0x9BE3_E0A3);
     }
@@ -362,20 +376,9 @@ mod tests {
     #[test]
     fn only_a_power_on_with_a_clean_record_arms() {
         let clean = Some(LatchRecord::CLEAN);
-        let faulted = Some(LatchRecord {
-            cause: Some(FaultCode::SupplyLost),
-            seen: FaultSet::of(FaultCode::SupplyLost),
-            vented: [false; 2],
-        });
+        let faulted = Some(faulted(FaultCode::SupplyLost, [false; 2]));
         assert_eq!(boot_decision(ResetCause::PowerOn, clean), BootDecision::Arm);
-        for cause in [
-            ResetCause::BrownOut,
-            ResetCause::Watchdog,
-            ResetCause::Software,
-            ResetCause::Pin,
-            ResetCause::LowPower,
-            ResetCause::Unknown,
-        ] {
+        for cause in NOT_POWER_ON {
             match boot_decision(cause, clean) {
                 BootDecision::Safe(r) => assert_eq!(r.cause, Some(FaultCode::ResetLatched)),
                 d => panic!("{cause:?}: {d:?}"),
@@ -401,11 +404,7 @@ mod tests {
         let (mut latch, d) =
             PersistentLatch::boot(RamStorage(LatchRecord::CLEAN.encode()), ResetCause::PowerOn);
         assert_eq!(d, BootDecision::Arm);
-        let fault = LatchRecord {
-            cause: Some(FaultCode::InletStuckOpen2),
-            seen: FaultSet::of(FaultCode::InletStuckOpen2),
-            vented: [false; 2],
-        };
+        let fault = faulted(FaultCode::InletStuckOpen2, [false; 2]);
         latch.update(fault);
         // Brown-out: the storage survives; the board boots into the safe state.
         let (latch2, d) = PersistentLatch::boot(latch.release(), ResetCause::BrownOut);
@@ -430,35 +429,21 @@ mod tests {
         const POR: u32 = 1 << 27;
         const BOR: u32 = 1 << 25;
         const PIN: u32 = 1 << 26;
-        // What the chip sets for each source (every reset pulses the pin).
-        assert_eq!(
-            ResetCause::from_rcc_csr(POR | BOR | PIN),
-            ResetCause::PowerOn
-        );
-        assert_eq!(ResetCause::from_rcc_csr(BOR | PIN), ResetCause::BrownOut);
-        assert_eq!(
-            ResetCause::from_rcc_csr(1 << 29 | PIN),
-            ResetCause::Watchdog
-        );
-        assert_eq!(
-            ResetCause::from_rcc_csr(1 << 30 | PIN),
-            ResetCause::Watchdog
-        );
-        assert_eq!(
-            ResetCause::from_rcc_csr(1 << 28 | PIN),
-            ResetCause::Software
-        );
-        assert_eq!(
-            ResetCause::from_rcc_csr(1 << 31 | PIN),
-            ResetCause::LowPower
-        );
-        assert_eq!(ResetCause::from_rcc_csr(PIN), ResetCause::Pin);
-        assert_eq!(ResetCause::from_rcc_csr(0), ResetCause::Unknown);
-        // RMVF (bit 24) and the reserved bits do not count.
-        assert_eq!(
-            ResetCause::from_rcc_csr(1 << 24 | 0xff),
-            ResetCause::Unknown
-        );
+        // What the chip sets for each source (every reset pulses the pin); RMVF (bit 24) and
+        // the reserved bits do not count.
+        for (csr, cause) in [
+            (POR | BOR | PIN, ResetCause::PowerOn),
+            (BOR | PIN, ResetCause::BrownOut),
+            (1 << 29 | PIN, ResetCause::Watchdog),
+            (1 << 30 | PIN, ResetCause::Watchdog),
+            (1 << 28 | PIN, ResetCause::Software),
+            (1 << 31 | PIN, ResetCause::LowPower),
+            (PIN, ResetCause::Pin),
+            (0, ResetCause::Unknown),
+            (1 << 24 | 0xff, ResetCause::Unknown),
+        ] {
+            assert_eq!(ResetCause::from_rcc_csr(csr), cause, "{csr:#x}");
+        }
     }
 
     #[test]
@@ -489,20 +474,7 @@ mod tests {
     /// path the board takes): encode, decode, decide.
     #[test]
     fn boot_table_through_the_storage() {
-        let faulted = LatchRecord {
-            cause: Some(FaultCode::InletStuckOpen1),
-            seen: FaultSet::of(FaultCode::InletStuckOpen1),
-            vented: [true, false],
-        };
-        let causes = [
-            ResetCause::PowerOn,
-            ResetCause::BrownOut,
-            ResetCause::Watchdog,
-            ResetCause::Software,
-            ResetCause::Pin,
-            ResetCause::LowPower,
-            ResetCause::Unknown,
-        ];
+        let faulted = faulted(FaultCode::InletStuckOpen1, [true, false]);
         let stores: [(&str, [u32; RECORD_WORDS]); 4] = [
             ("clean", LatchRecord::CLEAN.encode()),
             ("fault", faulted.encode()),
@@ -513,7 +485,7 @@ mod tests {
                 w
             }),
         ];
-        for cause in causes {
+        for cause in core::iter::once(ResetCause::PowerOn).chain(NOT_POWER_ON) {
             for (name, words) in stores {
                 let (latch, d) = PersistentLatch::boot(RamStorage(words), cause);
                 let armed = d == BootDecision::Arm;
@@ -548,14 +520,7 @@ mod tests {
         for count in [0, 1, -1, 8000, -123_456, i32::MAX, i32::MIN] {
             let w = encoder_words(count);
             assert_eq!(encoder_at_boot(w, ResetCause::PowerOn), None);
-            for cause in [
-                ResetCause::BrownOut,
-                ResetCause::Watchdog,
-                ResetCause::Software,
-                ResetCause::Pin,
-                ResetCause::LowPower,
-                ResetCause::Unknown,
-            ] {
+            for cause in NOT_POWER_ON {
                 assert_eq!(encoder_at_boot(w, cause), Some(count));
             }
             // Any single-bit flip is refused.

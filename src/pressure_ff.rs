@@ -398,6 +398,17 @@ mod tests {
         assert_eq!(m.duty(-f32::MAX, 100_000.0), -1.0);
     }
 
+    /// The feed-forward of the test parameters on the reference joint, 600 kPa supply, 1 kHz.
+    fn reference_ff() -> PressureFeedforward {
+        PressureFeedforward::new(
+            &PressureFfParams::OFF,
+            &params(),
+            &JointGeometry::REFERENCE,
+            600_000.0,
+            1000.0,
+        )
+    }
+
     #[test]
     fn nan_and_infinite_inputs_never_give_nan() {
         let m = model();
@@ -421,13 +432,7 @@ mod tests {
                 );
             }
         }
-        let mut ff = PressureFeedforward::new(
-            &PressureFfParams::OFF,
-            &params(),
-            &JointGeometry::REFERENCE,
-            600_000.0,
-            1000.0,
-        );
+        let mut ff = reference_ff();
         for &a in &vals {
             let o = ff.step([a, 3e5], [3e5, a], a, 0.1);
             assert!(
@@ -443,13 +448,7 @@ mod tests {
 
     #[test]
     fn rising_setpoint_inflates_falling_exhausts_and_the_rate_filter_converges() {
-        let mut ff = PressureFeedforward::new(
-            &PressureFfParams::OFF,
-            &params(),
-            &JointGeometry::REFERENCE,
-            600_000.0,
-            1000.0,
-        );
+        let mut ff = reference_ff();
         let mut o = [0.0; 2];
         for k in 0..200 {
             let s = k as f32 * 1000.0; // 1 MPa/s up on muscle 1, down on muscle 2
@@ -527,24 +526,38 @@ mod tick_tests {
         }
     }
 
-    #[test]
-    fn the_feed_forward_reaches_the_valves_and_stays_in_range() {
-        let (mut off, mut on) = (ControlTick::new(cfg(false)), ControlTick::new(cfg(true)));
+    /// Runs two ticks (configurations `a` and `b`) side by side for 400 ticks of a sine
+    /// set-point on the frames `frame(k)`; checks that `b`'s valve commands stay finite and in
+    /// [-1, 1]; returns on how many ticks the two commands differ.
+    pub(super) fn count_differing(
+        a: ControllerConfig,
+        b: ControllerConfig,
+        frame: impl Fn(usize) -> SensorFrame,
+    ) -> usize {
+        let (mut ta, mut tb) = (ControlTick::new(a), ControlTick::new(b));
         let mut differ = 0;
         for k in 0..400 {
             let sp = Setpoint {
                 angle_rad: 0.3 * libm::sinf(k as f32 * 0.02),
             };
-            let f = frame(550e3 + 100.0 * k as f32, 550e3 - 100.0 * k as f32, 0.0);
-            let a = off.step(&f, &sp, 1e-3);
-            let b = on.step(&f, &sp, 1e-3);
-            for u in [b.valves.muscle1, b.valves.muscle2] {
+            let f = frame(k);
+            let x = ta.step(&f, &sp, 1e-3);
+            let y = tb.step(&f, &sp, 1e-3);
+            for u in [y.valves.muscle1, y.valves.muscle2] {
                 assert!(u.is_finite() && (-1.0..=1.0).contains(&u), "{k}: {u}");
             }
-            if a.valves != b.valves {
+            if x.valves != y.valves {
                 differ += 1;
             }
         }
+        differ
+    }
+
+    #[test]
+    fn the_feed_forward_reaches_the_valves_and_stays_in_range() {
+        let differ = count_differing(cfg(false), cfg(true), |k| {
+            frame(550e3 + 100.0 * k as f32, 550e3 - 100.0 * k as f32, 0.0)
+        });
         // The frames do not follow the commands (the supervision faults both ticks after a
         // while, then both hold the safe state); before that the feed-forward shows.
         assert!(differ > 0, "the feed-forward never changed a valve command");
@@ -590,30 +603,12 @@ mod hybrid_tick_tests {
     #[test]
     fn the_learned_volume_changes_the_duty_and_stays_in_range() {
         let net = &crate::constants::VOLUME_FNN;
-        let (mut poly, mut hybrid) = (
-            ControlTick::new(cfg(None)),
-            ControlTick::new(cfg(Some(net))),
-        );
-        let mut differ = 0;
-        for k in 0..400 {
-            let sp = Setpoint {
-                angle_rad: 0.3 * libm::sinf(k as f32 * 0.02),
-            };
-            let a = 0.1 * libm::sinf(k as f32 * 0.01);
-            let f = SensorFrame {
+        let differ =
+            super::tick_tests::count_differing(cfg(None), cfg(Some(net)), |k| SensorFrame {
                 p1_gauge_pa: Some(300e3 + 50.0 * k as f32),
                 p2_gauge_pa: Some(300e3 - 50.0 * k as f32),
-                angle_rad: Some(a),
-            };
-            let x = poly.step(&f, &sp, 1e-3);
-            let y = hybrid.step(&f, &sp, 1e-3);
-            for u in [y.valves.muscle1, y.valves.muscle2] {
-                assert!(u.is_finite() && (-1.0..=1.0).contains(&u), "{k}: {u}");
-            }
-            if x.valves != y.valves {
-                differ += 1;
-            }
-        }
+                angle_rad: Some(0.1 * libm::sinf(k as f32 * 0.01)),
+            });
         assert!(
             differ > 0,
             "the learned volume never changed a valve command"

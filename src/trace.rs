@@ -250,6 +250,29 @@ mod tests {
     }
 }
 
+/// Muscle 1's force-law inputs over the trace, for every row with a pressure and an angle:
+/// gauge pressure [Pa] and stretch (f32), and both quantised for the fixed-point law (`None`
+/// where either does not fit). The benchmark images and the on-target tests evaluate the
+/// force laws at these.
+pub fn force_law_inputs() -> impl Iterator<
+    Item = (
+        f32,
+        f32,
+        Option<(crate::fixed_point::PressurePa, crate::fixed_point::Stretch)>,
+    ),
+> {
+    use crate::fixed_point::{pressure_pa_from_f32, q16_from_f32};
+    let p = wiring::pressure_scaling();
+    let g = crate::geometry::JointGeometry::REFERENCE;
+    SENSOR_TRACE.iter().filter_map(move |row| {
+        let f = row.frame(&p);
+        let (e1, _) = g.stretches(f.angle_rad?);
+        let p1 = f.p1_gauge_pa?;
+        let fixed = pressure_pa_from_f32(p1).zip(q16_from_f32(e1));
+        Some((p1, e1, fixed))
+    })
+}
+
 /// The fixed-point path (src/fixed_point.rs) over the trace, as the FPU-less image runs it:
 /// for every row with both pressures and the angle, the fixed force law on both muscles
 /// (force bits and flags) and the fixed torque model (forward at half the pressure

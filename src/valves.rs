@@ -573,6 +573,32 @@ mod tests {
         }
     }
 
+    type MockValves = OnOffValves<PinMock, PinMock, PinMock, PinMock>;
+
+    /// On/off valves (reference PWM) on four mock pins expecting `tx[k]` on pin k (in1, ex1,
+    /// in2, ex2); `drive` runs them, then every mock checks it saw all its transactions.
+    fn on_mock_pins(tx: [&[PinTx]; 4], drive: impl FnOnce(&mut MockValves)) {
+        let mut pins = tx.map(PinMock::new);
+        let [in1, ex1, in2, ex2] = pins.clone();
+        drive(&mut OnOffValves::new(
+            in1,
+            ex1,
+            in2,
+            ex2,
+            OnOffPwmConfig::REFERENCE,
+        ));
+        for p in pins.iter_mut() {
+            p.done();
+        }
+    }
+
+    /// `ticks` pin writes: high for the first `high` of them, low after.
+    fn pulse(high: usize, ticks: usize) -> Vec<PinTx> {
+        (0..ticks)
+            .map(|k| PinTx::set(if k < high { State::High } else { State::Low }))
+            .collect()
+    }
+
     #[test]
     fn switched_valves_read_back_as_openings() {
         for bits in 0u8..16 {
@@ -605,18 +631,8 @@ mod tests {
                 per_pin[pin as usize].push(t);
             }
         }
-        let mut in1 = PinMock::new(&per_pin[0]);
-        let mut ex1 = PinMock::new(&per_pin[1]);
-        let mut in2 = PinMock::new(&per_pin[2]);
-        let mut ex2 = PinMock::new(&per_pin[3]);
-        {
-            let mut v = OnOffValves::new(
-                in1.clone(),
-                ex1.clone(),
-                in2.clone(),
-                ex2.clone(),
-                OnOffPwmConfig::REFERENCE,
-            );
+        let [in1, ex1, in2, ex2] = &per_pin;
+        on_mock_pins([in1, ex1, in2, ex2], |v| {
             for _ in 0..3 {
                 let o = v.apply(&cmd(1.0, -1.0)).unwrap();
                 assert_eq!(
@@ -629,90 +645,29 @@ mod tests {
                     }
                 );
             }
-        }
-        in1.done();
-        ex1.done();
-        in2.done();
-        ex2.done();
+        });
     }
 
     #[test]
-    fn on_off_pin_sequence_of_one_pwm_period_at_30_percent() {
-        // Muscle 1 at +0.3 over one 10-tick period: inflate high 3 ticks then low 7 ticks;
-        // every other pin low every tick.
-        let mut in1_tx = Vec::new();
-        for k in 0..10 {
-            in1_tx.push(PinTx::set(if k < 3 { State::High } else { State::Low }));
+    fn on_off_pin_sequence_over_one_pwm_period() {
+        // Muscle 1 over one 10-tick period: inflate high for the first ticks, then low; every
+        // other pin low every tick.
+        // +0.3: 3 ticks high, 7 low.
+        // +0.15 with min on 2: 1.5 ticks rounds to 2 = min on -> high, high, low x8.
+        let low10 = pulse(0, 10);
+        for (u, high) in [(0.3, 3), (0.15, 2)] {
+            on_mock_pins([&pulse(high, 10), &low10, &low10, &low10], |v| {
+                for _ in 0..10 {
+                    v.apply(&cmd(u, 0.0)).unwrap();
+                }
+            });
         }
-        let low10: Vec<PinTx> = (0..10).map(|_| PinTx::set(State::Low)).collect();
-        let mut in1 = PinMock::new(&in1_tx);
-        let mut ex1 = PinMock::new(&low10);
-        let mut in2 = PinMock::new(&low10);
-        let mut ex2 = PinMock::new(&low10);
-        let mut v = OnOffValves::new(
-            in1.clone(),
-            ex1.clone(),
-            in2.clone(),
-            ex2.clone(),
-            OnOffPwmConfig::REFERENCE,
-        );
-        for _ in 0..10 {
-            v.apply(&cmd(0.3, 0.0)).unwrap();
-        }
-        in1.done();
-        ex1.done();
-        in2.done();
-        ex2.done();
-    }
-
-    #[test]
-    fn on_off_pin_sequence_min_on_time_stretches_short_pulse() {
-        // +0.15 with N = 10, min on 2: 1.5 ticks rounds to 2 = min on -> high, high, low x8.
-        let mut in1_tx = Vec::new();
-        for k in 0..10 {
-            in1_tx.push(PinTx::set(if k < 2 { State::High } else { State::Low }));
-        }
-        let low10: Vec<PinTx> = (0..10).map(|_| PinTx::set(State::Low)).collect();
-        let mut in1 = PinMock::new(&in1_tx);
-        let mut ex1 = PinMock::new(&low10);
-        let mut in2 = PinMock::new(&low10);
-        let mut ex2 = PinMock::new(&low10);
-        let mut v = OnOffValves::new(
-            in1.clone(),
-            ex1.clone(),
-            in2.clone(),
-            ex2.clone(),
-            OnOffPwmConfig::REFERENCE,
-        );
-        for _ in 0..10 {
-            v.apply(&cmd(0.15, 0.0)).unwrap();
-        }
-        in1.done();
-        ex1.done();
-        in2.done();
-        ex2.done();
     }
 
     #[test]
     fn on_off_close_all_drives_every_pin_low() {
-        let low = [PinTx::set(State::Low)];
-        let mut pins = [
-            PinMock::new(&low),
-            PinMock::new(&low),
-            PinMock::new(&low),
-            PinMock::new(&low),
-        ];
-        let mut v = OnOffValves::new(
-            pins[0].clone(),
-            pins[1].clone(),
-            pins[2].clone(),
-            pins[3].clone(),
-            OnOffPwmConfig::REFERENCE,
-        );
-        v.close_all().unwrap();
-        for p in pins.iter_mut() {
-            p.done();
-        }
+        let low = pulse(0, 1);
+        on_mock_pins([&low, &low, &low, &low], |v| v.close_all().unwrap());
     }
 
     #[test]
@@ -724,24 +679,11 @@ mod tests {
             PinTx::set(State::High).with_error(MockError::Io(ErrorKind::Other)),
             PinTx::set(State::Low),
         ];
-        let other_tx = [PinTx::set(State::Low), PinTx::set(State::Low)];
-        let mut in1 = PinMock::new(&in1_tx);
-        let mut ex1 = PinMock::new(&other_tx);
-        let mut in2 = PinMock::new(&other_tx);
-        let mut ex2 = PinMock::new(&other_tx);
-        let mut v = OnOffValves::new(
-            in1.clone(),
-            ex1.clone(),
-            in2.clone(),
-            ex2.clone(),
-            OnOffPwmConfig::REFERENCE,
-        );
-        let r = v.apply(&cmd(1.0, 0.0));
-        assert!(matches!(r, Err(Error::Inflate1(_))));
-        in1.done();
-        ex1.done();
-        in2.done();
-        ex2.done();
+        let other_tx = pulse(0, 2);
+        on_mock_pins([&in1_tx, &other_tx, &other_tx, &other_tx], |v| {
+            let r = v.apply(&cmd(1.0, 0.0));
+            assert!(matches!(r, Err(Error::Inflate1(_))));
+        });
     }
 
     /// Runs `cmds` through an OnOffValves on logging pins; returns per-tick openings and

@@ -19,7 +19,7 @@ use anyhow::{bail, Context, Result};
 use crate::control::closed_loop::{run, Scenario};
 use crate::fit::{compare, ChannelFit};
 use crate::io::plot::plot_comparison;
-use crate::io::recording::{Channel, Recording};
+use crate::io::recording::Recording;
 use crate::io::run_files::{firmware_trace_path, plot_run, run_recording, write_firmware_trace};
 use crate::plant::Plant;
 use crate::sim::{simulate, SolverOptions};
@@ -164,25 +164,17 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
     let sim = simulate(&plant, &fixture.inputs, dt, &SolverOptions::default())
         .with_context(|| format!("{}: replay failed", fixture_path.display()))?;
     let replay_wall = t0.elapsed().as_secs_f64();
-    let mut out = Recording {
-        metadata: vec![
-            ("plant".into(), plant_path.display().to_string()),
-            ("inputs".into(), fixture_path.display().to_string()),
-            ("sample_period_s".into(), format!("{dt}")),
-            (
-                "source".into(),
-                "host-sim demo: open-loop replay, ode_solvers Dopri5".into(),
-            ),
-            ("effects".into(), plant.effects_summary()),
-        ],
-        t_s: fixture.t_s.clone(),
-        inputs: fixture.inputs.clone(),
-        ..Default::default()
-    };
-    let meas = plant.measure_series(&sim.states, dt);
-    for c in Channel::ALL {
-        out.set_channel(c, meas.iter().map(|m| c.of(m)).collect());
-    }
+    let metadata = vec![
+        ("plant".into(), plant_path.display().to_string()),
+        ("inputs".into(), fixture_path.display().to_string()),
+        ("sample_period_s".into(), format!("{dt}")),
+        (
+            "source".into(),
+            "host-sim demo: open-loop replay, ode_solvers Dopri5".into(),
+        ),
+        ("effects".into(), plant.effects_summary()),
+    ];
+    let out = crate::sim::replay_recording(&plant, &fixture, &sim.states, metadata);
     let stem = fixture_path
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())

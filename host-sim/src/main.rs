@@ -362,18 +362,9 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
             .with_context(|| format!("{}: simulation failed", inputs_path.display()))?;
     bar.finish_and_clear();
 
-    let mut out = Recording {
-        metadata: simulate_metadata(plant_path, inputs_path, dt, &opts, "simulate"),
-        t_s: rec.t_s.clone(),
-        inputs: rec.inputs.clone(),
-        ..Default::default()
-    };
-    out.metadata
-        .push(("effects".into(), plant.effects_summary()));
-    let meas = plant.measure_series(&sim.states, dt);
-    for c in Channel::ALL {
-        out.set_channel(c, meas.iter().map(|m| c.of(m)).collect());
-    }
+    let mut metadata = simulate_metadata(plant_path, inputs_path, dt, &opts, "simulate");
+    metadata.push(("effects".into(), plant.effects_summary()));
+    let out = host_sim::sim::replay_recording(&plant, &rec, &sim.states, metadata);
     out.write(&a.out)?;
     println!("plant effects: {}", plant.effects_summary());
     eprintln!("{}: {} samples, {}", a.out.display(), out.len(), sim.stats);

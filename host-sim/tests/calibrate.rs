@@ -8,19 +8,21 @@
 mod common;
 use common::*;
 
+use std::ffi::OsStr;
 use std::path::Path;
 use std::process::Output;
 
+/// `host-sim calibrate --recording <rec> --plant <plant> --out-dir <dir> <extra>`.
+fn calibrate_with(rec: &Path, plant: &Path, dir: &Path, extra: &[&dyn AsRef<OsStr>]) -> Output {
+    let mut c = bin();
+    c.arg("calibrate").arg("--recording").arg(rec);
+    c.arg("--plant").arg(plant).arg("--out-dir").arg(dir);
+    c.args(extra).output().unwrap()
+}
+
+/// [`calibrate_with`] on the reference plant, nothing more.
 fn calibrate(rec: &Path, dir: &Path) -> Output {
-    host_sim(&[
-        &"calibrate",
-        &"--recording",
-        &rec,
-        &"--plant",
-        &plant(),
-        &"--out-dir",
-        &dir,
-    ])
+    calibrate_with(rec, &plant(), dir, &[])
 }
 
 /// Rewrites one column of a recording with `f(row index, old value)`.
@@ -90,9 +92,7 @@ fn calibrate_writes_the_torque_model_and_refuses_degenerate_data() {
 
     // A good recording: the three files are written and reported as new; a second run
     // reports every constant unchanged.
-    let r = calibrate(&rec, &cfg);
-    let out = text(&r.stdout);
-    assert!(r.status.success(), "{out}\n{}", text(&r.stderr));
+    let out = ok(&calibrate(&rec, &cfg));
     assert!(
         out.contains("torque_model.b_m2") && out.contains("(new)"),
         "{out}"
@@ -120,9 +120,7 @@ fn calibrate_writes_the_torque_model_and_refuses_degenerate_data() {
         geo["joint_geometry"]["rest_length_m"].as_float(),
         Some(0.25)
     );
-    let r = calibrate(&rec, &cfg);
-    let out = text(&r.stdout);
-    assert!(r.status.success(), "{out}\n{}", text(&r.stderr));
+    let out = ok(&calibrate(&rec, &cfg));
     assert!(
         out.contains("b_m2 = ") && out.contains("(unchanged)"),
         "{out}"
@@ -138,17 +136,7 @@ fn calibrate_writes_the_torque_model_and_refuses_degenerate_data() {
         p.replace("inertia_kgm2 = 0.014", "inertia_kgm2 = 0.154"),
     )
     .unwrap();
-    let r = host_sim(&[
-        &"calibrate",
-        &"--recording",
-        &rec,
-        &"--plant",
-        &heavy,
-        &"--out-dir",
-        &cfg,
-    ]);
-    let out = text(&r.stdout);
-    assert!(r.status.success(), "{out}\n{}", text(&r.stderr));
+    let out = ok(&calibrate_with(&rec, &heavy, &cfg, &[]));
     assert!(
         out.contains("joint.inertia_kgm2: 1.4e-2 -> 1.54e-1"),
         "{out}"
@@ -184,15 +172,11 @@ fn calibrate_identifies_two_mis_set_plant_keys_before_the_firmware_constants() {
     let r = host_sim(&[&"sweep", &"torque", &"--plant", &plant(), &"--out", &sweep]);
     assert!(r.status.success(), "{}", text(&r.stderr));
     let scenario = root().join("scenarios/random.toml");
-    let r = host_sim(&[
-        &"simulate",
-        &"--plant",
+    let r = on_plant(
+        "simulate",
         &plant(),
-        &"--scenario",
-        &scenario,
-        &"--out",
-        &valves,
-    ]);
+        &[&"--scenario", &scenario, &"--out", &valves],
+    );
     assert!(r.status.success(), "{}", text(&r.stderr));
     let truth = std::fs::read_to_string(plant()).unwrap();
     let mis = truth
@@ -204,21 +188,17 @@ fn calibrate_identifies_two_mis_set_plant_keys_before_the_firmware_constants() {
     assert_ne!(mis, truth, "the reference plant file's key lines changed");
     let mis_path = dir.path().join("mis.toml");
     std::fs::write(&mis_path, &mis).unwrap();
-    let r = host_sim(&[
-        &"calibrate",
-        &"--recording",
-        &sweep,
-        &"--plant",
-        &mis_path,
-        &"--out-dir",
+    // Calibrate on the torque sweep with the mis-set plant, identifying `keys` of it on the
+    // valve recording.
+    let calibrate_identifying = |keys: &str, out_dir: &Path| {
+        let extra: [&dyn AsRef<OsStr>; 4] =
+            [&"--identify-plant", &keys, &"--plant-recording", &valves];
+        calibrate_with(&sweep, &mis_path, out_dir, &extra)
+    };
+    let out = ok(&calibrate_identifying(
+        "joint.inertia_kgm2,valve.sonic_conductance_m3_per_s_pa",
         &cfg,
-        &"--identify-plant",
-        &"joint.inertia_kgm2,valve.sonic_conductance_m3_per_s_pa",
-        &"--plant-recording",
-        &valves,
-    ]);
-    let out = text(&r.stdout);
-    assert!(r.status.success(), "{out}\n{}", text(&r.stderr));
+    ));
     println!("{out}");
     assert!(
         out.contains("joint.inertia_kgm2: 2.1e-2 -> 1.3999"),
@@ -253,19 +233,7 @@ fn calibrate_identifies_two_mis_set_plant_keys_before_the_firmware_constants() {
     // A key the plant file does not have: refused, nothing written.
     let empty = dir.path().join("empty");
     std::fs::create_dir(&empty).unwrap();
-    let r = host_sim(&[
-        &"calibrate",
-        &"--recording",
-        &sweep,
-        &"--plant",
-        &mis_path,
-        &"--out-dir",
-        &empty,
-        &"--identify-plant",
-        &"joint.no_such_key",
-        &"--plant-recording",
-        &valves,
-    ]);
+    let r = calibrate_identifying("joint.no_such_key", &empty);
     assert_eq!(r.status.code(), Some(2), "{}", text(&r.stderr));
     assert!(
         text(&r.stderr).contains("joint.no_such_key"),

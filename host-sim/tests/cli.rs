@@ -9,17 +9,11 @@ fn simulate_then_fit_a_fixture() {
     let out = dir.path().join("sim.csv");
     let plot = dir.path().join("sim.svg");
     let pulses = fixture("pulses_nominal.csv");
-    let r = host_sim(&[
-        &"simulate",
-        &"--plant",
+    let r = on_plant(
+        "simulate",
         &fixture("reference-1dof.toml"),
-        &"--inputs",
-        &pulses,
-        &"--out",
-        &out,
-        &"--plot",
-        &plot,
-    ]);
+        &[&"--inputs", &pulses, &"--out", &out, &"--plot", &plot],
+    );
     ok(&r);
     let text = std::fs::read_to_string(&out).unwrap();
     let header = text.lines().find(|l| !l.starts_with('#')).unwrap();
@@ -66,15 +60,11 @@ fn bad_input_is_reported_with_file_line_and_field_and_keeps_old_output() {
         "t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg\n0,0,0,0,0,0\n0.001,0,oops,0,0,0\n",
     )
     .unwrap();
-    let r = host_sim(&[
-        &"simulate",
-        &"--plant",
+    let r = on_plant(
+        "simulate",
         &fixture("reference-1dof.toml"),
-        &"--inputs",
-        &inputs,
-        &"--out",
-        &out,
-    ]);
+        &[&"--inputs", &inputs, &"--out", &out],
+    );
     assert_eq!(r.status.code(), Some(2));
     let err = String::from_utf8_lossy(&r.stderr);
     assert!(
@@ -100,15 +90,11 @@ fn scenario_needs_a_plant_and_a_readable_file() {
     assert!(String::from_utf8_lossy(&r.stderr).contains("--plant"));
     let dir = tempfile::tempdir().unwrap();
     let missing = dir.path().join("missing.toml");
-    let r = host_sim(&[
-        &"simulate",
-        &"--plant",
+    let r = on_plant(
+        "simulate",
         &fixture("reference-1dof.toml"),
-        &"--scenario",
-        &missing,
-        &"--out",
-        &dir.path().join("o.csv"),
-    ]);
+        &[&"--scenario", &missing, &"--out", &dir.path().join("o.csv")],
+    );
     assert_eq!(r.status.code(), Some(2));
     let err = String::from_utf8_lossy(&r.stderr);
     assert!(err.contains(&missing.display().to_string()), "{err}");

@@ -52,15 +52,16 @@ fn a_directory_is_diagnosed_in_parallel_with_one_json_each_and_a_summary() {
 
     // The batch JSON is what the single-recording command writes.
     let single = dir.path().join("single.json");
-    let r = host_sim(&[
-        &"diagnose",
-        &"--plant",
+    let r = on_plant(
+        "diagnose",
         &plant,
-        &"--recording",
-        &recs.join("nominal.csv"),
-        &"--json",
-        &single,
-    ]);
+        &[
+            &"--recording",
+            &recs.join("nominal.csv"),
+            &"--json",
+            &single,
+        ],
+    );
     ok(&r);
     assert_eq!(
         std::fs::read_to_string(out.join("nominal.json")).unwrap(),

@@ -4,6 +4,7 @@
 mod common;
 use common::*;
 use std::path::{Path, PathBuf};
+use std::process::Output;
 
 /// A `key = value` number of a TOML table (top-level scalar keys only).
 fn toml_number(path: &Path, table: &str, key: &str) -> f64 {
@@ -23,28 +24,47 @@ fn pct_of_range(stdout: &str, label: &str) -> f64 {
         .unwrap()
 }
 
+/// `host-sim sweep <kind> --plant <reference plant> --out <out> <extra>`; its stdout (success
+/// asserted).
+fn sweep(kind: &str, out: &Path, extra: &[&str]) -> String {
+    ok(&bin()
+        .args(["sweep", kind, "--plant"])
+        .arg(plant())
+        .arg("--out")
+        .arg(out)
+        .args(extra)
+        .output()
+        .unwrap())
+}
+
+/// `host-sim identify force --data <data> --out <out>`.
+fn identify_force(data: &Path, out: &Path) -> Output {
+    host_sim(&[&"identify", &"force", &"--data", &data, &"--out", &out])
+}
+
+/// `host-sim identify <kind> --recording <recording> --plant <reference plant> --out <out>
+/// <extra>`.
+fn identify(kind: &str, recording: &Path, out: &Path, extra: &[&str]) -> Output {
+    bin()
+        .args(["identify", kind, "--recording"])
+        .arg(recording)
+        .arg("--plant")
+        .arg(plant())
+        .arg("--out")
+        .arg(out)
+        .args(extra)
+        .output()
+        .unwrap()
+}
+
 #[test]
 fn sweep_force_then_identify_force_reports_both_models_and_writes_the_firmware_toml() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("F.csv");
     let out = dir.path().join("force.toml");
-    let s = ok(&host_sim(&[
-        &"sweep",
-        &"force",
-        &"--plant",
-        &plant(),
-        &"--out",
-        &data,
-    ]));
+    let s = sweep("force", &data, &[]);
     assert!(s.contains("961 samples"), "{s}");
-    let s = ok(&host_sim(&[
-        &"identify",
-        &"force",
-        &"--data",
-        &data,
-        &"--out",
-        &out,
-    ]));
+    let s = ok(&identify_force(&data, &out));
     println!("{s}");
     // Both models, with MAE, % of range, max error and where; no branch column.
     for want in [
@@ -75,16 +95,7 @@ fn identify_force_reports_the_hysteresis_gap_of_two_branches() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("F.csv");
     let out = dir.path().join("force.toml");
-    ok(&host_sim(&[
-        &"sweep",
-        &"force",
-        &"--plant",
-        &plant(),
-        &"--out",
-        &data,
-        &"--hysteresis-gap-n",
-        &"40",
-    ]));
+    sweep("force", &data, &["--hysteresis-gap-n", "40"]);
     let header = std::fs::read_to_string(&data)
         .unwrap()
         .lines()
@@ -92,14 +103,7 @@ fn identify_force_reports_the_hysteresis_gap_of_two_branches() {
         .unwrap()
         .to_string();
     assert_eq!(header, "p_kpa,stretch,f_n,state");
-    let s = ok(&host_sim(&[
-        &"identify",
-        &"force",
-        &"--data",
-        &data,
-        &"--out",
-        &out,
-    ]));
+    let s = ok(&identify_force(&data, &out));
     let line = s.lines().find(|l| l.starts_with("hysteresis:")).unwrap();
     // gap 40 N * P / Pmax, averaged over the (P, e) points with force: between 10 and 30 N.
     let mean: f64 = line
@@ -140,7 +144,7 @@ fn bad_force_data_names_file_line_and_field_and_keeps_the_old_output() {
     ];
     for (body, at, field) in cases {
         std::fs::write(&data, body).unwrap();
-        let r = host_sim(&[&"identify", &"force", &"--data", &data, &"--out", &out]);
+        let r = identify_force(&data, &out);
         assert_eq!(r.status.code(), Some(2));
         let err = text(&r.stderr);
         assert!(err.contains(at) && err.contains(field), "{body:?}: {err}");
@@ -151,7 +155,7 @@ fn bad_force_data_names_file_line_and_field_and_keeps_the_old_output() {
     }
     // Too few samples for eq. 6: an error, and still no output.
     std::fs::write(&data, "p_kpa,stretch,f_n\n100,0.9,50\n200,0.9,90\n").unwrap();
-    let r = host_sim(&[&"identify", &"force", &"--data", &data, &"--out", &out]);
+    let r = identify_force(&data, &out);
     assert_eq!(r.status.code(), Some(2));
     assert!(text(&r.stderr).contains("at least 20 samples"));
     assert_eq!(
@@ -160,22 +164,8 @@ fn bad_force_data_names_file_line_and_field_and_keeps_the_old_output() {
     );
     // An output in a missing directory fails without leaving a temporary file behind.
     let good = dir.path().join("F.csv");
-    ok(&host_sim(&[
-        &"sweep",
-        &"force",
-        &"--plant",
-        &plant(),
-        &"--out",
-        &good,
-    ]));
-    let r = host_sim(&[
-        &"identify",
-        &"force",
-        &"--data",
-        &good,
-        &"--out",
-        &dir.path().join("no/such/dir/force.toml"),
-    ]);
+    sweep("force", &good, &[]);
+    let r = identify_force(&good, &dir.path().join("no/such/dir/force.toml"));
     assert_eq!(r.status.code(), Some(2));
     assert!(text(&r.stderr).contains("no/such/dir/force.toml"));
 }
@@ -185,27 +175,14 @@ fn sweep_torque_then_identify_torque_recovers_the_plant_torque_model() {
     let dir = tempfile::tempdir().unwrap();
     let rec = dir.path().join("R.csv");
     let out = dir.path().join("torque.toml");
-    let s = ok(&host_sim(&[
-        &"sweep",
-        &"torque",
-        &"--plant",
-        &plant(),
-        &"--out",
-        &rec,
-    ]));
+    let s = sweep("torque", &rec, &[]);
     println!("{s}");
-    let s = ok(&host_sim(&[
-        &"identify",
-        &"torque",
-        &"--recording",
+    let s = ok(&identify(
+        "torque",
         &rec,
-        &"--plant",
-        &plant(),
-        &"--out",
         &out,
-        &"--max-accel-rad-s2",
-        &"2",
-    ]));
+        &["--max-accel-rad-s2", "2"],
+    ));
     println!("{s}");
     assert!(s.contains("the recorded tensions"), "{s}");
     let a = toml_number(&out, "torque_model", "a_n_per_m_rad");
@@ -236,16 +213,7 @@ fn sweep_torque_then_identify_torque_recovers_the_plant_torque_model() {
 fn identify_torque_without_tensions_uses_the_plant_force_model_and_needs_pressures() {
     let dir = tempfile::tempdir().unwrap();
     let full = dir.path().join("R.csv");
-    ok(&host_sim(&[
-        &"sweep",
-        &"torque",
-        &"--plant",
-        &plant(),
-        &"--out",
-        &full,
-        &"--speeds-rad-s",
-        &"0.5,2",
-    ]));
+    sweep("torque", &full, &["--speeds-rad-s", "0.5,2"]);
     // Drop the tension columns (the last two).
     let body: String = std::fs::read_to_string(&full)
         .unwrap()
@@ -262,16 +230,7 @@ fn identify_torque_without_tensions_uses_the_plant_force_model_and_needs_pressur
     let no_f = dir.path().join("no_f.csv");
     std::fs::write(&no_f, &body).unwrap();
     let out = dir.path().join("torque.toml");
-    let s = ok(&host_sim(&[
-        &"identify",
-        &"torque",
-        &"--recording",
-        &no_f,
-        &"--plant",
-        &plant(),
-        &"--out",
-        &out,
-    ]));
+    let s = ok(&identify("torque", &no_f, &out, &[]));
     assert!(s.contains("the plant's force model"), "{s}");
     assert!((toml_number(&out, "torque_model", "a_n_per_m_rad") / -23204.0 - 1.0).abs() < 0.03);
 
@@ -293,16 +252,7 @@ fn identify_torque_without_tensions_uses_the_plant_force_model_and_needs_pressur
     let bad = dir.path().join("no_p.csv");
     std::fs::write(&bad, no_p).unwrap();
     std::fs::write(&out, "previous good output\n").unwrap();
-    let r = host_sim(&[
-        &"identify",
-        &"torque",
-        &"--recording",
-        &bad,
-        &"--plant",
-        &plant(),
-        &"--out",
-        &out,
-    ]);
+    let r = identify("torque", &bad, &out, &[]);
     assert_eq!(r.status.code(), Some(2));
     let err = text(&r.stderr);
     assert!(
@@ -341,28 +291,21 @@ fn identify_plant_recovers_perturbed_parameters_from_a_simulated_recording() {
         ],
     );
     let rec = dir.path().join("rec.csv");
-    ok(&host_sim(&[
-        &"simulate",
-        &"--plant",
+    ok(&on_plant(
+        "simulate",
         &truth,
-        &"--inputs",
-        &fixture("pulses_nominal.csv"),
-        &"--out",
-        &rec,
-    ]));
+        &[&"--inputs", &fixture("pulses_nominal.csv"), &"--out", &rec],
+    ));
     let out = dir.path().join("P2.toml");
-    let s = ok(&host_sim(&[
-        &"identify",
-        &"plant",
-        &"--recording",
+    let s = ok(&identify(
+        "plant",
         &rec,
-        &"--plant",
-        &plant(),
-        &"--params",
-        &"muscle.damping_m2s,valve.sonic_conductance_m3_per_s_pa",
-        &"--out",
         &out,
-    ]));
+        &[
+            "--params",
+            "muscle.damping_m2s,valve.sonic_conductance_m3_per_s_pa",
+        ],
+    ));
     println!("{s}");
     assert!(s.contains("held-out tail"), "{s}");
     // A complete plant file: loads, keeps the other values and the comments.
@@ -392,18 +335,7 @@ fn identify_plant_rejects_unknown_keys_and_bad_bounds_without_writing() {
         ("muscle.damping_m2s=1:2", "inside the bounds"),
         ("joint", "not a number"),
     ] {
-        let r = host_sim(&[
-            &"identify",
-            &"plant",
-            &"--recording",
-            &pulses,
-            &"--plant",
-            &plant(),
-            &"--params",
-            &params,
-            &"--out",
-            &out,
-        ]);
+        let r = identify("plant", &pulses, &out, &["--params", params]);
         assert_eq!(r.status.code(), Some(2));
         let err = text(&r.stderr);
         assert!(err.contains(want), "{params}: {err}");
@@ -417,16 +349,12 @@ fn identify_torque_warns_when_the_activation_is_not_symmetric() {
     // which eq. 11 assumes; the command still fits but says so.
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("torque.toml");
-    let s = ok(&host_sim(&[
-        &"identify",
-        &"torque",
-        &"--recording",
+    let s = ok(&identify(
+        "torque",
         &fixture("pulses_nominal.csv"),
-        &"--plant",
-        &plant(),
-        &"--out",
         &out,
-    ]));
+        &[],
+    ));
     assert!(s.contains("warning: (p1 + p2) / 2 spreads"), "{s}");
     assert!(out.exists());
 }
@@ -438,18 +366,15 @@ fn identify_plant_finds_the_load_inertia_in_the_independent_loaded_fixture() {
     // nominal plant, the fit must find the load and leave damping and conductance alone.
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("P2.toml");
-    let s = ok(&host_sim(&[
-        &"identify",
-        &"plant",
-        &"--recording",
+    let s = ok(&identify(
+        "plant",
         &fixture("pulses_loaded.csv"),
-        &"--plant",
-        &plant(),
-        &"--params",
-        &"joint.inertia_kgm2,muscle.damping_m2s,valve.sonic_conductance_m3_per_s_pa",
-        &"--out",
         &out,
-    ]));
+        &[
+            "--params",
+            "joint.inertia_kgm2,muscle.damping_m2s,valve.sonic_conductance_m3_per_s_pa",
+        ],
+    ));
     println!("{s}");
     let cfg = host_sim::PlantConfig::load(&out).unwrap();
     assert!(

@@ -31,10 +31,12 @@ fn run_scenario(name: &str) -> host_sim::control::closed_loop::ClosedLoopRun {
     r
 }
 
-fn assert_expectations(name: &str) {
+/// [`run_scenario`], asserting that the run meets the scenario's `[expect]` bounds.
+fn assert_expectations(name: &str) -> host_sim::control::closed_loop::ClosedLoopRun {
     let r = run_scenario(name);
     let fails = r.check();
     assert!(fails.is_empty(), "{name}: {fails:?}");
+    r
 }
 
 #[test]
@@ -64,8 +66,7 @@ fn load_inertia_change_stays_stable() {
 
 #[test]
 fn nan_pressure_latches_fault_and_holds_in_the_same_tick() {
-    let r = run_scenario("sensor_nan");
-    assert!(r.check().is_empty(), "{:?}", r.check());
+    let r = assert_expectations("sensor_nan");
     let k = r.first_latched_fault_tick.unwrap();
     // Safe state (Hold) in that very tick: every valve closed from then on.
     for row in &r.rows[k..] {
@@ -82,14 +83,12 @@ fn nan_pressure_latches_fault_and_holds_in_the_same_tick() {
 
 #[test]
 fn encoder_dropout_is_detected_as_stale() {
-    let r = run_scenario("sensor_dropout");
-    assert!(r.check().is_empty(), "{:?}", r.check());
+    assert_expectations("sensor_dropout");
 }
 
 #[test]
 fn stuck_inflate_valve_is_seen_by_the_pressure_residual() {
-    let r = run_scenario("stuck_valve");
-    assert!(r.check().is_empty(), "{:?}", r.check());
+    let r = assert_expectations("stuck_valve");
     // The inflate valve of muscle 1 sticks open at 2.0 s: its pressure climbs with the inlet
     // commanded closed. The pressure residual must latch InletStuckOpen1 within 40 ms of the
     // failure, and not before it.
@@ -118,8 +117,7 @@ fn valve_and_supply_fault_scenarios_are_detected_and_stay_safe() {
         ("stuck_exhaust_closed", &[ExhaustStuckClosed2][..]),
         ("supply_loss", &[SupplyLost][..]),
     ] {
-        let r = run_scenario(name);
-        assert!(r.check().is_empty(), "{name}: {:?}", r.check());
+        let r = assert_expectations(name);
         let l = r.first_latched_fault_tick.unwrap();
         let cause = r.rows[l].out.fault.unwrap();
         assert!(causes.contains(&cause), "{name}: cause {cause:?}");
@@ -129,8 +127,7 @@ fn valve_and_supply_fault_scenarios_are_detected_and_stay_safe() {
 
 #[test]
 fn supply_loss_never_commands_above_limit() {
-    let r = run_scenario("supply_loss");
-    assert!(r.check().is_empty(), "{:?}", r.check());
+    assert_expectations("supply_loss");
 }
 
 /// `transition_s` turns a step into a minimum-jerk move: the set-point starts at the old
@@ -198,12 +195,17 @@ fn transition_s_makes_set_point_changes_minimum_jerk_moves() {
 
 #[test]
 fn transition_longer_than_the_hold_is_rejected_with_file_line_and_key() {
-    let text = std::fs::read_to_string(root().join("scenarios/suite/random_move.toml"))
-        .unwrap()
-        .replace("transition_s = 0.15", "transition_s = 1.5");
-    let e = Scenario::from_toml_str(&text, "random_move.toml")
-        .unwrap_err()
-        .to_string();
+    // A suite scenario with its transition_s replaced by `to`: (its text, the load error).
+    let edited = |file: &str, to: &str| {
+        let text = std::fs::read_to_string(root().join("scenarios/suite").join(file))
+            .unwrap()
+            .replace("transition_s = 0.15", to);
+        let e = Scenario::from_toml_str(&text, file)
+            .unwrap_err()
+            .to_string();
+        (text, e)
+    };
+    let (text, e) = edited("random_move.toml", "transition_s = 1.5");
     let line = text
         .lines()
         .position(|l| l.starts_with("transition_s"))
@@ -212,12 +214,7 @@ fn transition_longer_than_the_hold_is_rejected_with_file_line_and_key() {
     assert!(e.contains("random_move.toml"), "{e}");
     assert!(e.contains("transition_s"), "{e}");
     assert!(e.contains(&format!("line {line}")), "{e}");
-    let neg = std::fs::read_to_string(root().join("scenarios/suite/step_move.toml"))
-        .unwrap()
-        .replace("transition_s = 0.15", "transition_s = -0.1");
-    let e = Scenario::from_toml_str(&neg, "step_move.toml")
-        .unwrap_err()
-        .to_string();
+    let (_, e) = edited("step_move.toml", "transition_s = -0.1");
     assert!(e.contains("transition_s") && e.contains(">= 0"), "{e}");
 }
 

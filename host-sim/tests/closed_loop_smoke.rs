@@ -8,23 +8,23 @@
 //! Run with `cargo test -p host-sim --test closed_loop_smoke -- --nocapture` to see the
 //! measured step-response figures.
 
-use core::f64::consts::PI;
-use std::path::PathBuf;
+mod common;
+use common::{tight_integrator, unwired_valves};
 
-use host_sim::sim::{Integrator, SolverOptions};
+use core::f64::consts::PI;
+
 use host_sim::{Plant, PlantConfig, ValveInputs};
-use pam_firmware::lockstep::UnwiredPin;
 use pam_firmware::log::{TickLog, TickRecord};
 use pam_firmware::safety::SafeState;
 use pam_firmware::sensors::{counts_to_rad, PressureScaling};
 use pam_firmware::tick::{
     ControlTick, ControllerConfig, FaultCode, SensorFrame, Setpoint, TickOutput, ValveCommand,
 };
-use pam_firmware::valves::{OnOffPwmConfig, OnOffValves, ValveOpenings};
+use pam_firmware::valves::{OnOffPwmConfig, ValveOpenings};
 
 /// The reference plant with joint inertia `inertia_kgm2`.
 fn plant(inertia_kgm2: f64) -> Plant {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/reference-1dof.toml");
+    let path = common::plant();
     let mut cfg = PlantConfig::load(path).unwrap();
     cfg.joint.inertia_kgm2 = inertia_kgm2;
     Plant::from_config(&cfg)
@@ -84,20 +84,9 @@ fn simulate(
     mut inject: impl FnMut(usize, &mut SensorFrame),
 ) -> Run {
     let plant = plant(inertia_kgm2);
-    let opts = SolverOptions {
-        rtol: 1e-6,
-        atol: 1e-6,
-        ..SolverOptions::default()
-    };
-    let mut integ = Integrator::new(&plant, plant.initial_state(), opts);
+    let mut integ = tight_integrator(&plant);
     let mut tick = ControlTick::new(cfg);
-    let mut valves = OnOffValves::new(
-        UnwiredPin,
-        UnwiredPin,
-        UnwiredPin,
-        UnwiredPin,
-        OnOffPwmConfig::REFERENCE,
-    );
+    let mut valves = unwired_valves();
     let n = (seconds / DT).round() as usize;
     let mut run = Run {
         t: Vec::with_capacity(n),

@@ -27,7 +27,7 @@ fn mse(stdout: &str, controller: &str, set: &str) -> f64 {
 
 #[test]
 fn compare_control_prints_the_tables_and_exits_by_its_verdict() {
-    let r = host_sim(&[&"compare-control", &"--plant", &plant(), &"--quick"]);
+    let r = on_plant("compare-control", &plant(), &[&"--quick"]);
     let out = text(&r.stdout);
     let code = r.status.code();
     assert!(
@@ -83,38 +83,27 @@ fn compare_control_prints_the_tables_and_exits_by_its_verdict() {
 
 #[test]
 fn compare_control_refuses_bad_arguments_with_status_2() {
-    let e = run_exits(
+    let e = exits(
         2,
-        &[
-            &"compare-control",
-            &"--plant",
+        &on_plant(
+            "compare-control",
             &plant(),
-            &"--quick",
-            &"--ff-gain",
-            &"5",
-        ],
+            &[&"--quick", &"--ff-gain", &"5"],
+        ),
     );
     assert!(e.contains("--ff-gain 5") && e.contains("0..=2"), "{e}");
-    let e = run_exits(
+    let e = exits(
         2,
-        &[
-            &"compare-control",
-            &"--plant",
+        &on_plant(
+            "compare-control",
             &plant(),
-            &"--quick",
-            &"--ff-cutoff-hz",
-            &"0",
-        ],
+            &[&"--quick", &"--ff-cutoff-hz", &"0"],
+        ),
     );
     assert!(e.contains("--ff-cutoff-hz"), "{e}");
-    let e = run_exits(
+    let e = exits(
         2,
-        &[
-            &"compare-control",
-            &"--plant",
-            &"/nonexistent/p.toml",
-            &"--quick",
-        ],
+        &on_plant("compare-control", &"/nonexistent/p.toml", &[&"--quick"]),
     );
     assert!(e.contains("/nonexistent/p.toml"), "{e}");
 }

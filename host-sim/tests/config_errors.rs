@@ -7,6 +7,11 @@ use common::*;
 use host_sim::plant::PlantState;
 use host_sim::{Plant, PlantConfig, ValveInputs};
 
+/// The reference plant file's text with `extra` (TOML) appended.
+fn with_nominal(extra: &str) -> String {
+    format!("{}\n{extra}", nominal_text())
+}
+
 fn load_err(text: &str) -> String {
     match PlantConfig::from_toml_str(text, "custom-plant.toml") {
         Ok(_) => panic!("expected an error for:\n{text}"),
@@ -35,10 +40,7 @@ fn unknown_key_names_key_and_file() {
 
 #[test]
 fn unknown_table_names_key_and_file() {
-    let text = format!(
-        "{}\n[effects.braid_hysteresis]\nwidth_n = 5.0\n",
-        nominal_text()
-    );
+    let text = with_nominal("[effects.braid_hysteresis]\nwidth_n = 5.0\n");
     let e = load_err(&text);
     assert!(e.contains("braid_hysteresis"), "{e}");
     assert!(e.contains("custom-plant.toml"), "{e}");
@@ -95,8 +97,7 @@ fn effects_tables_switch_on_friction_and_sensor_calibration() {
     let cfg =
         PlantConfig::from_toml_str(&text, "with-effects.toml").unwrap_or_else(|e| panic!("{e}"));
     let plant = Plant::from_config(&cfg);
-    let nominal =
-        Plant::from_config(&PlantConfig::from_toml_str(&nominal_text(), "n.toml").unwrap());
+    let nominal = plant_with("");
 
     // Friction decelerates a joint moving at equal pressures.
     let mut x = plant.initial_state();
@@ -140,8 +141,7 @@ fn leakage_and_gravity_act_on_the_right_hand_side() {
     );
     x.angle_rad = 0.5;
     x.p1_abs_pa = x.p2_abs_pa; // same pressures; remove the spring torque difference
-    let nominal =
-        Plant::from_config(&PlantConfig::from_toml_str(&nominal_text(), "n.toml").unwrap());
+    let nominal = plant_with("");
     let dg = plant.derivatives(&x, &ValveInputs::CLOSED).velocity_rad_s
         - nominal.derivatives(&x, &ValveInputs::CLOSED).velocity_rad_s;
     let expected = -9.80665 * 0.1 * 0.5f64.sin() / 0.014;
@@ -150,10 +150,9 @@ fn leakage_and_gravity_act_on_the_right_hand_side() {
 
 #[test]
 fn polytropic_exponent_scales_the_pressure_rate() {
-    let text = format!("{}\n[effects.polytropic]\nexponent = 1.4\n", nominal_text());
+    let text = with_nominal("[effects.polytropic]\nexponent = 1.4\n");
     let plant = Plant::from_config(&PlantConfig::from_toml_str(&text, "p.toml").unwrap());
-    let nominal =
-        Plant::from_config(&PlantConfig::from_toml_str(&nominal_text(), "n.toml").unwrap());
+    let nominal = plant_with("");
     let u = ValveInputs {
         u_in1: 1.0,
         u_ex2: 0.5,
@@ -176,13 +175,9 @@ fn polytropic_exponent_scales_the_pressure_rate() {
 #[test]
 fn valve_dead_time_delays_the_inputs_by_whole_and_fractional_samples() {
     use host_sim::sim::{simulate, SolverOptions};
-    let text = format!(
-        "{}\n[effects.valve_dead_time]\ndelay_s = 0.003\n",
-        nominal_text()
-    );
+    let text = with_nominal("[effects.valve_dead_time]\ndelay_s = 0.003\n");
     let delayed = Plant::from_config(&PlantConfig::from_toml_str(&text, "d.toml").unwrap());
-    let nominal =
-        Plant::from_config(&PlantConfig::from_toml_str(&nominal_text(), "n.toml").unwrap());
+    let nominal = plant_with("");
     let dt = 0.001;
     let mut u = vec![ValveInputs::CLOSED; 40];
     for v in &mut u[5..25] {
@@ -220,10 +215,7 @@ fn valve_dead_time_delays_the_inputs_by_whole_and_fractional_samples() {
 #[test]
 fn sensor_lag_filters_the_sampled_channels() {
     use host_sim::plant::PlantState;
-    let text = format!(
-        "{}\n[effects.sensor_lag]\nangle_time_constant_s = 0.01\n",
-        nominal_text()
-    );
+    let text = with_nominal("[effects.sensor_lag]\nangle_time_constant_s = 0.01\n");
     let plant = Plant::from_config(&PlantConfig::from_toml_str(&text, "l.toml").unwrap());
     let x0 = plant.initial_state();
     let mut x1 = x0;

@@ -86,15 +86,7 @@ fn check(file: &PathBuf, opts: &SolverOptions, with_options: bool) -> Vec<(Chann
     };
     let sim = simulate(&plant, &reference.inputs, reference.sample_period_s(), opts)
         .unwrap_or_else(|e| panic!("{}: {e}", file.display()));
-    let mut model = Recording {
-        t_s: reference.t_s.clone(),
-        inputs: reference.inputs.clone(),
-        ..Default::default()
-    };
-    let meas = plant.measure_series(&sim.states, reference.sample_period_s());
-    for c in Channel::ALL {
-        model.set_channel(c, meas.iter().map(|m| c.of(m)).collect());
-    }
+    let model = host_sim::sim::replay_recording(&plant, &reference, &sim.states, Vec::new());
     let fits = compare(&reference, &model).unwrap();
     println!(
         "{} (plant {plant_name}, {} samples, {:?}):\n{}",

@@ -55,10 +55,15 @@ fn recordings(
 
 fn run(truths: &[&str], seed: u64, dt_s: f64, channels: [bool; 5]) -> Diagnosis {
     let (train, check) = recordings(truths, seed, dt_s, channels);
+    diagnose_checked(&nominal(), &train, &check)
+}
+
+/// The diagnosis of `train` against `cfg`, checked on `check`, default options.
+fn diagnose_checked(cfg: &PlantConfig, train: &Recording, check: &Recording) -> Diagnosis {
     diagnose(
-        &nominal(),
-        &train,
-        Some(&check),
+        cfg,
+        train,
+        Some(check),
         &DiagnoseOptions::default(),
         &|_, _, _| {},
     )
@@ -159,19 +164,20 @@ fn cli_end_to_end_writes_json_and_report() {
     check.write(&cp).unwrap();
     let out = dir.path().join("out.json");
     let rep = dir.path().join("report");
-    let stdout = run_ok(&[
-        &"diagnose",
-        &"--plant",
+    let stdout = ok(&on_plant(
+        "diagnose",
         &plant(),
-        &"--recording",
-        &tp,
-        &"--check",
-        &cp,
-        &"--json",
-        &out,
-        &"--report",
-        &rep,
-    ]);
+        &[
+            &"--recording",
+            &tp,
+            &"--check",
+            &cp,
+            &"--json",
+            &out,
+            &"--report",
+            &rep,
+        ],
+    ));
     assert!(stdout.contains("The model leaves out leakage"), "{stdout}");
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
@@ -196,57 +202,44 @@ fn bad_inputs_give_clear_errors() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("o.json");
     let diagnose_fails = |plant: &Path, recording: &Path| {
-        run_exits(
+        exits(
             2,
-            &[
-                &"diagnose",
-                &"--plant",
+            &on_plant(
+                "diagnose",
                 &plant,
-                &"--recording",
-                &recording,
-                &"--json",
-                &out,
-            ],
+                &[&"--recording", &recording, &"--json", &out],
+            ),
         )
     };
+    let write = |name: &str, text: &str| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    };
     // A recording with a non-number on line 4 (2 comment lines, header, then data).
-    let bad = dir.path().join("bad.csv");
-    std::fs::write(
-        &bad,
+    let bad = write(
+        "bad.csv",
         "# sample_period_s = 0.001\n# x = y\nt_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg\n0,0,0,0,0,zero\n0.001,0,0,0,0,0\n",
-    )
-    .unwrap();
-    let err = diagnose_fails(&plant(), &bad);
-    assert!(
-        err.contains("bad.csv:4") && err.contains("angle_deg"),
-        "{err}"
     );
-    assert!(!out.exists());
     // A plant file with a misspelt key.
-    let misspelt = dir.path().join("p.toml");
-    std::fs::write(
-        &misspelt,
-        nominal_text().replace("inertia_kgm2", "inertia_kg"),
-    )
-    .unwrap();
-    let err = diagnose_fails(&misspelt, &bad);
-    assert!(
-        err.contains("p.toml") && err.contains("inertia_kg"),
-        "{err}"
+    let misspelt = write(
+        "p.toml",
+        &nominal_text().replace("inertia_kgm2", "inertia_kg"),
     );
     // Too short a recording.
-    let short = dir.path().join("short.csv");
-    std::fs::write(
-        &short,
+    let short = write(
+        "short.csv",
         "t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg\n0,0,0,0,0,0\n0.001,0,0,0,0,0\n0.002,0,0,0,0,0\n",
-    )
-    .unwrap();
-    let err = diagnose_fails(&plant(), &short);
-    assert!(
-        err.contains("short.csv") && err.contains("at least"),
-        "{err}"
     );
-    assert!(!out.exists());
+    for (plant, recording, wants) in [
+        (plant(), &bad, ["bad.csv:4", "angle_deg"]),
+        (misspelt, &bad, ["p.toml", "inertia_kg"]),
+        (plant(), &short, ["short.csv", "at least"]),
+    ] {
+        let err = diagnose_fails(&plant, recording);
+        assert!(wants.iter().all(|w| err.contains(w)), "{err}");
+        assert!(!out.exists());
+    }
 }
 
 /// The diagnosis of `rec` against the nominal file, default options, no check recording.
@@ -350,14 +343,7 @@ fn noise_free_nominal_data_says_nothing_is_missing() {
     };
     let train = mk(Excitation::Pulses, 41);
     let check = mk(Excitation::ChirpSteps, 42);
-    let d = diagnose(
-        &cfg,
-        &train,
-        Some(&check),
-        &DiagnoseOptions::default(),
-        &|_, _, _| {},
-    )
-    .unwrap();
+    let d = diagnose_checked(&cfg, &train, &check);
     assert_eq!(d.verdict, Verdict::NothingMissing, "{}", d.answer());
     assert!(
         d.answer().starts_with("Nothing is missing"),
@@ -387,15 +373,11 @@ fn pure_noise_names_nothing_and_exits_3_with_the_json_written() {
     let tp = dir.path().join("noise.csv");
     train.write(&tp).unwrap();
     let out = dir.path().join("out.json");
-    let o = host_sim(&[
-        &"diagnose",
-        &"--plant",
+    let o = on_plant(
+        "diagnose",
         &plant(),
-        &"--recording",
-        &tp,
-        &"--json",
-        &out,
-    ]);
+        &[&"--recording", &tp, &"--json", &out],
+    );
     exits(3, &o);
     let stdout = text(&o.stdout);
     let v: serde_json::Value =
@@ -431,14 +413,7 @@ fn a_recording_longer_than_the_fit_budget_is_fitted_on_its_head_with_the_same_an
     // and the final replay all of it. The answer and the parameter stay those of the full
     // fits (within the solver tolerance's effect on a refit).
     let (train, check) = recordings(&["leakage"], 77, 1e-3, [true; 5]);
-    let full = diagnose(
-        &nominal(),
-        &train,
-        Some(&check),
-        &DiagnoseOptions::default(),
-        &|_, _, _| {},
-    )
-    .unwrap();
+    let full = diagnose_checked(&nominal(), &train, &check);
     let budget = DiagnoseOptions {
         fit_budget_s: 2.0,
         ..DiagnoseOptions::default()
@@ -494,14 +469,7 @@ fn with_crosstalk(mut rec: Recording) -> Recording {
 fn an_effect_outside_the_catalogue_gets_an_unnamed_black_box_correction() {
     let (train, check) = recordings(&[], 41, 1e-3, [true; 5]);
     let (train, check) = (with_crosstalk(train), with_crosstalk(check));
-    let d = diagnose(
-        &nominal(),
-        &train,
-        Some(&check),
-        &DiagnoseOptions::default(),
-        &|_, _, _| {},
-    )
-    .unwrap();
+    let d = diagnose_checked(&nominal(), &train, &check);
     assert_eq!(d.verdict, Verdict::Unexplained, "{}", d.answer());
     assert!(d.effects.is_empty() && d.recalibrated.is_empty());
     let b = d.black_box.as_ref().expect("a black-box fallback");

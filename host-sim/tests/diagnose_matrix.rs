@@ -40,14 +40,23 @@ struct Outcome {
     line: String,
 }
 
-fn run_case(
-    text: &str,
-    nominal: &PlantConfig,
-    truths: &[&str],
-    seed: u64,
-    dt_s: f64,
-    channels: [bool; 5],
-) -> Outcome {
+/// The reference plant: its file's text (the truths are appended to it) and its nominal
+/// configuration.
+struct Reference {
+    text: String,
+    nominal: PlantConfig,
+}
+
+fn reference() -> Reference {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/reference-1dof.toml");
+    Reference {
+        text: std::fs::read_to_string(&path).unwrap(),
+        nominal: PlantConfig::load(&path).unwrap(),
+    }
+}
+
+fn run_case(r: &Reference, truths: &[&str], seed: u64, dt_s: f64, channels: [bool; 5]) -> Outcome {
+    let (text, nominal) = (r.text.as_str(), &r.nominal);
     let cfg = plant_with(text, truths, dt_s).unwrap();
     let label = if truths.is_empty() {
         "none".to_string()
@@ -162,9 +171,7 @@ fn run_case(
 #[test]
 #[ignore = "release build, a few minutes: see README"]
 fn diagnosis_matrix() {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/reference-1dof.toml");
-    let text = std::fs::read_to_string(&path).unwrap();
-    let nominal = PlantConfig::load(&path).unwrap();
+    let r = reference();
     let cases = cases();
     let mut rates = Vec::new();
     for (name, seeds) in [
@@ -176,19 +183,9 @@ fn diagnosis_matrix() {
         for &seed in seeds {
             for (i, truths) in cases.iter().enumerate() {
                 let dt = [1e-3, 2e-3, 3e-3][(i + seed as usize) % 3];
-                let o = run_case(
-                    &text,
-                    &nominal,
-                    truths,
-                    seed * 1000 + i as u64,
-                    dt,
-                    [true; 5],
-                );
+                let o = run_case(&r, truths, seed * 1000 + i as u64, dt, [true; 5]);
                 println!("{}", o.line);
-                total += 1;
-                if o.pass {
-                    pass += 1;
-                }
+                (pass, total) = (pass + o.pass as usize, total + 1);
             }
         }
         println!("{name}: {pass}/{total} cases pass");
@@ -207,9 +204,7 @@ fn diagnosis_matrix() {
 #[test]
 #[ignore = "release build, a few minutes: see README"]
 fn diagnosis_matrix_without_force_channels() {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/reference-1dof.toml");
-    let text = std::fs::read_to_string(&path).unwrap();
-    let nominal = PlantConfig::load(&path).unwrap();
+    let r = reference();
     let (mut pass, mut total) = (0, 0);
     println!("\nno force channels, seeds 7003, 7004, 7005, 7006, 7007\n| concealed | seed | dt ms | named | check min fit before % | check min fit after % | s | result |\n|---|---|---|---|---|---|---|---|");
     // 7006 and 7007 were added with the swap pass of the selection and first run after it
@@ -218,19 +213,9 @@ fn diagnosis_matrix_without_force_channels() {
         for (i, truths) in cases().iter().enumerate() {
             let dt = [1e-3, 2e-3, 3e-3][(i + seed as usize - 7003) % 3];
             let channels = [true, true, true, false, false];
-            let o = run_case(
-                &text,
-                &nominal,
-                truths,
-                seed * 1000 + i as u64,
-                dt,
-                channels,
-            );
+            let o = run_case(&r, truths, seed * 1000 + i as u64, dt, channels);
             println!("{}", o.line);
-            total += 1;
-            if o.pass {
-                pass += 1;
-            }
+            (pass, total) = (pass + o.pass as usize, total + 1);
         }
     }
     println!("no force channels: {pass}/{total} cases pass");

@@ -10,21 +10,20 @@
 //! to +-0.02 rad within 0.3 s, overshoot below 0.02 rad, residual below 5 mrad.
 //! `cargo test -p host-sim --test fixed_tick_closed_loop -- --nocapture` prints the figures.
 
-use core::f64::consts::PI;
-use std::path::PathBuf;
+mod common;
+use common::{tight_integrator, unwired_valves};
 
-use host_sim::sim::{Integrator, SolverOptions};
+use core::f64::consts::PI;
+
 use host_sim::{Plant, PlantConfig, ValveInputs};
 use pam_firmware::fixed_point::tick::{mrad_to_q16, reference_from_params, FixedFrame, FixedTick};
-use pam_firmware::lockstep::UnwiredPin;
 use pam_firmware::tick::ValveCommand;
-use pam_firmware::valves::{OnOffPwmConfig, OnOffValves};
 use pam_firmware::wiring;
 
 const DT: f64 = 1e-3;
 
 fn plant() -> Plant {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/reference-1dof.toml");
+    let path = common::plant();
     Plant::from_config(&PlantConfig::load(path).unwrap())
 }
 
@@ -47,20 +46,9 @@ fn frame(plant: &Plant, x: &host_sim::PlantState) -> FixedFrame {
 /// Step 0 -> `target_mrad` at 0.1 s, `seconds` long: (time, angle) samples and the faults.
 fn step(target_mrad: i32, seconds: f64) -> (Vec<f64>, Vec<f64>, u8, usize) {
     let plant = plant();
-    let opts = SolverOptions {
-        rtol: 1e-6,
-        atol: 1e-6,
-        ..SolverOptions::default()
-    };
-    let mut integ = Integrator::new(&plant, plant.initial_state(), opts);
+    let mut integ = tight_integrator(&plant);
     let mut tick = FixedTick::new(reference_from_params(1000.0));
-    let mut valves = OnOffValves::new(
-        UnwiredPin,
-        UnwiredPin,
-        UnwiredPin,
-        UnwiredPin,
-        OnOffPwmConfig::REFERENCE,
-    );
+    let mut valves = unwired_valves();
     let (mut t, mut beta, mut armed) = (Vec::new(), Vec::new(), 0);
     for k in 0..(seconds / DT).round() as usize {
         let tk = k as f64 * DT;

@@ -135,16 +135,7 @@ fn checked_in_torque_model_is_what_identify_gives_from_the_generated_sweep() {
 fn firmware_force_law_reproduces_the_tondu_surface_within_the_paper_error() {
     let truth = tondu_of(&PlantConfig::load(plant()).unwrap());
     // Noise-free surface on a 61 x 61 grid over the identification domain.
-    let grid = force::sweep(
-        &truth,
-        &ForceSweep {
-            n_stretch: 61,
-            n_pressure: 61,
-            force_noise_n: 0.0,
-            pressure_noise_pa: 0.0,
-            ..ForceSweep::default()
-        },
-    );
+    let grid = force::sweep(&truth, &ForceSweep::noise_free_grid(61));
     let c = FORCE_LAW.c.map(|x| x as f64);
     let eq6_f64 = force::Eq6 { c };
     let f64_stats = force::error_stats(&grid, |p, e| eq6_f64.force_n(p, e));

@@ -105,15 +105,16 @@ fn the_hybrid_volume_lowers_the_mass_flow_error_on_a_recording_it_was_not_traine
 /// A closed-loop recording with the mass-flow columns, written by `simulate --scenario`.
 fn recording(dir: &std::path::Path) -> std::path::PathBuf {
     let rec = dir.join("training.csv");
-    run_ok(&[
-        &"simulate",
-        &"--plant",
+    ok(&on_plant(
+        "simulate",
         &plant(),
-        &"--scenario",
-        &root().join("scenarios/volume_training.toml"),
-        &"--out",
-        &rec,
-    ]);
+        &[
+            &"--scenario",
+            &root().join("scenarios/volume_training.toml"),
+            &"--out",
+            &rec,
+        ],
+    ));
     rec
 }
 

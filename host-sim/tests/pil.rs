@@ -77,34 +77,27 @@ fn pil_matches_the_in_process_loop_bit_for_bit_and_capture_replays() {
     let out = dir.path().join("pil.csv");
     let log = dir.path().join("pil.stream");
     let t0 = std::time::Instant::now();
-    let r = host_sim(&[
-        &"pil",
-        &"--plant",
+    let r = on_plant(
+        "pil",
         &plant(),
-        &"--scenario",
-        &s,
-        &"--out",
-        &out,
-        &"--log",
-        &log,
-        &"--elf",
-        &elf,
-    ]);
+        &[
+            &"--scenario",
+            &s,
+            &"--out",
+            &out,
+            &"--log",
+            &log,
+            &"--elf",
+            &elf,
+        ],
+    );
     let stdout = ok(&r);
     assert!(stdout.contains("bit for bit on all 1500 ticks"), "{stdout}");
     eprintln!("pil: 1500 ticks in {:.2} s", t0.elapsed().as_secs_f64());
 
     // The recording equals `simulate --scenario`'s on the valve columns and the angle.
     let sim = dir.path().join("sim.csv");
-    let r = host_sim(&[
-        &"simulate",
-        &"--plant",
-        &plant(),
-        &"--scenario",
-        &s,
-        &"--out",
-        &sim,
-    ]);
+    let r = on_plant("simulate", &plant(), &[&"--scenario", &s, &"--out", &sim]);
     ok(&r);
     let (a, b) = (
         Recording::read(&out).unwrap(),
@@ -138,15 +131,7 @@ fn pil_matches_the_in_process_loop_bit_for_bit_and_capture_replays() {
         );
     }
     let rep = dir.path().join("rep.csv");
-    let r = host_sim(&[
-        &"simulate",
-        &"--plant",
-        &plant(),
-        &"--inputs",
-        &cap,
-        &"--out",
-        &rep,
-    ]);
+    let r = on_plant("simulate", &plant(), &[&"--inputs", &cap, &"--out", &rep]);
     ok(&r);
     // Replaying the captured openings open loop reproduces the closed-loop angle.
     let rr = Recording::read(&rep).unwrap();

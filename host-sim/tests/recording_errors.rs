@@ -56,47 +56,26 @@ fn blanks_around_names_and_numbers_are_ignored() {
     assert_eq!(a.channel(Channel::AngleDeg), b.channel(Channel::AngleDeg));
 }
 
+/// Each bad recording (`GOOD` with one text replaced) is refused with an error naming the
+/// file, the line and the field.
 #[test]
-fn missing_required_column_names_the_header_line_and_column() {
-    let e = err(&GOOD.replace("u_in2", "u_inX"));
-    assert_names(&e, 4, "u_in2");
-}
-
-#[test]
-fn no_output_column_is_an_error() {
-    let e = err(&GOOD.replace("angle_deg", "angle_rad_not_a_channel"));
-    assert_names(&e, 4, "angle_deg");
-}
-
-#[test]
-fn unparsable_number_names_line_and_field() {
-    let e = err(&GOOD.replace("0.6,0.25", "0.6,0.2x5"));
-    assert_names(&e, 6, "u_ex2");
-}
-
-#[test]
-fn nan_names_line_and_field() {
-    let e = err(&GOOD.replace("0.7,0,0.002", "NaN,0,0.002"));
-    assert_names(&e, 7, "angle_deg");
-}
-
-#[test]
-fn non_uniform_time_names_line_and_field() {
-    let text = format!("{GOOD}0.8,0,0.0045,0,0,0,w\n0.9,0,0.005,0,0,0,w\n");
-    let e = err(&text);
-    assert_names(&e, 8, "t_s");
-}
-
-#[test]
-fn opening_outside_0_1_names_line_and_field() {
-    let e = err(&GOOD.replace("0.5,0,0.000,0,1,0", "0.5,0,0.000,0,1.5,0"));
-    assert_names(&e, 5, "u_in1");
-}
-
-#[test]
-fn sample_period_metadata_must_match_the_time_column() {
-    let e = err(&GOOD.replace("sample_period_s = 0.001", "sample_period_s = 0.01"));
-    assert_names(&e, 2, "sample_period_s");
+fn bad_recordings_name_the_file_line_and_field() {
+    // (what, replaced, by, line, field)
+    let extra_rows = "z\n0.8,0,0.0045,0,0,0,w\n0.9,0,0.005,0,0,0,w\n";
+    let cases = [
+        ("required column", "u_in2", "u_inX", 4, "u_in2"),
+        ("no output", "angle_deg", "angle_x", 4, "angle_deg"),
+        ("not a number", "0.6,0.25", "0.6,0.2x5", 6, "u_ex2"),
+        ("NaN", "0.7,0,0.002", "NaN,0,0.002", 7, "angle_deg"),
+        ("non-uniform time", "z\n", extra_rows, 8, "t_s"),
+        ("opening above 1", "0,1,0,x", "0,1.5,0,x", 5, "u_in1"),
+        ("period", "= 0.001", "= 0.01", 2, "sample_period_s"),
+    ];
+    for (what, from, to, line, field) in cases {
+        assert!(GOOD.contains(from), "{what}");
+        eprintln!("case: {what}");
+        assert_names(&err(&GOOD.replace(from, to)), line, field);
+    }
 }
 
 #[test]
@@ -112,12 +91,18 @@ fn missing_file_names_the_file() {
     assert!(e.to_string().contains("rec-77.csv"));
 }
 
-#[test]
-fn write_then_read_round_trips_and_keeps_metadata() {
+/// [`GOOD`] written to `out.csv` in a new temporary directory: (directory, path, recording).
+fn good_written() -> (tempfile::TempDir, std::path::PathBuf, Recording) {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("out.csv");
     let r = Recording::parse(GOOD, "run-42.csv").unwrap();
     r.write(&path).unwrap();
+    (dir, path, r)
+}
+
+#[test]
+fn write_then_read_round_trips_and_keeps_metadata() {
+    let (dir, path, r) = good_written();
     let back = Recording::read(&path).unwrap();
     assert_eq!(back, r);
     // No temporary file is left behind.
@@ -126,10 +111,7 @@ fn write_then_read_round_trips_and_keeps_metadata() {
 
 #[test]
 fn failed_write_keeps_the_previous_good_file() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("out.csv");
-    let good = Recording::parse(GOOD, "run-42.csv").unwrap();
-    good.write(&path).unwrap();
+    let (dir, path, good) = good_written();
     let before = std::fs::read(&path).unwrap();
     let mut bad = good.clone();
     bad.inputs.pop(); // unequal column lengths: refused before anything is written

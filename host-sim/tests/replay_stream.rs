@@ -13,7 +13,7 @@ use common::*;
 
 use std::path::{Path, PathBuf};
 
-use host_sim::io::recording::{Channel, Recording};
+use host_sim::io::recording::Recording;
 use host_sim::io::replay_stream::replay_file;
 use host_sim::sim::{simulate_recording, SolverOptions};
 use host_sim::Plant;
@@ -31,16 +31,8 @@ fn whole(plant: &Plant, input: &Path) -> Vec<u8> {
     let rec = Recording::read(input).unwrap();
     let opts = SolverOptions::default();
     let sim = simulate_recording(plant, &rec, &opts, |_| {}).unwrap();
-    let mut out = Recording {
-        metadata: metadata(rec.sample_period_s()),
-        t_s: rec.t_s.clone(),
-        inputs: rec.inputs.clone(),
-        ..Default::default()
-    };
-    let meas = plant.measure_series(&sim.states, rec.sample_period_s());
-    for c in Channel::ALL {
-        out.set_channel(c, meas.iter().map(|m| c.of(m)).collect());
-    }
+    let metadata = metadata(rec.sample_period_s());
+    let out = host_sim::sim::replay_recording(plant, &rec, &sim.states, metadata);
     let mut bytes = Vec::new();
     out.write_to(&mut bytes).unwrap();
     bytes

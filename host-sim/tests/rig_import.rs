@@ -202,15 +202,11 @@ fn jittered_40hz_bar_and_volts_rig_file_imports_simulates_and_diagnoses() {
 
     // simulate replays it between its own stamps and fits the rig data closely.
     let sim_path = dir.path().join("sim.csv");
-    let out = host_sim(&[
-        &"simulate",
-        &"--plant",
+    let out = on_plant(
+        "simulate",
         &plant(),
-        &"--inputs",
-        &rec_path,
-        &"--out",
-        &sim_path,
-    ]);
+        &[&"--inputs", &rec_path, &"--out", &sim_path],
+    );
     ok(&out);
     let sim = Recording::read(&sim_path).unwrap();
     assert_eq!(sim.t_s, rec.t_s);
@@ -225,15 +221,11 @@ fn jittered_40hz_bar_and_volts_rig_file_imports_simulates_and_diagnoses() {
 
     // diagnose takes the jittered recording and finds nothing missing in a nominal rig.
     let json = dir.path().join("d.json");
-    let out = host_sim(&[
-        &"diagnose",
-        &"--plant",
+    let out = on_plant(
+        "diagnose",
         &plant(),
-        &"--recording",
-        &rec_path,
-        &"--json",
-        &json,
-    ]);
+        &[&"--recording", &rec_path, &"--json", &json],
+    );
     let stdout = ok(&out);
     let d: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();

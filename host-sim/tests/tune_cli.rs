@@ -37,7 +37,7 @@ fn bad_tune_arguments_are_refused_without_touching_the_output() {
         assert_eq!(std::fs::read_to_string(&out).unwrap(), "previous\n");
     }
     // A missing plant file is named.
-    let r = host_sim(&[&"tune", &"--plant", &"no/such/plant.toml", &"--out", &out]);
+    let r = on_plant("tune", &"no/such/plant.toml", &[&"--out", &out]);
     assert_eq!(r.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&r.stderr).contains("no/such/plant.toml"));
 }

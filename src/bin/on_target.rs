@@ -18,42 +18,28 @@
 use cortex_m_rt as _;
 use defmt_semihosting as _;
 
+#[path = "common/semihost.rs"]
+mod semihost;
+
 /// A failed assertion panics: log the location and exit with status 1 (semihosting).
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
-    match info.location() {
-        Some(l) => defmt::error!("panicked at {=str}:{=u32}", l.file(), l.line()),
-        None => defmt::error!("panicked"),
-    }
-    cortex_m_semihosting::debug::exit(cortex_m_semihosting::debug::EXIT_FAILURE);
-    loop {
-        cortex_m::asm::bkpt();
-    }
+    semihost::panicked(info)
 }
 
 #[defmt_test::tests]
 mod tests {
     use pam_firmware::constants::{FIXED_FORCE_LAW, FORCE_LAW};
-    use pam_firmware::control::{JointState, PidGains, PositionController};
-    use pam_firmware::fixed_point::{pressure_pa_from_f32, q16_from_f32};
-    use pam_firmware::geometry::JointGeometry;
-    use pam_firmware::trace::{TraceRunner, SENSOR_TRACE};
-    use pam_firmware::wiring;
+    use pam_firmware::control::saturated_step;
+    use pam_firmware::trace::{force_law_inputs, TraceRunner, SENSOR_TRACE};
 
     /// Over the trace: the fixed-point force law within 0.1 N of the f32 law (the FPU's) at
     /// the same inputs, for every row with a pressure and an angle.
     #[test]
     fn fixed_force_law_tracks_the_f32_law_over_the_trace() {
-        let p = wiring::pressure_scaling();
-        let g = JointGeometry::REFERENCE;
         let mut n = 0u32;
-        for row in SENSOR_TRACE.iter() {
-            let f = row.frame(&p);
-            let (Some(p1), Some(a)) = (f.p1_gauge_pa, f.angle_rad) else {
-                continue;
-            };
-            let (e1, _) = g.stretches(a);
-            let (Some(pq), Some(eq)) = (pressure_pa_from_f32(p1), q16_from_f32(e1)) else {
+        for (_, _, fixed) in force_law_inputs() {
+            let Some((pq, eq)) = fixed else {
                 continue;
             };
             let fx = FIXED_FORCE_LAW.force(pq, eq);
@@ -70,36 +56,12 @@ mod tests {
         defmt::assert!(n > 100);
     }
 
-    /// The saturated step of the host test (`control::tests`), on the target: 0.8 N m
+    /// The saturated step of the host test (`control::saturated_step`), on the target: 0.8 N m
     /// available, step 0 -> 1 rad; with anti-windup the overshoot is less than half.
     #[test]
     fn anti_windup_cuts_the_overshoot_of_a_saturated_step() {
-        let run = |anti_windup: bool| {
-            let mut c = PositionController::new(PidGains {
-                kp_nm_per_rad: 4.0,
-                ki_nm_per_rad_s: 10.0,
-                kd_nm_s_per_rad: 0.3,
-                i_limit_nm: 2.0,
-                out_limit_nm: 10.0,
-            });
-            let (j, b, t_sat, dt) = (0.01f32, 0.05f32, 0.8f32, 1e-3f32);
-            let (mut a, mut w, mut short, mut peak) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
-            for _ in 0..4000 {
-                let meas = JointState {
-                    angle_rad: a,
-                    velocity_rad_s: w,
-                };
-                let down = if anti_windup { short } else { 0.0 };
-                let t_cmd = c.step_limited(meas, 1.0, dt, down).unwrap();
-                let t_applied = t_cmd.clamp(-t_sat, t_sat);
-                short = t_cmd - t_applied;
-                w += (t_applied - b * w) / j * dt;
-                a += w * dt;
-                peak = peak.max(a);
-            }
-            peak - 1.0
-        };
-        let (with, without) = (run(true), run(false));
+        let (with, _, _) = saturated_step(true);
+        let (without, _, _) = saturated_step(false);
         defmt::info!(
             "overshoot with {=f32} rad, without {=f32} rad",
             with,

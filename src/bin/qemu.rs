@@ -19,11 +19,16 @@
 #![no_std]
 #![no_main]
 
-use cortex_m_rt::{entry, exception, ExceptionFrame};
-use cortex_m_semihosting::debug;
+use cortex_m_rt::entry;
 use defmt_semihosting as _;
 
 use pam_firmware::trace::{TraceRunner, TRACE_TICK_HZ};
+
+#[path = "common/semihost.rs"]
+mod semihost;
+#[cfg(feature = "mcu-bench")]
+#[path = "common/systick.rs"]
+mod systick;
 
 /// Pattern of the painted (never used) stack.
 const PAINT: u32 = 0xDEAD_C0DE;
@@ -102,26 +107,15 @@ mod bench {
     use core::hint::black_box;
     use core::sync::atomic::{AtomicU32, Ordering};
 
-    use cortex_m::peripheral::{syst::SystClkSource, SYST};
+    use cortex_m::peripheral::SYST;
+
+    use crate::systick::{measure, start_and_calibrate, Tally};
 
     use pam_firmware::constants::{FIXED_FORCE_LAW, FORCE_LAW};
-    use pam_firmware::fixed_point::{pressure_pa_from_f32, q16_from_f32};
-    use pam_firmware::geometry::JointGeometry;
     use pam_firmware::tick::{ControllerConfig, StartRamp};
-    use pam_firmware::trace::{ControlTick, SENSOR_TRACE, TRACE_TICK_HZ};
+    use pam_firmware::trace::{force_law_inputs, ControlTick, SENSOR_TRACE, TRACE_TICK_HZ};
     use pam_firmware::valves::{OnOffPwmConfig, OnOffValves};
     use pam_firmware::wiring;
-
-    /// SysTick counts elapsed while `f` runs (24-bit down counter, wraps once at most).
-    #[inline(always)]
-    fn measure<R>(f: impl FnOnce() -> R) -> (u32, R) {
-        let a = SYST::get_current();
-        // black_box: the result must exist before the second read (a pure computation could
-        // otherwise be scheduled after it and not be measured).
-        let r = black_box(f());
-        let b = SYST::get_current();
-        (a.wrapping_sub(b) & 0x00FF_FFFF, r)
-    }
 
     /// SysTick counts elapsed while `f` runs, for an `f` that ends in volatile stores (its
     /// work cannot be moved past them, nor they past the second read).
@@ -133,36 +127,8 @@ mod bench {
         (a.wrapping_sub(b) & 0x00FF_FFFF, r)
     }
 
-    /// Calibration: exactly 2 instructions per iteration (`subs`, `bne`).
-    #[inline(never)]
-    fn spin(iterations: u32) {
-        // SAFETY: a register-only loop.
-        unsafe {
-            core::arch::asm!(
-                "1:",
-                "subs {0}, {0}, #1",
-                "bne 1b",
-                inout(reg) iterations => _,
-                options(nomem, nostack),
-            );
-        }
-    }
-
     pub fn bench(syst: &mut SYST) {
-        syst.set_clock_source(SystClkSource::Core);
-        syst.set_reload(0x00FF_FFFF);
-        syst.clear_current();
-        syst.enable_counter();
-
-        const CAL_ITER: u32 = 100_000;
-        let (cal, _) = measure(|| spin(black_box(CAL_ITER)));
-        let (empty, _) = measure(|| black_box(0u32));
-        defmt::info!(
-            "bench calib insns={=u32} counts={=u32} empty_counts={=u32}",
-            2 * CAL_ITER,
-            cal,
-            empty
-        );
+        start_and_calibrate(syst);
 
         #[cfg(feature = "mcu-bench-arm")]
         {
@@ -214,9 +180,9 @@ mod bench {
     #[inline(never)]
     fn bench_volume_fnn() {
         let p = wiring::pressure_scaling();
-        let g = JointGeometry::REFERENCE;
+        let g = pam_firmware::geometry::JointGeometry::REFERENCE;
         let net = &pam_firmware::constants::VOLUME_FNN;
-        let (mut sum, mut n, mut max) = (0u32, 0u32, 0u32);
+        let mut t = Tally::default();
         let (mut e_prev, mut p_prev) = (g.initial_contraction, 0.0f32);
         for row in SENSOR_TRACE.iter() {
             let f = row.frame(&p);
@@ -231,16 +197,9 @@ mod bench {
             let x = black_box((e1, e_rate, p_abs, p_rate));
             let (c, r) = measure(|| net.volume_and_rate(x.0, x.1, x.2, x.3));
             black_box(r);
-            sum += c;
-            n += 1;
-            max = max.max(c);
+            t.add(c);
         }
-        defmt::info!(
-            "bench volume_fnn n={=u32} sum_counts={=u32} max_counts={=u32}",
-            n,
-            sum,
-            max
-        );
+        t.log("volume_fnn");
     }
 
     #[cfg(feature = "mcu-bench-arm")]
@@ -380,28 +339,14 @@ mod bench {
     /// Force law alone (f32), at the trace's pressures and the stretches of its angles.
     #[inline(never)]
     fn bench_force_law() {
-        let p = wiring::pressure_scaling();
-        let g = JointGeometry::REFERENCE;
-        let (mut sum, mut n, mut max) = (0u32, 0u32, 0u32);
-        for row in SENSOR_TRACE.iter() {
-            let f = row.frame(&p);
-            let (Some(p1), Some(a)) = (f.p1_gauge_pa, f.angle_rad) else {
-                continue;
-            };
-            let (e1, _) = g.stretches(a);
+        let mut t = Tally::default();
+        for (p1, e1, _) in force_law_inputs() {
             let (p1, e1) = (black_box(p1), black_box(e1));
             let (c, r) = measure(|| FORCE_LAW.force(p1, e1));
             black_box(r);
-            sum += c;
-            n += 1;
-            max = max.max(c);
+            t.add(c);
         }
-        defmt::info!(
-            "bench force_law_f32 n={=u32} sum_counts={=u32} max_counts={=u32}",
-            n,
-            sum,
-            max
-        );
+        t.log("force_law_f32");
     }
 
     /// Fixed-point force law (src/fixed_point.rs, `constants::FIXED_FORCE_LAW`) at the same
@@ -409,17 +354,10 @@ mod bench {
     /// integer readings).
     #[inline(never)]
     fn bench_force_law_fixed() {
-        let p = wiring::pressure_scaling();
-        let g = JointGeometry::REFERENCE;
         let law = FIXED_FORCE_LAW;
-        let (mut sum, mut n, mut max, mut off) = (0u32, 0u32, 0u32, 0u32);
-        for row in SENSOR_TRACE.iter() {
-            let f = row.frame(&p);
-            let (Some(p1), Some(a)) = (f.p1_gauge_pa, f.angle_rad) else {
-                continue;
-            };
-            let (e1, _) = g.stretches(a);
-            let (Some(pq), Some(eq)) = (pressure_pa_from_f32(p1), q16_from_f32(e1)) else {
+        let (mut t, mut off) = (Tally::default(), 0u32);
+        for (p1, e1, fixed) in force_law_inputs() {
+            let Some((pq, eq)) = fixed else {
                 continue;
             };
             let (pq, eq) = (black_box(pq), black_box(eq));
@@ -432,15 +370,13 @@ mod bench {
             {
                 off += 1;
             }
-            sum += c;
-            n += 1;
-            max = max.max(c);
+            t.add(c);
         }
         defmt::info!(
             "bench force_law_fixed n={=u32} sum_counts={=u32} max_counts={=u32} off_by_more_than_0.1N={=u32}",
-            n,
-            sum,
-            max,
+            t.n,
+            t.sum,
+            t.max,
             off
         );
     }
@@ -490,30 +426,7 @@ fn main() -> ! {
         stack_used_bytes(),
         unpainted
     );
-    debug::exit(debug::EXIT_SUCCESS);
-    loop {
-        cortex_m::asm::bkpt();
-    }
+    semihost::exit(false)
 }
 
-/// Panic: log the location (not the message: see Cargo.toml) and exit with status 1.
-#[panic_handler]
-fn panic(info: &core::panic::PanicInfo) -> ! {
-    match info.location() {
-        Some(l) => defmt::error!("panicked at {=str}:{=u32}", l.file(), l.line()),
-        None => defmt::error!("panicked"),
-    }
-    debug::exit(debug::EXIT_FAILURE);
-    loop {
-        cortex_m::asm::bkpt();
-    }
-}
-
-#[exception]
-unsafe fn HardFault(ef: &ExceptionFrame) -> ! {
-    defmt::error!("HardFault at pc={=u32:x}", ef.pc());
-    debug::exit(debug::EXIT_FAILURE);
-    loop {
-        cortex_m::asm::bkpt();
-    }
-}
+semihost::handlers!();

@@ -561,6 +561,21 @@ pub fn score_suite(
     score_suite_with(plant, scenarios, config_for(law, 1000.0))
 }
 
+/// `cfg` at the scenario's tick rate, with the reference tick's `dt` bound, limits and
+/// tracking supervision for that rate (as every scored run uses it).
+pub fn at_scenario_rate(cfg: ControllerConfig, s: &Scenario) -> ControllerConfig {
+    let tick_hz = s.scenario.tick_hz as f32;
+    let reference = ControllerConfig::reference(tick_hz);
+    ControllerConfig {
+        tick_hz,
+        dt_max_s: reference.dt_max_s,
+        pressure_limits: reference.pressure_limits,
+        angle_limits: reference.angle_limits,
+        tracking_ticks: reference.tracking_ticks,
+        ..cfg
+    }
+}
+
 /// [`score_suite`] with a whole tick configuration (`tick_hz` and `dt_max_s` are set per
 /// scenario).
 pub fn score_suite_with(
@@ -570,17 +585,7 @@ pub fn score_suite_with(
 ) -> Result<SuiteScore, ClosedLoopError> {
     let mut out = Vec::with_capacity(scenarios.len());
     for s in scenarios {
-        let tick_hz = s.scenario.tick_hz as f32;
-        let reference = ControllerConfig::reference(tick_hz);
-        let cfg = ControllerConfig {
-            tick_hz,
-            dt_max_s: reference.dt_max_s,
-            pressure_limits: reference.pressure_limits,
-            angle_limits: reference.angle_limits,
-            tracking_ticks: reference.tracking_ticks,
-            ..cfg
-        };
-        let run = run_with(plant, s, cfg, &mut |_| {})?;
+        let run = run_with(plant, s, at_scenario_rate(cfg, s), &mut |_| {})?;
         let fault = run
             .first_latched_fault_tick
             .and_then(|k| run.rows[k].out.fault);
@@ -810,37 +815,42 @@ suite_mse_at_margin_rad2 = 0.000001
 
     #[test]
     fn tuning_file_errors_name_file_line_and_field() {
-        let bad = GOOD.replace("kd_pa_s_per_rad = 10000.0\nsetpoint_rate_weight = 1.0\nsetpoint_rate_cutoff_hz = 20.0\ni_limit_pa = 150000.0",
-            "kd_pa_s_per_rad = -5.0\nsetpoint_rate_weight = 1.0\nsetpoint_rate_cutoff_hz = 20.0\ni_limit_pa = 150000.0");
-        let e = ControlTuning::from_toml_str(&bad, "t.toml")
-            .unwrap_err()
-            .to_string();
-        assert!(
-            e.starts_with("t.toml:16: field `pid.kd_pa_s_per_rad`"),
-            "{e}"
-        );
-        let bad = GOOD.replace("ki_pa_per_rad_s = 0.0", "ki_pa_per_rad_s = 3.0");
-        let e = ControlTuning::from_toml_str(&bad, "t.toml")
-            .unwrap_err()
-            .to_string();
-        assert!(e.starts_with("t.toml:3: field `pd.ki_pa_per_rad_s`"), "{e}");
-        let bad = GOOD.replace("i_limit_pa = 0.0", "i_limit_pa = 0.0\nkq = 1.0");
-        let e = ControlTuning::from_toml_str(&bad, "t.toml")
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("t.toml:8:") && e.contains("kq"), "{e}");
-        let bad = GOOD.replace("torque_ki_per_s = 2.0", "torque_ki_per_s = nan");
-        let e = ControlTuning::from_toml_str(&bad, "t.toml")
-            .unwrap_err()
-            .to_string();
-        assert!(
-            e.starts_with("t.toml:29: field `cascade.torque_ki_per_s`"),
-            "{e}"
-        );
-        let bad = GOOD.replace("setpoint_rate_weight = 1.0\n", "");
-        let e = ControlTuning::from_toml_str(&bad, "t.toml")
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("setpoint_rate_weight"), "{e}");
+        let pid_rest =
+            "setpoint_rate_weight = 1.0\nsetpoint_rate_cutoff_hz = 20.0\ni_limit_pa = 150000.0";
+        // (replaced, by, what the error says)
+        let cases = [
+            (
+                format!("kd_pa_s_per_rad = 10000.0\n{pid_rest}"),
+                format!("kd_pa_s_per_rad = -5.0\n{pid_rest}"),
+                "t.toml:16: field `pid.kd_pa_s_per_rad`",
+            ),
+            (
+                "ki_pa_per_rad_s = 0.0".into(),
+                "ki_pa_per_rad_s = 3.0".into(),
+                "t.toml:3: field `pd.ki_pa_per_rad_s`",
+            ),
+            (
+                "i_limit_pa = 0.0".into(),
+                "i_limit_pa = 0.0\nkq = 1.0".into(),
+                "t.toml:8: field `kq`",
+            ),
+            (
+                "torque_ki_per_s = 2.0".into(),
+                "torque_ki_per_s = nan".into(),
+                "t.toml:29: field `cascade.torque_ki_per_s`",
+            ),
+            (
+                "setpoint_rate_weight = 1.0\n".into(),
+                String::new(),
+                "setpoint_rate_weight",
+            ),
+        ];
+        for (from, to, want) in cases {
+            assert!(GOOD.contains(&from), "{from}");
+            let e = ControlTuning::from_toml_str(&GOOD.replacen(&from, &to, 1), "t.toml")
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(want), "{e}");
+        }
     }
 }

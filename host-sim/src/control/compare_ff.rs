@@ -27,7 +27,9 @@ use pam_firmware::pressure_ff::PressureFfParams;
 use pam_firmware::tick::ControllerConfig;
 
 use super::closed_loop::{run_with, Scenario};
-use super::compare::{control_tuned_path, jump_suite_scenarios, suite_scenarios, ControlTuning};
+use super::compare::{
+    at_scenario_rate, control_tuned_path, jump_suite_scenarios, suite_scenarios, ControlTuning,
+};
 use crate::identify::volume::{
     samples_from_recording, split_samples, train, Thermo, TrainOptions, VolumePoly,
 };
@@ -171,17 +173,7 @@ pub fn score(
     let (mut p_sq, mut p_n) = (0.0f64, 0usize);
     let mut faults = Vec::new();
     for s in scenarios {
-        let tick_hz = s.scenario.tick_hz as f32;
-        let reference = ControllerConfig::reference(tick_hz);
-        let cfg = ControllerConfig {
-            tick_hz,
-            dt_max_s: reference.dt_max_s,
-            pressure_limits: reference.pressure_limits,
-            angle_limits: reference.angle_limits,
-            tracking_ticks: reference.tracking_ticks,
-            ..cfg
-        };
-        let run = run_with(plant, s, cfg, &mut |_| {})?;
+        let run = run_with(plant, s, at_scenario_rate(cfg, s), &mut |_| {})?;
         let st = run.tracking(0.0);
         if let Some(f) = run
             .first_latched_fault_tick

@@ -1156,23 +1156,22 @@ impl ForceIdentification {
         let _ = writeln!(s, "#");
         let _ = writeln!(s, "#   F = (c1 P^2 + c2 e^2 + c3 P + c4 e + c5 P/e + c6) / (c7 P + c8 e) + c9 + c10 exp(e - 0.7)");
         let _ = writeln!(s, "#");
-        for l in [
-            "# Conventions (fixed by the firmware, see src/force_law.rs):",
-            "#   P  = gauge pressure in MPa (the unit of the paper's Fig. 4)",
-            "#   e  = deformation L / L0 (the paper's Fig. 4 axis), L0 = rest length",
-            "#   F  = muscle tension in N (clamped at 0: the muscle cannot push)",
-            "# The scale of the rational part is fixed by c8 = 1. p_gauge_max_pa, stretch_min and",
-            "# stretch_max are the domain of the data; outside it the firmware's law returns a",
-            "# flagged, clamped result. Fitted as the firmware evaluates it, F = max(eq. 6, 0):",
-            "# slack readings (F <= 0) constrain the law only where it would pull.",
-            "#",
-        ] {
-            let _ = writeln!(s, "{l}");
-        }
-        let _ = writeln!(
-            s,
-            "# Written by `host-sim identify force` from {source} ({} samples).",
-            self.n_samples
+        super::toml_header(
+            &mut s,
+            &[
+                "# Conventions (fixed by the firmware, see src/force_law.rs):",
+                "#   P  = gauge pressure in MPa (the unit of the paper's Fig. 4)",
+                "#   e  = deformation L / L0 (the paper's Fig. 4 axis), L0 = rest length",
+                "#   F  = muscle tension in N (clamped at 0: the muscle cannot push)",
+                "# The scale of the rational part is fixed by c8 = 1. p_gauge_max_pa, stretch_min and",
+                "# stretch_max are the domain of the data; outside it the firmware's law returns a",
+                "# flagged, clamped result. Fitted as the firmware evaluates it, F = max(eq. 6, 0):",
+                "# slack readings (F <= 0) constrain the law only where it would pull.",
+                "#",
+            ],
+            "force",
+            source,
+            self.n_samples,
         );
         for l in self.report_lines() {
             let _ = writeln!(s, "# {l}");
@@ -1378,6 +1377,20 @@ impl Default for ForceSweep {
     }
 }
 
+impl ForceSweep {
+    /// The noise-free surface on an `n` x `n` grid over the default domain (to measure a fitted
+    /// law's error against the truth).
+    pub fn noise_free_grid(n: usize) -> Self {
+        ForceSweep {
+            n_stretch: n,
+            n_pressure: n,
+            force_noise_n: 0.0,
+            pressure_noise_pa: 0.0,
+            ..ForceSweep::default()
+        }
+    }
+}
+
 /// Generates isometric data from a Tondu surface, as seed 002's bench does (fixed length,
 /// pressure swept from maximum to zero, and back up when a hysteresis gap is set).
 pub fn sweep(truth: &Tondu, opt: &ForceSweep) -> Vec<ForceSample> {
@@ -1491,16 +1504,7 @@ mod tests {
         );
         let id = identify(&data).unwrap();
         // Error against the noise-free surface on a dense grid over the whole domain.
-        let grid = sweep(
-            &truth,
-            &ForceSweep {
-                n_stretch: 61,
-                n_pressure: 61,
-                force_noise_n: 0.0,
-                pressure_noise_pa: 0.0,
-                ..ForceSweep::default()
-            },
-        );
+        let grid = sweep(&truth, &ForceSweep::noise_free_grid(61));
         let st = error_stats(&grid, |p, e| id.eq6.force_n(p, e));
         eprintln!("{}\nagainst the noise-free surface: {st:?}", id.summary());
         assert!(

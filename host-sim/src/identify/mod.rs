@@ -59,6 +59,24 @@ impl IdentError {
     }
 }
 
+/// Appends the comment header of a firmware TOML written by `host-sim identify <command>`:
+/// `lines` (each a whole `#` line), then where its data came from.
+pub(crate) fn toml_header(
+    s: &mut String,
+    lines: &[&str],
+    command: &str,
+    source: &str,
+    n_samples: usize,
+) {
+    for l in lines {
+        s.push_str(l);
+        s.push('\n');
+    }
+    s.push_str(&format!(
+        "# Written by `host-sim identify {command}` from {source} ({n_samples} samples).\n"
+    ));
+}
+
 /// Writes `bytes` to `path` atomically ([`crate::io::atomic`], the one atomic writer): a
 /// failed or interrupted write never replaces a good file.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IdentError> {

@@ -404,26 +404,25 @@ impl TorqueModelFit {
             s,
             "# Simplified torque model of the antagonistic joint (seed 003 eq. 11), SI units:"
         );
-        for l in [
-            "#",
-            "#   T = A r^2 alpha + B r dp + C alpha'^3 + D alpha'",
-            "#",
-            "#   T      joint torque [N m], positive when it drives the angle up (PLANT.md: T = (F1 - F2) r)",
-            "#   alpha  joint angle [rad], alpha' joint velocity [rad/s]",
-            "#   dp     activation [Pa] with the paper's symmetric scheme p1 = p0 - dp, p2 = p0 + dp",
-            "#          (gauge). On the reference joint muscle 1 pulls the angle up, so B < 0 here.",
-            "#   A [N/(m rad)], B [m^2], C [N m s^3/rad^3], D [N m s/rad]",
-            "#",
-            "# Paper values for comparison (converted from pi-rad and kg/cm^2 in src/torque_model.rs::paper_si):",
-            "#   A = -73670 N/(m pi), B = 174.2 N cm^2/kg, C = 0.07 N m (s/pi)^3, D = 0.45 N m s/pi.",
-            "#",
-        ] {
-            let _ = writeln!(s, "{l}");
-        }
-        let _ = writeln!(
-            s,
-            "# Written by `host-sim identify torque` from {source} ({} samples).",
-            q.n
+        super::toml_header(
+            &mut s,
+            &[
+                "#",
+                "#   T = A r^2 alpha + B r dp + C alpha'^3 + D alpha'",
+                "#",
+                "#   T      joint torque [N m], positive when it drives the angle up (PLANT.md: T = (F1 - F2) r)",
+                "#   alpha  joint angle [rad], alpha' joint velocity [rad/s]",
+                "#   dp     activation [Pa] with the paper's symmetric scheme p1 = p0 - dp, p2 = p0 + dp",
+                "#          (gauge). On the reference joint muscle 1 pulls the angle up, so B < 0 here.",
+                "#   A [N/(m rad)], B [m^2], C [N m s^3/rad^3], D [N m s/rad]",
+                "#",
+                "# Paper values for comparison (converted from pi-rad and kg/cm^2 in src/torque_model.rs::paper_si):",
+                "#   A = -73670 N/(m pi), B = 174.2 N cm^2/kg, C = 0.07 N m (s/pi)^3, D = 0.45 N m s/pi.",
+                "#",
+            ],
+            "torque",
+            source,
+            q.n,
         );
         let _ = writeln!(
             s,

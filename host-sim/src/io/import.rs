@@ -215,6 +215,16 @@ enum Convert {
     Curve(Vec<[f64; 2]>),
 }
 
+impl Convert {
+    /// Multiply by `factor`, nothing subtracted.
+    fn scale(factor: f64) -> Self {
+        Convert::Factor {
+            factor,
+            minus_pa: 0.0,
+        }
+    }
+}
+
 /// An import that failed: the message names file, line and column (or the mapping key).
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]
@@ -358,14 +368,8 @@ fn plan(
             }
         }
         Target::Output(Channel::AngleDeg) => match unit {
-            "rad" => Convert::Factor {
-                factor: 1.0,
-                minus_pa: 0.0,
-            },
-            "deg" => Convert::Factor {
-                factor: std::f64::consts::PI / 180.0,
-                minus_pa: 0.0,
-            },
+            "rad" => Convert::scale(1.0),
+            "deg" => Convert::scale(std::f64::consts::PI / 180.0),
             "counts" => {
                 let cpr = c.counts_per_rev.filter(|n| *n > 0).ok_or_else(|| {
                     ImportError(format!(
@@ -380,27 +384,15 @@ fn plan(
             _ => return Err(unit_err("rad, deg, counts")),
         },
         Target::Output(_) => match unit {
-            "N" => Convert::Factor {
-                factor: 1.0,
-                minus_pa: 0.0,
-            },
-            "kN" => Convert::Factor {
-                factor: 1e3,
-                minus_pa: 0.0,
-            },
+            "N" => Convert::scale(1.0),
+            "kN" => Convert::scale(1e3),
             _ => return Err(unit_err("N, kN")),
         },
         Target::Opening(_) | Target::Signed(_) => {
             let signed = matches!(target, Target::Signed(_));
             match unit {
-                "fraction" => Convert::Factor {
-                    factor: 1.0,
-                    minus_pa: 0.0,
-                },
-                "percent" => Convert::Factor {
-                    factor: 0.01,
-                    minus_pa: 0.0,
-                },
+                "fraction" => Convert::scale(1.0),
+                "percent" => Convert::scale(0.01),
                 "onoff" if !signed => Convert::OnOff {
                     threshold: c.threshold.unwrap_or(0.5),
                 },

@@ -255,6 +255,8 @@ fn draw_run<DB: DrawingBackend>(
     };
     let orange = RGBColor(230, 130, 0);
     let green = RGBColor(0, 140, 60);
+    let gauge_kpa = |p_abs_pa: f64| (p_abs_pa - plant.p_atm_pa) / 1e3;
+    let kpa = |p_gauge_pa: f32| p_gauge_pa as f64 / 1e3;
     let panels: [(&str, Vec<Series>); 3] = [
         (
             "angle_deg",
@@ -266,26 +268,10 @@ fn draw_run<DB: DrawingBackend>(
         (
             "pressure_kpa (gauge)",
             vec![
-                (
-                    "p1",
-                    RED,
-                    col(&|r| (r.state.p1_abs_pa - plant.p_atm_pa) / 1e3),
-                ),
-                (
-                    "p1 set",
-                    orange,
-                    col(&|r| r.out.p1_set_gauge_pa as f64 / 1e3),
-                ),
-                (
-                    "p2",
-                    BLUE,
-                    col(&|r| (r.state.p2_abs_pa - plant.p_atm_pa) / 1e3),
-                ),
-                (
-                    "p2 set",
-                    green,
-                    col(&|r| r.out.p2_set_gauge_pa as f64 / 1e3),
-                ),
+                ("p1", RED, col(&|r| gauge_kpa(r.state.p1_abs_pa))),
+                ("p1 set", orange, col(&|r| kpa(r.out.p1_set_gauge_pa))),
+                ("p2", BLUE, col(&|r| gauge_kpa(r.state.p2_abs_pa))),
+                ("p2 set", green, col(&|r| kpa(r.out.p2_set_gauge_pa))),
             ],
         ),
         (

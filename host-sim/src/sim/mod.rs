@@ -718,6 +718,28 @@ pub fn simulate_stamped(
     })
 }
 
+/// The recording of a replay of `source`: its time stamps and valve inputs, the channels
+/// `plant` measures along the simulated `states` (one per sample), and `metadata`.
+pub fn replay_recording(
+    plant: &Plant,
+    source: &crate::io::recording::Recording,
+    states: &[PlantState],
+    metadata: Vec<(String, String)>,
+) -> crate::io::recording::Recording {
+    use crate::io::recording::{Channel, Recording};
+    let mut out = Recording {
+        metadata,
+        t_s: source.t_s.clone(),
+        inputs: source.inputs.clone(),
+        ..Default::default()
+    };
+    let meas = plant.measure_series(states, source.sample_period_s());
+    for c in Channel::ALL {
+        out.set_channel(c, meas.iter().map(|m| c.of(m)).collect());
+    }
+    out
+}
+
 /// Replays a recording's valve inputs open loop: [`simulate_with_progress`] on a uniform
 /// recording, [`simulate_stamped`] on a jittered one (inputs held between its stamps).
 pub fn simulate_recording(

@@ -6,6 +6,8 @@ use std::ffi::OsStr;
 use std::path::PathBuf;
 use std::process::{Command, Output};
 
+use pam_firmware::lockstep::UnwiredPin;
+
 /// The workspace root.
 pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
@@ -131,4 +133,38 @@ pub fn pulse_inputs(n: usize, period: usize) -> Vec<host_sim::ValveInputs> {
             }
         })
         .collect()
+}
+
+/// Runs `host-sim <command> --plant <plant>` followed by `rest`.
+pub fn on_plant(command: &str, plant: &dyn AsRef<OsStr>, rest: &[&dyn AsRef<OsStr>]) -> Output {
+    let mut c = bin();
+    c.arg(command).arg("--plant").arg(plant);
+    for a in rest {
+        c.arg(a);
+    }
+    c.output().unwrap()
+}
+
+/// The reference on/off valve driver on pins wired to nothing (the openings it computes are
+/// what a plant-in-the-loop test applies).
+pub fn unwired_valves(
+) -> pam_firmware::valves::OnOffValves<UnwiredPin, UnwiredPin, UnwiredPin, UnwiredPin> {
+    pam_firmware::valves::OnOffValves::new(
+        UnwiredPin,
+        UnwiredPin,
+        UnwiredPin,
+        UnwiredPin,
+        pam_firmware::valves::OnOffPwmConfig::REFERENCE,
+    )
+}
+
+/// An integrator of `plant` from its initial state at tight tolerances (1e-6 relative and
+/// absolute), for closed-loop step tests.
+pub fn tight_integrator(plant: &host_sim::Plant) -> host_sim::sim::Integrator<'_> {
+    let opts = host_sim::sim::SolverOptions {
+        rtol: 1e-6,
+        atol: 1e-6,
+        ..Default::default()
+    };
+    host_sim::sim::Integrator::new(plant, plant.initial_state(), opts)
 }

@@ -7,9 +7,9 @@
 
 use serde::{Deserialize, Deserializer};
 
-use super::{Check, Effect, Hooks, Truth};
+use super::{Check, Effect, Hooks, Truth, torque_residual_scatter};
 use crate::diagnose::candidates::{clamp_to, Candidate, ParamSpec, Screening, Setup};
-use crate::diagnose::screen::{regress, Evidence, Scatter};
+use crate::diagnose::screen::{regress, Evidence};
 use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
 
 /// Registry entry of the inertia mismatch. There is no `[effects.inertia]` table: giving
@@ -75,12 +75,7 @@ impl Candidate for InertiaCandidate {
             note: format!(
                 "the joint torque balance residual is proportional to the angular acceleration (R^2 {r2:.2})"
             ),
-            scatter: Some(Scatter::new(
-                "angular acceleration [rad/s^2]",
-                "torque balance residual [N m]",
-                &ev.alpha_rad_s2,
-                &ev.torque_residual_nm,
-            )),
+            scatter: torque_residual_scatter(ev, "angular acceleration [rad/s^2]", &ev.alpha_rad_s2),
         }
     }
     fn apply(&self, cfg: &mut PlantConfig, p: &[f64], _s: &Setup) {

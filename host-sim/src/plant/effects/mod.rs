@@ -58,11 +58,11 @@ pub trait Effect: Debug + Clone + PartialEq + DeserializeOwned {
 }
 
 /// The [`Effect`] items of an effect whose run-time form is its own table (`Active = Self`,
-/// activated by a copy), switched by its `enabled` key, with one diagnosis candidate: write
-/// `table_effect!(TheCandidate);` inside `impl Effect for TheTable`, then `validate` and
-/// `truths`.
+/// activated by a copy), switched by its `enabled` key, with its diagnosis candidates: write
+/// `table_effect!(TheCandidate);` (or several, comma-separated) inside
+/// `impl Effect for TheTable`, then `validate` and `truths`.
 macro_rules! table_effect {
-    ($candidate:expr) => {
+    ($($candidate:expr),+ $(,)?) => {
         type Active = Self;
         fn enabled(&self) -> bool {
             self.enabled
@@ -71,7 +71,7 @@ macro_rules! table_effect {
             self.clone()
         }
         fn candidates() -> Vec<Box<dyn Candidate>> {
-            vec![Box::new($candidate)]
+            vec![$(Box::new($candidate)),+]
         }
     };
 }
@@ -221,6 +221,21 @@ pub(crate) fn params(p: &[(&str, f64)]) -> Vec<(String, String)> {
     p.iter()
         .map(|(k, v)| (k.to_string(), format!("{v}")))
         .collect()
+}
+
+/// The joint torque balance residual drawn against the regressor `x` (`x_label`): the scatter
+/// of the joint-torque candidates' screening.
+pub(crate) fn torque_residual_scatter(
+    ev: &crate::diagnose::screen::Evidence,
+    x_label: &str,
+    x: &[f64],
+) -> Option<crate::diagnose::screen::Scatter> {
+    Some(crate::diagnose::screen::Scatter::new(
+        x_label,
+        "torque balance residual [N m]",
+        x,
+        &ev.torque_residual_nm,
+    ))
 }
 
 pub(crate) fn enabled_default() -> bool {

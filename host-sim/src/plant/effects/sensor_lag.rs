@@ -103,21 +103,30 @@ impl Hooks for SensorLag {
     }
 }
 
+impl SensorLag {
+    /// Switched on, every time constant absent (no channel lags yet).
+    fn switched_on() -> Self {
+        SensorLag {
+            enabled: true,
+            angle_time_constant_s: None,
+            pressure_time_constant_s: None,
+            p1_time_constant_s: None,
+            p2_time_constant_s: None,
+            force_time_constant_s: None,
+        }
+    }
+}
+
 impl Effect for SensorLag {
-    type Active = Self;
-    fn enabled(&self) -> bool {
-        self.enabled
-    }
-    fn activate(&self, _valve: &ValveConfig) -> Self {
-        self.clone()
-    }
-    fn candidates() -> Vec<Box<dyn Candidate>> {
-        vec![
-            Box::new(SensorLagCandidate),
-            Box::new(PressureSensorLagCandidate { channel: Channel::P1Kpa }),
-            Box::new(PressureSensorLagCandidate { channel: Channel::P2Kpa }),
-        ]
-    }
+    table_effect!(
+        SensorLagCandidate,
+        PressureSensorLagCandidate {
+            channel: Channel::P1Kpa
+        },
+        PressureSensorLagCandidate {
+            channel: Channel::P2Kpa
+        },
+    );
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
         for (key, tau) in [
             ("angle_time_constant_s", self.angle_time_constant_s),
@@ -147,29 +156,18 @@ pub struct SensorLagCandidate;
 
 impl SensorLagCandidate {
     fn groups(s: &Setup) -> Vec<(&'static str, Channel)> {
+        // A group is fitted on its first measured channel.
+        let first = |a: Channel, b: Channel| if s.has(a) { a } else { b };
         let mut g = Vec::new();
         if s.has(Channel::AngleDeg) {
             g.push(("angle_time_constant_s", Channel::AngleDeg));
         }
         if s.has_pressure() {
-            g.push((
-                "pressure_time_constant_s",
-                if s.has(Channel::P1Kpa) {
-                    Channel::P1Kpa
-                } else {
-                    Channel::P2Kpa
-                },
-            ));
+            let c = first(Channel::P1Kpa, Channel::P2Kpa);
+            g.push(("pressure_time_constant_s", c));
         }
         if s.has_force() {
-            g.push((
-                "force_time_constant_s",
-                if s.has(Channel::F1N) {
-                    Channel::F1N
-                } else {
-                    Channel::F2N
-                },
-            ));
+            g.push(("force_time_constant_s", first(Channel::F1N, Channel::F2N)));
         }
         g
     }
@@ -222,14 +220,7 @@ impl Candidate for SensorLagCandidate {
         }
     }
     fn apply(&self, cfg: &mut PlantConfig, p: &[f64], s: &Setup) {
-        let mut lag = SensorLag {
-            enabled: true,
-            angle_time_constant_s: None,
-            pressure_time_constant_s: None,
-            p1_time_constant_s: None,
-            p2_time_constant_s: None,
-            force_time_constant_s: None,
-        };
+        let mut lag = SensorLag::switched_on();
         for ((name, _), v) in Self::groups(s).iter().zip(p) {
             let v = Some(v.max(0.0));
             match *name {
@@ -324,14 +315,7 @@ impl Candidate for PressureSensorLagCandidate {
     }
     fn apply(&self, cfg: &mut PlantConfig, p: &[f64], _s: &Setup) {
         let tau = p.first().map(|v| v.max(0.0));
-        let mut lag = SensorLag {
-            enabled: true,
-            angle_time_constant_s: None,
-            pressure_time_constant_s: None,
-            p1_time_constant_s: None,
-            p2_time_constant_s: None,
-            force_time_constant_s: None,
-        };
+        let mut lag = SensorLag::switched_on();
         if self.channel == Channel::P1Kpa {
             lag.p1_time_constant_s = tau;
         } else {

@@ -7,9 +7,9 @@
 
 use serde::Deserialize;
 
-use super::{Check, Effect, enabled_default, Hooks, params, Truth};
+use super::{Check, Effect, enabled_default, Hooks, params, Truth, torque_residual_scatter};
 use crate::diagnose::candidates::{clamp_to, Candidate, ParamSpec, Screening, Setup};
-use crate::diagnose::screen::{regress, Evidence, Scatter};
+use crate::diagnose::screen::{regress, Evidence};
 use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
 
 /// The `[effects.toy_spring]` table.
@@ -68,12 +68,7 @@ impl Candidate for ToySpringCandidate {
             score: r2,
             initial: clamp_to(&self.params(s), vec![c[0]]),
             note: format!("the torque balance residual follows -angle (R^2 {r2:.2})"),
-            scatter: Some(Scatter::new(
-                "joint angle [rad]",
-                "torque balance residual [N m]",
-                &ev.angle_rad,
-                &ev.torque_residual_nm,
-            )),
+            scatter: torque_residual_scatter(ev, "joint angle [rad]", &ev.angle_rad),
         }
     }
     fn apply(&self, cfg: &mut PlantConfig, p: &[f64], _s: &Setup) {
