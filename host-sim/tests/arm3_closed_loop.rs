@@ -122,6 +122,31 @@ fn a_missed_expectation_exits_1_and_a_bad_scenario_exits_2() {
     );
 }
 
+/// The run's recording, its open-loop replay, and the largest angle difference between the
+/// replay and the run: equal up to the integration tolerance (the replay integrates runs of
+/// equal openings in one segment, the loop tick by tick).
+fn replay(
+    arm: &Arm3,
+    run: &host_sim::control::arm3_loop::ArmRun,
+) -> (Arm3Recording, host_sim::plant::arm3::Arm3Simulation, f64) {
+    let rec = run.to_recording(arm, "arm", "sine");
+    let sim = simulate_arm3(
+        arm,
+        &rec.inputs,
+        run.dt_s,
+        &SolverOptions::default(),
+        |_| {},
+    )
+    .unwrap();
+    let worst = sim
+        .states
+        .iter()
+        .zip(&run.rows)
+        .flat_map(|(x, r)| (0..3).map(move |j| (x.angles_rad[j] - r.state.angles_rad[j]).abs()))
+        .fold(0.0, f64::max);
+    (rec, sim, worst)
+}
+
 #[test]
 fn the_run_recording_replays_open_loop_to_the_same_channels() {
     let arm = Arm3::load(arm3_plant()).unwrap();
@@ -129,23 +154,7 @@ fn the_run_recording_replays_open_loop_to_the_same_channels() {
     let mut short = s.clone();
     short.scenario.duration_s = 3.0;
     let run = run_arm(&arm, &short, ArmConfig::reference(1000.0)).unwrap();
-    let rec = run.to_recording(&arm, "arm", "sine");
-    let sim = simulate_arm3(
-        &arm,
-        &rec.inputs,
-        run.dt_s,
-        &SolverOptions::default(),
-        |_| {},
-    )
-    .unwrap();
-    // Up to the integration tolerance (the replay integrates runs of equal openings in one
-    // segment, the loop tick by tick).
-    let mut worst = 0.0f64;
-    for (k, x) in sim.states.iter().enumerate() {
-        for j in 0..3 {
-            worst = worst.max((x.angles_rad[j] - run.rows[k].state.angles_rad[j]).abs());
-        }
-    }
+    let (_, _, worst) = replay(&arm, &run);
     println!("largest angle difference {worst:.3e} rad");
     assert!(worst < 1e-5, "{worst}");
 }
@@ -194,21 +203,7 @@ fn with_dead_time_sensor_lag_and_a_shared_supply_drop_the_loop_tracks_and_replay
     assert!(moved > 1e3, "joint 2 pressure differs by {moved} Pa only");
     // The recording holds the commands and the lagged channels; the open-loop replay applies
     // the same dead time and the same sensor path.
-    let rec = run.to_recording(&arm, "arm", "sine");
-    let sim = simulate_arm3(
-        &arm,
-        &rec.inputs,
-        run.dt_s,
-        &SolverOptions::default(),
-        |_| {},
-    )
-    .unwrap();
-    let mut worst = 0.0f64;
-    for (k, x) in sim.states.iter().enumerate() {
-        for j in 0..3 {
-            worst = worst.max((x.angles_rad[j] - run.rows[k].state.angles_rad[j]).abs());
-        }
-    }
+    let (rec, sim, worst) = replay(&arm, &run);
     let replayed = arm.measure_run(&sim.states, run.dt_s);
     let lagged = rec
         .channel(2, host_sim::io::recording::Channel::AngleDeg)
