@@ -849,4 +849,7 @@ fn a_joint_supply_drop_is_refused_the_arm_supply_is_checked() {
     .unwrap_err()
     .to_string();
     assert!(e.contains("joint1.effects.valve_dead_time.delay_s"), "{e}");
+    // The error names the line of the key, as for a 1-DOF plant file.
+    let line = text.lines().count() + 3;
+    assert!(e.contains(&format!("arm.toml:{line}:")), "line {line}: {e}");
 }

@@ -52,7 +52,8 @@ use ode_solvers::System;
 use serde::Deserialize;
 
 use crate::plant::config::{
-    ConfigError, EnvironmentConfig, InitialConfig, MuscleConfig, ValveConfig,
+    parse_plant_text, read_plant_text, ConfigError, EnvironmentConfig, InitialConfig, MuscleConfig,
+    ValveConfig,
 };
 use crate::plant::effects::{Check, Effect, Effects, EffectsConfig, Supply, SupplyDrop};
 use crate::plant::muscle::Muscle;
@@ -205,22 +206,13 @@ impl Arm3Config {
     /// Reads and validates a 3-DOF arm plant file.
     pub fn load(path: impl AsRef<Path>) -> Result<Self, ConfigError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
-        Self::from_toml_str(&text, path)
+        Self::from_toml_str(&read_plant_text(path)?, path)
     }
 
-    /// Parses and validates arm TOML text; `path` is only used in error messages.
+    /// Parses and validates arm TOML text (a validation error names its key's line); `path`
+    /// is only used in error messages.
     pub fn from_toml_str(text: &str, path: impl AsRef<Path>) -> Result<Self, ConfigError> {
-        let path = path.as_ref();
-        let cfg: Arm3Config = toml::from_str(text).map_err(|e| ConfigError::Parse {
-            path: path.to_owned(),
-            message: e.to_string().trim_end().replace('\n', "\n  "),
-        })?;
-        cfg.validate(path)?;
-        Ok(cfg)
+        parse_plant_text(text, path.as_ref(), Self::validate)
     }
 
     fn validate(&self, path: &Path) -> Result<(), ConfigError> {

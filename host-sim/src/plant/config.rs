@@ -127,42 +127,55 @@ pub enum ConfigError {
     },
 }
 
+/// Reads a plant file's text (an I/O error names the file).
+pub fn read_plant_text(path: &Path) -> Result<String, ConfigError> {
+    std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+        path: path.to_owned(),
+        source,
+    })
+}
+
+/// Parses plant TOML text of any plant kind and validates it with `validate`; a validation
+/// error names the line of its key where the text has one. `path` is only used in messages.
+pub fn parse_plant_text<T: serde::de::DeserializeOwned>(
+    text: &str,
+    path: &Path,
+    validate: impl FnOnce(&T, &Path) -> Result<(), ConfigError>,
+) -> Result<T, ConfigError> {
+    let cfg: T = toml::from_str(text).map_err(|e| ConfigError::Parse {
+        path: path.to_owned(),
+        // toml's message already names the key (`unknown field `x``, `missing field `y``)
+        // and the line; keep it on one line after the file name.
+        message: e.to_string().trim_end().replace('\n', "\n  "),
+    })?;
+    validate(&cfg, path).map_err(|e| match e {
+        ConfigError::Invalid { path, key, message } => {
+            let (table, k) = key.rsplit_once('.').unwrap_or(("", key.as_str()));
+            match crate::validate::toml_key_line(text, table, 0, k) {
+                Some(line) => ConfigError::InvalidAt {
+                    path,
+                    line,
+                    key,
+                    message,
+                },
+                None => ConfigError::Invalid { path, key, message },
+            }
+        }
+        e => e,
+    })?;
+    Ok(cfg)
+}
+
 impl PlantConfig {
     /// Reads and validates a plant file.
     pub fn load(path: impl AsRef<Path>) -> Result<Self, ConfigError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
-        Self::from_toml_str(&text, path)
+        Self::from_toml_str(&read_plant_text(path)?, path)
     }
 
     /// Parses and validates plant TOML text; `path` is only used in error messages.
     pub fn from_toml_str(text: &str, path: impl AsRef<Path>) -> Result<Self, ConfigError> {
-        let path = path.as_ref();
-        let cfg: PlantConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
-            path: path.to_owned(),
-            // toml's message already names the key (`unknown field `x``, `missing field `y``)
-            // and the line; keep it on one line after the file name.
-            message: e.to_string().trim_end().replace('\n', "\n  "),
-        })?;
-        cfg.validate(path).map_err(|e| match e {
-            ConfigError::Invalid { path, key, message } => {
-                let (table, k) = key.rsplit_once('.').unwrap_or(("", key.as_str()));
-                match crate::validate::toml_key_line(text, table, 0, k) {
-                    Some(line) => ConfigError::InvalidAt {
-                        path,
-                        line,
-                        key,
-                        message,
-                    },
-                    None => ConfigError::Invalid { path, key, message },
-                }
-            }
-            e => e,
-        })?;
-        Ok(cfg)
+        parse_plant_text(text, path.as_ref(), Self::validate)
     }
 
     fn validate(&self, path: &Path) -> Result<(), ConfigError> {
