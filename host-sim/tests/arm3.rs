@@ -419,6 +419,15 @@ fn pressure_step_scenario_settles_to_the_static_equilibria() {
     }
 }
 
+/// Solver tolerances at which the arm and the 1-DOF plant converge to the same solution.
+fn tight() -> SolverOptions {
+    SolverOptions {
+        rtol: 1e-9,
+        atol: 1e-9,
+        ..SolverOptions::default()
+    }
+}
+
 /// A 3-DOF arm whose joint 1 is the reference 1-DOF joint: its muscles, valves and
 /// pressures; M11 = J (no link masses, I_y = I_z so that nothing depends on q2, q3); no
 /// friction; joints 2 and 3 at rest with equal pressures and closed valves.
@@ -472,11 +481,7 @@ fn one_dof_special_case_matches_the_one_dof_plant_and_the_conformance_fixture() 
     let pulses = Recording::read(fixture("pulses_nominal.csv")).unwrap();
     let dt = pulses.sample_period_s();
     // Both at a tight tolerance: they must converge to the same solution.
-    let opts = SolverOptions {
-        rtol: 1e-9,
-        atol: 1e-9,
-        ..SolverOptions::default()
-    };
+    let opts = tight();
     let one = simulate(&plant, &pulses.inputs, dt, &opts).unwrap();
     let inputs: Vec<Arm3Inputs> = pulses
         .inputs
@@ -542,11 +547,7 @@ fn one_dof_special_case_with_friction_matches_the_one_dof_joint_friction_effect(
     let pulses = Recording::read(fixture("pulses_nominal.csv")).unwrap();
     let n = 5000; // 5 s
     let dt = pulses.sample_period_s();
-    let opts = SolverOptions {
-        rtol: 1e-9,
-        atol: 1e-9,
-        ..SolverOptions::default()
-    };
+    let opts = tight();
     let one = simulate(&plant, &pulses.inputs[..n], dt, &opts).unwrap();
     let inputs: Vec<Arm3Inputs> = pulses.inputs[..n]
         .iter()
@@ -720,11 +721,7 @@ fn arm_joint1_against_one_dof(one_dof_effect: &str, arm_effect: &str) -> ([f64; 
     let pulses = Recording::read(fixture("pulses_nominal.csv")).unwrap();
     let n = 4000;
     let dt = pulses.sample_period_s();
-    let opts = SolverOptions {
-        rtol: 1e-9,
-        atol: 1e-9,
-        ..SolverOptions::default()
-    };
+    let opts = tight();
     let one = simulate(&plant, &pulses.inputs[..n], dt, &opts).unwrap();
     let one = plant.measure_series(&one.states, dt);
     let none = simulate(&nominal, &pulses.inputs[..n], dt, &opts).unwrap();

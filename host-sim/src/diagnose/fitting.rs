@@ -54,17 +54,42 @@ impl<'a> Problem<'a> {
         let dt = rec.sample_period_s();
         let plant = Plant::from_config(nominal);
         let base = simulate(&plant, &rec.inputs, dt, &opts)?;
-        Ok(Self {
+        Ok(Self::with_states(
+            nominal,
+            rec,
+            present,
+            scale,
+            opts,
+            base.states,
+            false,
+        ))
+    }
+
+    /// The problem over `rec` with the nominal replay's states `base_states` (all of them,
+    /// or the head's when `replay_heads`).
+    fn with_states(
+        nominal: &'a PlantConfig,
+        rec: &'a Recording,
+        present: [bool; 5],
+        scale: [f64; 5],
+        opts: SolverOptions,
+        base_states: Vec<PlantState>,
+        replay_heads: bool,
+    ) -> Self {
+        Self {
             nominal,
             recording: rec,
-            setup: Setup { dt_s: dt, present },
+            setup: Setup {
+                dt_s: rec.sample_period_s(),
+                present,
+            },
             inputs: &rec.inputs,
             measured: std::array::from_fn(|i| rec.outputs[i].as_deref()),
             scale,
-            base_states: base.states,
+            base_states,
             opts,
-            replay_heads: false,
-        })
+            replay_heads,
+        }
     }
 
     /// [`Self::new`] for a recording whose fits replay only its first `head` samples
@@ -100,17 +125,7 @@ impl<'a> Problem<'a> {
                 meas.push(sensor.push(&plant, x));
             },
         )?;
-        let problem = Self {
-            nominal,
-            recording: rec,
-            setup: Setup { dt_s: dt, present },
-            inputs: &rec.inputs,
-            measured: std::array::from_fn(|i| rec.outputs[i].as_deref()),
-            scale,
-            base_states: states,
-            opts,
-            replay_heads: keep < n,
-        };
+        let problem = Self::with_states(nominal, rec, present, scale, opts, states, keep < n);
         Ok((problem, meas))
     }
 
