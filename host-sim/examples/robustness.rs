@@ -6,13 +6,15 @@
 //! cargo run --release -p host-sim --example robustness [-- PLANT.toml [GAINS.toml]]
 //! ```
 //!
-//! After the tables: the MSE of every held-out scenario for each law on the nominal plant and
-//! with the valve dead time (where the cascade's lead comes from, or goes).
+//! Tables for the held-out sequences, the tuning suite and the jump suite (the demo's
+//! set-points). After them: the MSE of every held-out scenario for each law on the nominal
+//! plant, with the valve dead time and on the 11 x load (where the cascade's lead comes from,
+//! or goes).
 
 use anyhow::{Context, Result};
 use host_sim::control::compare::{
-    config_for, control_tuned_path, reference_plant_path, score_suite_with, suite_scenarios,
-    ControlTuning,
+    config_for, control_tuned_path, jump_suite_scenarios, reference_plant_path, score_suite_with,
+    suite_scenarios, ControlTuning,
 };
 use host_sim::control::robustness::{
     condition_config, condition_plant, format_table, held_out_scenarios, table, CONDITIONS,
@@ -36,6 +38,7 @@ fn main() -> Result<()> {
     for (title, scenarios) in [
         ("Held-out set-point suite", held_out_scenarios()?),
         ("Tuning suite", suite_scenarios()?),
+        ("Jump suite", jump_suite_scenarios()?),
     ] {
         let t0 = std::time::Instant::now();
         let rows = table(&text, &tuning, &scenarios, &[]);
@@ -61,7 +64,7 @@ fn main() -> Result<()> {
     let held_out = held_out_scenarios()?;
     for (name, effects, inertia) in CONDITIONS
         .iter()
-        .filter(|c| c.0 == "nominal" || c.0.starts_with("valve dead time"))
+        .filter(|c| c.0 == "nominal" || c.0.starts_with("valve dead time") || c.2 != 1.0)
     {
         let plant = condition_plant(&text, effects, *inertia);
         println!("Held-out scenarios, {name}: MSE [rad^2] (max |error| [rad])\n");
@@ -72,7 +75,15 @@ fn main() -> Result<()> {
             .collect();
         for (i, sc) in held_out.iter().enumerate() {
             let cell = |k: usize| match &scores[k] {
-                Ok(s) => (s.scenarios[i].mse_rad2, s.scenarios[i].max_abs_rad),
+                Ok(s) => {
+                    if let Some(f) = &s.scenarios[i].fault {
+                        println!(
+                            "({name}, {}: {} latched {f:?})",
+                            sc.scenario.name, laws[k].0
+                        );
+                    }
+                    (s.scenarios[i].mse_rad2, s.scenarios[i].max_abs_rad)
+                }
                 Err(_) => (f64::INFINITY, f64::INFINITY),
             };
             let (c, p, d) = (cell(0), cell(1), cell(2));

@@ -518,6 +518,35 @@ pub struct ScenarioScore {
     pub overshoot_frac: f64,
     /// The first latched fault, if any.
     pub fault: Option<FaultCode>,
+    /// Standard deviation of the angle error over the last [`FINAL_HOLD_S`] of the run when
+    /// the set-point has held still for twice that long [rad] (None otherwise): what is left
+    /// once the joint had time to settle, a limit cycle if large (a constant offset does not
+    /// count).
+    pub final_hold_sd_rad: Option<f64>,
+}
+
+/// The final window of a run over which [`ScenarioScore::final_hold_sd_rad`] is taken [s].
+pub const FINAL_HOLD_S: f64 = 0.5;
+
+/// [`ScenarioScore::final_hold_sd_rad`] of `run`.
+fn final_hold_sd_rad(run: &crate::control::closed_loop::ClosedLoopRun) -> Option<f64> {
+    let n = (FINAL_HOLD_S / run.dt_s).round() as usize;
+    if n < 2 || 2 * n > run.rows.len() {
+        return None;
+    }
+    let held = &run.rows[run.rows.len() - 2 * n..];
+    let (lo, hi) = held
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), r| {
+            (lo.min(r.setpoint_rad), hi.max(r.setpoint_rad))
+        });
+    if hi - lo > 1e-9 {
+        return None;
+    }
+    let tail = &held[n..];
+    let e = |r: &crate::control::closed_loop::TickRow| r.state.angle_rad - r.setpoint_rad;
+    let mean = tail.iter().map(e).sum::<f64>() / n as f64;
+    Some((tail.iter().map(|r| (e(r) - mean).powi(2)).sum::<f64>() / n as f64).sqrt())
 }
 
 /// Score of the suite.
@@ -624,6 +653,7 @@ pub fn score_suite_with(
             },
             overshoot_frac,
             fault,
+            final_hold_sd_rad: final_hold_sd_rad(&run),
         });
     }
     let mean = |f: fn(&ScenarioScore) -> f64| {

@@ -135,10 +135,28 @@ pub fn condition_config(name: &str, cfg: ControllerConfig) -> ControllerConfig {
     }
 }
 
-/// True when `cfg` runs the suite on `plant` with no fault and every |angle error| below
-/// 0.5 rad (the table's "stable").
+/// Largest [`ScenarioScore::final_hold_sd_rad`](crate::control::compare::ScenarioScore) a
+/// stable run may end with [rad]: the angle error's spread over the final hold. Past it the
+/// joint is still swinging at rest (a limit cycle); the cascade's runs end below 0.01 rad on
+/// every plant of the table.
+pub const HOLD_SD_MAX_RAD: f64 = 0.02;
+
+/// The tuner's stricter bound on the final hold's spread: half of [`HOLD_SD_MAX_RAD`], a
+/// margin like the gain margin of the cost (an optimiser lands on the edge of its
+/// constraints, and the held-out moves are larger than the tuning suite's).
+pub const TUNING_HOLD_SD_MAX_RAD: f64 = 0.5 * HOLD_SD_MAX_RAD;
+
+/// True when `cfg` runs the suite on `plant` with no fault, every |angle error| below
+/// 0.5 rad and no run ending in a limit cycle (the table's "stable").
 pub fn stable_on(plant: &Plant, scenarios: &[Scenario], cfg: ControllerConfig) -> bool {
     Cell::of(&score_suite_with(plant, scenarios, cfg)).stable
+}
+
+/// [`stable_on`] with the tuner's margin: every final hold's spread at most
+/// [`TUNING_HOLD_SD_MAX_RAD`].
+pub fn stable_with_margin_on(plant: &Plant, scenarios: &[Scenario], cfg: ControllerConfig) -> bool {
+    let c = Cell::of(&score_suite_with(plant, scenarios, cfg));
+    c.stable && c.hold_sd_rad <= TUNING_HOLD_SD_MAX_RAD
 }
 
 /// One cell of the table.
@@ -148,7 +166,11 @@ pub struct Cell {
     pub mse_rad2: f64,
     /// Largest |angle error| over the suite [rad].
     pub max_abs_rad: f64,
-    /// No fault latched and the error stayed bounded (below 0.5 rad).
+    /// Largest spread of the angle error over a run's final hold [rad] (0 when no run ends
+    /// in a hold).
+    pub hold_sd_rad: f64,
+    /// No fault latched, the error stayed bounded (below 0.5 rad) and every run that ends in a
+    /// hold comes to rest there (spread at most [`HOLD_SD_MAX_RAD`]).
     pub stable: bool,
 }
 
@@ -161,17 +183,25 @@ impl Cell {
                     .iter()
                     .map(|c| c.max_abs_rad)
                     .fold(0.0, f64::max);
+                let hold_sd = s
+                    .scenarios
+                    .iter()
+                    .filter_map(|c| c.final_hold_sd_rad)
+                    .fold(0.0, f64::max);
                 Cell {
                     mse_rad2: s.mse_rad2,
                     max_abs_rad: max_abs,
+                    hold_sd_rad: hold_sd,
                     stable: s.mse_rad2.is_finite()
                         && s.scenarios.iter().all(|c| c.fault.is_none())
-                        && max_abs < 0.5,
+                        && max_abs < 0.5
+                        && hold_sd <= HOLD_SD_MAX_RAD,
                 }
             }
             Err(_) => Cell {
                 mse_rad2: f64::INFINITY,
                 max_abs_rad: f64::INFINITY,
+                hold_sd_rad: f64::INFINITY,
                 stable: false,
             },
         }
@@ -246,12 +276,18 @@ pub fn format_table(rows: &[Row]) -> String {
                 "yes".to_string()
             } else {
                 let names = ["cascade", "PD", "PID"];
-                let bad: Vec<&str> = r
+                let bad: Vec<String> = r
                     .cells
                     .iter()
                     .zip(names)
                     .filter(|(c, _)| !c.stable)
-                    .map(|(_, n)| n)
+                    .map(|(c, n)| {
+                        if c.hold_sd_rad > HOLD_SD_MAX_RAD && c.max_abs_rad < 0.5 {
+                            format!("{n} (swings at rest, sd {:.3} rad)", c.hold_sd_rad)
+                        } else {
+                            n.to_string()
+                        }
+                    })
                     .collect();
                 format!("NO: {}", bad.join(", "))
             }
