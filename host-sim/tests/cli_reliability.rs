@@ -194,6 +194,48 @@ fn simulate_refuses_to_write_over_its_input_recording() {
     );
 }
 
+/// Every command that writes refuses an output that is one of its inputs, before any work,
+/// and leaves the input as it was (the plant file as tune's gains file replaced a plant file
+/// before this check).
+#[test]
+fn no_command_writes_over_one_of_its_inputs() {
+    let w = Workspace::new();
+    let rec = w.write(
+        "rec.csv",
+        &std::fs::read_to_string(fixture("pulses_nominal.csv")).unwrap(),
+    );
+    let p = w.write("plant.toml", &std::fs::read_to_string(plant()).unwrap());
+    std::fs::create_dir(w.dir.path().join("cfg")).unwrap();
+    let pc = w.write(
+        "cfg/plant_constants.toml",
+        &std::fs::read_to_string(plant()).unwrap(),
+    );
+    let scenario = w.write("step.toml", &STEP.replace("1e9", "2.0"));
+    let paths = [
+        ("rec", rec.as_path()),
+        ("p", &p),
+        ("pc", &pc),
+        ("s", &scenario),
+    ];
+    for (line, needle) in [
+        ("tune --plant {p} --out {p}", "--out"),
+        ("sweep force --plant {p} --out {p}", "--out"),
+        (
+            "identify torque --recording {rec} --plant {p} --out {rec}",
+            "--out",
+        ),
+        ("import --map {p} --input {rec} --out {rec}", "--out"),
+        ("capture --log {rec} --out {w}/./rec.csv", "--out"),
+        ("pil --plant {p} --scenario {s} --out {s}", "--out"),
+        (
+            "calibrate --recording {rec} --plant {pc} --out-dir {w}/cfg",
+            "--out-dir",
+        ),
+    ] {
+        w.refuses_with(line, &paths, &[needle, "refusing to overwrite an input"]);
+    }
+}
+
 #[test]
 fn an_unsupported_plot_format_is_refused_before_the_recording_is_replaced() {
     let w = Workspace::new();

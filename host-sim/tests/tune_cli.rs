@@ -36,6 +36,18 @@ fn bad_tune_arguments_are_refused_without_touching_the_output() {
         assert!(err.contains(want), "{args:?}: {err}");
         assert_eq!(std::fs::read_to_string(&out).unwrap(), "previous\n");
     }
+    // The plant file as the output is refused before any work: the gains would replace it.
+    let plant_copy = dir.path().join("plant.toml");
+    std::fs::copy(plant(), &plant_copy).unwrap();
+    let before = std::fs::read(&plant_copy).unwrap();
+    let r = on_plant("tune", &plant_copy, &[&"--out", &plant_copy]);
+    assert_eq!(r.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&r.stderr).contains("refusing to overwrite an input"),
+        "{}",
+        String::from_utf8_lossy(&r.stderr)
+    );
+    assert_eq!(std::fs::read(&plant_copy).unwrap(), before);
     // A missing plant file is named.
     let r = on_plant("tune", &"no/such/plant.toml", &[&"--out", &out]);
     assert_eq!(r.status.code(), Some(2));

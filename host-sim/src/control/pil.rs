@@ -409,6 +409,18 @@ pub fn run_pil(a: &PilArgs) -> anyhow::Result<(String, bool)> {
             a.tick_timeout_s
         );
     }
+    let mut inputs = vec![
+        ("--plant", a.plant.as_path()),
+        ("--scenario", a.scenario.as_path()),
+    ];
+    if let Some(elf) = &a.elf {
+        inputs.push(("--elf", elf.as_path()));
+    }
+    let mut outputs = vec![("--out", a.out.as_path())];
+    if let Some(log) = &a.log {
+        outputs.push(("--log", log.as_path()));
+    }
+    crate::validate::distinct_outputs(&inputs, &outputs).map_err(anyhow::Error::msg)?;
     let plant = crate::plant::Plant::load(&a.plant)?;
     let mut scenario = Scenario::load(&a.scenario)?;
     let forced = !scenario.sensors.board_counts;

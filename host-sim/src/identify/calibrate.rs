@@ -253,6 +253,27 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
     }
     let file = a.recording.display().to_string();
     let dest = |name: &str| a.out_dir.join(name);
+    // No file it replaces may be one it reads (e.g. --plant config/plant_constants.toml).
+    let mut inputs = vec![
+        ("--recording", a.recording.as_path()),
+        ("--plant", a.plant.as_path()),
+    ];
+    if let Some(r) = &a.plant_recording {
+        inputs.push(("--plant-recording", r.as_path()));
+    }
+    let written: Vec<PathBuf> = [
+        ("plant_identified.toml", !a.identify_plant.is_empty()),
+        ("torque_model.toml", true),
+        ("joint_geometry.toml", true),
+        ("plant_constants.toml", true),
+        ("control_tuned.toml", a.tune),
+    ]
+    .iter()
+    .filter(|(_, on)| *on)
+    .map(|(n, _)| dest(n))
+    .collect();
+    let outputs: Vec<(&str, &Path)> = written.iter().map(|p| ("--out-dir", p.as_path())).collect();
+    crate::validate::distinct_outputs(&inputs, &outputs).map_err(anyhow::Error::msg)?;
     // Stage 0 (optional): identify plant-file keys; the identified file is staged in a
     // temporary file beside the config for the later stages, and written at the end.
     let mut out = String::new();

@@ -168,6 +168,11 @@ pub fn recording_of(
 
 /// `host-sim capture`: returns the report printed on stdout.
 pub fn run_capture(a: &CaptureArgs) -> anyhow::Result<String> {
+    let mut inputs = vec![("--log", a.log.as_path())];
+    if let Some(elf) = &a.elf {
+        inputs.push(("--elf", elf.as_path()));
+    }
+    crate::validate::distinct_outputs(&inputs, &[("--out", &a.out)]).map_err(anyhow::Error::msg)?;
     let bytes = std::fs::read(&a.log).map_err(|e| anyhow::anyhow!("{}: {e}", a.log.display()))?;
     let (raw, skipped) = records_of_bytes(&bytes);
     let (records, what, how) = if !raw.is_empty() {

@@ -867,8 +867,16 @@ pub struct ImportArgs {
 
 /// `host-sim import`: returns the report printed on stdout.
 pub fn run_import(a: &ImportArgs) -> anyhow::Result<String> {
+    let inputs = [("--map", a.map.as_path()), ("--input", a.input.as_path())];
+    crate::validate::distinct_outputs(&inputs, &[("--out", &a.out)]).map_err(anyhow::Error::msg)?;
     let mapping = Mapping::load(&a.map)?;
     let imp = import(&mapping, &a.map, &a.input, a.split)?;
+    // With --split the segments have their own names: none may be an input either.
+    let segments: Vec<PathBuf> = (0..imp.segments.len())
+        .map(|i| segment_path(&a.out, i, imp.segments.len()))
+        .collect();
+    let outputs: Vec<(&str, &Path)> = segments.iter().map(|p| ("--out", p.as_path())).collect();
+    crate::validate::distinct_outputs(&inputs, &outputs).map_err(anyhow::Error::msg)?;
     // Every recording must read back (the same checks simulate / diagnose apply).
     let n = imp.segments.len();
     let mut report = String::new();
