@@ -748,20 +748,15 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
         ..g
     };
     let threads = a.threads;
-    let (pd, c_pd, note_pd) = tune(
-        &ctx,
-        false,
-        threads,
-        stored.as_ref().map(|t| with_cutoff(t.pd.gains())),
-    );
-    ctx.progress.inc(1);
-    let (pid, c_pid, note_pid) = tune(
-        &ctx,
-        true,
-        threads,
-        stored.as_ref().map(|t| with_cutoff(t.pid.gains())),
-    );
-    ctx.progress.inc(1);
+    // The PD (no integral) then the PID, each from the stored law of its kind with --warm-start.
+    let [(pd, c_pd, note_pd), (pid, c_pid, note_pid)] = [false, true].map(|ki_on| {
+        let start = stored
+            .as_ref()
+            .map(|t| with_cutoff(if ki_on { t.pid.gains() } else { t.pd.gains() }));
+        let tuned = tune(&ctx, ki_on, threads, start);
+        ctx.progress.inc(1);
+        tuned
+    });
     let (_, c_default, c_default_margin) = ctx.cost_cfg(reference);
     let mut step_tests = Vec::new();
     for (name, cfg) in [
