@@ -197,6 +197,22 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
     })
 }
 
+/// The tables' `expect` column: whether a scenario met its `[expect]` bounds.
+pub(crate) fn expect_column(expect_fails: &[String]) -> &'static str {
+    if expect_fails.is_empty() {
+        "met"
+    } else {
+        "FAILED"
+    }
+}
+
+/// One line per failed expectation of scenario `name`, under its row of the table.
+pub(crate) fn write_expect_fails(s: &mut String, name: &str, expect_fails: &[String]) {
+    for f in expect_fails {
+        let _ = writeln!(s, "  {name}: {f}");
+    }
+}
+
 /// The demo's text report.
 pub fn format_report(r: &DemoReport, out_dir: &Path) -> String {
     let mut s = String::new();
@@ -221,16 +237,10 @@ pub fn format_report(r: &DemoReport, out_dir: &Path) -> String {
             c.rms_error_rad.to_degrees(),
             c.max_abs_error_rad.to_degrees(),
             c.faults,
-            if c.expect_fails.is_empty() {
-                "met"
-            } else {
-                "FAILED"
-            },
+            expect_column(&c.expect_fails),
             c.speed_x
         );
-        for f in &c.expect_fails {
-            let _ = writeln!(s, "  {}: {f}", c.name);
-        }
+        write_expect_fails(&mut s, &c.name, &c.expect_fails);
     }
     let _ = writeln!(
         s,
