@@ -175,10 +175,7 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
         ("effects".into(), plant.effects_summary()),
     ];
     let out = crate::sim::replay_recording(&plant, &fixture, &sim.states, metadata);
-    let stem = fixture_path
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "fixture".into());
+    let stem = crate::io::file_stem_or(&fixture_path, "fixture");
     let replay_csv = opts.out_dir.join(format!("{stem}_replay.csv"));
     let replay_png = opts.out_dir.join(format!("{stem}_replay.png"));
     out.write(&replay_csv)?;
