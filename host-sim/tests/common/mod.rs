@@ -123,6 +123,21 @@ pub fn assert_trace_and_plot(dir: &Path, name: &str, ticks: usize) {
     );
 }
 
+/// What a refused run must leave in an output file an earlier good run wrote.
+pub const PREVIOUS_OUTPUT: &str = "previous good output\n";
+
+/// `dir/name` holding [`PREVIOUS_OUTPUT`] (an output file of an earlier good run).
+pub fn previous_output(dir: &Path, name: &str) -> PathBuf {
+    let out = dir.join(name);
+    std::fs::write(&out, PREVIOUS_OUTPUT).unwrap();
+    out
+}
+
+/// Asserts that `out` still holds [`PREVIOUS_OUTPUT`].
+pub fn assert_kept(out: &Path) {
+    assert_eq!(std::fs::read_to_string(out).unwrap(), PREVIOUS_OUTPUT);
+}
+
 /// Runs `host-sim` with `args` and asserts success; its stdout.
 pub fn run_ok(args: &[&dyn AsRef<OsStr>]) -> String {
     ok(&host_sim(args))
