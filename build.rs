@@ -9,6 +9,17 @@
 
 use std::{env, fs, path::PathBuf};
 
+/// `[("prefix.field", s.field), ...]`: fields of `s` with their TOML keys (the prefix is
+/// optional), for the checks and the generated constants.
+macro_rules! keyed {
+    ($prefix:literal, $s:expr; $($field:ident),+ $(,)?) => {
+        [$((concat!($prefix, stringify!($field)), $s.$field)),+]
+    };
+    ($s:expr; $($field:ident),+ $(,)?) => {
+        [$((stringify!($field), $s.$field)),+]
+    };
+}
+
 // Shared with the library (`crate::fixed_point::prescale`): the same f64 pre-scaling runs here
 // for the compile-time constants and in `FixedForceLaw::from_params` at run time.
 #[allow(dead_code)]
@@ -164,10 +175,47 @@ fn check(ok: bool, file: &str, field: &str, value: f64, must: &str) {
     assert!(ok, "{file}: {field} = {value} must be {must}");
 }
 
-fn read<T: serde::de::DeserializeOwned>(path: &str) -> T {
+/// Every value must be finite and >= 0.
+fn check_non_negative(file: &str, fields: &[(&str, f64)]) {
+    for &(field, v) in fields {
+        check(v.is_finite() && v >= 0.0, file, field, v, "finite and >= 0");
+    }
+}
+
+/// The ISO 6358 valve constants of a `[valve]` table.
+fn check_valve(file: &str, sonic_conductance_m3_per_s_pa: f64, critical_ratio: f64) {
+    let c = sonic_conductance_m3_per_s_pa;
+    check(
+        c > 0.0,
+        file,
+        "valve.sonic_conductance_m3_per_s_pa",
+        c,
+        "> 0",
+    );
+    let b = critical_ratio;
+    check(
+        (0.0..1.0).contains(&b),
+        file,
+        "valve.critical_ratio",
+        b,
+        "in 0..1",
+    );
+}
+
+/// The text of a config file (the build re-runs when it changes).
+fn read_text(path: &str) -> String {
     println!("cargo:rerun-if-changed={path}");
-    let text = fs::read_to_string(path).unwrap_or_else(|e| panic!("{path}: cannot read: {e}"));
-    toml::from_str(&text).unwrap_or_else(|e| panic!("{path}: {e}"))
+    fs::read_to_string(path).unwrap_or_else(|e| panic!("{path}: cannot read: {e}"))
+}
+
+/// A config file, parsed.
+fn read<T: serde::de::DeserializeOwned>(path: &str) -> T {
+    parse(path, &read_text(path))
+}
+
+/// The TOML `text` of the config file `path`, parsed.
+fn parse<T: serde::de::DeserializeOwned>(path: &str, text: &str) -> T {
+    toml::from_str(text).unwrap_or_else(|e| panic!("{path}: {e}"))
 }
 
 /// The f32 constant the firmware uses, widened back to f64 (the fixed-point model is pre-scaled
@@ -180,6 +228,40 @@ fn f32w(x: f64) -> f64 {
 fn lit(x: f64) -> String {
     assert!(x.is_finite(), "non-finite constant {x}");
     format!("{:?}_f32", x as f32)
+}
+
+/// [`lit`] of each value.
+fn lits<const N: usize>(fields: [(&'static str, f64); N]) -> Vec<(&'static str, String)> {
+    fields.into_iter().map(|(k, x)| (k, lit(x))).collect()
+}
+
+/// The Rust source of `pub const NAME: Type = Type { field: value, ... };`, one field a line.
+fn const_struct(name: &str, ty: &str, fields: &[(&str, String)]) -> String {
+    format!(
+        "pub const {name}: {ty} = {};\n",
+        struct_literal(ty, fields, "")
+    )
+}
+
+/// `Type { field: value, ... }`, one field a line, the lines after the first indented by
+/// `indent`.
+fn struct_literal(ty: &str, fields: &[(&str, String)], indent: &str) -> String {
+    let mut s = format!("{ty} {{\n");
+    for (field, value) in fields {
+        s += &format!("{indent}    {field}: {value},\n");
+    }
+    s + indent + "}"
+}
+
+/// `Type { field: value, ... }` on one line.
+fn inline_struct(ty: &str, fields: &[(&str, String)]) -> String {
+    format!("{ty} {{ {} }}", inline_fields(fields))
+}
+
+/// `field: value, ...`
+fn inline_fields(fields: &[(&str, String)]) -> String {
+    let fields: Vec<String> = fields.iter().map(|(f, v)| format!("{f}: {v}")).collect();
+    fields.join(", ")
 }
 
 fn main() {
@@ -237,76 +319,42 @@ fn main() {
             &plant.environment,
             &plant.valve,
         );
+        for (field, x) in [
+            ("joint.inertia_kgm2", j.inertia_kgm2),
+            ("muscle.p_max_gauge_pa", m.p_max_gauge_pa),
+            ("muscle.volume_poly_m3[0]", m.volume_poly_m3[0]),
+            ("environment.p_atm_pa", e.p_atm_pa),
+        ] {
+            check(x > 0.0, P, field, x, "> 0");
+        }
+        let supply = e.supply_gauge_pa;
         check(
-            j.inertia_kgm2 > 0.0,
-            P,
-            "joint.inertia_kgm2",
-            j.inertia_kgm2,
-            "> 0",
-        );
-        check(
-            m.p_max_gauge_pa > 0.0,
-            P,
-            "muscle.p_max_gauge_pa",
-            m.p_max_gauge_pa,
-            "> 0",
-        );
-        check(
-            m.volume_poly_m3[0] > 0.0,
-            P,
-            "muscle.volume_poly_m3[0]",
-            m.volume_poly_m3[0],
-            "> 0",
-        );
-        check(
-            e.p_atm_pa > 0.0,
-            P,
-            "environment.p_atm_pa",
-            e.p_atm_pa,
-            "> 0",
-        );
-        check(
-            e.supply_gauge_pa >= 0.0,
+            supply >= 0.0,
             P,
             "environment.supply_gauge_pa",
-            e.supply_gauge_pa,
+            supply,
             ">= 0",
         );
-        check(
-            v.sonic_conductance_m3_per_s_pa > 0.0,
-            P,
-            "valve.sonic_conductance_m3_per_s_pa",
-            v.sonic_conductance_m3_per_s_pa,
-            "> 0",
-        );
-        check(
-            (0.0..1.0).contains(&v.critical_ratio),
-            P,
-            "valve.critical_ratio",
-            v.critical_ratio,
-            "in 0..1",
-        );
+        check_valve(P, v.sonic_conductance_m3_per_s_pa, v.critical_ratio);
         const C: &str = "config/controller.toml";
-        let p = &ctl.position;
-        for (field, x) in [
-            ("position.kp_nm_per_rad", p.kp_nm_per_rad),
-            ("position.ki_nm_per_rad_s", p.ki_nm_per_rad_s),
-            ("position.kd_nm_s_per_rad", p.kd_nm_s_per_rad),
-            ("position.i_limit_nm", p.i_limit_nm),
-            ("position.out_limit_nm", p.out_limit_nm),
-            ("position.velocity_cutoff_hz", p.velocity_cutoff_hz),
-            ("torque.kp", ctl.torque.kp),
-            ("torque.ki_per_s", ctl.torque.ki_per_s),
-            ("torque.corr_limit_nm", ctl.torque.corr_limit_nm),
-            ("pressure.ki_per_pa_s", ctl.pressure.ki_per_pa_s),
-            ("pressure.deadband_pa", ctl.pressure.deadband_pa),
-            ("pressure.i_limit", ctl.pressure.i_limit),
-            ("feedforward.rate_weight", ctl.feedforward.rate_weight),
-            ("feedforward.cutoff_hz", ctl.feedforward.cutoff_hz),
-            ("feedforward.limit_nm", ctl.feedforward.limit_nm),
-        ] {
-            check(x.is_finite() && x >= 0.0, C, field, x, "finite and >= 0");
-        }
+        check_non_negative(
+            C,
+            &keyed!("position.", ctl.position;
+            kp_nm_per_rad, ki_nm_per_rad_s, kd_nm_s_per_rad, i_limit_nm, out_limit_nm,
+            velocity_cutoff_hz),
+        );
+        check_non_negative(
+            C,
+            &keyed!("torque.", ctl.torque; kp, ki_per_s, corr_limit_nm),
+        );
+        check_non_negative(
+            C,
+            &keyed!("pressure.", ctl.pressure; ki_per_pa_s, deadband_pa, i_limit),
+        );
+        check_non_negative(
+            C,
+            &keyed!("feedforward.", ctl.feedforward; rate_weight, cutoff_hz, limit_nm),
+        );
         check(
             ctl.pressure.full_opening_error_pa > 0.0,
             C,
@@ -316,47 +364,35 @@ fn main() {
         );
     }
     let c: Vec<String> = f.c.iter().map(|&x| lit(x)).collect();
+    let force_law = [
+        vec![("c", format!("[{}]", c.join(", ")))],
+        lits(keyed!(f; p_gauge_max_pa, stretch_min, stretch_max)),
+    ]
+    .concat();
     let src = format!(
         "// @generated by build.rs from config/force_law.toml, config/torque_model.toml,\n\
          // config/joint_geometry.toml, config/plant_constants.toml and config/controller.toml.\n\
          // Do not edit: change the config file (each states where its numbers come from).\n\
          /// Joint geometry (config/joint_geometry.toml).\n\
-         pub const JOINT_GEOMETRY: crate::geometry::JointGeometry = crate::geometry::JointGeometry {{\n\
-         \x20   sprocket_radius_m: {},\n\
-         \x20   rest_length_m: {},\n\
-         \x20   initial_contraction: {},\n\
-         }};\n\
+         {}\
          /// Identified force-law constants (config/force_law.toml).\n\
-         pub const FORCE_LAW: crate::force_law::ForceLawParams = crate::force_law::ForceLawParams {{\n\
-         \x20   c: [{}],\n\
-         \x20   p_gauge_max_pa: {},\n\
-         \x20   stretch_min: {},\n\
-         \x20   stretch_max: {},\n\
-         }};\n\
+         {}\
          /// Torque-model constants (config/torque_model.toml).\n\
-         pub const TORQUE_MODEL: crate::torque_model::TorqueModelParams = crate::torque_model::TorqueModelParams {{\n\
-         \x20   a_n_per_m_rad: {},\n\
-         \x20   b_m2: {},\n\
-         \x20   c_nms3_per_rad3: {},\n\
-         \x20   d_nms_per_rad: {},\n\
-         \x20   sprocket_radius_m: {},\n\
-         \x20   p0_gauge_pa: {},\n\
-         \x20   dp_max_pa: {},\n\
-         }};\n",
-        lit(g.sprocket_radius_m),
-        lit(g.rest_length_m),
-        lit(g.initial_contraction),
-        c.join(", "),
-        lit(f.p_gauge_max_pa),
-        lit(f.stretch_min),
-        lit(f.stretch_max),
-        lit(t.a_n_per_m_rad),
-        lit(t.b_m2),
-        lit(t.c_nms3_per_rad3),
-        lit(t.d_nms_per_rad),
-        lit(t.sprocket_radius_m),
-        lit(t.p0_gauge_pa),
-        lit(t.dp_max_pa),
+         {}",
+        const_struct(
+            "JOINT_GEOMETRY",
+            "crate::geometry::JointGeometry",
+            &lits(keyed!(g; sprocket_radius_m, rest_length_m, initial_contraction)),
+        ),
+        const_struct("FORCE_LAW", "crate::force_law::ForceLawParams", &force_law),
+        const_struct(
+            "TORQUE_MODEL",
+            "crate::torque_model::TorqueModelParams",
+            &lits(
+                keyed!(t; a_n_per_m_rad, b_m2, c_nms3_per_rad3, d_nms_per_rad,
+                sprocket_radius_m, p0_gauge_pa, dp_max_pa)
+            ),
+        ),
     );
     let (pm, env_, val, pos, tq, pr, ff) = (
         &plant.muscle,
@@ -368,6 +404,25 @@ fn main() {
         &ctl.feedforward,
     );
     let vp: Vec<String> = pm.volume_poly_m3.iter().map(|&x| lit(x)).collect();
+    let torque_loop = [
+        lits(keyed!(tq; kp, ki_per_s, corr_limit_nm)),
+        vec![("p_set_max_gauge_pa", "P_MUSCLE_MAX_GAUGE_PA".into())],
+    ]
+    .concat();
+    let pressure_loop = [
+        vec![(
+            "kp_per_pa",
+            format!("1.0 / {}", lit(pr.full_opening_error_pa)),
+        )],
+        lits(keyed!(pr; ki_per_pa_s, deadband_pa, i_limit)),
+    ]
+    .concat();
+    let feedforward = [
+        ("rate_weight", lit(ff.rate_weight)),
+        ("inertia_kgm2", "JOINT_INERTIA_KGM2".into()),
+        ("cutoff_hz", lit(ff.cutoff_hz)),
+        ("limit_nm", lit(ff.limit_nm)),
+    ];
     let src = format!(
         "{src}\
          // From config/plant_constants.toml.\n\
@@ -387,38 +442,17 @@ fn main() {
          pub const MUSCLE_VOLUME_POLY_M3: [f32; 4] = [{}];\n\
          // From config/controller.toml.\n\
          /// Default position-loop gains of the cascade (config/controller.toml [position]).\n\
-         pub const POSITION_GAINS: crate::control::PidGains = crate::control::PidGains {{\n\
-         \x20   kp_nm_per_rad: {},\n\
-         \x20   ki_nm_per_rad_s: {},\n\
-         \x20   kd_nm_s_per_rad: {},\n\
-         \x20   i_limit_nm: {},\n\
-         \x20   out_limit_nm: {},\n\
-         }};\n\
+         {}\
          /// Velocity filter cut-off of the position loop [Hz] (config/controller.toml [position]).\n\
          pub const VELOCITY_CUTOFF_HZ: f32 = {};\n\
          /// Default torque-loop gains (config/controller.toml [torque]); the set-point ceiling is\n\
          /// [`P_MUSCLE_MAX_GAUGE_PA`].\n\
-         pub const TORQUE_LOOP: crate::control::TorqueLoopGains = crate::control::TorqueLoopGains {{\n\
-         \x20   kp: {},\n\
-         \x20   ki_per_s: {},\n\
-         \x20   corr_limit_nm: {},\n\
-         \x20   p_set_max_gauge_pa: P_MUSCLE_MAX_GAUGE_PA,\n\
-         }};\n\
+         {}\
          /// Default pressure-loop gains (config/controller.toml [pressure]).\n\
-         pub const PRESSURE_LOOP: crate::control::PressureLoopGains = crate::control::PressureLoopGains {{\n\
-         \x20   kp_per_pa: 1.0 / {},\n\
-         \x20   ki_per_pa_s: {},\n\
-         \x20   deadband_pa: {},\n\
-         \x20   i_limit: {},\n\
-         }};\n\
+         {}\
          /// Default trajectory feed-forward (config/controller.toml [feedforward]; the inertia is\n\
          /// [`JOINT_INERTIA_KGM2`]).\n\
-         pub const FEEDFORWARD: crate::feedforward::FeedforwardGains = crate::feedforward::FeedforwardGains {{\n\
-         \x20   rate_weight: {},\n\
-         \x20   inertia_kgm2: JOINT_INERTIA_KGM2,\n\
-         \x20   cutoff_hz: {},\n\
-         \x20   limit_nm: {},\n\
-         }};\n",
+         {}",
         lit(plant.joint.inertia_kgm2),
         lit(pm.p_max_gauge_pa),
         lit(env_.p_atm_pa),
@@ -426,22 +460,16 @@ fn main() {
         lit(val.sonic_conductance_m3_per_s_pa),
         lit(val.critical_ratio),
         vp.join(", "),
-        lit(pos.kp_nm_per_rad),
-        lit(pos.ki_nm_per_rad_s),
-        lit(pos.kd_nm_s_per_rad),
-        lit(pos.i_limit_nm),
-        lit(pos.out_limit_nm),
+        const_struct(
+            "POSITION_GAINS",
+            "crate::control::PidGains",
+            &lits(keyed!(pos; kp_nm_per_rad, ki_nm_per_rad_s, kd_nm_s_per_rad, i_limit_nm,
+                out_limit_nm)),
+        ),
         lit(pos.velocity_cutoff_hz),
-        lit(tq.kp),
-        lit(tq.ki_per_s),
-        lit(tq.corr_limit_nm),
-        lit(pr.full_opening_error_pa),
-        lit(pr.ki_per_pa_s),
-        lit(pr.deadband_pa),
-        lit(pr.i_limit),
-        lit(ff.rate_weight),
-        lit(ff.cutoff_hz),
-        lit(ff.limit_nm),
+        const_struct("TORQUE_LOOP", "crate::control::TorqueLoopGains", &torque_loop),
+        const_struct("PRESSURE_LOOP", "crate::control::PressureLoopGains", &pressure_loop),
+        const_struct("FEEDFORWARD", "crate::feedforward::FeedforwardGains", &feedforward),
     );
     let fb = prescale::force_law_bits(
         f.c.map(f32w),
@@ -536,8 +564,7 @@ fn main() {
 /// and `tests/qemu_trace.rs` replay (see `scripts/gen-qemu-trace.py` for the columns). Errors
 /// name the file, line and field.
 fn sensor_trace(path: &str, joints: usize, name: &str, out_file: &str) {
-    println!("cargo:rerun-if-changed={path}");
-    let text = fs::read_to_string(path).unwrap_or_else(|e| panic!("{path}: cannot read: {e}"));
+    let text = read_text(path);
     const GROUP: [&str; 4] = [
         "angle_set_mrad",
         "p1_adc_counts",

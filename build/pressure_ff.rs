@@ -24,10 +24,7 @@ struct Ff {
 
 /// The Rust source of `PRESSURE_FF`.
 pub fn constants() -> String {
-    println!("cargo:rerun-if-changed={FILE}");
-    let text = std::fs::read_to_string(FILE).unwrap_or_else(|e| panic!("{FILE}: cannot read: {e}"));
-    let f: FfFile = toml::from_str(&text).unwrap_or_else(|e| panic!("{FILE}: {e}"));
-    let f = f.pressure_ff;
+    let f = super::read::<FfFile>(FILE).pressure_ff;
     let checks = [
         (
             "polytropic_index",
@@ -61,22 +58,16 @@ pub fn constants() -> String {
             "{FILE}: [pressure_ff] {name} = {v} must be {must}"
         );
     }
-    let lit = |x: f64| format!("{:?}_f32", x as f32);
+    let fields = [
+        vec![("enabled", f.enabled.to_string())],
+        super::lits(
+            keyed!(f; polytropic_index, gas_constant_j_per_kg_k, temperature_k,
+            rate_cutoff_hz, gain),
+        ),
+    ]
+    .concat();
     format!(
-        "/// Inverse thermodynamic feed-forward of the pressure loop (config/pressure_ff.toml).\n\
-         pub const PRESSURE_FF: crate::pressure_ff::PressureFfParams = crate::pressure_ff::PressureFfParams {{\n\
-         \x20   enabled: {},\n\
-         \x20   polytropic_index: {},\n\
-         \x20   gas_constant_j_per_kg_k: {},\n\
-         \x20   temperature_k: {},\n\
-         \x20   rate_cutoff_hz: {},\n\
-         \x20   gain: {},\n\
-         }};\n",
-        f.enabled,
-        lit(f.polytropic_index),
-        lit(f.gas_constant_j_per_kg_k),
-        lit(f.temperature_k),
-        lit(f.rate_cutoff_hz),
-        lit(f.gain),
+        "/// Inverse thermodynamic feed-forward of the pressure loop (config/pressure_ff.toml).\n{}",
+        super::const_struct("PRESSURE_FF", "crate::pressure_ff::PressureFfParams", &fields)
     )
 }

@@ -36,10 +36,8 @@ struct Net {
 
 /// The Rust source of `VOLUME_FNN`.
 pub fn constants() -> String {
-    println!("cargo:rerun-if-changed={FILE}");
-    let text = std::fs::read_to_string(FILE).unwrap_or_else(|e| panic!("{FILE}: cannot read: {e}"));
-    let f: VolumeFile = toml::from_str(&text).unwrap_or_else(|e| panic!("{FILE}: {e}"));
-    let n = f.volume_fnn;
+    let text = super::read_text(FILE);
+    let n = super::parse::<VolumeFile>(FILE, &text).volume_fnn;
     let bad =
         |field: &str, must: &str| -> ! { panic!("{FILE}: [volume_fnn] {field} must be {must}") };
     if n.hidden_units != [HIDDEN, HIDDEN] {
@@ -101,46 +99,34 @@ pub fn constants() -> String {
     if !(n.volume_floor_m3 > 0.0) {
         bad("volume_floor_m3", "> 0");
     }
-    let lit = |x: f64| format!("{:?}_f32", x as f32);
     let arr = |v: &[f64]| {
-        format!(
-            "[{}]",
-            v.iter().map(|x| lit(*x)).collect::<Vec<_>>().join(", ")
-        )
+        let v: Vec<String> = v.iter().map(|&x| super::lit(x)).collect();
+        format!("[{}]", v.join(", "))
     };
+    let rows = |rows: Vec<String>| format!("[{}]", rows.join(", "));
     let doc: String = text
         .lines()
         .take_while(|l| l.starts_with('#') || l.trim().is_empty())
         .filter(|l| l.starts_with('#'))
         .map(|l| format!("/// {}\n", l.trim_start_matches('#').trim_start()))
         .collect();
+    let fields = [
+        vec![
+            ("input_mean", arr(&n.input_mean)),
+            ("input_inv_std", arr(&n.input_std.map(|s| 1.0 / s))),
+            ("w1", rows(n.w1.iter().map(|r| arr(r)).collect())),
+            ("b1", arr(&n.b1)),
+            ("w2", rows(n.w2.iter().map(|r| arr(r)).collect())),
+            ("b2", arr(&n.b2)),
+            ("w3", arr(&n.w3)),
+        ],
+        super::lits(keyed!(n; b3, volume_offset_m3, volume_scale_m3, volume_floor_m3)),
+    ]
+    .concat();
     format!(
         "/// Hybrid-model volume network (config/volume.toml, `src/volume_fnn.rs`).\n\
          ///\n\
-         {doc}\
-         pub const VOLUME_FNN: crate::volume_fnn::VolumeFnn = crate::volume_fnn::VolumeFnn {{\n\
-         \x20   input_mean: {},\n\
-         \x20   input_inv_std: {},\n\
-         \x20   w1: [{}],\n\
-         \x20   b1: {},\n\
-         \x20   w2: [{}],\n\
-         \x20   b2: {},\n\
-         \x20   w3: {},\n\
-         \x20   b3: {},\n\
-         \x20   volume_offset_m3: {},\n\
-         \x20   volume_scale_m3: {},\n\
-         \x20   volume_floor_m3: {},\n\
-         }};\n",
-        arr(&n.input_mean),
-        arr(&n.input_std.map(|s| 1.0 / s)),
-        n.w1.iter().map(|r| arr(r)).collect::<Vec<_>>().join(", "),
-        arr(&n.b1),
-        n.w2.iter().map(|r| arr(r)).collect::<Vec<_>>().join(", "),
-        arr(&n.b2),
-        arr(&n.w3),
-        lit(n.b3),
-        lit(n.volume_offset_m3),
-        lit(n.volume_scale_m3),
-        lit(n.volume_floor_m3),
+         {doc}{}",
+        super::const_struct("VOLUME_FNN", "crate::volume_fnn::VolumeFnn", &fields)
     )
 }

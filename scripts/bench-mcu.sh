@@ -71,103 +71,53 @@ cargo build -q -p pam-firmware --bin qemu --features pam-firmware/mcu-bench,pam-
   --release --target thumbv7em-none-eabihf --target-dir "$fnn_dir"
 fnn_log=$(QEMU_EXTRA_ARGS="-icount shift=0" DEFMT_PRINT_ARGS="--log-format {s}" \
   scripts/qemu-run.sh "$fnn_dir/thumbv7em-none-eabihf/release/qemu" | grep -v '^tick=')
-fnn_stat() { # fnn_stat <bench name> -> "mean worst n" in instructions (calibrated)
-  local line calib
-  line=$(grep "^bench $1 " <<<"$fnn_log" | tr ' ' '\n')
-  calib=$(grep "^bench calib" <<<"$fnn_log" | tr ' ' '\n')
-  awk -v ci="$(sed -n 's/^insns=//p' <<<"$calib")" -v cc="$(sed -n 's/^counts=//p' <<<"$calib")" \
-    -v e="$(sed -n 's/^empty_counts=//p' <<<"$calib")" -v n="$(sed -n 's/^n=//p' <<<"$line")" \
-    -v s="$(sed -n 's/^sum_counts=//p' <<<"$line")" -v m="$(sed -n 's/^max_counts=//p' <<<"$line")" 'BEGIN {
+key() { # key <log> <line prefix> <key>: <key>= of the log's first line starting with the prefix
+  grep "^$2" <<<"$1" | tr ' ' '\n' | sed -n "s/^$3=//p" | head -1
+}
+stat() { # stat <log> <bench name> -> "mean worst n" in instructions, calibrated on the same
+  # log's "bench calib" line; "? ? 0" without samples
+  awk -v ci="$(key "$1" "bench calib" insns)" -v cc="$(key "$1" "bench calib" counts)" \
+    -v e="$(key "$1" "bench calib" empty_counts)" -v n="$(key "$1" "bench $2 " n)" \
+    -v s="$(key "$1" "bench $2 " sum_counts)" -v m="$(key "$1" "bench $2 " max_counts)" 'BEGIN {
     if (n == "" || n == 0 || cc == "") { print "? ? 0"; exit }
     k = ci / (cc - e); printf "%.0f %.0f %d\n", (s / n - e) * k, (m - e) * k, n }'
 }
-read -r fnn_tick0_mean fnn_tick0_worst _ < <(fnn_stat tick)
-read -r ff_tick_mean ff_tick_worst ff_tick_n < <(fnn_stat "ff tick")
-read -r hm_tick_mean hm_tick_worst hm_tick_n < <(fnn_stat "hybrid tick")
-read -r fnn_mean fnn_worst fnn_n < <(fnn_stat volume_fnn)
+read -r fnn_tick0_mean fnn_tick0_worst _ < <(stat "$fnn_log" tick)
+read -r ff_tick_mean ff_tick_worst ff_tick_n < <(stat "$fnn_log" "ff tick")
+read -r hm_tick_mean hm_tick_worst hm_tick_n < <(stat "$fnn_log" "hybrid tick")
+read -r fnn_mean fnn_worst fnn_n < <(stat "$fnn_log" volume_fnn)
 # Cortex-M0 (no FPU) image on QEMU microbit: SysTick runs at 16 MHz there, so 64 ns per
 # instruction (-icount shift=6) keeps about one count per instruction.
 m0_elf=${CARGO_TARGET_DIR:-target}/thumbv6m-none-eabi/release/qemu_m0
 m0_log=$(QEMU_EXTRA_ARGS="-icount shift=6" DEFMT_PRINT_ARGS="--log-format {s}" \
   scripts/qemu-run.sh "$m0_elf")
-m0() { # m0 <line-prefix> <key>
-  grep "^$1" <<<"$m0_log" | tr ' ' '\n' | sed -n "s/^$2=//p" | head -1
-}
-read -r m0_tk_mean m0_tk_worst m0_tk_n < <(awk \
-  -v ci="$(m0 "bench calib" insns)" -v cc="$(m0 "bench calib" counts)" -v e="$(m0 "bench calib" empty_counts)" \
-  -v n="$(m0 "bench m0 tick_f32_soft" n)" -v s="$(m0 "bench m0 tick_f32_soft" sum_counts)" \
-  -v m="$(m0 "bench m0 tick_f32_soft" max_counts)" 'BEGIN {
-    if (n == "" || n == 0 || cc == "") { print "? ? 0"; exit }
-    k = ci / (cc - e); printf "%.0f %.0f %d\n", (s / n - e) * k, (m - e) * k, n }')
-m0_stat() { # m0_stat <bench name> -> "mean worst n" in instructions (calibrated)
-  awk -v ci="$(m0 "bench calib" insns)" -v cc="$(m0 "bench calib" counts)" -v e="$(m0 "bench calib" empty_counts)" \
-    -v n="$(m0 "bench m0 $1" n)" -v s="$(m0 "bench m0 $1" sum_counts)" -v m="$(m0 "bench m0 $1" max_counts)" 'BEGIN {
-    if (n == "" || n == 0 || cc == "") { print "? ? 0"; exit }
-    k = ci / (cc - e); printf "%.0f %.0f %d\n", (s / n - e) * k, (m - e) * k, n }'
-}
-read -r m0_ft_mean m0_ft_worst m0_ft_n < <(m0_stat tick_fixed)
-read -r m0_tf_mean m0_tf_worst _ < <(m0_stat torque_fixed_forward)
-read -r m0_ti_mean m0_ti_worst _ < <(m0_stat torque_fixed_inverse)
-read -r m0_fx_mean m0_fx_worst m0_fl_mean m0_fl_worst m0_n < <(awk \
-  -v ci="$(m0 "bench calib" insns)" -v cc="$(m0 "bench calib" counts)" -v e="$(m0 "bench calib" empty_counts)" \
-  -v n="$(m0 "bench m0 force_law_fixed" n)" \
-  -v xs="$(m0 "bench m0 force_law_fixed" sum_counts)" -v xm="$(m0 "bench m0 force_law_fixed" max_counts)" \
-  -v fs="$(m0 "bench m0 force_law_f32_soft" sum_counts)" -v fm="$(m0 "bench m0 force_law_f32_soft" max_counts)" 'BEGIN {
-    if (n == "" || n == 0 || cc == "") { print "? ? ? ? 0"; exit }
-    k = ci / (cc - e);
-    printf "%.0f %.0f %.0f %.0f %d\n", (xs / n - e) * k, (xm - e) * k, (fs / n - e) * k, (fm - e) * k, n }')
+read -r m0_tk_mean m0_tk_worst m0_tk_n < <(stat "$m0_log" "m0 tick_f32_soft")
+read -r m0_ft_mean m0_ft_worst m0_ft_n < <(stat "$m0_log" "m0 tick_fixed")
+read -r m0_tf_mean m0_tf_worst _ < <(stat "$m0_log" "m0 torque_fixed_forward")
+read -r m0_ti_mean m0_ti_worst _ < <(stat "$m0_log" "m0 torque_fixed_inverse")
+read -r m0_fx_mean m0_fx_worst m0_n < <(stat "$m0_log" "m0 force_law_fixed")
+read -r m0_fl_mean m0_fl_worst _ < <(stat "$m0_log" "m0 force_law_f32_soft")
 
-field() { # field <line-prefix> <key>
-  grep "^$1" <<<"$log" | tr ' ' '\n' | sed -n "s/^$2=//p" | head -1
-}
-cal_insns=$(field "bench calib" insns)
-cal_counts=$(field "bench calib" counts)
-empty=$(field "bench calib" empty_counts)
-tick_n=$(field "bench tick" n)
-tick_sum=$(field "bench tick" sum_counts)
-tick_max=$(field "bench tick" max_counts)
-st_n=$(field "bench start tick" n)
-st_sum=$(field "bench start tick" sum_counts)
-st_max=$(field "bench start tick" max_counts)
-arm_field() { # arm_field <line-prefix> <key>: from the arm image's output
-  grep "^$1" <<<"$arm_log" | tr ' ' '\n' | sed -n "s/^$2=//p" | head -1
-}
-arm_n=$(arm_field "bench arm tick" n)
-arm_sum=$(arm_field "bench arm tick" sum_counts)
-arm_max=$(arm_field "bench arm tick" max_counts)
-arm_ticks=$(arm_field "bench arm tick" ticks)
-arm_cal_insns=$(arm_field "bench calib" insns)
-arm_cal_counts=$(arm_field "bench calib" counts)
-arm_empty=$(arm_field "bench calib" empty_counts)
-fl_n=$(field "bench force_law_f32" n)
-fl_sum=$(field "bench force_law_f32" sum_counts)
-fl_max=$(field "bench force_law_f32" max_counts)
-fx_n=$(field "bench force_law_fixed" n)
-fx_sum=$(field "bench force_law_fixed" sum_counts)
-fx_max=$(field "bench force_law_fixed" max_counts)
-fx_off=$(field "bench force_law_fixed" off_by_more_than_0.1N)
+cal_insns=$(key "$log" "bench calib" insns)
+cal_counts=$(key "$log" "bench calib" counts)
+empty=$(key "$log" "bench calib" empty_counts)
+read -r tick_mean tick_worst tick_n < <(stat "$log" tick)
+read -r st_mean st_worst st_n < <(stat "$log" "start tick")
+read -r fl_mean fl_worst fl_n < <(stat "$log" force_law_f32)
+read -r fx_mean fx_worst fx_n < <(stat "$log" force_law_fixed)
+fx_off=$(key "$log" "bench force_law_fixed" off_by_more_than_0.1N)
+read -r arm_mean arm_worst arm_n < <(stat "$arm_log" "arm tick")
+arm_ticks=$(key "$arm_log" "bench arm tick" ticks)
 stack=$(grep -o 'stack_used_bytes=[0-9]*' <<<"$log" | cut -d= -f2)
 unpainted=$(grep -o 'unpainted_top_bytes=[0-9]*' <<<"$log" | cut -d= -f2)
 if [ "${stack:-0}" -le "${unpainted:-0}" ]; then stack="<= $unpainted"; fi
-for v in cal_insns cal_counts empty tick_n tick_sum tick_max st_n st_sum st_max arm_n arm_sum arm_max arm_ticks arm_cal_insns arm_cal_counts arm_empty fl_n fl_sum fl_max fx_n fx_sum fx_max stack; do
+for v in cal_insns cal_counts empty arm_ticks stack; do
   [ -n "${!v}" ] || { echo "bench-mcu.sh: no '$v' in the QEMU output:" >&2; echo "$log" >&2; exit 2; }
 done
-
-read -r tick_mean tick_worst fl_mean fl_worst fx_mean fx_worst k < <(awk -v ci="$cal_insns" \
-  -v cc="$cal_counts" -v e="$empty" -v tn="$tick_n" -v ts="$tick_sum" -v tm="$tick_max" \
-  -v fn="$fl_n" -v fs="$fl_sum" -v fm="$fl_max" -v xn="$fx_n" -v xs="$fx_sum" -v xm="$fx_max" 'BEGIN {
-    k = ci / (cc - e);
-    printf "%.0f %.0f %.0f %.0f %.0f %.0f %.5f\n", (ts / tn - e) * k, (tm - e) * k,
-      (fs / fn - e) * k, (fm - e) * k, (xs / xn - e) * k, (xm - e) * k, k }')
-
-read -r st_mean st_worst < <(awk -v ci="$cal_insns" -v cc="$cal_counts" -v e="$empty" \
-  -v n="$st_n" -v s="$st_sum" -v m="$st_max" 'BEGIN {
-    k = ci / (cc - e); printf "%.0f %.0f\n", (s / n - e) * k, (m - e) * k }')
-
-read -r arm_mean arm_worst < <(awk -v ci="$arm_cal_insns" -v cc="$arm_cal_counts" -v e="$arm_empty" \
-  -v n="$arm_n" -v s="$arm_sum" -v m="$arm_max" 'BEGIN {
-    if (n == 0) { print "? ?"; exit }
-    k = ci / (cc - e); printf "%.0f %.0f\n", (s / n - e) * k, (m - e) * k }')
+for v in tick_n st_n fl_n fx_n; do
+  [ "${!v}" != 0 ] || { echo "bench-mcu.sh: no '$v' in the QEMU output:" >&2; echo "$log" >&2; exit 2; }
+done
+k=$(awk -v ci="$cal_insns" -v cc="$cal_counts" -v e="$empty" 'BEGIN { printf "%.5f\n", ci / (cc - e) }')
 
 read -r board_flash board_ram < <(sizes "$board_elf")
 

@@ -597,6 +597,17 @@ mod tests {
         None
     }
 
+    /// At inlet duty `duty` with the pressure not moving (a stuck-closed inlet), the monitor
+    /// reports the inlet (or a lost supply) within `max_ticks`.
+    fn assert_stuck_inlet_seen_within(duty: f32, max_ticks: u32) {
+        let (k, f) = run(duty, 200, |_| 300_000.0).expect("a stuck-closed inlet is seen");
+        assert!(k <= max_ticks, "seen after {k} ticks");
+        assert!(
+            f.contains(FaultCode::InletStuckClosed1) || f.contains(FaultCode::SupplyLost),
+            "{f:?}"
+        );
+    }
+
     /// The model's expected rate of muscle 1 at 300 kPa, the angle at 0, inlet duty `duty`.
     fn expected_rate(duty: f32) -> f32 {
         let g = JointGeometry::REFERENCE;
@@ -615,12 +626,7 @@ mod tests {
         // 10 % duty: per window the missing rise is below the rate threshold, but it adds up.
         let duty = 0.1;
         assert!(expected_rate(duty) < ValveModelParams::REFERENCE.residual_abs_pa_s);
-        let (k, f) = run(duty, 200, |_| 300_000.0).expect("a stuck-closed inlet is seen");
-        assert!(k <= 50, "seen after {k} ticks");
-        assert!(
-            f.contains(FaultCode::InletStuckClosed1) || f.contains(FaultCode::SupplyLost),
-            "{f:?}"
-        );
+        assert_stuck_inlet_seen_within(duty, 50);
     }
 
     #[test]
@@ -738,12 +744,7 @@ mod tests {
 
     #[test]
     fn a_stuck_closed_inlet_is_still_seen_within_30_ms() {
-        let (k, f) = run(1.0, 200, |_| 300_000.0).expect("a stuck-closed inlet is seen");
-        assert!(k <= 30, "seen after {k} ticks");
-        assert!(
-            f.contains(FaultCode::InletStuckClosed1) || f.contains(FaultCode::SupplyLost),
-            "{f:?}"
-        );
+        assert_stuck_inlet_seen_within(1.0, 30);
     }
 
     #[test]

@@ -8,7 +8,7 @@
 //! test fails when `CI=true` and is skipped with a message otherwise.
 
 use std::path::Path;
-use std::process::Command;
+use std::process::{Command, Output};
 
 use pam_firmware::trace::{TickRecord, TraceRunner, WORDS};
 
@@ -77,6 +77,19 @@ fn cargo_qemu(qemu_args: &[&str]) -> std::process::Output {
         .expect("cannot start cargo qemu")
 }
 
+/// The stdout of a run that must have succeeded (`what` failed: status, stderr and stdout
+/// shown otherwise).
+fn succeeded(out: &Output, what: &str) -> String {
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "{what} failed ({}):\n{}\n{stdout}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    stdout
+}
+
 #[test]
 fn qemu_run_matches_host_run_bit_for_bit() {
     let host = host_records();
@@ -85,13 +98,7 @@ fn qemu_run_matches_host_run_bit_for_bit() {
         return;
     }
     let out = cargo_qemu(&[]);
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        out.status.success(),
-        "cargo qemu failed ({}):\n{stderr}\n{stdout}",
-        out.status
-    );
+    let stdout = succeeded(&out, "cargo qemu");
 
     let qemu: Vec<TickRecord> = stdout.lines().filter_map(parse_tick).collect();
     assert_eq!(
@@ -149,13 +156,7 @@ fn qemu_m0_fixed_path_matches_host_bit_for_bit() {
         .env("QEMU_TIMEOUT_S", "60")
         .output()
         .expect("cannot start cargo run --bin qemu_m0");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "qemu_m0 failed ({}):\n{}\n{stdout}",
-        out.status,
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let stdout = succeeded(&out, "qemu_m0");
     let line = stdout
         .lines()
         .find(|l| l.contains("fixed path rows="))
@@ -189,13 +190,7 @@ fn on_target_tests_pass_under_qemu() {
         cmd.env("PATH", std::env::join_paths(paths).unwrap());
     }
     let out = cmd.output().expect("cannot start scripts/on-target.sh");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "on-target tests failed ({}):\n{}\n{stdout}",
-        out.status,
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let stdout = succeeded(&out, "on-target tests");
     assert!(stdout.contains("all tests passed!"), "{stdout}");
     let want = format!("on-target fixed path rows={rows} digest={hash:08x}");
     assert!(stdout.contains(&want), "want `{want}`:\n{stdout}");

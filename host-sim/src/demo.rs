@@ -175,10 +175,7 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
         ("effects".into(), plant.effects_summary()),
     ];
     let out = crate::sim::replay_recording(&plant, &fixture, &sim.states, metadata);
-    let stem = fixture_path
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "fixture".into());
+    let stem = crate::io::file_stem_or(&fixture_path, "fixture");
     let replay_csv = opts.out_dir.join(format!("{stem}_replay.csv"));
     let replay_png = opts.out_dir.join(format!("{stem}_replay.png"));
     out.write(&replay_csv)?;
@@ -195,6 +192,22 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
         replay_speed_x: duration_s / replay_wall.max(1e-9),
         replay_files: vec![replay_csv, replay_png],
     })
+}
+
+/// The tables' `expect` column: whether a scenario met its `[expect]` bounds.
+pub(crate) fn expect_column(expect_fails: &[String]) -> &'static str {
+    if expect_fails.is_empty() {
+        "met"
+    } else {
+        "FAILED"
+    }
+}
+
+/// One line per failed expectation of scenario `name`, under its row of the table.
+pub(crate) fn write_expect_fails(s: &mut String, name: &str, expect_fails: &[String]) {
+    for f in expect_fails {
+        let _ = writeln!(s, "  {name}: {f}");
+    }
 }
 
 /// The demo's text report.
@@ -221,16 +234,10 @@ pub fn format_report(r: &DemoReport, out_dir: &Path) -> String {
             c.rms_error_rad.to_degrees(),
             c.max_abs_error_rad.to_degrees(),
             c.faults,
-            if c.expect_fails.is_empty() {
-                "met"
-            } else {
-                "FAILED"
-            },
+            expect_column(&c.expect_fails),
             c.speed_x
         );
-        for f in &c.expect_fails {
-            let _ = writeln!(s, "  {}: {f}", c.name);
-        }
+        write_expect_fails(&mut s, &c.name, &c.expect_fails);
     }
     let _ = writeln!(
         s,

@@ -10,6 +10,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 
 use crate::control::arm3_loop::{run_arm, ArmScenario};
+use crate::demo::{expect_column, write_expect_fails};
 use crate::io::arm3::plot_arm3;
 use crate::plant::arm3::Arm3;
 use pam_firmware::arm::{ArmConfig, JOINTS};
@@ -151,16 +152,10 @@ pub fn format_arm_report(r: &ArmDemoReport, out_dir: &Path) -> String {
             tri(c.rms_error_rad),
             tri(c.max_abs_error_rad),
             c.max_pressure_kpa,
-            if c.expect_fails.is_empty() {
-                "met"
-            } else {
-                "FAILED"
-            },
+            expect_column(&c.expect_fails),
             c.speed_x
         );
-        for f in &c.expect_fails {
-            let _ = writeln!(s, "  {}: {f}", c.name);
-        }
+        write_expect_fails(&mut s, &c.name, &c.expect_fails);
     }
     let _ = writeln!(
         s,

@@ -1,5 +1,11 @@
 //! Sampled-signal kernels shared by identification and diagnosis.
 
+/// The half window (samples, at least 1) of a Savitzky-Golay filter spanning about `span_s`
+/// on either side at sample period `dt_s`.
+pub fn half_window_samples(span_s: f64, dt_s: f64) -> usize {
+    ((span_s / dt_s).round() as usize).max(1)
+}
+
 /// First derivative of a uniformly sampled signal by a Savitzky-Golay filter: the slope of
 /// the least-squares line (equivalently quadratic) over `2 half_window + 1` samples centred
 /// on each sample, the window shrunk symmetrically near the ends; weights k / sum(k^2).

@@ -102,13 +102,7 @@ impl fmt::Display for Range {
 pub fn f64_in(
     range: Range,
 ) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync + 'static {
-    move |s: &str| {
-        let v: f64 = s
-            .trim()
-            .parse()
-            .map_err(|_| format!("`{s}` is not a number (allowed: {range})"))?;
-        range.check(v)
-    }
+    move |s: &str| range.check(parse_trimmed(s, "a number", range)?)
 }
 
 /// A clap value parser for a whole number within `lo..=hi`.
@@ -117,16 +111,25 @@ pub fn usize_in(
     hi: usize,
 ) -> impl Fn(&str) -> Result<usize, String> + Clone + Send + Sync + 'static {
     move |s: &str| {
-        let v: usize = s
-            .trim()
-            .parse()
-            .map_err(|_| format!("`{s}` is not a whole number (allowed: {lo}..={hi})"))?;
+        let v: usize = parse_trimmed(s, "a whole number", format!("{lo}..={hi}"))?;
         if (lo..=hi).contains(&v) {
             Ok(v)
         } else {
             Err(format!("must be within {lo}..={hi}, got {v}"))
         }
     }
+}
+
+/// `s` without surrounding blanks as a `T`; the error says it is not `what` and what is
+/// `allowed`.
+fn parse_trimmed<T: std::str::FromStr>(
+    s: &str,
+    what: &str,
+    allowed: impl std::fmt::Display,
+) -> Result<T, String> {
+    s.trim()
+        .parse()
+        .map_err(|_| format!("`{s}` is not {what} (allowed: {allowed})"))
 }
 
 /// A clap value parser for a plot file: `.png` or `.svg` (checked before any work).

@@ -35,17 +35,7 @@ fn arm_demo_meets_every_expectation_and_writes_its_files() {
         assert_eq!(row.split_whitespace().nth(6), Some("met"), "{row}");
         let rec = Arm3Recording::read(out.join(format!("{name}.csv"))).unwrap();
         assert_eq!(rec.len(), ticks, "{name}");
-        let trace = std::fs::read_to_string(out.join(format!("{name}.firmware.csv"))).unwrap();
-        assert_eq!(
-            trace.lines().count(),
-            ticks + 1,
-            "{name}: header + one row per tick"
-        );
-        let png = std::fs::read(out.join(format!("{name}.png"))).unwrap();
-        assert!(
-            png.starts_with(b"\x89PNG") && png.len() > 10_000,
-            "{name}.png"
-        );
+        assert_trace_and_plot(&out, name, ticks);
     }
 }
 
@@ -66,15 +56,11 @@ fn a_missed_expectation_exits_1_and_a_bad_scenario_exits_2() {
     let tight = dir.path().join("tight.toml");
     std::fs::write(&tight, tight_text).unwrap();
     let out = dir.path().join("out");
-    let r = host_sim(&[
-        &"demo",
-        &"--plant",
+    let r = on_plant(
+        "demo",
         &arm3_plant(),
-        &"--scenario",
-        &tight,
-        &"--out-dir",
-        &out,
-    ]);
+        &[&"--scenario", &tight, &"--out-dir", &out],
+    );
     exits(1, &r);
     let stdout = text(&r.stdout);
     assert!(
@@ -92,33 +78,19 @@ fn a_missed_expectation_exits_1_and_a_bad_scenario_exits_2() {
     )
     .unwrap();
     let out2 = dir.path().join("out2");
-    let err = exits(
-        2,
-        &host_sim(&[
-            &"demo",
-            &"--plant",
-            &arm3_plant(),
-            &"--scenario",
-            &bad,
-            &"--out-dir",
-            &out2,
-        ]),
+    let r = on_plant(
+        "demo",
+        &arm3_plant(),
+        &[&"--scenario", &bad, &"--out-dir", &out2],
     );
-    assert!(err.contains("bad.toml") && err.contains("speed"), "{err}");
-    assert!(!out2.exists());
+    assert_refused(&r, &["bad.toml", "speed"], &out2);
 
     // A bad value names the line and the key.
-    let e = ArmScenario::from_toml_str(
-        &std::fs::read_to_string(scenario("pick_place.toml"))
-            .unwrap()
-            .replace("move_s = 2.0", "move_s = 5.0"),
-        "pp.toml",
-    )
-    .unwrap_err()
-    .to_string();
-    assert!(
-        e.contains("pp.toml") && e.contains("line") && e.contains("move_s"),
-        "{e}"
+    let text = std::fs::read_to_string(scenario("pick_place.toml")).unwrap();
+    let bad = text.replace("move_s = 2.0", "move_s = 5.0");
+    error_naming(
+        ArmScenario::from_toml_str(&bad, "pp.toml"),
+        &["pp.toml", "line", "move_s"],
     );
 }
 

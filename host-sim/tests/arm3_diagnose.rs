@@ -124,15 +124,11 @@ fn the_cli_diagnoses_an_arm_recording_and_refuses_a_check_recording() {
     );
     recording(&truth, 7).write(&rec_path).unwrap();
     let json = dir.path().join("arm.json");
-    let stdout = run_ok(&[
-        &"diagnose",
-        &"--plant",
-        &arm3_plant(),
-        &"--recording",
-        &rec_path,
-        &"--json",
-        &json,
-    ]);
+    let diagnose = |rest: &[&dyn AsRef<std::ffi::OsStr>]| {
+        let recording: [&dyn AsRef<std::ffi::OsStr>; 2] = [&"--recording", &rec_path];
+        on_plant("diagnose", &arm3_plant(), &[&recording[..], rest].concat())
+    };
+    let stdout = ok(&diagnose(&[&"--json", &json]));
     println!("{stdout}");
     assert!(stdout.contains("Arm: joint 3 departs"), "{stdout}");
     let v: serde_json::Value =
@@ -141,22 +137,11 @@ fn the_cli_diagnoses_an_arm_recording_and_refuses_a_check_recording() {
     assert_eq!(v["joints"][2]["joint"], serde_json::json!(3));
     // A check recording is not supported with an arm plant: exit 2, no JSON written.
     let json2 = dir.path().join("arm2.json");
-    let err = run_exits(
-        2,
-        &[
-            &"diagnose",
-            &"--plant",
-            &arm3_plant(),
-            &"--recording",
-            &rec_path,
-            &"--check",
-            &rec_path,
-            &"--json",
-            &json2,
-        ],
+    assert_refused(
+        &diagnose(&[&"--check", &rec_path, &"--json", &json2]),
+        &["--check"],
+        &json2,
     );
-    assert!(err.contains("--check"), "{err}");
-    assert!(!json2.exists());
 }
 
 /// The concealed truths of the effect registry that act on one arm joint (all but the

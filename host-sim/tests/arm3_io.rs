@@ -13,10 +13,7 @@ fn seed_text() -> String {
 }
 
 fn load_err(text: &str) -> String {
-    match Arm3Config::from_toml_str(text, "bad-arm.toml") {
-        Ok(_) => panic!("accepted:\n{text}"),
-        Err(e) => e.to_string(),
-    }
+    parse_error(text, |t| Arm3Config::from_toml_str(t, "bad-arm.toml"))
 }
 
 #[test]
@@ -151,17 +148,11 @@ fn cli_simulate_dispatches_on_an_arm_plant_and_reproduces_the_scenario() {
     let out = dir.path().join("sim.csv");
     let plot = dir.path().join("sim.svg");
     rec.write(&inputs).unwrap();
-    let r = host_sim(&[
-        &"simulate",
-        &"--plant",
+    let r = on_plant(
+        "simulate",
         &arm3_plant(),
-        &"--inputs",
-        &inputs,
-        &"--out",
-        &out,
-        &"--plot",
-        &plot,
-    ]);
+        &[&"--inputs", &inputs, &"--out", &out, &"--plot", &plot],
+    );
     let stdout = ok(&r);
     println!("{stdout}");
     let sim = Arm3Recording::read(&out).unwrap();
@@ -183,19 +174,11 @@ fn cli_simulate_dispatches_on_an_arm_plant_and_reproduces_the_scenario() {
         "t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg\n0,0,0,0,0,0\n0.1,0,0,0,0,1\n",
     )
     .unwrap();
-    let r = host_sim(&[
-        &"simulate",
-        &"--plant",
+    let x = dir.path().join("x.csv");
+    let r = on_plant(
+        "simulate",
         &arm3_plant(),
-        &"--inputs",
-        &one,
-        &"--out",
-        &dir.path().join("x.csv"),
-    ]);
-    let stderr = exits(2, &r);
-    assert!(
-        stderr.contains("one.csv:1") && stderr.contains("u_in1_j1"),
-        "{stderr}"
+        &[&"--inputs", &one, &"--out", &x],
     );
-    assert!(!dir.path().join("x.csv").exists());
+    assert_refused(&r, &["one.csv:1", "u_in1_j1"], &x);
 }

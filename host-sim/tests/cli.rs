@@ -53,8 +53,7 @@ fn fit_fails_with_status_1_below_min_fit() {
 fn bad_input_is_reported_with_file_line_and_field_and_keeps_old_output() {
     let dir = tempfile::tempdir().unwrap();
     let inputs = dir.path().join("bad.csv");
-    let out = dir.path().join("out.csv");
-    std::fs::write(&out, "previous good output\n").unwrap();
+    let out = previous_output(dir.path(), "out.csv");
     std::fs::write(
         &inputs,
         "t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg\n0,0,0,0,0,0\n0.001,0,oops,0,0,0\n",
@@ -71,10 +70,7 @@ fn bad_input_is_reported_with_file_line_and_field_and_keeps_old_output() {
         err.contains("bad.csv:3:") && err.contains("`u_ex1`"),
         "{err}"
     );
-    assert_eq!(
-        std::fs::read_to_string(&out).unwrap(),
-        "previous good output\n"
-    );
+    assert_kept(&out);
 }
 
 #[test]

@@ -32,17 +32,7 @@ fn demo_writes_every_file_and_reports_tracking_and_conformance() {
             rec.meta("firmware_trace"),
             Some(&*format!("{name}.firmware.csv"))
         );
-        let trace = std::fs::read_to_string(out_dir.join(format!("{name}.firmware.csv"))).unwrap();
-        assert_eq!(
-            trace.lines().filter(|l| !l.starts_with('#')).count(),
-            ticks + 1,
-            "{name}: header + one row per tick"
-        );
-        let png = std::fs::read(out_dir.join(format!("{name}.png"))).unwrap();
-        assert!(
-            png.starts_with(b"\x89PNG") && png.len() > 10_000,
-            "{name}.png"
-        );
+        assert_trace_and_plot(&out_dir, name, ticks);
         // The table row: name, length, settle time, rms, max, faults, verdict, speed.
         let row = stdout
             .lines()

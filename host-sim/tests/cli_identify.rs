@@ -122,8 +122,7 @@ fn identify_force_reports_the_hysteresis_gap_of_two_branches() {
 fn bad_force_data_names_file_line_and_field_and_keeps_the_old_output() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("bad.csv");
-    let out = dir.path().join("force.toml");
-    std::fs::write(&out, "previous good output\n").unwrap();
+    let out = previous_output(dir.path(), "force.toml");
     let cases = [
         (
             "# meta\np_kpa,stretch,f_n\n100,0.9,50\n200,0.9,x\n",
@@ -148,20 +147,14 @@ fn bad_force_data_names_file_line_and_field_and_keeps_the_old_output() {
         assert_eq!(r.status.code(), Some(2));
         let err = text(&r.stderr);
         assert!(err.contains(at) && err.contains(field), "{body:?}: {err}");
-        assert_eq!(
-            std::fs::read_to_string(&out).unwrap(),
-            "previous good output\n"
-        );
+        assert_kept(&out);
     }
     // Too few samples for eq. 6: an error, and still no output.
     std::fs::write(&data, "p_kpa,stretch,f_n\n100,0.9,50\n200,0.9,90\n").unwrap();
     let r = identify_force(&data, &out);
     assert_eq!(r.status.code(), Some(2));
     assert!(text(&r.stderr).contains("at least 20 samples"));
-    assert_eq!(
-        std::fs::read_to_string(&out).unwrap(),
-        "previous good output\n"
-    );
+    assert_kept(&out);
     // An output in a missing directory fails without leaving a temporary file behind.
     let good = dir.path().join("F.csv");
     sweep("force", &good, &[]);
@@ -251,7 +244,7 @@ fn identify_torque_without_tensions_uses_the_plant_force_model_and_needs_pressur
         .collect();
     let bad = dir.path().join("no_p.csv");
     std::fs::write(&bad, no_p).unwrap();
-    std::fs::write(&out, "previous good output\n").unwrap();
+    std::fs::write(&out, PREVIOUS_OUTPUT).unwrap();
     let r = identify("torque", &bad, &out, &[]);
     assert_eq!(r.status.code(), Some(2));
     let err = text(&r.stderr);
@@ -259,10 +252,7 @@ fn identify_torque_without_tensions_uses_the_plant_force_model_and_needs_pressur
         err.contains(&format!("no_p.csv:{}:", header_at + 1)) && err.contains("`p1_kpa`"),
         "{err}"
     );
-    assert_eq!(
-        std::fs::read_to_string(&out).unwrap(),
-        "previous good output\n"
-    );
+    assert_kept(&out);
 }
 
 /// The reference plant file with `key = old` replaced by `key = new` (first match).

@@ -13,10 +13,7 @@ fn with_nominal(extra: &str) -> String {
 }
 
 fn load_err(text: &str) -> String {
-    match PlantConfig::from_toml_str(text, "custom-plant.toml") {
-        Ok(_) => panic!("expected an error for:\n{text}"),
-        Err(e) => e.to_string(),
-    }
+    parse_error(text, |t| PlantConfig::from_toml_str(t, "custom-plant.toml"))
 }
 
 #[test]
@@ -234,11 +231,8 @@ fn sensor_lag_filters_the_sampled_channels() {
         "angle_time_constant_s = 0.01",
         "angle_time_constant_s = -1.0",
     );
-    let e = PlantConfig::from_toml_str(&bad, "l.toml")
-        .unwrap_err()
-        .to_string();
-    assert!(
-        e.contains("effects.sensor_lag.angle_time_constant_s"),
-        "{e}"
+    error_naming(
+        PlantConfig::from_toml_str(&bad, "l.toml"),
+        &["effects.sensor_lag.angle_time_constant_s"],
     );
 }

@@ -26,31 +26,42 @@ fn table(path: &Path, name: &str) -> toml::Table {
     t[name].as_table().unwrap().clone()
 }
 
+/// Sweeps `what` (`force`, `torque`) on the reference plant, runs `identify <what>
+/// <data_flag> <sweep file> <extra> --out <name>.toml` on it, and returns the fresh table
+/// `name` and the checked-in one of `config/<name>.toml`, which must have the same keys.
+fn fresh_and_checked_in(
+    what: &str,
+    data_flag: &str,
+    extra: &[&dyn AsRef<std::ffi::OsStr>],
+    name: &str,
+) -> (toml::Table, toml::Table) {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join(format!("{what}_sweep.csv"));
+    let out = dir.path().join(format!("{name}.toml"));
+    run_ok(&[&"sweep", &what, &"--plant", &plant(), &"--out", &data]);
+    let head: [&dyn AsRef<std::ffi::OsStr>; 4] = [&"identify", &what, &data_flag, &data];
+    let tail: [&dyn AsRef<std::ffi::OsStr>; 2] = [&"--out", &out];
+    run_ok(&[&head[..], extra, &tail[..]].concat());
+    let fresh = table(&out, name);
+    let checked_in = table(&root().join(format!("config/{name}.toml")), name);
+    assert_eq!(
+        fresh.keys().collect::<Vec<_>>(),
+        checked_in.keys().collect::<Vec<_>>()
+    );
+    (fresh, checked_in)
+}
+
 fn close(a: f64, b: f64) -> bool {
     (a - b).abs() <= 1e-9 * a.abs().max(b.abs()) + 1e-12
 }
 
 #[test]
 fn checked_in_force_law_is_what_identify_gives_from_the_generated_sweep() {
-    let dir = tempfile::tempdir().unwrap();
-    let data = dir.path().join("force_sweep.csv");
-    let out = dir.path().join("force_law.toml");
-    run_ok(&[&"sweep", &"force", &"--plant", &plant(), &"--out", &data]);
-    run_ok(&[
-        &"identify",
-        &"force",
-        &"--data",
-        &data,
-        &"--p-gauge-max-kpa",
-        &"600",
-        &"--out",
-        &out,
-    ]);
-    let fresh = table(&out, "force_law");
-    let checked_in = table(&root().join("config/force_law.toml"), "force_law");
-    assert_eq!(
-        fresh.keys().collect::<Vec<_>>(),
-        checked_in.keys().collect::<Vec<_>>()
+    let (fresh, checked_in) = fresh_and_checked_in(
+        "force",
+        "--data",
+        &[&"--p-gauge-max-kpa", &"600"],
+        "force_law",
     );
     let c = |t: &toml::Table| -> Vec<f64> {
         t["c"]
@@ -99,27 +110,11 @@ fn checked_in_force_law_is_what_identify_gives_from_the_generated_sweep() {
 
 #[test]
 fn checked_in_torque_model_is_what_identify_gives_from_the_generated_sweep() {
-    let dir = tempfile::tempdir().unwrap();
-    let rec = dir.path().join("torque_sweep.csv");
-    let out = dir.path().join("torque_model.toml");
-    run_ok(&[&"sweep", &"torque", &"--plant", &plant(), &"--out", &rec]);
-    run_ok(&[
-        &"identify",
-        &"torque",
-        &"--recording",
-        &rec,
-        &"--plant",
-        &plant(),
-        &"--max-accel-rad-s2",
-        &"2",
-        &"--out",
-        &out,
-    ]);
-    let fresh = table(&out, "torque_model");
-    let checked_in = table(&root().join("config/torque_model.toml"), "torque_model");
-    assert_eq!(
-        fresh.keys().collect::<Vec<_>>(),
-        checked_in.keys().collect::<Vec<_>>()
+    let (fresh, checked_in) = fresh_and_checked_in(
+        "torque",
+        "--recording",
+        &[&"--plant", &plant(), &"--max-accel-rad-s2", &"2"],
+        "torque_model",
     );
     for (k, v) in &fresh {
         let (a, b) = (v.as_float().unwrap(), checked_in[k].as_float().unwrap());

@@ -6,7 +6,7 @@
 mod common;
 use common::*;
 
-use host_sim::identify::plant::{fit_plant, parse_param_specs, PlantFitOptions};
+use host_sim::identify::plant::{fit_plant, parse_param_specs, PlantFit, PlantFitOptions};
 use host_sim::identify::MeasurementNoise;
 use host_sim::io::recording::Channel;
 use host_sim::sim::{simulate, SolverOptions};
@@ -33,6 +33,16 @@ fn recording(plant_text: &str, n: usize, noise: &MeasurementNoise) -> Recording 
     rec
 }
 
+/// The default fit of the parameters `keys` of the plant file `plant_text` (named `file`) to
+/// `rec`; its summary is printed.
+fn default_fit(rec: &Recording, plant_text: &str, file: &str, keys: &[&str]) -> PlantFit {
+    let keys: Vec<String> = keys.iter().map(|k| k.to_string()).collect();
+    let specs = parse_param_specs(&keys, plant_text, file).unwrap();
+    let fit = fit_plant(rec, plant_text, file, &specs, &PlantFitOptions::default()).unwrap();
+    println!("{}", fit.summary());
+    fit
+}
+
 #[test]
 fn perturbed_conductance_damping_and_inertia_are_recovered_from_a_noisy_recording() {
     let reference = std::fs::read_to_string(fixture("reference-1dof.toml")).unwrap();
@@ -52,17 +62,7 @@ fn perturbed_conductance_damping_and_inertia_are_recovered_from_a_noisy_recordin
         "muscle.damping_m2s",
         "joint.inertia_kgm2",
     ];
-    let specs =
-        parse_param_specs(&keys.map(String::from), &reference, "reference-1dof.toml").unwrap();
-    let fit = fit_plant(
-        &rec,
-        &reference,
-        "reference-1dof.toml",
-        &specs,
-        &PlantFitOptions::default(),
-    )
-    .unwrap();
-    println!("{}", fit.summary());
+    let fit = default_fit(&rec, &reference, "reference-1dof.toml", &keys);
     let want = [6.8e-9, 2.6e-4, 0.018];
     // Stated tolerance: 1 % on every parameter (measured: < 0.01 %).
     for ((key, start, got), want) in fit.params.iter().zip(want) {
@@ -127,16 +127,7 @@ fn joint_friction_constants_are_identified() {
         "effects.joint_friction.coulomb_nm=0:0.5",
         "effects.joint_friction.viscous_nm_s_per_rad",
     ];
-    let specs = parse_param_specs(&keys.map(String::from), &start, "start.toml").unwrap();
-    let fit = fit_plant(
-        &rec,
-        &start,
-        "start.toml",
-        &specs,
-        &PlantFitOptions::default(),
-    )
-    .unwrap();
-    println!("{}", fit.summary());
+    let fit = default_fit(&rec, &start, "start.toml", &keys);
     for ((key, _, got), want) in fit.params.iter().zip([0.3, 0.02]) {
         // Stated tolerance 2 % (measured: 0.3 %).
         assert!((got / want - 1.0).abs() < 0.02, "{key}: {got} vs {want}");

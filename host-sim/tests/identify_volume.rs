@@ -181,22 +181,14 @@ fn identify_volume_refuses_bad_input_with_status_2_and_writes_nothing() {
     let out = dir.path().join("v.toml");
     // A recording without the mass-flow columns (the conformance pulses).
     let no_flow = fixture("pulses_nominal.csv");
-    let e = run_exits(
-        2,
-        &[
-            &"identify",
-            &"volume",
-            &"--recording",
-            &no_flow,
-            &"--out",
-            &out,
-        ],
+    let volume = |rec: &std::path::Path| {
+        host_sim(&[&"identify", &"volume", &"--recording", &rec, &"--out", &out])
+    };
+    assert_refused(
+        &volume(&no_flow),
+        &["pulses_nominal.csv", "m_dot_1_kg_s"],
+        &out,
     );
-    assert!(
-        e.contains("pulses_nominal.csv") && e.contains("m_dot_1_kg_s"),
-        "{e}"
-    );
-    assert!(!out.exists());
     // Only one of the pair.
     let half = dir.path().join("half.csv");
     std::fs::write(
@@ -204,22 +196,7 @@ fn identify_volume_refuses_bad_input_with_status_2_and_writes_nothing() {
         "t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg,p1_kpa,p2_kpa,m_dot_1_kg_s\n0,0,0,0,0,0,1,1,0\n0.001,0,0,0,0,0,1,1,0\n",
     )
     .unwrap();
-    let e = run_exits(
-        2,
-        &[
-            &"identify",
-            &"volume",
-            &"--recording",
-            &half,
-            &"--out",
-            &out,
-        ],
-    );
-    assert!(
-        e.contains("half.csv:1") && e.contains("m_dot_2_kg_s"),
-        "{e}"
-    );
-    assert!(!out.exists());
+    assert_refused(&volume(&half), &["half.csv:1", "m_dot_2_kg_s"], &out);
     let rec = recording(dir.path());
     for (arg, val, says) in [
         ("--weight-decay", "5", "--weight-decay"),

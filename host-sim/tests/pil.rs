@@ -147,19 +147,9 @@ fn pil_matches_the_in_process_loop_bit_for_bit_and_capture_replays() {
     cut.extend_from_slice(&bytes[101 * 46..]);
     let lossy = dir.path().join("lossy.stream");
     std::fs::write(&lossy, cut).unwrap();
-    let r = host_sim(&[
-        &"capture",
-        &"--log",
-        &lossy,
-        &"--out",
-        &dir.path().join("never.csv"),
-    ]);
-    let e = exits(2, &r);
-    assert!(
-        e.contains("sequence 101 after 99") && e.contains("1 record(s) lost"),
-        "{e}"
-    );
-    assert!(!dir.path().join("never.csv").exists());
+    let never = dir.path().join("never.csv");
+    let r = host_sim(&[&"capture", &"--log", &lossy, &"--out", &never]);
+    assert_refused(&r, &["sequence 101 after 99", "1 record(s) lost"], &never);
 }
 
 #[test]
@@ -169,43 +159,33 @@ fn a_faulting_firmware_and_a_missing_qemu_are_clear_bounded_errors() {
     let plant = Plant::load(plant()).unwrap();
     let sc = Scenario::load(scenario(dir.path())).unwrap();
 
-    let mut opts = PilOptions::new(elf.clone());
-    opts.extra_args = vec!["-append".into(), "hardfault".into()];
-    opts.tick_timeout = Duration::from_secs(10);
-    let t0 = std::time::Instant::now();
-    let e = run_scenario(&plant, &sc, opts).unwrap_err().to_string();
-    assert!(
-        e.contains("tick 0") && e.contains("PIL-FAULT HardFault"),
-        "{e}"
-    );
-    assert!(t0.elapsed() < Duration::from_secs(10), "{:?}", t0.elapsed());
+    // The image run with `-append <mode>` fails on tick 0 naming `needle`, within `max_s`.
+    let fails_on_tick_0 = |mode: &str, tick_timeout_s: u64, needle: &str, max_s: u64| {
+        let mut opts = PilOptions::new(elf.clone());
+        opts.extra_args = vec!["-append".into(), mode.into()];
+        opts.tick_timeout = Duration::from_secs(tick_timeout_s);
+        let t0 = std::time::Instant::now();
+        let r = run_scenario(&plant, &sc, opts);
+        assert!(
+            t0.elapsed() < Duration::from_secs(max_s),
+            "{mode}: {:?}",
+            t0.elapsed()
+        );
+        error_naming(r, &["tick 0", needle]);
+    };
+    fails_on_tick_0("hardfault", 10, "PIL-FAULT HardFault", 10);
 
     let mut opts = PilOptions::new(elf.clone());
     opts.qemu = "/nonexistent/qemu-system-arm".into();
-    let e = run_scenario(&plant, &sc, opts).unwrap_err().to_string();
-    assert!(
-        e.contains("cannot start /nonexistent/qemu-system-arm"),
-        "{e}"
-    );
+    let r = run_scenario(&plant, &sc, opts);
+    error_naming(r, &["cannot start /nonexistent/qemu-system-arm"]);
 
     let opts = PilOptions::new(dir.path().join("no-such.elf"));
-    let e = run_scenario(&plant, &sc, opts).unwrap_err().to_string();
-    assert!(
-        e.contains("no-such.elf") && e.contains("no firmware image"),
-        "{e}"
-    );
+    let r = run_scenario(&plant, &sc, opts);
+    error_naming(r, &["no-such.elf", "no firmware image"]);
 
     // A hung image (never answers): the tick timeout ends the run with a clear error.
-    let mut opts = PilOptions::new(elf.clone());
-    opts.extra_args = vec!["-append".into(), "hang".into()];
-    opts.tick_timeout = Duration::from_secs(2);
-    let t0 = std::time::Instant::now();
-    let e = run_scenario(&plant, &sc, opts).unwrap_err().to_string();
-    assert!(
-        e.contains("tick 0") && e.contains("no record from the firmware within 2.0 s"),
-        "{e}"
-    );
-    assert!(t0.elapsed() < Duration::from_secs(8), "{:?}", t0.elapsed());
+    fails_on_tick_0("hang", 2, "no record from the firmware within 2.0 s", 8);
 
     // An image that is not firmware: QEMU refuses it or it never answers; bounded either way.
     let junk = dir.path().join("junk.elf");
@@ -277,16 +257,7 @@ fn capture_reads_defmt_print_text_lines_and_refuses_a_missing_sample() {
 
     text += &line(&rec(5, f32::NAN));
     std::fs::write(&log, &text).unwrap();
-    let r = host_sim(&[
-        &"capture",
-        &"--log",
-        &log,
-        &"--out",
-        &dir.path().join("n.csv"),
-    ]);
-    let e = exits(2, &r);
-    assert!(
-        e.contains("rtt.txt: line 7") && e.contains("no angle sample"),
-        "{e}"
-    );
+    let n = dir.path().join("n.csv");
+    let r = host_sim(&[&"capture", &"--log", &log, &"--out", &n]);
+    assert_refused(&r, &["rtt.txt: line 7", "no angle sample"], &n);
 }

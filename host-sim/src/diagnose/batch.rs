@@ -50,10 +50,7 @@ pub fn recordings_in(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
 
 /// The JSON file of `recording` in `out_dir`: `out_dir/<stem>.json`.
 pub fn json_path(out_dir: &Path, recording: &Path) -> PathBuf {
-    let stem = recording
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "recording".into());
+    let stem = crate::io::file_stem_or(recording, "recording");
     out_dir.join(format!("{stem}.json"))
 }
 

@@ -570,7 +570,7 @@ pub fn torque_model_file(a: &IdentifyTorqueArgs) -> Result<TorqueModelFile> {
     let dt = rec.sample_period_s();
     let hw = a
         .savgol_half_window
-        .unwrap_or_else(|| ((0.025 / dt).round() as usize).max(1));
+        .unwrap_or_else(|| crate::signal::half_window_samples(0.025, dt));
     let (mut samples, source) =
         torque::samples_from_recording(&rec, &plant, hw, &file, header_line_of(&a.recording))?;
     let n_all = samples.len();

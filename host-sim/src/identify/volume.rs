@@ -40,6 +40,7 @@ use pam_firmware::volume_fnn::VolumeFnn;
 use rand::{Rng, SeedableRng};
 
 use crate::io::recording::{Channel, MASS_FLOW_COLUMNS};
+use crate::signal::half_window_samples;
 use crate::Recording;
 
 /// Units per hidden layer (the firmware kernel's).
@@ -791,10 +792,9 @@ pub fn run_identify_volume(a: &IdentifyVolumeArgs) -> anyhow::Result<String> {
     crate::validate::distinct_outputs(&inputs, &[("--out", &a.out)]).map_err(anyhow::Error::msg)?;
     let rec = Recording::read(&a.recording)?.to_uniform();
     let file = a.recording.display().to_string();
-    let dt = rec.sample_period_s();
     let hw = a
         .savgol_half_window
-        .unwrap_or_else(|| ((0.010 / dt).round() as usize).max(1));
+        .unwrap_or_else(|| half_window_samples(0.010, rec.sample_period_s()));
     let geometry = pam_firmware::constants::JOINT_GEOMETRY;
     let p_atm = pam_firmware::constants::P_ATM_PA as f64;
     let per_muscle = samples_from_recording(&rec, &geometry, p_atm, hw)
@@ -805,7 +805,7 @@ pub fn run_identify_volume(a: &IdentifyVolumeArgs) -> anyhow::Result<String> {
         let r = Recording::read(v)?.to_uniform();
         let hw_v = a
             .savgol_half_window
-            .unwrap_or_else(|| ((0.010 / r.sample_period_s()).round() as usize).max(1));
+            .unwrap_or_else(|| half_window_samples(0.010, r.sample_period_s()));
         let [m1, m2] = samples_from_recording(&r, &geometry, p_atm, hw_v)
             .map_err(|e| anyhow::anyhow!("{}: {e}", v.display()))?;
         validation.push((

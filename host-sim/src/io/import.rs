@@ -836,10 +836,7 @@ pub fn segment_path(out: &Path, i: usize, n: usize) -> PathBuf {
     if n == 1 {
         return out.to_owned();
     }
-    let stem = out
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default();
+    let stem = super::file_stem_or(out, "");
     let ext = out
         .extension()
         .map(|s| format!(".{}", s.to_string_lossy()))

@@ -11,3 +11,12 @@ pub mod recording;
 pub mod replay_stream;
 pub mod run_files;
 pub mod scenario;
+
+use std::path::Path;
+
+/// The file name of `path` without its extension (`dir/name.csv` -> `name`), or `fallback`
+/// when it has none: the base of the names of the files written next to or for it.
+pub fn file_stem_or(path: &Path, fallback: &str) -> String {
+    path.file_stem()
+        .map_or_else(|| fallback.to_owned(), |s| s.to_string_lossy().into_owned())
+}

@@ -41,10 +41,7 @@ pub const FIRMWARE_COLUMNS: [&str; 8] = [
 
 /// `dir/name.csv` -> `dir/name.firmware.csv` (the firmware trace next to a recording).
 pub fn firmware_trace_path(recording: &Path) -> PathBuf {
-    let stem = recording
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "out".into());
+    let stem = super::file_stem_or(recording, "out");
     recording.with_file_name(format!("{stem}.firmware.csv"))
 }
 

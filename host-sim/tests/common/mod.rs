@@ -3,7 +3,7 @@
 #![allow(dead_code)]
 
 use std::ffi::OsStr;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use pam_firmware::lockstep::UnwiredPin;
@@ -72,6 +72,70 @@ pub fn exits(code: i32, r: &Output) -> String {
         text(&r.stderr)
     );
     text(&r.stderr)
+}
+
+/// Asserts that the run was refused with status 2, a message naming every one of `needles`
+/// and nothing written at `out`; its stderr.
+pub fn assert_refused(r: &Output, needles: &[&str], out: &Path) -> String {
+    let e = exits(2, r);
+    for n in needles {
+        assert!(e.contains(n), "`{n}` not in the message:\n{e}");
+    }
+    assert!(!out.exists(), "{} was written", out.display());
+    e
+}
+
+/// The message of `r`, which must be an error naming every one of `needles`.
+pub fn error_naming<T, E: std::fmt::Display>(r: Result<T, E>, needles: &[&str]) -> String {
+    let Err(e) = r.map_err(|e| e.to_string()) else {
+        panic!("accepted; expected an error naming {needles:?}");
+    };
+    for n in needles {
+        assert!(e.contains(n), "`{n}` not in the error:\n{e}");
+    }
+    e
+}
+
+/// The error message of `parse(text)`, which must fail (the text is shown otherwise).
+pub fn parse_error<T, E: std::fmt::Display>(
+    text: &str,
+    parse: impl FnOnce(&str) -> Result<T, E>,
+) -> String {
+    match parse(text) {
+        Ok(_) => panic!("accepted:\n{text}"),
+        Err(e) => e.to_string(),
+    }
+}
+
+/// The firmware trace (`<name>.firmware.csv`: a header and one row per tick; `#` lines are
+/// metadata) and the plot (`<name>.png`) a demo run wrote into `dir`.
+pub fn assert_trace_and_plot(dir: &Path, name: &str, ticks: usize) {
+    let trace = std::fs::read_to_string(dir.join(format!("{name}.firmware.csv"))).unwrap();
+    assert_eq!(
+        trace.lines().filter(|l| !l.starts_with('#')).count(),
+        ticks + 1,
+        "{name}: header + one row per tick"
+    );
+    let png = std::fs::read(dir.join(format!("{name}.png"))).unwrap();
+    assert!(
+        png.starts_with(b"\x89PNG") && png.len() > 10_000,
+        "{name}.png"
+    );
+}
+
+/// What a refused run must leave in an output file an earlier good run wrote.
+pub const PREVIOUS_OUTPUT: &str = "previous good output\n";
+
+/// `dir/name` holding [`PREVIOUS_OUTPUT`] (an output file of an earlier good run).
+pub fn previous_output(dir: &Path, name: &str) -> PathBuf {
+    let out = dir.join(name);
+    std::fs::write(&out, PREVIOUS_OUTPUT).unwrap();
+    out
+}
+
+/// Asserts that `out` still holds [`PREVIOUS_OUTPUT`].
+pub fn assert_kept(out: &Path) {
+    assert_eq!(std::fs::read_to_string(out).unwrap(), PREVIOUS_OUTPUT);
 }
 
 /// Runs `host-sim` with `args` and asserts success; its stdout.
