@@ -431,26 +431,19 @@ impl ArmRun {
                 ));
                 continue;
             }
-            if let Some(b) = e.max_abs_error_rad {
-                if !(st[j].max_abs_rad <= b[j]) {
-                    fails.push(format!(
-                        "joint {}: max |error| {:.4} rad after {} s exceeds {} rad",
-                        j + 1,
-                        st[j].max_abs_rad,
-                        e.settle_after_s,
-                        b[j]
-                    ));
-                }
-            }
-            if let Some(b) = e.rms_error_rad {
-                if !(st[j].rms_rad <= b[j]) {
-                    fails.push(format!(
-                        "joint {}: rms error {:.4} rad after {} s exceeds {} rad",
-                        j + 1,
-                        st[j].rms_rad,
-                        e.settle_after_s,
-                        b[j]
-                    ));
+            for (what, bound, value) in [
+                ("max |error|", e.max_abs_error_rad, st[j].max_abs_rad),
+                ("rms error", e.rms_error_rad, st[j].rms_rad),
+            ] {
+                if let Some(b) = bound {
+                    if !(value <= b[j]) {
+                        fails.push(format!(
+                            "joint {}: {what} {value:.4} rad after {} s exceeds {} rad",
+                            j + 1,
+                            e.settle_after_s,
+                            b[j]
+                        ));
+                    }
                 }
             }
         }
