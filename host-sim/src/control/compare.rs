@@ -247,7 +247,7 @@ fn check_fields(
 ) -> Result<(), IdentError> {
     for &(key, v, max) in fields {
         if !(v.is_finite() && v >= 0.0 && v <= max && (v as f32).is_finite()) {
-            let line = key_line(text, table, key).unwrap_or(0);
+            let line = crate::validate::toml_key_line(text, table, 0, key).unwrap_or(0);
             return Err(IdentError::at(
                 file,
                 line,
@@ -302,7 +302,8 @@ impl ControlTuning {
         t.pd.validate("pd", text, file)?;
         t.pid.validate("pid", text, file)?;
         if t.pd.ki_pa_per_rad_s != 0.0 {
-            let line = key_line(text, "pd", "ki_pa_per_rad_s").unwrap_or(0);
+            let line =
+                crate::validate::toml_key_line(text, "pd", 0, "ki_pa_per_rad_s").unwrap_or(0);
             return Err(IdentError::at(
                 file,
                 line,
@@ -329,25 +330,6 @@ impl ControlTuning {
     pub fn write(&self, path: &Path, header: &str) -> Result<(), IdentError> {
         write_atomic(path, self.to_toml_string(header).as_bytes())
     }
-}
-
-/// 1-based line of `key = ...` inside `[table]`.
-fn key_line(text: &str, table: &str, key: &str) -> Option<usize> {
-    let mut inside = false;
-    for (i, line) in text.lines().enumerate() {
-        let l = line.trim();
-        if l.starts_with('[') {
-            inside = l == format!("[{table}]");
-            continue;
-        }
-        if inside
-            && l.strip_prefix(key)
-                .is_some_and(|r| r.trim_start().starts_with('='))
-        {
-            return Some(i + 1);
-        }
-    }
-    None
 }
 
 /// The tick configuration of `law` at `tick_hz`: the reference configuration (validation,
