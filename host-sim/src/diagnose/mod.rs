@@ -153,9 +153,9 @@ pub struct CandidateScore {
     pub seconds: f64,
 }
 
-/// Channels of one recording for the report: every `stride`-th sample (TRAIN keeps what its
-/// plots draw, [`report::MAX_POINTS`] points, so the diagnosis holds no full-length series;
-/// CHECK keeps every sample) and each channel's range over all samples.
+/// Channels of one recording for the report: every `stride`-th sample (what its plots draw,
+/// [`report::MAX_POINTS`] points, so the diagnosis holds no full-length series) and each
+/// channel's range over all samples.
 #[derive(Debug, Clone)]
 pub struct Series {
     /// Samples of the recording.
@@ -432,7 +432,7 @@ impl NominalReplay {
         sums.map(|s| s / n).iter().sum()
     }
 
-    /// [`verdict::fit_vs_spread`] of every measured channel over the held-out tail.
+    /// [`verdict::fit_vs_spread_of_sum`] of every measured channel over the held-out tail.
     pub fn heldout_fits(&self, rec: &Recording, spread: &[f64; 5]) -> BTreeMap<&'static str, f64> {
         Channel::ALL
             .iter()
@@ -614,7 +614,7 @@ pub struct Replayed {
 
 impl Replayed {
     /// Of the model `parts` replayed without holding its series (the fits are those of
-    /// [`Self::of`] to the bit); `None` if the simulation fails.
+    /// `fit_percent` on the held series to the bit); `None` if the simulation fails.
     pub fn stream(problem: &Problem, parts: &[Part], stride: usize) -> Option<Self> {
         let rec = problem.recording;
         let mut sums = ReplaySums::new(rec, stride);

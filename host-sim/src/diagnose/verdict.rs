@@ -54,25 +54,10 @@ impl Verdict {
     }
 }
 
-/// The fit (in %) of channel `c` over `range`, its error normalised by `spread` (the whole
-/// recording's standard deviation, so a short tail where a channel barely moves is not
-/// judged by its own tiny spread).
-pub fn fit_vs_spread(
-    y: &[f64],
-    pred: &[Measurement],
-    c: Channel,
-    range: std::ops::Range<usize>,
-    spread: f64,
-) -> f64 {
-    let sum_sq = range
-        .clone()
-        .map(|k| (c.of(&pred[k]) - y[k]).powi(2))
-        .sum::<f64>();
-    fit_vs_spread_of_sum(sum_sq, range.len(), spread)
-}
-
-/// [`fit_vs_spread`] from the sum, in sample order, of `(predicted - y)^2` over `samples`
-/// samples (for a prediction that is not held; the same value to the bit).
+/// The fit (in %) of a channel over `samples` samples from the sum, in sample order, of
+/// `(predicted - y)^2` over them, its error normalised by `spread` (the whole recording's
+/// standard deviation, so a short tail where a channel barely moves is not judged by its own
+/// tiny spread).
 pub fn fit_vs_spread_of_sum(sum_sq: f64, samples: usize, spread: f64) -> f64 {
     let mse = sum_sq / samples.max(1) as f64;
     100.0 * (1.0 - mse.sqrt() / spread.max(1e-300))
