@@ -17,9 +17,9 @@ use std::ops::Range;
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::fit::fit_percent;
+use crate::fit::fit_percent_of_err2;
 use crate::io::recording::{Channel, Recording};
-use crate::plant::Measurement;
+use crate::plant::{Measurement, ValveInputs};
 
 /// Time constants of the low-pass copies of every regressor signal [s].
 pub const TIME_CONSTANTS_S: [f64; 4] = [0.01, 0.03, 0.1, 0.3];
@@ -45,6 +45,21 @@ pub struct BlackBox {
     pub ridge: BTreeMap<&'static str, f64>,
 }
 
+/// Streams the nominal simulation's channels of every sample of a run to `f(k, channels)`,
+/// in order from 0; `false` if the simulation fails (a replay, or a held series).
+pub type NominalStream<'a> = &'a dyn Fn(&mut dyn FnMut(usize, &Measurement)) -> bool;
+
+/// The nominal simulation of TRAIN as the fallback reads it: the channels of its first
+/// samples (at least those it is fitted on), their sums over the whole run (the basis's
+/// means) and a stream of every sample (the scales and the scores), so a long run is never
+/// held.
+pub struct NominalRun<'a> {
+    pub head: &'a [Measurement],
+    /// Sum of every channel over the run, in sample order.
+    pub channel_sum: [f64; 5],
+    pub stream: NominalStream<'a>,
+}
+
 /// The regressor matrix of a run: nominal channels and valve inputs, raw and low-passed,
 /// scaled to unit spread (the scales come from TRAIN so every run uses the same ones).
 struct Basis {
@@ -53,36 +68,73 @@ struct Basis {
     dt_s: f64,
 }
 
+/// Valve input `which - 5` of a sample.
+fn input_of(u: &ValveInputs, which: usize) -> f64 {
+    match which - 5 {
+        0 => u.u_in1,
+        1 => u.u_ex1,
+        2 => u.u_in2,
+        _ => u.u_ex2,
+    }
+}
+
 impl Basis {
-    fn signal(rec: &Recording, nominal: &[Measurement], which: usize) -> Vec<f64> {
+    /// Signal `which` of samples `0..end`.
+    fn signal(rec: &Recording, nominal: &[Measurement], which: usize, end: usize) -> Vec<f64> {
         if which < 5 {
-            nominal.iter().map(|m| m.to_array()[which]).collect()
+            nominal[..end].iter().map(|m| m.to_array()[which]).collect()
         } else {
-            rec.inputs
+            rec.inputs[..end]
                 .iter()
-                .map(|u| match which - 5 {
-                    0 => u.u_in1,
-                    1 => u.u_ex1,
-                    2 => u.u_in2,
-                    _ => u.u_ex2,
-                })
+                .map(|u| input_of(u, which))
                 .collect()
         }
     }
 
+    /// The scales of every signal, the valve inputs' and the nominal channels', over all of
+    /// TRAIN (`None`: constant or not finite): the mean from the run's sums, the spread
+    /// from a second pass over the stream (the sums of a held series, in order).
+    fn scales(rec: &Recording, nominal: &NominalRun) -> Option<[Option<f64>; 9]> {
+        let n = rec.len().max(1) as f64;
+        let mut mean = [0.0; 9];
+        for (which, m) in mean.iter_mut().enumerate() {
+            *m = if which < 5 {
+                nominal.channel_sum[which] / n
+            } else {
+                rec.inputs.iter().map(|u| input_of(u, which)).sum::<f64>() / n
+            };
+        }
+        let mut sq = [0.0f64; 9];
+        for (which, s) in sq.iter_mut().enumerate().skip(5) {
+            *s = rec
+                .inputs
+                .iter()
+                .map(|u| (input_of(u, which) - mean[which]).powi(2))
+                .sum::<f64>();
+        }
+        let ok = (nominal.stream)(&mut |_, m| {
+            let a = m.to_array();
+            for which in 0..5 {
+                sq[which] += (a[which] - mean[which]).powi(2);
+            }
+        });
+        ok.then(|| {
+            std::array::from_fn(|which| {
+                let sd = (sq[which] / n).sqrt();
+                (sd > 0.0 && sd.is_finite()).then_some(sd)
+            })
+        })
+    }
+
     /// The valve inputs, and with `channels` also the nominal simulation's channels.
-    fn new(rec: &Recording, nominal: &[Measurement], channels: bool) -> Self {
+    fn new(rec: &Recording, scales: &[Option<f64>; 9], channels: bool) -> Self {
         let mut signals = Vec::new();
-        for which in 0..9 {
+        for (which, sd) in scales.iter().enumerate() {
             if which < 5 && (!channels || rec.channel(Channel::ALL[which]).is_none()) {
                 continue;
             }
-            let s = Self::signal(rec, nominal, which);
-            let mean = s.iter().sum::<f64>() / s.len().max(1) as f64;
-            let sd =
-                (s.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / s.len().max(1) as f64).sqrt();
-            if sd > 0.0 && sd.is_finite() {
-                signals.push((which, sd));
+            if let Some(sd) = sd {
+                signals.push((which, *sd));
             }
         }
         Self {
@@ -95,7 +147,8 @@ impl Basis {
         self.signals.len() * (1 + TIME_CONSTANTS_S.len()) + 1
     }
 
-    /// Rows `range` of the regressor matrix (the filters run from the start of the run).
+    /// Rows `range` of the regressor matrix (the filters run from the start of the run;
+    /// `nominal` holds at least `range.end` samples).
     fn matrix(
         &self,
         rec: &Recording,
@@ -107,7 +160,7 @@ impl Basis {
         let mut x = DMatrix::<f64>::zeros(n, w);
         let mut col = 0;
         for &(which, sd) in &self.signals {
-            let s = Self::signal(rec, nominal, which);
+            let s = Self::signal(rec, nominal, which, range.end);
             for (i, k) in range.clone().enumerate() {
                 x[(i, col)] = s[k] / sd;
             }
@@ -131,7 +184,62 @@ impl Basis {
     }
 }
 
-/// Fits the fallback on `train[fit]`, scores it on `train[held]` and on `check`.
+/// The regressor rows of a run one sample at a time (the rows of [`Basis::matrix`] to the
+/// bit, without the matrix).
+struct Rows<'b> {
+    basis: &'b Basis,
+    /// Per signal: the low-pass states (`None` before the first sample).
+    state: Vec<Option<[f64; TIME_CONSTANTS_S.len()]>>,
+    coef: [f64; TIME_CONSTANTS_S.len()],
+    row: Vec<f64>,
+}
+
+impl<'b> Rows<'b> {
+    fn new(basis: &'b Basis) -> Self {
+        Self {
+            basis,
+            state: vec![None; basis.signals.len()],
+            coef: TIME_CONSTANTS_S.map(|tau| (-basis.dt_s / tau).exp()),
+            row: vec![0.0; basis.width()],
+        }
+    }
+
+    /// Makes `row` the row of the next sample (`u` its valve inputs, `m` its nominal
+    /// channels).
+    fn next(&mut self, u: &ValveInputs, m: &Measurement) {
+        let per = 1 + TIME_CONSTANTS_S.len();
+        let a = m.to_array();
+        for (j, &(which, sd)) in self.basis.signals.iter().enumerate() {
+            let v = if which < 5 {
+                a[which]
+            } else {
+                input_of(u, which)
+            };
+            let ys = self.state[j].get_or_insert([v; TIME_CONSTANTS_S.len()]);
+            self.row[j * per] = v / sd;
+            for (t, y) in ys.iter_mut().enumerate() {
+                let c = self.coef[t];
+                *y = c * *y + (1.0 - c) * v;
+                self.row[j * per + 1 + t] = *y / sd;
+            }
+        }
+        let w = self.row.len();
+        self.row[w - 1] = 1.0;
+    }
+}
+
+/// `x . beta` summed in column order (the value of nalgebra's matrix-vector product to the
+/// bit).
+fn dot(x: &[f64], beta: &DVector<f64>) -> f64 {
+    let mut acc = x[0] * beta[0];
+    for j in 1..x.len() {
+        acc = x[j] * beta[j] + acc;
+    }
+    acc
+}
+
+/// Fits the fallback on `train[fit]`, scores it on `train[held]` and on `check`, from held
+/// nominal series (every sample of each run).
 /// `None` when there is nothing to fit (no channel, too few samples).
 pub fn fit(
     train: &Recording,
@@ -140,25 +248,60 @@ pub fn fit(
     held: Range<usize>,
     check: Option<(&Recording, &[Measurement])>,
 ) -> Option<BlackBox> {
+    fn stream_of(s: &[Measurement], f: &mut dyn FnMut(usize, &Measurement)) -> bool {
+        s.iter().enumerate().for_each(|(k, m)| f(k, m));
+        true
+    }
+    let mut channel_sum = [0.0; 5];
+    for m in train_nominal {
+        let a = m.to_array();
+        (0..5).for_each(|i| channel_sum[i] += a[i]);
+    }
+    let train_stream = |f: &mut dyn FnMut(usize, &Measurement)| stream_of(train_nominal, f);
+    let check_nominal = check.map(|c| c.1).unwrap_or_default();
+    let check_stream = |f: &mut dyn FnMut(usize, &Measurement)| stream_of(check_nominal, f);
+    fit_streamed(
+        train,
+        &NominalRun {
+            head: train_nominal,
+            channel_sum,
+            stream: &train_stream,
+        },
+        fit,
+        held,
+        check.map(|(r, _)| (r, &check_stream as NominalStream)),
+    )
+}
+
+/// [`fit`] from nominal runs that are streamed (TRAIN's head is held for the fit): the
+/// regressor matrices of the fit range only, the held-out tail and CHECK (its nominal
+/// stream) scored row by row. `None` also when a stream's simulation fails.
+pub fn fit_streamed(
+    train: &Recording,
+    train_nominal: &NominalRun,
+    fit: Range<usize>,
+    held: Range<usize>,
+    check: Option<(&Recording, NominalStream)>,
+) -> Option<BlackBox> {
     // Two bases: the valve inputs alone, and with the nominal channels. Each with its
-    // matrices and the Cholesky factors of its ridge-regularised normal matrices.
+    // fit matrix and the Cholesky factors of its ridge-regularised normal matrices.
     struct Variant {
         basis: Basis,
         x_fit: DMatrix<f64>,
-        x_held: DMatrix<f64>,
-        x_check: Option<DMatrix<f64>>,
         chols: Vec<(f64, nalgebra::Cholesky<f64, nalgebra::Dyn>)>,
     }
+    if held.is_empty() || train_nominal.head.len() < fit.end {
+        return None;
+    }
+    let scales = Basis::scales(train, train_nominal)?;
     let mut variants = Vec::new();
     for channels in [false, true] {
-        let basis = Basis::new(train, train_nominal, channels);
+        let basis = Basis::new(train, &scales, channels);
         let w = basis.width();
-        if fit.len() < 4 * w || held.is_empty() {
+        if fit.len() < 4 * w {
             continue;
         }
-        let x_fit = basis.matrix(train, train_nominal, fit.clone());
-        let x_held = basis.matrix(train, train_nominal, held.clone());
-        let x_check = check.map(|(r, nom)| basis.matrix(r, nom, 0..r.len()));
+        let x_fit = basis.matrix(train, train_nominal.head, fit.clone());
         let xtx = x_fit.tr_mul(&x_fit);
         let mean_diag = (0..w).map(|i| xtx[(i, i)]).sum::<f64>() / w as f64;
         let chols: Vec<_> = RIDGE_REL
@@ -172,8 +315,6 @@ pub fn fit(
             variants.push(Variant {
                 basis,
                 x_fit,
-                x_held,
-                x_check,
                 chols,
             });
         }
@@ -181,44 +322,59 @@ pub fn fit(
     if variants.is_empty() {
         return None;
     }
-    let mut heldout = BTreeMap::new();
-    let mut check_fits = check.map(|_| BTreeMap::new());
-    let mut corrected = Vec::new();
-    let mut ridge = BTreeMap::new();
-    let mut regressors = BTreeMap::new();
+    // Every channel's candidate coefficients: (channel, variant, ridge, beta).
+    let mut trials: Vec<(Channel, usize, f64, DVector<f64>)> = Vec::new();
     for c in Channel::ALL {
         let Some(y) = train.channel(c) else {
             continue;
         };
         let r: DVector<f64> = DVector::from_iterator(
             fit.len(),
-            fit.clone().map(|k| y[k] - c.of(&train_nominal[k])),
+            fit.clone().map(|k| y[k] - c.of(&train_nominal.head[k])),
         );
-        let score = |beta: &DVector<f64>,
-                     x: &DMatrix<f64>,
-                     y: &[f64],
-                     nominal: &[Measurement],
-                     range: Range<usize>| {
-            let nom: Vec<f64> = range.clone().map(|k| c.of(&nominal[k])).collect();
-            let corr = x * beta;
-            let after: Vec<f64> = nom.iter().zip(corr.iter()).map(|(a, b)| a + b).collect();
-            let ys = &y[range];
-            (fit_percent(ys, &nom), fit_percent(ys, &after))
-        };
-        // Per basis the ridge weight with the best held-out fit; the larger basis only when it
-        // gains more than `LARGER_BASIS_GAIN_PCT` of held-out fit over the inputs alone.
-        let mut best: Option<(usize, f64, DVector<f64>, (f64, f64))> = None;
         for (vi, v) in variants.iter().enumerate() {
             let xtr = v.x_fit.tr_mul(&r);
-            let mut own: Option<(usize, f64, DVector<f64>, (f64, f64))> = None;
             for (rel, chol) in &v.chols {
                 let beta = chol.solve(&xtr);
                 if beta.iter().any(|b| !b.is_finite()) {
                     continue;
                 }
-                let h = score(&beta, &v.x_held, y, train_nominal, held.clone());
-                if own.as_ref().is_none_or(|b| h.1 > b.3 .1) {
-                    own = Some((vi, *rel, beta, h));
+                trials.push((c, vi, *rel, beta));
+            }
+        }
+    }
+    // The fit matrices are no longer needed.
+    let bases: Vec<Basis> = variants.into_iter().map(|v| v.basis).collect();
+    // The held-out scores of every trial, summed row by row over the tail of TRAIN:
+    // `fit_percent` of the nominal and of the corrected channel (their error sums).
+    let scored = score(train, train_nominal.stream, held.clone(), &bases, &trials)?;
+    let mut heldout = BTreeMap::new();
+    let mut chosen: Vec<(Channel, usize, usize)> = Vec::new();
+    let mut ridge = BTreeMap::new();
+    let mut regressors = BTreeMap::new();
+    let mut corrected = Vec::new();
+    for c in Channel::ALL {
+        let Some(y) = train.channel(c) else {
+            continue;
+        };
+        let ys = &y[held.clone()];
+        let fits = |t: usize| {
+            let (nom, after) = scored[t];
+            (fit_percent_of_err2(ys, nom), fit_percent_of_err2(ys, after))
+        };
+        // Per basis the ridge weight with the best held-out fit; the larger basis only when
+        // it gains more than `LARGER_BASIS_GAIN_PCT` of held-out fit over the inputs alone.
+        let mut best: Option<(usize, (f64, f64))> = None;
+        for vi in 0..bases.len() {
+            let mut own: Option<(usize, (f64, f64))> = None;
+            for (t, _) in trials
+                .iter()
+                .enumerate()
+                .filter(|(_, tr)| tr.0 == c && tr.1 == vi)
+            {
+                let h = fits(t);
+                if own.as_ref().is_none_or(|b| h.1 > b.1 .1) {
+                    own = Some((t, h));
                 }
             }
             if let Some(o) = own {
@@ -227,27 +383,44 @@ pub fn fit(
                 } else {
                     0.0
                 };
-                if best.as_ref().is_none_or(|b| o.3 .1 > b.3 .1 + gain) {
+                if best.as_ref().is_none_or(|b| o.1 .1 > b.1 .1 + gain) {
                     best = Some(o);
                 }
             }
         }
-        let Some((vi, rel, beta, h)) = best else {
+        let Some((t, h)) = best else {
             continue;
         };
-        let v = &variants[vi];
-        regressors.insert(c.name(), v.basis.width());
+        let (_, vi, rel, _) = &trials[t];
+        regressors.insert(c.name(), bases[*vi].width());
         heldout.insert(c.name(), h);
-        ridge.insert(c.name(), rel);
-        if let (Some(m), Some((rec, nom)), Some(xc)) = (&mut check_fits, check, &v.x_check) {
-            if let Some(yc) = rec.channel(c) {
-                m.insert(c.name(), score(&beta, xc, yc, nom, 0..rec.len()));
-            }
-        }
+        ridge.insert(c.name(), *rel);
+        chosen.push((c, *vi, t));
         if h.1 > h.0 {
             corrected.push(c.name());
         }
     }
+    let check_fits = match check {
+        Some((rec, stream)) => {
+            // The chosen trial of every channel CHECK records, scored over all of it.
+            let picked: Vec<(Channel, usize, f64, DVector<f64>)> = chosen
+                .iter()
+                .filter(|(c, _, _)| rec.channel(*c).is_some())
+                .map(|(_, _, t)| trials[*t].clone())
+                .collect();
+            let sums = score(rec, stream, 0..rec.len(), &bases, &picked)?;
+            let mut m = BTreeMap::new();
+            for ((c, ..), (nom, after)) in picked.iter().zip(sums) {
+                let yc = rec.channel(*c).expect("picked: recorded");
+                m.insert(
+                    c.name(),
+                    (fit_percent_of_err2(yc, nom), fit_percent_of_err2(yc, after)),
+                );
+            }
+            Some(m)
+        }
+        None => None,
+    };
     Some(BlackBox {
         heldout,
         check: check_fits,
@@ -255,6 +428,39 @@ pub fn fit(
         regressors,
         ridge,
     })
+}
+
+/// Per trial (channel, variant, ridge, coefficients): the error sums over `range` of `rec`,
+/// in sample order, of the nominal channel and of the nominal channel plus the correction
+/// `x . beta` (the sums of `fit_percent` on the held series to the bit). `None` if the
+/// nominal stream fails.
+fn score(
+    rec: &Recording,
+    stream: NominalStream,
+    range: Range<usize>,
+    bases: &[Basis],
+    trials: &[(Channel, usize, f64, DVector<f64>)],
+) -> Option<Vec<(f64, f64)>> {
+    let mut rows: Vec<Rows> = bases.iter().map(Rows::new).collect();
+    let mut sums = vec![(0.0f64, 0.0f64); trials.len()];
+    let ok = stream(&mut |k, m| {
+        if k >= range.end {
+            return;
+        }
+        let u = &rec.inputs[k];
+        rows.iter_mut().for_each(|r| r.next(u, m));
+        if k < range.start {
+            return;
+        }
+        for ((c, vi, _, beta), s) in trials.iter().zip(sums.iter_mut()) {
+            let y = rec.channel(*c).expect("a trial's channel is recorded")[k];
+            let nom = c.of(m);
+            let after = nom + dot(&rows[*vi].row, beta);
+            s.0 += (y - nom) * (y - nom);
+            s.1 += (y - after) * (y - after);
+        }
+    });
+    ok.then_some(sums)
 }
 
 impl BlackBox {
@@ -357,6 +563,46 @@ mod tests {
         let (before, after) = b.heldout["angle_deg"];
         assert!(before < 80.0 && after > 95.0, "{before} -> {after}");
         assert_eq!(b.corrected, vec!["angle_deg"]);
+    }
+
+    /// The rows streamed for the scores are those of the regressor matrix, and the
+    /// column-order dot product is nalgebra's matrix-vector product, to the bit.
+    #[test]
+    fn streamed_rows_and_products_match_the_matrix() {
+        let (rec, nominal) = case();
+        let mut sum = [0.0; 5];
+        nominal
+            .iter()
+            .for_each(|m| (0..5).for_each(|i| sum[i] += m.to_array()[i]));
+        let stream = |f: &mut dyn FnMut(usize, &Measurement)| {
+            nominal.iter().enumerate().for_each(|(k, m)| f(k, m));
+            true
+        };
+        let run = NominalRun {
+            head: &nominal,
+            channel_sum: sum,
+            stream: &stream,
+        };
+        let scales = Basis::scales(&rec, &run).expect("scales");
+        let basis = Basis::new(&rec, &scales, true);
+        assert!(basis.signals.len() >= 2, "{:?}", basis.signals);
+        let x = basis.matrix(&rec, &nominal, 1000..3000);
+        let beta = DVector::from_iterator(
+            basis.width(),
+            (0..basis.width()).map(|j| ((j * 37 % 11) as f64 - 5.0) * 0.173),
+        );
+        let product = &x * &beta;
+        let mut rows = Rows::new(&basis);
+        for k in 0..3000 {
+            rows.next(&rec.inputs[k], &nominal[k]);
+            if k >= 1000 {
+                let i = k - 1000;
+                for (j, v) in rows.row.iter().enumerate() {
+                    assert_eq!(v.to_bits(), x[(i, j)].to_bits(), "row {k} column {j}");
+                }
+                assert_eq!(dot(&rows.row, &beta).to_bits(), product[i].to_bits());
+            }
+        }
     }
 
     #[test]

@@ -105,13 +105,31 @@ impl<'a> Problem<'a> {
         opts: SolverOptions,
         head: usize,
     ) -> Result<(Self, Vec<Measurement>), crate::sim::SimError> {
+        let mut meas = Vec::with_capacity(rec.inputs.len());
+        let problem = Self::with_nominal_each(nominal, rec, present, scale, opts, head, |_, m| {
+            meas.push(*m)
+        })?;
+        Ok((problem, meas))
+    }
+
+    /// [`Self::with_nominal`] holding no nominal series: the channels of every sample are
+    /// handed to `f(k, channels)` in order as the replay runs.
+    pub fn with_nominal_each(
+        nominal: &'a PlantConfig,
+        rec: &'a Recording,
+        present: [bool; 5],
+        scale: [f64; 5],
+        opts: SolverOptions,
+        head: usize,
+        mut f: impl FnMut(usize, &Measurement),
+    ) -> Result<Self, crate::sim::SimError> {
         let dt = rec.sample_period_s();
         let plant = Plant::from_config(nominal);
         let n = rec.inputs.len();
         let keep = head.min(n);
         let mut states = Vec::with_capacity(keep);
-        let mut meas = Vec::with_capacity(n);
         let mut sensor = SensorPath::new(&plant, dt);
+        let mut k = 0;
         simulate_each(
             &plant,
             &rec.inputs,
@@ -122,11 +140,19 @@ impl<'a> Problem<'a> {
                 if states.len() < keep {
                     states.push(*x);
                 }
-                meas.push(sensor.push(&plant, x));
+                f(k, &sensor.push(&plant, x));
+                k += 1;
             },
         )?;
-        let problem = Self::with_states(nominal, rec, present, scale, opts, states, keep < n);
-        Ok((problem, meas))
+        Ok(Self::with_states(
+            nominal,
+            rec,
+            present,
+            scale,
+            opts,
+            states,
+            keep < n,
+        ))
     }
 
     /// The plant configuration with `parts` switched on.

@@ -42,7 +42,7 @@ use crate::fit::fit_percent_of_err2;
 use crate::io::recording::{Channel, Recording};
 use crate::plant::config::PlantConfig;
 use crate::plant::{Measurement, Plant};
-use crate::sim::{simulate, SolverOptions};
+use crate::sim::{simulate_each, SensorPath, SolverOptions};
 
 pub use candidates::{catalogue, Candidate, Screening, Setup};
 pub use differentiate::{noise_level, Differentiator, SavitzkyGolay};
@@ -153,9 +153,9 @@ pub struct CandidateScore {
     pub seconds: f64,
 }
 
-/// Channels of one recording for the report: every `stride`-th sample (TRAIN keeps what its
-/// plots draw, [`report::MAX_POINTS`] points, so the diagnosis holds no full-length series;
-/// CHECK keeps every sample) and each channel's range over all samples.
+/// Channels of one recording for the report: every `stride`-th sample (what its plots draw,
+/// [`report::MAX_POINTS`] points, so the diagnosis holds no full-length series) and each
+/// channel's range over all samples.
 #[derive(Debug, Clone)]
 pub struct Series {
     /// Samples of the recording.
@@ -182,22 +182,18 @@ fn widen(r: &mut [f64; 2], v: f64) {
 }
 
 impl Series {
-    /// Every `stride`-th sample of `rec`, `nominal` and `corrected` (the corrected series given
-    /// already thinned, with its range per channel).
-    fn thinned(
-        rec: &Recording,
-        stride: usize,
-        nominal: &[Measurement],
-        corrected: Vec<Measurement>,
-        corrected_range: [[f64; 2]; 5],
-    ) -> Self {
+    /// Every `stride`-th sample of `rec` with its nominal and corrected series, both given
+    /// already thinned with their ranges per channel (`nominal` and `corrected`).
+    fn thinned(rec: &Recording, stride: usize, nominal: &Replayed, corrected: Replayed) -> Self {
         let n = rec.len();
-        let mut range = corrected_range;
+        let mut range = corrected.range;
         for c in Channel::ALL {
             if let Some(y) = rec.channel(c) {
                 let r = &mut range[c.index()];
                 y.iter().for_each(|v| widen(r, *v));
-                nominal.iter().for_each(|m| widen(r, c.of(m)));
+                let [lo, hi] = nominal.range[c.index()];
+                widen(r, lo);
+                widen(r, hi);
             }
         }
         let thin = |v: &[f64]| -> Vec<f64> { v.iter().step_by(stride).copied().collect() };
@@ -207,25 +203,10 @@ impl Series {
             t_s: thin(&rec.t_s),
             t_end_s: rec.t_s[n - 1],
             measured: std::array::from_fn(|i| rec.outputs[i].as_deref().map(thin)),
-            nominal: nominal.iter().step_by(stride).copied().collect(),
-            corrected,
+            nominal: nominal.thinned.clone(),
+            corrected: corrected.thinned,
             range,
         }
-    }
-
-    /// Every sample of `rec` with its nominal and corrected series.
-    fn full(rec: &Recording, nominal: Vec<Measurement>, corrected: Vec<Measurement>) -> Self {
-        let mut range = [[f64::INFINITY, f64::NEG_INFINITY]; 5];
-        for c in Channel::ALL {
-            if rec.channel(c).is_some() {
-                corrected
-                    .iter()
-                    .for_each(|m| widen(&mut range[c.index()], c.of(m)));
-            }
-        }
-        let mut s = Self::thinned(rec, 1, &nominal, corrected, range);
-        s.nominal = nominal;
-        s
     }
 }
 
@@ -280,39 +261,199 @@ pub enum DiagnoseError {
 /// Fewest samples a recording needs.
 pub const MIN_SAMPLES: usize = 200;
 
-fn fits_of(rec: &Recording, pred: &[Measurement]) -> BTreeMap<&'static str, f64> {
-    let mut m = BTreeMap::new();
-    for c in Channel::ALL {
-        if let Some(y) = rec.channel(c) {
-            m.insert(c.name(), fit_of_channel(y, pred, c));
-        }
-    }
-    m
-}
-
-/// `fit_percent(y, channel c of pred)` without a copy of the channel (the same sums).
-fn fit_of_channel(y: &[f64], pred: &[Measurement], c: Channel) -> f64 {
-    assert_eq!(y.len(), pred.len(), "fit_percent: lengths differ");
-    let err2 = y
-        .iter()
-        .zip(pred)
-        .map(|(a, m)| {
-            let b = c.of(m);
-            (a - b) * (a - b)
-        })
-        .sum::<f64>();
-    fit_percent_of_err2(y, err2)
-}
-
-fn simulate_measure(
+/// A replay of `cfg` over `rec` (`CHECK`) holding no series: its fits, its plot points
+/// (every [`plot_stride`]-th sample) and ranges, [`Replayed`]; `f(k, channels)` sees every
+/// sample in order.
+fn replay_recording(
     cfg: &PlantConfig,
     rec: &Recording,
     opts: &SolverOptions,
-) -> Result<Vec<Measurement>, crate::sim::SimError> {
+    mut f: impl FnMut(usize, &Measurement),
+) -> Result<Replayed, crate::sim::SimError> {
     let plant = Plant::from_config(cfg);
     let dt = rec.sample_period_s();
-    let sim = simulate(&plant, &rec.inputs, dt, opts)?;
-    Ok(plant.measure_series(&sim.states, dt))
+    let mut sums = ReplaySums::new(rec, plot_stride(rec.len()));
+    let mut sensor = SensorPath::new(&plant, dt);
+    let mut k = 0;
+    simulate_each(
+        &plant,
+        &rec.inputs,
+        dt,
+        opts,
+        |_| {},
+        |x| {
+            let m = sensor.push(&plant, x);
+            sums.push(rec, k, &m);
+            f(k, &m);
+            k += 1;
+        },
+    )?;
+    Ok(sums.replayed(rec))
+}
+
+/// The fits, plot points and ranges of a replay ([`Replayed`]), summed sample by sample.
+struct ReplaySums {
+    err2: [f64; 5],
+    range: [[f64; 2]; 5],
+    thinned: Vec<Measurement>,
+    stride: usize,
+}
+
+impl ReplaySums {
+    fn new(rec: &Recording, stride: usize) -> Self {
+        Self {
+            err2: [0.0; 5],
+            range: [[f64::INFINITY, f64::NEG_INFINITY]; 5],
+            thinned: Vec::with_capacity(rec.len() / stride + 1),
+            stride,
+        }
+    }
+
+    /// Adds sample `k` (in order from 0) with its simulated channels `m`: the sums of
+    /// `fit_percent` for every measured channel and its range.
+    fn push(&mut self, rec: &Recording, k: usize, m: &Measurement) {
+        for c in Channel::ALL {
+            if let Some(y) = rec.channel(c) {
+                let (a, b) = (y[k], c.of(m));
+                self.err2[c.index()] += (a - b) * (a - b);
+                widen(&mut self.range[c.index()], b);
+            }
+        }
+        if k % self.stride == 0 {
+            self.thinned.push(*m);
+        }
+    }
+
+    /// The fit of measured channel `c` (`fit_percent` to the bit).
+    fn fit(&self, rec: &Recording, c: Channel) -> Option<f64> {
+        Some(fit_percent_of_err2(rec.channel(c)?, self.err2[c.index()]))
+    }
+
+    fn fits(&self, rec: &Recording) -> BTreeMap<&'static str, f64> {
+        Channel::ALL
+            .iter()
+            .filter_map(|c| Some((c.name(), self.fit(rec, *c)?)))
+            .collect()
+    }
+
+    fn replayed(self, rec: &Recording) -> Replayed {
+        Replayed {
+            fits: self.fits(rec),
+            thinned: self.thinned,
+            range: self.range,
+        }
+    }
+}
+
+/// What the diagnosis keeps of the nominal replay of TRAIN, gathered sample by sample while
+/// it runs (no full-length series): the channels of the head the fits and the evidence
+/// read, the plot points and ranges, and the sums of the whole-recording fits, the costs
+/// over all samples and over the held-out tail, the held-out fits and the plausibility
+/// checks (each the held-series code's sum in the same order, so the same values to the
+/// bit).
+pub struct NominalReplay {
+    /// The nominal channels of the first [`Gathered::fit_budget_n`] samples (all of a
+    /// recording within the budget).
+    pub head: Vec<Measurement>,
+    /// Samples of TRAIN.
+    pub len: usize,
+    /// Samples `head` keeps.
+    head_n: usize,
+    /// The held-out tail of TRAIN.
+    pub held: std::ops::Range<usize>,
+    sums: ReplaySums,
+    /// Sums of `((nominal - y) / spread)^2` per channel over all samples and over `held`.
+    cost_sum: [f64; 5],
+    held_cost_sum: [f64; 5],
+    /// Sum of `(nominal - y)^2` per channel over `held`.
+    held_sq: [f64; 5],
+    /// Sum of every nominal channel over all samples.
+    pub channel_sum: [f64; 5],
+    pub plausibility: verdict::PlausibilitySums,
+}
+
+impl NominalReplay {
+    fn new(rec: &Recording, head: usize, held: std::ops::Range<usize>) -> Self {
+        Self {
+            head: Vec::with_capacity(head.min(rec.len())),
+            len: rec.len(),
+            head_n: head.min(rec.len()),
+            held,
+            sums: ReplaySums::new(rec, plot_stride(rec.len())),
+            cost_sum: [0.0; 5],
+            held_cost_sum: [0.0; 5],
+            held_sq: [0.0; 5],
+            channel_sum: [0.0; 5],
+            plausibility: verdict::PlausibilitySums::default(),
+        }
+    }
+
+    fn push(&mut self, rec: &Recording, spread: &[f64; 5], k: usize, m: &Measurement) {
+        if self.head.len() < self.head_n {
+            self.head.push(*m);
+        }
+        self.sums.push(rec, k, m);
+        let in_held = self.held.contains(&k);
+        for c in Channel::ALL {
+            let i = c.index();
+            self.channel_sum[i] += c.of(m);
+            if let Some(y) = rec.channel(c) {
+                let e = c.of(m) - y[k];
+                let q = (e / spread[i]).powi(2);
+                self.cost_sum[i] += q;
+                if in_held {
+                    self.held_cost_sum[i] += q;
+                    self.held_sq[i] += e.powi(2);
+                }
+            }
+        }
+        self.plausibility.push(rec, k, m);
+    }
+
+    /// `fit_percent` of measured channel `c` against the nominal model over all samples.
+    pub fn fit(&self, rec: &Recording, c: Channel) -> Option<f64> {
+        self.sums.fit(rec, c)
+    }
+
+    /// The fits of every measured channel over all samples.
+    pub fn fits(&self, rec: &Recording) -> BTreeMap<&'static str, f64> {
+        self.sums.fits(rec)
+    }
+
+    /// [`Problem::channel_costs`] of the nominal replay over all samples (`held`: over the
+    /// held-out tail), summed over the channels.
+    pub fn cost(&self, held: bool) -> f64 {
+        let (sums, n) = if held {
+            (&self.held_cost_sum, self.held.len())
+        } else {
+            (&self.cost_sum, self.len)
+        };
+        let n = n.max(1) as f64;
+        sums.map(|s| s / n).iter().sum()
+    }
+
+    /// [`verdict::fit_vs_spread_of_sum`] of every measured channel over the held-out tail.
+    pub fn heldout_fits(&self, rec: &Recording, spread: &[f64; 5]) -> BTreeMap<&'static str, f64> {
+        Channel::ALL
+            .iter()
+            .filter(|c| rec.channel(**c).is_some())
+            .map(|c| {
+                let i = c.index();
+                let fit =
+                    verdict::fit_vs_spread_of_sum(self.held_sq[i], self.held.len(), spread[i]);
+                (c.name(), fit)
+            })
+            .collect()
+    }
+
+    /// The nominal replay as the report keeps it.
+    pub fn replayed(&self, rec: &Recording) -> Replayed {
+        Replayed {
+            fits: self.fits(rec),
+            thinned: self.sums.thinned.clone(),
+            range: self.sums.range,
+        }
+    }
 }
 
 /// Look-alike pairs (a, b): effects whose signatures resemble each other.
@@ -335,7 +476,8 @@ const LOOKALIKES: [(&str, &str); 6] = [
 /// Output of the evidence stage.
 pub struct Gathered<'a> {
     pub problem: Problem<'a>,
-    pub nominal_meas: Vec<Measurement>,
+    /// The nominal replay of TRAIN: its head's channels and its sums.
+    pub nominal: NominalReplay,
     pub present: [bool; 5],
     pub spread: [f64; 5],
     pub noise: [f64; 5],
@@ -343,6 +485,9 @@ pub struct Gathered<'a> {
     pub located: Vec<Located>,
     /// Samples a fit replays at most ([`DiagnoseOptions::fit_budget_s`]).
     pub fit_budget_n: usize,
+    /// Samples of the head of TRAIN the candidates are fitted on (`0..n_fit`); the rest,
+    /// `nominal.held`, scores them.
+    pub n_fit: usize,
 }
 
 /// Stage 1, evidence: replays the nominal plant (the only replay whose failure stops the
@@ -370,10 +515,25 @@ pub fn gather_evidence<'a>(
     } else {
         usize::MAX
     };
+    let n_fit = ((n as f64 * opts.fit_fraction).round() as usize)
+        .min(fit_budget_n)
+        .clamp(
+            MIN_SAMPLES / 2,
+            n.saturating_sub(MIN_SAMPLES / 4).max(MIN_SAMPLES / 2),
+        );
     // A recording longer than the budget: fits replay only the head they are scored on
-    // (`replay_heads`), so the nominal states are kept for that head alone.
-    let (problem, nominal_meas) =
-        Problem::with_nominal(nominal, train, present, spread, opts.solver, fit_budget_n)?;
+    // (`replay_heads`), so the nominal states and channels are kept for that head alone;
+    // the rest of the nominal replay is summed as it runs.
+    let mut nom = NominalReplay::new(train, fit_budget_n, n_fit..n);
+    let problem = Problem::with_nominal_each(
+        nominal,
+        train,
+        present,
+        spread,
+        opts.solver,
+        fit_budget_n,
+        |k, m| nom.push(train, &spread, k, m),
+    )?;
     // The equation-error evidence and the error windows of that head too (a recording
     // within the budget: all of it), so their memory does not grow with the recording.
     let head_rec;
@@ -383,7 +543,7 @@ pub fn gather_evidence<'a>(
     } else {
         train
     };
-    let ev_nominal = &nominal_meas[..ev_rec.len()];
+    let ev_nominal = &nom.head[..ev_rec.len()];
     let diff = SavitzkyGolay::default();
     let evidence = Evidence::build(nominal, ev_rec, ev_nominal, &diff);
     let mut located = locate::locate(
@@ -398,21 +558,22 @@ pub fn gather_evidence<'a>(
     if ev_rec.len() < n {
         // The fits of the located channels over the whole recording, in locate's order.
         for l in &mut located {
-            if let Some(y) = train.channel(l.channel) {
-                l.fit_pct = fit_of_channel(y, &nominal_meas, l.channel);
+            if let Some(fit) = nom.fit(train, l.channel) {
+                l.fit_pct = fit;
             }
         }
         located.sort_by(|a, b| a.fit_pct.total_cmp(&b.fit_pct));
     }
     Ok(Gathered {
         problem,
-        nominal_meas,
+        nominal: nom,
         present,
         spread,
         noise,
         evidence,
         located,
         fit_budget_n,
+        n_fit,
     })
 }
 
@@ -452,52 +613,13 @@ pub struct Replayed {
 }
 
 impl Replayed {
-    /// Of a replay that is held.
-    pub fn of(rec: &Recording, pred: &[Measurement], stride: usize) -> Self {
-        let mut range = [[f64::INFINITY, f64::NEG_INFINITY]; 5];
-        for c in Channel::ALL {
-            if rec.channel(c).is_some() {
-                pred.iter()
-                    .for_each(|m| widen(&mut range[c.index()], c.of(m)));
-            }
-        }
-        Self {
-            fits: fits_of(rec, pred),
-            thinned: pred.iter().step_by(stride).copied().collect(),
-            range,
-        }
-    }
-
     /// Of the model `parts` replayed without holding its series (the fits are those of
-    /// [`Self::of`] to the bit); `None` if the simulation fails.
+    /// `fit_percent` on the held series to the bit); `None` if the simulation fails.
     pub fn stream(problem: &Problem, parts: &[Part], stride: usize) -> Option<Self> {
         let rec = problem.recording;
-        let mut err2 = [0.0f64; 5];
-        let mut range = [[f64::INFINITY, f64::NEG_INFINITY]; 5];
-        let mut thinned = Vec::with_capacity(rec.len() / stride + 1);
-        let ok = problem.replay_each(parts, rec.len(), |k, m| {
-            for c in Channel::ALL {
-                if let Some(y) = rec.channel(c) {
-                    let (a, b) = (y[k], c.of(m));
-                    err2[c.index()] += (a - b) * (a - b);
-                    widen(&mut range[c.index()], b);
-                }
-            }
-            if k % stride == 0 {
-                thinned.push(*m);
-            }
-        });
-        ok.then(|| Self {
-            fits: Channel::ALL
-                .iter()
-                .filter_map(|c| {
-                    let y = rec.channel(*c)?;
-                    Some((c.name(), fit_percent_of_err2(y, err2[c.index()])))
-                })
-                .collect(),
-            thinned,
-            range,
-        })
+        let mut sums = ReplaySums::new(rec, stride);
+        let ok = problem.replay_each(parts, rec.len(), |k, m| sums.push(rec, k, m));
+        ok.then(|| sums.replayed(rec))
     }
 }
 
@@ -526,7 +648,7 @@ pub fn final_refit<'c>(
     let corrected = g.problem.config(&chosen);
     let rec = g.problem.recording;
     let stride = plot_stride(rec.len());
-    let nominal_replay = || Replayed::of(rec, &g.nominal_meas, stride);
+    let nominal_replay = || g.nominal.replayed(rec);
     // No part: the corrected model is the nominal one, whose replay is held.
     let replayed = if chosen.is_empty() {
         Some(nominal_replay())
@@ -603,7 +725,7 @@ pub fn diagnose(
     // 1. Evidence.
     let g = gather_evidence(nominal, train, opts)?;
     let setup = g.problem.setup.clone();
-    let fit_before = fits_of(train, &g.nominal_meas);
+    let fit_before = g.nominal.fits(train);
     step("screening");
 
     // 2. Candidates, screened.
@@ -611,18 +733,12 @@ pub fn diagnose(
         .iter()
         .map(|c| c.screen(&g.evidence, &setup))
         .collect();
-    let n_fit = ((n as f64 * opts.fit_fraction).round() as usize)
-        .min(g.fit_budget_n)
-        .clamp(MIN_SAMPLES / 2, n - MIN_SAMPLES / 4);
+    let n_fit = g.n_fit;
     let fit_range = 0..n_fit;
-    let held = n_fit..n;
+    let held = g.nominal.held.clone();
     let noise_cost = noise_cost(&g.present, &g.noise, &g.spread);
-    let nominal_cost: f64 = g.problem.channel_costs(&g.nominal_meas, 0..n).iter().sum();
-    let j0_h: f64 = g
-        .problem
-        .channel_costs(&g.nominal_meas, held.clone())
-        .iter()
-        .sum();
+    let nominal_cost = g.nominal.cost(false);
+    let j0_h = g.nominal.cost(true);
     let nothing_missing = nominal_cost <= opts.null_ratio * noise_cost;
     step("screening done");
 
@@ -657,20 +773,8 @@ pub fn diagnose(
     };
 
     // Held-out fits of the selection's best set (fitted on the head only).
-    let heldout_of = |pred: &[Measurement]| -> BTreeMap<&'static str, f64> {
-        let mut m = BTreeMap::new();
-        for c in Channel::ALL {
-            if let Some(y) = train.channel(c) {
-                m.insert(
-                    c.name(),
-                    verdict::fit_vs_spread(y, pred, c, held.clone(), g.spread[c.index()]),
-                );
-            }
-        }
-        m
-    };
-    let heldout_before = heldout_of(&g.nominal_meas);
-    // The same sums as `heldout_of`, from a replay that is not held (no part: the nominal
+    let heldout_before = g.nominal.heldout_fits(train, &g.spread);
+    // The same sums as `heldout_before`, from a replay that is not held (no part: the nominal
     // replay, whose fits are `heldout_before`).
     let heldout_after = if sel.chosen.is_empty() {
         heldout_before.clone()
@@ -714,7 +818,10 @@ pub fn diagnose(
     let mut failures = fin.failures;
 
     // Check recording: same rig, its own sample period.
+    // Both replays are summed as they run (plot points, ranges, fits): no CHECK series is
+    // held.
     let mut check_series = None;
+    let mut check_nominal = None;
     let (mut check_before, mut check_after) = (None, None);
     if let Some(rec) = check {
         let csetup = Setup {
@@ -726,13 +833,14 @@ pub fn diagnose(
             p.candidate.apply(&mut ccfg, &p.params, &csetup);
         }
         match (
-            simulate_measure(nominal, rec, &opts.solver),
-            simulate_measure(&ccfg, rec, &opts.solver),
+            replay_recording(nominal, rec, &opts.solver, |_, _| {}),
+            replay_recording(&ccfg, rec, &opts.solver, |_, _| {}),
         ) {
             (Ok(before), Ok(after)) => {
-                check_before = Some(fits_of(rec, &before));
-                check_after = Some(fits_of(rec, &after));
-                check_series = Some(Series::full(rec, before, after));
+                check_before = Some(before.fits.clone());
+                check_after = Some(after.fits.clone());
+                check_series = Some(Series::thinned(rec, plot_stride(rec.len()), &before, after));
+                check_nominal = Some(before);
             }
             (b, a) => {
                 for (which, r) in [("nominal", b.err()), ("corrected", a.err())] {
@@ -746,7 +854,7 @@ pub fn diagnose(
     step("check");
 
     // 5. Verdict.
-    let hints = verdict::plausibility_hints(nominal, train, &g.nominal_meas);
+    let hints = verdict::plausibility_hints(nominal, train, &g.nominal.plausibility);
     let min_heldout = heldout_after
         .values()
         .chain(check_after.iter().flat_map(|m| m.values()))
@@ -780,29 +888,37 @@ pub fn diagnose(
             Vec::new(),
             Vec::new(),
             nominal.clone(),
-            Replayed::of(train, &g.nominal_meas, plot_stride(n)),
+            g.nominal.replayed(train),
         )
     };
     if v != Verdict::Explained {
-        if let (Some(b), Some(cs)) = (&check_before, &mut check_series) {
+        if let (Some(b), Some(cs), Some(rec)) = (&check_before, &mut check_series, check) {
             check_after = Some(b.clone());
-            if let Some(rec) = check {
-                let nominal = std::mem::take(&mut cs.nominal);
-                *cs = Series::full(rec, nominal.clone(), nominal);
-            }
+            let nom = check_nominal.as_ref().expect("replayed with the series");
+            *cs = Series::thinned(rec, cs.stride, nom, nom.clone());
         }
     }
     let fit_after = corrected_replay.fits.clone();
     // The unnamed fallback when nothing explains the residual.
     let black_box = if v == Verdict::Unexplained {
-        black_box::fit(
+        // TRAIN's nominal replay (its head held, the rest replayed) and CHECK's.
+        let train_stream =
+            |f: &mut dyn FnMut(usize, &Measurement)| g.problem.replay_each(&[], n, |k, m| f(k, m));
+        let check_rec = check.filter(|_| check_series.is_some());
+        let check_stream = |f: &mut dyn FnMut(usize, &Measurement)| match check_rec {
+            Some(rec) => replay_recording(nominal, rec, &opts.solver, |k, m| f(k, m)).is_ok(),
+            None => false,
+        };
+        black_box::fit_streamed(
             train,
-            &g.nominal_meas,
+            &black_box::NominalRun {
+                head: &g.nominal.head,
+                channel_sum: g.nominal.channel_sum,
+                stream: &train_stream,
+            },
             0..n_fit,
             n_fit..n,
-            check
-                .zip(check_series.as_ref())
-                .map(|(r, cs)| (r, cs.nominal.as_slice())),
+            check_rec.map(|r| (r, &check_stream as black_box::NominalStream)),
         )
     } else {
         None
@@ -981,9 +1097,8 @@ pub fn diagnose(
         train: Series::thinned(
             train,
             plot_stride(n),
-            &g.nominal_meas,
-            corrected_replay.thinned,
-            corrected_replay.range,
+            &g.nominal.replayed(train),
+            corrected_replay,
         ),
         check: check_series,
         scatters,

@@ -54,58 +54,98 @@ impl Verdict {
     }
 }
 
-/// The fit (in %) of channel `c` over `range`, its error normalised by `spread` (the whole
-/// recording's standard deviation, so a short tail where a channel barely moves is not
-/// judged by its own tiny spread).
-pub fn fit_vs_spread(
-    y: &[f64],
-    pred: &[Measurement],
-    c: Channel,
-    range: std::ops::Range<usize>,
-    spread: f64,
-) -> f64 {
-    let sum_sq = range
-        .clone()
-        .map(|k| (c.of(&pred[k]) - y[k]).powi(2))
-        .sum::<f64>();
-    fit_vs_spread_of_sum(sum_sq, range.len(), spread)
-}
-
-/// [`fit_vs_spread`] from the sum, in sample order, of `(predicted - y)^2` over `samples`
-/// samples (for a prediction that is not held; the same value to the bit).
+/// The fit (in %) of a channel over `samples` samples from the sum, in sample order, of
+/// `(predicted - y)^2` over them, its error normalised by `spread` (the whole recording's
+/// standard deviation, so a short tail where a channel barely moves is not judged by its own
+/// tiny spread).
 pub fn fit_vs_spread_of_sum(sum_sq: f64, samples: usize, spread: f64) -> f64 {
     let mse = sum_sq / samples.max(1) as f64;
     100.0 * (1.0 - mse.sqrt() / spread.max(1e-300))
 }
 
-/// `fit_percent(y, sign * channel c of sim)` with neither series copied (the same sums).
-fn fit_to_sim<I: Iterator<Item = f64>>(
-    y: impl Fn() -> I,
-    sim: &[Measurement],
-    c: Channel,
-    sign: f64,
-) -> f64 {
-    let err2 = y()
-        .zip(sim)
-        .map(|(a, m)| {
-            let b = sign * c.of(m);
-            (a - b) * (a - b)
-        })
-        .sum::<f64>();
-    fit_percent_by(y, err2)
+/// What the plausibility checks read of the nominal simulation, summed sample by sample
+/// while it runs (so the simulation need not be held): per channel its largest value and,
+/// against the measured channels, the error sums of the straight, crossed (`p1` <-> `p2`,
+/// `f1` <-> `f2`), sign-flipped and radian readings, each in sample order (the sums of
+/// `fit_percent` to the bit).
+#[derive(Debug, Clone)]
+pub struct PlausibilitySums {
+    /// Largest value of every simulated channel (`f64::max` over the samples).
+    nominal_max: [f64; 5],
+    /// Sum of `(y_c - sim_c)^2` per measured channel `c`.
+    straight_err2: [f64; 5],
+    /// Sum of `(y_c - sim_pair(c))^2` for the pressure and force pairs.
+    crossed_err2: [f64; 5],
+    /// The angle against the simulated angle with its sign flipped.
+    angle_flipped_err2: f64,
+    /// The angle read as radians (converted to degrees) against the simulated angle.
+    angle_as_rad_err2: f64,
 }
 
-/// Plausibility checks of a recording against the nominal simulation of the same inputs:
-/// each message names a likely cause (units, channel mapping, plant file).
+/// The other muscle's channel of a pressure or force channel (`None` for the angle).
+fn pair_of(c: Channel) -> Option<Channel> {
+    match c {
+        Channel::P1Kpa => Some(Channel::P2Kpa),
+        Channel::P2Kpa => Some(Channel::P1Kpa),
+        Channel::F1N => Some(Channel::F2N),
+        Channel::F2N => Some(Channel::F1N),
+        Channel::AngleDeg => None,
+    }
+}
+
+impl Default for PlausibilitySums {
+    fn default() -> Self {
+        Self {
+            nominal_max: [f64::NEG_INFINITY; 5],
+            straight_err2: [0.0; 5],
+            crossed_err2: [0.0; 5],
+            angle_flipped_err2: 0.0,
+            angle_as_rad_err2: 0.0,
+        }
+    }
+}
+
+impl PlausibilitySums {
+    /// Adds sample `k` of `rec` with its simulated channels `m` (samples in order from 0).
+    pub fn push(&mut self, rec: &Recording, k: usize, m: &Measurement) {
+        let sq = |a: f64, b: f64| (a - b) * (a - b);
+        for c in Channel::ALL {
+            let i = c.index();
+            self.nominal_max[i] = self.nominal_max[i].max(c.of(m));
+            let Some(y) = rec.channel(c) else { continue };
+            let a = y[k];
+            self.straight_err2[i] += sq(a, c.of(m));
+            if let Some(p) = pair_of(c) {
+                self.crossed_err2[i] += sq(a, p.of(m));
+            } else {
+                self.angle_flipped_err2 += sq(a, -c.of(m));
+                self.angle_as_rad_err2 += sq(a.to_degrees(), c.of(m));
+            }
+        }
+    }
+
+    /// The sums of a simulation that is held.
+    pub fn of(rec: &Recording, sim: &[Measurement]) -> Self {
+        let mut s = Self::default();
+        sim.iter().enumerate().for_each(|(k, m)| s.push(rec, k, m));
+        s
+    }
+}
+
+/// Plausibility checks of a recording against the nominal simulation of the same inputs
+/// (its sums, [`PlausibilitySums`]): each message names a likely cause (units, channel
+/// mapping, plant file).
 pub fn plausibility_hints(
     nominal: &PlantConfig,
     rec: &Recording,
-    sim: &[Measurement],
+    sums: &PlausibilitySums,
 ) -> Vec<String> {
     let mut hints = Vec::new();
     let supply_kpa = nominal.environment.supply_gauge_pa / 1000.0;
     let p_atm_kpa = nominal.environment.p_atm_pa / 1000.0;
-    let fit_of = |y: &[f64], c: Channel, sign: f64| fit_to_sim(|| y.iter().copied(), sim, c, sign);
+    let fit_of = |y: &[f64], err2: f64| fit_percent_by(|| y.iter().copied(), err2);
+    let straight_of = |y: &[f64], c: Channel| fit_of(y, sums.straight_err2[c.index()]);
+    let crossed_of = |y: &[f64], c: Channel| fit_of(y, sums.crossed_err2[c.index()]);
     for c in [Channel::P1Kpa, Channel::P2Kpa] {
         let Some(y) = rec.channel(c) else { continue };
         let hi = y.iter().copied().fold(f64::NEG_INFINITY, f64::max);
@@ -121,10 +161,7 @@ pub fn plausibility_hints(
                 c.name()
             ));
         }
-        let nom_hi = sim
-            .iter()
-            .map(|m| c.of(m))
-            .fold(f64::NEG_INFINITY, f64::max);
+        let nom_hi = sums.nominal_max[c.index()];
         if nom_hi > 50.0 && hi.abs() < nom_hi / 50.0 && hi - lo < nom_hi / 50.0 {
             hints.push(format!(
                 "{} stays below {hi:.3} kPa where the nominal model reaches {nom_hi:.0} kPa: bar or MPa instead of kPa, or the valve columns are not mapped to the right valves",
@@ -140,8 +177,8 @@ pub fn plausibility_hints(
         let (Some(ya), Some(yb)) = (rec.channel(a), rec.channel(b)) else {
             continue;
         };
-        let straight = fit_of(ya, a, 1.0).min(fit_of(yb, b, 1.0));
-        let crossed = fit_of(ya, b, 1.0).min(fit_of(yb, a, 1.0));
+        let straight = straight_of(ya, a).min(straight_of(yb, b));
+        let crossed = crossed_of(ya, a).min(crossed_of(yb, b));
         if crossed > straight + 30.0 && crossed > 30.0 {
             hints.push(format!(
                 "{} and {} fit the model {:.0} % when swapped and {:.0} % as labelled: check the channel mapping (muscle 1 contracts when the angle grows) or the valve columns",
@@ -153,15 +190,14 @@ pub fn plausibility_hints(
         }
     }
     if let Some(y) = rec.channel(Channel::AngleDeg) {
-        let straight = fit_of(y, Channel::AngleDeg, 1.0);
-        let flipped = fit_of(y, Channel::AngleDeg, -1.0);
+        let straight = straight_of(y, Channel::AngleDeg);
+        let flipped = fit_of(y, sums.angle_flipped_err2);
         if flipped > straight + 30.0 && flipped > 30.0 {
             hints.push(format!(
                 "angle_deg fits the model {flipped:.0} % with its sign flipped and {straight:.0} % as recorded: check the angle sign convention (muscle 1 contracts when the angle grows)"
             ));
         }
-        let radians = || y.iter().map(|v| v.to_degrees());
-        let as_rad = fit_to_sim(radians, sim, Channel::AngleDeg, 1.0);
+        let as_rad = fit_percent_by(|| y.iter().map(|v| v.to_degrees()), sums.angle_as_rad_err2);
         if as_rad > straight + 30.0 && as_rad > 30.0 {
             hints.push(format!(
                 "angle_deg fits the model {as_rad:.0} % read as radians and {straight:.0} % as degrees: check the angle unit"
@@ -189,6 +225,63 @@ mod tests {
         assert_eq!(Verdict::NotThisPlant.as_str(), "not_this_plant");
         assert!(Verdict::NothingMissing.is_answer());
         assert!(!Verdict::Unexplained.is_answer());
+    }
+
+    /// The streamed sums give the fits of `fit_percent` on copied (crossed, flipped,
+    /// converted) series to the bit.
+    #[test]
+    fn plausibility_sums_are_those_of_fit_percent() {
+        use crate::fit::fit_percent;
+        let n = 500;
+        let sim: Vec<Measurement> = (0..n)
+            .map(|k| {
+                let t = k as f64 * 1e-2;
+                Measurement {
+                    angle_deg: 10.0 * t.sin(),
+                    p1_kpa: 200.0 + 50.0 * (1.3 * t).cos(),
+                    p2_kpa: 180.0 - 40.0 * (0.7 * t).sin(),
+                    f1_n: 90.0 * (0.3 * t).cos(),
+                    f2_n: 70.0 + t,
+                }
+            })
+            .collect();
+        let mut rec = Recording {
+            metadata: Vec::new(),
+            t_s: (0..n).map(|k| k as f64 * 1e-2).collect(),
+            inputs: vec![crate::plant::ValveInputs::CLOSED; n],
+            outputs: Default::default(),
+            mass_flow_kg_s: None,
+        };
+        for c in Channel::ALL {
+            let y: Vec<f64> = sim
+                .iter()
+                .enumerate()
+                .map(|(k, m)| 1.1 * c.of(m) + ((k * 7919) % 13) as f64 * 0.01)
+                .collect();
+            rec.set_channel(c, y);
+        }
+        let s = PlausibilitySums::of(&rec, &sim);
+        let col = |c: Channel, f: &dyn Fn(f64) -> f64| -> Vec<f64> {
+            sim.iter().map(|m| f(c.of(m))).collect()
+        };
+        let fit = |err2: f64, y: &[f64]| crate::fit::fit_percent_of_err2(y, err2).to_bits();
+        for c in Channel::ALL {
+            let y = rec.channel(c).unwrap();
+            let own = fit_percent(y, &col(c, &|v| v));
+            assert_eq!(fit(s.straight_err2[c.index()], y), own.to_bits());
+            if let Some(p) = pair_of(c) {
+                let crossed = fit_percent(y, &col(p, &|v| v));
+                assert_eq!(fit(s.crossed_err2[c.index()], y), crossed.to_bits());
+            }
+            let hi = col(c, &|v| v).into_iter().fold(f64::NEG_INFINITY, f64::max);
+            assert_eq!(s.nominal_max[c.index()], hi);
+        }
+        let y = rec.channel(Channel::AngleDeg).unwrap();
+        let flipped = fit_percent(y, &col(Channel::AngleDeg, &|v| -v));
+        assert_eq!(fit(s.angle_flipped_err2, y), flipped.to_bits());
+        let y_deg: Vec<f64> = y.iter().map(|v| v.to_degrees()).collect();
+        let as_rad = fit_percent(&y_deg, &col(Channel::AngleDeg, &|v| v));
+        assert_eq!(fit(s.angle_as_rad_err2, &y_deg), as_rad.to_bits());
     }
 
     #[test]

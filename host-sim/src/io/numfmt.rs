@@ -254,13 +254,77 @@ const POW10_U64: [u64; 20] = {
     p
 };
 
-/// Writes `n` (< 10^out.len()) into all of `out` as digits, zero-padded on the left.
+/// The digit pairs "00" to "99".
+const DIGIT_PAIRS: [u8; 200] = {
+    let mut t = [0u8; 200];
+    let mut i = 0;
+    while i < 100 {
+        t[2 * i] = b'0' + (i / 10) as u8;
+        t[2 * i + 1] = b'0' + (i % 10) as u8;
+        i += 1;
+    }
+    t
+};
+
+/// Writes `n` (< 10^out.len()) into all of `out` as digits, zero-padded on the left (two
+/// digits per division).
 #[inline(always)]
 fn put_padded(out: &mut [u8], mut n: u64) {
-    for d in out.iter_mut().rev() {
-        *d = b'0' + (n % 10) as u8;
-        n /= 10;
+    let mut i = out.len();
+    while i >= 2 {
+        let d = (n % 100) as usize;
+        n /= 100;
+        out[i - 2..i].copy_from_slice(&DIGIT_PAIRS[2 * d..2 * d + 2]);
+        i -= 2;
     }
+    if i == 1 {
+        out[0] = b'0' + (n % 10) as u8;
+    }
+}
+
+/// The field of `bytes` starting at `start` (up to the next `,`, `\r`, `\n` or the end)
+/// read as [`parse_plain_decimal`] reads it, in one pass: `(value, end)` with `end` the
+/// position of the delimiter; the value is `None` whenever [`parse_plain_decimal`] of the
+/// field is.
+#[inline(always)]
+pub fn scan_plain_decimal(bytes: &[u8], start: usize) -> (Option<f64>, usize) {
+    const POW10_F: [f64; 16] = [
+        1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15,
+    ];
+    let len = bytes.len();
+    let mut i = start;
+    let negative = i < len && bytes[i] == b'-';
+    i += usize::from(negative);
+    let (mut m, mut n_digits, mut frac_digits) = (0u64, 0usize, 0usize);
+    let mut seen_point = false;
+    while i < len {
+        match bytes[i] {
+            b @ b'0'..=b'9' => {
+                // Wraps only past 19 digits, which are refused below anyway.
+                m = m.wrapping_mul(10).wrapping_add(u64::from(b - b'0'));
+                n_digits += 1;
+                frac_digits += usize::from(seen_point);
+            }
+            b'.' if !seen_point => seen_point = true,
+            _ => break,
+        }
+        i += 1;
+    }
+    if i < len && !matches!(bytes[i], b',' | b'\n' | b'\r') {
+        // Something else in the field: find its end; the field is not a plain decimal.
+        while i < len && !matches!(bytes[i], b',' | b'\n' | b'\r') {
+            i += 1;
+        }
+        return (None, i);
+    }
+    if n_digits == 0
+        || n_digits > 15
+        || (seen_point && (frac_digits == 0 || frac_digits == n_digits))
+    {
+        return (None, i);
+    }
+    let v = m as f64 / POW10_F[frac_digits];
+    (Some(if negative { -v } else { v }), i)
 }
 
 #[cfg(test)]
@@ -378,6 +442,61 @@ mod tests {
             "0x10",
         ] {
             assert_eq!(parse_plain_decimal(s.as_bytes()), None, "{s:?}");
+        }
+    }
+
+    /// The one-pass scanner finds the field's end and reads it as `parse_plain_decimal`
+    /// reads the field cut out: `s` is a row of fields from a small alphabet of the bytes
+    /// that matter (digits, point, minus, delimiters, others).
+    fn scan_agrees_on(s: &[u8]) {
+        let mut start = 0;
+        loop {
+            let end = start
+                + s[start..]
+                    .iter()
+                    .position(|b| matches!(b, b',' | b'\n' | b'\r'))
+                    .unwrap_or(s.len() - start);
+            let (v, got_end) = scan_plain_decimal(s, start);
+            assert_eq!(
+                got_end,
+                end,
+                "{:?} from {start}",
+                String::from_utf8_lossy(s)
+            );
+            let want = parse_plain_decimal(&s[start..end]);
+            assert_eq!(
+                v.map(f64::to_bits),
+                want.map(f64::to_bits),
+                "{:?}",
+                String::from_utf8_lossy(&s[start..end])
+            );
+            if end >= s.len() {
+                break;
+            }
+            start = end + 1;
+        }
+    }
+
+    #[test]
+    fn the_scanner_reads_fields_as_parse_plain_decimal() {
+        for s in [
+            "0.001000,0,0,0,0,0.000000,550.000000,550.000000,529.601003,529.601003\n",
+            "-12.5,5.,.5,,-,1e3, 1,1 ,+1,1.2.3,nan,1234567890123456,999999999999999\r\n",
+            "--1,0x10,00012.50,-0,12345678901234567890123,7",
+        ] {
+            scan_agrees_on(s.as_bytes());
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(5_000))]
+        #[test]
+        fn the_scanner_agrees_on_random_rows(
+            picks in proptest::collection::vec(0usize..16, 1..60),
+        ) {
+            const ALPHABET: &[u8; 16] = b"0123456789.-,\ne ";
+            let s: Vec<u8> = picks.iter().map(|&i| ALPHABET[i]).collect();
+            scan_agrees_on(&s);
         }
     }
 

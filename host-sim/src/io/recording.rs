@@ -609,12 +609,16 @@ impl RowParser {
             }
             let (mut t_s, mut u, mut y) = (0.0, [0.0; 4], [0.0; 5]);
             for (f, role) in self.roles.iter().enumerate() {
-                let start = i;
-                while i < len && !matches!(bytes[i], b',' | b'\n' | b'\r') {
-                    i += 1;
-                }
-                if *role != Role::Ignored {
-                    let Some(v) = numfmt::parse_plain_decimal(&bytes[start..i]) else {
+                if *role == Role::Ignored {
+                    while i < len && !matches!(bytes[i], b',' | b'\n' | b'\r') {
+                        i += 1;
+                    }
+                } else {
+                    // The field read as `parse_plain_decimal` reads it, in the same pass
+                    // that finds its end.
+                    let (value, end) = numfmt::scan_plain_decimal(bytes, i);
+                    i = end;
+                    let Some(v) = value else {
                         return false;
                     };
                     match *role {
