@@ -148,6 +148,19 @@ pub fn plot_path(s: &str) -> Result<PathBuf, String> {
     }
 }
 
+/// A file output whose directory must already exist (the command does not create it):
+/// refused before the run, not after it (a tuning run takes minutes).
+pub fn output_parent_exists(flag: &str, path: &Path) -> Result<(), String> {
+    match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() && !d.is_dir() => Err(format!(
+            "{flag} {}: the directory {} does not exist",
+            path.display(),
+            d.display()
+        )),
+        _ => Ok(()),
+    }
+}
+
 /// A directory output (`--report DIR`, `--out-dir DIR`): absent (created) or a directory.
 pub fn output_dir(flag: &str, dir: &Path) -> Result<(), String> {
     if dir.exists() && !dir.is_dir() {
@@ -212,9 +225,26 @@ fn same_target(input: &Path, output: &Path) -> bool {
     }
 }
 
-/// Refuses an output that is one of the inputs (the run would replace the user's data) or
-/// two outputs that are the same file. Each path comes with the flag that named it.
+/// Refuses an output that is one of the inputs (the run would replace the user's data), two
+/// outputs that are the same file, or an output that exists and is not a regular file (a
+/// directory, a device such as /dev/null, a pipe: the rename of the finished file would
+/// replace it, or fail only after the run). Each path comes with the flag that named it.
 pub fn distinct_outputs(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> Result<(), String> {
+    for (oflag, o) in outputs {
+        if let Ok(m) = std::fs::metadata(o) {
+            if !m.is_file() {
+                return Err(format!(
+                    "{oflag} {}: exists and is not a regular file ({}); give a file path",
+                    o.display(),
+                    if m.is_dir() {
+                        "a directory"
+                    } else {
+                        "a device, pipe or socket"
+                    }
+                ));
+            }
+        }
+    }
     for (oflag, o) in outputs {
         for (iflag, i) in inputs {
             if same_target(i, o) {

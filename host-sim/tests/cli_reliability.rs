@@ -236,6 +236,37 @@ fn no_command_writes_over_one_of_its_inputs() {
     }
 }
 
+/// An output path that is a directory (or a missing directory's file, for a run that takes
+/// minutes) is refused before the run: the other outputs stay as they were.
+#[test]
+fn an_output_that_cannot_be_written_is_refused_before_the_run() {
+    let w = Workspace::new();
+    w.write("out.csv", "previous\n");
+    w.write("old.json", "{}\n");
+    std::fs::create_dir_all(w.dir.path().join("d.png")).unwrap();
+    std::fs::create_dir_all(w.dir.path().join("rd/index.html")).unwrap();
+    for (line, needles) in [
+        (
+            "simulate --plant {plant} --inputs {fixture} --out {w}/out.csv --plot {w}/d.png",
+            &["--plot", "not a regular file (a directory)"][..],
+        ),
+        (
+            "diagnose --plant {plant} --recording {fixture} --json {w}/old.json --report {w}/rd",
+            &["index.html", "not a regular file"][..],
+        ),
+        (
+            "diagnose --plant {plant} --recording {fixture} --json {w}/rd",
+            &["--json", "not a regular file"][..],
+        ),
+        (
+            "tune --plant {plant} --out {w}/missing/gains.toml",
+            &["--out", "does not exist"][..],
+        ),
+    ] {
+        w.refuses(line, needles);
+    }
+}
+
 #[test]
 fn an_unsupported_plot_format_is_refused_before_the_recording_is_replaced() {
     let w = Workspace::new();

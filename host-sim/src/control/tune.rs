@@ -590,6 +590,7 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
         }
     }
     crate::validate::distinct_outputs(&[("--plant", &a.plant)], &[("--out", &a.out)])
+        .and_then(|()| crate::validate::output_parent_exists("--out", &a.out))
         .map_err(anyhow::Error::msg)?;
     let mut cascade_starts: Vec<(f32, f32, f32, Option<f32>)> = Vec::new();
     for s in &a.cascade_start {

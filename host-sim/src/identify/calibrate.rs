@@ -247,9 +247,19 @@ fn plant_constants_toml(plant: &Plant, plant_path: &Path, old: &Path) -> String 
 
 /// Runs `host-sim calibrate`; returns the report for stdout. Fails (nothing written) on
 /// degenerate data or a poor torque fit.
+/// Least mean held-out fit of the identified plant (`--identify-plant`) for its values to
+/// reach the firmware [%].
+pub const MIN_IDENTIFIED_HELDOUT_FIT_PCT: f64 = 50.0;
+
 pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
     if !a.out_dir.is_dir() {
-        bail!("--out-dir {}: not a directory", a.out_dir.display());
+        bail!(
+            "--out-dir {}: does not exist or is not a directory (the firmware's config/ directory)",
+            a.out_dir.display()
+        );
+    }
+    if a.tune && !(1..=64).contains(&a.threads) {
+        bail!("--threads {}: allowed 1..=64", a.threads);
     }
     let file = a.recording.display().to_string();
     let dest = |name: &str| a.out_dir.join(name);
@@ -291,6 +301,16 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
             anyhow::anyhow!("refusing to write firmware constants (nothing written): {e:#}")
         })?;
         let (hb, ha) = fit.holdout_mean_pct();
+        if !(ha >= MIN_IDENTIFIED_HELDOUT_FIT_PCT) {
+            bail!(
+                "refusing to write firmware constants (nothing written): the identified plant \
+                 does not describe {} (held-out fit {hb:.1} % -> {ha:.1} %, at least \
+                 {MIN_IDENTIFIED_HELDOUT_FIT_PCT} % needed): the recording does not excite \
+                 these keys, it is not a valve-driven recording, or another part of the plant \
+                 file is wrong",
+                valve_rec.display()
+            );
+        }
         out += &format!(
             "plant identified from {} (held-out fit {hb:.3} % -> {ha:.3} %):\n",
             valve_rec.display()

@@ -188,6 +188,16 @@ fn temp_for(path: &Path) -> std::io::Result<tempfile::NamedTempFile> {
 }
 
 fn finish(tmp: tempfile::NamedTempFile, path: &Path) -> std::io::Result<()> {
+    // Never rename over a directory, device or pipe (the commands refuse them up front; this
+    // guards every other caller).
+    if let Ok(m) = std::fs::metadata(path) {
+        if !m.is_file() {
+            return Err(std::io::Error::other(format!(
+                "{}: exists and is not a regular file; not replaced",
+                path.display()
+            )));
+        }
+    }
     tmp.as_file().sync_all()?;
     set_output_permissions(tmp.as_file(), path)?;
     let tmp = tmp.into_temp_path();
