@@ -43,7 +43,11 @@ fn a_directory_is_diagnosed_in_parallel_with_one_json_each_and_a_summary() {
         lines[1].starts_with("broken.csv,0,\"error:") && lines[1].contains("u_ex1"),
         "{summary}"
     );
-    assert!(lines[2].starts_with("nominal.csv,20000,"), "{summary}");
+    assert!(
+        lines[2].starts_with("nominal.csv,20000,nothing_missing,"),
+        "{summary}"
+    );
+    assert!(lines[0].contains(",verdict,effects,"), "{summary}");
     assert!(
         stdout.contains("nominal.csv") && stdout.contains("broken.csv"),
         "{stdout}"

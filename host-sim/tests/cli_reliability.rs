@@ -179,6 +179,51 @@ fn a_scenario_settling_after_its_end_is_refused_at_its_line() {
     );
 }
 
+/// Unit mistakes and set-points that test nothing are refused at their line: degrees typed into
+/// a `_rad` key, a step after the end of the run, a sine above half the tick rate (it would
+/// alias to a constant and "meet" its expectations), Pa typed into a kPa bound.
+#[test]
+fn scenario_unit_mistakes_are_refused_at_their_line() {
+    let w = Workspace::new();
+    let short = STEP.replace("1e9", "4.0");
+    let sine = "[scenario]\nname = \"fast\"\nduration_s = 4.0\ntick_hz = 1000.0\n\n\
+[setpoint]\nkind = \"sine\"\noffset_rad = 0.0\namplitude_rad = 0.2\nfreq_hz = 1e6\nstart_s = 0.5\n";
+    for (name, text, needles) in [
+        (
+            "deg.toml",
+            short.replace("final_rad = 0.2", "final_rad = 20.0"),
+            &[
+                "deg.toml",
+                "line 9",
+                "final_rad",
+                "degrees typed as radians",
+            ][..],
+        ),
+        (
+            "late_step.toml",
+            short.replace("at_s = 1.0", "at_s = 10.0"),
+            &["late_step.toml", "line 10", "at_s", "never move"][..],
+        ),
+        (
+            "fast.toml",
+            sine.to_string(),
+            &["fast.toml", "freq_hz", "half the tick rate"][..],
+        ),
+        (
+            "pa.toml",
+            format!("{short}\n[expect]\nmax_pressure_kpa = 610000.0\n"),
+            &["pa.toml", "max_pressure_kpa", "Pa typed"][..],
+        ),
+    ] {
+        let path = w.write(name, &text);
+        w.refuses_with(
+            "simulate --plant {plant} --scenario {s} --out {w}/out.csv",
+            &[("s", &path)],
+            needles,
+        );
+    }
+}
+
 #[test]
 fn simulate_refuses_to_write_over_its_input_recording() {
     let w = Workspace::new();

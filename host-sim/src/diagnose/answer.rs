@@ -247,13 +247,17 @@ impl Diagnosis {
                 .first_departure_s
                 .map(|t| format!(", first departs at {t:.3} s"))
                 .unwrap_or_default();
+            // A regime ("high speed") or "throughout the run".
+            let when = if l.regime.starts_with("throughout") {
+                l.regime.clone()
+            } else {
+                format!("mostly during {}", l.regime)
+            };
             s += &format!(
-                "Located: {} (fit {:.1} %) in {} window(s), mostly during {}{}.\n",
+                "Located: {} (fit {:.1} %) in {} window(s), {when}{first}.\n",
                 l.channel.name(),
                 l.fit_pct,
                 l.windows_s.len(),
-                l.regime,
-                first
             );
         }
         if let Some(first) = self

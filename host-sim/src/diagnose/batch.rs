@@ -26,9 +26,9 @@ pub struct BatchRow {
 pub struct BatchDiagnosis {
     /// Pretty JSON (as `diagnose --json` writes it).
     pub json: String,
-    /// The recording is explained by the nominal model within its noise.
-    pub nothing_missing: bool,
-    /// Labels of the named effects.
+    /// The verdict (`explained`, `nothing_missing`, `unexplained`, `not_this_plant`).
+    pub verdict: &'static str,
+    /// Labels of the named effects, then `recalibrate KEY` for each recalibrated key.
     pub effects: Vec<String>,
     /// Lowest channel fit before / after the named effects [%].
     pub worst_fit_before_pct: f64,
@@ -107,8 +107,17 @@ fn diagnose_one(nominal: &PlantConfig, path: &Path, opts: &DiagnoseOptions) -> B
             };
             Ok(BatchDiagnosis {
                 json,
-                nothing_missing: d.nothing_missing,
-                effects: d.effects.iter().map(|e| e.label.clone()).collect(),
+                verdict: d.verdict.as_str(),
+                effects: d
+                    .effects
+                    .iter()
+                    .map(|e| e.label.clone())
+                    .chain(
+                        d.recalibrated
+                            .iter()
+                            .map(|r| format!("recalibrate {}", r.key)),
+                    )
+                    .collect(),
                 worst_fit_before_pct: worst(&d.fit_before),
                 worst_fit_after_pct: worst(&d.fit_after),
                 wall_s: t0.elapsed().as_secs_f64(),
@@ -118,17 +127,6 @@ fn diagnose_one(nominal: &PlantConfig, path: &Path, opts: &DiagnoseOptions) -> B
         recording: path.to_owned(),
         samples,
         result,
-    }
-}
-
-impl BatchDiagnosis {
-    /// `nominal` (nothing missing) or `departs`.
-    fn status(&self) -> &'static str {
-        if self.nothing_missing {
-            "nominal"
-        } else {
-            "departs"
-        }
     }
 }
 
@@ -142,11 +140,12 @@ impl BatchRow {
     }
 }
 
-/// The summary as CSV (`recording,samples,status,effects,worst_fit_before_pct,
-/// worst_fit_after_pct,wall_s`).
+/// The summary as CSV (`recording,samples,verdict,effects,worst_fit_before_pct,
+/// worst_fit_after_pct,wall_s`; `effects` joins the named effects and `recalibrate KEY` with
+/// `+`).
 pub fn summary_csv(rows: &[BatchRow]) -> String {
     let mut s = String::from(
-        "recording,samples,status,effects,worst_fit_before_pct,worst_fit_after_pct,wall_s\n",
+        "recording,samples,verdict,effects,worst_fit_before_pct,worst_fit_after_pct,wall_s\n",
     );
     for r in rows {
         let name = r.name();
@@ -154,7 +153,7 @@ pub fn summary_csv(rows: &[BatchRow]) -> String {
             Ok(d) => s.push_str(&format!(
                 "{name},{},{},{},{:.2},{:.2},{:.2}\n",
                 r.samples,
-                d.status(),
+                d.verdict,
                 d.effects.join("+").replace(',', ";"),
                 d.worst_fit_before_pct,
                 d.worst_fit_after_pct,
@@ -179,16 +178,16 @@ pub fn summary_table(rows: &[BatchRow]) -> String {
         .unwrap_or(9)
         .max(9);
     let mut s = format!(
-        "{:<w$}  {:>8}  {:<8}  {:>12}  {:>11}  effects\n",
-        "recording", "samples", "status", "worst fit %", "after %"
+        "{:<w$}  {:>8}  {:<14}  {:>12}  {:>11}  effects\n",
+        "recording", "samples", "verdict", "worst fit %", "after %"
     );
     for r in rows {
         let name = r.name();
         match &r.result {
             Ok(d) => s.push_str(&format!(
-                "{name:<w$}  {:>8}  {:<8}  {:>12.2}  {:>11.2}  {}\n",
+                "{name:<w$}  {:>8}  {:<14}  {:>12.2}  {:>11.2}  {}\n",
                 r.samples,
-                d.status(),
+                d.verdict,
                 d.worst_fit_before_pct,
                 d.worst_fit_after_pct,
                 if d.effects.is_empty() {
@@ -197,7 +196,10 @@ pub fn summary_table(rows: &[BatchRow]) -> String {
                     d.effects.join(", ")
                 }
             )),
-            Err(e) => s.push_str(&format!("{name:<w$}  {:>8}  error     {e}\n", r.samples)),
+            Err(e) => s.push_str(&format!(
+                "{name:<w$}  {:>8}  error           {e}\n",
+                r.samples
+            )),
         }
     }
     s

@@ -73,7 +73,9 @@ pub fn keys() -> Vec<RecalKey> {
             get: |c| c.muscle.damping_m2s,
             set: |c, v| c.muscle.damping_m2s = v.max(0.0),
         },
-        field_key!(joint.inertia_kgm2, "joint inertia (load)", 0.2, 30.0),
+        // Symmetric in ratio: a load added or taken off (a plant file of the loaded joint
+        // on a recording of the bare one).
+        field_key!(joint.inertia_kgm2, "joint inertia (load)", 1.0 / 30.0, 30.0),
         field_key!(environment.supply_gauge_pa, "supply pressure", 0.5, 1.3),
     ]
 }

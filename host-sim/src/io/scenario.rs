@@ -445,6 +445,34 @@ impl Scenario {
                 Err(bad("setpoint", key, format!("{v} must be a finite number")))
             }
         };
+        // A set-point angle beyond half a turn is a unit mistake (degrees typed into a
+        // `_rad` key), and a set-point change at or after the end of the run tests nothing.
+        let angle = |key: &str, v: f64| -> Result<(), ClosedLoopError> {
+            finite(key, v)?;
+            if v.abs() > std::f64::consts::PI {
+                return Err(bad(
+                    "setpoint",
+                    key,
+                    format!("{v} rad is more than half a turn (allowed -pi..=pi): degrees typed as radians?"),
+                ));
+            }
+            Ok(())
+        };
+        let before_end = |key: &str, v: f64| -> Result<(), ClosedLoopError> {
+            finite(key, v)?;
+            if !(v >= 0.0 && v < h.duration_s) {
+                return Err(bad(
+                    "setpoint",
+                    key,
+                    format!(
+                        "{v} s must be within [0, {}) (before the end of the run, [scenario] \
+                         duration_s): the set-point would never move",
+                        h.duration_s
+                    ),
+                ));
+            }
+            Ok(())
+        };
         match s.setpoint {
             SetpointProfile::Step {
                 initial_rad,
@@ -452,9 +480,9 @@ impl Scenario {
                 at_s,
                 transition_s,
             } => {
-                finite("initial_rad", initial_rad)?;
-                finite("final_rad", final_rad)?;
-                finite("at_s", at_s)?;
+                angle("initial_rad", initial_rad)?;
+                angle("final_rad", final_rad)?;
+                before_end("at_s", at_s)?;
                 if !(transition_s >= 0.0 && transition_s.is_finite()) {
                     return Err(bad(
                         "setpoint",
@@ -469,9 +497,9 @@ impl Scenario {
                 start_s,
                 end_s,
             } => {
-                finite("from_rad", from_rad)?;
-                finite("to_rad", to_rad)?;
-                finite("start_s", start_s)?;
+                angle("from_rad", from_rad)?;
+                angle("to_rad", to_rad)?;
+                before_end("start_s", start_s)?;
                 finite("end_s", end_s)?;
                 if !(end_s > start_s) {
                     return Err(bad(
@@ -487,10 +515,21 @@ impl Scenario {
                 freq_hz,
                 start_s,
             } => {
-                finite("offset_rad", offset_rad)?;
-                finite("amplitude_rad", amplitude_rad)?;
+                angle("offset_rad", offset_rad)?;
+                angle("amplitude_rad", amplitude_rad)?;
                 finite("freq_hz", freq_hz)?;
-                finite("start_s", start_s)?;
+                let nyquist_hz = 0.5 * h.tick_hz;
+                if !(freq_hz > 0.0 && freq_hz < nyquist_hz) {
+                    return Err(bad(
+                        "setpoint",
+                        "freq_hz",
+                        format!(
+                            "{freq_hz} Hz must be within (0, {nyquist_hz}) (below half the tick \
+                             rate, [scenario] tick_hz)"
+                        ),
+                    ));
+                }
+                before_end("start_s", start_s)?;
             }
             SetpointProfile::Random {
                 amplitude_rad,
@@ -498,8 +537,8 @@ impl Scenario {
                 start_s,
                 transition_s,
             } => {
-                finite("amplitude_rad", amplitude_rad)?;
-                finite("start_s", start_s)?;
+                angle("amplitude_rad", amplitude_rad)?;
+                before_end("start_s", start_s)?;
                 if !(hold_s > 0.0 && hold_s.is_finite()) {
                     return Err(bad("setpoint", "hold_s", format!("{hold_s} must be > 0")));
                 }
@@ -529,11 +568,11 @@ impl Scenario {
         }
         let ex = &s.expect;
         if let Some(v) = ex.max_pressure_kpa {
-            if !(v > 0.0 && v.is_finite()) {
+            if !(v > 0.0 && v <= 2000.0) {
                 return Err(bad(
                     "expect",
                     "max_pressure_kpa",
-                    format!("{v} must be > 0"),
+                    format!("{v} kPa must be within (0, 2000] (gauge, in kPa: Pa typed?)"),
                 ));
             }
         }

@@ -215,8 +215,8 @@ impl PlantConfig {
             (
                 "muscle.braid_angle_deg",
                 self.muscle.braid_angle_deg,
-                Range::open(0.0, 54.7),
-                "degrees (below the neutral braid angle 54.7)",
+                Range::open(5.0, 54.7),
+                "degrees (between 5 and the neutral braid angle 54.7; radians typed?)",
             ),
             (
                 "muscle.end_factor",

@@ -130,7 +130,18 @@ impl Hooks for ValveDeadTime {
 impl Effect for ValveDeadTime {
     table_effect!(ValveDelayCandidate);
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
-        c.non_negative("delay_s", self.delay_s)
+        c.non_negative("delay_s", self.delay_s)?;
+        if self.delay_s > MAX_PLAUSIBLE_DELAY_S {
+            return Err(c.error(
+                "delay_s",
+                format!(
+                    "{} s is more than {MAX_PLAUSIBLE_DELAY_S} s (allowed 0..={MAX_PLAUSIBLE_DELAY_S}): \
+                     milliseconds typed as seconds?",
+                    self.delay_s
+                ),
+            ));
+        }
+        Ok(())
     }
     fn truths() -> Vec<Truth> {
         vec![Truth::new("valve_delay", "valve_delay", |dt_s| {
@@ -141,6 +152,10 @@ impl Effect for ValveDeadTime {
             })]
     }
 }
+
+/// Longest valve dead time a plant file may state [s]: a pneumatic valve answers within tens
+/// of milliseconds; more is a unit mistake.
+pub const MAX_PLAUSIBLE_DELAY_S: f64 = 1.0;
 
 /// Longest valve dead time tried.
 pub const MAX_VALVE_DELAY_S: f64 = 0.05;
