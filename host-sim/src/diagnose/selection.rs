@@ -424,7 +424,7 @@ mod tests {
         let nominal = PlantConfig::from_toml_str(
             &std::fs::read_to_string(
                 std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-                    .join("../../shared/plant/reference-1dof.toml"),
+                    .join("tests/fixtures/reference-1dof.toml"),
             )
             .unwrap(),
             "p.toml",
