@@ -128,22 +128,12 @@ impl<'a> Problem<'a> {
         let n = rec.inputs.len();
         let keep = head.min(n);
         let mut states = Vec::with_capacity(keep);
-        let mut sensor = SensorPath::new(&plant, dt);
-        let mut k = 0;
-        simulate_each(
-            &plant,
-            &rec.inputs,
-            dt,
-            &opts,
-            |_| {},
-            |x| {
-                if states.len() < keep {
-                    states.push(*x);
-                }
-                f(k, &sensor.push(&plant, x));
-                k += 1;
-            },
-        )?;
+        crate::sim::measure_each(&plant, &rec.inputs, dt, &opts, |k, x, m| {
+            if states.len() < keep {
+                states.push(*x);
+            }
+            f(k, m);
+        })?;
         Ok(Self::with_states(
             nominal,
             rec,

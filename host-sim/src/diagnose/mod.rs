@@ -42,7 +42,7 @@ use crate::fit::fit_percent_of_err2;
 use crate::io::recording::{Channel, Recording};
 use crate::plant::config::PlantConfig;
 use crate::plant::{Measurement, Plant};
-use crate::sim::{simulate_each, SensorPath, SolverOptions};
+use crate::sim::SolverOptions;
 
 pub use candidates::{catalogue, Candidate, Screening, Setup};
 pub use differentiate::{noise_level, Differentiator, SavitzkyGolay};
@@ -273,21 +273,10 @@ fn replay_recording(
     let plant = Plant::from_config(cfg);
     let dt = rec.sample_period_s();
     let mut sums = ReplaySums::new(rec, plot_stride(rec.len()));
-    let mut sensor = SensorPath::new(&plant, dt);
-    let mut k = 0;
-    simulate_each(
-        &plant,
-        &rec.inputs,
-        dt,
-        opts,
-        |_| {},
-        |x| {
-            let m = sensor.push(&plant, x);
-            sums.push(rec, k, &m);
-            f(k, &m);
-            k += 1;
-        },
-    )?;
+    crate::sim::measure_each(&plant, &rec.inputs, dt, opts, |k, _, m| {
+        sums.push(rec, k, m);
+        f(k, m);
+    })?;
     Ok(sums.replayed(rec))
 }
 

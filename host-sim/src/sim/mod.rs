@@ -573,6 +573,31 @@ pub fn simulate_with_progress(
     })
 }
 
+/// [`simulate_each`] followed by the plant's sensor path ([`SensorPath`], as
+/// `Plant::measure_series`): `f(k, state, channels)` for every sample `k` in order, holding no
+/// series (the same values to the bit as simulating, then measuring the series).
+pub fn measure_each(
+    plant: &Plant,
+    inputs: &[ValveInputs],
+    dt_s: f64,
+    opts: &SolverOptions,
+    mut f: impl FnMut(usize, &PlantState, &crate::plant::Measurement),
+) -> Result<(PlantState, SimStats), SimError> {
+    let mut sensor = SensorPath::new(plant, dt_s);
+    let mut k = 0;
+    simulate_each(
+        plant,
+        inputs,
+        dt_s,
+        opts,
+        |_| {},
+        |x| {
+            f(k, x, &sensor.push(plant, x));
+            k += 1;
+        },
+    )
+}
+
 /// [`simulate_with_progress`] without the state series: `on_state` is called with the state
 /// of every sample in order (the same integrator calls, so the same states to the bit), and
 /// the final state and the counters are returned. Memory does not grow with the inputs (the
