@@ -572,7 +572,10 @@ impl Scenario {
                 return Err(bad(
                     "expect",
                     "max_pressure_kpa",
-                    format!("{v} kPa must be within (0, 2000] (gauge, in kPa: Pa typed?)"),
+                    format!(
+                        "{} kPa must be within (0, 2000] (gauge, in kPa: Pa typed?)",
+                        crate::validate::Shown(v)
+                    ),
                 ));
             }
         }
@@ -657,7 +660,8 @@ impl Scenario {
                 format!(
                     "{} must be within [0, {}) (before the end of the run, [scenario] duration_s): \
                      after the end there is nothing to check",
-                    ex.settle_after_s, h.duration_s
+                    crate::validate::Shown(ex.settle_after_s),
+                    crate::validate::Shown(h.duration_s)
                 ),
             ));
         }
@@ -719,7 +723,7 @@ impl ScenarioHeader {
             return Err(bad(
                 "scenario",
                 "duration_s",
-                format!("{} must be > 0", self.duration_s),
+                format!("{} must be > 0", crate::validate::Shown(self.duration_s)),
             ));
         }
         let (lo, hi) = (
@@ -732,7 +736,7 @@ impl ScenarioHeader {
                 "tick_hz",
                 format!(
                     "{} must be within {lo}..{hi} (the firmware's gains are stable from {lo} Hz)",
-                    self.tick_hz
+                    crate::validate::Shown(self.tick_hz)
                 ),
             ));
         }

@@ -425,7 +425,10 @@ impl Arm3Config {
                     Bound::Positive => "a finite number > 0",
                     Bound::NonNegative => "a finite number >= 0",
                 };
-                return Err(bad(key, format!("must be {need}, got {v}")));
+                return Err(bad(
+                    key,
+                    format!("must be {need}, got {}", crate::validate::Shown(*v)),
+                ));
             }
         }
         for (i, j) in self.joints().iter().enumerate() {
