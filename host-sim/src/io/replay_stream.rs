@@ -122,6 +122,11 @@ pub fn replay_file(
     let (valid, sim, written, write_result) = std::thread::scope(|s| -> std::io::Result<_> {
         let (tx_rows, rx_rows) = mpsc::sync_channel::<RowChunk>(CHANNEL_CHUNKS);
         let (tx_out, rx_out) = mpsc::sync_channel::<OutChunk>(CHANNEL_CHUNKS);
+        // Written chunks' buffers go back to the simulator for the next rows (fresh ones
+        // would cost a page fault every 4 KiB).
+        let (tx_spent, rx_spent) = mpsc::channel::<Vec<u8>>();
+        // The same for the parsed rows' buffers, from the simulator back to the reader.
+        let (tx_spent_rows, rx_spent_rows) = mpsc::channel::<RowChunk>();
         let abort = &abort;
         let table = &table;
         let parser = &parser;
@@ -153,7 +158,14 @@ pub fn replay_file(
                             None => (bytes.len(), memchr::memchr_iter(b'\n', rest).count() as u64),
                         };
                         let piece = &bytes[start..end];
-                        let mut chunk = RowChunk::default();
+                        let mut chunk = match rx_spent_rows.try_recv() {
+                            Ok(mut c) => {
+                                c.t_s.clear();
+                                c.inputs.clear();
+                                c
+                            }
+                            Err(_) => RowChunk::default(),
+                        };
                         chunk.reserve(CHUNK_ROWS);
                         if !parser.parse_plain_rows(piece, &mut chunk) {
                             match table
@@ -188,7 +200,11 @@ pub fn replay_file(
         let simulator = std::thread::Builder::new()
             .name("replay-simulator".into())
             .spawn_scoped(s, move || {
-                let r = simulate_chunks(plant, dt_s, opts, rx_rows, &tx_out, abort);
+                let spent = Spent {
+                    rows: tx_spent_rows,
+                    bytes: rx_spent,
+                };
+                let r = simulate_chunks(plant, dt_s, opts, rx_rows, &tx_out, &spent, abort);
                 if r.is_err() {
                     abort.store(true, Ordering::Relaxed);
                 }
@@ -204,6 +220,7 @@ pub fn replay_file(
             }
             written += chunk.rows;
             progress(written);
+            let _ = tx_spent.send(chunk.bytes);
         }
         let valid = reader.join().unwrap_or(false);
         let sim = simulator.join().unwrap_or(Err(()));
@@ -229,6 +246,7 @@ fn simulate_chunks(
     opts: &SolverOptions,
     rx: mpsc::Receiver<RowChunk>,
     tx: &mpsc::SyncSender<OutChunk>,
+    spent: &Spent,
     abort: &AtomicBool,
 ) -> Result<SimStats, ()> {
     let mut actuator = ActuatorPath::new(plant, dt_s, "open-loop replay").map_err(|_| ())?;
@@ -270,8 +288,16 @@ fn simulate_chunks(
                 }
             }
         }
+        let _ = spent.rows.send(chunk);
         if out.rows >= CHUNK_ROWS {
-            let full = std::mem::replace(&mut out, OutChunk::with_capacity(CHUNK_ROWS));
+            let next = match spent.bytes.try_recv() {
+                Ok(mut bytes) => {
+                    bytes.clear();
+                    OutChunk { bytes, rows: 0 }
+                }
+                Err(_) => OutChunk::with_capacity(CHUNK_ROWS),
+            };
+            let full = std::mem::replace(&mut out, next);
             tx.send(full).map_err(|_| ())?;
         }
     }
@@ -459,6 +485,13 @@ impl RowSink<(f64, [f64; 4], [f64; 5])> for RowChunk {
     }
 }
 
+/// The simulator's ends of the channels that recycle buffers: parsed-row chunks it is done
+/// with go back to the reader, written output buffers come back from the writer.
+struct Spent {
+    rows: mpsc::Sender<RowChunk>,
+    bytes: mpsc::Receiver<Vec<u8>>,
+}
+
 /// Finished rows, formatted: the input's time and openings with the simulated channels.
 struct OutChunk {
     bytes: Vec<u8>,
@@ -547,31 +580,29 @@ impl Blocks {
                 return Ok((!buf.is_empty()).then_some(buf));
             }
             // One read call for a block (asking one byte more than a file of at most one
-            // block holds finds its end in the same call).
+            // block holds finds its end in the same call), into the buffer's spare capacity
+            // (not zeroed first).
             let before = buf.len();
             let left = usize::try_from(self.left_hint).unwrap_or(usize::MAX);
-            let want = before + BLOCK_BYTES.min(left.saturating_add(1)).max(1);
-            buf.resize(want, 0);
-            let mut filled = before;
-            while filled < want {
-                match self.file.read(&mut buf[filled..]) {
-                    Ok(0) => {
-                        self.eof = true;
-                        break;
-                    }
-                    Ok(k) => filled += k,
-                    Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                    Err(e) => return Err(e),
-                }
-            }
-            buf.truncate(filled);
-            self.left_hint = self.left_hint.saturating_sub((filled - before) as u64);
+            let want = BLOCK_BYTES.min(left.saturating_add(1)).max(1);
+            buf.reserve_exact(want);
+            let got = (&mut self.file).take(want as u64).read_to_end(&mut buf)?;
+            self.eof = got < want;
+            self.left_hint = self.left_hint.saturating_sub(got as u64);
             if self.eof {
                 continue;
             }
             if let Some(i) = memchr::memrchr(b'\n', &buf[before..]) {
                 self.carry = buf.split_off(before + i + 1);
                 return Ok(Some(buf));
+            }
+            // No line end yet: a line this long is refused (`recording::read_text` words
+            // the error), so it is not read any further.
+            if buf.len() > recording::MAX_HEAD_LINE_BYTES {
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::InvalidData,
+                    "a line longer than a recording accepts",
+                ));
             }
         }
     }
