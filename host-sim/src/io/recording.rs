@@ -12,7 +12,7 @@
 //! Every error names the file, the line and the field. Writing goes to a temporary file in
 //! the target directory that is renamed over the target only when complete.
 
-use std::io::Write;
+use std::io::{Read as _, Write};
 use std::path::{Path, PathBuf};
 
 use crate::io::numfmt;
@@ -426,7 +426,7 @@ pub(crate) fn push_row(
                 return None;
             }
             row[k] = b',';
-            k += 1 + numfmt::fixed_into(&mut row[k + 1..], y, 6)?;
+            k += 1 + numfmt::fixed_into_const::<6>(&mut row[k + 1..], y)?;
         }
         row[k] = b'\n';
         Some(k + 1)
@@ -583,7 +583,8 @@ impl RowParser {
 
     /// The rows of `bytes` (whole lines) into `sink`, if every row is plain: the header's
     /// number of fields, each number a plain decimal ([`numfmt::parse_plain_decimal`]),
-    /// openings in [0, 1], lines ending in `\n` or `\r\n` (empty lines skipped). Then the
+    /// openings in [0, 1], lines ending in `\n` or `\r\n` (empty lines skipped), none longer than
+    /// [`MAX_DATA_LINE_BYTES`]. Then the
     /// values are those of [`Table::read_chunk`] with [`Self::parse`]; `false` as soon as a row
     /// is not plain (what was pushed must be discarded: the general reader reads the bytes
     /// and words any error).
@@ -607,6 +608,7 @@ impl RowParser {
                 }
                 _ => {}
             }
+            let row_start = i;
             let (mut t_s, mut u, mut y) = (0.0, [0.0; 4], [0.0; 5]);
             for (f, role) in self.roles.iter().enumerate() {
                 if *role == Role::Ignored {
@@ -641,6 +643,10 @@ impl RowParser {
                         _ => return false,
                     }
                 }
+            }
+            // A row longer than a recording may have: the general reader refuses it.
+            if i - row_start > MAX_DATA_LINE_BYTES {
+                return false;
             }
             sink.push((t_s, u, y));
         }
@@ -851,11 +857,125 @@ pub(crate) fn mean_step_s(t_s: &[f64]) -> f64 {
     (t_s[n - 1] - t_s[0]) / (n - 1) as f64
 }
 
-/// The text of a recording file.
+/// The longest metadata or CSV header line a recording may have, in bytes before its line
+/// end. A longer line is refused, naming its file and line, as soon as the reader has seen
+/// this many bytes of it (the rest of the file is not read).
+pub const MAX_HEAD_LINE_BYTES: usize = 64 * 1024;
+
+/// The longest data row a recording may have, in bytes before its line end (a row of the
+/// columns RECORDING.md defines takes under 200).
+pub const MAX_DATA_LINE_BYTES: usize = 16 * 1024;
+
+/// The error for line `line` of `path`, longer than `limit` bytes.
+fn line_too_long(path: &Path, line: u64, limit: usize) -> RecordingError {
+    let what = if limit == MAX_HEAD_LINE_BYTES {
+        "a metadata or header line"
+    } else {
+        "a data row"
+    };
+    RecordingError::Line {
+        path: path.to_owned(),
+        line,
+        message: format!(
+            "line longer than {limit} bytes, the longest {what} may be (not read further)"
+        ),
+    }
+}
+
+/// Line lengths checked over a file's bytes as they are read: metadata, blank lines and the
+/// CSV header (the first other line) against [`MAX_HEAD_LINE_BYTES`], the rows after it
+/// against [`MAX_DATA_LINE_BYTES`].
+struct LineLimits {
+    /// 1-based line of the line being read.
+    line: u64,
+    /// Offset of its first byte.
+    start: usize,
+    /// Whether it is a metadata, blank or header line.
+    head: bool,
+}
+
+impl LineLimits {
+    fn new() -> Self {
+        Self {
+            line: 1,
+            start: 0,
+            head: true,
+        }
+    }
+
+    fn limit(&self) -> usize {
+        if self.head {
+            MAX_HEAD_LINE_BYTES
+        } else {
+            MAX_DATA_LINE_BYTES
+        }
+    }
+
+    /// Checks the lines of `text` that end at or after `from` (the bytes before `from` were
+    /// checked by the previous calls); `Err((line, limit))` for the first one too long,
+    /// including the unfinished last line.
+    fn check(&mut self, text: &[u8], from: usize) -> Result<(), (u64, usize)> {
+        for i in memchr::memchr_iter(b'\n', &text[from..]) {
+            let end = from + i;
+            if end - self.start > self.limit() {
+                return Err((self.line, self.limit()));
+            }
+            if self.head {
+                // As `Preamble::of` tells the metadata from the header.
+                let mut raw = &text[self.start..end];
+                if self.line == 1 {
+                    raw = raw.strip_prefix("\u{feff}".as_bytes()).unwrap_or(raw);
+                }
+                let meta = std::str::from_utf8(raw)
+                    .map(str::trim)
+                    .is_ok_and(|t| t.is_empty() || t.starts_with('#'));
+                self.head = meta;
+            }
+            self.line += 1;
+            self.start = end + 1;
+        }
+        if text.len() - self.start > self.limit() {
+            return Err((self.line, self.limit()));
+        }
+        Ok(())
+    }
+}
+
+/// The text of a recording file. A line longer than [`MAX_HEAD_LINE_BYTES`] (metadata,
+/// header) or [`MAX_DATA_LINE_BYTES`] (rows) is refused, naming the file and the line, once
+/// that many bytes of it are read: memory stays bounded by the limit, whatever the line.
 pub(crate) fn read_text(path: &Path) -> Result<String, RecordingError> {
-    std::fs::read_to_string(path).map_err(|source| RecordingError::Io {
+    /// Bytes read between two checks.
+    const PIECE_BYTES: u64 = 1 << 20;
+    let io = |source: std::io::Error| RecordingError::Io {
         path: path.to_owned(),
         source,
+    };
+    let mut file = std::fs::File::open(path).map_err(io)?;
+    let size = file.metadata().map_or(0, |m| m.len());
+    let mut text = Vec::new();
+    // The whole file in one allocation when it is read to its end (pages are only touched
+    // as they are read).
+    text.reserve_exact(usize::try_from(size).unwrap_or(0).saturating_add(1));
+    let mut limits = LineLimits::new();
+    loop {
+        let before = text.len();
+        let got = (&mut file)
+            .take(PIECE_BYTES)
+            .read_to_end(&mut text)
+            .map_err(io)?;
+        limits
+            .check(&text, before)
+            .map_err(|(line, limit)| line_too_long(path, line, limit))?;
+        if got == 0 {
+            break;
+        }
+    }
+    String::from_utf8(text).map_err(|_| {
+        io(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            "stream did not contain valid UTF-8",
+        ))
     })
 }
 
@@ -869,6 +989,13 @@ impl<'t> Table<'t> {
             lines: meta_lines,
             offset,
         } = Preamble::of(text);
+        // The line limits of `read_text`, for text that did not come through it.
+        let mut limits = LineLimits::new();
+        let head_end = memchr::memchr(b'\n', &text.as_bytes()[offset..])
+            .map_or(text.len(), |i| offset + i + 1);
+        limits
+            .check(&text.as_bytes()[..head_end], 0)
+            .map_err(|(line, limit)| line_too_long(path, line, limit))?;
         let after_meta = &text.as_bytes()[offset..];
         let mut rdr = csv::ReaderBuilder::new()
             .has_headers(true)
@@ -1040,6 +1167,9 @@ impl<'t> Table<'t> {
                 memchr::memchr(b'\n', &bytes[line_start..]).map_or(bytes.len(), |i| line_start + i);
             let raw = &bytes[line_start..line_end];
             line_start = line_end + 1;
+            if raw.len() > MAX_DATA_LINE_BYTES {
+                return Err(line_too_long(self.path, line, MAX_DATA_LINE_BYTES));
+            }
             let row = raw.strip_suffix(b"\r").unwrap_or(raw);
             if !row.is_empty() {
                 fields.clear();
