@@ -156,14 +156,16 @@ fn run_case(r: &Reference, truths: &[&str], seed: u64, dt_s: f64, channels: [boo
     Outcome {
         pass,
         line: format!(
-            "| {label} | {seed} | {:.0} | {} | {min_before:.1} | {min_check:.1} | {secs:.2} | {} |",
+            "| {label} | {seed} | {:.0} | {} | {min_before:.1} | {min_check:.1} | {secs:.2} | {} | {:.2} {} |",
             dt_s * 1e3,
             if got.is_empty() {
                 "(none)".to_string()
             } else {
                 got.join("+")
             },
-            if pass { "pass" } else { "FAIL" }
+            if pass { "pass" } else { "FAIL" },
+            d.residual_x_noise.0,
+            d.residual_x_noise.1
         ),
     }
 }
@@ -178,7 +180,7 @@ fn diagnosis_matrix() {
         ("tuning", &TUNING_SEEDS[..]),
         ("held-out", &HELD_OUT_SEEDS[..]),
     ] {
-        println!("\n{name} seeds {seeds:?}\n| concealed | seed | dt ms | named | check min fit before % | check min fit after % | s | result |\n|---|---|---|---|---|---|---|---|");
+        println!("\n{name} seeds {seeds:?}\n| concealed | seed | dt ms | named | check min fit before % | check min fit after % | s | result | left x noise |\n|---|---|---|---|---|---|---|---|---|");
         let (mut pass, mut total) = (0, 0);
         for &seed in seeds {
             for (i, truths) in cases.iter().enumerate() {
@@ -206,7 +208,7 @@ fn diagnosis_matrix() {
 fn diagnosis_matrix_without_force_channels() {
     let r = reference();
     let (mut pass, mut total) = (0, 0);
-    println!("\nno force channels, seeds 7003, 7004, 7005, 7006, 7007\n| concealed | seed | dt ms | named | check min fit before % | check min fit after % | s | result |\n|---|---|---|---|---|---|---|---|");
+    println!("\nno force channels, seeds 7003, 7004, 7005, 7006, 7007\n| concealed | seed | dt ms | named | check min fit before % | check min fit after % | s | result | left x noise |\n|---|---|---|---|---|---|---|---|---|");
     // 7006 and 7007 were added with the swap pass of the selection and first run after it
     // was final (7005 had shown the misses the swap pass fixes).
     for seed in [7003u64, 7004, 7005, 7006, 7007] {

@@ -99,10 +99,18 @@ impl Diagnosis {
                         "Unexplained: the nominal model misses something (fits {}), but nothing in the catalogue or among the plant file's keys explains it on the held-out data; no effect is named.",
                         fits(&self.fit_before)
                     )
-                } else {
+                } else if worst < crate::diagnose::verdict::MIN_HELDOUT_FIT_PCT {
                     format!(
-                        "Unexplained: the best answer ({}) still leaves a held-out fit of {worst:.1} % (below 50 %); no effect is named.",
+                        "Unexplained: the best answer ({}) still leaves a held-out fit of {worst:.1} % (below 50 %); no effect is named. Perhaps a plant-file key the diagnosis does not refit is off (the muscles' geometry: rest length, initial contraction, end factor; the sprocket radius; the valve's critical ratio): `host-sim identify plant --params KEY` fits any key.",
                         self.best_attempt.join(" + ")
+                    )
+                } else {
+                    let (x, channel) = self.residual_x_noise;
+                    format!(
+                        "Unexplained: the best answer ({}) changes the fits {} but still leaves {x:.0} times the noise on {channel} (an explanation leaves at most {:.0} times): something else is off, perhaps a plant-file key the diagnosis does not refit (the muscles' geometry: rest length, initial contraction, end factor; the sprocket radius; the valve's critical ratio; `host-sim identify plant --params KEY` fits any key); no effect is named.",
+                        self.best_attempt.join(" + "),
+                        change(&self.fit_before, &self.fit_best_attempt),
+                        crate::diagnose::verdict::MAX_RESIDUAL_X_NOISE
                     )
                 }
             }
@@ -173,6 +181,12 @@ impl Diagnosis {
             "fit": {"before": json_fits(&self.fit_before), "after": json_fits(&self.fit_after)},
             "heldout_fit": {"before": json_fits(&self.heldout_before), "after": json_fits(&self.heldout_after)},
             "best_attempt": self.best_attempt,
+            "best_attempt_fit": self.fit_best_attempt.iter().map(|(k, v)| (k.to_string(), json_num(*v, 2))).collect::<serde_json::Map<_, _>>(),
+            "residual_x_noise": {
+                "worst_channel": self.residual_x_noise.1,
+                "times_noise": json_num(self.residual_x_noise.0, 2),
+                "limit": json_num(crate::diagnose::verdict::MAX_RESIDUAL_X_NOISE, 2),
+            },
             "lookalikes": self.lookalikes,
             "hints": self.hints,
             "failures": self.failures,

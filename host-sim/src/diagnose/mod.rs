@@ -76,6 +76,9 @@ pub struct DiagnoseOptions {
     pub min_gain_noise: f64,
     /// Held-out fits (%) below this: the answer is `unexplained`.
     pub min_heldout_fit_pct: f64,
+    /// An answer that leaves TRAIN's error above this many times the noise on a channel is
+    /// `unexplained` ([`verdict::MAX_RESIDUAL_X_NOISE`]).
+    pub max_residual_x_noise: f64,
     pub solver: SolverOptions,
 }
 
@@ -91,6 +94,7 @@ impl Default for DiagnoseOptions {
             min_explained: 0.3,
             min_gain_noise: 0.5,
             min_heldout_fit_pct: verdict::MIN_HELDOUT_FIT_PCT,
+            max_residual_x_noise: verdict::MAX_RESIDUAL_X_NOISE,
             solver: SolverOptions {
                 rtol: 1e-5,
                 atol: 1e-6,
@@ -236,6 +240,11 @@ pub struct Diagnosis {
     pub failures: Vec<String>,
     /// The recording is explained by the nominal model within its noise.
     pub nothing_missing: bool,
+    /// What the best answer (fitted, named or not) leaves of TRAIN's error on its worst
+    /// channel, in times that channel's noise, and the channel ([`verdict::residual_over_noise`]).
+    pub residual_x_noise: (f64, &'static str),
+    /// TRAIN's fits under the best answer (named or not).
+    pub fit_best_attempt: BTreeMap<&'static str, f64>,
     /// Noise level per channel (channel units).
     pub noise: [f64; 5],
     /// Cost of TRAIN under the nominal model and of the noise alone.
@@ -855,6 +864,9 @@ pub fn diagnose(
                 a.min(b)
             }
         });
+    // What the answer leaves of TRAIN's error, against the noise.
+    let residual_x_noise = verdict::residual_over_noise(&fin.replay.fits, &g.noise, &g.spread);
+    let fit_best_attempt = fin.replay.fits.clone();
     let v = if nothing_missing && hints.is_empty() {
         Verdict::NothingMissing
     } else if !hints.is_empty()
@@ -863,6 +875,7 @@ pub fn diagnose(
         Verdict::NotThisPlant
     } else if fin.chosen.is_empty()
         || !(min_heldout >= opts.min_heldout_fit_pct)
+        || !(residual_x_noise.0 <= opts.max_residual_x_noise)
         || !failures.is_empty()
     {
         Verdict::Unexplained
@@ -978,6 +991,9 @@ pub fn diagnose(
         };
         lookalikes.push(s);
     }
+    if named.contains(&"sensor_gain") {
+        lookalikes.push("A sensor gain on the angle, with or without a changed inertia, is also what a wrong sprocket radius or muscle rest length does to the model (the angle scales with the muscle travel over the radius): check `joint.sprocket_radius_m` and `muscle.rest_length_m` before trusting the gain (`host-sim identify plant --params KEY` fits one key).".into());
+    }
     if v.is_answer() && !has_force {
         let s = "No force channel was measured: joint friction and muscle hysteresis cannot be told apart.".to_string();
         if !lookalikes.iter().any(|l| l.starts_with("Without force")) {
@@ -1078,6 +1094,8 @@ pub fn diagnose(
         hints,
         failures,
         nothing_missing: v == Verdict::NothingMissing,
+        residual_x_noise,
+        fit_best_attempt,
         black_box,
         noise: g.noise,
         nominal_cost,

@@ -28,6 +28,11 @@ pub const MIN_HELDOUT_FIT_PCT: f64 = 50.0;
 /// 99.8 %.
 pub const FIT_FLOOR_REL: f64 = 2e-3;
 
+/// An answer leaves TRAIN's error within this many times each channel's noise (or, on
+/// noise-free data, of [`FIT_FLOOR_REL`]): beyond it, something else is off and the answer
+/// is not called an explanation (`unexplained`, its best attempt reported).
+pub const MAX_RESIDUAL_X_NOISE: f64 = 5.0;
+
 /// The kind of answer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Verdict {
@@ -61,6 +66,30 @@ impl Verdict {
 pub fn fit_vs_spread_of_sum(sum_sq: f64, samples: usize, spread: f64) -> f64 {
     let mse = sum_sq / samples.max(1) as f64;
     100.0 * (1.0 - mse.sqrt() / spread.max(1e-300))
+}
+
+/// How many times its noise the error a model leaves on its worst channel is: per channel
+/// `(1 - fit/100)` (the error's rms over the spread) over `noise / spread` (at least
+/// [`FIT_FLOOR_REL`]), the largest over the channels of `fits`; with the channel's name.
+pub fn residual_over_noise(
+    fits: &std::collections::BTreeMap<&'static str, f64>,
+    noise: &[f64; 5],
+    spread: &[f64; 5],
+) -> (f64, &'static str) {
+    let mut worst = (0.0, "");
+    for c in Channel::ALL {
+        let Some(fit) = fits.get(c.name()) else {
+            continue;
+        };
+        let rel_err = 1.0 - fit / 100.0;
+        let noise_rel = (noise[c.index()] / spread[c.index()]).max(FIT_FLOOR_REL);
+        let x = rel_err / noise_rel;
+        // NaN (a failed replay) is the worst.
+        if !(x <= worst.0) {
+            worst = (x, c.name());
+        }
+    }
+    worst
 }
 
 /// What the plausibility checks read of the nominal simulation, summed sample by sample
@@ -219,6 +248,27 @@ pub const LIKELY_CAUSES: &str = "Likely causes: a plant file that does not descr
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_residual_is_counted_in_noise_levels_on_the_worst_channel() {
+        let mut fits = std::collections::BTreeMap::new();
+        fits.insert("angle_deg", 78.9);
+        fits.insert("p1_kpa", 99.0);
+        let spread = [1.0; 5];
+        // Noise-free angle: the floor (0.2 % of the spread) is its noise: 0.211 / 0.002.
+        let mut noise = [0.0; 5];
+        noise[Channel::P1Kpa.index()] = 0.01;
+        let (x, c) = residual_over_noise(&fits, &noise, &spread);
+        assert_eq!(c, "angle_deg");
+        assert!((x - 105.5).abs() < 1e-9, "{x}");
+        // A noisy angle at its noise level is within the limit.
+        noise[Channel::AngleDeg.index()] = 0.2;
+        let (x, _) = residual_over_noise(&fits, &noise, &spread);
+        assert!(x <= MAX_RESIDUAL_X_NOISE, "{x}");
+        // A failed replay (NaN fit) is the worst.
+        fits.insert("p2_kpa", f64::NAN);
+        assert_eq!(residual_over_noise(&fits, &noise, &spread).1, "p2_kpa");
+    }
 
     #[test]
     fn verdict_strings_and_exit_kind() {
