@@ -7,10 +7,10 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 
 use crate::control::arm3_loop::{run_arm, ArmScenario};
-use crate::demo::{expect_column, write_expect_fails};
+use crate::demo::{expect_column, out_file, write_expect_fails};
 use crate::io::arm3::plot_arm3;
 use crate::plant::arm3::Arm3;
 use pam_firmware::arm::{ArmConfig, JOINTS};
@@ -70,20 +70,38 @@ pub fn run_arm_demo_with(
     scenarios: &[(&str, &str)],
 ) -> Result<ArmDemoReport> {
     let arm = Arm3::load(plant_path)?;
+    // Every scenario parses (its name is a plain file name) before anything runs, and two
+    // scenarios may not write the same files.
+    let parsed = scenarios
+        .iter()
+        .map(|(file, text)| ArmScenario::from_toml_str(text, file).map(|s| (*file, s)))
+        .collect::<Result<Vec<_>, _>>()?;
+    for (k, (file, s)) in parsed.iter().enumerate() {
+        if let Some((other, _)) = parsed[..k]
+            .iter()
+            .find(|(_, o)| o.scenario.name == s.scenario.name)
+        {
+            bail!(
+                "{file}: [scenario] name {:?} is also the name of {other}: each scenario's \
+                 files are named after it, give the two scenarios different names",
+                s.scenario.name
+            );
+        }
+    }
     crate::io::atomic::create_dir_all(out_dir)
         .with_context(|| format!("{}: cannot create the directory", out_dir.display()))?;
     let mut results = Vec::new();
-    for (file, text) in scenarios {
-        let s = ArmScenario::from_toml_str(text, file)?;
+    for (file, s) in &parsed {
+        let file = *file;
         let cfg = ArmConfig::reference(s.scenario.tick_hz as f32);
         let t0 = Instant::now();
         let r =
             run_arm(&arm, &s, cfg).with_context(|| format!("{file}: closed-loop run failed"))?;
         let wall = t0.elapsed().as_secs_f64();
         let name = &s.scenario.name;
-        let csv = out_dir.join(format!("{name}.csv"));
-        let trace = out_dir.join(format!("{name}.firmware.csv"));
-        let png = out_dir.join(format!("{name}.png"));
+        let csv = out_file(out_dir, name, ".csv")?;
+        let trace = out_file(out_dir, name, ".firmware.csv")?;
+        let png = out_file(out_dir, name, ".png")?;
         let rec = r.to_recording(&arm, &plant_path.display().to_string(), file);
         rec.write(&csv)?;
         crate::io::atomic::write_bytes(&trace, r.firmware_trace_csv().as_bytes())

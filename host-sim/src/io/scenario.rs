@@ -39,7 +39,8 @@ pub struct Scenario {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ScenarioHeader {
-    /// Name used in reports.
+    /// Name used in reports and as the stem of `demo`'s output files: letters, digits,
+    /// `_`, `.`, `-` only, not starting with `.` (no path).
     pub name: String,
     /// Simulated time [s].
     pub duration_s: f64,
@@ -709,12 +710,16 @@ pub(crate) fn key_error<'a>(
 }
 
 impl ScenarioHeader {
-    /// The `[scenario]` table's ranges: a positive finite length, a tick rate within the
-    /// firmware's stable range (`pam_firmware::tick::TICK_HZ_MIN` / `TICK_HZ_MAX`).
+    /// The `[scenario]` table's ranges: a name usable as a file name (the outputs of `demo`
+    /// are named after it), a positive finite length, a tick rate within the firmware's
+    /// stable range (`pam_firmware::tick::TICK_HZ_MIN` / `TICK_HZ_MAX`).
     pub(crate) fn check(
         &self,
         bad: &impl Fn(&str, &str, String) -> ClosedLoopError,
     ) -> Result<(), ClosedLoopError> {
+        if let Err(msg) = crate::validate::file_name_part(&self.name) {
+            return Err(bad("scenario", "name", msg));
+        }
         if !(self.duration_s > 0.0 && self.duration_s.is_finite()) {
             return Err(bad(
                 "scenario",
