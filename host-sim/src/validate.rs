@@ -98,6 +98,23 @@ impl fmt::Display for Range {
     }
 }
 
+/// The message for a file value `v` of `key` outside `range` ("must be within [lo, hi]
+/// UNIT, got v", with a hint when `v` kPa typed into a Pa key would have been in range);
+/// `None` inside it.
+pub fn range_error(key: &str, v: f64, range: Range, unit: &str) -> Option<String> {
+    if range.contains(v) {
+        return None;
+    }
+    let mut msg = format!("must be within {range} {unit}, got {v}");
+    if key.ends_with("_pa") && v > 0.0 && range.contains(v * 1e3) {
+        msg.push_str(&format!(
+            " (kPa typed into a Pa key? {v} kPa is {} Pa)",
+            v * 1e3
+        ));
+    }
+    Some(msg)
+}
+
 /// A clap value parser for an `f64` within `range` (NaN and infinities refused).
 pub fn f64_in(
     range: Range,

@@ -106,3 +106,103 @@ fn two_arm_scenarios_with_one_name_are_refused_before_anything_is_written() {
     ]);
     assert_refused(&r, &["b.toml", "\"same\"", "a.toml"], &out);
 }
+
+// ---------------------------------------------------------------------------------------
+// Arm plant files: physical ranges.
+
+/// The seed 001 arm plant file with `from` replaced by `to` (the first occurrence only).
+fn arm_plant_with(from: &str, to: &str) -> String {
+    let t = std::fs::read_to_string(arm3_plant()).unwrap();
+    assert!(t.contains(from), "{from} not in the arm plant file");
+    t.replacen(from, to, 1)
+}
+
+/// 1-based line of the first line of `text` containing `needle`.
+fn line_of(text: &str, needle: &str) -> usize {
+    text.lines().position(|l| l.contains(needle)).unwrap() + 1
+}
+
+/// `demo --plant <text>` on a 2 s arm step must be refused naming `key` at the line that
+/// contains `needle`, writing nothing and leaving the plant file as it was.
+fn assert_arm_plant_refused(text: &str, key: &str, needle: &str, more: &[&str]) -> String {
+    let d = tempfile::tempdir().unwrap();
+    let p = write(d.path(), "arm.toml", text);
+    let s = write(d.path(), "s.toml", &arm_step_named("arm_step"));
+    let out = d.path().join("out");
+    let t0 = std::time::Instant::now();
+    let r = host_sim(&[
+        &"demo",
+        &"--plant",
+        &p,
+        &"--scenario",
+        &s,
+        &"--out-dir",
+        &out,
+    ]);
+    let at = format!("arm.toml:{}", line_of(text, needle));
+    let mut needles = vec![at.as_str(), key];
+    needles.extend(more);
+    let e = assert_refused(&r, &needles, &out);
+    assert_eq!(std::fs::read_to_string(&p).unwrap(), text);
+    // Refused while reading the file, not after a long run.
+    assert!(t0.elapsed().as_secs_f64() < 30.0);
+    e
+}
+
+#[test]
+fn arm_lugre_bristles_too_stiff_to_integrate_are_refused_at_their_line() {
+    let lugre = "\n[joint1.friction.lugre]\nstatic_nm = 0.3\nstribeck_velocity_rad_s = 0.01\n\
+                 stiffness_nm_per_rad = 1e12\ndamping_nm_s_per_rad = 60.0\n";
+    let text = std::fs::read_to_string(arm3_plant()).unwrap() + lugre;
+    assert_arm_plant_refused(
+        &text,
+        "joint1.friction.lugre.stiffness_nm_per_rad",
+        "stiffness_nm_per_rad = 1e12",
+        &["(0, 100000]"],
+    );
+    // A sign smoothing velocity that makes the equations as stiff.
+    let text = arm_plant_with(
+        "sign_smoothing_velocity_rad_s = 0.01",
+        "sign_smoothing_velocity_rad_s = 1e-12",
+    );
+    assert_arm_plant_refused(
+        &text,
+        "joint1.friction.sign_smoothing_velocity_rad_s",
+        "sign_smoothing_velocity_rad_s = 1e-12",
+        &[],
+    );
+}
+
+#[test]
+fn arm_plant_values_outside_their_physical_range_are_refused_like_the_one_dof_ones() {
+    // kPa typed into a Pa key.
+    let text = arm_plant_with("supply_gauge_pa = 600000.0", "supply_gauge_pa = 600.0");
+    assert_arm_plant_refused(
+        &text,
+        "environment.supply_gauge_pa",
+        "supply_gauge_pa = 600.0",
+        &["kPa typed into a Pa key?"],
+    );
+    // Initial pressures above the supply (550 kPa on a 420 kPa supply).
+    let text = arm_plant_with("supply_gauge_pa = 600000.0", "supply_gauge_pa = 420000.0");
+    assert_arm_plant_refused(
+        &text,
+        "joint1.initial.p1_gauge_pa",
+        "p1_gauge_pa = 550000.0",
+        &["supply_gauge_pa"],
+    );
+    // An initial angle of 100 rad (the run then failed, blaming the scenario).
+    let text = arm_plant_with(
+        "[joint2.initial]\nangle_rad = 0.0",
+        "[joint2.initial]\nangle_rad = 100.0",
+    );
+    assert_arm_plant_refused(
+        &text,
+        "joint2.initial.angle_rad",
+        "angle_rad = 100.0",
+        &["rad"],
+    );
+    // A mass in grams.
+    let text = arm_plant_with("mass2_kg = 11.7805", "mass2_kg = 11780.5");
+    assert_arm_plant_refused(&text, "links.mass2_kg", "mass2_kg = 11780.5", &[]);
+}
