@@ -44,6 +44,10 @@ pub struct ArmScenarioResult {
     /// Highest muscle pressure [kPa].
     pub max_pressure_kpa: f64,
     pub expect_fails: Vec<String>,
+    /// The scenario sets no `[expect]` bound (nothing to meet).
+    pub no_expectations: bool,
+    /// The first latched fault: (time [s], code, joint 1-based).
+    pub first_fault: Option<(f64, u8, u8)>,
     /// Simulated seconds per wall second.
     pub speed_x: f64,
     pub files: Vec<PathBuf>,
@@ -116,6 +120,8 @@ pub fn run_arm_demo_with(
             max_abs_error_rad: st.map(|t| t.max_abs_rad),
             max_pressure_kpa: r.max_pressure_kpa(),
             expect_fails: r.check(),
+            no_expectations: s.expect.is_empty(),
+            first_fault: r.first_fault(),
             speed_x: s.scenario.duration_s / wall.max(1e-9),
             files: vec![csv, trace, png],
         });
@@ -170,10 +176,30 @@ pub fn format_arm_report(r: &ArmDemoReport, out_dir: &Path) -> String {
             tri(c.rms_error_rad),
             tri(c.max_abs_error_rad),
             c.max_pressure_kpa,
-            expect_column(&c.expect_fails),
+            if c.no_expectations {
+                "none"
+            } else {
+                expect_column(&c.expect_fails)
+            },
             c.speed_x
         );
         write_expect_fails(&mut s, &c.name, &c.expect_fails);
+        if c.no_expectations {
+            let _ = writeln!(
+                s,
+                "  {}: no expectations given (no [expect] bounds)",
+                c.name
+            );
+        }
+        if let Some((t, code, joint)) = c.first_fault {
+            if c.expect_fails.is_empty() {
+                let _ = writeln!(
+                    s,
+                    "  {}: fault code {code} latched by joint {joint} at t = {t:.3} s",
+                    c.name
+                );
+            }
+        }
     }
     let _ = writeln!(
         s,

@@ -206,3 +206,125 @@ fn arm_plant_values_outside_their_physical_range_are_refused_like_the_one_dof_on
     let text = arm_plant_with("mass2_kg = 11.7805", "mass2_kg = 11780.5");
     assert_arm_plant_refused(&text, "links.mass2_kg", "mass2_kg = 11780.5", &[]);
 }
+
+// ---------------------------------------------------------------------------------------
+// Arm scenario files: the 1-DOF scenario's checks.
+
+fn assert_arm_scenario_refused(text: &str, needle: &str, more: &[&str]) -> String {
+    let d = tempfile::tempdir().unwrap();
+    let s = write(d.path(), "s.toml", text);
+    let out = d.path().join("out");
+    let r = host_sim(&[
+        &"demo",
+        &"--plant",
+        &arm3_plant(),
+        &"--scenario",
+        &s,
+        &"--out-dir",
+        &out,
+    ]);
+    let at = format!("line {}", line_of(text, needle));
+    let mut needles = vec!["s.toml", at.as_str()];
+    needles.extend(more);
+    let e = assert_refused(&r, &needles, &out);
+    assert_eq!(std::fs::read_to_string(&s).unwrap(), text);
+    e
+}
+
+#[test]
+fn arm_scenario_values_are_checked_as_the_one_dof_scenario_values() {
+    let base = arm_step_named("arm_step");
+    // A set-point of 25 rad (degrees typed as radians).
+    let text = base.replace("final_rad = 0.3", "final_rad = 25.0");
+    assert_arm_scenario_refused(
+        &text,
+        "final_rad = 25.0",
+        &["[setpoint] joint1.final_rad", "half a turn"],
+    );
+    // A sine amplitude of 25 rad, in a [setpoint.joint2] table of its own.
+    let text = base.replace(
+        "joint2 = { kind = \"step\", initial_rad = -0.55, final_rad = -0.40, at_s = 1.0 }\n",
+        "",
+    ) + "\n[setpoint.joint2]\nkind = \"sine\"\noffset_rad = -0.5\namplitude_rad = 25.0\nfreq_hz = 0.2\n";
+    assert_arm_scenario_refused(
+        &text,
+        "amplitude_rad = 25.0",
+        &["[setpoint] joint2.amplitude_rad"],
+    );
+    // A step after the end of the run.
+    let text = base.replace("final_rad = 0.3, at_s = 1.0", "final_rad = 0.3, at_s = 5.0");
+    assert_arm_scenario_refused(&text, "at_s = 5.0", &["joint1.at_s", "[0, 2)"]);
+    // Settling after the end of the run.
+    let text = base.replace("settle_after_s = 1.5", "settle_after_s = 4.0");
+    assert_arm_scenario_refused(&text, "settle_after_s = 4.0", &["[expect] settle_after_s"]);
+    // A pressure noise of 1 GPa.
+    let text = base.replace("pressure_noise_pa = 500.0", "pressure_noise_pa = 1e9");
+    assert_arm_scenario_refused(
+        &text,
+        "pressure_noise_pa = 1e9",
+        &["[sensors] pressure_noise_pa", "[0, 100000]"],
+    );
+}
+
+#[test]
+fn a_one_dof_scenario_with_a_huge_pressure_noise_is_refused_too() {
+    let d = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(root().join("scenarios/step.toml"))
+        .unwrap()
+        .replace("pressure_noise_pa = 500.0", "pressure_noise_pa = 1e9");
+    let s = write(d.path(), "step.toml", &text);
+    let out = d.path().join("o.csv");
+    let r = host_sim(&[
+        &"simulate",
+        &"--plant",
+        &plant(),
+        &"--scenario",
+        &s,
+        &"--out",
+        &out,
+    ]);
+    let at = format!("line {}", line_of(&text, "pressure_noise_pa = 1e9"));
+    assert_refused(&r, &["step.toml", &at, "[sensors] pressure_noise_pa"], &out);
+}
+
+#[test]
+fn a_run_without_expectations_says_so_and_reports_its_faults() {
+    let d = tempfile::tempdir().unwrap();
+    // Arm: no [expect] table.
+    let text = arm_step_named("arm_free");
+    let text = &text[..text.find("[expect]").unwrap()];
+    let s = write(d.path(), "s.toml", text);
+    let out = d.path().join("out");
+    let stdout = run_ok(&[
+        &"demo",
+        &"--plant",
+        &arm3_plant(),
+        &"--scenario",
+        &s,
+        &"--out-dir",
+        &out,
+    ]);
+    assert!(
+        stdout.contains("arm_free: no expectations given"),
+        "{stdout}"
+    );
+    assert!(!stdout.contains(" met "), "{stdout}");
+    // 1-DOF: a NaN pressure sensor latches a fault; no [expect] table.
+    let text = std::fs::read_to_string(root().join("scenarios/step.toml")).unwrap();
+    let text = text[..text.find("[expect]").unwrap_or(text.len())].to_string()
+        + "\n[[events]]\nkind = \"sensor_nan\"\nat_s = 0.5\nduration_s = 0.5\nchannel = \"p1\"\n";
+    let s = write(d.path(), "step.toml", &text);
+    let o = d.path().join("o.csv");
+    let stdout = run_ok(&[
+        &"simulate",
+        &"--plant",
+        &plant(),
+        &"--scenario",
+        &s,
+        &"--out",
+        &o,
+    ]);
+    assert!(stdout.contains("expectations: none given"), "{stdout}");
+    assert!(!stdout.contains("expectations: met"), "{stdout}");
+    assert!(stdout.contains("latched at tick"), "{stdout}");
+}
