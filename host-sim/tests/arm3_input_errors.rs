@@ -328,3 +328,98 @@ fn a_run_without_expectations_says_so_and_reports_its_faults() {
     assert!(!stdout.contains("expectations: met"), "{stdout}");
     assert!(stdout.contains("latched at tick"), "{stdout}");
 }
+
+// ---------------------------------------------------------------------------------------
+// 3-joint recordings: the 1-DOF reader's time check.
+
+/// A 3-joint recording written by a closed-loop arm run (`demo`, 2 s at 1 kHz): its lines.
+fn arm_recording_lines(dir: &Path) -> Vec<String> {
+    let text = arm_step_named("rec");
+    // No [expect] bounds: the run is data, not a test of the controller.
+    let s = write(dir, "rec.toml", &text[..text.find("[expect]").unwrap()]);
+    let out = dir.join("rec_out");
+    run_ok(&[
+        &"demo",
+        &"--plant",
+        &arm3_plant(),
+        &"--scenario",
+        &s,
+        &"--out-dir",
+        &out,
+    ]);
+    std::fs::read_to_string(out.join("rec.csv"))
+        .unwrap()
+        .lines()
+        .map(str::to_owned)
+        .collect()
+}
+
+/// Index of the header in `lines` (the first line that is not `#` metadata).
+fn header_index(lines: &[String]) -> usize {
+    lines.iter().position(|l| !l.starts_with('#')).unwrap()
+}
+
+fn replay(dir: &Path, name: &str, lines: &[String]) -> (PathBuf, std::process::Output) {
+    let rec = write(dir, name, &(lines.join("\n") + "\n"));
+    let out = dir.join(format!("{name}.sim.csv"));
+    let r = host_sim(&[
+        &"simulate",
+        &"--plant",
+        &arm3_plant(),
+        &"--inputs",
+        &rec,
+        &"--out",
+        &out,
+    ]);
+    (out, r)
+}
+
+#[test]
+fn arm_recording_time_errors_name_their_own_line_and_jitter_is_accepted() {
+    let d = tempfile::tempdir().unwrap();
+    let lines = arm_recording_lines(d.path());
+    let h = header_index(&lines);
+    assert!(lines.len() - h - 1 == 2000, "2 s at 1 kHz");
+    // Without the samples of t in [1.0, 1.5) s: a 0.5 s gap before the row of t = 1.5 s.
+    let mut gap = lines.clone();
+    gap.drain(h + 1 + 1000..h + 1 + 1500);
+    let gap_line = h + 1 + 1000 + 1; // 1-based line of the row after the gap
+    assert!(
+        gap[gap_line - 1].starts_with("1.5"),
+        "{}",
+        gap[gap_line - 1]
+    );
+    let (out, r) = replay(d.path(), "gap.csv", &gap);
+    assert_refused(
+        &r,
+        &[&format!("gap.csv:{gap_line}"), "t_s", "non-uniform time"],
+        &out,
+    );
+    // A duplicated row at sample 1200.
+    let mut dup = lines.clone();
+    dup.insert(h + 1 + 1200, lines[h + 1 + 1200].clone());
+    let dup_line = h + 1 + 1200 + 2;
+    let (out, r) = replay(d.path(), "dup.csv", &dup);
+    assert_refused(
+        &r,
+        &[&format!("dup.csv:{dup_line}"), "time does not increase"],
+        &out,
+    );
+    // +-0.1 ms of jitter at 1 kHz: accepted, replayed on the uniform grid.
+    let mut jit = lines.clone();
+    for (k, l) in jit[h + 1..].iter_mut().enumerate() {
+        let (t, rest) = l.split_once(',').unwrap();
+        let t: f64 = t.parse().unwrap();
+        let j = [0.0, 1e-4, -1e-4, 0.5e-4][k % 4] * if k == 0 { 0.0 } else { 1.0 };
+        *l = format!("{},{rest}", t + j);
+    }
+    jit.retain(|l| !l.starts_with("# sample_period_s"));
+    let (out, r) = replay(d.path(), "jitter.csv", &jit);
+    ok(&r);
+    let sim = std::fs::read_to_string(&out).unwrap();
+    assert_eq!(
+        sim.lines().filter(|l| !l.starts_with('#')).count(),
+        2001,
+        "header + one row per sample"
+    );
+}
