@@ -423,3 +423,78 @@ fn arm_recording_time_errors_name_their_own_line_and_jitter_is_accepted() {
         "header + one row per sample"
     );
 }
+
+// ---------------------------------------------------------------------------------------
+// Arm files in 1-DOF-only commands.
+
+#[test]
+fn one_dof_commands_name_an_arm_plant_file_or_recording_as_such() {
+    let d = tempfile::tempdir().unwrap();
+    let arm = arm3_plant();
+    let out = d.path().join("out.x");
+    let s = root().join("scenarios/step.toml");
+    let recs = d.path().join("recs");
+    std::fs::create_dir(&recs).unwrap();
+    let plant_cases: Vec<(&str, Vec<&dyn AsRef<std::ffi::OsStr>>)> = vec![
+        ("tune", vec![&"tune", &"--plant", &arm, &"--out", &out]),
+        (
+            "sweep torque",
+            vec![&"sweep", &"torque", &"--plant", &arm, &"--out", &out],
+        ),
+        (
+            "pil",
+            vec![&"pil", &"--plant", &arm, &"--scenario", &s, &"--out", &out],
+        ),
+        (
+            "diagnose-batch",
+            vec![
+                &"diagnose-batch",
+                &"--plant",
+                &arm,
+                &"--recordings",
+                &recs,
+                &"--out-dir",
+                &out,
+            ],
+        ),
+        (
+            "compare-control",
+            vec![&"compare-control", &"--plant", &arm],
+        ),
+    ];
+    let what = format!(
+        "{} is a 3-DOF arm plant file (kind = \"arm3\")",
+        arm.display()
+    );
+    for (cmd, args) in plant_cases {
+        let r = host_sim(&args);
+        assert_refused(
+            &r,
+            &[
+                &what,
+                &format!("{cmd} is 1-DOF only"),
+                "demo / simulate / diagnose",
+            ],
+            &out,
+        );
+    }
+    // An arm recording in fit and identify plant.
+    let lines = arm_recording_lines(d.path());
+    let rec = write(d.path(), "arm.csv", &(lines.join("\n") + "\n"));
+    let what = format!("{} is a 3-DOF arm recording", rec.display());
+    let r = host_sim(&[&"fit", &rec, &rec]);
+    assert_refused(&r, &[&what, "fit is 1-DOF only"], &out);
+    let r = host_sim(&[
+        &"identify",
+        &"plant",
+        &"--recording",
+        &rec,
+        &"--plant",
+        &plant(),
+        &"--params",
+        &"joint.inertia_kgm2",
+        &"--out",
+        &out,
+    ]);
+    assert_refused(&r, &[&what, "identify plant is 1-DOF only"], &out);
+}

@@ -31,6 +31,28 @@ pub fn column(base: &str, joint: usize) -> String {
     format!("{base}_j{}", joint + 1)
 }
 
+/// Whether the file at `path` is a 3-joint recording: its header (the first line that is
+/// not `#` metadata, within the first 64 KiB) names `u_in1_j1`. False when it cannot be read.
+pub fn is_arm3_recording(path: impl AsRef<Path>) -> bool {
+    use std::io::Read;
+    let mut head = Vec::new();
+    let Ok(f) = std::fs::File::open(path) else {
+        return false;
+    };
+    if f.take(64 * 1024).read_to_end(&mut head).is_err() {
+        return false;
+    }
+    let text = String::from_utf8_lossy(&head);
+    let header = text
+        .lines()
+        .map(str::trim)
+        .find(|l| !l.is_empty() && !l.starts_with('#'));
+    header.is_some_and(|h| {
+        h.split(',')
+            .any(|c| c.trim().trim_matches('"') == column(INPUT_COLUMNS[0], 0))
+    })
+}
+
 /// One run of the arm.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Arm3Recording {
