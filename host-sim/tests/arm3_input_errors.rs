@@ -498,3 +498,39 @@ fn one_dof_commands_name_an_arm_plant_file_or_recording_as_such() {
     ]);
     assert_refused(&r, &[&what, "identify plant is 1-DOF only"], &out);
 }
+
+// ---------------------------------------------------------------------------------------
+// pil: the firmware image is checked first and named.
+
+#[test]
+fn pil_checks_the_firmware_image_before_the_run_and_names_it() {
+    let d = tempfile::tempdir().unwrap();
+    let s = root().join("scenarios/step.toml");
+    let out = d.path().join("pil.csv");
+    let empty = write(d.path(), "empty.elf", "");
+    let text = write(d.path(), "text.elf", "not an image\n");
+    // The host-sim binary: an ELF, but not for the board.
+    let host_elf = PathBuf::from(env!("CARGO_BIN_EXE_host-sim"));
+    for (elf, why) in [
+        (d.path().join("missing.elf"), "cannot read it"),
+        (d.path().to_path_buf(), "not a regular file"),
+        (empty, "is empty"),
+        (text, "not an ELF file"),
+        (host_elf, "not a 32-bit little-endian ARM image"),
+    ] {
+        let r = host_sim(&[
+            &"pil",
+            &"--plant",
+            &plant(),
+            &"--scenario",
+            &s,
+            &"--out",
+            &out,
+            &"--elf",
+            &elf,
+        ]);
+        let e = assert_refused(&r, &[&format!("--elf {}", elf.display()), why], &out);
+        assert!(!e.contains("step.toml"), "blames the scenario:\n{e}");
+        assert_eq!(e.lines().count(), 1, "one line:\n{e}");
+    }
+}
