@@ -534,3 +534,57 @@ fn pil_checks_the_firmware_image_before_the_run_and_names_it() {
         assert_eq!(e.lines().count(), 1, "one line:\n{e}");
     }
 }
+
+#[test]
+fn a_crashing_image_gives_qemus_first_line_and_a_few_lines_of_details() {
+    if std::process::Command::new("qemu-system-arm")
+        .arg("--version")
+        .output()
+        .is_err()
+    {
+        eprintln!("SKIPPED: qemu-system-arm not installed (scripts/setup.sh)");
+        return;
+    }
+    // An ELF header for 32-bit ARM and nothing else: QEMU loads it and the core locks up.
+    let mut h = b"\x7fELF\x01\x01\x01\x00".to_vec();
+    h.extend([0u8; 8]);
+    for (v, bytes) in [
+        (2u32, 2),
+        (40, 2),
+        (1, 4),
+        (0x0800_0000, 4),
+        (52, 4),
+        (0, 4),
+        (0, 4),
+        (52, 2),
+        (32, 2),
+        (0, 2),
+        (40, 2),
+        (0, 2),
+        (0, 2),
+    ] {
+        h.extend(&v.to_le_bytes()[..bytes]);
+    }
+    let d = tempfile::tempdir().unwrap();
+    let elf = d.path().join("hdr.elf");
+    std::fs::write(&elf, &h).unwrap();
+    let out = d.path().join("pil.csv");
+    let r = host_sim(&[
+        &"pil",
+        &"--plant",
+        &plant(),
+        &"--scenario",
+        &root().join("scenarios/step.toml"),
+        &"--out",
+        &out,
+        &"--elf",
+        &elf,
+        &"--tick-timeout-s",
+        &"5",
+    ]);
+    let e = assert_refused(&r, &["hdr.elf", "QEMU"], &out);
+    assert!(e.lines().count() <= 8, "at most a few lines:\n{e}");
+    if e.lines().count() > 1 {
+        assert!(e.contains("\n  details:"), "{e}");
+    }
+}
