@@ -36,6 +36,22 @@
 #[cfg(test)]
 extern crate std;
 
+/// Inputs the unit tests feed every public numeric function: non-finite, signed zero,
+/// subnormal-small, huge and ordinary values (0.1, a gauge pressure of 3e5 Pa).
+#[cfg(test)]
+pub(crate) const HOSTILE_F32: [f32; 10] = [
+    f32::NAN,
+    f32::INFINITY,
+    f32::NEG_INFINITY,
+    0.0,
+    -0.0,
+    1e-30,
+    1e30,
+    -1e30,
+    0.1,
+    3e5,
+];
+
 #[macro_use]
 mod fmt;
 

@@ -412,19 +412,8 @@ mod tests {
     #[test]
     fn nan_and_infinite_inputs_never_give_nan() {
         let m = model();
-        let vals = [
-            f32::NAN,
-            f32::INFINITY,
-            f32::NEG_INFINITY,
-            0.0,
-            -0.0,
-            1e-30,
-            1e30,
-            -1e30,
-            3e5,
-        ];
-        for &a in &vals {
-            for &b in &vals {
+        for a in crate::HOSTILE_F32 {
+            for b in crate::HOSTILE_F32 {
                 let d = m.duty(a, b);
                 assert!(
                     d.is_finite() && (-1.0..=1.0).contains(&d),
@@ -433,7 +422,7 @@ mod tests {
             }
         }
         let mut ff = reference_ff();
-        for &a in &vals {
+        for a in crate::HOSTILE_F32 {
             let o = ff.step([a, 3e5], [3e5, a], a, 0.1);
             assert!(
                 o.iter().all(|x| x.is_finite() && (-1.0..=1.0).contains(x)),

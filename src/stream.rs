@@ -18,7 +18,7 @@
 //! | 30..42 | scaled p1, p2 [Pa gauge], angle [rad] (f32 each, NaN = no sample) |
 //! | 42 | fault code (0 = none, else `FaultCode as u8`) |
 //! | 43 | flags (bit 0: armed) |
-//! | 44..46 | Fletcher-16 of bytes 2..44 |
+//! | 44..46 | [`checksum16`] of bytes 2..44 |
 //!
 //! At 1 kHz that is 46 000 bytes/s of payload.
 
@@ -64,14 +64,18 @@ pub struct TickRecord {
     pub armed: bool,
 }
 
-/// Fletcher-16 checksum.
-pub fn fletcher16(data: &[u8]) -> u16 {
-    let (mut a, mut b) = (0u16, 0u16);
+/// Fletcher-style checksum with its two sums modulo 256: the low byte (the sum of the bytes)
+/// changes with every single-byte change, which the textbook modulo-255 Fletcher-16 misses
+/// when a byte turns from 0x00 to 0xFF or back (0 and 255 are equal modulo 255); the high
+/// byte (the sum of the running sums) weighs each byte by its position, so swapped bytes
+/// are caught too.
+pub fn checksum16(data: &[u8]) -> u16 {
+    let (mut a, mut b) = (0u8, 0u8);
     for &x in data {
-        a = (a + x as u16) % 255;
-        b = (b + a) % 255;
+        a = a.wrapping_add(x);
+        b = b.wrapping_add(a);
     }
-    (b << 8) | a
+    ((b as u16) << 8) | a as u16
 }
 
 fn opening_to_u16(u: f32) -> u16 {
@@ -122,7 +126,7 @@ impl TickRecord {
         put(buf, 38, &self.angle_rad.to_le_bytes());
         buf[42] = self.fault;
         buf[43] = self.armed as u8;
-        let c = fletcher16(&buf[2..44]);
+        let c = checksum16(&buf[2..44]);
         put(buf, 44, &c.to_le_bytes());
     }
 
@@ -134,7 +138,7 @@ impl TickRecord {
         if b[0..2] != RECORD_SYNC {
             return Err(DecodeError::Sync);
         }
-        if fletcher16(&b[2..44]) != u16_at(b, 44) {
+        if checksum16(&b[2..44]) != u16_at(b, 44) {
             return Err(DecodeError::Checksum);
         }
         let f = |at| f32::from_bits(u32_at(b, at));
@@ -239,7 +243,7 @@ impl SensorInput {
         buf[18] = self.flags;
         buf[19] = self.reset;
         put(buf, 20, &self.dt_s.to_le_bytes());
-        let c = fletcher16(&buf[2..24]);
+        let c = checksum16(&buf[2..24]);
         put(buf, 24, &c.to_le_bytes());
     }
 
@@ -251,7 +255,7 @@ impl SensorInput {
         if b[0..2] != INPUT_SYNC {
             return Err(DecodeError::Sync);
         }
-        if fletcher16(&b[2..24]) != u16_at(b, 24) {
+        if checksum16(&b[2..24]) != u16_at(b, 24) {
             return Err(DecodeError::Checksum);
         }
         Ok(SensorInput {
@@ -291,7 +295,7 @@ impl RunConfig {
         put(buf, 10, &self.pa_per_count.to_le_bytes());
         put(buf, 14, &self.offset_pa.to_le_bytes());
         put(buf, 18, &self.counts_per_rev.to_le_bytes());
-        let c = fletcher16(&buf[2..22]);
+        let c = checksum16(&buf[2..22]);
         put(buf, 22, &c.to_le_bytes());
     }
 
@@ -303,7 +307,7 @@ impl RunConfig {
         if b[0..2] != CONFIG_SYNC {
             return Err(DecodeError::Sync);
         }
-        if fletcher16(&b[2..22]) != u16_at(b, 22) {
+        if checksum16(&b[2..22]) != u16_at(b, 22) {
             return Err(DecodeError::Checksum);
         }
         let f = |at| f32::from_bits(u32_at(b, at));
@@ -404,6 +408,51 @@ mod tests {
         assert!(d.p_gauge_pa[1].is_nan());
         assert_eq!(d.angle_rad.to_bits(), r.angle_rad.to_bits());
         assert!(d.armed);
+    }
+
+    #[test]
+    fn every_single_byte_change_and_swap_fails_the_checksum() {
+        let mut b = [0u8; RECORD_LEN];
+        sample().encode(&mut b);
+        for at in 2..RECORD_LEN {
+            for v in 0..=255u8 {
+                if v == b[at] {
+                    continue;
+                }
+                let mut bad = b;
+                bad[at] = v;
+                assert_eq!(
+                    TickRecord::decode(&bad),
+                    Err(DecodeError::Checksum),
+                    "byte {at} set to {v:#04x}"
+                );
+            }
+        }
+        for at in 2..43 {
+            if b[at] != b[at + 1] {
+                let mut bad = b;
+                bad.swap(at, at + 1);
+                assert_eq!(
+                    TickRecord::decode(&bad),
+                    Err(DecodeError::Checksum),
+                    "swap {at}"
+                );
+            }
+        }
+        // The textbook modulo-255 Fletcher-16 misses a zero byte read as 0xFF.
+        let fletcher255 = |d: &[u8]| {
+            let (mut a, mut b) = (0u16, 0u16);
+            for &x in d {
+                a = (a + x as u16) % 255;
+                b = (b + a) % 255;
+            }
+            (b << 8) | a
+        };
+        let zero = b[2..44].iter().position(|x| *x == 0).expect("a zero byte") + 2;
+        let mut bad = b;
+        bad[zero] = 0xFF;
+        assert_eq!(fletcher255(&b[2..44]), fletcher255(&bad[2..44]));
+        assert_ne!(checksum16(&b[2..44]), checksum16(&bad[2..44]));
     }
 
     #[test]

@@ -100,11 +100,18 @@ enum Command {
     DiagnoseBatch(host_sim::diagnose::batch::BatchArgs),
     /// Import a rig logger's CSV (other column names, units, time base) into a recording,
     /// through a mapping file (docs/rig.md).
+    ///
+    /// Writes a recording (RECORDING.md) with t_s,u_in1,u_ex1,u_in2,u_ex2 and the mapped
+    /// outputs among angle_deg,p1_kpa,p2_kpa,f1_n,f2_n; the report gives each channel's range
+    /// and warns of values a unit mistake usually causes.
     #[command(
         after_help = "Example (docs/rig.md has the mapping file):\n  host-sim import --map festo-joint.toml --input messung7.csv --out messung7.rec.csv"
     )]
     Import(host_sim::io::import::ImportArgs),
     /// Turn the firmware's per-tick stream (QEMU image or board) into a recording.
+    ///
+    /// Writes a recording (RECORDING.md) with t_s,u_in1,u_ex1,u_in2,u_ex2 (the valve
+    /// openings the firmware commanded) and angle_deg,p1_kpa,p2_kpa (what it measured).
     #[command(
         after_help = "Example (a stream written by `host-sim pil --log`):\n  host-sim capture --log pil.stream --out captured.csv"
     )]

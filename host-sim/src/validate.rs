@@ -80,7 +80,7 @@ impl Range {
         if self.contains(v) {
             Ok(v)
         } else {
-            Err(format!("must be a number within {self}, got {v}"))
+            Err(format!("must be a number within {self}, got {}", Shown(v)))
         }
     }
 }
@@ -91,8 +91,8 @@ impl fmt::Display for Range {
             f,
             "{}{}, {}{}",
             if self.lo_incl { '[' } else { '(' },
-            self.lo,
-            self.hi,
+            Shown(self.lo),
+            Shown(self.hi),
             if self.hi_incl { ']' } else { ')' }
         )
     }
@@ -105,14 +105,37 @@ pub fn range_error(key: &str, v: f64, range: Range, unit: &str) -> Option<String
     if range.contains(v) {
         return None;
     }
-    let mut msg = format!("must be within {range} {unit}, got {v}");
+    let mut msg = format!("must be within {range} {unit}, got {}", Shown(v));
     if key.ends_with("_pa") && v > 0.0 && range.contains(v * 1e3) {
         msg.push_str(&format!(
-            " (kPa typed into a Pa key? {v} kPa is {} Pa)",
-            v * 1e3
+            " (kPa typed into a Pa key? {} kPa is {} Pa)",
+            Shown(v),
+            Shown(v * 1e3)
         ));
     }
     Some(msg)
+}
+
+/// A number as an error message shows it: plain when it reads well, in exponent form when
+/// it is very large or very small (a typed `1e300` is not echoed with 300 digits), and
+/// without the last bits of a rounding error.
+#[derive(Clone, Copy, Debug)]
+pub struct Shown(pub f64);
+
+impl fmt::Display for Shown {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let a = self.0.abs();
+        if !self.0.is_finite() || a == 0.0 {
+            return write!(f, "{}", self.0);
+        }
+        // At most 12 significant digits: 104.60800000000002 reads 104.608.
+        let rounded: f64 = format!("{:.11e}", self.0).parse().unwrap_or(self.0);
+        if (1e-6..1e9).contains(&a) {
+            write!(f, "{rounded}")
+        } else {
+            write!(f, "{rounded:e}")
+        }
+    }
 }
 
 /// A clap value parser for an `f64` within `range` (NaN and infinities refused).
@@ -411,6 +434,19 @@ mod tests {
         assert!(p("10.5").unwrap_err().contains("(0, 10]"));
         assert!(usize_in(1, 5)("0").is_err());
         assert_eq!(usize_in(1, 5)("5").unwrap(), 5);
+    }
+
+    #[test]
+    fn numbers_in_messages_are_short_but_keep_what_was_typed() {
+        let shown = |v: f64| Shown(v).to_string();
+        assert_eq!(shown(1e300), "1e300");
+        assert_eq!(shown(-2.5e-9), "-2.5e-9");
+        assert_eq!(shown(-104.60800000000002), "-104.608");
+        assert_eq!(shown(10.0000000001), "10.0000000001");
+        assert_eq!(shown(600000.0), "600000");
+        assert_eq!(shown(f64::NAN), "NaN");
+        let e = f64_in(Range::closed(1e-14, 0.1))("1e300").unwrap_err();
+        assert!(e.contains("[1e-14, 0.1], got 1e300"), "{e}");
     }
 
     #[test]

@@ -9,14 +9,35 @@ use host_sim::control::compare::{
     control_tuned_path, reference_plant_path, suite_scenarios, ControlTuning,
 };
 use host_sim::control::robustness::{
-    format_table, held_out_scenarios, table, CONDITIONS, SUPERVISION_OFF_DEAD_TIME,
+    format_table, held_out_scenarios, table, Row, CONDITIONS, SUPERVISION_OFF_DEAD_TIME,
     TUNING_HOLD_SD_MAX_RAD,
 };
+use std::ops::RangeBounds;
+
+/// The reference plant file's text.
+fn reference_text() -> String {
+    let plant = reference_plant_path().expect("../shared/plant/reference-1dof.toml");
+    std::fs::read_to_string(plant).unwrap()
+}
+
+/// The gains of `host-sim tune --robust` (config/control_robust.toml).
+fn robust_gains() -> ControlTuning {
+    ControlTuning::load(&control_tuned_path().with_file_name("control_robust.toml")).unwrap()
+}
+
+/// The cascade's lead over the PID (PID MSE / cascade MSE) on row `r` lies in `lead`.
+fn assert_lead_over_pid(r: &Row, lead: impl RangeBounds<f64> + std::fmt::Debug) {
+    assert!(
+        lead.contains(&r.lead_over_pid()),
+        "{}: lead {:.2} not in {lead:?}",
+        r.condition,
+        r.lead_over_pid()
+    );
+}
 
 #[test]
 fn stored_gains_on_held_out_sequences_and_concealed_effects() {
-    let plant = reference_plant_path().expect("../shared/plant/reference-1dof.toml");
-    let text = std::fs::read_to_string(plant).unwrap();
+    let text = reference_text();
     let tuning = ControlTuning::load(&control_tuned_path()).unwrap();
     let rows = table(&text, &tuning, &held_out_scenarios().unwrap(), &[]);
     println!("{}", format_table(&rows));
@@ -55,12 +76,7 @@ fn stored_gains_on_held_out_sequences_and_concealed_effects() {
             r.cells[1].mse_rad2
         );
         // ... and is never worse than the PID on the held-out sequences.
-        assert!(
-            r.lead_over_pid() >= 1.0,
-            "{}: {:.2}",
-            r.condition,
-            r.lead_over_pid()
-        );
+        assert_lead_over_pid(r, 1.0..);
     }
 }
 
@@ -72,10 +88,8 @@ fn stored_gains_on_held_out_sequences_and_concealed_effects() {
 /// at rest there, is as good as the cascade (stated, so a change shows).
 #[test]
 fn robust_gains_hold_the_lead_on_held_out_sequences() {
-    let plant = reference_plant_path().expect("../shared/plant/reference-1dof.toml");
-    let text = std::fs::read_to_string(plant).unwrap();
-    let path = control_tuned_path().with_file_name("control_robust.toml");
-    let tuning = ControlTuning::load(&path).unwrap();
+    let text = reference_text();
+    let tuning = robust_gains();
     let rows = table(&text, &tuning, &held_out_scenarios().unwrap(), &[]);
     println!("{}", format_table(&rows));
     for r in &rows {
@@ -83,19 +97,9 @@ fn robust_gains_hold_the_lead_on_held_out_sequences() {
             assert!(c.stable, "{}: {law} {c:?}", r.condition);
         }
         if r.condition.starts_with("11 x") {
-            assert!(
-                (0.5..2.0).contains(&r.lead_over_pid()),
-                "{}: lead {:.2}",
-                r.condition,
-                r.lead_over_pid()
-            );
+            assert_lead_over_pid(r, 0.5..2.0);
         } else {
-            assert!(
-                r.lead_over_pid() >= 2.0,
-                "{}: lead {:.2}",
-                r.condition,
-                r.lead_over_pid()
-            );
+            assert_lead_over_pid(r, 2.0..);
         }
     }
 }
@@ -105,10 +109,8 @@ fn robust_gains_hold_the_lead_on_held_out_sequences() {
 /// the 11 x load's step with a spread of 0.1 rad or more; the stored robust PID comes to rest.
 #[test]
 fn a_limit_cycle_inside_the_band_is_unstable() {
-    let plant = reference_plant_path().expect("../shared/plant/reference-1dof.toml");
-    let text = std::fs::read_to_string(plant).unwrap();
-    let path = control_tuned_path().with_file_name("control_robust.toml");
-    let stored = ControlTuning::load(&path).unwrap();
+    let text = reference_text();
+    let stored = robust_gains();
     let mut earlier = stored.clone();
     earlier.pid.kp_pa_per_rad = 163199.796875;
     earlier.pid.ki_pa_per_rad_s = 2837019.75;

@@ -70,6 +70,15 @@ fn diagnose_checked(cfg: &PlantConfig, train: &Recording, check: &Recording) -> 
     .unwrap()
 }
 
+/// [`diagnose_checked`] on the nominal plant with a fit budget of `fit_budget_s`.
+fn diagnose_on_budget(train: &Recording, check: &Recording, fit_budget_s: f64) -> Diagnosis {
+    let opts = DiagnoseOptions {
+        fit_budget_s,
+        ..DiagnoseOptions::default()
+    };
+    diagnose(&nominal(), train, Some(check), &opts, &|_, _, _| {}).unwrap()
+}
+
 fn named(d: &Diagnosis) -> Vec<String> {
     let mut v: Vec<String> = d.effects.iter().map(|e| e.id.clone()).collect();
     v.sort();
@@ -414,11 +423,7 @@ fn a_recording_longer_than_the_fit_budget_is_fitted_on_its_head_with_the_same_an
     // fits (within the solver tolerance's effect on a refit).
     let (train, check) = recordings(&["leakage"], 77, 1e-3, [true; 5]);
     let full = diagnose_checked(&nominal(), &train, &check);
-    let budget = DiagnoseOptions {
-        fit_budget_s: 2.0,
-        ..DiagnoseOptions::default()
-    };
-    let head = diagnose(&nominal(), &train, Some(&check), &budget, &|_, _, _| {}).unwrap();
+    let head = diagnose_on_budget(&train, &check, 2.0);
     assert_eq!(
         named(&full),
         vec!["leakage".to_string()],
@@ -556,11 +561,7 @@ fn streamed_read_matches_whole_text() {
 fn fit_budget_shorter_than_train_names_the_truth() {
     for (truth, seed) in [("leakage", 3), ("sensor_lag", 5)] {
         let (train, check) = recordings(&[truth], seed, 1e-3, [true; 5]);
-        let opts = DiagnoseOptions {
-            fit_budget_s: 3.0,
-            ..DiagnoseOptions::default()
-        };
-        let d = diagnose(&nominal(), &train, Some(&check), &opts, &|_, _, _| {}).unwrap();
+        let d = diagnose_on_budget(&train, &check, 3.0);
         assert_eq!(
             named(&d),
             vec![expected_id(truth).to_string()],

@@ -138,6 +138,14 @@ fn closed_loop(plant: &Plant, s: &Scenario) -> ClosedLoopRun {
     run_with(plant, s, cfg, &mut |_| {}).unwrap()
 }
 
+/// The step scenario on the nominal plant and its closed-loop run.
+fn nominal_step() -> (Scenario, Plant, ClosedLoopRun) {
+    let s = step_scenario();
+    let nominal = plant_with("");
+    let run = closed_loop(&nominal, &s);
+    (s, nominal, run)
+}
+
 /// How far a closed-loop run may depart from the replay of its own commands, per channel:
 /// 10 x the larger of the nominal run's own departure (the integration error of the two
 /// integrations, measured) and the solver's relative tolerance (1e-6) times the channel's
@@ -156,9 +164,7 @@ fn replay_bound(nominal_departure: &[f64; 5], nominal: &[Measurement]) -> [f64; 
 
 #[test]
 fn every_effect_changes_the_closed_loop_and_matches_its_own_replay() {
-    let s = step_scenario();
-    let nominal = plant_with("");
-    let run0 = closed_loop(&nominal, &s);
+    let (s, nominal, run0) = nominal_step();
     let (rep_true0, rep_meas0) = replay(&nominal, &run0);
     let true0 = true_channels(&nominal, &run0);
     let meas0: Vec<Measurement> = run0.rows.iter().map(|r| r.measured).collect();
@@ -395,9 +401,7 @@ fn same_effect(name: &str, id: &str) -> bool {
 /// valve commands.
 #[test]
 fn step_with_dead_time_or_sensor_lag_differs_and_matches_its_replay() {
-    let s = step_scenario();
-    let nominal = plant_with("");
-    let run0 = closed_loop(&nominal, &s);
+    let (s, nominal, run0) = nominal_step();
     let (rep0, _) = replay(&nominal, &run0);
     let tol = max_diff(&true_channels(&nominal, &run0), &rep0);
     let st0 = run0.tracking(0.0);

@@ -255,9 +255,46 @@ fn capture_reads_defmt_print_text_lines_and_refuses_a_missing_sample() {
             < 1e-4
     );
 
+    // A line logged twice is dropped and counted; the same sequence number with other
+    // content, or a record whose zero byte reads 0xFF, is refused.
+    let twice = dir.path().join("twice.txt");
+    std::fs::write(&twice, text.clone() + &line(&rec(4, 0.04))).unwrap();
+    let r = host_sim(&[&"capture", &"--log", &twice, &"--out", &out]);
+    ok(&r);
+    assert!(
+        String::from_utf8_lossy(&r.stdout).contains("1 repeated record(s) dropped"),
+        "{}",
+        String::from_utf8_lossy(&r.stdout)
+    );
+    assert_eq!(Recording::read(&out).unwrap().len(), 5);
+    let n = dir.path().join("n.csv");
+    std::fs::write(&twice, text.clone() + &line(&rec(4, 0.05))).unwrap();
+    let r = host_sim(&[&"capture", &"--log", &twice, &"--out", &n]);
+    assert_refused(
+        &r,
+        &[
+            "twice.txt: line 7",
+            "sequence 4 after 4",
+            "repeated with other content",
+        ],
+        &n,
+    );
+    let mut b = [0u8; RECORD_LEN];
+    rec(5, 0.05).encode(&mut b);
+    let zero = (2..44).find(|i| b[*i] == 0).expect("a zero byte");
+    b[zero] = 0xFF;
+    let bytes: Vec<String> = b.iter().map(|x| x.to_string()).collect();
+    let flipped = dir.path().join("flipped.txt");
+    std::fs::write(
+        &flipped,
+        text.clone() + &format!("0.006 INFO stream [{}]\n", bytes.join(", ")),
+    )
+    .unwrap();
+    let r = host_sim(&[&"capture", &"--log", &flipped, &"--out", &n]);
+    assert_refused(&r, &["flipped.txt:7", "not a stream record (Checksum)"], &n);
+
     text += &line(&rec(5, f32::NAN));
     std::fs::write(&log, &text).unwrap();
-    let n = dir.path().join("n.csv");
     let r = host_sim(&[&"capture", &"--log", &log, &"--out", &n]);
     assert_refused(&r, &["rtt.txt: line 7", "no angle sample"], &n);
 }

@@ -299,14 +299,117 @@ fn gaps_are_listed_and_refused_or_split_never_filled() {
         "{e}"
     );
     assert!(!out_path.exists());
+    // A third segment left by an earlier import of another file is named, not taken over.
+    std::fs::write(dir.path().join("rec-3.csv"), "earlier").unwrap();
     let out = host_sim(&[
         &"import", &"--split", &"--map", &map, &"--input", &raw, &"--out", &out_path,
     ]);
     ok(&out);
+    let report = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        report.contains("rec-3.csv is not part of this import (2 segments)"),
+        "{report}"
+    );
+    assert_eq!(
+        std::fs::read_to_string(dir.path().join("rec-3.csv")).unwrap(),
+        "earlier"
+    );
     let a = Recording::read(dir.path().join("rec-1.csv")).unwrap();
     let b = Recording::read(dir.path().join("rec-2.csv")).unwrap();
     assert_eq!(a.len(), 100);
     assert_eq!(a.len() + b.len(), 240 - 3);
+}
+
+#[test]
+fn unit_mistakes_in_a_mapping_are_refused_at_their_line_or_flagged() {
+    let dir = tmp();
+    let (raw, _) = rig_file(dir.path(), 2.0, 5, &[]);
+    let out_path = dir.path().join("rec.csv");
+    let run = |map_text: &str| {
+        let map = write_map(dir.path(), map_text);
+        host_sim(&[
+            &"import", &"--map", &map, &"--input", &raw, &"--out", &out_path,
+        ])
+    };
+    let refused = |map_text: &str, needles: &[&str]| {
+        let out = run(map_text);
+        let e = exits(2, &out);
+        for n in needles {
+            assert!(e.contains(n), "`{n}` not in: {e}");
+        }
+        assert!(!out_path.exists(), "{e}");
+    };
+    // The atmosphere typed in kPa into its Pa key (line 13 of the mapping).
+    refused(
+        &MAP.replace("p_atm_pa = 101325.0", "p_atm_pa = 101.325"),
+        &[
+            "map.toml:13",
+            "pressure.p_atm_pa",
+            "kPa typed into a Pa key",
+        ],
+    );
+    // A time column in ms declared as seconds: a 25 s median step.
+    refused(
+        &MAP.replace("unit = \"ms\"", "unit = \"s\""),
+        &[
+            "rig.csv:5",
+            "Zeit [ms]",
+            "median time step is 25 s",
+            "ms read as s",
+        ],
+    );
+    // Absolute pressures below vacuum: the atmosphere given as 2 bar.
+    refused(
+        &MAP.replace(
+            "p_atm_pa = 101325.0",
+            "p_atm_pa = 101325.0\nregulator_band_pa = 2e4",
+        )
+        .replace(
+            "[[channel]]\ncolumn = \"P1 [bar abs]\"",
+            "[[channel]]\ncolumn = \"P1 [bar abs]\"\noffset = -3.0",
+        ),
+        &[
+            "rig.csv:",
+            "P1 [bar abs]",
+            "-104.608 kPa gauge is below vacuum (-101.325 kPa)",
+        ],
+    );
+    // A scale of zero would flatten the channel.
+    refused(
+        &MAP.replacen(
+            "channel = \"p1\"\nunit = \"bar\"",
+            "channel = \"p1\"\nscale = 0.0\nunit = \"bar\"",
+            1,
+        ),
+        &["map.toml:", "channel[0]", "`scale`", "other than 0"],
+    );
+    // Gauge bar read as kPa, and absolute bar read as kPa, are possible but suspect:
+    // imported, with a warning naming the channel, and each channel's range.
+    let warned = |map_text: &str, needles: &[&str]| {
+        let out = run(map_text);
+        ok(&out);
+        let report = String::from_utf8_lossy(&out.stdout).into_owned();
+        for n in needles {
+            assert!(report.contains(n), "`{n}` not in: {report}");
+        }
+        assert!(!report.contains("warning: p2"), "{report}");
+    };
+    warned(
+        &MAP.replacen(
+            "unit = \"bar\"\nreference = \"absolute\"",
+            "unit = \"kPa\"\noffset = -1.01325",
+            1,
+        ),
+        &[
+            "warning: p1 never exceeds 10 kPa gauge",
+            "bar or MPa read as kPa",
+            "p2 (column `P2 [bar abs]`):",
+        ],
+    );
+    warned(
+        &MAP.replacen("unit = \"bar\"", "unit = \"kPa\"", 1),
+        &["warning: p1 goes down to -100.", "absolute read as gauge"],
+    );
 }
 
 #[test]

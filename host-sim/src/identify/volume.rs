@@ -244,38 +244,18 @@ impl VolumeNet {
         let (w2, rest) = rest.split_at(H * H);
         let (b2, rest) = rest.split_at(H);
         let (w3, b3) = rest.split_at(H);
-        let mut a1 = [0.0; H];
-        let mut ad1 = [0.0; H];
-        let mut s1 = [(0.0, 0.0, 0.0); H];
-        let mut zd1 = [0.0; H];
-        for j in 0..H {
-            let mut z = b1[j];
-            let mut zd = 0.0;
-            for i in 0..4 {
-                z += w1[j * 4 + i] * x[i];
-                zd += w1[j * 4 + i] * d[i];
-            }
-            s1[j] = softsign(z);
-            zd1[j] = zd;
-            a1[j] = s1[j].0;
-            ad1[j] = s1[j].1 * zd;
-        }
-        let mut a2 = [0.0; H];
-        let mut ad2 = [0.0; H];
-        let mut s2 = [(0.0, 0.0, 0.0); H];
-        let mut zd2 = [0.0; H];
-        for j in 0..H {
-            let mut z = b2[j];
-            let mut zd = 0.0;
-            for i in 0..H {
-                z += w2[j * H + i] * a1[i];
-                zd += w2[j * H + i] * ad1[i];
-            }
-            s2[j] = softsign(z);
-            zd2[j] = zd;
-            a2[j] = s2[j].0;
-            ad2[j] = s2[j].1 * zd;
-        }
+        let Layer {
+            a: a1,
+            ad: ad1,
+            s: s1,
+            zd: zd1,
+        } = Layer::<H>::forward(w1, b1, x, d);
+        let Layer {
+            a: a2,
+            ad: ad2,
+            s: s2,
+            zd: zd2,
+        } = Layer::<H>::forward(w2, b2, &a1, &ad1);
         let mut y = b3[0];
         let mut yd = 0.0;
         for j in 0..H {
@@ -623,6 +603,46 @@ pub fn train(
         loss_end,
         termination: format!("{:?}", report.termination),
     })
+}
+
+/// One softsign layer's forward pass with its tangent along the eq. 9 direction (the
+/// network's two hidden layers).
+struct Layer<const H: usize> {
+    /// Activations.
+    a: [f64; H],
+    /// Their directional derivatives.
+    ad: [f64; H],
+    /// Softsign (value, first, second derivative) at each pre-activation.
+    s: [(f64, f64, f64); H],
+    /// Directional derivative of each pre-activation.
+    zd: [f64; H],
+}
+
+impl<const H: usize> Layer<H> {
+    /// The layer of weights `w` (`H` rows of `x.len()`) and biases `b` over the inputs `x`
+    /// with directional derivatives `xd`.
+    fn forward(w: &[f64], b: &[f64], x: &[f64], xd: &[f64]) -> Self {
+        let n = x.len();
+        let mut l = Layer {
+            a: [0.0; H],
+            ad: [0.0; H],
+            s: [(0.0, 0.0, 0.0); H],
+            zd: [0.0; H],
+        };
+        for j in 0..H {
+            let mut z = b[j];
+            let mut zd = 0.0;
+            for i in 0..n {
+                z += w[j * n + i] * x[i];
+                zd += w[j * n + i] * xd[i];
+            }
+            l.s[j] = softsign(z);
+            l.zd[j] = zd;
+            l.a[j] = l.s[j].0;
+            l.ad[j] = l.s[j].1 * zd;
+        }
+        l
+    }
 }
 
 #[cfg(test)]

@@ -72,13 +72,46 @@ pub fn records_of_text(text: &str, file: &Path) -> anyhow::Result<Vec<(usize, Ti
     Ok(v)
 }
 
+/// What [`recording_of`] counted besides the samples.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct CaptureCounts {
+    /// Ticks with a latched fault (kept).
+    pub faulted: usize,
+    /// Records that repeat the one before byte for byte (a logger that read its buffer
+    /// twice): dropped, nothing is lost.
+    pub repeated: usize,
+}
+
+/// The records with byte-for-byte repeats of the one before removed, and how many were.
+fn without_repeats(records: &[(usize, TickRecord)]) -> (Vec<(usize, TickRecord)>, usize) {
+    let bytes = |r: &TickRecord| {
+        let mut b = [0u8; RECORD_LEN];
+        r.encode(&mut b);
+        b
+    };
+    let mut kept: Vec<(usize, TickRecord)> = Vec::with_capacity(records.len());
+    let mut repeated = 0;
+    for (at, r) in records {
+        if let Some((_, prev)) = kept.last() {
+            if bytes(prev) == bytes(r) {
+                repeated += 1;
+                continue;
+            }
+        }
+        kept.push((*at, *r));
+    }
+    (kept, repeated)
+}
+
 /// The recording of a record sequence; `what` names a record's position for errors
 /// (`byte 92`, `line 7`).
 pub fn recording_of(
     records: &[(usize, TickRecord)],
     file: &Path,
     what: &str,
-) -> anyhow::Result<(Recording, usize)> {
+) -> anyhow::Result<(Recording, CaptureCounts)> {
+    let (records, repeated) = without_repeats(records);
+    let records = records.as_slice();
     if records.len() < 2 {
         anyhow::bail!(
             "{}: {} stream record(s); a recording needs at least 2",
@@ -92,6 +125,21 @@ pub fn recording_of(
     for (i, (at, r)) in records.iter().enumerate() {
         if i > 0 {
             let prev = &records[i - 1].1;
+            let ahead = r.seq.wrapping_sub(prev.seq);
+            if ahead == 0 || ahead > u32::MAX / 2 {
+                anyhow::bail!(
+                    "{}: {what} {at}: sequence {} after {}: a record {} (not a byte-for-byte \
+                     repeat); the log is not one run in order",
+                    file.display(),
+                    r.seq,
+                    prev.seq,
+                    if ahead == 0 {
+                        "repeated with other content"
+                    } else {
+                        "out of order"
+                    }
+                );
+            }
             if r.seq != prev.seq.wrapping_add(1) {
                 anyhow::bail!(
                     "{}: {what} {at}: sequence {} after {}: {} record(s) lost (not \
@@ -163,7 +211,7 @@ pub fn recording_of(
             "angle_deg, p1_kpa, p2_kpa as the firmware scaled them".into(),
         ),
     ];
-    Ok((rec, faulted))
+    Ok((rec, CaptureCounts { faulted, repeated }))
 }
 
 /// `host-sim capture`: returns the report printed on stdout.
@@ -197,15 +245,17 @@ pub fn run_capture(a: &CaptureArgs) -> anyhow::Result<String> {
             "text lines".to_string(),
         )
     };
-    let (rec, faulted) = recording_of(&records, &a.log, what)?;
+    let (rec, counts) = recording_of(&records, &a.log, what)?;
     rec.write(&a.out)?;
     Ok(format!(
         "wrote {}: {} ticks from {how}, {} bytes per record, {:.0} bytes/s at the logged rate; \
-         {faulted} tick(s) with a latched fault\n",
+         {} tick(s) with a latched fault; {} repeated record(s) dropped\n",
         a.out.display(),
         rec.len(),
         RECORD_LEN,
-        RECORD_LEN as f64 / rec.sample_period_s()
+        RECORD_LEN as f64 / rec.sample_period_s(),
+        counts.faulted,
+        counts.repeated
     ))
 }
 

@@ -60,6 +60,7 @@ use serde::Deserialize;
 
 use crate::io::recording::{Channel, Recording, MAX_STEP_RATIO, MIN_STEP_RATIO};
 use crate::plant::ValveInputs;
+use crate::validate::{Range, Shown};
 
 /// The mapping file.
 #[derive(Debug, Clone, Deserialize)]
@@ -71,6 +72,9 @@ pub struct Mapping {
     #[serde(default)]
     pub pressure: PressureOptions,
     pub channel: Vec<ChannelMap>,
+    /// The file's text, to name the line of a key in an error.
+    #[serde(skip)]
+    text: String,
 }
 
 /// `[pressure]`: atmosphere and the regulator model.
@@ -240,21 +244,50 @@ pub struct Imported {
     pub max_jitter: f64,
     /// Median step [s].
     pub median_step_s: f64,
+    /// One line per mapped output channel: its range over the file, in recording units.
+    pub ranges: Vec<String>,
+    /// Values that are possible but suspect (a unit mistake is the usual cause).
+    pub warnings: Vec<String>,
 }
 
 impl Mapping {
     pub fn load(path: &Path) -> Result<Self, ImportError> {
         let text = std::fs::read_to_string(path)
             .map_err(|e| ImportError(format!("{}: {e}", path.display())))?;
-        let m: Mapping =
+        let mut m: Mapping =
             toml::from_str(&text).map_err(|e| ImportError(format!("{}: {e}", path.display())))?;
+        m.text = text;
         m.check(path)?;
         Ok(m)
     }
 
+    /// "file:line: `table.key`: message" (the line when it is found).
+    fn key_error(
+        &self,
+        path: &Path,
+        table: &str,
+        index: usize,
+        key: &str,
+        msg: &str,
+    ) -> ImportError {
+        let dotted = if table.is_empty() {
+            key.to_string()
+        } else {
+            format!("{table}.{key}")
+        };
+        ImportError(
+            match crate::validate::toml_key_line(&self.text, table, index, key) {
+                Some(line) => format!("{}:{line}: `{dotted}`: {msg}", path.display()),
+                None => format!("{}: `{dotted}`: {msg}", path.display()),
+            },
+        )
+    }
+
     fn check(&self, path: &Path) -> Result<(), ImportError> {
-        let bad =
-            |key: &str, msg: String| ImportError(format!("{}: `{key}`: {msg}", path.display()));
+        let bad = |dotted: &str, msg: String| {
+            let (table, key) = dotted.rsplit_once('.').unwrap_or(("", dotted));
+            self.key_error(path, table, 0, key, &msg)
+        };
         if self.csv.delimiter.chars().count() != 1 || !self.csv.delimiter.is_ascii() {
             return Err(bad("csv.delimiter", "must be one ASCII character".into()));
         }
@@ -274,21 +307,53 @@ impl Mapping {
             )
         })?;
         let p = &self.pressure;
-        if !(p.p_atm_pa > 0.0 && p.p_atm_pa.is_finite()) {
-            return Err(bad(
-                "pressure.p_atm_pa",
-                format!("{} must be > 0", p.p_atm_pa),
-            ));
-        }
-        if !(p.regulator_band_pa > 0.0 && p.regulator_band_pa.is_finite()) {
-            return Err(bad(
+        for (key, v, range) in [
+            ("pressure.p_atm_pa", p.p_atm_pa, P_ATM_RANGE_PA),
+            (
                 "pressure.regulator_band_pa",
-                format!("{} must be > 0", p.regulator_band_pa),
-            ));
+                p.regulator_band_pa,
+                REGULATOR_BAND_RANGE_PA,
+            ),
+        ] {
+            if let Err(msg) = range.check(v) {
+                let mut msg = format!("{msg} Pa");
+                for (unit, factor) in [("kPa", 1e3), ("bar", 1e5)] {
+                    if v > 0.0 && range.contains(v * factor) {
+                        msg.push_str(&format!(
+                            " ({unit} typed into a Pa key? {} {unit} is {} Pa)",
+                            Shown(v),
+                            Shown(v * factor)
+                        ));
+                    }
+                }
+                return Err(bad(key, msg));
+            }
         }
         Ok(())
     }
 }
+
+/// Atmospheric pressure a rig can see: from about 5 500 m of altitude to a deep mine [Pa].
+pub const P_ATM_RANGE_PA: Range = Range::closed(50_000.0, 110_000.0);
+/// Proportional band of a pressure regulator [Pa].
+pub const REGULATOR_BAND_RANGE_PA: Range = Range::closed(100.0, 1e6);
+/// Median time step of a recording a PAM joint can be studied from: 100 kHz .. 10 Hz [s].
+pub const STEP_RANGE_S: Range = Range::closed(1e-5, 0.1);
+/// Highest gauge pressure a mapped column may reach [Pa] (pneumatics runs below 1.6 MPa).
+pub const P_GAUGE_MAX_PA: f64 = 10e6;
+/// Largest |angle| a joint may report [rad]: half a turn.
+pub const ANGLE_MAX_RAD: f64 = std::f64::consts::PI;
+/// Largest |force| a muscle may report [N] (the largest fluidic muscles give about 6 kN).
+pub const FORCE_MAX_N: f64 = 1e5;
+/// A pressure channel whose |gauge| never reaches this is suspect (a unit too large read
+/// as a smaller one: bar or MPa mapped as kPa) [Pa].
+pub const P_SUSPECT_BELOW_PA: f64 = 10e3;
+/// A muscle exhausts to the atmosphere: a gauge pressure below this is suspect (an absolute
+/// sensor read as gauge, or a unit too large read as a smaller one) [Pa].
+pub const P_SUSPECT_GAUGE_BELOW_PA: f64 = -20e3;
+/// An angle channel that never moves more than this is suspect (radians mapped as degrees)
+/// [rad].
+pub const ANGLE_SPAN_SUSPECT_BELOW_RAD: f64 = 1.0 * std::f64::consts::PI / 180.0;
 
 fn time_factor(unit: &str) -> Option<f64> {
     match unit {
@@ -317,7 +382,15 @@ fn plan(
     c: &ChannelMap,
     path: &Path,
 ) -> Result<(Target, Convert), ImportError> {
-    let key = |k: &str| format!("{}: channel[{i}] (`{}`): `{k}`", path.display(), c.channel);
+    let key = |k: &str| {
+        let at = match crate::validate::toml_key_line(&m.text, "channel", i, k)
+            .or_else(|| crate::validate::toml_key_line(&m.text, "channel", i, "channel"))
+        {
+            Some(line) => format!("{}:{line}", path.display()),
+            None => path.display().to_string(),
+        };
+        format!("{at}: channel[{i}] (`{}`): `{k}`", c.channel)
+    };
     let target = Target::parse(&c.channel).ok_or_else(|| {
         ImportError(format!(
             "{}: {:?} is not a channel (p1 p2 angle f1 f2 u_in1 u_ex1 u_in2 u_ex2 valve1 valve2 \
@@ -335,8 +408,19 @@ fn plan(
             )))
         }
     }
-    if !(c.scale.is_finite() && c.offset.is_finite()) {
-        return Err(ImportError(format!("{}: not finite", key("scale"))));
+    if !(c.scale.is_finite() && c.scale != 0.0) {
+        return Err(ImportError(format!(
+            "{}: must be a finite number other than 0 (value = raw * scale + offset), got {}",
+            key("scale"),
+            Shown(c.scale)
+        )));
+    }
+    if !c.offset.is_finite() {
+        return Err(ImportError(format!(
+            "{}: must be a finite number, got {}",
+            key("offset"),
+            c.offset
+        )));
     }
     let unit = c.unit.as_deref().unwrap_or(match target {
         Target::Opening(_) | Target::Signed(_) => "fraction",
@@ -455,6 +539,43 @@ fn convert(conv: &Convert, v: f64) -> f64 {
             let (a, b) = (pts[j], pts[j + 1]);
             a[1] + (v - a[0]) / (b[0] - a[0]) * (b[1] - a[1])
         }
+    }
+}
+
+/// Why a converted value cannot be what the channel says (gauge Pa, rad, N), with the unit
+/// mistake that usually causes it; `None` when it can be.
+fn implausible(target: Target, v: f64, p_atm_pa: f64) -> Option<String> {
+    match target {
+        Target::Output(Channel::P1Kpa | Channel::P2Kpa) | Target::Regulator(_) => {
+            if v < -p_atm_pa {
+                Some(format!(
+                    "{} kPa gauge is below vacuum ({} kPa): an absolute sensor mapped with \
+                     `reference = \"gauge\"`, a wrong `pressure.p_atm_pa`, or the wrong `unit`?",
+                    Shown(v * 1e-3),
+                    Shown(-p_atm_pa * 1e-3)
+                ))
+            } else if v > P_GAUGE_MAX_PA {
+                Some(format!(
+                    "{} kPa gauge is above {} kPa: the wrong `unit` (Pa read as kPa?) or `scale`?",
+                    Shown(v * 1e-3),
+                    Shown(P_GAUGE_MAX_PA * 1e-3)
+                ))
+            } else {
+                None
+            }
+        }
+        Target::Output(Channel::AngleDeg) if v.abs() > ANGLE_MAX_RAD => Some(format!(
+            "{} rad ({} deg) is beyond half a turn: degrees mapped with `unit = \"rad\"`, or \
+             the wrong `counts_per_rev` / `scale`?",
+            Shown(v),
+            Shown(v.to_degrees())
+        )),
+        Target::Output(Channel::F1N | Channel::F2N) if v.abs() > FORCE_MAX_N => Some(format!(
+            "{} N is beyond {} N: kN mapped as N, or the wrong `scale`?",
+            Shown(v),
+            Shown(FORCE_MAX_N)
+        )),
+        _ => None,
     }
 }
 
@@ -650,6 +771,10 @@ pub fn import(
                 _ => unreachable!("checked: column or constant"),
             };
             let v = convert(&plans[i].1, raw * c.scale + c.offset);
+            if let Some(msg) = implausible(plans[i].0, v, mapping.pressure.p_atm_pa) {
+                let name = c.column.as_deref().unwrap_or("constant");
+                return Err(at(line, name, format!("channel `{}`: {msg}", c.channel)));
+            }
             // Openings must end up in range: say where they do not.
             if let Target::Opening(_) = plans[i].0 {
                 if !(0.0..=1.0).contains(&v) {
@@ -699,6 +824,20 @@ pub fn import(
     let mut steps: Vec<f64> = t_s.windows(2).map(|w| w[1] - w[0]).collect();
     steps.sort_by(f64::total_cmp);
     let median = steps[steps.len() / 2];
+    if !STEP_RANGE_S.contains(median) {
+        return Err(at(
+            lines[1],
+            time_name,
+            format!(
+                "the median time step is {} s (with `time.unit = {:?}` in {}), outside {} s \
+                 (100 kHz .. 10 Hz): is the time column in another unit (ms read as s?)",
+                Shown(median),
+                mapping.time.unit,
+                map_path.display(),
+                STEP_RANGE_S
+            ),
+        ));
+    }
     let mut gaps = Vec::new();
     let mut cuts = vec![0usize];
     let mut max_jitter: f64 = 0.0;
@@ -739,6 +878,7 @@ pub fn import(
         )));
     }
     cuts.push(n);
+    let (ranges, warnings) = channel_ranges(mapping, &plans, &values);
 
     // Assemble the recordings.
     let find = |t: Target| plans.iter().position(|(p, _)| *p == t);
@@ -828,7 +968,72 @@ pub fn import(
         gaps,
         max_jitter,
         median_step_s: median,
+        ranges,
+        warnings,
     })
+}
+
+/// The range of each mapped output channel, and a warning for a pressure that never leaves
+/// the first few kPa or an angle that never moves a degree (a unit too large read as a
+/// smaller one: bar as kPa, radians as degrees).
+fn channel_ranges(
+    mapping: &Mapping,
+    plans: &[(Target, Convert)],
+    values: &[Vec<f64>],
+) -> (Vec<String>, Vec<String>) {
+    let mut ranges = Vec::new();
+    let mut warnings = Vec::new();
+    for ((target, _), (c, v)) in plans.iter().zip(mapping.channel.iter().zip(values)) {
+        let Target::Output(ch) = *target else {
+            continue;
+        };
+        let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let source = match &c.column {
+            Some(col) => format!("column `{col}`"),
+            None => "constant".into(),
+        };
+        let (scale, unit) = match ch {
+            Channel::P1Kpa | Channel::P2Kpa => (1e-3, "kPa gauge"),
+            Channel::AngleDeg => (180.0 / std::f64::consts::PI, "deg"),
+            _ => (1.0, "N"),
+        };
+        ranges.push(format!(
+            "{} ({source}): {:.4} .. {:.4} {unit}",
+            c.channel,
+            lo * scale,
+            hi * scale
+        ));
+        if c.column.is_none() {
+            continue;
+        }
+        match ch {
+            Channel::P1Kpa | Channel::P2Kpa if lo.abs().max(hi.abs()) < P_SUSPECT_BELOW_PA => {
+                warnings.push(format!(
+                    "{} never exceeds {} kPa gauge over the file: a muscle that moves sees \
+                     hundreds of kPa; is `unit` right (bar or MPa read as kPa?)",
+                    c.channel,
+                    P_SUSPECT_BELOW_PA * 1e-3
+                ))
+            }
+            Channel::P1Kpa | Channel::P2Kpa if lo < P_SUSPECT_GAUGE_BELOW_PA => {
+                warnings.push(format!(
+                    "{} goes down to {:.1} kPa gauge: a muscle exhausts to the atmosphere (0 \
+                     kPa gauge); is `reference` right (absolute read as gauge?), or `unit` (bar \
+                     read as kPa?)",
+                    c.channel,
+                    lo * 1e-3
+                ))
+            }
+            Channel::AngleDeg if hi - lo < ANGLE_SPAN_SUSPECT_BELOW_RAD => warnings.push(format!(
+                "angle moves {:.4} deg over the whole file: is `unit` right (radians read as \
+                 degrees?)",
+                (hi - lo).to_degrees()
+            )),
+            _ => {}
+        }
+    }
+    (ranges, warnings)
 }
 
 /// Output path of segment `i` of `n`: `OUT` itself for one segment, else `OUT-1.csv`, ...
@@ -911,6 +1116,27 @@ pub fn run_import(a: &ImportArgs) -> anyhow::Result<String> {
     );
     for (l, t0, t1) in &imp.gaps {
         let _ = writeln!(report, "  gap before line {l}: {t0:.6} s -> {t1:.6} s");
+    }
+    for r in &imp.ranges {
+        let _ = writeln!(report, "  {r}");
+    }
+    for w in &imp.warnings {
+        let _ = writeln!(report, "warning: {w}");
+    }
+    // Segments of an earlier import with more of them are not this import's: say so.
+    let first_stale = if n == 1 { 0 } else { n };
+    for k in first_stale..first_stale + 1000 {
+        let p = segment_path(&a.out, k, n.max(2));
+        if !p.exists() {
+            break;
+        }
+        let _ = writeln!(
+            report,
+            "note: {} is not part of this import ({n} segment{}): an earlier run's file, left \
+             as it was",
+            p.display(),
+            if n == 1 { "" } else { "s" }
+        );
     }
     Ok(report)
 }

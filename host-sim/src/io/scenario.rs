@@ -696,7 +696,10 @@ pub(crate) fn check_expect(
         if !(v > 0.0 && v <= 2000.0) {
             return Err(bad(
                 "max_pressure_kpa",
-                format!("{v} kPa must be within (0, 2000] (gauge, in kPa: Pa typed?)"),
+                format!(
+                    "{} kPa must be within (0, 2000] (gauge, in kPa: Pa typed?)",
+                    crate::validate::Shown(v)
+                ),
             ));
         }
     }
@@ -706,7 +709,8 @@ pub(crate) fn check_expect(
             format!(
                 "{} must be within [0, {}) (before the end of the run, [scenario] duration_s): \
                  after the end there is nothing to check",
-                settle_after_s, h.duration_s
+                crate::validate::Shown(settle_after_s),
+                crate::validate::Shown(h.duration_s)
             ),
         ));
     }
@@ -764,7 +768,7 @@ impl ScenarioHeader {
             return Err(bad(
                 "scenario",
                 "duration_s",
-                format!("{} must be > 0", self.duration_s),
+                format!("{} must be > 0", crate::validate::Shown(self.duration_s)),
             ));
         }
         let (lo, hi) = (
@@ -777,7 +781,7 @@ impl ScenarioHeader {
                 "tick_hz",
                 format!(
                     "{} must be within {lo}..{hi} (the firmware's gains are stable from {lo} Hz)",
-                    self.tick_hz
+                    crate::validate::Shown(self.tick_hz)
                 ),
             ));
         }

@@ -1390,49 +1390,30 @@ impl<'a> Arm3Integrator<'a> {
         if n == 0 {
             return Ok(());
         }
-        let crate::sim::SegmentPlan {
-            duration_s,
-            single,
-            x_end,
-            h0,
-        } = crate::sim::SegmentPlan::new(n, dt_s, self.h_s);
+        let plan = crate::sim::SegmentPlan::new(n, dt_s, self.h_s);
+        let t_s = self.t_s;
+        let integration = |message| Arm3SimError::Integration { t_s, message };
         let (solver, accepted) = crate::sim::dopri_segment(
             Rhs {
                 arm: self.arm,
                 u: inputs,
             },
             self.state.to_vector(),
-            x_end,
+            &plan,
             dt_s,
-            h0,
             &self.opts,
-            single,
             &mut self.stats,
         )
-        .map_err(|message| Arm3SimError::Integration {
-            t_s: self.t_s,
-            message,
-        })?;
-        let ys = solver.y_out();
-        let end = if single {
+        .map_err(integration)?;
+        let (starts, last) = plan.points(solver.y_out(), n).map_err(integration)?;
+        if plan.single {
             on_sample(&self.state);
-            Arm3State::from_vector(ys.last().expect("sparse output holds the start point"))
-        } else {
-            if ys.len() < n + 1 {
-                return Err(Arm3SimError::Integration {
-                    t_s: self.t_s,
-                    message: format!(
-                        "dense output gave {} points for {} samples",
-                        ys.len(),
-                        n + 1
-                    ),
-                });
-            }
-            for y in &ys[..n] {
-                on_sample(&Arm3State::from_vector(y));
-            }
-            Arm3State::from_vector(&ys[n])
-        };
+        }
+        for y in starts {
+            on_sample(&Arm3State::from_vector(y));
+        }
+        let end = Arm3State::from_vector(last);
+        let duration_s = plan.duration_s;
         if !end.is_finite() {
             return Err(Arm3SimError::NonFinite {
                 t_s: self.t_s + duration_s,
@@ -1441,7 +1422,7 @@ impl<'a> Arm3Integrator<'a> {
         }
         self.state = end;
         self.t_s += duration_s;
-        self.h_s = duration_s / f64::from(accepted.max(1));
+        self.h_s = plan.mean_step_s(accepted);
         Ok(())
     }
 }

@@ -186,7 +186,7 @@ impl PlantConfig {
         };
         // Physical or practical ranges: wide enough for any real rig, narrow enough to catch
         // a unit typed wrong (kPa in a Pa key) or a value the model cannot run.
-        use crate::validate::Range;
+        use crate::validate::{Range, Shown};
         let ranges = [
             (
                 "environment.p_atm_pa",
@@ -269,7 +269,7 @@ impl PlantConfig {
         ];
         for (key, v, range, unit) in ranges {
             if !range.contains(v) {
-                let mut msg = format!("must be within {range} {unit}, got {v}");
+                let mut msg = format!("must be within {range} {unit}, got {}", Shown(v));
                 if key.ends_with("_pa") && v > 0.0 && range.contains(v * 1e3) {
                     msg.push_str(&format!(
                         " (kPa typed into a Pa key? {v} kPa is {} Pa)",
@@ -287,7 +287,8 @@ impl PlantConfig {
         ] {
             if !p_range.contains(v) {
                 let mut msg = format!(
-                    "must be within {p_range} Pa gauge (vacuum .. supply_gauge_pa), got {v}"
+                    "must be within {p_range} Pa gauge (vacuum .. supply_gauge_pa), got {}",
+                    Shown(v)
                 );
                 if v > 0.0 && p_range.contains(v * 1e3) {
                     msg.push_str(&format!(
@@ -345,7 +346,10 @@ impl PlantConfig {
         ] {
             if let Some(v) = v {
                 if !(v.is_finite() && v >= 0.0) {
-                    return Err(bad(key, &format!("must be a finite number >= 0, got {v}")));
+                    return Err(bad(
+                        key,
+                        &format!("must be a finite number >= 0, got {}", Shown(v)),
+                    ));
                 }
             }
         }

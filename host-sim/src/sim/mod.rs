@@ -131,18 +131,19 @@ impl<const N: usize> System<f64, SVector<f64, N>> for RhsAux<'_, N> {
 /// integrator here uses (safety 0.9, step-size factors, stiffness test off: the laminar patch
 /// keeps |lambda| h small), sparse output for a single sample (the last point is the end of
 /// the last accepted step), dense output at the sample times otherwise. Adds the run's
-/// counters to `stats`; returns the solver (its `y_out`) and the accepted steps.
-#[allow(clippy::too_many_arguments)]
+/// counters to `stats`; returns the solver (its `y_out`, read with [`SegmentPlan::points`])
+/// and the accepted steps.
 pub(crate) fn dopri_segment<const N: usize, F: System<f64, SVector<f64, N>>>(
     f: F,
     y0: SVector<f64, N>,
-    x_end: f64,
+    plan: &SegmentPlan,
     dt_s: f64,
-    h0: f64,
     opts: &SolverOptions,
-    single: bool,
     stats: &mut SimStats,
 ) -> Result<(Dopri5<f64, SVector<f64, N>, F>, u32), String> {
+    let SegmentPlan {
+        single, x_end, h0, ..
+    } = *plan;
     let mut solver = Dopri5::from_param(
         f,
         0.0,
@@ -175,6 +176,7 @@ pub(crate) fn dopri_segment<const N: usize, F: System<f64, SVector<f64, N>>>(
 
 /// Where one segment of `n` samples of `dt_s` ends and how it starts (shared by the 1-DOF
 /// integrator and the 3-DOF arm's).
+#[derive(Clone, Copy)]
 pub(crate) struct SegmentPlan {
     /// `n dt_s`.
     pub duration_s: f64,
@@ -209,6 +211,28 @@ impl SegmentPlan {
             x_end,
             h0,
         }
+    }
+
+    /// The output points of a [`dopri_segment`] over this plan's `n` samples (`ys`: the
+    /// solver's output): the states at the starts of the samples (none for a single sample,
+    /// whose start is the caller's state) and the state at the end.
+    pub fn points<'y, V>(&self, ys: &'y [V], n: usize) -> Result<(&'y [V], &'y V), String> {
+        if self.single {
+            return Ok((&[], ys.last().expect("sparse output holds the start point")));
+        }
+        if ys.len() < n + 1 {
+            return Err(format!(
+                "dense output gave {} points for {} samples",
+                ys.len(),
+                n + 1
+            ));
+        }
+        Ok((&ys[..n], &ys[n]))
+    }
+
+    /// The mean accepted step of the segment, as the first step of the next one.
+    pub fn mean_step_s(&self, accepted: u32) -> f64 {
+        self.duration_s / f64::from(accepted.max(1))
     }
 }
 
@@ -320,13 +344,9 @@ impl<'a> Integrator<'a> {
         if n == 0 {
             return Ok(());
         }
-        let SegmentPlan {
-            duration_s,
-            single,
-            x_end,
-            h0,
-        } = SegmentPlan::new(n, dt_s, self.h_s);
-        if single
+        let plan = SegmentPlan::new(n, dt_s, self.h_s);
+        let duration_s = plan.duration_s;
+        if plan.single
             && self.single_step_path
             && !self.plant.has_aux_state()
             && self.h_s >= 0.5 * duration_s
@@ -340,17 +360,13 @@ impl<'a> Integrator<'a> {
         }
         self.fsal = None;
         match self.plant.aux_layout() {
-            AuxLayout::None => {
-                self.advance_samples_n::<4>(inputs, dt_s, n, x_end, h0, single, on_sample)
-            }
-            AuxLayout::Supply => {
-                self.advance_samples_n::<5>(inputs, dt_s, n, x_end, h0, single, on_sample)
-            }
+            AuxLayout::None => self.advance_samples_n::<4>(inputs, dt_s, n, &plan, on_sample),
+            AuxLayout::Supply => self.advance_samples_n::<5>(inputs, dt_s, n, &plan, on_sample),
             AuxLayout::Temperatures => {
-                self.advance_samples_n::<6>(inputs, dt_s, n, x_end, h0, single, on_sample)
+                self.advance_samples_n::<6>(inputs, dt_s, n, &plan, on_sample)
             }
             AuxLayout::SupplyAndTemperatures => {
-                self.advance_samples_n::<7>(inputs, dt_s, n, x_end, h0, single, on_sample)
+                self.advance_samples_n::<7>(inputs, dt_s, n, &plan, on_sample)
             }
         }
     }
@@ -444,18 +460,17 @@ impl<'a> Integrator<'a> {
 
     /// [`Self::advance_samples`] with `Dopri5` over (beta, omega, p1, p2) and the plant's
     /// auxiliary states (`N` = 4 + their number).
-    #[allow(clippy::too_many_arguments)]
     fn advance_samples_n<const N: usize>(
         &mut self,
         inputs: ValveInputs,
         dt_s: f64,
         n: usize,
-        x_end: f64,
-        h0: f64,
-        single: bool,
+        plan: &SegmentPlan,
         mut on_sample: impl FnMut(&PlantState),
     ) -> Result<(), SimError> {
-        let duration_s = n as f64 * dt_s;
+        let duration_s = plan.duration_s;
+        let t_s = self.t_s;
+        let integration = |message| SimError::Integration { t_s, message };
         let a = self.state.to_array();
         let layout = self.plant.aux_layout();
         let packed = layout.pack(&self.aux);
@@ -471,33 +486,13 @@ impl<'a> Integrator<'a> {
                 base: self.aux,
             },
             y0,
-            x_end,
+            plan,
             dt_s,
-            h0,
             &self.opts,
-            single,
             &mut self.stats,
         )
-        .map_err(|message| SimError::Integration {
-            t_s: self.t_s,
-            message,
-        })?;
-        let ys = solver.y_out();
-        let last = if single {
-            *ys.last().expect("sparse output holds the start point")
-        } else {
-            if ys.len() < n + 1 {
-                return Err(SimError::Integration {
-                    t_s: self.t_s,
-                    message: format!(
-                        "dense output gave {} points for {} samples",
-                        ys.len(),
-                        n + 1
-                    ),
-                });
-            }
-            ys[n]
-        };
+        .map_err(integration)?;
+        let (starts, last) = plan.points(solver.y_out(), n).map_err(integration)?;
         let end = PlantState::from_array([last[0], last[1], last[2], last[3]]);
         if !end.to_array().iter().all(|v| v.is_finite()) {
             return Err(SimError::NonFinite {
@@ -510,18 +505,16 @@ impl<'a> Integrator<'a> {
                 t_s: self.t_s + duration_s,
             });
         }
-        if single {
+        if plan.single {
             on_sample(&self.state);
-        } else {
-            for y in &ys[..n] {
-                on_sample(&PlantState::from_array([y[0], y[1], y[2], y[3]]));
-            }
+        }
+        for y in starts {
+            on_sample(&PlantState::from_array([y[0], y[1], y[2], y[3]]));
         }
         self.state = end;
         self.aux = layout.unpack(&self.aux, &last.as_slice()[4..]);
         self.t_s += duration_s;
-        // Mean accepted step of this segment, as the first step of the next one.
-        self.h_s = duration_s / f64::from(accepted.max(1));
+        self.h_s = plan.mean_step_s(accepted);
         Ok(())
     }
 

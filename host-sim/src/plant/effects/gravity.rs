@@ -77,12 +77,7 @@ pub const GRAVITY_COM_DISTANCE_M: f64 = 0.1;
 pub struct GravityCandidate;
 
 impl Candidate for GravityCandidate {
-    fn id(&self) -> &'static str {
-        "gravity"
-    }
-    fn label(&self) -> &'static str {
-        "gravity load"
-    }
+    id_and_label!("gravity", "gravity load");
     fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
         vec![
             ParamSpec::new("mass_kg", 0.0, 20.0, 1.0),

@@ -58,12 +58,7 @@ impl Effect for InertiaMismatch {
 pub struct InertiaCandidate;
 
 impl Candidate for InertiaCandidate {
-    fn id(&self) -> &'static str {
-        "inertia"
-    }
-    fn label(&self) -> &'static str {
-        "inertia (load) mismatch"
-    }
+    id_and_label!("inertia", "inertia (load) mismatch");
     fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
         vec![ParamSpec::new("inertia_kgm2", 1e-3, 10.0, 0.01)]
     }

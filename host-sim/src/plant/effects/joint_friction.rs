@@ -91,12 +91,7 @@ pub const FRICTION_SMOOTHING_RAD_S: f64 = 0.02;
 pub struct JointFrictionCandidate;
 
 impl Candidate for JointFrictionCandidate {
-    fn id(&self) -> &'static str {
-        "joint_friction"
-    }
-    fn label(&self) -> &'static str {
-        "joint friction"
-    }
+    id_and_label!("joint_friction", "joint friction");
     fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
         vec![
             ParamSpec::new("coulomb_nm", 0.0, 20.0, 0.2),

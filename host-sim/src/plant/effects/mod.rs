@@ -76,6 +76,21 @@ macro_rules! table_effect {
     };
 }
 
+/// A diagnosis candidate's [`Candidate::id`] (the effect id of the diagnosis JSON) and
+/// [`Candidate::label`] (its name in sentences): write `id_and_label!("gravity", "gravity
+/// load");` inside `impl Candidate for TheCandidate`. A candidate whose id depends on its
+/// fields (`leakage.rs`) writes the two methods by hand.
+macro_rules! id_and_label {
+    ($id:literal, $label:literal) => {
+        fn id(&self) -> &'static str {
+            $id
+        }
+        fn label(&self) -> &'static str {
+            $label
+        }
+    };
+}
+
 /// How an enabled effect acts on the plant. Every hook defaults to "no change"; an effect
 /// overrides the ones it acts through.
 pub trait Hooks: Debug + Clone + PartialEq {

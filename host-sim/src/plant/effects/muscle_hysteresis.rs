@@ -82,12 +82,7 @@ pub const HYSTERESIS_SMOOTHING_PER_S: f64 = 0.01;
 pub struct MuscleHysteresisCandidate;
 
 impl Candidate for MuscleHysteresisCandidate {
-    fn id(&self) -> &'static str {
-        "muscle_hysteresis"
-    }
-    fn label(&self) -> &'static str {
-        "muscle (braid) hysteresis"
-    }
+    id_and_label!("muscle_hysteresis", "muscle (braid) hysteresis");
     fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
         vec![
             ParamSpec::new("base_force_n", 0.0, 500.0, 5.0),

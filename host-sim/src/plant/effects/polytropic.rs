@@ -48,12 +48,7 @@ impl Effect for Polytropic {
 pub struct PolytropicCandidate;
 
 impl Candidate for PolytropicCandidate {
-    fn id(&self) -> &'static str {
-        "polytropic"
-    }
-    fn label(&self) -> &'static str {
-        "polytropic (non-isothermal) chamber process"
-    }
+    id_and_label!("polytropic", "polytropic (non-isothermal) chamber process");
     fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
         vec![ParamSpec::new("exponent", 0.5, 2.0, 1.0)]
     }

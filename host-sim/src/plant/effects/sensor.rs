@@ -148,12 +148,7 @@ const OFFSET_NAMES: [&str; 5] = [
 const OFFSET_SCALES: [f64; 5] = [0.5, 5.0, 5.0, 5.0, 5.0];
 
 impl Candidate for SensorOffsetCandidate {
-    fn id(&self) -> &'static str {
-        "sensor_offset"
-    }
-    fn label(&self) -> &'static str {
-        "sensor calibration offset"
-    }
+    id_and_label!("sensor_offset", "sensor calibration offset");
     fn params(&self, s: &Setup) -> Vec<ParamSpec> {
         Channel::ALL
             .iter()
@@ -165,30 +160,13 @@ impl Candidate for SensorOffsetCandidate {
             .collect()
     }
     fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
-        let mut init = Vec::new();
-        let mut explained = 0.0;
-        let mut total = 0.0;
-        for c in Channel::ALL {
-            if let Some(r) = &ev.residual[c.index()] {
-                let n = r.len() as f64;
-                let mean = r.iter().sum::<f64>() / n;
-                let ss: f64 = r.iter().map(|v| v * v).sum();
-                let w = 1.0 / ev.spread[c.index()].powi(2);
-                explained += w * mean * mean * n;
-                total += w * ss;
-                init.push(mean);
-            }
-        }
-        let score = if total > 0.0 { explained / total } else { 0.0 };
-        Screening {
-            score,
-            initial: clamp_to(&self.params(s), init),
-            note: format!(
-                "a constant share of the residual ({:.0} % of its energy) is a fixed offset",
-                100.0 * score
-            ),
-            scatter: None,
-        }
+        // Per channel, the residual's mean.
+        let share = "a constant share of the residual";
+        screen_channels(ev, &self.params(s), share, "a fixed offset", |_, r, w| {
+            let n = r.len() as f64;
+            let mean = r.iter().sum::<f64>() / n;
+            Some((w * mean * mean * n, mean))
+        })
     }
     fn apply(&self, cfg: &mut PlantConfig, p: &[f64], s: &Setup) {
         // The offsets are fitted; the gains of a calibration the plant file already has stay.
@@ -208,6 +186,45 @@ impl Candidate for SensorOffsetCandidate {
             .map(|(n, v)| format!("{} {:+.3}", n.name, v))
             .collect();
         format!("constant sensor offsets ({})", parts.join(", "))
+    }
+}
+
+/// The screening of a per-channel calibration: each measured channel's residual fitted
+/// alone, weighted by 1 / spread^2. `fit(channel index, residual, weight)` gives the weighted
+/// residual energy the calibration explains and the channel's initial value (`None`: the
+/// channel cannot be fitted); the score is the explained share of the weighted residual
+/// energy, which the note reports as "`share` (.. % of its energy) is `what`".
+fn screen_channels(
+    ev: &Evidence,
+    params: &[ParamSpec],
+    share: &str,
+    what: &str,
+    fit: impl Fn(usize, &[f64], f64) -> Option<(f64, f64)>,
+) -> Screening {
+    let mut init = Vec::new();
+    let mut explained = 0.0;
+    let mut total = 0.0;
+    for c in Channel::ALL {
+        let Some(r) = &ev.residual[c.index()] else {
+            continue;
+        };
+        let w = 1.0 / ev.spread[c.index()].powi(2);
+        if let Some((e, x0)) = fit(c.index(), r, w) {
+            let ss: f64 = r.iter().map(|v| v * v).sum();
+            explained += e;
+            total += w * ss;
+            init.push(x0);
+        }
+    }
+    let score = if total > 0.0 { explained / total } else { 0.0 };
+    Screening {
+        score,
+        initial: clamp_to(params, init),
+        note: format!(
+            "{share} ({:.0} % of its energy) is {what}",
+            100.0 * score
+        ),
+        scatter: None,
     }
 }
 
@@ -256,12 +273,7 @@ pub struct SensorGainCandidate;
 const GAIN_NAMES: [&str; 5] = ["angle_gain", "p1_gain", "p2_gain", "f1_gain", "f2_gain"];
 
 impl Candidate for SensorGainCandidate {
-    fn id(&self) -> &'static str {
-        "sensor_gain"
-    }
-    fn label(&self) -> &'static str {
-        "sensor calibration gain"
-    }
+    id_and_label!("sensor_gain", "sensor calibration gain");
     fn params(&self, s: &Setup) -> Vec<ParamSpec> {
         Channel::ALL
             .iter()
@@ -271,31 +283,14 @@ impl Candidate for SensorGainCandidate {
     }
     fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
         // Per channel, the residual's projection on the nominal channel: r = (g - 1) y.
-        let mut init = Vec::new();
-        let mut explained = 0.0;
-        let mut total = 0.0;
-        for c in Channel::ALL {
-            if let (Some(r), Some(y)) = (&ev.residual[c.index()], &ev.nominal[c.index()]) {
-                let yy: f64 = y.iter().map(|v| v * v).sum();
-                let ry: f64 = r.iter().zip(y).map(|(a, b)| a * b).sum();
-                let ss: f64 = r.iter().map(|v| v * v).sum();
-                let w = 1.0 / ev.spread[c.index()].powi(2);
-                let k = if yy > 0.0 { ry / yy } else { 0.0 };
-                explained += w * k * ry;
-                total += w * ss;
-                init.push(1.0 + k);
-            }
-        }
-        let score = if total > 0.0 { explained / total } else { 0.0 };
-        Screening {
-            score,
-            initial: clamp_to(&self.params(s), init),
-            note: format!(
-                "a share of the residual proportional to the channel itself ({:.0} % of its energy) is a gain",
-                100.0 * score
-            ),
-            scatter: None,
-        }
+        let share = "a share of the residual proportional to the channel itself";
+        screen_channels(ev, &self.params(s), share, "a gain", |i, r, w| {
+            let y = ev.nominal[i].as_ref()?;
+            let yy: f64 = y.iter().map(|v| v * v).sum();
+            let ry: f64 = r.iter().zip(y).map(|(a, b)| a * b).sum();
+            let k = if yy > 0.0 { ry / yy } else { 0.0 };
+            Some((w * k * ry, 1.0 + k))
+        })
     }
     fn apply(&self, cfg: &mut PlantConfig, p: &[f64], s: &Setup) {
         // The gains are fitted; the offsets of a calibration the plant file already has stay.

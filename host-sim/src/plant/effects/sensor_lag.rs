@@ -174,12 +174,7 @@ impl SensorLagCandidate {
 }
 
 impl Candidate for SensorLagCandidate {
-    fn id(&self) -> &'static str {
-        "sensor_lag"
-    }
-    fn label(&self) -> &'static str {
-        "sensor lag"
-    }
+    id_and_label!("sensor_lag", "sensor lag");
     fn params(&self, s: &Setup) -> Vec<ParamSpec> {
         Self::groups(s)
             .into_iter()

@@ -337,30 +337,31 @@ pub fn supply_signature(ev: &Evidence) -> [Vec<f64>; 2] {
     supply
 }
 
+/// The screening of both forms: the chambers' pressure-rate residual regressed on
+/// [`supply_signature`]; `initial(coefficient)` gives the initial parameters, `note` says
+/// what a good score means.
+fn screen_supply(ev: &Evidence, note: &str, initial: impl FnOnce(f64) -> Vec<f64>) -> Screening {
+    let sig = supply_signature(ev);
+    let (c, r2) = regress_pressure(ev, &sig);
+    Screening {
+        score: r2,
+        initial: initial(c),
+        note: format!("{note} (R^2 {r2:.2})"),
+        scatter: pressure_scatter(ev, &sig, "supply-drop regressor [Pa/s per Pa s/m^3]"),
+    }
+}
+
 /// The static form: a line resistance.
 pub struct SupplyDropCandidate;
 
 impl Candidate for SupplyDropCandidate {
-    fn id(&self) -> &'static str {
-        "supply_drop"
-    }
-    fn label(&self) -> &'static str {
-        "supply pressure drop"
-    }
+    id_and_label!("supply_drop", "supply pressure drop");
     fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
         vec![ParamSpec::new("resistance_pa_s_per_m3", 0.0, 1e9, 1e7)]
     }
     fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
-        let sig = supply_signature(ev);
-        let (c, r2) = regress_pressure(ev, &sig);
-        Screening {
-            score: r2,
-            initial: clamp_to(&self.params(s), vec![c]),
-            note: format!(
-                "the chambers fill slower than nominal in proportion to the total inlet flow (R^2 {r2:.2})"
-            ),
-            scatter: pressure_scatter(ev, &sig, "supply-drop regressor [Pa/s per Pa s/m^3]"),
-        }
+        let note = "the chambers fill slower than nominal in proportion to the total inlet flow";
+        screen_supply(ev, note, |c| clamp_to(&self.params(s), vec![c]))
     }
     fn apply(&self, cfg: &mut PlantConfig, p: &[f64], _s: &Setup) {
         cfg.effects.supply_drop = Some(SupplyDrop {
@@ -384,12 +385,7 @@ impl Candidate for SupplyDropCandidate {
 pub struct SupplyReservoirCandidate;
 
 impl Candidate for SupplyReservoirCandidate {
-    fn id(&self) -> &'static str {
-        "supply_drop"
-    }
-    fn label(&self) -> &'static str {
-        "supply pressure drop"
-    }
+    id_and_label!("supply_drop", "supply pressure drop");
     fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
         vec![
             ParamSpec::new("tank_volume_m3", 1e-6, 0.1, 1e-3),
@@ -397,16 +393,9 @@ impl Candidate for SupplyReservoirCandidate {
         ]
     }
     fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
-        let sig = supply_signature(ev);
-        let (_, r2) = regress_pressure(ev, &sig);
-        Screening {
-            score: r2,
-            initial: self.params(s).iter().map(|p| p.scale).collect(),
-            note: format!(
-                "the chambers fill slower than nominal while the inlet valves draw air, as from a supply tank that drains and refills (R^2 {r2:.2})"
-            ),
-            scatter: pressure_scatter(ev, &sig, "supply-drop regressor [Pa/s per Pa s/m^3]"),
-        }
+        let note = "the chambers fill slower than nominal while the inlet valves draw air, as from a supply tank that drains and refills";
+        // No closed form for the tank: the typical sizes.
+        screen_supply(ev, note, |_| self.params(s).iter().map(|p| p.scale).collect())
     }
     fn apply(&self, cfg: &mut PlantConfig, p: &[f64], _s: &Setup) {
         cfg.effects.supply_drop = Some(SupplyDrop {

@@ -144,12 +144,7 @@ impl Effect for ThermalChamber {
 pub struct HeatTransferCandidate;
 
 impl Candidate for HeatTransferCandidate {
-    fn id(&self) -> &'static str {
-        "heat_transfer"
-    }
-    fn label(&self) -> &'static str {
-        "chamber thermodynamics (gas temperature with wall heat transfer)"
-    }
+    id_and_label!("heat_transfer", "chamber thermodynamics (gas temperature with wall heat transfer)");
     fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
         vec![ParamSpec::new("heat_transfer_w_per_k", 0.0, 50.0, 1.0)]
     }

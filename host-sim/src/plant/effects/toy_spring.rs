@@ -51,12 +51,7 @@ impl Effect for ToySpring {
 pub struct ToySpringCandidate;
 
 impl Candidate for ToySpringCandidate {
-    fn id(&self) -> &'static str {
-        "toy_spring"
-    }
-    fn label(&self) -> &'static str {
-        "torsion spring"
-    }
+    id_and_label!("toy_spring", "torsion spring");
     fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
         vec![ParamSpec::new("stiffness_nm_per_rad", 0.0, 100.0, 1.0)]
     }

@@ -164,12 +164,7 @@ pub const MAX_VALVE_DELAY_S: f64 = 0.05;
 pub struct ValveDelayCandidate;
 
 impl Candidate for ValveDelayCandidate {
-    fn id(&self) -> &'static str {
-        "valve_delay"
-    }
-    fn label(&self) -> &'static str {
-        "valve delay"
-    }
+    id_and_label!("valve_delay", "valve delay");
     fn params(&self, s: &Setup) -> Vec<ParamSpec> {
         vec![ParamSpec::new("delay_s", 0.0, MAX_VALVE_DELAY_S, s.dt_s)]
     }
