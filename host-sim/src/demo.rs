@@ -134,9 +134,9 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
         let r = run(&plant, &s).with_context(|| format!("{file}: closed-loop run failed"))?;
         let wall = t0.elapsed().as_secs_f64();
         let name = &s.scenario.name;
-        let csv = opts.out_dir.join(format!("{name}.csv"));
+        let csv = out_file(&opts.out_dir, name, ".csv")?;
         let trace = firmware_trace_path(&csv);
-        let png = opts.out_dir.join(format!("{name}.png"));
+        let png = out_file(&opts.out_dir, name, ".png")?;
         write_firmware_trace(&r, &trace)?;
         run_recording(&r, &plant_path.display().to_string(), file, Some(&trace)).write(&csv)?;
         plot_run(&png, &r, &plant)?;
@@ -176,8 +176,8 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
     ];
     let out = crate::sim::replay_recording(&plant, &fixture, &sim.states, metadata);
     let stem = crate::io::file_stem_or(&fixture_path, "fixture");
-    let replay_csv = opts.out_dir.join(format!("{stem}_replay.csv"));
-    let replay_png = opts.out_dir.join(format!("{stem}_replay.png"));
+    let replay_csv = out_file(&opts.out_dir, &stem, "_replay.csv")?;
+    let replay_png = out_file(&opts.out_dir, &stem, "_replay.png")?;
     out.write(&replay_csv)?;
     let fits = compare(&fixture, &out)
         .with_context(|| format!("cannot compare {} with the replay", fixture_path.display()))?;
@@ -192,6 +192,12 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
         replay_speed_x: duration_s / replay_wall.max(1e-9),
         replay_files: vec![replay_csv, replay_png],
     })
+}
+
+/// `out_dir/<name><suffix>`, refused unless it is a plain file inside `out_dir` (a name from
+/// a scenario file never writes elsewhere; the scenario parser refuses such names first).
+pub(crate) fn out_file(out_dir: &Path, name: &str, suffix: &str) -> Result<PathBuf> {
+    crate::validate::inside_dir(out_dir, &format!("{name}{suffix}")).map_err(anyhow::Error::msg)
 }
 
 /// The tables' `expect` column: whether a scenario met its `[expect]` bounds.

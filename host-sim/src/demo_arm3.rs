@@ -7,10 +7,10 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 
 use crate::control::arm3_loop::{run_arm, ArmScenario};
-use crate::demo::{expect_column, write_expect_fails};
+use crate::demo::{expect_column, out_file, write_expect_fails};
 use crate::io::arm3::plot_arm3;
 use crate::plant::arm3::Arm3;
 use pam_firmware::arm::{ArmConfig, JOINTS};
@@ -44,6 +44,10 @@ pub struct ArmScenarioResult {
     /// Highest muscle pressure [kPa].
     pub max_pressure_kpa: f64,
     pub expect_fails: Vec<String>,
+    /// The scenario sets no `[expect]` bound (nothing to meet).
+    pub no_expectations: bool,
+    /// The first latched fault: (time [s], code, joint 1-based).
+    pub first_fault: Option<(f64, u8, u8)>,
     /// Simulated seconds per wall second.
     pub speed_x: f64,
     pub files: Vec<PathBuf>,
@@ -70,20 +74,38 @@ pub fn run_arm_demo_with(
     scenarios: &[(&str, &str)],
 ) -> Result<ArmDemoReport> {
     let arm = Arm3::load(plant_path)?;
+    // Every scenario parses (its name is a plain file name) before anything runs, and two
+    // scenarios may not write the same files.
+    let parsed = scenarios
+        .iter()
+        .map(|(file, text)| ArmScenario::from_toml_str(text, file).map(|s| (*file, s)))
+        .collect::<Result<Vec<_>, _>>()?;
+    for (k, (file, s)) in parsed.iter().enumerate() {
+        if let Some((other, _)) = parsed[..k]
+            .iter()
+            .find(|(_, o)| o.scenario.name == s.scenario.name)
+        {
+            bail!(
+                "{file}: [scenario] name {:?} is also the name of {other}: each scenario's \
+                 files are named after it, give the two scenarios different names",
+                s.scenario.name
+            );
+        }
+    }
     crate::io::atomic::create_dir_all(out_dir)
         .with_context(|| format!("{}: cannot create the directory", out_dir.display()))?;
     let mut results = Vec::new();
-    for (file, text) in scenarios {
-        let s = ArmScenario::from_toml_str(text, file)?;
+    for (file, s) in &parsed {
+        let file = *file;
         let cfg = ArmConfig::reference(s.scenario.tick_hz as f32);
         let t0 = Instant::now();
         let r =
             run_arm(&arm, &s, cfg).with_context(|| format!("{file}: closed-loop run failed"))?;
         let wall = t0.elapsed().as_secs_f64();
         let name = &s.scenario.name;
-        let csv = out_dir.join(format!("{name}.csv"));
-        let trace = out_dir.join(format!("{name}.firmware.csv"));
-        let png = out_dir.join(format!("{name}.png"));
+        let csv = out_file(out_dir, name, ".csv")?;
+        let trace = out_file(out_dir, name, ".firmware.csv")?;
+        let png = out_file(out_dir, name, ".png")?;
         let rec = r.to_recording(&arm, &plant_path.display().to_string(), file);
         rec.write(&csv)?;
         crate::io::atomic::write_bytes(&trace, r.firmware_trace_csv().as_bytes())
@@ -98,6 +120,8 @@ pub fn run_arm_demo_with(
             max_abs_error_rad: st.map(|t| t.max_abs_rad),
             max_pressure_kpa: r.max_pressure_kpa(),
             expect_fails: r.check(),
+            no_expectations: s.expect.is_empty(),
+            first_fault: r.first_fault(),
             speed_x: s.scenario.duration_s / wall.max(1e-9),
             files: vec![csv, trace, png],
         });
@@ -152,10 +176,30 @@ pub fn format_arm_report(r: &ArmDemoReport, out_dir: &Path) -> String {
             tri(c.rms_error_rad),
             tri(c.max_abs_error_rad),
             c.max_pressure_kpa,
-            expect_column(&c.expect_fails),
+            if c.no_expectations {
+                "none"
+            } else {
+                expect_column(&c.expect_fails)
+            },
             c.speed_x
         );
         write_expect_fails(&mut s, &c.name, &c.expect_fails);
+        if c.no_expectations {
+            let _ = writeln!(
+                s,
+                "  {}: no expectations given (no [expect] bounds)",
+                c.name
+            );
+        }
+        if let Some((t, code, joint)) = c.first_fault {
+            if c.expect_fails.is_empty() {
+                let _ = writeln!(
+                    s,
+                    "  {}: fault code {code} latched by joint {joint} at t = {t:.3} s",
+                    c.name
+                );
+            }
+        }
     }
     let _ = writeln!(
         s,

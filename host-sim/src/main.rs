@@ -229,6 +229,10 @@ struct FitArgs {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if let Err(e) = refuse_arm_files(&cli.command) {
+        eprintln!("error: {e}");
+        return ExitCode::from(2);
+    }
     // Every output of the command is staged and renamed into place only if it succeeds: a
     // failed run leaves the user's files as they were and nothing behind.
     let outputs = host_sim::io::atomic::Transaction::begin();
@@ -280,6 +284,56 @@ fn main() -> ExitCode {
             ExitCode::from(2)
         }
     }
+}
+
+/// Refuses a 3-DOF arm plant file or arm recording given to a 1-DOF-only command, naming
+/// the file, what it is and the commands that take it (the 1-DOF parsers would report an
+/// unknown key or a missing column instead).
+fn refuse_arm_files(c: &Command) -> Result<(), String> {
+    use host_sim::identify::cli::{IdentifyWhat, SweepWhat};
+    let (name, plants, recordings): (&str, Vec<&Path>, Vec<&Path>) = match c {
+        Command::Tune(a) => ("tune", vec![&a.plant], vec![]),
+        Command::Pil(a) => ("pil", vec![&a.plant], vec![]),
+        Command::DiagnoseBatch(a) => ("diagnose-batch", vec![&a.plant], vec![]),
+        Command::CompareControl(a) => ("compare-control", vec![&a.plant], vec![]),
+        Command::Fit(a) => ("fit", vec![], vec![&a.a, &a.b]),
+        Command::Calibrate(a) => {
+            let mut r = vec![a.recording.as_path()];
+            r.extend(a.plant_recording.as_deref());
+            ("calibrate", vec![&a.plant], r)
+        }
+        Command::Sweep(a) => match &a.what {
+            SweepWhat::Force(w) => ("sweep force", vec![&w.plant], vec![]),
+            SweepWhat::Torque(w) => ("sweep torque", vec![&w.plant], vec![]),
+            SweepWhat::ForceMap(_) => return Ok(()),
+        },
+        Command::Identify(a) => match &a.what {
+            IdentifyWhat::Plant(w) => ("identify plant", vec![&w.plant], vec![&w.recording]),
+            IdentifyWhat::Torque(w) => ("identify torque", vec![&w.plant], vec![&w.recording]),
+            IdentifyWhat::Volume(w) => ("identify volume", vec![], vec![&w.recording]),
+            IdentifyWhat::Force(_) => return Ok(()),
+        },
+        _ => return Ok(()),
+    };
+    let arm_use = "for the arm use demo / simulate / diagnose";
+    for p in plants {
+        if let Some(kind) = host_sim::plant::arm3::file_kind(p) {
+            return Err(format!(
+                "{} is a 3-DOF arm plant file (kind = {kind:?}); {name} is 1-DOF only: {arm_use}",
+                p.display()
+            ));
+        }
+    }
+    for r in recordings {
+        if host_sim::io::arm3::is_arm3_recording(r) {
+            return Err(format!(
+                "{} is a 3-DOF arm recording (columns with a _j1.._j3 suffix); {name} is 1-DOF \
+                 only: {arm_use}",
+                r.display()
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// An error with its causes, `: `-separated, each cause left out when the text before it

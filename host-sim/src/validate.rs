@@ -98,6 +98,24 @@ impl fmt::Display for Range {
     }
 }
 
+/// The message for a file value `v` of `key` outside `range` ("must be within [lo, hi]
+/// UNIT, got v", with a hint when `v` kPa typed into a Pa key would have been in range);
+/// `None` inside it.
+pub fn range_error(key: &str, v: f64, range: Range, unit: &str) -> Option<String> {
+    if range.contains(v) {
+        return None;
+    }
+    let mut msg = format!("must be within {range} {unit}, got {}", Shown(v));
+    if key.ends_with("_pa") && v > 0.0 && range.contains(v * 1e3) {
+        msg.push_str(&format!(
+            " (kPa typed into a Pa key? {} kPa is {} Pa)",
+            Shown(v),
+            Shown(v * 1e3)
+        ));
+    }
+    Some(msg)
+}
+
 /// A number as an error message shows it: plain when it reads well, in exponent form when
 /// it is very large or very small (a typed `1e300` is not echoed with 300 digits), and
 /// without the last bits of a rounding error.
@@ -192,6 +210,50 @@ pub fn output_dir(flag: &str, dir: &Path) -> Result<(), String> {
         ));
     }
     Ok(())
+}
+
+/// Longest name [`file_name_part`] accepts [characters].
+pub const MAX_NAME_CHARS: usize = 100;
+
+/// Checks a name typed into a file that becomes part of an output file name (a scenario's
+/// `name`): 1 to [`MAX_NAME_CHARS`] characters of `A-Za-z0-9_.-`, not starting with `.`
+/// and without `..`, so that it can never name a path outside the output directory.
+pub fn file_name_part(name: &str) -> Result<(), String> {
+    let allowed = |c: char| c.is_ascii_alphanumeric() || matches!(c, '_' | '.' | '-');
+    let why = if name.is_empty() {
+        "is empty"
+    } else if name.chars().count() > MAX_NAME_CHARS {
+        "is too long"
+    } else if name.contains('/') || name.contains('\\') {
+        "contains a path separator"
+    } else if name.starts_with('.') {
+        "starts with '.'"
+    } else if name.contains("..") {
+        "contains '..'"
+    } else if !name.chars().all(allowed) {
+        "contains a character outside A-Za-z0-9_.-"
+    } else {
+        return Ok(());
+    };
+    Err(format!(
+        "{name:?} {why}: the name becomes a file name, so it must be 1 to {MAX_NAME_CHARS} \
+         characters of A-Za-z0-9_.- , not start with '.' and not contain '..'"
+    ))
+}
+
+/// `dir/file_name`, refused unless `file_name` is one plain component (no separator, no
+/// `..`, not absolute): every output of a run named after user text stays inside `dir`.
+pub fn inside_dir(dir: &Path, file_name: &str) -> Result<PathBuf, String> {
+    let mut parts = Path::new(file_name).components();
+    match (parts.next(), parts.next()) {
+        (Some(std::path::Component::Normal(n)), None) if n == std::ffi::OsStr::new(file_name) => {
+            Ok(dir.join(file_name))
+        }
+        _ => Err(format!(
+            "output file name {file_name:?} is not a plain file name inside {}",
+            dir.display()
+        )),
+    }
 }
 
 /// 1-based line of `key = ...` inside `[table]` (or `[[table]]`, the `index`-th one) of TOML
@@ -394,6 +456,32 @@ mod tests {
         assert_eq!(toml_key_line(t, "b", 0, "x"), Some(5));
         assert_eq!(toml_key_line(t, "e", 1, "z"), Some(9));
         assert_eq!(toml_key_line(t, "b", 0, "z"), None);
+    }
+
+    #[test]
+    fn names_that_would_leave_the_output_directory_are_refused() {
+        for bad in [
+            "",
+            "../x",
+            "a/b",
+            "a\\b",
+            ".hidden",
+            "a..b",
+            "..",
+            "x y",
+            "caf\u{e9}",
+            "/abs",
+        ] {
+            assert!(file_name_part(bad).is_err(), "{bad:?} accepted");
+        }
+        for good in ["step", "arm_pick-place.v2", "A1"] {
+            file_name_part(good).unwrap();
+        }
+        let d = Path::new("out");
+        assert_eq!(inside_dir(d, "a.csv").unwrap(), d.join("a.csv"));
+        for bad in ["../a.csv", "/a.csv", "x/a.csv", "..", "."] {
+            assert!(inside_dir(d, bad).is_err(), "{bad:?} accepted");
+        }
     }
 
     #[test]

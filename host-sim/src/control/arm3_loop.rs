@@ -35,8 +35,11 @@ use serde::Deserialize;
 
 use crate::control::closed_loop::{FakePin, TrackingStats};
 use crate::io::arm3::Arm3Recording;
+use std::f64::consts::PI;
+
 use crate::io::scenario::{
-    key_error, read_scenario_text, ClosedLoopError, ScenarioHeader, SensorModel, SetpointProfile,
+    check_expect, key_error, key_line, read_scenario_text, ClosedLoopError, ScenarioHeader,
+    SensorModel, SetpointProfile,
 };
 use crate::plant::arm3::{Arm3, Arm3Inputs, Arm3Integrator, Arm3State};
 use crate::plant::ValveInputs;
@@ -97,6 +100,16 @@ pub struct ArmExpectations {
     pub no_fault: bool,
 }
 
+impl ArmExpectations {
+    /// True when the scenario sets no bound (no `[expect]` table, or only `settle_after_s`).
+    pub fn is_empty(&self) -> bool {
+        self.max_abs_error_rad.is_none()
+            && self.rms_error_rad.is_none()
+            && self.max_pressure_kpa.is_none()
+            && !self.no_fault
+    }
+}
+
 impl ArmScenario {
     /// Reads and validates an arm scenario file.
     pub fn load(path: impl AsRef<Path>) -> Result<Self, ClosedLoopError> {
@@ -126,14 +139,43 @@ impl ArmScenario {
                 "the arm loop feeds SI frames: must be false".into(),
             ));
         }
-        if !(s.sensors.pressure_noise_pa.is_finite() && s.sensors.pressure_noise_pa >= 0.0) {
-            return Err(bad(
-                "sensors",
-                "pressure_noise_pa",
-                format!("{} must be >= 0", s.sensors.pressure_noise_pa),
-            ));
-        }
+        // The 1-DOF scenario's checks: sensors, each joint's profile, the [expect] values.
+        s.sensors.check(&|key, msg| bad("sensors", key, msg))?;
+        let h = &s.scenario;
         let sp = &s.setpoint;
+        for (j, p) in [&sp.joint1, &sp.joint2, &sp.joint3].iter().enumerate() {
+            if let Some(p) = p {
+                let joint = format!("joint{}", j + 1);
+                p.check(h, &|key, msg| {
+                    // `jointN = { ... }` in [setpoint], or a [setpoint.jointN] table.
+                    let line = key_line(text, &format!("setpoint.{joint}"), key)
+                        .or_else(|| key_line(text, "setpoint", &joint));
+                    ClosedLoopError::Scenario {
+                        file: file.to_string(),
+                        msg: format!(
+                            "{}[setpoint] {joint}.{key}: {msg}",
+                            line.map(|l| format!("line {l}: ")).unwrap_or_default()
+                        ),
+                    }
+                })?;
+            }
+        }
+        let e = &s.expect;
+        let per_joint = |b: Option<[f64; JOINTS]>, j: usize| b.map(|b| b[j]);
+        check_expect(
+            h,
+            e.settle_after_s,
+            e.max_pressure_kpa,
+            &[
+                ("max_abs_error_rad", per_joint(e.max_abs_error_rad, 0)),
+                ("max_abs_error_rad", per_joint(e.max_abs_error_rad, 1)),
+                ("max_abs_error_rad", per_joint(e.max_abs_error_rad, 2)),
+                ("rms_error_rad", per_joint(e.rms_error_rad, 0)),
+                ("rms_error_rad", per_joint(e.rms_error_rad, 1)),
+                ("rms_error_rad", per_joint(e.rms_error_rad, 2)),
+            ],
+            &|key, msg| bad("expect", key, msg),
+        )?;
         let profiles = [&sp.joint1, &sp.joint2, &sp.joint3];
         if let Some(w) = &sp.waypoints {
             if profiles.iter().any(|p| p.is_some()) {
@@ -153,6 +195,24 @@ impl ArmScenario {
                     "setpoint",
                     "waypoints",
                     "values must be finite and the times increasing".into(),
+                ));
+            }
+            if let Some(v) = w.iter().flat_map(|r| &r[1..]).find(|v| v.abs() > PI) {
+                return Err(bad(
+                    "setpoint",
+                    "waypoints",
+                    format!("{v} rad is more than half a turn (allowed -pi..=pi): degrees typed as radians?"),
+                ));
+            }
+            if let Some(r) = w.iter().find(|r| !(r[0] >= 0.0 && r[0] < h.duration_s)) {
+                return Err(bad(
+                    "setpoint",
+                    "waypoints",
+                    format!(
+                        "time {} s must be within [0, {}) (before the end of the run, [scenario] \
+                         duration_s)",
+                        r[0], h.duration_s
+                    ),
                 ));
             }
             match sp.move_s {
@@ -190,8 +250,12 @@ impl ArmScenario {
             }
         }
         if let Some(hold) = sp.hold_rad {
-            if hold.iter().any(|v| !v.is_finite()) {
-                return Err(bad("setpoint", "hold_rad", "must be finite".into()));
+            if hold.iter().any(|v| !(v.is_finite() && v.abs() <= PI)) {
+                return Err(bad(
+                    "setpoint",
+                    "hold_rad",
+                    format!("{hold:?}: every angle must be within -pi..=pi rad"),
+                ));
             }
         }
         Ok(s)

@@ -206,9 +206,28 @@ impl QemuFirmware {
         if let Some(s) = status {
             msg.push_str(&format!("; QEMU exited with {s}"));
         }
-        let stderr = stderr.trim();
-        if !stderr.is_empty() {
-            msg.push_str(&format!("; QEMU said: {stderr}"));
+        // QEMU's first line in the message; a register dump or other long output after a
+        // "details:" tail of a few lines, not in the one-line error.
+        let mut lines = stderr
+            .lines()
+            .map(str::trim_end)
+            .filter(|l| !l.trim().is_empty());
+        if let Some(first) = lines.next() {
+            msg.push_str(&format!("; QEMU said: {}", first.trim()));
+            let rest: Vec<&str> = lines.collect();
+            if !rest.is_empty() {
+                const DETAIL_LINES: usize = 4;
+                msg.push_str("\n  details:");
+                for l in rest.iter().take(DETAIL_LINES) {
+                    msg.push_str(&format!("\n    {l}"));
+                }
+                if rest.len() > DETAIL_LINES {
+                    msg.push_str(&format!(
+                        "\n    ... ({} more lines of QEMU output)",
+                        rest.len() - DETAIL_LINES
+                    ));
+                }
+            }
         }
         err(tick, msg)
     }
@@ -421,14 +440,31 @@ pub fn run_pil(a: &PilArgs) -> anyhow::Result<(String, bool)> {
         outputs.push(("--log", log.as_path()));
     }
     crate::validate::distinct_outputs(&inputs, &outputs).map_err(anyhow::Error::msg)?;
+    let elf = a.elf.clone().unwrap_or_else(PilOptions::default_elf);
+    check_elf(&elf).map_err(|e| {
+        anyhow::anyhow!(
+            "{} {}: {e}",
+            if a.elf.is_some() {
+                "--elf"
+            } else {
+                "the default firmware image"
+            },
+            elf.display()
+        )
+    })?;
     let plant = crate::plant::Plant::load(&a.plant)?;
     let mut scenario = Scenario::load(&a.scenario)?;
     let forced = !scenario.sensors.board_counts;
     scenario.sensors.board_counts = true;
-    let mut opts = PilOptions::new(a.elf.clone().unwrap_or_else(PilOptions::default_elf));
+    let mut opts = PilOptions::new(elf.clone());
     opts.tick_timeout = Duration::from_secs_f64(a.tick_timeout_s);
-    let (run, log) = run_scenario(&plant, &scenario, opts)
-        .with_context(|| format!("{}: processor-in-the-loop run failed", a.scenario.display()))?;
+    let (run, log) = run_scenario(&plant, &scenario, opts).with_context(|| {
+        format!(
+            "processor-in-the-loop run of the image {} on {} failed",
+            elf.display(),
+            a.scenario.display()
+        )
+    })?;
     let mut rec = crate::io::run_files::run_recording(
         &run,
         &a.plant.display().to_string(),
@@ -479,6 +515,44 @@ pub fn run_pil(a: &PilArgs) -> anyhow::Result<(String, bool)> {
         }
     };
     Ok((report, same))
+}
+
+/// Checks that `elf` can be a firmware image for the board before QEMU is started: an
+/// existing, non-empty regular file with an ELF header for 32-bit little-endian ARM (what
+/// `cargo build --target thumbv7em-none-eabihf` writes). Reads the 20 header bytes only.
+pub fn check_elf(elf: &std::path::Path) -> Result<(), String> {
+    use std::io::Read;
+    const BUILD: &str = "build it: cargo build -p pam-firmware --bin pil --features \
+                         pam-firmware/firmware --release --target thumbv7em-none-eabihf";
+    let meta = std::fs::metadata(elf).map_err(|e| format!("cannot read it: {e} ({BUILD})"))?;
+    if !meta.is_file() {
+        return Err("is not a regular file: give the firmware image (an ELF file)".into());
+    }
+    if meta.len() == 0 {
+        return Err(format!("is empty, not a firmware image ({BUILD})"));
+    }
+    let mut head = Vec::with_capacity(20);
+    std::fs::File::open(elf)
+        .and_then(|f| f.take(20).read_to_end(&mut head))
+        .map_err(|e| format!("cannot read it: {e}"))?;
+    if !head.starts_with(b"\x7fELF") {
+        return Err(format!(
+            "is not an ELF file (it does not start with the ELF magic bytes) ({BUILD})"
+        ));
+    }
+    // e_ident[EI_CLASS] = 1 (32-bit), e_ident[EI_DATA] = 1 (little endian), e_machine = 40
+    // (EM_ARM) at byte 18.
+    const EM_ARM: u16 = 40;
+    let machine = (head.len() >= 20).then(|| u16::from_le_bytes([head[18], head[19]]));
+    if head.get(4) != Some(&1) || head.get(5) != Some(&1) || machine != Some(EM_ARM) {
+        return Err(format!(
+            "is an ELF file but not a 32-bit little-endian ARM image (class {:?}, data {:?}, \
+             machine {machine:?}; the board needs machine {EM_ARM}, ARM) ({BUILD})",
+            head.get(4),
+            head.get(5)
+        ));
+    }
+    Ok(())
 }
 
 /// Runs `scenario` on `plant` with the firmware under QEMU; returns the run and the stream.

@@ -4,7 +4,8 @@
 //! # 3-joint recording format
 //! The RECORDING.md format with every joint's columns suffixed `_j1`, `_j2`, `_j3`:
 //! - optional leading `# key = value` metadata lines, then a header, then one row per sample;
-//! - required: `t_s` (uniform steps) and the twelve valve openings `u_in1_jN`, `u_ex1_jN`,
+//! - required: `t_s` (increasing; jitter within [0.5, 1.5] median steps is accepted and put
+//!   on the uniform grid, a gap is refused, as in a 1-DOF recording) and the twelve valve openings `u_in1_jN`, `u_ex1_jN`,
 //!   `u_in2_jN`, `u_ex2_jN` (N = 1..3, in [0, 1], held over [t_k, t_k+1));
 //! - outputs, optional, at least one: `angle_deg_jN`, `p1_kpa_jN`, `p2_kpa_jN` (gauge),
 //!   `f1_n_jN`, `f2_n_jN`; other columns are ignored; columns in any order.
@@ -28,6 +29,28 @@ pub const JOINTS: usize = 3;
 /// Column name of a 1-DOF column `base` for joint `joint` (0-based): `base_j{joint+1}`.
 pub fn column(base: &str, joint: usize) -> String {
     format!("{base}_j{}", joint + 1)
+}
+
+/// Whether the file at `path` is a 3-joint recording: its header (the first line that is
+/// not `#` metadata, within the first 64 KiB) names `u_in1_j1`. False when it cannot be read.
+pub fn is_arm3_recording(path: impl AsRef<Path>) -> bool {
+    use std::io::Read;
+    let mut head = Vec::new();
+    let Ok(f) = std::fs::File::open(path) else {
+        return false;
+    };
+    if f.take(64 * 1024).read_to_end(&mut head).is_err() {
+        return false;
+    }
+    let text = String::from_utf8_lossy(&head);
+    let header = text
+        .lines()
+        .map(str::trim)
+        .find(|l| !l.is_empty() && !l.starts_with('#'));
+    header.is_some_and(|h| {
+        h.split(',')
+            .any(|c| c.trim().trim_matches('"') == column(INPUT_COLUMNS[0], 0))
+    })
 }
 
 /// One run of the arm.
@@ -67,6 +90,25 @@ impl Arm3Recording {
             inputs: self.inputs.iter().map(|u| u[joint]).collect(),
             outputs: self.outputs[joint].clone(),
             mass_flow_kg_s: None,
+        }
+    }
+
+    /// The recording on the uniform grid `t_0 + k dt` (`dt` the mean step): each joint's
+    /// columns through [`Recording::to_uniform`] (openings time-averaged over each grid
+    /// cell, outputs linearly interpolated). A uniform recording is returned unchanged.
+    pub fn to_uniform(self) -> Arm3Recording {
+        if crate::io::recording::stamps_uniform(&self.t_s) {
+            return self;
+        }
+        let joints: [Recording; JOINTS] =
+            std::array::from_fn(|j| self.joint_recording(j).to_uniform());
+        Arm3Recording {
+            metadata: joints[0].metadata.clone(),
+            t_s: joints[0].t_s.clone(),
+            inputs: (0..self.t_s.len())
+                .map(|k| std::array::from_fn(|j| joints[j].inputs[k]))
+                .collect(),
+            outputs: std::array::from_fn(|j| joints[j].outputs.clone()),
         }
     }
 
@@ -158,26 +200,12 @@ impl Arm3Recording {
             rec.outputs[*j][*c] = Some(rows.iter().map(|r| r.2[i]).collect());
         }
         drop(rows);
-        let dt = table.sample_period_s(&rec.t_s, &lines)?;
-        let field_err =
-            |line: u64, field: &str, message: String| table.field_err(line, field, message);
-        for (k, line) in lines.iter().enumerate().skip(1) {
-            let step = rec.t_s[k] - rec.t_s[k - 1];
-            let drift = rec.t_s[k] - (rec.t_s[0] + k as f64 * dt);
-            if (step - dt).abs() > 0.01 * dt || drift.abs() > 0.01 * dt {
-                return Err(field_err(
-                    *line,
-                    "t_s",
-                    format!(
-                        "non-uniform time: {} after {} (sample period {dt} s)",
-                        rec.t_s[k],
-                        rec.t_s[k - 1]
-                    ),
-                ));
-            }
-        }
-        table.check_declared_period(dt, 0.01 * dt)?;
-        Ok(rec)
+        // The 1-DOF reader's time check: increasing, jitter within [0.5, 1.5] median steps
+        // accepted, a gap refused at its own line, a declared sample period that agrees.
+        table.check_time(&rec.t_s, |k| lines[k])?;
+        // The arm integrates and is diagnosed on a uniform grid: jittered stamps are put on
+        // it as the 1-DOF tools do ([`Recording::to_uniform`], joint by joint).
+        Ok(rec.to_uniform())
     }
 
     /// Writes the recording (header `t_s`, the twelve valve columns, then the present

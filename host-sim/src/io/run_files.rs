@@ -206,7 +206,9 @@ pub fn summary(run: &ClosedLoopRun, scenario: &Scenario, fails: &[String]) -> St
         run.max_p_gauge_pa / 1e3,
         run.max_p_set_gauge_pa / 1e3
     );
-    if fails.is_empty() {
+    if scenario.expect.is_empty() {
+        s += "expectations: none given (no [expect] bounds in the scenario)\n";
+    } else if fails.is_empty() {
         s += "expectations: met\n";
     } else {
         for f in fails {

@@ -39,7 +39,8 @@ pub struct Scenario {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ScenarioHeader {
-    /// Name used in reports.
+    /// Name used in reports and as the stem of `demo`'s output files: letters, digits,
+    /// `_`, `.`, `-` only, not starting with `.` (no path).
     pub name: String,
     /// Simulated time [s].
     pub duration_s: f64,
@@ -117,6 +118,118 @@ pub enum SetpointProfile {
 }
 
 impl SetpointProfile {
+    /// Checks the profile's values against the run `h` (angles within half a turn, times
+    /// before the end of the run, a sine below half the tick rate); `bad(key, message)`
+    /// makes the error naming the key. The 1-DOF `[setpoint]` and each arm joint's profile.
+    pub(crate) fn check(
+        &self,
+        h: &ScenarioHeader,
+        bad: &dyn Fn(&str, String) -> ClosedLoopError,
+    ) -> Result<(), ClosedLoopError> {
+        let finite = |key: &str, v: f64| -> Result<(), ClosedLoopError> {
+            if v.is_finite() {
+                Ok(())
+            } else {
+                Err(bad(key, format!("{v} must be a finite number")))
+            }
+        };
+        // A set-point angle beyond half a turn is a unit mistake (degrees typed into a
+        // `_rad` key), and a set-point change at or after the end of the run tests nothing.
+        let angle = |key: &str, v: f64| -> Result<(), ClosedLoopError> {
+            finite(key, v)?;
+            if v.abs() > std::f64::consts::PI {
+                return Err(bad(
+                    key,
+                    format!("{v} rad is more than half a turn (allowed -pi..=pi): degrees typed as radians?"),
+                ));
+            }
+            Ok(())
+        };
+        let before_end = |key: &str, v: f64| -> Result<(), ClosedLoopError> {
+            finite(key, v)?;
+            if !(v >= 0.0 && v < h.duration_s) {
+                return Err(bad(
+                    key,
+                    format!(
+                        "{v} s must be within [0, {}) (before the end of the run, [scenario] \
+                         duration_s): the set-point would never move",
+                        h.duration_s
+                    ),
+                ));
+            }
+            Ok(())
+        };
+        match *self {
+            SetpointProfile::Step {
+                initial_rad,
+                final_rad,
+                at_s,
+                transition_s,
+            } => {
+                angle("initial_rad", initial_rad)?;
+                angle("final_rad", final_rad)?;
+                before_end("at_s", at_s)?;
+                if !(transition_s >= 0.0 && transition_s.is_finite()) {
+                    return Err(bad("transition_s", format!("{transition_s} must be >= 0")));
+                }
+            }
+            SetpointProfile::Ramp {
+                from_rad,
+                to_rad,
+                start_s,
+                end_s,
+            } => {
+                angle("from_rad", from_rad)?;
+                angle("to_rad", to_rad)?;
+                before_end("start_s", start_s)?;
+                finite("end_s", end_s)?;
+                if !(end_s > start_s) {
+                    return Err(bad("end_s", format!("{end_s} must be > start_s")));
+                }
+            }
+            SetpointProfile::Sine {
+                offset_rad,
+                amplitude_rad,
+                freq_hz,
+                start_s,
+            } => {
+                angle("offset_rad", offset_rad)?;
+                angle("amplitude_rad", amplitude_rad)?;
+                finite("freq_hz", freq_hz)?;
+                let nyquist_hz = 0.5 * h.tick_hz;
+                if !(freq_hz > 0.0 && freq_hz < nyquist_hz) {
+                    return Err(bad(
+                        "freq_hz",
+                        format!(
+                            "{freq_hz} Hz must be within (0, {nyquist_hz}) (below half the tick \
+                             rate, [scenario] tick_hz)"
+                        ),
+                    ));
+                }
+                before_end("start_s", start_s)?;
+            }
+            SetpointProfile::Random {
+                amplitude_rad,
+                hold_s,
+                start_s,
+                transition_s,
+            } => {
+                angle("amplitude_rad", amplitude_rad)?;
+                before_end("start_s", start_s)?;
+                if !(hold_s > 0.0 && hold_s.is_finite()) {
+                    return Err(bad("hold_s", format!("{hold_s} must be > 0")));
+                }
+                if !(transition_s >= 0.0 && transition_s <= hold_s) {
+                    return Err(bad(
+                        "transition_s",
+                        format!("{transition_s} must be within 0..hold_s ({hold_s})"),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// The set-point [rad] at time `t_s`; `levels` are the pre-drawn random levels.
     pub(crate) fn at(&self, t_s: f64, levels: &[f64]) -> f64 {
         // The shapes are the firmware's (`pam_firmware::profile`), evaluated in f64.
@@ -341,6 +454,19 @@ pub struct Expectations {
     pub no_fault: bool,
 }
 
+impl Expectations {
+    /// True when the scenario sets no bound (no `[expect]` table, or an empty one): a run
+    /// then has nothing to meet, and says so rather than "met".
+    pub fn is_empty(&self) -> bool {
+        self.max_abs_error_rad.is_none()
+            && self.rms_error_rad.is_none()
+            && self.fault_within_ticks.is_none()
+            && self.max_pressure_kpa.is_none()
+            && self.angle_within_rad.is_none()
+            && !self.no_fault
+    }
+}
+
 /// Errors of closed-loop runs.
 #[derive(Debug, thiserror::Error)]
 pub enum ClosedLoopError {
@@ -438,148 +564,9 @@ impl Scenario {
         let bad = key_error(text, file);
         s.scenario.check(&bad)?;
         let h = &s.scenario;
-        let finite = |key: &str, v: f64| -> Result<(), ClosedLoopError> {
-            if v.is_finite() {
-                Ok(())
-            } else {
-                Err(bad("setpoint", key, format!("{v} must be a finite number")))
-            }
-        };
-        // A set-point angle beyond half a turn is a unit mistake (degrees typed into a
-        // `_rad` key), and a set-point change at or after the end of the run tests nothing.
-        let angle = |key: &str, v: f64| -> Result<(), ClosedLoopError> {
-            finite(key, v)?;
-            if v.abs() > std::f64::consts::PI {
-                return Err(bad(
-                    "setpoint",
-                    key,
-                    format!("{v} rad is more than half a turn (allowed -pi..=pi): degrees typed as radians?"),
-                ));
-            }
-            Ok(())
-        };
-        let before_end = |key: &str, v: f64| -> Result<(), ClosedLoopError> {
-            finite(key, v)?;
-            if !(v >= 0.0 && v < h.duration_s) {
-                return Err(bad(
-                    "setpoint",
-                    key,
-                    format!(
-                        "{v} s must be within [0, {}) (before the end of the run, [scenario] \
-                         duration_s): the set-point would never move",
-                        h.duration_s
-                    ),
-                ));
-            }
-            Ok(())
-        };
-        match s.setpoint {
-            SetpointProfile::Step {
-                initial_rad,
-                final_rad,
-                at_s,
-                transition_s,
-            } => {
-                angle("initial_rad", initial_rad)?;
-                angle("final_rad", final_rad)?;
-                before_end("at_s", at_s)?;
-                if !(transition_s >= 0.0 && transition_s.is_finite()) {
-                    return Err(bad(
-                        "setpoint",
-                        "transition_s",
-                        format!("{transition_s} must be >= 0"),
-                    ));
-                }
-            }
-            SetpointProfile::Ramp {
-                from_rad,
-                to_rad,
-                start_s,
-                end_s,
-            } => {
-                angle("from_rad", from_rad)?;
-                angle("to_rad", to_rad)?;
-                before_end("start_s", start_s)?;
-                finite("end_s", end_s)?;
-                if !(end_s > start_s) {
-                    return Err(bad(
-                        "setpoint",
-                        "end_s",
-                        format!("{end_s} must be > start_s"),
-                    ));
-                }
-            }
-            SetpointProfile::Sine {
-                offset_rad,
-                amplitude_rad,
-                freq_hz,
-                start_s,
-            } => {
-                angle("offset_rad", offset_rad)?;
-                angle("amplitude_rad", amplitude_rad)?;
-                finite("freq_hz", freq_hz)?;
-                let nyquist_hz = 0.5 * h.tick_hz;
-                if !(freq_hz > 0.0 && freq_hz < nyquist_hz) {
-                    return Err(bad(
-                        "setpoint",
-                        "freq_hz",
-                        format!(
-                            "{freq_hz} Hz must be within (0, {nyquist_hz}) (below half the tick \
-                             rate, [scenario] tick_hz)"
-                        ),
-                    ));
-                }
-                before_end("start_s", start_s)?;
-            }
-            SetpointProfile::Random {
-                amplitude_rad,
-                hold_s,
-                start_s,
-                transition_s,
-            } => {
-                angle("amplitude_rad", amplitude_rad)?;
-                before_end("start_s", start_s)?;
-                if !(hold_s > 0.0 && hold_s.is_finite()) {
-                    return Err(bad("setpoint", "hold_s", format!("{hold_s} must be > 0")));
-                }
-                if !(transition_s >= 0.0 && transition_s <= hold_s) {
-                    return Err(bad(
-                        "setpoint",
-                        "transition_s",
-                        format!("{transition_s} must be within 0..hold_s ({hold_s})"),
-                    ));
-                }
-            }
-        }
-        let se = &s.sensors;
-        if !(se.pressure_noise_pa >= 0.0 && se.pressure_noise_pa.is_finite()) {
-            return Err(bad(
-                "sensors",
-                "pressure_noise_pa",
-                format!("{} must be >= 0", se.pressure_noise_pa),
-            ));
-        }
-        if !(se.pressure_lsb_pa >= 0.0 && se.pressure_lsb_pa.is_finite()) {
-            return Err(bad(
-                "sensors",
-                "pressure_lsb_pa",
-                format!("{} must be >= 0", se.pressure_lsb_pa),
-            ));
-        }
-        let ex = &s.expect;
-        if let Some(v) = ex.max_pressure_kpa {
-            if !(v > 0.0 && v <= 2000.0) {
-                return Err(bad(
-                    "expect",
-                    "max_pressure_kpa",
-                    format!(
-                        "{} kPa must be within (0, 2000] (gauge, in kPa: Pa typed?)",
-                        crate::validate::Shown(v)
-                    ),
-                ));
-            }
-        }
-        if let Some(v) = ex.angle_within_rad {
+        s.setpoint.check(h, &|key, msg| bad("setpoint", key, msg))?;
+        s.sensors.check(&|key, msg| bad("sensors", key, msg))?;
+        if let Some(v) = s.expect.angle_within_rad {
             if !(v > 0.0 && v.is_finite()) {
                 return Err(bad(
                     "expect",
@@ -587,13 +574,6 @@ impl Scenario {
                     format!("{v} must be > 0"),
                 ));
             }
-        }
-        if se.delay_ticks > 10_000 {
-            return Err(bad(
-                "sensors",
-                "delay_ticks",
-                format!("{} is more than 10000 ticks", se.delay_ticks),
-            ));
         }
         for (i, e) in s.events.iter().enumerate() {
             let ev_bad = |key: &str, msg: String| -> Result<(), ClosedLoopError> {
@@ -653,34 +633,95 @@ impl Scenario {
             }
         }
         let ex = &s.expect;
-        if !(ex.settle_after_s >= 0.0 && ex.settle_after_s < h.duration_s) {
+        check_expect(
+            h,
+            ex.settle_after_s,
+            ex.max_pressure_kpa,
+            &[
+                ("max_abs_error_rad", ex.max_abs_error_rad),
+                ("rms_error_rad", ex.rms_error_rad),
+            ],
+            &|key, msg| bad("expect", key, msg),
+        )?;
+        Ok(s)
+    }
+}
+
+/// Largest `[sensors] pressure_noise_pa` and `pressure_lsb_pa` [Pa]: 100 kPa, a tenth of
+/// the pressure sensors' range; above it the firmware sees only noise (its pressure checks
+/// latch a fault at the first tick).
+pub const SENSOR_PA_MAX: f64 = 1.0e5;
+
+impl SensorModel {
+    /// The `[sensors]` ranges (1-DOF and arm scenarios); `bad(key, message)` makes the
+    /// error naming the key.
+    pub(crate) fn check(
+        &self,
+        bad: &dyn Fn(&str, String) -> ClosedLoopError,
+    ) -> Result<(), ClosedLoopError> {
+        let range = crate::validate::Range::closed(0.0, SENSOR_PA_MAX);
+        for (key, v, what) in [
+            (
+                "pressure_noise_pa",
+                self.pressure_noise_pa,
+                "Pa (a standard deviation)",
+            ),
+            ("pressure_lsb_pa", self.pressure_lsb_pa, "Pa per count"),
+        ] {
+            if let Some(msg) = crate::validate::range_error(key, v, range, what) {
+                return Err(bad(key, msg));
+            }
+        }
+        if self.delay_ticks > 10_000 {
             return Err(bad(
-                "expect",
-                "settle_after_s",
+                "delay_ticks",
+                format!("{} is more than 10000 ticks", self.delay_ticks),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The `[expect]` values both the 1-DOF and the arm scenarios have: `settle_after_s` before
+/// the end of the run `h`, a gauge pressure bound in kPa, error bounds (`(key, bound)`,
+/// one per joint for the arm) finite and > 0; `bad(key, message)` makes the error.
+pub(crate) fn check_expect(
+    h: &ScenarioHeader,
+    settle_after_s: f64,
+    max_pressure_kpa: Option<f64>,
+    error_bounds_rad: &[(&str, Option<f64>)],
+    bad: &dyn Fn(&str, String) -> ClosedLoopError,
+) -> Result<(), ClosedLoopError> {
+    if let Some(v) = max_pressure_kpa {
+        if !(v > 0.0 && v <= 2000.0) {
+            return Err(bad(
+                "max_pressure_kpa",
                 format!(
-                    "{} must be within [0, {}) (before the end of the run, [scenario] duration_s): \
-                     after the end there is nothing to check",
-                    crate::validate::Shown(ex.settle_after_s),
-                    crate::validate::Shown(h.duration_s)
+                    "{} kPa must be within (0, 2000] (gauge, in kPa: Pa typed?)",
+                    crate::validate::Shown(v)
                 ),
             ));
         }
-        for (key, v) in [
-            ("max_abs_error_rad", ex.max_abs_error_rad),
-            ("rms_error_rad", ex.rms_error_rad),
-        ] {
-            if let Some(v) = v {
-                if !(v > 0.0 && v.is_finite()) {
-                    return Err(bad(
-                        "expect",
-                        key,
-                        format!("{v} must be a finite number > 0"),
-                    ));
-                }
+    }
+    if !(settle_after_s >= 0.0 && settle_after_s < h.duration_s) {
+        return Err(bad(
+            "settle_after_s",
+            format!(
+                "{} must be within [0, {}) (before the end of the run, [scenario] duration_s): \
+                 after the end there is nothing to check",
+                crate::validate::Shown(settle_after_s),
+                crate::validate::Shown(h.duration_s)
+            ),
+        ));
+    }
+    for (key, v) in error_bounds_rad {
+        if let Some(v) = v {
+            if !(*v > 0.0 && v.is_finite()) {
+                return Err(bad(key, format!("{v} must be a finite number > 0")));
             }
         }
-        Ok(s)
     }
+    Ok(())
 }
 
 /// The text of a scenario file and the name its errors give it.
@@ -713,12 +754,16 @@ pub(crate) fn key_error<'a>(
 }
 
 impl ScenarioHeader {
-    /// The `[scenario]` table's ranges: a positive finite length, a tick rate within the
-    /// firmware's stable range (`pam_firmware::tick::TICK_HZ_MIN` / `TICK_HZ_MAX`).
+    /// The `[scenario]` table's ranges: a name usable as a file name (the outputs of `demo`
+    /// are named after it), a positive finite length, a tick rate within the firmware's
+    /// stable range (`pam_firmware::tick::TICK_HZ_MIN` / `TICK_HZ_MAX`).
     pub(crate) fn check(
         &self,
         bad: &impl Fn(&str, &str, String) -> ClosedLoopError,
     ) -> Result<(), ClosedLoopError> {
+        if let Err(msg) = crate::validate::file_name_part(&self.name) {
+            return Err(bad("scenario", "name", msg));
+        }
         if !(self.duration_s > 0.0 && self.duration_s.is_finite()) {
             return Err(bad(
                 "scenario",
@@ -745,7 +790,7 @@ impl ScenarioHeader {
 }
 
 /// 1-based line of `key = ...` inside `[table]` of TOML `text`, if it is there.
-fn key_line(text: &str, table: &str, key: &str) -> Option<usize> {
+pub(crate) fn key_line(text: &str, table: &str, key: &str) -> Option<usize> {
     let mut in_table = false;
     for (i, line) in text.lines().enumerate() {
         let l = line.trim();

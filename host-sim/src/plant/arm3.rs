@@ -230,68 +230,110 @@ impl Arm3Config {
                 ),
             ));
         }
+        // Physical or practical ranges, the 1-DOF file's where the key is the same
+        // (`PlantConfig::validate`): wide enough for any real rig, narrow enough to catch a
+        // unit typed wrong (kPa in a Pa key) or a value the model cannot run in finite time.
+        use crate::validate::Range;
+        use std::f64::consts::PI;
         let l = &self.links;
-        let mut checks: Vec<(String, f64, Bound)> = vec![
+        let env = &self.environment;
+        let mut checks: Vec<(String, f64, Range, &str)> = vec![
             (
                 "environment.p_atm_pa".into(),
-                self.environment.p_atm_pa,
-                Bound::Positive,
+                env.p_atm_pa,
+                Range::closed(5.0e4, 1.2e5),
+                "Pa absolute",
             ),
             (
                 "environment.supply_gauge_pa".into(),
-                self.environment.supply_gauge_pa,
-                Bound::Finite,
+                env.supply_gauge_pa,
+                Range::closed(1.0e4, 2.0e6),
+                "Pa gauge",
             ),
             (
                 "valve.sonic_conductance_m3_per_s_pa".into(),
                 self.valve.sonic_conductance_m3_per_s_pa,
-                Bound::Positive,
+                Range::positive(1.0e-5),
+                "m^3/(s Pa)",
             ),
             // M stays positive definite for every q if Iz1, Ix2, Ix3 > 0 and the rest >= 0.
             (
                 "links.inertia_x2_kgm2".into(),
                 l.inertia_x2_kgm2,
-                Bound::Positive,
+                Range::positive(1.0e3),
+                "kg m^2",
             ),
             (
                 "links.inertia_x3_kgm2".into(),
                 l.inertia_x3_kgm2,
-                Bound::Positive,
+                Range::positive(1.0e3),
+                "kg m^2",
             ),
             (
                 "links.inertia_z1_kgm2".into(),
                 l.inertia_z1_kgm2,
-                Bound::Positive,
+                Range::positive(1.0e3),
+                "kg m^2",
             ),
             (
                 "links.inertia_y2_kgm2".into(),
                 l.inertia_y2_kgm2,
-                Bound::NonNegative,
+                Range::closed(0.0, 1.0e3),
+                "kg m^2",
             ),
             (
                 "links.inertia_y3_kgm2".into(),
                 l.inertia_y3_kgm2,
-                Bound::NonNegative,
+                Range::closed(0.0, 1.0e3),
+                "kg m^2",
             ),
             (
                 "links.inertia_z2_kgm2".into(),
                 l.inertia_z2_kgm2,
-                Bound::NonNegative,
+                Range::closed(0.0, 1.0e3),
+                "kg m^2",
             ),
             (
                 "links.inertia_z3_kgm2".into(),
                 l.inertia_z3_kgm2,
-                Bound::NonNegative,
+                Range::closed(0.0, 1.0e3),
+                "kg m^2",
             ),
-            ("links.mass2_kg".into(), l.mass2_kg, Bound::NonNegative),
-            ("links.mass3_kg".into(), l.mass3_kg, Bound::NonNegative),
-            ("links.length2_m".into(), l.length2_m, Bound::NonNegative),
-            ("links.com2_m".into(), l.com2_m, Bound::Finite),
-            ("links.com3_m".into(), l.com3_m, Bound::Finite),
+            (
+                "links.mass2_kg".into(),
+                l.mass2_kg,
+                Range::closed(0.0, 1.0e3),
+                "kg",
+            ),
+            (
+                "links.mass3_kg".into(),
+                l.mass3_kg,
+                Range::closed(0.0, 1.0e3),
+                "kg",
+            ),
+            (
+                "links.length2_m".into(),
+                l.length2_m,
+                Range::closed(0.0, 10.0),
+                "m",
+            ),
+            (
+                "links.com2_m".into(),
+                l.com2_m,
+                Range::closed(-10.0, 10.0),
+                "m",
+            ),
+            (
+                "links.com3_m".into(),
+                l.com3_m,
+                Range::closed(-10.0, 10.0),
+                "m",
+            ),
             (
                 "links.gravity_m_s2".into(),
                 l.gravity_m_s2,
-                Bound::NonNegative,
+                Range::closed(0.0, 30.0),
+                "m/s^2",
             ),
         ];
         for (i, j) in self.joints().iter().enumerate() {
@@ -299,135 +341,157 @@ impl Arm3Config {
             let m = &j.muscle;
             let f = &j.friction;
             let n = &j.initial;
+            // Vacuum .. supply, as the 1-DOF `[initial]` pressures.
+            let p_range = Range::closed(-env.p_atm_pa, env.supply_gauge_pa);
             checks.extend([
                 (
                     format!("{k}sprocket_radius_m"),
                     j.sprocket_radius_m,
-                    Bound::Positive,
+                    Range::positive(1.0),
+                    "m",
                 ),
                 (
                     format!("{k}initial_contraction"),
                     j.initial_contraction,
-                    Bound::Finite,
+                    Range::half_open(0.0, 1.0),
+                    "fraction",
                 ),
                 (
                     format!("{k}neutral_angle_rad"),
                     j.neutral_angle_rad,
-                    Bound::Finite,
+                    Range::closed(-PI, PI),
+                    "rad",
                 ),
                 (
                     format!("{k}muscle.rest_length_m"),
                     m.rest_length_m,
-                    Bound::Positive,
+                    Range::positive(5.0),
+                    "m",
                 ),
-                (format!("{k}muscle.radius_m"), m.radius_m, Bound::Positive),
+                (
+                    format!("{k}muscle.radius_m"),
+                    m.radius_m,
+                    Range::positive(0.5),
+                    "m",
+                ),
                 (
                     format!("{k}muscle.braid_angle_deg"),
                     m.braid_angle_deg,
-                    Bound::Positive,
+                    Range::open(5.0, 54.7),
+                    "degrees (between 5 and the neutral braid angle 54.7; radians typed?)",
                 ),
-                (format!("{k}muscle.end_factor"), m.end_factor, Bound::Finite),
+                (
+                    format!("{k}muscle.end_factor"),
+                    m.end_factor,
+                    Range::positive(10.0),
+                    "",
+                ),
                 (
                     format!("{k}muscle.damping_m2s"),
                     m.damping_m2s,
-                    Bound::NonNegative,
+                    Range::closed(0.0, 1.0),
+                    "m^2 s",
                 ),
                 (
                     format!("{k}friction.coulomb_nm"),
                     f.coulomb_nm,
-                    Bound::NonNegative,
+                    Range::closed(0.0, FRICTION_MAX_NM),
+                    "N m",
                 ),
                 (
                     format!("{k}friction.viscous_nm_s_per_rad"),
                     f.viscous_nm_s_per_rad,
-                    Bound::NonNegative,
+                    Range::closed(0.0, FRICTION_MAX_NM),
+                    "N m s/rad",
                 ),
                 (
                     format!("{k}friction.quadratic_nm_s2_per_rad2"),
                     f.quadratic_nm_s2_per_rad2,
-                    Bound::NonNegative,
+                    Range::closed(0.0, FRICTION_MAX_NM),
+                    "N m s^2/rad^2",
                 ),
                 (
                     format!("{k}friction.cubic_nm_s3_per_rad3"),
                     f.cubic_nm_s3_per_rad3,
-                    Bound::NonNegative,
+                    Range::closed(0.0, FRICTION_MAX_NM),
+                    "N m s^3/rad^3",
                 ),
                 (
                     format!("{k}friction.sign_smoothing_velocity_rad_s"),
                     f.sign_smoothing_velocity_rad_s,
-                    Bound::Positive,
+                    SIGN_SMOOTHING_RANGE_RAD_S,
+                    "rad/s (smaller makes the equations too stiff to integrate in useful time)",
                 ),
                 (
-                    format!("{k}friction.lugre.stribeck_velocity_rad_s"),
-                    f.lugre.map_or(1.0, |l| l.stribeck_velocity_rad_s),
-                    Bound::Positive,
+                    format!("{k}initial.angle_rad"),
+                    n.angle_rad,
+                    Range::closed(-PI, PI),
+                    "rad",
                 ),
-                (
-                    format!("{k}friction.lugre.stiffness_nm_per_rad"),
-                    f.lugre.map_or(1.0, |l| l.stiffness_nm_per_rad),
-                    Bound::Positive,
-                ),
-                (
-                    format!("{k}friction.lugre.damping_nm_s_per_rad"),
-                    f.lugre.map_or(0.0, |l| l.damping_nm_s_per_rad),
-                    Bound::NonNegative,
-                ),
-                (format!("{k}initial.angle_rad"), n.angle_rad, Bound::Finite),
                 (
                     format!("{k}initial.velocity_rad_s"),
                     n.velocity_rad_s,
-                    Bound::Finite,
+                    Range::closed(-100.0, 100.0),
+                    "rad/s",
                 ),
                 (
                     format!("{k}initial.p1_gauge_pa"),
                     n.p1_gauge_pa,
-                    Bound::Finite,
+                    p_range,
+                    "Pa gauge (vacuum .. environment.supply_gauge_pa)",
                 ),
                 (
                     format!("{k}initial.p2_gauge_pa"),
                     n.p2_gauge_pa,
-                    Bound::Finite,
+                    p_range,
+                    "Pa gauge (vacuum .. environment.supply_gauge_pa)",
                 ),
             ]);
-            if m.braid_angle_deg >= 90.0 {
+            if let Some(lg) = &f.lugre {
+                checks.extend([
+                    (format!("{k}friction.lugre.static_nm"), lg.static_nm, Range::closed(0.0, FRICTION_MAX_NM), "N m"),
+                    (format!("{k}friction.lugre.stribeck_velocity_rad_s"), lg.stribeck_velocity_rad_s, Range::positive(10.0), "rad/s"),
+                    (
+                        format!("{k}friction.lugre.stiffness_nm_per_rad"),
+                        lg.stiffness_nm_per_rad,
+                        LUGRE_STIFFNESS_RANGE_NM_PER_RAD,
+                        "N m/rad (stiffer bristles make the equations too stiff to integrate in useful time)",
+                    ),
+                    (
+                        format!("{k}friction.lugre.damping_nm_s_per_rad"),
+                        lg.damping_nm_s_per_rad,
+                        LUGRE_DAMPING_RANGE_NM_S_PER_RAD,
+                        "N m s/rad",
+                    ),
+                ]);
+            }
+        }
+        for (key, v, range, unit) in &checks {
+            if let Some(msg) = crate::validate::range_error(key, *v, *range, unit) {
+                return Err(bad(key, msg));
+            }
+        }
+        for (i, j) in self.joints().iter().enumerate() {
+            let k = format!("joint{}.", i + 1);
+            let m = &j.muscle;
+            // The Tondu force vanishes at the maximum contraction: the muscles must start
+            // below it (as the 1-DOF file's).
+            let chi_max =
+                (1.0 - 1.0 / (3f64.sqrt() * m.braid_angle_deg.to_radians().cos())) / m.end_factor;
+            if !(j.initial_contraction < chi_max) {
                 return Err(bad(
-                    &format!("{k}muscle.braid_angle_deg"),
-                    "must be below 90 degrees".into(),
+                    &format!("{k}initial_contraction"),
+                    format!(
+                        "must be within [0, {chi_max:.4}) (below the muscle's maximum contraction \
+                         (1 - 1/(sqrt(3) cos braid_angle)) / end_factor), got {}",
+                        j.initial_contraction
+                    ),
                 ));
             }
             if m.volume_poly_m3.iter().any(|v| !v.is_finite()) || m.volume_poly_m3[0] <= 0.0 {
                 return Err(bad(
                     &format!("{k}muscle.volume_poly_m3"),
                     "coefficients must be finite, b0 (volume at zero contraction) > 0".into(),
-                ));
-            }
-            for (name, p) in [
-                ("p1_gauge_pa", n.p1_gauge_pa),
-                ("p2_gauge_pa", n.p2_gauge_pa),
-            ] {
-                if p + self.environment.p_atm_pa <= 0.0 {
-                    return Err(bad(
-                        &format!("{k}initial.{name}"),
-                        format!("absolute pressure must be > 0, got gauge {p} Pa"),
-                    ));
-                }
-            }
-        }
-        for (key, v, b) in &checks {
-            let ok = match b {
-                Bound::Finite => v.is_finite(),
-                Bound::Positive => v.is_finite() && *v > 0.0,
-                Bound::NonNegative => v.is_finite() && *v >= 0.0,
-            };
-            if !ok {
-                let need = match b {
-                    Bound::Finite => "a finite number",
-                    Bound::Positive => "a finite number > 0",
-                    Bound::NonNegative => "a finite number >= 0",
-                };
-                return Err(bad(
-                    key,
-                    format!("must be {need}, got {}", crate::validate::Shown(*v)),
                 ));
             }
         }
@@ -492,10 +556,36 @@ impl Arm3Config {
     }
 }
 
-enum Bound {
-    Finite,
-    Positive,
-    NonNegative,
+/// Largest friction coefficient of a joint (any of eq. 7's and the LuGre static torque):
+/// 1000 N m (and per rad/s powers), far above any muscle pair's torque.
+pub const FRICTION_MAX_NM: f64 = 1.0e3;
+
+/// Allowed w_eps of the regularised sign [rad/s]: below 1e-4 rad/s the friction torque
+/// switches within a velocity the integrator must resolve with ever smaller steps.
+pub const SIGN_SMOOTHING_RANGE_RAD_S: crate::validate::Range =
+    crate::validate::Range::closed(1.0e-4, 10.0);
+
+/// Allowed LuGre bristle stiffness sigma0 [N m/rad]. LuGre's bristles are stiff springs
+/// whose natural frequency sqrt(sigma0 / I) sets the integrator's step: the arm demo's
+/// 41 s of scenarios (`host-sim demo --plant` the seed 001 file with a joint-1 LuGre table)
+/// take 0.9 s without LuGre, 3.2 s with sigma0 = 1e5, 27 s with 1e6; 1e12 did not end.
+pub const LUGRE_STIFFNESS_RANGE_NM_PER_RAD: crate::validate::Range =
+    crate::validate::Range::positive(1.0e5);
+
+/// Allowed LuGre bristle damping sigma1 [N m s/rad].
+pub const LUGRE_DAMPING_RANGE_NM_S_PER_RAD: crate::validate::Range =
+    crate::validate::Range::closed(0.0, 1.0e4);
+
+/// The top-level `kind` of a plant file (`Some("arm3")` for a 3-DOF arm file; the 1-DOF
+/// files have none); `None` also when the file cannot be read or is not TOML (the command
+/// reading it reports that).
+pub fn file_kind(path: impl AsRef<Path>) -> Option<String> {
+    let text = std::fs::read_to_string(path).ok()?;
+    let v: toml::Table = toml::from_str(&text).ok()?;
+    v.get("kind").map(|k| match k.as_str() {
+        Some(s) => s.to_owned(),
+        None => k.to_string(),
+    })
 }
 
 /// Whether a plant file is for [`Arm3Config`]: it has a top-level `kind` (the 1-DOF files
