@@ -336,17 +336,32 @@ fn identify_plant_rejects_unknown_keys_and_bad_bounds_without_writing() {
 #[test]
 fn identify_torque_warns_when_the_activation_is_not_symmetric() {
     // The pulses fixture drives the muscles independently: (p1 + p2) / 2 is far from constant,
-    // which eq. 11 assumes; the command still fits but says so.
+    // which eq. 11 assumes: the fit is poor (2.41 %), refused with the cause; with
+    // --allow-poor-fit it is written and the report says so.
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("torque.toml");
+    let out = previous_output(dir.path(), "torque.toml");
+    let r = identify("torque", &fixture("pulses_nominal.csv"), &out, &[]);
+    let e = exits(2, &r);
+    for n in [
+        "pulses_nominal.csv",
+        "2.41 %",
+        "90 %",
+        "(p1 + p2) / 2 spreads",
+        "--allow-poor-fit",
+    ] {
+        assert!(e.contains(n), "`{n}` not in:\n{e}");
+    }
+    assert_kept(&out);
     let s = ok(&identify(
         "torque",
         &fixture("pulses_nominal.csv"),
         &out,
-        &[],
+        &["--allow-poor-fit"],
     ));
     assert!(s.contains("warning: (p1 + p2) / 2 spreads"), "{s}");
-    assert!(out.exists());
+    assert!(std::fs::read_to_string(&out)
+        .unwrap()
+        .contains("[torque_model]"));
 }
 
 #[test]

@@ -16,7 +16,7 @@ use host_sim::identify::volume::{
 /// at the working contraction (a longer tube to the valve) and a 28 % flatter slope.
 const TRUE_VOLUME_POLY_M3: [f64; 4] = [115.0e-6, 32.0e-5, 40.0e-5, -20.0e-4];
 
-fn mismatched_plant() -> host_sim::Plant {
+fn mismatched_text() -> String {
     let text = nominal_text();
     let old = "volume_poly_m3 = [79.0e-6, 48.0e-5, -18.0e-6, -11.0e-4]";
     assert!(text.contains(old), "the fixture's volume line changed");
@@ -27,7 +27,11 @@ fn mismatched_plant() -> host_sim::Plant {
         TRUE_VOLUME_POLY_M3[2],
         TRUE_VOLUME_POLY_M3[3]
     );
-    let cfg = host_sim::PlantConfig::from_toml_str(&text.replace(old, &new), "mismatched.toml")
+    text.replace(old, &new)
+}
+
+fn mismatched_plant() -> host_sim::Plant {
+    let cfg = host_sim::PlantConfig::from_toml_str(&mismatched_text(), "mismatched.toml")
         .unwrap_or_else(|e| panic!("{e}"));
     host_sim::Plant::from_config(&cfg)
 }
@@ -102,12 +106,24 @@ fn the_hybrid_volume_lowers_the_mass_flow_error_on_a_recording_it_was_not_traine
     }
 }
 
-/// A closed-loop recording with the mass-flow columns, written by `simulate --scenario`.
+/// A closed-loop recording of the reference plant (whose chamber volume is the firmware's
+/// polynomial) with the mass-flow columns, written by `simulate --scenario`.
 fn recording(dir: &std::path::Path) -> std::path::PathBuf {
-    let rec = dir.join("training.csv");
+    recording_of(dir, &plant(), "training.csv")
+}
+
+/// The same recording of the plant whose volume differs from the firmware's polynomial.
+fn mismatched_recording(dir: &std::path::Path) -> std::path::PathBuf {
+    let p = dir.join("mismatched.toml");
+    std::fs::write(&p, mismatched_text()).unwrap();
+    recording_of(dir, &p, "mismatched.csv")
+}
+
+fn recording_of(dir: &std::path::Path, plant: &std::path::Path, name: &str) -> std::path::PathBuf {
+    let rec = dir.join(name);
     ok(&on_plant(
         "simulate",
-        &plant(),
+        &plant,
         &[
             &"--scenario",
             &root().join("scenarios/volume_training.toml"),
@@ -121,7 +137,7 @@ fn recording(dir: &std::path::Path) -> std::path::PathBuf {
 #[test]
 fn identify_volume_is_reproducible_and_writes_a_file_the_firmware_build_reads() {
     let dir = tempfile::tempdir().unwrap();
-    let rec = recording(dir.path());
+    let rec = mismatched_recording(dir.path());
     let head = std::fs::read_to_string(&rec).unwrap();
     assert!(
         head.lines()
@@ -219,4 +235,129 @@ fn identify_volume_refuses_bad_input_with_status_2_and_writes_nothing() {
         assert!(e.contains(says), "{arg} {val}: {e}");
         assert!(!out.exists());
     }
+}
+
+/// Runs `identify volume` on `rec` writing `out`, with `extra` arguments.
+fn volume_run(
+    rec: &std::path::Path,
+    out: &std::path::Path,
+    extra: &[&str],
+) -> std::process::Output {
+    let mut args: Vec<&dyn AsRef<std::ffi::OsStr>> =
+        vec![&"identify", &"volume", &"--recording", &rec, &"--out", &out];
+    for e in extra {
+        args.push(e);
+    }
+    host_sim(&args)
+}
+
+/// The figure `what` (e.g. "polynomial volume") of the `set` line of a report.
+fn figure(report: &str, set: &str, what: &str) -> f64 {
+    let line = report
+        .lines()
+        .find(|l| l.starts_with(set))
+        .unwrap_or_else(|| panic!("{report}"));
+    let rest = &line[line.find(what).unwrap_or_else(|| panic!("{line}")) + what.len()..];
+    rest.split_whitespace()
+        .next()
+        .unwrap()
+        .trim_end_matches(',')
+        .parse()
+        .unwrap()
+}
+
+#[test]
+fn a_network_no_better_than_the_polynomial_on_held_out_data_is_refused_and_the_old_file_kept() {
+    // The reference plant's chamber volume IS the firmware's polynomial: the network cannot
+    // beat it on the recording's tail.
+    let dir = tempfile::tempdir().unwrap();
+    let rec = recording(dir.path());
+    let out = previous_output(dir.path(), "volume.toml");
+    let r = volume_run(&rec, &out, &["--max-evals", "400"]);
+    let e = exits(2, &r);
+    for n in [
+        "training.csv",
+        "held out",
+        "hybrid",
+        "polynomial",
+        "--allow-worse",
+        "nothing written",
+    ] {
+        assert!(e.contains(n), "`{n}` not in:\n{e}");
+    }
+    assert_kept(&out);
+    // With --allow-worse the same network is written, and its report shows it is worse.
+    let forced = dir.path().join("forced.toml");
+    let report = ok(&volume_run(
+        &rec,
+        &forced,
+        &["--max-evals", "400", "--allow-worse"],
+    ));
+    let held = "held out (recording tail)";
+    let (p, h) = (
+        figure(&report, held, "polynomial volume"),
+        figure(&report, held, "hybrid"),
+    );
+    assert!(h >= p, "refused although the hybrid was better: {report}");
+    assert!(
+        e.contains(&format!("{h:.3e}")) && e.contains(&format!("{p:.3e}")),
+        "{e}\n{report}"
+    );
+    assert!(forced.exists());
+    // Nothing held out and nothing to validate on: nothing to judge the network by.
+    let e = exits(
+        2,
+        &volume_run(
+            &rec,
+            &out,
+            &["--max-evals", "10", "--holdout-fraction", "0"],
+        ),
+    );
+    assert!(
+        e.contains("--holdout-fraction") && e.contains("--validate"),
+        "{e}"
+    );
+    assert_kept(&out);
+}
+
+#[test]
+fn a_recording_too_short_or_too_still_is_refused_before_training() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = mismatched_recording(dir.path());
+    let text = std::fs::read_to_string(&rec).unwrap();
+    let out = previous_output(dir.path(), "volume.toml");
+    // The first 400 lines (0.4 s; the set-point starts at 0.3 s).
+    let short = dir.path().join("short.csv");
+    std::fs::write(
+        &short,
+        text.lines().take(400).collect::<Vec<_>>().join("\n") + "\n",
+    )
+    .unwrap();
+    let e = exits(2, &volume_run(&short, &out, &[]));
+    for n in ["short.csv", "training samples", "1210", "per weight"] {
+        assert!(e.contains(n), "`{n}` not in:\n{e}");
+    }
+    assert!(!e.contains("loss"), "trained before refusing: {e}");
+    assert_kept(&out);
+    // Long enough but the joint held still: the whole recording with the angle frozen.
+    let header = text.lines().find(|l| l.starts_with("t_s,")).unwrap();
+    let col = header.split(',').position(|c| c == "angle_deg").unwrap();
+    let still: Vec<String> = text
+        .lines()
+        .map(|l| {
+            if l.starts_with('#') || l.starts_with("t_s,") {
+                return l.to_string();
+            }
+            let mut f: Vec<&str> = l.split(',').collect();
+            f[col] = "1.5";
+            f.join(",")
+        })
+        .collect();
+    let still_path = dir.path().join("still.csv");
+    std::fs::write(&still_path, still.join("\n") + "\n").unwrap();
+    let e = exits(2, &volume_run(&still_path, &out, &[]));
+    for n in ["still.csv", "angle_deg", "0.00 deg", "5 deg"] {
+        assert!(e.contains(n), "`{n}` not in:\n{e}");
+    }
+    assert_kept(&out);
 }

@@ -349,6 +349,7 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
         savgol_half_window: None,
         dp_max_kpa: None,
         max_accel_rad_s2: None,
+        allow_poor_fit: false,
     })
     .map_err(|e| {
         anyhow::anyhow!("refusing to write firmware constants (nothing written): {e:#}")

@@ -13,7 +13,7 @@ use clap::{Args, Subcommand};
 
 use super::force::{self, ForceSweep, Tondu};
 use super::force_maps;
-use super::plant::{identify_plant_files, PlantFitOptions};
+use super::plant::{identify_plant_text, PlantFitOptions};
 use super::torque::{self, TorqueSource, TorqueSweep};
 use super::{write_atomic, MeasurementNoise};
 use crate::sim::SolverOptions;
@@ -69,10 +69,10 @@ pub struct SweepForceArgs {
     #[arg(long, default_value_t = 31, value_parser = usize_in(2, 100_000))]
     pub n_pressure: usize,
     /// Lowest L/L0.
-    #[arg(long, default_value_t = 0.75, value_parser = f64_in(Range::closed(0.3, 1.5)))]
+    #[arg(long, default_value_t = 0.75, value_parser = f64_in(Range::closed(force::STRETCH_MIN, force::STRETCH_MAX)))]
     pub stretch_min: f64,
     /// Highest L/L0.
-    #[arg(long, default_value_t = 1.05, value_parser = f64_in(Range::closed(0.3, 1.5)))]
+    #[arg(long, default_value_t = 1.05, value_parser = f64_in(Range::closed(force::STRETCH_MIN, force::STRETCH_MAX)))]
     pub stretch_max: f64,
     /// Highest gauge pressure [kPa].
     #[arg(long, default_value_t = 600.0, value_parser = f64_in(Range::positive(2000.0)))]
@@ -231,6 +231,10 @@ pub struct IdentifyTorqueArgs {
     /// averaged over the velocity window at most this [rad/s^2] [default: all samples].
     #[arg(long, value_parser = f64_in(Range::positive(1e6)))]
     pub max_accel_rad_s2: Option<f64>,
+    /// Write the model even when its fit is below the trustworthy fit that `calibrate`
+    /// requires (docs/identification.md).
+    #[arg(long)]
+    pub allow_poor_fit: bool,
 }
 
 #[derive(Args, Debug)]
@@ -258,6 +262,10 @@ pub struct IdentifyPlantArgs {
     /// parameter (plus one).
     #[arg(long, default_value_t = 40, value_parser = usize_in(1, 100_000))]
     pub patience: usize,
+    /// Write the plant file even when its mean held-out fit is below the one `calibrate`
+    /// requires of an identified plant (docs/identification.md).
+    #[arg(long)]
+    pub allow_poor_fit: bool,
 }
 
 /// Runs `host-sim sweep ...`; returns the report for stdout.
@@ -541,7 +549,21 @@ fn header_line_of(path: &Path) -> usize {
 }
 
 fn identify_torque(a: &IdentifyTorqueArgs) -> Result<String> {
+    use super::calibrate::MIN_TORQUE_FIT_PCT;
     let t = torque_model_file(a)?;
+    if !a.allow_poor_fit && !(t.fit_pct >= MIN_TORQUE_FIT_PCT) {
+        bail!(
+            "{}: the torque model fits the force-derived torque {:.2} %, below the {MIN_TORQUE_FIT_PCT} % \
+             `calibrate` requires; nothing written. {}Likely causes: an activation that is not \
+             symmetric (p1 + p2 != 2 p0), pressures in another unit than kPa, tensions that do not \
+             belong to this plant's sprocket, too little motion or too much sensor noise. Record a \
+             `sweep torque`-like run (the joint driven through its range at a few activations); \
+             --allow-poor-fit writes the model anyway",
+            a.recording.display(),
+            t.fit_pct,
+            t.warnings.replace("warning: ", "")
+        );
+    }
     write_atomic(&a.out, t.toml.as_bytes())?;
     Ok(t.report)
 }
@@ -554,6 +576,8 @@ pub struct TorqueModelFile {
     pub report: String,
     /// Fit against the force-derived torque [%].
     pub fit_pct: f64,
+    /// Warnings about the data (empty or lines ending in a newline), also in the report.
+    pub warnings: String,
 }
 
 /// `host-sim identify torque` without the write: the file content, the report, the fit.
@@ -564,9 +588,30 @@ pub fn torque_model_file(a: &IdentifyTorqueArgs) -> Result<TorqueModelFile> {
     )
     .map_err(anyhow::Error::msg)?;
     let plant = Plant::load(&a.plant)?;
-    // Jittered time stamps go on the uniform grid the velocity filter needs.
-    let rec = Recording::read(&a.recording)?.to_uniform();
+    let raw = Recording::read(&a.recording)?;
     let file = a.recording.display().to_string();
+    // A pressure beyond what a muscle bears is a unit mistake (Pa or MPa written for kPa).
+    for (c, name) in [
+        (crate::io::recording::Channel::P1Kpa, "p1_kpa"),
+        (crate::io::recording::Channel::P2Kpa, "p2_kpa"),
+    ] {
+        let Some(p) = raw.channel(c) else { continue };
+        if let Some(k) = p
+            .iter()
+            .position(|v| !(force::P_KPA_MIN..=force::P_KPA_MAX).contains(v))
+        {
+            bail!(
+                "{file}:{}: column `{name}`: {} is outside {}..{} kPa gauge (a value in Pa? the \
+                 column is in kPa); nothing written",
+                header_line_of(&a.recording) + 1 + k,
+                p[k],
+                force::P_KPA_MIN,
+                force::P_KPA_MAX
+            );
+        }
+    }
+    // Jittered time stamps go on the uniform grid the velocity filter needs.
+    let rec = raw.to_uniform();
     let dt = rec.sample_period_s();
     let hw = a
         .savgol_half_window
@@ -691,6 +736,7 @@ pub fn torque_model_file(a: &IdentifyTorqueArgs) -> Result<TorqueModelFile> {
         toml,
         report,
         fit_pct: q.fit_pct,
+        warnings: symmetric_note,
     })
 }
 
@@ -714,7 +760,26 @@ fn identify_plant(a: &IdentifyPlantArgs) -> Result<String> {
         ..PlantFitOptions::default()
     };
     let t0 = std::time::Instant::now();
-    let fit = identify_plant_files(&a.recording, &a.plant, &a.params, &a.out, &opts)?;
+    let (fit, body) = identify_plant_text(&a.recording, &a.plant, &a.params, &opts)?;
+    // The gate `calibrate --identify-plant` applies, on the held-out tail (on the training
+    // part when nothing is held out).
+    let (set, (before, after)) = if fit.holdout.is_empty() {
+        ("training", super::plant::mean_scores(&fit.train))
+    } else {
+        ("held-out", fit.holdout_mean_pct())
+    };
+    let min = super::calibrate::MIN_IDENTIFIED_HELDOUT_FIT_PCT;
+    if !a.allow_poor_fit && !(after >= min) {
+        bail!(
+            "{}: the identified plant fits the recording's channels {after:.1} % on the {set} \
+             part (mean over channels; {before:.1} % with the start values), below the {min} % \
+             `calibrate` requires; nothing written. The recording does not excite these keys, it \
+             is not driven by the valve inputs it records, or another part of the plant file is \
+             wrong; --allow-poor-fit writes the plant file anyway",
+            a.recording.display()
+        );
+    }
+    write_atomic(&a.out, body.as_bytes())?;
     Ok(format!(
         "{}wrote {} ({:.2} s)\n",
         fit.summary(),

@@ -1193,6 +1193,11 @@ impl ForceIdentification {
 
 /// Lowest gauge pressure a force map may hold [kPa] (sensor noise around 0 gauge).
 pub const P_KPA_MIN: f64 = -20.0;
+/// Physical range of L/L0 in force data and sweeps: a braided muscle contracts by at most
+/// about 40 % (L/L0 0.6; 0.5 leaves room) and is not stretched by half its length.
+pub const STRETCH_MIN: f64 = 0.5;
+/// Upper end of [`STRETCH_MIN`]'s range.
+pub const STRETCH_MAX: f64 = 1.5;
 /// Highest gauge pressure a force map may hold [kPa] (no braided muscle runs above 1.5 MPa).
 pub const P_KPA_MAX: f64 = 1500.0;
 /// A force map's largest pressure must reach this [kPa]; below, the column is not in kPa.
@@ -1253,8 +1258,16 @@ pub fn read_force_csv(path: &Path) -> Result<Vec<ForceSample>, IdentError> {
         let p_kpa = num(ip, "p_kpa")?;
         let stretch = num(ie, "stretch")?;
         let f_n = num(iff, "f_n")?;
-        if stretch <= 0.0 {
-            return Err(IdentError::at(&file, line, "stretch", "L/L0 must be > 0"));
+        if !(STRETCH_MIN..=STRETCH_MAX).contains(&stretch) {
+            return Err(IdentError::at(
+                &file,
+                line,
+                "stretch",
+                &format!(
+                    "{stretch} is outside {STRETCH_MIN}..{STRETCH_MAX}: the column is L/L0, a ratio \
+                     (contraction 0..0.5); percent typed as a fraction? 75 % is 0.75"
+                ),
+            ));
         }
         if !(P_KPA_MIN..=P_KPA_MAX).contains(&p_kpa) {
             return Err(IdentError::at(

@@ -29,7 +29,7 @@ use std::path::Path;
 use toml_edit::{DocumentMut, Item, Value};
 
 use super::output_error::{self, Differences, OeOptions, OeParam};
-use super::{write_atomic, IdentError};
+use super::IdentError;
 use crate::fit::fit_percent;
 use crate::io::recording::{Channel, Recording};
 use crate::sim::{simulate, SolverOptions};
@@ -167,7 +167,7 @@ impl PlantFit {
     }
 }
 
-fn mean_scores(scores: &[ChannelScore]) -> (f64, f64) {
+pub(crate) fn mean_scores(scores: &[ChannelScore]) -> (f64, f64) {
     let n = scores.len().max(1) as f64;
     (
         scores.iter().map(|c| c.before_pct).sum::<f64>() / n,
@@ -479,19 +479,6 @@ pub fn fit_plant(
         cost: (cost0, cost1),
         toml,
     })
-}
-
-/// Reads the recording and the plant file, fits, writes the fitted plant file atomically.
-pub fn identify_plant_files(
-    recording: &Path,
-    plant: &Path,
-    params: &[String],
-    out: &Path,
-    opts: &PlantFitOptions,
-) -> Result<PlantFit, IdentError> {
-    let (fit, body) = identify_plant_text(recording, plant, params, opts)?;
-    write_atomic(out, body.as_bytes())?;
-    Ok(fit)
 }
 
 /// Reads the recording and the plant file and fits: the fit and the fitted plant file's text

@@ -30,6 +30,9 @@
 //! (`m_dot_1_kg_s`, `m_dot_2_kg_s`: a flow sensor on a rig, the plant's true net flow in
 //! host-sim's recordings), so target and `P'` average over the same window.
 
+// `!(x >= min)` is deliberate: it also refuses NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use std::cell::Cell;
 use std::fmt::Write as _;
 
@@ -783,6 +786,75 @@ pub struct IdentifyVolumeArgs {
     /// At most this many training samples (both muscles; evenly thinned).
     #[arg(long, default_value_t = 4000, value_parser = crate::validate::usize_in(100, 1_000_000))]
     pub max_samples: usize,
+    /// Write the network even when its mass-flow error on the held-out tail (or on a
+    /// --validate recording) is not below the polynomial volume's, or when nothing is held out
+    /// to judge it by (docs/identification.md).
+    #[arg(long)]
+    pub allow_worse: bool,
+}
+
+/// Least training samples (both muscles) per network weight: fewer and the network fits the
+/// noise of a short stretch of motion.
+pub const MIN_SAMPLES_PER_WEIGHT: usize = 10;
+/// Least joint angle range of the training part [deg]: below it the contraction barely
+/// changes and the network learns nothing about the volume's dependence on it.
+pub const MIN_TRAINING_ANGLE_RANGE_DEG: f64 = 5.0;
+
+/// Refuses training data that cannot determine the network (before any training): fewer
+/// than [`MIN_SAMPLES_PER_WEIGHT`] samples per weight, a joint that moves less than
+/// [`MIN_TRAINING_ANGLE_RANGE_DEG`], or a pressure that does not vary (sd below
+/// [`super::calibrate::MIN_PRESSURE_SD_KPA`]) in the training part of the recording.
+pub fn check_training_data(
+    per_muscle: &[Vec<VolumeSample>; 2],
+    holdout_fraction: f64,
+    geometry: &JointGeometry,
+) -> Result<(), String> {
+    let advice = "record the joint moving over its range with the pressures varying \
+                  (e.g. `host-sim simulate --scenario scenarios/volume_training.toml`), \
+                  a few seconds at least";
+    let train: Vec<&[VolumeSample]> = per_muscle
+        .iter()
+        .map(|m| &m[..((m.len() as f64) * (1.0 - holdout_fraction)).round() as usize])
+        .collect();
+    let n: usize = train.iter().map(|m| m.len()).sum();
+    let need = MIN_SAMPLES_PER_WEIGHT * PARAMETERS;
+    if n < need {
+        return Err(format!(
+            "{n} training samples (both muscles, after --holdout-fraction {holdout_fraction}): \
+             fewer than the {need} ({MIN_SAMPLES_PER_WEIGHT} per weight of the {PARAMETERS}) \
+             the network needs; {advice}"
+        ));
+    }
+    let ratio = geometry.sprocket_radius_m as f64 / geometry.rest_length_m as f64;
+    let (lo, hi) = train[0]
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), s| {
+            (l.min(s.contraction), h.max(s.contraction))
+        });
+    let range_deg = ((hi - lo) / ratio).to_degrees();
+    if !(range_deg >= MIN_TRAINING_ANGLE_RANGE_DEG) {
+        return Err(format!(
+            "column `angle_deg`: the joint moves over {range_deg:.2} deg in the training part \
+             (the first {:.0} % of the recording), below the {MIN_TRAINING_ANGLE_RANGE_DEG} deg \
+             the network needs to learn the volume's dependence on the contraction; {advice}",
+            100.0 * (1.0 - holdout_fraction)
+        ));
+    }
+    for (i, m) in train.iter().enumerate() {
+        let mean = m.iter().map(|s| s.p_abs_pa).sum::<f64>() / m.len() as f64;
+        let sd_kpa = (m.iter().map(|s| (s.p_abs_pa - mean).powi(2)).sum::<f64>() / m.len() as f64)
+            .sqrt()
+            / 1e3;
+        let min_kpa = super::calibrate::MIN_PRESSURE_SD_KPA;
+        if !(sd_kpa >= min_kpa) {
+            return Err(format!(
+                "column `p{}_kpa`: sd {sd_kpa:.3} kPa in the training part, below {min_kpa} kPa: \
+                 the pressure does not vary; {advice}",
+                i + 1
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Training and hold-out samples of a recording, thinned to at most `max_samples` training
@@ -833,6 +905,8 @@ pub fn run_identify_volume(a: &IdentifyVolumeArgs) -> anyhow::Result<String> {
             [m1, m2].concat(),
         ));
     }
+    check_training_data(&per_muscle, a.holdout_fraction, &geometry)
+        .map_err(|e| anyhow::anyhow!("{file}: {e} (nothing written)"))?;
     let (train_s, held) = split_samples(&per_muscle, a.holdout_fraction, a.max_samples);
     let thermo = Thermo::firmware();
     let poly = VolumePoly::firmware();
@@ -868,15 +942,56 @@ pub fn run_identify_volume(a: &IdentifyVolumeArgs) -> anyhow::Result<String> {
     ];
     sets.extend(validation.iter().map(|(n, s)| (n.clone(), s)));
     sets.retain(|(_, s)| !s.is_empty());
-    let figures: Vec<String> = sets.into_iter().map(|(name, s)| {
-        let a = mse_kg2_s2(s, poly_flow);
-        let h = mse_kg2_s2(s, hm);
-        format!(
-            "{name}: {} samples, mass-flow MSE polynomial volume {a:.3e}, hybrid {h:.3e} (kg/s)^2 ({:.2}x)",
-            s.len(),
-            a / h
-        )
-    }).collect();
+    // (name, samples, polynomial MSE, hybrid MSE) of each data set.
+    let errors: Vec<(String, usize, f64, f64)> = sets
+        .into_iter()
+        .map(|(name, s)| (name, s.len(), mse_kg2_s2(s, poly_flow), mse_kg2_s2(s, hm)))
+        .collect();
+    let figures: Vec<String> = errors
+        .iter()
+        .map(|(name, n, a, h)| {
+            format!(
+                "{name}: {n} samples, mass-flow MSE polynomial volume {a:.3e}, hybrid {h:.3e} (kg/s)^2 ({:.2}x)",
+                a / h
+            )
+        })
+        .collect();
+    // The network is judged on data it was not trained on: it must beat the polynomial there.
+    let judged: Vec<&(String, usize, f64, f64)> = errors
+        .iter()
+        .filter(|(name, ..)| name != "training")
+        .collect();
+    if !a.allow_worse {
+        let advice =
+            "record the joint moving over its whole range with varying pressures, and more \
+                      of it (e.g. `host-sim simulate --scenario scenarios/volume_training.toml`); \
+                      or keep the polynomial volume; --allow-worse writes the network anyway";
+        if judged.is_empty() {
+            anyhow::bail!(
+                "{file}: nothing held out to judge the network by (--holdout-fraction 0 and no \
+                 --validate); nothing written. Give --holdout-fraction > 0 or --validate R2.csv; \
+                 --allow-worse writes the network anyway"
+            );
+        }
+        let worse: Vec<String> = judged
+            .iter()
+            .filter(|(_, _, p, h)| !(h < p))
+            .map(|(name, _, p, h)| {
+                format!(
+                    "{name}: hybrid {h:.3e} vs polynomial {p:.3e} (kg/s)^2 ({:.2}x)",
+                    p / h
+                )
+            })
+            .collect();
+        if !worse.is_empty() {
+            anyhow::bail!(
+                "{file}: the trained network's mass-flow error is not below the polynomial \
+                 volume's on data it was not trained on, so it would make the feed-forward worse; \
+                 nothing written.\n  {}\n{advice}",
+                worse.join("\n  ")
+            );
+        }
+    }
     let fw = t.net.to_firmware();
     anyhow::ensure!(
         fw.is_valid(),
