@@ -31,8 +31,9 @@ enum Command {
     /// Replay the valve inputs of a recording on the plant (open loop), or run a closed-loop
     /// scenario with the firmware in the loop.
     ///
-    /// --inputs needs the columns t_s,u_in1,u_ex1,u_in2,u_ex2 (RECORDING.md); the measured
-    /// angle_deg,p1_kpa,p2_kpa,f1_n,f2_n, if present, are drawn under the simulated ones.
+    /// --inputs needs the columns t_s,u_in1,u_ex1,u_in2,u_ex2 and at least one measured
+    /// channel of angle_deg,p1_kpa,p2_kpa,f1_n,f2_n (RECORDING.md); the measured channels
+    /// are drawn under the simulated ones.
     #[command(
         after_help = "Examples:\n  host-sim simulate --plant ../shared/plant/reference-1dof.toml --inputs ../shared/conformance/pulses_nominal.csv --out sim.csv --plot sim.png\n  host-sim simulate --plant ../shared/plant/reference-1dof.toml --scenario scenarios/step.toml --out step.csv"
     )]
