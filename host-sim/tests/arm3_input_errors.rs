@@ -68,10 +68,19 @@ fn an_arm_scenario_name_that_is_a_path_is_refused_and_nothing_outside_out_dir_is
 
 #[test]
 fn a_one_dof_scenario_name_that_is_a_path_is_refused_at_its_line() {
+    simulate_step_refused(
+        ("name = \"step\"", "name = \"../escape\""),
+        &["step.toml", "line 3", "[scenario] name"],
+    );
+}
+
+/// `simulate` of the shipped step scenario with `edit` (from, to) applied must be refused
+/// naming every needle and the line of the edit, writing nothing (no firmware trace either).
+fn simulate_step_refused(edit: (&str, &str), needles: &[&str]) {
     let d = tempfile::tempdir().unwrap();
     let text = std::fs::read_to_string(root().join("scenarios/step.toml"))
         .unwrap()
-        .replace("name = \"step\"", "name = \"../escape\"");
+        .replace(edit.0, edit.1);
     let s = write(d.path(), "step.toml", &text);
     let out = d.path().join("o.csv");
     let r = host_sim(&[
@@ -83,7 +92,10 @@ fn a_one_dof_scenario_name_that_is_a_path_is_refused_at_its_line() {
         &"--out",
         &out,
     ]);
-    assert_refused(&r, &["step.toml", "line 3", "[scenario] name"], &out);
+    let at = format!("line {}", line_of(&text, edit.1));
+    let mut needles = needles.to_vec();
+    needles.push(&at);
+    assert_refused(&r, &needles, &out);
     assert!(!out.with_extension("firmware.csv").exists());
 }
 
@@ -268,23 +280,10 @@ fn arm_scenario_values_are_checked_as_the_one_dof_scenario_values() {
 
 #[test]
 fn a_one_dof_scenario_with_a_huge_pressure_noise_is_refused_too() {
-    let d = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(root().join("scenarios/step.toml"))
-        .unwrap()
-        .replace("pressure_noise_pa = 500.0", "pressure_noise_pa = 1e9");
-    let s = write(d.path(), "step.toml", &text);
-    let out = d.path().join("o.csv");
-    let r = host_sim(&[
-        &"simulate",
-        &"--plant",
-        &plant(),
-        &"--scenario",
-        &s,
-        &"--out",
-        &out,
-    ]);
-    let at = format!("line {}", line_of(&text, "pressure_noise_pa = 1e9"));
-    assert_refused(&r, &["step.toml", &at, "[sensors] pressure_noise_pa"], &out);
+    simulate_step_refused(
+        ("pressure_noise_pa = 500.0", "pressure_noise_pa = 1e9"),
+        &["step.toml", "[sensors] pressure_noise_pa"],
+    );
 }
 
 #[test]

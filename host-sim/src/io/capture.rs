@@ -91,13 +91,14 @@ fn without_repeats(records: &[(usize, TickRecord)]) -> (Vec<(usize, TickRecord)>
     };
     let mut kept: Vec<(usize, TickRecord)> = Vec::with_capacity(records.len());
     let mut repeated = 0;
+    let mut last = None;
     for (at, r) in records {
-        if let Some((_, prev)) = kept.last() {
-            if bytes(prev) == bytes(r) {
-                repeated += 1;
-                continue;
-            }
+        let b = bytes(r);
+        if last == Some(b) {
+            repeated += 1;
+            continue;
         }
+        last = Some(b);
         kept.push((*at, *r));
     }
     (kept, repeated)
