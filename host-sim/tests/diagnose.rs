@@ -310,6 +310,30 @@ fn a_wrong_key_outside_the_library_is_unexplained_not_explained_by_a_lookalike()
 }
 
 #[test]
+fn a_key_off_beyond_its_search_range_is_named_at_its_bound() {
+    // The muscle radius 40 % large, beyond the 0.7x..1.3x the diagnosis searches: the best
+    // attempt puts the radius at the end of its range and still leaves many times the noise.
+    // The answer is unexplained, and it says the radius ended at its bound.
+    let (train, check) = recordings_of_edited("radius_m = 0.01 ", "radius_m = 0.014 ", 4244, false);
+    let d = diagnose_checked(&nominal(), &train, &check);
+    let answer = d.answer();
+    assert_eq!(d.verdict, Verdict::Unexplained, "{answer}");
+    let hit = d
+        .best_attempt_at_bound
+        .iter()
+        .find(|h| h.part == "muscle.radius_m")
+        .unwrap_or_else(|| panic!("{:?}\n{answer}", d.best_attempt_at_bound));
+    assert_eq!(hit.nominal, Some(0.01));
+    assert!((hit.bound - 0.013).abs() < 1e-12, "{hit:?}");
+    assert!(answer.contains("muscle.radius_m ended at"), "{answer}");
+    assert!(answer.contains("--params muscle.radius_m"), "{answer}");
+    assert_eq!(
+        d.to_json()["best_attempt_at_bound"][0]["part"],
+        "muscle.radius_m"
+    );
+}
+
+#[test]
 fn a_wrong_sprocket_radius_is_explained_by_its_exact_lookalike_and_said_so() {
     // A sprocket radius 30 % large is, to the model, exactly an angle gain of 1/1.3 with
     // the inertia scaled: the answer fits to the noise, and the look-alike is stated.

@@ -194,3 +194,28 @@ fn a_long_recording_reads_the_same_as_row_by_row_and_names_lines_past_the_split(
     }));
     assert_names(&e, 103, "u_in1");
 }
+
+/// Two swapped rows are named as rows out of order at the row where time goes back, not as
+/// a gap at the row before it (where the step first doubles); a duplicated row as repeated.
+#[test]
+fn swapped_or_repeated_rows_are_named_as_such() {
+    let mut text = String::from("t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg\n");
+    let rows: Vec<String> = (0..20)
+        .map(|k| format!("{:.3},0,0,0,0,{}", k as f64 * 0.001, k))
+        .collect();
+    // Swap the rows of t = 0.010 and 0.011 s (data rows 10 and 11: file lines 12 and 13).
+    let mut swapped = rows.clone();
+    swapped.swap(10, 11);
+    let e = err(&(text.clone() + &swapped.join("\n") + "\n"));
+    assert_names(&e, 13, "t_s");
+    assert!(e.contains("0.01 after 0.011"), "{e}");
+    assert!(e.contains("out of order"), "{e}");
+    assert!(!e.contains("non-uniform"), "{e}");
+    // A repeated row: the repeat (file line 13) is named.
+    let mut repeated = rows.clone();
+    repeated.insert(11, rows[10].clone());
+    text.push_str(&repeated.join("\n"));
+    let e = err(&text);
+    assert_names(&e, 13, "t_s");
+    assert!(e.contains("repeated"), "{e}");
+}

@@ -88,37 +88,66 @@ impl Diagnosis {
                 }
             }
             Verdict::Unexplained => {
-                let worst = self
-                    .heldout_after
-                    .iter()
-                    .chain(self.check_after.iter().flatten())
-                    .map(|(_, v)| *v)
-                    .fold(f64::INFINITY, f64::min);
-                if self.best_attempt.is_empty() {
-                    format!(
-                        "Unexplained: the nominal model misses something (fits {}), but nothing in the catalogue or among the plant file's keys explains it on the held-out data; no effect is named.",
-                        fits(&self.fit_before)
-                    )
-                } else if worst < crate::diagnose::verdict::MIN_HELDOUT_FIT_PCT {
-                    format!(
-                        "Unexplained: the best answer ({}) still leaves a held-out fit of {worst:.1} % (below 50 %); no effect is named. Perhaps a plant-file key the diagnosis does not refit is off (the muscles' geometry: rest length, initial contraction, end factor; the sprocket radius; the valve's critical ratio): `host-sim identify plant --params KEY` fits any key.",
-                        self.best_attempt.join(" + ")
-                    )
-                } else {
-                    let (x, channel) = self.residual_x_noise;
-                    format!(
-                        "Unexplained: the best answer ({}) changes the fits {} but still leaves {x:.0} times the noise on {channel} (an explanation leaves at most {:.0} times): something else is off, perhaps a plant-file key the diagnosis does not refit (the muscles' geometry: rest length, initial contraction, end factor; the sprocket radius; the valve's critical ratio; `host-sim identify plant --params KEY` fits any key); no effect is named.",
-                        self.best_attempt.join(" + "),
-                        change(&self.fit_before, &self.fit_best_attempt),
-                        crate::diagnose::verdict::MAX_RESIDUAL_X_NOISE
-                    )
-                }
+                let message = {
+                    let worst = self
+                        .heldout_after
+                        .iter()
+                        .chain(self.check_after.iter().flatten())
+                        .map(|(_, v)| *v)
+                        .fold(f64::INFINITY, f64::min);
+                    if self.best_attempt.is_empty() {
+                        format!(
+                            "Unexplained: the nominal model misses something (fits {}), but nothing in the catalogue or among the plant file's keys explains it on the held-out data; no effect is named.",
+                            fits(&self.fit_before)
+                        )
+                    } else if worst < crate::diagnose::verdict::MIN_HELDOUT_FIT_PCT {
+                        format!(
+                            "Unexplained: the best answer ({}) still leaves a held-out fit of {worst:.1} % (below 50 %); no effect is named. Perhaps a plant-file key the diagnosis does not refit is off (the muscles' geometry: rest length, initial contraction, end factor; the sprocket radius; the valve's critical ratio): `host-sim identify plant --params KEY` fits any key.",
+                            self.best_attempt.join(" + ")
+                        )
+                    } else {
+                        let (x, channel) = self.residual_x_noise;
+                        format!(
+                            "Unexplained: the best answer ({}) changes the fits {} but still leaves {x:.0} times the noise on {channel} (an explanation leaves at most {:.0} times): something else is off, perhaps a plant-file key the diagnosis does not refit (the muscles' geometry: rest length, initial contraction, end factor; the sprocket radius; the valve's critical ratio; `host-sim identify plant --params KEY` fits any key); no effect is named.",
+                            self.best_attempt.join(" + "),
+                            change(&self.fit_before, &self.fit_best_attempt),
+                            crate::diagnose::verdict::MAX_RESIDUAL_X_NOISE
+                        )
+                    }
+                };
+                message + &self.bound_note()
             }
             Verdict::NotThisPlant => format!(
                 "This recording does not look like this plant (nominal fits {}); no effect is named.",
                 fits(&self.fit_before)
             ),
         }
+    }
+
+    /// For an unexplained answer: the parameters of the best attempt that ended at the end of
+    /// the range the diagnosis searches (a plant-file key then is off by more than the range).
+    fn bound_note(&self) -> String {
+        self.best_attempt_at_bound
+            .iter()
+            .map(|h| match h.nominal {
+                Some(nominal) => format!(
+                    " The refitted {key} ended at {:.3}x the plant file's value, at the end of \
+                     the range the diagnosis searches ({:.2}x): the file's value is probably off \
+                     by more than that; check it, or fit it with `host-sim identify plant \
+                     --params {key}`.",
+                    h.value / nominal,
+                    h.bound / nominal,
+                    key = h.part
+                ),
+                None => format!(
+                    " The {} of {} ended at its bound {} (the true value may lie beyond, or the \
+                     effect stands in for something else).",
+                    h.param,
+                    h.part,
+                    crate::validate::Shown(h.bound)
+                ),
+            })
+            .collect()
     }
 
     /// The JSON of the diagnosis.
@@ -181,6 +210,13 @@ impl Diagnosis {
             "fit": {"before": json_fits(&self.fit_before), "after": json_fits(&self.fit_after)},
             "heldout_fit": {"before": json_fits(&self.heldout_before), "after": json_fits(&self.heldout_after)},
             "best_attempt": self.best_attempt,
+            "best_attempt_at_bound": self.best_attempt_at_bound.iter().map(|h| serde_json::json!({
+                "part": h.part,
+                "param": h.param,
+                "value": json_raw(h.value),
+                "bound": json_raw(h.bound),
+                "nominal": h.nominal.map(json_raw).unwrap_or(serde_json::Value::Null),
+            })).collect::<Vec<_>>(),
             "best_attempt_fit": self.fit_best_attempt.iter().map(|(k, v)| (k.to_string(), json_num(*v, 2))).collect::<serde_json::Map<_, _>>(),
             "residual_x_noise": {
                 "worst_channel": self.residual_x_noise.1,

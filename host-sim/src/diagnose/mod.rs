@@ -232,6 +232,9 @@ pub struct Diagnosis {
     pub candidates: Vec<CandidateScore>,
     /// The best set the selection found (ids), also when the verdict names nothing.
     pub best_attempt: Vec<String>,
+    /// Parameters of the best set (named or not) that ended at a bound of the range the
+    /// diagnosis searches.
+    pub best_attempt_at_bound: Vec<BoundHit>,
     /// Look-alike statements.
     pub lookalikes: Vec<String>,
     /// Why the recording may not be of this plant (units, channel mapping).
@@ -681,6 +684,19 @@ pub fn final_refit<'c>(
     }
 }
 
+/// A fitted parameter that ended at a bound of its search range.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BoundHit {
+    /// The candidate's id (an effect, or a plant-file key such as `muscle.radius_m`).
+    pub part: String,
+    /// The parameter's name.
+    pub param: String,
+    pub value: f64,
+    pub bound: f64,
+    /// The plant file's value, for a recalibrated key.
+    pub nominal: Option<f64>,
+}
+
 /// Runs the diagnosis. `progress(done, total, stage)` is called as it goes.
 pub fn diagnose(
     nominal: &PlantConfig,
@@ -738,6 +754,10 @@ pub fn diagnose(
     let nominal_cost = g.nominal.cost(false);
     let j0_h = g.nominal.cost(true);
     let nothing_missing = nominal_cost <= opts.null_ratio * noise_cost;
+    // Unit and wiring mistakes (a pressure in Pa, an angle in radians, swapped channels) are
+    // seen on the nominal replay alone: the answer is then `not_this_plant` whatever the
+    // selection finds, so the selection does not run (seconds instead of minutes).
+    let hints = verdict::plausibility_hints(nominal, train, &g.nominal.plausibility);
     step("screening done");
 
     // 3. Selection.
@@ -748,7 +768,7 @@ pub fn diagnose(
         n_heldout: held.len() as f64,
         explained_cost: opts.null_ratio * noise_cost,
     };
-    let sel = if nothing_missing {
+    let sel = if nothing_missing || !hints.is_empty() {
         selection::Selected {
             chosen: Vec::new(),
             heldout_cost: j0_h,
@@ -813,6 +833,26 @@ pub fn diagnose(
     // 4. Recalibration and final refit.
     let fin = final_refit(&g, sel.chosen, n, opts);
     step("final refit");
+    let best_attempt_at_bound: Vec<BoundHit> = fin
+        .chosen
+        .iter()
+        .flat_map(|p| {
+            let c = p.candidate;
+            let specs = c.params(&setup);
+            recalibrate::at_bounds(c, &p.params, &setup)
+                .into_iter()
+                .map(move |(param, bound)| {
+                    let i = specs.iter().position(|s| s.name == param).unwrap_or(0);
+                    BoundHit {
+                        part: c.id().to_string(),
+                        value: p.params.get(i).copied().unwrap_or(f64::NAN),
+                        nominal: recalibrate::is_recal_id(c.id()).then(|| specs[i].scale),
+                        param,
+                        bound,
+                    }
+                })
+        })
+        .collect();
     let mut failures = fin.failures;
 
     // Check recording: same rig, its own sample period.
@@ -852,7 +892,6 @@ pub fn diagnose(
     step("check");
 
     // 5. Verdict.
-    let hints = verdict::plausibility_hints(nominal, train, &g.nominal.plausibility);
     let min_heldout = heldout_after
         .values()
         .chain(check_after.iter().flat_map(|m| m.values()))
@@ -1090,6 +1129,7 @@ pub fn diagnose(
         check_after,
         candidates: sel.scores,
         best_attempt,
+        best_attempt_at_bound,
         lookalikes,
         hints,
         failures,

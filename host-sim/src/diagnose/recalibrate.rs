@@ -239,19 +239,32 @@ impl Candidate for Bounded {
     }
 }
 
-/// Names of the parameters of `c` that ended at a bound (within 0.1 % of their scale).
+/// Share of a non-zero bound within which a refitted plant-file key counts as at its bound:
+/// the diagnosis searches a key only within a factor range of the file's value (radius
+/// 0.7x..1.3x), so a key that ends at 1.29x most likely lies beyond the range.
+pub const RECAL_NEAR_BOUND: f64 = 0.02;
+
+/// Names of the parameters of `c` that ended at a bound: within 0.1 % of their scale, or for
+/// a recalibrated key within [`RECAL_NEAR_BOUND`] of a non-zero bound.
 pub fn at_bounds(c: &dyn Candidate, params: &[f64], s: &Setup) -> Vec<(String, f64)> {
     if c.grid(params, s).is_some() {
         return Vec::new();
     }
+    let recal = is_recal_id(c.id());
     c.params(s)
         .iter()
         .zip(params)
         .filter_map(|(p, v)| {
-            let tol = 1e-3 * p.scale.abs().max(1e-300);
-            if p.lo.is_finite() && (v - p.lo).abs() <= tol {
+            let tol_of = |bound: f64| {
+                if recal && bound != 0.0 {
+                    RECAL_NEAR_BOUND * bound.abs()
+                } else {
+                    1e-3 * p.scale.abs().max(1e-300)
+                }
+            };
+            if p.lo.is_finite() && (v - p.lo).abs() <= tol_of(p.lo) {
                 Some((p.name.clone(), p.lo))
-            } else if p.hi.is_finite() && (p.hi - v).abs() <= tol {
+            } else if p.hi.is_finite() && (p.hi - v).abs() <= tol_of(p.hi) {
                 Some((p.name.clone(), p.hi))
             } else {
                 None

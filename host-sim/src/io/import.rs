@@ -813,11 +813,19 @@ pub fn import(
             return Err(at(
                 lines[k],
                 time_name,
-                format!(
-                    "time does not increase: {} s after {} s",
-                    t_s[k],
-                    t_s[k - 1]
-                ),
+                if t_s[k] == t_s[k - 1] {
+                    format!(
+                        "time does not increase: time stamp {} s repeated (a duplicated row?)",
+                        t_s[k]
+                    )
+                } else {
+                    format!(
+                        "time does not increase: {} s after {} s (rows out of order? the rows \
+                         must be sorted by time)",
+                        t_s[k],
+                        t_s[k - 1]
+                    )
+                },
             ));
         }
     }

@@ -1280,16 +1280,33 @@ impl<'t> Table<'t> {
         let half = steps.len() / 2;
         let median_step = *steps.select_nth_unstable_by(half, f64::total_cmp).1;
         drop(steps);
+        // Rows out of order or repeated, named at the row where time stops increasing.
+        let order_err = |k: usize| {
+            let what = if t_s[k] == t_s[k - 1] {
+                format!(
+                    "time does not increase: time stamp {} repeated (a duplicated row?)",
+                    t_s[k]
+                )
+            } else {
+                format!(
+                    "time does not increase: {} after {} (rows out of order? the rows must be \
+                     sorted by t_s)",
+                    t_s[k],
+                    t_s[k - 1]
+                )
+            };
+            self.field_err(line_of(k), "t_s", what)
+        };
         for k in 1..n {
             let step = t_s[k] - t_s[k - 1];
             if !(step > 0.0) {
-                return Err(self.field_err(
-                    line_of(k),
-                    "t_s",
-                    format!("time does not increase: {} after {}", t_s[k], t_s[k - 1]),
-                ));
+                return Err(order_err(k));
             }
             if step > MAX_STEP_RATIO * median_step || step < MIN_STEP_RATIO * median_step {
+                // Two swapped rows first show as a double step: name the swap, not a gap.
+                if k + 1 < n && !(t_s[k + 1] > t_s[k]) {
+                    return Err(order_err(k + 1));
+                }
                 return Err(self.field_err(
                     line_of(k),
                     "t_s",
