@@ -593,6 +593,46 @@ pub fn saturated_step(anti_windup: bool) -> (f32, f32, f32) {
     (peak - 1.0, i_max, settled_at)
 }
 
+/// The input check every position loop (`step(meas, setpoint_rad, dt_s)`) shares, for its
+/// unit tests: after `warm_up` steps towards `setpoint_rad` from rest the integral is
+/// positive; a NaN set-point is [`ControlError::NonFiniteInput`] and zeroes it; an infinite
+/// angle or velocity and a period of 0, below 0 or NaN are errors.
+#[cfg(test)]
+pub(crate) fn assert_refuses_bad_inputs_and_resets<C, T: core::fmt::Debug>(
+    c: &mut C,
+    step: fn(&mut C, JointState, f32, f32) -> Result<T, ControlError>,
+    integral: fn(&C) -> f32,
+    setpoint_rad: f32,
+    warm_up: usize,
+) {
+    let rest = JointState {
+        angle_rad: 0.0,
+        velocity_rad_s: 0.0,
+    };
+    for _ in 0..warm_up {
+        step(c, rest, setpoint_rad, 1e-3).unwrap();
+    }
+    assert!(integral(c) > 0.0);
+    let r = step(c, rest, f32::NAN, 1e-3);
+    assert!(matches!(r, Err(ControlError::NonFiniteInput)), "{r:?}");
+    assert_eq!(integral(c), 0.0);
+    for bad in [
+        JointState {
+            angle_rad: f32::INFINITY,
+            ..rest
+        },
+        JointState {
+            velocity_rad_s: f32::INFINITY,
+            ..rest
+        },
+    ] {
+        assert!(step(c, bad, 0.0, 1e-3).is_err(), "{bad:?}");
+    }
+    for dt_s in [0.0, -1e-3, f32::NAN] {
+        assert!(step(c, rest, 0.0, dt_s).is_err(), "dt_s = {dt_s}");
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -930,23 +970,13 @@ mod tests {
 
     #[test]
     fn position_loop_rejects_nan_and_resets_integrator() {
-        let mut c = pid();
-        for _ in 0..10 {
-            c.step(AT_REST, 0.1, 1e-3).unwrap();
-        }
-        assert!(c.integral_nm() > 0.0);
-        assert_eq!(
-            c.step(AT_REST, f32::NAN, 1e-3),
-            Err(ControlError::NonFiniteInput)
+        assert_refuses_bad_inputs_and_resets(
+            &mut pid(),
+            PositionController::step,
+            PositionController::integral_nm,
+            0.1,
+            10,
         );
-        assert_eq!(c.integral_nm(), 0.0);
-        let bad = JointState {
-            angle_rad: f32::INFINITY,
-            velocity_rad_s: 0.0,
-        };
-        assert!(c.step(bad, 0.0, 1e-3).is_err());
-        assert!(c.step(AT_REST, 0.0, 0.0).is_err());
-        assert!(c.step(AT_REST, 0.0, -1e-3).is_err());
     }
 
     #[test]

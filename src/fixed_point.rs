@@ -598,13 +598,7 @@ mod tests {
 
     /// Eq. 6 in f64 with the f32 constants, on inputs inside the domain.
     fn eq6_f64(p_pa: f64, e: f64) -> f64 {
-        let c = FORCE_LAW.c.map(|x| x as f64);
-        let p = p_pa * 1e-6;
-        let f = (c[0] * p * p + c[1] * e * e + c[2] * p + c[3] * e + c[4] * p / e + c[5])
-            / (c[6] * p + c[7] * e)
-            + c[8]
-            + c[9] * (e - 0.7).exp();
-        f.max(0.0)
+        eq6_f64_with(&FORCE_LAW, p_pa, e)
     }
 
     fn q16(x: f64) -> I16F16 {

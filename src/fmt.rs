@@ -3,47 +3,33 @@
 //! arguments.
 #![allow(unused_macros)]
 
-macro_rules! trace {
-    ($s:literal $(, $x:expr)* $(,)?) => {{
+/// One level's macro: `log_at!(info, "x={}", x)` is `defmt::info!("x={}", x)` with the
+/// `defmt` feature, otherwise only borrows its arguments.
+macro_rules! log_at {
+    ($level:ident, $s:literal $(, $x:expr)* $(,)?) => {{
         #[cfg(feature = "defmt")]
-        ::defmt::trace!($s $(, $x)*);
+        ::defmt::$level!($s $(, $x)*);
         #[cfg(not(feature = "defmt"))]
         let _ = ($( & $x ),*);
     }};
+}
+
+macro_rules! trace {
+    ($($t:tt)*) => { log_at!(trace, $($t)*) };
 }
 
 macro_rules! debug {
-    ($s:literal $(, $x:expr)* $(,)?) => {{
-        #[cfg(feature = "defmt")]
-        ::defmt::debug!($s $(, $x)*);
-        #[cfg(not(feature = "defmt"))]
-        let _ = ($( & $x ),*);
-    }};
+    ($($t:tt)*) => { log_at!(debug, $($t)*) };
 }
 
 macro_rules! info {
-    ($s:literal $(, $x:expr)* $(,)?) => {{
-        #[cfg(feature = "defmt")]
-        ::defmt::info!($s $(, $x)*);
-        #[cfg(not(feature = "defmt"))]
-        let _ = ($( & $x ),*);
-    }};
+    ($($t:tt)*) => { log_at!(info, $($t)*) };
 }
 
 macro_rules! warn {
-    ($s:literal $(, $x:expr)* $(,)?) => {{
-        #[cfg(feature = "defmt")]
-        ::defmt::warn!($s $(, $x)*);
-        #[cfg(not(feature = "defmt"))]
-        let _ = ($( & $x ),*);
-    }};
+    ($($t:tt)*) => { log_at!(warn, $($t)*) };
 }
 
 macro_rules! error {
-    ($s:literal $(, $x:expr)* $(,)?) => {{
-        #[cfg(feature = "defmt")]
-        ::defmt::error!($s $(, $x)*);
-        #[cfg(not(feature = "defmt"))]
-        let _ = ($( & $x ),*);
-    }};
+    ($($t:tt)*) => { log_at!(error, $($t)*) };
 }

@@ -345,24 +345,13 @@ mod tests {
 
     #[test]
     fn bad_inputs_are_errors_and_reset_state() {
-        let mut c = DpPid::new(gains());
-        for _ in 0..100 {
-            c.step(AT_REST, 0.05, 1e-3).unwrap();
-        }
-        assert!(c.integral_pa() > 0.0);
-        assert_eq!(
-            c.step(AT_REST, f32::NAN, 1e-3),
-            Err(ControlError::NonFiniteInput)
+        crate::control::assert_refuses_bad_inputs_and_resets(
+            &mut DpPid::new(gains()),
+            DpPid::step,
+            DpPid::integral_pa,
+            0.05,
+            100,
         );
-        assert_eq!(c.integral_pa(), 0.0);
-        let bad = JointState {
-            angle_rad: 0.0,
-            velocity_rad_s: f32::INFINITY,
-        };
-        assert!(c.step(bad, 0.0, 1e-3).is_err());
-        assert!(c.step(AT_REST, 0.0, 0.0).is_err());
-        assert!(c.step(AT_REST, 0.0, -1e-3).is_err());
-        assert!(c.step(AT_REST, 0.0, f32::NAN).is_err());
     }
 
     #[test]

@@ -106,37 +106,29 @@ pub trait ProfileFloat:
     fn is_nan(self) -> bool;
 }
 
-impl ProfileFloat for f32 {
-    const ZERO: Self = 0.0;
-    const ONE: Self = 1.0;
-    const TWO_PI: Self = 2.0 * core::f32::consts::PI;
-    const MIN_JERK: [Self; 3] = [10.0, -15.0, 6.0];
-    fn floor(self) -> Self {
-        libm::floorf(self)
-    }
-    fn sin(self) -> Self {
-        libm::sinf(self)
-    }
-    fn is_nan(self) -> bool {
-        f32::is_nan(self)
-    }
+/// The impl for one float type: its libm floor and sine, its pi.
+macro_rules! profile_float {
+    ($t:ident, $floor:path, $sin:path, $pi:expr) => {
+        impl ProfileFloat for $t {
+            const ZERO: Self = 0.0;
+            const ONE: Self = 1.0;
+            const TWO_PI: Self = 2.0 * $pi;
+            const MIN_JERK: [Self; 3] = [10.0, -15.0, 6.0];
+            fn floor(self) -> Self {
+                $floor(self)
+            }
+            fn sin(self) -> Self {
+                $sin(self)
+            }
+            fn is_nan(self) -> bool {
+                $t::is_nan(self)
+            }
+        }
+    };
 }
 
-impl ProfileFloat for f64 {
-    const ZERO: Self = 0.0;
-    const ONE: Self = 1.0;
-    const TWO_PI: Self = 2.0 * core::f64::consts::PI;
-    const MIN_JERK: [Self; 3] = [10.0, -15.0, 6.0];
-    fn floor(self) -> Self {
-        libm::floor(self)
-    }
-    fn sin(self) -> Self {
-        libm::sin(self)
-    }
-    fn is_nan(self) -> bool {
-        f64::is_nan(self)
-    }
-}
+profile_float!(f32, libm::floorf, libm::sinf, core::f32::consts::PI);
+profile_float!(f64, libm::floor, libm::sin, core::f64::consts::PI);
 
 /// `initial` until `at_s`, then `final`; with `transition_s > 0` a minimum-jerk move over
 /// `transition_s` from `at_s`.
@@ -195,6 +187,13 @@ mod tests {
         (a as f64 - b).abs() <= tol
     }
 
+    /// The values `p` must hit to the bit: `(t_s, angle_rad)` pairs.
+    fn assert_exact(p: &SetpointProfile, cases: &[(f32, f32)]) {
+        for &(t_s, want) in cases {
+            assert_eq!(p.at(t_s), want, "{p:?} at {t_s} s");
+        }
+    }
+
     #[test]
     fn step_with_and_without_transition() {
         let jump = SetpointProfile::Step {
@@ -203,17 +202,14 @@ mod tests {
             at_s: 1.0,
             transition_s: 0.0,
         };
-        assert_eq!(jump.at(0.0), 0.0);
-        assert_eq!(jump.at(0.999), 0.0);
-        assert_eq!(jump.at(1.0), 0.2);
-        assert_eq!(jump.at(100.0), 0.2);
+        assert_exact(&jump, &[(0.0, 0.0), (0.999, 0.0), (1.0, 0.2), (100.0, 0.2)]);
         let smooth = SetpointProfile::Step {
             initial_rad: -0.1,
             final_rad: 0.3,
             at_s: 1.0,
             transition_s: 0.5,
         };
-        assert_eq!(smooth.at(1.0), -0.1);
+        assert_exact(&smooth, &[(1.0, -0.1), (1.5, 0.3)]);
         assert!(close(smooth.at(1.25), 0.1, 1e-6)); // symmetric: half-way at mid-time
         for k in 0..=50 {
             let t = 1.0 + 0.01 * k as f64;
@@ -221,7 +217,6 @@ mod tests {
             let want = -0.1 + 0.4 * (10.0 * u.powi(3) - 15.0 * u.powi(4) + 6.0 * u.powi(5));
             assert!(close(smooth.at(t as f32), want, 1e-5), "t={t}");
         }
-        assert_eq!(smooth.at(1.5), 0.3);
     }
 
     #[test]
@@ -232,12 +227,10 @@ mod tests {
             start_s: 1.0,
             end_s: 3.0,
         };
-        assert_eq!(r.at(0.5), 0.0);
+        assert_exact(&r, &[(0.5, 0.0), (3.5, 0.5)]);
         assert!(close(r.at(2.0), 0.25, 1e-6));
-        assert_eq!(r.at(3.5), 0.5);
         let h = SetpointProfile::Hold { angle_rad: 0.1 };
-        assert_eq!(h.at(0.0), 0.1);
-        assert_eq!(h.at(1e6), 0.1);
+        assert_exact(&h, &[(0.0, 0.1), (1e6, 0.1)]);
     }
 
     #[test]

@@ -97,6 +97,30 @@ fn u32_at(b: &[u8], at: usize) -> u32 {
     u32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]])
 }
 
+/// Completes a frame whose fields are in `buf[2..len - 2]`: the sync bytes at its start,
+/// the [`checksum16`] of the fields at its end.
+fn seal(buf: &mut [u8], sync: [u8; 2]) {
+    let end = buf.len() - 2;
+    put(buf, 0, &sync);
+    let c = checksum16(&buf[2..end]);
+    put(buf, end, &c.to_le_bytes());
+}
+
+/// The first `len` bytes of `b` when they are a frame: long enough, `sync` at the start and
+/// the checksum of bytes `2..len - 2` in the last two.
+fn checked(b: &[u8], len: usize, sync: [u8; 2]) -> Result<&[u8], DecodeError> {
+    let Some(b) = b.get(..len) else {
+        return Err(DecodeError::Short);
+    };
+    if b[0..2] != sync {
+        return Err(DecodeError::Sync);
+    }
+    if checksum16(&b[2..len - 2]) != u16_at(b, len - 2) {
+        return Err(DecodeError::Checksum);
+    }
+    Ok(b)
+}
+
 /// Why a frame did not decode.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum DecodeError {
@@ -111,7 +135,6 @@ pub enum DecodeError {
 impl TickRecord {
     /// Encodes into `buf`.
     pub fn encode(&self, buf: &mut [u8; RECORD_LEN]) {
-        put(buf, 0, &RECORD_SYNC);
         put(buf, 2, &self.seq.to_le_bytes());
         put(buf, 6, &self.t_us.to_le_bytes());
         put(buf, 10, &self.setpoint_rad.to_le_bytes());
@@ -126,21 +149,21 @@ impl TickRecord {
         put(buf, 38, &self.angle_rad.to_le_bytes());
         buf[42] = self.fault;
         buf[43] = self.armed as u8;
-        let c = checksum16(&buf[2..44]);
-        put(buf, 44, &c.to_le_bytes());
+        seal(buf, RECORD_SYNC);
+    }
+
+    /// Logs the encoded record as the defmt frame `stream {=[u8]}`: the board's per-tick
+    /// stream (docs/rig.md), read on the host by `host-sim capture`.
+    #[cfg(feature = "defmt")]
+    pub fn log(&self) {
+        let mut buf = [0u8; RECORD_LEN];
+        self.encode(&mut buf);
+        defmt::info!("stream {=[u8]}", buf[..]);
     }
 
     /// Decodes one record from the start of `b`.
     pub fn decode(b: &[u8]) -> Result<Self, DecodeError> {
-        if b.len() < RECORD_LEN {
-            return Err(DecodeError::Short);
-        }
-        if b[0..2] != RECORD_SYNC {
-            return Err(DecodeError::Sync);
-        }
-        if checksum16(&b[2..44]) != u16_at(b, 44) {
-            return Err(DecodeError::Checksum);
-        }
+        let b = checked(b, RECORD_LEN, RECORD_SYNC)?;
         let f = |at| f32::from_bits(u32_at(b, at));
         let mut openings = [0.0f32; 4];
         for (i, o) in openings.iter_mut().enumerate() {
@@ -163,8 +186,9 @@ impl TickRecord {
 
 impl TickRecord {
     /// The record of one tick: the raw readings it got, the frame the tick saw, the tick's
-    /// output and the pin levels the valve driver wrote (in1, ex1, in2, ex2). This is what the
-    /// board and the QEMU images call after `ControlTick::step` and the valve update.
+    /// output and the openings the valve driver applied (in1, ex1, in2, ex2; an on/off
+    /// driver's pin levels as 0 or 1). This is what the board and the QEMU images call after
+    /// `ControlTick::step` and the valve update.
     #[allow(clippy::too_many_arguments)]
     pub fn of_tick(
         seq: u32,
@@ -174,15 +198,14 @@ impl TickRecord {
         encoder_counts: i32,
         frame: &crate::tick::SensorFrame,
         out: &crate::tick::TickOutput,
-        pins: [bool; 4],
+        openings: [f32; 4],
     ) -> Self {
         let nan_if_none = |v: Option<f32>| v.unwrap_or(f32::NAN);
-        let open = |b: bool| if b { 1.0 } else { 0.0 };
         TickRecord {
             seq,
             t_us,
             setpoint_rad,
-            openings: [open(pins[0]), open(pins[1]), open(pins[2]), open(pins[3])],
+            openings,
             p_counts,
             encoder_counts,
             p_gauge_pa: [
@@ -234,7 +257,6 @@ pub const RESET_WATCHDOG: u8 = 2;
 impl SensorInput {
     /// Encodes into `buf`.
     pub fn encode(&self, buf: &mut [u8; INPUT_LEN]) {
-        put(buf, 0, &INPUT_SYNC);
         put(buf, 2, &self.seq.to_le_bytes());
         put(buf, 6, &self.setpoint_rad.to_le_bytes());
         put(buf, 10, &self.p_counts[0].to_le_bytes());
@@ -243,21 +265,12 @@ impl SensorInput {
         buf[18] = self.flags;
         buf[19] = self.reset;
         put(buf, 20, &self.dt_s.to_le_bytes());
-        let c = checksum16(&buf[2..24]);
-        put(buf, 24, &c.to_le_bytes());
+        seal(buf, INPUT_SYNC);
     }
 
     /// Decodes one frame from the start of `b`.
     pub fn decode(b: &[u8]) -> Result<Self, DecodeError> {
-        if b.len() < INPUT_LEN {
-            return Err(DecodeError::Short);
-        }
-        if b[0..2] != INPUT_SYNC {
-            return Err(DecodeError::Sync);
-        }
-        if checksum16(&b[2..24]) != u16_at(b, 24) {
-            return Err(DecodeError::Checksum);
-        }
+        let b = checked(b, INPUT_LEN, INPUT_SYNC)?;
         Ok(SensorInput {
             seq: u32_at(b, 2),
             setpoint_rad: f32::from_bits(u32_at(b, 6)),
@@ -289,27 +302,17 @@ pub struct RunConfig {
 impl RunConfig {
     /// Encodes into `buf`.
     pub fn encode(&self, buf: &mut [u8; CONFIG_LEN]) {
-        put(buf, 0, &CONFIG_SYNC);
         put(buf, 2, &self.tick_hz.to_le_bytes());
         put(buf, 6, &self.dt_s.to_le_bytes());
         put(buf, 10, &self.pa_per_count.to_le_bytes());
         put(buf, 14, &self.offset_pa.to_le_bytes());
         put(buf, 18, &self.counts_per_rev.to_le_bytes());
-        let c = checksum16(&buf[2..22]);
-        put(buf, 22, &c.to_le_bytes());
+        seal(buf, CONFIG_SYNC);
     }
 
     /// Decodes one frame from the start of `b`.
     pub fn decode(b: &[u8]) -> Result<Self, DecodeError> {
-        if b.len() < CONFIG_LEN {
-            return Err(DecodeError::Short);
-        }
-        if b[0..2] != CONFIG_SYNC {
-            return Err(DecodeError::Sync);
-        }
-        if checksum16(&b[2..22]) != u16_at(b, 22) {
-            return Err(DecodeError::Checksum);
-        }
+        let b = checked(b, CONFIG_LEN, CONFIG_SYNC)?;
         let f = |at| f32::from_bits(u32_at(b, at));
         Ok(RunConfig {
             tick_hz: f(2),

@@ -16,6 +16,31 @@ use proptest::prelude::*;
 mod common;
 use common::{dt, f32_any_or, frame};
 
+/// Both muscles at 300 kPa gauge, the joint at `angle_rad`.
+fn frame_at(angle_rad: f32) -> SensorFrame {
+    SensorFrame {
+        p1_gauge_pa: Some(300e3),
+        p2_gauge_pa: Some(300e3),
+        angle_rad: Some(angle_rad),
+    }
+}
+
+/// `cfg` is refused (`is_valid`), and the tick built from it latches a fault at its first
+/// step on good sensor data instead of arming; the tick is returned.
+fn assert_config_fault(cfg: ControllerConfig, setpoint_rad: f32) -> ControlTick {
+    assert!(!cfg.is_valid());
+    let mut t = ControlTick::new(cfg);
+    let o = t.step(
+        &frame_at(0.0),
+        &Setpoint {
+            angle_rad: setpoint_rad,
+        },
+        1e-3,
+    );
+    assert!(o.fault.is_some() && !o.armed, "{o:?}");
+    t
+}
+
 fn realistic_gains() -> impl Strategy<Value = DpPidGains> {
     (
         0.0f32..1e7,
@@ -136,11 +161,7 @@ proptest! {
     ) {
         let mut cfg = ControllerConfig::reference(1000.0);
         cfg.law = ControlLaw::DirectPid(DpPidGains { kp_pa_per_rad: kp, ..tuned_like() });
-        prop_assert!(!cfg.is_valid());
-        let mut t = ControlTick::new(cfg);
-        let good = SensorFrame { p1_gauge_pa: Some(3e5), p2_gauge_pa: Some(3e5), angle_rad: Some(0.0) };
-        let o = t.step(&good, &Setpoint { angle_rad: 0.1 }, 1e-3);
-        prop_assert!(o.fault.is_some() && !o.armed);
+        let mut t = assert_config_fault(cfg, 0.1);
         prop_assert!(!t.reset());
     }
 }
@@ -159,11 +180,7 @@ fn tick_with_pid_drives_a_positive_step_like_the_cascade() {
         start: instant,
         ..ControllerConfig::reference(1000.0)
     });
-    let f = SensorFrame {
-        p1_gauge_pa: Some(300e3),
-        p2_gauge_pa: Some(300e3),
-        angle_rad: Some(0.0),
-    };
+    let f = frame_at(0.0);
     let sp = Setpoint { angle_rad: 0.2 };
     let a = pid.step(&f, &sp, 1e-3);
     let b = cascade.step(&f, &sp, 1e-3);
@@ -199,15 +216,7 @@ fn invalid_feedforward_latches_config_fault() {
     ] {
         let mut cfg = ControllerConfig::reference(1000.0);
         cfg.feedforward = ff;
-        assert!(!cfg.is_valid());
-        let mut t = ControlTick::new(cfg);
-        let f = SensorFrame {
-            p1_gauge_pa: Some(300e3),
-            p2_gauge_pa: Some(300e3),
-            angle_rad: Some(0.0),
-        };
-        let o = t.step(&f, &Setpoint { angle_rad: 0.0 }, 1e-3);
-        assert!(o.fault.is_some() && !o.armed);
+        assert_config_fault(cfg, 0.0);
     }
 }
 
@@ -232,12 +241,7 @@ fn cascade_feedforward_adds_kd_times_setpoint_rate_on_a_ramp() {
         let mut last = None;
         for k in 0..400 {
             let a = 0.5 * k as f32 * 1e-3;
-            let f = SensorFrame {
-                p1_gauge_pa: Some(300e3),
-                p2_gauge_pa: Some(300e3),
-                angle_rad: Some(a),
-            };
-            last = Some(t.step(&f, &Setpoint { angle_rad: a }, 1e-3));
+            last = Some(t.step(&frame_at(a), &Setpoint { angle_rad: a }, 1e-3));
         }
         (last.unwrap(), kd)
     };

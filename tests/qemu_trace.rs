@@ -61,20 +61,28 @@ fn qemu_available() -> bool {
     true
 }
 
-/// `cargo qemu [-- qemu args]` exactly as a developer runs it (alias in .cargo/config.toml).
-fn cargo_qemu(qemu_args: &[&str]) -> std::process::Output {
+/// `cargo <args>` from the repository root, defmt lines decoded as bare messages, QEMU given
+/// 60 s (scripts/qemu-run.sh is the runner of both firmware targets).
+fn cargo_run_in_qemu(args: &[&str]) -> Output {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let mut cmd = Command::new(cargo);
-    cmd.arg("qemu");
-    if !qemu_args.is_empty() {
-        cmd.arg("--").args(qemu_args);
-    }
-    cmd.current_dir(root)
+    Command::new(cargo)
+        .args(args)
+        .current_dir(root)
         .env("DEFMT_PRINT_ARGS", "--log-format {s}")
         .env("QEMU_TIMEOUT_S", "60")
         .output()
-        .expect("cannot start cargo qemu")
+        .unwrap_or_else(|e| panic!("cannot start cargo {}: {e}", args.join(" ")))
+}
+
+/// `cargo qemu [-- qemu args]` exactly as a developer runs it (alias in .cargo/config.toml).
+fn cargo_qemu(qemu_args: &[&str]) -> Output {
+    let mut args = vec!["qemu"];
+    if !qemu_args.is_empty() {
+        args.push("--");
+        args.extend(qemu_args);
+    }
+    cargo_run_in_qemu(&args)
 }
 
 /// The stdout of a run that must have succeeded (`what` failed: status, stderr and stdout
@@ -136,26 +144,9 @@ fn qemu_m0_fixed_path_matches_host_bit_for_bit() {
     if !qemu_available() {
         return;
     }
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let out = Command::new(cargo)
-        .args([
-            "run",
-            "-p",
-            "pam-firmware",
-            "--bin",
-            "qemu_m0",
-            "--features",
-            "pam-firmware/firmware",
-            "--release",
-            "--target",
-            "thumbv6m-none-eabi",
-        ])
-        .current_dir(root)
-        .env("DEFMT_PRINT_ARGS", "--log-format {s}")
-        .env("QEMU_TIMEOUT_S", "60")
-        .output()
-        .expect("cannot start cargo run --bin qemu_m0");
+    let image = "run -p pam-firmware --bin qemu_m0 --features pam-firmware/firmware --release \
+                 --target thumbv6m-none-eabi";
+    let out = cargo_run_in_qemu(&image.split_whitespace().collect::<Vec<_>>());
     let stdout = succeeded(&out, "qemu_m0");
     let line = stdout
         .lines()

@@ -155,7 +155,7 @@ mod app {
     use pam_firmware::latch_bkpsram::{self, BackupSram, EncoderKeep};
     use pam_firmware::safety::{FaultCode, FaultSet, SafeState};
     use pam_firmware::sensors::{Clock, PressureScaling, TickTimer};
-    use pam_firmware::stream::{TickRecord, MISSING_COUNTS, RECORD_LEN};
+    use pam_firmware::stream::{TickRecord, MISSING_COUNTS};
     use pam_firmware::tick::{ControlTick, ControllerConfig, SensorFrame, Setpoint};
     use pam_firmware::valves::{ProportionalValves, ValveOpenings};
     use pam_firmware::wiring;
@@ -618,27 +618,17 @@ mod app {
             }
         }
         // The stream record of this tick (docs/rig.md).
-        let rec = TickRecord {
-            seq: *l.ticks,
-            t_us: l.ticks.wrapping_mul(US_PER_TICK),
+        let rec = TickRecord::of_tick(
+            *l.ticks,
+            l.ticks.wrapping_mul(US_PER_TICK),
             setpoint_rad,
-            openings: [applied.u_in1, applied.u_ex1, applied.u_in2, applied.u_ex2],
-            p_counts: [
-                counts[0].unwrap_or(MISSING_COUNTS),
-                counts[1].unwrap_or(MISSING_COUNTS),
-            ],
+            counts.map(|c| c.unwrap_or(MISSING_COUNTS)),
             encoder_counts,
-            p_gauge_pa: [
-                frame.p1_gauge_pa.unwrap_or(f32::NAN),
-                frame.p2_gauge_pa.unwrap_or(f32::NAN),
-            ],
-            angle_rad: frame.angle_rad.unwrap_or(f32::NAN),
-            fault: out.fault.map_or(0, |f| f.code()),
-            armed: out.armed,
-        };
-        let mut buf = [0u8; RECORD_LEN];
-        rec.encode(&mut buf);
-        defmt::info!("stream {=[u8]}", buf[..]);
+            &frame,
+            &out,
+            [applied.u_in1, applied.u_ex1, applied.u_in2, applied.u_ex2],
+        );
+        rec.log();
         *l.ticks = l.ticks.wrapping_add(1);
         if *l.ticks % TICK_HZ == 0 {
             defmt::info!(

@@ -185,7 +185,7 @@ fn main() -> ! {
             input.encoder_counts,
             &t.frame,
             &t.out,
-            t.pins,
+            t.pins.map(|high| if high { 1.0 } else { 0.0 }),
         );
         rec.encode(&mut rbuf);
         if !write_all(out, &rbuf) {

@@ -142,11 +142,11 @@ mod bench {
     /// The 1-DOF rows: the f32 tick with and without the start phase, the force laws.
     #[cfg(not(feature = "mcu-bench-arm"))]
     fn bench_one_dof() {
-        bench_ticks("bench tick", pam_firmware::trace::trace_config());
+        bench_ticks("tick", pam_firmware::trace::trace_config());
         // The same trace with the reference start phase: its first ~300 armed ticks ramp the
         // pressure ceiling from the trace's pressures to 600 kPa.
         bench_ticks(
-            "bench start tick",
+            "start tick",
             ControllerConfig {
                 start: StartRamp::REFERENCE,
                 ..pam_firmware::trace::trace_config()
@@ -165,9 +165,9 @@ mod bench {
                 c.volume_fnn = fnn;
                 c
             };
-            bench_ticks("bench ff tick", ff_on(None));
+            bench_ticks("ff tick", ff_on(None));
             bench_ticks(
-                "bench hybrid tick",
+                "hybrid tick",
                 ff_on(Some(&pam_firmware::constants::VOLUME_FNN)),
             );
             bench_volume_fnn();
@@ -234,7 +234,7 @@ mod bench {
             BenchPin::<11>,
             pwm,
         );
-        let (mut sum_armed, mut n_armed, mut max_any) = (0u32, 0u32, 0u32);
+        let mut t = Tally::default();
         for row in ARM3_SENSOR_TRACE.iter() {
             let frame = black_box(ArmFrame {
                 joints: [row[0].frame(&p), row[1].frame(&p), row[2].frame(&p)],
@@ -253,17 +253,13 @@ mod bench {
                 out
             });
             let out = black_box(out);
-            if out.fault.is_none() && out.joints.iter().all(|j| j.armed) {
-                sum_armed += c;
-                n_armed += 1;
-            }
-            max_any = max_any.max(c);
+            t.add_counted(c, out.fault.is_none() && out.joints.iter().all(|j| j.armed));
         }
         defmt::info!(
             "bench arm tick n={=u32} sum_counts={=u32} max_counts={=u32} ticks={=u32}",
-            n_armed,
-            sum_armed,
-            max_any,
+            t.n,
+            t.sum,
+            t.max,
             ARM3_SENSOR_TRACE.len() as u32
         );
     }
@@ -285,7 +281,7 @@ mod bench {
             BenchPin::<3>,
             OnOffPwmConfig::REFERENCE,
         );
-        let (mut sum_armed, mut n_armed, mut max_any) = (0u32, 0u32, 0u32);
+        let mut t = Tally::default();
         for row in SENSOR_TRACE.iter() {
             let frame = black_box(row.frame(&p));
             let sp = black_box(row.setpoint());
@@ -299,19 +295,9 @@ mod bench {
                 out
             });
             let out = black_box(out);
-            if out.armed {
-                sum_armed += c;
-                n_armed += 1;
-            }
-            max_any = max_any.max(c);
+            t.add_counted(c, out.armed);
         }
-        defmt::info!(
-            "{=str} n={=u32} sum_counts={=u32} max_counts={=u32}",
-            label,
-            n_armed,
-            sum_armed,
-            max_any
-        );
+        t.log(label);
     }
 
     /// A valve output for the tick benchmark: set/reset are single volatile stores of a

@@ -55,23 +55,14 @@ fn main() -> ! {
     // the M0, per armed tick of the trace: what a 1 kHz tick costs on an FPU-less core.
     let dt = 1.0 / TRACE_TICK_HZ;
     let mut tick = ControlTick::new(pam_firmware::trace::trace_config());
-    let (mut t_sum, mut t_max, mut t_n) = (0u32, 0u32, 0u32);
+    let mut tf32 = Tally::default();
     for row in SENSOR_TRACE.iter() {
         let frame = black_box(row.frame(&p));
         let sp = black_box(row.setpoint());
         let (c, out) = measure(|| tick.step(&frame, &sp, black_box(dt)));
-        if out.armed {
-            t_sum += c;
-            t_n += 1;
-        }
-        t_max = t_max.max(c);
+        tf32.add_counted(c, out.armed);
     }
-    defmt::info!(
-        "bench m0 tick_f32_soft n={=u32} sum_counts={=u32} max_counts={=u32}",
-        t_n,
-        t_sum,
-        t_max
-    );
+    tf32.log("m0 tick_f32_soft");
     // The fixed-point torque model (forward and inverse) and the whole fixed-point tick
     // (src/fixed_point/tick.rs: raw counts -> valve commands), per armed tick of the trace.
     // The tick's configuration is pre-scaled once here (f64 soft-float, start-up only).

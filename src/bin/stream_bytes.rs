@@ -1,7 +1,7 @@
 //! Measures what one stream record costs on the defmt wire (`scripts/stream-bytes.sh`; feature `stream-bytes`):
 //! replays the embedded sensor trace through the control tick under QEMU netduinoplus2,
-//! logging exactly the board's per-tick record (`defmt::info!("stream {=[u8]}", ..)`, the
-//! same `stream::TickRecord` fields as `src/bin/board.rs`) and nothing else, then exits.
+//! logging exactly the board's per-tick record (`TickRecord::of_tick` and `TickRecord::log`,
+//! as `src/bin/board.rs` does) and nothing else, then exits.
 //! defmt-semihosting and defmt-rtt carry the same encoded frames (defmt's rzCOBS encoder
 //! runs before the transport), so the bytes on semihosting stdout per record are the bytes
 //! per tick the RTT up channel must carry.
@@ -12,7 +12,7 @@ use cortex_m_rt::{entry, exception, ExceptionFrame};
 use cortex_m_semihosting::debug;
 use defmt_semihosting as _;
 
-use pam_firmware::stream::{TickRecord, MISSING_COUNTS, MISSING_ENCODER, RECORD_LEN};
+use pam_firmware::stream::{TickRecord, MISSING_COUNTS, MISSING_ENCODER};
 use pam_firmware::tick::{ControlTick, ControllerConfig};
 use pam_firmware::trace::{MISSING_ADC, SENSOR_TRACE, TRACE_TICK_HZ};
 use pam_firmware::valves::ValveOpenings;
@@ -29,39 +29,29 @@ fn main() -> ! {
         let out = tick.step(&frame, &sp, 1.0 / TRACE_TICK_HZ);
         let o = ValveOpenings::from_command(&out.valves);
         tick.valves_applied(&o);
-        let rec = TickRecord {
-            seq: i as u32,
-            t_us: (i as u32).wrapping_mul(us_per_tick),
-            setpoint_rad: sp.angle_rad,
-            openings: [o.u_in1, o.u_ex1, o.u_in2, o.u_ex2],
-            p_counts: [
-                if row.p1_adc == MISSING_ADC {
-                    MISSING_COUNTS
-                } else {
-                    row.p1_adc
-                },
-                if row.p2_adc == MISSING_ADC {
-                    MISSING_COUNTS
-                } else {
-                    row.p2_adc
-                },
-            ],
-            encoder_counts: if row.encoder == pam_firmware::trace::MISSING_ENCODER {
-                MISSING_ENCODER
+        let counts = |adc: u16| {
+            if adc == MISSING_ADC {
+                MISSING_COUNTS
             } else {
-                row.encoder as i32
-            },
-            p_gauge_pa: [
-                frame.p1_gauge_pa.unwrap_or(f32::NAN),
-                frame.p2_gauge_pa.unwrap_or(f32::NAN),
-            ],
-            angle_rad: frame.angle_rad.unwrap_or(f32::NAN),
-            fault: out.fault.map_or(0, |f| f.code()),
-            armed: out.armed,
+                adc
+            }
         };
-        let mut buf = [0u8; RECORD_LEN];
-        rec.encode(&mut buf);
-        defmt::info!("stream {=[u8]}", buf[..]);
+        let encoder_counts = if row.encoder == pam_firmware::trace::MISSING_ENCODER {
+            MISSING_ENCODER
+        } else {
+            row.encoder as i32
+        };
+        let rec = TickRecord::of_tick(
+            i as u32,
+            (i as u32).wrapping_mul(us_per_tick),
+            sp.angle_rad,
+            [counts(row.p1_adc), counts(row.p2_adc)],
+            encoder_counts,
+            &frame,
+            &out,
+            [o.u_in1, o.u_ex1, o.u_in2, o.u_ex2],
+        );
+        rec.log();
     }
     debug::exit(debug::EXIT_SUCCESS);
     loop {

@@ -61,8 +61,16 @@ pub struct Tally {
 
 impl Tally {
     pub fn add(&mut self, counts: u32) {
-        self.n += 1;
-        self.sum += counts;
+        self.add_counted(counts, true);
+    }
+
+    /// A control tick: it counts in `n` and `sum` (the mean over the armed ticks) only when
+    /// `counted`, in `max` always (the worst tick of the trace, armed or not).
+    pub fn add_counted(&mut self, counts: u32, counted: bool) {
+        if counted {
+            self.n += 1;
+            self.sum += counts;
+        }
         self.max = self.max.max(counts);
     }
 
