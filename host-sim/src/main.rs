@@ -158,6 +158,10 @@ struct DiagnoseArgs {
     /// Worker threads for the candidate refits.
     #[arg(long, default_value_t = 2, value_parser = usize_in(1, 256))]
     threads: usize,
+    /// Run even when the estimated memory or time exceeds the limit (docs/reliability.md);
+    /// the estimate is printed on stderr when the run is long.
+    #[arg(long)]
+    allow_large: bool,
 }
 
 #[derive(Args)]
@@ -806,6 +810,11 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
     let cfg = host_sim::PlantConfig::load(&a.plant)?;
     let train = Recording::read(&a.recording)?;
     let check = a.check.as_ref().map(Recording::read).transpose()?;
+    let estimate = host_sim::diagnose::run_estimate(&train, check.as_ref(), &opts);
+    estimate.check(a.allow_large).map_err(anyhow::Error::msg)?;
+    if estimate.seconds > 30.0 {
+        bar.suspend(|| eprintln!("{}", estimate.summary()));
+    }
     let result = diagnose(&cfg, &train, check.as_ref(), &opts, &|done, total, msg| {
         bar.set_length(total);
         bar.set_position(done);

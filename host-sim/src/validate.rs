@@ -393,6 +393,16 @@ fn human_s(s: f64) -> String {
 }
 
 impl RunEstimate {
+    /// One line: what, and the estimated memory and time.
+    pub fn summary(&self) -> String {
+        format!(
+            "{}: estimated {} of memory and {} of run time",
+            self.what,
+            human_bytes(self.bytes),
+            human_s(self.seconds)
+        )
+    }
+
     /// Refuses (naming the estimate and the limit) a run above [`MAX_RUN_BYTES`] or
     /// [`MAX_RUN_S`] unless `allow_large`.
     pub fn check(&self, allow_large: bool) -> Result<(), String> {

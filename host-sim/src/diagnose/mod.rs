@@ -511,11 +511,7 @@ pub fn gather_evidence<'a>(
             noise[c.index()] = noise_level(y);
         }
     }
-    let fit_budget_n = if opts.fit_budget_s.is_finite() && opts.fit_budget_s > 0.0 {
-        ((opts.fit_budget_s / train.sample_period_s()).round() as usize).max(MIN_SAMPLES)
-    } else {
-        usize::MAX
-    };
+    let fit_budget_n = fit_budget_samples(opts, train.sample_period_s());
     let n_fit = ((n as f64 * opts.fit_fraction).round() as usize)
         .min(fit_budget_n)
         .clamp(
@@ -681,6 +677,94 @@ pub fn final_refit<'c>(
         corrected,
         replay,
         failures,
+    }
+}
+
+/// Samples a fit replays at most ([`DiagnoseOptions::fit_budget_s`] at the sample period
+/// `dt_s`; unbounded without a budget).
+fn fit_budget_samples(opts: &DiagnoseOptions, dt_s: f64) -> usize {
+    if opts.fit_budget_s.is_finite() && opts.fit_budget_s > 0.0 {
+        ((opts.fit_budget_s / dt_s).round() as usize).max(MIN_SAMPLES)
+    } else {
+        usize::MAX
+    }
+}
+
+/// Run time per sample a fit replays [s] (one laptop core; measured: 120 s at 10 kHz took
+/// 161 s, the fits of 1 h at 1 kHz about 16 s of its 18-25 s).
+const SECONDS_PER_FIT_SAMPLE: f64 = 1.3e-4;
+/// Run time per sample of the whole-recording replays (nominal, answer, check) [s].
+const SECONDS_PER_REPLAY_SAMPLE: f64 = 1.5e-6;
+/// Memory per recorded row (time, four openings, five channels as f64) [bytes].
+const BYTES_PER_ROW: f64 = 80.0;
+/// Memory per sample a fit replays (states and channels of the head kept) [bytes]
+/// (measured: 650 MB at 1.2e6 fit samples, 367 MB for 1 h at 1 kHz).
+const BYTES_PER_FIT_SAMPLE: f64 = 460.0;
+
+/// The estimated time and memory of [`diagnose`] on these recordings, before any work:
+/// within a factor of two on this project's machines (`docs/performance.md`).
+pub fn run_estimate(
+    train: &Recording,
+    check: Option<&Recording>,
+    opts: &DiagnoseOptions,
+) -> crate::validate::RunEstimate {
+    estimate_for(
+        train.len(),
+        train.sample_period_s(),
+        check.map_or(0, |c| c.len()),
+        opts,
+    )
+}
+
+/// [`run_estimate`] from the rows of TRAIN, its sample period and the rows of CHECK.
+pub fn estimate_for(
+    rows: usize,
+    dt_s: f64,
+    check_rows: usize,
+    opts: &DiagnoseOptions,
+) -> crate::validate::RunEstimate {
+    let (n, n_check) = (rows as f64, check_rows as f64);
+    let fit_n = (fit_budget_samples(opts, dt_s) as f64).min(n);
+    crate::validate::RunEstimate {
+        what: format!(
+            "diagnose: the fits replay {fit_n:.3e} samples (the first {:.0} s at {:.0} Hz)",
+            fit_n * dt_s,
+            1.0 / dt_s
+        ),
+        samples: n + n_check,
+        bytes: BYTES_PER_ROW * (n + n_check) + BYTES_PER_FIT_SAMPLE * fit_n,
+        seconds: SECONDS_PER_FIT_SAMPLE * fit_n
+            + SECONDS_PER_REPLAY_SAMPLE * (2.0 * n + 2.0 * n_check),
+    }
+}
+
+#[cfg(test)]
+mod estimate_tests {
+    use super::*;
+
+    #[test]
+    fn the_estimate_is_within_twice_the_measured_runs_and_refuses_beyond_the_limit() {
+        let o = DiagnoseOptions::default();
+        // (rows, dt, measured seconds, measured bytes): 120 s at 10 kHz, 1 h at 1 kHz.
+        for (rows, dt_s, s, b) in [
+            (1_200_000, 1e-4, 161.0, 650e6),
+            (3_600_000, 1e-3, 22.0, 367e6),
+        ] {
+            let e = estimate_for(rows, dt_s, 0, &o);
+            assert!(e.seconds > s / 2.0 && e.seconds < 2.0 * s, "{e:?}");
+            assert!(e.bytes > b / 2.0 && e.bytes < 2.0 * b, "{e:?}");
+            assert!(e.check(false).is_ok());
+        }
+        // 1 kHz for 30 s: a few seconds, no message needed.
+        assert!(estimate_for(30_000, 1e-3, 0, &o).seconds < 30.0);
+        // 20 M rows at 1 MHz: the fits replay all of it; refused unless allowed.
+        let e = estimate_for(20_000_000, 1e-6, 0, &o);
+        let msg = e.check(false).unwrap_err();
+        assert!(
+            msg.contains("--allow-large") && msg.contains("at 1000000 Hz"),
+            "{msg}"
+        );
+        assert!(e.check(true).is_ok());
     }
 }
 
