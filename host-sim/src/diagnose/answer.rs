@@ -209,6 +209,7 @@ impl Diagnosis {
             "recalibrated": recalibrated,
             "fit": {"before": json_fits(&self.fit_before), "after": json_fits(&self.fit_after)},
             "heldout_fit": {"before": json_fits(&self.heldout_before), "after": json_fits(&self.heldout_after)},
+            "data_notes": self.data_notes,
             "best_attempt": self.best_attempt,
             "best_attempt_at_bound": self.best_attempt_at_bound.iter().map(|h| serde_json::json!({
                 "part": h.part,
@@ -325,6 +326,9 @@ impl Diagnosis {
         for l in &self.lookalikes {
             s += l;
             s.push('\n');
+        }
+        for d in &self.data_notes {
+            s += &format!("Note: {d}.\n");
         }
         s
     }

@@ -237,6 +237,8 @@ pub struct Diagnosis {
     pub best_attempt_at_bound: Vec<BoundHit>,
     /// Look-alike statements.
     pub lookalikes: Vec<String>,
+    /// What in the recording itself limits the answer (coarse on/off openings).
+    pub data_notes: Vec<String>,
     /// Why the recording may not be of this plant (units, channel mapping).
     pub hints: Vec<String>,
     /// Failures met on the way (a replay that failed, with its time and state).
@@ -1215,6 +1217,7 @@ pub fn diagnose(
         best_attempt,
         best_attempt_at_bound,
         lookalikes,
+        data_notes: verdict::coarse_onoff_note(train).into_iter().collect(),
         hints,
         failures,
         nothing_missing: v == Verdict::NothingMissing,

@@ -346,3 +346,49 @@ mod tests {
         assert!(unlike_plant(&m));
     }
 }
+
+/// Sample periods from which on/off valve openings are too coarse to describe a valve that
+/// switches faster (a PWM at the firmware's rate) [s].
+pub const COARSE_ONOFF_DT_S: f64 = 0.005;
+
+/// A note when the valve openings are on/off values sampled every [`COARSE_ONOFF_DT_S`] or
+/// more: a valve that switches between two samples (PWM) is then not described by them,
+/// and no plant model can replay it (the nominal one included).
+pub fn coarse_onoff_note(rec: &Recording) -> Option<String> {
+    let dt_s = rec.sample_period_s();
+    let on_off = |u: f64| u == 0.0 || u == 1.0;
+    let all_on_off = rec
+        .inputs
+        .iter()
+        .all(|u| on_off(u.u_in1) && on_off(u.u_ex1) && on_off(u.u_in2) && on_off(u.u_ex2));
+    (dt_s >= COARSE_ONOFF_DT_S && all_on_off).then(|| {
+        format!(
+            "the valve openings are on/off values sampled every {} ms: a valve that switches \
+             between two samples (PWM) is not described by them; record the openings at the \
+             valves' switching rate, or time-averaged over each sample",
+            crate::validate::Shown(1e3 * dt_s)
+        )
+    })
+}
+
+#[cfg(test)]
+mod coarse_tests {
+    use super::*;
+
+    fn rec(dt_s: f64, opening: f64) -> Recording {
+        let mut t = String::from("t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg\n");
+        for k in 0..10 {
+            let u = if k % 2 == 0 { opening } else { 0.0 };
+            t += &format!("{},{u},0,0,{u},0\n", k as f64 * dt_s);
+        }
+        Recording::parse(&t, "r.csv").unwrap()
+    }
+
+    #[test]
+    fn coarse_on_off_openings_are_noted_and_fine_or_averaged_ones_are_not() {
+        let note = coarse_onoff_note(&rec(0.01, 1.0)).expect("10 ms on/off");
+        assert!(note.contains("every 10 ms"), "{note}");
+        assert!(coarse_onoff_note(&rec(0.001, 1.0)).is_none());
+        assert!(coarse_onoff_note(&rec(0.01, 0.4)).is_none());
+    }
+}
