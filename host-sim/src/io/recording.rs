@@ -1311,11 +1311,13 @@ impl<'t> Table<'t> {
                     line_of(k),
                     "t_s",
                     format!(
-                        "non-uniform time: {} after {} (step {step} s, median step \
-                         {median_step} s; jitter within [{MIN_STEP_RATIO}, {MAX_STEP_RATIO}] \
-                         median steps is accepted, a gap is not filled: split the recording)",
+                        "non-uniform time: {} after {} (step {} s, median step {} s; jitter \
+                         within [{MIN_STEP_RATIO}, {MAX_STEP_RATIO}] median steps is accepted, \
+                         a gap is not filled: split the recording)",
                         t_s[k],
-                        t_s[k - 1]
+                        t_s[k - 1],
+                        crate::validate::Shown(step),
+                        crate::validate::Shown(median_step)
                     ),
                 ));
             }
