@@ -1,8 +1,10 @@
 //! Inverse thermodynamic feed-forward of the pressure loop (seed 004, eq. 7).
 //!
-//! From the desired pressure trajectory of one muscle (the pressure set-point `P` and its rate
-//! `P'`), the chamber volume `V` and its rate `V'` (the firmware's volume polynomial at the
-//! measured angle and velocity), the mass flow that produces it is
+//! From the desired pressure trajectory of one muscle (the pressure set-point `P` and the rate
+//! `P'` of a desired pressure the tick hands in: the set-point itself, or the reference
+//! trajectory's pressure), the chamber volume `V` and its rate `V'` (the firmware's volume
+//! polynomial at the measured angle and a velocity, measured or desired), the mass flow that
+//! produces it is
 //!
 //! ```text
 //! m' = P' V / (k R T) + P V' / (R T)                                  (seed 004, eq. 7)
@@ -17,7 +19,8 @@
 //! Inflow (`m' > 0`) runs from the supply to the measured muscle pressure, outflow from the
 //! muscle to the atmosphere; the duty is `m' / (rho_ANR C p_up phi)`, signed like the valve
 //! command (> 0 inflate, < 0 exhaust) and clamped to [-1, 1]: a PWM duty for on/off valves
-//! ([`crate::valves::OnOffValves`]), the opening for proportional ones.
+//! ([`crate::valves::OnOffValves`]), the opening for proportional ones. A duty below
+//! `min_duty` is dropped (an on/off valve opens for at least its minimum on-time).
 //!
 //! The P loop stays on top: the tick adds this duty to the pressure loop's command and clamps
 //! the sum to [-1, 1]. The duty is never NaN (non-finite inputs give 0), never inflates a

@@ -6,7 +6,9 @@
 //! a leak and a supply drop added.
 //!
 //! Rows: the tuned cascade (`config/control_tuned.toml`) with the P-only pressure loops, the
-//! same cascade + the analytical inverse model (isothermal, k = 1, and polytropic, k = 1.4),
+//! same cascade + the analytical inverse model (isothermal, k = 1, and polytropic, k = 1.4;
+//! k = 1 also with `P'` and `V'` taken the other way: reference trajectory or set-point /
+//! measurement, see `rate_from_reference` in `config/pressure_ff.toml`),
 //! and + seed 004's hybrid model (eq. 12: the learned volume of [`pam_firmware::volume_fnn`]
 //! in place of the polynomial, k = 1). The hybrid volume is trained per plant, as the seed
 //! trains on its rig: `identify volume`'s trainer ([`crate::identify::volume::train`], seed 1,
@@ -14,6 +16,10 @@
 //! [`TRAINING_SCENARIO`] (random set-points, none of the compared scenarios). Columns: position MSE [rad^2] (angle error over every tick; infinite when a fault
 //! latched), its ratio to the P-only row, and the RMS pressure tracking error [kPa] (set-point
 //! minus measured gauge pressure, both muscles, every armed tick).
+//!
+//! `--breakdown` adds, on the nominal plant, where each set's position error comes from
+//! ([`breakdown`]: moving / at rest, slow pressure error and ripple, lag, deadband,
+//! saturation) for P only, two diagnostic variants of its pressure loop and the k = 1 rows.
 //!
 //! Exit status 1 when, on the given (nominal) plant and the suite, the analytical feed-forward
 //! does not improve the position MSE by at least [`REQUIRED_RATIO`] over the same cascade
