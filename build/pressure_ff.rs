@@ -19,7 +19,10 @@ struct Ff {
     gas_constant_j_per_kg_k: f64,
     temperature_k: f64,
     rate_cutoff_hz: f64,
+    rate_from_reference: bool,
+    volume_rate_from_reference: bool,
     gain: f64,
+    min_duty: f64,
 }
 
 /// The Rust source of `PRESSURE_FF`.
@@ -51,6 +54,12 @@ pub fn constants() -> String {
             "> 0",
         ),
         ("gain", f.gain, (0.0..=2.0).contains(&f.gain), "in [0, 2]"),
+        (
+            "min_duty",
+            f.min_duty,
+            (0.0..=1.0).contains(&f.min_duty),
+            "in [0, 1]",
+        ),
     ];
     for (name, v, ok, must) in checks {
         assert!(
@@ -62,8 +71,16 @@ pub fn constants() -> String {
         vec![("enabled", f.enabled.to_string())],
         super::lits(
             keyed!(f; polytropic_index, gas_constant_j_per_kg_k, temperature_k,
-            rate_cutoff_hz, gain),
+            rate_cutoff_hz),
         ),
+        vec![
+            ("rate_from_reference", f.rate_from_reference.to_string()),
+            (
+                "volume_rate_from_reference",
+                f.volume_rate_from_reference.to_string(),
+            ),
+        ],
+        super::lits(keyed!(f; gain, min_duty)),
     ]
     .concat();
     format!(

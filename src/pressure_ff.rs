@@ -1,8 +1,10 @@
 //! Inverse thermodynamic feed-forward of the pressure loop (seed 004, eq. 7).
 //!
-//! From the desired pressure trajectory of one muscle (the pressure set-point `P` and its rate
-//! `P'`), the chamber volume `V` and its rate `V'` (the firmware's volume polynomial at the
-//! measured angle and velocity), the mass flow that produces it is
+//! From the desired pressure trajectory of one muscle (the pressure set-point `P` and the rate
+//! `P'` of a desired pressure the tick hands in: the set-point itself, or the reference
+//! trajectory's pressure), the chamber volume `V` and its rate `V'` (the firmware's volume
+//! polynomial at the measured angle and a velocity, measured or desired), the mass flow that
+//! produces it is
 //!
 //! ```text
 //! m' = P' V / (k R T) + P V' / (R T)                                  (seed 004, eq. 7)
@@ -17,7 +19,8 @@
 //! Inflow (`m' > 0`) runs from the supply to the measured muscle pressure, outflow from the
 //! muscle to the atmosphere; the duty is `m' / (rho_ANR C p_up phi)`, signed like the valve
 //! command (> 0 inflate, < 0 exhaust) and clamped to [-1, 1]: a PWM duty for on/off valves
-//! ([`crate::valves::OnOffValves`]), the opening for proportional ones.
+//! ([`crate::valves::OnOffValves`]), the opening for proportional ones. A duty below
+//! `min_duty` is dropped (an on/off valve opens for at least its minimum on-time).
 //!
 //! The P loop stays on top: the tick adds this duty to the pressure loop's command and clamps
 //! the sum to [-1, 1]. The duty is never NaN (non-finite inputs give 0), never inflates a
@@ -48,10 +51,19 @@ pub struct PressureFfParams {
     pub gas_constant_j_per_kg_k: f32,
     /// Gas temperature `T` [K].
     pub temperature_k: f32,
-    /// Cut-off of the low-pass on the set-point's finite difference [Hz].
+    /// Cut-off of the low-pass on the desired pressure's finite difference [Hz].
     pub rate_cutoff_hz: f32,
+    /// Desired pressure rate `P'` from the reference trajectory (the set-point, its rate and
+    /// acceleration through the inverse torque model: noise-free) instead of the finite
+    /// difference of the torque loop's pressure set-point (which carries the feedback).
+    pub rate_from_reference: bool,
+    /// Volume rate `V'` from the set-point's rate instead of the measured velocity.
+    pub volume_rate_from_reference: bool,
     /// Scale of the duty (1 = the model's), in [0, 2].
     pub gain: f32,
+    /// Duties of a smaller magnitude are dropped (0), in [0, 1]: the on/off valve delivers
+    /// flow in pulses of at least its minimum on-time, so a small duty only adds pulses.
+    pub min_duty: f32,
 }
 
 impl PressureFfParams {
@@ -62,7 +74,10 @@ impl PressureFfParams {
         gas_constant_j_per_kg_k: 287.05,
         temperature_k: T_ANR_K,
         rate_cutoff_hz: 150.0,
+        rate_from_reference: false,
+        volume_rate_from_reference: false,
         gain: 1.0,
+        min_duty: 0.0,
     };
 
     /// Every constant finite and in its range (checked also when off).
@@ -76,6 +91,7 @@ impl PressureFfParams {
             && self.rate_cutoff_hz.is_finite()
             && self.rate_cutoff_hz > 0.0
             && (0.0..=2.0).contains(&self.gain)
+            && (0.0..=1.0).contains(&self.min_duty)
     }
 }
 
@@ -94,6 +110,8 @@ pub struct InverseModel {
     inv_one_minus_b: f32,
     /// Ceiling of the muscle gauge pressure for an inflow [Pa].
     p_hi_gauge_pa: f32,
+    /// |duty| below this gives 0.
+    min_duty: f32,
 }
 
 /// Smallest `p_up phi` the duty divides by, as a fraction of `p_up`: below it (flow function
@@ -115,6 +133,7 @@ impl InverseModel {
             critical_ratio: valve.critical_ratio,
             inv_one_minus_b: 1.0 / (1.0 - valve.critical_ratio),
             p_hi_gauge_pa,
+            min_duty: ff.min_duty,
         }
     }
 
@@ -170,12 +189,13 @@ impl InverseModel {
             // 0, or NaN.
             return 0.0;
         };
-        // In [-1, 1]; NaN (an infinite flow over an infinite pressure) gives 0.
+        // In [-1, 1]; NaN (an infinite flow over an infinite pressure) and a duty below the
+        // minimum give 0.
         if d >= 1.0 {
             1.0
         } else if d <= -1.0 {
             -1.0
-        } else if d == d {
+        } else if libm::fabsf(d) >= self.min_duty {
             d
         } else {
             0.0
@@ -197,6 +217,7 @@ pub struct PressureFeedforward {
     /// Low-pass weight per tick and nominal tick rate [Hz].
     alpha: f32,
     alpha_tick_hz: f32,
+    /// Previous desired pressures [Pa] and their filtered rates [Pa/s].
     prev_set_pa: [f32; 2],
     rate_pa_s: [f32; 2],
     init: bool,
@@ -252,28 +273,39 @@ impl PressureFeedforward {
         self.rate_pa_s = [0.0; 2];
     }
 
-    /// The filtered set-point rates [Pa/s].
+    /// The filtered desired-pressure rates [Pa/s].
     pub fn rates_pa_s(&self) -> [f32; 2] {
         self.rate_pa_s
     }
 
     /// One tick: the feed-forward duties of both muscles for the pressure set-points `set_pa`
-    /// and measured pressures `meas_pa` (gauge), the angle and velocity. Each in [-1, 1],
-    /// never NaN; non-finite inputs give 0 and reset the history.
+    /// (the `P` of eq. 7), the desired pressures `desired_pa` whose filtered finite difference
+    /// is `P'` (the set-points themselves, or the reference trajectory's pressures), the
+    /// measured pressures `meas_pa` (gauge), the angle and the velocity that gives `V'`
+    /// (measured or desired). Each duty in [-1, 1], never NaN; non-finite inputs give 0 and
+    /// reset the history.
     pub fn step(
         &mut self,
         set_pa: [f32; 2],
+        desired_pa: [f32; 2],
         meas_pa: [f32; 2],
         angle_rad: f32,
         velocity_rad_s: f32,
     ) -> [f32; 2] {
-        let sum = set_pa[0] + set_pa[1] + meas_pa[0] + meas_pa[1] + angle_rad + velocity_rad_s;
+        let sum = set_pa[0]
+            + set_pa[1]
+            + desired_pa[0]
+            + desired_pa[1]
+            + meas_pa[0]
+            + meas_pa[1]
+            + angle_rad
+            + velocity_rad_s;
         if !sum.is_finite() {
             self.reset();
             return [0.0; 2];
         }
         if !self.init {
-            self.prev_set_pa = set_pa;
+            self.prev_set_pa = desired_pa;
             self.init = true;
         }
         let [b0, b1, b2, b3] = self.poly;
@@ -284,8 +316,8 @@ impl PressureFeedforward {
         let signs = [1.0f32, -1.0];
         for i in 0..2 {
             let r = &mut self.rate_pa_s[i];
-            *r += self.alpha_tick_hz * (set_pa[i] - self.prev_set_pa[i]) - self.alpha * *r;
-            self.prev_set_pa[i] = set_pa[i];
+            *r += self.alpha_tick_hz * (desired_pa[i] - self.prev_set_pa[i]) - self.alpha * *r;
+            self.prev_set_pa[i] = desired_pa[i];
             let chi = self.chi0 + signs[i] * dchi;
             let p_abs = set_pa[i] + self.model.p_atm_pa;
             #[cfg(feature = "volume-fnn")]
@@ -368,6 +400,26 @@ mod tests {
     }
 
     #[test]
+    fn duties_below_the_minimum_are_dropped() {
+        let m = InverseModel::new(
+            &PressureFfParams {
+                min_duty: 0.2,
+                ..PressureFfParams::OFF
+            },
+            &params(),
+            600_000.0,
+        );
+        let full = model();
+        for mdot in [1e-5f32, -1e-5, 1e-4, -1e-4, 3e-3, -3e-3] {
+            let d = full.duty(mdot, 300_000.0);
+            let got = m.duty(mdot, 300_000.0);
+            assert_eq!(got, if d.abs() >= 0.2 { d } else { 0.0 }, "{mdot}: {d}");
+        }
+        // Both cases occur: a duty dropped and one kept.
+        assert!(full.duty(1e-5, 300_000.0).abs() < 0.2 && full.duty(3e-3, 300_000.0) > 0.2);
+    }
+
+    #[test]
     fn duty_is_continuous_across_the_critical_ratio() {
         let m = model();
         let ps = 701_325.0f32;
@@ -423,15 +475,15 @@ mod tests {
         }
         let mut ff = reference_ff();
         for a in crate::HOSTILE_F32 {
-            let o = ff.step([a, 3e5], [3e5, a], a, 0.1);
+            let o = ff.step([a, 3e5], [3e5, a], [3e5, a], a, 0.1);
             assert!(
                 o.iter().all(|x| x.is_finite() && (-1.0..=1.0).contains(x)),
                 "{a}: {o:?}"
             );
         }
         // After a non-finite input the history restarts: a steady set-point gives no duty.
-        ff.step([f32::NAN, 0.0], [0.0; 2], 0.0, 0.0);
-        let o = ff.step([3e5, 3e5], [3e5, 3e5], 0.0, 0.0);
+        ff.step([f32::NAN, 0.0], [0.0; 2], [0.0; 2], 0.0, 0.0);
+        let o = ff.step([3e5, 3e5], [3e5, 3e5], [3e5, 3e5], 0.0, 0.0);
         assert_eq!(o, [0.0, 0.0]);
     }
 
@@ -442,6 +494,7 @@ mod tests {
         for k in 0..200 {
             let s = k as f32 * 1000.0; // 1 MPa/s up on muscle 1, down on muscle 2
             o = ff.step(
+                [200_000.0 + s, 500_000.0 - s],
                 [200_000.0 + s, 500_000.0 - s],
                 [200_000.0 + s, 500_000.0 - s],
                 0.0,
@@ -458,8 +511,45 @@ mod tests {
         // set-point needs inflow, the other one (lengthening) outflow.
         let mut ff2 = ff;
         ff2.reset();
-        let o = ff2.step([300_000.0; 2], [300_000.0; 2], 0.0, 1.0);
+        let o = ff2.step([300_000.0; 2], [300_000.0; 2], [300_000.0; 2], 0.0, 1.0);
         assert!(o[0] > 0.0 && o[1] < 0.0, "{o:?}");
+    }
+
+    #[test]
+    fn the_rate_is_that_of_the_desired_pressures_not_of_the_set_points() {
+        // Steady set-points, desired pressures ramping at 1 MPa/s (muscle 1 up, 2 down): the
+        // rate and the duty's sign follow the desired pressures.
+        let mut ff = reference_ff();
+        let mut o = [0.0; 2];
+        for k in 0..200 {
+            let s = k as f32 * 1000.0;
+            o = ff.step(
+                [300_000.0; 2],
+                [200_000.0 + s, 500_000.0 - s],
+                [300_000.0; 2],
+                0.0,
+                0.0,
+            );
+        }
+        let r = ff.rates_pa_s();
+        assert!(
+            (r[0] - 1.0e6).abs() < 1e3 && (r[1] + 1.0e6).abs() < 1e3,
+            "{r:?}"
+        );
+        assert!(o[0] > 0.0 && o[1] < 0.0, "{o:?}");
+        // Ramping set-points under steady desired pressures: no rate, no duty.
+        let mut ff = reference_ff();
+        for k in 0..200 {
+            let s = k as f32 * 1000.0;
+            o = ff.step(
+                [200_000.0 + s, 500_000.0 - s],
+                [300_000.0; 2],
+                [300_000.0; 2],
+                0.0,
+                0.0,
+            );
+        }
+        assert_eq!(o, [0.0, 0.0]);
     }
 
     #[test]

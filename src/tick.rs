@@ -752,9 +752,15 @@ impl ControlTick {
     }
 
     /// The P loops' commands plus the inverse thermodynamic feed-forward, each clamped to
-    /// [-1, 1] (both terms are finite and in [-1, 1]).
+    /// [-1, 1] (both terms are finite and in [-1, 1]). With `rate_from_reference` the
+    /// desired pressures are those of the reference trajectory: the torque loop's inverse
+    /// model at the set-point `sp_rad` and its rate for the inertia torque `J r''` of the
+    /// trajectory feed-forward (within its limit), `p0 -+ dp`, otherwise the set-points
+    /// themselves; `V'` from the set-point rate with `volume_rate_from_reference`, otherwise
+    /// from the measured velocity.
     #[cfg(feature = "pressure-ff")]
     #[inline(never)]
+    #[allow(clippy::too_many_arguments)]
     fn add_pressure_ff(
         &mut self,
         u1: f32,
@@ -763,10 +769,40 @@ impl ControlTick {
         meas_pa: [f32; 2],
         angle_rad: f32,
         velocity_rad_s: f32,
+        sp_rad: f32,
+        sp_rate_rad_s: f32,
+        sp_accel_rad_s2: f32,
     ) -> (f32, f32) {
+        let pf = &self.cfg.pressure_ff;
+        let v_rad_s = if pf.volume_rate_from_reference {
+            sp_rate_rad_s
+        } else {
+            velocity_rad_s
+        };
+        let desired_pa = if pf.rate_from_reference {
+            let ff = &self.cfg.feedforward;
+            let t = ff.inertia_kgm2 * sp_accel_rad_s2;
+            let lim = libm::fabsf(ff.limit_nm);
+            let t = if t > lim {
+                lim
+            } else if t < -lim {
+                -lim
+            } else {
+                t
+            };
+            let m = &self.cfg.torque_model;
+            // Finite inputs (validated set-point and its derivatives): dp finite and clamped.
+            let dp = m
+                .inverse_at_finite(sp_rad, sp_rate_rad_s, self.dp_limit_pa)
+                .activation(t)
+                .dp_pa;
+            [m.p0_gauge_pa - dp, m.p0_gauge_pa + dp]
+        } else {
+            set_pa
+        };
         let [f1, f2] = self
             .pressure_ff
-            .step(set_pa, meas_pa, angle_rad, velocity_rad_s);
+            .step(set_pa, desired_pa, meas_pa, angle_rad, v_rad_s);
         let c = |u: f32| {
             if u > 1.0 {
                 1.0
@@ -1221,6 +1257,9 @@ impl ControlTick {
                     [p1, p2],
                     angle,
                     vel,
+                    sp,
+                    rate,
+                    accel,
                 )
             } else {
                 (u1, u2)

@@ -16,10 +16,12 @@ fn ratio(stdout: &str) -> f64 {
     after.split_whitespace().next().unwrap().parse().unwrap()
 }
 
-/// The position MSE column of the row starting with `controller` on `set`.
+/// The position MSE column of the row starting with `controller` on `set` in the nominal
+/// plant's comparison table.
 fn mse(stdout: &str, controller: &str, set: &str) -> f64 {
     let row = stdout
         .lines()
+        .skip_while(|l| !l.starts_with("### nominal"))
         .find(|l| l.starts_with(&format!("| {controller}")) && l.contains(&format!("| {set} |")))
         .unwrap_or_else(|| panic!("no row {controller} / {set} in\n{stdout}"));
     row.split('|').nth(3).unwrap().trim().parse().unwrap()
@@ -27,7 +29,7 @@ fn mse(stdout: &str, controller: &str, set: &str) -> f64 {
 
 #[test]
 fn compare_control_prints_the_tables_and_exits_by_its_verdict() {
-    let r = on_plant("compare-control", &plant(), &[&"--quick"]);
+    let r = on_plant("compare-control", &plant(), &[&"--quick", &"--breakdown"]);
     let out = text(&r.stdout);
     let code = r.status.code();
     assert!(
@@ -79,6 +81,26 @@ fn compare_control_prints_the_tables_and_exits_by_its_verdict() {
             "suite",
         );
     assert!((table / q - 1.0).abs() < 0.01, "{table} vs {q}");
+    // The breakdown's P-only position MSE (its own pass over the run's ticks) is the table's
+    // on the one scenario of each set; its shares are percentages.
+    for set in ["suite", "held-out"] {
+        let row = out
+            .lines()
+            .skip_while(|l| !l.starts_with("### Where the position error comes from"))
+            .find(|l| l.starts_with("| P only |") && l.contains(&format!("| {set} |")))
+            .unwrap_or_else(|| panic!("no breakdown row for {set}\n{out}"));
+        let cols: Vec<&str> = row.split('|').map(str::trim).collect();
+        let b: f64 = cols[3].parse().unwrap();
+        let t = mse(&out, "P only", set);
+        assert!(
+            (b / t - 1.0).abs() < 2e-3,
+            "{set}: breakdown {b} vs table {t}"
+        );
+        for c in [4, 9, 10] {
+            let pct: f64 = cols[c].trim_end_matches(" %").parse().unwrap();
+            assert!((0.0..=100.0).contains(&pct), "{row}");
+        }
+    }
 }
 
 #[test]
@@ -101,6 +123,27 @@ fn compare_control_refuses_bad_arguments_with_status_2() {
         ),
     );
     assert!(e.contains("--ff-cutoff-hz"), "{e}");
+    let e = exits(
+        2,
+        &on_plant(
+            "compare-control",
+            &plant(),
+            &[&"--quick", &"--ff-min-duty", &"1.5"],
+        ),
+    );
+    assert!(
+        e.contains("--ff-min-duty 1.5") && e.contains("0..=1"),
+        "{e}"
+    );
+    let e = exits(
+        2,
+        &on_plant(
+            "compare-control",
+            &plant(),
+            &[&"--quick", &"--ff-rate-from", &"measured"],
+        ),
+    );
+    assert!(e.contains("--ff-rate-from"), "{e}");
     let e = exits(
         2,
         &on_plant("compare-control", &"/nonexistent/p.toml", &[&"--quick"]),

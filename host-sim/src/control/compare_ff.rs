@@ -6,7 +6,9 @@
 //! a leak and a supply drop added.
 //!
 //! Rows: the tuned cascade (`config/control_tuned.toml`) with the P-only pressure loops, the
-//! same cascade + the analytical inverse model (isothermal, k = 1, and polytropic, k = 1.4),
+//! same cascade + the analytical inverse model (isothermal, k = 1, and polytropic, k = 1.4;
+//! k = 1 also with `P'` and `V'` taken the other way: reference trajectory or set-point /
+//! measurement, see `rate_from_reference` in `config/pressure_ff.toml`),
 //! and + seed 004's hybrid model (eq. 12: the learned volume of [`pam_firmware::volume_fnn`]
 //! in place of the polynomial, k = 1). The hybrid volume is trained per plant, as the seed
 //! trains on its rig: `identify volume`'s trainer ([`crate::identify::volume::train`], seed 1,
@@ -14,6 +16,10 @@
 //! [`TRAINING_SCENARIO`] (random set-points, none of the compared scenarios). Columns: position MSE [rad^2] (angle error over every tick; infinite when a fault
 //! latched), its ratio to the P-only row, and the RMS pressure tracking error [kPa] (set-point
 //! minus measured gauge pressure, both muscles, every armed tick).
+//!
+//! `--breakdown` adds, on the nominal plant, where each set's position error comes from
+//! ([`breakdown`]: moving / at rest, slow pressure error and ripple, lag, deadband,
+//! saturation) for P only, two diagnostic variants of its pressure loop and the k = 1 rows.
 //!
 //! Exit status 1 when, on the given (nominal) plant and the suite, the analytical feed-forward
 //! does not improve the position MSE by at least [`REQUIRED_RATIO`] over the same cascade
@@ -105,9 +111,33 @@ pub struct CompareControlArgs {
     /// Cut-off of the set-point rate filter [Hz] (1..=500) [default: config/pressure_ff.toml].
     #[arg(long, value_name = "HZ")]
     pub ff_cutoff_hz: Option<f32>,
+    /// Where the feed-forward takes its desired pressure rate P' and volume rate V' from:
+    /// `reference` (the set-point trajectory through the inverse torque model) or
+    /// `set-point` (the torque loop's pressure set-point and the measured velocity)
+    /// [default: config/pressure_ff.toml rate_from_reference].
+    #[arg(long, value_name = "SOURCE", value_parser = ["reference", "set-point"])]
+    pub ff_rate_from: Option<String>,
+    /// Where the feed-forward takes the volume rate V' from: `reference` (the set-point's
+    /// rate) or `measured` (the velocity estimate) [default: config/pressure_ff.toml
+    /// volume_rate_from_reference].
+    #[arg(long, value_name = "SOURCE", value_parser = ["reference", "measured"])]
+    pub ff_volume_rate_from: Option<String>,
+    /// Feed-forward duties of a smaller magnitude are dropped (0..=1) [default:
+    /// config/pressure_ff.toml min_duty].
+    #[arg(long, value_name = "D")]
+    pub ff_min_duty: Option<f32>,
     /// Only the nominal plant and the suite's first scenario of each set (the CI run).
     #[arg(long)]
     pub quick: bool,
+    /// Only the nominal plant, every scenario of both sets.
+    #[arg(long, conflicts_with = "quick")]
+    pub nominal_only: bool,
+    /// Also print, per scenario set on the nominal plant, where the P-only cascade's position
+    /// error comes from (moves / rest, pressure lag, ripple, deadband, saturation) and the
+    /// same cascade with the pressure loop's deadband removed or its gain x4 (diagnostics
+    /// only: those change the cascade).
+    #[arg(long)]
+    pub breakdown: bool,
 }
 
 /// The effect variants of the plant: name and the TOML table added to the plant file.
@@ -210,10 +240,22 @@ pub fn controllers(
     base: ControllerConfig,
     hybrid: Option<&'static VolumeFnn>,
 ) -> Vec<(&'static str, ControllerConfig)> {
-    let with = |k: f32| ControllerConfig {
+    let with_rate = |k: f32, from_reference: bool| ControllerConfig {
         pressure_ff: PressureFfParams {
             enabled: true,
             polytropic_index: k,
+            rate_from_reference: from_reference,
+            volume_rate_from_reference: from_reference,
+            ..base.pressure_ff
+        },
+        volume_fnn: None,
+        ..base
+    };
+    let from_ref = base.pressure_ff.rate_from_reference;
+    let with = |k: f32| ControllerConfig {
+        pressure_ff: PressureFfParams {
+            polytropic_index: k,
+            enabled: true,
             ..base.pressure_ff
         },
         volume_fnn: None,
@@ -233,6 +275,14 @@ pub fn controllers(
             "+ analytical inverse model, k = 1.4 (polytropic)",
             with(1.4),
         ),
+        (
+            if from_ref {
+                "+ analytical, k = 1, P' and V' of the set-point / measurement"
+            } else {
+                "+ analytical, k = 1, P' and V' of the reference"
+            },
+            with_rate(1.0, !from_ref),
+        ),
     ];
     if let Some(n) = hybrid {
         v.push((
@@ -244,6 +294,196 @@ pub fn controllers(
         ));
     }
     v
+}
+
+/// Where the position error of one controller comes from on one scenario set (sums over the
+/// scenarios' armed, unfaulted ticks).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Breakdown {
+    /// Position MSE over all ticks [rad^2] and the share of its squared error on ticks whose
+    /// set-point moved within the last [`MOVE_WINDOW_TICKS`] ticks.
+    pub position_mse_rad2: f64,
+    pub moving_share: f64,
+    /// RMS of the pressure error (set-point minus measured) averaged over one PWM period
+    /// (the part that moves the joint) and of the rest (the ripple), moving / at rest [Pa],
+    /// from the first set-point change on (as every pressure figure below).
+    pub slow_rms_pa: [f64; 2],
+    pub ripple_rms_pa: [f64; 2],
+    /// The slow activation error `((e2 - e1) / 2)` as a joint torque through the torque
+    /// model's gain `B r`, RMS moving / at rest [N m].
+    pub torque_rms_nm: [f64; 2],
+    /// Least-squares lag `tau` of the slow pressure error against the set-point's rate
+    /// (`e ~ tau P'`) [s], and the share of the slow error's energy it explains.
+    pub lag_s: f64,
+    pub lag_explained: f64,
+    /// Shares of the muscle-ticks inside the deadband and with the valve saturated (|u| = 1).
+    pub deadband_share: f64,
+    pub saturated_share: f64,
+}
+
+/// Ticks after a set-point change counted as "moving" in [`Breakdown`].
+pub const MOVE_WINDOW_TICKS: usize = 20;
+
+/// Runs `cfg` on `scenarios` and splits its errors ([`Breakdown`]).
+pub fn breakdown(
+    plant: &Plant,
+    scenarios: &[Scenario],
+    cfg: ControllerConfig,
+) -> anyhow::Result<Breakdown> {
+    let pwm = pam_firmware::valves::OnOffPwmConfig::REFERENCE.period_ticks as usize;
+    let half = pwm / 2;
+    let gain_nm_per_pa =
+        (cfg.torque_model.b_m2 as f64 * cfg.torque_model.sprocket_radius_m as f64).abs();
+    let (mut sq, mut sq_moving, mut n) = (0.0, 0.0, 0usize);
+    let (mut slow, mut ripple, mut torque, mut cnt) =
+        ([0.0f64; 2], [0.0f64; 2], [0.0f64; 2], [0usize; 2]);
+    let (mut ep, mut pp, mut ee) = (0.0f64, 0.0f64, 0.0f64);
+    let (mut dead, mut sat, mut m) = (0usize, 0usize, 0usize);
+    let db = cfg.pressure.deadband_pa as f64;
+    for s in scenarios {
+        let run = run_with(plant, s, at_scenario_rate(cfg, s), &mut |_| {})?;
+        let rows: Vec<_> = run
+            .rows
+            .iter()
+            .take_while(|r| r.out.fault.is_none())
+            .collect();
+        let err = |r: &super::closed_loop::TickRow| {
+            [
+                r.out.p1_set_gauge_pa as f64 - r.measured.p1_kpa * 1e3,
+                r.out.p2_set_gauge_pa as f64 - r.measured.p2_kpa * 1e3,
+            ]
+        };
+        let mut last_change = None::<usize>;
+        for k in 0..rows.len() {
+            let r = rows[k];
+            if k > 0 && r.setpoint_rad != rows[k - 1].setpoint_rad {
+                last_change = Some(k);
+            }
+            let moving = matches!(last_change, Some(c) if k - c < MOVE_WINDOW_TICKS);
+            let e = r.state.angle_rad - r.setpoint_rad;
+            sq += e * e;
+            n += 1;
+            if moving {
+                sq_moving += e * e;
+            }
+            // Pressure figures from the first set-point change on (before it the muscles
+            // leave their initial pressures).
+            if last_change.is_none() || !r.out.armed || k < half + 1 || k + half + 1 >= rows.len() {
+                continue;
+            }
+            let win = &rows[k - half..k - half + pwm];
+            if !win.iter().all(|w| w.out.armed) {
+                continue;
+            }
+            let j = usize::from(!moving);
+            let e_now = err(r);
+            let mut e_slow = [0.0; 2];
+            for w in win {
+                let x = err(w);
+                e_slow[0] += x[0] / pwm as f64;
+                e_slow[1] += x[1] / pwm as f64;
+            }
+            // Set-point rate over the PWM period (the slow part of P').
+            let (a, b) = (win[0], win[pwm - 1]);
+            let dt = (b.t_s - a.t_s).max(1e-9);
+            let rate = [
+                (b.out.p1_set_gauge_pa - a.out.p1_set_gauge_pa) as f64 / dt,
+                (b.out.p2_set_gauge_pa - a.out.p2_set_gauge_pa) as f64 / dt,
+            ];
+            let t_err = gain_nm_per_pa * 0.5 * (e_slow[1] - e_slow[0]);
+            torque[j] += t_err * t_err;
+            for i in 0..2 {
+                slow[j] += e_slow[i] * e_slow[i];
+                ripple[j] += (e_now[i] - e_slow[i]).powi(2);
+                cnt[j] += 1;
+                ep += e_slow[i] * rate[i];
+                pp += rate[i] * rate[i];
+                ee += e_slow[i] * e_slow[i];
+                dead += usize::from(e_now[i].abs() <= db);
+                m += 1;
+            }
+            sat += usize::from(r.out.valves.muscle1.abs() >= 1.0)
+                + usize::from(r.out.valves.muscle2.abs() >= 1.0);
+        }
+    }
+    let rms = |x: f64, c: usize| {
+        if c == 0 {
+            f64::NAN
+        } else {
+            (x / c as f64).sqrt()
+        }
+    };
+    let lag_s = if pp > 0.0 { ep / pp } else { f64::NAN };
+    Ok(Breakdown {
+        position_mse_rad2: sq / n.max(1) as f64,
+        moving_share: sq_moving / sq.max(f64::MIN_POSITIVE),
+        slow_rms_pa: [rms(slow[0], cnt[0]), rms(slow[1], cnt[1])],
+        ripple_rms_pa: [rms(ripple[0], cnt[0]), rms(ripple[1], cnt[1])],
+        torque_rms_nm: [rms(2.0 * torque[0], cnt[0]), rms(2.0 * torque[1], cnt[1])],
+        lag_s,
+        lag_explained: if ee > 0.0 { lag_s * ep / ee } else { f64::NAN },
+        deadband_share: dead as f64 / m.max(1) as f64,
+        saturated_share: sat as f64 / m.max(1) as f64,
+    })
+}
+
+/// The breakdown report of the nominal plant: P-only, the diagnostic variants of its pressure
+/// loop, and the feed-forward designs, on each set.
+fn breakdown_report(
+    out: &mut String,
+    plant: &Plant,
+    sets: &[(&str, &Vec<Scenario>)],
+    base: ControllerConfig,
+) -> anyhow::Result<()> {
+    let ctl = controllers(base, None);
+    let off = ctl[0].1;
+    let mut rows: Vec<(String, ControllerConfig)> = vec![(ctl[0].0.to_string(), off)];
+    let mut no_db = off;
+    no_db.pressure.deadband_pa = 0.0;
+    rows.push(("P only, deadband 0 (diagnostic)".into(), no_db));
+    let mut fast = off;
+    fast.pressure.kp_per_pa *= 4.0;
+    rows.push(("P only, pressure kp x4 (diagnostic)".into(), fast));
+    for (n, c) in ctl.iter().skip(1) {
+        if c.pressure_ff.polytropic_index == 1.0 {
+            rows.push((n.to_string(), *c));
+        }
+    }
+    writeln!(
+        out,
+        "\n### Where the position error comes from (nominal plant)\n\n\
+         moving = set-point changed within {MOVE_WINDOW_TICKS} ticks; pressure figures from the \
+         first set-point change on; slow = pressure error averaged over one PWM period; \
+         torque = slow activation error x B r; lag = least-squares tau in e_slow ~ tau P'_set \
+         (share of the slow error it explains)\n"
+    )?;
+    writeln!(
+        out,
+        "| controller | set | position MSE [rad^2] | share moving | slow pressure RMS moving / rest [kPa] | ripple RMS moving / rest [kPa] | torque RMS moving / rest [N m] | lag [ms] (explained) | in deadband | saturated |"
+    )?;
+    writeln!(out, "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|")?;
+    for (set_name, sc) in sets {
+        for (name, c) in &rows {
+            let b = breakdown(plant, sc, *c)?;
+            writeln!(
+                out,
+                "| {name} | {set_name} | {:.3e} | {:.0} % | {:.1} / {:.1} | {:.1} / {:.1} | {:.3} / {:.3} | {:.1} ({:.0} %) | {:.0} % | {:.1} % |",
+                b.position_mse_rad2,
+                100.0 * b.moving_share,
+                b.slow_rms_pa[0] / 1e3,
+                b.slow_rms_pa[1] / 1e3,
+                b.ripple_rms_pa[0] / 1e3,
+                b.ripple_rms_pa[1] / 1e3,
+                b.torque_rms_nm[0],
+                b.torque_rms_nm[1],
+                b.lag_s * 1e3,
+                100.0 * b.lag_explained,
+                100.0 * b.deadband_share,
+                100.0 * b.saturated_share,
+            )?;
+        }
+    }
+    Ok(())
 }
 
 /// `host-sim compare-control`: the report and whether the nominal-plant requirement holds.
@@ -268,6 +508,19 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
         );
         base.pressure_ff.rate_cutoff_hz = f;
     }
+    if let Some(d) = a.ff_min_duty {
+        anyhow::ensure!(
+            (0.0..=1.0).contains(&d),
+            "--ff-min-duty {d}: outside the allowed range 0..=1"
+        );
+        base.pressure_ff.min_duty = d;
+    }
+    if let Some(src) = &a.ff_rate_from {
+        base.pressure_ff.rate_from_reference = src == "reference";
+    }
+    if let Some(src) = &a.ff_volume_rate_from {
+        base.pressure_ff.volume_rate_from_reference = src == "reference";
+    }
     let mut suite = suite_scenarios()?;
     let mut held_out = jump_suite_scenarios()?;
     let mut variants: Vec<(&str, String)> = VARIANTS
@@ -281,6 +534,8 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
     if a.quick {
         suite.truncate(1);
         held_out.truncate(1);
+    }
+    if a.quick || a.nominal_only {
         variants.truncate(1);
     }
     let sets = [("suite", &suite), ("held-out", &held_out)];
@@ -301,6 +556,24 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
             .collect::<Vec<_>>()
             .join(", "),
     )?;
+    let f = &base.pressure_ff;
+    writeln!(
+        out,
+        "feed-forward: P' of the {}, V' of the {}, rate cut-off {} Hz, gain {}, minimum duty {}",
+        if f.rate_from_reference {
+            "reference trajectory"
+        } else {
+            "pressure set-point"
+        },
+        if f.volume_rate_from_reference {
+            "set-point rate"
+        } else {
+            "measured velocity"
+        },
+        f.rate_cutoff_hz,
+        f.gain,
+        f.min_duty
+    )?;
     writeln!(
         out,
         "hybrid model: volume network trained per plant on the P-only cascade's run of {} (seed 1)",
@@ -311,6 +584,9 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
         let cfg = PlantConfig::from_toml_str(plant_text, &a.plant)
             .with_context(|| format!("--plant {} with the {vname} variant", a.plant.display()))?;
         let plant = Plant::from_config(&cfg);
+        if a.breakdown && *vname == "nominal" {
+            breakdown_report(&mut out, &plant, &sets, base)?;
+        }
         writeln!(out, "\n### {vname}\n")?;
         let (hybrid, mse_poly, mse_hybrid) = train_hybrid(&plant, base)
             .with_context(|| format!("training the hybrid volume on the {vname} plant"))?;
