@@ -18,15 +18,6 @@ fn arm_step_named(name: &str) -> String {
         .replace("settle_after_s = 6.5", "settle_after_s = 1.5")
 }
 
-/// `host-sim demo` of the seed 001 arm on the scenario file `s`, writing into `out`.
-fn arm_demo(s: &Path, out: &Path) -> std::process::Output {
-    on_plant(
-        "demo",
-        &arm3_plant(),
-        &[&"--scenario", &s, &"--out-dir", &out],
-    )
-}
-
 fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     let p = dir.join(name);
     std::fs::write(&p, text).unwrap();
