@@ -246,14 +246,7 @@ fn main() -> ExitCode {
         Command::Fit(a) => run_fit(&a),
         Command::Demo(a) => run_demo(&a),
         Command::Diagnose(a) => run_diagnose(&a),
-        Command::DiagnoseBatch(a) => host_sim::diagnose::batch::run_batch(&a).map(|(table, ok)| {
-            print!("{table}");
-            if ok {
-                ExitCode::SUCCESS
-            } else {
-                ExitCode::from(1)
-            }
-        }),
+        Command::DiagnoseBatch(a) => run_verdict(host_sim::diagnose::batch::run_batch(&a)),
         Command::Sweep(a) => run_report(host_sim::identify::cli::run_sweep(&a)),
         Command::Identify(a) => run_report(host_sim::identify::cli::run_identify(&a)),
         Command::Tune(a) => run_report(host_sim::control::tune::run_tune(&a)),
@@ -261,23 +254,9 @@ fn main() -> ExitCode {
         Command::Capture(a) => run_report(host_sim::io::capture::run_capture(&a)),
         Command::Calibrate(a) => run_report(host_sim::identify::calibrate::run_calibrate(&a)),
         Command::CompareControl(a) => {
-            host_sim::control::compare_ff::run_compare_control(&a).map(|(report, ok)| {
-                print!("{report}");
-                if ok {
-                    ExitCode::SUCCESS
-                } else {
-                    ExitCode::from(1)
-                }
-            })
+            run_verdict(host_sim::control::compare_ff::run_compare_control(&a))
         }
-        Command::Pil(a) => host_sim::control::pil::run_pil(&a).map(|(report, same)| {
-            print!("{report}");
-            if same {
-                ExitCode::SUCCESS
-            } else {
-                ExitCode::from(1)
-            }
-        }),
+        Command::Pil(a) => run_verdict(host_sim::control::pil::run_pil(&a)),
     };
     match result.and_then(|code| {
         outputs.commit().context("cannot write the outputs")?;
@@ -359,6 +338,18 @@ fn error_text(e: &anyhow::Error) -> String {
 fn run_report(report: Result<String>) -> Result<ExitCode> {
     print!("{}", report?);
     Ok(ExitCode::SUCCESS)
+}
+
+/// Prints the report of a command that passes or fails a check (the batch's runs, the
+/// feed-forward's gain, PIL's bit-for-bit match): exit status 0 if it passed, 1 if not.
+fn run_verdict(result: Result<(String, bool)>) -> Result<ExitCode> {
+    let (report, passed) = result?;
+    print!("{report}");
+    Ok(if passed {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
 }
 
 fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {

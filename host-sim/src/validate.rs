@@ -116,6 +116,31 @@ pub fn range_error(key: &str, v: f64, range: Range, unit: &str) -> Option<String
     Some(msg)
 }
 
+/// One range check of a file value: its key, the value, the allowed range and the unit the
+/// message names.
+pub type RangeRow = (String, f64, Range, &'static str);
+
+/// The rows of a range table: `range_rows![base, prefix; field.path: range, "unit"; ...]`
+/// checks `base.field.path` under the key `prefix` + `field.path`, so that a key cannot
+/// drift from the field it checks. Rows keep their order (the first error is reported).
+macro_rules! range_rows {
+    ($base:expr, $prefix:expr; $($first:ident $(. $rest:ident)* : $range:expr, $unit:expr;)+) => {
+        vec![$((
+            format!(concat!("{}", stringify!($first) $(, ".", stringify!($rest))*), $prefix),
+            $base.$first $(.$rest)*,
+            $range,
+            $unit,
+        )),+]
+    };
+}
+pub(crate) use range_rows;
+
+/// The first row outside its range: its key and [`range_error`]'s message.
+pub fn first_range_error(rows: &[RangeRow]) -> Option<(&str, String)> {
+    rows.iter()
+        .find_map(|(key, v, range, unit)| Some((key.as_str(), range_error(key, *v, *range, unit)?)))
+}
+
 /// A number as an error message shows it: plain when it reads well, in exponent form when
 /// it is very large or very small (a typed `1e300` is not echoed with 300 digits), and
 /// without the last bits of a rounding error.

@@ -56,11 +56,7 @@ fn a_missed_expectation_exits_1_and_a_bad_scenario_exits_2() {
     let tight = dir.path().join("tight.toml");
     std::fs::write(&tight, tight_text).unwrap();
     let out = dir.path().join("out");
-    let r = on_plant(
-        "demo",
-        &arm3_plant(),
-        &[&"--scenario", &tight, &"--out-dir", &out],
-    );
+    let r = arm_demo(&tight, &out);
     exits(1, &r);
     let stdout = text(&r.stdout);
     assert!(
@@ -78,11 +74,7 @@ fn a_missed_expectation_exits_1_and_a_bad_scenario_exits_2() {
     )
     .unwrap();
     let out2 = dir.path().join("out2");
-    let r = on_plant(
-        "demo",
-        &arm3_plant(),
-        &[&"--scenario", &bad, &"--out-dir", &out2],
-    );
+    let r = arm_demo(&bad, &out2);
     assert_refused(&r, &["bad.toml", "speed"], &out2);
 
     // A bad value names the line and the key.

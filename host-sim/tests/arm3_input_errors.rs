@@ -42,15 +42,7 @@ fn an_arm_scenario_name_that_is_a_path_is_refused_and_nothing_outside_out_dir_is
     ] {
         let text = arm_step_named(name);
         let s = write(d.path(), "s.toml", &text);
-        let r = host_sim(&[
-            &"demo",
-            &"--plant",
-            &arm3_plant(),
-            &"--scenario",
-            &s,
-            &"--out-dir",
-            &out,
-        ]);
+        let r = arm_demo(&s, &out);
         assert_refused(
             &r,
             &["s.toml", "line 6", "[scenario] name", "A-Za-z0-9_.-"],
@@ -83,15 +75,7 @@ fn simulate_step_refused(edit: (&str, &str), needles: &[&str]) {
         .replace(edit.0, edit.1);
     let s = write(d.path(), "step.toml", &text);
     let out = d.path().join("o.csv");
-    let r = host_sim(&[
-        &"simulate",
-        &"--plant",
-        &plant(),
-        &"--scenario",
-        &s,
-        &"--out",
-        &out,
-    ]);
+    let r = on_plant("simulate", &plant(), &[&"--scenario", &s, &"--out", &out]);
     let at = format!("line {}", line_of(&text, edit.1));
     let mut needles = needles.to_vec();
     needles.push(&at);
@@ -105,17 +89,11 @@ fn two_arm_scenarios_with_one_name_are_refused_before_anything_is_written() {
     let a = write(d.path(), "a.toml", &arm_step_named("same"));
     let b = write(d.path(), "b.toml", &arm_step_named("same"));
     let out = d.path().join("out");
-    let r = host_sim(&[
-        &"demo",
-        &"--plant",
+    let r = on_plant(
+        "demo",
         &arm3_plant(),
-        &"--scenario",
-        &a,
-        &"--scenario",
-        &b,
-        &"--out-dir",
-        &out,
-    ]);
+        &[&"--scenario", &a, &"--scenario", &b, &"--out-dir", &out],
+    );
     assert_refused(&r, &["b.toml", "\"same\"", "a.toml"], &out);
 }
 
@@ -142,15 +120,7 @@ fn assert_arm_plant_refused(text: &str, key: &str, needle: &str, more: &[&str]) 
     let s = write(d.path(), "s.toml", &arm_step_named("arm_step"));
     let out = d.path().join("out");
     let t0 = std::time::Instant::now();
-    let r = host_sim(&[
-        &"demo",
-        &"--plant",
-        &p,
-        &"--scenario",
-        &s,
-        &"--out-dir",
-        &out,
-    ]);
+    let r = on_plant("demo", &p, &[&"--scenario", &s, &"--out-dir", &out]);
     let at = format!("arm.toml:{}", line_of(text, needle));
     let mut needles = vec![at.as_str(), key];
     needles.extend(more);
@@ -226,15 +196,7 @@ fn assert_arm_scenario_refused(text: &str, needle: &str, more: &[&str]) -> Strin
     let d = tempfile::tempdir().unwrap();
     let s = write(d.path(), "s.toml", text);
     let out = d.path().join("out");
-    let r = host_sim(&[
-        &"demo",
-        &"--plant",
-        &arm3_plant(),
-        &"--scenario",
-        &s,
-        &"--out-dir",
-        &out,
-    ]);
+    let r = arm_demo(&s, &out);
     let at = format!("line {}", line_of(text, needle));
     let mut needles = vec!["s.toml", at.as_str()];
     needles.extend(more);
@@ -294,15 +256,7 @@ fn a_run_without_expectations_says_so_and_reports_its_faults() {
     let text = &text[..text.find("[expect]").unwrap()];
     let s = write(d.path(), "s.toml", text);
     let out = d.path().join("out");
-    let stdout = run_ok(&[
-        &"demo",
-        &"--plant",
-        &arm3_plant(),
-        &"--scenario",
-        &s,
-        &"--out-dir",
-        &out,
-    ]);
+    let stdout = ok(&arm_demo(&s, &out));
     assert!(
         stdout.contains("arm_free: no expectations given"),
         "{stdout}"
@@ -314,15 +268,11 @@ fn a_run_without_expectations_says_so_and_reports_its_faults() {
         + "\n[[events]]\nkind = \"sensor_nan\"\nat_s = 0.5\nduration_s = 0.5\nchannel = \"p1\"\n";
     let s = write(d.path(), "step.toml", &text);
     let o = d.path().join("o.csv");
-    let stdout = run_ok(&[
-        &"simulate",
-        &"--plant",
+    let stdout = ok(&on_plant(
+        "simulate",
         &plant(),
-        &"--scenario",
-        &s,
-        &"--out",
-        &o,
-    ]);
+        &[&"--scenario", &s, &"--out", &o],
+    ));
     assert!(stdout.contains("expectations: none given"), "{stdout}");
     assert!(!stdout.contains("expectations: met"), "{stdout}");
     assert!(stdout.contains("latched at tick"), "{stdout}");
@@ -337,15 +287,7 @@ fn arm_recording_lines(dir: &Path) -> Vec<String> {
     // No [expect] bounds: the run is data, not a test of the controller.
     let s = write(dir, "rec.toml", &text[..text.find("[expect]").unwrap()]);
     let out = dir.join("rec_out");
-    run_ok(&[
-        &"demo",
-        &"--plant",
-        &arm3_plant(),
-        &"--scenario",
-        &s,
-        &"--out-dir",
-        &out,
-    ]);
+    ok(&arm_demo(&s, &out));
     std::fs::read_to_string(out.join("rec.csv"))
         .unwrap()
         .lines()
@@ -361,15 +303,11 @@ fn header_index(lines: &[String]) -> usize {
 fn replay(dir: &Path, name: &str, lines: &[String]) -> (PathBuf, std::process::Output) {
     let rec = write(dir, name, &(lines.join("\n") + "\n"));
     let out = dir.join(format!("{name}.sim.csv"));
-    let r = host_sim(&[
-        &"simulate",
-        &"--plant",
+    let r = on_plant(
+        "simulate",
         &arm3_plant(),
-        &"--inputs",
-        &rec,
-        &"--out",
-        &out,
-    ]);
+        &[&"--inputs", &rec, &"--out", &out],
+    );
     (out, r)
 }
 
@@ -517,17 +455,11 @@ fn pil_checks_the_firmware_image_before_the_run_and_names_it() {
         (text, "not an ELF file"),
         (host_elf, "not a 32-bit little-endian ARM image"),
     ] {
-        let r = host_sim(&[
-            &"pil",
-            &"--plant",
+        let r = on_plant(
+            "pil",
             &plant(),
-            &"--scenario",
-            &s,
-            &"--out",
-            &out,
-            &"--elf",
-            &elf,
-        ]);
+            &[&"--scenario", &s, &"--out", &out, &"--elf", &elf],
+        );
         let e = assert_refused(&r, &[&format!("--elf {}", elf.display()), why], &out);
         assert!(!e.contains("step.toml"), "blames the scenario:\n{e}");
         assert_eq!(e.lines().count(), 1, "one line:\n{e}");
@@ -568,19 +500,20 @@ fn a_crashing_image_gives_qemus_first_line_and_a_few_lines_of_details() {
     let elf = d.path().join("hdr.elf");
     std::fs::write(&elf, &h).unwrap();
     let out = d.path().join("pil.csv");
-    let r = host_sim(&[
-        &"pil",
-        &"--plant",
+    let r = on_plant(
+        "pil",
         &plant(),
-        &"--scenario",
-        &root().join("scenarios/step.toml"),
-        &"--out",
-        &out,
-        &"--elf",
-        &elf,
-        &"--tick-timeout-s",
-        &"5",
-    ]);
+        &[
+            &"--scenario",
+            &root().join("scenarios/step.toml"),
+            &"--out",
+            &out,
+            &"--elf",
+            &elf,
+            &"--tick-timeout-s",
+            &"5",
+        ],
+    );
     let e = assert_refused(&r, &["hdr.elf", "QEMU"], &out);
     assert!(e.lines().count() <= 8, "at most a few lines:\n{e}");
     if e.lines().count() > 1 {

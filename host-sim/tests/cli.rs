@@ -64,12 +64,10 @@ fn bad_input_is_reported_with_file_line_and_field_and_keeps_old_output() {
         &fixture("reference-1dof.toml"),
         &[&"--inputs", &inputs, &"--out", &out],
     );
-    assert_eq!(r.status.code(), Some(2));
-    let err = String::from_utf8_lossy(&r.stderr);
-    assert!(
-        err.contains("bad.csv:3:") && err.contains("`u_ex1`"),
-        "{err}"
-    );
+    let err = exits(2, &r);
+    for needle in ["bad.csv:3:", "`u_ex1`"] {
+        assert!(err.contains(needle), "`{needle}` not in:\n{err}");
+    }
     assert_kept(&out);
 }
 

@@ -301,14 +301,8 @@ fn identify_plant_recovers_perturbed_parameters_from_a_simulated_recording() {
     // A complete plant file: loads, keeps the other values and the comments.
     let cfg = host_sim::PlantConfig::load(&out).unwrap();
     let reference = host_sim::PlantConfig::load(plant()).unwrap();
-    assert!(
-        (cfg.muscle.damping_m2s / 3.0e-4 - 1.0).abs() < 0.01,
-        "{cfg:?}"
-    );
-    assert!(
-        (cfg.valve.sonic_conductance_m3_per_s_pa / 6.5e-9 - 1.0).abs() < 0.01,
-        "{cfg:?}"
-    );
+    assert_rel(cfg.muscle.damping_m2s, 3.0e-4, 0.01, &cfg);
+    assert_rel(cfg.valve.sonic_conductance_m3_per_s_pa, 6.5e-9, 0.01, &cfg);
     assert_eq!(cfg.joint, reference.joint);
     assert_eq!(cfg.environment, reference.environment);
     let out_text = std::fs::read_to_string(&out).unwrap();
@@ -382,18 +376,9 @@ fn identify_plant_finds_the_load_inertia_in_the_independent_loaded_fixture() {
     ));
     println!("{s}");
     let cfg = host_sim::PlantConfig::load(&out).unwrap();
-    assert!(
-        (cfg.joint.inertia_kgm2 / 0.155 - 1.0).abs() < 0.005,
-        "{cfg:?}"
-    );
-    assert!(
-        (cfg.muscle.damping_m2s / 2.0e-4 - 1.0).abs() < 0.005,
-        "{cfg:?}"
-    );
-    assert!(
-        (cfg.valve.sonic_conductance_m3_per_s_pa / 8.0e-9 - 1.0).abs() < 0.005,
-        "{cfg:?}"
-    );
+    assert_rel(cfg.joint.inertia_kgm2, 0.155, 0.005, &cfg);
+    assert_rel(cfg.muscle.damping_m2s, 2.0e-4, 0.005, &cfg);
+    assert_rel(cfg.valve.sonic_conductance_m3_per_s_pa, 8.0e-9, 0.005, &cfg);
     // Held-out tail: the mean fit goes from about 51 % to the conformance level.
     let tail = s
         .split("held-out tail")
@@ -409,4 +394,12 @@ fn identify_plant_finds_the_load_inertia_in_the_independent_loaded_fixture() {
         .map(|x| x.parse().unwrap())
         .collect();
     assert!(v[0] < 80.0 && v[1] > 99.5, "{tail}");
+}
+
+/// Asserts `value` within the relative tolerance `rel` of `want` (`context` shown otherwise).
+fn assert_rel(value: f64, want: f64, rel: f64, context: &dyn std::fmt::Debug) {
+    assert!(
+        (value / want - 1.0).abs() < rel,
+        "{value} is not within {rel} (relative) of {want}: {context:?}"
+    );
 }

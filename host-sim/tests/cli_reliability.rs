@@ -149,10 +149,9 @@ const STEP: &str = "[scenario]\nname = \"long\"\nduration_s = 1e9\ntick_hz = 100
 #[test]
 fn a_scenario_too_long_for_memory_is_refused_with_the_estimate() {
     let w = Workspace::new();
-    let s = w.write("long.toml", STEP);
-    w.refuses_with(
-        "simulate --plant {plant} --scenario {s} --out {w}/out.csv",
-        &[("s", &s)],
+    w.write("long.toml", STEP);
+    w.refuses(
+        "simulate --plant {plant} --scenario {w}/long.toml --out {w}/out.csv",
         &[
             "long.toml",
             "1.000e12 samples",
@@ -165,16 +164,15 @@ fn a_scenario_too_long_for_memory_is_refused_with_the_estimate() {
 #[test]
 fn a_scenario_settling_after_its_end_is_refused_at_its_line() {
     let w = Workspace::new();
-    let s = w.write(
+    w.write(
         "late.toml",
         &format!(
             "{}\n[expect]\nsettle_after_s = 10.0\nmax_abs_error_rad = 0.01\n",
             STEP.replace("1e9", "4.0")
         ),
     );
-    w.refuses_with(
-        "simulate --plant {plant} --scenario {s} --out {w}/out.csv",
-        &[("s", &s)],
+    w.refuses(
+        "simulate --plant {plant} --scenario {w}/late.toml --out {w}/out.csv",
         &["late.toml", "line 13", "settle_after_s", "[0, 4)"],
     );
 }
@@ -227,14 +225,13 @@ fn scenario_unit_mistakes_are_refused_at_their_line() {
 #[test]
 fn simulate_refuses_to_write_over_its_input_recording() {
     let w = Workspace::new();
-    let rec = w.write(
+    w.write(
         "rec.csv",
         &std::fs::read_to_string(fixture("pulses_nominal.csv")).unwrap(),
     );
     // The same file under another spelling of its path.
-    w.refuses_with(
-        "simulate --plant {plant} --inputs {rec} --out {w}/./rec.csv",
-        &[("rec", &rec)],
+    w.refuses(
+        "simulate --plant {plant} --inputs {w}/rec.csv --out {w}/./rec.csv",
         &["--out", "is the input --inputs"],
     );
 }
@@ -335,11 +332,10 @@ fn demo_with_a_bad_fixture_leaves_nothing_behind() {
     let w = Workspace::new();
     let mut bad = std::fs::read_to_string(fixture("pulses_nominal.csv")).unwrap();
     bad.push_str("20.000000,0,0,0,0,abc,550,550,529,529\n");
-    let bad = w.write("bad.csv", &bad);
+    w.write("bad.csv", &bad);
     // The demo directory must not appear.
-    w.refuses_with(
-        "demo --out-dir {w}/demo --plant {plant} --fixture {bad}",
-        &[("bad", &bad)],
+    w.refuses(
+        "demo --out-dir {w}/demo --plant {plant} --fixture {w}/bad.csv",
         &["bad.csv", "angle_deg"],
     );
 }
@@ -347,14 +343,13 @@ fn demo_with_a_bad_fixture_leaves_nothing_behind() {
 #[test]
 fn identify_force_on_a_constant_map_is_refused() {
     let w = Workspace::new();
-    let mut csv = String::from("p_kpa,stretch,f_n\n");
-    for _ in 0..50 {
-        csv.push_str("300,0.9,400\n");
-    }
-    let data = w.write("const.csv", &csv);
-    w.refuses_with(
-        "identify force --data {data} --out {w}/out.toml",
-        &[("data", &data)],
+    // Fifty readings of one point: one length, one pressure.
+    w.write(
+        "const.csv",
+        &("p_kpa,stretch,f_n\n".to_owned() + &"300,0.9,400\n".repeat(50)),
+    );
+    w.refuses(
+        "identify force --data {w}/const.csv --out {w}/out.toml",
         &["const.csv", "one length"],
     );
 }
@@ -362,17 +357,15 @@ fn identify_force_on_a_constant_map_is_refused() {
 #[test]
 fn identify_torque_on_a_constant_recording_is_refused() {
     let w = Workspace::new();
-    let mut csv = String::from("t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg,p1_kpa,p2_kpa,f1_n,f2_n\n");
-    for k in 0..400 {
-        csv.push_str(&format!(
-            "{:.3},0,0,0,0,0,300,300,400,400\n",
-            k as f64 * 0.005
-        ));
-    }
-    let rec = w.write("const.csv", &csv);
-    w.refuses_with(
-        "identify torque --recording {rec} --plant {plant} --out {w}/out.toml",
-        &[("rec", &rec)],
+    // 2 s at 200 Hz of a joint at rest under constant pressures and tensions.
+    let rows = (0..400).map(|k| format!("{:.3},0,0,0,0,0,300,300,400,400\n", k as f64 * 0.005));
+    let header = "t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg,p1_kpa,p2_kpa,f1_n,f2_n\n";
+    w.write(
+        "const.csv",
+        &(header.to_owned() + &rows.collect::<String>()),
+    );
+    w.refuses(
+        "identify torque --recording {w}/const.csv --plant {plant} --out {w}/out.toml",
         &["const.csv", "angle_deg", "does not move"],
     );
 }

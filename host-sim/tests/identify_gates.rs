@@ -8,18 +8,40 @@ mod common;
 use common::*;
 use std::path::{Path, PathBuf};
 
-/// `sweep <what> --plant <reference> --out dir/name`.
+/// `sweep <what> --plant <reference> --out <out>` followed by `extra`.
+fn sweep_to(what: &str, out: &Path, extra: &[&str]) -> std::process::Output {
+    let mut c = bin();
+    c.args(["sweep", what, "--plant"])
+        .arg(plant())
+        .arg("--out")
+        .arg(out);
+    c.args(extra).output().unwrap()
+}
+
+/// `sweep <what> --plant <reference> --out dir/name`, which must succeed; its output.
 fn sweep(what: &str, dir: &Path, name: &str) -> PathBuf {
     let out = dir.join(name);
-    ok(&host_sim(&[
-        &"sweep",
-        &what,
-        &"--plant",
-        &plant(),
-        &"--out",
-        &out,
-    ]));
+    ok(&sweep_to(what, &out, &[]));
     out
+}
+
+/// A `sweep <what>` in `dir` with its `col` column mapped by `f`, written to `dir/name`: its
+/// path and the 1-based line of its first data row (after the comments and the header).
+fn mapped_sweep(
+    what: &str,
+    dir: &Path,
+    name: &str,
+    col: &str,
+    f: impl Fn(f64) -> f64,
+) -> (PathBuf, usize) {
+    let good = sweep(what, dir, &format!("good-{name}"));
+    let text = map_column(&good, col, f);
+    let path = dir.join(name);
+    std::fs::write(&path, &text).unwrap();
+    (
+        path,
+        text.lines().position(|l| !l.starts_with('#')).unwrap() + 2,
+    )
 }
 
 /// The data lines of a CSV with the `col` column mapped by `f` (comments and header kept).
@@ -66,16 +88,7 @@ fn identify_torque_refuses_a_fit_below_the_calibrate_gate_and_keeps_the_old_file
     let dir = tempfile::tempdir().unwrap();
     // A load cell with 200 N of noise (sd) on each tension: eq. 11 explains a third of it.
     let short = dir.path().join("noisy.csv");
-    ok(&host_sim(&[
-        &"sweep",
-        &"torque",
-        &"--plant",
-        &plant(),
-        &"--out",
-        &short,
-        &"--force-noise-n",
-        &"200",
-    ]));
+    ok(&sweep_to("torque", &short, &["--force-noise-n", "200"]));
     let out = previous_output(dir.path(), "torque.toml");
     let e = exits(2, &identify_torque(&short, &out, &[]));
     assert_kept(&out);
@@ -111,17 +124,9 @@ fn identify_torque_refuses_a_fit_below_the_calibrate_gate_and_keeps_the_old_file
 #[test]
 fn identify_torque_refuses_pressures_in_pa() {
     let dir = tempfile::tempdir().unwrap();
-    let full = sweep("torque", dir.path(), "sweep.csv");
-    let pa = dir.path().join("pa.csv");
-    std::fs::write(&pa, map_column(&full, "p1_kpa", |p| p * 1e3)).unwrap();
+    let (pa, line) = mapped_sweep("torque", dir.path(), "pa.csv", "p1_kpa", |p| p * 1e3);
     let out = previous_output(dir.path(), "torque.toml");
     let e = exits(2, &identify_torque(&pa, &out, &[]));
-    let line = std::fs::read_to_string(&pa)
-        .unwrap()
-        .lines()
-        .position(|l| !l.starts_with('#'))
-        .unwrap()
-        + 2;
     for n in [
         format!("pa.csv:{line}:"),
         "`p1_kpa`".into(),
@@ -136,11 +141,8 @@ fn identify_torque_refuses_pressures_in_pa() {
 #[test]
 fn identify_force_refuses_a_stretch_in_percent_naming_the_line() {
     let dir = tempfile::tempdir().unwrap();
-    let good = sweep("force", dir.path(), "force.csv");
-    let pct = dir.path().join("percent.csv");
-    std::fs::write(&pct, map_column(&good, "stretch", |e| e * 100.0)).unwrap();
-    let text = std::fs::read_to_string(&pct).unwrap();
-    let first_data = text.lines().position(|l| !l.starts_with('#')).unwrap() + 2;
+    let (pct, first_data) =
+        mapped_sweep("force", dir.path(), "percent.csv", "stretch", |e| e * 100.0);
     let out = previous_output(dir.path(), "force.toml");
     let r = host_sim(&[&"identify", &"force", &"--data", &pct, &"--out", &out]);
     let e = exits(2, &r);
@@ -155,18 +157,9 @@ fn identify_force_refuses_a_stretch_in_percent_naming_the_line() {
     }
     assert_kept(&out);
     // The same bounds on the sweep's arguments.
-    let e = run_exits(
+    let e = exits(
         2,
-        &[
-            &"sweep",
-            &"force",
-            &"--plant",
-            &plant(),
-            &"--out",
-            &dir.path().join("s.csv"),
-            &"--stretch-min",
-            &"75",
-        ],
+        &sweep_to("force", &dir.path().join("s.csv"), &["--stretch-min", "75"]),
     );
     assert!(e.contains("--stretch-min") && e.contains("75"), "{e}");
 }
@@ -177,18 +170,11 @@ fn identify_plant_refuses_a_fit_below_the_calibrate_gate() {
     // valve inputs reproduces none of its channels, whatever the inertia.
     let dir = tempfile::tempdir().unwrap();
     let rec = dir.path().join("sweep.csv");
-    ok(&host_sim(&[
-        &"sweep",
-        &"torque",
-        &"--plant",
-        &plant(),
-        &"--out",
+    ok(&sweep_to(
+        "torque",
         &rec,
-        &"--speeds-rad-s",
-        &"2",
-        &"--dp-kpa",
-        &"0,100",
-    ]));
+        &["--speeds-rad-s", "2", "--dp-kpa", "0, 100"],
+    ));
     let out = previous_output(dir.path(), "fitted.toml");
     let args = |out: &Path, extra: &'static str| {
         let mut c = bin();

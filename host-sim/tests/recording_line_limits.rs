@@ -75,15 +75,7 @@ fn a_60_mb_header_line_is_refused_with_its_line_and_the_limit_without_reading_it
     let input = dir.path().join("huge-header.csv");
     write_recording(&input, 60_000_000, 200, usize::MAX, 0);
     let out = dir.path().join("out.csv");
-    let r = host_sim(&[
-        &"simulate",
-        &"--plant",
-        &plant(),
-        &"--inputs",
-        &input,
-        &"--out",
-        &out,
-    ]);
+    let r = on_plant("simulate", &plant(), &[&"--inputs", &input, &"--out", &out]);
     let limit = MAX_HEAD_LINE_BYTES.to_string();
     refused(&r, &["huge-header.csv:2:", &limit]);
     assert!(!out.exists(), "an output was written");
@@ -113,15 +105,7 @@ fn a_data_row_over_the_limit_is_refused_and_one_under_it_is_read() {
     // Row 3 (0-based) is on line 6: one metadata line, the header, rows 0-2.
     write_recording(&long, 0, 200, 3, MAX_DATA_LINE_BYTES + 1);
     let out = dir.path().join("out.csv");
-    let r = host_sim(&[
-        &"simulate",
-        &"--plant",
-        &plant(),
-        &"--inputs",
-        &long,
-        &"--out",
-        &out,
-    ]);
+    let r = on_plant("simulate", &plant(), &[&"--inputs", &long, &"--out", &out]);
     refused(&r, &["long-row.csv:6:", &MAX_DATA_LINE_BYTES.to_string()]);
     assert!(!out.exists(), "an output was written");
     let r = host_sim(&[&"fit", &long, &long]);
@@ -131,15 +115,7 @@ fn a_data_row_over_the_limit_is_refused_and_one_under_it_is_read() {
     let fine = dir.path().join("fine.csv");
     let row_bytes = "0.003,1,0,0,1,0.0,".len();
     write_recording(&fine, 0, 200, 3, MAX_DATA_LINE_BYTES - row_bytes);
-    let r = host_sim(&[
-        &"simulate",
-        &"--plant",
-        &plant(),
-        &"--inputs",
-        &fine,
-        &"--out",
-        &out,
-    ]);
+    let r = on_plant("simulate", &plant(), &[&"--inputs", &fine, &"--out", &out]);
     ok(&r);
     let rec = Recording::read(&out).unwrap();
     assert_eq!(rec.len(), 200);

@@ -233,243 +233,57 @@ impl Arm3Config {
         // Physical or practical ranges, the 1-DOF file's where the key is the same
         // (`PlantConfig::validate`): wide enough for any real rig, narrow enough to catch a
         // unit typed wrong (kPa in a Pa key) or a value the model cannot run in finite time.
-        use crate::validate::Range;
+        use crate::plant::config::{environment_range_rows, initial_range_rows, muscle_range_rows};
+        use crate::validate::{range_rows, Range};
         use std::f64::consts::PI;
-        let l = &self.links;
-        let env = &self.environment;
-        let mut checks: Vec<(String, f64, Range, &str)> = vec![
-            (
-                "environment.p_atm_pa".into(),
-                env.p_atm_pa,
-                Range::closed(5.0e4, 1.2e5),
-                "Pa absolute",
-            ),
-            (
-                "environment.supply_gauge_pa".into(),
-                env.supply_gauge_pa,
-                Range::closed(1.0e4, 2.0e6),
-                "Pa gauge",
-            ),
-            (
-                "valve.sonic_conductance_m3_per_s_pa".into(),
-                self.valve.sonic_conductance_m3_per_s_pa,
-                Range::positive(1.0e-5),
-                "m^3/(s Pa)",
-            ),
-            // M stays positive definite for every q if Iz1, Ix2, Ix3 > 0 and the rest >= 0.
-            (
-                "links.inertia_x2_kgm2".into(),
-                l.inertia_x2_kgm2,
-                Range::positive(1.0e3),
-                "kg m^2",
-            ),
-            (
-                "links.inertia_x3_kgm2".into(),
-                l.inertia_x3_kgm2,
-                Range::positive(1.0e3),
-                "kg m^2",
-            ),
-            (
-                "links.inertia_z1_kgm2".into(),
-                l.inertia_z1_kgm2,
-                Range::positive(1.0e3),
-                "kg m^2",
-            ),
-            (
-                "links.inertia_y2_kgm2".into(),
-                l.inertia_y2_kgm2,
-                Range::closed(0.0, 1.0e3),
-                "kg m^2",
-            ),
-            (
-                "links.inertia_y3_kgm2".into(),
-                l.inertia_y3_kgm2,
-                Range::closed(0.0, 1.0e3),
-                "kg m^2",
-            ),
-            (
-                "links.inertia_z2_kgm2".into(),
-                l.inertia_z2_kgm2,
-                Range::closed(0.0, 1.0e3),
-                "kg m^2",
-            ),
-            (
-                "links.inertia_z3_kgm2".into(),
-                l.inertia_z3_kgm2,
-                Range::closed(0.0, 1.0e3),
-                "kg m^2",
-            ),
-            (
-                "links.mass2_kg".into(),
-                l.mass2_kg,
-                Range::closed(0.0, 1.0e3),
-                "kg",
-            ),
-            (
-                "links.mass3_kg".into(),
-                l.mass3_kg,
-                Range::closed(0.0, 1.0e3),
-                "kg",
-            ),
-            (
-                "links.length2_m".into(),
-                l.length2_m,
-                Range::closed(0.0, 10.0),
-                "m",
-            ),
-            (
-                "links.com2_m".into(),
-                l.com2_m,
-                Range::closed(-10.0, 10.0),
-                "m",
-            ),
-            (
-                "links.com3_m".into(),
-                l.com3_m,
-                Range::closed(-10.0, 10.0),
-                "m",
-            ),
-            (
-                "links.gravity_m_s2".into(),
-                l.gravity_m_s2,
-                Range::closed(0.0, 30.0),
-                "m/s^2",
-            ),
-        ];
+        let mut rows = environment_range_rows(&self.environment);
+        // M stays positive definite for every q if Iz1, Ix2, Ix3 > 0 and the rest >= 0.
+        rows.extend(range_rows![self, "";
+            valve.sonic_conductance_m3_per_s_pa: Range::positive(1.0e-5), "m^3/(s Pa)";
+            links.inertia_x2_kgm2: Range::positive(1.0e3), "kg m^2";
+            links.inertia_x3_kgm2: Range::positive(1.0e3), "kg m^2";
+            links.inertia_z1_kgm2: Range::positive(1.0e3), "kg m^2";
+            links.inertia_y2_kgm2: Range::closed(0.0, 1.0e3), "kg m^2";
+            links.inertia_y3_kgm2: Range::closed(0.0, 1.0e3), "kg m^2";
+            links.inertia_z2_kgm2: Range::closed(0.0, 1.0e3), "kg m^2";
+            links.inertia_z3_kgm2: Range::closed(0.0, 1.0e3), "kg m^2";
+            links.mass2_kg: Range::closed(0.0, 1.0e3), "kg";
+            links.mass3_kg: Range::closed(0.0, 1.0e3), "kg";
+            links.length2_m: Range::closed(0.0, 10.0), "m";
+            links.com2_m: Range::closed(-10.0, 10.0), "m";
+            links.com3_m: Range::closed(-10.0, 10.0), "m";
+            links.gravity_m_s2: Range::closed(0.0, 30.0), "m/s^2";
+        ]);
         for (i, j) in self.joints().iter().enumerate() {
             let k = format!("joint{}.", i + 1);
-            let m = &j.muscle;
-            let f = &j.friction;
-            let n = &j.initial;
-            // Vacuum .. supply, as the 1-DOF `[initial]` pressures.
-            let p_range = Range::closed(-env.p_atm_pa, env.supply_gauge_pa);
-            checks.extend([
-                (
-                    format!("{k}sprocket_radius_m"),
-                    j.sprocket_radius_m,
-                    Range::positive(1.0),
-                    "m",
-                ),
-                (
-                    format!("{k}initial_contraction"),
-                    j.initial_contraction,
-                    Range::half_open(0.0, 1.0),
-                    "fraction",
-                ),
-                (
-                    format!("{k}neutral_angle_rad"),
-                    j.neutral_angle_rad,
-                    Range::closed(-PI, PI),
-                    "rad",
-                ),
-                (
-                    format!("{k}muscle.rest_length_m"),
-                    m.rest_length_m,
-                    Range::positive(5.0),
-                    "m",
-                ),
-                (
-                    format!("{k}muscle.radius_m"),
-                    m.radius_m,
-                    Range::positive(0.5),
-                    "m",
-                ),
-                (
-                    format!("{k}muscle.braid_angle_deg"),
-                    m.braid_angle_deg,
-                    Range::open(5.0, 54.7),
-                    "degrees (between 5 and the neutral braid angle 54.7; radians typed?)",
-                ),
-                (
-                    format!("{k}muscle.end_factor"),
-                    m.end_factor,
-                    Range::positive(10.0),
-                    "",
-                ),
-                (
-                    format!("{k}muscle.damping_m2s"),
-                    m.damping_m2s,
-                    Range::closed(0.0, 1.0),
-                    "m^2 s",
-                ),
-                (
-                    format!("{k}friction.coulomb_nm"),
-                    f.coulomb_nm,
-                    Range::closed(0.0, FRICTION_MAX_NM),
-                    "N m",
-                ),
-                (
-                    format!("{k}friction.viscous_nm_s_per_rad"),
-                    f.viscous_nm_s_per_rad,
-                    Range::closed(0.0, FRICTION_MAX_NM),
-                    "N m s/rad",
-                ),
-                (
-                    format!("{k}friction.quadratic_nm_s2_per_rad2"),
-                    f.quadratic_nm_s2_per_rad2,
-                    Range::closed(0.0, FRICTION_MAX_NM),
-                    "N m s^2/rad^2",
-                ),
-                (
-                    format!("{k}friction.cubic_nm_s3_per_rad3"),
-                    f.cubic_nm_s3_per_rad3,
-                    Range::closed(0.0, FRICTION_MAX_NM),
-                    "N m s^3/rad^3",
-                ),
-                (
-                    format!("{k}friction.sign_smoothing_velocity_rad_s"),
-                    f.sign_smoothing_velocity_rad_s,
-                    SIGN_SMOOTHING_RANGE_RAD_S,
-                    "rad/s (smaller makes the equations too stiff to integrate in useful time)",
-                ),
-                (
-                    format!("{k}initial.angle_rad"),
-                    n.angle_rad,
-                    Range::closed(-PI, PI),
-                    "rad",
-                ),
-                (
-                    format!("{k}initial.velocity_rad_s"),
-                    n.velocity_rad_s,
-                    Range::closed(-100.0, 100.0),
-                    "rad/s",
-                ),
-                (
-                    format!("{k}initial.p1_gauge_pa"),
-                    n.p1_gauge_pa,
-                    p_range,
-                    "Pa gauge (vacuum .. environment.supply_gauge_pa)",
-                ),
-                (
-                    format!("{k}initial.p2_gauge_pa"),
-                    n.p2_gauge_pa,
-                    p_range,
-                    "Pa gauge (vacuum .. environment.supply_gauge_pa)",
-                ),
+            rows.extend(range_rows![j, &k;
+                sprocket_radius_m: Range::positive(1.0), "m";
+                initial_contraction: Range::half_open(0.0, 1.0), "fraction";
+                neutral_angle_rad: Range::closed(-PI, PI), "rad";
             ]);
-            if let Some(lg) = &f.lugre {
-                checks.extend([
-                    (format!("{k}friction.lugre.static_nm"), lg.static_nm, Range::closed(0.0, FRICTION_MAX_NM), "N m"),
-                    (format!("{k}friction.lugre.stribeck_velocity_rad_s"), lg.stribeck_velocity_rad_s, Range::positive(10.0), "rad/s"),
-                    (
-                        format!("{k}friction.lugre.stiffness_nm_per_rad"),
-                        lg.stiffness_nm_per_rad,
-                        LUGRE_STIFFNESS_RANGE_NM_PER_RAD,
-                        "N m/rad (stiffer bristles make the equations too stiff to integrate in useful time)",
-                    ),
-                    (
-                        format!("{k}friction.lugre.damping_nm_s_per_rad"),
-                        lg.damping_nm_s_per_rad,
-                        LUGRE_DAMPING_RANGE_NM_S_PER_RAD,
-                        "N m s/rad",
-                    ),
+            rows.extend(muscle_range_rows(&j.muscle, &k));
+            rows.extend(range_rows![j.friction, format!("{k}friction.");
+                coulomb_nm: Range::closed(0.0, FRICTION_MAX_NM), "N m";
+                viscous_nm_s_per_rad: Range::closed(0.0, FRICTION_MAX_NM), "N m s/rad";
+                quadratic_nm_s2_per_rad2: Range::closed(0.0, FRICTION_MAX_NM), "N m s^2/rad^2";
+                cubic_nm_s3_per_rad3: Range::closed(0.0, FRICTION_MAX_NM), "N m s^3/rad^3";
+                sign_smoothing_velocity_rad_s: SIGN_SMOOTHING_RANGE_RAD_S,
+                    "rad/s (smaller makes the equations too stiff to integrate in useful time)";
+            ]);
+            rows.extend(initial_range_rows(&j.initial, &self.environment, &k));
+            if let Some(lg) = &j.friction.lugre {
+                rows.extend(range_rows![lg, format!("{k}friction.lugre.");
+                    static_nm: Range::closed(0.0, FRICTION_MAX_NM), "N m";
+                    stribeck_velocity_rad_s: Range::positive(10.0), "rad/s";
+                    stiffness_nm_per_rad: LUGRE_STIFFNESS_RANGE_NM_PER_RAD,
+                        "N m/rad (stiffer bristles make the equations too stiff to integrate in \
+                         useful time)";
+                    damping_nm_s_per_rad: LUGRE_DAMPING_RANGE_NM_S_PER_RAD, "N m s/rad";
                 ]);
             }
         }
-        for (key, v, range, unit) in &checks {
-            if let Some(msg) = crate::validate::range_error(key, *v, *range, unit) {
-                return Err(bad(key, msg));
-            }
+        if let Some((key, msg)) = crate::validate::first_range_error(&rows) {
+            return Err(bad(key, msg));
         }
         for (i, j) in self.joints().iter().enumerate() {
             let k = format!("joint{}.", i + 1);

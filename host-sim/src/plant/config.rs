@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 
 use crate::plant::effects::EffectsConfig;
+use crate::validate::{range_rows, Range, RangeRow};
 
 /// The whole plant file.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -166,6 +167,46 @@ pub fn parse_plant_text<T: serde::de::DeserializeOwned>(
     Ok(cfg)
 }
 
+// Range rows the 1-DOF and the arm plant files share (same keys under the arm's `jointN.`
+// prefix, same physical or practical ranges): wide enough for any real rig, narrow enough to
+// catch a unit typed wrong (kPa in a Pa key) or a value the model cannot run.
+
+/// `[environment]`: atmospheric and supply pressure.
+pub(crate) fn environment_range_rows(env: &EnvironmentConfig) -> Vec<RangeRow> {
+    range_rows![env, "environment.";
+        p_atm_pa: Range::closed(5.0e4, 1.2e5), "Pa absolute";
+        supply_gauge_pa: Range::closed(1.0e4, 2.0e6), "Pa gauge";
+    ]
+}
+
+/// `[muscle]` (`prefix` `""`, or the arm's `jointN.`).
+pub(crate) fn muscle_range_rows(m: &MuscleConfig, prefix: &str) -> Vec<RangeRow> {
+    range_rows![m, format!("{prefix}muscle.");
+        rest_length_m: Range::positive(5.0), "m";
+        radius_m: Range::positive(0.5), "m";
+        braid_angle_deg: Range::open(5.0, 54.7),
+            "degrees (between 5 and the neutral braid angle 54.7; radians typed?)";
+        end_factor: Range::positive(10.0), "";
+        damping_m2s: Range::closed(0.0, 1.0), "m^2 s";
+    ]
+}
+
+/// `[initial]`: angle, velocity, and the two pressures between vacuum and the supply.
+pub(crate) fn initial_range_rows(
+    n: &InitialConfig,
+    env: &EnvironmentConfig,
+    prefix: &str,
+) -> Vec<RangeRow> {
+    let p_range = Range::closed(-env.p_atm_pa, env.supply_gauge_pa);
+    let p_unit = "Pa gauge (vacuum .. environment.supply_gauge_pa)";
+    range_rows![n, format!("{prefix}initial.");
+        angle_rad: Range::closed(-std::f64::consts::PI, std::f64::consts::PI), "rad";
+        velocity_rad_s: Range::closed(-100.0, 100.0), "rad/s";
+        p1_gauge_pa: p_range, p_unit;
+        p2_gauge_pa: p_range, p_unit;
+    ]
+}
+
 impl PlantConfig {
     /// Reads and validates a plant file.
     pub fn load(path: impl AsRef<Path>) -> Result<Self, ConfigError> {
@@ -186,118 +227,18 @@ impl PlantConfig {
         };
         // Physical or practical ranges: wide enough for any real rig, narrow enough to catch
         // a unit typed wrong (kPa in a Pa key) or a value the model cannot run.
-        use crate::validate::{Range, Shown};
-        let ranges = [
-            (
-                "environment.p_atm_pa",
-                self.environment.p_atm_pa,
-                Range::closed(5.0e4, 1.2e5),
-                "Pa absolute",
-            ),
-            (
-                "environment.supply_gauge_pa",
-                self.environment.supply_gauge_pa,
-                Range::closed(1.0e4, 2.0e6),
-                "Pa gauge",
-            ),
-            (
-                "muscle.rest_length_m",
-                self.muscle.rest_length_m,
-                Range::positive(5.0),
-                "m",
-            ),
-            (
-                "muscle.radius_m",
-                self.muscle.radius_m,
-                Range::positive(0.5),
-                "m",
-            ),
-            (
-                "muscle.braid_angle_deg",
-                self.muscle.braid_angle_deg,
-                Range::open(5.0, 54.7),
-                "degrees (between 5 and the neutral braid angle 54.7; radians typed?)",
-            ),
-            (
-                "muscle.end_factor",
-                self.muscle.end_factor,
-                Range::positive(10.0),
-                "",
-            ),
-            (
-                "muscle.damping_m2s",
-                self.muscle.damping_m2s,
-                Range::closed(0.0, 1.0),
-                "m^2 s",
-            ),
-            (
-                "joint.sprocket_radius_m",
-                self.joint.sprocket_radius_m,
-                Range::positive(1.0),
-                "m",
-            ),
-            (
-                "joint.inertia_kgm2",
-                self.joint.inertia_kgm2,
-                Range::positive(1.0e3),
-                "kg m^2",
-            ),
-            (
-                "joint.initial_contraction",
-                self.joint.initial_contraction,
-                Range::half_open(0.0, 1.0),
-                "fraction",
-            ),
-            (
-                "valve.sonic_conductance_m3_per_s_pa",
-                self.valve.sonic_conductance_m3_per_s_pa,
-                Range::positive(1.0e-5),
-                "m^3/(s Pa)",
-            ),
-            (
-                "initial.angle_rad",
-                self.initial.angle_rad,
-                Range::closed(-std::f64::consts::PI, std::f64::consts::PI),
-                "rad",
-            ),
-            (
-                "initial.velocity_rad_s",
-                self.initial.velocity_rad_s,
-                Range::closed(-100.0, 100.0),
-                "rad/s",
-            ),
-        ];
-        for (key, v, range, unit) in ranges {
-            if !range.contains(v) {
-                let mut msg = format!("must be within {range} {unit}, got {}", Shown(v));
-                if key.ends_with("_pa") && v > 0.0 && range.contains(v * 1e3) {
-                    msg.push_str(&format!(
-                        " (kPa typed into a Pa key? {v} kPa is {} Pa)",
-                        v * 1e3
-                    ));
-                }
-                return Err(bad(key, &msg));
-            }
-        }
-        // Pressures between vacuum and the supply.
-        let p_range = Range::closed(-self.environment.p_atm_pa, self.environment.supply_gauge_pa);
-        for (key, v) in [
-            ("initial.p1_gauge_pa", self.initial.p1_gauge_pa),
-            ("initial.p2_gauge_pa", self.initial.p2_gauge_pa),
-        ] {
-            if !p_range.contains(v) {
-                let mut msg = format!(
-                    "must be within {p_range} Pa gauge (vacuum .. supply_gauge_pa), got {}",
-                    Shown(v)
-                );
-                if v > 0.0 && p_range.contains(v * 1e3) {
-                    msg.push_str(&format!(
-                        " (kPa typed into a Pa key? {v} kPa is {} Pa)",
-                        v * 1e3
-                    ));
-                }
-                return Err(bad(key, &msg));
-            }
+        use crate::validate::Shown;
+        let mut rows = environment_range_rows(&self.environment);
+        rows.extend(muscle_range_rows(&self.muscle, ""));
+        rows.extend(range_rows![self, "";
+            joint.sprocket_radius_m: Range::positive(1.0), "m";
+            joint.inertia_kgm2: Range::positive(1.0e3), "kg m^2";
+            joint.initial_contraction: Range::half_open(0.0, 1.0), "fraction";
+            valve.sonic_conductance_m3_per_s_pa: Range::positive(1.0e-5), "m^3/(s Pa)";
+        ]);
+        rows.extend(initial_range_rows(&self.initial, &self.environment, ""));
+        if let Some((key, msg)) = crate::validate::first_range_error(&rows) {
+            return Err(bad(key, &msg));
         }
         // The Tondu force vanishes at the maximum contraction
         // (1 - 1 / (sqrt(3) cos alpha0)) / k: the muscles must start below it.

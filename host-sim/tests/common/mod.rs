@@ -209,6 +209,16 @@ pub fn on_plant(command: &str, plant: &dyn AsRef<OsStr>, rest: &[&dyn AsRef<OsSt
     c.output().unwrap()
 }
 
+/// `host-sim demo` of the seed 001 arm ([`arm3_plant`]) on the scenario file `scenario`,
+/// writing into `out_dir`.
+pub fn arm_demo(scenario: &Path, out_dir: &Path) -> Output {
+    on_plant(
+        "demo",
+        &arm3_plant(),
+        &[&"--scenario", &scenario, &"--out-dir", &out_dir],
+    )
+}
+
 /// The reference on/off valve driver on pins wired to nothing (the openings it computes are
 /// what a plant-in-the-loop test applies).
 pub fn unwired_valves(

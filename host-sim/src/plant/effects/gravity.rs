@@ -5,7 +5,7 @@
 
 use serde::Deserialize;
 
-use super::{Check, Effect, enabled_default, Hooks, params, Truth, torque_residual_scatter};
+use super::{Check, Effect, enabled_default, Hooks, Truth, torque_residual_scatter};
 use crate::diagnose::candidates::{clamp_to, Candidate, ParamSpec, Screening, Setup};
 use crate::diagnose::screen::{regress, Evidence};
 use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
@@ -43,14 +43,7 @@ impl Gravity {
 }
 
 impl Hooks for Gravity {
-    fn parameters(&self) -> Option<Vec<(String, String)>> {
-        Some(params(&[
-            ("mass_kg", self.mass_kg),
-            ("com_distance_m", self.com_distance_m),
-            ("hanging_angle_rad", self.hanging_angle_rad),
-            ("g_m_s2", self.g_m_s2),
-        ]))
-    }
+    parameters!(mass_kg, com_distance_m, hanging_angle_rad, g_m_s2);
     #[inline(always)]
     fn joint_torque_nm(&self, angle_rad: f64, _velocity_rad_s: f64) -> f64 {
         self.torque_nm(angle_rad)

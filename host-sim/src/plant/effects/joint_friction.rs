@@ -10,7 +10,7 @@
 
 use serde::Deserialize;
 
-use super::{Check, Effect, enabled_default, Hooks, params, Truth};
+use super::{Check, Effect, enabled_default, Hooks, Truth};
 use crate::diagnose::candidates::{clamp_to, Candidate, ParamSpec, Screening, Setup};
 use crate::diagnose::screen::{regress, Evidence, Scatter};
 use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
@@ -45,15 +45,7 @@ impl JointFriction {
 }
 
 impl Hooks for JointFriction {
-    fn parameters(&self) -> Option<Vec<(String, String)>> {
-        Some(params(&[
-            ("coulomb_nm", self.coulomb_nm),
-            ("breakaway_nm", self.breakaway_nm),
-            ("stribeck_velocity_rad_s", self.stribeck_velocity_rad_s),
-            ("viscous_nm_s_per_rad", self.viscous_nm_s_per_rad),
-            ("smoothing_velocity_rad_s", self.smoothing_velocity_rad_s),
-        ]))
-    }
+    parameters!(coulomb_nm, breakaway_nm, stribeck_velocity_rad_s, viscous_nm_s_per_rad, smoothing_velocity_rad_s);
     #[inline(always)]
     fn joint_torque_nm(&self, _angle_rad: f64, velocity_rad_s: f64) -> f64 {
         self.torque_nm(velocity_rad_s)

@@ -91,6 +91,17 @@ macro_rules! id_and_label {
     };
 }
 
+/// [`Hooks::parameters`] of an effect that changes the plant whenever it is enabled: the
+/// named fields, each reported under its own name as TOML key. Write
+/// `parameters!(mass_kg, com_distance_m);` inside `impl Hooks for TheTable`.
+macro_rules! parameters {
+    ($($field:ident),+ $(,)?) => {
+        fn parameters(&self) -> Option<Vec<(String, String)>> {
+            Some($crate::plant::effects::params(&[$((stringify!($field), self.$field)),+]))
+        }
+    };
+}
+
 /// How an enabled effect acts on the plant. Every hook defaults to "no change"; an effect
 /// overrides the ones it acts through.
 pub trait Hooks: Debug + Clone + PartialEq {

@@ -19,7 +19,7 @@
 
 use serde::Deserialize;
 
-use super::{Check, Effect, enabled_default, Hooks, params, Truth};
+use super::{Check, Effect, enabled_default, Hooks, Truth};
 use crate::diagnose::candidates::{clamp_to, Candidate, ParamSpec, Screening, Setup};
 use crate::diagnose::screen::{regress, Evidence, Scatter};
 use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
@@ -50,13 +50,7 @@ impl MuscleHysteresis {
 }
 
 impl Hooks for MuscleHysteresis {
-    fn parameters(&self) -> Option<Vec<(String, String)>> {
-        Some(params(&[
-            ("base_force_n", self.base_force_n),
-            ("pressure_gain_n_per_pa", self.pressure_gain_n_per_pa),
-            ("smoothing_rate_per_s", self.smoothing_rate_per_s),
-        ]))
-    }
+    parameters!(base_force_n, pressure_gain_n_per_pa, smoothing_rate_per_s);
     #[inline(always)]
     fn muscle_friction_n(&self, p_gauge_pa: f64, contraction_rate_per_s: f64) -> Option<f64> {
         Some(self.force_n(p_gauge_pa, contraction_rate_per_s))

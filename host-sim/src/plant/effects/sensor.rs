@@ -150,14 +150,10 @@ const OFFSET_SCALES: [f64; 5] = [0.5, 5.0, 5.0, 5.0, 5.0];
 impl Candidate for SensorOffsetCandidate {
     id_and_label!("sensor_offset", "sensor calibration offset");
     fn params(&self, s: &Setup) -> Vec<ParamSpec> {
-        Channel::ALL
-            .iter()
-            .filter(|c| s.has(**c))
-            .map(|c| {
-                let sc = OFFSET_SCALES[c.index()];
-                ParamSpec::new(OFFSET_NAMES[c.index()], -1e3 * sc, 1e3 * sc, sc)
-            })
-            .collect()
+        per_present_channel(s, |i| {
+            let sc = OFFSET_SCALES[i];
+            ParamSpec::new(OFFSET_NAMES[i], -1e3 * sc, 1e3 * sc, sc)
+        })
     }
     fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
         // Per channel, the residual's mean.
@@ -179,12 +175,7 @@ impl Candidate for SensorOffsetCandidate {
         false
     }
     fn describe(&self, p: &[f64], s: &Setup) -> String {
-        let parts: Vec<String> = self
-            .params(s)
-            .iter()
-            .zip(p)
-            .map(|(n, v)| format!("{} {:+.3}", n.name, v))
-            .collect();
+        let parts = channel_values(&self.params(s), p, |_| true, |v| format!("{v:+.3}"));
         format!("constant sensor offsets ({})", parts.join(", "))
     }
 }
@@ -226,6 +217,31 @@ fn screen_channels(
         ),
         scatter: None,
     }
+}
+
+/// One parameter per channel the recording has (`spec` of the channel index), in channel
+/// order.
+fn per_present_channel(s: &Setup, spec: impl Fn(usize) -> ParamSpec) -> Vec<ParamSpec> {
+    Channel::ALL
+        .iter()
+        .filter(|c| s.has(**c))
+        .map(|c| spec(c.index()))
+        .collect()
+}
+
+/// "channel value" of each fitted value `keep` accepts (`value` formats it), for `describe`.
+fn channel_values(
+    params: &[ParamSpec],
+    p: &[f64],
+    keep: impl Fn(f64) -> bool,
+    value: impl Fn(f64) -> String,
+) -> Vec<String> {
+    params
+        .iter()
+        .zip(p)
+        .filter(|(_, v)| keep(**v))
+        .map(|(n, v)| format!("{} {}", n.name, value(*v)))
+        .collect()
 }
 
 /// Writes one fitted value per present channel (`p`, in channel order) into the plant's
@@ -275,11 +291,7 @@ const GAIN_NAMES: [&str; 5] = ["angle_gain", "p1_gain", "p2_gain", "f1_gain", "f
 impl Candidate for SensorGainCandidate {
     id_and_label!("sensor_gain", "sensor calibration gain");
     fn params(&self, s: &Setup) -> Vec<ParamSpec> {
-        Channel::ALL
-            .iter()
-            .filter(|c| s.has(**c))
-            .map(|c| ParamSpec::new(GAIN_NAMES[c.index()], 0.5, 2.0, 0.05))
-            .collect()
+        per_present_channel(s, |i| ParamSpec::new(GAIN_NAMES[i], 0.5, 2.0, 0.05))
     }
     fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
         // Per channel, the residual's projection on the nominal channel: r = (g - 1) y.
@@ -303,13 +315,8 @@ impl Candidate for SensorGainCandidate {
         false
     }
     fn describe(&self, p: &[f64], s: &Setup) -> String {
-        let parts: Vec<String> = self
-            .params(s)
-            .iter()
-            .zip(p)
-            .filter(|(_, v)| (**v - 1.0).abs() >= 0.005)
-            .map(|(n, v)| format!("{} {:.3}", n.name, v))
-            .collect();
+        let off_1 = |v: f64| (v - 1.0).abs() >= 0.005;
+        let parts = channel_values(&self.params(s), p, off_1, |v| format!("{v:.3}"));
         format!(
             "sensor gains off 1 ({})",
             if parts.is_empty() {

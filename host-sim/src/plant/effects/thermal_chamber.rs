@@ -23,7 +23,7 @@
 
 use serde::Deserialize;
 
-use super::{Check, Effect, enabled_default, Hooks, params, Truth};
+use super::{Check, Effect, enabled_default, Hooks, Truth};
 use crate::diagnose::candidates::{
     clamp_to, pressure_scatter, regress_pressure, Candidate, ParamSpec, Screening, Setup,
 };
@@ -94,14 +94,7 @@ impl ThermalChamber {
 }
 
 impl Hooks for ThermalChamber {
-    fn parameters(&self) -> Option<Vec<(String, String)>> {
-        Some(params(&[
-            ("heat_transfer_w_per_k", self.heat_transfer_w_per_k),
-            ("kappa", self.kappa),
-            ("wall_temperature_k", self.wall_temperature_k),
-            ("initial_temperature_k", self.initial_temperature_k),
-        ]))
-    }
+    parameters!(heat_transfer_w_per_k, kappa, wall_temperature_k, initial_temperature_k);
     #[inline(always)]
     fn thermal_chamber(&self) -> Option<&ThermalChamber> {
         Some(self)

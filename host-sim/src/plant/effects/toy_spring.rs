@@ -7,7 +7,7 @@
 
 use serde::Deserialize;
 
-use super::{Check, Effect, enabled_default, Hooks, params, Truth, torque_residual_scatter};
+use super::{Check, Effect, enabled_default, Hooks, Truth, torque_residual_scatter};
 use crate::diagnose::candidates::{clamp_to, Candidate, ParamSpec, Screening, Setup};
 use crate::diagnose::screen::{regress, Evidence};
 use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
@@ -25,12 +25,7 @@ pub struct ToySpring {
 }
 
 impl Hooks for ToySpring {
-    fn parameters(&self) -> Option<Vec<(String, String)>> {
-        Some(params(&[
-            ("stiffness_nm_per_rad", self.stiffness_nm_per_rad),
-            ("rest_angle_rad", self.rest_angle_rad),
-        ]))
-    }
+    parameters!(stiffness_nm_per_rad, rest_angle_rad);
     fn joint_torque_nm(&self, angle_rad: f64, _velocity_rad_s: f64) -> f64 {
         -self.stiffness_nm_per_rad * (angle_rad - self.rest_angle_rad)
     }
