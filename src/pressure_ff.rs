@@ -487,25 +487,39 @@ mod tests {
         assert_eq!(o, [0.0, 0.0]);
     }
 
-    #[test]
-    fn rising_setpoint_inflates_falling_exhausts_and_the_rate_filter_converges() {
+    /// 200 ticks of a fresh reference feed-forward with the chosen inputs (set-points,
+    /// desired pressures, measured pressures) ramping at 1 MPa/s (muscle 1 up from 200 kPa,
+    /// muscle 2 down from 500 kPa), the others steady at 300 kPa: the last duty and the
+    /// feed-forward.
+    fn ramped(ramp: [bool; 3]) -> ([f32; 2], PressureFeedforward) {
         let mut ff = reference_ff();
         let mut o = [0.0; 2];
         for k in 0..200 {
-            let s = k as f32 * 1000.0; // 1 MPa/s up on muscle 1, down on muscle 2
-            o = ff.step(
-                [200_000.0 + s, 500_000.0 - s],
-                [200_000.0 + s, 500_000.0 - s],
-                [200_000.0 + s, 500_000.0 - s],
-                0.0,
-                0.0,
-            );
+            let s = k as f32 * 1000.0;
+            let [sp, desired, measured] = ramp.map(|r| {
+                if r {
+                    [200_000.0 + s, 500_000.0 - s]
+                } else {
+                    [300_000.0; 2]
+                }
+            });
+            o = ff.step(sp, desired, measured, 0.0, 0.0);
         }
+        (o, ff)
+    }
+
+    fn assert_rates_of_the_ramp(ff: &PressureFeedforward) {
         let r = ff.rates_pa_s();
         assert!(
             (r[0] - 1.0e6).abs() < 1e3 && (r[1] + 1.0e6).abs() < 1e3,
             "{r:?}"
         );
+    }
+
+    #[test]
+    fn rising_setpoint_inflates_falling_exhausts_and_the_rate_filter_converges() {
+        let (o, ff) = ramped([true; 3]);
+        assert_rates_of_the_ramp(&ff);
         assert!(o[0] > 0.0 && o[1] < 0.0, "{o:?}");
         // A muscle contracting (its volume rising: muscle 1 at a positive velocity) at a steady
         // set-point needs inflow, the other one (lengthening) outflow.
@@ -517,38 +531,13 @@ mod tests {
 
     #[test]
     fn the_rate_is_that_of_the_desired_pressures_not_of_the_set_points() {
-        // Steady set-points, desired pressures ramping at 1 MPa/s (muscle 1 up, 2 down): the
-        // rate and the duty's sign follow the desired pressures.
-        let mut ff = reference_ff();
-        let mut o = [0.0; 2];
-        for k in 0..200 {
-            let s = k as f32 * 1000.0;
-            o = ff.step(
-                [300_000.0; 2],
-                [200_000.0 + s, 500_000.0 - s],
-                [300_000.0; 2],
-                0.0,
-                0.0,
-            );
-        }
-        let r = ff.rates_pa_s();
-        assert!(
-            (r[0] - 1.0e6).abs() < 1e3 && (r[1] + 1.0e6).abs() < 1e3,
-            "{r:?}"
-        );
+        // Steady set-points, desired pressures ramping: the rate and the duty's sign follow
+        // the desired pressures.
+        let (o, ff) = ramped([false, true, false]);
+        assert_rates_of_the_ramp(&ff);
         assert!(o[0] > 0.0 && o[1] < 0.0, "{o:?}");
         // Ramping set-points under steady desired pressures: no rate, no duty.
-        let mut ff = reference_ff();
-        for k in 0..200 {
-            let s = k as f32 * 1000.0;
-            o = ff.step(
-                [200_000.0 + s, 500_000.0 - s],
-                [300_000.0; 2],
-                [300_000.0; 2],
-                0.0,
-                0.0,
-            );
-        }
+        let (o, _) = ramped([true, false, false]);
         assert_eq!(o, [0.0, 0.0]);
     }
 
