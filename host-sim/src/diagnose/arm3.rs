@@ -330,6 +330,35 @@ pub fn joint_plant_config(
     }
 }
 
+/// The candidates of a joint's 1-DOF pool (ids of [`super::selection::candidate_pool`])
+/// whose effect the arm plant cannot simulate: each candidate is applied at its typical
+/// parameters to the joint's 1-DOF plant, and refused when the effects it makes are ones
+/// the arm refuses on a joint (a thermal chamber: [`Arm3::from_config`]'s check). The supply
+/// drop stays: the joint's view of the arm's shared supply, which [`shared_supply`] takes
+/// to the arm level.
+pub fn candidates_the_arm_cannot_simulate(plant: &PlantConfig) -> Vec<String> {
+    let setup = crate::diagnose::candidates::Setup {
+        dt_s: 1e-3,
+        present: [true; 5],
+    };
+    crate::diagnose::selection::candidate_pool(plant)
+        .iter()
+        .filter(|c| {
+            let x: Vec<f64> = c
+                .params(&setup)
+                .iter()
+                .map(|p| p.scale.clamp(p.lo, p.hi))
+                .collect();
+            let mut applied = plant.clone();
+            c.apply(&mut applied, &x, &setup);
+            crate::plant::effects::Effects::from_config(&applied.effects, &plant.valve)
+                .thermal_chamber()
+                .is_some()
+        })
+        .map(|c| c.id().to_string())
+        .collect()
+}
+
 /// The external torque on each joint from the rest of the arm (see the module
 /// documentation), at every sample of `rec`, and the 1-DOF inertias `M_ii` at the mean
 /// pose. Needs the angle channel of every joint.
@@ -418,6 +447,11 @@ pub fn diagnose_arm(
         plant.load = Some(LoadTorque {
             torque_nm: Arc::from(load_i),
         });
+        // Only what the arm can have: no candidate the arm plant cannot simulate.
+        let opts = &DiagnoseOptions {
+            exclude_candidates: candidates_the_arm_cannot_simulate(&plant),
+            ..opts.clone()
+        };
         let train = joint_recording(cfg, rec, i);
         let label = format!("joint {}{pass}", i + 1);
         diagnose(&plant, &train, None, opts, &|done, total, msg| {

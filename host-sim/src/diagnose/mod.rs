@@ -79,6 +79,10 @@ pub struct DiagnoseOptions {
     /// An answer that leaves TRAIN's error above this many times the noise on a channel is
     /// `unexplained` ([`verdict::MAX_RESIDUAL_X_NOISE`]).
     pub max_residual_x_noise: f64,
+    /// Candidate ids (effects of the catalogue, `recalibrate` keys) left out of the pool:
+    /// effects the plant the recording comes from cannot have (the 3-DOF arm has no
+    /// thermal chamber). Empty for the 1-DOF plant.
+    pub exclude_candidates: Vec<String>,
     pub solver: SolverOptions,
 }
 
@@ -95,6 +99,7 @@ impl Default for DiagnoseOptions {
             min_gain_noise: 0.5,
             min_heldout_fit_pct: verdict::MIN_HELDOUT_FIT_PCT,
             max_residual_x_noise: verdict::MAX_RESIDUAL_X_NOISE,
+            exclude_candidates: Vec::new(),
             solver: SolverOptions {
                 rtol: 1e-5,
                 atol: 1e-6,
@@ -711,7 +716,10 @@ pub fn diagnose(
         }
     }
     // Stage 2's pool is known before stage 1 runs (for the progress total).
-    let cands = selection::candidate_pool(nominal);
+    let cands: Vec<_> = selection::candidate_pool(nominal)
+        .into_iter()
+        .filter(|c| !opts.exclude_candidates.iter().any(|x| x == c.id()))
+        .collect();
     let total = 4 + 2 * cands.len() as u64;
     let done = AtomicU64::new(0);
     let step = |msg: &str| {
