@@ -451,11 +451,9 @@ fn a_wrong_muscle_radius_on_joint_2_is_not_answered_with_a_thermal_chamber() {
             named(&d, j)
         );
     }
-    assert!(
-        d.departing_joints().contains(&2),
-        "{:?}",
-        d.departing_joints()
-    );
+    // Joint 3 is as the file says: it starts elsewhere (joint 2 settles at another angle)
+    // but is not called departing for that.
+    assert_eq!(d.departing_joints(), vec![2]);
     assert_eq!(
         named(&d, 2).first().map(String::as_str),
         Some("muscle.radius_m"),
