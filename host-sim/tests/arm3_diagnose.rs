@@ -461,3 +461,12 @@ fn a_wrong_muscle_radius_on_joint_2_is_not_answered_with_a_thermal_chamber() {
         named(&d, 2)
     );
 }
+
+/// Joint 3's muscle damping twice what the file says: a 2.6 % angle error on noise-free
+/// data, hidden in the summed cost by the pressures' noise. The joint departs (each channel
+/// is judged against its own noise) and nothing else does.
+#[test]
+fn twice_the_muscle_damping_on_joint_3_is_noticed_there() {
+    let d = diagnose_truth(&truth_scaled("joint3.muscle", "damping_m2s", 2.0), 208);
+    assert_eq!(d.departing_joints(), vec![3]);
+}

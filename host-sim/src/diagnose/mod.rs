@@ -83,6 +83,11 @@ pub struct DiagnoseOptions {
     /// effects the plant the recording comes from cannot have (the 3-DOF arm has no
     /// thermal chamber). Empty for the 1-DOF plant.
     pub exclude_candidates: Vec<String>,
+    /// The nominal model explains TRAIN within its noise only when it also leaves no
+    /// channel's error above this many times that channel's noise
+    /// ([`verdict::residual_over_noise`]); infinite for the 1-DOF plant, whose summed cost
+    /// is the whole rule.
+    pub max_nothing_missing_x_noise: f64,
     pub solver: SolverOptions,
 }
 
@@ -100,6 +105,7 @@ impl Default for DiagnoseOptions {
             min_heldout_fit_pct: verdict::MIN_HELDOUT_FIT_PCT,
             max_residual_x_noise: verdict::MAX_RESIDUAL_X_NOISE,
             exclude_candidates: Vec::new(),
+            max_nothing_missing_x_noise: f64::INFINITY,
             solver: SolverOptions {
                 rtol: 1e-5,
                 atol: 1e-6,
@@ -745,7 +751,9 @@ pub fn diagnose(
     let noise_cost = noise_cost(&g.present, &g.noise, &g.spread);
     let nominal_cost = g.nominal.cost(false);
     let j0_h = g.nominal.cost(true);
-    let nothing_missing = nominal_cost <= opts.null_ratio * noise_cost;
+    let nothing_missing = nominal_cost <= opts.null_ratio * noise_cost
+        && !(verdict::residual_over_noise(&fit_before, &g.noise, &g.spread).0
+            > opts.max_nothing_missing_x_noise);
     step("screening done");
 
     // 3. Selection.
