@@ -79,6 +79,15 @@ pub struct DiagnoseOptions {
     /// An answer that leaves TRAIN's error above this many times the noise on a channel is
     /// `unexplained` ([`verdict::MAX_RESIDUAL_X_NOISE`]).
     pub max_residual_x_noise: f64,
+    /// Candidate ids (effects of the catalogue, `recalibrate` keys) left out of the pool:
+    /// effects the plant the recording comes from cannot have (the 3-DOF arm has no
+    /// thermal chamber). Empty for the 1-DOF plant.
+    pub exclude_candidates: Vec<String>,
+    /// The nominal model explains TRAIN within its noise only when it also leaves no
+    /// channel's error above this many times that channel's noise
+    /// ([`verdict::residual_over_noise`]); infinite for the 1-DOF plant, whose summed cost
+    /// is the whole rule.
+    pub max_nothing_missing_x_noise: f64,
     pub solver: SolverOptions,
 }
 
@@ -95,6 +104,8 @@ impl Default for DiagnoseOptions {
             min_gain_noise: 0.5,
             min_heldout_fit_pct: verdict::MIN_HELDOUT_FIT_PCT,
             max_residual_x_noise: verdict::MAX_RESIDUAL_X_NOISE,
+            exclude_candidates: Vec::new(),
+            max_nothing_missing_x_noise: f64::INFINITY,
             solver: SolverOptions {
                 rtol: 1e-5,
                 atol: 1e-6,
@@ -813,7 +824,10 @@ pub fn diagnose(
         }
     }
     // Stage 2's pool is known before stage 1 runs (for the progress total).
-    let cands = selection::candidate_pool(nominal);
+    let cands: Vec<_> = selection::candidate_pool(nominal)
+        .into_iter()
+        .filter(|c| !opts.exclude_candidates.iter().any(|x| x == c.id()))
+        .collect();
     let total = 4 + 2 * cands.len() as u64;
     let done = AtomicU64::new(0);
     let step = |msg: &str| {
@@ -839,7 +853,9 @@ pub fn diagnose(
     let noise_cost = noise_cost(&g.present, &g.noise, &g.spread);
     let nominal_cost = g.nominal.cost(false);
     let j0_h = g.nominal.cost(true);
-    let nothing_missing = nominal_cost <= opts.null_ratio * noise_cost;
+    let nothing_missing = nominal_cost <= opts.null_ratio * noise_cost
+        && !(verdict::residual_over_noise(&fit_before, &g.noise, &g.spread).0
+            > opts.max_nothing_missing_x_noise);
     // Unit and wiring mistakes (a pressure in Pa, an angle in radians, swapped channels) are
     // seen on the nominal replay alone: the answer is then `not_this_plant` whatever the
     // selection finds, so the selection does not run (seconds instead of minutes).
