@@ -780,16 +780,10 @@ impl ControlTick {
             velocity_rad_s
         };
         let desired_pa = if pf.rate_from_reference {
-            let ff = &self.cfg.feedforward;
-            let t = ff.inertia_kgm2 * sp_accel_rad_s2;
-            let lim = libm::fabsf(ff.limit_nm);
-            let t = if t > lim {
-                lim
-            } else if t < -lim {
-                -lim
-            } else {
-                t
-            };
+            // The trajectory feed-forward's inertia term alone (no derivative gain), within
+            // its limit.
+            let t =
+                feedforward_torque_nm(&self.cfg.feedforward, 0.0, sp_rate_rad_s, sp_accel_rad_s2);
             let m = &self.cfg.torque_model;
             // Finite inputs (validated set-point and its derivatives): dp finite and clamped.
             let dp = m

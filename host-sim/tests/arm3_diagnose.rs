@@ -32,20 +32,20 @@ fn truth_config(extra: &str) -> Arm3Config {
     Arm3Config::from_toml_str(&text, "truth.toml").unwrap()
 }
 
-/// The nominal arm file with the value of `key` in table `[table]` multiplied by `factor`
-/// (a mis-set key of the plant file).
-fn truth_scaled(table: &str, key: &str, factor: f64) -> Arm3Config {
+/// The nominal arm file with the values of `keys` in table `[table]` multiplied by `factor`,
+/// and how many lines were changed.
+fn scaled_text(table: &str, keys: &[&str], factor: f64) -> (String, usize) {
     let nominal_text = std::fs::read_to_string(arm3_plant()).unwrap();
     let mut text = String::new();
     let mut in_table = false;
     let mut replaced = 0;
     for line in nominal_text.lines() {
         if line.starts_with('[') {
-            in_table = line.trim() == format!("[{table}]");
+            in_table = line.split('#').next().unwrap().trim() == format!("[{table}]");
         }
         let mut kv = line.splitn(2, '=');
         let k = kv.next().unwrap_or("").trim();
-        if in_table && k == key {
+        if in_table && keys.contains(&k) {
             let v: f64 = kv
                 .next()
                 .unwrap()
@@ -55,13 +55,20 @@ fn truth_scaled(table: &str, key: &str, factor: f64) -> Arm3Config {
                 .trim()
                 .parse()
                 .unwrap();
-            text.push_str(&format!("{key} = {:e}\n", factor * v));
+            text.push_str(&format!("{k} = {:e}\n", factor * v));
             replaced += 1;
         } else {
             text.push_str(line);
             text.push('\n');
         }
     }
+    (text, replaced)
+}
+
+/// The nominal arm file with the value of `key` in table `[table]` multiplied by `factor`
+/// (a mis-set key of the plant file).
+fn truth_scaled(table: &str, key: &str, factor: f64) -> Arm3Config {
+    let (text, replaced) = scaled_text(table, &[key], factor);
     assert_eq!(replaced, 1, "[{table}] {key}");
     Arm3Config::from_toml_str(&text, "truth.toml").unwrap()
 }
@@ -277,30 +284,12 @@ fn matrix(forces: bool) -> (usize, usize, usize) {
             })
             .collect();
         // eq. 7 x3 on this joint: scale f_c and f_d in its [jointN.friction] table.
-        let mut text = String::new();
-        let mut in_table = false;
-        for line in nominal_text.lines() {
-            if line.starts_with('[') {
-                in_table = line.starts_with(&format!("[joint{joint}.friction]"));
-            }
-            let key = line.split('=').next().unwrap_or("").trim();
-            if in_table && (key == "coulomb_nm" || key == "viscous_nm_s_per_rad") {
-                let v: f64 = line
-                    .split('=')
-                    .nth(1)
-                    .unwrap()
-                    .split('#')
-                    .next()
-                    .unwrap()
-                    .trim()
-                    .parse()
-                    .unwrap();
-                text.push_str(&format!("{key} = {}\n", 3.0 * v));
-            } else {
-                text.push_str(line);
-                text.push('\n');
-            }
-        }
+        let (text, replaced) = scaled_text(
+            &format!("joint{joint}.friction"),
+            &["coulomb_nm", "viscous_nm_s_per_rad"],
+            3.0,
+        );
+        assert_eq!(replaced, 2, "joint{joint}.friction");
         cases.push((
             "eq7_friction_x3".into(),
             "joint_friction".into(),
