@@ -2,30 +2,42 @@
 //! parsed and validated here, written as a `pam_firmware::profile::SetpointProfile`
 //! expression by `build.rs`, checked by `tests/board_profile.rs` (both include this file).
 
-/// The profile read from a scenario (f64 as in the file; the firmware evaluates it in f32).
+/// The shapes the board plays, in [`Kind`] order: the scenario's `kind`, the
+/// `SetpointProfile` variant and its four fields in order (the `[setpoint]` keys have the
+/// fields' names).
+const KINDS: [(&str, &str, [&str; 4]); 3] = [
+    (
+        "step",
+        "Step",
+        ["initial_rad", "final_rad", "at_s", "transition_s"],
+    ),
+    ("ramp", "Ramp", ["from_rad", "to_rad", "start_s", "end_s"]),
+    (
+        "sine",
+        "Sine",
+        ["offset_rad", "amplitude_rad", "freq_hz", "start_s"],
+    ),
+];
+
+/// Which shape (see [`KINDS`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    /// `kind = "step"`: initial, final angle, step time, transition time.
+    Step,
+    /// `kind = "ramp"`: start, end angle, start, end time.
+    Ramp,
+    /// `kind = "sine"`: offset, amplitude, frequency, start time.
+    Sine,
+}
+
+/// The profile read from a scenario: its shape and the values of its four fields, in the
+/// order of [`KINDS`] (f64 as in the file; the firmware evaluates it in f32).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum ProfileSpec {
-    /// `kind = "step"`.
-    Step {
-        initial_rad: f64,
-        final_rad: f64,
-        at_s: f64,
-        transition_s: f64,
-    },
-    /// `kind = "ramp"`.
-    Ramp {
-        from_rad: f64,
-        to_rad: f64,
-        start_s: f64,
-        end_s: f64,
-    },
-    /// `kind = "sine"`.
-    Sine {
-        offset_rad: f64,
-        amplitude_rad: f64,
-        freq_hz: f64,
-        start_s: f64,
-    },
+pub struct ProfileSpec {
+    /// The shape.
+    pub kind: Kind,
+    /// The field values.
+    pub values: [f64; 4],
 }
 
 /// The `[setpoint]` of the scenario `text` (read from `path`, named in every error with the
@@ -53,108 +65,62 @@ pub fn parse_setpoint(path: &str, text: &str) -> Result<ProfileSpec, String> {
             None => default.ok_or_else(|| format!("{path}: [setpoint] {key}: missing")),
         }
     };
-    let kind = sp
+    let name = sp
         .get("kind")
         .and_then(|v| v.as_str())
         .ok_or_else(|| format!("{path}: [setpoint] kind: missing or not a string"))?;
-    let known: &[&str] = match kind {
-        "step" => &["kind", "initial_rad", "final_rad", "at_s", "transition_s"],
-        "ramp" => &["kind", "from_rad", "to_rad", "start_s", "end_s"],
-        "sine" => &["kind", "offset_rad", "amplitude_rad", "freq_hz", "start_s"],
-        other => {
-            return Err(format!(
-                "{path}: [setpoint] kind = \"{other}\": the board plays step, ramp or sine"
-            ))
-        }
+    let Some(index) = KINDS.iter().position(|(n, _, _)| *n == name) else {
+        return Err(format!(
+            "{path}: [setpoint] kind = \"{name}\": the board plays step, ramp or sine"
+        ));
     };
+    let (kind, keys) = ([Kind::Step, Kind::Ramp, Kind::Sine][index], KINDS[index].2);
+    let known: Vec<&str> = core::iter::once("kind").chain(keys).collect();
     for k in sp.keys() {
         if !known.contains(&k.as_str()) {
             return Err(format!(
-                "{path}: [setpoint] {k}: unknown key for kind = \"{kind}\" (allowed: {known:?})"
+                "{path}: [setpoint] {k}: unknown key for kind = \"{name}\" (allowed: {known:?})"
             ));
         }
     }
-    Ok(match kind {
-        "step" => {
-            let transition_s = num("transition_s", Some(0.0))?;
-            if transition_s < 0.0 {
-                return Err(format!("{path}: [setpoint] transition_s: must be >= 0"));
-            }
-            ProfileSpec::Step {
-                initial_rad: num("initial_rad", None)?,
-                final_rad: num("final_rad", None)?,
-                at_s: num("at_s", None)?,
-                transition_s,
-            }
-        }
-        "ramp" => {
-            let (start_s, end_s) = (num("start_s", None)?, num("end_s", None)?);
-            if end_s <= start_s {
-                return Err(format!("{path}: [setpoint] end_s: must be > start_s"));
-            }
-            ProfileSpec::Ramp {
-                from_rad: num("from_rad", None)?,
-                to_rad: num("to_rad", None)?,
-                start_s,
-                end_s,
-            }
-        }
-        _ => {
-            let freq_hz = num("freq_hz", None)?;
-            if freq_hz <= 0.0 {
-                return Err(format!("{path}: [setpoint] freq_hz: must be > 0"));
-            }
-            ProfileSpec::Sine {
-                offset_rad: num("offset_rad", None)?,
-                amplitude_rad: num("amplitude_rad", None)?,
-                freq_hz,
-                start_s: num("start_s", Some(0.0))?,
-            }
-        }
-    })
+    let mut values = [0.0; 4];
+    for (v, key) in values.iter_mut().zip(keys) {
+        // A step's transition and a sine's start time are optional.
+        let default = match (kind, key) {
+            (Kind::Step, "transition_s") | (Kind::Sine, "start_s") => Some(0.0),
+            _ => None,
+        };
+        *v = num(key, default)?;
+    }
+    let [_, _, c, d] = values;
+    let refused = match kind {
+        Kind::Step if d < 0.0 => Some("transition_s: must be >= 0"),
+        Kind::Ramp if d <= c => Some("end_s: must be > start_s"),
+        Kind::Sine if c <= 0.0 => Some("freq_hz: must be > 0"),
+        _ => None,
+    };
+    match refused {
+        Some(why) => Err(format!("{path}: [setpoint] {why}")),
+        None => Ok(ProfileSpec { kind, values }),
+    }
 }
 
 impl ProfileSpec {
     /// The f32 values of the profile, in field order.
     #[allow(dead_code)]
     pub fn f32_fields(&self) -> [f32; 4] {
-        let v = match *self {
-            ProfileSpec::Step {
-                initial_rad,
-                final_rad,
-                at_s,
-                transition_s,
-            } => [initial_rad, final_rad, at_s, transition_s],
-            ProfileSpec::Ramp {
-                from_rad,
-                to_rad,
-                start_s,
-                end_s,
-            } => [from_rad, to_rad, start_s, end_s],
-            ProfileSpec::Sine {
-                offset_rad,
-                amplitude_rad,
-                freq_hz,
-                start_s,
-            } => [offset_rad, amplitude_rad, freq_hz, start_s],
-        };
-        v.map(|x| x as f32)
+        self.values.map(|x| x as f32)
     }
 
     /// A `SetpointProfile` constant expression (`SetpointProfile` in scope).
     #[allow(dead_code)]
     pub fn rust_expr(&self) -> String {
-        let [a, b, c, d] = self.f32_fields();
-        match self {
-            ProfileSpec::Step { .. } => format!(
-                "SetpointProfile::Step {{ initial_rad: {a:?}, final_rad: {b:?}, at_s: {c:?}, transition_s: {d:?} }}"
-            ),
-            ProfileSpec::Ramp { .. } => format!(
-                "SetpointProfile::Ramp {{ from_rad: {a:?}, to_rad: {b:?}, start_s: {c:?}, end_s: {d:?} }}"
-            ),
-            ProfileSpec::Sine { .. } => format!(
-                "SetpointProfile::Sine {{ offset_rad: {a:?}, amplitude_rad: {b:?}, freq_hz: {c:?}, start_s: {d:?} }}"
-            ),
-        }
+        let (_, variant, keys) = KINDS[self.kind as usize];
+        let fields: Vec<String> = keys
+            .iter()
+            .zip(self.f32_fields())
+            .map(|(k, x)| format!("{k}: {x:?}"))
+            .collect();
+        format!("SetpointProfile::{variant} {{ {} }}", fields.join(", "))
     }
 }

@@ -108,7 +108,7 @@
 
 use fixed::types::{I16F16, I32F0};
 
-use crate::force_law::{ForceFlags, ForceLawParams};
+use crate::force_law::{clamp_flagged, ForceFlags, ForceLawParams};
 use crate::torque_model::TorqueModelParams;
 
 /// Pre-scaling of the constants into bit patterns (f64), shared with `build.rs`.
@@ -120,6 +120,19 @@ use prescale::{
     ForceLawBits, TorqueModelBits, SEED_MAX, SEG_AE0, SEG_E20, SEG_GE0, SEG_K0, SEG_M0, SEG_MAX,
     SEG_SHIFT, TM_ANGLE_MAX_Q16, TM_DP_MAX_PA, TM_VELOCITY_MAX_Q16,
 };
+
+/// One `pub const fn` per line `name: Type = field;`, returning `Type::from_bits(self.b.field)`:
+/// the accessors of the pre-scaled constants (`self.b`) in their fixed-point types.
+macro_rules! from_bits_accessors {
+    ($($(#[$doc:meta])* $name:ident: $T:ident = $field:ident;)*) => {
+        $(
+            $(#[$doc])*
+            pub const fn $name(&self) -> $T {
+                $T::from_bits(self.b.$field)
+            }
+        )*
+    };
+}
 
 /// Gauge pressure or pressure difference \[Pa\], whole pascal.
 pub type PressurePa = I32F0;
@@ -227,17 +240,13 @@ impl FixedForceLaw {
     pub const fn is_valid(&self) -> bool {
         self.b.valid
     }
-    /// Highest gauge pressure of the domain \[Pa\].
-    pub const fn p_gauge_max_pa(&self) -> PressurePa {
-        PressurePa::from_bits(self.b.p_gauge_max_pa)
-    }
-    /// Lowest stretch of the domain.
-    pub const fn stretch_min(&self) -> Stretch {
-        Stretch::from_bits(self.b.stretch_min_q16)
-    }
-    /// Highest stretch of the domain.
-    pub const fn stretch_max(&self) -> Stretch {
-        Stretch::from_bits(self.b.stretch_max_q16)
+    from_bits_accessors! {
+        /// Highest gauge pressure of the domain \[Pa\].
+        p_gauge_max_pa: PressurePa = p_gauge_max_pa;
+        /// Lowest stretch of the domain.
+        stretch_min: Stretch = stretch_min_q16;
+        /// Highest stretch of the domain.
+        stretch_max: Stretch = stretch_max_q16;
     }
 
     /// Tension \[N\] at gauge pressure `p_gauge_pa` and deformation `stretch` (L/L0), with the
@@ -248,21 +257,16 @@ impl FixedForceLaw {
         let b = &self.b;
         let mut flags = ForceFlags::NONE;
         let mut p = p_gauge_pa.to_bits();
-        if p < 0 {
-            p = 0;
-            flags = flags.union(ForceFlags::PRESSURE_LOW);
-        } else if p > b.p_gauge_max_pa {
-            p = b.p_gauge_max_pa;
-            flags = flags.union(ForceFlags::PRESSURE_HIGH);
-        }
+        clamp_flagged!(p, 0, b.p_gauge_max_pa, flags, PRESSURE_LOW, PRESSURE_HIGH);
         let mut e = stretch.to_bits();
-        if e < b.stretch_min_q16 {
-            e = b.stretch_min_q16;
-            flags = flags.union(ForceFlags::STRETCH_LOW);
-        } else if e > b.stretch_max_q16 {
-            e = b.stretch_max_q16;
-            flags = flags.union(ForceFlags::STRETCH_HIGH);
-        }
+        clamp_flagged!(
+            e,
+            b.stretch_min_q16,
+            b.stretch_max_q16,
+            flags,
+            STRETCH_LOW,
+            STRETCH_HIGH
+        );
         if !b.valid {
             return FixedForceEstimate::invalid(flags.union(ForceFlags::SINGULAR));
         }
@@ -429,14 +433,11 @@ impl FixedTorqueModel {
         self.b.valid
     }
 
-    /// Mid pressure p0 of the symmetric activation \[Pa\].
-    pub const fn p0_gauge_pa(&self) -> PressurePa {
-        PressurePa::from_bits(self.b.p0_gauge_pa)
-    }
-
-    /// The usable |dp| \[Pa\] (as [`TorqueModelParams::dp_limit_pa`], rounded down).
-    pub const fn dp_limit_pa(&self) -> PressurePa {
-        PressurePa::from_bits(self.b.dp_limit_pa)
+    from_bits_accessors! {
+        /// Mid pressure p0 of the symmetric activation \[Pa\].
+        p0_gauge_pa: PressurePa = p0_gauge_pa;
+        /// The usable |dp| \[Pa\] (as [`TorqueModelParams::dp_limit_pa`], rounded down).
+        dp_limit_pa: PressurePa = dp_limit_pa;
     }
 
     /// Passive torque (A r^2 alpha + C v^3 + D v) in Q(qt) at the clamped angle and velocity.

@@ -17,6 +17,24 @@
 //! near zero gives 0 N with [`ForceFlags::SINGULAR`]. The function never panics and never
 //! returns NaN.
 
+/// Clamps the variable `$x` into `[$lo, $hi]`, adding the [`ForceFlags`] `$low` / `$high`
+/// to `$flags` when it was below / above (a NaN fails both tests and passes unchanged): the
+/// domain clamp of the f32 law and of the fixed-point law (`crate::fixed_point`). A macro,
+/// so that each law keeps its straight-line code (a shared function cost instructions per
+/// tick).
+macro_rules! clamp_flagged {
+    ($x:ident, $lo:expr, $hi:expr, $flags:ident, $low:ident, $high:ident) => {
+        if $x < $lo {
+            $x = $lo;
+            $flags = $flags.union($crate::force_law::ForceFlags::$low);
+        } else if $x > $hi {
+            $x = $hi;
+            $flags = $flags.union($crate::force_law::ForceFlags::$high);
+        }
+    };
+}
+pub(crate) use clamp_flagged;
+
 /// Identified constants c1..c10 and the domain they were identified on.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -143,21 +161,23 @@ impl ForceLawParams {
         }
         let mut flags = ForceFlags::NONE;
         let mut p = p_gauge_pa;
-        if p < 0.0 {
-            p = 0.0;
-            flags = flags.union(ForceFlags::PRESSURE_LOW);
-        } else if p > self.p_gauge_max_pa {
-            p = self.p_gauge_max_pa;
-            flags = flags.union(ForceFlags::PRESSURE_HIGH);
-        }
+        clamp_flagged!(
+            p,
+            0.0,
+            self.p_gauge_max_pa,
+            flags,
+            PRESSURE_LOW,
+            PRESSURE_HIGH
+        );
         let mut e = stretch;
-        if e < self.stretch_min {
-            e = self.stretch_min;
-            flags = flags.union(ForceFlags::STRETCH_LOW);
-        } else if e > self.stretch_max {
-            e = self.stretch_max;
-            flags = flags.union(ForceFlags::STRETCH_HIGH);
-        }
+        clamp_flagged!(
+            e,
+            self.stretch_min,
+            self.stretch_max,
+            flags,
+            STRETCH_LOW,
+            STRETCH_HIGH
+        );
         let p_mpa = p * MPA_PER_PA;
         let c = &self.c;
         let den = c[6] * p_mpa + c[7] * e;

@@ -53,13 +53,18 @@ impl PressureScaling {
     }
 }
 
-/// A muscle pressure sensor behind an ADC.
-pub trait PressureSensor {
+/// A sensor read as raw counts: an ADC's conversion results, an encoder's position.
+pub trait CountingSensor {
     /// Bus / peripheral error.
     type Error;
-    /// The newest conversion result in ADC counts, `Ok(None)` when no new conversion is
-    /// ready since the last call.
-    fn read_counts(&mut self) -> Result<Option<u32>, Self::Error>;
+    /// The raw reading.
+    type Counts;
+    /// The newest raw reading, `Ok(None)` when none is new since the last call.
+    fn read_counts(&mut self) -> Result<Option<Self::Counts>, Self::Error>;
+}
+
+/// A muscle pressure sensor behind an ADC (counts: the newest conversion result).
+pub trait PressureSensor: CountingSensor<Counts = u32> {
     /// The linear scaling of this channel.
     fn scaling(&self) -> PressureScaling;
     /// The newest gauge pressure [Pa], `Ok(None)` when no new sample is ready.
@@ -69,13 +74,9 @@ pub trait PressureSensor {
     }
 }
 
-/// A joint angle sensor: a quadrature encoder counter.
-pub trait AngleSensor {
-    /// Bus / peripheral error.
-    type Error;
-    /// Signed encoder position in counts (4x decoded, zero at the reference angle),
-    /// `Ok(None)` when no new sample is ready.
-    fn read_counts(&mut self) -> Result<Option<i32>, Self::Error>;
+/// A joint angle sensor: a quadrature encoder counter (counts: the signed position, 4x
+/// decoded, zero at the reference angle).
+pub trait AngleSensor: CountingSensor<Counts = i32> {
     /// Counts per revolution of the joint (e.g. 8000 as in seed 003's testbed).
     fn counts_per_rev(&self) -> u32;
     /// The newest joint angle [rad], `Ok(None)` when no new sample is ready.
@@ -254,9 +255,8 @@ impl ChannelValidator {
 
     /// Forgets the history (the next sample is not jump-checked).
     pub fn clear(&mut self) {
-        self.last = None;
-        self.age_ticks = 0;
-        self.elapsed_s = 0.0;
+        // `new` keeps limits it already made finite as they are.
+        *self = Self::new(self.limits);
     }
 
     /// One tick: ages the stored sample by one tick of `dt_s` seconds, then checks `sample`
@@ -391,6 +391,11 @@ impl VelocityEstimator {
         } else {
             0.0
         };
+        Self::with_tau(tau_s)
+    }
+
+    /// Estimator with time constant `tau_s` and no history.
+    const fn with_tau(tau_s: f32) -> Self {
         VelocityEstimator {
             tau_s,
             last_angle_rad: None,
@@ -411,9 +416,7 @@ impl VelocityEstimator {
 
     /// Forgets the history (estimate 0, next sample starts over).
     pub fn reset(&mut self) {
-        self.last_angle_rad = None;
-        self.since_last_s = 0.0;
-        self.velocity_rad_s = 0.0;
+        *self = Self::with_tau(self.tau_s);
     }
 
     /// One tick of `dt_s`; `angle_rad` is a new *validated* sample or `None`.
@@ -495,21 +498,27 @@ mod tests {
     }
 
     struct FakeEncoder(i32);
-    impl AngleSensor for FakeEncoder {
+    impl CountingSensor for FakeEncoder {
         type Error = ();
+        type Counts = i32;
         fn read_counts(&mut self) -> Result<Option<i32>, ()> {
             Ok(Some(self.0))
         }
+    }
+    impl AngleSensor for FakeEncoder {
         fn counts_per_rev(&self) -> u32 {
             8000
         }
     }
     struct FakeAdc(Option<u32>);
-    impl PressureSensor for FakeAdc {
+    impl CountingSensor for FakeAdc {
         type Error = ();
+        type Counts = u32;
         fn read_counts(&mut self) -> Result<Option<u32>, ()> {
             Ok(self.0.take())
         }
+    }
+    impl PressureSensor for FakeAdc {
         fn scaling(&self) -> PressureScaling {
             PressureScaling {
                 pa_per_count: 250.0,

@@ -506,18 +506,35 @@ pub struct ControlTick {
     pending_command: bool,
 }
 
-fn channel_fault(
-    f: ChannelFault,
-    invalid: FaultCode,
-    range: FaultCode,
-    stale: FaultCode,
-    jump: FaultCode,
-) -> FaultCode {
-    match f {
-        ChannelFault::NotFinite => invalid,
-        ChannelFault::OutOfRange => range,
-        ChannelFault::Stale => stale,
-        ChannelFault::Implausible => jump,
+/// The fault codes of the channels pressure 1, pressure 2 and angle, each in
+/// [`ChannelFault`] order (not finite, out of range, stale, implausible).
+const CHANNEL_CODES: [[FaultCode; 4]; 3] = {
+    use FaultCode::*;
+    [
+        [
+            PressureInvalid1,
+            PressureOutOfRange1,
+            PressureStale1,
+            PressureImplausible1,
+        ],
+        [
+            PressureInvalid2,
+            PressureOutOfRange2,
+            PressureStale2,
+            PressureImplausible2,
+        ],
+        [AngleInvalid, AngleOutOfRange, AngleStale, AngleImplausible],
+    ]
+};
+
+/// The fault code of a channel's status (`None` unless it is a fault).
+fn channel_fault(s: ChannelStatus, codes: &[FaultCode; 4]) -> Option<FaultCode> {
+    match s {
+        ChannelStatus::Fault(ChannelFault::NotFinite) => Some(codes[0]),
+        ChannelStatus::Fault(ChannelFault::OutOfRange) => Some(codes[1]),
+        ChannelStatus::Fault(ChannelFault::Stale) => Some(codes[2]),
+        ChannelStatus::Fault(ChannelFault::Implausible) => Some(codes[3]),
+        _ => None,
     }
 }
 
@@ -537,81 +554,23 @@ fn conditions(
     over2: bool,
     sp_ok: bool,
 ) -> (FaultSet, Option<FaultCode>) {
-    let first = first_condition(config_ok, dt_ok, s1, s2, sa, over1, over2, sp_ok);
-    let mut set = FaultSet::EMPTY;
-    let none = ChannelStatus::Waiting;
-    // Each condition alone, through the same ordered test.
-    let parts = [
-        first_condition(config_ok, true, none, none, none, false, false, true),
-        first_condition(true, dt_ok, none, none, none, false, false, true),
-        first_condition(true, true, s1, none, none, false, false, true),
-        first_condition(true, true, none, s2, none, false, false, true),
-        first_condition(true, true, none, none, sa, false, false, true),
-        first_condition(true, true, none, none, none, over1, false, true),
-        first_condition(true, true, none, none, none, false, over2, true),
-        first_condition(true, true, none, none, none, false, false, sp_ok),
+    use FaultCode::*;
+    // Each condition, in the documented order.
+    let ordered = [
+        (!config_ok).then_some(ConfigInvalid),
+        (!dt_ok).then_some(Watchdog),
+        channel_fault(s1, &CHANNEL_CODES[0]),
+        channel_fault(s2, &CHANNEL_CODES[1]),
+        channel_fault(sa, &CHANNEL_CODES[2]),
+        over1.then_some(OverPressure1),
+        over2.then_some(OverPressure2),
+        (!sp_ok).then_some(SetpointInvalid),
     ];
-    for c in parts.into_iter().flatten() {
+    let mut set = FaultSet::EMPTY;
+    for c in ordered.into_iter().flatten() {
         set.insert(c);
     }
-    (set, first)
-}
-
-#[allow(clippy::too_many_arguments)]
-fn first_condition(
-    config_ok: bool,
-    dt_ok: bool,
-    s1: ChannelStatus,
-    s2: ChannelStatus,
-    sa: ChannelStatus,
-    over1: bool,
-    over2: bool,
-    sp_ok: bool,
-) -> Option<FaultCode> {
-    use FaultCode::*;
-    if !config_ok {
-        return Some(ConfigInvalid);
-    }
-    if !dt_ok {
-        return Some(Watchdog);
-    }
-    if let ChannelStatus::Fault(f) = s1 {
-        return Some(channel_fault(
-            f,
-            PressureInvalid1,
-            PressureOutOfRange1,
-            PressureStale1,
-            PressureImplausible1,
-        ));
-    }
-    if let ChannelStatus::Fault(f) = s2 {
-        return Some(channel_fault(
-            f,
-            PressureInvalid2,
-            PressureOutOfRange2,
-            PressureStale2,
-            PressureImplausible2,
-        ));
-    }
-    if let ChannelStatus::Fault(f) = sa {
-        return Some(channel_fault(
-            f,
-            AngleInvalid,
-            AngleOutOfRange,
-            AngleStale,
-            AngleImplausible,
-        ));
-    }
-    if over1 {
-        return Some(OverPressure1);
-    }
-    if over2 {
-        return Some(OverPressure2);
-    }
-    if !sp_ok {
-        return Some(SetpointInvalid);
-    }
-    None
+    (set, ordered.into_iter().flatten().next())
 }
 
 impl ControlTick {
@@ -754,30 +713,26 @@ impl ControlTick {
     /// The P loops' commands plus the inverse thermodynamic feed-forward, each clamped to
     /// [-1, 1] (both terms are finite and in [-1, 1]). With `rate_from_reference` the
     /// desired pressures are those of the reference trajectory: the torque loop's inverse
-    /// model at the set-point `sp_rad` and its rate for the inertia torque `J r''` of the
-    /// trajectory feed-forward (within its limit), `p0 -+ dp`, otherwise the set-points
+    /// model at the `reference` (set-point and its rate) for the inertia torque `J r''` of
+    /// the trajectory feed-forward (within its limit), `p0 -+ dp`, otherwise the set-points
     /// themselves; `V'` from the set-point rate with `volume_rate_from_reference`, otherwise
-    /// from the measured velocity.
+    /// from the measured velocity of `meas` (this tick's measurements).
     #[cfg(feature = "pressure-ff")]
     #[inline(never)]
-    #[allow(clippy::too_many_arguments)]
     fn add_pressure_ff(
         &mut self,
-        u1: f32,
-        u2: f32,
+        (u1, u2): (f32, f32),
         set_pa: [f32; 2],
-        meas_pa: [f32; 2],
-        angle_rad: f32,
-        velocity_rad_s: f32,
-        sp_rad: f32,
-        sp_rate_rad_s: f32,
+        meas: &TorqueMeasurement,
+        reference: JointState,
         sp_accel_rad_s2: f32,
     ) -> (f32, f32) {
         let pf = &self.cfg.pressure_ff;
+        let (sp_rad, sp_rate_rad_s) = (reference.angle_rad, reference.velocity_rad_s);
         let v_rad_s = if pf.volume_rate_from_reference {
             sp_rate_rad_s
         } else {
-            velocity_rad_s
+            meas.velocity_rad_s
         };
         let desired_pa = if pf.rate_from_reference {
             // The trajectory feed-forward's inertia term alone (no derivative gain), within
@@ -794,9 +749,13 @@ impl ControlTick {
         } else {
             set_pa
         };
-        let [f1, f2] = self
-            .pressure_ff
-            .step(set_pa, desired_pa, meas_pa, angle_rad, v_rad_s);
+        let [f1, f2] = self.pressure_ff.step(
+            set_pa,
+            desired_pa,
+            [meas.p1_gauge_pa, meas.p2_gauge_pa],
+            meas.angle_rad,
+            v_rad_s,
+        );
         let c = |u: f32| {
             if u > 1.0 {
                 1.0
@@ -922,9 +881,9 @@ impl ControlTick {
     #[inline]
     pub fn step(&mut self, frame: &SensorFrame, setpoint: &Setpoint, dt_s: f32) -> TickOutput {
         self.command_stands_in();
-        // Without the external torque: a separate instantiation, so the 1-DOF tick's code is
-        // what it was before the torque input existed.
-        let out = self.step_inner::<false>(frame, setpoint, 0.0, dt_s);
+        // Without the external torque (`None`, a constant once `step_inner` is inlined: the
+        // 1-DOF tick's code is what it was before the torque input existed).
+        let out = self.step_inner(frame, setpoint, None, dt_s);
         self.last_command = out.valves;
         self.pending_command = true;
         out
@@ -948,7 +907,7 @@ impl ControlTick {
             0.0
         };
         self.command_stands_in();
-        let out = self.step_inner::<true>(frame, setpoint, t, dt_s);
+        let out = self.step_inner(frame, setpoint, Some(t), dt_s);
         self.last_command = out.valves;
         self.pending_command = true;
         out
@@ -1012,11 +971,11 @@ impl ControlTick {
     }
 
     #[inline(always)]
-    fn step_inner<const EXTERNAL_TORQUE: bool>(
+    fn step_inner(
         &mut self,
         frame: &SensorFrame,
         setpoint: &Setpoint,
-        torque_ff_nm: f32,
+        torque_ff_nm: Option<f32>,
         dt_s: f32,
     ) -> TickOutput {
         // Scalars read once; the configuration (with its force-law and torque-model tables) is
@@ -1212,10 +1171,9 @@ impl ControlTick {
                 t_sum
             };
             // The external feed-forward (finite), only in `step_with_torque`.
-            let t_des = if EXTERNAL_TORQUE {
-                t_des + torque_ff_nm
-            } else {
-                t_des
+            let t_des = match torque_ff_nm {
+                Some(t) => t_des + t,
+                None => t_des,
             };
             let meas = TorqueMeasurement {
                 p1_gauge_pa: p1,
@@ -1245,14 +1203,13 @@ impl ControlTick {
             #[cfg(feature = "pressure-ff")]
             let (u1, u2) = if self.pressure_ff_on {
                 self.add_pressure_ff(
-                    u1,
-                    u2,
+                    (u1, u2),
                     [ps.p1_gauge_pa, ps.p2_gauge_pa],
-                    [p1, p2],
-                    angle,
-                    vel,
-                    sp,
-                    rate,
+                    &meas,
+                    JointState {
+                        angle_rad: sp,
+                        velocity_rad_s: rate,
+                    },
                     accel,
                 )
             } else {
@@ -1379,6 +1336,20 @@ mod tests {
 
     const SP0: Setpoint = Setpoint { angle_rad: 0.0 };
 
+    /// A tick armed by one nominal frame (300 kPa in both muscles, 0 rad).
+    fn armed() -> ControlTick {
+        let mut t = tick();
+        t.step(&frame(300e3, 300e3, 0.0), &SP0, DT);
+        t
+    }
+
+    /// The reference configuration at 1 kHz with one edit.
+    fn reference_with(edit: impl FnOnce(&mut ControllerConfig)) -> ControllerConfig {
+        let mut cfg = ControllerConfig::reference(1000.0);
+        edit(&mut cfg);
+        cfg
+    }
+
     #[test]
     fn valve_shortfall_maps_full_valves_to_the_blocked_torque_direction() {
         // Muscle 1 inflating flat out: p1 = p0 - dp cannot rise faster, so dp cannot fall
@@ -1444,9 +1415,7 @@ mod tests {
 
     #[test]
     fn vent_safe_state_opens_exhausts() {
-        let mut cfg = ControllerConfig::reference(1000.0);
-        cfg.safe_state = SafeState::Vent;
-        let mut t = ControlTick::new(cfg);
+        let mut t = ControlTick::new(reference_with(|c| c.safe_state = SafeState::Vent));
         let o = t.step(&frame(300e3, 300e3, f32::INFINITY), &SP0, DT);
         assert_eq!(o.fault, Some(FaultCode::AngleInvalid));
         assert_eq!(
@@ -1460,8 +1429,7 @@ mod tests {
 
     #[test]
     fn fault_is_latched_until_explicit_reset() {
-        let mut t = tick();
-        t.step(&frame(300e3, 300e3, 0.0), &SP0, DT);
+        let mut t = armed();
         t.step(&frame(300e3, 300e3, 2.0), &SP0, DT);
         assert_eq!(t.fault(), Some(FaultCode::AngleOutOfRange));
         // Good data again: still latched.
@@ -1488,8 +1456,7 @@ mod tests {
 
     #[test]
     fn over_pressure_in_hold_vents_that_muscle_and_reports_all_conditions() {
-        let mut t = tick();
-        t.step(&frame(300e3, 300e3, 0.0), &SP0, DT);
+        let mut t = armed();
         // A first fault (angle out of range) puts the joint in Hold.
         let o = t.step(&frame(300e3, 300e3, 1.5), &SP0, DT);
         assert_eq!(o.fault, Some(FaultCode::AngleOutOfRange));
@@ -1522,32 +1489,25 @@ mod tests {
 
     #[test]
     fn over_pressure_vents_with_vent_or_hold_and_limit_is_validated() {
-        let mut cfg = ControllerConfig::reference(1000.0);
-        cfg.p_over_gauge_pa = 500e3;
-        let mut t = ControlTick::new(cfg);
+        let mut t = ControlTick::new(reference_with(|c| c.p_over_gauge_pa = 500e3));
         let o = t.step(&frame(520e3, 300e3, 0.0), &SP0, DT);
         assert_eq!(o.fault, Some(FaultCode::OverPressure1));
         assert_eq!(o.valves.muscle1, -1.0);
         assert_eq!(o.valves.muscle2, 0.0);
-        cfg.p_over_gauge_pa = 630e3;
-        assert!(!cfg.is_valid());
+        assert!(!reference_with(|c| c.p_over_gauge_pa = 630e3).is_valid());
     }
 
     #[test]
     fn short_dt_raises_watchdog() {
-        let mut t = tick();
-        t.step(&frame(300e3, 300e3, 0.0), &SP0, DT);
+        let mut t = armed();
         let o = t.step(&frame(300e3, 300e3, 0.0), &SP0, 1e-5);
         assert_eq!(o.fault, Some(FaultCode::Watchdog));
-        let mut cfg = ControllerConfig::reference(1000.0);
-        cfg.dt_min_s = 0.0;
-        assert!(!cfg.is_valid());
+        assert!(!reference_with(|c| c.dt_min_s = 0.0).is_valid());
     }
 
     #[test]
     fn stale_angle_raises_fault_after_limit() {
-        let mut t = tick();
-        t.step(&frame(300e3, 300e3, 0.0), &SP0, DT);
+        let mut t = armed();
         let f = SensorFrame {
             p1_gauge_pa: Some(300e3),
             p2_gauge_pa: Some(300e3),
@@ -1562,8 +1522,7 @@ mod tests {
 
     #[test]
     fn implausible_pressure_jump_raises_fault() {
-        let mut t = tick();
-        t.step(&frame(300e3, 300e3, 0.0), &SP0, DT);
+        let mut t = armed();
         let o = t.step(&frame(300e3, 500e3, 0.0), &SP0, DT);
         assert_eq!(o.fault, Some(FaultCode::PressureImplausible2));
     }
@@ -1597,9 +1556,7 @@ mod tests {
 
     #[test]
     fn invalid_config_latches_config_fault_forever() {
-        let mut cfg = ControllerConfig::reference(1000.0);
-        cfg.position.kp_nm_per_rad = f32::NAN;
-        let mut t = ControlTick::new(cfg);
+        let mut t = ControlTick::new(reference_with(|c| c.position.kp_nm_per_rad = f32::NAN));
         let o = t.step(&frame(300e3, 300e3, 0.0), &SP0, DT);
         assert_eq!(o.fault, Some(FaultCode::ConfigInvalid));
         assert!(!t.reset());

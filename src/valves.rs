@@ -105,6 +105,22 @@ pub enum Error<EI1, EE1, EI2, EE2> {
     Exhaust2(EE2),
 }
 
+/// The error of [`OnOffValves`] with the pins `I1`, `E1`, `I2`, `E2`.
+pub type PinsError<I1, E1, I2, E2> = Error<
+    <I1 as embedded_hal::digital::ErrorType>::Error,
+    <E1 as embedded_hal::digital::ErrorType>::Error,
+    <I2 as embedded_hal::digital::ErrorType>::Error,
+    <E2 as embedded_hal::digital::ErrorType>::Error,
+>;
+
+/// The error of [`ProportionalValves`] with the channels `I1`, `E1`, `I2`, `E2`.
+pub type ChannelsError<I1, E1, I2, E2> = Error<
+    <I1 as embedded_hal::pwm::ErrorType>::Error,
+    <E1 as embedded_hal::pwm::ErrorType>::Error,
+    <I2 as embedded_hal::pwm::ErrorType>::Error,
+    <E2 as embedded_hal::pwm::ErrorType>::Error,
+>;
+
 /// NaN -> 0, clamp to [-1, 1].
 #[inline]
 fn sanitize(x: f32) -> f32 {
@@ -256,6 +272,71 @@ impl PwmChannel {
     }
 }
 
+/// The methods both drivers share over their four outputs `inflate1`, `exhaust1`,
+/// `inflate2`, `exhaust2`: `release`; `close_outputs`, every output closed through its method
+/// `$close` (all tried, the first error returned); `write`, the four output levels through
+/// `$pass` (one output, one pass: the closing pass first, then the opening one, so that
+/// the inflate and exhaust valve of a muscle are never open at once); `closed_on_error`, a
+/// write's error after every valve was driven closed (best effort).
+macro_rules! four_outputs {
+    ($what:literal, $close:ident, $pass:ident, $level:ty, $err:ident) => {
+        #[doc = concat!("Gives the ", $what, " back.")]
+        pub fn release(self) -> (I1, E1, I2, E2) {
+            (self.inflate1, self.exhaust1, self.inflate2, self.exhaust2)
+        }
+
+        fn close_outputs(&mut self) -> Result<(), $err<I1, E1, I2, E2>> {
+            let r1 = self.inflate1.$close().map_err(Error::Inflate1);
+            let r2 = self.exhaust1.$close().map_err(Error::Exhaust1);
+            let r3 = self.inflate2.$close().map_err(Error::Inflate2);
+            let r4 = self.exhaust2.$close().map_err(Error::Exhaust2);
+            r1.and(r2).and(r3).and(r4)
+        }
+
+        fn write(&mut self, [l1, l2, l3, l4]: [$level; 4]) -> Result<(), $err<I1, E1, I2, E2>> {
+            for opening in [false, true] {
+                $pass(&mut self.inflate1, l1, opening).map_err(Error::Inflate1)?;
+                $pass(&mut self.exhaust1, l2, opening).map_err(Error::Exhaust1)?;
+                $pass(&mut self.inflate2, l3, opening).map_err(Error::Inflate2)?;
+                $pass(&mut self.exhaust2, l4, opening).map_err(Error::Exhaust2)?;
+            }
+            Ok(())
+        }
+
+        fn closed_on_error<T>(
+            &mut self,
+            written: Result<(), $err<I1, E1, I2, E2>>,
+            ok: T,
+        ) -> Result<T, $err<I1, E1, I2, E2>> {
+            if let Err(e) = written {
+                let _ = self.close_all();
+                return Err(e);
+            }
+            Ok(ok)
+        }
+    };
+}
+
+/// One pass of [`OnOffValves`]' write on one pin: set to `open` in the pass of that level.
+#[inline(always)]
+fn pass_pin<P: OutputPin>(pin: &mut P, open: bool, opening: bool) -> Result<(), P::Error> {
+    if open != opening {
+        return Ok(());
+    }
+    pin.set_state(open.into())
+}
+
+/// One pass of [`ProportionalValves`]' write on one channel: zero duties in the closing
+/// pass, the others in the opening pass.
+#[inline(always)]
+fn pass_duty<P: SetDutyCycle>(pwm: &mut P, duty: u16, opening: bool) -> Result<(), P::Error> {
+    if (duty != 0) == opening {
+        pwm.set_duty_cycle(duty)
+    } else {
+        Ok(())
+    }
+}
+
 /// Two on/off 2/2 valves per muscle (3/3 function), driven by GPIO with tick-level PWM.
 /// `I1`/`E1`: inflate/exhaust pin of muscle 1, `I2`/`E2`: of muscle 2; high = open.
 pub struct OnOffValves<I1, E1, I2, E2> {
@@ -297,89 +378,38 @@ where
         }
     }
 
-    /// Gives the pins back.
-    pub fn release(self) -> (I1, E1, I2, E2) {
-        (self.inflate1, self.exhaust1, self.inflate2, self.exhaust2)
-    }
+    four_outputs!("pins", set_low, pass_pin, bool, PinsError);
 
     /// Closes all four valves and resets the PWM state. Tries every pin even if one fails;
     /// returns the first error.
-    #[allow(clippy::type_complexity)]
-    pub fn close_all(&mut self) -> Result<(), Error<I1::Error, E1::Error, I2::Error, E2::Error>> {
+    pub fn close_all(&mut self) -> Result<(), PinsError<I1, E1, I2, E2>> {
         self.ch1 = PwmChannel::new();
         self.ch2 = PwmChannel::new();
-        let r1 = self.inflate1.set_low().map_err(Error::Inflate1);
-        let r2 = self.exhaust1.set_low().map_err(Error::Exhaust1);
-        let r3 = self.inflate2.set_low().map_err(Error::Inflate2);
-        let r4 = self.exhaust2.set_low().map_err(Error::Exhaust2);
-        r1.and(r2).and(r3).and(r4)
+        self.close_outputs()
     }
 
     /// One tick: advances the PWM and writes the pins (closing pins first, then opening
     /// pins). On a pin error every valve is driven closed (best effort) and the error is
     /// returned.
-    #[allow(clippy::type_complexity)]
     pub fn apply(
         &mut self,
         cmd: &ValveCommand,
-    ) -> Result<ValveOpenings, Error<I1::Error, E1::Error, I2::Error, E2::Error>> {
+    ) -> Result<ValveOpenings, PinsError<I1, E1, I2, E2>> {
         self.apply_switched(cmd).map(SwitchedValves::openings)
     }
 
     /// [`Self::apply`], returning which valves it switched open (what the control
     /// tick's valve supervision counts: [`crate::tick::ControlTick::valves_switched`]).
-    #[allow(clippy::type_complexity)]
     #[inline(never)]
     pub fn apply_switched(
         &mut self,
         cmd: &ValveCommand,
-    ) -> Result<SwitchedValves, Error<I1::Error, E1::Error, I2::Error, E2::Error>> {
+    ) -> Result<SwitchedValves, PinsError<I1, E1, I2, E2>> {
         let (in1, ex1) = self.ch1.tick(sanitize(cmd.muscle1), self.n, self.min_on);
         let (in2, ex2) = self.ch2.tick(sanitize(cmd.muscle2), self.n, self.min_on);
         debug_assert!(!(in1 && ex1 || in2 && ex2));
-        match self.write(in1, ex1, in2, ex2) {
-            Ok(()) => Ok(SwitchedValves::new(in1, ex1, in2, ex2)),
-            Err(e) => {
-                let _ = self.close_all();
-                Err(e)
-            }
-        }
-    }
-
-    #[allow(clippy::type_complexity)]
-    fn write(
-        &mut self,
-        in1: bool,
-        ex1: bool,
-        in2: bool,
-        ex2: bool,
-    ) -> Result<(), Error<I1::Error, E1::Error, I2::Error, E2::Error>> {
-        // Closing first: no instant with inflate and exhaust of one muscle both open.
-        if !in1 {
-            self.inflate1.set_low().map_err(Error::Inflate1)?;
-        }
-        if !ex1 {
-            self.exhaust1.set_low().map_err(Error::Exhaust1)?;
-        }
-        if !in2 {
-            self.inflate2.set_low().map_err(Error::Inflate2)?;
-        }
-        if !ex2 {
-            self.exhaust2.set_low().map_err(Error::Exhaust2)?;
-        }
-        if in1 {
-            self.inflate1.set_high().map_err(Error::Inflate1)?;
-        }
-        if ex1 {
-            self.exhaust1.set_high().map_err(Error::Exhaust1)?;
-        }
-        if in2 {
-            self.inflate2.set_high().map_err(Error::Inflate2)?;
-        }
-        if ex2 {
-            self.exhaust2.set_high().map_err(Error::Exhaust2)?;
-        }
-        Ok(())
+        let written = self.write([in1, ex1, in2, ex2]);
+        self.closed_on_error(written, SwitchedValves::new(in1, ex1, in2, ex2))
     }
 }
 
@@ -421,41 +451,26 @@ where
         }
     }
 
-    /// Gives the channels back.
-    pub fn release(self) -> (I1, E1, I2, E2) {
-        (self.inflate1, self.exhaust1, self.inflate2, self.exhaust2)
-    }
+    four_outputs!(
+        "channels",
+        set_duty_cycle_fully_off,
+        pass_duty,
+        u16,
+        ChannelsError
+    );
 
     /// Sets all four duties to 0 (tries all, returns the first error).
-    #[allow(clippy::type_complexity)]
-    pub fn close_all(&mut self) -> Result<(), Error<I1::Error, E1::Error, I2::Error, E2::Error>> {
-        let r1 = self
-            .inflate1
-            .set_duty_cycle_fully_off()
-            .map_err(Error::Inflate1);
-        let r2 = self
-            .exhaust1
-            .set_duty_cycle_fully_off()
-            .map_err(Error::Exhaust1);
-        let r3 = self
-            .inflate2
-            .set_duty_cycle_fully_off()
-            .map_err(Error::Inflate2);
-        let r4 = self
-            .exhaust2
-            .set_duty_cycle_fully_off()
-            .map_err(Error::Exhaust2);
-        r1.and(r2).and(r3).and(r4)
+    pub fn close_all(&mut self) -> Result<(), ChannelsError<I1, E1, I2, E2>> {
+        self.close_outputs()
     }
 
     /// Applies the command: the channel of the unused direction is set to 0 first, then
     /// the used one to `|command|` of its maximum duty. On error all are driven to 0 (best
     /// effort) and the error is returned.
-    #[allow(clippy::type_complexity)]
     pub fn apply(
         &mut self,
         cmd: &ValveCommand,
-    ) -> Result<ValveOpenings, Error<I1::Error, E1::Error, I2::Error, E2::Error>> {
+    ) -> Result<ValveOpenings, ChannelsError<I1, E1, I2, E2>> {
         let (in1, ex1) = split(sanitize(cmd.muscle1));
         let (in2, ex2) = split(sanitize(cmd.muscle2));
         // One max_duty_cycle() read per channel per tick.
@@ -471,62 +486,14 @@ where
             duty_of(in2, m[2]),
             duty_of(ex2, m[3]),
         ];
-        match self.write(d[0], d[1], d[2], d[3]) {
-            Ok(()) => Ok(ValveOpenings {
-                u_in1: frac(d[0], m[0]),
-                u_ex1: frac(d[1], m[1]),
-                u_in2: frac(d[2], m[2]),
-                u_ex2: frac(d[3], m[3]),
-            }),
-            Err(e) => {
-                let _ = self.close_all();
-                Err(e)
-            }
-        }
-    }
-
-    #[allow(clippy::type_complexity)]
-    fn write(
-        &mut self,
-        d_in1: u16,
-        d_ex1: u16,
-        d_in2: u16,
-        d_ex2: u16,
-    ) -> Result<(), Error<I1::Error, E1::Error, I2::Error, E2::Error>> {
-        // Zeros first (at most one of each pair is non-zero).
-        if d_in1 == 0 {
-            self.inflate1.set_duty_cycle(0).map_err(Error::Inflate1)?;
-        }
-        if d_ex1 == 0 {
-            self.exhaust1.set_duty_cycle(0).map_err(Error::Exhaust1)?;
-        }
-        if d_in2 == 0 {
-            self.inflate2.set_duty_cycle(0).map_err(Error::Inflate2)?;
-        }
-        if d_ex2 == 0 {
-            self.exhaust2.set_duty_cycle(0).map_err(Error::Exhaust2)?;
-        }
-        if d_in1 != 0 {
-            self.inflate1
-                .set_duty_cycle(d_in1)
-                .map_err(Error::Inflate1)?;
-        }
-        if d_ex1 != 0 {
-            self.exhaust1
-                .set_duty_cycle(d_ex1)
-                .map_err(Error::Exhaust1)?;
-        }
-        if d_in2 != 0 {
-            self.inflate2
-                .set_duty_cycle(d_in2)
-                .map_err(Error::Inflate2)?;
-        }
-        if d_ex2 != 0 {
-            self.exhaust2
-                .set_duty_cycle(d_ex2)
-                .map_err(Error::Exhaust2)?;
-        }
-        Ok(())
+        let written = self.write(d);
+        let openings = ValveOpenings {
+            u_in1: frac(d[0], m[0]),
+            u_ex1: frac(d[1], m[1]),
+            u_in2: frac(d[2], m[2]),
+            u_ex2: frac(d[3], m[3]),
+        };
+        self.closed_on_error(written, openings)
     }
 }
 
@@ -554,22 +521,42 @@ mod tests {
         }
     }
 
-    /// Infallible fake pin recording its level, shared log of (pin id, level) writes.
-    struct LogPin<'a> {
+    /// Infallible fake output (pin or PWM channel) logging its writes as (output id,
+    /// level) to a shared log.
+    struct LogOutput<'a, L> {
         id: u8,
-        log: &'a core::cell::RefCell<Vec<(u8, bool)>>,
+        log: &'a core::cell::RefCell<Vec<(u8, L)>>,
     }
-    impl embedded_hal::digital::ErrorType for LogPin<'_> {
-        type Error = core::convert::Infallible;
-    }
-    impl OutputPin for LogPin<'_> {
-        fn set_low(&mut self) -> Result<(), Self::Error> {
-            self.log.borrow_mut().push((self.id, false));
+    impl<L> LogOutput<'_, L> {
+        fn record(&mut self, level: L) -> Result<(), core::convert::Infallible> {
+            self.log.borrow_mut().push((self.id, level));
             Ok(())
         }
+    }
+    /// Four outputs, ids 0 to 3 (inflate 1, exhaust 1, inflate 2, exhaust 2), on `log`.
+    fn log_outputs<L>(log: &core::cell::RefCell<Vec<(u8, L)>>) -> [LogOutput<'_, L>; 4] {
+        core::array::from_fn(|k| LogOutput { id: k as u8, log })
+    }
+    impl embedded_hal::digital::ErrorType for LogOutput<'_, bool> {
+        type Error = core::convert::Infallible;
+    }
+    impl OutputPin for LogOutput<'_, bool> {
+        fn set_low(&mut self) -> Result<(), Self::Error> {
+            self.record(false)
+        }
         fn set_high(&mut self) -> Result<(), Self::Error> {
-            self.log.borrow_mut().push((self.id, true));
-            Ok(())
+            self.record(true)
+        }
+    }
+    impl embedded_hal::pwm::ErrorType for LogOutput<'_, u16> {
+        type Error = core::convert::Infallible;
+    }
+    impl SetDutyCycle for LogOutput<'_, u16> {
+        fn max_duty_cycle(&self) -> u16 {
+            100
+        }
+        fn set_duty_cycle(&mut self, duty: u16) -> Result<(), Self::Error> {
+            self.record(duty)
         }
     }
 
@@ -690,13 +677,8 @@ mod tests {
     /// checks the write-order invariant on the way.
     fn run(cmds: &[ValveCommand], cfg: OnOffPwmConfig) -> Vec<ValveOpenings> {
         let log = core::cell::RefCell::new(Vec::new());
-        let mut v = OnOffValves::new(
-            LogPin { id: 0, log: &log },
-            LogPin { id: 1, log: &log },
-            LogPin { id: 2, log: &log },
-            LogPin { id: 3, log: &log },
-            cfg,
-        );
+        let [in1, ex1, in2, ex2] = log_outputs(&log);
+        let mut v = OnOffValves::new(in1, ex1, in2, ex2, cfg);
         let mut level = [false; 4];
         let mut out = Vec::new();
         for c in cmds {
@@ -826,33 +808,11 @@ mod tests {
         ex2.done();
     }
 
-    /// Fake PWM channel logging (channel id, duty) writes.
-    struct LogPwm<'a> {
-        id: u8,
-        log: &'a core::cell::RefCell<Vec<(u8, u16)>>,
-    }
-    impl embedded_hal::pwm::ErrorType for LogPwm<'_> {
-        type Error = core::convert::Infallible;
-    }
-    impl SetDutyCycle for LogPwm<'_> {
-        fn max_duty_cycle(&self) -> u16 {
-            100
-        }
-        fn set_duty_cycle(&mut self, duty: u16) -> Result<(), Self::Error> {
-            self.log.borrow_mut().push((self.id, duty));
-            Ok(())
-        }
-    }
-
     #[test]
     fn proportional_reversal_zeroes_before_opening_never_both() {
         let log = core::cell::RefCell::new(Vec::new());
-        let mut v = ProportionalValves::new(
-            LogPwm { id: 0, log: &log },
-            LogPwm { id: 1, log: &log },
-            LogPwm { id: 2, log: &log },
-            LogPwm { id: 3, log: &log },
-        );
+        let [in1, ex1, in2, ex2] = log_outputs(&log);
+        let mut v = ProportionalValves::new(in1, ex1, in2, ex2);
         let mut duty = [0u16; 4];
         for c in [
             cmd(0.6, -0.2),
