@@ -1119,7 +1119,7 @@ mod tests {
         /// Any f32 bit pattern: never panics, force >= 0, flags as the f32 law would set them
         /// for the quantised inputs, INVALID_INPUT exactly for non-finite inputs.
         #[test]
-        fn fixed_force_from_any_f32_is_safe_and_flagged(p in proptest::num::f32::ANY, e in proptest::num::f32::ANY) {
+        fn fixed_force_from_any_f32_is_safe_and_flagged([p, e] in crate::any_f32s()) {
             let l = &FIXED_FORCE_LAW;
             let r = l.force_from_f32(p, e);
             prop_assert!(r.force_n >= ForceN::ZERO);
@@ -1244,9 +1244,7 @@ mod tests {
 
         /// Inverse from any f32 bit patterns: |dp| within the limit, pressures in \[0, 600 kPa\].
         #[test]
-        fn fixed_activation_is_bounded_for_any_f32(
-            t in proptest::num::f32::ANY, a in proptest::num::f32::ANY, v in proptest::num::f32::ANY,
-        ) {
+        fn fixed_activation_is_bounded_for_any_f32([t, a, v] in crate::any_f32s()) {
             let m = &FIXED_TORQUE_MODEL;
             let act = m.activation_from_f32(t, a, v);
             prop_assert!(act.dp_pa.abs() <= m.dp_limit_pa());

@@ -323,10 +323,7 @@ mod tests {
         /// Any f32 bit patterns (NaN, infinities, subnormals, huge values): never panics,
         /// never NaN or negative, flags exactly describe the input class.
         #[test]
-        fn force_of_any_f32_is_finite_non_negative_and_flagged(
-            p in proptest::num::f32::ANY,
-            e in proptest::num::f32::ANY,
-        ) {
+        fn force_of_any_f32_is_finite_non_negative_and_flagged([p, e] in crate::any_f32s()) {
             let l = &FORCE_LAW;
             let r = l.force(p, e);
             proptest::prop_assert!(r.force_n.is_finite() && r.force_n >= 0.0, "{:?}", r);

@@ -52,6 +52,13 @@ pub(crate) const HOSTILE_F32: [f32; 10] = [
     3e5,
 ];
 
+/// `N` independent arbitrary f32 bit patterns (NaN, infinities, subnormals, huge values):
+/// the inputs of the never-panic, never-NaN property tests.
+#[cfg(test)]
+pub(crate) fn any_f32s<const N: usize>() -> impl proptest::strategy::Strategy<Value = [f32; N]> {
+    proptest::array::uniform(proptest::num::f32::ANY)
+}
+
 #[macro_use]
 mod fmt;
 

@@ -359,11 +359,7 @@ mod tests {
         /// Any f32 bit patterns: the activation is finite and within +-dp_limit, and the
         /// pressures it leads to are within [0, 600 kPa]; non-finite inputs give dp = 0.
         #[test]
-        fn activation_of_any_f32_is_finite_and_bounded(
-            t in proptest::num::f32::ANY,
-            a in proptest::num::f32::ANY,
-            v in proptest::num::f32::ANY,
-        ) {
+        fn activation_of_any_f32_is_finite_and_bounded([t, a, v] in crate::any_f32s()) {
             let m = &TORQUE_MODEL;
             let act = m.activation(t, a, v);
             proptest::prop_assert!(act.dp_pa.is_finite());
@@ -389,11 +385,7 @@ mod tests {
         /// The forward model never panics on any bit pattern and is finite for finite,
         /// physically meaningful inputs.
         #[test]
-        fn forward_never_panics(
-            a in proptest::num::f32::ANY,
-            v in proptest::num::f32::ANY,
-            dp in proptest::num::f32::ANY,
-        ) {
+        fn forward_never_panics([a, v, dp] in crate::any_f32s()) {
             let t = TORQUE_MODEL.torque_nm(a, v, dp);
             if a.abs() <= 1e3 && v.abs() <= 1e3 && dp.abs() <= 1e7 {
                 proptest::prop_assert!(t.is_finite(), "{a} {v} {dp} -> {t}");
