@@ -401,6 +401,9 @@ pub(crate) fn write_head(
     Ok(())
 }
 
+/// Bytes a row of [`push_row_in`] may take before it is appended.
+pub(crate) const ROW_BYTES: usize = 10 * (numfmt::NUMBER_BYTES + 1);
+
 /// One data row: numbers only (nothing to quote), formatted by `numfmt` (byte-identical to
 /// `{}` for time and openings, `{:.6}` for the readings), at most 5 readings. The row is
 /// built on the stack and appended at once; a number the integer path cannot prove (a
@@ -412,14 +415,32 @@ pub(crate) fn push_row(
     u: &ValveInputs,
     outputs: impl Iterator<Item = f64> + Clone,
 ) {
-    const ROW_BYTES: usize = 10 * (numfmt::NUMBER_BYTES + 1);
-    let mut row = [0u8; ROW_BYTES];
+    push_row_in(&mut [0u8; ROW_BYTES], buf, t_s, u, outputs);
+}
+
+/// [`push_row`] built in `row`, a scratch buffer the caller keeps from row to row (what it
+/// holds is overwritten; a fresh one would be zeroed for every row).
+#[inline]
+pub(crate) fn push_row_in(
+    row: &mut [u8; ROW_BYTES],
+    buf: &mut Vec<u8>,
+    t_s: f64,
+    u: &ValveInputs,
+    outputs: impl Iterator<Item = f64> + Clone,
+) {
     let openings = [u.u_in1, u.u_ex1, u.u_in2, u.u_ex2];
     let fast = (|| {
-        let mut k = numfmt::shortest_into(&mut row, t_s)?;
+        let mut k = numfmt::shortest_into(&mut row[..], t_s)?;
         for v in openings {
             row[k] = b',';
-            k += 1 + numfmt::shortest_into(&mut row[k + 1..], v)?;
+            // The usual openings, +0 and 1, in place (-0 is written `-0` by the standard
+            // formatter, through `shortest_into`).
+            if v.to_bits() == 0 || v == 1.0 {
+                row[k + 1] = if v == 1.0 { b'1' } else { b'0' };
+                k += 2;
+            } else {
+                k += 1 + numfmt::shortest_into(&mut row[k + 1..], v)?;
+            }
         }
         for (i, y) in outputs.clone().enumerate() {
             if i >= 5 {
@@ -484,8 +505,9 @@ pub(crate) fn stamps_uniform(t_s: &[f64]) -> bool {
     }
     let dt = mean_step_s(t_s);
     let mut steps: Vec<f64> = t_s.windows(2).map(|w| w[1] - w[0]).collect();
-    steps.sort_by(f64::total_cmp);
-    let median = steps[steps.len() / 2];
+    // The middle element of the sorted steps, selected without sorting them all.
+    let half = steps.len() / 2;
+    let median = *steps.select_nth_unstable_by(half, f64::total_cmp).1;
     steps
         .iter()
         .all(|s| (s - median).abs() <= UNIFORM_TOLERANCE * median.abs())
@@ -611,23 +633,44 @@ impl RowParser {
             let row_start = i;
             let (mut t_s, mut u, mut y) = (0.0, [0.0; 4], [0.0; 5]);
             for (f, role) in self.roles.iter().enumerate() {
-                if *role == Role::Ignored {
-                    while i < len && !matches!(bytes[i], b',' | b'\n' | b'\r') {
+                match *role {
+                    Role::Ignored => {
+                        while i < len && !matches!(bytes[i], b',' | b'\n' | b'\r') {
+                            i += 1;
+                        }
+                    }
+                    // The usual openings, `0` and `1` alone in their field: their value
+                    // without the scanner.
+                    Role::Opening(k)
+                        if matches!(bytes.get(i), Some(b'0' | b'1'))
+                            && matches!(bytes.get(i + 1), Some(b',' | b'\n' | b'\r')) =>
+                    {
+                        u[k] = f64::from(bytes[i] - b'0');
                         i += 1;
                     }
-                } else {
-                    // The field read as `parse_plain_decimal` reads it, in the same pass
-                    // that finds its end.
-                    let (value, end) = numfmt::scan_plain_decimal(bytes, i);
-                    i = end;
-                    let Some(v) = value else {
-                        return false;
-                    };
-                    match *role {
-                        Role::Time => t_s = v,
-                        Role::Opening(k) if (0.0..=1.0).contains(&v) => u[k] = v,
-                        Role::Output(k) => y[k] = v,
-                        _ => return false,
+                    // A reading the sink does not keep: checked as the scanner checks it,
+                    // without its value.
+                    Role::Output(_) if !S::WANTS_OUTPUTS => {
+                        let (plain, end) = numfmt::scan_plain_decimal_syntax(bytes, i);
+                        i = end;
+                        if !plain {
+                            return false;
+                        }
+                    }
+                    _ => {
+                        // The field read as `parse_plain_decimal` reads it, in the same pass
+                        // that finds its end.
+                        let (value, end) = numfmt::scan_plain_decimal(bytes, i);
+                        i = end;
+                        let Some(v) = value else {
+                            return false;
+                        };
+                        match *role {
+                            Role::Time => t_s = v,
+                            Role::Opening(k) if (0.0..=1.0).contains(&v) => u[k] = v,
+                            Role::Output(k) => y[k] = v,
+                            _ => return false,
+                        }
                     }
                 }
                 if f + 1 < n_fields {
@@ -825,6 +868,9 @@ impl Row<'_> {
 /// Where [`Table::rows`] collects the values `f` makes of the rows: a `Vec` of them, or a
 /// column store that splits each value into its columns as it comes.
 pub(crate) trait RowSink<T>: Default + Send {
+    /// Whether the sink keeps the output channels' values; when it does not,
+    /// [`RowParser::parse_plain_rows`] only checks that those fields are plain decimals.
+    const WANTS_OUTPUTS: bool = true;
     /// Room for `n` more rows.
     fn reserve(&mut self, n: usize);
     /// One row's value.

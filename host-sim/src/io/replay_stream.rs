@@ -257,6 +257,7 @@ fn simulate_chunks(
     let mut pending: VecDeque<(f64, ValveInputs)> = VecDeque::new();
     let mut run: Option<(ValveInputs, usize)> = None;
     let mut out = OutChunk::with_capacity(CHUNK_ROWS);
+    let mut row = [0u8; recording::ROW_BYTES];
     let mut advance = |u: ValveInputs,
                        len: usize,
                        pending: &mut VecDeque<(f64, ValveInputs)>,
@@ -266,7 +267,7 @@ fn simulate_chunks(
             .advance_samples(u, dt_s, len, |x| {
                 let (t, u) = pending.pop_front().unwrap_or_default();
                 let m = sensor.push(plant, x);
-                recording::push_row(&mut out.bytes, t, &u, m.to_array().into_iter());
+                recording::push_row_in(&mut row, &mut out.bytes, t, &u, m.to_array().into_iter());
                 out.rows += 1;
             })
             .map_err(|_| ())
@@ -471,6 +472,8 @@ struct RowChunk {
 }
 
 impl RowSink<(f64, [f64; 4], [f64; 5])> for RowChunk {
+    // The replay reads the readings only to refuse a file `Recording::read` would refuse.
+    const WANTS_OUTPUTS: bool = false;
     fn reserve(&mut self, n: usize) {
         self.t_s.reserve(n);
         self.inputs.reserve(n);
