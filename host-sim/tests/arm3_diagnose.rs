@@ -409,6 +409,28 @@ fn a_supply_at_another_pressure_is_named_once_for_the_arm_with_its_value() {
 /// The arm has no thermal chamber (its plant refuses one on a joint), so no joint's pool
 /// offers it; every other candidate of the 1-DOF pool stays (the supply drop included: the
 /// joint's view of the arm's supply).
+/// A rig whose supply is 30 % below the file's and whose muscles start 170 kPa lower than the
+/// file's initial pressures (a user who edits both keys): the recording starts away from the
+/// file's start, and the arm is still answered with one supply pressure.
+#[test]
+fn a_lower_supply_with_other_initial_pressures_is_named_once_for_the_arm() {
+    let (text, replaced) = scaled_text("environment", &["supply_gauge_pa"], 0.7);
+    assert_eq!(replaced, 1);
+    let start = "_gauge_pa = 550000.0";
+    assert_eq!(text.matches(start).count(), 6, "the six initial pressures");
+    let text = text.replace(start, "_gauge_pa = 380000.0");
+    let truth = Arm3Config::from_toml_str(&text, "truth.toml").unwrap();
+    match shared_supply_of(&truth, 207).form {
+        SupplyForm::Pressure {
+            fitted_gauge_pa, ..
+        } => assert!(
+            (fitted_gauge_pa / 4.2e5 - 1.0).abs() < 0.01,
+            "{fitted_gauge_pa}"
+        ),
+        f => panic!("named {f:?}, not the supply pressure"),
+    }
+}
+
 #[test]
 fn the_arm_candidate_pool_leaves_out_only_what_the_arm_cannot_simulate() {
     let cfg = Arm3Config::load(arm3_plant()).unwrap();

@@ -652,3 +652,38 @@ fn a_leak_in_one_muscle_drains_that_chamber_only() {
         "{e}"
     );
 }
+
+/// A start given as sensor readings (a recording's first sample) is read back through the
+/// plant's sensor calibration: the calibrated measurement of the starting state gives the
+/// readings again, so a calibration fitted by the diagnosis moves the start with it.
+#[test]
+fn a_start_given_as_readings_starts_where_the_calibration_says() {
+    let mut c = config_with(
+        "[effects.sensor.angle_deg]\noffset = 2.0\ngain = 1.1\n[effects.sensor.p1_kpa]\ngain = 1.06\n[effects.sensor.p2_kpa]\noffset = -7.0\n",
+    );
+    c.initial.angle_rad = 0.3;
+    c.initial.p1_gauge_pa = 250e3;
+    c.initial.p2_gauge_pa = 180e3;
+    let as_state = Plant::from_config(&c).initial_state();
+    assert_eq!(as_state.angle_rad, 0.3);
+    assert_eq!(as_state.p1_abs_pa, 250e3 + c.environment.p_atm_pa);
+    c.initial.as_read = true;
+    let plant = Plant::from_config(&c);
+    let x = plant.initial_state();
+    assert!((x.angle_rad.to_degrees() - (0.3f64.to_degrees() - 2.0) / 1.1).abs() < 1e-9);
+    let m = plant.measure(&x);
+    for (got, want) in [
+        (m.angle_deg, 0.3f64.to_degrees()),
+        (m.p1_kpa, 250.0),
+        (m.p2_kpa, 180.0),
+    ] {
+        assert!((got - want).abs() < 1e-9, "read {got}, first sample {want}");
+    }
+    // Without a calibration the readings are the state.
+    let mut plain = c.clone();
+    plain.effects.sensor = None;
+    assert_eq!(
+        Plant::from_config(&plain).initial_state().p2_abs_pa,
+        180e3 + c.environment.p_atm_pa
+    );
+}

@@ -183,11 +183,19 @@ pub fn shared_supply(
     let mean = |v: &[(String, f64, f64)], tail: bool| {
         v.iter().map(|c| if tail { c.2 } else { c.1 }).sum::<f64>() / v.len().max(1) as f64
     };
-    let Some(before) = replay(cfg) else {
+    // The arm starts as the file says, or (when another key is off, e.g. the initial
+    // pressures with the supply) from the recording's first sample, whichever the nominal
+    // arm replays better: the joints' stage makes the same choice.
+    let Some(from_file) = replay(cfg) else {
         return Ok(None);
     };
+    let recorded = arm_started_as_recorded(cfg, rec);
+    let (base, before) = match replay(&recorded) {
+        Some(v) if mean(&v, false) > mean(&from_file, false) => (recorded, v),
+        _ => (cfg.clone(), from_file),
+    };
     let with_form = |form: &SupplyForm| {
-        let mut c = cfg.clone();
+        let mut c = base.clone();
         match form {
             SupplyForm::Pressure {
                 fitted_gauge_pa, ..
@@ -467,6 +475,7 @@ pub fn joint_plant_config(
             velocity_rad_s: initial.velocities_rad_s[joint],
             p1_gauge_pa: initial.p_abs_pa[joint][0] - p_atm,
             p2_gauge_pa: initial.p_abs_pa[joint][1] - p_atm,
+            as_read: false,
         },
         // The arm's shared supply drop, if the nominal arm has one, as the joint's own: the
         // joint then sees the drop of its own inlet flow only (the other joints' draw is
@@ -480,9 +489,11 @@ pub fn joint_plant_config(
 }
 
 /// `plant` starting from the first sample of `rec` (a joint's 1-DOF recording): its angle,
-/// at rest, and its pressures where recorded.
+/// at rest, and its pressures where recorded, as the sensors read them (a sensor
+/// calibration the diagnosis fits moves the start with it).
 fn started_as_recorded(plant: &PlantConfig, rec: &Recording) -> PlantConfig {
     let mut c = plant.clone();
+    c.initial.as_read = true;
     if let Some(a) = rec.channel(Channel::AngleDeg) {
         c.initial.angle_rad = a[0].to_radians();
         c.initial.velocity_rad_s = 0.0;
@@ -493,6 +504,30 @@ fn started_as_recorded(plant: &PlantConfig, rec: &Recording) -> PlantConfig {
     if let Some(p) = rec.channel(Channel::P2Kpa) {
         c.initial.p2_gauge_pa = p[0] * 1e3;
     }
+    c
+}
+
+/// The arm `cfg` starting from the first sample of `rec`: each joint at its recorded angle,
+/// at rest, with its recorded pressures (the file's where a channel is not recorded).
+fn arm_started_as_recorded(cfg: &Arm3Config, rec: &Arm3Recording) -> Arm3Config {
+    let mut c = cfg.clone();
+    for (j, joint) in [&mut c.joint1, &mut c.joint2, &mut c.joint3]
+        .into_iter()
+        .enumerate()
+    {
+        if let Some(a) = rec.channel(j, Channel::AngleDeg) {
+            joint.initial.angle_rad = a[0].to_radians();
+            joint.initial.velocity_rad_s = 0.0;
+        }
+        if let Some(p) = rec.channel(j, Channel::P1Kpa) {
+            joint.initial.p1_gauge_pa = p[0] * 1e3;
+        }
+        if let Some(p) = rec.channel(j, Channel::P2Kpa) {
+            joint.initial.p2_gauge_pa = p[0] * 1e3;
+        }
+    }
+    // The recorded angles are the start, not the file's equilibrium.
+    c.settle_initial_angles = false;
     c
 }
 

@@ -99,6 +99,12 @@ pub struct InitialConfig {
     pub velocity_rad_s: f64,
     pub p1_gauge_pa: f64,
     pub p2_gauge_pa: f64,
+    /// The angle and the two pressures are what the sensors read (a recording's first
+    /// sample), not the plant's state: the plant starts from the values the
+    /// `[effects.sensor]` calibration says were read, so a calibration fitted by the
+    /// diagnosis moves the start with it. Not a plant-file key.
+    #[serde(skip)]
+    pub as_read: bool,
 }
 
 /// A plant file that could not be read or is invalid.

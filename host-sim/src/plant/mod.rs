@@ -213,6 +213,23 @@ pub struct Plant {
 impl Plant {
     pub fn from_config(c: &PlantConfig) -> Self {
         let p_atm_pa = c.environment.p_atm_pa;
+        let effects = Effects::from_config(&c.effects, &c.valve);
+        let mut initial = PlantState {
+            angle_rad: c.initial.angle_rad,
+            velocity_rad_s: c.initial.velocity_rad_s,
+            p1_abs_pa: c.initial.p1_gauge_pa + p_atm_pa,
+            p2_abs_pa: c.initial.p2_gauge_pa + p_atm_pa,
+        };
+        // `[initial]` values that are readings: the state the calibration says was read
+        // (in the sensors' units, deg and kPa gauge).
+        if let (true, Some(cal)) = (c.initial.as_read, &effects.sensor) {
+            let [angle, p1, p2] = [cal.0[0], cal.0[1], cal.0[2]];
+            initial.angle_rad = angle
+                .read_back(c.initial.angle_rad.to_degrees())
+                .to_radians();
+            initial.p1_abs_pa = p1.read_back(c.initial.p1_gauge_pa * 1e-3) * 1e3 + p_atm_pa;
+            initial.p2_abs_pa = p2.read_back(c.initial.p2_gauge_pa * 1e-3) * 1e3 + p_atm_pa;
+        }
         Self {
             p_atm_pa,
             p_supply_abs_pa: c.environment.supply_gauge_pa + p_atm_pa,
@@ -223,13 +240,8 @@ impl Plant {
                 c.valve.critical_ratio,
                 c.valve.laminar_ratio,
             ),
-            effects: Effects::from_config(&c.effects, &c.valve),
-            initial: PlantState {
-                angle_rad: c.initial.angle_rad,
-                velocity_rad_s: c.initial.velocity_rad_s,
-                p1_abs_pa: c.initial.p1_gauge_pa + p_atm_pa,
-                p2_abs_pa: c.initial.p2_gauge_pa + p_atm_pa,
-            },
+            effects,
+            initial,
             load: c.load.clone(),
         }
     }

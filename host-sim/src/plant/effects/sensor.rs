@@ -40,6 +40,16 @@ impl ChannelCalibration {
     pub fn apply(&self, v: f64) -> f64 {
         self.gain * v + self.offset
     }
+    /// The true value behind a reading `r` (the inverse of [`Self::apply`]); `r` itself
+    /// when the gain is zero or not finite.
+    pub fn read_back(&self, r: f64) -> f64 {
+        let v = (r - self.offset) / self.gain;
+        if v.is_finite() {
+            v
+        } else {
+            r
+        }
+    }
 }
 
 /// The `[effects.sensor]` table.
