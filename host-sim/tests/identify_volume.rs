@@ -214,6 +214,39 @@ fn identify_volume_refuses_bad_input_with_status_2_and_writes_nothing() {
     .unwrap();
     assert_refused(&volume(&half), &["half.csv:1", "m_dot_2_kg_s"], &out);
     let rec = recording(dir.path());
+    // The flows in g/s: a thousand times the valve's.
+    let text = std::fs::read_to_string(&rec).unwrap();
+    let mut cols = Vec::new();
+    let grams: String = text
+        .lines()
+        .map(|line| {
+            if line.starts_with('#') {
+                return format!("{line}\n");
+            }
+            if line.starts_with("t_s") {
+                cols = (line.split(',').enumerate())
+                    .filter(|(_, c)| c.starts_with("m_dot_"))
+                    .map(|(i, _)| i)
+                    .collect();
+                return format!("{line}\n");
+            }
+            let fields: Vec<String> = (line.split(',').enumerate())
+                .map(|(i, v)| match cols.contains(&i) {
+                    true => format!("{}", v.parse::<f64>().unwrap() * 1e3),
+                    false => v.to_string(),
+                })
+                .collect();
+            fields.join(",") + "\n"
+        })
+        .collect();
+    assert_eq!(cols.len(), 2, "both flow columns");
+    let in_grams = dir.path().join("grams.csv");
+    std::fs::write(&in_grams, grams).unwrap();
+    assert_refused(
+        &volume(&in_grams),
+        &["grams.csv", "m_dot_", "kg/s", "g/s"],
+        &out,
+    );
     for (arg, val, says) in [
         ("--weight-decay", "5", "--weight-decay"),
         ("--holdout-fraction", "0.95", "--holdout-fraction"),

@@ -1233,7 +1233,13 @@ pub fn diagnose(
         best_attempt,
         best_attempt_at_bound,
         lookalikes,
-        data_notes: verdict::coarse_onoff_note(train).into_iter().collect(),
+        data_notes: [
+            verdict::coarse_onoff_note(train),
+            verdict::start_note(nominal, train),
+        ]
+        .into_iter()
+        .flatten()
+        .collect(),
         hints,
         failures,
         nothing_missing: v == Verdict::NothingMissing,

@@ -371,6 +371,65 @@ pub fn coarse_onoff_note(rec: &Recording) -> Option<String> {
     })
 }
 
+/// How far a recording's first sample may sit from the plant file's `[initial]` before the
+/// answer notes it: pressures (kPa) and angle (deg), well above a sensor's noise and the
+/// offsets the diagnosis names as calibrations.
+const START_NOTE_KPA: f64 = 20.0;
+const START_NOTE_DEG: f64 = 3.0;
+
+/// A note when the recording does not start where the plant file's `[initial]` says (the
+/// replays start from the file's values): a rig log rarely starts at the file's state, and
+/// the departure of the first seconds is then the start's, not the model's.
+pub fn start_note(plant: &crate::plant::config::PlantConfig, rec: &Recording) -> Option<String> {
+    if plant.initial.as_read || rec.is_empty() {
+        return None;
+    }
+    let i = &plant.initial;
+    let mut off = Vec::new();
+    let mut check = |c: Channel, key: &str, file: f64, tol: f64, unit: &str| {
+        if let Some(y) = rec.channel(c) {
+            if (y[0] - file).abs() > tol {
+                off.push(format!(
+                    "{} {} {unit} (`initial.{key}`: {} {unit})",
+                    c.name(),
+                    crate::validate::Shown(y[0]),
+                    crate::validate::Shown(file)
+                ));
+            }
+        }
+    };
+    check(
+        Channel::AngleDeg,
+        "angle_rad",
+        i.angle_rad.to_degrees(),
+        START_NOTE_DEG,
+        "deg",
+    );
+    check(
+        Channel::P1Kpa,
+        "p1_gauge_pa",
+        i.p1_gauge_pa * 1e-3,
+        START_NOTE_KPA,
+        "kPa",
+    );
+    check(
+        Channel::P2Kpa,
+        "p2_gauge_pa",
+        i.p2_gauge_pa * 1e-3,
+        START_NOTE_KPA,
+        "kPa",
+    );
+    (!off.is_empty()).then(|| {
+        format!(
+            "the recording does not start where the plant file's [initial] says: {}; the \
+             replays start from the file's values, so the first seconds depart by the start \
+             alone: set [initial] to the rig's first sample (angle in rad, pressures in Pa \
+             gauge)",
+            off.join(", ")
+        )
+    })
+}
+
 #[cfg(test)]
 mod coarse_tests {
     use super::*;
@@ -390,5 +449,35 @@ mod coarse_tests {
         assert!(note.contains("every 10 ms"), "{note}");
         assert!(coarse_onoff_note(&rec(0.001, 1.0)).is_none());
         assert!(coarse_onoff_note(&rec(0.01, 0.4)).is_none());
+    }
+
+    #[test]
+    fn a_recording_that_starts_away_from_the_files_initial_state_is_noted() {
+        let text = include_str!("../../tests/fixtures/reference-1dof.toml");
+        let plant = crate::plant::config::PlantConfig::from_toml_str(text, "p.toml").unwrap();
+        let i = &plant.initial;
+        let rec = |dp_kpa: f64| {
+            let row = |t: f64| {
+                format!(
+                    "{t},0,0,0,0,{},{},{}\n",
+                    i.angle_rad.to_degrees(),
+                    i.p1_gauge_pa * 1e-3 + dp_kpa,
+                    i.p2_gauge_pa * 1e-3
+                )
+            };
+            let t = String::from("t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg,p1_kpa,p2_kpa\n");
+            Recording::parse(&(t + &row(0.0) + &row(0.001)), "r.csv").unwrap()
+        };
+        assert!(start_note(&plant, &rec(0.0)).is_none());
+        assert!(
+            start_note(&plant, &rec(8.0)).is_none(),
+            "a sensor offset's size"
+        );
+        let note = start_note(&plant, &rec(-100.0)).expect("100 kPa below the file's start");
+        assert!(
+            note.contains("p1_kpa") && note.contains("initial.p1_gauge_pa"),
+            "{note}"
+        );
+        assert!(!note.contains("p2_kpa"), "{note}");
     }
 }

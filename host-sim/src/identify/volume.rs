@@ -118,6 +118,9 @@ impl VolumePoly {
     }
 }
 
+/// The largest net mass flow into a muscle a recording may carry, kg/s.
+pub const MAX_MASS_FLOW_KG_S: f64 = 0.1;
+
 /// The samples of both muscles of a recording (angle_deg, p1_kpa, p2_kpa and the mass-flow
 /// columns required), in time order per muscle (muscle 1's, then muscle 2's), leaving out the
 /// `half_window` samples at each end where the derivative window is cut. Errors name the
@@ -141,6 +144,22 @@ pub fn samples_from_recording(
             MASS_FLOW_COLUMNS[0], MASS_FLOW_COLUMNS[1]
         )
     })?;
+    // A valve a muscle of this size is driven through passes some 1e-2 kg/s; 0.1 kg/s
+    // (about 5 000 standard litres a minute) is beyond any of them: a column in g/s or
+    // another unit would train the network on flows a thousand times too large.
+    for (i, f) in flows.iter().enumerate() {
+        if let Some(k) = f.iter().position(|v| v.abs() > MAX_MASS_FLOW_KG_S) {
+            return Err(format!(
+                "column `{}` at t = {} s: {} kg/s, above the {} kg/s no valve for a \
+                 muscle of this size passes (the column is in kg/s: a flow in g/s is 1000 \
+                 times too large)",
+                MASS_FLOW_COLUMNS[i],
+                crate::validate::Shown(rec.t_s[k]),
+                crate::validate::Shown(f[k]),
+                crate::validate::Shown(MAX_MASS_FLOW_KG_S)
+            ));
+        }
+    }
     let n = rec.len();
     if n < 2 * half_window + 3 {
         return Err(format!(
