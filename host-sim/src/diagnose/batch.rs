@@ -207,6 +207,9 @@ pub fn summary_table(rows: &[BatchRow]) -> String {
 
 /// `host-sim diagnose-batch`: the arguments.
 #[derive(clap::Args, Debug)]
+#[command(
+    after_help = "Example:\n  host-sim diagnose-batch --plant ../shared/plant/reference-1dof.toml --recordings ../shared/conformance --out-dir diagnoses/"
+)]
 pub struct BatchArgs {
     /// Nominal plant file (TOML) the user believes in.
     #[arg(long, value_name = "P.toml")]
