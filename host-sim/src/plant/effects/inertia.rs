@@ -31,13 +31,13 @@ impl Hooks for InertiaMismatch {
     }}
 
 impl Effect for InertiaMismatch {
+    type Active = Self;
     const TRUTHS: &'static [Truth] = &[Truth {
         name: "inertia",
         expected_id: "inertia",
         toml: |_| "inertia_kgm2 = 0.03\n".into(),
         replaces_key: Some("inertia_kgm2"),
     }];
-    type Active = Self;
     fn enabled(&self) -> bool {
         false
     }

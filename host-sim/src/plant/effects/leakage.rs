@@ -58,13 +58,13 @@ impl Hooks for LeakOrifice {
 }
 
 impl Effect for Leakage {
+    type Active = LeakOrifice;
     const TRUTHS: &'static [Truth] = &[
         Truth::new("leakage", "leakage", |_| "[effects.leakage]\nsonic_conductance_m3_per_s_pa = 4.0e-10\n".into()),
         Truth::new("leakage_one_muscle", "leakage_muscle2", |_| {
             "[effects.leakage]\nsonic_conductance_m3_per_s_pa = 6.0e-10\nmuscle = 2\n".into()
         }),
     ];
-    type Active = LeakOrifice;
     fn enabled(&self) -> bool {
         self.enabled
     }

@@ -409,6 +409,25 @@ registry! {
     toy_spring::ToySpring,
 }
 
+/// The first enabled effect's `Some` answer, in registry order, to `hook`, a [`Hooks`] method
+/// returning `Option<&T>`: `first_answer!(effects, supply -> Supply)`.
+macro_rules! first_answer {
+    ($effects:expr, $hook:ident -> $t:ty) => {{
+        struct First<'e>(Option<&'e $t>);
+        impl<'e> Visit<'e> for First<'e> {
+            #[inline(always)]
+            fn visit<A: Hooks>(&mut self, a: &'e A) {
+                if self.0.is_none() {
+                    self.0 = a.$hook();
+                }
+            }
+        }
+        let mut f = First(None);
+        $effects.visit(&mut f);
+        f.0
+    }};
+}
+
 impl Effects {
     /// Sum of the effect torques on the joint.
     #[inline(always)]
@@ -476,35 +495,13 @@ impl Effects {
     /// The supply the inlet valves see ([`Supply::Ideal`] unless an effect models it).
     #[inline(always)]
     pub fn supply(&self) -> &Supply {
-        struct First<'e>(Option<&'e Supply>);
-        impl<'e> Visit<'e> for First<'e> {
-            #[inline(always)]
-            fn visit<A: Hooks>(&mut self, a: &'e A) {
-                if self.0.is_none() {
-                    self.0 = a.supply();
-                }
-            }
-        }
-        let mut f = First(None);
-        self.visit(&mut f);
-        f.0.unwrap_or(&Supply::Ideal)
+        first_answer!(self, supply -> Supply).unwrap_or(&Supply::Ideal)
     }
 
     /// The chamber thermodynamics, if enabled (then the gas temperatures are ODE states).
     #[inline(always)]
     pub fn thermal_chamber(&self) -> Option<&ThermalChamber> {
-        struct First<'e>(Option<&'e ThermalChamber>);
-        impl<'e> Visit<'e> for First<'e> {
-            #[inline(always)]
-            fn visit<A: Hooks>(&mut self, a: &'e A) {
-                if self.0.is_none() {
-                    self.0 = a.thermal_chamber();
-                }
-            }
-        }
-        let mut f = First(None);
-        self.visit(&mut f);
-        f.0
+        first_answer!(self, thermal_chamber -> ThermalChamber)
     }
 
     /// Total delay between a valve command and the valve opening; `None`: no delay effect.

@@ -88,6 +88,7 @@ impl Hooks for Calibrations {
 }
 
 impl Effect for SensorCalibration {
+    type Active = Calibrations;
     const TRUTHS: &'static [Truth] = &[
         Truth::new("sensor_offset", "sensor_offset", |_| {
             "[effects.sensor.angle_deg]\noffset = 1.5\n[effects.sensor.p1_kpa]\noffset = 8.0\n[effects.sensor.p2_kpa]\noffset = -6.0\n".into()
@@ -96,7 +97,6 @@ impl Effect for SensorCalibration {
             "[effects.sensor.p1_kpa]\ngain = 1.06\n".into()
         }),
     ];
-    type Active = Calibrations;
     fn enabled(&self) -> bool {
         self.enabled
     }

@@ -233,11 +233,11 @@ pub fn static_supply_pressure_pa<const N: usize>(
 type KeyValue<'a> = (&'a str, Option<f64>);
 
 impl Effect for SupplyDrop {
+    type Active = Supply;
     const TRUTHS: &'static [Truth] = &[
         Truth::new("supply_drop", "supply_drop", |_| "[effects.supply_drop]\nmodel = \"static\"\nresistance_pa_s_per_m3 = 2.0e7\n".into()),
         Truth::new("supply_drop_reservoir", "supply_drop", |_| "[effects.supply_drop]\nmodel = \"reservoir\"\ntank_volume_m3 = 5.0e-4\nfeed_conductance_m3_per_s_pa = 6.0e-9\n".into()),
     ];
-    type Active = Supply;
     fn enabled(&self) -> bool {
         self.enabled
     }
