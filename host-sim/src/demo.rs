@@ -73,11 +73,20 @@ pub struct DemoReport {
     pub plant: PathBuf,
     /// The plant's active effects ([`Plant::effects_summary`]), honoured by every run.
     pub effects: String,
-    pub fixture: PathBuf,
     pub scenarios: Vec<ScenarioResult>,
-    pub fixture_fits: Vec<ChannelFit>,
-    pub replay_speed_x: f64,
-    pub replay_files: Vec<PathBuf>,
+    pub replay: FixtureReplay,
+}
+
+/// The open-loop replay of the conformance fixture.
+#[derive(Debug, Clone)]
+pub struct FixtureReplay {
+    pub fixture: PathBuf,
+    /// Fit of each measured channel of the fixture.
+    pub fits: Vec<ChannelFit>,
+    /// The replay and its plot.
+    pub files: Vec<PathBuf>,
+    /// Simulated seconds per wall second.
+    pub speed_x: f64,
 }
 
 /// `shared/<rel>` candidates: `../shared/<rel>` from the working directory, then from the
@@ -186,11 +195,13 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
     Ok(DemoReport {
         effects: plant.effects_summary(),
         plant: plant_path,
-        fixture: fixture_path,
         scenarios,
-        fixture_fits: fits,
-        replay_speed_x: duration_s / replay_wall.max(1e-9),
-        replay_files: vec![replay_csv, replay_png],
+        replay: FixtureReplay {
+            fixture: fixture_path,
+            fits,
+            files: vec![replay_csv, replay_png],
+            speed_x: duration_s / replay_wall.max(1e-9),
+        },
     })
 }
 
@@ -248,10 +259,10 @@ pub fn format_report(r: &DemoReport, out_dir: &Path) -> String {
     let _ = writeln!(
         s,
         "\nconformance: open-loop replay of {} ({:.0} x real time), fit per channel (>= 99.5 % required):",
-        r.fixture.display(),
-        r.replay_speed_x
+        r.replay.fixture.display(),
+        r.replay.speed_x
     );
-    for f in &r.fixture_fits {
+    for f in &r.replay.fits {
         let _ = writeln!(
             s,
             "  {:<10} {:>8.4} %{}",
@@ -268,7 +279,8 @@ pub fn format_report(r: &DemoReport, out_dir: &Path) -> String {
         s,
         "\nfiles in {}: <scenario>.csv (RECORDING.md), <scenario>.firmware.csv (set-point, torque estimate, fault code), <scenario>.png, {}",
         out_dir.display(),
-        r.replay_files
+        r.replay
+            .files
             .iter()
             .filter_map(|p| p.file_name())
             .map(|n| n.to_string_lossy().into_owned())
@@ -282,6 +294,6 @@ impl DemoReport {
     /// True when every scenario met its expectations and every fixture channel fits >= 99.5 %.
     pub fn ok(&self) -> bool {
         self.scenarios.iter().all(|c| c.expect_fails.is_empty())
-            && self.fixture_fits.iter().all(|f| f.fit_percent >= 99.5)
+            && self.replay.fits.iter().all(|f| f.fit_percent >= 99.5)
     }
 }

@@ -34,49 +34,30 @@ enum Command {
     /// --inputs needs the columns t_s,u_in1,u_ex1,u_in2,u_ex2 and at least one measured
     /// channel of angle_deg,p1_kpa,p2_kpa,f1_n,f2_n (RECORDING.md); the measured channels
     /// are drawn under the simulated ones.
-    #[command(
-        after_help = "Examples:\n  host-sim simulate --plant ../shared/plant/reference-1dof.toml --inputs ../shared/conformance/pulses_nominal.csv --out sim.csv --plot sim.png\n  host-sim simulate --plant ../shared/plant/reference-1dof.toml --scenario scenarios/step.toml --out step.csv"
-    )]
     Simulate(SimulateArgs),
     /// Per-channel fit (NRMSE %), MAE and MSE of B (model) against A (reference/measured).
     ///
     /// Both recordings need t_s (same length) and share at least one of angle_deg, p1_kpa,
     /// p2_kpa, f1_n, f2_n; the fit is 100 (1 - ||b - a|| / ||a - mean(a)||) % (normalised RMS error), 100 = perfect.
-    #[command(
-        after_help = "Example:\n  host-sim fit ../shared/conformance/pulses_nominal.csv sim.csv --min-fit 99.5 --plot fit.png"
-    )]
     Fit(FitArgs),
     /// The main job: the reference plant with the firmware in the loop on the step, sine and
     /// random scenarios (CSV + plots), and the conformance fit of an open-loop replay.
     ///
     /// The fixture needs t_s,u_in1,u_ex1,u_in2,u_ex2 and the measured angle_deg,p1_kpa,
     /// p2_kpa,f1_n,f2_n (RECORDING.md).
-    #[command(after_help = "Example:\n  host-sim demo --out-dir target/demo")]
     Demo(DemoArgs),
     /// Generate identification data from a plant file (force: isometric bench sweep; torque:
     /// constant-speed passes at fixed activations, the torque-model paper's protocol).
-    #[command(
-        after_help = "Examples:\n  host-sim sweep force --plant ../shared/plant/reference-1dof.toml --out force.csv\n  host-sim sweep torque --plant ../shared/plant/reference-1dof.toml --out torque.csv"
-    )]
     Sweep(host_sim::identify::cli::SweepArgs),
     /// Identify the force law, the torque model or plant parameters from data.
-    #[command(
-        after_help = "Examples:\n  host-sim identify force --data force.csv --out force_law.toml\n  host-sim identify torque --recording torque.csv --plant ../shared/plant/reference-1dof.toml --out torque_model.toml\n  host-sim identify plant --recording ../shared/conformance/pulses_loaded.csv --plant ../shared/plant/reference-1dof.toml --params joint.inertia_kgm2 --out fitted.toml"
-    )]
     Identify(host_sim::identify::cli::IdentifyArgs),
     /// Tune the cascade, PD and PID gains on the set-point suite (firmware in the loop) and
     /// write the gains file (the format of config/control_tuned.toml).
-    #[command(
-        after_help = "Example:\n  host-sim tune --plant ../shared/plant/reference-1dof.toml --out control_tuned.toml"
-    )]
     Tune(host_sim::control::tune::TuneArgs),
     /// From a recording to the firmware's constants (config/): refuse degenerate data,
     /// identify the torque model, take the plant-derived constants from the plant file, (with
     /// --tune) tune the gains, and replace the files in --out-dir, printing old -> new per key.
     /// All files or none are written; exit status 2 and nothing written on refused data.
-    #[command(
-        after_help = "Example:\n  host-sim calibrate --recording rec.csv --plant ../shared/plant/reference-1dof.toml --out-dir config/ --tune"
-    )]
     Calibrate(host_sim::identify::calibrate::CalibrateArgs),
     /// Diagnosis: locate where a recording departs from the nominal model, tell a mis-set
     /// parameter (recalibration) from left-out physics (a named effect), model it and report
@@ -86,18 +67,12 @@ enum Command {
     /// The recording needs t_s,u_in1,u_ex1,u_in2,u_ex2 and the measured angle_deg,p1_kpa,
     /// p2_kpa (f1_n,f2_n used when present), as in RECORDING.md; with an arm plant, the same
     /// columns per joint with a _j1, _j2, _j3 suffix.
-    #[command(
-        after_help = "Examples:\n  host-sim diagnose --plant ../shared/plant/reference-1dof.toml --recording ../shared/conformance/pulses_thermal.csv --json diagnosis.json --report report/\n  host-sim diagnose --plant host-sim/plants/arm3-seed001.toml --recording target/demo/arm_sine.csv --json arm.json"
-    )]
     Diagnose(DiagnoseArgs),
     /// Diagnose every recording (*.csv) of a directory against one plant, in parallel: one
     /// JSON per recording and a summary table (summary.csv); exit status 1 if any failed.
     ///
     /// Each recording needs t_s,u_in1,u_ex1,u_in2,u_ex2 and the measured angle_deg,p1_kpa,
     /// p2_kpa (f1_n,f2_n used when present), as in RECORDING.md.
-    #[command(
-        after_help = "Example:\n  host-sim diagnose-batch --plant ../shared/plant/reference-1dof.toml --recordings ../shared/conformance --out-dir diagnoses/"
-    )]
     DiagnoseBatch(host_sim::diagnose::batch::BatchArgs),
     /// Import a rig logger's CSV (other column names, units, time base) into a recording,
     /// through a mapping file (docs/rig.md).
@@ -105,38 +80,29 @@ enum Command {
     /// Writes a recording (RECORDING.md) with t_s,u_in1,u_ex1,u_in2,u_ex2 and the mapped
     /// outputs among angle_deg,p1_kpa,p2_kpa,f1_n,f2_n; the report gives each channel's range
     /// and warns of values a unit mistake usually causes.
-    #[command(
-        after_help = "Example (docs/rig.md has the mapping file):\n  host-sim import --map festo-joint.toml --input messung7.csv --out messung7.rec.csv"
-    )]
     Import(host_sim::io::import::ImportArgs),
     /// Turn the firmware's per-tick stream (QEMU image or board) into a recording.
     ///
     /// Writes a recording (RECORDING.md) with t_s,u_in1,u_ex1,u_in2,u_ex2 (the valve
     /// openings the firmware commanded) and angle_deg,p1_kpa,p2_kpa (what it measured).
-    #[command(
-        after_help = "Example (a stream written by `host-sim pil --log`):\n  host-sim capture --log pil.stream --out captured.csv"
-    )]
     Capture(host_sim::io::capture::CaptureArgs),
     /// Processor in the loop: the firmware image under qemu-system-arm closes the loop with the
     /// plant, one exchanged sensor frame (board counts) and valve command per tick; writes the
     /// recording and compares it bit for bit with the in-process loop (exit status 1 on a
     /// mismatch, named by its first tick and field).
-    #[command(
-        after_help = "Example (build the image first):\n  cargo build -p pam-firmware --bin pil --features pam-firmware/firmware --release --target thumbv7em-none-eabihf\n  host-sim pil --plant ../shared/plant/reference-1dof.toml --scenario scenarios/step.toml --out pil.csv --log pil.stream"
-    )]
     Pil(host_sim::control::pil::PilArgs),
     /// The pressure loop with and without the firmware's inverse thermodynamic feed-forward
     /// (seed 004 eq. 7), firmware in the loop: position MSE and pressure tracking error on the
     /// controller suite and held-out set-points, on the plant and on it with a thermodynamic
     /// chamber, a leak and a supply drop. Exit status 1 when the feed-forward does not improve
     /// the nominal plant's suite position MSE by >= 1.85x.
-    #[command(
-        after_help = "Example:\n  host-sim compare-control --plant ../shared/plant/reference-1dof.toml"
-    )]
     CompareControl(host_sim::control::compare_ff::CompareControlArgs),
 }
 
 #[derive(Args)]
+#[command(
+    after_help = "Examples:\n  host-sim diagnose --plant ../shared/plant/reference-1dof.toml --recording ../shared/conformance/pulses_thermal.csv --json diagnosis.json --report report/\n  host-sim diagnose --plant host-sim/plants/arm3-seed001.toml --recording target/demo/arm_sine.csv --json arm.json"
+)]
 struct DiagnoseArgs {
     /// Nominal plant file (TOML) the user believes in. A 3-DOF arm file (`kind = "arm3"`)
     /// diagnoses each joint of a 3-joint recording (`_j1`.. `_j3` columns, every angle
@@ -165,6 +131,7 @@ struct DiagnoseArgs {
 }
 
 #[derive(Args)]
+#[command(after_help = "Example:\n  host-sim demo --out-dir target/demo")]
 struct DemoArgs {
     /// Output directory (created if missing).
     #[arg(long, value_name = "DIR", default_value = "target/demo")]
@@ -183,6 +150,9 @@ struct DemoArgs {
 }
 
 #[derive(Args)]
+#[command(
+    after_help = "Examples:\n  host-sim simulate --plant ../shared/plant/reference-1dof.toml --inputs ../shared/conformance/pulses_nominal.csv --out sim.csv --plot sim.png\n  host-sim simulate --plant ../shared/plant/reference-1dof.toml --scenario scenarios/step.toml --out step.csv"
+)]
 struct SimulateArgs {
     /// Plant parameter file (TOML, e.g. shared/plant/reference-1dof.toml).
     #[arg(long, value_name = "P.toml")]
@@ -219,6 +189,9 @@ struct SimulateArgs {
 }
 
 #[derive(Args)]
+#[command(
+    after_help = "Example:\n  host-sim fit ../shared/conformance/pulses_nominal.csv sim.csv --min-fit 99.5 --plot fit.png"
+)]
 struct FitArgs {
     /// Reference (measured) recording.
     a: PathBuf,
@@ -384,7 +357,7 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
                 plant_path.display()
             );
         }
-        return run_closed_loop(plant_path, s, &a.out, a.plot.as_deref());
+        return run_closed_loop(a, s);
     }
     let inputs_path = a.inputs.as_ref().expect("clap: --inputs required");
     if host_sim::plant::arm3::is_arm3_file(plant_path)? {
@@ -396,23 +369,16 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
         if let Some(done) = simulate_streaming(a, &plant, inputs_path, &opts)? {
             warn_other_plant(&done.metadata, plant_path, inputs_path);
             println!("plant effects: {}", plant.effects_summary());
-            eprintln!(
-                "{}: {} samples, {}",
-                a.out.display(),
-                done.samples,
-                done.stats
-            );
+            eprint_written(&a.out, done.samples, &done.stats);
             return Ok(ExitCode::SUCCESS);
         }
     }
     let rec = Recording::read(inputs_path)?;
     warn_other_plant(&rec.metadata, plant_path, inputs_path);
     let dt = rec.sample_period_s();
-    let bar = ProgressBar::with_draw_target(Some(rec.len() as u64), ProgressDrawTarget::stderr());
-    bar.set_style(
-        ProgressStyle::with_template("{spinner} simulate [{bar:40}] {pos}/{len} samples {elapsed}")
-            .expect("static template")
-            .progress_chars("=> "),
+    let bar = stderr_bar(
+        Some(rec.len()),
+        "{spinner} simulate [{bar:40}] {pos}/{len} samples {elapsed}",
     );
     let sim =
         host_sim::sim::simulate_recording(&plant, &rec, &opts, |k| bar.set_position(k as u64))
@@ -424,7 +390,7 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
     let out = host_sim::sim::replay_recording(&plant, &rec, &sim.states, metadata);
     out.write(&a.out)?;
     println!("plant effects: {}", plant.effects_summary());
-    eprintln!("{}: {} samples, {}", a.out.display(), out.len(), sim.stats);
+    eprint_written(&a.out, out.len(), &sim.stats);
     if let Some(p) = &a.plot {
         plot_comparison(p, Some(&rec), &out)?;
     }
@@ -440,11 +406,7 @@ fn simulate_streaming(
     inputs_path: &Path,
     opts: &SolverOptions,
 ) -> Result<Option<host_sim::io::replay_stream::StreamedReplay>> {
-    let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr());
-    bar.set_style(
-        ProgressStyle::with_template("{spinner} simulate {pos} samples {elapsed}")
-            .expect("static template"),
-    );
+    let bar = stderr_bar(None, "{spinner} simulate {pos} samples {elapsed}");
     let mut done = None;
     let written = host_sim::io::atomic::write_with(&a.out, |w| {
         let metadata = |dt_s: f64| {
@@ -471,6 +433,22 @@ fn simulate_streaming(
         (Err(_), None) => Ok(None),
         (Err(e), Some(_)) => Err(anyhow::anyhow!("{}: {e}", a.out.display())),
     }
+}
+
+/// A progress bar on stderr of `len` steps (`None`: unknown) drawn by `template`.
+fn stderr_bar(len: Option<usize>, template: &str) -> ProgressBar {
+    let bar = ProgressBar::with_draw_target(len.map(|n| n as u64), ProgressDrawTarget::stderr());
+    bar.set_style(
+        ProgressStyle::with_template(template)
+            .expect("static template")
+            .progress_chars("=> "),
+    );
+    bar
+}
+
+/// The line `simulate` prints on stderr for the recording it wrote to `out`.
+fn eprint_written(out: &Path, samples: usize, stats: &impl std::fmt::Display) {
+    eprintln!("{}: {samples} samples, {stats}", out.display());
 }
 
 /// Warns when the recording's `plant` metadata names another plant file than `plant_path`.
@@ -538,13 +516,9 @@ fn run_simulate_arm3(a: &SimulateArgs, inputs_path: &Path) -> Result<ExitCode> {
     let rec = Arm3Recording::read(inputs_path)?;
     let opts = a.solver_options()?;
     let dt = rec.sample_period_s();
-    let bar = ProgressBar::with_draw_target(Some(rec.len() as u64), ProgressDrawTarget::stderr());
-    bar.set_style(
-        ProgressStyle::with_template(
-            "{spinner} simulate arm3 [{bar:40}] {pos}/{len} samples {elapsed}",
-        )
-        .expect("static template")
-        .progress_chars("=> "),
+    let bar = stderr_bar(
+        Some(rec.len()),
+        "{spinner} simulate arm3 [{bar:40}] {pos}/{len} samples {elapsed}",
     );
     let sim = simulate_arm3(&arm, &rec.inputs, dt, &opts, |k| bar.set_position(k as u64))
         .with_context(|| format!("{}: simulation failed", inputs_path.display()))?;
@@ -557,7 +531,7 @@ fn run_simulate_arm3(a: &SimulateArgs, inputs_path: &Path) -> Result<ExitCode> {
     };
     out.set_outputs_from_states(&arm, &sim.states, dt);
     out.write(&a.out)?;
-    eprintln!("{}: {} samples, {}", a.out.display(), out.len(), sim.stats);
+    eprint_written(&a.out, out.len(), &sim.stats);
     for (name, fit) in fits(&rec, &out) {
         println!("{name:<14} fit {fit:9.4} %");
     }
@@ -567,19 +541,17 @@ fn run_simulate_arm3(a: &SimulateArgs, inputs_path: &Path) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-fn run_closed_loop(
-    plant: &Path,
-    scenario: &Path,
-    out: &Path,
-    plot: Option<&Path>,
-) -> Result<ExitCode> {
+/// `simulate --scenario`: the closed loop with the firmware on the 1-DOF plant.
+fn run_closed_loop(a: &SimulateArgs, scenario: &Path) -> Result<ExitCode> {
     let bar = ProgressBar::with_draw_target(Some(1000), ProgressDrawTarget::stderr());
-    let r = host_sim::io::run_files::simulate_scenario(plant, scenario, out, plot, &mut |f| {
-        bar.set_position((f * 1000.0) as u64)
-    })?;
+    let plot = a.plot.as_deref();
+    let r =
+        host_sim::io::run_files::simulate_scenario(&a.plant, scenario, &a.out, plot, &mut |f| {
+            bar.set_position((f * 1000.0) as u64)
+        })?;
     bar.finish_and_clear();
     print!("{}", r.summary);
-    println!("wrote {} and {}", out.display(), r.trace_path.display());
+    println!("wrote {} and {}", a.out.display(), r.trace_path.display());
     Ok(if r.fails.is_empty() {
         ExitCode::SUCCESS
     } else {
@@ -785,11 +757,9 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
         validate::distinct_outputs(&inputs, &[("--report", &report_json), ("--report", &index)])
             .map_err(anyhow::Error::msg)?;
     }
-    let bar = ProgressBar::with_draw_target(Some(100), ProgressDrawTarget::stderr());
-    bar.set_style(
-        ProgressStyle::with_template("{spinner} diagnose [{bar:40}] {pos}/{len} {msg} {elapsed}")
-            .expect("static template")
-            .progress_chars("=> "),
+    let bar = stderr_bar(
+        Some(100),
+        "{spinner} diagnose [{bar:40}] {pos}/{len} {msg} {elapsed}",
     );
     let opts = DiagnoseOptions {
         threads: a.threads,

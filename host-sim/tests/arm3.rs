@@ -71,21 +71,38 @@ where
     (f(&qp) - f(&qm)) / (2.0 * h)
 }
 
+/// At every grid point and for each joint k: the analytic partial `partial(q, k)` against the
+/// central difference of `f` in `q[k]`, the size (`size`) of their difference below `tol`;
+/// `what` names the partial in the message.
+fn assert_partials_match<T>(
+    what: &str,
+    partial: impl Fn(&[f64; 3], usize) -> T,
+    f: impl Fn(&[f64; 3]) -> T,
+    size: impl Fn(T) -> f64,
+    tol: f64,
+) where
+    T: Copy + std::fmt::Display + std::ops::Sub<Output = T> + std::ops::Div<f64, Output = T>,
+{
+    for q in grid() {
+        for k in 0..3 {
+            let fd = central_difference(q, k, &f);
+            let d = partial(&q, k);
+            assert!(size(fd - d) < tol, "{what}{} at {q:?}: {d} vs {fd}", k + 1);
+        }
+    }
+}
+
 #[test]
 fn mass_matrix_partials_match_finite_differences() {
     let links = seed_arm().links;
-    for q in grid() {
-        let d = links.mass_matrix_partials(&q);
-        for k in 0..3 {
-            let fd = central_difference(q, k, |q| links.mass_matrix(q));
-            assert!(
-                (fd - d[k]).amax() < 1e-7,
-                "dM/dq{} at {q:?}: {} vs {fd}",
-                k + 1,
-                d[k]
-            );
-        }
-    }
+    let partial = |q: &[f64; 3], k: usize| links.mass_matrix_partials(q)[k];
+    assert_partials_match(
+        "dM/dq",
+        partial,
+        |q| links.mass_matrix(q),
+        |e| e.amax(),
+        1e-7,
+    );
 }
 
 #[test]
@@ -148,18 +165,16 @@ fn coriolis_matches_the_closed_form_of_seed001() {
 fn gravity_is_the_gradient_of_the_potential_and_spares_joint_1() {
     let links = seed_arm().links;
     for q in grid() {
-        let g = links.gravity_torques_nm(&q);
-        assert_eq!(g[0], 0.0);
-        for k in 0..3 {
-            let fd = central_difference(q, k, |q| links.potential_energy_j(q));
-            assert!(
-                (fd - g[k]).abs() < 1e-6,
-                "G{} at {q:?}: {} vs {fd}",
-                k + 1,
-                g[k]
-            );
-        }
+        assert_eq!(links.gravity_torques_nm(&q)[0], 0.0);
     }
+    let partial = |q: &[f64; 3], k: usize| links.gravity_torques_nm(q)[k];
+    assert_partials_match(
+        "G",
+        partial,
+        |q| links.potential_energy_j(q),
+        f64::abs,
+        1e-6,
+    );
     // Link 2 horizontal, link 3 in line: the whole weight moment on joint 2.
     let g = links.gravity_torques_nm(&[0.0, 0.0, 0.0]);
     let expect = 9.80665 * (11.7805 * 0.555 + 4.8147 * 0.8099 + 4.8147 * 0.191);

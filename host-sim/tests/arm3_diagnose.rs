@@ -199,8 +199,7 @@ fn the_cli_diagnoses_an_arm_recording_and_refuses_a_check_recording() {
 #[test]
 #[ignore]
 fn every_arm_truth_on_every_joint_from_angles_and_pressures() {
-    let (joints, effects, n) = matrix(false);
-    assert!(joints * 10 >= n * 9, "{joints}/{n}");
+    let (effects, n) = matrix(false);
     assert!(effects * 10 >= n * 6, "{effects}/{n}");
 }
 
@@ -209,8 +208,7 @@ fn every_arm_truth_on_every_joint_from_angles_and_pressures() {
 #[test]
 #[ignore]
 fn every_arm_truth_on_every_joint_with_force_sensors() {
-    let (joints, effects, n) = matrix(true);
-    assert!(joints * 10 >= n * 9, "{joints}/{n}");
+    let (effects, n) = matrix(true);
     // Measured 28/36: with force channels a lagging sensor on joints 2 and 3 is left
     // unexplained in three of six cases (docs/arm3.md).
     assert!(effects * 4 >= n * 3, "{effects}/{n}");
@@ -250,8 +248,9 @@ fn residual_line(
     s
 }
 
-/// Runs the matrix; returns (cases with the right joint, with the right effect, cases).
-fn matrix(forces: bool) -> (usize, usize, usize) {
+/// Runs the matrix and checks that at least 9 cases of 10 name the right joint (with or without
+/// force channels); returns (cases with the right effect, cases).
+fn matrix(forces: bool) -> (usize, usize) {
     let registry = [
         "valve_delay",
         "sensor_lag",
@@ -329,7 +328,8 @@ fn matrix(forces: bool) -> (usize, usize, usize) {
     println!(
         "force channels: {forces}; joint right {joints_right}/{n}, effect right {effects_right}/{n}"
     );
-    (joints_right, effects_right, n)
+    assert!(joints_right * 10 >= n * 9, "joint right {joints_right}/{n}");
+    (effects_right, n)
 }
 
 /// The shared supply: a static line resistance (or a tank) on the arm's `[effects.supply_drop]`.

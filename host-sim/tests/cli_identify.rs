@@ -37,6 +37,28 @@ fn sweep(kind: &str, out: &Path, extra: &[&str]) -> String {
         .unwrap())
 }
 
+/// `text` (a CSV) with each line but the `#` comments rewritten by `row(its fields)`.
+fn map_rows(text: &str, row: impl Fn(&[&str]) -> String) -> String {
+    text.lines()
+        .map(|l| {
+            if l.starts_with('#') {
+                format!("{l}\n")
+            } else {
+                format!("{}\n", row(&l.split(',').collect::<Vec<_>>()))
+            }
+        })
+        .collect()
+}
+
+/// A temporary directory with the data of `host-sim sweep <kind> ... <extra>` in its file
+/// `name`: the directory, that file and the sweep's stdout.
+fn swept(kind: &str, name: &str, extra: &[&str]) -> (tempfile::TempDir, PathBuf, String) {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join(name);
+    let s = sweep(kind, &data, extra);
+    (dir, data, s)
+}
+
 /// `host-sim identify force --data <data> --out <out>`.
 fn identify_force(data: &Path, out: &Path) -> Output {
     host_sim(&[&"identify", &"force", &"--data", &data, &"--out", &out])
@@ -59,10 +81,8 @@ fn identify(kind: &str, recording: &Path, out: &Path, extra: &[&str]) -> Output 
 
 #[test]
 fn sweep_force_then_identify_force_reports_both_models_and_writes_the_firmware_toml() {
-    let dir = tempfile::tempdir().unwrap();
-    let data = dir.path().join("F.csv");
+    let (dir, data, s) = swept("force", "F.csv", &[]);
     let out = dir.path().join("force.toml");
-    let s = sweep("force", &data, &[]);
     assert!(s.contains("961 samples"), "{s}");
     let s = ok(&identify_force(&data, &out));
     println!("{s}");
@@ -92,10 +112,8 @@ fn sweep_force_then_identify_force_reports_both_models_and_writes_the_firmware_t
 
 #[test]
 fn identify_force_reports_the_hysteresis_gap_of_two_branches() {
-    let dir = tempfile::tempdir().unwrap();
-    let data = dir.path().join("F.csv");
+    let (dir, data, _) = swept("force", "F.csv", &["--hysteresis-gap-n", "40"]);
     let out = dir.path().join("force.toml");
-    sweep("force", &data, &["--hysteresis-gap-n", "40"]);
     let header = std::fs::read_to_string(&data)
         .unwrap()
         .lines()
@@ -165,10 +183,8 @@ fn bad_force_data_names_file_line_and_field_and_keeps_the_old_output() {
 
 #[test]
 fn sweep_torque_then_identify_torque_recovers_the_plant_torque_model() {
-    let dir = tempfile::tempdir().unwrap();
-    let rec = dir.path().join("R.csv");
+    let (dir, rec, s) = swept("torque", "R.csv", &[]);
     let out = dir.path().join("torque.toml");
-    let s = sweep("torque", &rec, &[]);
     println!("{s}");
     let s = ok(&identify(
         "torque",
@@ -204,22 +220,11 @@ fn sweep_torque_then_identify_torque_recovers_the_plant_torque_model() {
 
 #[test]
 fn identify_torque_without_tensions_uses_the_plant_force_model_and_needs_pressures() {
-    let dir = tempfile::tempdir().unwrap();
-    let full = dir.path().join("R.csv");
-    sweep("torque", &full, &["--speeds-rad-s", "0.5,2"]);
+    let (dir, full, _) = swept("torque", "R.csv", &["--speeds-rad-s", "0.5,2"]);
     // Drop the tension columns (the last two).
-    let body: String = std::fs::read_to_string(&full)
-        .unwrap()
-        .lines()
-        .map(|l| {
-            if l.starts_with('#') {
-                format!("{l}\n")
-            } else {
-                let f: Vec<&str> = l.split(',').collect();
-                format!("{}\n", f[..f.len() - 2].join(","))
-            }
-        })
-        .collect();
+    let body = map_rows(&std::fs::read_to_string(&full).unwrap(), |f| {
+        f[..f.len() - 2].join(",")
+    });
     let no_f = dir.path().join("no_f.csv");
     std::fs::write(&no_f, &body).unwrap();
     let out = dir.path().join("torque.toml");
@@ -230,18 +235,8 @@ fn identify_torque_without_tensions_uses_the_plant_force_model_and_needs_pressur
     // Without p1_kpa: an error naming the file, the header line and the field.
     let lines: Vec<&str> = body.lines().collect();
     let header_at = lines.iter().position(|l| !l.starts_with('#')).unwrap();
-    let no_p: String = lines
-        .iter()
-        .map(|l| {
-            if l.starts_with('#') {
-                format!("{l}\n")
-            } else {
-                let f: Vec<&str> = l.split(',').collect();
-                // t_s, 4 valves, angle_deg, p1_kpa, p2_kpa: drop p1_kpa.
-                format!("{},{}\n", f[..6].join(","), f[7])
-            }
-        })
-        .collect();
+    // t_s, 4 valves, angle_deg, p1_kpa, p2_kpa: drop p1_kpa.
+    let no_p = map_rows(&body, |f| format!("{},{}", f[..6].join(","), f[7]));
     let bad = dir.path().join("no_p.csv");
     std::fs::write(&bad, no_p).unwrap();
     std::fs::write(&out, PREVIOUS_OUTPUT).unwrap();

@@ -22,7 +22,7 @@ fn run_scenario(name: &str) -> host_sim::control::closed_loop::ClosedLoopRun {
         st.rms_rad,
         st.max_abs_rad,
         s.expect.settle_after_s,
-        r.first_injected_fault_tick,
+        r.first_injected_fault_tick(),
         r.first_latched_fault_tick,
         r.first_latched_fault_tick.map(|k| r.rows[k].out.fault),
         r.max_p_gauge_pa / 1e3,

@@ -251,10 +251,9 @@ fn bad_inputs_give_clear_errors() {
     }
 }
 
-/// The diagnosis of `rec` against the nominal file, default options, no check recording.
-/// TRAIN and CHECK of the nominal rig with one plant-file line changed (a key the diagnosis
-/// does not refit), at 2 ms.
-fn recordings_of_edited(from: &str, to: &str, seed: u64, noise: bool) -> (Recording, Recording) {
+/// The diagnosis, against the nominal file, of TRAIN and CHECK of the nominal rig with one
+/// plant-file line changed (a key the diagnosis does not refit), at 2 ms.
+fn diagnosis_of_edited(from: &str, to: &str, seed: u64, noise: bool) -> Diagnosis {
     let text = nominal_text();
     assert!(text.contains(from), "{from}");
     let cfg = plant_with(&text.replace(from, to), &[], 0.002).unwrap();
@@ -266,15 +265,15 @@ fn recordings_of_edited(from: &str, to: &str, seed: u64, noise: bool) -> (Record
         noise,
         channels: [true; 5],
     };
-    (
-        generate(&cfg, &spec(Excitation::Pulses, 8.0, seed), "edited").unwrap(),
-        generate(
-            &cfg,
-            &spec(Excitation::ChirpSteps, 6.0, seed + 1000),
-            "edited",
-        )
-        .unwrap(),
-    )
+    let train = generate(&cfg, &spec(Excitation::Pulses, 8.0, seed), "edited").unwrap();
+    let check_spec = spec(Excitation::ChirpSteps, 6.0, seed + 1000);
+    let check = generate(&cfg, &check_spec, "edited").unwrap();
+    diagnose_checked(&nominal(), &train, &check)
+}
+
+/// Asserts that one of the look-alike statements of `d` `says` what is expected.
+fn assert_lookalike(d: &Diagnosis, says: impl Fn(&str) -> bool) {
+    assert!(d.lookalikes.iter().any(|l| says(l)), "{:?}", d.lookalikes);
 }
 
 #[test]
@@ -283,13 +282,12 @@ fn a_wrong_key_outside_the_library_is_unexplained_not_explained_by_a_lookalike()
     // key describes it. The best the library finds raises the fits but leaves many times
     // the noise: it must not be called an explanation, with or without noise.
     for noise in [false, true] {
-        let (train, check) = recordings_of_edited(
+        let d = diagnosis_of_edited(
             "initial_contraction = 0.14 ",
             "initial_contraction = 0.182 ",
             4242,
             noise,
         );
-        let d = diagnose_checked(&nominal(), &train, &check);
         let answer = d.answer();
         assert_eq!(d.verdict, Verdict::Unexplained, "noise {noise}: {answer}");
         assert!(
@@ -314,8 +312,7 @@ fn a_key_off_beyond_its_search_range_is_named_at_its_bound() {
     // The muscle radius 40 % large, beyond the 0.7x..1.3x the diagnosis searches: the best
     // attempt puts the radius at the end of its range and still leaves many times the noise.
     // The answer is unexplained, and it says the radius ended at its bound.
-    let (train, check) = recordings_of_edited("radius_m = 0.01 ", "radius_m = 0.014 ", 4244, false);
-    let d = diagnose_checked(&nominal(), &train, &check);
+    let d = diagnosis_of_edited("radius_m = 0.01 ", "radius_m = 0.014 ", 4244, false);
     let answer = d.answer();
     assert_eq!(d.verdict, Verdict::Unexplained, "{answer}");
     let hit = d
@@ -337,13 +334,12 @@ fn a_key_off_beyond_its_search_range_is_named_at_its_bound() {
 fn a_wrong_sprocket_radius_is_explained_by_its_exact_lookalike_and_said_so() {
     // A sprocket radius 30 % large is, to the model, exactly an angle gain of 1/1.3 with
     // the inertia scaled: the answer fits to the noise, and the look-alike is stated.
-    let (train, check) = recordings_of_edited(
+    let d = diagnosis_of_edited(
         "sprocket_radius_m = 0.025 ",
         "sprocket_radius_m = 0.0325 ",
         4243,
         true,
     );
-    let d = diagnose_checked(&nominal(), &train, &check);
     assert_eq!(d.verdict, Verdict::Explained, "{}", d.answer());
     assert!(
         named(&d).contains(&"sensor_gain".to_string()),
@@ -355,13 +351,7 @@ fn a_wrong_sprocket_radius_is_explained_by_its_exact_lookalike_and_said_so() {
         "{:?}",
         d.residual_x_noise
     );
-    assert!(
-        d.lookalikes
-            .iter()
-            .any(|l| l.contains("joint.sprocket_radius_m")),
-        "{:?}",
-        d.lookalikes
-    );
+    assert_lookalike(&d, |l| l.contains("joint.sprocket_radius_m"));
 }
 
 fn diagnose_default(rec: &Recording) -> Diagnosis {
@@ -435,13 +425,9 @@ fn independent_thermal_fixture_is_the_chamber_thermodynamics() {
         d.fit_before
     );
     // The look-alike (a constant polytropic exponent) is named, with what each removes.
-    assert!(
-        d.lookalikes
-            .iter()
-            .any(|l| l.starts_with("Chamber thermodynamics vs a constant polytropic exponent")),
-        "{:?}",
-        d.lookalikes
-    );
+    assert_lookalike(&d, |l| {
+        l.starts_with("Chamber thermodynamics vs a constant polytropic exponent")
+    });
 }
 
 #[test]
@@ -616,12 +602,14 @@ fn streamed_replay_costs_match_held_replays() {
     let nominal = nominal();
     let (train, _) = recordings(&["leakage"], 11, 1e-3, [true, true, true, true, true]);
     let n = train.len();
-    let present = [true; 5];
     let scale = [2.0, 50.0, 60.0, 40.0, 45.0];
     let opts = DiagnoseOptions::default().solver;
-    let held = Problem::new(&nominal, &train, present, scale, opts).unwrap();
-    let (streamed, nominal_meas) =
-        Problem::with_nominal(&nominal, &train, present, scale, opts, n / 4).unwrap();
+    let held = Problem::new(&nominal, &train, scale, opts).unwrap();
+    let mut nominal_meas = Vec::new();
+    let streamed = Problem::with_nominal_each(&nominal, &train, scale, opts, n / 4, |_, m| {
+        nominal_meas.push(*m)
+    })
+    .unwrap();
     assert!(streamed.replay_heads && streamed.base_states.len() == n / 4);
     assert_eq!(nominal_meas, held.predict(&[]).unwrap());
     let pool = candidate_pool(&nominal);

@@ -316,8 +316,7 @@ fn every_effect_is_kept_by_the_diagnosis_and_its_candidates() {
     for c in Channel::ALL {
         rec.set_channel(c, meas.iter().map(|m| c.of(m)).collect());
     }
-    let present = [true; 5];
-    let problem0 = Problem::new(&nominal_cfg, &rec, present, [1.0; 5], OPTS).unwrap();
+    let problem0 = Problem::new(&nominal_cfg, &rec, [1.0; 5], OPTS).unwrap();
     let cands = catalogue();
     let parts = |p: &Problem| -> Vec<Vec<Measurement>> {
         let mut out = vec![p.predict(&[]).unwrap()];
@@ -349,7 +348,7 @@ fn every_effect_is_kept_by_the_diagnosis_and_its_candidates() {
     let mut failures = Vec::new();
     for (name, toml) in EFFECTS {
         let cfg = config_with(toml);
-        let problem = Problem::new(&cfg, &rec, present, [1.0; 5], OPTS).unwrap();
+        let problem = Problem::new(&cfg, &rec, [1.0; 5], OPTS).unwrap();
         let with = parts(&problem);
         for (i, (a, b)) in with.iter().zip(&base).enumerate() {
             let what = if i == 0 {

@@ -217,8 +217,6 @@ pub struct ClosedLoopRun {
     pub dt_s: f64,
     /// One row per tick.
     pub rows: Vec<TickRow>,
-    /// Tick of the first injected fault (sensor, valve or supply), if any.
-    pub first_injected_fault_tick: Option<usize>,
     /// Tick at which each injected fault started, in time order.
     pub injected_fault_ticks: Vec<usize>,
     /// Ticks at which the MCU was reset (scenario `firmware_reset` events).
@@ -660,7 +658,6 @@ pub fn run_with_firmware(
         name: scenario.scenario.name.clone(),
         dt_s,
         rows,
-        first_injected_fault_tick: injected.first().copied(),
         injected_fault_ticks: injected,
         reset_ticks: resets,
         first_latched_fault_tick: first_latched,
@@ -748,6 +745,11 @@ fn fallback_tick(
 }
 
 impl ClosedLoopRun {
+    /// Tick of the first injected fault (sensor, valve or supply), if any.
+    pub fn first_injected_fault_tick(&self) -> Option<usize> {
+        self.injected_fault_ticks.first().copied()
+    }
+
     /// Ticks from the injection of the latched fault's cause to the latch: from the latest
     /// injection at or before the first latched tick. `None` without a latch or when the
     /// latch came before any injection.

@@ -100,37 +100,46 @@ pub struct DpPidToml {
     pub suite_mse_at_margin_rad2: f64,
 }
 
+/// The gains [`DpPidToml`] shares with the firmware's [`DpPidGains`] (f64 in the file, f32
+/// on the MCU): the conversions both ways, from one list of the fields.
+macro_rules! dp_pid_gain_fields {
+    ($($field:ident),* $(,)?) => {
+        impl DpPidToml {
+            /// The firmware's gains.
+            pub fn gains(&self) -> DpPidGains {
+                DpPidGains {
+                    $($field: self.$field as f32,)*
+                }
+            }
+
+            /// From firmware gains and the measured suite MSEs (nominal, at the gain margin).
+            pub fn from_gains(
+                g: &DpPidGains,
+                suite_mse_rad2: f64,
+                suite_mse_at_margin_rad2: f64,
+            ) -> Self {
+                DpPidToml {
+                    $($field: g.$field as f64,)*
+                    suite_mse_rad2,
+                    suite_mse_at_margin_rad2,
+                }
+            }
+        }
+    };
+}
+
+dp_pid_gain_fields!(
+    kp_pa_per_rad,
+    ki_pa_per_rad_s,
+    kd_pa_s_per_rad,
+    setpoint_rate_weight,
+    setpoint_rate_cutoff_hz,
+    i_limit_pa,
+    dp_max_pa,
+    p0_gauge_pa,
+);
+
 impl DpPidToml {
-    /// The firmware's gains.
-    pub fn gains(&self) -> DpPidGains {
-        DpPidGains {
-            kp_pa_per_rad: self.kp_pa_per_rad as f32,
-            ki_pa_per_rad_s: self.ki_pa_per_rad_s as f32,
-            kd_pa_s_per_rad: self.kd_pa_s_per_rad as f32,
-            setpoint_rate_weight: self.setpoint_rate_weight as f32,
-            setpoint_rate_cutoff_hz: self.setpoint_rate_cutoff_hz as f32,
-            i_limit_pa: self.i_limit_pa as f32,
-            dp_max_pa: self.dp_max_pa as f32,
-            p0_gauge_pa: self.p0_gauge_pa as f32,
-        }
-    }
-
-    /// From firmware gains and the measured suite MSEs (nominal, at the gain margin).
-    pub fn from_gains(g: &DpPidGains, suite_mse_rad2: f64, suite_mse_at_margin_rad2: f64) -> Self {
-        DpPidToml {
-            kp_pa_per_rad: g.kp_pa_per_rad as f64,
-            ki_pa_per_rad_s: g.ki_pa_per_rad_s as f64,
-            kd_pa_s_per_rad: g.kd_pa_s_per_rad as f64,
-            setpoint_rate_weight: g.setpoint_rate_weight as f64,
-            setpoint_rate_cutoff_hz: g.setpoint_rate_cutoff_hz as f64,
-            i_limit_pa: g.i_limit_pa as f64,
-            dp_max_pa: g.dp_max_pa as f64,
-            p0_gauge_pa: g.p0_gauge_pa as f64,
-            suite_mse_rad2,
-            suite_mse_at_margin_rad2,
-        }
-    }
-
     fn validate(&self, table: &str, text: &str, file: &str) -> Result<(), IdentError> {
         let fields = [
             ("kp_pa_per_rad", self.kp_pa_per_rad, f64::INFINITY),
@@ -141,14 +150,9 @@ impl DpPidToml {
             ("i_limit_pa", self.i_limit_pa, 1e6),
             ("dp_max_pa", self.dp_max_pa, 6e5),
             ("p0_gauge_pa", self.p0_gauge_pa, 6e5),
-            ("suite_mse_rad2", self.suite_mse_rad2, f64::INFINITY),
-            (
-                "suite_mse_at_margin_rad2",
-                self.suite_mse_at_margin_rad2,
-                f64::INFINITY,
-            ),
         ];
-        check_fields(&fields, table, text, file)
+        let suite_mse_rad2 = [self.suite_mse_rad2, self.suite_mse_at_margin_rad2];
+        check_fields(&fields, suite_mse_rad2, table, text, file)
     }
 }
 
@@ -228,24 +232,27 @@ impl CascadeToml {
                 1e3,
             ),
             ("setpoint_rate_cutoff_hz", self.setpoint_rate_cutoff_hz, 1e4),
-            ("suite_mse_rad2", self.suite_mse_rad2, f64::INFINITY),
-            (
-                "suite_mse_at_margin_rad2",
-                self.suite_mse_at_margin_rad2,
-                f64::INFINITY,
-            ),
         ];
-        check_fields(&fields, table, text, file)
+        let suite_mse_rad2 = [self.suite_mse_rad2, self.suite_mse_at_margin_rad2];
+        check_fields(&fields, suite_mse_rad2, table, text, file)
     }
 }
 
+/// Checks each `(key, value, max)` of `fields` of `[table]` and the two suite MSEs every tuned
+/// law ends with (`suite_mse_rad2`, `suite_mse_at_margin_rad2`): finite, in 0..=max and
+/// finite in f32; the error names the key's line in `text`.
 fn check_fields(
     fields: &[(&str, f64, f64)],
+    suite_mse_rad2: [f64; 2],
     table: &str,
     text: &str,
     file: &str,
 ) -> Result<(), IdentError> {
-    for &(key, v, max) in fields {
+    let suite = [
+        ("suite_mse_rad2", suite_mse_rad2[0], f64::INFINITY),
+        ("suite_mse_at_margin_rad2", suite_mse_rad2[1], f64::INFINITY),
+    ];
+    for &(key, v, max) in fields.iter().chain(&suite) {
         if !(v.is_finite() && v >= 0.0 && v <= max && (v as f32).is_finite()) {
             let line = crate::validate::toml_key_line(text, table, 0, key).unwrap_or(0);
             return Err(IdentError::at(

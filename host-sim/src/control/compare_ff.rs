@@ -98,6 +98,9 @@ pub const REQUIRED_RATIO: f64 = 1.85;
 
 /// Arguments of `host-sim compare-control`.
 #[derive(clap::Args, Debug)]
+#[command(
+    after_help = "Example:\n  host-sim compare-control --plant ../shared/plant/reference-1dof.toml"
+)]
 pub struct CompareControlArgs {
     /// Plant parameter file (TOML): the nominal plant; the effect variants are added to it.
     #[arg(long, value_name = "P.toml")]
@@ -105,27 +108,8 @@ pub struct CompareControlArgs {
     /// Tuned gains [default: config/control_tuned.toml].
     #[arg(long, value_name = "CONTROL_TUNED.toml")]
     pub gains: Option<PathBuf>,
-    /// Scale of the feed-forward duty (0..=2) [default: config/pressure_ff.toml gain].
-    #[arg(long, value_name = "G")]
-    pub ff_gain: Option<f32>,
-    /// Cut-off of the set-point rate filter [Hz] (1..=500) [default: config/pressure_ff.toml].
-    #[arg(long, value_name = "HZ")]
-    pub ff_cutoff_hz: Option<f32>,
-    /// Where the feed-forward takes its desired pressure rate P' and volume rate V' from:
-    /// `reference` (the set-point trajectory through the inverse torque model) or
-    /// `set-point` (the torque loop's pressure set-point and the measured velocity)
-    /// [default: config/pressure_ff.toml rate_from_reference].
-    #[arg(long, value_name = "SOURCE", value_parser = ["reference", "set-point"])]
-    pub ff_rate_from: Option<String>,
-    /// Where the feed-forward takes the volume rate V' from: `reference` (the set-point's
-    /// rate) or `measured` (the velocity estimate) [default: config/pressure_ff.toml
-    /// volume_rate_from_reference].
-    #[arg(long, value_name = "SOURCE", value_parser = ["reference", "measured"])]
-    pub ff_volume_rate_from: Option<String>,
-    /// Feed-forward duties of a smaller magnitude are dropped (0..=1) [default:
-    /// config/pressure_ff.toml min_duty].
-    #[arg(long, value_name = "D")]
-    pub ff_min_duty: Option<f32>,
+    #[command(flatten)]
+    pub ff: FfOverrides,
     /// Only the nominal plant and the suite's first scenario of each set (the CI run).
     #[arg(long)]
     pub quick: bool,
@@ -138,6 +122,65 @@ pub struct CompareControlArgs {
     /// only: those change the cascade).
     #[arg(long)]
     pub breakdown: bool,
+}
+
+/// The `--ff-*` options of `host-sim compare-control`: values that replace those of
+/// config/pressure_ff.toml.
+#[derive(clap::Args, Debug)]
+pub struct FfOverrides {
+    /// Scale of the feed-forward duty (0..=2) [default: config/pressure_ff.toml gain].
+    #[arg(long = "ff-gain", value_name = "G")]
+    pub gain: Option<f32>,
+    /// Cut-off of the set-point rate filter [Hz] (1..=500) [default: config/pressure_ff.toml].
+    #[arg(long = "ff-cutoff-hz", value_name = "HZ")]
+    pub cutoff_hz: Option<f32>,
+    /// Where the feed-forward takes its desired pressure rate P' and volume rate V' from:
+    /// `reference` (the set-point trajectory through the inverse torque model) or
+    /// `set-point` (the torque loop's pressure set-point and the measured velocity)
+    /// [default: config/pressure_ff.toml rate_from_reference].
+    #[arg(long = "ff-rate-from", value_name = "SOURCE", value_parser = ["reference", "set-point"])]
+    pub rate_from: Option<String>,
+    /// Where the feed-forward takes the volume rate V' from: `reference` (the set-point's
+    /// rate) or `measured` (the velocity estimate) [default: config/pressure_ff.toml
+    /// volume_rate_from_reference].
+    #[arg(long = "ff-volume-rate-from", value_name = "SOURCE", value_parser = ["reference", "measured"])]
+    pub volume_rate_from: Option<String>,
+    /// Feed-forward duties of a smaller magnitude are dropped (0..=1) [default:
+    /// config/pressure_ff.toml min_duty].
+    #[arg(long = "ff-min-duty", value_name = "D")]
+    pub min_duty: Option<f32>,
+}
+
+impl FfOverrides {
+    /// Replaces the given values in `ff`; a value outside its range is an error naming the
+    /// option.
+    pub fn apply(&self, ff: &mut PressureFfParams) -> anyhow::Result<()> {
+        let checked = |option: &str, v: f32, range: std::ops::RangeInclusive<f32>| {
+            anyhow::ensure!(
+                range.contains(&v),
+                "{option} {v}: outside the allowed range {}..={}",
+                range.start(),
+                range.end()
+            );
+            Ok(v)
+        };
+        if let Some(g) = self.gain {
+            ff.gain = checked("--ff-gain", g, 0.0..=2.0)?;
+        }
+        if let Some(f) = self.cutoff_hz {
+            ff.rate_cutoff_hz = checked("--ff-cutoff-hz", f, 1.0..=500.0)?;
+        }
+        if let Some(d) = self.min_duty {
+            ff.min_duty = checked("--ff-min-duty", d, 0.0..=1.0)?;
+        }
+        if let Some(src) = &self.rate_from {
+            ff.rate_from_reference = src == "reference";
+        }
+        if let Some(src) = &self.volume_rate_from {
+            ff.volume_rate_from_reference = src == "reference";
+        }
+        Ok(())
+    }
 }
 
 /// The effect variants of the plant: name and the TOML table added to the plant file.
@@ -304,21 +347,41 @@ pub struct Breakdown {
     /// set-point moved within the last [`MOVE_WINDOW_TICKS`] ticks.
     pub position_mse_rad2: f64,
     pub moving_share: f64,
-    /// RMS of the pressure error (set-point minus measured) averaged over one PWM period
-    /// (the part that moves the joint) and of the rest (the ripple), moving / at rest [Pa],
-    /// from the first set-point change on (as every pressure figure below).
-    pub slow_rms_pa: [f64; 2],
-    pub ripple_rms_pa: [f64; 2],
-    /// The slow activation error `((e2 - e1) / 2)` as a joint torque through the torque
-    /// model's gain `B r`, RMS moving / at rest [N m].
-    pub torque_rms_nm: [f64; 2],
-    /// Least-squares lag `tau` of the slow pressure error against the set-point's rate
-    /// (`e ~ tau P'`) [s], and the share of the slow error's energy it explains.
-    pub lag_s: f64,
-    pub lag_explained: f64,
+    /// The pressure error while moving (index 0) and at rest (1), from the first set-point
+    /// change on (as every pressure figure below).
+    pub pressure: [PressureErrorRms; 2],
+    /// Least-squares lag `tau` of the slow pressure error against the set-point's rate.
+    pub lag: PressureLag,
     /// Shares of the muscle-ticks inside the deadband and with the valve saturated (|u| = 1).
-    pub deadband_share: f64,
-    pub saturated_share: f64,
+    pub valves: ValveShares,
+}
+
+/// RMS of the pressure error (set-point minus measured) of one regime of [`Breakdown`].
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PressureErrorRms {
+    /// Averaged over one PWM period (the part that moves the joint) [Pa].
+    pub slow_pa: f64,
+    /// The rest (the ripple) [Pa].
+    pub ripple_pa: f64,
+    /// The slow activation error `((e2 - e1) / 2)` as a joint torque through the torque
+    /// model's gain `B r` [N m].
+    pub torque_nm: f64,
+}
+
+/// `e ~ tau P'` fitted to the slow pressure error `e` and the set-point's rate `P'`.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PressureLag {
+    /// `tau` [s].
+    pub tau_s: f64,
+    /// Share of the slow error's energy it explains.
+    pub explained: f64,
+}
+
+/// Shares of the muscle-ticks in each valve state.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ValveShares {
+    pub deadband: f64,
+    pub saturated: f64,
 }
 
 /// Ticks after a set-point change counted as "moving" in [`Breakdown`].
@@ -413,17 +476,23 @@ pub fn breakdown(
             (x / c as f64).sqrt()
         }
     };
-    let lag_s = if pp > 0.0 { ep / pp } else { f64::NAN };
+    let tau_s = if pp > 0.0 { ep / pp } else { f64::NAN };
     Ok(Breakdown {
         position_mse_rad2: sq / n.max(1) as f64,
         moving_share: sq_moving / sq.max(f64::MIN_POSITIVE),
-        slow_rms_pa: [rms(slow[0], cnt[0]), rms(slow[1], cnt[1])],
-        ripple_rms_pa: [rms(ripple[0], cnt[0]), rms(ripple[1], cnt[1])],
-        torque_rms_nm: [rms(2.0 * torque[0], cnt[0]), rms(2.0 * torque[1], cnt[1])],
-        lag_s,
-        lag_explained: if ee > 0.0 { lag_s * ep / ee } else { f64::NAN },
-        deadband_share: dead as f64 / m.max(1) as f64,
-        saturated_share: sat as f64 / m.max(1) as f64,
+        pressure: std::array::from_fn(|j| PressureErrorRms {
+            slow_pa: rms(slow[j], cnt[j]),
+            ripple_pa: rms(ripple[j], cnt[j]),
+            torque_nm: rms(2.0 * torque[j], cnt[j]),
+        }),
+        lag: PressureLag {
+            tau_s,
+            explained: if ee > 0.0 { tau_s * ep / ee } else { f64::NAN },
+        },
+        valves: ValveShares {
+            deadband: dead as f64 / m.max(1) as f64,
+            saturated: sat as f64 / m.max(1) as f64,
+        },
     })
 }
 
@@ -470,16 +539,16 @@ fn breakdown_report(
                 "| {name} | {set_name} | {:.3e} | {:.0} % | {:.1} / {:.1} | {:.1} / {:.1} | {:.3} / {:.3} | {:.1} ({:.0} %) | {:.0} % | {:.1} % |",
                 b.position_mse_rad2,
                 100.0 * b.moving_share,
-                b.slow_rms_pa[0] / 1e3,
-                b.slow_rms_pa[1] / 1e3,
-                b.ripple_rms_pa[0] / 1e3,
-                b.ripple_rms_pa[1] / 1e3,
-                b.torque_rms_nm[0],
-                b.torque_rms_nm[1],
-                b.lag_s * 1e3,
-                100.0 * b.lag_explained,
-                100.0 * b.deadband_share,
-                100.0 * b.saturated_share,
+                b.pressure[0].slow_pa / 1e3,
+                b.pressure[1].slow_pa / 1e3,
+                b.pressure[0].ripple_pa / 1e3,
+                b.pressure[1].ripple_pa / 1e3,
+                b.pressure[0].torque_nm,
+                b.pressure[1].torque_nm,
+                b.lag.tau_s * 1e3,
+                100.0 * b.lag.explained,
+                100.0 * b.valves.deadband,
+                100.0 * b.valves.saturated,
             )?;
         }
     }
@@ -494,33 +563,7 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
     let gains = a.gains.clone().unwrap_or_else(control_tuned_path);
     let tuning = ControlTuning::load(&gains)?;
     let mut base = tuning.cascade.config(1000.0);
-    if let Some(g) = a.ff_gain {
-        anyhow::ensure!(
-            (0.0..=2.0).contains(&g),
-            "--ff-gain {g}: outside the allowed range 0..=2"
-        );
-        base.pressure_ff.gain = g;
-    }
-    if let Some(f) = a.ff_cutoff_hz {
-        anyhow::ensure!(
-            (1.0..=500.0).contains(&f),
-            "--ff-cutoff-hz {f}: outside the allowed range 1..=500"
-        );
-        base.pressure_ff.rate_cutoff_hz = f;
-    }
-    if let Some(d) = a.ff_min_duty {
-        anyhow::ensure!(
-            (0.0..=1.0).contains(&d),
-            "--ff-min-duty {d}: outside the allowed range 0..=1"
-        );
-        base.pressure_ff.min_duty = d;
-    }
-    if let Some(src) = &a.ff_rate_from {
-        base.pressure_ff.rate_from_reference = src == "reference";
-    }
-    if let Some(src) = &a.ff_volume_rate_from {
-        base.pressure_ff.volume_rate_from_reference = src == "reference";
-    }
+    a.ff.apply(&mut base.pressure_ff)?;
     let mut suite = suite_scenarios()?;
     let mut held_out = jump_suite_scenarios()?;
     let mut variants: Vec<(&str, String)> = VARIANTS

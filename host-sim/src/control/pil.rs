@@ -393,6 +393,9 @@ pub fn first_difference(
 
 /// Arguments of `host-sim pil`.
 #[derive(clap::Args, Debug)]
+#[command(
+    after_help = "Example (build the image first):\n  cargo build -p pam-firmware --bin pil --features pam-firmware/firmware --release --target thumbv7em-none-eabihf\n  host-sim pil --plant ../shared/plant/reference-1dof.toml --scenario scenarios/step.toml --out pil.csv --log pil.stream"
+)]
 pub struct PilArgs {
     /// Plant parameter file (TOML).
     #[arg(long, value_name = "P.toml")]

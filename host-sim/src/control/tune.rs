@@ -77,6 +77,9 @@ inertia: no fault, |error| < 0.5 rad, and a run that ends in a hold comes to res
 
 /// `host-sim tune`.
 #[derive(Args, Debug)]
+#[command(
+    after_help = "Example:\n  host-sim tune --plant ../shared/plant/reference-1dof.toml --out control_tuned.toml"
+)]
 pub struct TuneArgs {
     /// Plant file the gains are tuned on.
     #[arg(long, value_name = "P.toml")]

@@ -144,29 +144,23 @@ impl BatchRow {
 /// worst_fit_after_pct,wall_s`; `effects` joins the named effects and `recalibrate KEY` with
 /// `+`).
 pub fn summary_csv(rows: &[BatchRow]) -> String {
-    let mut s = String::from(
-        "recording,samples,verdict,effects,worst_fit_before_pct,worst_fit_after_pct,wall_s\n",
-    );
-    for r in rows {
-        let name = r.name();
-        match &r.result {
-            Ok(d) => s.push_str(&format!(
-                "{name},{},{},{},{:.2},{:.2},{:.2}\n",
-                r.samples,
-                d.verdict,
-                d.effects.join("+").replace(',', ";"),
-                d.worst_fit_before_pct,
-                d.worst_fit_after_pct,
-                d.wall_s
-            )),
-            Err(e) => s.push_str(&format!(
-                "{name},{},\"error: {}\",,,,\n",
-                r.samples,
-                e.replace('"', "'").replace('\n', " ")
-            )),
-        }
-    }
-    s
+    let head =
+        "recording,samples,verdict,effects,worst_fit_before_pct,worst_fit_after_pct,wall_s\n";
+    head.to_string()
+        + &summary_lines(
+            rows,
+            |name, samples, d| {
+                let effects = d.effects.join("+").replace(',', ";");
+                format!(
+                    "{name},{samples},{},{effects},{:.2},{:.2},{:.2}\n",
+                    d.verdict, d.worst_fit_before_pct, d.worst_fit_after_pct, d.wall_s
+                )
+            },
+            |name, samples, e| {
+                let e = e.replace('"', "'").replace('\n', " ");
+                format!("{name},{samples},\"error: {e}\",,,,\n")
+            },
+        )
 }
 
 /// The summary as an aligned table for the terminal.
@@ -177,36 +171,47 @@ pub fn summary_table(rows: &[BatchRow]) -> String {
         .max()
         .unwrap_or(9)
         .max(9);
-    let mut s = format!(
+    let head = format!(
         "{:<w$}  {:>8}  {:<14}  {:>12}  {:>11}  effects\n",
         "recording", "samples", "verdict", "worst fit %", "after %"
     );
-    for r in rows {
-        let name = r.name();
-        match &r.result {
-            Ok(d) => s.push_str(&format!(
-                "{name:<w$}  {:>8}  {:<14}  {:>12.2}  {:>11.2}  {}\n",
-                r.samples,
-                d.verdict,
-                d.worst_fit_before_pct,
-                d.worst_fit_after_pct,
-                if d.effects.is_empty() {
-                    "-".to_string()
-                } else {
-                    d.effects.join(", ")
-                }
-            )),
-            Err(e) => s.push_str(&format!(
-                "{name:<w$}  {:>8}  error           {e}\n",
-                r.samples
-            )),
-        }
-    }
-    s
+    head + &summary_lines(
+        rows,
+        |name, samples, d| {
+            let effects = if d.effects.is_empty() {
+                "-".to_string()
+            } else {
+                d.effects.join(", ")
+            };
+            format!(
+                "{name:<w$}  {samples:>8}  {:<14}  {:>12.2}  {:>11.2}  {effects}\n",
+                d.verdict, d.worst_fit_before_pct, d.worst_fit_after_pct
+            )
+        },
+        |name, samples, e| format!("{name:<w$}  {samples:>8}  error           {e}\n"),
+    )
+}
+
+/// One line per row of a summary: `ok(file name, samples, diagnosis)` for a diagnosed
+/// recording, `failed(file name, samples, error)` for one that failed.
+fn summary_lines(
+    rows: &[BatchRow],
+    ok: impl Fn(&str, usize, &BatchDiagnosis) -> String,
+    failed: impl Fn(&str, usize, &str) -> String,
+) -> String {
+    rows.iter()
+        .map(|r| match &r.result {
+            Ok(d) => ok(&r.name(), r.samples, d),
+            Err(e) => failed(&r.name(), r.samples, e),
+        })
+        .collect()
 }
 
 /// `host-sim diagnose-batch`: the arguments.
 #[derive(clap::Args, Debug)]
+#[command(
+    after_help = "Example:\n  host-sim diagnose-batch --plant ../shared/plant/reference-1dof.toml --recordings ../shared/conformance --out-dir diagnoses/"
+)]
 pub struct BatchArgs {
     /// Nominal plant file (TOML) the user believes in.
     #[arg(long, value_name = "P.toml")]

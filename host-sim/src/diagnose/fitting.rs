@@ -9,7 +9,7 @@
 use crate::io::recording::{Channel, Recording};
 use crate::plant::config::PlantConfig;
 use crate::plant::{Measurement, Plant, PlantState, ValveInputs};
-use crate::sim::{simulate, simulate_each, SensorPath, SolverOptions};
+use crate::sim::{simulate_each, SensorPath, SolverOptions};
 
 use super::candidates::{Candidate, Setup};
 use crate::identify::output_error::{self, Differences, OeOptions, OeParam};
@@ -34,7 +34,7 @@ pub struct Problem<'a> {
     pub scale: [f64; 5],
     /// States of the nominal simulation (reused when only sensor effects change): of every
     /// sample, or of the head a fit replays ([`Self::replay_heads`], built by
-    /// [`Self::with_nominal`]); longer replays of sensor effects replay the nominal plant.
+    /// [`Self::with_nominal_each`]); longer replays of sensor effects replay the nominal plant.
     pub base_states: Vec<PlantState>,
     pub opts: SolverOptions,
     /// Fits over a head of the recording replay only that head (set for recordings longer
@@ -44,105 +44,55 @@ pub struct Problem<'a> {
 }
 
 impl<'a> Problem<'a> {
+    /// The problem over `rec` (its present channels fitted, each divided by `scale`), with
+    /// the nominal replay's states of every sample.
     pub fn new(
         nominal: &'a PlantConfig,
         rec: &'a Recording,
-        present: [bool; 5],
         scale: [f64; 5],
         opts: SolverOptions,
     ) -> Result<Self, crate::sim::SimError> {
-        let dt = rec.sample_period_s();
-        let plant = Plant::from_config(nominal);
-        let base = simulate(&plant, &rec.inputs, dt, &opts)?;
-        Ok(Self::with_states(
-            nominal,
-            rec,
-            present,
-            scale,
-            opts,
-            base.states,
-            false,
-        ))
+        Self::with_nominal_each(nominal, rec, scale, opts, usize::MAX, |_, _| {})
     }
 
-    /// The problem over `rec` with the nominal replay's states `base_states` (all of them,
-    /// or the head's when `replay_heads`).
-    fn with_states(
+    /// [`Self::new`] for a recording whose fits replay only its first `head` samples
+    /// ([`Self::replay_heads`] set when `head` is shorter than it): the nominal replay keeps
+    /// the states of the head alone and hands the nominal channels of every sample to
+    /// `f(k, channels)` in order as it runs (the same integrator calls and sensor path as
+    /// `Plant::measure_series` on the full replay, so the same values to the bit).
+    pub fn with_nominal_each(
         nominal: &'a PlantConfig,
         rec: &'a Recording,
-        present: [bool; 5],
         scale: [f64; 5],
         opts: SolverOptions,
-        base_states: Vec<PlantState>,
-        replay_heads: bool,
-    ) -> Self {
-        Self {
+        head: usize,
+        mut f: impl FnMut(usize, &Measurement),
+    ) -> Result<Self, crate::sim::SimError> {
+        let dt_s = rec.sample_period_s();
+        let plant = Plant::from_config(nominal);
+        let n = rec.inputs.len();
+        let keep = head.min(n);
+        let mut base_states = Vec::with_capacity(keep);
+        crate::sim::measure_each(&plant, &rec.inputs, dt_s, &opts, |k, x, m| {
+            if base_states.len() < keep {
+                base_states.push(*x);
+            }
+            f(k, m);
+        })?;
+        Ok(Self {
             nominal,
             recording: rec,
             setup: Setup {
-                dt_s: rec.sample_period_s(),
-                present,
+                dt_s,
+                present: std::array::from_fn(|i| rec.outputs[i].is_some()),
             },
             inputs: &rec.inputs,
             measured: std::array::from_fn(|i| rec.outputs[i].as_deref()),
             scale,
             base_states,
             opts,
-            replay_heads,
-        }
-    }
-
-    /// [`Self::new`] for a recording whose fits replay only its first `head` samples
-    /// ([`Self::replay_heads`] set when `head` is shorter than it): the nominal replay keeps
-    /// the states of the head alone and returns the nominal channels of every sample (the
-    /// same integrator calls and sensor path as [`Self::new`] + `Plant::measure_series`, so
-    /// the same values to the bit).
-    pub fn with_nominal(
-        nominal: &'a PlantConfig,
-        rec: &'a Recording,
-        present: [bool; 5],
-        scale: [f64; 5],
-        opts: SolverOptions,
-        head: usize,
-    ) -> Result<(Self, Vec<Measurement>), crate::sim::SimError> {
-        let mut meas = Vec::with_capacity(rec.inputs.len());
-        let problem = Self::with_nominal_each(nominal, rec, present, scale, opts, head, |_, m| {
-            meas.push(*m)
-        })?;
-        Ok((problem, meas))
-    }
-
-    /// [`Self::with_nominal`] holding no nominal series: the channels of every sample are
-    /// handed to `f(k, channels)` in order as the replay runs.
-    pub fn with_nominal_each(
-        nominal: &'a PlantConfig,
-        rec: &'a Recording,
-        present: [bool; 5],
-        scale: [f64; 5],
-        opts: SolverOptions,
-        head: usize,
-        mut f: impl FnMut(usize, &Measurement),
-    ) -> Result<Self, crate::sim::SimError> {
-        let dt = rec.sample_period_s();
-        let plant = Plant::from_config(nominal);
-        let n = rec.inputs.len();
-        let keep = head.min(n);
-        let mut states = Vec::with_capacity(keep);
-        crate::sim::measure_each(&plant, &rec.inputs, dt, &opts, |k, x, m| {
-            if states.len() < keep {
-                states.push(*x);
-            }
-            f(k, m);
-        })?;
-        Ok(Self::with_states(
-            nominal,
-            rec,
-            present,
-            scale,
-            opts,
-            states,
-            keep < n,
-        ))
+            replay_heads: keep < n,
+        })
     }
 
     /// The plant configuration with `parts` switched on.

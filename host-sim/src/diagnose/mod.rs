@@ -535,15 +535,10 @@ pub fn gather_evidence<'a>(
     // (`replay_heads`), so the nominal states and channels are kept for that head alone;
     // the rest of the nominal replay is summed as it runs.
     let mut nom = NominalReplay::new(train, fit_budget_n, n_fit..n);
-    let problem = Problem::with_nominal_each(
-        nominal,
-        train,
-        present,
-        spread,
-        opts.solver,
-        fit_budget_n,
-        |k, m| nom.push(train, &spread, k, m),
-    )?;
+    let problem =
+        Problem::with_nominal_each(nominal, train, spread, opts.solver, fit_budget_n, |k, m| {
+            nom.push(train, &spread, k, m)
+        })?;
     // The equation-error evidence and the error windows of that head too (a recording
     // within the budget: all of it), so their memory does not grow with the recording.
     let head_rec;

@@ -32,6 +32,9 @@ pub const SUPPLY_MARGIN_KPA: f64 = 20.0;
 
 /// `host-sim calibrate`.
 #[derive(Args, Debug)]
+#[command(
+    after_help = "Example:\n  host-sim calibrate --recording rec.csv --plant ../shared/plant/reference-1dof.toml --out-dir config/ --tune"
+)]
 pub struct CalibrateArgs {
     /// Recording of the joint (RECORDING.md: angle_deg, p1_kpa, p2_kpa, optionally f1_n, f2_n):
     /// a motion through a range of angles under varying activation (e.g. `host-sim sweep torque`).

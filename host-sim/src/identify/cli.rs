@@ -22,6 +22,9 @@ use crate::{Plant, PlantConfig, Recording};
 
 /// `host-sim sweep ...`: synthetic identification data from a plant file.
 #[derive(Args, Debug)]
+#[command(
+    after_help = "Examples:\n  host-sim sweep force --plant ../shared/plant/reference-1dof.toml --out force.csv\n  host-sim sweep torque --plant ../shared/plant/reference-1dof.toml --out torque.csv"
+)]
 pub struct SweepArgs {
     #[command(subcommand)]
     pub what: SweepWhat,
@@ -32,29 +35,23 @@ pub enum SweepWhat {
     /// Isometric force data (writes columns p_kpa, stretch, f_n[, state]) from the plant's
     /// Tondu surface: at each L/L0 the pressure is swept from the maximum to 0 (and back up
     /// with --hysteresis-gap-n), as on the force-law paper's test bench.
-    #[command(
-        after_help = "Example:\n  host-sim sweep force --plant ../shared/plant/reference-1dof.toml --out force.csv"
-    )]
     Force(SweepForceArgs),
     /// A measured-style isometric force map (columns p_kpa, stretch, f_n[, state]) from an
     /// independent thick-walled Chou-Hannaford muscle drawn from the seed: 5..9 lengths down to
     /// L/L0 ~ 0.74, 10..15 pressures up to 600..700 kPa, 60..130 points, exactly 0 N where the
     /// muscle is slack, noisy readings; --branches adds the falling branch with braid friction.
-    #[command(
-        after_help = "Example:\n  host-sim sweep force-map --seed 3 --branches --out map.csv"
-    )]
     ForceMap(SweepForceMapArgs),
     /// A torque-identification recording (writes RECORDING.md columns t_s, u_in1..u_ex2,
     /// angle_deg, p1_kpa, p2_kpa, f1_n, f2_n) as in the torque-model paper: the joint is driven
     /// quasi-statically and at constant speeds through +-amplitude at each activation dp
     /// (p1 = p0 - dp, p2 = p0 + dp held by regulators); channels from the plant's sensors.
-    #[command(
-        after_help = "Example:\n  host-sim sweep torque --plant ../shared/plant/reference-1dof.toml --out torque.csv --dt-s 0.001"
-    )]
     Torque(SweepTorqueArgs),
 }
 
 #[derive(Args, Debug)]
+#[command(
+    after_help = "Example:\n  host-sim sweep force --plant ../shared/plant/reference-1dof.toml --out force.csv"
+)]
 pub struct SweepForceArgs {
     /// Plant file: the muscle's Tondu parameters (radius_m, braid_angle_deg, end_factor).
     #[arg(long, value_name = "P.toml")]
@@ -96,6 +93,7 @@ pub struct SweepForceArgs {
 }
 
 #[derive(Args, Debug)]
+#[command(after_help = "Example:\n  host-sim sweep force-map --seed 3 --branches --out map.csv")]
 pub struct SweepForceMapArgs {
     /// Output CSV.
     #[arg(long, value_name = "F.csv")]
@@ -109,6 +107,9 @@ pub struct SweepForceMapArgs {
 }
 
 #[derive(Args, Debug)]
+#[command(
+    after_help = "Example:\n  host-sim sweep torque --plant ../shared/plant/reference-1dof.toml --out torque.csv --dt-s 0.001"
+)]
 pub struct SweepTorqueArgs {
     /// Plant file.
     #[arg(long, value_name = "P.toml")]
@@ -156,6 +157,9 @@ pub struct SweepTorqueArgs {
 
 /// `host-sim identify ...`.
 #[derive(Args, Debug)]
+#[command(
+    after_help = "Examples:\n  host-sim identify force --data force.csv --out force_law.toml\n  host-sim identify torque --recording torque.csv --plant ../shared/plant/reference-1dof.toml --out torque_model.toml\n  host-sim identify plant --recording ../shared/conformance/pulses_loaded.csv --plant ../shared/plant/reference-1dof.toml --params joint.inertia_kgm2 --out fitted.toml"
+)]
 pub struct IdentifyArgs {
     #[command(subcommand)]
     pub what: IdentifyWhat,
@@ -167,35 +171,24 @@ pub enum IdentifyWhat {
     /// force-law paper, its eq. 6, constants c1..c10) and the Tondu baseline to isometric data
     /// (CSV columns p_kpa, stretch, f_n[, state|direction]); print both models' errors; write
     /// the firmware's force-law TOML.
-    #[command(
-        after_help = "Example:\n  host-sim identify force --data force.csv --out force_law.toml"
-    )]
     Force(IdentifyForceArgs),
     /// Fit A, B, C, D of the simplified joint torque model (the torque-model paper's eq. 11:
     /// stiffness from the activation, viscous and cubic damping) to a recording (columns t_s,
     /// angle_deg, p1_kpa, p2_kpa and f1_n, f2_n, else tensions from the plant's force model);
     /// write the torque-model TOML.
-    #[command(
-        after_help = "Example:\n  host-sim identify torque --recording torque.csv --plant ../shared/plant/reference-1dof.toml --out torque_model.toml"
-    )]
     Torque(IdentifyTorqueArgs),
     /// Output-error fit of plant-file parameters by replaying the recording's valve inputs
     /// (columns t_s, u_in1, u_ex1, u_in2, u_ex2 and the measured angle_deg, p1_kpa, p2_kpa,
     /// f1_n, f2_n that are present); write the plant file with the fitted values.
-    #[command(
-        after_help = "Example:\n  host-sim identify plant --recording ../shared/conformance/pulses_loaded.csv --plant ../shared/plant/reference-1dof.toml --params joint.inertia_kgm2 --out fitted.toml"
-    )]
     Plant(IdentifyPlantArgs),
     /// Train the hybrid model's chamber volume (seed 004 eq. 8-12: a network of two hidden
     /// layers V(e, e', P, P'), loss = mass-flow error + weight decay) on a recording with the
     /// mass-flow columns m_dot_1_kg_s, m_dot_2_kg_s; write the firmware's config/volume.toml.
-    #[command(
-        after_help = "Example:\n  host-sim simulate --plant ../shared/plant/reference-1dof.toml --scenario scenarios/random.toml --out random.csv\n  host-sim identify volume --recording random.csv --out config/volume.toml"
-    )]
     Volume(super::volume::IdentifyVolumeArgs),
 }
 
 #[derive(Args, Debug)]
+#[command(after_help = "Example:\n  host-sim identify force --data force.csv --out force_law.toml")]
 pub struct IdentifyForceArgs {
     /// Isometric data CSV.
     #[arg(long, value_name = "F.csv")]
@@ -210,6 +203,9 @@ pub struct IdentifyForceArgs {
 }
 
 #[derive(Args, Debug)]
+#[command(
+    after_help = "Example:\n  host-sim identify torque --recording torque.csv --plant ../shared/plant/reference-1dof.toml --out torque_model.toml"
+)]
 pub struct IdentifyTorqueArgs {
     /// Recording (RECORDING.md).
     #[arg(long, value_name = "R.csv")]
@@ -238,6 +234,9 @@ pub struct IdentifyTorqueArgs {
 }
 
 #[derive(Args, Debug)]
+#[command(
+    after_help = "Example:\n  host-sim identify plant --recording ../shared/conformance/pulses_loaded.csv --plant ../shared/plant/reference-1dof.toml --params joint.inertia_kgm2 --out fitted.toml"
+)]
 pub struct IdentifyPlantArgs {
     /// Recording whose valve inputs are replayed and whose channels are fitted.
     #[arg(long, value_name = "R.csv")]

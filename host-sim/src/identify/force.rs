@@ -17,13 +17,15 @@
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
+use std::ops::RangeInclusive;
 use std::path::Path;
 
-use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
-use nalgebra::{DMatrix, DVector, Dyn, Owned};
+use levenberg_marquardt::LevenbergMarquardt;
+use nalgebra::{DMatrix, DVector};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
+use super::output_error::{LmProblem, LmResiduals};
 use super::{write_atomic, IdentError};
 use crate::plant::muscle::TonduLaw;
 
@@ -334,11 +336,10 @@ fn c7_lower_bound(samples: &[ForceSample]) -> f64 {
 
 /// Levenberg-Marquardt problem of all nine free constants; c7 = lb + exp(u) keeps the
 /// denominator positive over the data.
+/// Its parameters are (c1..c6, u, c9, c10).
 struct Eq6Problem<'a> {
     samples: &'a [ForceSample],
     c7_lb: f64,
-    /// (c1..c6, u, c9, c10).
-    x: DVector<f64>,
 }
 
 impl Eq6Problem<'_> {
@@ -360,21 +361,9 @@ impl Eq6Problem<'_> {
     }
 }
 
-impl LeastSquaresProblem<f64, Dyn, Dyn> for Eq6Problem<'_> {
-    type ResidualStorage = Owned<f64, Dyn>;
-    type JacobianStorage = Owned<f64, Dyn, Dyn>;
-    type ParameterStorage = Owned<f64, Dyn>;
-
-    fn set_params(&mut self, x: &DVector<f64>) {
-        self.x.copy_from(x);
-    }
-
-    fn params(&self) -> DVector<f64> {
-        self.x.clone()
-    }
-
-    fn residuals(&self) -> Option<DVector<f64>> {
-        let m = self.eq6(&self.x);
+impl LmResiduals for Eq6Problem<'_> {
+    fn residuals_at(&self, x: &DVector<f64>) -> Option<DVector<f64>> {
+        let m = self.eq6(x);
         let r = DVector::from_iterator(
             self.samples.len(),
             self.samples
@@ -384,8 +373,8 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Eq6Problem<'_> {
         r.iter().all(|v| v.is_finite()).then_some(r)
     }
 
-    fn jacobian(&self) -> Option<DMatrix<f64>> {
-        let m = self.eq6(&self.x);
+    fn jacobian_at(&self, x: &DVector<f64>, _r: &DVector<f64>) -> Option<DMatrix<f64>> {
+        let m = self.eq6(x);
         let c = &m.c;
         let mut j = DMatrix::<f64>::zeros(self.samples.len(), 9);
         for (i, s) in self.samples.iter().enumerate() {
@@ -413,15 +402,11 @@ fn eq6_polish(samples: &[ForceSample], c7_lb: f64, start: Eq6, cost0: f64) -> (E
     let c = start.c;
     let u = (c[6] - c7_lb).max(1e-12).ln();
     let x0 = DVector::from_vec(vec![c[0], c[1], c[2], c[3], c[4], c[5], u, c[8], c[9]]);
-    let problem = Eq6Problem {
-        samples,
-        c7_lb,
-        x: x0,
-    };
-    let (problem, _report) = LevenbergMarquardt::new()
+    let problem = LmProblem::new(Eq6Problem { samples, c7_lb }, x0);
+    let (lm, _report) = LevenbergMarquardt::new()
         .with_patience(100)
         .minimize(problem);
-    let polished = problem.eq6(&problem.x);
+    let polished = lm.problem.eq6(&lm.x);
     let cost1 = eq6_cost(&polished, samples);
     if cost1.is_finite() && cost1 < cost0 && polished.c.iter().all(|v| v.is_finite()) {
         (polished, cost1)
@@ -652,7 +637,6 @@ struct BoundedProblem<'a> {
     lo: &'a [f64],
     hi: &'a [f64],
     model: &'a dyn Fn(&[f64], f64, f64) -> f64,
-    z: DVector<f64>,
 }
 
 impl BoundedProblem<'_> {
@@ -671,7 +655,7 @@ impl BoundedProblem<'_> {
             }),
         )
     }
-    fn residuals_at(&self, z: &DVector<f64>) -> DVector<f64> {
+    fn residuals_of(&self, z: &DVector<f64>) -> DVector<f64> {
         let x = self.x_of(z);
         DVector::from_iterator(
             self.samples.len(),
@@ -682,48 +666,48 @@ impl BoundedProblem<'_> {
     }
 }
 
-impl LeastSquaresProblem<f64, Dyn, Dyn> for BoundedProblem<'_> {
-    type ResidualStorage = Owned<f64, Dyn>;
-    type JacobianStorage = Owned<f64, Dyn, Dyn>;
-    type ParameterStorage = Owned<f64, Dyn>;
-
-    fn set_params(&mut self, z: &DVector<f64>) {
-        self.z.copy_from(z);
-    }
-
-    fn params(&self) -> DVector<f64> {
-        self.z.clone()
-    }
-
-    fn residuals(&self) -> Option<DVector<f64>> {
-        let r = self.residuals_at(&self.z);
+impl LmResiduals for BoundedProblem<'_> {
+    fn residuals_at(&self, z: &DVector<f64>) -> Option<DVector<f64>> {
+        let r = self.residuals_of(z);
         r.iter().all(|v| v.is_finite()).then_some(r)
     }
 
-    fn jacobian(&self) -> Option<DMatrix<f64>> {
+    fn jacobian_at(&self, z: &DVector<f64>, _r: &DVector<f64>) -> Option<DMatrix<f64>> {
         let n = self.samples.len();
-        let mut j = DMatrix::<f64>::zeros(n, self.z.len());
-        for k in 0..self.z.len() {
+        let mut j = DMatrix::<f64>::zeros(n, z.len());
+        for k in 0..z.len() {
             let h = 1e-6;
-            let mut zp = self.z.clone();
-            let mut zm = self.z.clone();
+            let mut zp = z.clone();
+            let mut zm = z.clone();
             zp[k] += h;
             zm[k] -= h;
-            let d = (self.residuals_at(&zp) - self.residuals_at(&zm)) / (2.0 * h);
+            let d = (self.residuals_of(&zp) - self.residuals_of(&zm)) / (2.0 * h);
             j.set_column(k, &d);
         }
         j.iter().all(|v| v.is_finite()).then_some(j)
     }
 }
 
-/// Fits a bounded clamped model from every start; returns (best parameters, cost).
-fn fit_bounded(
+/// Fits the baseline `name` (at least `min_samples` samples), the model `of_x(x)` whose force
+/// is `force_n(model, p, L/L0)` clamped at 0, within `bounds` from every start; returns the
+/// best.
+fn fit_bounded<M, const N: usize>(
+    name: &str,
+    min_samples: usize,
     samples: &[ForceSample],
-    lo: &[f64],
-    hi: &[f64],
+    bounds: &([f64; N], [f64; N]),
     starts: &[Vec<f64>],
-    model: &dyn Fn(&[f64], f64, f64) -> f64,
-) -> Option<(Vec<f64>, f64)> {
+    of_x: fn(&[f64]) -> M,
+    force_n: fn(&M, f64, f64) -> f64,
+) -> Result<M, IdentError> {
+    if samples.len() < min_samples {
+        return Err(IdentError::Data(format!(
+            "{name}: need at least {min_samples} samples"
+        )));
+    }
+    let (lo, hi) = (&bounds.0[..], &bounds.1[..]);
+    let model = |x: &[f64], p: f64, e: f64| force_n(&of_x(x), p, e);
+    let model: &dyn Fn(&[f64], f64, f64) -> f64 = &model;
     let mut best: Option<(Vec<f64>, f64)> = None;
     for x0 in starts {
         let problem = BoundedProblem {
@@ -731,17 +715,18 @@ fn fit_bounded(
             lo,
             hi,
             model,
-            z: BoundedProblem::z_of(lo, hi, x0),
         };
-        let (problem, _) = LevenbergMarquardt::new()
+        let z0 = BoundedProblem::z_of(lo, hi, x0);
+        let (lm, _) = LevenbergMarquardt::new()
             .with_patience(100)
-            .minimize(problem);
-        let cost = problem.residuals_at(&problem.z).norm_squared();
+            .minimize(LmProblem::new(problem, z0));
+        let cost = lm.problem.residuals_of(&lm.x).norm_squared();
         if cost.is_finite() && best.as_ref().is_none_or(|b| cost < b.1) {
-            best = Some((problem.x_of(&problem.z), cost));
+            best = Some((lm.problem.x_of(&lm.x), cost));
         }
     }
-    best
+    best.map(|(x, _)| of_x(&x))
+        .ok_or_else(|| IdentError::Data(format!("{name}: no start converged")))
 }
 
 /// Bounds of the Tondu baseline: r0 [mm], alpha0 [deg], k.
@@ -787,40 +772,32 @@ fn physical_starts(with_threshold: bool) -> Vec<Vec<f64>> {
 
 /// Fits the Tondu model (r0, alpha0, k) within [`TONDU_BOUNDS`] from 12 starts.
 pub fn fit_tondu(samples: &[ForceSample]) -> Result<Tondu, IdentError> {
-    if samples.len() < 3 {
-        return Err(IdentError::Data(
-            "Tondu model: need at least 3 samples".into(),
-        ));
-    }
-    let model = |x: &[f64], p: f64, e: f64| tondu_of_x(x).eval(p, e);
+    let starts = physical_starts(false);
     fit_bounded(
+        "Tondu model",
+        3,
         samples,
-        &TONDU_BOUNDS.0,
-        &TONDU_BOUNDS.1,
-        &physical_starts(false),
-        &model,
+        &TONDU_BOUNDS,
+        &starts,
+        tondu_of_x,
+        Tondu::eval,
     )
-    .map(|(x, _)| tondu_of_x(&x))
-    .ok_or_else(|| IdentError::Data("Tondu model: no start converged".into()))
 }
 
 /// Fits the Chou-Hannaford-type baseline within [`CHOU_HANNAFORD_BOUNDS`] from 24 starts.
 pub fn fit_chou_hannaford(samples: &[ForceSample]) -> Result<ChouHannaford, IdentError> {
-    if samples.len() < 4 {
-        return Err(IdentError::Data(
-            "Chou-Hannaford model: need at least 4 samples".into(),
-        ));
-    }
-    let model = |x: &[f64], p: f64, e: f64| ch_of_x(x).force_n(p, e);
+    let starts = physical_starts(true);
+    let bounds = &CHOU_HANNAFORD_BOUNDS;
+    let force_n = ChouHannaford::force_n;
     fit_bounded(
+        "Chou-Hannaford model",
+        4,
         samples,
-        &CHOU_HANNAFORD_BOUNDS.0,
-        &CHOU_HANNAFORD_BOUNDS.1,
-        &physical_starts(true),
-        &model,
+        bounds,
+        &starts,
+        ch_of_x,
+        force_n,
     )
-    .map(|(x, _)| ch_of_x(&x))
-    .ok_or_else(|| IdentError::Data("Chou-Hannaford model: no start converged".into()))
 }
 
 /// True when a fitted parameter sits on a bound (within 0.1 % of the range).
@@ -1033,11 +1010,18 @@ pub fn identify(samples: &[ForceSample]) -> Result<ForceIdentification, IdentErr
     })
 }
 
-fn stats_line(name: &str, st: &ErrorStats) -> String {
-    format!(
-        "{name:<8} MAE {:8.3} N ({:6.3} % of range)  RMSE {:8.3} N  max {:8.3} N at {:.0} kPa, L/L0 {:.3}\n         largest mean error: {} ({:.3} N)",
-        st.mae_n, st.mae_pct_of_range, st.rmse_n, st.max_abs_n, st.max_at.0, st.max_at.1, st.worst_region, st.worst_region_mae_n
-    )
+/// The two report lines of one model's errors.
+fn stats_lines(name: &str, st: &ErrorStats) -> [String; 2] {
+    [
+        format!(
+            "{name:<8} MAE {:8.3} N ({:6.3} % of range)  RMSE {:8.3} N  max {:8.3} N at {:.0} kPa, L/L0 {:.3}",
+            st.mae_n, st.mae_pct_of_range, st.rmse_n, st.max_abs_n, st.max_at.0, st.max_at.1
+        ),
+        format!(
+            "         largest mean error: {} ({:.3} N)",
+            st.worst_region, st.worst_region_mae_n
+        ),
+    ]
 }
 
 impl ForceIdentification {
@@ -1052,11 +1036,7 @@ impl ForceIdentification {
             self.domain.1,
             self.domain.2
         ));
-        v.extend(
-            stats_line("eq. 6", &self.eq6_stats)
-                .lines()
-                .map(String::from),
-        );
+        v.extend(stats_lines("eq. 6", &self.eq6_stats));
         v.push(format!(
             "global search: {} of {} c7 starts reached the best cost {:.6e} N^2 (firmware law max(eq. 6, 0))",
             self.eq6_fit.starts_at_best, self.eq6_fit.starts, self.eq6_fit.cost_n2
@@ -1089,11 +1069,7 @@ impl ForceIdentification {
             "           c6 = {:.9e}, c7 = {:.9e}, c8 = {:.9e}, c9 = {:.9e}, c10 = {:.9e}",
             c[5], c[6], c[7], c[8], c[9]
         ));
-        v.extend(
-            stats_line("Tondu", &self.tondu_stats)
-                .lines()
-                .map(String::from),
-        );
+        v.extend(stats_lines("Tondu", &self.tondu_stats));
         v.push(format!(
             "Tondu fit: r0 = {:.5} mm, alpha0 = {:.4} deg, k = {:.5} (bounds r0 {}..{} mm, alpha0 {}..{} deg, k {}..{})",
             self.tondu.r0_m * 1e3,
@@ -1106,11 +1082,7 @@ impl ForceIdentification {
             TONDU_BOUNDS.0[2],
             TONDU_BOUNDS.1[2]
         ));
-        v.extend(
-            stats_line("Chou-H.", &self.chou_hannaford_stats)
-                .lines()
-                .map(String::from),
-        );
+        v.extend(stats_lines("Chou-H.", &self.chou_hannaford_stats));
         let ch = &self.chou_hannaford;
         v.push(format!(
             "Chou-Hannaford fit (end effect, slack threshold): r0 = {:.5} mm, alpha0 = {:.4} deg, k = {:.5}, p_th = {:.3} kPa",
@@ -1258,27 +1230,28 @@ pub fn read_force_csv(path: &Path) -> Result<Vec<ForceSample>, IdentError> {
         let p_kpa = num(ip, "p_kpa")?;
         let stretch = num(ie, "stretch")?;
         let f_n = num(iff, "f_n")?;
-        if !(STRETCH_MIN..=STRETCH_MAX).contains(&stretch) {
-            return Err(IdentError::at(
-                &file,
-                line,
-                "stretch",
-                &format!(
-                    "{stretch} is outside {STRETCH_MIN}..{STRETCH_MAX}: the column is L/L0, a ratio \
-                     (contraction 0..0.5); percent typed as a fraction? 75 % is 0.75"
-                ),
-            ));
-        }
-        if !(P_KPA_MIN..=P_KPA_MAX).contains(&p_kpa) {
-            return Err(IdentError::at(
-                &file,
-                line,
-                "p_kpa",
-                &format!(
-                    "{p_kpa} is outside {P_KPA_MIN}..{P_KPA_MAX} kPa gauge (a value in Pa? the column is in kPa)"
-                ),
-            ));
-        }
+        // `hint` follows the range in the message: the unit mistake such a value suggests.
+        let in_range = |name: &str, v: f64, range: RangeInclusive<f64>, hint: &str| {
+            if range.contains(&v) {
+                return Ok(());
+            }
+            let (lo, hi) = range.into_inner();
+            let msg = format!("{v} is outside {lo}..{hi}{hint}");
+            Err(IdentError::at(&file, line, name, &msg))
+        };
+        in_range(
+            "stretch",
+            stretch,
+            STRETCH_MIN..=STRETCH_MAX,
+            ": the column is L/L0, a ratio (contraction 0..0.5); percent typed as a fraction? \
+             75 % is 0.75",
+        )?;
+        in_range(
+            "p_kpa",
+            p_kpa,
+            P_KPA_MIN..=P_KPA_MAX,
+            " kPa gauge (a value in Pa? the column is in kPa)",
+        )?;
         if p_kpa > max_p.0 {
             max_p = (p_kpa, line);
         }
@@ -1497,6 +1470,15 @@ mod tests {
         }
     }
 
+    /// The default sweep on an `n_stretch` x `n_pressure` grid.
+    fn grid_sweep(n_stretch: usize, n_pressure: usize) -> ForceSweep {
+        ForceSweep {
+            n_stretch,
+            n_pressure,
+            ..ForceSweep::default()
+        }
+    }
+
     #[test]
     fn tondu_matches_plant_equilibrium_force() {
         // PLANT.md / fixtures: 529.601003 N at 550 kPa, chi = 0.14.
@@ -1507,14 +1489,7 @@ mod tests {
     #[test]
     fn eq6_fit_on_noisy_tondu_data_beats_the_paper_error_against_the_truth() {
         let truth = reference();
-        let data = sweep(
-            &truth,
-            &ForceSweep {
-                n_stretch: 31,
-                n_pressure: 31,
-                ..ForceSweep::default()
-            },
-        );
+        let data = sweep(&truth, &grid_sweep(31, 31));
         let id = identify(&data).unwrap();
         // Error against the noise-free surface on a dense grid over the whole domain.
         let grid = sweep(&truth, &ForceSweep::noise_free_grid(61));
@@ -1552,14 +1527,7 @@ mod tests {
 
     #[test]
     fn too_few_samples_is_an_error() {
-        let data = sweep(
-            &reference(),
-            &ForceSweep {
-                n_stretch: 2,
-                n_pressure: 3,
-                ..ForceSweep::default()
-            },
-        );
+        let data = sweep(&reference(), &grid_sweep(2, 3));
         assert!(matches!(fit_eq6(&data), Err(IdentError::Data(_))));
     }
 }

@@ -135,8 +135,6 @@ struct Problem<'a, 'f> {
     f: &'a Residuals<'f>,
     opts: OeOptions,
     m: usize,
-    z: DVector<f64>,
-    r: Option<DVector<f64>>,
     evaluations: RefCell<usize>,
     best: RefCell<(f64, DVector<f64>)>,
 }
@@ -165,37 +163,23 @@ impl Problem<'_, '_> {
     }
 }
 
-impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_, '_> {
-    type ResidualStorage = Owned<f64, Dyn>;
-    type JacobianStorage = Owned<f64, Dyn, Dyn>;
-    type ParameterStorage = Owned<f64, Dyn>;
-
-    fn set_params(&mut self, z: &DVector<f64>) {
-        self.z.copy_from(z);
-        self.r = Some(self.eval(z));
+impl LmResiduals for Problem<'_, '_> {
+    fn residuals_at(&self, z: &DVector<f64>) -> Option<DVector<f64>> {
+        Some(self.eval(z))
     }
 
-    fn params(&self) -> DVector<f64> {
-        self.z.clone()
-    }
-
-    fn residuals(&self) -> Option<DVector<f64>> {
-        self.r.clone()
-    }
-
-    fn jacobian(&self) -> Option<DMatrix<f64>> {
-        let n = self.z.len();
+    fn jacobian_at(&self, z: &DVector<f64>, r0: &DVector<f64>) -> Option<DMatrix<f64>> {
+        let n = z.len();
         let mut j = DMatrix::zeros(self.m, n);
         let h = self.opts.fd_step;
-        let r0 = self.r.clone()?;
         for k in 0..n {
-            let mut zp = self.z.clone();
+            let mut zp = z.clone();
             zp[k] += h;
             let rp = self.eval(&zp);
             match self.opts.differences {
-                Differences::Forward => j.set_column(k, &((rp - &r0) / h)),
+                Differences::Forward => j.set_column(k, &((rp - r0) / h)),
                 Differences::Central => {
-                    let mut zm = self.z.clone();
+                    let mut zm = z.clone();
                     zm[k] -= h;
                     let rm = self.eval(&zm);
                     j.set_column(k, &((rp - rm) / (2.0 * h)));
@@ -203,6 +187,54 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_, '_> {
             }
         }
         Some(j)
+    }
+}
+
+/// A least-squares problem for the `levenberg_marquardt` solver, driven through
+/// [`LmProblem`]: the residuals at a parameter vector and the Jacobian there.
+pub(crate) trait LmResiduals {
+    /// The residuals at `x`; `None` where they are not defined (the solver rejects the step).
+    fn residuals_at(&self, x: &DVector<f64>) -> Option<DVector<f64>>;
+    /// The Jacobian at `x`, whose residuals are `r`.
+    fn jacobian_at(&self, x: &DVector<f64>, r: &DVector<f64>) -> Option<DMatrix<f64>>;
+}
+
+/// `problem` at the parameters `x` the solver set last, with their residuals (evaluated once
+/// per point set): the solver's `LeastSquaresProblem`.
+pub(crate) struct LmProblem<P> {
+    pub problem: P,
+    pub x: DVector<f64>,
+    r: Option<DVector<f64>>,
+}
+
+impl<P: LmResiduals> LmProblem<P> {
+    /// `problem` at `x0`.
+    pub fn new(problem: P, x0: DVector<f64>) -> Self {
+        let r = problem.residuals_at(&x0);
+        Self { problem, x: x0, r }
+    }
+}
+
+impl<P: LmResiduals> LeastSquaresProblem<f64, Dyn, Dyn> for LmProblem<P> {
+    type ResidualStorage = Owned<f64, Dyn>;
+    type JacobianStorage = Owned<f64, Dyn, Dyn>;
+    type ParameterStorage = Owned<f64, Dyn>;
+
+    fn set_params(&mut self, x: &DVector<f64>) {
+        self.x.copy_from(x);
+        self.r = self.problem.residuals_at(x);
+    }
+
+    fn params(&self) -> DVector<f64> {
+        self.x.clone()
+    }
+
+    fn residuals(&self) -> Option<DVector<f64>> {
+        self.r.clone()
+    }
+
+    fn jacobian(&self) -> Option<DMatrix<f64>> {
+        self.problem.jacobian_at(&self.x, self.r.as_ref()?)
     }
 }
 
@@ -230,23 +262,20 @@ pub fn fit(f: &Residuals<'_>, params: &[OeParam], opts: &OeOptions) -> OeResult 
         };
     }
     let z0 = DVector::zeros(n);
-    let mut problem = Problem {
+    let problem = Problem {
         params,
         f,
         opts: *opts,
         m: r0.len(),
-        z: z0.clone(),
-        r: None,
         evaluations: RefCell::new(1),
         best: RefCell::new((cost0, z0.clone())),
     };
-    problem.set_params(&z0);
-    let (problem, report) = LevenbergMarquardt::new()
+    let (LmProblem { problem, .. }, report) = LevenbergMarquardt::new()
         .with_stepbound(1.0)
         .with_patience(opts.patience.max(1))
         .with_ftol(opts.tol)
         .with_xtol(opts.tol)
-        .minimize(problem);
+        .minimize(LmProblem::new(problem, z0));
     let (cost1, z_best) = problem.best.borrow().clone();
     let x = problem.x(&z_best);
     let mut evaluations = *problem.evaluations.borrow();

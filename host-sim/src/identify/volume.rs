@@ -775,6 +775,9 @@ mod tests {
 
 /// Arguments of `host-sim identify volume`.
 #[derive(clap::Args, Debug)]
+#[command(
+    after_help = "Example:\n  host-sim simulate --plant ../shared/plant/reference-1dof.toml --scenario scenarios/random.toml --out random.csv\n  host-sim identify volume --recording random.csv --out config/volume.toml"
+)]
 pub struct IdentifyVolumeArgs {
     /// Recording with angle_deg, p1_kpa, p2_kpa and the mass-flow columns m_dot_1_kg_s,
     /// m_dot_2_kg_s (RECORDING.md; `host-sim simulate --scenario` writes them).

@@ -24,6 +24,9 @@ use crate::plant::ValveInputs;
 
 /// Arguments of `host-sim capture`.
 #[derive(clap::Args, Debug)]
+#[command(
+    after_help = "Example (a stream written by `host-sim pil --log`):\n  host-sim capture --log pil.stream --out captured.csv"
+)]
 pub struct CaptureArgs {
     /// The firmware image that wrote the log (decodes a raw defmt log through defmt-print).
     #[arg(long, value_name = "ELF")]

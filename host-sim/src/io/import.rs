@@ -1059,6 +1059,9 @@ pub fn segment_path(out: &Path, i: usize, n: usize) -> PathBuf {
 
 /// Arguments of `host-sim import`.
 #[derive(clap::Args, Debug)]
+#[command(
+    after_help = "Example (docs/rig.md has the mapping file):\n  host-sim import --map festo-joint.toml --input messung7.csv --out messung7.rec.csv"
+)]
 pub struct ImportArgs {
     /// Mapping file (TOML): rig columns -> recording channels and units (docs/rig.md).
     #[arg(long, value_name = "MAP.toml")]

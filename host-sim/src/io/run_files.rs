@@ -173,7 +173,7 @@ pub fn summary(run: &ClosedLoopRun, scenario: &Scenario, fails: &[String]) -> St
             &run.tracking(settle),
         );
     }
-    if let Some(k) = run.first_injected_fault_tick {
+    if let Some(k) = run.first_injected_fault_tick() {
         let _ = writeln!(
             s,
             "injected sensor fault from tick {k} (t = {:.3} s)",

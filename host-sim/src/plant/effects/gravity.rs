@@ -3,10 +3,12 @@
 //! Diagnosis: the torque-balance residual against sin and cos of the angle (only m l
 //! counts: the candidate fits the mass at a fixed lever). Truth: 1 kg at 0.1 m.
 
+use std::f64::consts::PI;
+
 use serde::Deserialize;
 
 use super::{Check, Effect, enabled_default, Hooks, Truth, torque_residual_scatter};
-use crate::diagnose::candidates::{clamp_to, Candidate, ParamSpec, Screening, Setup};
+use crate::diagnose::candidates::{clamp_to, Candidate, Screening, Setup};
 use crate::diagnose::screen::{regress, Evidence};
 use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
 
@@ -51,15 +53,11 @@ impl Hooks for Gravity {
 }
 
 impl Effect for Gravity {
+    const TRUTHS: &'static [Truth] = &[Truth::new("gravity", "gravity", |_| "[effects.gravity]\nmass_kg = 1.0\ncom_distance_m = 0.1\nhanging_angle_rad = 0.0\n".into())];
     table_effect!(GravityCandidate);
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
-        c.finite("mass_kg", self.mass_kg)?;
-        c.finite("com_distance_m", self.com_distance_m)?;
-        c.finite("hanging_angle_rad", self.hanging_angle_rad)?;
-        c.finite("g_m_s2", self.g_m_s2)
-    }
-    fn truths() -> Vec<Truth> {
-        vec![Truth::new("gravity", "gravity", |_| "[effects.gravity]\nmass_kg = 1.0\ncom_distance_m = 0.1\nhanging_angle_rad = 0.0\n".into())]
+        check_fields!(self, c, finite: mass_kg, com_distance_m, hanging_angle_rad, g_m_s2);
+        Ok(())
     }
 }
 
@@ -70,20 +68,11 @@ pub const GRAVITY_COM_DISTANCE_M: f64 = 0.1;
 pub struct GravityCandidate;
 
 impl Candidate for GravityCandidate {
-    id_and_label!("gravity", "gravity load");
-    fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
-        vec![
-            ParamSpec::new("mass_kg", 0.0, 20.0, 1.0),
-            ParamSpec::new(
-                "hanging_angle_rad",
-                -std::f64::consts::PI,
-                std::f64::consts::PI,
-                1.0,
-            ),
-        ]
-    }
-    fn fixed(&self) -> Vec<(&'static str, f64)> {
-        vec![("com_distance_m", GRAVITY_COM_DISTANCE_M)]
+    candidate_spec! {
+        id: "gravity",
+        label: "gravity load",
+        params: [("mass_kg", 0.0, 20.0, 1.0), ("hanging_angle_rad", -PI, PI, 1.0)],
+        fixed: [("com_distance_m", GRAVITY_COM_DISTANCE_M)],
     }
     fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
         let sin: Vec<f64> = ev.angle_rad.iter().map(|b| b.sin()).collect();

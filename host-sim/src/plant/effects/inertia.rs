@@ -8,7 +8,7 @@
 use serde::{Deserialize, Deserializer};
 
 use super::{Check, Effect, Hooks, Truth, torque_residual_scatter};
-use crate::diagnose::candidates::{clamp_to, Candidate, ParamSpec, Screening, Setup};
+use crate::diagnose::candidates::{clamp_to, Candidate, Screening, Setup};
 use crate::diagnose::screen::{regress, Evidence};
 use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
 
@@ -32,6 +32,12 @@ impl Hooks for InertiaMismatch {
 
 impl Effect for InertiaMismatch {
     type Active = Self;
+    const TRUTHS: &'static [Truth] = &[Truth {
+        name: "inertia",
+        expected_id: "inertia",
+        toml: |_| "inertia_kgm2 = 0.03\n".into(),
+        replaces_key: Some("inertia_kgm2"),
+    }];
     fn enabled(&self) -> bool {
         false
     }
@@ -44,23 +50,16 @@ impl Effect for InertiaMismatch {
     fn candidates() -> Vec<Box<dyn Candidate>> {
         vec![Box::new(InertiaCandidate)]
     }
-    fn truths() -> Vec<Truth> {
-        vec![Truth {
-            name: "inertia",
-            expected_id: "inertia",
-            toml: |_| "inertia_kgm2 = 0.03\n".into(),
-            replaces_key: Some("inertia_kgm2"),
-        }]
-    }
 }
 
 /// The joint inertia, refitted.
 pub struct InertiaCandidate;
 
 impl Candidate for InertiaCandidate {
-    id_and_label!("inertia", "inertia (load) mismatch");
-    fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
-        vec![ParamSpec::new("inertia_kgm2", 1e-3, 10.0, 0.01)]
+    candidate_spec! {
+        id: "inertia",
+        label: "inertia (load) mismatch",
+        params: [("inertia_kgm2", 1e-3, 10.0, 0.01)],
     }
     fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
         let (c, r2) = regress(&ev.torque_residual_nm, &[&ev.alpha_rad_s2]);

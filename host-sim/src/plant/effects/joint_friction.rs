@@ -11,7 +11,7 @@
 use serde::Deserialize;
 
 use super::{Check, Effect, enabled_default, Hooks, Truth};
-use crate::diagnose::candidates::{clamp_to, Candidate, ParamSpec, Screening, Setup};
+use crate::diagnose::candidates::{clamp_to, Candidate, Screening, Setup};
 use crate::diagnose::screen::{regress, Evidence, Scatter};
 use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
 
@@ -53,13 +53,14 @@ impl Hooks for JointFriction {
 }
 
 impl Effect for JointFriction {
+    const TRUTHS: &'static [Truth] = &[
+        Truth::new("joint_friction", "joint_friction", |_| "[effects.joint_friction]\ncoulomb_nm = 0.35\nbreakaway_nm = 0.35\nstribeck_velocity_rad_s = 1.0\nviscous_nm_s_per_rad = 0.08\nsmoothing_velocity_rad_s = 0.01\n".into()),
+        Truth::new("joint_friction_stribeck", "joint_friction", |_| "[effects.joint_friction]\ncoulomb_nm = 0.25\nbreakaway_nm = 0.5\nstribeck_velocity_rad_s = 0.3\nviscous_nm_s_per_rad = 0.05\nsmoothing_velocity_rad_s = 0.01\n".into()),
+    ];
     table_effect!(JointFrictionCandidate);
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
-        c.finite("coulomb_nm", self.coulomb_nm)?;
-        c.finite("breakaway_nm", self.breakaway_nm)?;
-        c.finite("viscous_nm_s_per_rad", self.viscous_nm_s_per_rad)?;
-        c.positive("stribeck_velocity_rad_s", self.stribeck_velocity_rad_s)?;
-        c.positive("smoothing_velocity_rad_s", self.smoothing_velocity_rad_s)?;
+        check_fields!(self, c, finite: coulomb_nm, breakaway_nm, viscous_nm_s_per_rad;
+            positive: stribeck_velocity_rad_s, smoothing_velocity_rad_s);
         if self.coulomb_nm < 0.0 || self.breakaway_nm < self.coulomb_nm {
             return Err(c.error(
                 "breakaway_nm",
@@ -67,12 +68,6 @@ impl Effect for JointFriction {
             ));
         }
         Ok(())
-    }
-    fn truths() -> Vec<Truth> {
-        vec![
-            Truth::new("joint_friction", "joint_friction", |_| "[effects.joint_friction]\ncoulomb_nm = 0.35\nbreakaway_nm = 0.35\nstribeck_velocity_rad_s = 1.0\nviscous_nm_s_per_rad = 0.08\nsmoothing_velocity_rad_s = 0.01\n".into()),
-            Truth::new("joint_friction_stribeck", "joint_friction", |_| "[effects.joint_friction]\ncoulomb_nm = 0.25\nbreakaway_nm = 0.5\nstribeck_velocity_rad_s = 0.3\nviscous_nm_s_per_rad = 0.05\nsmoothing_velocity_rad_s = 0.01\n".into()),
-        ]
     }
 }
 
@@ -83,15 +78,11 @@ pub const FRICTION_SMOOTHING_RAD_S: f64 = 0.02;
 pub struct JointFrictionCandidate;
 
 impl Candidate for JointFrictionCandidate {
-    id_and_label!("joint_friction", "joint friction");
-    fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
-        vec![
-            ParamSpec::new("coulomb_nm", 0.0, 20.0, 0.2),
-            ParamSpec::new("viscous_nm_s_per_rad", 0.0, 20.0, 0.05),
-        ]
-    }
-    fn fixed(&self) -> Vec<(&'static str, f64)> {
-        vec![("smoothing_velocity_rad_s", FRICTION_SMOOTHING_RAD_S)]
+    candidate_spec! {
+        id: "joint_friction",
+        label: "joint friction",
+        params: [("coulomb_nm", 0.0, 20.0, 0.2), ("viscous_nm_s_per_rad", 0.0, 20.0, 0.05)],
+        fixed: [("smoothing_velocity_rad_s", FRICTION_SMOOTHING_RAD_S)],
     }
     fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
         let sign: Vec<f64> = ev

@@ -59,6 +59,12 @@ impl Hooks for LeakOrifice {
 
 impl Effect for Leakage {
     type Active = LeakOrifice;
+    const TRUTHS: &'static [Truth] = &[
+        Truth::new("leakage", "leakage", |_| "[effects.leakage]\nsonic_conductance_m3_per_s_pa = 4.0e-10\n".into()),
+        Truth::new("leakage_one_muscle", "leakage_muscle2", |_| {
+            "[effects.leakage]\nsonic_conductance_m3_per_s_pa = 6.0e-10\nmuscle = 2\n".into()
+        }),
+    ];
     fn enabled(&self) -> bool {
         self.enabled
     }
@@ -68,10 +74,8 @@ impl Effect for Leakage {
                 return Err(c.error("muscle", format!("{m}: the leaking muscle is 1 or 2")));
             }
         }
-        c.non_negative(
-            "sonic_conductance_m3_per_s_pa",
-            self.sonic_conductance_m3_per_s_pa,
-        )
+        check_fields!(self, c, non_negative: sonic_conductance_m3_per_s_pa);
+        Ok(())
     }
     fn activate(&self, valve: &ValveConfig) -> LeakOrifice {
         LeakOrifice {
@@ -88,14 +92,6 @@ impl Effect for Leakage {
             Box::new(LeakageCandidate { only: None }),
             Box::new(LeakageCandidate { only: Some(0) }),
             Box::new(LeakageCandidate { only: Some(1) }),
-        ]
-    }
-    fn truths() -> Vec<Truth> {
-        vec![
-            Truth::new("leakage", "leakage", |_| "[effects.leakage]\nsonic_conductance_m3_per_s_pa = 4.0e-10\n".into()),
-            Truth::new("leakage_one_muscle", "leakage_muscle2", |_| {
-                "[effects.leakage]\nsonic_conductance_m3_per_s_pa = 6.0e-10\nmuscle = 2\n".into()
-            }),
         ]
     }
 }

@@ -54,13 +54,13 @@ pub trait Effect: Debug + Clone + PartialEq + DeserializeOwned {
     /// The diagnosis candidates that can name this effect (usually one), in catalogue order.
     fn candidates() -> Vec<Box<dyn Candidate>>;
     /// The synthetic truths that conceal this effect in generated recordings.
-    fn truths() -> Vec<Truth>;
+    const TRUTHS: &'static [Truth];
 }
 
 /// The [`Effect`] items of an effect whose run-time form is its own table (`Active = Self`,
 /// activated by a copy), switched by its `enabled` key, with its diagnosis candidates: write
 /// `table_effect!(TheCandidate);` (or several, comma-separated) inside
-/// `impl Effect for TheTable`, then `validate` and `truths`.
+/// `impl Effect for TheTable`, after `TRUTHS`, then `validate`.
 macro_rules! table_effect {
     ($($candidate:expr),+ $(,)?) => {
         type Active = Self;
@@ -76,18 +76,58 @@ macro_rules! table_effect {
     };
 }
 
-/// A diagnosis candidate's [`Candidate::id`] (the effect id of the diagnosis JSON) and
-/// [`Candidate::label`] (its name in sentences): write `id_and_label!("gravity", "gravity
-/// load");` inside `impl Candidate for TheCandidate`. A candidate whose id depends on its
-/// fields (`leakage.rs`) writes the two methods by hand.
-macro_rules! id_and_label {
-    ($id:literal, $label:literal) => {
+/// The fixed part of a diagnosis candidate, written inside `impl Candidate for TheCandidate`:
+/// [`Candidate::id`] (the effect id of the diagnosis JSON), [`Candidate::label`] (its name in
+/// sentences) and, when they do not depend on the recording, [`Candidate::params`] (name,
+/// bounds and typical size, as `ParamSpec::new` takes them) and [`Candidate::fixed`]:
+///
+/// ```text
+/// candidate_spec! {
+///     id: "gravity",
+///     label: "gravity load",
+///     params: [("mass_kg", 0.0, 20.0, 1.0)],
+///     fixed: [("com_distance_m", GRAVITY_COM_DISTANCE_M)],
+/// }
+/// ```
+///
+/// A candidate whose id depends on its fields (`leakage.rs`) writes the methods by hand.
+macro_rules! candidate_spec {
+    (
+        id: $id:literal,
+        label: $label:literal
+        $(, params: [$(($name:literal, $lo:expr, $hi:expr, $scale:expr)),+ $(,)?])?
+        $(, fixed: [$(($key:literal, $value:expr)),+ $(,)?])?
+        $(,)?
+    ) => {
         fn id(&self) -> &'static str {
             $id
         }
         fn label(&self) -> &'static str {
             $label
         }
+        $(
+            fn params(
+                &self,
+                _s: &$crate::diagnose::candidates::Setup,
+            ) -> Vec<$crate::diagnose::candidates::ParamSpec> {
+                vec![$($crate::diagnose::candidates::ParamSpec::new($name, $lo, $hi, $scale)),+]
+            }
+        )?
+        $(
+            fn fixed(&self) -> Vec<(&'static str, f64)> {
+                vec![$(($key, $value)),+]
+            }
+        )?
+    };
+}
+
+/// The checks of [`Effect::validate`] for keys named as their fields, run in the order
+/// written and stopping at the first error: `check_fields!(self, c, finite: mass_kg,
+/// com_distance_m; positive: smoothing_rate_per_s);` inside `validate` (`c` the [`Check`];
+/// each kind is one of its methods).
+macro_rules! check_fields {
+    ($table:expr, $check:expr, $($kind:ident: $($field:ident),+);+ $(;)?) => {
+        $($($check.$kind(stringify!($field), $table.$field)?;)+)+
     };
 }
 
@@ -345,7 +385,7 @@ macro_rules! registry {
         /// Every synthetic truth of every registered effect, in registry order.
         pub fn truths() -> Vec<Truth> {
             let mut v = Vec::new();
-            $( $(#[$attr])* v.extend(<$ty as Effect>::truths()); )*
+            $( $(#[$attr])* v.extend_from_slice(<$ty as Effect>::TRUTHS); )*
             v
         }
     };
@@ -367,6 +407,25 @@ registry! {
     thermal_chamber::ThermalChamber,
     #[cfg(test)]
     toy_spring::ToySpring,
+}
+
+/// The first enabled effect's `Some` answer, in registry order, to `hook`, a [`Hooks`] method
+/// returning `Option<&T>`: `first_answer!(effects, supply -> Supply)`.
+macro_rules! first_answer {
+    ($effects:expr, $hook:ident -> $t:ty) => {{
+        struct First<'e>(Option<&'e $t>);
+        impl<'e> Visit<'e> for First<'e> {
+            #[inline(always)]
+            fn visit<A: Hooks>(&mut self, a: &'e A) {
+                if self.0.is_none() {
+                    self.0 = a.$hook();
+                }
+            }
+        }
+        let mut f = First(None);
+        $effects.visit(&mut f);
+        f.0
+    }};
 }
 
 impl Effects {
@@ -436,35 +495,13 @@ impl Effects {
     /// The supply the inlet valves see ([`Supply::Ideal`] unless an effect models it).
     #[inline(always)]
     pub fn supply(&self) -> &Supply {
-        struct First<'e>(Option<&'e Supply>);
-        impl<'e> Visit<'e> for First<'e> {
-            #[inline(always)]
-            fn visit<A: Hooks>(&mut self, a: &'e A) {
-                if self.0.is_none() {
-                    self.0 = a.supply();
-                }
-            }
-        }
-        let mut f = First(None);
-        self.visit(&mut f);
-        f.0.unwrap_or(&Supply::Ideal)
+        first_answer!(self, supply -> Supply).unwrap_or(&Supply::Ideal)
     }
 
     /// The chamber thermodynamics, if enabled (then the gas temperatures are ODE states).
     #[inline(always)]
     pub fn thermal_chamber(&self) -> Option<&ThermalChamber> {
-        struct First<'e>(Option<&'e ThermalChamber>);
-        impl<'e> Visit<'e> for First<'e> {
-            #[inline(always)]
-            fn visit<A: Hooks>(&mut self, a: &'e A) {
-                if self.0.is_none() {
-                    self.0 = a.thermal_chamber();
-                }
-            }
-        }
-        let mut f = First(None);
-        self.visit(&mut f);
-        f.0
+        first_answer!(self, thermal_chamber -> ThermalChamber)
     }
 
     /// Total delay between a valve command and the valve opening; `None`: no delay effect.

@@ -20,7 +20,7 @@
 use serde::Deserialize;
 
 use super::{Check, Effect, enabled_default, Hooks, Truth};
-use crate::diagnose::candidates::{clamp_to, Candidate, ParamSpec, Screening, Setup};
+use crate::diagnose::candidates::{clamp_to, Candidate, Screening, Setup};
 use crate::diagnose::screen::{regress, Evidence, Scatter};
 use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
 
@@ -58,14 +58,12 @@ impl Hooks for MuscleHysteresis {
 }
 
 impl Effect for MuscleHysteresis {
+    const TRUTHS: &'static [Truth] = &[Truth::new("muscle_hysteresis", "muscle_hysteresis", |_| "[effects.muscle_hysteresis]\nbase_force_n = 6.0\npressure_gain_n_per_pa = 2.0e-5\nsmoothing_rate_per_s = 0.02\n".into())];
     table_effect!(MuscleHysteresisCandidate);
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
-        c.non_negative("base_force_n", self.base_force_n)?;
-        c.non_negative("pressure_gain_n_per_pa", self.pressure_gain_n_per_pa)?;
-        c.positive("smoothing_rate_per_s", self.smoothing_rate_per_s)
-    }
-    fn truths() -> Vec<Truth> {
-        vec![Truth::new("muscle_hysteresis", "muscle_hysteresis", |_| "[effects.muscle_hysteresis]\nbase_force_n = 6.0\npressure_gain_n_per_pa = 2.0e-5\nsmoothing_rate_per_s = 0.02\n".into())]
+        check_fields!(self, c, non_negative: base_force_n, pressure_gain_n_per_pa;
+            positive: smoothing_rate_per_s);
+        Ok(())
     }
 }
 
@@ -76,15 +74,11 @@ pub const HYSTERESIS_SMOOTHING_PER_S: f64 = 0.01;
 pub struct MuscleHysteresisCandidate;
 
 impl Candidate for MuscleHysteresisCandidate {
-    id_and_label!("muscle_hysteresis", "muscle (braid) hysteresis");
-    fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
-        vec![
-            ParamSpec::new("base_force_n", 0.0, 500.0, 5.0),
-            ParamSpec::new("pressure_gain_n_per_pa", 0.0, 1e-3, 1e-5),
-        ]
-    }
-    fn fixed(&self) -> Vec<(&'static str, f64)> {
-        vec![("smoothing_rate_per_s", HYSTERESIS_SMOOTHING_PER_S)]
+    candidate_spec! {
+        id: "muscle_hysteresis",
+        label: "muscle (braid) hysteresis",
+        params: [("base_force_n", 0.0, 500.0, 5.0), ("pressure_gain_n_per_pa", 0.0, 1e-3, 1e-5)],
+        fixed: [("smoothing_rate_per_s", HYSTERESIS_SMOOTHING_PER_S)],
     }
     fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
         let th: Vec<f64> = ev

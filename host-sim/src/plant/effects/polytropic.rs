@@ -9,7 +9,7 @@ use serde::Deserialize;
 
 use super::{Check, Effect, enabled_default, Hooks, params, Truth};
 use crate::diagnose::candidates::{
-    clamp_to, pressure_scatter, regress_pressure, Candidate, ParamSpec, Screening, Setup,
+    clamp_to, pressure_scatter, regress_pressure, Candidate, Screening, Setup,
 };
 use crate::diagnose::screen::Evidence;
 use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
@@ -35,12 +35,11 @@ impl Hooks for Polytropic {
 }
 
 impl Effect for Polytropic {
+    const TRUTHS: &'static [Truth] = &[Truth::new("polytropic", "polytropic", |_| "[effects.polytropic]\nexponent = 1.3\n".into())];
     table_effect!(PolytropicCandidate);
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
-        c.positive("exponent", self.exponent)
-    }
-    fn truths() -> Vec<Truth> {
-        vec![Truth::new("polytropic", "polytropic", |_| "[effects.polytropic]\nexponent = 1.3\n".into())]
+        check_fields!(self, c, positive: exponent);
+        Ok(())
     }
 }
 
@@ -48,9 +47,10 @@ impl Effect for Polytropic {
 pub struct PolytropicCandidate;
 
 impl Candidate for PolytropicCandidate {
-    id_and_label!("polytropic", "polytropic (non-isothermal) chamber process");
-    fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
-        vec![ParamSpec::new("exponent", 0.5, 2.0, 1.0)]
+    candidate_spec! {
+        id: "polytropic",
+        label: "polytropic (non-isothermal) chamber process",
+        params: [("exponent", 0.5, 2.0, 1.0)],
     }
     fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
         let (c, r2) = regress_pressure(ev, &ev.nominal_dp);

@@ -99,6 +99,14 @@ impl Hooks for Calibrations {
 
 impl Effect for SensorCalibration {
     type Active = Calibrations;
+    const TRUTHS: &'static [Truth] = &[
+        Truth::new("sensor_offset", "sensor_offset", |_| {
+            "[effects.sensor.angle_deg]\noffset = 1.5\n[effects.sensor.p1_kpa]\noffset = 8.0\n[effects.sensor.p2_kpa]\noffset = -6.0\n".into()
+        }),
+        Truth::new("sensor_gain_one_channel", "sensor_gain", |_| {
+            "[effects.sensor.p1_kpa]\ngain = 1.06\n".into()
+        }),
+    ];
     fn enabled(&self) -> bool {
         self.enabled
     }
@@ -133,16 +141,6 @@ impl Effect for SensorCalibration {
             Box::new(SensorGainCandidate),
         ]
     }
-    fn truths() -> Vec<Truth> {
-        vec![
-            Truth::new("sensor_offset", "sensor_offset", |_| {
-                "[effects.sensor.angle_deg]\noffset = 1.5\n[effects.sensor.p1_kpa]\noffset = 8.0\n[effects.sensor.p2_kpa]\noffset = -6.0\n".into()
-            }),
-            Truth::new("sensor_gain_one_channel", "sensor_gain", |_| {
-                "[effects.sensor.p1_kpa]\ngain = 1.06\n".into()
-            }),
-        ]
-    }
 }
 
 /// A constant offset on every measured channel.
@@ -158,7 +156,10 @@ const OFFSET_NAMES: [&str; 5] = [
 const OFFSET_SCALES: [f64; 5] = [0.5, 5.0, 5.0, 5.0, 5.0];
 
 impl Candidate for SensorOffsetCandidate {
-    id_and_label!("sensor_offset", "sensor calibration offset");
+    candidate_spec! {
+        id: "sensor_offset",
+        label: "sensor calibration offset",
+    }
     fn params(&self, s: &Setup) -> Vec<ParamSpec> {
         per_present_channel(s, |i| {
             let sc = OFFSET_SCALES[i];
@@ -299,7 +300,10 @@ pub struct SensorGainCandidate;
 const GAIN_NAMES: [&str; 5] = ["angle_gain", "p1_gain", "p2_gain", "f1_gain", "f2_gain"];
 
 impl Candidate for SensorGainCandidate {
-    id_and_label!("sensor_gain", "sensor calibration gain");
+    candidate_spec! {
+        id: "sensor_gain",
+        label: "sensor calibration gain",
+    }
     fn params(&self, s: &Setup) -> Vec<ParamSpec> {
         per_present_channel(s, |i| ParamSpec::new(GAIN_NAMES[i], 0.5, 2.0, 0.05))
     }

@@ -118,6 +118,12 @@ impl SensorLag {
 }
 
 impl Effect for SensorLag {
+    const TRUTHS: &'static [Truth] = &[
+        Truth::new("sensor_lag", "sensor_lag", |_| "[effects.sensor_lag]\nangle_time_constant_s = 0.015\npressure_time_constant_s = 0.008\n".into()),
+        Truth::new("sensor_lag_one_pressure", "sensor_lag_p2", |_| {
+            "[effects.sensor_lag]\np2_time_constant_s = 0.02\n".into()
+        }),
+    ];
     table_effect!(
         SensorLagCandidate,
         PressureSensorLagCandidate {
@@ -140,14 +146,6 @@ impl Effect for SensorLag {
             }
         }
         Ok(())
-    }
-    fn truths() -> Vec<Truth> {
-        vec![
-            Truth::new("sensor_lag", "sensor_lag", |_| "[effects.sensor_lag]\nangle_time_constant_s = 0.015\npressure_time_constant_s = 0.008\n".into()),
-            Truth::new("sensor_lag_one_pressure", "sensor_lag_p2", |_| {
-                "[effects.sensor_lag]\np2_time_constant_s = 0.02\n".into()
-            }),
-        ]
     }
 }
 
@@ -174,7 +172,10 @@ impl SensorLagCandidate {
 }
 
 impl Candidate for SensorLagCandidate {
-    id_and_label!("sensor_lag", "sensor lag");
+    candidate_spec! {
+        id: "sensor_lag",
+        label: "sensor lag",
+    }
     fn params(&self, s: &Setup) -> Vec<ParamSpec> {
         Self::groups(s)
             .into_iter()

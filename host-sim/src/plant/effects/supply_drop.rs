@@ -23,7 +23,7 @@ use serde::Deserialize;
 
 use super::{enabled_default, Check, Effect, Hooks, Truth};
 use crate::diagnose::candidates::{
-    clamp_to, pressure_scatter, regress_pressure, Candidate, ParamSpec, Screening, Setup,
+    clamp_to, pressure_scatter, regress_pressure, Candidate, Screening, Setup,
 };
 use crate::diagnose::screen::Evidence;
 use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
@@ -234,6 +234,10 @@ type KeyValue<'a> = (&'a str, Option<f64>);
 
 impl Effect for SupplyDrop {
     type Active = Supply;
+    const TRUTHS: &'static [Truth] = &[
+        Truth::new("supply_drop", "supply_drop", |_| "[effects.supply_drop]\nmodel = \"static\"\nresistance_pa_s_per_m3 = 2.0e7\n".into()),
+        Truth::new("supply_drop_reservoir", "supply_drop", |_| "[effects.supply_drop]\nmodel = \"reservoir\"\ntank_volume_m3 = 5.0e-4\nfeed_conductance_m3_per_s_pa = 6.0e-9\n".into()),
+    ];
     fn enabled(&self) -> bool {
         self.enabled
     }
@@ -300,12 +304,6 @@ impl Effect for SupplyDrop {
     fn candidates() -> Vec<Box<dyn Candidate>> {
         vec![Box::new(SupplyDropCandidate), Box::new(SupplyReservoirCandidate)]
     }
-    fn truths() -> Vec<Truth> {
-        vec![
-            Truth::new("supply_drop", "supply_drop", |_| "[effects.supply_drop]\nmodel = \"static\"\nresistance_pa_s_per_m3 = 2.0e7\n".into()),
-            Truth::new("supply_drop_reservoir", "supply_drop", |_| "[effects.supply_drop]\nmodel = \"reservoir\"\ntank_volume_m3 = 5.0e-4\nfeed_conductance_m3_per_s_pa = 6.0e-9\n".into()),
-        ]
-    }
 }
 
 /// Regressor of a unit supply-line resistance in each chamber's pressure rate (Pa/s per
@@ -355,9 +353,10 @@ fn screen_supply(ev: &Evidence, note: &str, initial: impl FnOnce(f64) -> Vec<f64
 pub struct SupplyDropCandidate;
 
 impl Candidate for SupplyDropCandidate {
-    id_and_label!("supply_drop", "supply pressure drop");
-    fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
-        vec![ParamSpec::new("resistance_pa_s_per_m3", 0.0, 1e9, 1e7)]
+    candidate_spec! {
+        id: "supply_drop",
+        label: "supply pressure drop",
+        params: [("resistance_pa_s_per_m3", 0.0, 1e9, 1e7)],
     }
     fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
         let note = "the chambers fill slower than nominal in proportion to the total inlet flow";
@@ -385,12 +384,13 @@ impl Candidate for SupplyDropCandidate {
 pub struct SupplyReservoirCandidate;
 
 impl Candidate for SupplyReservoirCandidate {
-    id_and_label!("supply_drop", "supply pressure drop");
-    fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
-        vec![
-            ParamSpec::new("tank_volume_m3", 1e-6, 0.1, 1e-3),
-            ParamSpec::new("feed_conductance_m3_per_s_pa", 1e-11, 1e-6, 1e-8),
-        ]
+    candidate_spec! {
+        id: "supply_drop",
+        label: "supply pressure drop",
+        params: [
+            ("tank_volume_m3", 1e-6, 0.1, 1e-3),
+            ("feed_conductance_m3_per_s_pa", 1e-11, 1e-6, 1e-8),
+        ],
     }
     fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
         let note = "the chambers fill slower than nominal while the inlet valves draw air, as from a supply tank that drains and refills";

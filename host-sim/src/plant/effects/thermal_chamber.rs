@@ -25,7 +25,7 @@ use serde::Deserialize;
 
 use super::{Check, Effect, enabled_default, Hooks, Truth};
 use crate::diagnose::candidates::{
-    clamp_to, pressure_scatter, regress_pressure, Candidate, ParamSpec, Screening, Setup,
+    clamp_to, pressure_scatter, regress_pressure, Candidate, Screening, Setup,
 };
 use crate::diagnose::screen::Evidence;
 use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
@@ -102,10 +102,12 @@ impl Hooks for ThermalChamber {
 }
 
 impl Effect for ThermalChamber {
+    const TRUTHS: &'static [Truth] = &[Truth::new("thermal_chamber", "heat_transfer", |_| {
+        "[effects.thermal_chamber]\nheat_transfer_w_per_k = 2.0\nkappa = 1.4\n".into()
+    })];
     table_effect!(HeatTransferCandidate);
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
-        c.non_negative("heat_transfer_w_per_k", self.heat_transfer_w_per_k)?;
-        c.finite("kappa", self.kappa)?;
+        check_fields!(self, c, non_negative: heat_transfer_w_per_k; finite: kappa);
         if !(self.kappa > 1.0 && self.kappa <= 5.0 / 3.0) {
             return Err(c.error(
                 "kappa",
@@ -126,23 +128,17 @@ impl Effect for ThermalChamber {
         }
         Ok(())
     }
-    fn truths() -> Vec<Truth> {
-        vec![Truth::new("thermal_chamber", "heat_transfer", |_| {
-            "[effects.thermal_chamber]\nheat_transfer_w_per_k = 2.0\nkappa = 1.4\n".into()
-        })]
-    }
 }
 
 /// Heat exchange of the chamber gas with the wall, kappa of air.
 pub struct HeatTransferCandidate;
 
 impl Candidate for HeatTransferCandidate {
-    id_and_label!("heat_transfer", "chamber thermodynamics (gas temperature with wall heat transfer)");
-    fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
-        vec![ParamSpec::new("heat_transfer_w_per_k", 0.0, 50.0, 1.0)]
-    }
-    fn fixed(&self) -> Vec<(&'static str, f64)> {
-        vec![("kappa", KAPPA_AIR)]
+    candidate_spec! {
+        id: "heat_transfer",
+        label: "chamber thermodynamics (gas temperature with wall heat transfer)",
+        params: [("heat_transfer_w_per_k", 0.0, 50.0, 1.0)],
+        fixed: [("kappa", KAPPA_AIR)],
     }
     fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
         // On fast flows the gas has no time to exchange heat: the pressure rate is the

@@ -8,7 +8,7 @@
 use serde::Deserialize;
 
 use super::{Check, Effect, enabled_default, Hooks, Truth, torque_residual_scatter};
-use crate::diagnose::candidates::{clamp_to, Candidate, ParamSpec, Screening, Setup};
+use crate::diagnose::candidates::{clamp_to, Candidate, Screening, Setup};
 use crate::diagnose::screen::{regress, Evidence};
 use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
 
@@ -32,13 +32,11 @@ impl Hooks for ToySpring {
 }
 
 impl Effect for ToySpring {
+    const TRUTHS: &'static [Truth] = &[Truth::new("toy_spring", "toy_spring", |_| "[effects.toy_spring]\nstiffness_nm_per_rad = 2.0\nrest_angle_rad = 0.0\n".into())];
     table_effect!(ToySpringCandidate);
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
-        c.non_negative("stiffness_nm_per_rad", self.stiffness_nm_per_rad)?;
-        c.finite("rest_angle_rad", self.rest_angle_rad)
-    }
-    fn truths() -> Vec<Truth> {
-        vec![Truth::new("toy_spring", "toy_spring", |_| "[effects.toy_spring]\nstiffness_nm_per_rad = 2.0\nrest_angle_rad = 0.0\n".into())]
+        check_fields!(self, c, non_negative: stiffness_nm_per_rad; finite: rest_angle_rad);
+        Ok(())
     }
 }
 
@@ -46,9 +44,10 @@ impl Effect for ToySpring {
 pub struct ToySpringCandidate;
 
 impl Candidate for ToySpringCandidate {
-    id_and_label!("toy_spring", "torsion spring");
-    fn params(&self, _s: &Setup) -> Vec<ParamSpec> {
-        vec![ParamSpec::new("stiffness_nm_per_rad", 0.0, 100.0, 1.0)]
+    candidate_spec! {
+        id: "toy_spring",
+        label: "torsion spring",
+        params: [("stiffness_nm_per_rad", 0.0, 100.0, 1.0)],
     }
     fn screen(&self, ev: &Evidence, s: &Setup) -> Screening {
         // J alpha - T_muscles = -k beta: the torque residual follows -beta.

@@ -128,9 +128,15 @@ impl Hooks for ValveDeadTime {
 }
 
 impl Effect for ValveDeadTime {
+    const TRUTHS: &'static [Truth] = &[Truth::new("valve_delay", "valve_delay", |dt_s| {
+        format!(
+            "[effects.valve_dead_time]\ndelay_s = {}\n",
+            (0.008 / dt_s).round().max(1.0) * dt_s
+        )
+    })];
     table_effect!(ValveDelayCandidate);
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
-        c.non_negative("delay_s", self.delay_s)?;
+        check_fields!(self, c, non_negative: delay_s);
         if self.delay_s > MAX_PLAUSIBLE_DELAY_S {
             return Err(c.error(
                 "delay_s",
@@ -142,14 +148,6 @@ impl Effect for ValveDeadTime {
             ));
         }
         Ok(())
-    }
-    fn truths() -> Vec<Truth> {
-        vec![Truth::new("valve_delay", "valve_delay", |dt_s| {
-                format!(
-                    "[effects.valve_dead_time]\ndelay_s = {}\n",
-                    (0.008 / dt_s).round().max(1.0) * dt_s
-                )
-            })]
     }
 }
 
@@ -164,7 +162,10 @@ pub const MAX_VALVE_DELAY_S: f64 = 0.05;
 pub struct ValveDelayCandidate;
 
 impl Candidate for ValveDelayCandidate {
-    id_and_label!("valve_delay", "valve delay");
+    candidate_spec! {
+        id: "valve_delay",
+        label: "valve delay",
+    }
     fn params(&self, s: &Setup) -> Vec<ParamSpec> {
         vec![ParamSpec::new("delay_s", 0.0, MAX_VALVE_DELAY_S, s.dt_s)]
     }
