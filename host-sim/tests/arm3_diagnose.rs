@@ -141,6 +141,42 @@ fn a_nominal_arm_departs_nowhere() {
     assert_eq!(d.departing_joints(), Vec::<usize>::new());
 }
 
+/// Two angle columns swapped (joints 2 and 3): no joint is "explained" by invented sensor
+/// calibrations; what is answered at all leaves no more than the arm's limit.
+#[test]
+fn swapped_angle_columns_are_not_explained_by_invented_calibrations() {
+    let nominal = truth_config("");
+    let mut rec = recording(&nominal, 7);
+    let a = Channel::AngleDeg.index();
+    let j2 = rec.outputs[1][a].take();
+    rec.outputs[1][a] = rec.outputs[2][a].take();
+    rec.outputs[2][a] = j2;
+    let d = diagnose_arm(&nominal, &rec, &DiagnoseOptions::default(), &|_, _, _| {}).unwrap();
+    for (i, j) in d.joints.iter().enumerate() {
+        println!(
+            "joint {}: {} {:?}",
+            i + 1,
+            j.verdict.as_str(),
+            j.residual_x_noise
+        );
+        if j.verdict.as_str() == "explained" {
+            assert!(
+                j.residual_x_noise.0 <= host_sim::diagnose::arm3::MAX_RESIDUAL_X_NOISE,
+                "joint {}: {:?}",
+                i + 1,
+                j.residual_x_noise
+            );
+        }
+    }
+    assert!(
+        d.joints[1..]
+            .iter()
+            .any(|j| j.verdict.as_str() != "explained"),
+        "{}",
+        d.answer()
+    );
+}
+
 #[test]
 fn a_leak_in_one_muscle_of_joint_2_is_named_there_and_nowhere_else() {
     let d = diagnose(

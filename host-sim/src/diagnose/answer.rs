@@ -111,7 +111,7 @@ impl Diagnosis {
                             "Unexplained: the best answer ({}) changes the fits {} but still leaves {x:.0} times the noise on {channel} (an explanation leaves at most {:.0} times): something else is off, perhaps a plant-file key the diagnosis does not refit (the muscles' geometry: rest length, initial contraction, end factor; the sprocket radius; the valve's critical ratio; `host-sim identify plant --params KEY` fits any key); no effect is named.",
                             self.best_attempt.join(" + "),
                             change(&self.fit_before, &self.fit_best_attempt),
-                            crate::diagnose::verdict::MAX_RESIDUAL_X_NOISE
+                            self.max_residual_x_noise
                         )
                     }
                 };
@@ -222,7 +222,7 @@ impl Diagnosis {
             "residual_x_noise": {
                 "worst_channel": self.residual_x_noise.1,
                 "times_noise": json_num(self.residual_x_noise.0, 2),
-                "limit": json_num(crate::diagnose::verdict::MAX_RESIDUAL_X_NOISE, 2),
+                "limit": json_num(self.max_residual_x_noise, 2),
             },
             "lookalikes": self.lookalikes,
             "hints": self.hints,

@@ -259,6 +259,9 @@ pub struct Diagnosis {
     /// What the best answer (fitted, named or not) leaves of TRAIN's error on its worst
     /// channel, in times that channel's noise, and the channel ([`verdict::residual_over_noise`]).
     pub residual_x_noise: (f64, &'static str),
+    /// The most an accepted answer may leave, in times the noise
+    /// ([`DiagnoseOptions::max_residual_x_noise`]).
+    pub max_residual_x_noise: f64,
     /// TRAIN's fits under the best answer (named or not).
     pub fit_best_attempt: BTreeMap<&'static str, f64>,
     /// Noise level per channel (channel units).
@@ -1239,6 +1242,7 @@ pub fn diagnose(
         failures,
         nothing_missing: v == Verdict::NothingMissing,
         residual_x_noise,
+        max_residual_x_noise: opts.max_residual_x_noise,
         fit_best_attempt,
         black_box,
         noise: g.noise,
