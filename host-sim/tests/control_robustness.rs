@@ -5,9 +5,7 @@
 //! the held-out suite is 1.27x, not 2x; on the 11 x load the suite-tuned cascade and PD leave
 //! the 0.5 rad band).
 
-use host_sim::control::compare::{
-    control_tuned_path, reference_plant_path, suite_scenarios, ControlTuning,
-};
+use host_sim::control::compare::{control_tuned_path, suite_scenarios, ControlTuning};
 use host_sim::control::robustness::{
     format_table, held_out_scenarios, table, Row, CONDITIONS, SUPERVISION_OFF_DEAD_TIME,
     TUNING_HOLD_SD_MAX_RAD,
@@ -16,7 +14,8 @@ use std::ops::RangeBounds;
 
 /// The reference plant file's text.
 fn reference_text() -> String {
-    let plant = reference_plant_path().expect("../shared/plant/reference-1dof.toml");
+    let plant =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/reference-1dof.toml");
     std::fs::read_to_string(plant).unwrap()
 }
 

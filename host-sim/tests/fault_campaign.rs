@@ -20,9 +20,10 @@ use host_sim::control::closed_loop::{run, ClosedLoopRun, Scenario};
 use host_sim::plant::ValveInputs;
 use host_sim::Plant;
 
-fn shared(name: &str) -> Plant {
+/// A plant file of `tests/fixtures/` (copies of the shared reference plants).
+fn fixture_plant(name: &str) -> Plant {
     let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/plant")
+        .join("tests/fixtures")
         .join(name);
     Plant::load(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
@@ -242,8 +243,8 @@ struct KindStats {
 fn fault_campaign() {
     let full = std::env::var("FAULT_CAMPAIGN").is_ok_and(|v| v == "full");
     let plants = [
-        ("nominal", shared("reference-1dof.toml")),
-        ("loaded 11x", shared("reference-1dof-loaded.toml")),
+        ("nominal", fixture_plant("reference-1dof.toml")),
+        ("loaded 11x", fixture_plant("reference-1dof-loaded.toml")),
     ];
     let fault_times: &[f64] = if full { &[0.8, 1.33] } else { &[1.0] };
     let mut stats: BTreeMap<&str, KindStats> = BTreeMap::new();
