@@ -497,22 +497,27 @@ pub fn joint_plant_config(
     }
 }
 
-/// `plant` starting from the first sample of `rec` (a joint's 1-DOF recording): its angle,
-/// at rest, and its pressures where recorded, as the sensors read them (a sensor
-/// calibration the diagnosis fits moves the start with it).
+/// `initial` set to a recording's first sample (`first(channel)`, `None` where the channel is
+/// not recorded): the angle, at rest, and the two pressures; the others stay.
+fn start_at_first_sample(initial: &mut InitialConfig, first: impl Fn(Channel) -> Option<f64>) {
+    if let Some(a) = first(Channel::AngleDeg) {
+        initial.angle_rad = a.to_radians();
+        initial.velocity_rad_s = 0.0;
+    }
+    if let Some(p) = first(Channel::P1Kpa) {
+        initial.p1_gauge_pa = p * 1e3;
+    }
+    if let Some(p) = first(Channel::P2Kpa) {
+        initial.p2_gauge_pa = p * 1e3;
+    }
+}
+
+/// `plant` starting from the first sample of `rec` (a joint's 1-DOF recording), as the
+/// sensors read it (a sensor calibration the diagnosis fits moves the start with it).
 fn started_as_recorded(plant: &PlantConfig, rec: &Recording) -> PlantConfig {
     let mut c = plant.clone();
     c.initial.as_read = true;
-    if let Some(a) = rec.channel(Channel::AngleDeg) {
-        c.initial.angle_rad = a[0].to_radians();
-        c.initial.velocity_rad_s = 0.0;
-    }
-    if let Some(p) = rec.channel(Channel::P1Kpa) {
-        c.initial.p1_gauge_pa = p[0] * 1e3;
-    }
-    if let Some(p) = rec.channel(Channel::P2Kpa) {
-        c.initial.p2_gauge_pa = p[0] * 1e3;
-    }
+    start_at_first_sample(&mut c.initial, |ch| rec.channel(ch).map(|y| y[0]));
     c
 }
 
@@ -524,16 +529,7 @@ fn arm_started_as_recorded(cfg: &Arm3Config, rec: &Arm3Recording) -> Arm3Config 
         .into_iter()
         .enumerate()
     {
-        if let Some(a) = rec.channel(j, Channel::AngleDeg) {
-            joint.initial.angle_rad = a[0].to_radians();
-            joint.initial.velocity_rad_s = 0.0;
-        }
-        if let Some(p) = rec.channel(j, Channel::P1Kpa) {
-            joint.initial.p1_gauge_pa = p[0] * 1e3;
-        }
-        if let Some(p) = rec.channel(j, Channel::P2Kpa) {
-            joint.initial.p2_gauge_pa = p[0] * 1e3;
-        }
+        start_at_first_sample(&mut joint.initial, |ch| rec.channel(j, ch).map(|y| y[0]));
     }
     // The recorded angles are the start, not the file's equilibrium.
     c.settle_initial_angles = false;
