@@ -142,7 +142,8 @@ fn a_nominal_arm_departs_nowhere() {
 }
 
 /// Two angle columns swapped (joints 2 and 3): no joint is "explained" by invented sensor
-/// calibrations; what is answered at all leaves no more than the arm's limit.
+/// calibrations; what is answered at all leaves no more than the arm's limit (the swap is
+/// named before any search: both joints `not_this_plant`).
 #[test]
 fn swapped_angle_columns_are_not_explained_by_invented_calibrations() {
     let nominal = truth_config("");
@@ -175,6 +176,89 @@ fn swapped_angle_columns_are_not_explained_by_invented_calibrations() {
         "{}",
         d.answer()
     );
+}
+
+/// An angle column recorded in radians, one with the other sign, two swapped: named on the
+/// whole arm before any joint is searched (every joint's load comes from every angle).
+#[test]
+fn an_angle_in_radians_a_flipped_angle_and_swapped_angles_are_named_before_any_search() {
+    let nominal = truth_config("");
+    let rec = recording(&nominal, 8);
+    let a = Channel::AngleDeg.index();
+    let solver = DiagnoseOptions::default().solver;
+    let hints =
+        |r: &Arm3Recording| host_sim::diagnose::arm3::angle_unit_hints(&nominal, r, &solver);
+    assert_eq!(hints(&rec), [None, None, None], "the recording as made");
+
+    let mut rad = rec.clone();
+    rad.outputs[1][a]
+        .as_mut()
+        .unwrap()
+        .iter_mut()
+        .for_each(|v| *v = v.to_radians());
+    let h = hints(&rad);
+    println!("{h:?}");
+    assert!(h[0].is_none() && h[2].is_none(), "{h:?}");
+    assert!(
+        h[1].as_deref().unwrap().contains("angle_deg_j2")
+            && h[1].as_deref().unwrap().contains("radians"),
+        "{h:?}"
+    );
+
+    let mut flipped = rec.clone();
+    flipped.outputs[0][a]
+        .as_mut()
+        .unwrap()
+        .iter_mut()
+        .for_each(|v| *v = -*v);
+    let h = hints(&flipped);
+    println!("{h:?}");
+    assert!(h[0].as_deref().unwrap().contains("sign flipped"), "{h:?}");
+    assert!(h[1].is_none() && h[2].is_none(), "{h:?}");
+
+    let mut swapped = rec.clone();
+    let j2 = swapped.outputs[1][a].take();
+    swapped.outputs[1][a] = swapped.outputs[2][a].take();
+    swapped.outputs[2][a] = j2;
+    let h = hints(&swapped);
+    println!("{h:?}");
+    assert!(h[0].is_none(), "{h:?}");
+    for j in [1, 2] {
+        assert!(h[j].as_deref().unwrap().contains("when swapped"), "{h:?}");
+    }
+
+    // The diagnosis answers from the hint alone: every joint `not_this_plant`, the arm's
+    // answer says why and names the joint.
+    let d = diagnose_arm(&nominal, &rad, &DiagnoseOptions::default(), &|_, _, _| {}).unwrap();
+    assert_eq!(d.angle_misrecorded, vec![2]);
+    for j in &d.joints {
+        assert_eq!(j.verdict.as_str(), "not_this_plant", "{}", d.answer());
+    }
+    assert!(
+        d.answer().contains("no joint was diagnosed"),
+        "{}",
+        d.answer()
+    );
+    assert_eq!(d.to_json()["angle_misrecorded_joints"][0], 2);
+}
+
+/// No angle hint on a recording whose angles are as RECORDING.md says: the nominal arm (three
+/// seeds) and every truth of the arm matrix (36 recordings, seeds the matrix does not use).
+#[test]
+fn no_angle_hint_on_the_nominal_arm_or_any_truth_of_the_matrix() {
+    let nominal = truth_config("");
+    let solver = DiagnoseOptions::default().solver;
+    let mut truths = vec![("nominal".to_string(), nominal.clone()); 3];
+    truths.extend(
+        matrix_cases()
+            .into_iter()
+            .map(|(j, name, _, truth)| (format!("joint {j} {name}"), truth)),
+    );
+    for (k, (label, truth)) in truths.iter().enumerate() {
+        let rec = recording(truth, 900 + k as u64);
+        let h = host_sim::diagnose::arm3::angle_unit_hints(&nominal, &rec, &solver);
+        assert_eq!(h, [None, None, None], "{label}");
+    }
 }
 
 #[test]
@@ -286,7 +370,9 @@ fn residual_line(
 
 /// Runs the matrix and checks that at least 9 cases of 10 name the right joint (with or without
 /// force channels); returns (cases with the right effect, cases).
-fn matrix(forces: bool) -> (usize, usize) {
+/// The arm matrix's truths: per joint (1-based) every effect of the registry concealed on that
+/// joint, and eq. 7's friction x3 there: (joint, case name, expected answer, truth).
+fn matrix_cases() -> Vec<(usize, String, String, Arm3Config)> {
     let registry = [
         "valve_delay",
         "sensor_lag",
@@ -300,24 +386,19 @@ fn matrix(forces: bool) -> (usize, usize) {
         "sensor_offset",
         "sensor_gain_one_channel",
     ];
-    let nominal_text = std::fs::read_to_string(arm3_plant()).unwrap();
-    let nominal = Arm3Config::from_toml_str(&nominal_text, "arm3-seed001.toml").unwrap();
-    let mut rows = Vec::new();
-    let mut seed = 100;
+    let mut all = Vec::new();
     for joint in 1..=JOINTS {
-        let mut cases: Vec<(String, String, Arm3Config)> = registry
-            .iter()
-            .map(|name| {
-                let toml = host_sim::diagnose::synth::effect_toml(name, 1e-3)
-                    .unwrap()
-                    .replace("[effects.", &format!("[joint{joint}.effects."));
-                (
-                    name.to_string(),
-                    host_sim::diagnose::synth::expected_id(name).to_string(),
-                    truth_config(&toml),
-                )
-            })
-            .collect();
+        for name in registry {
+            let toml = host_sim::diagnose::synth::effect_toml(name, 1e-3)
+                .unwrap()
+                .replace("[effects.", &format!("[joint{joint}.effects."));
+            all.push((
+                joint,
+                name.to_string(),
+                host_sim::diagnose::synth::expected_id(name).to_string(),
+                truth_config(&toml),
+            ));
+        }
         // eq. 7 x3 on this joint: scale f_c and f_d in its [jointN.friction] table.
         let (text, replaced) = scaled_text(
             &format!("joint{joint}.friction"),
@@ -325,11 +406,27 @@ fn matrix(forces: bool) -> (usize, usize) {
             3.0,
         );
         assert_eq!(replaced, 2, "joint{joint}.friction");
-        cases.push((
+        all.push((
+            joint,
             "eq7_friction_x3".into(),
             "joint_friction".into(),
             Arm3Config::from_toml_str(&text, "truth.toml").unwrap(),
         ));
+    }
+    all
+}
+
+fn matrix(forces: bool) -> (usize, usize) {
+    let nominal_text = std::fs::read_to_string(arm3_plant()).unwrap();
+    let nominal = Arm3Config::from_toml_str(&nominal_text, "arm3-seed001.toml").unwrap();
+    let mut rows = Vec::new();
+    let mut seed = 100;
+    let all = matrix_cases();
+    for joint in 1..=JOINTS {
+        let cases = all
+            .iter()
+            .filter(|c| c.0 == joint)
+            .map(|c| (c.1.clone(), c.2.clone(), c.3.clone()));
         for (name, expected, truth) in cases {
             seed += 1;
             let rec = recording_with(&truth, seed, forces);

@@ -50,10 +50,98 @@ pub const NOTHING_MISSING_X_NOISE: f64 = 10.0;
 /// A joint's 1-DOF view carries the rest of the arm as a load taken from differentiated
 /// angles, so right answers leave more than the 1-DOF limit: at most 41.4 times on the
 /// 36-case arm matrix (16-34 on the shipped cases). Two swapped angle columns were
-/// "explained" by invented calibrations at 118-155 times, a link mass off by 45 % at 180;
-/// the limit leaves those joints unexplained (a swapped column's other joint can stay
-/// under it: 58.6 times in `swapped_angle_columns_are_not_explained_by_invented_calibrations`).
+/// "explained" by invented calibrations at 118-155 times (now named before any search by
+/// [`angle_unit_hints`]), a link mass off by 45 % at 180; the limit leaves such joints
+/// unexplained.
 pub const MAX_RESIDUAL_X_NOISE: f64 = 60.0;
+
+/// The angle columns' unit and sign, checked on the whole arm before any joint is diagnosed:
+/// every joint's load is computed from every joint's angle, so an angle recorded in radians
+/// or with the other sign puts every joint off, and each joint's 1-DOF view (angle from its
+/// neutral angle, the load from the wrong angles) no longer shows it; the joints would be
+/// searched for minutes for an answer that is not there. The nominal arm replays the
+/// recorded valve commands open loop; a joint whose recorded angle fits that replay
+/// [`ANGLE_HINT_MARGIN_PCT`] points better read as radians, or with its sign flipped, than as
+/// recorded is named, and two joints whose angle columns each fit the other's replay that
+/// much better (`None` for a joint that is fine, or when the replay fails).
+pub fn angle_unit_hints(
+    cfg: &Arm3Config,
+    rec: &Arm3Recording,
+    solver: &crate::sim::SolverOptions,
+) -> [Option<String>; JOINTS] {
+    let mut hints: [Option<String>; JOINTS] = Default::default();
+    let Ok(arm) = Arm3::from_config(cfg) else {
+        return hints;
+    };
+    let dt = rec.sample_period_s();
+    let Ok(sim) = simulate_arm3(&arm, &rec.inputs, dt, solver, |_| {}) else {
+        return hints;
+    };
+    let meas = arm.measure_run(&sim.states, dt);
+    let angles: [Option<&[f64]>; JOINTS] =
+        std::array::from_fn(|j| rec.channel(j, Channel::AngleDeg));
+    // Fit of joint `j`'s recorded angle, read through `f`, to joint `s`'s replayed angle.
+    let fit = |j: usize, s: usize, f: &dyn Fn(f64) -> f64| -> Option<f64> {
+        let y = angles[j]?;
+        let err2: f64 = y
+            .iter()
+            .zip(&meas)
+            .map(|(a, m)| (f(*a) - m[s].channel(Channel::AngleDeg)).powi(2))
+            .sum();
+        Some(crate::fit::fit_percent_by(|| y.iter().map(|a| f(*a)), err2))
+    };
+    let better =
+        |other: f64, straight: f64| other > straight + ANGLE_HINT_MARGIN_PCT && other > 30.0;
+    let straight: [Option<f64>; JOINTS] = std::array::from_fn(|j| fit(j, j, &|a| a));
+    let column = |j: usize| crate::io::arm3::column("angle_deg", j);
+    // Two columns swapped: each fits the other joint's replay.
+    for a in 0..JOINTS {
+        for b in a + 1..JOINTS {
+            let (Some(sa), Some(sb), Some(ca), Some(cb)) = (
+                straight[a],
+                straight[b],
+                fit(a, b, &|v| v),
+                fit(b, a, &|v| v),
+            ) else {
+                continue;
+            };
+            if better(ca.min(cb), sa.min(sb)) && hints[a].is_none() && hints[b].is_none() {
+                let h = format!(
+                    "{} and {} fit the nominal arm's replay {:.0} % when swapped and {:.0} % as labelled: check the angle columns' mapping to the joints",
+                    column(a),
+                    column(b),
+                    ca.min(cb),
+                    sa.min(sb)
+                );
+                hints[a] = Some(h.clone());
+                hints[b] = Some(h);
+            }
+        }
+    }
+    for (j, hint) in hints.iter_mut().enumerate() {
+        let (Some(straight), None) = (straight[j], hint.as_ref()) else {
+            continue;
+        };
+        let as_rad = fit(j, j, &|a: f64| a.to_degrees()).unwrap_or(f64::NEG_INFINITY);
+        let flipped = fit(j, j, &|a: f64| -a).unwrap_or(f64::NEG_INFINITY);
+        if better(as_rad, straight) {
+            *hint = Some(format!(
+                "{} fits the nominal arm's replay {as_rad:.0} % read as radians and {straight:.0} % as degrees: check the angle unit (RECORDING.md: degrees)",
+                column(j)
+            ));
+        } else if better(flipped, straight) {
+            *hint = Some(format!(
+                "{} fits the nominal arm's replay {flipped:.0} % with its sign flipped and {straight:.0} % as recorded: check the angle sign convention (muscle 1 contracts when the angle grows)",
+                column(j)
+            ));
+        }
+    }
+    hints
+}
+
+/// How many points better an angle must fit the nominal arm read otherwise (as radians,
+/// sign flipped) for [`angle_unit_hints`] to name it (the 1-DOF plausibility check's margin).
+pub const ANGLE_HINT_MARGIN_PCT: f64 = 30.0;
 
 /// The diagnosis of each joint of an arm recording.
 #[derive(Debug)]
@@ -68,6 +156,9 @@ pub struct ArmDiagnosis {
     /// The arm's shared supply, when two or more joints name it and a supply line
     /// resistance on the whole arm explains the recording ([`shared_supply`]).
     pub shared_supply: Option<SharedSupply>,
+    /// Joints (1-based) whose angle column looks mis-recorded ([`angle_unit_hints`]): no
+    /// joint was searched, every joint's answer carries the hint.
+    pub angle_misrecorded: Vec<usize>,
 }
 
 /// The arm-level supply stage: the six muscles draw on one supply, so a supply that sags
@@ -326,20 +417,33 @@ impl ArmDiagnosis {
     /// The answer in words, joint by joint.
     pub fn answer(&self) -> String {
         let departing = self.departing_joints();
-        let mut s = if departing.is_empty() {
-            "Arm: every joint is explained by the nominal model within its noise.\n".to_string()
-        } else {
-            format!(
-                "Arm: joint{} {} depart{} from the nominal model.\n",
-                if departing.len() > 1 { "s" } else { "" },
-                departing
+        let mut s =
+            if !self.angle_misrecorded.is_empty() {
+                format!(
+                "Arm: the angle column of joint{} {} looks mis-recorded (unit, sign or mapping; \
+                 see below); every joint's load is computed from every joint's angle, so no \
+                 joint was diagnosed. Fix the column(s) and run again.\n",
+                if self.angle_misrecorded.len() > 1 { "s" } else { "" },
+                self.angle_misrecorded
                     .iter()
                     .map(|j| j.to_string())
                     .collect::<Vec<_>>()
                     .join(", "),
-                if departing.len() > 1 { "" } else { "s" },
             )
-        };
+            } else if departing.is_empty() {
+                "Arm: every joint is explained by the nominal model within its noise.\n".to_string()
+            } else {
+                format!(
+                    "Arm: joint{} {} depart{} from the nominal model.\n",
+                    if departing.len() > 1 { "s" } else { "" },
+                    departing
+                        .iter()
+                        .map(|j| j.to_string())
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                    if departing.len() > 1 { "" } else { "s" },
+                )
+            };
         if let Some(sup) = &self.shared_supply {
             let mean = |f: fn(&(String, f64, f64)) -> f64| {
                 sup.heldout_fits.iter().map(f).sum::<f64>() / sup.heldout_fits.len().max(1) as f64
@@ -411,6 +515,7 @@ impl ArmDiagnosis {
             "kind": "arm3",
             "departing_joints": self.departing_joints(),
             "angle_corrected_joints": self.angle_corrected,
+            "angle_misrecorded_joints": self.angle_misrecorded,
             "shared_supply": self.shared_supply.as_ref().map(|sup| serde_json::json!({
                 "model": match &sup.form {
                     SupplyForm::Pressure { .. } => "supply_pressure",
@@ -673,6 +778,10 @@ pub fn diagnose_arm(
 ) -> Result<ArmDiagnosis, DiagnoseError> {
     let arm = Arm3::from_config(cfg).map_err(|e| DiagnoseError::Data(e.to_string()))?;
     let diff = crate::diagnose::SavitzkyGolay::default();
+    // An angle column in another unit or sign: every joint is answered by that hint (no
+    // search: each joint's load comes from every joint's angle).
+    let unit_hints = angle_unit_hints(cfg, rec, &opts.solver);
+    let offending: Vec<usize> = (0..JOINTS).filter(|j| unit_hints[*j].is_some()).collect();
     let (load, inertia) = load_torques_nm(&arm, rec, &diff)?;
     // The residual limit per joint is the arm's (MAX_RESIDUAL_X_NOISE), not the 1-DOF one.
     // Nothing is missing on a joint only when the nominal model leaves no channel's error
@@ -690,8 +799,19 @@ pub fn diagnose_arm(
             torque_nm: Arc::from(load_i),
         });
         // Only what the arm can have: no candidate the arm plant cannot simulate.
+        let extra_hints = match &unit_hints[i] {
+            Some(h) => vec![h.clone()],
+            None if !offending.is_empty() => vec![format!(
+                "not diagnosed: the angle of joint{} {} looks mis-recorded (see {}), and this joint's load is computed from every joint's angle",
+                if offending.len() > 1 { "s" } else { "" },
+                offending.iter().map(|j| (j + 1).to_string()).collect::<Vec<_>>().join(", "),
+                if offending.len() > 1 { "those joints" } else { "that joint" },
+            )],
+            None => Vec::new(),
+        };
         let opts = &DiagnoseOptions {
             exclude_candidates: candidates_the_arm_cannot_simulate(&plant),
+            extra_hints,
             ..opts.clone()
         };
         let train = joint_recording(cfg, rec, i);
@@ -762,5 +882,6 @@ pub fn diagnose_arm(
         inertia_kgm2: inertia,
         angle_corrected,
         shared_supply,
+        angle_misrecorded: offending.iter().map(|j| j + 1).collect(),
     })
 }

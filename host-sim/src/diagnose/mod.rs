@@ -88,6 +88,9 @@ pub struct DiagnoseOptions {
     /// ([`verdict::residual_over_noise`]); infinite for the 1-DOF plant, whose summed cost
     /// is the whole rule.
     pub max_nothing_missing_x_noise: f64,
+    /// Plausibility hints found by the caller (the arm's angle-unit check), answered like
+    /// the recording's own ([`verdict::plausibility_hints`]): `not_this_plant`, no search.
+    pub extra_hints: Vec<String>,
     pub solver: SolverOptions,
 }
 
@@ -106,6 +109,7 @@ impl Default for DiagnoseOptions {
             max_residual_x_noise: verdict::MAX_RESIDUAL_X_NOISE,
             exclude_candidates: Vec::new(),
             max_nothing_missing_x_noise: f64::INFINITY,
+            extra_hints: Vec::new(),
             solver: SolverOptions {
                 rtol: 1e-5,
                 atol: 1e-6,
@@ -857,7 +861,8 @@ pub fn diagnose(
     // Unit and wiring mistakes (a pressure in Pa, an angle in radians, swapped channels) are
     // seen on the nominal replay alone: the answer is then `not_this_plant` whatever the
     // selection finds, so the selection does not run (seconds instead of minutes).
-    let hints = verdict::plausibility_hints(nominal, train, &g.nominal.plausibility);
+    let mut hints = verdict::plausibility_hints(nominal, train, &g.nominal.plausibility);
+    hints.extend(opts.extra_hints.iter().cloned());
     step("screening done");
 
     // 3. Selection.
