@@ -677,3 +677,39 @@ fn fit_budget_shorter_than_train_names_the_truth() {
         assert_eq!(d.train.corrected.len(), d.train.t_s.len());
     }
 }
+
+/// A rig log rarely starts at the plant file's `[initial]`: the conformance fixture
+/// (an independent implementation of the plant, started at 550 kPa) against a plant file that
+/// says 450 kPa. The replays start from the recording's first sample, and the answer says so;
+/// before, the first seconds' departure was answered `unexplained`.
+#[test]
+fn a_recording_that_starts_away_from_the_files_initial_state_is_replayed_from_its_first_sample() {
+    let text = nominal_text()
+        .replace("p1_gauge_pa = 550000.0", "p1_gauge_pa = 450000.0")
+        .replace("p2_gauge_pa = 550000.0", "p2_gauge_pa = 450000.0");
+    assert_ne!(text, nominal_text());
+    let cfg = PlantConfig::from_toml_str(&text, "mis_initial.toml").unwrap();
+    let train = Recording::read(fixture("pulses_nominal.csv")).unwrap();
+    let d = diagnose(
+        &cfg,
+        &train,
+        None,
+        &DiagnoseOptions::default(),
+        &|_, _, _| {},
+    )
+    .unwrap();
+    println!("{}\n{:?}", d.answer(), d.data_notes);
+    assert_eq!(d.verdict, Verdict::NothingMissing, "{}", d.answer());
+    assert!(
+        d.data_notes
+            .iter()
+            .any(|n| n.contains("p1_kpa 550") && n.contains("starts there")),
+        "{:?}",
+        d.data_notes
+    );
+    assert!(
+        d.answer().contains("Note: the recording does not start"),
+        "{}",
+        d.answer()
+    );
+}

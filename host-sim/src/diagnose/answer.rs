@@ -248,6 +248,9 @@ impl Diagnosis {
                 if let Some(b) = &self.check_before {
                     s += &format!("Check recording: {}.\n", fits(b));
                 }
+                for d in &self.data_notes {
+                    s += &format!("Note: {d}.\n");
+                }
                 return s;
             }
             Verdict::Explained => {

@@ -602,30 +602,6 @@ pub fn joint_plant_config(
     }
 }
 
-/// `initial` set to a recording's first sample (`first(channel)`, `None` where the channel is
-/// not recorded): the angle, at rest, and the two pressures; the others stay.
-fn start_at_first_sample(initial: &mut InitialConfig, first: impl Fn(Channel) -> Option<f64>) {
-    if let Some(a) = first(Channel::AngleDeg) {
-        initial.angle_rad = a.to_radians();
-        initial.velocity_rad_s = 0.0;
-    }
-    if let Some(p) = first(Channel::P1Kpa) {
-        initial.p1_gauge_pa = p * 1e3;
-    }
-    if let Some(p) = first(Channel::P2Kpa) {
-        initial.p2_gauge_pa = p * 1e3;
-    }
-}
-
-/// `plant` starting from the first sample of `rec` (a joint's 1-DOF recording), as the
-/// sensors read it (a sensor calibration the diagnosis fits moves the start with it).
-fn started_as_recorded(plant: &PlantConfig, rec: &Recording) -> PlantConfig {
-    let mut c = plant.clone();
-    c.initial.as_read = true;
-    start_at_first_sample(&mut c.initial, |ch| rec.channel(ch).map(|y| y[0]));
-    c
-}
-
 /// The arm `cfg` starting from the first sample of `rec`: each joint at its recorded angle,
 /// at rest, with its recorded pressures (the file's where a channel is not recorded).
 fn arm_started_as_recorded(cfg: &Arm3Config, rec: &Arm3Recording) -> Arm3Config {
@@ -634,45 +610,13 @@ fn arm_started_as_recorded(cfg: &Arm3Config, rec: &Arm3Recording) -> Arm3Config 
         .into_iter()
         .enumerate()
     {
-        start_at_first_sample(&mut joint.initial, |ch| rec.channel(j, ch).map(|y| y[0]));
+        crate::diagnose::start::at_first_sample(&mut joint.initial, |ch| {
+            rec.channel(j, ch).map(|y| y[0])
+        });
     }
     // The recorded angles are the start, not the file's equilibrium.
     c.settle_initial_angles = false;
     c
-}
-
-/// Cost of `plant`'s replay of `rec`: per recorded channel the mean squared error over the
-/// channel's variance, summed (infinite when the replay fails).
-fn replay_cost(plant: &PlantConfig, rec: &Recording, opts: &DiagnoseOptions) -> f64 {
-    let n = rec.len();
-    let mut variance = [1.0f64; 5];
-    for c in Channel::ALL {
-        if let Some(y) = rec.channel(c) {
-            let mean = y.iter().sum::<f64>() / n as f64;
-            let var = y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n as f64;
-            variance[c.index()] = if var > 0.0 { var } else { 1.0 };
-        }
-    }
-    let mut cost = 0.0;
-    let ok = crate::sim::measure_each(
-        &crate::plant::Plant::from_config(plant),
-        &rec.inputs,
-        rec.sample_period_s(),
-        &opts.solver,
-        |k, _, m| {
-            for c in Channel::ALL {
-                if let Some(y) = rec.channel(c) {
-                    cost += (c.of(m) - y[k]).powi(2) / variance[c.index()];
-                }
-            }
-        },
-    )
-    .is_ok();
-    if ok && cost.is_finite() {
-        cost / n.max(1) as f64
-    } else {
-        f64::INFINITY
-    }
 }
 
 /// The candidates of a joint's 1-DOF pool (ids of [`super::selection::candidate_pool`])
@@ -819,8 +763,9 @@ pub fn diagnose_arm(
         // off (a muscle radius, the supply) the recording starts elsewhere, and a joint that
         // is itself as the file says would depart by the start alone: the recording's first
         // sample is the start then, when the nominal model replays the joint better from it.
-        let recorded_start = started_as_recorded(&plant, &train);
-        if replay_cost(&recorded_start, &train, opts) < replay_cost(&plant, &train, opts) {
+        if let Some(recorded_start) =
+            crate::diagnose::start::better_from_recording(&plant, &train, opts)
+        {
             plant = recorded_start;
         }
         let label = format!("joint {}{pass}", i + 1);

@@ -31,6 +31,7 @@ pub mod recalibrate;
 pub mod report;
 pub mod screen;
 pub mod selection;
+pub mod start;
 pub mod synth;
 pub mod testrig;
 pub mod verdict;
@@ -825,6 +826,12 @@ pub fn diagnose(
             ));
         }
     }
+    // A recording that starts away from the file's `[initial]` is replayed from its first
+    // sample when that replays it better (`start`): the departure of the first seconds is
+    // then not answered as the model's.
+    let recorded_start = start::for_diagnosis(nominal, train, opts);
+    let file_nominal = nominal;
+    let nominal = recorded_start.as_ref().unwrap_or(nominal);
     // Stage 2's pool is known before stage 1 runs (for the progress total).
     let cands: Vec<_> = selection::candidate_pool(nominal)
         .into_iter()
@@ -971,12 +978,21 @@ pub fn diagnose(
             dt_s: rec.sample_period_s(),
             present: g.present,
         };
+        // CHECK starts from its own first sample when TRAIN did from its own.
+        let from_check = |c: &PlantConfig| {
+            if recorded_start.is_some() {
+                start::as_recorded(c, rec)
+            } else {
+                c.clone()
+            }
+        };
         let mut ccfg = nominal.clone();
         for p in &fin.chosen {
             p.candidate.apply(&mut ccfg, &p.params, &csetup);
         }
+        let ccfg = from_check(&ccfg);
         match (
-            replay_recording(nominal, rec, &opts.solver, |_, _| {}),
+            replay_recording(&from_check(nominal), rec, &opts.solver, |_, _| {}),
             replay_recording(&ccfg, rec, &opts.solver, |_, _| {}),
         ) {
             (Ok(before), Ok(after)) => {
@@ -1238,7 +1254,7 @@ pub fn diagnose(
         lookalikes,
         data_notes: [
             verdict::coarse_onoff_note(train),
-            verdict::start_note(nominal, train),
+            verdict::start_note(file_nominal, train, recorded_start.is_some()),
         ]
         .into_iter()
         .flatten()

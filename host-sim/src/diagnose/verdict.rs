@@ -377,10 +377,15 @@ pub fn coarse_onoff_note(rec: &Recording) -> Option<String> {
 const START_NOTE_KPA: f64 = 20.0;
 const START_NOTE_DEG: f64 = 3.0;
 
-/// A note when the recording does not start where the plant file's `[initial]` says (the
-/// replays start from the file's values): a rig log rarely starts at the file's state, and
-/// the departure of the first seconds is then the start's, not the model's.
-pub fn start_note(plant: &crate::plant::config::PlantConfig, rec: &Recording) -> Option<String> {
+/// A note when the recording does not start where the plant file's `[initial]` says: a rig
+/// log rarely starts at the file's state, and the departure of the first seconds is then the
+/// start's, not the model's. `started_from_recording`: the replays started from the
+/// recording's first sample ([`super::start`]); otherwise from the file's values.
+pub fn start_note(
+    plant: &crate::plant::config::PlantConfig,
+    rec: &Recording,
+    started_from_recording: bool,
+) -> Option<String> {
     if plant.initial.as_read || rec.is_empty() {
         return None;
     }
@@ -420,13 +425,23 @@ pub fn start_note(plant: &crate::plant::config::PlantConfig, rec: &Recording) ->
         "kPa",
     );
     (!off.is_empty()).then(|| {
-        format!(
-            "the recording does not start where the plant file's [initial] says: {}; the \
-             replays start from the file's values, so the first seconds depart by the start \
-             alone: set [initial] to the rig's first sample (angle in rad, pressures in Pa \
-             gauge)",
-            off.join(", ")
-        )
+        if started_from_recording {
+            format!(
+                "the recording does not start where the plant file's [initial] says: {}; \
+                 the nominal model replays it better from its first sample, so every replay \
+                 (and a check recording's, from its own first sample) starts there, as the \
+                 sensors read it",
+                off.join(", ")
+            )
+        } else {
+            format!(
+                "the recording does not start where the plant file's [initial] says: {}; the \
+                 replays start from the file's values, so the first seconds depart by the \
+                 start alone: set [initial] to the rig's first sample (angle in rad, pressures \
+                 in Pa gauge)",
+                off.join(", ")
+            )
+        }
     })
 }
 
@@ -468,12 +483,12 @@ mod coarse_tests {
             let t = String::from("t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg,p1_kpa,p2_kpa\n");
             Recording::parse(&(t + &row(0.0) + &row(0.001)), "r.csv").unwrap()
         };
-        assert!(start_note(&plant, &rec(0.0)).is_none());
+        assert!(start_note(&plant, &rec(0.0), false).is_none());
         assert!(
-            start_note(&plant, &rec(8.0)).is_none(),
+            start_note(&plant, &rec(8.0), false).is_none(),
             "a sensor offset's size"
         );
-        let note = start_note(&plant, &rec(-100.0)).expect("100 kPa below the file's start");
+        let note = start_note(&plant, &rec(-100.0), false).expect("100 kPa below the file's start");
         assert!(
             note.contains("p1_kpa") && note.contains("initial.p1_gauge_pa"),
             "{note}"

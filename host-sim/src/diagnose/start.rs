@@ -1,0 +1,98 @@
+//! Where the diagnosis' replays start.
+//!
+//! A replay starts from the plant file's `[initial]`; a rig log rarely starts there (the rig
+//! sits wherever the last run left it), and the first seconds of a replay from the file's
+//! state then depart by the start alone. When the recording's first sample is clearly away
+//! from the file's state ([`super::verdict::start_note`]: 20 kPa or 3 deg) and the nominal
+//! model replays the recording better from that sample, the replays start from it, as the
+//! sensors read it (a sensor calibration the diagnosis fits moves the start with it:
+//! `InitialConfig::as_read`). A 3-DOF arm's joints make the same choice against the arm's
+//! settled state.
+
+use crate::diagnose::DiagnoseOptions;
+use crate::io::recording::{Channel, Recording};
+use crate::plant::config::{InitialConfig, PlantConfig};
+
+/// `initial` set to a recording's first sample (`first(channel)`, `None` where the channel is
+/// not recorded): the angle, at rest, and the two pressures; the others stay.
+pub fn at_first_sample(initial: &mut InitialConfig, first: impl Fn(Channel) -> Option<f64>) {
+    if let Some(a) = first(Channel::AngleDeg) {
+        initial.angle_rad = a.to_radians();
+        initial.velocity_rad_s = 0.0;
+    }
+    if let Some(p) = first(Channel::P1Kpa) {
+        initial.p1_gauge_pa = p * 1e3;
+    }
+    if let Some(p) = first(Channel::P2Kpa) {
+        initial.p2_gauge_pa = p * 1e3;
+    }
+}
+
+/// `plant` starting from the first sample of `rec` (a 1-DOF recording), as the sensors
+/// read it.
+pub fn as_recorded(plant: &PlantConfig, rec: &Recording) -> PlantConfig {
+    let mut c = plant.clone();
+    c.initial.as_read = true;
+    at_first_sample(&mut c.initial, |ch| rec.channel(ch).map(|y| y[0]));
+    c
+}
+
+/// Cost of `plant`'s replay of `rec`: per recorded channel the mean squared error over the
+/// channel's variance, summed (infinite when the replay fails).
+pub fn replay_cost(plant: &PlantConfig, rec: &Recording, opts: &DiagnoseOptions) -> f64 {
+    let n = rec.len();
+    let mut variance = [1.0f64; 5];
+    for c in Channel::ALL {
+        if let Some(y) = rec.channel(c) {
+            let mean = y.iter().sum::<f64>() / n as f64;
+            let var = y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n as f64;
+            variance[c.index()] = if var > 0.0 { var } else { 1.0 };
+        }
+    }
+    let mut cost = 0.0;
+    let ok = crate::sim::measure_each(
+        &crate::plant::Plant::from_config(plant),
+        &rec.inputs,
+        rec.sample_period_s(),
+        &opts.solver,
+        |k, _, m| {
+            for c in Channel::ALL {
+                if let Some(y) = rec.channel(c) {
+                    cost += (c.of(m) - y[k]).powi(2) / variance[c.index()];
+                }
+            }
+        },
+    )
+    .is_ok();
+    if ok && cost.is_finite() {
+        cost / n.max(1) as f64
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// `plant` started from `rec`'s first sample ([`as_recorded`]) when the nominal model replays
+/// `rec` better from there than from `plant`'s own start; `None` otherwise.
+pub fn better_from_recording(
+    plant: &PlantConfig,
+    rec: &Recording,
+    opts: &DiagnoseOptions,
+) -> Option<PlantConfig> {
+    if rec.is_empty() {
+        return None;
+    }
+    let recorded = as_recorded(plant, rec);
+    (replay_cost(&recorded, rec, opts) < replay_cost(plant, rec, opts)).then_some(recorded)
+}
+
+/// The 1-DOF diagnosis' start: `nominal` from `train`'s first sample when that sample is
+/// away from the file's `[initial]` ([`super::verdict::start_note`]) and the nominal model
+/// replays TRAIN better from it; `None`: the file's start.
+pub fn for_diagnosis(
+    nominal: &PlantConfig,
+    train: &Recording,
+    opts: &DiagnoseOptions,
+) -> Option<PlantConfig> {
+    super::verdict::start_note(nominal, train, false)?;
+    better_from_recording(nominal, train, opts)
+}
