@@ -94,7 +94,8 @@ enum Command {
     /// mismatch, named by its first tick and field).
     Pil(host_sim::control::pil::PilArgs),
     /// The pressure loop with and without the firmware's inverse thermodynamic feed-forward
-    /// (seed 004 eq. 7), firmware in the loop: position MSE and pressure tracking error on the
+    /// (the pressure command from the chamber's gas law, eq. 7 of the
+    /// learned-inverse-thermodynamics paper), firmware in the loop: position MSE and pressure tracking error on the
     /// controller suite and held-out set-points, on the plant and on it with a thermodynamic
     /// chamber, a leak and a supply drop. Exit status 1 when the feed-forward does not improve
     /// the nominal plant's suite position MSE by >= 1.85x.

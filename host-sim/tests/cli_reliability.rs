@@ -489,7 +489,8 @@ fn plant_values_out_of_their_physical_range_are_refused_at_their_line() {
 #[test]
 fn fit_refuses_a_nan_gate() {
     let w = Workspace::new();
-    for gate in ["NaN", "150"] {
+    // A negative number is taken as the value and refused by the range check.
+    for gate in ["NaN", "150", "-2e6"] {
         w.refuses(
             &format!("fit {{fixture}} {{fixture}} --min-fit {gate}"),
             &["--min-fit", "100"],
