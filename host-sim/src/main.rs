@@ -69,7 +69,9 @@ enum Command {
     /// columns per joint with a _j1, _j2, _j3 suffix.
     Diagnose(DiagnoseArgs),
     /// Diagnose every recording (*.csv) of a directory against one plant, in parallel: one
-    /// JSON per recording and a summary table (summary.csv); exit status 1 if any failed.
+    /// JSON per recording and a summary table (summary.csv). Exit status: the worst over the
+    /// recordings: 1 if one could not be diagnosed (its error is in the summary), else 3 if one
+    /// is unexplained or not this plant (as `diagnose` exits 3), else 0; 2: bad input.
     ///
     /// Each recording needs t_s,u_in1,u_ex1,u_in2,u_ex2 and the measured angle_deg,p1_kpa,
     /// p2_kpa (f1_n,f2_n used when present), as in RECORDING.md.
@@ -92,7 +94,8 @@ enum Command {
     /// mismatch, named by its first tick and field).
     Pil(host_sim::control::pil::PilArgs),
     /// The pressure loop with and without the firmware's inverse thermodynamic feed-forward
-    /// (seed 004 eq. 7), firmware in the loop: position MSE and pressure tracking error on the
+    /// (the pressure command from the chamber's gas law, eq. 7 of the
+    /// learned-inverse-thermodynamics paper), firmware in the loop: position MSE and pressure tracking error on the
     /// controller suite and held-out set-points, on the plant and on it with a thermodynamic
     /// chamber, a leak and a supply drop. Exit status 1 when the feed-forward does not improve
     /// the nominal plant's suite position MSE by >= 1.85x.
@@ -112,7 +115,9 @@ struct DiagnoseArgs {
     /// Training recording of the real rig (RECORDING.md).
     #[arg(long, value_name = "TRAIN.csv")]
     recording: PathBuf,
-    /// Optional check recording (other excitation), used only to validate.
+    /// Optional check recording (other excitation, not --recording itself), used only to
+    /// validate: an answer that makes its fit worse on a channel (by more than 2 points) is
+    /// not named (unexplained, exit status 3).
     #[arg(long, value_name = "CHECK.csv")]
     check: Option<PathBuf>,
     /// Output JSON (written atomically).
@@ -205,8 +210,19 @@ struct FitArgs {
     min_fit: Option<f64>,
 }
 
+/// `cmd` and its subcommands with negative numbers taken as values (`--offset -5`): a value
+/// out of range is then refused by the argument's range check, which names the range.
+fn with_negative_numbers(cmd: clap::Command) -> clap::Command {
+    cmd.allow_negative_numbers(true)
+        .mut_subcommands(with_negative_numbers)
+}
+
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = {
+        use clap::{CommandFactory as _, FromArgMatches as _};
+        let matches = with_negative_numbers(Cli::command()).get_matches();
+        Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit())
+    };
     if let Err(e) = refuse_arm_files(&cli.command) {
         eprintln!("error: {e}");
         return ExitCode::from(2);
@@ -219,7 +235,12 @@ fn main() -> ExitCode {
         Command::Fit(a) => run_fit(&a),
         Command::Demo(a) => run_demo(&a),
         Command::Diagnose(a) => run_diagnose(&a),
-        Command::DiagnoseBatch(a) => run_verdict(host_sim::diagnose::batch::run_batch(&a)),
+        Command::DiagnoseBatch(a) => {
+            host_sim::diagnose::batch::run_batch(&a).map(|(report, code)| {
+                print!("{report}");
+                ExitCode::from(code)
+            })
+        }
         Command::Sweep(a) => run_report(host_sim::identify::cli::run_sweep(&a)),
         Command::Identify(a) => run_report(host_sim::identify::cli::run_identify(&a)),
         Command::Tune(a) => run_report(host_sim::control::tune::run_tune(&a)),
@@ -745,6 +766,16 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
     };
     let mut inputs: Vec<(&str, &Path)> = vec![("--plant", &a.plant), ("--recording", &a.recording)];
     if let Some(c) = &a.check {
+        // The check recording validates the answer on data it was not fitted to.
+        if validate::same_existing_file(c, &a.recording) {
+            anyhow::bail!(
+                "--check {}: is the same file as --recording {}; give a recording of the same rig \
+                 with another excitation (or leave out --check: the held-out tail of --recording \
+                 is always checked)",
+                c.display(),
+                a.recording.display()
+            );
+        }
         inputs.push(("--check", c));
     }
     validate::distinct_outputs(&inputs, &[("--json", &a.json)])

@@ -316,6 +316,24 @@ pub fn file_value_error(file: &Path, text: &str, dotted: &str, message: &str) ->
     }
 }
 
+/// Whether two existing paths name the same file: the same canonical path (a symbolic link,
+/// `./` or `..`), or on Unix the same device and inode (a hard link).
+pub fn same_existing_file(a: &Path, b: &Path) -> bool {
+    if let (Ok(x), Ok(y)) = (a.canonicalize(), b.canonicalize()) {
+        if x == y {
+            return true;
+        }
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt as _;
+        if let (Ok(x), Ok(y)) = (std::fs::metadata(a), std::fs::metadata(b)) {
+            return x.dev() == y.dev() && x.ino() == y.ino();
+        }
+    }
+    false
+}
+
 fn same_target(input: &Path, output: &Path) -> bool {
     let Ok(i) = input.canonicalize() else {
         return false;

@@ -435,6 +435,47 @@ fn plant_values_out_of_their_physical_range_are_refused_at_their_line() {
             "-200000.0",
             vec!["plant.toml:33:", "initial.p1_gauge_pa", "vacuum"],
         ),
+        // Finite and positive but absurd for this product: refused before any work with the
+        // plausible range, not inside the integrator.
+        (
+            "inertia_kgm2",
+            "1e-30",
+            vec![
+                "plant.toml:22:",
+                "joint.inertia_kgm2",
+                "[0.0001, 10] kg m^2",
+                "rehab joint or soft manipulator",
+                "got 1e-30",
+            ],
+        ),
+        (
+            "inertia_kgm2",
+            "500.0",
+            vec!["plant.toml:22:", "joint.inertia_kgm2", "[0.0001, 10]"],
+        ),
+        (
+            "sprocket_radius_m",
+            "0.9",
+            vec![
+                "plant.toml:21:",
+                "joint.sprocket_radius_m",
+                "[0.005, 0.2] m",
+            ],
+        ),
+        (
+            "radius_m",
+            "1e-9",
+            vec!["plant.toml:13:", "muscle.radius_m", "[0.001, 0.1] m"],
+        ),
+        (
+            "sonic_conductance_m3_per_s_pa",
+            "1e-20",
+            vec![
+                "plant.toml:26:",
+                "valve.sonic_conductance_m3_per_s_pa",
+                "[1e-11, 0.000001] m^3/(s Pa)",
+            ],
+        ),
     ] {
         let p = edited_plant(&w, key, value);
         w.refuses_with(
@@ -448,10 +489,140 @@ fn plant_values_out_of_their_physical_range_are_refused_at_their_line() {
 #[test]
 fn fit_refuses_a_nan_gate() {
     let w = Workspace::new();
-    for gate in ["NaN", "150"] {
+    // A negative number is taken as the value and refused by the range check.
+    for gate in ["NaN", "150", "-2e6"] {
         w.refuses(
             &format!("fit {{fixture}} {{fixture}} --min-fit {gate}"),
             &["--min-fit", "100"],
+        );
+    }
+}
+
+#[test]
+fn plant_values_at_the_ends_of_their_plausible_ranges_run() {
+    // The bounds the plant file accepts are ones the simulator can run.
+    let w = Workspace::new();
+    for (key, value) in [
+        ("inertia_kgm2", "1e-4"),
+        ("inertia_kgm2", "10.0"),
+        ("sprocket_radius_m", "0.005"),
+        ("sonic_conductance_m3_per_s_pa", "1e-6"),
+        ("radius_m", "0.001"),
+    ] {
+        let p = edited_plant(&w, key, value);
+        let out = w.p("end.csv");
+        ok(&bin()
+            .args(["simulate", "--plant"])
+            .arg(&p)
+            .arg("--inputs")
+            .arg(fixture("pulses_nominal.csv"))
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap());
+        // and what it wrote reads back.
+        host_sim::Recording::read(&out).unwrap();
+    }
+}
+
+/// The nominal fixture with the cell of `column` on data row `row` (0-based) replaced by
+/// `value`; its 1-based line in the file.
+fn fixture_with_cell(
+    w: &Workspace,
+    name: &str,
+    column: &str,
+    row: usize,
+    value: &str,
+) -> (PathBuf, usize) {
+    let text = std::fs::read_to_string(fixture("pulses_nominal.csv")).unwrap();
+    let mut out = Vec::new();
+    let (mut header, mut data, mut line_no) = (None::<Vec<String>>, 0usize, 0usize);
+    for (i, l) in text.lines().enumerate() {
+        if l.starts_with('#') {
+            out.push(l.to_string());
+            continue;
+        }
+        let Some(h) = &header else {
+            header = Some(l.split(',').map(String::from).collect());
+            out.push(l.to_string());
+            continue;
+        };
+        let mut f: Vec<String> = l.split(',').map(String::from).collect();
+        if data == row {
+            let c = h.iter().position(|x| x == column).unwrap();
+            f[c] = value.to_string();
+            line_no = i + 1;
+        }
+        data += 1;
+        out.push(f.join(","));
+    }
+    assert!(line_no > 0);
+    (w.write(name, &(out.join("\n") + "\n")), line_no)
+}
+
+#[test]
+fn a_recording_value_absurd_for_its_channel_is_refused_at_its_line() {
+    let w = Workspace::new();
+    for (column, value, needles) in [
+        // Not a plain decimal: the general reader.
+        (
+            "p1_kpa",
+            "1e300",
+            vec!["`p1_kpa`", "1e300", "[-200, 2500] kPa gauge"],
+        ),
+        // A plain decimal (a pressure in Pa): the fast reader hands the row to the general one.
+        (
+            "p2_kpa",
+            "550000.0",
+            vec!["`p2_kpa`", "550000", "a value in Pa?"],
+        ),
+        (
+            "angle_deg",
+            "-1e9",
+            vec!["`angle_deg`", "[-3600, 3600] degrees"],
+        ),
+        ("f1_n", "3e12", vec!["`f1_n`", "[-1000000, 1000000] N"]),
+    ] {
+        let (rec, line) = fixture_with_cell(&w, "absurd.csv", column, 7000, value);
+        let line = format!("absurd.csv:{line}:");
+        let mut all = vec![line.as_str()];
+        all.extend(needles.iter());
+        for cmd in [
+            "diagnose --plant {plant} --recording {rec} --json {w}/out.json",
+            "fit {rec} {fixture}",
+        ] {
+            w.refuses_with(cmd, &[("rec", &rec)], &all);
+        }
+    }
+    // Legitimate extremes of the channels read: vacuum, a full supply, a large angle.
+    for (column, value) in [
+        ("p1_kpa", "-101.3"),
+        ("p2_kpa", "1999.5"),
+        ("angle_deg", "-720.0"),
+    ] {
+        let (rec, _) = fixture_with_cell(&w, "extreme.csv", column, 7000, value);
+        host_sim::Recording::read(&rec).unwrap();
+    }
+}
+
+#[test]
+fn diagnose_refuses_a_check_recording_that_is_the_training_recording() {
+    let w = Workspace::new();
+    let rec = w.p("train.csv");
+    std::fs::copy(fixture("pulses_nominal.csv"), &rec).unwrap();
+    let hard = w.p("hard.csv");
+    std::fs::hard_link(&rec, &hard).unwrap();
+    #[cfg(unix)]
+    std::os::unix::fs::symlink(&rec, w.p("link.csv")).unwrap();
+    let dotted = w.dir.path().join(".").join("train.csv");
+    let mut checks = vec![rec.clone(), hard.clone(), dotted];
+    #[cfg(unix)]
+    checks.push(w.p("link.csv"));
+    for check in &checks {
+        w.refuses_with(
+            "diagnose --plant {plant} --recording {rec} --check {check} --json {w}/out.json",
+            &[("rec", &rec), ("check", check)],
+            &["--check", "is the same file as --recording"],
         );
     }
 }

@@ -124,3 +124,49 @@ fn compare_control_refuses_bad_arguments_with_status_2() {
     );
     assert!(e.contains("/nonexistent/p.toml"), "{e}");
 }
+
+#[test]
+fn compare_control_outside_the_repository_names_the_gains_it_used() {
+    // Run from a directory of the user's: no config/ there -> the shipped gains, said so.
+    let dir = tempfile::tempdir().unwrap();
+    let run = || {
+        bin()
+            .current_dir(dir.path())
+            .args(["compare-control", "--quick", "--plant"])
+            .arg(plant())
+            .output()
+            .unwrap()
+    };
+    let r = run();
+    let out = text(&r.stdout);
+    assert!(
+        matches!(r.status.code(), Some(0 | 1)),
+        "{out}\n{}",
+        text(&r.stderr)
+    );
+    let first = out.lines().next().unwrap_or("");
+    assert!(first.contains("gains the shipped gains"), "{first}");
+    // The user's own config/control_tuned.toml in the working directory is used and named.
+    std::fs::create_dir(dir.path().join("config")).unwrap();
+    let own = dir.path().join("config/control_tuned.toml");
+    std::fs::write(
+        &own,
+        host_sim::control::compare::SHIPPED_CONTROL_TUNED.replace("\n[", "\n# the user's copy\n["),
+    )
+    .unwrap();
+    let r = run();
+    let out = text(&r.stdout);
+    let first = out.lines().next().unwrap_or("");
+    let own = own.canonicalize().unwrap();
+    assert!(
+        first.contains(&format!(
+            "gains {} (in the working directory)",
+            own.display()
+        )),
+        "{first}"
+    );
+    // A broken file there is an error naming it, not a silent fall-back.
+    std::fs::write(dir.path().join("config/control_tuned.toml"), "[cascade\n").unwrap();
+    let e = exits(2, &run());
+    assert!(e.contains("control_tuned.toml"), "{e}");
+}

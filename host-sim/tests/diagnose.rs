@@ -713,3 +713,131 @@ fn a_recording_that_starts_away_from_the_files_initial_state_is_replayed_from_it
         d.answer()
     );
 }
+
+/// `text` (a recording) with `add` added to every cell of `columns`.
+fn shifted_columns(text: &str, columns: &[&str], add: f64) -> String {
+    let mut header: Option<Vec<&str>> = None;
+    let mut out = String::new();
+    for l in text.lines() {
+        if l.starts_with('#') {
+            out += l;
+        } else if let Some(h) = &header {
+            let f: Vec<String> = l
+                .split(',')
+                .zip(h)
+                .map(|(v, name)| {
+                    if columns.contains(name) {
+                        format!("{:.6}", v.parse::<f64>().unwrap() + add)
+                    } else {
+                        v.to_string()
+                    }
+                })
+                .collect();
+            out += &f.join(",");
+        } else {
+            header = Some(l.split(',').collect());
+            out += l;
+        }
+        out.push('\n');
+    }
+    out
+}
+
+#[test]
+fn a_correction_that_makes_the_check_recording_worse_is_not_named() {
+    // TRAIN from a rig with twice the inertia (the simulator, through the CLI); CHECK is the
+    // nominal rig's recording (the independent reference implementation): the inertia the
+    // diagnosis refits on TRAIN makes CHECK worse, so it did not hold there.
+    let dir = tempfile::tempdir().unwrap();
+    let heavy = dir.path().join("heavy.toml");
+    std::fs::write(
+        &heavy,
+        nominal_text().replace("inertia_kgm2 = 0.014", "inertia_kgm2 = 0.028"),
+    )
+    .unwrap();
+    let train = dir.path().join("train.csv");
+    ok(&host_sim(&[
+        &"simulate",
+        &"--plant",
+        &heavy,
+        &"--inputs",
+        &fixture("pulses_nominal.csv"),
+        &"--out",
+        &train,
+    ]));
+    let json = dir.path().join("d.json");
+    let r = on_plant(
+        "diagnose",
+        &plant(),
+        &[
+            &"--recording",
+            &train,
+            &"--check",
+            &fixture("pulses_nominal.csv"),
+            &"--json",
+            &json,
+        ],
+    );
+    exits(3, &r);
+    let out = text(&r.stdout);
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(v["verdict"], "unexplained", "{out}");
+    assert!(v["recalibrated"].as_array().unwrap().is_empty(), "{v}");
+    let not_held = v["check"]["not_held"].as_str().unwrap();
+    assert!(not_held.contains("angle_deg 100.0 % -> "), "{not_held}");
+    assert!(
+        out.contains("did not hold on the check recording") && out.contains("joint.inertia_kgm2"),
+        "{out}"
+    );
+    // Without the check recording the same training data is explained (the inertia).
+    let stdout = ok(&on_plant(
+        "diagnose",
+        &plant(),
+        &[&"--recording", &train, &"--json", &json],
+    ));
+    assert!(stdout.contains("joint.inertia_kgm2"), "{stdout}");
+}
+
+#[test]
+fn pressures_logged_absolute_get_the_gauge_hint() {
+    // The nominal rig's recording with p_atm added to both pressure columns (an absolute
+    // sensor logged as gauge): the fitted offset is the atmosphere, and the answer says so.
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(fixture("pulses_nominal.csv")).unwrap();
+    let abs = dir.path().join("abs.csv");
+    std::fs::write(&abs, shifted_columns(&text, &["p1_kpa", "p2_kpa"], 101.325)).unwrap();
+    let json = dir.path().join("d.json");
+    let stdout = text_of_any_status(&on_plant(
+        "diagnose",
+        &plant(),
+        &[&"--recording", &abs, &"--json", &json],
+    ));
+    for n in [
+        "the pressure columns look absolute, not gauge",
+        "RECORDING.md's columns are gauge: subtract p_atm or import with reference = \"absolute\"",
+    ] {
+        assert!(stdout.contains(n), "`{n}` not in:\n{stdout}");
+    }
+    // A real sensor offset (20 kPa) gets no such hint.
+    std::fs::write(&abs, shifted_columns(&text, &["p1_kpa", "p2_kpa"], 20.0)).unwrap();
+    let stdout = text_of_any_status(&on_plant(
+        "diagnose",
+        &plant(),
+        &[&"--recording", &abs, &"--json", &json],
+    ));
+    assert!(stdout.contains("p1_offset_kpa +20.0"), "{stdout}");
+    assert!(!stdout.contains("look absolute"), "{stdout}");
+}
+
+/// stdout of a run that exited 0 or 3 (an answer either way), without a panic.
+fn text_of_any_status(r: &std::process::Output) -> String {
+    assert!(
+        matches!(r.status.code(), Some(0 | 3)),
+        "{:?}\n{}\n{}",
+        r.status,
+        text(&r.stdout),
+        text(&r.stderr)
+    );
+    text(&r.stdout)
+}

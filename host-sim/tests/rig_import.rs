@@ -388,11 +388,17 @@ fn unit_mistakes_in_a_mapping_are_refused_at_their_line_or_flagged() {
     let warned = |map_text: &str, needles: &[&str]| {
         let out = run(map_text);
         ok(&out);
-        let report = String::from_utf8_lossy(&out.stdout).into_owned();
+        // The ranges on stdout, the warnings on stderr.
+        let report = String::from_utf8_lossy(&out.stdout).into_owned()
+            + &String::from_utf8_lossy(&out.stderr);
         for n in needles {
             assert!(report.contains(n), "`{n}` not in: {report}");
         }
         assert!(!report.contains("warning: p2"), "{report}");
+        assert!(
+            !String::from_utf8_lossy(&out.stdout).contains("warning:"),
+            "warnings belong on stderr"
+        );
     };
     warned(
         &MAP.replacen(
@@ -504,4 +510,201 @@ unit = "rad"
     assert!(u[0].u_ex2 == 1.0 && u[0].u_in2 == 0.0);
     assert!(u[2].u_in1 == 0.0 && u[2].u_ex1 == 0.0);
     assert!((u[2].u_ex2 - 0.5).abs() < 1e-9);
+}
+
+/// `import` of `raw` through `map_text` into `out`.
+fn import_with(
+    dir: &Path,
+    map_text: &str,
+    raw: &Path,
+    out: &Path,
+    split: bool,
+) -> std::process::Output {
+    let map = write_map(dir, map_text);
+    let mut args: Vec<&dyn AsRef<std::ffi::OsStr>> =
+        vec![&"import", &"--map", &map, &"--input", &raw, &"--out", &out];
+    if split {
+        args.push(&"--split");
+    }
+    host_sim(&args)
+}
+
+/// The 1-based line of the `n`-th (0-based) line of `text` equal to `line`.
+fn line_of(text: &str, line: &str, n: usize) -> usize {
+    text.lines()
+        .enumerate()
+        .filter(|(_, l)| l.trim() == line)
+        .nth(n)
+        .unwrap()
+        .0
+        + 1
+}
+
+#[test]
+fn a_column_mapped_twice_is_refused_at_its_line() {
+    let dir = tmp();
+    let (raw, _) = rig_file(dir.path(), 2.0, 1, &[]);
+    let out = dir.path().join("never.csv");
+    for (extra, needles) in [
+        (
+            "\n[[channel]]\ncolumn = \"Zeit [ms]\"\nchannel = \"f1\"\nunit = \"N\"\n",
+            vec![
+                "channel[5] (`f1`): `column`",
+                "\"Zeit [ms]\" is the time column",
+            ],
+        ),
+        (
+            "\n[[channel]]\ncolumn = \"MPYE1 [V]\"\nchannel = \"f2\"\nunit = \"N\"\n",
+            vec![
+                "channel[5] (`f2`): `column`",
+                "\"MPYE1 [V]\" is already mapped by channel[3] (`valve1`)",
+            ],
+        ),
+    ] {
+        let text = format!("{MAP}{extra}");
+        let e = exits(2, &import_with(dir.path(), &text, &raw, &out, false));
+        let col = extra.lines().nth(2).unwrap();
+        // The column's second mention (the first is its [time] or its valve1 entry).
+        let at = format!("map.toml:{}:", line_of(&text, col, 1));
+        assert!(e.contains(&at), "`{at}` not in: {e}");
+        for n in needles {
+            assert!(e.contains(n), "`{n}` not in: {e}");
+        }
+        assert!(!out.exists());
+    }
+}
+
+#[test]
+fn an_onoff_threshold_that_leaves_a_valve_closed_or_open_is_warned_at_its_line() {
+    let dir = tmp();
+    let (raw, _) = rig_file(dir.path(), 2.0, 1, &[]);
+    let out = dir.path().join("rec.csv");
+    let valve1 = "[[channel]]\ncolumn = \"MPYE1 [V]\"\nchannel = \"valve1\"\nunit = \"V\"\ncurve = [[0.0, -1.0], [4.8, 0.0], [5.2, 0.0], [10.0, 1.0]]\n";
+    assert!(MAP.contains(valve1));
+    // The valve voltage (0..10 V) against 50: never open. The lab temperature (21.5) against
+    // 5: always open.
+    let onoff = "[[channel]]\ncolumn = \"MPYE1 [V]\"\nchannel = \"u_in1\"\nunit = \"onoff\"\nthreshold = 50.0\n\n\
+                 [[channel]]\ncolumn = \"Temp [C]\"\nchannel = \"u_ex1\"\nunit = \"onoff\"\nthreshold = 5.0\n";
+    let text = MAP.replace(valve1, onoff);
+    let r = import_with(dir.path(), &text, &raw, &out, false);
+    ok(&r);
+    let e = text_of(&r.stderr);
+    for (n, state, value) in [(0, "closed", "50"), (1, "open", "5")] {
+        let line = line_of(&text, &format!("threshold = {value}.0"), 0);
+        let want = format!("map.toml:{line}: channel[{}]", 3 + n);
+        assert!(e.contains(&want), "`{want}` not in: {e}");
+        let want = format!("`threshold` {value} leaves column");
+        assert!(e.contains(&want), "`{want}` not in: {e}");
+        assert!(e.contains(&format!("{state} over the whole file")), "{e}");
+    }
+    // The rig's own mapping warns of nothing.
+    let r = import_with(dir.path(), MAP, &raw, &out, false);
+    ok(&r);
+    assert!(
+        !text_of(&r.stderr).contains("threshold"),
+        "{}",
+        text_of(&r.stderr)
+    );
+}
+
+fn text_of(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+#[test]
+fn split_removes_its_own_stale_segments_and_a_missing_directory_names_the_users_path() {
+    let dir = tmp();
+    let map = MAP;
+    let out = dir.path().join("rec.csv");
+    // Three segments, then two: rec-3.csv of the first import would pass for part of the
+    // second; it is removed and the report says so.
+    let (raw3, _) = rig_file(dir.path(), 6.0, 3, &[60, 61, 62, 150, 151, 152]);
+    ok(&import_with(dir.path(), map, &raw3, &out, true));
+    assert!(dir.path().join("rec-3.csv").exists());
+    let (raw2, _) = rig_file(dir.path(), 6.0, 3, &[100, 101, 102]);
+    let report = ok(&import_with(dir.path(), map, &raw2, &out, true));
+    assert!(!dir.path().join("rec-3.csv").exists(), "{report}");
+    assert!(
+        report.contains("removed") && report.contains("rec-3.csv") && report.contains("2 segments"),
+        "{report}"
+    );
+    Recording::read(dir.path().join("rec-2.csv")).unwrap();
+    // One segment: OUT itself, and the earlier run's rec-1.csv, rec-2.csv go.
+    let (raw1, _) = rig_file(dir.path(), 6.0, 3, &[]);
+    ok(&import_with(dir.path(), map, &raw1, &out, true));
+    assert!(out.exists());
+    assert!(!dir.path().join("rec-1.csv").exists() && !dir.path().join("rec-2.csv").exists());
+
+    // A missing output directory: the user's path, not a temporary file's.
+    let missing = dir.path().join("no_such_dir").join("rec.csv");
+    let e = exits(2, &import_with(dir.path(), map, &raw1, &missing, false));
+    assert!(
+        e.contains(&format!("--out {}", missing.display())) && e.contains("does not exist"),
+        "{e}"
+    );
+    assert!(!e.contains("no_such_dir/."), "{e}");
+}
+
+#[test]
+fn a_negative_or_fractional_counts_per_rev_is_refused_with_its_range() {
+    let dir = tmp();
+    let (raw, _) = rig_file(dir.path(), 2.0, 1, &[]);
+    let out = dir.path().join("never.csv");
+    for (value, got) in [
+        ("-8000", "got -8000"),
+        ("1e300", "got 1e300"),
+        ("8000.5", "got 8000.5"),
+    ] {
+        let text = MAP.replace(
+            "counts_per_rev = 8000",
+            &format!("counts_per_rev = {value}"),
+        );
+        let e = exits(2, &import_with(dir.path(), &text, &raw, &out, false));
+        let line = line_of(&text, &format!("counts_per_rev = {value}"), 0);
+        for n in [
+            format!("map.toml:{line}:"),
+            "`counts_per_rev`".to_string(),
+            "[1, 1073741824]".to_string(),
+            got.to_string(),
+        ] {
+            assert!(e.contains(&n), "`{n}` not in: {e}");
+        }
+        assert!(!e.contains("expected"), "{e}");
+        assert!(!out.exists());
+    }
+}
+
+#[test]
+fn absolute_pressures_mapped_as_gauge_get_the_hint_on_stderr() {
+    let dir = tmp();
+    // A logger file whose muscles vent from 6.5 bar absolute down to the atmosphere (written
+    // here, 200 rows at 25 ms, in the rig's layout).
+    let mut t = String::from(
+        "Prüfstand\nexportiert\nZeit [ms];P1 [bar abs];P2 [bar abs];Encoder;MPYE1 [V];MPYE2 [V];Temp [C]\n",
+    );
+    for k in 0..200 {
+        let p_bar = 1.01325 + 5.5 * (-(k as f64) / 20.0).exp();
+        let row = format!(
+            "{:.1};{p_bar:.5};{p_bar:.5};{};2.0;2.0;21.5\n",
+            25.0 * k as f64,
+            k % 7
+        );
+        t.push_str(&row.replace('.', ","));
+    }
+    let raw = dir.path().join("vent.csv");
+    std::fs::write(&raw, t).unwrap();
+    let out = dir.path().join("rec.csv");
+    // bar absolute read as bar gauge: the minimum is about 1 bar.
+    let text = MAP.replace("reference = \"absolute\"", "reference = \"gauge\"");
+    let r = import_with(dir.path(), &text, &raw, &out, false);
+    let e = text_of(&r.stderr) + &text_of(&r.stdout);
+    ok(&r);
+    for n in [
+        "warning: p1 never goes below",
+        "the pressure columns look absolute, not gauge; RECORDING.md's columns are gauge: subtract p_atm or import with reference = \"absolute\"",
+    ] {
+        assert!(e.contains(n), "`{n}` not in: {e}");
+    }
+    let r = import_with(dir.path(), MAP, &raw, &out, false);
+    assert!(!text_of(&r.stderr).contains("look absolute"));
 }

@@ -21,6 +21,11 @@ fn bad_tune_arguments_are_refused_without_touching_the_output() {
             "--setpoint-cutoff-hz 0: allowed 1..=500 Hz",
         ),
         (vec!["--cascade-start", "1,2"], "--cascade-start 1,2"),
+        // A negative number is a value out of range, not an unknown argument.
+        (
+            vec!["--transition-s", "-1"],
+            "--transition-s -1: allowed 0..=2 s",
+        ),
     ] {
         let r = bin()
             .arg("tune")

@@ -56,6 +56,32 @@ pub const SUITE: [(&str, &str); 3] = [
 /// Where the tuned PD / PID gains live, relative to the repository root.
 pub const CONTROL_TUNED_TOML: &str = "config/control_tuned.toml";
 
+/// The shipped tuned gains (`config/control_tuned.toml` of this repository), built into the
+/// binary: a command run outside the repository still has them.
+pub const SHIPPED_CONTROL_TUNED: &str = include_str!("../../../config/control_tuned.toml");
+
+/// The tuned gains a command uses when none is given, and where they came from:
+/// `config/control_tuned.toml` under the working directory when it is there (the user's own
+/// tuning, `host-sim tune` writes it), else the shipped gains ([`SHIPPED_CONTROL_TUNED`]).
+pub fn default_control_tuning() -> Result<(ControlTuning, String), IdentError> {
+    let own = Path::new(CONTROL_TUNED_TOML);
+    if own.is_file() {
+        let label = match own.canonicalize() {
+            Ok(abs) => format!("{} (in the working directory)", abs.display()),
+            Err(_) => format!("{CONTROL_TUNED_TOML} (in the working directory)"),
+        };
+        return Ok((ControlTuning::load(own)?, label));
+    }
+    let label = format!(
+        "the shipped gains ({CONTROL_TUNED_TOML} built into host-sim; no {CONTROL_TUNED_TOML} in \
+         the working directory)"
+    );
+    Ok((
+        ControlTuning::from_toml_str(SHIPPED_CONTROL_TUNED, "shipped config/control_tuned.toml")?,
+        label,
+    ))
+}
+
 /// The tuned gains file, relative to this crate's source tree (for tests and examples).
 pub fn control_tuned_path() -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -34,7 +34,7 @@ use pam_firmware::tick::ControllerConfig;
 
 use super::closed_loop::{run_with, Scenario};
 use super::compare::{
-    at_scenario_rate, control_tuned_path, jump_suite_scenarios, suite_scenarios, ControlTuning,
+    at_scenario_rate, default_control_tuning, jump_suite_scenarios, suite_scenarios, ControlTuning,
 };
 use crate::identify::volume::{
     samples_from_recording, split_samples, train, Thermo, TrainOptions, VolumePoly,
@@ -105,7 +105,9 @@ pub struct CompareControlArgs {
     /// Plant parameter file (TOML): the nominal plant; the effect variants are added to it.
     #[arg(long, value_name = "P.toml")]
     pub plant: PathBuf,
-    /// Tuned gains [default: config/control_tuned.toml].
+    /// Tuned gains [default: config/control_tuned.toml under the working directory if it is
+    /// there, else the shipped gains built into host-sim]; the report's first line names the
+    /// file used.
     #[arg(long, value_name = "CONTROL_TUNED.toml")]
     pub gains: Option<PathBuf>,
     #[command(flatten)]
@@ -560,8 +562,13 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
     // Arguments first: a bad one touches nothing and costs no run.
     let text = std::fs::read_to_string(&a.plant)
         .with_context(|| format!("--plant {}: cannot read", a.plant.display()))?;
-    let gains = a.gains.clone().unwrap_or_else(control_tuned_path);
-    let tuning = ControlTuning::load(&gains)?;
+    let (tuning, gains) = match &a.gains {
+        Some(p) => (
+            ControlTuning::load(p)?,
+            format!("{} (--gains)", p.display()),
+        ),
+        None => default_control_tuning()?,
+    };
     let mut base = tuning.cascade.config(1000.0);
     a.ff.apply(&mut base.pressure_ff)?;
     let mut suite = suite_scenarios()?;
@@ -585,9 +592,8 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
     let mut out = String::new();
     writeln!(
         out,
-        "plant {}, gains {} (tuned cascade), suite: {}; held-out: {}",
+        "plant {}, gains {gains} (tuned cascade), suite: {}; held-out: {}",
         a.plant.display(),
-        gains.display(),
         suite
             .iter()
             .map(|s| s.scenario.name.as_str())

@@ -487,12 +487,16 @@ fn tune_cascade(ctx: &Ctx, start: ControllerConfig) -> (ControllerConfig, f64) {
     let cost_cfg = |cfg: ControllerConfig| ctx.cascade_cost(cfg).0;
     let c_start = cost_cfg(start);
     ctx.say(format!(
-        "cascade: start kp {} ki {} kd {} torque ki {} feed-forward {:?}: cost {:.4e} rad^2",
+        "cascade: start kp {} ki {} kd {} torque ki {} feed-forward (rate weight {}, J {} kg m^2, \
+         cutoff {} Hz, limit {} N m): cost {:.4e} rad^2",
         start.position.kp_nm_per_rad,
         start.position.ki_nm_per_rad_s,
         start.position.kd_nm_s_per_rad,
         start.torque.ki_per_s,
-        start.feedforward,
+        start.feedforward.rate_weight,
+        start.feedforward.inertia_kgm2,
+        start.feedforward.cutoff_hz,
+        start.feedforward.limit_nm,
         c_start
     ));
     let with = |x: &[f64]| {

@@ -95,7 +95,12 @@ impl Diagnosis {
                         .chain(self.check_after.iter().flatten())
                         .map(|(_, v)| *v)
                         .fold(f64::INFINITY, f64::min);
-                    if self.best_attempt.is_empty() {
+                    if let Some(lost) = &self.check_not_held {
+                        format!(
+                            "Unexplained: the best answer ({}) fits the training recording but did not hold on the check recording: it makes the check fit worse ({lost}); no effect is named.",
+                            self.best_attempt.join(" + ")
+                        )
+                    } else if self.best_attempt.is_empty() {
                         format!(
                             "Unexplained: the nominal model misses something (fits {}), but nothing in the catalogue or among the plant file's keys explains it on the held-out data; no effect is named.",
                             fits(&self.fit_before)
@@ -230,6 +235,9 @@ impl Diagnosis {
         });
         if let (Some(b), Some(a)) = (&self.check_before, &self.check_after) {
             out["check"] = serde_json::json!({"before": json_fits(b), "after": json_fits(a)});
+            if let Some(lost) = &self.check_not_held {
+                out["check"]["not_held"] = serde_json::Value::String(lost.clone());
+            }
         }
         out["black_box"] = self
             .black_box

@@ -3,6 +3,7 @@
 //! recording and a summary table. A recording that cannot be diagnosed is listed in the
 //! summary with its error; the others are still written.
 
+use std::io::Read as _;
 use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
@@ -144,9 +145,7 @@ impl BatchRow {
 /// worst_fit_after_pct,wall_s`; `effects` joins the named effects and `recalibrate KEY` with
 /// `+`).
 pub fn summary_csv(rows: &[BatchRow]) -> String {
-    let head =
-        "recording,samples,verdict,effects,worst_fit_before_pct,worst_fit_after_pct,wall_s\n";
-    head.to_string()
+    format!("{SUMMARY_HEADER}\n")
         + &summary_lines(
             rows,
             |name, samples, d| {
@@ -220,7 +219,9 @@ pub struct BatchArgs {
     /// u_in2, u_ex2, angle_deg, p1_kpa, p2_kpa[, f1_n, f2_n]).
     #[arg(long, value_name = "DIR")]
     pub recordings: PathBuf,
-    /// Output directory (created if missing): one `<recording>.json` each and `summary.csv`.
+    /// Output directory (created if missing): one `<recording>.json` each and `summary.csv`;
+    /// it may be --recordings itself (an earlier run's summary.csv there is not read as a
+    /// recording).
     #[arg(long, value_name = "OUT_DIR")]
     pub out_dir: PathBuf,
     /// Recordings diagnosed at once (worker threads).
@@ -229,13 +230,18 @@ pub struct BatchArgs {
 }
 
 /// Runs the batch: writes the JSON files and the summary (atomically, through the run's
-/// transaction); returns the summary table and whether every recording was diagnosed.
-pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, bool)> {
+/// transaction); returns the summary table and the exit status ([`exit_status`]).
+pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, u8)> {
     use anyhow::Context as _;
     crate::validate::output_dir("--out-dir", &a.out_dir).map_err(anyhow::Error::msg)?;
     let cfg = PlantConfig::load(&a.plant)?;
-    let recs = recordings_in(&a.recordings)
+    let mut recs = recordings_in(&a.recordings)
         .with_context(|| format!("--recordings {}", a.recordings.display()))?;
+    // With --out-dir equal to --recordings, an earlier run's summary.csv is listed too: it
+    // is this command's output (its header says so), not a recording. A user's recording
+    // named summary.csv is kept (and refused below as an output that is an input).
+    let own_summary = a.out_dir.join(SUMMARY_FILE);
+    recs.retain(|r| !(crate::validate::same_existing_file(r, &own_summary) && is_batch_summary(r)));
     if recs.is_empty() {
         anyhow::bail!(
             "--recordings {}: no *.csv file in it",
@@ -244,7 +250,7 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, bool)> {
     }
     // Two recordings with the same stem would write the same JSON.
     let mut jsons: Vec<PathBuf> = recs.iter().map(|r| json_path(&a.out_dir, r)).collect();
-    jsons.push(a.out_dir.join("summary.csv"));
+    jsons.push(own_summary.clone());
     let outs: Vec<(&str, &Path)> = jsons.iter().map(|p| ("--out-dir", p.as_path())).collect();
     let ins: Vec<(&str, &Path)> = std::iter::once(("--plant", a.plant.as_path()))
         .chain(recs.iter().map(|p| ("--recordings", p.as_path())))
@@ -266,10 +272,9 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, bool)> {
                 .with_context(|| format!("{}", p.display()))?;
         }
     }
-    let summary = a.out_dir.join("summary.csv");
+    let summary = own_summary;
     crate::io::atomic::write_bytes(&summary, summary_csv(&rows).as_bytes())
         .with_context(|| format!("{}", summary.display()))?;
-    let all_ok = rows.iter().all(|r| r.result.is_ok());
     Ok((
         format!(
             "{}wrote {} JSON files and {}\n",
@@ -277,6 +282,45 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, bool)> {
             rows.iter().filter(|r| r.result.is_ok()).count(),
             summary.display()
         ),
-        all_ok,
+        exit_status(&rows),
     ))
+}
+
+/// The batch's exit status, the worst over its recordings: 1 if one could not be diagnosed
+/// (its error is in the summary), else 3 if one is `unexplained` or `not_this_plant` (as
+/// `diagnose` exits 3 on them), else 0.
+pub fn exit_status(rows: &[BatchRow]) -> u8 {
+    if rows.iter().any(|r| r.result.is_err()) {
+        1
+    } else if rows.iter().any(|r| {
+        matches!(
+            &r.result,
+            Ok(d) if !matches!(d.verdict, "explained" | "nothing_missing")
+        )
+    }) {
+        3
+    } else {
+        0
+    }
+}
+
+/// The name of the batch's summary in `--out-dir`.
+pub const SUMMARY_FILE: &str = "summary.csv";
+
+/// The first line of [`summary_csv`].
+const SUMMARY_HEADER: &str =
+    "recording,samples,verdict,effects,worst_fit_before_pct,worst_fit_after_pct,wall_s";
+
+/// Whether `path` is a summary this command wrote (its first line is the summary's header).
+fn is_batch_summary(path: &Path) -> bool {
+    use std::io::BufRead as _;
+    let Ok(f) = std::fs::File::open(path) else {
+        return false;
+    };
+    let mut first = String::new();
+    std::io::BufReader::new(f)
+        .take(4096)
+        .read_line(&mut first)
+        .is_ok()
+        && first.trim_end() == SUMMARY_HEADER
 }

@@ -245,6 +245,9 @@ pub struct Diagnosis {
     pub heldout_after: BTreeMap<&'static str, f64>,
     pub check_before: Option<BTreeMap<&'static str, f64>>,
     pub check_after: Option<BTreeMap<&'static str, f64>>,
+    /// When the correction made the CHECK recording worse ([`verdict::check_not_held`]): the
+    /// channels that lost fit, "p1_kpa 100.0 % -> 82.8 %" (the verdict is then unexplained).
+    pub check_not_held: Option<String>,
     pub candidates: Vec<CandidateScore>,
     /// The best set the selection found (ids), also when the verdict names nothing.
     pub best_attempt: Vec<String>,
@@ -1027,6 +1030,11 @@ pub fn diagnose(
     // What the answer leaves of TRAIN's error, against the noise.
     let residual_x_noise = verdict::residual_over_noise(&fin.replay.fits, &g.noise, &g.spread);
     let fit_best_attempt = fin.replay.fits.clone();
+    // A correction that makes the check recording worse did not hold there.
+    let check_not_held = match (&check_before, &check_after) {
+        (Some(b), Some(a)) if !fin.chosen.is_empty() => verdict::check_not_held(b, a),
+        _ => None,
+    };
     let v = if nothing_missing && hints.is_empty() {
         Verdict::NothingMissing
     } else if !hints.is_empty()
@@ -1037,6 +1045,7 @@ pub fn diagnose(
         || !(min_heldout >= opts.min_heldout_fit_pct)
         || !(residual_x_noise.0 <= opts.max_residual_x_noise)
         || !failures.is_empty()
+        || check_not_held.is_some()
     {
         Verdict::Unexplained
     } else {
@@ -1237,6 +1246,7 @@ pub fn diagnose(
         });
     }
     progress(total, total, "done");
+    let absolute_note = verdict::absolute_pressure_note(nominal, &effects);
     Ok(Diagnosis {
         verdict: v,
         located: g.located,
@@ -1248,6 +1258,7 @@ pub fn diagnose(
         heldout_after,
         check_before,
         check_after,
+        check_not_held: check_not_held.filter(|_| v == Verdict::Unexplained),
         candidates: sel.scores,
         best_attempt,
         best_attempt_at_bound,
@@ -1255,6 +1266,7 @@ pub fn diagnose(
         data_notes: [
             verdict::coarse_onoff_note(train),
             verdict::start_note(file_nominal, train, recorded_start.is_some()),
+            absolute_note,
         ]
         .into_iter()
         .flatten()

@@ -8,7 +8,9 @@
 //!   (the held-out tail of TRAIN and the CHECK recording) are all at least
 //!   [`MIN_HELDOUT_FIT_PCT`].
 //! - `unexplained`: the best answer still leaves a held-out fit below
-//!   [`MIN_HELDOUT_FIT_PCT`] (or nothing was accepted): no effect is named.
+//!   [`MIN_HELDOUT_FIT_PCT`], or it makes the CHECK recording's fit worse on a channel (by
+//!   more than [`MAX_CHECK_FIT_LOSS_PCT`] points: the correction did not hold there), or
+//!   nothing was accepted: no effect is named.
 //! - `not_this_plant`: the recording does not look like this plant at all (the nominal model
 //!   fits no channel, or a plausibility check on the units and the channel mapping fires):
 //!   no effect is named and the likely cause is pointed at.
@@ -32,6 +34,28 @@ pub const FIT_FLOOR_REL: f64 = 2e-3;
 /// noise-free data, of [`FIT_FLOOR_REL`]): beyond it, something else is off and the answer
 /// is not called an explanation (`unexplained`, its best attempt reported).
 pub const MAX_RESIDUAL_X_NOISE: f64 = 5.0;
+
+/// A correction that lowers a channel's fit on the CHECK recording by more than this (in
+/// percentage points) did not hold there: the verdict is `unexplained`.
+pub const MAX_CHECK_FIT_LOSS_PCT: f64 = 2.0;
+
+/// The channels whose CHECK fit the correction lowered by more than
+/// [`MAX_CHECK_FIT_LOSS_PCT`] ("p1_kpa 100.0 % -> 82.8 %"), or `None` when it held (a NaN
+/// after the correction counts as lost).
+pub fn check_not_held(
+    before: &std::collections::BTreeMap<&'static str, f64>,
+    after: &std::collections::BTreeMap<&'static str, f64>,
+) -> Option<String> {
+    let lost: Vec<String> = before
+        .iter()
+        .filter_map(|(k, b)| {
+            let a = after.get(k).copied().unwrap_or(f64::NAN);
+            (b.is_finite() && !(a >= b - MAX_CHECK_FIT_LOSS_PCT))
+                .then(|| format!("{k} {b:.1} % -> {a:.1} %"))
+        })
+        .collect();
+    (!lost.is_empty()).then(|| lost.join(", "))
+}
 
 /// The kind of answer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -367,6 +391,37 @@ pub fn coarse_onoff_note(rec: &Recording) -> Option<String> {
              between two samples (PWM) is not described by them; record the openings at the \
              valves' switching rate, or time-averaged over each sample",
             crate::validate::Shown(1e3 * dt_s)
+        )
+    })
+}
+
+/// A fitted pressure offset within this of the atmosphere (either sign) is the atmosphere:
+/// pressures logged absolute (or the offset of a gauge column subtracted twice) [kPa].
+pub const ABSOLUTE_OFFSET_WITHIN_KPA: f64 = 5.0;
+
+/// A note when a named sensor offset on a pressure channel is the atmosphere
+/// (+-`environment.p_atm_pa`, within [`ABSOLUTE_OFFSET_WITHIN_KPA`]): the columns were
+/// logged absolute, not gauge, and the "offset" is a unit of reference, not a sensor fault.
+pub fn absolute_pressure_note(
+    plant: &PlantConfig,
+    effects: &[crate::diagnose::NamedEffect],
+) -> Option<String> {
+    let p_atm_kpa = plant.environment.p_atm_pa * 1e-3;
+    let hits: Vec<String> = effects
+        .iter()
+        .filter(|e| e.id == "sensor_offset")
+        .flat_map(|e| e.params.iter())
+        .filter(|(name, v)| {
+            matches!(name.as_str(), "p1_offset_kpa" | "p2_offset_kpa")
+                && (v.abs() - p_atm_kpa).abs() <= ABSOLUTE_OFFSET_WITHIN_KPA
+        })
+        .map(|(name, v)| format!("{name} {v:+.1} kPa"))
+        .collect();
+    (!hits.is_empty()).then(|| {
+        format!(
+            "the fitted pressure offset ({}) is the atmosphere ({p_atm_kpa:.3} kPa): {}",
+            hits.join(", "),
+            crate::io::import::ABSOLUTE_PRESSURE_HINT
         )
     })
 }

@@ -181,7 +181,7 @@ pub enum IdentifyWhat {
     /// (columns t_s, u_in1, u_ex1, u_in2, u_ex2 and the measured angle_deg, p1_kpa, p2_kpa,
     /// f1_n, f2_n that are present); write the plant file with the fitted values.
     Plant(IdentifyPlantArgs),
-    /// Train the hybrid model's chamber volume (seed 004 eq. 8-12: a network of two hidden
+    /// Train the hybrid model's chamber volume (eq. 8-12 of the learned-inverse-thermodynamics paper: a network of two hidden
     /// layers V(e, e', P, P'), loss = mass-flow error + weight decay) on a recording with the
     /// mass-flow columns m_dot_1_kg_s, m_dot_2_kg_s; write the firmware's config/volume.toml.
     Volume(super::volume::IdentifyVolumeArgs),

@@ -789,7 +789,8 @@ pub struct IdentifyVolumeArgs {
     /// Seed of the random start (the same seed and recording give the same file).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Weight decay lambda of seed 004 eq. 10.
+    /// Weight decay lambda (the penalty on the network's squared weights in the training
+    /// loss, eq. 10 of the learned-inverse-thermodynamics paper).
     #[arg(long, default_value_t = 1e-5, value_parser = crate::validate::f64_in(crate::validate::Range::closed(0.0, 1.0)))]
     pub weight_decay: f64,
     /// Levenberg-Marquardt budget [loss evaluations].

@@ -157,7 +157,9 @@ pub struct ChannelMap {
     #[serde(default)]
     pub offset: f64,
     #[serde(default)]
-    pub counts_per_rev: Option<u32>,
+    /// Read as any number so that a negative, fractional or too large count is refused with
+    /// the range ([`COUNTS_PER_REV`]), not as a type error.
+    pub counts_per_rev: Option<f64>,
     #[serde(default)]
     pub threshold: Option<f64>,
     #[serde(default)]
@@ -337,6 +339,9 @@ impl Mapping {
 pub const P_ATM_RANGE_PA: Range = Range::closed(50_000.0, 110_000.0);
 /// Proportional band of a pressure regulator [Pa].
 pub const REGULATOR_BAND_RANGE_PA: Range = Range::closed(100.0, 1e6);
+/// Encoder counts per turn an angle in `counts` may give (1 to 2^30: a 30-bit encoder).
+pub const COUNTS_PER_REV: std::ops::RangeInclusive<u32> = 1..=1 << 30;
+
 /// Median time step of a recording a PAM joint can be studied from: 100 kHz .. 10 Hz [s].
 pub const STEP_RANGE_S: Range = Range::closed(1e-5, 0.1);
 /// Highest gauge pressure a mapped column may reach [Pa] (pneumatics runs below 1.6 MPa).
@@ -351,6 +356,14 @@ pub const P_SUSPECT_BELOW_PA: f64 = 10e3;
 /// A muscle exhausts to the atmosphere: a gauge pressure below this is suspect (an absolute
 /// sensor read as gauge, or a unit too large read as a smaller one) [Pa].
 pub const P_SUSPECT_GAUGE_BELOW_PA: f64 = -20e3;
+/// A gauge pressure column whose minimum lies within this of the atmosphere (and so never
+/// vents to 0 kPa gauge) looks like an absolute sensor read as gauge [Pa].
+pub const P_ABSOLUTE_SUSPECT_WITHIN_PA: f64 = 15e3;
+/// What to do about pressures that look absolute (the import's warning and the diagnosis'
+/// note say the same).
+pub const ABSOLUTE_PRESSURE_HINT: &str = "the pressure columns look absolute, not gauge; \
+     RECORDING.md's columns are gauge: subtract p_atm or import with reference = \"absolute\"";
+
 /// An angle channel that never moves more than this is suspect (radians mapped as degrees)
 /// [rad].
 pub const ANGLE_SPAN_SUSPECT_BELOW_RAD: f64 = 1.0 * std::f64::consts::PI / 180.0;
@@ -455,12 +468,27 @@ fn plan(
             "rad" => Convert::scale(1.0),
             "deg" => Convert::scale(std::f64::consts::PI / 180.0),
             "counts" => {
-                let cpr = c.counts_per_rev.filter(|n| *n > 0).ok_or_else(|| {
-                    ImportError(format!(
-                        "{}: angle in counts needs counts_per_rev > 0",
-                        key("counts_per_rev")
-                    ))
-                })?;
+                let cpr = c
+                    .counts_per_rev
+                    .filter(|n| {
+                        n.fract() == 0.0
+                            && (f64::from(*COUNTS_PER_REV.start())
+                                ..=f64::from(*COUNTS_PER_REV.end()))
+                                .contains(n)
+                    })
+                    .map(|n| n as u32)
+                    .ok_or_else(|| {
+                        ImportError(format!(
+                            "{}: angle in counts needs counts_per_rev, an integer in [{}, {}] \
+                             (encoder counts per turn){}",
+                            key("counts_per_rev"),
+                            COUNTS_PER_REV.start(),
+                            COUNTS_PER_REV.end(),
+                            c.counts_per_rev
+                                .map(|n| format!(", got {}", Shown(n)))
+                                .unwrap_or_else(|| ", not given".into())
+                        ))
+                    })?;
                 Convert::Counts {
                     counts_per_rev: cpr,
                 }
@@ -601,6 +629,38 @@ pub fn import(
                 "{}: channel[{i}] and channel[{j}] both map `{}`",
                 map_path.display(),
                 mapping.channel[i].channel
+            )));
+        }
+    }
+    // One source column, one meaning: the time column is not a channel, and no column is
+    // read as two channels.
+    let column_at =
+        |i: usize| match crate::validate::toml_key_line(&mapping.text, "channel", i, "column") {
+            Some(line) => format!("{}:{line}", map_path.display()),
+            None => map_path.display().to_string(),
+        };
+    for (i, c) in mapping.channel.iter().enumerate() {
+        let Some(col) = c.column.as_deref() else {
+            continue;
+        };
+        if col == mapping.time.column {
+            return Err(ImportError(format!(
+                "{}: channel[{i}] (`{}`): `column`: {col:?} is the time column ([time] column); \
+                 a column is read as one thing: map the channel's own column",
+                column_at(i),
+                c.channel
+            )));
+        }
+        if let Some(j) = mapping.channel[..i]
+            .iter()
+            .position(|d| d.column.as_deref() == Some(col))
+        {
+            return Err(ImportError(format!(
+                "{}: channel[{i}] (`{}`): `column`: {col:?} is already mapped by channel[{j}] \
+                 (`{}`); a column is read as one channel: map each channel's own column",
+                column_at(i),
+                c.channel,
+                mapping.channel[j].channel
             )));
         }
     }
@@ -782,7 +842,7 @@ pub fn import(
                     return Err(at(
                         line,
                         name,
-                        format!("opening {v} outside [0, 1] after the mapping"),
+                        format!("opening {} outside [0, 1] after the mapping", Shown(v)),
                     ));
                 }
             }
@@ -792,7 +852,10 @@ pub fn import(
                     return Err(at(
                         line,
                         name,
-                        format!("signed opening {v} outside [-1, 1] after the mapping"),
+                        format!(
+                            "signed opening {} outside [-1, 1] after the mapping",
+                            Shown(v)
+                        ),
                     ));
                 }
             }
@@ -816,14 +879,14 @@ pub fn import(
                 if t_s[k] == t_s[k - 1] {
                     format!(
                         "time does not increase: time stamp {} s repeated (a duplicated row?)",
-                        t_s[k]
+                        Shown(t_s[k])
                     )
                 } else {
                     format!(
                         "time does not increase: {} s after {} s (rows out of order? the rows \
                          must be sorted by time)",
-                        t_s[k],
-                        t_s[k - 1]
+                        Shown(t_s[k]),
+                        Shown(t_s[k - 1])
                     )
                 },
             ));
@@ -859,8 +922,11 @@ pub fn import(
                 lines[k],
                 time_name,
                 format!(
-                "step {step} s is less than {MIN_STEP_RATIO} median steps ({median} s): a doubled \
-                 or misordered time stamp"),
+                    "step {} s is less than {MIN_STEP_RATIO} median steps ({} s): a doubled or \
+                     misordered time stamp",
+                    Shown(step),
+                    Shown(median)
+                ),
             ));
         } else {
             max_jitter = max_jitter.max((step - median).abs() / median);
@@ -878,15 +944,17 @@ pub fn import(
             .collect();
         return Err(ImportError(format!(
             "{}: {} gap(s) in column `{time_name}` (steps over {MAX_STEP_RATIO} median steps of \
-             {median} s); gaps are not filled: cut the file, or pass --split to write one \
+             {} s); gaps are not filled: cut the file, or pass --split to write one \
              recording per gap-free segment\n{}",
             input.display(),
             gaps.len(),
+            Shown(median),
             list.join("\n")
         )));
     }
     cuts.push(n);
-    let (ranges, warnings) = channel_ranges(mapping, &plans, &values);
+    let (ranges, mut warnings) = channel_ranges(mapping, &plans, &values);
+    warnings.extend(stuck_onoff_valves(mapping, map_path, &plans, &values));
 
     // Assemble the recordings.
     let find = |t: Target| plans.iter().position(|(p, _)| *p == t);
@@ -958,8 +1026,9 @@ pub fn import(
             (
                 "time_stamps".into(),
                 format!(
-                    "as logged, max |step - median| = {:.1} % of the median step {median} s",
-                    100.0 * max_jitter
+                    "as logged, max |step - median| = {:.1} % of the median step {} s",
+                    100.0 * max_jitter,
+                    Shown(median)
                 ),
             ),
         ];
@@ -979,6 +1048,53 @@ pub fn import(
         ranges,
         warnings,
     })
+}
+
+/// A warning for each on/off valve column whose `threshold` leaves it closed (or open) over
+/// the whole file: the threshold is probably on the wrong side of the logged levels.
+fn stuck_onoff_valves(
+    mapping: &Mapping,
+    map_path: &Path,
+    plans: &[(Target, Convert)],
+    values: &[Vec<f64>],
+) -> Vec<String> {
+    let mut warnings = Vec::new();
+    for (i, ((_, conv), (c, v))) in plans
+        .iter()
+        .zip(mapping.channel.iter().zip(values))
+        .enumerate()
+    {
+        let (Convert::OnOff { threshold }, Some(col)) = (conv, c.column.as_deref()) else {
+            continue;
+        };
+        let state = if v.iter().all(|u| *u == 0.0) {
+            "closed"
+        } else if v.iter().all(|u| *u == 1.0) {
+            "open"
+        } else {
+            continue;
+        };
+        let at = crate::validate::toml_key_line(&mapping.text, "channel", i, "threshold")
+            .or_else(|| crate::validate::toml_key_line(&mapping.text, "channel", i, "unit"))
+            .map(|line| format!("{}:{line}", map_path.display()))
+            .unwrap_or_else(|| map_path.display().to_string());
+        warnings.push(format!(
+            "{at}: channel[{i}] (`{}`): `threshold` {} leaves column `{col}` {state} over the \
+             whole file (open when the value is >= threshold): is the threshold between the \
+             column's closed and open levels?",
+            c.channel,
+            Shown(*threshold)
+        ));
+    }
+    warnings
+}
+
+/// How `plans` converts output channel `ch`.
+fn plan_conv(plans: &[(Target, Convert)], ch: Channel) -> Option<&Convert> {
+    plans
+        .iter()
+        .find(|(t, _)| *t == Target::Output(ch))
+        .map(|(_, c)| c)
 }
 
 /// The range of each mapped output channel, and a warning for a pressure that never leaves
@@ -1015,7 +1131,20 @@ fn channel_ranges(
         if c.column.is_none() {
             continue;
         }
+        let read_as_gauge = matches!(plan_conv(plans, ch), Some(Convert::Factor { minus_pa, .. }) if *minus_pa == 0.0);
         match ch {
+            Channel::P1Kpa | Channel::P2Kpa
+                if read_as_gauge
+                    && (lo - mapping.pressure.p_atm_pa).abs() <= P_ABSOLUTE_SUSPECT_WITHIN_PA =>
+            {
+                warnings.push(format!(
+                    "{} never goes below {} kPa gauge over the file (a muscle that vents \
+                     reaches 0 kPa gauge, and the atmosphere is {} kPa): {ABSOLUTE_PRESSURE_HINT}",
+                    c.channel,
+                    Shown(lo * 1e-3),
+                    Shown(mapping.pressure.p_atm_pa * 1e-3)
+                ))
+            }
             Channel::P1Kpa | Channel::P2Kpa if lo.abs().max(hi.abs()) < P_SUSPECT_BELOW_PA => {
                 warnings.push(format!(
                     "{} never exceeds {} kPa gauge over the file: a muscle that moves sees \
@@ -1042,6 +1171,20 @@ fn channel_ranges(
         }
     }
     (ranges, warnings)
+}
+
+/// Whether `path` is a recording `host-sim import` wrote (its `# source` metadata line).
+fn is_import_output(path: &Path) -> bool {
+    use std::io::{BufRead as _, Read as _};
+    let Ok(f) = std::fs::File::open(path) else {
+        return false;
+    };
+    let mut first = String::new();
+    std::io::BufReader::new(f.take(4096))
+        .read_line(&mut first)
+        .is_ok()
+        && first.starts_with("# source = host-sim ")
+        && first.contains(" import of ")
 }
 
 /// Output path of segment `i` of `n`: `OUT` itself for one segment, else `OUT-1.csv`, ...
@@ -1081,7 +1224,9 @@ pub struct ImportArgs {
 /// `host-sim import`: returns the report printed on stdout.
 pub fn run_import(a: &ImportArgs) -> anyhow::Result<String> {
     let inputs = [("--map", a.map.as_path()), ("--input", a.input.as_path())];
-    crate::validate::distinct_outputs(&inputs, &[("--out", &a.out)]).map_err(anyhow::Error::msg)?;
+    crate::validate::distinct_outputs(&inputs, &[("--out", &a.out)])
+        .and_then(|()| crate::validate::output_parent_exists("--out", &a.out))
+        .map_err(anyhow::Error::msg)?;
     let mapping = Mapping::load(&a.map)?;
     let imp = import(&mapping, &a.map, &a.input, a.split)?;
     // With --split the segments have their own names: none may be an input either.
@@ -1111,7 +1256,7 @@ pub fn run_import(a: &ImportArgs) -> anyhow::Result<String> {
             p.display(),
             rec.len(),
             rec.t_s[rec.len() - 1],
-            imp.median_step_s
+            Shown(imp.median_step_s)
         );
     }
     let _ = writeln!(
@@ -1131,23 +1276,38 @@ pub fn run_import(a: &ImportArgs) -> anyhow::Result<String> {
     for r in &imp.ranges {
         let _ = writeln!(report, "  {r}");
     }
+    // Warnings go to stderr (the report on stdout stays the record of what was written).
     for w in &imp.warnings {
-        let _ = writeln!(report, "warning: {w}");
+        eprintln!("warning: {w}");
     }
-    // Segments of an earlier import with more of them are not this import's: say so.
+    // Segments OUT-k.csv beyond this import's: an earlier import into the same OUT with more
+    // segments wrote them (their `# source` line says so) and they would pass for part of
+    // this one: removed. Any other file of that name is the user's: named, left as it was.
     let first_stale = if n == 1 { 0 } else { n };
     for k in first_stale..first_stale + 1000 {
         let p = segment_path(&a.out, k, n.max(2));
         if !p.exists() {
             break;
         }
-        let _ = writeln!(
-            report,
-            "note: {} is not part of this import ({n} segment{}): an earlier run's file, left \
-             as it was",
-            p.display(),
-            if n == 1 { "" } else { "s" }
-        );
+        let plural = if n == 1 { "" } else { "s" };
+        if is_import_output(&p) {
+            std::fs::remove_file(&p)
+                .map_err(|e| ImportError(format!("{}: cannot remove: {e}", p.display())))?;
+            let _ = writeln!(
+                report,
+                "removed {}: a segment of an earlier import into {} (this import has {n} \
+                 segment{plural})",
+                p.display(),
+                a.out.display()
+            );
+        } else {
+            let _ = writeln!(
+                report,
+                "note: {} is not part of this import ({n} segment{plural}) and not an import's \
+                 output: left as it was",
+                p.display()
+            );
+        }
     }
     Ok(report)
 }

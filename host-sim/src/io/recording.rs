@@ -60,7 +60,45 @@ impl Channel {
     pub fn of(self, m: &Measurement) -> f64 {
         m.to_array()[self.index()]
     }
+
+    /// The values a reading of this channel may have: wide enough for any rig of this
+    /// product (and any run of the simulator on a plant file it accepts), narrow enough that
+    /// an absurd value (`1e300`, a pressure in Pa, an angle in millidegrees) is refused where
+    /// it is read instead of turning a fit into NaN. Returns (lo, hi, what the range means).
+    pub fn plausible_range(self) -> (f64, f64, &'static str) {
+        match self {
+            Channel::AngleDeg => (-3600.0, 3600.0, "degrees (ten turns either way)"),
+            Channel::P1Kpa | Channel::P2Kpa => (
+                -200.0,
+                2500.0,
+                "kPa gauge (vacuum is -101.325 kPa, a supply at most 2000 kPa; a value in Pa?)",
+            ),
+            Channel::F1N | Channel::F2N => (-1.0e6, 1.0e6, "N"),
+        }
+    }
+
+    /// Whether `v` lies in [`Self::plausible_range`].
+    #[inline]
+    pub fn is_plausible(self, v: f64) -> bool {
+        let (lo, hi, _) = self.plausible_range();
+        (lo..=hi).contains(&v)
+    }
+
+    /// The message for a value outside [`Self::plausible_range`].
+    pub fn implausible(self, v: f64) -> String {
+        let (lo, hi, what) = self.plausible_range();
+        format!(
+            "{} is outside the plausible range [{}, {}] {what}",
+            crate::validate::Shown(v),
+            crate::validate::Shown(lo),
+            crate::validate::Shown(hi)
+        )
+    }
 }
+
+/// The net mass flow a `m_dot_*_kg_s` reading may have [kg/s] (a large valve passes about
+/// 0.05 kg/s).
+pub const MASS_FLOW_RANGE_KG_S: (f64, f64) = (-10.0, 10.0);
 
 /// Largest accepted step between two time stamps, in median steps: a longer step is a gap.
 pub const MAX_STEP_RATIO: f64 = 1.5;
@@ -289,6 +327,16 @@ impl Recording {
             if let Some(cols) = flow_cols {
                 for i in 0..2 {
                     m[i] = row.num(cols[i], MASS_FLOW_COLUMNS[i])?;
+                    let (lo, hi) = MASS_FLOW_RANGE_KG_S;
+                    if !(lo..=hi).contains(&m[i]) {
+                        return Err(row.field_err(
+                            MASS_FLOW_COLUMNS[i],
+                            format!(
+                                "{} is outside the plausible range [{lo}, {hi}] kg/s",
+                                crate::validate::Shown(m[i])
+                            ),
+                        ));
+                    }
                 }
             }
             Ok((t_s, u, y, m))
@@ -668,7 +716,7 @@ impl RowParser {
                         match *role {
                             Role::Time => t_s = v,
                             Role::Opening(k) if (0.0..=1.0).contains(&v) => u[k] = v,
-                            Role::Output(k) => y[k] = v,
+                            Role::Output(k) if Channel::ALL[k].is_plausible(v) => y[k] = v,
                             _ => return false,
                         }
                     }
@@ -707,7 +755,11 @@ impl RowParser {
         let mut y = [0.0; 5];
         for c in Channel::ALL {
             if let Some(col) = self.out_cols[c.index()] {
-                y[c.index()] = row.num(col, c.name())?;
+                let v = row.num(col, c.name())?;
+                if !c.is_plausible(v) {
+                    return Err(row.field_err(c.name(), c.implausible(v)));
+                }
+                y[c.index()] = v;
             }
         }
         Ok((t_s, u, y))

@@ -53,7 +53,8 @@ use serde::Deserialize;
 
 use crate::plant::config::{
     parse_plant_text, read_plant_text, ConfigError, EnvironmentConfig, InitialConfig, MuscleConfig,
-    ValveConfig,
+    ValveConfig, INERTIA_KGM2, INERTIA_UNIT, SONIC_CONDUCTANCE_M3_PER_S_PA, SONIC_CONDUCTANCE_UNIT,
+    SPROCKET_RADIUS_M, SPROCKET_UNIT,
 };
 use crate::plant::effects::{Check, Effect, Effects, EffectsConfig, Supply, SupplyDrop};
 use crate::plant::muscle::Muscle;
@@ -239,14 +240,14 @@ impl Arm3Config {
         let mut rows = environment_range_rows(&self.environment);
         // M stays positive definite for every q if Iz1, Ix2, Ix3 > 0 and the rest >= 0.
         rows.extend(range_rows![self, "";
-            valve.sonic_conductance_m3_per_s_pa: Range::positive(1.0e-5), "m^3/(s Pa)";
-            links.inertia_x2_kgm2: Range::positive(1.0e3), "kg m^2";
-            links.inertia_x3_kgm2: Range::positive(1.0e3), "kg m^2";
-            links.inertia_z1_kgm2: Range::positive(1.0e3), "kg m^2";
-            links.inertia_y2_kgm2: Range::closed(0.0, 1.0e3), "kg m^2";
-            links.inertia_y3_kgm2: Range::closed(0.0, 1.0e3), "kg m^2";
-            links.inertia_z2_kgm2: Range::closed(0.0, 1.0e3), "kg m^2";
-            links.inertia_z3_kgm2: Range::closed(0.0, 1.0e3), "kg m^2";
+            valve.sonic_conductance_m3_per_s_pa: SONIC_CONDUCTANCE_M3_PER_S_PA, SONIC_CONDUCTANCE_UNIT;
+            links.inertia_x2_kgm2: INERTIA_KGM2, INERTIA_UNIT;
+            links.inertia_x3_kgm2: INERTIA_KGM2, INERTIA_UNIT;
+            links.inertia_z1_kgm2: INERTIA_KGM2, INERTIA_UNIT;
+            links.inertia_y2_kgm2: Range::closed(0.0, INERTIA_KGM2.hi), INERTIA_UNIT;
+            links.inertia_y3_kgm2: Range::closed(0.0, INERTIA_KGM2.hi), INERTIA_UNIT;
+            links.inertia_z2_kgm2: Range::closed(0.0, INERTIA_KGM2.hi), INERTIA_UNIT;
+            links.inertia_z3_kgm2: Range::closed(0.0, INERTIA_KGM2.hi), INERTIA_UNIT;
             links.mass2_kg: Range::closed(0.0, 1.0e3), "kg";
             links.mass3_kg: Range::closed(0.0, 1.0e3), "kg";
             links.length2_m: Range::closed(0.0, 10.0), "m";
@@ -257,7 +258,7 @@ impl Arm3Config {
         for (i, j) in self.joints().iter().enumerate() {
             let k = format!("joint{}.", i + 1);
             rows.extend(range_rows![j, &k;
-                sprocket_radius_m: Range::positive(1.0), "m";
+                sprocket_radius_m: SPROCKET_RADIUS_M, SPROCKET_UNIT;
                 initial_contraction: Range::half_open(0.0, 1.0), "fraction";
                 neutral_angle_rad: Range::closed(-PI, PI), "rad";
             ]);

@@ -176,6 +176,24 @@ pub fn parse_plant_text<T: serde::de::DeserializeOwned>(
 // Range rows the 1-DOF and the arm plant files share (same keys under the arm's `jointN.`
 // prefix, same physical or practical ranges): wide enough for any real rig, narrow enough to
 // catch a unit typed wrong (kPa in a Pa key) or a value the model cannot run.
+//
+// The bounds are those of this product's plants (rehabilitation joints and soft manipulators
+// driven by pneumatic muscles), not of the number type: a value far outside them (an inertia
+// of 1e-30 kg m^2) would only fail later inside the integrator. docs/reliability.md lists them.
+
+/// Joint (and link) inertia about the joint axis: a small soft-manipulator finger to a
+/// loaded leg or arm of a rehabilitation device [kg m^2].
+pub(crate) const INERTIA_KGM2: Range = Range::closed(1.0e-4, 10.0);
+/// The unit and context [`INERTIA_KGM2`]'s message names.
+pub(crate) const INERTIA_UNIT: &str = "kg m^2 (a rehab joint or soft manipulator)";
+/// Sprocket (pulley) radius: 5 mm .. 20 cm [m].
+pub(crate) const SPROCKET_RADIUS_M: Range = Range::closed(0.005, 0.2);
+/// The unit and context [`SPROCKET_RADIUS_M`]'s message names.
+pub(crate) const SPROCKET_UNIT: &str = "m (5 mm .. 20 cm)";
+/// ISO 6358 sonic conductance of a valve: 0.001 .. 100 dm^3/(s bar) [m^3/(s Pa)].
+pub(crate) const SONIC_CONDUCTANCE_M3_PER_S_PA: Range = Range::closed(1.0e-11, 1.0e-6);
+/// The unit and context [`SONIC_CONDUCTANCE_M3_PER_S_PA`]'s message names.
+pub(crate) const SONIC_CONDUCTANCE_UNIT: &str = "m^3/(s Pa) (0.001 .. 100 dm^3/(s bar))";
 
 /// `[environment]`: atmospheric and supply pressure.
 pub(crate) fn environment_range_rows(env: &EnvironmentConfig) -> Vec<RangeRow> {
@@ -188,12 +206,12 @@ pub(crate) fn environment_range_rows(env: &EnvironmentConfig) -> Vec<RangeRow> {
 /// `[muscle]` (`prefix` `""`, or the arm's `jointN.`).
 pub(crate) fn muscle_range_rows(m: &MuscleConfig, prefix: &str) -> Vec<RangeRow> {
     range_rows![m, format!("{prefix}muscle.");
-        rest_length_m: Range::positive(5.0), "m";
-        radius_m: Range::positive(0.5), "m";
+        rest_length_m: Range::closed(0.02, 2.0), "m (a muscle 2 cm .. 2 m long)";
+        radius_m: Range::closed(0.001, 0.1), "m (a muscle 2 mm .. 20 cm across)";
         braid_angle_deg: Range::open(5.0, 54.7),
             "degrees (between 5 and the neutral braid angle 54.7; radians typed?)";
-        end_factor: Range::positive(10.0), "";
-        damping_m2s: Range::closed(0.0, 1.0), "m^2 s";
+        end_factor: Range::closed(0.5, 5.0), "(Tondu's k, about 1 .. 1.6 on real muscles)";
+        damping_m2s: Range::closed(0.0, 0.01), "m^2 s";
     ]
 }
 
@@ -237,10 +255,10 @@ impl PlantConfig {
         let mut rows = environment_range_rows(&self.environment);
         rows.extend(muscle_range_rows(&self.muscle, ""));
         rows.extend(range_rows![self, "";
-            joint.sprocket_radius_m: Range::positive(1.0), "m";
-            joint.inertia_kgm2: Range::positive(1.0e3), "kg m^2";
+            joint.sprocket_radius_m: SPROCKET_RADIUS_M, SPROCKET_UNIT;
+            joint.inertia_kgm2: INERTIA_KGM2, INERTIA_UNIT;
             joint.initial_contraction: Range::half_open(0.0, 1.0), "fraction";
-            valve.sonic_conductance_m3_per_s_pa: Range::positive(1.0e-5), "m^3/(s Pa)";
+            valve.sonic_conductance_m3_per_s_pa: SONIC_CONDUCTANCE_M3_PER_S_PA, SONIC_CONDUCTANCE_UNIT;
         ]);
         rows.extend(initial_range_rows(&self.initial, &self.environment, ""));
         if let Some((key, msg)) = crate::validate::first_range_error(&rows) {
