@@ -41,8 +41,9 @@ const BLOCK_BYTES: usize = 4 << 20;
 /// enough that the buffer's pages are faulted in once (a block of the whole file would take
 /// a page fault per 4 KiB of it), large enough that the read calls cost little.
 const REPLAY_BLOCK_BYTES: usize = 64 << 10;
-/// Rows per chunk passed between the threads.
-const CHUNK_ROWS: usize = 1024;
+/// Rows per chunk passed between the threads (small chunks: the buffers in flight are
+/// reused instead of faulted in fresh, and the pipeline fills and drains sooner).
+const CHUNK_ROWS: usize = 256;
 /// Chunks in flight between two threads (bounds the memory of the pipeline).
 const CHANNEL_CHUNKS: usize = 8;
 
