@@ -804,12 +804,12 @@ mod tests {
     use proptest::prelude::*;
     use rand::{Rng as _, SeedableRng as _};
 
+    /// A row count and mean step.
+    type Counted = Option<(usize, f64)>;
+
     /// The count and mean step [`rows_from_ends`] gives for the recording `text` (written to
     /// `path`), and the counting pass's.
-    fn from_ends_and_counted(
-        path: &Path,
-        text: &str,
-    ) -> (Option<(usize, f64)>, Option<(usize, f64)>) {
+    fn from_ends_and_counted(path: &Path, text: &str) -> (Counted, Counted) {
         std::fs::write(path, text).unwrap();
         let mut blocks =
             Blocks::with_block_bytes(std::fs::File::open(path).unwrap(), REPLAY_BLOCK_BYTES);
