@@ -1,7 +1,7 @@
 //! Streaming open-loop replay of a recording file (`simulate --inputs`): a pipeline of three
 //! threads over chunks of rows,
 //!
-//! reader (file blocks -> rows) -> simulator (integration, sensor path, formatting) -> writer,
+//! reader (file blocks -> rows) -> simulator (integration, sensor path) -> writer (formatting),
 //!
 //! so reading, simulating and writing overlap, and memory does not grow with the recording
 //! beyond its time column (kept for the checks that need every stamp: the median step, the
@@ -11,8 +11,12 @@
 //! as one segment, also across chunk boundaries), the same sensor path and number formatting.
 //!
 //! The mean sample period (first to last stamp over the number of rows) is needed before the
-//! first integration step: a first pass over the file counts the rows and reads the last one
-//! (for a file of at most one block, 4 MiB, that pass runs on the block in memory).
+//! first integration step. The number of rows follows from the first block and the file's
+//! last row when the uniform grid the stream requires leaves one possible count
+//! ([`rows_from_ends`]; the 20 s fixture); otherwise the writer thread counts them in a pass
+//! over the file while the reader already parses. The passes read the file in blocks of
+//! [`REPLAY_BLOCK_BYTES`] into buffers they reuse, and the writer thread formats the
+//! simulated rows (the reader and the simulator are the two busy threads).
 //!
 //! The stream only takes the ordinary case: a plain (quote-free) UTF-8 file whose rows all
 //! parse, whose time stamps are uniform and pass the recording checks, and a simulation that
@@ -31,10 +35,15 @@ use crate::io::recording::{self, Channel, RowParser, RowSink, Table};
 use crate::plant::{Plant, ValveInputs};
 use crate::sim::{ActuatorPath, Integrator, SensorPath, SimStats, SolverOptions};
 
-/// Bytes read from the file at a time (whole lines).
+/// Bytes read from the file at a time (whole lines) by [`RowStream`].
 const BLOCK_BYTES: usize = 4 << 20;
-/// Rows per chunk passed between the threads.
-const CHUNK_ROWS: usize = 1024;
+/// Bytes read at a time by [`replay_file`]'s passes, each into one buffer it reuses: small
+/// enough that the buffer's pages are faulted in once (a block of the whole file would take
+/// a page fault per 4 KiB of it), large enough that the read calls cost little.
+const REPLAY_BLOCK_BYTES: usize = 64 << 10;
+/// Rows per chunk passed between the threads (small chunks: the buffers in flight are
+/// reused instead of faulted in fresh, and the pipeline fills and drains sooner).
+const CHUNK_ROWS: usize = 256;
 /// Chunks in flight between two threads (bounds the memory of the pipeline).
 const CHANNEL_CHUNKS: usize = 8;
 
@@ -68,8 +77,9 @@ pub fn replay_file(
     let Ok(file) = std::fs::File::open(input) else {
         return Ok(None);
     };
-    let mut blocks = Blocks::new(file);
-    let Ok(Some(first)) = blocks.next_block() else {
+    let mut blocks = Blocks::with_block_bytes(file, REPLAY_BLOCK_BYTES);
+    let mut first = Vec::new();
+    let Ok(true) = blocks.next_block_into(&mut first) else {
         return Ok(None);
     };
     let Ok(first_text) = std::str::from_utf8(&first) else {
@@ -82,153 +92,161 @@ pub fn replay_file(
         return Ok(None);
     };
     let (data, data_line) = table.data();
-    let data_offset = data.as_ptr() as usize - first.as_ptr() as usize;
-    let single_block = blocks.at_end();
-
-    // First pass: the number of rows and the first and last row.
-    let mut count = RowCount::default();
-    count.add(data);
-    if !single_block {
-        while let Ok(Some(b)) = blocks.next_block() {
-            count.add(&b);
-        }
-        if !blocks.at_end() {
-            return Ok(None);
-        }
-    }
-    let n = count.rows;
-    let time_of = |line: &[u8]| -> Option<f64> {
-        let (v, _): (Vec<_>, _) = table.read_chunk(line, 1, 0, &|r| parser.parse(r)).ok()?;
-        (v.len() == 1).then(|| v[0].0)
-    };
-    let (Some(t_first), Some(t_last)) = (
-        count.first.as_deref().and_then(time_of),
-        count.last.as_deref().and_then(time_of),
-    ) else {
-        return Ok(None);
-    };
-    if n < 2 {
-        return Ok(None);
-    }
-    // `recording::mean_step_s` of the whole column, from its two ends.
-    let dt_s = (t_last - t_first) / (n - 1) as f64;
-    if !(dt_s > 0.0) {
-        return Ok(None);
-    }
-
-    recording::write_head(&out_metadata(dt_s), &Channel::ALL, &[], w)?;
+    let mut first_count = RowCount::default();
+    first_count.add(data);
+    let known = rows_from_ends(input, first.len() as u64, &first_count, &table, &parser);
 
     let abort = AtomicBool::new(false);
-    let (valid, sim, written, write_result) = std::thread::scope(|s| -> std::io::Result<_> {
-        let (tx_rows, rx_rows) = mpsc::sync_channel::<RowChunk>(CHANNEL_CHUNKS);
-        let (tx_out, rx_out) = mpsc::sync_channel::<OutChunk>(CHANNEL_CHUNKS);
-        // Written chunks' buffers go back to the simulator for the next rows (fresh ones
-        // would cost a page fault every 4 KiB).
-        let (tx_spent, rx_spent) = mpsc::channel::<Vec<u8>>();
-        // The same for the parsed rows' buffers, from the simulator back to the reader.
-        let (tx_spent_rows, rx_spent_rows) = mpsc::channel::<RowChunk>();
-        let abort = &abort;
-        let table = &table;
-        let parser = &parser;
-        let first = &first;
-        let reader = std::thread::Builder::new()
-            .name("replay-reader".into())
-            .spawn_scoped(s, move || {
-                let mut t_all: Vec<f64> = Vec::with_capacity(n);
-                let mut line = data_line;
-                // The first block is UTF-8 (checked for the table); the others are checked here.
-                let mut checked = single_block;
-                let mut feed = |bytes: &[u8]| -> bool {
-                    if memchr::memchr(b'"', bytes).is_some()
-                        || (!checked && std::str::from_utf8(bytes).is_err())
-                    {
-                        return false;
-                    }
-                    checked = false;
-                    let mut start = 0;
-                    while start < bytes.len() {
-                        if abort.load(Ordering::Relaxed) {
-                            return false;
-                        }
-                        let rest = &bytes[start..];
-                        let (end, lines) = match memchr::memchr_iter(b'\n', rest)
-                            .nth(CHUNK_ROWS - 1)
+    let (valid, sim, written, write_result, n_dt) =
+        std::thread::scope(|s| -> std::io::Result<_> {
+            let (tx_rows, rx_rows) = mpsc::sync_channel::<RowChunk>(CHANNEL_CHUNKS);
+            let (tx_out, rx_out) = mpsc::sync_channel::<OutChunk>(CHANNEL_CHUNKS);
+            // The row count and mean step, from the counting pass of this thread.
+            let (tx_dt_sim, rx_dt_sim) = mpsc::sync_channel::<f64>(1);
+            let (tx_n_dt_reader, rx_n_dt_reader) = mpsc::sync_channel::<(usize, f64)>(1);
+            // Simulated rows the writer has formatted go back to the simulator for the next rows
+            // (fresh buffers would cost a page fault every 4 KiB).
+            let (tx_spent, rx_spent) = mpsc::channel::<OutChunk>();
+            // The same for the parsed rows' buffers, from the simulator back to the reader.
+            let (tx_spent_rows, rx_spent_rows) = mpsc::channel::<RowChunk>();
+            let abort = &abort;
+            let table = &table;
+            let parser = &parser;
+            let first = &first;
+            // The reader reads the file itself, block by block into one buffer, while this
+            // thread counts its rows.
+            let reader = std::thread::Builder::new()
+                .name("replay-reader".into())
+                .spawn_scoped(s, move || {
+                    let mut t_all: Vec<f64> = Vec::new();
+                    let mut line = data_line;
+                    let mut feed = |bytes: &[u8]| -> bool {
+                        if memchr::memchr(b'"', bytes).is_some()
+                            || std::str::from_utf8(bytes).is_err()
                         {
-                            Some(i) => (start + i + 1, CHUNK_ROWS as u64),
-                            None => (bytes.len(), memchr::memchr_iter(b'\n', rest).count() as u64),
-                        };
-                        let piece = &bytes[start..end];
-                        let mut chunk = match rx_spent_rows.try_recv() {
-                            Ok(mut c) => {
-                                c.t_s.clear();
-                                c.inputs.clear();
-                                c
-                            }
-                            Err(_) => RowChunk::default(),
-                        };
-                        chunk.reserve(CHUNK_ROWS);
-                        if !parser.parse_plain_rows(piece, &mut chunk) {
-                            match table
-                                .read_chunk::<_, RowChunk>(piece, line, 0, &|r| parser.parse(r))
-                            {
-                                Ok((c, _)) => chunk = c,
-                                Err(_) => return false,
-                            }
-                        }
-                        line += lines;
-                        t_all.extend_from_slice(&chunk.t_s);
-                        if tx_rows.send(chunk).is_err() {
                             return false;
                         }
-                        start = end;
+                        let mut start = 0;
+                        while start < bytes.len() {
+                            if abort.load(Ordering::Relaxed) {
+                                return false;
+                            }
+                            let rest = &bytes[start..];
+                            let (end, lines) = match memchr::memchr_iter(b'\n', rest)
+                                .nth(CHUNK_ROWS - 1)
+                            {
+                                Some(i) => (start + i + 1, CHUNK_ROWS as u64),
+                                None => {
+                                    (bytes.len(), memchr::memchr_iter(b'\n', rest).count() as u64)
+                                }
+                            };
+                            let piece = &bytes[start..end];
+                            let mut chunk = match rx_spent_rows.try_recv() {
+                                Ok(mut c) => {
+                                    c.t_s.clear();
+                                    c.inputs.clear();
+                                    c
+                                }
+                                Err(_) => RowChunk::default(),
+                            };
+                            chunk.reserve(CHUNK_ROWS);
+                            if !parser.parse_plain_rows(piece, &mut chunk) {
+                                match table
+                                    .read_chunk::<_, RowChunk>(piece, line, 0, &|r| parser.parse(r))
+                                {
+                                    Ok((c, _)) => chunk = c,
+                                    Err(_) => return false,
+                                }
+                            }
+                            line += lines;
+                            t_all.extend_from_slice(&chunk.t_s);
+                            if tx_rows.send(chunk).is_err() {
+                                return false;
+                            }
+                            start = end;
+                        }
+                        true
+                    };
+                    // The first block is in memory (and UTF-8: it was checked for the table).
+                    let fed = feed(data) && stream_blocks(input, first.len() as u64, &mut feed);
+                    drop(tx_rows);
+                    let Ok((n, dt_s)) = rx_n_dt_reader.recv() else {
+                        return false;
+                    };
+                    // The checks of `Recording::parse` that need the whole time column, and the
+                    // uniform grid the replay assumed.
+                    fed && t_all.len() == n
+                        && recording::mean_step_s(&t_all) == dt_s
+                        && table.check_time(&t_all, |_| 0).is_ok()
+                        && recording::stamps_uniform(&t_all)
+                })?;
+            let simulator = std::thread::Builder::new()
+                .name("replay-simulator".into())
+                .spawn_scoped(s, move || {
+                    let r = match rx_dt_sim.recv() {
+                        Ok(dt_s) => simulate_chunks(
+                            plant,
+                            dt_s,
+                            opts,
+                            rx_rows,
+                            &tx_out,
+                            &tx_spent_rows,
+                            &rx_spent,
+                            abort,
+                        ),
+                        Err(_) => Err(()),
+                    };
+                    if r.is_err() {
+                        abort.store(true, Ordering::Relaxed);
                     }
-                    true
-                };
-                let fed = if single_block {
-                    feed(&first[data_offset..])
-                } else {
-                    stream_blocks(input, data_offset as u64, &mut feed)
-                };
-                drop(tx_rows);
-                // The checks of `Recording::parse` that need the whole time column, and the
-                // uniform grid the replay assumed.
-                fed && t_all.len() == n
-                    && recording::mean_step_s(&t_all) == dt_s
-                    && table.check_time(&t_all, |_| 0).is_ok()
-                    && recording::stamps_uniform(&t_all)
-            })?;
-        let simulator = std::thread::Builder::new()
-            .name("replay-simulator".into())
-            .spawn_scoped(s, move || {
-                let spent = Spent {
-                    rows: tx_spent_rows,
-                    bytes: rx_spent,
-                };
-                let r = simulate_chunks(plant, dt_s, opts, rx_rows, &tx_out, &spent, abort);
-                if r.is_err() {
-                    abort.store(true, Ordering::Relaxed);
-                }
-                r
-            })?;
-        let mut written = 0usize;
-        let mut write_result = Ok(());
-        for chunk in rx_out {
-            if let Err(e) = w.write_all(&chunk.bytes) {
+                    r
+                })?;
+            // The number of rows and the mean sample period (needed before the first
+            // integration step): from the file's two ends, or counted here while the reader
+            // parses.
+            let n_dt = match known {
+                Some(n_dt) => Some(n_dt),
+                None => count_rows(&mut blocks, first_count, table, parser),
+            };
+            let mut written = 0usize;
+            let mut write_result = Ok(());
+            if let Some((n, dt_s)) = n_dt {
+                let _ = tx_dt_sim.send(dt_s);
+                let _ = tx_n_dt_reader.send((n, dt_s));
+                write_result = recording::write_head(&out_metadata(dt_s), &Channel::ALL, &[], w);
+            } else {
                 abort.store(true, Ordering::Relaxed);
-                write_result = Err(e);
-                break;
             }
-            written += chunk.rows;
-            progress(written);
-            let _ = tx_spent.send(chunk.bytes);
-        }
-        let valid = reader.join().unwrap_or(false);
-        let sim = simulator.join().unwrap_or(Err(()));
-        Ok((valid, sim, written, write_result))
-    })?;
+            drop((tx_dt_sim, tx_n_dt_reader));
+            // The writer formats the simulated rows (the simulator and the reader keep the two
+            // cores busy; this thread would otherwise wait).
+            let mut text = Vec::with_capacity(CHUNK_ROWS * 80);
+            let mut row = [0u8; recording::ROW_BYTES];
+            for chunk in rx_out {
+                if write_result.is_err() || n_dt.is_none() {
+                    abort.store(true, Ordering::Relaxed);
+                    break;
+                }
+                text.clear();
+                for (t, u, m) in &chunk.rows {
+                    recording::push_row_in(&mut row, &mut text, *t, u, m.iter().copied());
+                }
+                if let Err(e) = w.write_all(&text) {
+                    abort.store(true, Ordering::Relaxed);
+                    write_result = Err(e);
+                    break;
+                }
+                written += chunk.rows.len();
+                progress(written);
+                let _ = tx_spent.send(chunk);
+            }
+            let valid = reader.join().unwrap_or(false);
+            let sim = simulator.join().unwrap_or(Err(()));
+            Ok((valid, sim, written, write_result, n_dt))
+        })?;
     write_result?;
-    match sim {
-        Ok(stats) if valid && written == n => Ok(Some(StreamedReplay {
+    match (sim, n_dt) {
+        (Ok(stats), Some((n, dt_s))) if valid && written == n => Ok(Some(StreamedReplay {
             samples: n,
             dt_s,
             stats,
@@ -238,15 +256,120 @@ pub fn replay_file(
     }
 }
 
+/// The time stamp of the data row `line` (the general row reader's), `None` if it does not
+/// parse.
+fn time_of(table: &Table<'_>, parser: &RowParser, line: &[u8]) -> Option<f64> {
+    let (v, _): (Vec<_>, _) = table.read_chunk(line, 1, 0, &|r| parser.parse(r)).ok()?;
+    (v.len() == 1).then(|| v[0].0)
+}
+
+/// The number of rows and the mean step of [`replay_file`] (`recording::mean_step_s` of the
+/// whole column: first to last stamp over the rows) from the two ends of the file alone,
+/// without a pass over it: `first` counts the rows of the first block (the file's bytes up
+/// to `data_end`), the last row is read from the file's last [`REPLAY_BLOCK_BYTES`].
+///
+/// Between the two ends the count follows from the sample period: a recording the stream
+/// takes has every stamp within `UNIFORM_TOLERANCE` of a step of the uniform grid of the
+/// mean step (`recording::stamps_uniform`, checked at the end), so the first block's mean
+/// step over `k` steps is within `UNIFORM_TOLERANCE / k` of the whole file's, and the span
+/// over it gives the number of steps up to that share. `None` when that range holds more
+/// than one whole number (a long file, a short first block) or an end is not a plain row:
+/// the caller counts the rows. A count that is still wrong (a file that is not uniform,
+/// or changed under us) is caught by the reader's checks of the whole column, and the
+/// stream is left to the whole-recording path.
+fn rows_from_ends(
+    input: &Path,
+    data_end: u64,
+    first: &RowCount,
+    table: &Table<'_>,
+    parser: &RowParser,
+) -> Option<(usize, f64)> {
+    let mut file = std::fs::File::open(input).ok()?;
+    let size = file.metadata().ok()?.len();
+    if size <= data_end {
+        return None;
+    }
+    let tail_start = size.saturating_sub(REPLAY_BLOCK_BYTES as u64).max(data_end);
+    file.seek(std::io::SeekFrom::Start(tail_start)).ok()?;
+    let mut tail = Vec::new();
+    file.take(size - tail_start).read_to_end(&mut tail).ok()?;
+    let whole_rest = tail_start == data_end;
+    let lines = if whole_rest {
+        &tail[..]
+    } else {
+        // From the first line end on (the tail starts inside a line).
+        &tail[memchr::memchr(b'\n', &tail)? + 1..]
+    };
+    let mut end = RowCount::default();
+    end.add(lines);
+    let t_first = time_of(table, parser, first.first.as_deref()?)?;
+    let t_last = time_of(table, parser, end.last.as_deref()?)?;
+    let n = if whole_rest {
+        first.rows + end.rows
+    } else {
+        let k = first.rows.checked_sub(1).filter(|&k| k >= 1)?;
+        let step_s = (time_of(table, parser, first.last.as_deref()?)? - t_first) / k as f64;
+        let steps = (t_last - t_first) / step_s;
+        // The share above, with a margin for the rounding of the stamps and of these
+        // divisions.
+        let share = 1.5 * recording::UNIFORM_TOLERANCE / k as f64 + 1e-9;
+        let (lo, hi) = (steps * (1.0 - share), steps * (1.0 + share));
+        if !(lo > 0.0 && hi < 1e15 && hi.floor() == lo.ceil()) {
+            return None;
+        }
+        let n = hi.floor() as usize + 1;
+        if n < first.rows + end.rows {
+            return None;
+        }
+        n
+    };
+    if n < 2 {
+        return None;
+    }
+    let dt_s = (t_last - t_first) / (n - 1) as f64;
+    (dt_s > 0.0).then_some((n, dt_s))
+}
+
+/// The counting pass of [`replay_file`]: the number of data rows of the file (`first`
+/// counted the rows of its first block; the blocks of `blocks` are read into one buffer)
+/// and the mean sample period from the first and last stamp, `recording::mean_step_s` of
+/// the whole column; `None` if the file cannot be replayed by the stream.
+fn count_rows(
+    blocks: &mut Blocks,
+    mut count: RowCount,
+    table: &Table<'_>,
+    parser: &RowParser,
+) -> Option<(usize, f64)> {
+    let mut block = Vec::new();
+    loop {
+        match blocks.next_block_into(&mut block) {
+            Ok(true) => count.add(&block),
+            Ok(false) => break,
+            Err(_) => return None,
+        }
+    }
+    let n = count.rows;
+    let t_first = time_of(table, parser, count.first.as_deref()?)?;
+    let t_last = time_of(table, parser, count.last.as_deref()?)?;
+    if n < 2 {
+        return None;
+    }
+    let dt_s = (t_last - t_first) / (n - 1) as f64;
+    (dt_s > 0.0).then_some((n, dt_s))
+}
+
 /// The simulator stage: [`crate::sim::simulate_with_progress`] over the rows as they come,
-/// then the sensor path, sending the finished rows on.
+/// then the sensor path, sending the simulated rows on (`spent_rows`: parsed rows back to
+/// the reader; `spent_out`: output chunks back from the writer).
+#[allow(clippy::too_many_arguments)]
 fn simulate_chunks(
     plant: &Plant,
     dt_s: f64,
     opts: &SolverOptions,
     rx: mpsc::Receiver<RowChunk>,
     tx: &mpsc::SyncSender<OutChunk>,
-    spent: &Spent,
+    spent_rows: &mpsc::Sender<RowChunk>,
+    spent_out: &mpsc::Receiver<OutChunk>,
     abort: &AtomicBool,
 ) -> Result<SimStats, ()> {
     let mut actuator = ActuatorPath::new(plant, dt_s, "open-loop replay").map_err(|_| ())?;
@@ -257,7 +380,6 @@ fn simulate_chunks(
     let mut pending: VecDeque<(f64, ValveInputs)> = VecDeque::new();
     let mut run: Option<(ValveInputs, usize)> = None;
     let mut out = OutChunk::with_capacity(CHUNK_ROWS);
-    let mut row = [0u8; recording::ROW_BYTES];
     let mut advance = |u: ValveInputs,
                        len: usize,
                        pending: &mut VecDeque<(f64, ValveInputs)>,
@@ -267,8 +389,7 @@ fn simulate_chunks(
             .advance_samples(u, dt_s, len, |x| {
                 let (t, u) = pending.pop_front().unwrap_or_default();
                 let m = sensor.push(plant, x);
-                recording::push_row_in(&mut row, &mut out.bytes, t, &u, m.to_array().into_iter());
-                out.rows += 1;
+                out.rows.push((t, u, m.to_array()));
             })
             .map_err(|_| ())
     };
@@ -289,12 +410,12 @@ fn simulate_chunks(
                 }
             }
         }
-        let _ = spent.rows.send(chunk);
-        if out.rows >= CHUNK_ROWS {
-            let next = match spent.bytes.try_recv() {
-                Ok(mut bytes) => {
-                    bytes.clear();
-                    OutChunk { bytes, rows: 0 }
+        let _ = spent_rows.send(chunk);
+        if out.rows.len() >= CHUNK_ROWS {
+            let next = match spent_out.try_recv() {
+                Ok(mut c) => {
+                    c.rows.clear();
+                    c
                 }
                 Err(_) => OutChunk::with_capacity(CHUNK_ROWS),
             };
@@ -309,7 +430,7 @@ fn simulate_chunks(
         return Err(());
     }
     drop(advance);
-    if out.rows > 0 {
+    if !out.rows.is_empty() {
         tx.send(out).map_err(|_| ())?;
     }
     Ok(integ.stats())
@@ -488,24 +609,16 @@ impl RowSink<(f64, [f64; 4], [f64; 5])> for RowChunk {
     }
 }
 
-/// The simulator's ends of the channels that recycle buffers: parsed-row chunks it is done
-/// with go back to the reader, written output buffers come back from the writer.
-struct Spent {
-    rows: mpsc::Sender<RowChunk>,
-    bytes: mpsc::Receiver<Vec<u8>>,
-}
-
-/// Finished rows, formatted: the input's time and openings with the simulated channels.
+/// Simulated rows, for the writer to format: the input's time and openings with the
+/// simulated channels (by [`Channel::index`]).
 struct OutChunk {
-    bytes: Vec<u8>,
-    rows: usize,
+    rows: Vec<(f64, ValveInputs, [f64; 5])>,
 }
 
 impl OutChunk {
     fn with_capacity(rows: usize) -> Self {
         Self {
-            bytes: Vec::with_capacity(rows * 80),
-            rows: 0,
+            rows: Vec::with_capacity(rows),
         }
     }
 }
@@ -585,6 +698,8 @@ impl RowCount {
 /// A file read in blocks of whole lines.
 struct Blocks {
     file: std::fs::File,
+    /// Bytes read at a time.
+    block_bytes: usize,
     /// The bytes after the last line end of the previous read.
     carry: Vec<u8>,
     eof: bool,
@@ -593,47 +708,58 @@ struct Blocks {
 }
 
 impl Blocks {
-    /// The blocks of `file` from its current position.
-    fn new(mut file: std::fs::File) -> Self {
+    /// The blocks of `file` from its current position, [`BLOCK_BYTES`] at a time.
+    fn new(file: std::fs::File) -> Self {
+        Self::with_block_bytes(file, BLOCK_BYTES)
+    }
+
+    /// The blocks of `file` from its current position, `block_bytes` at a time.
+    fn with_block_bytes(mut file: std::fs::File, block_bytes: usize) -> Self {
         let size = file.metadata().map_or(0, |m| m.len());
         let pos = file.stream_position().unwrap_or(0);
         Self {
             file,
+            block_bytes,
             carry: Vec::new(),
             eof: false,
             left_hint: size.saturating_sub(pos),
         }
     }
 
-    /// Whether the whole file has been handed out.
-    fn at_end(&self) -> bool {
-        self.eof && self.carry.is_empty()
-    }
-
     /// The next block: whole lines (ending with `\n`), or the rest of the file at its end;
     /// `None` after the end.
     fn next_block(&mut self) -> std::io::Result<Option<Vec<u8>>> {
-        let mut buf = std::mem::take(&mut self.carry);
+        let mut buf = Vec::new();
+        Ok(self.next_block_into(&mut buf)?.then_some(buf))
+    }
+
+    /// [`Self::next_block`] into `buf` (its old content dropped, its memory reused); `false`
+    /// after the end.
+    fn next_block_into(&mut self, buf: &mut Vec<u8>) -> std::io::Result<bool> {
+        buf.clear();
+        buf.extend_from_slice(&self.carry);
+        self.carry.clear();
         loop {
             if self.eof {
-                return Ok((!buf.is_empty()).then_some(buf));
+                return Ok(!buf.is_empty());
             }
             // One read call for a block (asking one byte more than a file of at most one
             // block holds finds its end in the same call), into the buffer's spare capacity
             // (not zeroed first).
             let before = buf.len();
             let left = usize::try_from(self.left_hint).unwrap_or(usize::MAX);
-            let want = BLOCK_BYTES.min(left.saturating_add(1)).max(1);
-            buf.reserve_exact(want);
-            let got = (&mut self.file).take(want as u64).read_to_end(&mut buf)?;
+            let want = self.block_bytes.min(left.saturating_add(1)).max(1);
+            buf.reserve(want);
+            let got = (&mut self.file).take(want as u64).read_to_end(buf)?;
             self.eof = got < want;
             self.left_hint = self.left_hint.saturating_sub(got as u64);
             if self.eof {
                 continue;
             }
             if let Some(i) = memchr::memrchr(b'\n', &buf[before..]) {
-                self.carry = buf.split_off(before + i + 1);
-                return Ok(Some(buf));
+                self.carry.extend_from_slice(&buf[before + i + 1..]);
+                buf.truncate(before + i + 1);
+                return Ok(true);
             }
             // No line end yet: a line this long is refused (`recording::read_text` words
             // the error), so it is not read any further.
@@ -647,8 +773,9 @@ impl Blocks {
     }
 }
 
-/// Reads `path` from byte `offset` in blocks of whole lines through `feed` until it answers
-/// false or the file ends; whether every block was fed.
+/// Reads `path` from byte `offset` in blocks of whole lines ([`REPLAY_BLOCK_BYTES`], into
+/// one buffer) through `feed` until it answers false or the file ends; whether every block
+/// was fed.
 fn stream_blocks(path: &Path, offset: u64, feed: &mut impl FnMut(&[u8]) -> bool) -> bool {
     let Ok(mut file) = std::fs::File::open(path) else {
         return false;
@@ -656,15 +783,16 @@ fn stream_blocks(path: &Path, offset: u64, feed: &mut impl FnMut(&[u8]) -> bool)
     if file.seek(std::io::SeekFrom::Start(offset)).is_err() {
         return false;
     }
-    let mut blocks = Blocks::new(file);
+    let mut blocks = Blocks::with_block_bytes(file, REPLAY_BLOCK_BYTES);
+    let mut block = Vec::new();
     loop {
-        match blocks.next_block() {
-            Ok(Some(b)) => {
-                if !feed(&b) {
+        match blocks.next_block_into(&mut block) {
+            Ok(true) => {
+                if !feed(&block) {
                     return false;
                 }
             }
-            Ok(None) => return true,
+            Ok(false) => return true,
             Err(_) => return false,
         }
     }
@@ -672,8 +800,83 @@ fn stream_blocks(path: &Path, offset: u64, feed: &mut impl FnMut(&[u8]) -> bool)
 
 #[cfg(test)]
 mod tests {
-    use super::RowCount;
+    use super::*;
     use proptest::prelude::*;
+    use rand::{Rng as _, SeedableRng as _};
+
+    /// A row count and mean step.
+    type Counted = Option<(usize, f64)>;
+
+    /// The count and mean step [`rows_from_ends`] gives for the recording `text` (written to
+    /// `path`), and the counting pass's.
+    fn from_ends_and_counted(path: &Path, text: &str) -> (Counted, Counted) {
+        std::fs::write(path, text).unwrap();
+        let mut blocks =
+            Blocks::with_block_bytes(std::fs::File::open(path).unwrap(), REPLAY_BLOCK_BYTES);
+        let mut first = Vec::new();
+        assert!(blocks.next_block_into(&mut first).unwrap());
+        let table = Table::parse(std::str::from_utf8(&first).unwrap(), path).unwrap();
+        let parser = RowParser::of(&table).unwrap();
+        let mut count = RowCount::default();
+        count.add(table.data().0);
+        let ends = rows_from_ends(path, first.len() as u64, &count, &table, &parser);
+        (ends, count_rows(&mut blocks, count, &table, &parser))
+    }
+
+    /// The count from the file's ends is the counting pass's (or left to it) for every
+    /// recording the stream takes (uniform stamps), with stamps on the grid and jittered up
+    /// to the tolerance, sample periods that are not a whole number of microseconds, short
+    /// and long files, blank lines at the end; the 20 s recording at 1 kHz is counted from
+    /// its ends.
+    #[test]
+    fn row_counts_from_the_ends_are_the_counting_passes() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("rec.csv");
+        let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+        let mut from_ends = 0;
+        for (rows, dt_s, jitter, tail) in [
+            (20_001, 0.001, 0.0, ""),
+            (20_001, 0.001, 0.0, "\n\n"),
+            (900, 0.001, 0.0, ""),
+            (1_500, 1.0 / 3.0, 0.0, ""),
+            (4_000, 1.0 / 3.0, 0.0, ""),
+            (60_000, 1.0 / 3.0, 0.0, ""),
+            (200_000, 0.001, 0.0, ""),
+            (20_001, 0.001, 0.004, ""),
+            (200_000, 1.0 / 7.0, 0.004, "\r\n"),
+            (20_001, 0.002, 0.2, ""),
+        ] {
+            let mut text =
+                String::from("# sample_period_s = 0.001\nt_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg\n");
+            let mut t_s = Vec::with_capacity(rows);
+            for k in 0..rows {
+                let j = if k == 0 {
+                    0.0
+                } else {
+                    jitter * rng.random_range(-1.0..1.0)
+                };
+                let t = format!("{:.6}", (k as f64 + j) * dt_s);
+                t_s.push(t.parse::<f64>().unwrap());
+                text += &format!("{t},0,1,0.25,0,1.5\n");
+            }
+            text += tail;
+            let (ends, counted) = from_ends_and_counted(&path, &text);
+            assert_eq!(counted.map(|c| c.0), Some(rows));
+            if let Some(e) = ends {
+                if recording::stamps_uniform(&t_s) {
+                    assert_eq!(Some(e), counted, "{rows} rows, dt {dt_s}, jitter {jitter}");
+                }
+                from_ends += 1;
+            } else {
+                // A file of one block is counted in it; a long or jittered one is counted.
+                assert!(
+                    text.len() <= REPLAY_BLOCK_BYTES || rows > 20_001 || jitter > 0.01,
+                    "{rows} rows, dt {dt_s} not from the ends"
+                );
+            }
+        }
+        assert!(from_ends >= 4, "{from_ends}");
+    }
 
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(5_000))]
