@@ -3,7 +3,7 @@
 //! A replay starts from the plant file's `[initial]`; a rig log rarely starts there (the rig
 //! sits wherever the last run left it), and the first seconds of a replay from the file's
 //! state then depart by the start alone. When the recording's first sample is clearly away
-//! from the file's state ([`super::verdict::start_note`]: 20 kPa or 3 deg) and the nominal
+//! from the file's state on two channels or more (20 kPa or 3 deg each) and the nominal
 //! model replays the recording better from that sample, the replays start from it, as the
 //! sensors read it (a sensor calibration the diagnosis fits moves the start with it:
 //! `InitialConfig::as_read`). A 3-DOF arm's joints make the same choice against the arm's
@@ -86,13 +86,19 @@ pub fn better_from_recording(
 }
 
 /// The 1-DOF diagnosis' start: `nominal` from `train`'s first sample when that sample is
-/// away from the file's `[initial]` ([`super::verdict::start_note`]) and the nominal model
-/// replays TRAIN better from it; `None`: the file's start.
+/// away from the file's `[initial]` on two channels or more
+/// ([`super::verdict::channels_away_from_initial`]) and the nominal model replays TRAIN
+/// better from it; `None`: the file's start. One channel alone away is what a sensor reading
+/// off looks like (a gain of 1.06 on p1 reads 583 kPa for 550), which the diagnosis names as
+/// a calibration: starting from that reading cost the generated matrix three one-channel
+/// gains; a rig that sits elsewhere shows on both pressures, or on the angle with them.
 pub fn for_diagnosis(
     nominal: &PlantConfig,
     train: &Recording,
     opts: &DiagnoseOptions,
 ) -> Option<PlantConfig> {
-    super::verdict::start_note(nominal, train, false)?;
+    if super::verdict::channels_away_from_initial(nominal, train).len() < 2 {
+        return None;
+    }
     better_from_recording(nominal, train, opts)
 }

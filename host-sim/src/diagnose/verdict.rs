@@ -432,17 +432,15 @@ pub fn absolute_pressure_note(
 const START_NOTE_KPA: f64 = 20.0;
 const START_NOTE_DEG: f64 = 3.0;
 
-/// A note when the recording does not start where the plant file's `[initial]` says: a rig
-/// log rarely starts at the file's state, and the departure of the first seconds is then the
-/// start's, not the model's. `started_from_recording`: the replays started from the
-/// recording's first sample ([`super::start`]); otherwise from the file's values.
-pub fn start_note(
+/// The recorded channels whose first sample sits away from the plant file's `[initial]`
+/// (more than 20 kPa or 3 deg), each as "channel value (`initial.key`: value)"; empty for a
+/// start given as readings (`as_read`) or an empty recording.
+pub fn channels_away_from_initial(
     plant: &crate::plant::config::PlantConfig,
     rec: &Recording,
-    started_from_recording: bool,
-) -> Option<String> {
+) -> Vec<String> {
     if plant.initial.as_read || rec.is_empty() {
-        return None;
+        return Vec::new();
     }
     let i = &plant.initial;
     let mut off = Vec::new();
@@ -479,6 +477,19 @@ pub fn start_note(
         START_NOTE_KPA,
         "kPa",
     );
+    off
+}
+
+/// A note when the recording does not start where the plant file's `[initial]` says: a rig
+/// log rarely starts at the file's state, and the departure of the first seconds is then the
+/// start's, not the model's. `started_from_recording`: the replays started from the
+/// recording's first sample ([`super::start`]); otherwise from the file's values.
+pub fn start_note(
+    plant: &crate::plant::config::PlantConfig,
+    rec: &Recording,
+    started_from_recording: bool,
+) -> Option<String> {
+    let off = channels_away_from_initial(plant, rec);
     (!off.is_empty()).then(|| {
         if started_from_recording {
             format!(
