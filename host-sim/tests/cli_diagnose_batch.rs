@@ -19,17 +19,7 @@ fn a_directory_is_diagnosed_in_parallel_with_one_json_each_and_a_summary() {
     std::fs::write(recs.join("broken.csv"), "t_s,u_in1\n0,0\n").unwrap();
     let out = dir.path().join("out");
     let plant = shared().join("plant/reference-1dof.toml");
-    let r = host_sim(&[
-        &"diagnose-batch",
-        &"--jobs",
-        &"2",
-        &"--plant",
-        &plant,
-        &"--recordings",
-        &recs,
-        &"--out-dir",
-        &out,
-    ]);
+    let r = batch(&plant, &recs, &out, &[&"--jobs", &"2"]);
     let stdout = String::from_utf8_lossy(&r.stdout);
     assert_eq!(
         r.status.code(),
@@ -74,20 +64,17 @@ fn a_directory_is_diagnosed_in_parallel_with_one_json_each_and_a_summary() {
     );
 }
 
+/// `diagnose-batch` of `recs` against `plant` into `out`, with `extra` arguments.
 fn batch(
     plant: &std::path::Path,
     recs: &std::path::Path,
     out: &std::path::Path,
+    extra: &[&dyn AsRef<std::ffi::OsStr>],
 ) -> std::process::Output {
-    host_sim(&[
-        &"diagnose-batch",
-        &"--plant",
-        &plant,
-        &"--recordings",
-        &recs,
-        &"--out-dir",
-        &out,
-    ])
+    let mut rest: Vec<&dyn AsRef<std::ffi::OsStr>> =
+        vec![&"--recordings", &recs, &"--out-dir", &out];
+    rest.extend_from_slice(extra);
+    on_plant("diagnose-batch", &plant, &rest)
 }
 
 #[test]
@@ -98,10 +85,10 @@ fn the_exit_status_follows_the_worst_verdict_and_the_out_dir_may_be_the_recordin
     let plant = fixture("reference-1dof.toml");
     std::fs::copy(fixture("pulses_nominal.csv"), recs.join("nominal.csv")).unwrap();
     // All explained or nothing missing: 0, with the outputs next to the recordings.
-    ok(&batch(&plant, &recs, &recs));
+    ok(&batch(&plant, &recs, &recs, &[]));
     assert!(recs.join("summary.csv").exists() && recs.join("nominal.json").exists());
     // Again into the same directory: its own summary.csv is not read as a recording.
-    let stdout = ok(&batch(&plant, &recs, &recs));
+    let stdout = ok(&batch(&plant, &recs, &recs, &[]));
     assert!(!stdout.contains("summary.csv  "), "{stdout}");
     let summary = std::fs::read_to_string(recs.join("summary.csv")).unwrap();
     assert_eq!(summary.lines().count(), 2, "{summary}");
@@ -122,7 +109,7 @@ fn the_exit_status_follows_the_worst_verdict_and_the_out_dir_may_be_the_recordin
         &"--out",
         &recs.join("other.csv"),
     ]));
-    let r = batch(&plant, &recs, &recs);
+    let r = batch(&plant, &recs, &recs, &[]);
     let summary = std::fs::read_to_string(recs.join("summary.csv")).unwrap();
     let other_row = summary
         .lines()
@@ -136,6 +123,6 @@ fn the_exit_status_follows_the_worst_verdict_and_the_out_dir_may_be_the_recordin
     // A user's recording that happens to be named summary.csv is not skipped: refused as an
     // input the batch would overwrite.
     std::fs::copy(fixture("pulses_nominal.csv"), recs.join("summary.csv")).unwrap();
-    let e = exits(2, &batch(&plant, &recs, &recs));
+    let e = exits(2, &batch(&plant, &recs, &recs, &[]));
     assert!(e.contains("summary.csv") && e.contains("input"), "{e}");
 }
