@@ -33,6 +33,9 @@
 //! contraction offset), per muscle one division for an inflow (two for an outflow) and one
 //! square root when the flow is not choked. All reciprocals are precomputed.
 
+// `!(x > y)` is the deliberate NaN-rejecting comparison (NaN fails every comparison).
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use crate::geometry::JointGeometry;
 use crate::residual::ValveModelParams;
 
@@ -166,6 +169,9 @@ impl InverseModel {
 
     /// The valve command in [-1, 1] (> 0 inflate, < 0 exhaust) that delivers `m_dot_kg_s` at
     /// the measured gauge pressure `p_meas_gauge_pa`. Never NaN: non-finite inputs give 0.
+    // Not `f32::clamp`: its unreachable panic message would link core::fmt's float
+    // formatting (~20 KiB of MCU flash), and the dropped duty is tested first.
+    #[allow(clippy::manual_clamp)]
     #[inline(always)]
     pub fn duty(&self, m_dot_kg_s: f32, p_meas_gauge_pa: f32) -> f32 {
         let p = p_meas_gauge_pa + self.p_atm_pa;

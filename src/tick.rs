@@ -757,7 +757,9 @@ impl ControlTick {
             meas.angle_rad,
             v_rad_s,
         );
-        // In range (the usual case: one test) or the clamp; NaN passes unchanged.
+        // In range (the usual case: one test) or the clamp; NaN passes unchanged. (Not
+        // `f32::clamp`: its unreachable panic message would link core::fmt's float formatting.)
+        #[allow(clippy::manual_clamp)]
         let c = |u: f32| {
             if libm::fabsf(u) <= 1.0 {
                 u
