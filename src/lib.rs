@@ -73,6 +73,7 @@ pub mod latch;
 pub mod latch_bkpsram;
 pub mod lockstep;
 pub mod log;
+pub mod math;
 pub mod pid;
 pub mod pressure_ff;
 pub mod profile;

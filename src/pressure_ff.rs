@@ -33,6 +33,9 @@
 //! contraction offset), per muscle one division for an inflow (two for an outflow) and one
 //! square root when the flow is not choked. All reciprocals are precomputed.
 
+// `!(x > y)` is the deliberate NaN-rejecting comparison (NaN fails every comparison).
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use crate::geometry::JointGeometry;
 use crate::residual::ValveModelParams;
 
@@ -158,7 +161,7 @@ impl InverseModel {
             1.0
         } else if s < 1.0 {
             let x = (s - self.critical_ratio) * self.inv_one_minus_b;
-            libm::sqrtf(1.0 - x * x)
+            crate::math::sqrtf(1.0 - x * x)
         } else {
             0.0
         }
@@ -166,6 +169,9 @@ impl InverseModel {
 
     /// The valve command in [-1, 1] (> 0 inflate, < 0 exhaust) that delivers `m_dot_kg_s` at
     /// the measured gauge pressure `p_meas_gauge_pa`. Never NaN: non-finite inputs give 0.
+    // Not `f32::clamp`: its unreachable panic message would link core::fmt's float
+    // formatting (~20 KiB of MCU flash), and the dropped duty is tested first.
+    #[allow(clippy::manual_clamp)]
     #[inline(always)]
     pub fn duty(&self, m_dot_kg_s: f32, p_meas_gauge_pa: f32) -> f32 {
         let p = p_meas_gauge_pa + self.p_atm_pa;
@@ -190,15 +196,16 @@ impl InverseModel {
             return 0.0;
         };
         // In [-1, 1]; NaN (an infinite flow over an infinite pressure) and a duty below the
-        // minimum give 0.
-        if d >= 1.0 {
+        // minimum give 0. The dropped duty first: the usual case with a minimum duty, one
+        // test (the minimum is at most 1, so a dropped duty is never one the clamp changes).
+        if !(libm::fabsf(d) >= self.min_duty) {
+            0.0
+        } else if d >= 1.0 {
             1.0
         } else if d <= -1.0 {
             -1.0
-        } else if libm::fabsf(d) >= self.min_duty {
-            d
         } else {
-            0.0
+            d
         }
     }
 }
@@ -304,11 +311,71 @@ impl PressureFeedforward {
             self.reset();
             return [0.0; 2];
         }
+        self.step_finite(set_pa, desired_pa, meas_pa, angle_rad, velocity_rad_s)
+    }
+
+    /// [`Self::step`] for inputs known to be finite (the armed tick's: validated channels,
+    /// the torque loop's clamped set-points, a finite set-point and its derivatives): the
+    /// same bits, without the finiteness test of the inputs. A non-finite input here still
+    /// gives no NaN duty (see [`InverseModel::duty`]), but the filtered rate keeps it until
+    /// [`Self::reset`].
+    #[inline(always)]
+    pub fn step_finite(
+        &mut self,
+        set_pa: [f32; 2],
+        desired_pa: [f32; 2],
+        meas_pa: [f32; 2],
+        angle_rad: f32,
+        velocity_rad_s: f32,
+    ) -> [f32; 2] {
         if !self.init {
             self.prev_set_pa = desired_pa;
             self.init = true;
         }
+        // The volume source is chosen once per tick (not per muscle): the polynomial loop
+        // then has no call in it and keeps its constants in registers.
+        #[cfg(feature = "volume-fnn")]
+        if let Some(n) = self.fnn {
+            return self.muscles(
+                set_pa,
+                desired_pa,
+                meas_pa,
+                angle_rad,
+                velocity_rad_s,
+                |chi, chi_rate, p_abs, p_rate| n.volume_and_rate(chi, chi_rate, p_abs, p_rate),
+            );
+        }
         let [b0, b1, b2, b3] = self.poly;
+        let v_floor_m3 = self.v_floor_m3;
+        self.muscles(
+            set_pa,
+            desired_pa,
+            meas_pa,
+            angle_rad,
+            velocity_rad_s,
+            // `dV/dchi chi'` with `chi' = sign dchi'`: the same bits as `(dV/dchi sign) dchi'`
+            // (a product with +-1 is exact, and rounding is symmetric in the sign).
+            |chi, chi_rate, _, _| {
+                let v = b0 + chi * (b1 + chi * (b2 + chi * b3));
+                let v = if v > v_floor_m3 { v } else { v_floor_m3 };
+                let v_rate = (b1 + chi * (2.0 * b2 + chi * 3.0 * b3)) * chi_rate;
+                (v, v_rate)
+            },
+        )
+    }
+
+    /// Both muscles' duties with the volume and its rate from `volume(chi, chi_rate, p_abs,
+    /// p_rate)` (contraction, its rate, absolute set-point pressure and its filtered rate).
+    #[inline(always)]
+    fn muscles(
+        &mut self,
+        set_pa: [f32; 2],
+        desired_pa: [f32; 2],
+        meas_pa: [f32; 2],
+        angle_rad: f32,
+        velocity_rad_s: f32,
+        volume: impl Fn(f32, f32, f32, f32) -> (f32, f32),
+    ) -> [f32; 2] {
         let dchi = self.geometry_ratio * angle_rad;
         let dchi_rate = self.geometry_ratio * velocity_rad_s;
         let mut out = [0.0; 2];
@@ -320,25 +387,7 @@ impl PressureFeedforward {
             self.prev_set_pa[i] = desired_pa[i];
             let chi = self.chi0 + signs[i] * dchi;
             let p_abs = set_pa[i] + self.model.p_atm_pa;
-            #[cfg(feature = "volume-fnn")]
-            let learned = self
-                .fnn
-                .map(|n| n.volume_and_rate(chi, signs[i] * dchi_rate, p_abs, *r));
-            #[cfg(not(feature = "volume-fnn"))]
-            let learned: Option<(f32, f32)> = None;
-            let (v, v_rate) = match learned {
-                Some(vr) => vr,
-                None => {
-                    let v = b0 + chi * (b1 + chi * (b2 + chi * b3));
-                    let v = if v > self.v_floor_m3 {
-                        v
-                    } else {
-                        self.v_floor_m3
-                    };
-                    let v_rate = (b1 + chi * (2.0 * b2 + chi * 3.0 * b3)) * signs[i] * dchi_rate;
-                    (v, v_rate)
-                }
-            };
+            let (v, v_rate) = volume(chi, signs[i] * dchi_rate, p_abs, *r);
             let m = self.model.mass_flow_kg_s(p_abs, *r, v, v_rate);
             out[i] = self.model.duty(m, meas_pa[i]);
         }

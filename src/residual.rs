@@ -154,7 +154,7 @@ impl ValveModelParams {
             0.0
         } else {
             let x = (s - b) / (1.0 - b);
-            libm::sqrtf(1.0 - x * x)
+            crate::math::sqrtf(1.0 - x * x)
         }
     }
 

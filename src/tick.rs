@@ -718,7 +718,7 @@ impl ControlTick {
     /// themselves; `V'` from the set-point rate with `volume_rate_from_reference`, otherwise
     /// from the measured velocity of `meas` (this tick's measurements).
     #[cfg(feature = "pressure-ff")]
-    #[inline(never)]
+    #[inline(always)]
     fn add_pressure_ff(
         &mut self,
         (u1, u2): (f32, f32),
@@ -749,15 +749,21 @@ impl ControlTick {
         } else {
             set_pa
         };
-        let [f1, f2] = self.pressure_ff.step(
+        // Finite inputs (see `step_inner`): no finiteness test of its own.
+        let [f1, f2] = self.pressure_ff.step_finite(
             set_pa,
             desired_pa,
             [meas.p1_gauge_pa, meas.p2_gauge_pa],
             meas.angle_rad,
             v_rad_s,
         );
+        // In range (the usual case: one test) or the clamp; NaN passes unchanged. (Not
+        // `f32::clamp`: its unreachable panic message would link core::fmt's float formatting.)
+        #[allow(clippy::manual_clamp)]
         let c = |u: f32| {
-            if u > 1.0 {
+            if libm::fabsf(u) <= 1.0 {
+                u
+            } else if u > 1.0 {
                 1.0
             } else if u < -1.0 {
                 -1.0

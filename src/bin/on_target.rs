@@ -6,7 +6,7 @@
 //! target would build the std-only dev-dependencies for the bare-metal target.
 //!
 //! They check on the target, with its FPU and its code generation, what the host tests check
-//! on the host: the fixed-point force law against the f32 law, the anti-windup of a saturated
+//! on the host: the FPU square root against libm's, the fixed-point force law against the f32 law, the anti-windup of a saturated
 //! step, the valve commands of the control tick over the embedded sensor trace, and the
 //! fixed-point tick over the trace (its digest is compared with the host's by
 //! `tests/qemu_trace.rs`).
@@ -32,6 +32,32 @@ mod tests {
     use pam_firmware::constants::{FIXED_FORCE_LAW, FORCE_LAW};
     use pam_firmware::control::saturated_step;
     use pam_firmware::trace::{force_law_inputs, TraceRunner, SENSOR_TRACE};
+
+    /// The tick's square root (`math::sqrtf`: the FPU's VSQRT here) has the bits of
+    /// `libm::sqrtf` (the host's and the Cortex-M0's) for every 4099th non-negative f32 bit
+    /// pattern from zero (subnormals, normals), for infinity, and for every
+    /// argument `1 - x^2` of the valve flow functions at 2^-16 steps of `x` in [0, 1].
+    #[test]
+    fn fpu_sqrt_has_the_bits_of_libm() {
+        let mut bits = 0u32;
+        while bits <= 0x7f80_0000 {
+            let x = f32::from_bits(bits);
+            let (a, b) = (pam_firmware::math::sqrtf(x), libm::sqrtf(x));
+            defmt::assert_eq!(a.to_bits(), b.to_bits(), "sqrt of bits {=u32:08x}", bits);
+            bits += 4099;
+        }
+        let inf = f32::INFINITY;
+        defmt::assert_eq!(
+            pam_firmware::math::sqrtf(inf).to_bits(),
+            libm::sqrtf(inf).to_bits()
+        );
+        for k in 0..=65_536u32 {
+            let x = k as f32 / 65_536.0;
+            let y = 1.0 - x * x;
+            let (a, b) = (pam_firmware::math::sqrtf(y), libm::sqrtf(y));
+            defmt::assert_eq!(a.to_bits(), b.to_bits(), "sqrt(1 - x^2) at x = {=f32}", x);
+        }
+    }
 
     /// Over the trace: the fixed-point force law within 0.1 N of the f32 law (the FPU's) at
     /// the same inputs, for every row with a pressure and an angle.
