@@ -49,13 +49,13 @@ fn compare_control_prints_the_tables_and_exits_by_its_verdict() {
         out.contains("hybrid volume training run: mass-flow MSE"),
         "{out}"
     );
-    let hybrid =
-        ["suite", "held-out"].map(|set| mse(&out, "+ hybrid model (learned volume), k = 1", set));
-    let analytical = ["suite", "held-out"]
+    let hybrid = ["suite", "held-out moves", "jumps"]
+        .map(|set| mse(&out, "+ hybrid model (learned volume), k = 1", set));
+    let analytical = ["suite", "held-out moves", "jumps"]
         .map(|set| mse(&out, "+ analytical inverse model, k = 1 (isothermal)", set));
     assert!(hybrid.iter().all(|m| m.is_finite()), "{out}");
     assert!(hybrid != analytical, "{out}");
-    for set in ["suite", "held-out"] {
+    for set in ["suite", "held-out moves", "jumps"] {
         let p_only = mse(&out, "P only", set);
         let am = mse(&out, "+ analytical inverse model, k = 1 (isothermal)", set);
         let poly = mse(
@@ -73,17 +73,39 @@ fn compare_control_prints_the_tables_and_exits_by_its_verdict() {
             "{set}: {p_only} {am} {poly}\n{out}"
         );
     }
-    // The verdict is the table's ratio.
+    // The verdict is the table's ratio of the cascades each at its own gains (the P-only
+    // cascade of config/control_tuned.toml, the re-tuned one of config/control_tuned_ff.toml);
+    // the same-gains ratio is printed on its own line.
+    assert!(
+        out.contains("(the cascade tuned with the pressure feed-forward on)"),
+        "{out}"
+    );
     let table = mse(&out, "P only", "suite")
+        / mse(&out, host_sim::control::compare_ff::RETUNED_ROW, "suite");
+    assert!((table / q - 1.0).abs() < 0.01, "{table} vs {q}");
+    let same = out
+        .lines()
+        .find(|l| l.starts_with("same gains, nominal plant, suite:"))
+        .unwrap_or_else(|| panic!("no same-gains line\n{out}"));
+    let same: f64 = same
+        .rsplit(" = ")
+        .next()
+        .and_then(|v| v.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("{same}"));
+    let same_table = mse(&out, "P only", "suite")
         / mse(
             &out,
             "+ analytical inverse model, k = 1 (isothermal)",
             "suite",
         );
-    assert!((table / q - 1.0).abs() < 0.01, "{table} vs {q}");
+    assert!(
+        (same_table / same - 1.0).abs() < 0.01,
+        "{same_table} vs {same}"
+    );
     // The breakdown's P-only position MSE (its own pass over the run's ticks) is the table's
     // on the one scenario of each set; its shares are percentages.
-    for set in ["suite", "held-out"] {
+    for set in ["suite", "held-out moves", "jumps"] {
         let row = out
             .lines()
             .skip_while(|l| !l.starts_with("### Where the position error comes from"))
@@ -99,6 +121,23 @@ fn compare_control_prints_the_tables_and_exits_by_its_verdict() {
         for c in [4, 9, 10] {
             let pct: f64 = cols[c].trim_end_matches(" %").parse().unwrap();
             assert!((0.0..=100.0).contains(&pct), "{row}");
+        }
+    }
+    // The per-scenario table (one scenario per set here) repeats the set's rows.
+    for set in ["suite", "held-out moves", "jumps"] {
+        let row = out
+            .lines()
+            .skip_while(|l| !l.starts_with("per scenario"))
+            .find(|l| l.starts_with(&format!("| {set} |")))
+            .unwrap_or_else(|| panic!("no per-scenario row for {set}\n{out}"));
+        let cols: Vec<&str> = row.split('|').map(str::trim).collect();
+        for (col, controller) in [
+            (3, "P only"),
+            (4, "+ analytical inverse model, k = 1 (isothermal)"),
+            (6, host_sim::control::compare_ff::RETUNED_ROW),
+        ] {
+            let v: f64 = cols[col].parse().unwrap();
+            assert_eq!(v, mse(&out, controller, set), "{set} {controller}: {row}");
         }
     }
 }
@@ -123,6 +162,15 @@ fn compare_control_refuses_bad_arguments_with_status_2() {
         &on_plant("compare-control", &"/nonexistent/p.toml", &[&"--quick"]),
     );
     assert!(e.contains("/nonexistent/p.toml"), "{e}");
+    let e = exits(
+        2,
+        &on_plant(
+            "compare-control",
+            &plant(),
+            &[&"--quick", &"--ff-gains", &"/nonexistent/ff.toml"],
+        ),
+    );
+    assert!(e.contains("/nonexistent/ff.toml"), "{e}");
 }
 
 #[test]
@@ -146,6 +194,11 @@ fn compare_control_outside_the_repository_names_the_gains_it_used() {
     );
     let first = out.lines().next().unwrap_or("");
     assert!(first.contains("gains the shipped gains"), "{first}");
+    let second = out.lines().nth(1).unwrap_or("");
+    assert!(
+        second.contains("re-tuned rows: gains the shipped gains (config/control_tuned_ff.toml"),
+        "{second}"
+    );
     // The user's own config/control_tuned.toml in the working directory is used and named.
     std::fs::create_dir(dir.path().join("config")).unwrap();
     let own = dir.path().join("config/control_tuned.toml");

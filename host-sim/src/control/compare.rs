@@ -60,24 +60,41 @@ pub const CONTROL_TUNED_TOML: &str = "config/control_tuned.toml";
 /// binary: a command run outside the repository still has them.
 pub const SHIPPED_CONTROL_TUNED: &str = include_str!("../../../config/control_tuned.toml");
 
+/// Where the cascade tuned with the pressure loops' feed-forward on lives (`host-sim tune
+/// --pressure-ff`), relative to the repository root.
+pub const CONTROL_TUNED_FF_TOML: &str = "config/control_tuned_ff.toml";
+
+/// The shipped gains tuned with the pressure feed-forward on, built into the binary.
+pub const SHIPPED_CONTROL_TUNED_FF: &str = include_str!("../../../config/control_tuned_ff.toml");
+
 /// The tuned gains a command uses when none is given, and where they came from:
 /// `config/control_tuned.toml` under the working directory when it is there (the user's own
 /// tuning, `host-sim tune` writes it), else the shipped gains ([`SHIPPED_CONTROL_TUNED`]).
 pub fn default_control_tuning() -> Result<(ControlTuning, String), IdentError> {
-    let own = Path::new(CONTROL_TUNED_TOML);
+    default_tuning_file(CONTROL_TUNED_TOML, SHIPPED_CONTROL_TUNED)
+}
+
+/// [`default_control_tuning`] for the gains tuned with the pressure feed-forward on
+/// (`config/control_tuned_ff.toml`, else [`SHIPPED_CONTROL_TUNED_FF`]).
+pub fn default_control_tuning_ff() -> Result<(ControlTuning, String), IdentError> {
+    default_tuning_file(CONTROL_TUNED_FF_TOML, SHIPPED_CONTROL_TUNED_FF)
+}
+
+/// `rel` under the working directory when it is there, else the `shipped` text; with a label
+/// saying which.
+fn default_tuning_file(rel: &str, shipped: &str) -> Result<(ControlTuning, String), IdentError> {
+    let own = Path::new(rel);
     if own.is_file() {
         let label = match own.canonicalize() {
             Ok(abs) => format!("{} (in the working directory)", abs.display()),
-            Err(_) => format!("{CONTROL_TUNED_TOML} (in the working directory)"),
+            Err(_) => format!("{rel} (in the working directory)"),
         };
         return Ok((ControlTuning::load(own)?, label));
     }
-    let label = format!(
-        "the shipped gains ({CONTROL_TUNED_TOML} built into host-sim; no {CONTROL_TUNED_TOML} in \
-         the working directory)"
-    );
+    let label =
+        format!("the shipped gains ({rel} built into host-sim; no {rel} in the working directory)");
     Ok((
-        ControlTuning::from_toml_str(SHIPPED_CONTROL_TUNED, "shipped config/control_tuned.toml")?,
+        ControlTuning::from_toml_str(shipped, &format!("shipped {rel}"))?,
         label,
     ))
 }
@@ -200,6 +217,12 @@ pub struct CascadeToml {
     pub feedforward_inertia_kgm2: f64,
     /// Cut-off of the set-point differentiators [Hz].
     pub setpoint_rate_cutoff_hz: f64,
+    /// The pressure loops' inverse thermodynamic feed-forward (`config/pressure_ff.toml`'s
+    /// options, the analytical model: the firmware's volume polynomial) on while these gains
+    /// were tuned, and on in [`CascadeToml::config`] (`host-sim tune --pressure-ff`; absent =
+    /// off).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub pressure_feedforward: bool,
     /// Suite MSE the tuner measured with these gains [rad^2] (checked by the tests).
     pub suite_mse_rad2: f64,
     /// Suite MSE with the position gains scaled by [`GAIN_MARGIN`] [rad^2] (checked by the
@@ -217,6 +240,9 @@ impl CascadeToml {
         c.torque.ki_per_s = self.torque_ki_per_s as f32;
         c.feedforward.inertia_kgm2 = self.feedforward_inertia_kgm2 as f32;
         c.feedforward.cutoff_hz = self.setpoint_rate_cutoff_hz as f32;
+        c.pressure_ff.enabled = self.pressure_feedforward;
+        // The analytical model (the firmware's volume polynomial), as tuned.
+        c.volume_fnn = None;
         c
     }
 
@@ -233,6 +259,7 @@ impl CascadeToml {
             torque_ki_per_s: c.torque.ki_per_s as f64,
             feedforward_inertia_kgm2: c.feedforward.inertia_kgm2 as f64,
             setpoint_rate_cutoff_hz: c.feedforward.cutoff_hz as f64,
+            pressure_feedforward: c.pressure_ff.enabled,
             suite_mse_rad2,
             suite_mse_at_margin_rad2,
         }

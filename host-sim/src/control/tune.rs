@@ -112,6 +112,17 @@ pub struct TuneArgs {
     /// 0.5 rad, no limit cycle at rest).
     #[arg(long)]
     pub robust: bool,
+    /// Tune the cascade with the pressure loops' inverse thermodynamic feed-forward on
+    /// (config/pressure_ff.toml's options; the gains file records it), so that it can be
+    /// compared at its own best gains (`compare-control --ff-gains`). The PD / PID do not use it.
+    #[arg(long)]
+    pub pressure_ff: bool,
+    /// Infinite cost unless the suite and the jump suite (the demo's step, sine and random
+    /// set-points) stay stable on the plant itself: no fault, |error| < 0.5 rad, and a run that
+    /// ends in a hold comes to rest (spread of the error over its last 0.5 s <= 0.01 rad).
+    /// Keeps gains tuned on the smooth suite from limit-cycling after a set-point jump.
+    #[arg(long)]
+    pub stable_on_jumps: bool,
 }
 
 const KP_GRID: [f64; 7] = [3e4, 1e5, 2e5, 5e5, 1e6, 2e6, 5e6];
@@ -649,7 +660,10 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
             }
         }
     }
-    let stability_scenarios = if a.robust {
+    if a.stable_on_jumps {
+        robust_stable.push((Plant::load(&a.plant)?, "nominal"));
+    }
+    let stability_scenarios = if a.robust || a.stable_on_jumps {
         let mut all = scenarios.clone();
         all.extend(jump_suite_scenarios()?);
         all
@@ -679,6 +693,13 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
     if a.robust {
         ctx.say(ROBUST_NOTE.replace('\n', " "));
     }
+    if a.stable_on_jumps {
+        ctx.say(
+            "--stable-on-jumps: infinite cost unless the suite and the jump suite stay stable \
+             on the plant (no fault, |error| < 0.5 rad, at rest within 0.01 rad)"
+                .into(),
+        );
+    }
     // With --warm-start, the gains stored in the output file are one more start of every search.
     let stored = if a.warm_start {
         match ControlTuning::load(&a.out) {
@@ -696,7 +717,12 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
     // The cascade: start points (kp, ki, kd[, torque ki]) = the gains tuned before the
     // feed-forward existed, the firmware's default gains, the stored tuning, any given with
     // --cascade-start; each with the inertia feed-forward off and on (J of the plant).
-    let reference = ControllerConfig::reference(1000.0);
+    let mut reference = ControllerConfig::reference(1000.0);
+    if a.pressure_ff {
+        reference.pressure_ff.enabled = true;
+        reference.volume_fnn = None;
+        ctx.say("cascade tuned with the pressure feed-forward on (config/pressure_ff.toml)".into());
+    }
     let mut starts = vec![
         (11.0, 8.0, 0.8, None),
         (
@@ -793,7 +819,7 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
     let header = format!(
         "The three laws of the closed-loop comparison, each tuned on the suite\n\
          (host-sim control::compare::SUITE) by the same procedure and cost. Written by\n\
-         \x20 host-sim tune --plant {} --out {}{}{}\n\
+         \x20 host-sim tune --plant {} --out {}{}{}{}{}{}{}\n\
          with the firmware in the loop. Suite MSE = mean over the step_move, sine and\n\
          random_move scenarios of the MSE of the angle over every tick (a latched fault = infinite);\n\
          cost = the worse of the suite MSE at the gains and with the feedback gains x {}\n\
@@ -819,6 +845,17 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
         a.out.display(),
         if a.warm_start { " --warm-start" } else { "" },
         if a.robust { " --robust" } else { "" },
+        if a.no_step_constraints { " --no-step-constraints" } else { "" },
+        if a.pressure_ff { " --pressure-ff" } else { "" },
+        if a.stable_on_jumps {
+            " --stable-on-jumps"
+        } else {
+            ""
+        },
+        a.cascade_start
+            .iter()
+            .map(|s| format!(" --cascade-start {s}"))
+            .collect::<String>(),
         GAIN_MARGIN,
         if a.robust {
             format!("\n{ROBUST_NOTE}")

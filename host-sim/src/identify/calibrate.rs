@@ -397,6 +397,8 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
             cascade_start: Vec::new(),
             no_step_constraints: false,
             robust: false,
+            pressure_ff: false,
+            stable_on_jumps: false,
         })
         .context("tuning the gains")?;
         out += &format!("{r}{}:\n{}", control.display(), changes(&control, &text));
