@@ -10,7 +10,7 @@ use common::*;
 fn ratio(stdout: &str) -> f64 {
     let line = stdout
         .lines()
-        .find(|l| l.starts_with("nominal plant, suite:"))
+        .find(|l| l.starts_with("verdict (exit status), nominal plant, suite"))
         .unwrap_or_else(|| panic!("no verdict line in\n{stdout}"));
     let after = line.rsplit(" = ").next().unwrap();
     after.split_whitespace().next().unwrap().parse().unwrap()
@@ -77,15 +77,16 @@ fn compare_control_prints_the_tables_and_exits_by_its_verdict() {
     // cascade of config/control_tuned.toml, the re-tuned one of config/control_tuned_ff.toml);
     // the same-gains ratio is printed on its own line.
     assert!(
-        out.contains("(the cascade tuned with the pressure feed-forward on)"),
+        out.contains("(the cascade tuned with the pressure feed-forward on, with the options"),
         "{out}"
     );
+    assert!(out.contains("suite (--quick: step_move only)"), "{out}");
     let table = mse(&out, "P only", "suite")
         / mse(&out, host_sim::control::compare_ff::RETUNED_ROW, "suite");
     assert!((table / q - 1.0).abs() < 0.01, "{table} vs {q}");
     let same = out
         .lines()
-        .find(|l| l.starts_with("same gains, nominal plant, suite:"))
+        .find(|l| l.starts_with("for comparison, same gains, nominal plant, suite"))
         .unwrap_or_else(|| panic!("no same-gains line\n{out}"));
     let same: f64 = same
         .rsplit(" = ")
@@ -171,6 +172,34 @@ fn compare_control_refuses_bad_arguments_with_status_2() {
         ),
     );
     assert!(e.contains("/nonexistent/ff.toml"), "{e}");
+    // Gains files swapped: each option refuses the other kind of file, naming it.
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let p_only = root.join("config/control_tuned.toml");
+    let with_ff = root.join("config/control_tuned_ff.toml");
+    let e = exits(
+        2,
+        &on_plant(
+            "compare-control",
+            &plant(),
+            &[&"--quick", &"--gains", &with_ff],
+        ),
+    );
+    assert!(
+        e.contains("control_tuned_ff.toml (--gains)") && e.contains("--ff-gains"),
+        "{e}"
+    );
+    let e = exits(
+        2,
+        &on_plant(
+            "compare-control",
+            &plant(),
+            &[&"--quick", &"--ff-gains", &p_only],
+        ),
+    );
+    assert!(
+        e.contains("control_tuned.toml (--ff-gains)") && e.contains("--pressure-ff"),
+        "{e}"
+    );
 }
 
 #[test]

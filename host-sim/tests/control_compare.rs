@@ -24,6 +24,7 @@ use host_sim::control::compare::{
     compare, config_for, control_tuned_path, format_table, meets_step_requirement, scale_feedback,
     suite_scenarios, tuning_cost, ControlTuning, GAIN_MARGIN, STEP_REQUIREMENTS,
 };
+use host_sim::control::tune::cascade_polish_moves;
 use host_sim::Plant;
 use pam_firmware::pid::DpPidGains;
 use pam_firmware::tick::ControlLaw;
@@ -123,22 +124,13 @@ fn stored_cascade_gains_are_a_local_optimum_of_the_tuning_cost() {
         .cascade
         .suite_mse_rad2
         .max(t.cascade.suite_mse_at_margin_rad2);
-    for f in [0.7f32, 1.4] {
-        for what in ["kp", "ki", "kd", "torque ki"] {
-            let mut cfg = base;
-            match what {
-                "kp" => cfg.position.kp_nm_per_rad *= f,
-                "ki" => cfg.position.ki_nm_per_rad_s *= f,
-                "kd" => cfg.position.kd_nm_s_per_rad *= f,
-                _ => cfg.torque.ki_per_s *= f,
-            }
-            let (c, ..) = tuning_cost(&plant, &sc, cfg);
-            eprintln!("cascade {what} x{f}: cost {c:.4e} rad^2 (stored {c0:.4e})");
-            assert!(
-                c >= 0.98 * c0,
-                "cascade with {what} x{f} costs {c:.4e} rad^2 < stored {c0:.4e} rad^2"
-            );
-        }
+    for (what, f, cfg) in cascade_polish_moves(&base) {
+        let (c, ..) = tuning_cost(&plant, &sc, cfg);
+        eprintln!("cascade {what} x{f}: cost {c:.4e} rad^2 (stored {c0:.4e})");
+        assert!(
+            c >= 0.98 * c0,
+            "cascade with {what} x{f} costs {c:.4e} rad^2 < stored {c0:.4e} rad^2"
+        );
     }
     let (_, nominal, _) = tuning_cost(&plant, &sc, base);
     let mut off = base;

@@ -10,6 +10,7 @@ use std::path::PathBuf;
 use host_sim::control::compare::{
     suite_scenarios, tuning_cost, ControlTuning, CONTROL_TUNED_FF_TOML, CONTROL_TUNED_TOML,
 };
+use host_sim::control::tune::cascade_polish_moves;
 use host_sim::Plant;
 
 fn reference_plant() -> Plant {
@@ -60,22 +61,13 @@ fn the_feed_forward_cascade_is_a_local_optimum_and_needs_the_feed_forward() {
         .cascade
         .suite_mse_rad2
         .max(t.cascade.suite_mse_at_margin_rad2);
-    for f in [0.7f32, 1.4] {
-        for what in ["kp", "ki", "kd", "torque ki"] {
-            let mut cfg = base;
-            match what {
-                "kp" => cfg.position.kp_nm_per_rad *= f,
-                "ki" => cfg.position.ki_nm_per_rad_s *= f,
-                "kd" => cfg.position.kd_nm_s_per_rad *= f,
-                _ => cfg.torque.ki_per_s *= f,
-            }
-            let (c, ..) = tuning_cost(&plant, &sc, cfg);
-            eprintln!("{what} x{f}: cost {c:.4e} rad^2 (stored {c0:.4e})");
-            assert!(
-                c >= 0.98 * c0,
-                "{what} x{f} costs {c:.4e} rad^2 < stored {c0:.4e} rad^2"
-            );
-        }
+    for (what, f, cfg) in cascade_polish_moves(&base) {
+        let (c, ..) = tuning_cost(&plant, &sc, cfg);
+        eprintln!("{what} x{f}: cost {c:.4e} rad^2 (stored {c0:.4e})");
+        assert!(
+            c >= 0.98 * c0,
+            "{what} x{f} costs {c:.4e} rad^2 < stored {c0:.4e} rad^2"
+        );
     }
     // Without the feed-forward, the same gains cost more than the P-only cascade's own tuning:
     // the P-only loop cannot use them.

@@ -678,6 +678,20 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
         ),
         None => default_control_tuning_ff()?,
     };
+    // Each file must hold the cascade its rows say: a mix-up would print a verdict on the
+    // wrong comparison.
+    anyhow::ensure!(
+        !tuning.cascade.pressure_feedforward,
+        "gains {gains}: its cascade was tuned with the pressure feed-forward on \
+         (pressure_feedforward = true); the P-only rows need gains tuned without it \
+         (host-sim tune without --pressure-ff); give this file to --ff-gains"
+    );
+    anyhow::ensure!(
+        tuning_ff.cascade.pressure_feedforward,
+        "re-tuned gains {gains_ff}: its cascade was tuned without the pressure feed-forward \
+         (no pressure_feedforward = true); --ff-gains needs the output of host-sim tune \
+         --pressure-ff"
+    );
     let mut base = tuning.cascade.config(1000.0);
     a.ff.apply(&mut base.pressure_ff)?;
     // The re-tuned cascade runs the feed-forward with the same options as the other rows.
@@ -725,14 +739,20 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
         names(&moves),
         names(&jumps),
     )?;
+    let overridden = a.ff.gain.is_some()
+        || a.ff.cutoff_hz.is_some()
+        || a.ff.rate_from.is_some()
+        || a.ff.volume_rate_from.is_some()
+        || a.ff.min_duty.is_some();
     writeln!(
         out,
-        "re-tuned rows: gains {gains_ff} ({})",
-        if tuning_ff.cascade.pressure_feedforward {
-            "the cascade tuned with the pressure feed-forward on"
+        "re-tuned rows: gains {gains_ff} (the cascade tuned with the pressure feed-forward on, \
+         with the options of config/pressure_ff.toml built into host-sim{})",
+        if overridden {
+            "; the --ff-* options given here change them: those rows are no longer at their \
+             tuned optimum"
         } else {
-            "WARNING: this file's cascade was tuned without the pressure feed-forward \
-             (host-sim tune --pressure-ff writes one tuned with it)"
+            ""
         }
     )?;
     let f = &base.pressure_ff;
@@ -775,7 +795,8 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
         )?;
         writeln!(
             out,
-            "| controller | set | position MSE [rad^2] | vs P only | pressure RMS error [kPa] | latched faults |"
+            "vs P only = the P-only row's MSE / this row's (above 1: better than P only); pressure RMS error over every armed tick, the start's fill included (its share of the slow error while moving is in --breakdown)\n\n\
+             | controller | set | position MSE [rad^2] | vs P only | pressure RMS error [kPa] | latched faults |"
         )?;
         writeln!(out, "|---|---|---:|---:|---:|---|")?;
         for (set_name, sc) in &sets {
@@ -801,7 +822,7 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
                     out,
                     "| {cname} | {set_name} | {:.3e} | {} | {:.1} | {} |",
                     s.position_mse_rad2,
-                    if ratio.is_finite() {
+                    if ratio.is_finite() && ratio > 0.0 {
                         format!("{ratio:.2}x")
                     } else {
                         "-".to_string()
@@ -824,13 +845,18 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
         }
     }
     let ok = nominal_ratio >= REQUIRED_RATIO;
+    let which = if a.quick {
+        format!(" (--quick: {} only)", names(&suite))
+    } else {
+        String::new()
+    };
     writeln!(
         out,
-        "\nsame gains, nominal plant, suite: P-only position MSE / with the analytical feed-forward (k = 1) = {same_gains_ratio:.2} (the feed-forward added to a cascade tuned without it)"
+        "\nfor comparison, same gains, nominal plant, suite{which}: P-only position MSE / with the analytical feed-forward (k = 1) = {same_gains_ratio:.2} (the feed-forward added to the cascade tuned without it)"
     )?;
     writeln!(
         out,
-        "nominal plant, suite: P-only position MSE / with the analytical feed-forward (k = 1), each cascade at its own tuned gains = {nominal_ratio:.2} (required >= {REQUIRED_RATIO}): {}",
+        "verdict (exit status), nominal plant, suite{which}: P-only position MSE / with the analytical feed-forward (k = 1), each cascade at its own tuned gains = {nominal_ratio:.2} (required >= {REQUIRED_RATIO}): {}",
         if ok { "met" } else { "NOT met" }
     )?;
     Ok((out, ok))

@@ -66,6 +66,19 @@ use crate::control::robustness::{
 use crate::optimize::{nelder_mead, nelder_mead_restarted, pattern_search};
 use crate::Plant;
 
+/// What `--stable-on-jumps` does, for the gains file's header.
+const STABLE_ON_JUMPS_NOTE: &str =
+    "--stable-on-jumps, every law: infinite cost unless the suite and the jump suite (the\n\
+demo's step, sine and random set-points) stay stable on the plant: no fault, |error| < 0.5\n\
+rad, and a run that ends in a hold comes to rest (spread of the error over its last 0.5 s\n\
+<= 0.01 rad).";
+
+/// What `--pressure-ff` does, for the gains file's header.
+const PRESSURE_FF_NOTE: &str =
+    "--pressure-ff: the cascade (and the default gains' figure below) runs the pressure loops'\n\
+inverse thermodynamic feed-forward (the analytical model, with the options of\n\
+config/pressure_ff.toml built into host-sim); the PD / PID do not use it.";
+
 /// What `--robust` does, for the log and the gains file's header.
 const ROBUST_NOTE: &str =
     "Robust cost (--robust), every law: the worst of this cost on the plant and on the\n\
@@ -558,22 +571,10 @@ fn tune_cascade(ctx: &Ctx, start: ControllerConfig) -> (ControllerConfig, f64) {
         cfg,
         c,
         |cfg: &ControllerConfig| {
-            // Each gain x 0.7, then each x 1.4: kp, ki, kd, torque ki.
-            let gains: [fn(&mut ControllerConfig) -> &mut f32; 4] = [
-                |c| &mut c.position.kp_nm_per_rad,
-                |c| &mut c.position.ki_nm_per_rad_s,
-                |c| &mut c.position.kd_nm_s_per_rad,
-                |c| &mut c.torque.ki_per_s,
-            ];
-            let mut moves = Vec::new();
-            for f in [0.7f32, 1.4] {
-                for g in gains {
-                    let mut m = *cfg;
-                    *g(&mut m) *= f;
-                    moves.push(m);
-                }
-            }
-            moves
+            cascade_polish_moves(cfg)
+                .into_iter()
+                .map(|(_, _, m)| m)
+                .collect()
         },
         |moves: &[ControllerConfig]| moves.iter().map(|m| cost_cfg(*m)).collect(),
     );
@@ -584,6 +585,27 @@ fn tune_cascade(ctx: &Ctx, start: ControllerConfig) -> (ControllerConfig, f64) {
         cfg.torque.ki_per_s, cfg.feedforward.inertia_kgm2, cfg.feedforward.cutoff_hz
     ));
     (cfg, c)
+}
+
+/// The cascade's polish moves (and the local-optimum tests' perturbations): each gain x 0.7,
+/// then each x 1.4 (kp, ki, kd, torque ki), with the gain's name and the factor.
+pub fn cascade_polish_moves(cfg: &ControllerConfig) -> Vec<(&'static str, f32, ControllerConfig)> {
+    type Gain = fn(&mut ControllerConfig) -> &mut f32;
+    let gains: [(&str, Gain); 4] = [
+        ("kp", |c| &mut c.position.kp_nm_per_rad),
+        ("ki", |c| &mut c.position.ki_nm_per_rad_s),
+        ("kd", |c| &mut c.position.kd_nm_s_per_rad),
+        ("torque ki", |c| &mut c.torque.ki_per_s),
+    ];
+    let mut moves = Vec::new();
+    for f in [0.7f32, 1.4] {
+        for (name, g) in gains {
+            let mut m = *cfg;
+            *g(&mut m) *= f;
+            moves.push((name, f, m));
+        }
+    }
+    moves
 }
 
 /// Runs `host-sim tune`; returns the report for stdout.
@@ -834,7 +856,7 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
          \x20 point{}, restarted, x0.7 / x1.4 polish.\n\
          {note_pd}\n\
          {note_pid}\n\
-         Firmware step tests (settle and overshoot, nominal and 11 x inertia):\n\
+         Firmware step tests (settle and overshoot, nominal and 11 x inertia){}:\n\
          \x20 {}\n\
          For comparison, the cascade with the firmware's default gains (ControllerConfig::reference,\n\
          tuned for the jump suite and the firmware's step tests) scored {:.4e} rad^2\n\
@@ -857,11 +879,15 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
             .map(|s| format!(" --cascade-start {s}"))
             .collect::<String>(),
         GAIN_MARGIN,
-        if a.robust {
-            format!("\n{ROBUST_NOTE}")
-        } else {
-            String::new()
-        },
+        [
+            (a.robust, ROBUST_NOTE),
+            (a.stable_on_jumps, STABLE_ON_JUMPS_NOTE),
+            (a.pressure_ff, PRESSURE_FF_NOTE),
+        ]
+        .iter()
+        .filter(|(on, _)| *on)
+        .map(|(_, note)| format!("\n{note}"))
+        .collect::<String>(),
         if ctx.cascade_step_constraints {
             ", the firmware's step tests imposed"
         } else {
@@ -872,6 +898,11 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
             " and from the stored gains"
         } else {
             ""
+        },
+        if ctx.cascade_step_constraints {
+            ""
+        } else {
+            ", reported, not imposed (--no-step-constraints)"
         },
         step_tests.join("\n  "),
         c_default,
