@@ -18,13 +18,15 @@
 //! `cargo test -p host-sim --test control_compare -- --nocapture` prints the table
 //! (`cargo run --release -p host-sim --example compare_control` prints the same).
 
+mod common;
+
 use std::path::PathBuf;
 
+use common::assert_cascade_local_optimum;
 use host_sim::control::compare::{
     compare, config_for, control_tuned_path, format_table, meets_step_requirement, scale_feedback,
     suite_scenarios, tuning_cost, ControlTuning, GAIN_MARGIN, STEP_REQUIREMENTS,
 };
-use host_sim::control::tune::cascade_polish_moves;
 use host_sim::Plant;
 use pam_firmware::pid::DpPidGains;
 use pam_firmware::tick::ControlLaw;
@@ -124,14 +126,7 @@ fn stored_cascade_gains_are_a_local_optimum_of_the_tuning_cost() {
         .cascade
         .suite_mse_rad2
         .max(t.cascade.suite_mse_at_margin_rad2);
-    for (what, f, cfg) in cascade_polish_moves(&base) {
-        let (c, ..) = tuning_cost(&plant, &sc, cfg);
-        eprintln!("cascade {what} x{f}: cost {c:.4e} rad^2 (stored {c0:.4e})");
-        assert!(
-            c >= 0.98 * c0,
-            "cascade with {what} x{f} costs {c:.4e} rad^2 < stored {c0:.4e} rad^2"
-        );
-    }
+    assert_cascade_local_optimum(&plant, &sc, base, c0);
     let (_, nominal, _) = tuning_cost(&plant, &sc, base);
     let mut off = base;
     off.feedforward = pam_firmware::feedforward::FeedforwardGains::OFF;

@@ -5,12 +5,14 @@
 //! feed-forward is what makes the higher position gains usable). `compare-control`'s verdict
 //! compares this cascade against `config/control_tuned.toml`'s, each at its own gains.
 
+mod common;
+
 use std::path::PathBuf;
 
+use common::assert_cascade_local_optimum;
 use host_sim::control::compare::{
     suite_scenarios, tuning_cost, ControlTuning, CONTROL_TUNED_FF_TOML, CONTROL_TUNED_TOML,
 };
-use host_sim::control::tune::cascade_polish_moves;
 use host_sim::Plant;
 
 fn reference_plant() -> Plant {
@@ -61,14 +63,7 @@ fn the_feed_forward_cascade_is_a_local_optimum_and_needs_the_feed_forward() {
         .cascade
         .suite_mse_rad2
         .max(t.cascade.suite_mse_at_margin_rad2);
-    for (what, f, cfg) in cascade_polish_moves(&base) {
-        let (c, ..) = tuning_cost(&plant, &sc, cfg);
-        eprintln!("{what} x{f}: cost {c:.4e} rad^2 (stored {c0:.4e})");
-        assert!(
-            c >= 0.98 * c0,
-            "{what} x{f} costs {c:.4e} rad^2 < stored {c0:.4e} rad^2"
-        );
-    }
+    assert_cascade_local_optimum(&plant, &sc, base, c0);
     // Without the feed-forward, the same gains cost more than the P-only cascade's own tuning:
     // the P-only loop cannot use them.
     let mut off = base;

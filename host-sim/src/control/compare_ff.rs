@@ -609,28 +609,15 @@ fn breakdown_report(
     Ok(())
 }
 
-/// Per scenario on `plant`: the P-only cascade, the same gains + the analytical feed-forward
-/// (k = 1) and the cascade re-tuned with it on. The sets' figures are means of these
+/// Per scenario on `plant`: `rows` = the P-only cascade, the same gains + the analytical
+/// feed-forward (k = 1) and the cascade re-tuned with it on. The sets' figures are means of these
 /// MSEs, so one scenario the valves cannot follow can hide what the others say.
 fn per_scenario_report(
     out: &mut String,
     plant: &Plant,
     sets: &[(&str, &Vec<Scenario>)],
-    base: ControllerConfig,
-    retuned: ControllerConfig,
+    rows: [ControllerConfig; 3],
 ) -> anyhow::Result<()> {
-    let ctl = controllers(base, None, Some(retuned));
-    let pick = |name: &str| {
-        ctl.iter()
-            .find(|(n, _)| *n == name)
-            .map(|(_, c)| *c)
-            .expect("controllers() has this row")
-    };
-    let rows = [
-        pick("P only"),
-        pick("+ analytical inverse model, k = 1 (isothermal)"),
-        pick(RETUNED_ROW),
-    ];
     writeln!(
         out,
         "\nper scenario (position MSE [rad^2]; ratio = P only / the row):\n\n\
@@ -841,7 +828,19 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
             }
         }
         if *vname == "nominal" {
-            per_scenario_report(&mut out, &plant, &sets, base, retuned)?;
+            let ctl = controllers(base, None, Some(retuned));
+            let pick = |name: &str| {
+                ctl.iter()
+                    .find(|(n, _)| *n == name)
+                    .map(|(_, c)| *c)
+                    .expect("controllers() has this row")
+            };
+            let rows = [
+                pick("P only"),
+                pick("+ analytical inverse model, k = 1 (isothermal)"),
+                pick(RETUNED_ROW),
+            ];
+            per_scenario_report(&mut out, &plant, &sets, rows)?;
         }
     }
     let ok = nominal_ratio >= REQUIRED_RATIO;

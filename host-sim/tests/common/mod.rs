@@ -242,3 +242,21 @@ pub fn tight_integrator(plant: &host_sim::Plant) -> host_sim::sim::Integrator<'_
     };
     host_sim::sim::Integrator::new(plant, plant.initial_state(), opts)
 }
+
+/// Asserts that no polish move of the tuner (each cascade gain x 0.7 / x 1.4) lowers the
+/// tuning cost below 98 % of `stored_cost` (the stored gains are a local optimum).
+pub fn assert_cascade_local_optimum(
+    plant: &host_sim::Plant,
+    scenarios: &[host_sim::control::closed_loop::Scenario],
+    cfg: pam_firmware::tick::ControllerConfig,
+    stored_cost: f64,
+) {
+    for (what, f, moved) in host_sim::control::tune::cascade_polish_moves(&cfg) {
+        let (c, ..) = host_sim::control::compare::tuning_cost(plant, scenarios, moved);
+        eprintln!("cascade {what} x{f}: cost {c:.4e} rad^2 (stored {stored_cost:.4e})");
+        assert!(
+            c >= 0.98 * stored_cost,
+            "cascade with {what} x{f} costs {c:.4e} rad^2 < stored {stored_cost:.4e} rad^2"
+        );
+    }
+}
