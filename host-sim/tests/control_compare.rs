@@ -121,12 +121,7 @@ fn stored_cascade_gains_are_a_local_optimum_of_the_tuning_cost() {
     let plant = reference_plant();
     let sc = suite_scenarios().unwrap();
     let t = tuning();
-    let base = t.cascade.config(1000.0);
-    let c0 = t
-        .cascade
-        .suite_mse_rad2
-        .max(t.cascade.suite_mse_at_margin_rad2);
-    assert_cascade_local_optimum(&plant, &sc, base, c0);
+    let base = assert_cascade_local_optimum(&plant, &sc, &t.cascade);
     let (_, nominal, _) = tuning_cost(&plant, &sc, base);
     let mut off = base;
     off.feedforward = pam_firmware::feedforward::FeedforwardGains::OFF;

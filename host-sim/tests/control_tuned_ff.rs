@@ -58,12 +58,11 @@ fn the_feed_forward_cascade_is_a_local_optimum_and_needs_the_feed_forward() {
     let plant = reference_plant();
     let sc = suite_scenarios().unwrap();
     let t = load(CONTROL_TUNED_FF_TOML);
-    let base = t.cascade.config(1000.0);
+    let base = assert_cascade_local_optimum(&plant, &sc, &t.cascade);
     let c0 = t
         .cascade
         .suite_mse_rad2
         .max(t.cascade.suite_mse_at_margin_rad2);
-    assert_cascade_local_optimum(&plant, &sc, base, c0);
     // Without the feed-forward, the same gains cost more than the P-only cascade's own tuning:
     // the P-only loop cannot use them.
     let mut off = base;

@@ -244,13 +244,15 @@ pub fn tight_integrator(plant: &host_sim::Plant) -> host_sim::sim::Integrator<'_
 }
 
 /// Asserts that no polish move of the tuner (each cascade gain x 0.7 / x 1.4) lowers the
-/// tuning cost below 98 % of `stored_cost` (the stored gains are a local optimum).
+/// tuning cost below 98 % of the stored cascade's (the worse of its two stored suite MSEs):
+/// the stored gains are a local optimum. Returns the stored cascade's configuration.
 pub fn assert_cascade_local_optimum(
     plant: &host_sim::Plant,
     scenarios: &[host_sim::control::closed_loop::Scenario],
-    cfg: pam_firmware::tick::ControllerConfig,
-    stored_cost: f64,
-) {
+    stored: &host_sim::control::compare::CascadeToml,
+) -> pam_firmware::tick::ControllerConfig {
+    let cfg = stored.config(1000.0);
+    let stored_cost = stored.suite_mse_rad2.max(stored.suite_mse_at_margin_rad2);
     for (what, f, moved) in host_sim::control::tune::cascade_polish_moves(&cfg) {
         let (c, ..) = host_sim::control::compare::tuning_cost(plant, scenarios, moved);
         eprintln!("cascade {what} x{f}: cost {c:.4e} rad^2 (stored {stored_cost:.4e})");
@@ -259,4 +261,5 @@ pub fn assert_cascade_local_optimum(
             "cascade with {what} x{f} costs {c:.4e} rad^2 < stored {stored_cost:.4e} rad^2"
         );
     }
+    cfg
 }
