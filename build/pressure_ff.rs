@@ -23,6 +23,7 @@ struct Ff {
     volume_rate_from_reference: bool,
     gain: f64,
     min_duty: f64,
+    update_period_ticks: u16,
 }
 
 /// The Rust source of `PRESSURE_FF`.
@@ -61,6 +62,11 @@ pub fn constants() -> String {
             "in [0, 1]",
         ),
     ];
+    assert!(
+        (1..=100).contains(&f.update_period_ticks),
+        "{FILE}: [pressure_ff] update_period_ticks = {} must be in [1, 100]",
+        f.update_period_ticks
+    );
     for (name, v, ok, must) in checks {
         assert!(
             ok && v.is_finite(),
@@ -81,6 +87,7 @@ pub fn constants() -> String {
             ),
         ],
         super::lits(keyed!(f; gain, min_duty)),
+        vec![("update_period_ticks", f.update_period_ticks.to_string())],
     ]
     .concat();
     format!(

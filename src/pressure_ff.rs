@@ -31,7 +31,11 @@
 //!
 //! Cost: the volume polynomial and its slope (shared by both muscles up to the sign of the
 //! contraction offset), per muscle one division for an inflow (two for an outflow) and one
-//! square root when the flow is not choked. All reciprocals are precomputed.
+//! square root when the flow is not choked. All reciprocals are precomputed. With
+//! `update_period_ticks = N > 1` this runs on one tick in N and the duties are held in
+//! between (`P'` is then the filtered difference over the N ticks); a held inflow duty is
+//! dropped on every tick at which the measured pressure is at or above the ceiling. The
+//! tracking benefit falls with N much faster than the cost (`docs/control.md`).
 
 // `!(x > y)` is the deliberate NaN-rejecting comparison (NaN fails every comparison).
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -67,6 +71,10 @@ pub struct PressureFfParams {
     /// Duties of a smaller magnitude are dropped (0), in [0, 1]: the on/off valve delivers
     /// flow in pulses of at least its minimum on-time, so a small duty only adds pulses.
     pub min_duty: f32,
+    /// The feed-forward is evaluated once every this many ticks and held in between (1 =
+    /// every tick), in [1, 100]; `P'` is then the filtered difference over the period. Fewer
+    /// evaluations cost fewer instructions and track worse (`docs/control.md`).
+    pub update_period_ticks: u16,
 }
 
 impl PressureFfParams {
@@ -81,6 +89,7 @@ impl PressureFfParams {
         volume_rate_from_reference: false,
         gain: 1.0,
         min_duty: 0.0,
+        update_period_ticks: 1,
     };
 
     /// Every constant finite and in its range (checked also when off).
@@ -95,6 +104,7 @@ impl PressureFfParams {
             && self.rate_cutoff_hz > 0.0
             && (0.0..=2.0).contains(&self.gain)
             && (0.0..=1.0).contains(&self.min_duty)
+            && (1..=100).contains(&self.update_period_ticks)
     }
 }
 
@@ -221,13 +231,21 @@ pub struct PressureFeedforward {
     v_floor_m3: f32,
     chi0: f32,
     geometry_ratio: f32,
-    /// Low-pass weight per tick and nominal tick rate [Hz].
+    /// Low-pass weight per evaluation, times the evaluation rate [Hz].
     alpha: f32,
     alpha_tick_hz: f32,
     /// Previous desired pressures [Pa] and their filtered rates [Pa/s].
     prev_set_pa: [f32; 2],
     rate_pa_s: [f32; 2],
     init: bool,
+    /// Evaluation period [ticks] (>= 1) and the ticks left until the next evaluation.
+    period_ticks: u16,
+    countdown_ticks: u16,
+    /// The last evaluation's duties, held until the next one, and per muscle the measured
+    /// gauge pressure at or above which the held duty is dropped (the ceiling for an
+    /// inflow, +inf otherwise) [Pa].
+    held: [f32; 2],
+    held_below_pa: [f32; 2],
     /// The learned volume in place of the polynomial (feature `volume-fnn`).
     #[cfg(feature = "volume-fnn")]
     fnn: Option<&'static crate::volume_fnn::VolumeFnn>,
@@ -243,8 +261,10 @@ impl PressureFeedforward {
         p_hi_gauge_pa: f32,
         tick_hz: f32,
     ) -> Self {
+        let period_ticks = ff.update_period_ticks.max(1);
+        let update_hz = tick_hz / period_ticks as f32;
         let tau = 1.0 / (2.0 * core::f32::consts::PI * ff.rate_cutoff_hz);
-        let alpha = 1.0 / (1.0 + tau * tick_hz);
+        let alpha = 1.0 / (1.0 + tau * update_hz);
         let alpha = if alpha.is_finite() && alpha > 0.0 && alpha <= 1.0 {
             alpha
         } else {
@@ -257,10 +277,14 @@ impl PressureFeedforward {
             chi0: geometry.initial_contraction,
             geometry_ratio: geometry.sprocket_radius_m / geometry.rest_length_m,
             alpha,
-            alpha_tick_hz: alpha * tick_hz,
+            alpha_tick_hz: alpha * update_hz,
             prev_set_pa: [0.0; 2],
             rate_pa_s: [0.0; 2],
             init: false,
+            period_ticks,
+            countdown_ticks: 0,
+            held: [0.0; 2],
+            held_below_pa: [f32::INFINITY; 2],
             #[cfg(feature = "volume-fnn")]
             fnn: None,
         }
@@ -274,10 +298,12 @@ impl PressureFeedforward {
         self
     }
 
-    /// Forgets the set-point history (the next step starts at rate 0).
+    /// Forgets the set-point history (the next step evaluates, starting at rate 0).
     pub fn reset(&mut self) {
         self.init = false;
         self.rate_pa_s = [0.0; 2];
+        self.countdown_ticks = 0;
+        self.held = [0.0; 2];
     }
 
     /// The filtered desired-pressure rates [Pa/s].
@@ -289,8 +315,11 @@ impl PressureFeedforward {
     /// (the `P` of eq. 7), the desired pressures `desired_pa` whose filtered finite difference
     /// is `P'` (the set-points themselves, or the reference trajectory's pressures), the
     /// measured pressures `meas_pa` (gauge), the angle and the velocity that gives `V'`
-    /// (measured or desired). Each duty in [-1, 1], never NaN; non-finite inputs give 0 and
-    /// reset the history.
+    /// (measured or desired). Evaluated on the first tick and then once every
+    /// `update_period_ticks`; in between the last duties are held, each dropped while its
+    /// muscle's measured pressure is at or above the ceiling (an inflow) or not finite. Each
+    /// duty in [-1, 1], never NaN; non-finite inputs give 0 and reset the history (the next
+    /// tick evaluates).
     pub fn step(
         &mut self,
         set_pa: [f32; 2],
@@ -311,16 +340,75 @@ impl PressureFeedforward {
             self.reset();
             return [0.0; 2];
         }
-        self.step_finite(set_pa, desired_pa, meas_pa, angle_rad, velocity_rad_s)
+        self.step_finite(set_pa, || desired_pa, meas_pa, angle_rad, velocity_rad_s)
     }
 
     /// [`Self::step`] for inputs known to be finite (the armed tick's: validated channels,
-    /// the torque loop's clamped set-points, a finite set-point and its derivatives): the
+    /// the torque loop's clamped set-points, a finite set-point and its derivatives), with
+    /// the desired pressures from `desired_pa`, called on the evaluating ticks only: the
     /// same bits, without the finiteness test of the inputs. A non-finite input here still
     /// gives no NaN duty (see [`InverseModel::duty`]), but the filtered rate keeps it until
     /// [`Self::reset`].
     #[inline(always)]
     pub fn step_finite(
+        &mut self,
+        set_pa: [f32; 2],
+        desired_pa: impl FnOnce() -> [f32; 2],
+        meas_pa: [f32; 2],
+        angle_rad: f32,
+        velocity_rad_s: f32,
+    ) -> [f32; 2] {
+        match self.held(meas_pa) {
+            Some(d) => d,
+            None => self.evaluate_finite(set_pa, desired_pa(), meas_pa, angle_rad, velocity_rad_s),
+        }
+    }
+
+    /// A tick between evaluations: the held duties, each dropped (0) while its muscle's
+    /// measured gauge pressure `meas_pa` is at or above the ceiling (a held inflow) or not
+    /// finite; `None` on a tick that evaluates (then call [`Self::evaluate_finite`]). No
+    /// division, no root: the usual tick when evaluating once per PWM period.
+    #[inline(always)]
+    pub fn held(&mut self, meas_pa: [f32; 2]) -> Option<[f32; 2]> {
+        if self.countdown_ticks == 0 {
+            return None;
+        }
+        self.countdown_ticks -= 1;
+        let hold = |i: usize| {
+            if meas_pa[i] < self.held_below_pa[i] {
+                self.held[i]
+            } else {
+                0.0
+            }
+        };
+        Some([hold(0), hold(1)])
+    }
+
+    /// The evaluating tick of [`Self::step_finite`] (after [`Self::held`] returned `None`):
+    /// the duties, held for the next `update_period_ticks - 1` ticks.
+    #[inline(always)]
+    pub fn evaluate_finite(
+        &mut self,
+        set_pa: [f32; 2],
+        desired_pa: [f32; 2],
+        meas_pa: [f32; 2],
+        angle_rad: f32,
+        velocity_rad_s: f32,
+    ) -> [f32; 2] {
+        self.countdown_ticks = self.period_ticks - 1;
+        let out = self.evaluate(set_pa, desired_pa, meas_pa, angle_rad, velocity_rad_s);
+        if self.period_ticks > 1 {
+            let p_hi = self.model.p_hi_gauge_pa;
+            self.held = out;
+            self.held_below_pa = out.map(|d| if d > 0.0 { p_hi } else { f32::INFINITY });
+        }
+        out
+    }
+
+    /// One evaluation: the filtered rates advance by one period, the duties of eq. 7 through
+    /// the inverse valve.
+    #[inline(always)]
+    fn evaluate(
         &mut self,
         set_pa: [f32; 2],
         desired_pa: [f32; 2],
@@ -332,8 +420,8 @@ impl PressureFeedforward {
             self.prev_set_pa = desired_pa;
             self.init = true;
         }
-        // The volume source is chosen once per tick (not per muscle): the polynomial loop
-        // then has no call in it and keeps its constants in registers.
+        // The volume source is chosen once per evaluation (not per muscle): the polynomial
+        // loop then has no call in it and keeps its constants in registers.
         #[cfg(feature = "volume-fnn")]
         if let Some(n) = self.fnn {
             return self.muscles(
@@ -590,6 +678,80 @@ mod tests {
         assert_eq!(o, [0.0, 0.0]);
     }
 
+    /// The reference feed-forward evaluated once every `n` ticks.
+    fn decimated(n: u16) -> PressureFeedforward {
+        PressureFeedforward::new(
+            &PressureFfParams {
+                update_period_ticks: n,
+                ..PressureFfParams::OFF
+            },
+            &params(),
+            &JointGeometry::REFERENCE,
+            600_000.0,
+            1000.0,
+        )
+    }
+
+    #[test]
+    fn a_decimated_feed_forward_evaluates_once_per_period_and_holds_in_between() {
+        // The ramp of `ramped` (1 MPa/s up in muscle 1, down in muscle 2) at 1 kHz, evaluated
+        // every 10 ticks and every tick side by side: the decimated duties change only on
+        // ticks 0, 10, 20, ...; its filtered rate (a difference over the period) converges to
+        // the ramp's rate, and once it has, an evaluating tick gives the every-tick duty.
+        let (mut dec, mut every) = (decimated(10), reference_ff());
+        let mut prev = [f32::NAN; 2];
+        let mut changes = 0;
+        for k in 0..200 {
+            let s = k as f32 * 1000.0;
+            let p = [200_000.0 + s, 500_000.0 - s];
+            let o = dec.step(p, p, p, 0.0, 0.0);
+            let e = every.step(p, p, p, 0.0, 0.0);
+            if o != prev {
+                assert_eq!(k % 10, 0, "tick {k}: {o:?} after {prev:?}");
+                changes += 1;
+            }
+            if k % 10 == 0 && k >= 100 {
+                for i in 0..2 {
+                    assert!(
+                        (o[i] - e[i]).abs() <= 0.01 * e[i].abs() && e[i] != 0.0,
+                        "tick {k}: {o:?} vs every tick {e:?}"
+                    );
+                }
+            }
+            prev = o;
+        }
+        assert_eq!(changes, 20);
+        assert_rates_of_the_ramp(&dec);
+        assert!(prev[0] > 0.0 && prev[1] < 0.0, "{prev:?}");
+    }
+
+    #[test]
+    fn a_held_inflow_is_dropped_at_the_ceiling_and_on_a_bad_pressure() {
+        // Evaluated on a rising set-point (inflow in muscle 1), then held: muscle 1's held
+        // duty stops at the ceiling (600 kPa here) and on a NaN pressure; muscle 2's exhaust
+        // duty is held on.
+        let mut ff = decimated(10);
+        let mut o = [0.0; 2];
+        for k in 0..11 {
+            let s = k as f32 * 1000.0;
+            let p = [200_000.0 + s, 500_000.0 - s];
+            o = ff.step(p, p, p, 0.0, 0.0);
+        }
+        assert!(o[0] > 0.0 && o[1] < 0.0, "{o:?}");
+        let set = [211_000.0, 489_000.0];
+        let held = ff.step(set, set, [300_000.0, 489_000.0], 0.0, 0.0);
+        assert_eq!(held, o);
+        let at_ceiling = ff.step(set, set, [600_000.0, 489_000.0], 0.0, 0.0);
+        assert_eq!(at_ceiling, [0.0, o[1]]);
+        assert_eq!(ff.held([f32::NAN, 489_000.0]), Some([0.0, o[1]]));
+        // Below the ceiling again: held as before, until the period ends.
+        assert_eq!(ff.held([300_000.0, 489_000.0]), Some(o));
+        // A reset: the next tick evaluates (with no history: rate 0, no duty).
+        ff.reset();
+        assert_eq!(ff.held([300_000.0; 2]), None);
+        assert_eq!(ff.step(set, set, set, 0.0, 0.0), [0.0, 0.0]);
+    }
+
     #[test]
     fn adiabatic_index_asks_for_less_flow() {
         let iso = model();
@@ -620,6 +782,13 @@ mod tests {
             ..PressureFfParams::OFF
         }
         .is_valid());
+        for n in [0, 101] {
+            assert!(!PressureFfParams {
+                update_period_ticks: n,
+                ..PressureFfParams::OFF
+            }
+            .is_valid());
+        }
     }
 }
 
@@ -678,6 +847,21 @@ mod tick_tests {
         // The frames do not follow the commands (the supervision faults both ticks after a
         // while, then both hold the safe state); before that the feed-forward shows.
         assert!(differ > 0, "the feed-forward never changed a valve command");
+    }
+
+    #[test]
+    fn the_evaluation_period_reaches_the_tick() {
+        // Evaluated once every 10 ticks against every tick, on the same frames: the commands
+        // differ (and stay in range: `count_differing`); a period out of its range is a
+        // configuration fault.
+        let mut every_tenth = cfg(true);
+        every_tenth.pressure_ff.update_period_ticks = 10;
+        let differ = count_differing(cfg(true), every_tenth, |k| {
+            frame(300e3 + 100.0 * k as f32, 300e3 - 100.0 * k as f32, 0.0)
+        });
+        assert!(differ > 0, "the period never changed a valve command");
+        every_tenth.pressure_ff.update_period_ticks = 0;
+        assert!(!every_tenth.is_valid());
     }
 
     #[test]

@@ -711,12 +711,8 @@ impl ControlTick {
     }
 
     /// The P loops' commands plus the inverse thermodynamic feed-forward, each clamped to
-    /// [-1, 1] (both terms are finite and in [-1, 1]). With `rate_from_reference` the
-    /// desired pressures are those of the reference trajectory: the torque loop's inverse
-    /// model at the `reference` (set-point and its rate) for the inertia torque `J r''` of
-    /// the trajectory feed-forward (within its limit), `p0 -+ dp`, otherwise the set-points
-    /// themselves; `V'` from the set-point rate with `volume_rate_from_reference`, otherwise
-    /// from the measured velocity of `meas` (this tick's measurements).
+    /// [-1, 1] (both terms are finite and in [-1, 1]): the held duties between the
+    /// feed-forward's evaluations, else [`Self::evaluate_pressure_ff`].
     #[cfg(feature = "pressure-ff")]
     #[inline(always)]
     fn add_pressure_ff(
@@ -727,6 +723,42 @@ impl ControlTick {
         reference: JointState,
         sp_accel_rad_s2: f32,
     ) -> (f32, f32) {
+        let [f1, f2] = match self.pressure_ff.held([meas.p1_gauge_pa, meas.p2_gauge_pa]) {
+            Some(f) => f,
+            None => self.evaluate_pressure_ff(set_pa, meas, reference, sp_accel_rad_s2),
+        };
+        // In range (the usual case: one test) or the clamp; NaN passes unchanged. (Not
+        // `f32::clamp`: its unreachable panic message would link core::fmt's float formatting.)
+        #[allow(clippy::manual_clamp)]
+        let c = |u: f32| {
+            if libm::fabsf(u) <= 1.0 {
+                u
+            } else if u > 1.0 {
+                1.0
+            } else if u < -1.0 {
+                -1.0
+            } else {
+                u
+            }
+        };
+        (c(u1 + f1), c(u2 + f2))
+    }
+
+    /// The feed-forward's evaluating tick: with `rate_from_reference` the desired pressures
+    /// are those of the reference trajectory: the torque loop's inverse model at the
+    /// `reference` (set-point and its rate) for the inertia torque `J r''` of the trajectory
+    /// feed-forward (within its limit), `p0 -+ dp`, otherwise the set-points themselves;
+    /// `V'` from the set-point rate with `volume_rate_from_reference`, otherwise from the
+    /// measured velocity of `meas` (this tick's measurements).
+    #[cfg(feature = "pressure-ff")]
+    #[inline(always)]
+    fn evaluate_pressure_ff(
+        &mut self,
+        set_pa: [f32; 2],
+        meas: &TorqueMeasurement,
+        reference: JointState,
+        sp_accel_rad_s2: f32,
+    ) -> [f32; 2] {
         let pf = &self.cfg.pressure_ff;
         let (sp_rad, sp_rate_rad_s) = (reference.angle_rad, reference.velocity_rad_s);
         let v_rad_s = if pf.volume_rate_from_reference {
@@ -750,28 +782,13 @@ impl ControlTick {
             set_pa
         };
         // Finite inputs (see `step_inner`): no finiteness test of its own.
-        let [f1, f2] = self.pressure_ff.step_finite(
+        self.pressure_ff.evaluate_finite(
             set_pa,
             desired_pa,
             [meas.p1_gauge_pa, meas.p2_gauge_pa],
             meas.angle_rad,
             v_rad_s,
-        );
-        // In range (the usual case: one test) or the clamp; NaN passes unchanged. (Not
-        // `f32::clamp`: its unreachable panic message would link core::fmt's float formatting.)
-        #[allow(clippy::manual_clamp)]
-        let c = |u: f32| {
-            if libm::fabsf(u) <= 1.0 {
-                u
-            } else if u > 1.0 {
-                1.0
-            } else if u < -1.0 {
-                -1.0
-            } else {
-                u
-            }
-        };
-        (c(u1 + f1), c(u2 + f2))
+        )
     }
 
     fn reset_laws(&mut self) {

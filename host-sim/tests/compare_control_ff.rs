@@ -151,6 +151,12 @@ fn compare_control_refuses_bad_arguments_with_status_2() {
         ("--ff-cutoff-hz", "0", &["--ff-cutoff-hz"]),
         ("--ff-min-duty", "1.5", &["--ff-min-duty 1.5", "0..=1"]),
         ("--ff-rate-from", "measured", &["--ff-rate-from"]),
+        (
+            "--ff-update-ticks",
+            "0",
+            &["--ff-update-ticks 0", "1..=100"],
+        ),
+        ("--ff-update-ticks", "2.5", &["--ff-update-ticks"]),
     ] {
         let e = exits(
             2,
@@ -171,7 +177,10 @@ fn compare_control_refuses_bad_arguments_with_status_2() {
             &[&"--quick", &"--ff-gains", &"/nonexistent/ff.toml"],
         ),
     );
-    assert!(e.contains("/nonexistent/ff.toml"), "{e}");
+    assert!(
+        e.contains("/nonexistent/ff.toml") && e.contains("--ff-gains"),
+        "{e}"
+    );
     // Gains files swapped: each option refuses the other kind of file, naming it.
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let p_only = root.join("config/control_tuned.toml");

@@ -166,6 +166,10 @@ pub struct FfOverrides {
     /// config/pressure_ff.toml min_duty].
     #[arg(long = "ff-min-duty", value_name = "D")]
     pub min_duty: Option<f32>,
+    /// Evaluate the feed-forward once every N ticks and hold it in between (1..=100; 1 =
+    /// every tick) [default: config/pressure_ff.toml update_period_ticks].
+    #[arg(long = "ff-update-ticks", value_name = "N")]
+    pub update_ticks: Option<u16>,
 }
 
 impl FfOverrides {
@@ -189,6 +193,13 @@ impl FfOverrides {
         }
         if let Some(d) = self.min_duty {
             ff.min_duty = checked("--ff-min-duty", d, 0.0..=1.0)?;
+        }
+        if let Some(n) = self.update_ticks {
+            anyhow::ensure!(
+                (1..=100).contains(&n),
+                "--ff-update-ticks {n}: outside the allowed range 1..=100"
+            );
+            ff.update_period_ticks = n;
         }
         if let Some(src) = &self.rate_from {
             ff.rate_from_reference = src == "reference";
@@ -653,14 +664,14 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
         .with_context(|| format!("--plant {}: cannot read", a.plant.display()))?;
     let (tuning, gains) = match &a.gains {
         Some(p) => (
-            ControlTuning::load(p)?,
+            ControlTuning::load(p).context("--gains")?,
             format!("{} (--gains)", p.display()),
         ),
         None => default_control_tuning()?,
     };
     let (tuning_ff, gains_ff) = match &a.ff_gains {
         Some(p) => (
-            ControlTuning::load(p)?,
+            ControlTuning::load(p).context("--ff-gains")?,
             format!("{} (--ff-gains)", p.display()),
         ),
         None => default_control_tuning_ff()?,
@@ -730,7 +741,8 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
         || a.ff.cutoff_hz.is_some()
         || a.ff.rate_from.is_some()
         || a.ff.volume_rate_from.is_some()
-        || a.ff.min_duty.is_some();
+        || a.ff.min_duty.is_some()
+        || a.ff.update_ticks.is_some();
     writeln!(
         out,
         "re-tuned rows: gains {gains_ff} (the cascade tuned with the pressure feed-forward on, \
@@ -745,7 +757,8 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
     let f = &base.pressure_ff;
     writeln!(
         out,
-        "feed-forward: P' of the {}, V' of the {}, rate cut-off {} Hz, gain {}, minimum duty {}",
+        "feed-forward: P' of the {}, V' of the {}, rate cut-off {} Hz, gain {}, minimum duty {}, \
+         evaluated every {} tick(s)",
         if f.rate_from_reference {
             "reference trajectory"
         } else {
@@ -758,7 +771,8 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
         },
         f.rate_cutoff_hz,
         f.gain,
-        f.min_duty
+        f.min_duty,
+        f.update_period_ticks
     )?;
     writeln!(
         out,
