@@ -338,8 +338,9 @@ fn same_target(input: &Path, output: &Path) -> bool {
     let Ok(i) = input.canonicalize() else {
         return false;
     };
-    if let Ok(o) = output.canonicalize() {
-        return i == o;
+    if output.exists() {
+        // A symbolic link, `..`, or a hard link: another name of the input.
+        return same_existing_file(input, output);
     }
     // A new output: compare its directory and name.
     let dir = match output.parent() {
@@ -476,6 +477,32 @@ impl RunEstimate {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_output_that_is_another_name_of_an_input_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let input = dir.path().join("plant.toml");
+        std::fs::write(&input, "x = 1\n").unwrap();
+        let hard = dir.path().join("hard.toml");
+        std::fs::hard_link(&input, &hard).unwrap();
+        let dotted = dir.path().join(".").join("plant.toml");
+        let mut names = vec![input.clone(), hard, dotted];
+        #[cfg(unix)]
+        {
+            let link = dir.path().join("link.toml");
+            std::os::unix::fs::symlink(&input, &link).unwrap();
+            names.push(link);
+        }
+        for out in &names {
+            let e = distinct_outputs(&[("--plant", &input)], &[("--out", out)]).unwrap_err();
+            assert!(e.contains("is the input --plant"), "{}: {e}", out.display());
+        }
+        // A new file next to it, and an existing other file, are fine.
+        let other = dir.path().join("other.toml");
+        assert!(distinct_outputs(&[("--plant", &input)], &[("--out", &other)]).is_ok());
+        std::fs::write(&other, "y = 2\n").unwrap();
+        assert!(distinct_outputs(&[("--plant", &input)], &[("--out", &other)]).is_ok());
+    }
 
     #[test]
     fn ranges_refuse_nan_and_the_bounds_they_exclude() {

@@ -354,7 +354,7 @@ impl ControlTuning {
                 .split('`')
                 .nth(1)
                 .filter(|_| msg.contains("field"))
-                .unwrap_or("-")
+                .unwrap_or("")
                 .to_string();
             IdentError::at(file, line, &field, &msg)
         })?;
@@ -915,6 +915,12 @@ suite_mse_at_margin_rad2 = 0.000001
                 "setpoint_rate_weight = 1.0\n".into(),
                 String::new(),
                 "setpoint_rate_weight",
+            ),
+            // A syntax error: at its line, in no field (no made-up field name).
+            (
+                "[pid]".into(),
+                "[pid".into(),
+                "t.toml:13: invalid table header",
             ),
         ];
         for (from, to, want) in cases {

@@ -31,8 +31,8 @@ pub enum IdentError {
         /// What went wrong.
         msg: String,
     },
-    /// A bad value in an input file.
-    #[error("{file}:{line}: field `{field}`: {msg}")]
+    /// A bad value in an input file (a line of 0 or an empty field: not known, left out).
+    #[error("{}", input_text(file, *line, field, msg))]
     Input {
         /// The file.
         file: String,
@@ -46,6 +46,19 @@ pub enum IdentError {
     /// The data cannot support the fit.
     #[error("{0}")]
     Data(String),
+}
+
+/// `file:line: field `f`: msg`, without the line when it is 0 and the field when it is empty
+/// (a TOML syntax error is at a line but in no field).
+fn input_text(file: &str, line: usize, field: &str, msg: &str) -> String {
+    let mut s = file.to_string();
+    if line > 0 {
+        s += &format!(":{line}");
+    }
+    if !field.is_empty() {
+        s += &format!(": field `{field}`");
+    }
+    format!("{s}: {msg}")
 }
 
 impl IdentError {
