@@ -220,6 +220,21 @@ impl InverseModel {
     }
 }
 
+/// One tick's inputs of the feed-forward ([`PressureFeedforward::step`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FfInputs {
+    /// Pressure set-points (gauge) [Pa]: the `P` of eq. 7.
+    pub set_pa: [f32; 2],
+    /// Desired pressures (gauge) [Pa] whose filtered difference is `P'`.
+    pub desired_pa: [f32; 2],
+    /// Measured pressures (gauge) [Pa]: the valve's upstream or downstream side.
+    pub meas_pa: [f32; 2],
+    /// Joint angle [rad] (the volume's contraction).
+    pub angle_rad: f32,
+    /// Joint velocity [rad/s] that gives `V'` (measured or desired).
+    pub velocity_rad_s: f32,
+}
+
 /// The feed-forward of both muscles with its state (the set-points' previous values and
 /// filtered rates).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -316,8 +331,7 @@ impl PressureFeedforward {
     /// is `P'` (the set-points themselves, or the reference trajectory's pressures), the
     /// measured pressures `meas_pa` (gauge), the angle and the velocity that gives `V'`
     /// (measured or desired). Evaluated on the first tick and then once every
-    /// `update_period_ticks`; in between the last duties are held, each dropped while its
-    /// muscle's measured pressure is at or above the ceiling (an inflow) or not finite. Each
+    /// `update_period_ticks`; in between the last duties are held ([`Self::held`]). Each
     /// duty in [-1, 1], never NaN; non-finite inputs give 0 and reset the history (the next
     /// tick evaluates).
     pub fn step(
@@ -328,6 +342,13 @@ impl PressureFeedforward {
         angle_rad: f32,
         velocity_rad_s: f32,
     ) -> [f32; 2] {
+        let x = FfInputs {
+            set_pa,
+            desired_pa,
+            meas_pa,
+            angle_rad,
+            velocity_rad_s,
+        };
         let sum = set_pa[0]
             + set_pa[1]
             + desired_pa[0]
@@ -340,27 +361,9 @@ impl PressureFeedforward {
             self.reset();
             return [0.0; 2];
         }
-        self.step_finite(set_pa, || desired_pa, meas_pa, angle_rad, velocity_rad_s)
-    }
-
-    /// [`Self::step`] for inputs known to be finite (the armed tick's: validated channels,
-    /// the torque loop's clamped set-points, a finite set-point and its derivatives), with
-    /// the desired pressures from `desired_pa`, called on the evaluating ticks only: the
-    /// same bits, without the finiteness test of the inputs. A non-finite input here still
-    /// gives no NaN duty (see [`InverseModel::duty`]), but the filtered rate keeps it until
-    /// [`Self::reset`].
-    #[inline(always)]
-    pub fn step_finite(
-        &mut self,
-        set_pa: [f32; 2],
-        desired_pa: impl FnOnce() -> [f32; 2],
-        meas_pa: [f32; 2],
-        angle_rad: f32,
-        velocity_rad_s: f32,
-    ) -> [f32; 2] {
         match self.held(meas_pa) {
             Some(d) => d,
-            None => self.evaluate_finite(set_pa, desired_pa(), meas_pa, angle_rad, velocity_rad_s),
+            None => self.evaluate_finite(&x),
         }
     }
 
@@ -384,19 +387,20 @@ impl PressureFeedforward {
         Some([hold(0), hold(1)])
     }
 
-    /// The evaluating tick of [`Self::step_finite`] (after [`Self::held`] returned `None`):
-    /// the duties, held for the next `update_period_ticks - 1` ticks.
+    /// The evaluating tick of [`Self::step`] (after [`Self::held`] returned `None`) for
+    /// inputs known to be finite (the armed tick's: validated channels, the torque loop's
+    /// clamped set-points, a finite set-point and its derivatives): the same bits, without
+    /// the finiteness test. The duties are held for the next `update_period_ticks - 1` ticks.
+    /// A non-finite input here still gives no NaN duty (see [`InverseModel::duty`]), but the
+    /// filtered rate keeps it until [`Self::reset`].
     #[inline(always)]
-    pub fn evaluate_finite(
-        &mut self,
-        set_pa: [f32; 2],
-        desired_pa: [f32; 2],
-        meas_pa: [f32; 2],
-        angle_rad: f32,
-        velocity_rad_s: f32,
-    ) -> [f32; 2] {
+    pub fn evaluate_finite(&mut self, x: &FfInputs) -> [f32; 2] {
         self.countdown_ticks = self.period_ticks - 1;
-        let out = self.evaluate(set_pa, desired_pa, meas_pa, angle_rad, velocity_rad_s);
+        if !self.init {
+            self.prev_set_pa = x.desired_pa;
+            self.init = true;
+        }
+        let out = self.evaluate(x);
         if self.period_ticks > 1 {
             let p_hi = self.model.p_hi_gauge_pa;
             self.held = out;
@@ -406,50 +410,26 @@ impl PressureFeedforward {
     }
 
     /// One evaluation: the filtered rates advance by one period, the duties of eq. 7 through
-    /// the inverse valve.
+    /// the inverse valve. The volume source is chosen once per evaluation (not per muscle):
+    /// the polynomial loop then has no call in it and keeps its constants in registers.
     #[inline(always)]
-    fn evaluate(
-        &mut self,
-        set_pa: [f32; 2],
-        desired_pa: [f32; 2],
-        meas_pa: [f32; 2],
-        angle_rad: f32,
-        velocity_rad_s: f32,
-    ) -> [f32; 2] {
-        if !self.init {
-            self.prev_set_pa = desired_pa;
-            self.init = true;
-        }
-        // The volume source is chosen once per evaluation (not per muscle): the polynomial
-        // loop then has no call in it and keeps its constants in registers.
+    fn evaluate(&mut self, x: &FfInputs) -> [f32; 2] {
         #[cfg(feature = "volume-fnn")]
         if let Some(n) = self.fnn {
-            return self.muscles(
-                set_pa,
-                desired_pa,
-                meas_pa,
-                angle_rad,
-                velocity_rad_s,
-                |chi, chi_rate, p_abs, p_rate| n.volume_and_rate(chi, chi_rate, p_abs, p_rate),
-            );
+            return self.muscles(x, |chi, chi_rate, p_abs, p_rate| {
+                n.volume_and_rate(chi, chi_rate, p_abs, p_rate)
+            });
         }
         let [b0, b1, b2, b3] = self.poly;
         let v_floor_m3 = self.v_floor_m3;
-        self.muscles(
-            set_pa,
-            desired_pa,
-            meas_pa,
-            angle_rad,
-            velocity_rad_s,
-            // `dV/dchi chi'` with `chi' = sign dchi'`: the same bits as `(dV/dchi sign) dchi'`
-            // (a product with +-1 is exact, and rounding is symmetric in the sign).
-            |chi, chi_rate, _, _| {
-                let v = b0 + chi * (b1 + chi * (b2 + chi * b3));
-                let v = if v > v_floor_m3 { v } else { v_floor_m3 };
-                let v_rate = (b1 + chi * (2.0 * b2 + chi * 3.0 * b3)) * chi_rate;
-                (v, v_rate)
-            },
-        )
+        // `dV/dchi chi'` with `chi' = sign dchi'`: the same bits as `(dV/dchi sign) dchi'` (a
+        // product with +-1 is exact, and rounding is symmetric in the sign).
+        self.muscles(x, |chi, chi_rate, _, _| {
+            let v = b0 + chi * (b1 + chi * (b2 + chi * b3));
+            let v = if v > v_floor_m3 { v } else { v_floor_m3 };
+            let v_rate = (b1 + chi * (2.0 * b2 + chi * 3.0 * b3)) * chi_rate;
+            (v, v_rate)
+        })
     }
 
     /// Both muscles' duties with the volume and its rate from `volume(chi, chi_rate, p_abs,
@@ -457,13 +437,16 @@ impl PressureFeedforward {
     #[inline(always)]
     fn muscles(
         &mut self,
-        set_pa: [f32; 2],
-        desired_pa: [f32; 2],
-        meas_pa: [f32; 2],
-        angle_rad: f32,
-        velocity_rad_s: f32,
+        x: &FfInputs,
         volume: impl Fn(f32, f32, f32, f32) -> (f32, f32),
     ) -> [f32; 2] {
+        let FfInputs {
+            set_pa,
+            desired_pa,
+            meas_pa,
+            angle_rad,
+            velocity_rad_s,
+        } = *x;
         let dchi = self.geometry_ratio * angle_rad;
         let dchi_rate = self.geometry_ratio * velocity_rad_s;
         let mut out = [0.0; 2];

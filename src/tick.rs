@@ -782,13 +782,14 @@ impl ControlTick {
             set_pa
         };
         // Finite inputs (see `step_inner`): no finiteness test of its own.
-        self.pressure_ff.evaluate_finite(
-            set_pa,
-            desired_pa,
-            [meas.p1_gauge_pa, meas.p2_gauge_pa],
-            meas.angle_rad,
-            v_rad_s,
-        )
+        self.pressure_ff
+            .evaluate_finite(&crate::pressure_ff::FfInputs {
+                set_pa,
+                desired_pa,
+                meas_pa: [meas.p1_gauge_pa, meas.p2_gauge_pa],
+                angle_rad: meas.angle_rad,
+                velocity_rad_s: v_rad_s,
+            })
     }
 
     fn reset_laws(&mut self) {
