@@ -133,14 +133,37 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
         }
     };
     let plant = Plant::load(&plant_path)?;
+    let parsed = SCENARIOS
+        .iter()
+        .map(|(file, text)| Ok((*file, Scenario::from_toml_str(text, file)?)))
+        .collect::<Result<Vec<_>>>()?;
+    // Every output named before any run: none may be an input (a `--plant` or `--fixture`
+    // inside the output directory under an output's name would be replaced).
+    let stem = crate::io::file_stem_or(&fixture_path, "fixture");
+    let replay_csv = out_file(&opts.out_dir, &stem, "_replay.csv")?;
+    let replay_png = out_file(&opts.out_dir, &stem, "_replay.png")?;
+    let mut outputs = Vec::new();
+    for (_, s) in &parsed {
+        let csv = out_file(&opts.out_dir, &s.scenario.name, ".csv")?;
+        outputs.push(firmware_trace_path(&csv));
+        outputs.push(out_file(&opts.out_dir, &s.scenario.name, ".png")?);
+        outputs.push(csv);
+    }
+    outputs.push(replay_csv.clone());
+    outputs.push(replay_png.clone());
+    let flagged: Vec<(&str, &Path)> = outputs.iter().map(|p| ("--out-dir", p.as_path())).collect();
+    crate::validate::distinct_outputs(
+        &[("--plant", &plant_path), ("--fixture", &fixture_path)],
+        &flagged,
+    )
+    .map_err(anyhow::Error::msg)?;
     crate::io::atomic::create_dir_all(&opts.out_dir)
         .with_context(|| format!("{}: cannot create the directory", opts.out_dir.display()))?;
 
     let mut scenarios = Vec::new();
-    for (file, text) in SCENARIOS {
-        let s = Scenario::from_toml_str(text, file)?;
+    for (file, s) in &parsed {
         let t0 = Instant::now();
-        let r = run(&plant, &s).with_context(|| format!("{file}: closed-loop run failed"))?;
+        let r = run(&plant, s).with_context(|| format!("{file}: closed-loop run failed"))?;
         let wall = t0.elapsed().as_secs_f64();
         let name = &s.scenario.name;
         let csv = out_file(&opts.out_dir, name, ".csv")?;
@@ -184,9 +207,6 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
         ("effects".into(), plant.effects_summary()),
     ];
     let out = crate::sim::replay_recording(&plant, &fixture, &sim.states, metadata);
-    let stem = crate::io::file_stem_or(&fixture_path, "fixture");
-    let replay_csv = out_file(&opts.out_dir, &stem, "_replay.csv")?;
-    let replay_png = out_file(&opts.out_dir, &stem, "_replay.png")?;
     out.write(&replay_csv)?;
     let fits = compare(&fixture, &out)
         .with_context(|| format!("cannot compare {} with the replay", fixture_path.display()))?;

@@ -92,6 +92,16 @@ pub fn run_arm_demo_with(
             );
         }
     }
+    // No output may be the plant file (under an output's name in the output directory).
+    let mut outputs = Vec::new();
+    for (_, s) in &parsed {
+        for suffix in [".csv", ".firmware.csv", ".png"] {
+            outputs.push(out_file(out_dir, &s.scenario.name, suffix)?);
+        }
+    }
+    let flagged: Vec<(&str, &Path)> = outputs.iter().map(|p| ("--out-dir", p.as_path())).collect();
+    crate::validate::distinct_outputs(&[("--plant", plant_path)], &flagged)
+        .map_err(anyhow::Error::msg)?;
     crate::io::atomic::create_dir_all(out_dir)
         .with_context(|| format!("{}: cannot create the directory", out_dir.display()))?;
     let mut results = Vec::new();

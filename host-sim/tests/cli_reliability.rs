@@ -341,6 +341,25 @@ fn demo_with_a_bad_fixture_leaves_nothing_behind() {
 }
 
 #[test]
+fn demo_refuses_an_input_that_sits_where_it_writes() {
+    // The fixture under the name of a scenario's recording, the plant under the name of a
+    // firmware trace: both would be replaced; nothing is written, both stay as they were.
+    let w = Workspace::new();
+    std::fs::create_dir(w.p("out")).unwrap();
+    std::fs::copy(fixture("pulses_nominal.csv"), w.p("out/step.csv")).unwrap();
+    w.refuses(
+        "demo --out-dir {w}/out --plant {plant} --fixture {w}/out/step.csv",
+        &["--out-dir", "step.csv", "is the input --fixture"],
+    );
+    std::fs::remove_file(w.p("out/step.csv")).unwrap();
+    std::fs::copy(plant(), w.p("out/sine.firmware.csv")).unwrap();
+    w.refuses(
+        "demo --out-dir {w}/out --plant {w}/out/sine.firmware.csv --fixture {fixture}",
+        &["--out-dir", "sine.firmware.csv", "is the input --plant"],
+    );
+}
+
+#[test]
 fn identify_force_on_a_constant_map_is_refused() {
     let w = Workspace::new();
     // Fifty readings of one point: one length, one pressure.
