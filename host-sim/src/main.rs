@@ -363,7 +363,7 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
     if let Some(p) = &a.plot {
         outputs.push(("--plot", p));
     }
-    validate::distinct_outputs(&inputs, &outputs).map_err(anyhow::Error::msg)?;
+    validate::distinct_file_outputs(&inputs, &outputs).map_err(anyhow::Error::msg)?;
     if let Some(s) = &a.scenario {
         let sc = host_sim::io::scenario::Scenario::load(s)?;
         sc.run_estimate()
@@ -659,7 +659,7 @@ fn run_demo(a: &DemoArgs) -> Result<ExitCode> {
 
 fn run_fit(a: &FitArgs) -> Result<ExitCode> {
     if let Some(p) = &a.plot {
-        validate::distinct_outputs(&[("A", &a.a), ("B", &a.b)], &[("--plot", p)])
+        validate::distinct_file_outputs(&[("A", &a.a), ("B", &a.b)], &[("--plot", p)])
             .map_err(anyhow::Error::msg)?;
     }
     // Without a plot the files are compared streaming (memory: their time columns); the

@@ -213,6 +213,20 @@ pub fn plot_path(s: &str) -> Result<PathBuf, String> {
     }
 }
 
+/// [`distinct_outputs`] for outputs that are files in directories the command does not
+/// create: also each output's directory exists, checked before the run (not found by the
+/// rename after it).
+pub fn distinct_file_outputs(
+    inputs: &[(&str, &Path)],
+    outputs: &[(&str, &Path)],
+) -> Result<(), String> {
+    distinct_outputs(inputs, outputs)?;
+    for (flag, p) in outputs {
+        output_parent_exists(flag, p)?;
+    }
+    Ok(())
+}
+
 /// A file output whose directory must already exist (the command does not create it):
 /// refused before the run, not after it (a tuning run takes minutes).
 pub fn output_parent_exists(flag: &str, path: &Path) -> Result<(), String> {

@@ -304,6 +304,18 @@ fn an_output_that_cannot_be_written_is_refused_before_the_run() {
             "tune --plant {plant} --out {w}/missing/gains.toml",
             &["--out", "does not exist"][..],
         ),
+        (
+            "simulate --plant {plant} --inputs {fixture} --out {w}/missing/o.csv",
+            &["--out", "missing", "does not exist"][..],
+        ),
+        (
+            "sweep force --plant {plant} --out {w}/missing/f.csv",
+            &["--out", "missing", "does not exist"][..],
+        ),
+        (
+            "fit {fixture} {fixture} --plot {w}/missing/x.png",
+            &["--plot", "missing", "does not exist"][..],
+        ),
     ] {
         w.refuses(line, needles);
     }

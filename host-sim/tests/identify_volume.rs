@@ -247,6 +247,14 @@ fn identify_volume_refuses_bad_input_with_status_2_and_writes_nothing() {
         &["grams.csv", "m_dot_", "kg/s", "g/s"],
         &out,
     );
+    // The training recording given again as the validation one (another name of it).
+    let again = dir.path().join("again.csv");
+    std::fs::hard_link(&rec, &again).unwrap();
+    assert_refused(
+        &volume_run(&rec, &out, &["--validate", again.to_str().unwrap()]),
+        &["--validate", "again.csv", "same file as --recording"],
+        &out,
+    );
     for (arg, val, says) in [
         ("--weight-decay", "5", "--weight-decay"),
         ("--holdout-fraction", "0.95", "--holdout-fraction"),

@@ -442,7 +442,7 @@ pub fn run_pil(a: &PilArgs) -> anyhow::Result<(String, bool)> {
     if let Some(log) = &a.log {
         outputs.push(("--log", log.as_path()));
     }
-    crate::validate::distinct_outputs(&inputs, &outputs).map_err(anyhow::Error::msg)?;
+    crate::validate::distinct_file_outputs(&inputs, &outputs).map_err(anyhow::Error::msg)?;
     let elf = a.elf.clone().unwrap_or_else(PilOptions::default_elf);
     check_elf(&elf).map_err(|e| {
         anyhow::anyhow!(

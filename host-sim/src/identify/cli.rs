@@ -296,7 +296,7 @@ pub fn tondu_of(cfg: &PlantConfig) -> Tondu {
 }
 
 fn sweep_force(a: &SweepForceArgs) -> Result<String> {
-    validate::distinct_outputs(&[("--plant", &a.plant)], &[("--out", &a.out)])
+    validate::distinct_file_outputs(&[("--plant", &a.plant)], &[("--out", &a.out)])
         .map_err(anyhow::Error::msg)?;
     let points =
         a.n_stretch as f64 * a.n_pressure as f64 * if a.hysteresis_gap_n > 0.0 { 2.0 } else { 1.0 };
@@ -420,7 +420,7 @@ fn sweep_force_map(a: &SweepForceMapArgs) -> Result<String> {
 }
 
 fn sweep_torque(a: &SweepTorqueArgs) -> Result<String> {
-    validate::distinct_outputs(&[("--plant", &a.plant)], &[("--out", &a.out)])
+    validate::distinct_file_outputs(&[("--plant", &a.plant)], &[("--out", &a.out)])
         .map_err(anyhow::Error::msg)?;
     // Each pass -a -> +a -> -a at speed w lasts 4 a / w.
     let samples = a.dp_kpa.len() as f64
@@ -492,7 +492,7 @@ fn sweep_torque(a: &SweepTorqueArgs) -> Result<String> {
 }
 
 fn identify_force(a: &IdentifyForceArgs) -> Result<String> {
-    validate::distinct_outputs(&[("--data", &a.data)], &[("--out", &a.out)])
+    validate::distinct_file_outputs(&[("--data", &a.data)], &[("--out", &a.out)])
         .map_err(anyhow::Error::msg)?;
     let data = force::read_force_csv(&a.data)?;
     // The fit refuses maps it cannot determine (too few samples, no positive force, one
@@ -581,7 +581,7 @@ pub struct TorqueModelFile {
 
 /// `host-sim identify torque` without the write: the file content, the report, the fit.
 pub fn torque_model_file(a: &IdentifyTorqueArgs) -> Result<TorqueModelFile> {
-    validate::distinct_outputs(
+    validate::distinct_file_outputs(
         &[("--recording", &a.recording), ("--plant", &a.plant)],
         &[("--out", &a.out)],
     )
@@ -740,7 +740,7 @@ pub fn torque_model_file(a: &IdentifyTorqueArgs) -> Result<TorqueModelFile> {
 }
 
 fn identify_plant(a: &IdentifyPlantArgs) -> Result<String> {
-    validate::distinct_outputs(
+    validate::distinct_file_outputs(
         &[("--recording", &a.recording), ("--plant", &a.plant)],
         &[("--out", &a.out)],
     )

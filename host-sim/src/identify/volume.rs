@@ -904,7 +904,21 @@ pub fn run_identify_volume(a: &IdentifyVolumeArgs) -> anyhow::Result<String> {
     use anyhow::Context;
     let mut inputs = vec![("--recording", a.recording.as_path())];
     inputs.extend(a.validate.iter().map(|v| ("--validate", v.as_path())));
-    crate::validate::distinct_outputs(&inputs, &[("--out", &a.out)]).map_err(anyhow::Error::msg)?;
+    crate::validate::distinct_file_outputs(&inputs, &[("--out", &a.out)])
+        .map_err(anyhow::Error::msg)?;
+    // A validation recording is one the network was not trained on.
+    if let Some(v) = a
+        .validate
+        .iter()
+        .find(|v| crate::validate::same_existing_file(v, &a.recording))
+    {
+        anyhow::bail!(
+            "--validate {}: is the same file as --recording {}; give a recording the network \
+             is not trained on (its own held-out part is already reported)",
+            v.display(),
+            a.recording.display()
+        );
+    }
     let rec = Recording::read(&a.recording)?.to_uniform();
     let file = a.recording.display().to_string();
     let hw = a

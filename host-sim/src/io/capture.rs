@@ -224,7 +224,8 @@ pub fn run_capture(a: &CaptureArgs) -> anyhow::Result<String> {
     if let Some(elf) = &a.elf {
         inputs.push(("--elf", elf.as_path()));
     }
-    crate::validate::distinct_outputs(&inputs, &[("--out", &a.out)]).map_err(anyhow::Error::msg)?;
+    crate::validate::distinct_file_outputs(&inputs, &[("--out", &a.out)])
+        .map_err(anyhow::Error::msg)?;
     let bytes = std::fs::read(&a.log).map_err(|e| anyhow::anyhow!("{}: {e}", a.log.display()))?;
     let (raw, skipped) = records_of_bytes(&bytes);
     let (records, what, how) = if !raw.is_empty() {
