@@ -386,6 +386,33 @@ fn identify_force_on_a_constant_map_is_refused() {
 }
 
 #[test]
+fn identify_force_refuses_forces_a_thousand_times_off() {
+    // A plausible map of a 300 N muscle (tension falling with contraction, rising with
+    // pressure), then the same in mN and in kN.
+    let w = Workspace::new();
+    let map = |scale: f64| {
+        let mut s = "p_kpa,stretch,f_n\n".to_owned();
+        for p in [0, 100, 200, 300, 400, 500, 600] {
+            for e in [0.8, 0.85, 0.9, 0.95, 1.0] {
+                let f = (p as f64 * 0.5 * (e - 0.7) / 0.3).max(0.0);
+                s += &format!("{p},{e},{}\n", f * scale);
+            }
+        }
+        s
+    };
+    w.write("mn.csv", &map(1e3));
+    w.refuses(
+        "identify force --data {w}/mn.csv --out {w}/out.toml",
+        &["mn.csv:", "field `f_n`", "mN"],
+    );
+    w.write("kn.csv", &map(1e-3));
+    w.refuses(
+        "identify force --data {w}/kn.csv --out {w}/out.toml",
+        &["kn.csv:", "field `f_n`", "kN"],
+    );
+}
+
+#[test]
 fn identify_torque_on_a_constant_recording_is_refused() {
     let w = Workspace::new();
     // 2 s at 200 Hz of a joint at rest under constant pressures and tensions.

@@ -932,8 +932,17 @@ pub fn identify(samples: &[ForceSample]) -> Result<ForceIdentification, IdentErr
     let names = ["r0 [mm]", "alpha0 [deg]", "k", "p_th [kPa]"];
     for (i, x) in tx.iter().enumerate() {
         if at_bound(*x, TONDU_BOUNDS.0[i], TONDU_BOUNDS.1[i]) {
+            // The radius scales the force: pinned at an end, the forces are likely off by a
+            // unit.
+            let unit_hint = match i {
+                0 if *x <= TONDU_BOUNDS.0[0] * 1.001 => {
+                    " (forces this small for their pressures: f_n in kN instead of N?)"
+                }
+                0 => " (forces this large for their pressures: f_n in mN instead of N?)",
+                _ => "",
+            };
             warnings.push(format!(
-                "Tondu baseline: {} = {x:.6} is on its bound {}..{}",
+                "Tondu baseline: {} = {x:.6} is on its bound {}..{}{unit_hint}",
                 names[i], TONDU_BOUNDS.0[i], TONDU_BOUNDS.1[i]
             ));
         }
@@ -1174,6 +1183,16 @@ pub const STRETCH_MAX: f64 = 1.5;
 pub const P_KPA_MAX: f64 = 1500.0;
 /// A force map's largest pressure must reach this [kPa]; below, the column is not in kPa.
 pub const P_KPA_MAX_AT_LEAST: f64 = 20.0;
+/// Plausible tension of one sample [N]: a little negative (load-cell offset) up to well above
+/// the largest fluidic muscles (~6 kN); beyond it the column is in mN.
+pub const F_N_MIN: f64 = -500.0;
+/// See [`F_N_MIN`].
+pub const F_N_MAX: f64 = 20_000.0;
+/// A map that reaches [`F_N_KPA_FOR_AT_LEAST`] kPa pulls at least this much [N] somewhere
+/// (a 5 mm muscle pulls a few N at 200 kPa); less is a column in kN.
+pub const F_N_MAX_AT_LEAST: f64 = 1.0;
+/// See [`F_N_MAX_AT_LEAST`] [kPa].
+pub const F_N_KPA_FOR_AT_LEAST: f64 = 200.0;
 
 /// Reads isometric force data: columns `p_kpa` (gauge), `stretch` (L/L0), `f_n`, and
 /// optionally `state` (`pressurising|up|inflate` / `depressurising|down|deflate`) or
@@ -1205,6 +1224,7 @@ pub fn read_force_csv(path: &Path) -> Result<Vec<ForceSample>, IdentError> {
     // Largest pressure and its line: a map whose largest pressure is a few units is in MPa or
     // bar, not kPa.
     let mut max_p = (f64::NEG_INFINITY, 0usize);
+    let mut max_f = (f64::NEG_INFINITY, 0usize);
     for rec in rdr.records() {
         let rec = rec.map_err(|e| {
             let line = e.position().map(|p| p.line() as usize).unwrap_or(0);
@@ -1252,8 +1272,18 @@ pub fn read_force_csv(path: &Path) -> Result<Vec<ForceSample>, IdentError> {
             P_KPA_MIN..=P_KPA_MAX,
             " kPa gauge (a value in Pa? the column is in kPa)",
         )?;
+        in_range(
+            "f_n",
+            f_n,
+            F_N_MIN..=F_N_MAX,
+            " N (the column is the tension in N, positive; the largest fluidic muscles pull \
+             ~6 kN: a value in mN, or a load cell logging tension negative?)",
+        )?;
         if p_kpa > max_p.0 {
             max_p = (p_kpa, line);
+        }
+        if f_n > max_f.0 {
+            max_f = (f_n, line);
         }
         let branch = if let Some(i) = istate {
             let v = rec.get(i).unwrap_or("").to_ascii_lowercase();
@@ -1310,6 +1340,20 @@ pub fn read_force_csv(path: &Path) -> Result<Vec<ForceSample>, IdentError> {
                 "the largest pressure is {} kPa: the column is in kPa gauge and a force map reaches \
                  at least {P_KPA_MAX_AT_LEAST} kPa (values this small look like MPa or bar)",
                 max_p.0
+            ),
+        ));
+    }
+    // (No positive force at all has its own message, after the read.)
+    if max_f.0 > 0.0 && max_f.0 < F_N_MAX_AT_LEAST && max_p.0 >= F_N_KPA_FOR_AT_LEAST {
+        return Err(IdentError::at(
+            &file,
+            max_f.1,
+            "f_n",
+            &format!(
+                "the largest force is {} N with pressures up to {} kPa: the column is in N and a \
+                 muscle at {F_N_KPA_FOR_AT_LEAST} kPa pulls at least {F_N_MAX_AT_LEAST} N \
+                 (values this small look like kN)",
+                max_f.0, max_p.0
             ),
         ));
     }
