@@ -6,6 +6,20 @@ pub fn half_window_samples(span_s: f64, dt_s: f64) -> usize {
     ((span_s / dt_s).round() as usize).max(1)
 }
 
+/// Refuses a Savitzky-Golay half window whose full window (`2 hw + 1` samples) is longer
+/// than the recording `file` of `n` samples: every sample would take a shrunk window, and
+/// the velocity would be a line through the whole run. `option` names the argument.
+pub fn window_fits(option: &str, hw: usize, n: usize, file: &str) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        2 * hw < n,
+        "{option} {hw}: its window of {} samples is longer than {file} ({n} samples); give at \
+         most {}",
+        2 * hw + 1,
+        n.saturating_sub(1) / 2
+    );
+    Ok(())
+}
+
 /// First derivative of a uniformly sampled signal by a Savitzky-Golay filter: the slope of
 /// the least-squares line (equivalently quadratic) over `2 half_window + 1` samples centred
 /// on each sample, the window shrunk symmetrically near the ends; weights k / sum(k^2).

@@ -413,6 +413,24 @@ fn identify_force_refuses_forces_a_thousand_times_off() {
 }
 
 #[test]
+fn identify_torque_refuses_an_activation_limit_in_mpa_and_a_window_longer_than_the_recording() {
+    let w = Workspace::new();
+    w.refuses(
+        "identify torque --recording {fixture} --plant {plant} --out {w}/t.toml --dp-max-kpa 0.2",
+        &["--dp-max-kpa 0.2", "MPa", "200 kPa"],
+    );
+    w.refuses(
+        "identify torque --recording {fixture} --plant {plant} --out {w}/t.toml \
+         --savgol-half-window 99999",
+        &[
+            "--savgol-half-window 99999",
+            "longer than",
+            "pulses_nominal.csv",
+        ],
+    );
+}
+
+#[test]
 fn identify_torque_on_a_constant_recording_is_refused() {
     let w = Workspace::new();
     // 2 s at 200 Hz of a joint at rest under constant pressures and tensions.

@@ -615,6 +615,9 @@ pub fn torque_model_file(a: &IdentifyTorqueArgs) -> Result<TorqueModelFile> {
     let hw = a
         .savgol_half_window
         .unwrap_or_else(|| crate::signal::half_window_samples(0.025, dt));
+    if a.savgol_half_window.is_some() {
+        crate::signal::window_fits("--savgol-half-window", hw, rec.len(), &file)?;
+    }
     let (mut samples, source) =
         torque::samples_from_recording(&rec, &plant, hw, &file, header_line_of(&a.recording))?;
     let n_all = samples.len();
@@ -670,6 +673,13 @@ pub fn torque_model_file(a: &IdentifyTorqueArgs) -> Result<TorqueModelFile> {
         Some(v) => {
             // p1 = p0 - dp and p2 = p0 + dp must stay between atmosphere and the supply.
             let limit_kpa = model.p0_gauge_pa.min(supply_gauge_pa - model.p0_gauge_pa) / 1e3;
+            if v < DP_MAX_KPA_MIN && v <= limit_kpa {
+                bail!(
+                    "--dp-max-kpa {v}: below {DP_MAX_KPA_MIN} kPa the controller can hardly \
+                     activate the joint (within (0, {limit_kpa:.1}] kPa here): a value in MPa or \
+                     bar? 0.2 MPa = 2 bar = 200 kPa"
+                );
+            }
             if !(v > 0.0 && v <= limit_kpa) {
                 bail!(
                     "--dp-max-kpa {v}: must be within (0, {limit_kpa:.1}] kPa: p0 -+ dp must stay \
@@ -738,6 +748,9 @@ pub fn torque_model_file(a: &IdentifyTorqueArgs) -> Result<TorqueModelFile> {
         warnings: symmetric_note,
     })
 }
+
+/// Smallest activation limit `identify torque --dp-max-kpa` takes [kPa].
+const DP_MAX_KPA_MIN: f64 = 5.0;
 
 fn identify_plant(a: &IdentifyPlantArgs) -> Result<String> {
     validate::distinct_file_outputs(

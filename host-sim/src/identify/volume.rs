@@ -924,6 +924,9 @@ pub fn run_identify_volume(a: &IdentifyVolumeArgs) -> anyhow::Result<String> {
     let hw = a
         .savgol_half_window
         .unwrap_or_else(|| half_window_samples(0.010, rec.sample_period_s()));
+    if a.savgol_half_window.is_some() {
+        crate::signal::window_fits("--savgol-half-window", hw, rec.len(), &file)?;
+    }
     let geometry = pam_firmware::constants::JOINT_GEOMETRY;
     let p_atm = pam_firmware::constants::P_ATM_PA as f64;
     let per_muscle = samples_from_recording(&rec, &geometry, p_atm, hw)
