@@ -374,6 +374,21 @@ fn unit_mistakes_in_a_mapping_are_refused_at_their_line_or_flagged() {
             "-104.608 kPa gauge is below vacuum (-101.325 kPa)",
         ],
     );
+    // Bar mapped as MPa: ten times too high, refused at the raw file's line and column
+    // (not at the output's, as the recording's own range check would).
+    refused(
+        &MAP.replacen(
+            "channel = \"p1\"\nunit = \"bar\"",
+            "channel = \"p1\"\nunit = \"MPa\"",
+            1,
+        ),
+        &[
+            "rig.csv:",
+            "P1 [bar abs]",
+            "kPa gauge is above 2500 kPa",
+            "bar mapped as MPa",
+        ],
+    );
     // A scale of zero would flatten the channel.
     refused(
         &MAP.replacen(

@@ -344,8 +344,9 @@ pub const COUNTS_PER_REV: std::ops::RangeInclusive<u32> = 1..=1 << 30;
 
 /// Median time step of a recording a PAM joint can be studied from: 100 kHz .. 10 Hz [s].
 pub const STEP_RANGE_S: Range = Range::closed(1e-5, 0.1);
-/// Highest gauge pressure a mapped column may reach [Pa] (pneumatics runs below 1.6 MPa).
-pub const P_GAUGE_MAX_PA: f64 = 10e6;
+/// Highest gauge pressure a mapped column may reach [Pa] (pneumatics runs below 1.6 MPa):
+/// the recording's own limit, so that the import names the raw line and the mapping.
+pub const P_GAUGE_MAX_PA: f64 = crate::io::recording::P_KPA_PLAUSIBLE.1 * 1e3;
 /// Largest |angle| a joint may report [rad]: half a turn.
 pub const ANGLE_MAX_RAD: f64 = std::f64::consts::PI;
 /// Largest |force| a muscle may report [N] (the largest fluidic muscles give about 6 kN).
@@ -584,7 +585,8 @@ fn implausible(target: Target, v: f64, p_atm_pa: f64) -> Option<String> {
                 ))
             } else if v > P_GAUGE_MAX_PA {
                 Some(format!(
-                    "{} kPa gauge is above {} kPa: the wrong `unit` (Pa read as kPa?) or `scale`?",
+                    "{} kPa gauge is above {} kPa: the wrong `unit` (bar mapped as MPa, Pa as kPa?) \
+                     or `scale`?",
                     Shown(v * 1e-3),
                     Shown(P_GAUGE_MAX_PA * 1e-3)
                 ))

@@ -69,8 +69,8 @@ impl Channel {
         match self {
             Channel::AngleDeg => (-3600.0, 3600.0, "degrees (ten turns either way)"),
             Channel::P1Kpa | Channel::P2Kpa => (
-                -200.0,
-                2500.0,
+                P_KPA_PLAUSIBLE.0,
+                P_KPA_PLAUSIBLE.1,
                 "kPa gauge (vacuum is -101.325 kPa, a supply at most 2000 kPa; a value in Pa?)",
             ),
             Channel::F1N | Channel::F2N => (-1.0e6, 1.0e6, "N"),
@@ -95,6 +95,10 @@ impl Channel {
         )
     }
 }
+
+/// The gauge pressures a `p1_kpa` / `p2_kpa` reading may have [kPa] (also what `import`
+/// accepts from a mapped column).
+pub const P_KPA_PLAUSIBLE: (f64, f64) = (-200.0, 2500.0);
 
 /// The net mass flow a `m_dot_*_kg_s` reading may have [kg/s] (a large valve passes about
 /// 0.05 kg/s).
