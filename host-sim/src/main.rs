@@ -217,10 +217,37 @@ fn with_negative_numbers(cmd: clap::Command) -> clap::Command {
         .mut_subcommands(with_negative_numbers)
 }
 
+/// `--opt -1e-6` and `--opt -.5` passed as `--opt=-1e-6`, `--opt=-.5`: clap takes `-1` and
+/// `-0.5` after an option as values, but not a negative number with an exponent or without a
+/// leading digit (it would be read as short flags).
+fn join_negative_values(args: impl Iterator<Item = std::ffi::OsString>) -> Vec<std::ffi::OsString> {
+    let mut out: Vec<std::ffi::OsString> = Vec::new();
+    for a in args {
+        let joined = match (out.last().and_then(|o| o.to_str()), a.to_str()) {
+            (Some(opt), Some(v))
+                if opt.starts_with("--")
+                    && opt.len() > 2
+                    && !opt.contains('=')
+                    && v.starts_with('-')
+                    && v.parse::<f64>().is_ok() =>
+            {
+                Some(format!("{opt}={v}"))
+            }
+            _ => None,
+        };
+        match joined {
+            Some(j) => *out.last_mut().unwrap() = j.into(),
+            None => out.push(a),
+        }
+    }
+    out
+}
+
 fn main() -> ExitCode {
     let cli = {
         use clap::{CommandFactory as _, FromArgMatches as _};
-        let matches = with_negative_numbers(Cli::command()).get_matches();
+        let matches = with_negative_numbers(Cli::command())
+            .get_matches_from(join_negative_values(std::env::args_os()));
         Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit())
     };
     if let Err(e) = refuse_arm_files(&cli.command) {

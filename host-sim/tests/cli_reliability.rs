@@ -322,6 +322,20 @@ fn an_output_that_cannot_be_written_is_refused_before_the_run() {
 }
 
 #[test]
+fn a_negative_number_with_an_exponent_or_no_leading_digit_is_read_as_the_value() {
+    // Not as short flags: the option's own range message.
+    let w = Workspace::new();
+    for v in ["-1e-6", "-.5"] {
+        w.refuses(
+            &format!(
+                "simulate --plant {{plant}} --inputs {{fixture}} --out {{w}}/o.csv --rtol {v}"
+            ),
+            &["--rtol", "must be a number within"],
+        );
+    }
+}
+
+#[test]
 fn an_unsupported_plot_format_is_refused_before_the_recording_is_replaced() {
     let w = Workspace::new();
     w.refuses(

@@ -50,7 +50,7 @@ impl PilOptions {
     /// pam-firmware/firmware --release --target thumbv7em-none-eabihf` in the workspace.
     pub fn default_elf() -> PathBuf {
         let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-        root.join("target/thumbv7em-none-eabihf/release/pil")
+        root.join(DEFAULT_ELF_IN_WORKING_DIR)
     }
 
     pub fn new(elf: PathBuf) -> Self {
@@ -392,6 +392,9 @@ pub fn first_difference(
 }
 
 /// Arguments of `host-sim pil`.
+/// `pil`'s firmware image without `--elf`, relative to the working directory.
+pub const DEFAULT_ELF_IN_WORKING_DIR: &str = "target/thumbv7em-none-eabihf/release/pil";
+
 #[derive(clap::Args, Debug)]
 #[command(
     after_help = "Example (build the image first):\n  cargo build -p pam-firmware --bin pil --features pam-firmware/firmware --release --target thumbv7em-none-eabihf\n  host-sim pil --plant ../shared/plant/reference-1dof.toml --scenario scenarios/step.toml --out pil.csv --log pil.stream"
@@ -407,7 +410,8 @@ pub struct PilArgs {
     /// Output recording (RECORDING.md), as `simulate --scenario` writes it.
     #[arg(long, value_name = "REC.csv")]
     pub out: PathBuf,
-    /// Firmware image [default: target/thumbv7em-none-eabihf/release/pil].
+    /// Firmware image [default: target/thumbv7em-none-eabihf/release/pil under the working
+    /// directory].
     #[arg(long, value_name = "ELF")]
     pub elf: Option<PathBuf>,
     /// Also write the firmware's per-tick stream (binary records) here, for `host-sim capture`.
@@ -443,14 +447,20 @@ pub fn run_pil(a: &PilArgs) -> anyhow::Result<(String, bool)> {
         outputs.push(("--log", log.as_path()));
     }
     crate::validate::distinct_file_outputs(&inputs, &outputs).map_err(anyhow::Error::msg)?;
-    let elf = a.elf.clone().unwrap_or_else(PilOptions::default_elf);
+    // The default image is the one under the working directory (a checkout's build), never
+    // the build tree host-sim itself was compiled in: that could be another checkout's
+    // firmware.
+    let elf = a
+        .elf
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(DEFAULT_ELF_IN_WORKING_DIR));
     check_elf(&elf).map_err(|e| {
         anyhow::anyhow!(
             "{} {}: {e}",
             if a.elf.is_some() {
                 "--elf"
             } else {
-                "the default firmware image"
+                "the default firmware image (no --elf; under the working directory)"
             },
             elf.display()
         )
