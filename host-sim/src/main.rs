@@ -711,6 +711,17 @@ fn run_fit(a: &FitArgs) -> Result<ExitCode> {
     };
     println!("reference: {}\nmodel:     {}", a.a.display(), a.b.display());
     print!("{}", format_table(&fits));
+    // -inf only comes from a reference channel that never changes (no spread to normalise
+    // by) while the model differs from it: say so instead of a bare -inf.
+    let constant = |f: &host_sim::fit::ChannelFit| f.fit_percent == f64::NEG_INFINITY;
+    for f in fits.iter().filter(|f| constant(f)) {
+        println!(
+            "{}: constant in the reference {} (a dead or unplugged sensor?): its fit is undefined; \
+             MAE and MSE still compare",
+            f.channel.name(),
+            a.a.display()
+        );
+    }
     if let Some(min) = a.min_fit {
         let bad: Vec<_> = fits
             .iter()
@@ -718,7 +729,14 @@ fn run_fit(a: &FitArgs) -> Result<ExitCode> {
             .collect();
         if !bad.is_empty() {
             for f in bad {
-                eprintln!("{}: fit {:.4} % < {min} %", f.channel.name(), f.fit_percent);
+                if constant(f) {
+                    eprintln!(
+                        "{}: fit undefined (the reference is constant) < {min} %",
+                        f.channel.name()
+                    );
+                } else {
+                    eprintln!("{}: fit {:.4} % < {min} %", f.channel.name(), f.fit_percent);
+                }
             }
             return Ok(ExitCode::from(1));
         }

@@ -336,6 +336,48 @@ fn a_negative_number_with_an_exponent_or_no_leading_digit_is_read_as_the_value()
 }
 
 #[test]
+fn fit_against_a_constant_reference_channel_says_so_instead_of_a_bare_minus_infinity() {
+    // The angle column of the reference set to 0 (a dead encoder).
+    let w = Workspace::new();
+    let text = std::fs::read_to_string(fixture("pulses_nominal.csv")).unwrap();
+    let mut col = usize::MAX;
+    let dead: String = text
+        .lines()
+        .map(|l| {
+            if l.starts_with("t_s") {
+                col = l.split(',').position(|c| c == "angle_deg").unwrap();
+            } else if !l.starts_with('#') && col != usize::MAX {
+                let mut v: Vec<&str> = l.split(',').collect();
+                v[col] = "0";
+                return v.join(",") + "\n";
+            }
+            format!("{l}\n")
+        })
+        .collect();
+    w.write("dead.csv", &dead);
+    let r = bin()
+        .args(["fit", &w.p("dead.csv").to_string_lossy()])
+        .arg(fixture("pulses_nominal.csv"))
+        .args(["--min-fit", "99"])
+        .output()
+        .unwrap();
+    assert_eq!(r.status.code(), Some(1));
+    let (out, err) = (
+        String::from_utf8_lossy(&r.stdout),
+        String::from_utf8_lossy(&r.stderr),
+    );
+    assert!(
+        out.contains("angle_deg: constant in the reference") && out.contains("dead.csv"),
+        "{out}"
+    );
+    assert!(
+        err.contains("angle_deg: fit undefined (the reference is constant)"),
+        "{err}"
+    );
+    assert!(!err.contains("p1_kpa"), "{err}");
+}
+
+#[test]
 fn an_unsupported_plot_format_is_refused_before_the_recording_is_replaced() {
     let w = Workspace::new();
     w.refuses(
