@@ -11,7 +11,8 @@ fn bad_tune_arguments_are_refused_without_touching_the_output() {
     let out = dir.path().join("control.toml");
     std::fs::write(&out, "previous\n").unwrap();
     for (args, want) in [
-        (vec!["--threads", "0"], "--threads 0: allowed 1..=64"),
+        (vec!["--threads", "0"], "must be within 1..=256, got 0"),
+        (vec!["--threads", "300"], "must be within 1..=256, got 300"),
         (
             vec!["--transition-s", "5"],
             "--transition-s 5: allowed 0..=2 s",

@@ -100,8 +100,8 @@ pub struct TuneArgs {
     /// Output gains file (the format of config/control_tuned.toml), written atomically.
     #[arg(long, value_name = "control.toml")]
     pub out: PathBuf,
-    /// Threads for the PD / PID grids and polish (1..=64).
-    #[arg(long, default_value_t = 2)]
+    /// Threads for the PD / PID grids and polish (1..=256, as every command's --threads).
+    #[arg(long, default_value_t = 2, value_parser = crate::validate::usize_in(1, 256))]
     pub threads: usize,
     /// Also start every search from the gains stored in --out (when it loads); without it the
     /// search is reproducible from scratch.
@@ -615,8 +615,8 @@ pub fn run_tune(a: &TuneArgs) -> Result<String> {
 
 /// [`run_tune`], also returning the text of the gains file it wrote.
 pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
-    if !(1..=64).contains(&a.threads) {
-        bail!("--threads {}: allowed 1..=64", a.threads);
+    if !(1..=256).contains(&a.threads) {
+        bail!("--threads {}: allowed 1..=256", a.threads);
     }
     if !(a.setpoint_cutoff_hz >= 1.0 && a.setpoint_cutoff_hz <= 500.0) {
         bail!(
