@@ -205,8 +205,9 @@ struct FitArgs {
     /// Draw B over A for every channel to .png or .svg.
     #[arg(long, value_name = "out.png|svg", value_parser = validate::plot_path)]
     plot: Option<PathBuf>,
-    /// Exit with status 1 if any channel fits below this many percent (at most 100).
-    #[arg(long, value_name = "PERCENT", value_parser = f64_in(Range::closed(-1e6, 100.0)))]
+    /// Exit with status 1 if any channel fits below this many percent (at most 100; 0 < x <= 1
+    /// is refused: a fraction typed for a percentage).
+    #[arg(long, value_name = "PERCENT", value_parser = min_fit_percent)]
     min_fit: Option<f64>,
 }
 
@@ -215,6 +216,20 @@ struct FitArgs {
 fn with_negative_numbers(cmd: clap::Command) -> clap::Command {
     cmd.allow_negative_numbers(true)
         .mut_subcommands(with_negative_numbers)
+}
+
+/// `fit --min-fit`: a percentage up to 100; a value in (0, 1] is a fraction typed for one
+/// (0.995 for 99.5 %), refused with the percentage it likely meant.
+fn min_fit_percent(s: &str) -> Result<f64, String> {
+    let v = f64_in(Range::closed(-1e6, 100.0))(s)?;
+    if v > 0.0 && v <= 1.0 {
+        return Err(format!(
+            "{v} looks like a fraction; the threshold is in percent (give {} for {} %)",
+            v * 100.0,
+            v * 100.0
+        ));
+    }
+    Ok(v)
 }
 
 /// `--opt -1e-6` and `--opt -.5` passed as `--opt=-1e-6`, `--opt=-.5`: clap takes `-1` and

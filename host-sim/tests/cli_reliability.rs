@@ -628,6 +628,20 @@ fn fit_refuses_a_nan_gate() {
             &["--min-fit", "100"],
         );
     }
+    // A fraction typed for a percentage.
+    w.refuses(
+        "fit {fixture} {fixture} --min-fit 0.995",
+        &["--min-fit", "looks like a fraction", "give 99.5"],
+    );
+}
+
+#[test]
+fn sweep_force_refuses_a_top_pressure_in_mpa() {
+    let w = Workspace::new();
+    w.refuses(
+        "sweep force --plant {plant} --out {w}/f.csv --p-max-kpa 0.6",
+        &["--p-max-kpa", "[20, 2000]", "0.6"],
+    );
 }
 
 #[test]

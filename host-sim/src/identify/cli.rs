@@ -71,8 +71,9 @@ pub struct SweepForceArgs {
     /// Highest L/L0.
     #[arg(long, default_value_t = 1.05, value_parser = f64_in(Range::closed(force::STRETCH_MIN, force::STRETCH_MAX)))]
     pub stretch_max: f64,
-    /// Highest gauge pressure [kPa].
-    #[arg(long, default_value_t = 600.0, value_parser = f64_in(Range::positive(2000.0)))]
+    /// Highest gauge pressure [kPa] (20..=2000: `identify force` needs a map reaching 20 kPa;
+    /// less is a value in MPa or bar).
+    #[arg(long, default_value_t = 600.0, value_parser = f64_in(Range::closed(force::P_KPA_MAX_AT_LEAST, 2000.0)))]
     pub p_max_kpa: f64,
     /// Load-cell noise, standard deviation [N].
     #[arg(long, default_value_t = 3.0, value_parser = f64_in(Range::closed(0.0, 1e4)))]
