@@ -335,10 +335,9 @@ fn a_negative_number_with_an_exponent_or_no_leading_digit_is_read_as_the_value()
     }
 }
 
-#[test]
-fn fit_against_a_constant_reference_channel_says_so_instead_of_a_bare_minus_infinity() {
-    // The angle column of the reference set to 0 (a dead encoder).
-    let w = Workspace::new();
+/// The conformance pulses with the angle column set to 0 (a dead encoder), as `dead.csv` in
+/// `w`.
+fn dead_angle_recording(w: &Workspace) -> PathBuf {
     let text = std::fs::read_to_string(fixture("pulses_nominal.csv")).unwrap();
     let mut col = usize::MAX;
     let dead: String = text
@@ -355,8 +354,15 @@ fn fit_against_a_constant_reference_channel_says_so_instead_of_a_bare_minus_infi
         })
         .collect();
     w.write("dead.csv", &dead);
+    w.p("dead.csv")
+}
+
+#[test]
+fn fit_against_a_constant_reference_channel_says_so_instead_of_a_bare_minus_infinity() {
+    let w = Workspace::new();
+    let dead = dead_angle_recording(&w);
     let r = bin()
-        .args(["fit", &w.p("dead.csv").to_string_lossy()])
+        .args(["fit", &dead.to_string_lossy()])
         .arg(fixture("pulses_nominal.csv"))
         .args(["--min-fit", "99"])
         .output()
@@ -375,6 +381,17 @@ fn fit_against_a_constant_reference_channel_says_so_instead_of_a_bare_minus_infi
         "{err}"
     );
     assert!(!err.contains("p1_kpa"), "{err}");
+}
+
+#[test]
+fn diagnose_refuses_a_dead_channel_instead_of_naming_physics_for_it() {
+    let w = Workspace::new();
+    let dead = dead_angle_recording(&w);
+    w.refuses_with(
+        "diagnose --plant {plant} --recording {dead} --json {w}/out.json",
+        &[("dead", &dead)],
+        &["dead.csv", "angle_deg", "dead or unplugged sensor"],
+    );
 }
 
 #[test]

@@ -297,6 +297,30 @@ pub enum DiagnoseError {
 /// Fewest samples a recording needs.
 pub const MIN_SAMPLES: usize = 200;
 
+/// A measured channel that holds one value over the whole recording while the valves move:
+/// a dead or unplugged sensor (or a clamped joint), which no physics of the plant explains
+/// and no fit can be judged on (its spread is 0). `None` when every channel moves, or when
+/// the valves never change either (nothing was excited).
+fn dead_channel(rec: &Recording) -> Option<String> {
+    let excited = rec.inputs.windows(2).any(|w| w[0] != w[1]);
+    if !excited {
+        return None;
+    }
+    Channel::ALL.into_iter().find_map(|c| {
+        let y = rec.outputs[c.index()].as_ref()?;
+        let first = *y.first()?;
+        y.iter().all(|v| *v == first).then(|| {
+            format!(
+                "column `{}` is {first} in all {} samples while the valves move: a dead or \
+                 unplugged sensor (or, for the angle, a clamped joint)? The diagnosis compares \
+                 the model with every recorded channel; fix the sensor, or leave the column out",
+                c.name(),
+                y.len()
+            )
+        })
+    })
+}
+
 /// A replay of `cfg` over `rec` (`CHECK`) holding no series: its fits, its plot points
 /// (every [`plot_stride`]-th sample) and ranges, [`Replayed`]; `f(k, channels)` sees every
 /// sample in order.
@@ -827,6 +851,11 @@ pub fn diagnose(
             return Err(DiagnoseError::Data(
                 "check recording has fewer than 2 samples".into(),
             ));
+        }
+    }
+    for (what, r) in [("recording", Some(train)), ("check recording", check)] {
+        if let Some(msg) = r.and_then(dead_channel) {
+            return Err(DiagnoseError::Data(format!("{what}: {msg}")));
         }
     }
     // A recording that starts away from the file's `[initial]` is replayed from its first
