@@ -653,6 +653,22 @@ fn fit_refuses_a_nan_gate() {
 }
 
 #[test]
+fn capture_refuses_an_elf_that_is_not_a_firmware_image_before_decoding() {
+    let w = Workspace::new();
+    w.write("raw.log", "\u{1}\u{2}not records\n");
+    w.write("notes.txt", "not an image\n");
+    w.refuses(
+        "capture --log {w}/raw.log --elf {w}/notes.txt --out {w}/rec.csv",
+        &[
+            "--elf",
+            "notes.txt",
+            "ELF magic",
+            "the board's or the QEMU image's ELF",
+        ],
+    );
+}
+
+#[test]
 fn sweep_force_refuses_a_top_pressure_in_mpa() {
     let w = Workspace::new();
     w.refuses(

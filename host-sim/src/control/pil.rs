@@ -534,9 +534,19 @@ pub fn run_pil(a: &PilArgs) -> anyhow::Result<(String, bool)> {
 /// existing, non-empty regular file with an ELF header for 32-bit little-endian ARM (what
 /// `cargo build --target thumbv7em-none-eabihf` writes). Reads the 20 header bytes only.
 pub fn check_elf(elf: &std::path::Path) -> Result<(), String> {
+    check_elf_for(
+        elf,
+        "build it: cargo build -p pam-firmware --bin pil --features pam-firmware/firmware \
+         --release --target thumbv7em-none-eabihf",
+    )
+}
+
+/// [`check_elf`] with `hint` (what the image should be) in place of the PIL image's build
+/// command.
+pub fn check_elf_for(elf: &std::path::Path, hint: &str) -> Result<(), String> {
     use std::io::Read;
-    const BUILD: &str = "build it: cargo build -p pam-firmware --bin pil --features \
-                         pam-firmware/firmware --release --target thumbv7em-none-eabihf";
+    #[allow(non_snake_case)]
+    let BUILD = hint;
     let meta = std::fs::metadata(elf).map_err(|e| format!("cannot read it: {e} ({BUILD})"))?;
     if !meta.is_file() {
         return Err("is not a regular file: give the firmware image (an ELF file)".into());

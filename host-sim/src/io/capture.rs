@@ -226,6 +226,13 @@ pub fn run_capture(a: &CaptureArgs) -> anyhow::Result<String> {
     }
     crate::validate::distinct_file_outputs(&inputs, &[("--out", &a.out)])
         .map_err(anyhow::Error::msg)?;
+    if let Some(elf) = &a.elf {
+        crate::control::pil::check_elf_for(
+            elf,
+            "give the firmware image that wrote the log: the board's or the QEMU image's ELF",
+        )
+        .map_err(|e| anyhow::anyhow!("--elf {}: {e}", elf.display()))?;
+    }
     let bytes = std::fs::read(&a.log).map_err(|e| anyhow::anyhow!("{}: {e}", a.log.display()))?;
     let (raw, skipped) = records_of_bytes(&bytes);
     let (records, what, how) = if !raw.is_empty() {
@@ -281,7 +288,12 @@ fn decode_defmt(elf: &Path, log: &Path) -> anyhow::Result<String> {
             "defmt-print -e {} failed on {}: {}",
             elf.display(),
             log.display(),
-            String::from_utf8_lossy(&out.stderr).trim()
+            // Its first lines: the cause, not a backtrace.
+            String::from_utf8_lossy(&out.stderr)
+                .lines()
+                .take(3)
+                .collect::<Vec<_>>()
+                .join(" / ")
         );
     }
     Ok(String::from_utf8_lossy(&out.stdout).into_owned())
