@@ -335,16 +335,15 @@ fn a_negative_number_with_an_exponent_or_no_leading_digit_is_read_as_the_value()
     }
 }
 
-/// The conformance pulses with the angle column set to 0 (a dead encoder), as `dead.csv` in
-/// `w`.
-fn dead_angle_recording(w: &Workspace) -> PathBuf {
+/// The conformance pulses with the `column` set to 0 (a dead sensor), as `dead.csv` in `w`.
+fn dead_channel_recording(w: &Workspace, column: &str) -> PathBuf {
     let text = std::fs::read_to_string(fixture("pulses_nominal.csv")).unwrap();
     let mut col = usize::MAX;
     let dead: String = text
         .lines()
         .map(|l| {
             if l.starts_with("t_s") {
-                col = l.split(',').position(|c| c == "angle_deg").unwrap();
+                col = l.split(',').position(|c| c == column).unwrap();
             } else if !l.starts_with('#') && col != usize::MAX {
                 let mut v: Vec<&str> = l.split(',').collect();
                 v[col] = "0";
@@ -360,7 +359,7 @@ fn dead_angle_recording(w: &Workspace) -> PathBuf {
 #[test]
 fn fit_against_a_constant_reference_channel_says_so_instead_of_a_bare_minus_infinity() {
     let w = Workspace::new();
-    let dead = dead_angle_recording(&w);
+    let dead = dead_channel_recording(&w, "angle_deg");
     let r = bin()
         .args(["fit", &dead.to_string_lossy()])
         .arg(fixture("pulses_nominal.csv"))
@@ -384,13 +383,13 @@ fn fit_against_a_constant_reference_channel_says_so_instead_of_a_bare_minus_infi
 }
 
 #[test]
-fn diagnose_refuses_a_dead_channel_instead_of_naming_physics_for_it() {
+fn diagnose_refuses_a_dead_pressure_sensor_instead_of_naming_physics_for_it() {
     let w = Workspace::new();
-    let dead = dead_angle_recording(&w);
+    let dead = dead_channel_recording(&w, "p2_kpa");
     w.refuses_with(
         "diagnose --plant {plant} --recording {dead} --json {w}/out.json",
         &[("dead", &dead)],
-        &["dead.csv", "angle_deg", "dead or unplugged sensor"],
+        &["dead.csv", "p2_kpa", "dead or unplugged sensor"],
     );
 }
 

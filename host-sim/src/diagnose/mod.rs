@@ -297,28 +297,31 @@ pub enum DiagnoseError {
 /// Fewest samples a recording needs.
 pub const MIN_SAMPLES: usize = 200;
 
-/// A measured channel that holds one value over the whole recording while the valves move:
-/// a dead or unplugged sensor (or a clamped joint), which no physics of the plant explains
-/// and no fit can be judged on (its spread is 0). `None` when every channel moves, or when
-/// the valves never change either (nothing was excited).
+/// A pressure or tension channel that holds one value over the whole recording while the
+/// valves move: a dead or unplugged sensor, which no physics of the plant explains and no fit
+/// can be judged on (its spread is 0). `None` when every such channel moves, or when the
+/// valves never change either (nothing was excited). The angle is not judged: a joint at an
+/// end stop or clamped, read by a quantising encoder, legitimately holds one value.
 fn dead_channel(rec: &Recording) -> Option<String> {
     let excited = rec.inputs.windows(2).any(|w| w[0] != w[1]);
     if !excited {
         return None;
     }
-    Channel::ALL.into_iter().find_map(|c| {
-        let y = rec.outputs[c.index()].as_ref()?;
-        let first = *y.first()?;
-        y.iter().all(|v| *v == first).then(|| {
-            format!(
-                "column `{}` is {first} in all {} samples while the valves move: a dead or \
-                 unplugged sensor (or, for the angle, a clamped joint)? The diagnosis compares \
-                 the model with every recorded channel; fix the sensor, or leave the column out",
-                c.name(),
-                y.len()
-            )
+    [Channel::P1Kpa, Channel::P2Kpa, Channel::F1N, Channel::F2N]
+        .into_iter()
+        .find_map(|c| {
+            let y = rec.outputs[c.index()].as_ref()?;
+            let first = *y.first()?;
+            y.iter().all(|v| *v == first).then(|| {
+                format!(
+                    "column `{}` is {first} in all {} samples while the valves move: a dead or \
+                     unplugged sensor? The diagnosis compares the model with every recorded \
+                     channel; fix the sensor, or leave the column out",
+                    c.name(),
+                    y.len()
+                )
+            })
         })
-    })
 }
 
 /// A replay of `cfg` over `rec` (`CHECK`) holding no series: its fits, its plot points
