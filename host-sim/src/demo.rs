@@ -142,16 +142,21 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
     let stem = crate::io::file_stem_or(&fixture_path, "fixture");
     let replay_csv = out_file(&opts.out_dir, &stem, "_replay.csv")?;
     let replay_png = out_file(&opts.out_dir, &stem, "_replay.png")?;
-    let mut outputs = Vec::new();
-    for (_, s) in &parsed {
-        let csv = out_file(&opts.out_dir, &s.scenario.name, ".csv")?;
-        outputs.push(firmware_trace_path(&csv));
-        outputs.push(out_file(&opts.out_dir, &s.scenario.name, ".png")?);
-        outputs.push(csv);
-    }
-    outputs.push(replay_csv.clone());
-    outputs.push(replay_png.clone());
-    let flagged: Vec<(&str, &Path)> = outputs.iter().map(|p| ("--out-dir", p.as_path())).collect();
+    // Per scenario: its firmware trace, plot and recording.
+    let files = parsed
+        .iter()
+        .map(|(_, s)| {
+            let csv = out_file(&opts.out_dir, &s.scenario.name, ".csv")?;
+            let png = out_file(&opts.out_dir, &s.scenario.name, ".png")?;
+            Ok([firmware_trace_path(&csv), png, csv])
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let flagged: Vec<(&str, &Path)> = files
+        .iter()
+        .flatten()
+        .chain([&replay_csv, &replay_png])
+        .map(|p| ("--out-dir", p.as_path()))
+        .collect();
     crate::validate::distinct_outputs(
         &[("--plant", &plant_path), ("--fixture", &fixture_path)],
         &flagged,
@@ -161,14 +166,11 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
         .with_context(|| format!("{}: cannot create the directory", opts.out_dir.display()))?;
 
     let mut scenarios = Vec::new();
-    for (file, s) in &parsed {
+    for ((file, s), [trace, png, csv]) in parsed.iter().zip(files) {
         let t0 = Instant::now();
         let r = run(&plant, s).with_context(|| format!("{file}: closed-loop run failed"))?;
         let wall = t0.elapsed().as_secs_f64();
         let name = &s.scenario.name;
-        let csv = out_file(&opts.out_dir, name, ".csv")?;
-        let trace = firmware_trace_path(&csv);
-        let png = out_file(&opts.out_dir, name, ".png")?;
         write_firmware_trace(&r, &trace)?;
         run_recording(&r, &plant_path.display().to_string(), file, Some(&trace)).write(&csv)?;
         plot_run(&png, &r, &plant)?;

@@ -93,19 +93,25 @@ pub fn run_arm_demo_with(
         }
     }
     // No output may be the plant file (under an output's name in the output directory).
-    let mut outputs = Vec::new();
-    for (_, s) in &parsed {
-        for suffix in [".csv", ".firmware.csv", ".png"] {
-            outputs.push(out_file(out_dir, &s.scenario.name, suffix)?);
-        }
-    }
-    let flagged: Vec<(&str, &Path)> = outputs.iter().map(|p| ("--out-dir", p.as_path())).collect();
+    // Per scenario: its recording, firmware trace and plot.
+    let files = parsed
+        .iter()
+        .map(|(_, s)| {
+            let f = |suffix| out_file(out_dir, &s.scenario.name, suffix);
+            Ok([f(".csv")?, f(".firmware.csv")?, f(".png")?])
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let flagged: Vec<(&str, &Path)> = files
+        .iter()
+        .flatten()
+        .map(|p| ("--out-dir", p.as_path()))
+        .collect();
     crate::validate::distinct_outputs(&[("--plant", plant_path)], &flagged)
         .map_err(anyhow::Error::msg)?;
     crate::io::atomic::create_dir_all(out_dir)
         .with_context(|| format!("{}: cannot create the directory", out_dir.display()))?;
     let mut results = Vec::new();
-    for (file, s) in &parsed {
+    for ((file, s), [csv, trace, png]) in parsed.iter().zip(files) {
         let file = *file;
         let cfg = ArmConfig::reference(s.scenario.tick_hz as f32);
         let t0 = Instant::now();
@@ -113,9 +119,6 @@ pub fn run_arm_demo_with(
             run_arm(&arm, &s, cfg).with_context(|| format!("{file}: closed-loop run failed"))?;
         let wall = t0.elapsed().as_secs_f64();
         let name = &s.scenario.name;
-        let csv = out_file(out_dir, name, ".csv")?;
-        let trace = out_file(out_dir, name, ".firmware.csv")?;
-        let png = out_file(out_dir, name, ".png")?;
         let rec = r.to_recording(&arm, &plant_path.display().to_string(), file);
         rec.write(&csv)?;
         crate::io::atomic::write_bytes(&trace, r.firmware_trace_csv().as_bytes())

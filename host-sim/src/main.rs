@@ -838,9 +838,7 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
         }
         inputs.push(("--check", c));
     }
-    validate::distinct_outputs(&inputs, &[("--json", &a.json)])
-        .and_then(|()| validate::output_parent_exists("--json", &a.json))
-        .map_err(anyhow::Error::msg)?;
+    validate::distinct_file_outputs(&inputs, &[("--json", &a.json)]).map_err(anyhow::Error::msg)?;
     if let Some(dir) = &a.report {
         validate::output_dir("--report", dir).map_err(anyhow::Error::msg)?;
         let report_json = dir.join("diagnosis.json");

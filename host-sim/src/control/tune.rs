@@ -629,8 +629,7 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
             bail!("--transition-s {t}: allowed 0..=2 s");
         }
     }
-    crate::validate::distinct_outputs(&[("--plant", &a.plant)], &[("--out", &a.out)])
-        .and_then(|()| crate::validate::output_parent_exists("--out", &a.out))
+    crate::validate::distinct_file_outputs(&[("--plant", &a.plant)], &[("--out", &a.out)])
         .map_err(anyhow::Error::msg)?;
     let mut cascade_starts: Vec<(f32, f32, f32, Option<f32>)> = Vec::new();
     for s in &a.cascade_start {

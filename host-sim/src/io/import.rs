@@ -1226,8 +1226,7 @@ pub struct ImportArgs {
 /// `host-sim import`: returns the report printed on stdout.
 pub fn run_import(a: &ImportArgs) -> anyhow::Result<String> {
     let inputs = [("--map", a.map.as_path()), ("--input", a.input.as_path())];
-    crate::validate::distinct_outputs(&inputs, &[("--out", &a.out)])
-        .and_then(|()| crate::validate::output_parent_exists("--out", &a.out))
+    crate::validate::distinct_file_outputs(&inputs, &[("--out", &a.out)])
         .map_err(anyhow::Error::msg)?;
     let mapping = Mapping::load(&a.map)?;
     let imp = import(&mapping, &a.map, &a.input, a.split)?;
