@@ -52,7 +52,7 @@ PARTS = [
     ("feed-forward: eq. 7 mass flow", "InverseModel::mass_flow_kg_s"),
     ("feed-forward: P' filter, volume and its rate, per-muscle loop", "PressureFeedforward::"),
     ("feed-forward: tick side (options, desired pressures, sum and clamp)", "add_pressure_ff"),
-    ("force-law torque estimate (both muscles)", "torque_estimate_nm"),
+    ("force-law torque estimate (both muscles)", "torque_from"),
     ("channel validators (p1, p2, angle)", "ChannelValidator::"),
     ("velocity estimator", "VelocityEstimator"),
     ("valve / supply residual", "ResidualMonitor"),

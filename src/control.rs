@@ -17,7 +17,7 @@
 //! returns [`ControlError`] and resets the law's internal state, so one bad value cannot
 //! poison an integrator; the caller disarms.
 
-use crate::force_law::{ForceFlags, ForceLawParams};
+use crate::force_law::{ForceEstimate, ForceFlags, ForceLawParams};
 use crate::geometry::JointGeometry;
 use crate::safety::{clamp_pressure_setpoint_pa, clamp_setpoint_to};
 use crate::torque_model::TorqueModelParams;
@@ -272,9 +272,47 @@ pub fn torque_estimate_nm(
     p2_gauge_pa: f32,
     angle_rad: f32,
 ) -> (f32, ForceFlags) {
+    torque_from(
+        |p, e| force_law.force_inline(p, e),
+        geometry,
+        p1_gauge_pa,
+        p2_gauge_pa,
+        angle_rad,
+    )
+}
+
+/// [`torque_estimate_nm`] through [`ForceLawParams::force_regular`]: the same bits for a
+/// law that is [regular](ForceLawParams::is_regular), finite pressures and an angle whose
+/// stretches are finite (the control tick's validated configuration and channels), without
+/// the tests that cannot fail there (no FATAL flag).
+#[inline(always)]
+pub(crate) fn torque_estimate_regular_nm(
+    force_law: &ForceLawParams,
+    geometry: &JointGeometry,
+    p1_gauge_pa: f32,
+    p2_gauge_pa: f32,
+    angle_rad: f32,
+) -> (f32, ForceFlags) {
+    torque_from(
+        |p, e| force_law.force_regular(p, e),
+        geometry,
+        p1_gauge_pa,
+        p2_gauge_pa,
+        angle_rad,
+    )
+}
+
+#[inline(always)]
+fn torque_from(
+    force: impl Fn(f32, f32) -> ForceEstimate,
+    geometry: &JointGeometry,
+    p1_gauge_pa: f32,
+    p2_gauge_pa: f32,
+    angle_rad: f32,
+) -> (f32, ForceFlags) {
     let (e1, e2) = geometry.stretches(angle_rad);
-    let f1 = force_law.force_inline(p1_gauge_pa, e1);
-    let f2 = force_law.force_inline(p2_gauge_pa, e2);
+    let f1 = force(p1_gauge_pa, e1);
+    let f2 = force(p2_gauge_pa, e2);
     (
         (f1.force_n - f2.force_n) * geometry.sprocket_radius_m,
         f1.flags.union(f2.flags),

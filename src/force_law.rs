@@ -147,8 +147,7 @@ impl ForceLawParams {
         self.force_inline(p_gauge_pa, stretch)
     }
 
-    /// [`Self::force`], always inlined: the control tick's torque estimate evaluates it
-    /// twice per tick, without the call overhead.
+    /// [`Self::force`], always inlined (the general entry: any input, any parameter set).
     #[inline(always)]
     #[allow(clippy::neg_cmp_op_on_partial_ord)]
     pub(crate) fn force_inline(&self, p_gauge_pa: f32, stretch: f32) -> ForceEstimate {
@@ -159,6 +158,51 @@ impl ForceLawParams {
                 flags: ForceFlags::INVALID_INPUT,
             };
         }
+        let (p_mpa, e, flags) = self.clamp_to_domain(p_gauge_pa, stretch);
+        let c = &self.c;
+        let den = c[6] * p_mpa + c[7] * e;
+        // `e` is clamped to the domain, which must exclude 0 (checked at build time for the
+        // generated constants); guard anyway so a bad parameter set cannot divide by zero.
+        if !(libm::fabsf(den) > DEN_EPS) || !(libm::fabsf(e) > DEN_EPS) {
+            return ForceEstimate {
+                force_n: 0.0,
+                flags: flags.union(ForceFlags::SINGULAR),
+            };
+        }
+        let f = self.eval_raw(p_mpa, e);
+        if !f.is_finite() {
+            return ForceEstimate {
+                force_n: 0.0,
+                flags: flags.union(ForceFlags::SINGULAR),
+            };
+        }
+        ForceEstimate {
+            force_n: tension(f),
+            flags,
+        }
+    }
+
+    /// [`Self::force`] for a law that is [regular on its domain](Self::is_regular) and finite
+    /// inputs (the control tick's: validated channels, a configuration checked with
+    /// [`Self::is_regular`] and [`JointGeometry::stretches_finite_over`]). Then no test of
+    /// `force_inline` can fail, and this is the same bits without them (never a FATAL flag).
+    /// For other inputs it never panics and the force is NaN-free (`f > 0` is false for NaN)
+    /// but may be infinite; the tick's finiteness test of the torque catches that.
+    ///
+    /// [`JointGeometry::stretches_finite_over`]: crate::geometry::JointGeometry::stretches_finite_over
+    #[inline(always)]
+    pub(crate) fn force_regular(&self, p_gauge_pa: f32, stretch: f32) -> ForceEstimate {
+        let (p_mpa, e, flags) = self.clamp_to_domain(p_gauge_pa, stretch);
+        ForceEstimate {
+            force_n: tension(self.eval_raw(p_mpa, e)),
+            flags,
+        }
+    }
+
+    /// The inputs clamped into the identified domain (pressure in MPa) with the flags of the
+    /// clamps.
+    #[inline(always)]
+    fn clamp_to_domain(&self, p_gauge_pa: f32, stretch: f32) -> (f32, f32, ForceFlags) {
         let mut flags = ForceFlags::NONE;
         let mut p = p_gauge_pa;
         clamp_flagged!(
@@ -178,28 +222,77 @@ impl ForceLawParams {
             STRETCH_LOW,
             STRETCH_HIGH
         );
-        let p_mpa = p * MPA_PER_PA;
+        (p * MPA_PER_PA, e, flags)
+    }
+
+    /// True when eq. 6 is well posed on the whole identified domain (gauge pressure
+    /// `0 ..= p_gauge_max_pa`, deformation `stretch_min ..= stretch_max`): finite constants
+    /// and bounds, `stretch_min > 0`, the denominator `c7 P + c8 e` of one sign and clear of
+    /// zero at the domain's four corners (it is linear, so over the whole domain; with a
+    /// margin for the f32 rounding of its evaluation), and a force bounded well inside f32.
+    /// Then [`Self::force`] never flags SINGULAR for a finite input. The control tick's
+    /// configuration requires it ([`Self::force_regular`]); a law that fails it is singular
+    /// somewhere it claims to be identified.
+    // `!(x > m)` is deliberate: it is also true for NaN.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    pub fn is_regular(&self) -> bool {
+        let fin = |x: f32| x.is_finite();
+        if !(self.c.iter().all(|&c| fin(c))
+            && fin(self.p_gauge_max_pa)
+            && self.p_gauge_max_pa > 0.0
+            && fin(self.stretch_min)
+            && fin(self.stretch_max)
+            && self.stretch_min > 1.0e-3
+            && self.stretch_min <= self.stretch_max)
+        {
+            return false;
+        }
+        // In f32 (no soft-float f64 in the MCU image); the margins dwarf its rounding.
         let c = &self.c;
-        let den = c[6] * p_mpa + c[7] * e;
-        // `e` is clamped to the domain, which must exclude 0 (checked at build time for the
-        // generated constants); guard anyway so a bad parameter set cannot divide by zero.
-        if !(libm::fabsf(den) > DEN_EPS) || !(libm::fabsf(e) > DEN_EPS) {
-            return ForceEstimate {
-                force_n: 0.0,
-                flags: flags.union(ForceFlags::SINGULAR),
-            };
+        let abs = libm::fabsf;
+        // The value the law computes at the top of the range.
+        let p_hi = self.p_gauge_max_pa * MPA_PER_PA;
+        let (e_lo, e_hi) = (self.stretch_min, self.stretch_max);
+        // The denominator at the four corners: at P = 0 it is `c8 e`, and each corner at
+        // `p_hi` adds `c7 p_hi`. One sign at all four, clear of 0 by the margin.
+        let (d00, d01) = (c[7] * e_lo, c[7] * e_hi);
+        let (d10, d11) = (c[6] * p_hi + d00, c[6] * p_hi + d01);
+        let lo = if d00 < d01 { d00 } else { d01 };
+        let lo = if d10 < lo { d10 } else { lo };
+        let lo = if d11 < lo { d11 } else { lo };
+        let hi = if d00 > d01 { d00 } else { d01 };
+        let hi = if d10 > hi { d10 } else { hi };
+        let hi = if d11 > hi { d11 } else { hi };
+        // Two roundings of terms at most this large (here and in the tick), and the
+        // pressure's conversion, with a wide margin.
+        let margin = 2.0 * DEN_EPS + 1.0e-5 * (abs(c[6]) * p_hi + abs(c[7]) * e_hi);
+        let den_min = if lo > 0.0 { lo } else { -hi };
+        if !(den_min > margin) {
+            return false;
         }
-        let f = self.eval_raw(p_mpa, e);
-        if !f.is_finite() {
-            return ForceEstimate {
-                force_n: 0.0,
-                flags: flags.union(ForceFlags::SINGULAR),
-            };
-        }
-        ForceEstimate {
-            force_n: if f > 0.0 { f } else { 0.0 },
-            flags,
-        }
+        let num_max = abs(c[0]) * p_hi * p_hi
+            + abs(c[1]) * e_hi * e_hi
+            + abs(c[2]) * p_hi
+            + abs(c[3]) * e_hi
+            + abs(c[4]) * p_hi / e_lo
+            + abs(c[5]);
+        let x_max = if abs(e_hi - 0.7) > abs(e_lo - 0.7) {
+            abs(e_hi - 0.7)
+        } else {
+            abs(e_lo - 0.7)
+        };
+        let f_max = num_max / den_min + abs(c[8]) + abs(c[9]) * libm::expf(x_max);
+        f_max < 1.0e30
+    }
+}
+
+/// The tension of a law value: negative (a muscle cannot push) and NaN give 0.
+#[inline(always)]
+fn tension(f: f32) -> f32 {
+    if f > 0.0 {
+        f
+    } else {
+        0.0
     }
 }
 
@@ -315,6 +408,68 @@ mod tests {
         let short = FORCE_LAW.force(400_000.0, 0.8).force_n;
         let long = FORCE_LAW.force(400_000.0, 1.0).force_n;
         assert!(long > short);
+    }
+
+    #[test]
+    fn regularity_is_decided_over_the_whole_domain() {
+        assert!(FORCE_LAW.is_regular());
+        let with = |edit: &dyn Fn(&mut ForceLawParams)| {
+            let mut l = FORCE_LAW;
+            edit(&mut l);
+            l.is_regular()
+        };
+        // The denominator 0.52 P + e is 0.75 .. 1.36 on the domain; with c7 = -1.25 it is 0
+        // at the corner (0.6 MPa, 0.75), with -1.2 clear of it, with -2 negative there.
+        assert!(with(&|l| l.c[6] = -1.2));
+        assert!(!with(&|l| l.c[6] = -1.25));
+        assert!(!with(&|l| l.c[6] = -2.0));
+        // ... at the corner within rounding of 0: refused with the margin.
+        assert!(!with(&|l| l.c[6] = -(0.75 - 1.0e-7) / 0.6));
+        assert!(!with(&|l| l.c[3] = f32::NAN));
+        assert!(!with(&|l| l.p_gauge_max_pa = f32::INFINITY));
+        assert!(!with(&|l| l.stretch_min = 0.0));
+        assert!(!with(&|l| l.stretch_min = 1.1));
+        // A force beyond 1e30 N somewhere on the domain.
+        assert!(!with(&|l| l.c[9] = 1.0e31));
+        assert!(with(&|l| l.c[9] = 1.0e20));
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(4096))]
+
+        /// For a regular law and finite inputs the check-free evaluation of the control tick
+        /// is the checked one, bit for bit, and never fatal; for an irregular one it still
+        /// never gives NaN. The laws straddle the regularity margin (denominators through 0
+        /// on and near the domain, stretch ranges down to 0.01).
+        #[test]
+        fn the_regular_force_is_the_checked_one_on_regular_laws(
+            scale in proptest::array::uniform10(-3.0f32..3.0),
+            c7 in -3.0f32..3.0,
+            c8 in -2.0f32..2.0,
+            p_max in 1.0e4f32..1.0e6,
+            e_lo in 0.01f32..1.0,
+            e_span in 0.0f32..0.5,
+            p in -1.0e6f32..2.0e6,
+            e in -1.0f32..2.0,
+        ) {
+            let mut l = FORCE_LAW;
+            for (c, s) in l.c.iter_mut().zip(scale) {
+                *c *= s;
+            }
+            l.c[6] = c7;
+            l.c[7] = c8;
+            l.p_gauge_max_pa = p_max;
+            l.stretch_min = e_lo;
+            l.stretch_max = e_lo + e_span;
+            let fast = l.force_regular(p, e);
+            proptest::prop_assert!(!fast.force_n.is_nan());
+            if l.is_regular() {
+                let checked = l.force(p, e);
+                proptest::prop_assert!(!checked.flags.contains_any(ForceFlags::FATAL));
+                proptest::prop_assert_eq!(fast.force_n.to_bits(), checked.force_n.to_bits());
+                proptest::prop_assert_eq!(fast.flags, checked.flags);
+            }
+        }
     }
 
     proptest::proptest! {

@@ -34,4 +34,15 @@ impl JointGeometry {
         let (c1, c2) = self.contractions(angle_rad);
         (1.0 - c1, 1.0 - c2)
     }
+
+    /// True when [`Self::stretches`] is finite for every angle in `angle_lo_rad ..=
+    /// angle_hi_rad` (finite bounds): the contraction is monotonic in the angle, so the two
+    /// ends decide. False for a geometry whose `r / l_n` times the angle overflows.
+    pub fn stretches_finite_over(&self, angle_lo_rad: f32, angle_hi_rad: f32) -> bool {
+        let fin = |a: f32| {
+            let (e1, e2) = self.stretches(a);
+            e1.is_finite() && e2.is_finite()
+        };
+        fin(angle_lo_rad) && fin(angle_hi_rad)
+    }
 }

@@ -15,7 +15,7 @@
 
 use crate::constants::{FORCE_LAW, TORQUE_MODEL};
 use crate::control::{
-    torque_estimate_nm, JointState, PidGains, PositionController, PressureController,
+    torque_estimate_regular_nm, JointState, PidGains, PositionController, PressureController,
     PressureLoopGains, TorqueController, TorqueLoopGains, TorqueMeasurement,
 };
 use crate::feedforward::{feedforward_torque_nm, FeedforwardGains, SetpointDerivatives};
@@ -390,7 +390,9 @@ impl ControllerConfig {
             && pos(g.sprocket_radius_m)
             && pos(g.rest_length_m)
             && g.initial_contraction.is_finite()
-            && self.force_law.c.iter().all(|c| c.is_finite())
+            // The tick's torque estimate relies on both (`torque_estimate_regular_nm`).
+            && self.force_law.is_regular()
+            && g.stretches_finite_over(self.angle_limits.min, self.angle_limits.max)
             && self.torque_model.b_m2.is_finite()
             && self.torque_model.b_m2 != 0.0
             && self.torque_model.sprocket_radius_m.is_finite()
@@ -1078,7 +1080,7 @@ impl ControlTick {
         // `torque_est_nm` and, when all channels are fresh this tick (then `last_*` are this
         // tick's values), the torque loop's feedback.
         let estimate = match (self.p1.last(), self.p2.last(), self.angle.last()) {
-            (Some(p1), Some(p2), Some(a)) => Some(torque_estimate_nm(
+            (Some(p1), Some(p2), Some(a)) => Some(torque_estimate_regular_nm(
                 &self.cfg.force_law,
                 &self.cfg.geometry,
                 p1,
@@ -1584,6 +1586,19 @@ mod tests {
         let o = t.step(&frame(300e3, 300e3, 0.0), &SP0, DT);
         assert_eq!(o.fault, Some(FaultCode::ConfigInvalid));
         assert!(!t.reset());
+    }
+
+    #[test]
+    fn a_force_law_singular_on_its_domain_or_an_overflowing_geometry_is_a_config_fault() {
+        // c7 P + c8 e crosses 0 inside the domain (P up to 0.6 MPa, e down to 0.75).
+        let singular = reference_with(|c| c.force_law.c[6] = -2.0);
+        let overflow = reference_with(|c| c.geometry.rest_length_m = 1e-44);
+        for cfg in [singular, overflow] {
+            assert!(!cfg.is_valid());
+            let o = ControlTick::new(cfg).step(&frame(300e3, 300e3, 0.0), &SP0, DT);
+            assert_eq!(o.fault, Some(FaultCode::ConfigInvalid));
+            assert!(!o.armed && o.torque_est_nm.is_finite());
+        }
     }
 
     #[test]

@@ -506,6 +506,17 @@ fn identify_force(a: &IdentifyForceArgs) -> Result<String> {
         }
         id.domain.0 = p * 1e3;
     }
+    id.check_regular().with_context(|| {
+        format!(
+            "{}: the force law fitted to it cannot be written{}",
+            a.data.display(),
+            if a.p_gauge_max_kpa.is_some() {
+                " with this --p-gauge-max-kpa"
+            } else {
+                ""
+            }
+        )
+    })?;
     let toml = with_provenance(
         &id.to_toml(&a.data.display().to_string()),
         &a.data,

@@ -317,17 +317,23 @@ fn eq6_linear(samples: &[ForceSample], c7: f64) -> Option<(Eq6, f64)> {
     best
 }
 
-/// Lowest c7 for which the denominator `c7 P + e` stays positive over the data (with margin).
+/// Lowest c7 for which the denominator `c7 P + e` stays positive (with margin) over the
+/// whole domain the law is written with: every pressure up to the data's highest at every
+/// deformation from the data's lowest (the firmware's control tick refuses a law singular
+/// anywhere on its domain, `ForceLawParams::is_regular`). `c7 P + e` is linear, so the
+/// corner (highest pressure, lowest deformation) decides.
 fn c7_lower_bound(samples: &[ForceSample]) -> f64 {
-    let mut lb = f64::NEG_INFINITY;
-    for s in samples {
-        let p = s.p_gauge_pa * 1e-6;
-        if p > 1e-9 {
-            // c7 p + e > 0.05 e  <=>  c7 > -0.95 e / p
-            lb = lb.max(-0.95 * s.stretch / p);
-        }
-    }
-    if lb.is_finite() {
+    let p_max = samples
+        .iter()
+        .map(|s| s.p_gauge_pa * 1e-6)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let e_min = samples
+        .iter()
+        .map(|s| s.stretch)
+        .fold(f64::INFINITY, f64::min);
+    // c7 P + e > 0.05 e  <=>  c7 > -0.95 e / P
+    let lb = -0.95 * e_min / p_max;
+    if p_max > 1e-9 && lb.is_finite() {
         lb
     } else {
         -1.0
@@ -1131,6 +1137,45 @@ impl ForceIdentification {
     }
 
     /// The `config/force_law.toml` text (the firmware's build reads it).
+    /// The firmware's law as written by [`Self::to_toml`] (f32 constants, the domain).
+    pub fn firmware_law(&self) -> pam_firmware::force_law::ForceLawParams {
+        pam_firmware::force_law::ForceLawParams {
+            c: self.eq6.c.map(|c| c as f32),
+            p_gauge_max_pa: self.domain.0.max(1.0) as f32,
+            stretch_min: self.domain.1 as f32,
+            stretch_max: self.domain.2 as f32,
+        }
+    }
+
+    /// Refuses a law the firmware's control tick would refuse: eq. 6 singular or unbounded
+    /// somewhere on the written domain (`ForceLawParams::is_regular`). The fit keeps the
+    /// denominator positive on the data's own domain; a wider pressure range given by hand
+    /// can take it through 0.
+    pub fn check_regular(&self) -> Result<(), IdentError> {
+        if self.firmware_law().is_regular() {
+            return Ok(());
+        }
+        let c7 = self.eq6.c[6];
+        let hint = if c7 < 0.0 {
+            format!(
+                "its denominator c7 P + e (c7 = {c7:.4}) reaches 0 at {:.0} kPa for the lowest \
+                 deformation {:.3}: keep the pressure range below {:.0} kPa",
+                -self.domain.1 / c7 * 1e3,
+                self.domain.1,
+                -0.95 * self.domain.1 / c7 * 1e3
+            )
+        } else {
+            "a constant is not finite or the force exceeds 1e30 N on the domain".into()
+        };
+        Err(IdentError::Data(format!(
+            "the fitted law is not usable up to {:.0} kPa, deformation {:.3} .. {:.3} (the \
+             firmware refuses a law singular on its domain): {hint}",
+            self.domain.0 / 1e3,
+            self.domain.1,
+            self.domain.2
+        )))
+    }
+
     pub fn to_toml(&self, source: &str) -> String {
         let mut s = String::new();
         let _ = writeln!(s, "# Identified force law of the muscle (seed 002, eq. 6):");
@@ -1550,6 +1595,23 @@ mod tests {
             (id.tondu.alpha0_rad.to_degrees() - 25.3).abs() < 0.3,
             "{:?}",
             id.tondu
+        );
+    }
+
+    #[test]
+    fn a_law_singular_on_its_written_domain_is_refused_with_the_pressure_to_keep_below() {
+        let mut id = identify(&sweep(&reference(), &grid_sweep(11, 11))).unwrap();
+        id.check_regular().unwrap();
+        assert!(id.firmware_law().is_regular());
+        // A negative c7: the denominator c7 P + e is 0 at P = e / |c7| = 750 kPa for e = 0.75.
+        id.eq6.c[6] = -1.0;
+        id.domain = (600e3, 0.75, 1.05);
+        id.check_regular().unwrap();
+        id.domain.0 = 800e3;
+        let e = id.check_regular().unwrap_err().to_string();
+        assert!(
+            e.contains("reaches 0 at 750 kPa") && e.contains("below 712 kPa"),
+            "{e}"
         );
     }
 
