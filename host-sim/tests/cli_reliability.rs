@@ -143,6 +143,19 @@ fn sweep_torque_sizes_that_would_exhaust_memory_are_refused_with_the_estimate() 
     );
 }
 
+#[test]
+fn sweep_torque_names_a_mid_pressure_in_the_wrong_unit_not_the_levels() {
+    let w = Workspace::new();
+    w.refuses(
+        "sweep torque --plant {plant} --out {w}/out.csv --p0-kpa 0.3",
+        &["--p0-kpa 0.3", "MPa or bar", "0.3 MPa = 300 kPa"],
+    );
+    w.refuses(
+        "sweep torque --plant {plant} --out {w}/out.csv --p0-kpa 300 --dp-kpa 400",
+        &["--dp-kpa 400 with --p0-kpa 300", "the supply"],
+    );
+}
+
 const STEP: &str = "[scenario]\nname = \"long\"\nduration_s = 1e9\ntick_hz = 1000.0\n\n\
 [setpoint]\nkind = \"step\"\ninitial_rad = 0.0\nfinal_rad = 0.2\nat_s = 1.0\n";
 
@@ -158,6 +171,28 @@ fn a_scenario_too_long_for_memory_is_refused_with_the_estimate() {
             "TB of memory",
             "--allow-large",
         ],
+    );
+}
+
+#[test]
+fn a_set_point_beyond_the_firmware_limit_is_refused_not_silently_clamped() {
+    let w = Workspace::new();
+    w.write(
+        "far.toml",
+        &STEP
+            .replace("1e9", "4.0")
+            .replace("final_rad = 0.2", "final_rad = 1.2"),
+    );
+    w.refuses(
+        "simulate --plant {plant} --scenario {w}/far.toml --out {w}/out.csv",
+        &["far.toml", "final_rad: 1.2 rad", "+-0.8 rad", "clamp"],
+    );
+    let sine = "[scenario]\nname = \"wide\"\nduration_s = 4.0\n\n[setpoint]\nkind = \"sine\"\n\
+offset_rad = 0.3\namplitude_rad = 0.6\nfreq_hz = 0.5\n";
+    w.write("wide.toml", sine);
+    w.refuses(
+        "simulate --plant {plant} --scenario {w}/wide.toml --out {w}/out.csv",
+        &["wide.toml", "offset_rad + amplitude_rad: 0.9 rad"],
     );
 }
 

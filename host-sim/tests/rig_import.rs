@@ -358,6 +358,18 @@ fn unit_mistakes_in_a_mapping_are_refused_at_their_line_or_flagged() {
             "ms read as s",
         ],
     );
+    // The same column declared as microseconds: a legal 40 kHz step, but 2 s of data
+    // become 2 ms.
+    refused(
+        &MAP.replace("unit = \"ms\"", "unit = \"us\""),
+        &[
+            "rig.csv:",
+            "Zeit [ms]",
+            "the recording spans 0.00",
+            "is the time column in ms?",
+            "at 40",
+        ],
+    );
     // Absolute pressures below vacuum: the atmosphere given as 2 bar.
     refused(
         &MAP.replace(

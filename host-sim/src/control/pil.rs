@@ -467,6 +467,13 @@ pub fn run_pil(a: &PilArgs) -> anyhow::Result<(String, bool)> {
     })?;
     let plant = crate::plant::Plant::load(&a.plant)?;
     let mut scenario = Scenario::load(&a.scenario)?;
+    // The image runs the reference configuration.
+    let limit_rad =
+        pam_firmware::tick::ControllerConfig::reference(scenario.scenario.tick_hz as f32)
+            .angle_setpoint_max_rad;
+    scenario
+        .setpoint
+        .check_within(&a.scenario.display().to_string(), limit_rad)?;
     let forced = !scenario.sensors.board_counts;
     scenario.sensors.board_counts = true;
     let mut opts = PilOptions::new(elf.clone());

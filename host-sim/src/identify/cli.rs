@@ -420,6 +420,10 @@ fn sweep_force_map(a: &SweepForceMapArgs) -> Result<String> {
     ))
 }
 
+/// Lowest mid pressure of a torque sweep [kPa gauge]: below it both muscles are near slack
+/// (and a value typed in MPa or bar lands here).
+const P0_MIN_KPA: f64 = 20.0;
+
 fn sweep_torque(a: &SweepTorqueArgs) -> Result<String> {
     validate::distinct_file_outputs(&[("--plant", &a.plant)], &[("--out", &a.out)])
         .map_err(anyhow::Error::msg)?;
@@ -449,11 +453,30 @@ fn sweep_torque(a: &SweepTorqueArgs) -> Result<String> {
         bail!("--dp-kpa needs at least one level; --speeds-rad-s at least one speed, all > 0");
     }
     let supply_kpa = (plant.p_supply_abs_pa - plant.p_atm_pa) / 1e3;
+    // The mid pressure first: a slip of its unit would otherwise be blamed on every level.
+    if a.p0_kpa < P0_MIN_KPA {
+        bail!(
+            "--p0-kpa {}: below {P0_MIN_KPA} kPa the muscles are slack around the mid pressure \
+             (a value in MPa or bar? {} MPa = {} kPa)",
+            a.p0_kpa,
+            a.p0_kpa,
+            a.p0_kpa * 1e3
+        );
+    }
+    if a.p0_kpa >= supply_kpa {
+        bail!(
+            "--p0-kpa {}: at or above the plant's supply ({supply_kpa} kPa gauge, {})",
+            a.p0_kpa,
+            a.plant.display()
+        );
+    }
     for dp in &a.dp_kpa {
         let (p1, p2) = (a.p0_kpa - dp, a.p0_kpa + dp);
         if p1 < 0.0 || p2 < 0.0 || p1 > supply_kpa || p2 > supply_kpa {
             bail!(
-                "--dp-kpa {dp}: p0 -+ dp = {p1}, {p2} kPa leave 0..{supply_kpa} kPa (the supply)"
+                "--dp-kpa {dp} with --p0-kpa {}: p0 -+ dp = {p1}, {p2} kPa leave 0..{supply_kpa} kPa \
+                 (the supply)",
+                a.p0_kpa
             );
         }
     }

@@ -344,6 +344,10 @@ pub const COUNTS_PER_REV: std::ops::RangeInclusive<u32> = 1..=1 << 30;
 
 /// Median time step of a recording a PAM joint can be studied from: 100 kHz .. 10 Hz [s].
 pub const STEP_RANGE_S: Range = Range::closed(1e-5, 0.1);
+/// A recording shorter than this [s] is too short to identify or diagnose a joint from (a
+/// few valve pulses): with a time column that, read in the next larger unit, has a plausible
+/// step, the import takes it for a unit off by 1000 (ms read as us, s read as ms).
+pub const SPAN_MIN_S: f64 = 0.5;
 /// Highest gauge pressure a mapped column may reach [Pa] (pneumatics runs below 1.6 MPa):
 /// the recording's own limit, so that the import names the raw line and the mapping.
 pub const P_GAUGE_MAX_PA: f64 = crate::io::recording::P_KPA_PLAUSIBLE.1 * 1e3;
@@ -908,6 +912,32 @@ pub fn import(
                 mapping.time.unit,
                 map_path.display(),
                 STEP_RANGE_S
+            ),
+        ));
+    }
+    // A span too short to study a joint from, whose time column read in the next larger
+    // unit has a plausible step: the unit is off by 1000 (ms read as us, s read as ms). A
+    // short file whose unit gives no such reading is left alone.
+    let span_s = t_s[n - 1] - t_s[0];
+    let larger = match mapping.time.unit.as_str() {
+        "us" => Some("ms"),
+        "ms" => Some("s"),
+        _ => None,
+    };
+    if let Some(u) = larger.filter(|_| span_s < SPAN_MIN_S && STEP_RANGE_S.contains(median * 1e3)) {
+        return Err(at(
+            lines[n - 1],
+            time_name,
+            format!(
+                "the recording spans {} s (median step {} s, `time.unit = {:?}` in {}), under \
+                 the {SPAN_MIN_S} s a joint can be identified or diagnosed from: is the time \
+                 column in {u}? With `time.unit = \"{u}\"` it spans {} s at {} Hz",
+                Shown(span_s),
+                Shown(median),
+                mapping.time.unit,
+                map_path.display(),
+                Shown(span_s * 1e3),
+                Shown(1.0 / (median * 1e3))
             ),
         ));
     }

@@ -59,6 +59,14 @@ fn default_seed() -> u64 {
     1
 }
 
+fn larger(a: (&'static str, f64), b: (&'static str, f64)) -> (&'static str, f64) {
+    if b.1.abs() > a.1.abs() {
+        (b.0, b.1.abs())
+    } else {
+        (a.0, a.1.abs())
+    }
+}
+
 /// Angle set-point profiles.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
@@ -118,6 +126,50 @@ pub enum SetpointProfile {
 }
 
 impl SetpointProfile {
+    /// The profile's largest |set-point| [rad] and the key that gives it (for a sine the
+    /// offset plus the amplitude).
+    pub fn extreme_rad(&self) -> (&'static str, f64) {
+        match *self {
+            SetpointProfile::Step {
+                initial_rad,
+                final_rad,
+                ..
+            } => larger(("initial_rad", initial_rad), ("final_rad", final_rad)),
+            SetpointProfile::Ramp {
+                from_rad, to_rad, ..
+            } => larger(("from_rad", from_rad), ("to_rad", to_rad)),
+            SetpointProfile::Sine {
+                offset_rad,
+                amplitude_rad,
+                ..
+            } => (
+                "offset_rad + amplitude_rad",
+                offset_rad.abs() + amplitude_rad.abs(),
+            ),
+            SetpointProfile::Random { amplitude_rad, .. } => ("amplitude_rad", amplitude_rad.abs()),
+        }
+    }
+
+    /// Refuses a profile that asks for more than the controller's set-point limit
+    /// (`ControllerConfig::angle_setpoint_max_rad`): the firmware would clamp it, and the run
+    /// would test a smaller move than the file says (and fail its `[expect]` for that reason).
+    pub fn check_within(&self, file: &str, limit_rad: f32) -> Result<(), ClosedLoopError> {
+        let (key, v) = self.extreme_rad();
+        if v > f64::from(limit_rad) {
+            return Err(ClosedLoopError::Scenario {
+                file: file.to_string(),
+                msg: format!(
+                    "[setpoint] {key}: {} rad is beyond the firmware's set-point limit of +-{} rad \
+                     (angle_setpoint_max_rad of the controller configuration): the tick would \
+                     clamp it, and the run would test a smaller move than the file asks",
+                    crate::validate::Shown(v),
+                    limit_rad
+                ),
+            });
+        }
+        Ok(())
+    }
+
     /// Checks the profile's values against the run `h` (angles within half a turn, times
     /// before the end of the run, a sine below half the tick rate); `bad(key, message)`
     /// makes the error naming the key. The 1-DOF `[setpoint]` and each arm joint's profile.
