@@ -699,6 +699,26 @@ fn run_demo(a: &DemoArgs) -> Result<ExitCode> {
     })
 }
 
+/// The output channels a recording's header names (its `#` metadata lines skipped; the
+/// file has been read or streamed successfully before).
+fn header_channels(path: &Path) -> Result<Vec<Channel>> {
+    use std::io::BufRead as _;
+    let f = std::fs::File::open(path).with_context(|| format!("{}", path.display()))?;
+    for line in std::io::BufReader::new(f).lines() {
+        let line = line.with_context(|| format!("{}", path.display()))?;
+        let line = line.trim_start_matches('\u{feff}');
+        if line.starts_with('#') || line.trim().is_empty() {
+            continue;
+        }
+        let names: Vec<&str> = line.split(',').map(str::trim).collect();
+        return Ok(Channel::ALL
+            .into_iter()
+            .filter(|c| names.contains(&c.name()))
+            .collect());
+    }
+    Ok(Vec::new())
+}
+
 fn run_fit(a: &FitArgs) -> Result<ExitCode> {
     if let Some(p) = &a.plot {
         validate::distinct_file_outputs(&[("A", &a.a), ("B", &a.b)], &[("--plot", p)])
@@ -726,6 +746,19 @@ fn run_fit(a: &FitArgs) -> Result<ExitCode> {
     };
     println!("reference: {}\nmodel:     {}", a.a.display(), a.b.display());
     print!("{}", format_table(&fits));
+    // A reference channel the model lacks is not compared: say so, and fail --min-fit on it
+    // (a model that drops a channel must not pass on the others alone).
+    let unmatched: Vec<Channel> = header_channels(&a.a)?
+        .into_iter()
+        .filter(|c| !fits.iter().any(|f| f.channel == *c))
+        .collect();
+    for c in &unmatched {
+        println!(
+            "{}: in the reference, not in the model {}: not compared",
+            c.name(),
+            a.b.display()
+        );
+    }
     // -inf only comes from a reference channel that never changes (no spread to normalise
     // by) while the model differs from it: say so instead of a bare -inf.
     let constant = |f: &host_sim::fit::ChannelFit| f.fit_percent == f64::NEG_INFINITY;
@@ -742,7 +775,10 @@ fn run_fit(a: &FitArgs) -> Result<ExitCode> {
             .iter()
             .filter(|f| f.fit_percent.is_nan() || f.fit_percent < min)
             .collect();
-        if !bad.is_empty() {
+        for c in &unmatched {
+            eprintln!("{}: missing in the model, no fit < {min} %", c.name());
+        }
+        if !bad.is_empty() || !unmatched.is_empty() {
             for f in bad {
                 if constant(f) {
                     eprintln!(

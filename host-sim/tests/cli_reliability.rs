@@ -517,6 +517,17 @@ fn identify_force_refuses_forces_a_thousand_times_off() {
         "identify force --data {w}/kn.csv --out {w}/out.toml",
         &["kn.csv:", "field `f_n`", "kN"],
     );
+    // The domain's upper pressure in MPa, and one far below the data's 600 kPa: the firmware
+    // would clamp every pressure to it.
+    w.write("n.csv", &map(1.0));
+    w.refuses(
+        "identify force --data {w}/n.csv --out {w}/out.toml --p-gauge-max-kpa 0.6",
+        &["--p-gauge-max-kpa", "[20, 2000]"],
+    );
+    w.refuses(
+        "identify force --data {w}/n.csv --out {w}/out.toml --p-gauge-max-kpa 60",
+        &["--p-gauge-max-kpa 60", "600 kPa", "clamps"],
+    );
 }
 
 #[test]
@@ -838,4 +849,100 @@ fn diagnose_refuses_a_check_recording_that_is_the_training_recording() {
             &["--check", "is the same file as --recording"],
         );
     }
+}
+
+/// The fixture's text with its header edited by `header` and each line's fields filtered by
+/// `keep` (the field's index).
+fn fixture_edited(header: impl Fn(&str) -> String, keep: impl Fn(usize) -> bool) -> String {
+    let text = std::fs::read_to_string(fixture("pulses_nominal.csv")).unwrap();
+    let mut out = String::new();
+    let mut seen_header = false;
+    for line in text.lines() {
+        if line.starts_with('#') {
+            out += line;
+        } else {
+            let l = if seen_header {
+                line.to_owned()
+            } else {
+                seen_header = true;
+                header(line)
+            };
+            let fields: Vec<&str> = l
+                .split(',')
+                .enumerate()
+                .filter(|(i, _)| keep(*i))
+                .map(|(_, f)| f)
+                .collect();
+            out += &fields.join(",");
+        }
+        out.push('\n');
+    }
+    out
+}
+
+/// A channel under another unit or spelling is not silently dropped (the file judged without
+/// it), and a semicolon file is named as such.
+#[test]
+fn a_channel_in_another_unit_or_separator_is_named_not_ignored() {
+    let w = Workspace::new();
+    w.write(
+        "rad.csv",
+        &fixture_edited(|h| h.replace("angle_deg", "angle_rad"), |_| true),
+    );
+    w.refuses(
+        "fit {fixture} {w}/rad.csv",
+        &[
+            "rad.csv",
+            "angle_rad",
+            "RECORDING.md's is `angle_deg`",
+            "degrees",
+        ],
+    );
+    w.write(
+        "case.csv",
+        &fixture_edited(|h| h.replace("p1_kpa", "P1_kPa"), |_| true),
+    );
+    w.refuses(
+        "diagnose --plant {plant} --recording {w}/case.csv --json {w}/d.json",
+        &["case.csv", "P1_kPa", "`p1_kpa`"],
+    );
+    w.write(
+        "semi.csv",
+        &fixture_edited(|h| h.replace(',', ";"), |_| true),
+    );
+    w.refuses(
+        "fit {fixture} {w}/semi.csv",
+        &["semi.csv", "t_s", "comma-separated", "host-sim import"],
+    );
+}
+
+/// A model that lacks a channel of the reference does not pass `--min-fit` on the others.
+#[test]
+fn fit_fails_min_fit_when_the_model_lacks_a_reference_channel() {
+    let w = Workspace::new();
+    // The fixture without its angle column (the sixth).
+    let b = w.write("noangle.csv", &fixture_edited(|h| h.to_owned(), |i| i != 5));
+    let r = bin()
+        .args(["fit"])
+        .arg(fixture("pulses_nominal.csv"))
+        .arg(&b)
+        .args(["--min-fit", "99.5"])
+        .output()
+        .unwrap();
+    let (out, err) = (text(&r.stdout), text(&r.stderr));
+    assert_eq!(r.status.code(), Some(1), "{out}\n{err}");
+    assert!(
+        out.contains("angle_deg: in the reference, not in the model"),
+        "{out}"
+    );
+    assert!(err.contains("angle_deg: missing in the model"), "{err}");
+    // Without --min-fit it still says so, and exits 0.
+    let r = bin()
+        .args(["fit"])
+        .arg(fixture("pulses_nominal.csv"))
+        .arg(&b)
+        .output()
+        .unwrap();
+    assert_eq!(r.status.code(), Some(0));
+    assert!(text(&r.stdout).contains("not compared"));
 }

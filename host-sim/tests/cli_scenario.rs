@@ -103,6 +103,29 @@ fn injected_nan_reports_the_fault_tick_and_time() {
 }
 
 #[test]
+fn an_error_bound_with_every_tick_faulted_is_not_met() {
+    // NaN on p1 before the settle time, no `no_fault`: the fault stays latched, so no tick
+    // is left to bound the error; that must not read as "met".
+    let dir = tempfile::tempdir().unwrap();
+    let s = dir.path().join("faulted.toml");
+    std::fs::write(
+        &s,
+        "[scenario]\nname = \"faulted\"\nduration_s = 2.0\n\n[setpoint]\nkind = \"step\"\n\
+initial_rad = 0.0\nfinal_rad = 0.2\nat_s = 0.5\n\n[[events]]\nkind = \"sensor_nan\"\nat_s = 0.1\n\
+duration_s = 0.01\nchannel = \"p1\"\n\n[expect]\nsettle_after_s = 1.0\nmax_abs_error_rad = 0.01\n",
+    )
+    .unwrap();
+    let r = simulate(&s, &dir.path().join("f.csv"), &[]);
+    let stdout = text(&r.stdout);
+    assert_eq!(r.status.code(), Some(1), "{stdout}\n{}", text(&r.stderr));
+    assert!(
+        stdout.contains("no tick without a latched fault after 1 s to bound the angle error"),
+        "{stdout}"
+    );
+    assert!(!stdout.contains("expectations: met"), "{stdout}");
+}
+
+#[test]
 fn unmet_expectation_exits_with_status_1_and_says_why() {
     let dir = tempfile::tempdir().unwrap();
     let s = dir.path().join("tight.toml");

@@ -774,7 +774,18 @@ impl ClosedLoopRun {
         let mut fails = Vec::new();
         let e = &self.expect;
         let st = self.tracking(e.settle_after_s);
-        if let Some(b) = e.max_abs_error_rad {
+        // An error bound with no tick to judge (a fault latched before `settle_after_s` and
+        // stayed) is not met: the run shows nothing about the tracking it asks for.
+        if (e.max_abs_error_rad.is_some() || e.rms_error_rad.is_some()) && st.n == 0 {
+            fails.push(format!(
+                "no tick without a latched fault after {} s to bound the angle error (a fault \
+                 ({:?}) latched at tick {:?})",
+                e.settle_after_s,
+                self.first_latched_fault_tick
+                    .map(|l| self.rows[l].out.fault),
+                self.first_latched_fault_tick
+            ));
+        } else if let Some(b) = e.max_abs_error_rad {
             if !(st.max_abs_rad <= b) {
                 fails.push(format!(
                     "max |angle error| {:.4} rad > {b} rad after {} s",
@@ -782,7 +793,7 @@ impl ClosedLoopRun {
                 ));
             }
         }
-        if let Some(b) = e.rms_error_rad {
+        if let (Some(b), true) = (e.rms_error_rad, st.n > 0) {
             if !(st.rms_rad <= b) {
                 fails.push(format!(
                     "rms angle error {:.4} rad > {b} rad after {} s",

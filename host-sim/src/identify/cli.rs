@@ -197,9 +197,10 @@ pub struct IdentifyForceArgs {
     /// Output TOML (the format of config/force_law.toml).
     #[arg(long, value_name = "force.toml")]
     pub out: PathBuf,
-    /// Upper end of the pressure domain written for the firmware [kPa] [default: the largest
-    /// pressure in the data, which sensor noise pushes above the sweep's nominal maximum].
-    #[arg(long, value_parser = f64_in(Range::positive(2000.0)))]
+    /// Upper end of the pressure domain written for the firmware [kPa] (20..=2000: less is a
+    /// value in MPa or bar) [default: the largest pressure in the data, which sensor noise
+    /// pushes above the sweep's nominal maximum].
+    #[arg(long, value_parser = f64_in(Range::closed(force::P_KPA_MAX_AT_LEAST, 2000.0)))]
     pub p_gauge_max_kpa: Option<f64>,
 }
 
@@ -526,6 +527,18 @@ fn identify_force(a: &IdentifyForceArgs) -> Result<String> {
     if let Some(p) = a.p_gauge_max_kpa {
         if !(p > 0.0 && p.is_finite()) {
             bail!("--p-gauge-max-kpa must be > 0");
+        }
+        // The firmware clamps the pressure to the domain: a domain far below the data's
+        // pressures flattens every force above it.
+        let data_kpa = id.domain.0 / 1e3;
+        if p < 0.5 * data_kpa {
+            bail!(
+                "--p-gauge-max-kpa {p}: below half the data's highest pressure ({data_kpa:.0} kPa \
+                 in {}); the firmware clamps pressures to it, so every force above {p} kPa would \
+                 be the force at {p} kPa (a value in MPa or bar? leave the option out to use the \
+                 data's range)",
+                a.data.display()
+            );
         }
         id.domain.0 = p * 1e3;
     }

@@ -630,6 +630,19 @@ impl RowParser {
         for c in Channel::ALL {
             out_cols[c.index()] = table.find(c.name())?;
         }
+        // A channel present under another unit or spelling (`angle_rad`, `p1_kPa`) would be
+        // ignored, and the file judged without it.
+        for c in Channel::ALL {
+            if out_cols[c.index()].is_none() {
+                if let Some(h) = table.near_miss(c.name()) {
+                    return Err(table.field_err(
+                        table.header_line,
+                        h,
+                        format!("not a RECORDING.md column: {}", rename_advice(c.name())),
+                    ));
+                }
+            }
+        }
         if out_cols.iter().all(|c| c.is_none()) {
             return Err(table.field_err(
                 table.header_line,
@@ -864,6 +877,46 @@ pub(crate) struct Table<'t> {
     data: &'t [u8],
     /// 1-based line of the first byte of `data`.
     data_line: u64,
+}
+
+/// The other way to read a rig's file, for hints.
+const IMPORT_ADVICE: &str = "or read the file with `host-sim import` and a mapping (docs/rig.md)";
+
+/// What to do about a column that names RECORDING.md's `name` another way.
+fn rename_advice(name: &str) -> String {
+    format!(
+        "RECORDING.md's is `{name}`, {}; convert and rename it, {IMPORT_ADVICE}",
+        column_meaning(name)
+    )
+}
+
+/// What a RECORDING.md column holds, for hints.
+fn column_meaning(name: &str) -> &'static str {
+    match name {
+        "t_s" => "the time in seconds",
+        "angle_deg" => "the joint angle in degrees",
+        "p1_kpa" | "p2_kpa" => "the muscle's gauge pressure in kPa",
+        "f1_n" | "f2_n" => "the muscle's tension in N",
+        _ => "a valve opening in [0, 1]",
+    }
+}
+
+/// The quantity a column name stands for: lower case, without a unit suffix (`angle_rad`,
+/// `Angle_deg` and `angle` are `angle`; `P1_kPa` is `p1`; `time_ms` is `t`).
+fn column_stem(name: &str) -> String {
+    const UNITS: [&str; 16] = [
+        "s", "ms", "us", "deg", "rad", "kpa", "pa", "mpa", "bar", "psi", "n", "kn", "mn", "lbf",
+        "pct", "percent",
+    ];
+    let lower = name.trim().to_ascii_lowercase();
+    let stem = match lower.rsplit_once(|c: char| c == '_' || c == ' ' || c == '[') {
+        Some((head, unit)) if UNITS.contains(&unit.trim_end_matches(']')) => head.trim(),
+        _ => lower.as_str(),
+    };
+    match stem {
+        "time" => "t".into(),
+        s => s.into(),
+    }
 }
 
 /// One data row of a [`Table`]: its fields, read with errors naming file, line and field.
@@ -1326,15 +1379,43 @@ impl<'t> Table<'t> {
         Ok(first)
     }
 
-    /// The column named `name`; missing is an error saying `why` (may be empty).
+    /// The column named `name`; missing is an error saying `why` (may be empty), with a hint
+    /// when the header looks like another separator or has a near miss of the name.
     pub(crate) fn required(&self, name: &str, why: &str) -> Result<usize, RecordingError> {
         self.find(name)?.ok_or_else(|| {
             self.field_err(
                 self.header_line,
                 name,
-                format!("required column is missing{why}"),
+                format!("required column is missing{why}{}", self.missing_hint(name)),
             )
         })
+    }
+
+    /// Why a RECORDING.md column `name` may be missing: a header that is one field holding
+    /// `;` or tabs (another separator), or a column that names the same quantity in another
+    /// unit or spelling (`angle_rad`, `P1_kPa`, `p1`). Empty when neither.
+    pub(crate) fn missing_hint(&self, name: &str) -> String {
+        if let [only] = self.headers.iter().collect::<Vec<_>>()[..] {
+            if only.contains(';') || only.contains('\t') {
+                return format!(
+                    " (the header is one field, `{only}`: RECORDING.md is comma-separated; \
+                     convert the file, {IMPORT_ADVICE})"
+                );
+            }
+        }
+        match self.near_miss(name) {
+            Some(h) => format!(" (column `{h}` is there: {})", rename_advice(name)),
+            None => String::new(),
+        }
+    }
+
+    /// A header other than `name` naming the same quantity: equal ignoring case, or the same
+    /// stem with another (or no) unit suffix.
+    fn near_miss(&self, name: &str) -> Option<&str> {
+        let want = column_stem(name);
+        self.headers
+            .iter()
+            .find(|h| *h != name && (h.eq_ignore_ascii_case(name) || column_stem(h) == want))
     }
 
     /// At least two rows (`t_s`, their `lines`) and increasing time: the mean sample period.
