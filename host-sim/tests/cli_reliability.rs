@@ -197,6 +197,34 @@ offset_rad = 0.3\namplitude_rad = 0.6\nfreq_hz = 0.5\n";
 }
 
 #[test]
+fn event_values_in_the_wrong_unit_are_refused_with_the_plant_files_ranges() {
+    let w = Workspace::new();
+    let short = STEP.replace("1e9", "4.0");
+    for (event, needles) in [
+        (
+            "kind = \"supply_loss\"\nat_s = 1.0\nsupply_gauge_pa = 5.5\n",
+            &[
+                "supply_gauge_pa",
+                "bar or kPa typed",
+                "5.5 bar is 550000 Pa",
+            ][..],
+        ),
+        (
+            "kind = \"load_inertia\"\nat_s = 1.0\ninertia_kgm2 = 1550.0\n",
+            &["inertia_kgm2", "[0.0001, 10]"][..],
+        ),
+    ] {
+        w.write("ev.toml", &format!("{short}\n[[events]]\n{event}"));
+        let mut n = vec!["ev.toml", "[[events]] #1"];
+        n.extend_from_slice(needles);
+        w.refuses(
+            "simulate --plant {plant} --scenario {w}/ev.toml --out {w}/out.csv",
+            &n,
+        );
+    }
+}
+
+#[test]
 fn a_scenario_settling_after_its_end_is_refused_at_its_line() {
     let w = Workspace::new();
     w.write(

@@ -236,3 +236,40 @@ fn sensor_lag_filters_the_sampled_channels() {
         &["effects.sensor_lag.angle_time_constant_s"],
     );
 }
+
+/// Values in the wrong unit are refused with the key, the range and the likely unit: the
+/// chamber volume in cm^3, the effect tables' physical ranges.
+#[test]
+fn unit_slips_in_the_volume_and_the_effect_tables_are_refused() {
+    let text = nominal_text().replace(
+        "volume_poly_m3 = [79.0e-6, 48.0e-5, -18.0e-6, -11.0e-4]",
+        "volume_poly_m3 = [79.0, 480.0, -18.0, -1100.0]",
+    );
+    assert!(text.contains("[79.0, 480.0"));
+    let e = load_err(&text);
+    for n in ["muscle.volume_poly_m3", "cylinder", "cm^3"] {
+        assert!(e.contains(n), "`{n}` not in {e}");
+    }
+    for (table, key, needle) in [
+        (
+            "[effects.gravity]\nmass_kg = 1.0\ncom_distance_m = 200.0\nhanging_angle_rad = 0.0\n",
+            "effects.gravity.com_distance_m",
+            "mm typed?",
+        ),
+        (
+            "[effects.gravity]\nmass_kg = 1.0\ncom_distance_m = 0.1\nhanging_angle_rad = 90.0\n",
+            "effects.gravity.hanging_angle_rad",
+            "degrees typed?",
+        ),
+        (
+            "[effects.joint_friction]\ncoulomb_nm = 350.0\nbreakaway_nm = 400.0\n\
+             stribeck_velocity_rad_s = 0.1\nviscous_nm_s_per_rad = 0.05\n\
+             smoothing_velocity_rad_s = 0.01\n",
+            "effects.joint_friction.coulomb_nm",
+            "N mm typed?",
+        ),
+    ] {
+        let e = load_err(&with_nominal(table));
+        assert!(e.contains(key) && e.contains(needle), "{e}");
+    }
+}

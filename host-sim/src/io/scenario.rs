@@ -665,15 +665,43 @@ impl Scenario {
                     }
                 }
                 Event::LoadInertia { inertia_kgm2, .. } => {
-                    if !(inertia_kgm2 > 0.0 && inertia_kgm2.is_finite()) {
-                        ev_bad("inertia_kgm2", format!("{inertia_kgm2} must be > 0"))?;
+                    // The plant file's own range for the joint's inertia.
+                    if let Some(msg) = crate::validate::range_error(
+                        "inertia_kgm2",
+                        inertia_kgm2,
+                        crate::plant::config::INERTIA_KGM2,
+                        crate::plant::config::INERTIA_UNIT,
+                    ) {
+                        ev_bad("inertia_kgm2", msg)?;
                     }
                 }
                 Event::SupplyLoss {
                     supply_gauge_pa, ..
                 } => {
-                    if !(supply_gauge_pa >= 0.0 && supply_gauge_pa.is_finite()) {
-                        ev_bad("supply_gauge_pa", format!("{supply_gauge_pa} must be >= 0"))?;
+                    // 0 (a complete loss) or a supply in the plant file's range; a few Pa is
+                    // a value in bar or kPa.
+                    let range = crate::plant::config::SUPPLY_GAUGE_PA;
+                    if !(supply_gauge_pa == 0.0 || range.contains(supply_gauge_pa)) {
+                        let hint = if supply_gauge_pa > 0.0 && supply_gauge_pa < range.lo {
+                            format!(
+                                " (bar or kPa typed into a Pa key? {} bar is {} Pa, {} kPa is \
+                                 {} Pa)",
+                                crate::validate::Shown(supply_gauge_pa),
+                                crate::validate::Shown(supply_gauge_pa * 1e5),
+                                crate::validate::Shown(supply_gauge_pa),
+                                crate::validate::Shown(supply_gauge_pa * 1e3)
+                            )
+                        } else {
+                            String::new()
+                        };
+                        ev_bad(
+                            "supply_gauge_pa",
+                            format!(
+                                "must be 0 (a complete loss) or within {range} Pa gauge, got \
+                                 {}{hint}",
+                                crate::validate::Shown(supply_gauge_pa)
+                            ),
+                        )?;
                     }
                 }
                 Event::SensorStep { offset, .. } => {

@@ -195,25 +195,43 @@ pub(crate) const SONIC_CONDUCTANCE_M3_PER_S_PA: Range = Range::closed(1.0e-11, 1
 /// The unit and context [`SONIC_CONDUCTANCE_M3_PER_S_PA`]'s message names.
 pub(crate) const SONIC_CONDUCTANCE_UNIT: &str = "m^3/(s Pa) (0.001 .. 100 dm^3/(s bar))";
 
+/// Supply gauge pressure a plant (or a supply-loss event) may have [Pa].
+pub(crate) const SUPPLY_GAUGE_PA: Range = Range::closed(1.0e4, 2.0e6);
+
 /// `[environment]`: atmospheric and supply pressure.
 pub(crate) fn environment_range_rows(env: &EnvironmentConfig) -> Vec<RangeRow> {
     range_rows![env, "environment.";
         p_atm_pa: Range::closed(5.0e4, 1.2e5), "Pa absolute";
-        supply_gauge_pa: Range::closed(1.0e4, 2.0e6), "Pa gauge";
+        supply_gauge_pa: SUPPLY_GAUGE_PA, "Pa gauge";
     ]
 }
 
 /// `[muscle]` (`prefix` `""`, or the arm's `jointN.`).
 pub(crate) fn muscle_range_rows(m: &MuscleConfig, prefix: &str) -> Vec<RangeRow> {
-    range_rows![m, format!("{prefix}muscle.");
+    let mut rows = range_rows![m, format!("{prefix}muscle.");
         rest_length_m: Range::closed(0.02, 2.0), "m (a muscle 2 cm .. 2 m long)";
         radius_m: Range::closed(0.001, 0.1), "m (a muscle 2 mm .. 20 cm across)";
         braid_angle_deg: Range::open(5.0, 54.7),
             "degrees (between 5 and the neutral braid angle 54.7; radians typed?)";
         end_factor: Range::closed(0.5, 5.0), "(Tondu's k, about 1 .. 1.6 on real muscles)";
         damping_m2s: Range::closed(0.0, 0.01), "m^2 s";
-    ]
+    ];
+    // The chamber at zero contraction against the muscle's own cylinder: a volume in cm^3 or
+    // litres typed into the m^3 key is 1e6 or 1e3 times off (the reference: 1.01).
+    let cylinder_m3 = std::f64::consts::PI * m.radius_m * m.radius_m * m.rest_length_m;
+    rows.push((
+        format!("{prefix}muscle.volume_poly_m3"),
+        m.volume_poly_m3[0] / cylinder_m3,
+        Range::closed(VOLUME_OVER_CYLINDER.0, VOLUME_OVER_CYLINDER.1),
+        "x the cylinder pi radius_m^2 rest_length_m (b0, the chamber at zero contraction, \
+         over the muscle's own size: cm^3 or litres typed as m^3?)",
+    ));
+    rows
 }
+
+/// Allowed ratio of a muscle's chamber volume at zero contraction (`volume_poly_m3` b0) to the
+/// cylinder of its radius and rest length: a McKibben chamber is about that cylinder.
+pub const VOLUME_OVER_CYLINDER: (f64, f64) = (0.2, 5.0);
 
 /// `[initial]`: angle, velocity, and the two pressures between vacuum and the supply.
 pub(crate) fn initial_range_rows(

@@ -56,7 +56,21 @@ impl Effect for Gravity {
     const TRUTHS: &'static [Truth] = &[Truth::new("gravity", "gravity", |_| "[effects.gravity]\nmass_kg = 1.0\ncom_distance_m = 0.1\nhanging_angle_rad = 0.0\n".into())];
     table_effect!(GravityCandidate);
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
-        check_fields!(self, c, finite: mass_kg, com_distance_m, hanging_angle_rad, g_m_s2);
+        use crate::validate::Range;
+        c.within("mass_kg", self.mass_kg, Range::closed(0.0, 100.0), "kg (the load on the joint)")?;
+        c.within(
+            "com_distance_m",
+            self.com_distance_m,
+            Range::closed(0.0, 2.0),
+            "m (the load's lever from the joint axis; mm typed?)",
+        )?;
+        c.within(
+            "hanging_angle_rad",
+            self.hanging_angle_rad,
+            Range::closed(-std::f64::consts::PI, std::f64::consts::PI),
+            "rad (degrees typed?)",
+        )?;
+        c.within("g_m_s2", self.g_m_s2, Range::closed(0.0, 30.0), "m/s^2")?;
         Ok(())
     }
 }

@@ -59,8 +59,20 @@ impl Effect for JointFriction {
     ];
     table_effect!(JointFrictionCandidate);
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
-        check_fields!(self, c, finite: coulomb_nm, breakaway_nm, viscous_nm_s_per_rad;
-            positive: stribeck_velocity_rad_s, smoothing_velocity_rad_s);
+        check_fields!(self, c, positive: stribeck_velocity_rad_s, smoothing_velocity_rad_s);
+        use crate::validate::Range;
+        // Up to 50 N m: beyond the torque any muscle pair of the plants here can give (N mm
+        // typed as N m is 1000 times off).
+        let torque = Range::closed(0.0, 50.0);
+        let unit = "N m (N mm typed?)";
+        c.within("coulomb_nm", self.coulomb_nm, torque, unit)?;
+        c.within("breakaway_nm", self.breakaway_nm, torque, unit)?;
+        c.within(
+            "viscous_nm_s_per_rad",
+            self.viscous_nm_s_per_rad,
+            torque,
+            "N m s/rad",
+        )?;
         if self.coulomb_nm < 0.0 || self.breakaway_nm < self.coulomb_nm {
             return Err(c.error(
                 "breakaway_nm",

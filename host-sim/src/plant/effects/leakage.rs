@@ -74,7 +74,12 @@ impl Effect for Leakage {
                 return Err(c.error("muscle", format!("{m}: the leaking muscle is 1 or 2")));
             }
         }
-        check_fields!(self, c, non_negative: sonic_conductance_m3_per_s_pa);
+        c.within(
+            "sonic_conductance_m3_per_s_pa",
+            self.sonic_conductance_m3_per_s_pa,
+            crate::validate::Range::closed(0.0, crate::plant::config::SONIC_CONDUCTANCE_M3_PER_S_PA.hi),
+            crate::plant::config::SONIC_CONDUCTANCE_UNIT,
+        )?;
         Ok(())
     }
     fn activate(&self, valve: &ValveConfig) -> LeakOrifice {

@@ -271,6 +271,21 @@ impl<'a> Check<'a> {
         }
     }
 
+    /// `v` must lie in `range` (a physical range: wide enough for any real rig, narrow enough
+    /// to catch a unit typed wrong); `unit` is named in the message.
+    pub fn within(
+        &self,
+        key: &str,
+        v: f64,
+        range: crate::validate::Range,
+        unit: &str,
+    ) -> Result<(), ConfigError> {
+        match crate::validate::range_error(key, v, range, unit) {
+            Some(msg) => Err(self.error(key, msg)),
+            None => Ok(()),
+        }
+    }
+
     /// `v` must be finite and >= 0.
     pub fn non_negative(&self, key: &str, v: f64) -> Result<(), ConfigError> {
         self.finite(key, v)?;

@@ -61,8 +61,20 @@ impl Effect for MuscleHysteresis {
     const TRUTHS: &'static [Truth] = &[Truth::new("muscle_hysteresis", "muscle_hysteresis", |_| "[effects.muscle_hysteresis]\nbase_force_n = 6.0\npressure_gain_n_per_pa = 2.0e-5\nsmoothing_rate_per_s = 0.02\n".into())];
     table_effect!(MuscleHysteresisCandidate);
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
-        check_fields!(self, c, non_negative: base_force_n, pressure_gain_n_per_pa;
-            positive: smoothing_rate_per_s);
+        check_fields!(self, c, positive: smoothing_rate_per_s);
+        use crate::validate::Range;
+        c.within(
+            "base_force_n",
+            self.base_force_n,
+            Range::closed(0.0, 5000.0),
+            "N (the band's half-width at zero pressure)",
+        )?;
+        c.within(
+            "pressure_gain_n_per_pa",
+            self.pressure_gain_n_per_pa,
+            Range::closed(0.0, 0.01),
+            "N/Pa (N/kPa typed?)",
+        )?;
         Ok(())
     }
 }

@@ -107,7 +107,13 @@ impl Effect for ThermalChamber {
     })];
     table_effect!(HeatTransferCandidate);
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
-        check_fields!(self, c, non_negative: heat_transfer_w_per_k; finite: kappa);
+        check_fields!(self, c, finite: kappa);
+        c.within(
+            "heat_transfer_w_per_k",
+            self.heat_transfer_w_per_k,
+            crate::validate::Range::closed(0.0, 100.0),
+            "W/K (a muscle's wall exchanges about 0.1 .. 10; mW/K typed?)",
+        )?;
         if !(self.kappa > 1.0 && self.kappa <= 5.0 / 3.0) {
             return Err(c.error(
                 "kappa",

@@ -35,7 +35,19 @@ impl Effect for ToySpring {
     const TRUTHS: &'static [Truth] = &[Truth::new("toy_spring", "toy_spring", |_| "[effects.toy_spring]\nstiffness_nm_per_rad = 2.0\nrest_angle_rad = 0.0\n".into())];
     table_effect!(ToySpringCandidate);
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
-        check_fields!(self, c, non_negative: stiffness_nm_per_rad; finite: rest_angle_rad);
+        use crate::validate::Range;
+        c.within(
+            "stiffness_nm_per_rad",
+            self.stiffness_nm_per_rad,
+            Range::closed(0.0, 1000.0),
+            "N m/rad",
+        )?;
+        c.within(
+            "rest_angle_rad",
+            self.rest_angle_rad,
+            Range::closed(-std::f64::consts::PI, std::f64::consts::PI),
+            "rad (degrees typed?)",
+        )?;
         Ok(())
     }
 }
