@@ -974,3 +974,30 @@ fn fit_fails_min_fit_when_the_model_lacks_a_reference_channel() {
     assert_eq!(r.status.code(), Some(0));
     assert!(text(&r.stdout).contains("not compared"));
 }
+
+/// A time column in ms under `t_s` is named as such (it used to run as a 1000 times slower
+/// recording).
+#[test]
+fn a_recording_time_column_in_ms_is_refused() {
+    let w = Workspace::new();
+    let text = std::fs::read_to_string(fixture("pulses_nominal.csv")).unwrap();
+    let ms: String = text
+        .lines()
+        .map(|l| match l.split_once(',') {
+            Some((t, rest)) if t.parse::<f64>().is_ok() => {
+                format!("{},{rest}\n", t.parse::<f64>().unwrap() * 1e3)
+            }
+            _ => format!("{l}\n"),
+        })
+        .collect();
+    w.write("ms.csv", &ms);
+    w.refuses(
+        "fit {fixture} {w}/ms.csv",
+        &[
+            "ms.csv:6",
+            "t_s",
+            "median time step is 1 s",
+            "ms written as s",
+        ],
+    );
+}

@@ -1505,6 +1505,25 @@ impl<'t> Table<'t> {
                 ));
             }
         }
+        // A time column in another unit (ms written under `t_s`): the step range of a rig's
+        // import, 100 kHz .. 10 Hz.
+        let range = crate::io::import::STEP_RANGE_S;
+        if n >= 2 && !range.contains(median_step) {
+            return Err(self.field_err(
+                line_of(1),
+                "t_s",
+                format!(
+                    "the median time step is {} s, outside {range} s (100 kHz .. 10 Hz): is \
+                     the time column in another unit ({})?",
+                    crate::validate::Shown(median_step),
+                    if median_step > range.hi {
+                        "ms written as s"
+                    } else {
+                        "us written as s"
+                    }
+                ),
+            ));
+        }
         self.check_declared_period(dt, tol)
     }
 
