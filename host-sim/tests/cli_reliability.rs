@@ -127,6 +127,19 @@ fn identify_plant_with_zero_patience_is_refused() {
 }
 
 #[test]
+fn identify_plant_bounds_reversed_or_beyond_the_keys_range_are_refused() {
+    let w = Workspace::new();
+    w.refuses(
+        "identify plant --recording {fixture} --plant {plant} --params joint.inertia_kgm2=1:0.001 --out {w}/out.toml",
+        &["--params joint.inertia_kgm2=1:0.001", "reversed", "lower 1 must be below the upper 0.001"],
+    );
+    w.refuses(
+        "identify plant --recording {fixture} --plant {plant} --params joint.inertia_kgm2=0.001:1000 --out {w}/out.toml",
+        &["joint.inertia_kgm2", "[0.0001, 10]", "bounds within it"],
+    );
+}
+
+#[test]
 fn sweep_torque_sizes_that_would_exhaust_memory_are_refused_with_the_estimate() {
     let w = Workspace::new();
     w.refuses(
@@ -153,6 +166,11 @@ fn sweep_torque_names_a_mid_pressure_in_the_wrong_unit_not_the_levels() {
     w.refuses(
         "sweep torque --plant {plant} --out {w}/out.csv --p0-kpa 300 --dp-kpa 400",
         &["--dp-kpa 400 with --p0-kpa 300", "the supply"],
+    );
+    // The reference joint reaches +-1.099 rad (muscle 1 at its maximum contraction 0.2499).
+    w.refuses(
+        "sweep torque --plant {plant} --out {w}/out.csv --amplitude-rad 2.0",
+        &["--amplitude-rad 2", "reach", "+-1.099 rad", "0.2499"],
     );
 }
 

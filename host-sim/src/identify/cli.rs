@@ -453,6 +453,23 @@ fn sweep_torque(a: &SweepTorqueArgs) -> Result<String> {
     {
         bail!("--dp-kpa needs at least one level; --speeds-rad-s at least one speed, all > 0");
     }
+    // The passes sweep +-amplitude: both muscles must stay between their rest length and
+    // the contraction where the braid gives no force.
+    let (law, joint) = (&plant.muscle.law, &plant.joint);
+    let chi_max = (1.0 - (law.b / law.a).sqrt()) / law.end_factor;
+    let chi0 = joint.initial_contraction;
+    let reach_rad = (chi_max - chi0).min(chi0) / joint.contraction_per_rad;
+    if !(a.amplitude_rad < reach_rad) {
+        bail!(
+            "--amplitude-rad {}: beyond the joint's reach on {} (+-{:.3} rad: from contraction \
+             {chi0} at 0 rad, {} rad per rad, a muscle reaches its maximum contraction {chi_max:.4} \
+             (no force left) or its rest length there)",
+            a.amplitude_rad,
+            a.plant.display(),
+            reach_rad,
+            joint.contraction_per_rad
+        );
+    }
     let supply_kpa = (plant.p_supply_abs_pa - plant.p_atm_pa) / 1e3;
     // The mid pressure first: a slip of its unit would otherwise be blamed on every level.
     if a.p0_kpa < P0_MIN_KPA {
@@ -829,6 +846,17 @@ fn identify_plant(a: &IdentifyPlantArgs) -> Result<String> {
         ("held-out", fit.holdout_mean_pct())
     };
     let min = super::calibrate::MIN_IDENTIFIED_HELDOUT_FIT_PCT;
+    if !a.allow_poor_fit && !(after >= min) && after < before {
+        // Worse than where it started: the search left the start's basin, the recording is
+        // not to blame.
+        bail!(
+            "{}: the fit ended below its start ({before:.1} % -> {after:.1} % on the {set} part, \
+             mean over channels; {min} % needed); nothing written. The search left the start \
+             values' basin: give tighter bounds (--params key=lo:hi) around a start value \
+             closer to the rig's; --allow-poor-fit writes the plant file anyway",
+            a.recording.display()
+        );
+    }
     if !a.allow_poor_fit && !(after >= min) {
         bail!(
             "{}: the identified plant fits the recording's channels {after:.1} % on the {set} \

@@ -176,10 +176,13 @@ pub(crate) fn mean_scores(scores: &[ChannelScore]) -> (f64, f64) {
 }
 
 /// Parses `--params a,b,c` with optional bounds `key=lo:hi` (either side may be empty).
+/// `allowed(key)` is the key's range in a plant file (range, unit), when it has one: bounds
+/// given beyond it are refused (the fitted file would be), default bounds are clipped to it.
 pub fn parse_param_specs(
     list: &[String],
     doc_text: &str,
     file: &str,
+    allowed: &dyn Fn(&str) -> Option<(crate::validate::Range, &'static str)>,
 ) -> Result<Vec<ParamSpec>, IdentError> {
     let doc: DocumentMut = doc_text
         .parse()
@@ -213,6 +216,24 @@ pub fn parse_param_specs(
             };
             lo = num(l, f64::NEG_INFINITY)?;
             hi = num(h, f64::INFINITY)?;
+            if !(lo < hi) {
+                return Err(IdentError::Data(format!(
+                    "--params {raw}: the bounds are reversed or empty: the lower {lo} must be \
+                     below the upper {hi}"
+                )));
+            }
+            if let Some((r, unit)) = allowed(key) {
+                if lo < r.lo || hi > r.hi {
+                    return Err(IdentError::Data(format!(
+                        "--params {raw}: the bounds ({lo}, {hi}) leave the range of `{key}` in a \
+                         plant file, {r} {unit}: a fitted value there would be refused; give \
+                         bounds within it"
+                    )));
+                }
+            }
+        } else if let Some((r, _)) = allowed(key) {
+            lo = lo.max(r.lo);
+            hi = hi.min(r.hi);
         }
         if !(lo < hi) || !(x0 > lo && x0 < hi) {
             return Err(IdentError::Data(format!(
@@ -499,8 +520,15 @@ pub fn identify_plant_text(
         msg: e.to_string(),
     })?;
     // Validate the plant file as a whole first (errors name the key).
-    PlantConfig::from_toml_str(&text, plant).map_err(|e| IdentError::Data(e.to_string()))?;
-    let specs = parse_param_specs(params, &text, &file)?;
+    let cfg =
+        PlantConfig::from_toml_str(&text, plant).map_err(|e| IdentError::Data(e.to_string()))?;
+    let rows = cfg.range_rows();
+    let allowed = |key: &str| {
+        rows.iter()
+            .find(|(k, ..)| k == key && key != "muscle.volume_poly_m3")
+            .map(|(_, _, r, unit)| (*r, *unit))
+    };
+    let specs = parse_param_specs(params, &text, &file, &allowed)?;
     let fit = fit_plant(&rec, &text, &file, &specs, opts)?;
     let mut body = String::new();
     let _ = writeln!(
@@ -528,19 +556,20 @@ mod tests {
     #[test]
     fn param_specs_parse_bounds_and_reject_bad_keys() {
         let text = "[a]\nx = 2.0 # c\ny = -1\nz = \"s\"\n";
-        let s = parse_param_specs(&["a.x".into(), "a.y=-5:".into()], text, "p.toml").unwrap();
+        let s = parse_param_specs(&["a.x".into(), "a.y=-5:".into()], text, "p.toml", &|_| None)
+            .unwrap();
         assert_eq!(s[0].lower, 0.0);
         assert_eq!(s[0].upper, f64::INFINITY);
         assert_eq!(s[1].lower, -5.0);
         assert_eq!(s[1].upper, f64::INFINITY);
-        let e = parse_param_specs(&["a.q".into()], text, "p.toml").unwrap_err();
+        let e = parse_param_specs(&["a.q".into()], text, "p.toml", &|_| None).unwrap_err();
         assert!(
             e.to_string().contains("p.toml") && e.to_string().contains("a.q"),
             "{e}"
         );
-        let e = parse_param_specs(&["a.z".into()], text, "p.toml").unwrap_err();
+        let e = parse_param_specs(&["a.z".into()], text, "p.toml", &|_| None).unwrap_err();
         assert!(e.to_string().contains("not a number"), "{e}");
-        let e = parse_param_specs(&["a.x=3:4".into()], text, "p.toml").unwrap_err();
+        let e = parse_param_specs(&["a.x=3:4".into()], text, "p.toml", &|_| None).unwrap_err();
         assert!(e.to_string().contains("inside the bounds"), "{e}");
     }
 

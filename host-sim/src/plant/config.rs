@@ -261,15 +261,9 @@ impl PlantConfig {
         parse_plant_text(text, path.as_ref(), Self::validate)
     }
 
-    fn validate(&self, path: &Path) -> Result<(), ConfigError> {
-        let bad = |key: &str, message: &str| ConfigError::Invalid {
-            path: path.to_owned(),
-            key: key.to_owned(),
-            message: message.to_owned(),
-        };
-        // Physical or practical ranges: wide enough for any real rig, narrow enough to catch
-        // a unit typed wrong (kPa in a Pa key) or a value the model cannot run.
-        use crate::validate::Shown;
+    /// The range checks of the file's scalar keys: key, value, allowed range, unit (the
+    /// `muscle.volume_poly_m3` row checks b0 over the muscle's cylinder, not a key's value).
+    pub(crate) fn range_rows(&self) -> Vec<RangeRow> {
         let mut rows = environment_range_rows(&self.environment);
         rows.extend(muscle_range_rows(&self.muscle, ""));
         rows.extend(range_rows![self, "";
@@ -279,6 +273,19 @@ impl PlantConfig {
             valve.sonic_conductance_m3_per_s_pa: SONIC_CONDUCTANCE_M3_PER_S_PA, SONIC_CONDUCTANCE_UNIT;
         ]);
         rows.extend(initial_range_rows(&self.initial, &self.environment, ""));
+        rows
+    }
+
+    fn validate(&self, path: &Path) -> Result<(), ConfigError> {
+        let bad = |key: &str, message: &str| ConfigError::Invalid {
+            path: path.to_owned(),
+            key: key.to_owned(),
+            message: message.to_owned(),
+        };
+        // Physical or practical ranges: wide enough for any real rig, narrow enough to catch
+        // a unit typed wrong (kPa in a Pa key) or a value the model cannot run.
+        use crate::validate::Shown;
+        let rows = self.range_rows();
         if let Some((key, msg)) = crate::validate::first_range_error(&rows) {
             return Err(bad(key, &msg));
         }
