@@ -99,7 +99,7 @@ impl fmt::Display for Range {
 }
 
 /// The message for a file value `v` of `key` outside `range` ("must be within [lo, hi]
-/// UNIT, got v", with a hint when `v` kPa typed into a Pa key would have been in range);
+/// UNIT, got v", with a hint when `v` kPa (or bar) typed into a Pa key would have been in range);
 /// `None` inside it.
 pub fn range_error(key: &str, v: f64, range: Range, unit: &str) -> Option<String> {
     if range.contains(v) {
@@ -111,6 +111,12 @@ pub fn range_error(key: &str, v: f64, range: Range, unit: &str) -> Option<String
             " (kPa typed into a Pa key? {} kPa is {} Pa)",
             Shown(v),
             Shown(v * 1e3)
+        ));
+    } else if key.ends_with("_pa") && v > 0.0 && range.contains(v * 1e5) {
+        msg.push_str(&format!(
+            " (bar typed into a Pa key? {} bar is {} Pa)",
+            Shown(v),
+            Shown(v * 1e5)
         ));
     }
     Some(msg)
@@ -516,6 +522,25 @@ mod tests {
         assert!(distinct_outputs(&[("--plant", &input)], &[("--out", &other)]).is_ok());
         std::fs::write(&other, "y = 2\n").unwrap();
         assert!(distinct_outputs(&[("--plant", &input)], &[("--out", &other)]).is_ok());
+    }
+
+    #[test]
+    fn a_pressure_in_kpa_or_bar_gets_its_unit_hint() {
+        let supply = Range::closed(1.0e4, 2.0e6);
+        let e = range_error("supply_gauge_pa", 600.0, supply, "Pa").unwrap();
+        assert!(e.contains("600 kPa is 600000 Pa"), "{e}");
+        let e = range_error("supply_gauge_pa", 6.0, supply, "Pa").unwrap();
+        assert!(
+            e.contains("bar typed into a Pa key? 6 bar is 600000 Pa"),
+            "{e}"
+        );
+        // Not a pressure key, or no unit that fits: no hint.
+        assert!(!range_error("mass_kg", 6.0, supply, "kg")
+            .unwrap()
+            .contains("typed"));
+        assert!(!range_error("supply_gauge_pa", 0.01, supply, "Pa")
+            .unwrap()
+            .contains("typed"));
     }
 
     #[test]

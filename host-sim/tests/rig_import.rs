@@ -624,11 +624,30 @@ fn an_onoff_threshold_that_leaves_a_valve_closed_or_open_is_warned_at_its_line()
         assert!(e.contains(&want), "`{want}` not in: {e}");
         assert!(e.contains(&format!("{state} over the whole file")), "{e}");
     }
+    // A valve logged as a fraction (0..1, here the volts scaled by 0.1) mapped as percent:
+    // it never opens beyond 1 %.
+    let percent = "[[channel]]\ncolumn = \"MPYE1 [V]\"\nchannel = \"u_in1\"\nunit = \"percent\"\nscale = 0.1\n\n\
+                   [[channel]]\ncolumn = \"Temp [C]\"\nchannel = \"u_ex1\"\nunit = \"percent\"\n";
+    let text = MAP.replace(valve1, percent);
+    let r = import_with(dir.path(), &text, &raw, &out, false);
+    ok(&r);
+    let e = text_of(&r.stderr);
+    assert!(
+        e.contains(
+            "channel[3] (`u_in1`): column `MPYE1 [V]` with `unit = \"percent\"` never opens beyond"
+        ),
+        "{e}"
+    );
+    assert!(
+        e.contains("read as percent?") && !e.contains("channel[4]"),
+        "{e}"
+    );
     // The rig's own mapping warns of nothing.
     let r = import_with(dir.path(), MAP, &raw, &out, false);
     ok(&r);
     assert!(
-        !text_of(&r.stderr).contains("threshold"),
+        !text_of(&r.stderr).contains("read as percent")
+            && !text_of(&r.stderr).contains("threshold"),
         "{}",
         text_of(&r.stderr)
     );

@@ -1083,7 +1083,8 @@ pub fn import(
 }
 
 /// A warning for each on/off valve column whose `threshold` leaves it closed (or open) over
-/// the whole file: the threshold is probably on the wrong side of the logged levels.
+/// the whole file (the threshold is probably on the wrong side of the logged levels), and for
+/// each percent valve column that never passes 1 % (fractions read as percent).
 fn stuck_onoff_valves(
     mapping: &Mapping,
     map_path: &Path,
@@ -1091,11 +1092,29 @@ fn stuck_onoff_valves(
     values: &[Vec<f64>],
 ) -> Vec<String> {
     let mut warnings = Vec::new();
-    for (i, ((_, conv), (c, v))) in plans
+    for (i, ((target, conv), (c, v))) in plans
         .iter()
         .zip(mapping.channel.iter().zip(values))
         .enumerate()
     {
+        // A percent column that never passes 1 %: fractions (0..1) read as percent.
+        if let (Convert::Factor { factor, .. }, Some(col), Target::Opening(_) | Target::Signed(_)) =
+            (conv, c.column.as_deref(), target)
+        {
+            let hi = v.iter().fold(0.0f64, |m, u| m.max(u.abs()));
+            if *factor == 0.01 && hi > 0.0 && hi <= 0.01 {
+                let at = crate::validate::toml_key_line(&mapping.text, "channel", i, "unit")
+                    .map(|line| format!("{}:{line}", map_path.display()))
+                    .unwrap_or_else(|| map_path.display().to_string());
+                warnings.push(format!(
+                    "{at}: channel[{i}] (`{}`): column `{col}` with `unit = \"percent\"` never \
+                     opens beyond {} % over the whole file: values in 0..1 (`unit = \"fraction\"`) \
+                     read as percent?",
+                    c.channel,
+                    Shown(hi * 100.0)
+                ));
+            }
+        }
         let (Convert::OnOff { threshold }, Some(col)) = (conv, c.column.as_deref()) else {
             continue;
         };
