@@ -1007,15 +1007,21 @@ pub fn diagnose(
     // held.
     let mut check_series = None;
     let mut check_nominal = None;
+    let mut check_start_note = None;
     let (mut check_before, mut check_after) = (None, None);
     if let Some(rec) = check {
         let csetup = Setup {
             dt_s: rec.sample_period_s(),
             present: g.present,
         };
-        // CHECK starts from its own first sample when TRAIN did from its own.
+        // CHECK starts from its own first sample when TRAIN did from its own, or when CHECK
+        // itself starts away from the file's `[initial]` (a check cut from later in a run)
+        // and replays better from there: decided on CHECK as on TRAIN.
+        let check_own_start =
+            recorded_start.is_some() || start::for_diagnosis(file_nominal, rec, opts).is_some();
+        check_start_note = verdict::check_start_note(file_nominal, rec, check_own_start);
         let from_check = |c: &PlantConfig| {
-            if recorded_start.is_some() {
+            if check_own_start {
                 start::as_recorded(c, rec)
             } else {
                 c.clone()
@@ -1298,6 +1304,7 @@ pub fn diagnose(
         data_notes: [
             verdict::coarse_onoff_note(train),
             verdict::start_note(file_nominal, train, recorded_start.is_some()),
+            check_start_note,
             absolute_note,
         ]
         .into_iter()

@@ -511,6 +511,31 @@ pub fn start_note(
     })
 }
 
+/// A note when the check recording starts away from the plant file's `[initial]`: from
+/// where it was replayed, and that a check cut from a moving run cannot be replayed
+/// faithfully (the velocity and the chambers' history at its first sample are not recorded).
+pub fn check_start_note(
+    plant: &crate::plant::config::PlantConfig,
+    check: &Recording,
+    started_from_recording: bool,
+) -> Option<String> {
+    let off = channels_away_from_initial(plant, check);
+    (!off.is_empty()).then(|| {
+        format!(
+            "the check recording does not start where the plant file's [initial] says: {}; it \
+             was replayed from {}. A check cut from the middle of a run starts in motion, which \
+             a replay cannot know (the velocity is not recorded): cut the check where the joint \
+             rests, or record it from its own start",
+            off.join(", "),
+            if started_from_recording {
+                "its own first sample, at rest"
+            } else {
+                "the file's values"
+            }
+        )
+    })
+}
+
 #[cfg(test)]
 mod coarse_tests {
     use super::*;
@@ -560,5 +585,14 @@ mod coarse_tests {
             "{note}"
         );
         assert!(!note.contains("p2_kpa"), "{note}");
+        // The check recording's own note says from where it was replayed.
+        assert!(check_start_note(&plant, &rec(0.0), true).is_none());
+        let note = check_start_note(&plant, &rec(-100.0), true).expect("away");
+        assert!(
+            note.contains("check recording") && note.contains("its own first sample"),
+            "{note}"
+        );
+        let note = check_start_note(&plant, &rec(-100.0), false).expect("away");
+        assert!(note.contains("the file's values"), "{note}");
     }
 }
