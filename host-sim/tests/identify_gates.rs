@@ -152,7 +152,20 @@ fn identify_force_refuses_a_stretch_in_percent_naming_the_line() {
         "`stretch`".into(),
         "75".into(),
         "0.5..1.5".into(),
-        "percent typed as a fraction".into(),
+        "a percentage? 75 % is 0.75".into(),
+    ] {
+        assert!(e.contains(&n), "`{n}` not in:\n{e}");
+    }
+    assert_kept(&out);
+    // A contraction (1 - L/L0) in the column is named as such.
+    let (chi, first_data) = mapped_sweep("force", dir.path(), "contraction.csv", "stretch", |e| {
+        1.0 - e
+    });
+    let r = host_sim(&[&"identify", &"force", &"--data", &chi, &"--out", &out]);
+    let e = exits(2, &r);
+    for n in [
+        format!("contraction.csv:{first_data}"),
+        "a contraction 1 - L/L0 instead?".into(),
     ] {
         assert!(e.contains(&n), "`{n}` not in:\n{e}");
     }

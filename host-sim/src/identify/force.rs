@@ -1304,13 +1304,18 @@ pub fn read_force_csv(path: &Path) -> Result<Vec<ForceSample>, IdentError> {
             let msg = format!("{v} is outside {lo}..{hi}{hint}");
             Err(IdentError::at(&file, line, name, &msg))
         };
-        in_range(
-            "stretch",
-            stretch,
-            STRETCH_MIN..=STRETCH_MAX,
-            ": the column is L/L0, a ratio (contraction 0..0.5); percent typed as a fraction? \
-             75 % is 0.75",
-        )?;
+        // Below the range and under 0.5: a contraction 1 - L/L0; above it: a percentage.
+        let stretch_hint = if (0.0..STRETCH_MIN).contains(&stretch) {
+            format!(
+                ": the column is L/L0, the deformation; a contraction 1 - L/L0 instead? \
+                 contraction {stretch} is L/L0 = {}",
+                crate::validate::Shown(1.0 - stretch)
+            )
+        } else {
+            ": the column is L/L0, a ratio (contraction 0..0.5); a percentage? 75 % is 0.75"
+                .to_string()
+        };
+        in_range("stretch", stretch, STRETCH_MIN..=STRETCH_MAX, &stretch_hint)?;
         in_range(
             "p_kpa",
             p_kpa,
