@@ -281,29 +281,13 @@ pub fn torque_estimate_nm(
     )
 }
 
-/// [`torque_estimate_nm`] through [`ForceLawParams::force_regular`]: the same bits for a
-/// law that is [regular](ForceLawParams::is_regular), finite pressures and an angle whose
-/// stretches are finite (the control tick's validated configuration and channels), without
-/// the tests that cannot fail there (no FATAL flag).
+/// [`torque_estimate_nm`] with the force law's evaluation `force(p_gauge_pa, stretch)` given:
+/// the control tick passes [`ForceLawParams::force_regular`] (the same bits for a law that is
+/// [regular](ForceLawParams::is_regular), finite pressures and an angle whose stretches are
+/// finite: its validated configuration and channels, without the tests that cannot fail
+/// there).
 #[inline(always)]
-pub(crate) fn torque_estimate_regular_nm(
-    force_law: &ForceLawParams,
-    geometry: &JointGeometry,
-    p1_gauge_pa: f32,
-    p2_gauge_pa: f32,
-    angle_rad: f32,
-) -> (f32, ForceFlags) {
-    torque_from(
-        |p, e| force_law.force_regular(p, e),
-        geometry,
-        p1_gauge_pa,
-        p2_gauge_pa,
-        angle_rad,
-    )
-}
-
-#[inline(always)]
-fn torque_from(
+pub(crate) fn torque_from(
     force: impl Fn(f32, f32) -> ForceEstimate,
     geometry: &JointGeometry,
     p1_gauge_pa: f32,

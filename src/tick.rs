@@ -15,8 +15,8 @@
 
 use crate::constants::{FORCE_LAW, TORQUE_MODEL};
 use crate::control::{
-    torque_estimate_regular_nm, JointState, PidGains, PositionController, PressureController,
-    PressureLoopGains, TorqueController, TorqueLoopGains, TorqueMeasurement,
+    torque_from, JointState, PidGains, PositionController, PressureController, PressureLoopGains,
+    TorqueController, TorqueLoopGains, TorqueMeasurement,
 };
 use crate::feedforward::{feedforward_torque_nm, FeedforwardGains, SetpointDerivatives};
 use crate::force_law::{ForceFlags, ForceLawParams};
@@ -390,7 +390,7 @@ impl ControllerConfig {
             && pos(g.sprocket_radius_m)
             && pos(g.rest_length_m)
             && g.initial_contraction.is_finite()
-            // The tick's torque estimate relies on both (`torque_estimate_regular_nm`).
+            // The tick's torque estimate relies on both (`torque_from` with `force_regular`).
             && self.force_law.is_regular()
             && g.stretches_finite_over(self.angle_limits.min, self.angle_limits.max)
             && self.torque_model.b_m2.is_finite()
@@ -1080,8 +1080,8 @@ impl ControlTick {
         // `torque_est_nm` and, when all channels are fresh this tick (then `last_*` are this
         // tick's values), the torque loop's feedback.
         let estimate = match (self.p1.last(), self.p2.last(), self.angle.last()) {
-            (Some(p1), Some(p2), Some(a)) => Some(torque_estimate_regular_nm(
-                &self.cfg.force_law,
+            (Some(p1), Some(p2), Some(a)) => Some(torque_from(
+                |p, e| self.cfg.force_law.force_regular(p, e),
                 &self.cfg.geometry,
                 p1,
                 p2,

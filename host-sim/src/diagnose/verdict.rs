@@ -489,23 +489,20 @@ pub fn start_note(
     rec: &Recording,
     started_from_recording: bool,
 ) -> Option<String> {
-    let off = channels_away_from_initial(plant, rec);
-    (!off.is_empty()).then(|| {
+    channels_away_from_initial_joined(plant, rec).map(|off| {
         if started_from_recording {
             format!(
-                "the recording does not start where the plant file's [initial] says: {}; \
+                "the recording does not start where the plant file's [initial] says: {off}; \
                  the nominal model replays it better from its first sample, so every replay \
                  (and a check recording's, from its own first sample) starts there, as the \
-                 sensors read it",
-                off.join(", ")
+                 sensors read it"
             )
         } else {
             format!(
-                "the recording does not start where the plant file's [initial] says: {}; the \
-                 replays start from the file's values, so the first seconds depart by the \
+                "the recording does not start where the plant file's [initial] says: {off}; \
+                 the replays start from the file's values, so the first seconds depart by the \
                  start alone: set [initial] to the rig's first sample (angle in rad, pressures \
-                 in Pa gauge)",
-                off.join(", ")
+                 in Pa gauge)"
             )
         }
     })
@@ -519,21 +516,28 @@ pub fn check_start_note(
     check: &Recording,
     started_from_recording: bool,
 ) -> Option<String> {
-    let off = channels_away_from_initial(plant, check);
-    (!off.is_empty()).then(|| {
+    let from = if started_from_recording {
+        "its own first sample, at rest"
+    } else {
+        "the file's values"
+    };
+    channels_away_from_initial_joined(plant, check).map(|off| {
         format!(
-            "the check recording does not start where the plant file's [initial] says: {}; it \
-             was replayed from {}. A check cut from the middle of a run starts in motion, which \
-             a replay cannot know (the velocity is not recorded): cut the check where the joint \
-             rests, or record it from its own start",
-            off.join(", "),
-            if started_from_recording {
-                "its own first sample, at rest"
-            } else {
-                "the file's values"
-            }
+            "the check recording does not start where the plant file's [initial] says: {off}; \
+             it was replayed from {from}. A check cut from the middle of a run starts in motion, \
+             which a replay cannot know (the velocity is not recorded): cut the check where the \
+             joint rests, or record it from its own start"
         )
     })
+}
+
+/// [`channels_away_from_initial`] joined for a sentence, `None` when none is away.
+fn channels_away_from_initial_joined(
+    plant: &crate::plant::config::PlantConfig,
+    rec: &Recording,
+) -> Option<String> {
+    let off = channels_away_from_initial(plant, rec);
+    (!off.is_empty()).then(|| off.join(", "))
 }
 
 #[cfg(test)]
