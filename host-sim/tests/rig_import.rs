@@ -568,6 +568,35 @@ fn line_of(text: &str, line: &str, n: usize) -> usize {
 }
 
 #[test]
+fn a_key_that_does_nothing_for_its_channel_is_refused_at_its_line() {
+    let dir = tmp();
+    let (raw, _) = rig_file(dir.path(), 2.0, 1, &[]);
+    let out = dir.path().join("rec.csv");
+    let p1 = "[[channel]]\ncolumn = \"P1 [bar abs]\"\nchannel = \"p1\"\nunit = \"bar\"\nreference = \"absolute\"\n";
+    assert!(MAP.contains(p1));
+    for (extra, key) in [
+        (
+            "threshold = 0.5\n",
+            "`threshold`: applies to a valve with `unit = \"onoff\"` only",
+        ),
+        (
+            "counts_per_rev = 8000\n",
+            "`counts_per_rev`: applies to an angle",
+        ),
+    ] {
+        let text = MAP.replace(p1, &format!("{p1}{extra}"));
+        let r = import_with(dir.path(), &text, &raw, &out, false);
+        let e = exits(2, &r);
+        let line = line_of(&text, extra.trim_end(), 0);
+        assert!(
+            e.contains(&format!("map.toml:{line}: channel[0] (`p1`): {key}")),
+            "{e}"
+        );
+        assert!(!out.exists());
+    }
+}
+
+#[test]
 fn a_column_mapped_twice_is_refused_at_its_line() {
     let dir = tmp();
     let (raw, _) = rig_file(dir.path(), 2.0, 1, &[]);

@@ -544,6 +544,46 @@ fn plan(
             }
         }
     };
+    // A key that does nothing for this channel and unit is a mistake somewhere (the unit it
+    // was meant for, or the channel): refused rather than ignored.
+    let is_pressure = matches!(
+        target,
+        Target::Output(Channel::P1Kpa | Channel::P2Kpa) | Target::Regulator(_)
+    );
+    for (k, given, applies, what) in [
+        (
+            "counts_per_rev",
+            c.counts_per_rev.is_some(),
+            matches!(conv, Convert::Counts { .. }),
+            "an angle with `unit = \"counts\"`",
+        ),
+        (
+            "threshold",
+            c.threshold.is_some(),
+            matches!(conv, Convert::OnOff { .. }),
+            "a valve with `unit = \"onoff\"`",
+        ),
+        (
+            "curve",
+            c.curve.is_some(),
+            matches!(conv, Convert::Curve(_)),
+            "a valve with `unit = \"V\"`",
+        ),
+        (
+            "reference",
+            c.reference.is_some(),
+            is_pressure,
+            "a pressure (p1, p2, regulator1, regulator2)",
+        ),
+    ] {
+        if given && !applies {
+            return Err(ImportError(format!(
+                "{}: applies to {what} only, not to this channel with `unit = {unit:?}`: is the \
+                 unit or the channel wrong? (remove the key otherwise)",
+                key(k)
+            )));
+        }
+    }
     Ok((target, conv))
 }
 
