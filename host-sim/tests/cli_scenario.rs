@@ -164,6 +164,15 @@ fn bad_scenario_names_file_line_and_key_and_keeps_the_old_output() {
             vec!["line 13: key `at_z`", "unknown field", "at_z"],
         ),
         (
+            "at_s = 1.0",
+            "at_s = \"1.0\"",
+            vec![
+                "line 12: key `at_s`",
+                "a number is expected",
+                "remove the quotes",
+            ],
+        ),
+        (
             "pressure_noise_pa = 500.0",
             "pressure_noise_pa = -1.0",
             vec!["line 15", "[sensors] pressure_noise_pa"],

@@ -609,8 +609,10 @@ impl Scenario {
         let s: Scenario = toml::from_str(text).map_err(|e| {
             let mut msg = e.to_string().trim_end().to_string();
             // Tagged tables (`[setpoint]`, `[[events]]`) are reported at their header line;
-            // point at the offending key's own line too.
-            if let Some(name) = msg
+            // name the offending key's own line instead (the parser's last line is its
+            // message, without the header's line and snippet).
+            let reason = e.message().trim_end().to_string();
+            if let Some(name) = reason
                 .split("unknown field `")
                 .nth(1)
                 .and_then(|r| r.split('`').next())
@@ -620,7 +622,24 @@ impl Scenario {
                     .enumerate()
                     .find(|(_, l)| sets_key(l.trim(), name))
                 {
-                    msg = format!("line {}: key `{name}`: {msg}", i + 1);
+                    msg = format!("line {}: key `{name}`: {reason}", i + 1);
+                }
+            } else if reason.starts_with("invalid type: string") && reason.contains("expected f64")
+            {
+                // A number typed in quotes: the first quoted value of a key that takes a
+                // number (every such key carries its unit or is a count).
+                if let Some((i, key)) = text.lines().enumerate().find_map(|(i, l)| {
+                    let (k, v) = l.split_once('=')?;
+                    let k = k.trim();
+                    let quoted = v.trim().starts_with('"');
+                    let numeric = !matches!(k, "kind" | "name" | "channel" | "valve" | "state");
+                    (quoted && numeric).then_some((i, k))
+                }) {
+                    msg = format!(
+                        "line {}: key `{key}`: a number is expected, got a string (remove the \
+                         quotes)",
+                        i + 1
+                    );
                 }
             }
             ClosedLoopError::Scenario {
