@@ -176,9 +176,18 @@ pub(crate) fn mean_scores(scores: &[ChannelScore]) -> (f64, f64) {
 }
 
 /// Parses `--params a,b,c` with optional bounds `key=lo:hi` (either side may be empty).
-/// `allowed(key)` is the key's range in a plant file (range, unit), when it has one: bounds
-/// given beyond it are refused (the fitted file would be), default bounds are clipped to it.
 pub fn parse_param_specs(
+    list: &[String],
+    doc_text: &str,
+    file: &str,
+) -> Result<Vec<ParamSpec>, IdentError> {
+    parse_param_specs_within(list, doc_text, file, &|_| None)
+}
+
+/// [`parse_param_specs`] where `allowed(key)` is the key's range in a plant file (range,
+/// unit), when it has one: bounds given beyond it are refused (the fitted file would be),
+/// default bounds are clipped to it.
+pub fn parse_param_specs_within(
     list: &[String],
     doc_text: &str,
     file: &str,
@@ -528,7 +537,7 @@ pub fn identify_plant_text(
             .find(|(k, ..)| k == key && key != "muscle.volume_poly_m3")
             .map(|(_, _, r, unit)| (*r, *unit))
     };
-    let specs = parse_param_specs(params, &text, &file, &allowed)?;
+    let specs = parse_param_specs_within(params, &text, &file, &allowed)?;
     let fit = fit_plant(&rec, &text, &file, &specs, opts)?;
     let mut body = String::new();
     let _ = writeln!(
@@ -556,20 +565,19 @@ mod tests {
     #[test]
     fn param_specs_parse_bounds_and_reject_bad_keys() {
         let text = "[a]\nx = 2.0 # c\ny = -1\nz = \"s\"\n";
-        let s = parse_param_specs(&["a.x".into(), "a.y=-5:".into()], text, "p.toml", &|_| None)
-            .unwrap();
+        let s = parse_param_specs(&["a.x".into(), "a.y=-5:".into()], text, "p.toml").unwrap();
         assert_eq!(s[0].lower, 0.0);
         assert_eq!(s[0].upper, f64::INFINITY);
         assert_eq!(s[1].lower, -5.0);
         assert_eq!(s[1].upper, f64::INFINITY);
-        let e = parse_param_specs(&["a.q".into()], text, "p.toml", &|_| None).unwrap_err();
+        let e = parse_param_specs(&["a.q".into()], text, "p.toml").unwrap_err();
         assert!(
             e.to_string().contains("p.toml") && e.to_string().contains("a.q"),
             "{e}"
         );
-        let e = parse_param_specs(&["a.z".into()], text, "p.toml", &|_| None).unwrap_err();
+        let e = parse_param_specs(&["a.z".into()], text, "p.toml").unwrap_err();
         assert!(e.to_string().contains("not a number"), "{e}");
-        let e = parse_param_specs(&["a.x=3:4".into()], text, "p.toml", &|_| None).unwrap_err();
+        let e = parse_param_specs(&["a.x=3:4".into()], text, "p.toml").unwrap_err();
         assert!(e.to_string().contains("inside the bounds"), "{e}");
     }
 
