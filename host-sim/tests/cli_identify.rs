@@ -311,7 +311,10 @@ fn identify_plant_rejects_unknown_keys_and_bad_bounds_without_writing() {
     let pulses = fixture("pulses_nominal.csv");
     for (params, want) in [
         ("muscle.no_such_key", "`muscle.no_such_key`"),
-        ("muscle.damping_m2s=1:2", "leave the range of `muscle.damping_m2s`"),
+        (
+            "muscle.damping_m2s=1:2",
+            "leave the range of `muscle.damping_m2s`",
+        ),
         ("muscle.damping_m2s=0.001:0.002", "inside the bounds"),
         ("joint", "not a number"),
     ] {

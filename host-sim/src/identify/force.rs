@@ -11,8 +11,9 @@
 //!
 //! Fitting eq. 6: for a fixed c7 the model is *linear* in the other eight constants
 //! (c1..c6, c9, c10), so the fit is a variable-projection problem: a one-dimensional search
-//! over c7 (with the denominator kept positive over the data) solving a linear least-squares
-//! problem (SVD) at each point, then a Levenberg-Marquardt polish of all nine constants
+//! over c7 (with the denominator kept positive over the data's whole domain box) solving a
+//! linear least-squares problem (SVD) at each point, then a Levenberg-Marquardt polish of all
+//! nine constants
 //! (`levenberg-marquardt` crate). This needs no random restarts and is deterministic.
 
 use std::collections::BTreeMap;
@@ -341,7 +342,7 @@ fn c7_lower_bound(samples: &[ForceSample]) -> f64 {
 }
 
 /// Levenberg-Marquardt problem of all nine free constants; c7 = lb + exp(u) keeps the
-/// denominator positive over the data.
+/// denominator positive over the data's domain box ([`c7_lower_bound`]).
 /// Its parameters are (c1..c6, u, c9, c10).
 struct Eq6Problem<'a> {
     samples: &'a [ForceSample],
