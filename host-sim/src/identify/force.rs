@@ -13,8 +13,8 @@
 //! (c1..c6, c9, c10), so the fit is a variable-projection problem: a one-dimensional search
 //! over c7 (with the denominator kept positive over the data's whole domain box) solving a
 //! linear least-squares problem (SVD) at each point, then a Levenberg-Marquardt polish of all
-//! nine constants
-//! (`levenberg-marquardt` crate). This needs no random restarts and is deterministic.
+//! nine constants (`levenberg-marquardt` crate). This needs no random restarts and is
+//! deterministic.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
