@@ -29,12 +29,35 @@ pub fn at_first_sample(initial: &mut InitialConfig, first: impl Fn(Channel) -> O
 }
 
 /// `plant` starting from the first sample of `rec` (a 1-DOF recording), as the sensors
-/// read it.
+/// read it, moving at the angle's initial slope.
 pub fn as_recorded(plant: &PlantConfig, rec: &Recording) -> PlantConfig {
     let mut c = plant.clone();
     c.initial.as_read = true;
     at_first_sample(&mut c.initial, |ch| rec.channel(ch).map(|y| y[0]));
+    // A recording cut from a moving run starts in motion: the angle's least-squares slope
+    // over its first 20 ms (0 for a joint at rest, up to the encoder's quantisation).
+    if let Some(a) = rec.channel(Channel::AngleDeg) {
+        c.initial.velocity_rad_s = initial_slope(a, rec.sample_period_s()).to_radians();
+    }
     c
+}
+
+/// Least-squares slope [unit/s] of `y` over its first 20 ms (at least 3 samples; 0 for
+/// fewer or a bad sample period).
+fn initial_slope(y: &[f64], dt_s: f64) -> f64 {
+    let m = ((0.02 / dt_s).round() as usize).max(3).min(y.len());
+    if m < 3 || !(dt_s > 0.0) {
+        return 0.0;
+    }
+    let t_mean = (m - 1) as f64 / 2.0;
+    let y_mean = y[..m].iter().sum::<f64>() / m as f64;
+    let (mut sxy, mut sxx) = (0.0, 0.0);
+    for (k, v) in y[..m].iter().enumerate() {
+        let dk = k as f64 - t_mean;
+        sxy += dk * (v - y_mean);
+        sxx += dk * dk;
+    }
+    sxy / sxx / dt_s
 }
 
 /// Cost of `plant`'s replay of `rec`: per recorded channel the mean squared error over the

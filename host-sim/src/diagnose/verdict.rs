@@ -509,24 +509,24 @@ pub fn start_note(
 }
 
 /// A note when the check recording starts away from the plant file's `[initial]`: from
-/// where it was replayed, and that a check cut from a moving run cannot be replayed
-/// faithfully (the velocity and the chambers' history at its first sample are not recorded).
+/// where it was replayed, and that a check cut from a moving run replays only as well as its
+/// start is known.
 pub fn check_start_note(
     plant: &crate::plant::config::PlantConfig,
     check: &Recording,
     started_from_recording: bool,
 ) -> Option<String> {
     let from = if started_from_recording {
-        "its own first sample, at rest"
+        "its own first sample (the velocity from the angle over its first 20 ms)"
     } else {
         "the file's values"
     };
     channels_away_from_initial_joined(plant, check).map(|off| {
         format!(
             "the check recording does not start where the plant file's [initial] says: {off}; \
-             it was replayed from {from}. A check cut from the middle of a run starts in motion, \
-             which a replay cannot know (the velocity is not recorded): cut the check where the \
-             joint rests, or record it from its own start"
+             it was replayed from {from}. A check cut from the middle of a run replays only as \
+             well as that start is known (the chambers' temperature and the valves' history \
+             are not recorded): cut it where the joint rests, or record it from its own start"
         )
     })
 }
