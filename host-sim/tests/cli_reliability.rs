@@ -1029,3 +1029,68 @@ fn a_recording_time_column_in_ms_is_refused() {
         ],
     );
 }
+
+/// Muscle 1 and 2 swapped in a torque recording (p1/p2 wired the other way) flips the sign of
+/// B, which fits as well: refused by `identify torque` and so by `calibrate`, instead of a
+/// torque model that drives the joint the wrong way.
+#[test]
+fn a_torque_recording_with_the_muscles_swapped_is_refused() {
+    let w = Workspace::new();
+    let rec = w.p("rec.csv");
+    ok(&bin()
+        .args(["sweep", "torque", "--plant"])
+        .arg(plant())
+        .arg("--out")
+        .arg(&rec)
+        .output()
+        .unwrap());
+    let text = std::fs::read_to_string(&rec).unwrap();
+    let mut header_done = false;
+    let swapped: String = text
+        .lines()
+        .map(|l| {
+            if !header_done && !l.starts_with('#') {
+                header_done = true;
+                format!(
+                    "{}\n",
+                    l.replace("p1_kpa", "P_TMP")
+                        .replace("p2_kpa", "p1_kpa")
+                        .replace("P_TMP", "p2_kpa")
+                )
+            } else {
+                format!("{l}\n")
+            }
+        })
+        .collect();
+    w.write("swap.csv", &swapped);
+    w.refuses(
+        "identify torque --recording {w}/swap.csv --plant {plant} --out {w}/out.toml",
+        &[
+            "swap.csv",
+            "opposite sign of the plant's muscles",
+            "swapped",
+        ],
+    );
+}
+
+/// A config file calibrate replaces that does not parse is named, nothing written: it keeps
+/// the muscle's pressure rating from plant_constants.toml, which a typo elsewhere in the file
+/// used to reset to 600 kPa silently.
+#[test]
+fn calibrate_refuses_a_config_file_it_replaces_that_does_not_parse() {
+    let w = Workspace::new();
+    std::fs::create_dir(w.p("cfg")).unwrap();
+    w.write(
+        "cfg/plant_constants.toml",
+        "[muscle]\np_max_gauge_pa = 400000.0   # our muscles: 4 bar\ninertia_kgm2 = 0.014 kg m^2\n",
+    );
+    w.refuses(
+        "calibrate --recording {fixture} --plant {plant} --out-dir {w}/cfg",
+        &[
+            "plant_constants.toml:3",
+            "does not parse",
+            "p_max_gauge_pa",
+            "nothing written",
+        ],
+    );
+}

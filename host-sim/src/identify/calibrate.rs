@@ -52,8 +52,8 @@ pub struct CalibrateArgs {
     /// Also tune the control gains on the plant file (`host-sim tune`, minutes).
     #[arg(long)]
     pub tune: bool,
-    /// Worker threads of the tuner (with --tune).
-    #[arg(long, default_value_t = 2)]
+    /// Worker threads of the tuner (with --tune; 1..=256, as every command's --threads).
+    #[arg(long, default_value_t = 2, value_parser = crate::validate::usize_in(1, 256))]
     pub threads: usize,
     /// First identify these plant-file keys (comma separated, `key` or `key=lo:hi`, as
     /// `host-sim identify plant --params`) by replaying a valve-driven recording; the
@@ -261,9 +261,6 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
             a.out_dir.display()
         );
     }
-    if a.tune && !(1..=64).contains(&a.threads) {
-        bail!("--threads {}: allowed 1..=64", a.threads);
-    }
     let file = a.recording.display().to_string();
     let dest = |name: &str| a.out_dir.join(name);
     // No file it replaces may be one it reads (e.g. --plant config/plant_constants.toml).
@@ -287,6 +284,27 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
     .collect();
     let outputs: Vec<(&str, &Path)> = written.iter().map(|p| ("--out-dir", p.as_path())).collect();
     crate::validate::distinct_outputs(&inputs, &outputs).map_err(anyhow::Error::msg)?;
+    // A file it replaces must parse: its values are what the report compares with, and the
+    // muscle's pressure rating is kept from plant_constants.toml (a file that does not parse
+    // would silently reset the rating to 600 kPa).
+    for p in &written {
+        if let Ok(text) = std::fs::read_to_string(p) {
+            if let Err(e) = text.parse::<toml::Table>() {
+                let at = e
+                    .span()
+                    .map(|s| format!(":{}", text[..s.start].matches('\n').count() + 1))
+                    .unwrap_or_default();
+                bail!(
+                    "{}{at}: the file calibrate would replace does not parse ({}); nothing \
+                     written: fix or remove it first (calibrate keeps the muscle's pressure \
+                     rating muscle.p_max_gauge_pa from plant_constants.toml and reports every \
+                     change against these files)",
+                    p.display(),
+                    e.message()
+                );
+            }
+        }
+    }
     // Stage 0 (optional): identify plant-file keys; the identified file is staged in a
     // temporary file beside the config for the later stages, and written at the end.
     let mut out = String::new();

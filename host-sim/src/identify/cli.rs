@@ -716,6 +716,27 @@ pub fn torque_model_file(a: &IdentifyTorqueArgs) -> Result<TorqueModelFile> {
     // p0 is the controller's mid pressure: the data mean to 0.1 kPa (the mean of noisy
     // readings is not meaningful below that).
     model.p0_gauge_pa = (model.p0_gauge_pa / 100.0).round() * 100.0;
+    // The sign of B r is physics, not data: dp raises p2 and lowers p1, so the plant's own
+    // muscles at angle 0 say which way the torque goes. The opposite sign fits as well on data
+    // whose p1 and p2 (or valves, or tension columns) are the other muscle's, and would make
+    // the firmware drive the joint the wrong way.
+    let chi0 = plant.joint.initial_contraction;
+    let delta_pa = 10e3;
+    let f = |p: f64| plant.muscle.static_force_n(p, chi0);
+    let plant_gain = plant.joint.sprocket_radius_m
+        * (f(model.p0_gauge_pa - delta_pa) - f(model.p0_gauge_pa + delta_pa))
+        / (2.0 * delta_pa);
+    let fitted_gain = model.b_m2 * model.sprocket_radius_m;
+    if fitted_gain * plant_gain < 0.0 {
+        bail!(
+            "{file}: the fitted B r = {fitted_gain:.4e} m^3 has the opposite sign of the plant's \
+             muscles ({plant_gain:.4e} m^3 at angle 0 and p0 = {:.1} kPa of {}): the recording's \
+             muscle 1 and 2 are swapped (p1_kpa / p2_kpa, the valve columns, or f1_n / f2_n); \
+             nothing written",
+            model.p0_gauge_pa / 1e3,
+            a.plant.display()
+        );
+    }
     // Eq. 11 assumes the symmetric activation p1 + p2 = 2 p0: report how far the data is from it.
     let p0_sd_pa = (samples
         .iter()
