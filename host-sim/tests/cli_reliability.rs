@@ -1094,3 +1094,16 @@ fn calibrate_refuses_a_config_file_it_replaces_that_does_not_parse() {
         ],
     );
 }
+
+/// `tune` replaces --out at the end of a long run: an existing file there that is not a gains
+/// file (a plant file picked by a completion slip) is refused before any work.
+#[test]
+fn tune_refuses_an_out_that_is_not_a_gains_file() {
+    let w = Workspace::new();
+    let copy = w.p("plant-copy.toml");
+    std::fs::copy(plant(), &copy).unwrap();
+    w.refuses(
+        "tune --plant {plant} --out {w}/plant-copy.toml --warm-start",
+        &["--out", "plant-copy.toml", "not a gains file"],
+    );
+}
