@@ -62,6 +62,22 @@ fn a_directory_is_diagnosed_in_parallel_with_one_json_each_and_a_summary() {
         std::fs::read_to_string(out.join("nominal.json")).unwrap(),
         std::fs::read_to_string(&single).unwrap()
     );
+    // The nominal recording replaced by a broken one: its earlier answer is removed, not left
+    // next to a summary that says "error"; a JSON that is not a diagnosis is left alone.
+    std::fs::write(recs.join("nominal.csv"), "t_s,u_in1\n0,0\n").unwrap();
+    std::fs::write(out.join("broken.json"), "my notes\n").unwrap();
+    let r = batch(&plant, &recs, &out, &[&"--jobs", &"2"]);
+    let stdout = String::from_utf8_lossy(&r.stdout);
+    assert_eq!(r.status.code(), Some(1), "{stdout}");
+    assert!(!out.join("nominal.json").exists(), "{stdout}");
+    assert!(
+        stdout.contains("nominal.json: an earlier run's answer"),
+        "{stdout}"
+    );
+    assert_eq!(
+        std::fs::read_to_string(out.join("broken.json")).unwrap(),
+        "my notes\n"
+    );
 }
 
 /// `diagnose-batch` of `recs` against `plant` into `out`, with `extra` arguments.

@@ -265,11 +265,25 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, u8)> {
     .map_err(anyhow::Error::msg)?;
     crate::io::atomic::create_dir_all(&a.out_dir)
         .with_context(|| format!("{}: cannot create the directory", a.out_dir.display()))?;
+    let mut removed = String::new();
     for r in &rows {
-        if let Ok(d) = &r.result {
-            let p = json_path(&a.out_dir, &r.recording);
-            crate::io::atomic::write_bytes(&p, d.json.as_bytes())
-                .with_context(|| format!("{}", p.display()))?;
+        let p = json_path(&a.out_dir, &r.recording);
+        match &r.result {
+            Ok(d) => crate::io::atomic::write_bytes(&p, d.json.as_bytes())
+                .with_context(|| format!("{}", p.display()))?,
+            // An earlier run's answer for a recording that now fails would read as this
+            // run's: removed (only a diagnosis JSON, this command's own output).
+            Err(_) => {
+                let stale = std::fs::read_to_string(&p)
+                    .is_ok_and(|t| t.trim_start().starts_with('{') && t.contains("\"verdict\""));
+                if stale {
+                    std::fs::remove_file(&p).with_context(|| format!("{}", p.display()))?;
+                    removed += &format!(
+                        "removed {}: an earlier run's answer for a recording that now fails\n",
+                        p.display()
+                    );
+                }
+            }
         }
     }
     let summary = own_summary;
@@ -277,7 +291,7 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, u8)> {
         .with_context(|| format!("{}", summary.display()))?;
     Ok((
         format!(
-            "{}wrote {} JSON files and {}\n",
+            "{}{removed}wrote {} JSON files and {}\n",
             summary_table(&rows),
             rows.iter().filter(|r| r.result.is_ok()).count(),
             summary.display()
