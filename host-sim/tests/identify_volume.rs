@@ -240,6 +240,53 @@ fn identify_volume_refuses_bad_input_with_status_2_and_writes_nothing() {
         })
         .collect();
     assert_eq!(cols.len(), 2, "both flow columns");
+    // The flows negated (a sensor logging outflow as positive), and the two columns swapped:
+    // both would pass the held-out comparison with the polynomial, which is as wrong there.
+    let edit_flows = |f: &dyn Fn(&[&str]) -> Vec<String>| -> String {
+        text.lines()
+            .map(|line| {
+                if line.starts_with('#') || line.starts_with("t_s") {
+                    return format!("{line}\n");
+                }
+                let v: Vec<&str> = line.split(',').collect();
+                let flows = f(&[v[cols[0]], v[cols[1]]]);
+                let fields: Vec<String> = (v.iter().enumerate())
+                    .map(|(i, x)| match cols.iter().position(|c| *c == i) {
+                        Some(j) => flows[j].clone(),
+                        None => x.to_string(),
+                    })
+                    .collect();
+                fields.join(",") + "\n"
+            })
+            .collect()
+    };
+    let negated = dir.path().join("negated.csv");
+    std::fs::write(
+        &negated,
+        edit_flows(&|f| {
+            f.iter()
+                .map(|x| format!("{}", -x.parse::<f64>().unwrap()))
+                .collect()
+        }),
+    )
+    .unwrap();
+    assert_refused(
+        &volume(&negated),
+        &[
+            "negated.csv",
+            "m_dot_1_kg_s",
+            "runs against muscle 1's pressure rate",
+            "INTO",
+        ],
+        &out,
+    );
+    let swapped = dir.path().join("swapped.csv");
+    std::fs::write(
+        &swapped,
+        edit_flows(&|f| vec![f[1].to_string(), f[0].to_string()]),
+    )
+    .unwrap();
+    assert_refused(&volume(&swapped), &["swapped.csv", "swapped"], &out);
     let in_grams = dir.path().join("grams.csv");
     std::fs::write(&in_grams, grams).unwrap();
     assert_refused(

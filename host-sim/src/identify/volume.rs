@@ -208,7 +208,48 @@ pub fn samples_from_recording(
             o.push(s);
         }
     }
+    check_flow_follows_pressure(&out)?;
     Ok(out)
+}
+
+/// The net flow into a muscle raises its pressure: each flow column must correlate positively
+/// with its own muscle's pressure rate, and better than with the other muscle's. A sensor that
+/// logs outflow as positive, or the two columns swapped, would train a network (and pass the
+/// held-out comparison, the polynomial being as wrong on such data) that inverts the
+/// feed-forward.
+fn check_flow_follows_pressure(out: &[Vec<VolumeSample>; 2]) -> Result<(), String> {
+    let corr = |a: &[VolumeSample], b: &[VolumeSample]| {
+        let x: Vec<f64> = a.iter().map(|s| s.m_dot_kg_s).collect();
+        let y: Vec<f64> = b.iter().map(|s| s.p_rate_pa_s).collect();
+        crate::signal::correlation(&x, &y)
+    };
+    let own = [corr(&out[0], &out[0]), corr(&out[1], &out[1])];
+    let cross = [corr(&out[0], &out[1]), corr(&out[1], &out[0])];
+    // Antagonistic muscles' pressure rates run against each other: a negated column
+    // correlates negatively with its own muscle and positively (less) with the other; swapped
+    // columns positively (more) with the other muscle.
+    if cross[0] > own[0].abs() && cross[1] > own[1].abs() {
+        return Err(format!(
+            "columns `{}` and `{}` follow the other muscle's pressure (correlation with their \
+             own muscle's pressure rate {:.2} / {:.2}, with the other's {:.2} / {:.2}): the two \
+             flow columns are swapped",
+            MASS_FLOW_COLUMNS[0], MASS_FLOW_COLUMNS[1], own[0], own[1], cross[0], cross[1]
+        ));
+    }
+    for i in 0..2 {
+        if own[i] < 0.0 {
+            // (|own| >= cross here, or the columns were named swapped above.)
+            return Err(format!(
+                "column `{}` runs against muscle {}'s pressure rate (correlation {:.2}): the \
+                 column is the net flow INTO the muscle; a sensor logging the outflow as \
+                 positive needs its sign flipped",
+                MASS_FLOW_COLUMNS[i],
+                i + 1,
+                own[i]
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// The network in f64 (the firmware kernel's structure).
