@@ -1107,3 +1107,20 @@ fn tune_refuses_an_out_that_is_not_a_gains_file() {
         &["--out", "plant-copy.toml", "not a gains file"],
     );
 }
+
+/// One tension column without the other is named, not silently replaced by the force model.
+#[test]
+fn identify_torque_refuses_one_tension_column_without_the_other() {
+    let w = Workspace::new();
+    // The fixture without f2_n (its tenth column).
+    w.write("onef.csv", &fixture_edited(|h| h.to_owned(), |i| i != 9));
+    w.refuses(
+        "identify torque --recording {w}/onef.csv --plant {plant} --out {w}/out.toml",
+        &[
+            "onef.csv",
+            "f2_n",
+            "while `f1_n` is there",
+            "needs both tensions",
+        ],
+    );
+}

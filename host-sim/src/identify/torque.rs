@@ -362,6 +362,24 @@ pub fn samples_from_recording(
     let vel = savgol_velocity(&angle, rec.sample_period_s(), half_window);
     let r = plant.joint.sprocket_radius_m;
     let (f1, f2) = (rec.channel(Channel::F1N), rec.channel(Channel::F2N));
+    // One tension without the other cannot give (f1 - f2) r; falling back to the force
+    // model silently would ignore the column the user recorded.
+    if f1.is_some() != f2.is_some() {
+        let (has, lacks) = if f1.is_some() {
+            ("f1_n", "f2_n")
+        } else {
+            ("f2_n", "f1_n")
+        };
+        return Err(IdentError::at(
+            file,
+            header_line,
+            lacks,
+            &format!(
+                "missing while `{has}` is there: the torque (f1_n - f2_n) r needs both tensions \
+                 (remove `{has}` to take the torque from the plant's force model instead)"
+            ),
+        ));
+    }
     let source = if f1.is_some() && f2.is_some() {
         TorqueSource::MeasuredTensions
     } else {
