@@ -78,6 +78,20 @@ fn a_directory_is_diagnosed_in_parallel_with_one_json_each_and_a_summary() {
         std::fs::read_to_string(out.join("broken.json")).unwrap(),
         "my notes\n"
     );
+    // Two recordings whose names differ only in their extension's case share a JSON: both
+    // named, nothing run.
+    std::fs::copy(
+        shared().join("conformance/pulses_nominal.csv"),
+        recs.join("nominal.CSV"),
+    )
+    .unwrap();
+    let r = batch(&plant, &recs, &out, &[]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert_eq!(r.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("the JSON of") && err.contains("nominal.CSV") && err.contains("nominal.csv"),
+        "{err}"
+    );
 }
 
 /// `diagnose-batch` of `recs` against `plant` into `out`, with `extra` arguments.

@@ -251,7 +251,18 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, u8)> {
     // Two recordings with the same stem would write the same JSON.
     let mut jsons: Vec<PathBuf> = recs.iter().map(|r| json_path(&a.out_dir, r)).collect();
     jsons.push(own_summary.clone());
-    let outs: Vec<(&str, &Path)> = jsons.iter().map(|p| ("--out-dir", p.as_path())).collect();
+    // Each output named by what it is for (two recordings whose names differ only in case
+    // or extension share a JSON: the message names both).
+    let labels: Vec<String> = recs
+        .iter()
+        .map(|r| format!("the JSON of {}", r.display()))
+        .chain(std::iter::once("the summary".to_string()))
+        .collect();
+    let outs: Vec<(&str, &Path)> = labels
+        .iter()
+        .zip(&jsons)
+        .map(|(l, p)| (l.as_str(), p.as_path()))
+        .collect();
     let ins: Vec<(&str, &Path)> = std::iter::once(("--plant", a.plant.as_path()))
         .chain(recs.iter().map(|p| ("--recordings", p.as_path())))
         .collect();
