@@ -455,8 +455,8 @@ fn sweep_torque(a: &SweepTorqueArgs) -> Result<String> {
     }
     // The passes sweep +-amplitude: both muscles must stay between their rest length and
     // the contraction where the braid gives no force.
-    let (law, joint) = (&plant.muscle.law, &plant.joint);
-    let chi_max = (1.0 - (law.b / law.a).sqrt()) / law.end_factor;
+    let joint = &plant.joint;
+    let chi_max = plant.muscle.law.max_contraction();
     let chi0 = joint.initial_contraction;
     let reach_rad = (chi_max - chi0).min(chi0) / joint.contraction_per_rad;
     if !(a.amplitude_rad < reach_rad) {

@@ -32,6 +32,11 @@ impl TonduLaw {
         }
     }
 
+    /// The contraction where the braid gives no force, `(1 - sqrt(b / a)) / k`.
+    pub fn max_contraction(&self) -> f64 {
+        (1.0 - (self.b / self.a).sqrt()) / self.end_factor
+    }
+
     /// The force before the clamp at 0 (negative where the muscle would have to push).
     #[inline(always)]
     pub fn force_unclamped_n(&self, p_gauge_pa: f64, contraction: f64) -> f64 {
