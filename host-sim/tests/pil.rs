@@ -291,10 +291,149 @@ fn capture_reads_defmt_print_text_lines_and_refuses_a_missing_sample() {
     )
     .unwrap();
     let r = host_sim(&[&"capture", &"--log", &flipped, &"--out", &n]);
-    assert_refused(&r, &["flipped.txt:7", "not a stream record (Checksum)"], &n);
+    assert_refused(
+        &r,
+        &[
+            "flipped.txt:7",
+            "not a stream record (checksum mismatch: a corrupted byte)",
+            "--split-at-gaps",
+        ],
+        &n,
+    );
 
     text += &line(&rec(5, f32::NAN));
     std::fs::write(&log, &text).unwrap();
     let r = host_sim(&[&"capture", &"--log", &log, &"--out", &n]);
     assert_refused(&r, &["rtt.txt: line 7", "no angle sample"], &n);
+}
+
+#[test]
+fn capture_splits_a_run_at_its_gaps_and_names_faulted_ticks() {
+    use pam_firmware::stream::{TickRecord, RECORD_LEN};
+    let dir = tempfile::tempdir().unwrap();
+    let rec = |seq: u32| TickRecord {
+        seq,
+        t_us: 1000 * seq + 500,
+        setpoint_rad: 0.1,
+        openings: [1.0, 0.0, (seq % 2) as f32, 1.0],
+        p_counts: [1547, 1600],
+        encoder_counts: 12,
+        p_gauge_pa: [266_601.56, 279_541.0],
+        angle_rad: 0.001 * seq as f32,
+        // A sensor fault latched from tick 15 on: the safe state's openings, still data.
+        fault: if seq >= 15 { 9 } else { 0 },
+        armed: seq < 15,
+    };
+    let bytes_of = |r: &TickRecord| {
+        let mut b = [0u8; RECORD_LEN];
+        r.encode(&mut b);
+        b
+    };
+    // Raw: ticks 0..30, tick 8 lost, tick 12's angle missing, tick 20 corrupted (one byte).
+    let mut raw = Vec::new();
+    for k in 0..30u32 {
+        let mut r = rec(k);
+        if k == 8 {
+            continue;
+        }
+        if k == 12 {
+            r.angle_rad = f32::NAN;
+        }
+        let mut b = bytes_of(&r);
+        if k == 20 {
+            b[10] ^= 0x40;
+        }
+        raw.extend_from_slice(&b);
+    }
+    let log = dir.path().join("run.stream");
+    std::fs::write(&log, &raw).unwrap();
+    let out = dir.path().join("run.csv");
+
+    // Without the flag: refused at the first gap, naming the flag; nothing written.
+    let r = host_sim(&[&"capture", &"--log", &log, &"--out", &out]);
+    assert_refused(
+        &r,
+        &["sequence 9 after 7", "1 record(s) lost", "--split-at-gaps"],
+        &out,
+    );
+
+    let r = host_sim(&[&"capture", &"--log", &log, &"--out", &out, &"--split-at-gaps"]);
+    ok(&r);
+    let stdout = String::from_utf8_lossy(&r.stdout).to_string();
+    assert!(!out.exists(), "pieces only");
+    let piece = |n: usize| Recording::read(dir.path().join(format!("run.{n}.csv"))).unwrap();
+    // 0..=7 | 9..=11 | (12 missing) 13..=19 | (20 corrupted) 21..=29
+    let lens: Vec<usize> = (1..=4).map(|n| piece(n).len()).collect();
+    assert_eq!(lens, [8, 3, 7, 9], "{stdout}");
+    assert!(!dir.path().join("run.5.csv").exists());
+    for needle in [
+        "sequence 8..=8: 1 record(s) lost",
+        "sequence 12: no angle sample",
+        "a corrupted record, not a lost one",
+        "4 piece(s)",
+        "1 tick(s) without a sensor sample dropped",
+    ] {
+        assert!(stdout.contains(needle), "{needle:?} in {stdout}");
+    }
+    // Each piece starts at t = 0, keeps the firmware's time in its source line, and the
+    // period is the stamped one exactly.
+    let p3 = piece(3);
+    assert_eq!(p3.t_s[0], 0.0);
+    let meta = |r: &Recording, k: &str| {
+        r.metadata
+            .iter()
+            .find(|(key, _)| key == k)
+            .map(|(_, v)| v.clone())
+            .unwrap_or_default()
+    };
+    assert!(meta(&p3, "source").contains("sequence 13..=19"), "{:?}", p3.metadata);
+    assert_eq!(meta(&p3, "sample_period_s"), "0.001");
+    // The latched fault (from tick 15) is named in the pieces that hold it, not before.
+    assert!(meta(&piece(1), "faulted").is_empty());
+    let f = meta(&p3, "faulted");
+    assert!(
+        f.contains("5 tick(s)") && f.contains("sequence 15") && f.contains("AngleStale"),
+        "{f}"
+    );
+    assert_eq!(meta(&p3, "armed_ticks"), "2 of 7");
+
+    // Text (defmt-print lines): a corrupted line is a gap in split mode, and the log's last
+    // line cut inside its record is ignored with a note in either mode.
+    let line = |b: &[u8]| {
+        let v: Vec<String> = b.iter().map(|x| x.to_string()).collect();
+        format!("0.001 INFO stream [{}]\n", v.join(", "))
+    };
+    let mut text = String::new();
+    for k in 0..10u32 {
+        let mut b = bytes_of(&rec(k));
+        if k == 4 {
+            b[7] ^= 1;
+        }
+        text += &line(&b);
+    }
+    let cut = line(&bytes_of(&rec(10)));
+    text += &cut[..cut.len() / 2];
+    let txt = dir.path().join("rtt.txt");
+    std::fs::write(&txt, &text).unwrap();
+    let t = dir.path().join("t.csv");
+    let r = host_sim(&[&"capture", &"--log", &txt, &"--out", &t, &"--split-at-gaps"]);
+    ok(&r);
+    let stdout = String::from_utf8_lossy(&r.stdout).to_string();
+    assert!(stdout.contains("line 5 between them is not a stream record (checksum mismatch"), "{stdout}");
+    assert!(stdout.contains("line 11, the log's last, is cut"), "{stdout}");
+    assert_eq!(Recording::read(dir.path().join("t.1.csv")).unwrap().len(), 4);
+    assert_eq!(Recording::read(dir.path().join("t.2.csv")).unwrap().len(), 5);
+
+    // A log with nothing but ticks without samples: a clear error, nothing written.
+    let mut none = Vec::new();
+    for k in 0..5u32 {
+        let mut r = rec(k);
+        r.p_gauge_pa[1] = f32::NAN;
+        none.extend_from_slice(&bytes_of(&r));
+    }
+    std::fs::write(&log, &none).unwrap();
+    let n = dir.path().join("n.csv");
+    let r = host_sim(&[&"capture", &"--log", &log, &"--out", &n, &"--split-at-gaps"]);
+    assert_refused(&r, &["5 without a sensor sample", "at least 2 consecutive ticks"], &n);
+    assert!(!dir.path().join("n.1.csv").exists());
 }

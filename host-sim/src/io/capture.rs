@@ -9,15 +9,19 @@
 //!   `defmt-print -e ELF --log-format {s}` on it.
 //!
 //! Columns: `t_s` from the record's time stamp, the four applied openings, `angle_deg` and
-//! `p1_kpa` / `p2_kpa` from the firmware's scaled values (what the controller saw). A lost
-//! record (a jump in the sequence number), a missing sensor sample (NaN) or a time stamp that
-//! does not increase is an error naming the record; nothing is interpolated. A record with a
-//! latched fault is kept and counted.
+//! `p1_kpa` / `p2_kpa` from the firmware's scaled values (what the controller saw). Nothing
+//! is interpolated: a gap in the stream (a lost record, a record that does not decode, a
+//! tick without a sensor sample) is an error naming it, or with `--split-at-gaps` the end of
+//! one piece of the run, each piece its own recording. A time stamp that does not increase
+//! or a sequence that goes back is always an error (the log is not one run). Ticks with a
+//! latched fault are kept (their openings are the safe state's, which the plant saw) and
+//! named in the recording's metadata (`faulted`).
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
-use pam_firmware::stream::{scan_records, TickRecord, RECORD_LEN};
+use pam_firmware::safety::FaultCode;
+use pam_firmware::stream::{scan_records, DecodeError, TickRecord, RECORD_LEN};
 
 use crate::io::recording::{Channel, Recording};
 use crate::plant::ValveInputs;
@@ -25,7 +29,7 @@ use crate::plant::ValveInputs;
 /// Arguments of `host-sim capture`.
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Example (a stream written by `host-sim pil --log`):\n  host-sim capture --log pil.stream --out captured.csv"
+    after_help = "Examples:\n  host-sim capture --log pil.stream --out captured.csv\n  host-sim capture --log rtt.log --out run.csv --split-at-gaps   # run.1.csv, run.2.csv, ..."
 )]
 pub struct CaptureArgs {
     /// The firmware image that wrote the log (decodes a raw defmt log through defmt-print).
@@ -34,9 +38,15 @@ pub struct CaptureArgs {
     /// The stream: raw records, `stream [..]` text lines, or (with --elf) a raw defmt log.
     #[arg(long, value_name = "LOG")]
     pub log: PathBuf,
-    /// Output recording (RECORDING.md).
+    /// Output recording (RECORDING.md); with --split-at-gaps the pieces go to OUT's name
+    /// numbered: run.csv -> run.1.csv, run.2.csv, ...
     #[arg(long, value_name = "REC.csv")]
     pub out: PathBuf,
+    /// A gap in the stream (lost or corrupted records, a tick without a sensor sample) ends
+    /// one piece of the run instead of refusing the log: each piece of at least 2 ticks is
+    /// written as its own recording (nothing is interpolated across a gap).
+    #[arg(long)]
+    pub split_at_gaps: bool,
 }
 
 /// Records in the raw bytes of a log, with their byte offsets.
@@ -46,36 +56,75 @@ pub fn records_of_bytes(bytes: &[u8]) -> (Vec<(usize, TickRecord)>, usize) {
     (v, skipped)
 }
 
+/// The stream records of a text log and what did not decode.
+#[derive(Debug, Default)]
+pub struct TextRecords {
+    /// Records with their line numbers (1-based).
+    pub records: Vec<(usize, TickRecord)>,
+    /// `stream [..]` lines that are not a record: line number and why.
+    pub bad: Vec<(usize, String)>,
+    /// The log ends inside its last `stream [` line (a log cut while being written): that
+    /// line's number; the line is ignored.
+    pub cut_last: Option<usize>,
+}
+
+/// Why a record does not decode, in words.
+fn decode_error_words(e: DecodeError) -> &'static str {
+    match e {
+        DecodeError::Short => "fewer bytes than a record",
+        DecodeError::Sync => "wrong sync bytes",
+        DecodeError::Checksum => "checksum mismatch: a corrupted byte",
+    }
+}
+
 /// Records in text lines `... stream [b0, b1, ...]`, with their line numbers (1-based).
-pub fn records_of_text(text: &str, file: &Path) -> anyhow::Result<Vec<(usize, TickRecord)>> {
-    let mut v = Vec::new();
+pub fn records_of_text(text: &str) -> TextRecords {
+    let mut out = TextRecords::default();
+    let n_lines = text.lines().count();
     for (i, line) in text.lines().enumerate() {
         let Some(p) = line.find("stream [") else {
             continue;
         };
         let rest = &line[p + "stream [".len()..];
         let Some(end) = rest.find(']') else {
-            anyhow::bail!("{}:{}: `stream [` without `]`", file.display(), i + 1);
+            if i + 1 == n_lines && !text.ends_with('\n') {
+                out.cut_last = Some(i + 1);
+            } else {
+                out.bad.push((i + 1, "`stream [` without `]`".into()));
+            }
+            continue;
         };
         let mut bytes = Vec::with_capacity(RECORD_LEN);
+        let mut not_byte = None;
         for tok in rest[..end].split(',') {
             let t = tok.trim();
-            let b = match t.strip_prefix("0x") {
+            match match t.strip_prefix("0x") {
                 Some(h) => u8::from_str_radix(h, 16),
                 None => t.parse::<u8>(),
+            } {
+                Ok(b) => bytes.push(b),
+                Err(_) => {
+                    not_byte = Some(format!("{t:?} is not a byte"));
+                    break;
+                }
             }
-            .map_err(|_| anyhow::anyhow!("{}:{}: {t:?} is not a byte", file.display(), i + 1))?;
-            bytes.push(b);
         }
-        let r = TickRecord::decode(&bytes).map_err(|e| {
-            anyhow::anyhow!("{}:{}: not a stream record ({e:?})", file.display(), i + 1)
-        })?;
-        v.push((i + 1, r));
+        if let Some(m) = not_byte {
+            out.bad.push((i + 1, m));
+            continue;
+        }
+        match TickRecord::decode(&bytes) {
+            Ok(r) => out.records.push((i + 1, r)),
+            Err(e) => out.bad.push((
+                i + 1,
+                format!("not a stream record ({})", decode_error_words(e)),
+            )),
+        }
     }
-    Ok(v)
+    out
 }
 
-/// What [`recording_of`] counted besides the samples.
+/// What [`pieces_of`] counted besides the samples.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct CaptureCounts {
     /// Ticks with a latched fault (kept).
@@ -83,6 +132,20 @@ pub struct CaptureCounts {
     /// Records that repeat the one before byte for byte (a logger that read its buffer
     /// twice): dropped, nothing is lost.
     pub repeated: usize,
+    /// Ticks without a sensor sample (split mode: dropped, each ends a piece).
+    pub missing: usize,
+    /// Ticks in pieces too short to be a recording (split mode: fewer than 2 ticks).
+    pub too_short: usize,
+}
+
+/// One piece of a captured run: its recording and how it ended.
+#[derive(Debug)]
+pub struct Piece {
+    pub recording: Recording,
+    /// First and last sequence number.
+    pub seq: (u32, u32),
+    /// The gap after it (`None`: the log's end).
+    pub ended_by: Option<String>,
 }
 
 /// The records with byte-for-byte repeats of the one before removed, and how many were.
@@ -107,36 +170,99 @@ fn without_repeats(records: &[(usize, TickRecord)]) -> (Vec<(usize, TickRecord)>
     (kept, repeated)
 }
 
-/// The recording of a record sequence; `what` names a record's position for errors
-/// (`byte 92`, `line 7`).
-pub fn recording_of(
+/// Where the records were found: raw bytes (positions are byte offsets) or text lines
+/// (line numbers, with the lines that did not decode).
+pub enum Positions<'a> {
+    Bytes,
+    Lines(&'a [(usize, String)]),
+}
+
+impl Positions<'_> {
+    fn what(&self) -> &'static str {
+        match self {
+            Positions::Bytes => "byte",
+            Positions::Lines(_) => "line",
+        }
+    }
+
+    /// What lies between two consecutive records at `prev_at` and `at` that did not decode.
+    fn between(&self, prev_at: usize, at: usize) -> Option<String> {
+        match self {
+            Positions::Bytes => {
+                let n = at.saturating_sub(prev_at + RECORD_LEN);
+                (n > 0).then(|| {
+                    format!(
+                        "{n} byte(s) between them do not decode: a corrupted record, not a \
+                         lost one"
+                    )
+                })
+            }
+            Positions::Lines(bad) => {
+                let inside: Vec<&(usize, String)> = bad
+                    .iter()
+                    .filter(|(l, _)| *l > prev_at && *l < at)
+                    .collect();
+                inside.first().map(|(l, why)| {
+                    format!(
+                        "line {l} between them is {why}{}",
+                        if inside.len() > 1 {
+                            format!(" (and {} more lines)", inside.len() - 1)
+                        } else {
+                            String::new()
+                        }
+                    )
+                })
+            }
+        }
+    }
+}
+
+/// The pieces of a record sequence. Without `split` a gap is an error (one piece, the
+/// whole run); with it each gap ends a piece and pieces shorter than 2 ticks are dropped
+/// (counted). A sequence that goes back or a time stamp that does not increase is an error
+/// either way.
+pub fn pieces_of(
     records: &[(usize, TickRecord)],
     file: &Path,
-    what: &str,
-) -> anyhow::Result<(Recording, CaptureCounts)> {
+    pos: &Positions<'_>,
+    split: bool,
+) -> anyhow::Result<(Vec<Piece>, CaptureCounts)> {
+    let what = pos.what();
     let (records, repeated) = without_repeats(records);
-    let records = records.as_slice();
-    if records.len() < 2 {
-        anyhow::bail!(
-            "{}: {} stream record(s); a recording needs at least 2",
-            file.display(),
-            records.len()
-        );
+    let mut counts = CaptureCounts {
+        repeated,
+        ..CaptureCounts::default()
+    };
+    let hint = "capture with --split-at-gaps to write the pieces between gaps as recordings";
+    if let (false, Positions::Lines(bad)) = (split, pos) {
+        if let Some((l, why)) = bad.first() {
+            anyhow::bail!("{}:{l}: {why}; {hint}", file.display());
+        }
     }
-    let mut rec = Recording::default();
-    let mut ch: [Vec<f64>; 3] = Default::default();
-    let mut faulted = 0;
-    for (i, (at, r)) in records.iter().enumerate() {
-        if i > 0 {
-            let prev = &records[i - 1].1;
-            let ahead = r.seq.wrapping_sub(prev.seq);
+    let mut pieces = Vec::new();
+    let mut cur: Vec<(usize, TickRecord)> = Vec::new();
+    let close = |cur: &mut Vec<(usize, TickRecord)>,
+                 ended_by: Option<String>,
+                 pieces: &mut Vec<Piece>,
+                 counts: &mut CaptureCounts| {
+        if cur.len() >= 2 {
+            pieces.push(piece_of(cur, file, ended_by));
+        } else {
+            counts.too_short += cur.len();
+        }
+        cur.clear();
+    };
+    let mut prev: Option<(usize, TickRecord)> = None;
+    for &(at, r) in &records {
+        if let Some((prev_at, p)) = prev {
+            let ahead = r.seq.wrapping_sub(p.seq);
             if ahead == 0 || ahead > u32::MAX / 2 {
                 anyhow::bail!(
                     "{}: {what} {at}: sequence {} after {}: a record {} (not a byte-for-byte \
                      repeat); the log is not one run in order",
                     file.display(),
                     r.seq,
-                    prev.seq,
+                    p.seq,
                     if ahead == 0 {
                         "repeated with other content"
                     } else {
@@ -144,45 +270,109 @@ pub fn recording_of(
                     }
                 );
             }
-            if r.seq != prev.seq.wrapping_add(1) {
-                anyhow::bail!(
-                    "{}: {what} {at}: sequence {} after {}: {} record(s) lost (not \
-                     interpolated; capture again with a larger RTT buffer or a lower rate)",
-                    file.display(),
-                    r.seq,
-                    prev.seq,
-                    r.seq.wrapping_sub(prev.seq).wrapping_sub(1)
-                );
-            }
-            if r.t_us <= prev.t_us {
+            if r.t_us <= p.t_us {
                 anyhow::bail!(
                     "{}: {what} {at}: time {} us after {} us",
                     file.display(),
                     r.t_us,
-                    prev.t_us
+                    p.t_us
+                );
+            }
+            if ahead != 1 {
+                let n = ahead - 1;
+                let gap = match pos.between(prev_at, at) {
+                    Some(c) => format!("{n} record(s) missing; {c}"),
+                    None => format!(
+                        "{n} record(s) lost (capture again with a larger RTT buffer or a \
+                         lower rate)"
+                    ),
+                };
+                if !split {
+                    anyhow::bail!(
+                        "{}: {what} {at}: sequence {} after {}: {gap}; nothing is \
+                         interpolated: {hint}",
+                        file.display(),
+                        r.seq,
+                        p.seq
+                    );
+                }
+                close(
+                    &mut cur,
+                    Some(format!("sequence {}..={}: {gap}", p.seq + 1, r.seq - 1)),
+                    &mut pieces,
+                    &mut counts,
                 );
             }
         }
-        let vals = [
-            ("angle", (r.angle_rad as f64).to_degrees()),
-            ("p1", r.p_gauge_pa[0] as f64 * 1e-3),
-            ("p2", r.p_gauge_pa[1] as f64 * 1e-3),
-        ];
-        for (c, (name, v)) in ch.iter_mut().zip(vals) {
-            if !v.is_finite() {
+        prev = Some((at, r));
+        let missing = [
+            ("angle", r.angle_rad),
+            ("p1", r.p_gauge_pa[0]),
+            ("p2", r.p_gauge_pa[1]),
+        ]
+        .into_iter()
+        .find(|(_, v)| !v.is_finite());
+        if let Some((name, _)) = missing {
+            if !split {
                 anyhow::bail!(
                     "{}: {what} {at} (sequence {}): no {name} sample (dropout or NaN); a \
-                     missing sample is not filled",
+                     missing sample is not filled: {hint}",
                     file.display(),
                     r.seq
                 );
             }
-            c.push(v);
+            counts.missing += 1;
+            if !cur.is_empty() {
+                close(
+                    &mut cur,
+                    Some(format!("sequence {}: no {name} sample", r.seq)),
+                    &mut pieces,
+                    &mut counts,
+                );
+            }
+            continue;
         }
         if r.fault != 0 {
-            faulted += 1;
+            counts.faulted += 1;
         }
-        rec.t_s.push((r.t_us - records[0].1.t_us) as f64 * 1e-6);
+        cur.push((at, r));
+    }
+    close(&mut cur, None, &mut pieces, &mut counts);
+    if pieces.is_empty() {
+        anyhow::bail!(
+            "{}: {} stream record(s){}; a recording needs at least 2 consecutive ticks with \
+             every sensor sample",
+            file.display(),
+            records.len(),
+            if counts.missing > 0 {
+                format!(", {} without a sensor sample", counts.missing)
+            } else {
+                String::new()
+            }
+        );
+    }
+    Ok((pieces, counts))
+}
+
+/// The recording of consecutive, complete records.
+fn piece_of(records: &[(usize, TickRecord)], file: &Path, ended_by: Option<String>) -> Piece {
+    let mut rec = Recording::default();
+    let mut ch: [Vec<f64>; 3] = Default::default();
+    let t0_us = records[0].1.t_us;
+    let mut first_fault: Option<(f64, u32, u8)> = None;
+    let mut faulted = 0usize;
+    let mut armed = 0usize;
+    for (_, r) in records {
+        let t_s = (r.t_us - t0_us) as f64 * 1e-6;
+        ch[0].push((r.angle_rad as f64).to_degrees());
+        ch[1].push(r.p_gauge_pa[0] as f64 * 1e-3);
+        ch[2].push(r.p_gauge_pa[1] as f64 * 1e-3);
+        if r.fault != 0 {
+            faulted += 1;
+            first_fault.get_or_insert((t_s, r.seq, r.fault));
+        }
+        armed += r.armed as usize;
+        rec.t_s.push(t_s);
         let u = |x: f32| x as f64;
         rec.inputs.push(ValveInputs {
             u_in1: u(r.openings[0]),
@@ -195,27 +385,62 @@ pub fn recording_of(
     rec.set_channel(Channel::AngleDeg, a);
     rec.set_channel(Channel::P1Kpa, p1);
     rec.set_channel(Channel::P2Kpa, p2);
+    let seq = (records[0].1.seq, records[records.len() - 1].1.seq);
+    // The period to the microsecond the firmware stamps (no float noise of the mean).
+    let period_s = ((records[records.len() - 1].1.t_us - t0_us) as f64
+        / (records.len() - 1) as f64)
+        .round()
+        * 1e-6;
     rec.metadata = vec![
         (
             "source".into(),
             format!(
-                "host-sim {} capture of {} (firmware per-tick stream, sequence {}..={})",
+                "host-sim {} capture of {} (firmware per-tick stream, sequence {}..={}, \
+                 firmware time {} s at t_s = 0)",
                 env!("CARGO_PKG_VERSION"),
                 file.display(),
-                records[0].1.seq,
-                records[records.len() - 1].1.seq
+                seq.0,
+                seq.1,
+                t0_us as f64 * 1e-6
             ),
         ),
-        (
-            "sample_period_s".into(),
-            format!("{}", rec.sample_period_s()),
-        ),
+        ("sample_period_s".into(), format!("{period_s}")),
         (
             "channels".into(),
             "angle_deg, p1_kpa, p2_kpa as the firmware scaled them".into(),
         ),
+        ("armed_ticks".into(), format!("{armed} of {}", records.len())),
     ];
-    Ok((rec, CaptureCounts { faulted, repeated }))
+    if let Some((t_s, s, code)) = first_fault {
+        let name = FaultCode::from_code(code)
+            .map(|c| format!("{c:?}"))
+            .unwrap_or_else(|| format!("unknown code {code}"));
+        rec.metadata.push((
+            "faulted".into(),
+            format!(
+                "{faulted} tick(s) with a latched fault, the first at t_s = {t_s} (sequence \
+                 {s}, {name}); their openings are the safe state's"
+            ),
+        ));
+    }
+    Piece {
+        recording: rec,
+        seq,
+        ended_by,
+    }
+}
+
+/// `run.csv` -> `run.<n>.csv` (the pieces of `--split-at-gaps`).
+pub fn piece_path(out: &Path, n: usize) -> PathBuf {
+    let stem = out
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let name = match out.extension() {
+        Some(e) => format!("{stem}.{n}.{}", e.to_string_lossy()),
+        None => format!("{stem}.{n}"),
+    };
+    out.with_file_name(name)
 }
 
 /// `host-sim capture`: returns the report printed on stdout.
@@ -235,12 +460,10 @@ pub fn run_capture(a: &CaptureArgs) -> anyhow::Result<String> {
     }
     let bytes = std::fs::read(&a.log).map_err(|e| anyhow::anyhow!("{}: {e}", a.log.display()))?;
     let (raw, skipped) = records_of_bytes(&bytes);
-    let (records, what, how) = if !raw.is_empty() {
-        (
-            raw,
-            "byte",
-            format!("raw records ({skipped} other bytes skipped)"),
-        )
+    let mut notes = Vec::new();
+    let (pieces, counts, how) = if !raw.is_empty() {
+        let (p, c) = pieces_of(&raw, &a.log, &Positions::Bytes, a.split_at_gaps)?;
+        (p, c, format!("raw records ({skipped} other bytes skipped)"))
     } else {
         let text = match (&a.elf, std::str::from_utf8(&bytes)) {
             (_, Ok(t)) if t.contains("stream [") => t.to_string(),
@@ -251,26 +474,77 @@ pub fn run_capture(a: &CaptureArgs) -> anyhow::Result<String> {
                 a.log.display()
             ),
         };
-        (
-            records_of_text(&text, &a.log)?,
-            "line",
-            "text lines".to_string(),
-        )
+        let t = records_of_text(&text);
+        if let Some(l) = t.cut_last {
+            notes.push(format!(
+                "line {l}, the log's last, is cut inside its record (a log cut while being \
+                 written): ignored"
+            ));
+        }
+        if let Some((l, why)) = t.bad.first() {
+            if a.split_at_gaps {
+                notes.push(format!(
+                    "{} `stream [` line(s) do not decode (the first: line {l}, {why}); a gap \
+                     where they stood between records",
+                    t.bad.len()
+                ));
+            }
+        }
+        let (p, c) = pieces_of(
+            &t.records,
+            &a.log,
+            &Positions::Lines(&t.bad),
+            a.split_at_gaps,
+        )?;
+        (p, c, "text lines".to_string())
     };
-    let (rec, counts) = recording_of(&records, &a.log, what)?;
-    rec.write(&a.out)?;
-    Ok(format!(
-        "wrote {}: {} ticks from {how}, {} bytes per record, {:.0} bytes/s at the logged rate; \
-         {} tick(s) with a latched fault; {} repeated record(s) dropped\n",
-        a.out.display(),
-        rec.len(),
+    let targets: Vec<PathBuf> = if a.split_at_gaps {
+        (1..=pieces.len()).map(|n| piece_path(&a.out, n)).collect()
+    } else {
+        vec![a.out.clone()]
+    };
+    let outs: Vec<(&str, &Path)> = targets.iter().map(|p| ("--out", p.as_path())).collect();
+    crate::validate::distinct_file_outputs(&inputs, &outs).map_err(anyhow::Error::msg)?;
+    let mut report = String::new();
+    for (p, path) in pieces.iter().zip(&targets) {
+        p.recording.write(path)?;
+        report += &format!(
+            "wrote {}: {} ticks (sequence {}..={}), {:.3} s{}\n",
+            path.display(),
+            p.recording.len(),
+            p.seq.0,
+            p.seq.1,
+            p.recording.t_s.last().copied().unwrap_or(0.0),
+            match &p.ended_by {
+                Some(g) => format!("; then a gap: {g}"),
+                None => String::new(),
+            }
+        );
+    }
+    let period_s = pieces[0].recording.sample_period_s();
+    report += &format!(
+        "{} piece(s) from {how}, {} bytes per record, {:.0} bytes/s at the logged rate; {} \
+         tick(s) with a latched fault (kept, named in each recording's `faulted` line); {} \
+         repeated record(s) dropped",
+        pieces.len(),
         RECORD_LEN,
-        RECORD_LEN as f64 / rec.sample_period_s(),
+        RECORD_LEN as f64 / period_s,
         counts.faulted,
         counts.repeated
-    ))
+    );
+    if a.split_at_gaps {
+        report += &format!(
+            "; {} tick(s) without a sensor sample dropped; {} tick(s) in pieces shorter than \
+             2 ticks dropped",
+            counts.missing, counts.too_short
+        );
+    }
+    report.push('\n');
+    for n in notes {
+        report += &format!("note: {n}\n");
+    }
+    Ok(report)
 }
-
 /// Runs `defmt-print -e ELF --log-format {s}` on a raw defmt log.
 fn decode_defmt(elf: &Path, log: &Path) -> anyhow::Result<String> {
     let input = std::fs::File::open(log).map_err(|e| anyhow::anyhow!("{}: {e}", log.display()))?;
