@@ -516,18 +516,13 @@ fn eprint_written(out: &Path, samples: usize, stats: &impl std::fmt::Display) {
 
 /// Warns when the recording's `plant` metadata names another plant file than `plant_path`.
 fn warn_other_plant(metadata: &[(String, String)], plant_path: &Path, inputs_path: &Path) {
-    let Some((_, named)) = metadata.iter().find(|(k, _)| k == "plant") else {
-        return;
-    };
-    let given = plant_path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned());
-    if given.as_deref() != Path::new(named).file_name().and_then(|n| n.to_str()) {
-        eprintln!(
-            "warning: {} was recorded on plant `{named}`, simulating {}",
-            inputs_path.display(),
-            plant_path.display()
-        );
+    if let Some(w) = host_sim::io::recording::other_plant_warning(
+        metadata,
+        plant_path,
+        inputs_path,
+        "simulating",
+    ) {
+        eprintln!("{w}");
     }
 }
 

@@ -92,7 +92,13 @@ fn calibrate_writes_the_torque_model_and_refuses_degenerate_data() {
 
     // A good recording: the three files are written and reported as new; a second run
     // reports every constant unchanged.
-    let out = ok(&calibrate(&rec, &cfg));
+    let r = calibrate(&rec, &cfg);
+    assert!(
+        !text(&r.stderr).contains("recorded on plant"),
+        "{}",
+        text(&r.stderr)
+    );
+    let out = ok(&r);
     assert!(
         out.contains("torque_model.b_m2") && out.contains("(new)"),
         "{out}"
@@ -136,7 +142,18 @@ fn calibrate_writes_the_torque_model_and_refuses_degenerate_data() {
         p.replace("inertia_kgm2 = 0.014", "inertia_kgm2 = 0.154"),
     )
     .unwrap();
-    let out = ok(&calibrate_with(&rec, &heavy, &cfg, &[]));
+    let r = calibrate_with(&rec, &heavy, &cfg, &[]);
+    // The recording names the plant it was made on: another file given is said first.
+    let err = text(&r.stderr);
+    assert!(
+        err.contains("rec.csv was recorded on plant `")
+            && err.contains(
+                "reference-1dof.toml`, calibrating with the geometry, supply and valve of"
+            )
+            && err.contains("heavy.toml"),
+        "{err}"
+    );
+    let out = ok(&r);
     assert!(
         out.contains("joint.inertia_kgm2: 1.4e-2 -> 1.54e-1"),
         "{out}"

@@ -357,7 +357,14 @@ fn capture_splits_a_run_at_its_gaps_and_names_faulted_ticks() {
         &out,
     );
 
-    let r = host_sim(&[&"capture", &"--log", &log, &"--out", &out, &"--split-at-gaps"]);
+    let r = host_sim(&[
+        &"capture",
+        &"--log",
+        &log,
+        &"--out",
+        &out,
+        &"--split-at-gaps",
+    ]);
     ok(&r);
     let stdout = String::from_utf8_lossy(&r.stdout).to_string();
     assert!(!out.exists(), "pieces only");
@@ -386,7 +393,11 @@ fn capture_splits_a_run_at_its_gaps_and_names_faulted_ticks() {
             .map(|(_, v)| v.clone())
             .unwrap_or_default()
     };
-    assert!(meta(&p3, "source").contains("sequence 13..=19"), "{:?}", p3.metadata);
+    assert!(
+        meta(&p3, "source").contains("sequence 13..=19"),
+        "{:?}",
+        p3.metadata
+    );
     assert_eq!(meta(&p3, "sample_period_s"), "0.001");
     // The latched fault (from tick 15) is named in the pieces that hold it, not before.
     assert!(meta(&piece(1), "faulted").is_empty());
@@ -419,10 +430,22 @@ fn capture_splits_a_run_at_its_gaps_and_names_faulted_ticks() {
     let r = host_sim(&[&"capture", &"--log", &txt, &"--out", &t, &"--split-at-gaps"]);
     ok(&r);
     let stdout = String::from_utf8_lossy(&r.stdout).to_string();
-    assert!(stdout.contains("line 5 between them is not a stream record (checksum mismatch"), "{stdout}");
-    assert!(stdout.contains("line 11, the log's last, is cut"), "{stdout}");
-    assert_eq!(Recording::read(dir.path().join("t.1.csv")).unwrap().len(), 4);
-    assert_eq!(Recording::read(dir.path().join("t.2.csv")).unwrap().len(), 5);
+    assert!(
+        stdout.contains("line 5 between them is not a stream record (checksum mismatch"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("line 11, the log's last, is cut"),
+        "{stdout}"
+    );
+    assert_eq!(
+        Recording::read(dir.path().join("t.1.csv")).unwrap().len(),
+        4
+    );
+    assert_eq!(
+        Recording::read(dir.path().join("t.2.csv")).unwrap().len(),
+        5
+    );
 
     // A log with nothing but ticks without samples: a clear error, nothing written.
     let mut none = Vec::new();
@@ -434,6 +457,10 @@ fn capture_splits_a_run_at_its_gaps_and_names_faulted_ticks() {
     std::fs::write(&log, &none).unwrap();
     let n = dir.path().join("n.csv");
     let r = host_sim(&[&"capture", &"--log", &log, &"--out", &n, &"--split-at-gaps"]);
-    assert_refused(&r, &["5 without a sensor sample", "at least 2 consecutive ticks"], &n);
+    assert_refused(
+        &r,
+        &["5 without a sensor sample", "at least 2 consecutive ticks"],
+        &n,
+    );
     assert!(!dir.path().join("n.1.csv").exists());
 }

@@ -355,6 +355,16 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
     };
     let plant = Plant::load(&plant_path)?;
     let rec = Recording::read(&a.recording)?;
+    // A recording made on another plant file than the one given: the geometry, supply and
+    // valve constants written below are the given file's, so say so first.
+    if let Some(w) = crate::io::recording::other_plant_warning(
+        &rec.metadata,
+        &a.plant,
+        &a.recording,
+        "calibrating with the geometry, supply and valve of",
+    ) {
+        eprintln!("{w}");
+    }
     let why = degenerate_reasons(&rec, &plant, &file);
     if !why.is_empty() {
         bail!(

@@ -387,10 +387,9 @@ fn piece_of(records: &[(usize, TickRecord)], file: &Path, ended_by: Option<Strin
     rec.set_channel(Channel::P2Kpa, p2);
     let seq = (records[0].1.seq, records[records.len() - 1].1.seq);
     // The period to the microsecond the firmware stamps (no float noise of the mean).
-    let period_s = ((records[records.len() - 1].1.t_us - t0_us) as f64
-        / (records.len() - 1) as f64)
-        .round()
-        * 1e-6;
+    let period_s =
+        ((records[records.len() - 1].1.t_us - t0_us) as f64 / (records.len() - 1) as f64).round()
+            * 1e-6;
     rec.metadata = vec![
         (
             "source".into(),
@@ -409,7 +408,10 @@ fn piece_of(records: &[(usize, TickRecord)], file: &Path, ended_by: Option<Strin
             "channels".into(),
             "angle_deg, p1_kpa, p2_kpa as the firmware scaled them".into(),
         ),
-        ("armed_ticks".into(), format!("{armed} of {}", records.len())),
+        (
+            "armed_ticks".into(),
+            format!("{armed} of {}", records.len()),
+        ),
     ];
     if let Some((t_s, s, code)) = first_fault {
         let name = FaultCode::from_code(code)

@@ -18,6 +18,28 @@ use std::path::{Path, PathBuf};
 use crate::io::numfmt;
 use crate::plant::{Measurement, ValveInputs};
 
+/// The warning for a recording whose `# plant` metadata names another plant file (by file
+/// name) than `plant_path`, the one a command is given; `None` when it names the same one or
+/// none.
+pub fn other_plant_warning(
+    metadata: &[(String, String)],
+    plant_path: &Path,
+    recording_path: &Path,
+    doing: &str,
+) -> Option<String> {
+    let (_, named) = metadata.iter().find(|(k, _)| k == "plant")?;
+    let given = plant_path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned());
+    (given.as_deref() != Path::new(named).file_name().and_then(|n| n.to_str())).then(|| {
+        format!(
+            "warning: {} was recorded on plant `{named}`, {doing} {}",
+            recording_path.display(),
+            plant_path.display()
+        )
+    })
+}
+
 /// A measured (or simulated) output channel.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Channel {
