@@ -78,6 +78,23 @@ fn a_directory_is_diagnosed_in_parallel_with_one_json_each_and_a_summary() {
         std::fs::read_to_string(out.join("broken.json")).unwrap(),
         "my notes\n"
     );
+    // A `*.csv` that is a link to nowhere or a directory is a row with its cause, not skipped.
+    #[cfg(unix)]
+    {
+        let odd = dir.path().join("odd");
+        std::fs::create_dir(&odd).unwrap();
+        std::os::unix::fs::symlink(dir.path().join("gone.csv"), odd.join("gone.csv")).unwrap();
+        std::fs::create_dir(odd.join("sub.csv")).unwrap();
+        let o = dir.path().join("odd-out");
+        let r = batch(&plant, &odd, &o, &[]);
+        let stdout = String::from_utf8_lossy(&r.stdout);
+        assert_eq!(r.status.code(), Some(1), "{stdout}");
+        let summary = std::fs::read_to_string(o.join("summary.csv")).unwrap();
+        assert!(
+            summary.contains("gone.csv,0,\"error:") && summary.contains("sub.csv,0,\"error:"),
+            "{summary}"
+        );
+    }
     // Two recordings whose names differ only in their extension's case share a JSON: both
     // named, nothing run.
     std::fs::copy(

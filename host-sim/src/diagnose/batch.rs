@@ -39,11 +39,13 @@ pub struct BatchDiagnosis {
     pub wall_s: f64,
 }
 
-/// The `*.csv` files of `dir`, sorted by name.
+/// The `*.csv` entries of `dir`, sorted by name: every one, also a symbolic link that leads
+/// nowhere or a directory named `*.csv`, so that each is a row of the summary (one that
+/// cannot be read fails there with its cause) instead of being skipped unsaid.
 pub fn recordings_in(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
     let mut v: Vec<PathBuf> = std::fs::read_dir(dir)?
         .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.is_file() && p.extension().is_some_and(|e| e.eq_ignore_ascii_case("csv")))
+        .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("csv")))
         .collect();
     v.sort();
     Ok(v)
