@@ -453,7 +453,10 @@ fn pil_checks_the_firmware_image_before_the_run_and_names_it() {
         (d.path().to_path_buf(), "not a regular file"),
         (empty, "is empty"),
         (text, "not an ELF file"),
-        (host_elf, "not a 32-bit little-endian ARM image"),
+        (
+            host_elf,
+            "64-bit little-endian x86-64 ELF file, not a 32-bit little-endian ARM",
+        ),
     ] {
         let r = on_plant(
             "pil",

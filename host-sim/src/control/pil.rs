@@ -575,11 +575,28 @@ pub fn check_elf_for(elf: &std::path::Path, hint: &str) -> Result<(), String> {
     const EM_ARM: u16 = 40;
     let machine = (head.len() >= 20).then(|| u16::from_le_bytes([head[18], head[19]]));
     if head.get(4) != Some(&1) || head.get(5) != Some(&1) || machine != Some(EM_ARM) {
+        let class = match head.get(4) {
+            Some(1) => "32-bit",
+            Some(2) => "64-bit",
+            _ => "unknown class",
+        };
+        let data = match head.get(5) {
+            Some(1) => "little-endian",
+            Some(2) => "big-endian",
+            _ => "unknown byte order",
+        };
+        let arch = match machine {
+            Some(3) => "x86".to_string(),
+            Some(40) => "ARM".to_string(),
+            Some(62) => "x86-64".to_string(),
+            Some(183) => "AArch64".to_string(),
+            Some(243) => "RISC-V".to_string(),
+            Some(m) => format!("machine {m}"),
+            None => "no machine field".to_string(),
+        };
         return Err(format!(
-            "is an ELF file but not a 32-bit little-endian ARM image (class {:?}, data {:?}, \
-             machine {machine:?}; the board needs machine {EM_ARM}, ARM) ({BUILD})",
-            head.get(4),
-            head.get(5)
+            "is a {class} {data} {arch} ELF file, not a 32-bit little-endian ARM (Cortex-M) \
+             firmware image ({BUILD})"
         ));
     }
     Ok(())
