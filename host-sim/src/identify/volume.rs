@@ -150,12 +150,17 @@ pub fn samples_from_recording(
     for (i, f) in flows.iter().enumerate() {
         if let Some(k) = f.iter().position(|v| v.abs() > MAX_MASS_FLOW_KG_S) {
             return Err(format!(
-                "column `{}` at t = {} s: {} kg/s, above the {} kg/s no valve for a \
+                "column `{}` at t = {} s: {} kg/s, {} the {} kg/s no valve for a \
                  muscle of this size passes (the column is in kg/s: a flow in g/s is 1000 \
                  times too large)",
                 MASS_FLOW_COLUMNS[i],
                 crate::validate::Shown(rec.t_s[k]),
                 crate::validate::Shown(f[k]),
+                if f[k] < 0.0 {
+                    "an outflow beyond"
+                } else {
+                    "above"
+                },
                 crate::validate::Shown(MAX_MASS_FLOW_KG_S)
             ));
         }
@@ -733,6 +738,27 @@ mod tests {
             p_abs_pa: 3.5e5,
             p_rate_pa_s: 4.0e5,
             m_dot_kg_s: 0.0,
+        }
+    }
+
+    #[test]
+    fn a_flow_column_in_another_unit_is_refused_by_its_sign() {
+        let n = 40;
+        let mut rec = Recording {
+            t_s: (0..n).map(|k| k as f64 * 1e-3).collect(),
+            inputs: vec![crate::plant::ValveInputs::default(); n],
+            ..Recording::default()
+        };
+        rec.set_channel(Channel::AngleDeg, vec![0.0; n]);
+        rec.set_channel(Channel::P1Kpa, vec![300.0; n]);
+        rec.set_channel(Channel::P2Kpa, vec![300.0; n]);
+        let geometry = JointGeometry::REFERENCE;
+        for (flow, says) in [(5.0, "5 kg/s, above"), (-5.0, "-5 kg/s, an outflow beyond")] {
+            let mut f = vec![0.0; n];
+            f[10] = flow;
+            rec.mass_flow_kg_s = Some([f, vec![0.0; n]]);
+            let e = samples_from_recording(&rec, &geometry, 101_325.0, 3).unwrap_err();
+            assert!(e.contains(says) && e.contains("g/s"), "{e}");
         }
     }
 
