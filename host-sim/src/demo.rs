@@ -113,6 +113,9 @@ fn first_existing(what: &str, flag: &str, candidates: Vec<PathBuf>) -> Result<Pa
 
 /// Runs the demo, writing into `opts.out_dir`.
 pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
+    // Before the runs: an --out-dir that is a file is refused by name (not "File exists"
+    // from the directory creation after them).
+    crate::validate::output_dir("--out-dir", &opts.out_dir).map_err(anyhow::Error::msg)?;
     let plant_path = match &opts.plant {
         Some(p) => p.clone(),
         None => first_existing(

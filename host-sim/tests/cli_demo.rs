@@ -75,3 +75,21 @@ fn demo_with_a_missing_plant_says_where_it_looked() {
     let err = String::from_utf8_lossy(&r.stderr);
     assert!(err.contains(&missing.display().to_string()), "{err}");
 }
+
+#[test]
+fn demo_into_a_file_is_refused_before_the_runs_and_the_file_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("afile");
+    std::fs::write(&file, "mine\n").unwrap();
+    let t0 = std::time::Instant::now();
+    let r = host_sim(&[&"demo", &"--out-dir", &file]);
+    assert_eq!(r.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(
+        err.contains("--out-dir") && err.contains("exists and is not a directory"),
+        "{err}"
+    );
+    // Refused first: no scenario ran (the demo's runs take seconds).
+    assert!(t0.elapsed() < std::time::Duration::from_secs(5));
+    assert_eq!(std::fs::read_to_string(&file).unwrap(), "mine\n");
+}
