@@ -185,9 +185,11 @@ dp_pid_gain_fields!(
 impl DpPidToml {
     fn validate(&self, table: &str, text: &str, file: &str) -> Result<(), IdentError> {
         let fields = [
-            ("kp_pa_per_rad", self.kp_pa_per_rad, f64::INFINITY),
-            ("ki_pa_per_rad_s", self.ki_pa_per_rad_s, f64::INFINITY),
-            ("kd_pa_s_per_rad", self.kd_pa_s_per_rad, f64::INFINITY),
+            // Beyond these a gain saturates dp (6e5 Pa) on less than one encoder count
+            // (8 000 per turn: 0.8 mrad) within a millisecond: a unit slip, not a tuning.
+            ("kp_pa_per_rad", self.kp_pa_per_rad, 1e10),
+            ("ki_pa_per_rad_s", self.ki_pa_per_rad_s, 1e12),
+            ("kd_pa_s_per_rad", self.kd_pa_s_per_rad, 1e9),
             ("setpoint_rate_weight", self.setpoint_rate_weight, 1.0),
             ("setpoint_rate_cutoff_hz", self.setpoint_rate_cutoff_hz, 1e4),
             ("i_limit_pa", self.i_limit_pa, 1e6),
@@ -312,7 +314,11 @@ fn check_fields(
                 file,
                 line,
                 &format!("{table}.{key}"),
-                &format!("{v} must be a finite number in 0..={max}"),
+                &if max.is_finite() {
+                    format!("{v} must be a finite number in 0..={max}")
+                } else {
+                    format!("{v} must be a finite number >= 0")
+                },
             ));
         }
     }
@@ -900,6 +906,12 @@ suite_mse_at_margin_rad2 = 0.000001
                 "ki_pa_per_rad_s = 0.0".into(),
                 "ki_pa_per_rad_s = 3.0".into(),
                 "t.toml:3: field `pd.ki_pa_per_rad_s`",
+            ),
+            // A gain in another unit (e.g. Pa per micro-radian): beyond its plausible range.
+            (
+                "[pd]\nkp_pa_per_rad = 500000.0".into(),
+                "[pd]\nkp_pa_per_rad = 5e11".into(),
+                "t.toml:2: field `pd.kp_pa_per_rad`: 500000000000 must be a finite number in 0..=10000000000",
             ),
             (
                 "i_limit_pa = 0.0".into(),
