@@ -89,6 +89,10 @@ fn demo_into_a_file_is_refused_before_the_runs_and_the_file_kept() {
         "{err}"
     );
     // Refused first: nothing of a run on stdout.
-    assert!(r.stdout.is_empty(), "{}", String::from_utf8_lossy(&r.stdout));
+    assert!(
+        r.stdout.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&r.stdout)
+    );
     assert_eq!(std::fs::read_to_string(&file).unwrap(), "mine\n");
 }

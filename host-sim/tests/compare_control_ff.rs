@@ -169,6 +169,20 @@ fn compare_control_refuses_bad_arguments_with_status_2() {
         &on_plant("compare-control", &"/nonexistent/p.toml", &[&"--quick"]),
     );
     assert!(e.contains("/nonexistent/p.toml"), "{e}");
+    // Another of the product's files given as the plant: named for what it is.
+    let gains_as_plant =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/control_tuned.toml");
+    let e = exits(
+        2,
+        &on_plant("compare-control", &gains_as_plant, &[&"--quick"]),
+    );
+    assert!(
+        e.contains("control_tuned.toml")
+            && e.contains("this is a control gains file")
+            && e.contains("not a plant file")
+            && !e.contains("volume_poly_m3"),
+        "{e}"
+    );
     let e = exits(
         2,
         &on_plant(

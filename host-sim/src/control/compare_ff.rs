@@ -662,6 +662,9 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
     // Arguments first: a bad one touches nothing and costs no run.
     let text = std::fs::read_to_string(&a.plant)
         .with_context(|| format!("--plant {}: cannot read", a.plant.display()))?;
+    // The plant file itself valid before its variants are made from it (an error then names
+    // its own key, not one of a variant's edits).
+    PlantConfig::from_toml_str(&text, &a.plant).context("--plant")?;
     let (tuning, gains) = match &a.gains {
         Some(p) => (
             ControlTuning::load(p).context("--gains")?,

@@ -142,6 +142,46 @@ pub fn read_plant_text(path: &Path) -> Result<String, ConfigError> {
     })
 }
 
+/// What another of this product's TOML files is, told by its tables, when `text` is one
+/// (given where a plant file belongs): `None` for anything else.
+fn other_product_file(text: &str) -> Option<&'static str> {
+    let doc: toml::Table = text.parse().ok()?;
+    let has = |t: &str| doc.contains_key(t);
+    if has("muscle") || has("joint") || has("joint1") {
+        return None;
+    }
+    [
+        (
+            "cascade",
+            "a control gains file (host-sim tune, config/control_tuned.toml)",
+        ),
+        (
+            "torque_model",
+            "a torque model file (host-sim identify torque)",
+        ),
+        ("force_law", "a force law file (host-sim identify force)"),
+        ("joint_geometry", "a firmware joint geometry file (config/)"),
+        (
+            "pressure_ff",
+            "a firmware feed-forward file (config/pressure_ff.toml)",
+        ),
+        (
+            "volume_fnn",
+            "a learned volume file (host-sim identify volume)",
+        ),
+        ("scenario", "a scenario file (scenarios/)"),
+        ("setpoint", "a scenario file (scenarios/)"),
+        ("channel", "an import mapping file (host-sim import)"),
+        (
+            "position",
+            "a firmware controller file (config/controller.toml)",
+        ),
+    ]
+    .into_iter()
+    .find(|(t, _)| has(t))
+    .map(|(_, kind)| kind)
+}
+
 /// Parses plant TOML text of any plant kind and validates it with `validate`; a validation
 /// error names the line of its key where the text has one. `path` is only used in messages.
 pub fn parse_plant_text<T: serde::de::DeserializeOwned>(
@@ -153,7 +193,16 @@ pub fn parse_plant_text<T: serde::de::DeserializeOwned>(
         path: path.to_owned(),
         // toml's message already names the key (`unknown field `x``, `missing field `y``)
         // and the line; keep it on one line after the file name.
-        message: e.to_string().trim_end().replace('\n', "\n  "),
+        message: format!(
+            "{}{}",
+            e.to_string().trim_end().replace('\n', "\n  "),
+            other_product_file(text)
+                .map(|kind| format!(
+                    "\n  this is {kind}, not a plant file (PLANT.md: [environment], [muscle], \
+                     [joint], [valve], [initial])"
+                ))
+                .unwrap_or_default()
+        ),
     })?;
     validate(&cfg, path).map_err(|e| match e {
         ConfigError::Invalid { path, key, message } => {
