@@ -131,20 +131,21 @@ impl PlantFit {
             "parameter", "start", "fitted", "change"
         );
         for (k, a, b) in &self.params {
-            let _ = writeln!(
-                s,
-                "{k:<44} {a:>14.6e} {b:>14.6e} {:>8.2}%",
-                if *a != 0.0 {
-                    100.0 * (b / a - 1.0)
-                } else {
-                    f64::NAN
-                }
-            );
+            // Relative to the start; from a start of 0 the absolute change.
+            let change = if *a != 0.0 {
+                format!("{:>8.2}%", 100.0 * (b / a - 1.0))
+            } else {
+                format!("{:+.3e} (from 0)", b - a)
+            };
+            let _ = writeln!(s, "{k:<44} {a:>14.6e} {b:>14.6e} {change:>9}");
         }
         for (name, scores) in [
             ("training part", &self.train),
             ("held-out tail", &self.holdout),
         ] {
+            if scores.is_empty() {
+                continue;
+            }
             let _ = writeln!(
                 s,
                 "fit [%] on the {name}: {:<10} {:>9} {:>9}",
@@ -162,6 +163,9 @@ impl PlantFit {
             }
             let (b, a) = mean_scores(scores);
             let _ = writeln!(s, "{:>33} {:<10} {:>9.3} {:>9.3}", "", "mean", b, a);
+        }
+        if self.holdout.is_empty() {
+            let _ = writeln!(s, "fit [%] on the held-out tail: none held out");
         }
         s
     }
@@ -548,12 +552,21 @@ pub fn identify_plant_text(
     for (k, a, b) in &fit.params {
         let _ = writeln!(body, "#   {k}: {a:e} -> {b:e}");
     }
-    let (hb, ha) = fit.holdout_mean_pct();
-    let _ = writeln!(
-        body,
-        "#   held-out tail ({} samples): mean fit {hb:.3} % -> {ha:.3} %",
-        fit.samples.1
-    );
+    if fit.holdout.is_empty() {
+        let (tb, ta) = mean_scores(&fit.train);
+        let _ = writeln!(
+            body,
+            "#   nothing held out; training part ({} samples): mean fit {tb:.3} % -> {ta:.3} %",
+            fit.samples.0
+        );
+    } else {
+        let (hb, ha) = fit.holdout_mean_pct();
+        let _ = writeln!(
+            body,
+            "#   held-out tail ({} samples): mean fit {hb:.3} % -> {ha:.3} %",
+            fit.samples.1
+        );
+    }
     body.push_str(&fit.toml);
     Ok((fit, body))
 }
@@ -561,6 +574,33 @@ pub fn identify_plant_text(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_summary_reports_a_start_of_zero_and_nothing_held_out_in_words() {
+        let score = |c| ChannelScore {
+            channel: c,
+            before_pct: 90.0,
+            after_pct: 99.0,
+        };
+        let fit = PlantFit {
+            params: vec![
+                ("joint.inertia_kgm2".into(), 0.014, 0.0154),
+                ("initial.angle_rad".into(), 0.0, 0.002),
+            ],
+            train: vec![score(Channel::AngleDeg)],
+            holdout: Vec::new(),
+            samples: (100, 0),
+            termination: "converged".into(),
+            evaluations: 3,
+            cost: (1.0, 0.1),
+            toml: String::new(),
+        };
+        let s = fit.summary();
+        assert!(s.contains("10.00%"), "{s}");
+        assert!(s.contains("+2.000e-3 (from 0)"), "{s}");
+        assert!(!s.contains("NaN") && !s.contains("-0.000"), "{s}");
+        assert!(s.contains("held-out tail: none held out"), "{s}");
+    }
 
     #[test]
     fn param_specs_parse_bounds_and_reject_bad_keys() {
