@@ -9,7 +9,7 @@ use std::path::Path;
 
 use host_sim::diagnose::synth::{expected_id, generate, plant_with, Excitation, SynthSpec};
 use host_sim::diagnose::{diagnose, DiagnoseOptions, Diagnosis, Verdict};
-use host_sim::{PlantConfig, Recording};
+use host_sim::{Channel, PlantConfig, Recording};
 
 fn nominal() -> PlantConfig {
     PlantConfig::load(plant()).unwrap()
@@ -840,4 +840,33 @@ fn text_of_any_status(r: &std::process::Output) -> String {
         text(&r.stderr)
     );
     text(&r.stdout)
+}
+
+/// A noise-free recording (the independent conformance run) whose angle alone is offset by
+/// 0.5 deg after 1 s: only the angle is located; the other channels, which still fit the
+/// model to rounding (100.0 %), are not listed as departures.
+#[test]
+fn only_channels_that_depart_are_located_on_noise_free_data() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut rec = Recording::read(shared().join("conformance/pulses_nominal.csv")).unwrap();
+    let t = rec.t_s.clone();
+    let mut angle = rec.channel(Channel::AngleDeg).unwrap().to_vec();
+    for (a, t) in angle.iter_mut().zip(&t) {
+        if *t > 1.0 {
+            *a += 0.5;
+        }
+    }
+    rec.set_channel(Channel::AngleDeg, angle);
+    let p = dir.path().join("bumped.csv");
+    rec.write(&p).unwrap();
+    let out = dir.path().join("out.json");
+    let r = on_plant("diagnose", &plant(), &[&"--recording", &p, &"--json", &out]);
+    let stdout = String::from_utf8_lossy(&r.stdout).to_string();
+    let located: Vec<&str> = stdout
+        .lines()
+        .filter(|l| l.starts_with("Located:"))
+        .collect();
+    assert_eq!(located.len(), 1, "{stdout}");
+    assert!(located[0].starts_with("Located: angle_deg"), "{stdout}");
+    assert!(!stdout.contains("(fit 100.0 %)"), "{stdout}");
 }
