@@ -191,6 +191,21 @@ struct SimulateArgs {
     /// (docs/reliability.md).
     #[arg(long)]
     allow_large: bool,
+    /// Where an --inputs replay starts: `auto` = from the recording's first sample when it
+    /// sits away from the plant file's [initial] (20 kPa or 3 deg; a segment cut from a run,
+    /// a rig that rests elsewhere), else from [initial]; `recording` = always from the first
+    /// sample (angle, pressures as the sensors read them, velocity from the angle's first
+    /// 20 ms); `file` = always from [initial].
+    #[arg(long, value_enum, default_value_t = StartFrom::Auto, requires = "inputs")]
+    start: StartFrom,
+}
+
+/// Where an open-loop replay starts (`simulate --start`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum StartFrom {
+    Auto,
+    Recording,
+    File,
 }
 
 #[derive(Args)]
@@ -426,7 +441,7 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
     if host_sim::plant::arm3::is_arm3_file(plant_path)? {
         return run_simulate_arm3(a, inputs_path);
     }
-    let plant = Plant::load(plant_path)?;
+    let plant = replay_start(a, plant_path, inputs_path)?;
     let opts = a.solver_options()?;
     if a.plot.is_none() {
         if let Some(done) = simulate_streaming(a, &plant, inputs_path, &opts)? {
@@ -496,6 +511,66 @@ fn simulate_streaming(
         (Err(_), None) => Ok(None),
         (Err(e), Some(_)) => Err(anyhow::anyhow!("{}: {e}", a.out.display())),
     }
+}
+
+/// The plant of an `--inputs` replay, started as `--start` says (a note on stderr when it
+/// starts from the recording). The recording's start is read from its head (the first 64
+/// KiB), so that a long recording still streams; a head that does not parse leaves the
+/// file's start (the full read then names the error).
+fn replay_start(a: &SimulateArgs, plant_path: &Path, inputs_path: &Path) -> Result<Plant> {
+    let cfg = host_sim::PlantConfig::load(plant_path)?;
+    if a.start == StartFrom::File {
+        return Ok(Plant::from_config(&cfg));
+    }
+    let head = {
+        use std::io::Read as _;
+        let mut buf = Vec::new();
+        std::fs::File::open(inputs_path)
+            .and_then(|f| f.take(64 * 1024).read_to_end(&mut buf))
+            .with_context(|| inputs_path.display().to_string())?;
+        let text = String::from_utf8_lossy(&buf);
+        // Whole lines only (the head may end inside one).
+        let end = if buf.len() < 64 * 1024 {
+            text.len()
+        } else {
+            text.rfind('\n').map_or(0, |i| i + 1)
+        };
+        Recording::parse(&text[..end], inputs_path).ok()
+    };
+    let Some(head) = head.filter(|h| h.len() >= 2) else {
+        return Ok(Plant::from_config(&cfg));
+    };
+    let away = host_sim::diagnose::verdict::channels_away_from_initial(&cfg, &head);
+    if a.start == StartFrom::Auto && away.is_empty() {
+        return Ok(Plant::from_config(&cfg));
+    }
+    let started = host_sim::diagnose::start::as_recorded(&cfg, &head);
+    eprintln!(
+        "note: {} replayed from its first sample (angle {:.3} deg, p1 {}, p2 {}, velocity \
+         {:.4} rad/s from its first 20 ms){}; --start file replays from [initial]",
+        inputs_path.display(),
+        started.initial.angle_rad.to_degrees(),
+        fmt_kpa(head.channel(host_sim::Channel::P1Kpa)),
+        fmt_kpa(head.channel(host_sim::Channel::P2Kpa)),
+        started.initial.velocity_rad_s,
+        if away.is_empty() {
+            String::new()
+        } else {
+            format!(
+                ": it does not start at the plant file's [initial] ({})",
+                away.join(", ")
+            )
+        }
+    );
+    Ok(Plant::from_config(&started))
+}
+
+/// A recording's first pressure sample as text (`not recorded: [initial]'s` when absent).
+fn fmt_kpa(ch: Option<&[f64]>) -> String {
+    ch.map_or_else(
+        || "not recorded ([initial]'s)".to_string(),
+        |y| format!("{:.1} kPa", y[0]),
+    )
 }
 
 /// A progress bar on stderr of `len` steps (`None`: unknown) drawn by `template`.

@@ -30,6 +30,56 @@ fn simulate_then_fit_a_fixture() {
     assert_channel_fits(&stdout, 99.5);
 }
 
+/// A segment cut from the middle of a run (as `capture --split` / `import --split` write
+/// them: the joint moving, the pressures far from the plant file's [initial]) replays from
+/// its own first sample, with a note; `--start file` replays from [initial] and departs.
+#[test]
+fn a_segment_cut_from_a_run_replays_from_its_first_sample() {
+    use host_sim::{Channel, Recording};
+    let dir = tempfile::tempdir().unwrap();
+    let full = Recording::read(fixture("pulses_nominal.csv")).unwrap();
+    let k0 = full.t_s.iter().position(|t| *t >= 7.3).unwrap();
+    let mut tail = Recording {
+        t_s: full.t_s[k0..].iter().map(|t| t - full.t_s[k0]).collect(),
+        inputs: full.inputs[k0..].to_vec(),
+        ..Recording::default()
+    };
+    for c in Channel::ALL {
+        if let Some(y) = full.channel(c) {
+            tail.set_channel(c, y[k0..].to_vec());
+        }
+    }
+    let seg = dir.path().join("segment.csv");
+    tail.write(&seg).unwrap();
+    let fit_of = |start: &str| {
+        let out = dir.path().join(format!("sim_{start}.csv"));
+        let r = on_plant(
+            "simulate",
+            &fixture("reference-1dof.toml"),
+            &[&"--inputs", &seg, &"--out", &out, &"--start", &start],
+        );
+        let err = String::from_utf8_lossy(&r.stderr).to_string();
+        ok(&r);
+        let stdout = run_ok(&[&"fit", &seg, &out]);
+        (stdout, err)
+    };
+    let (auto, note) = fit_of("auto");
+    assert!(
+        note.contains("replayed from its first sample") && note.contains("initial.p1_gauge_pa"),
+        "{note}"
+    );
+    assert_channel_fits(&auto, 99.5);
+    let (file, note) = fit_of("file");
+    assert!(!note.contains("first sample"), "{note}");
+    let angle: f64 = file
+        .lines()
+        .find(|l| l.starts_with("angle_deg"))
+        .and_then(|l| l.split_whitespace().nth(1))
+        .and_then(|v| v.parse().ok())
+        .unwrap();
+    assert!(angle < 50.0, "from [initial] the segment departs: {file}");
+}
+
 #[test]
 fn fit_fails_with_status_1_below_min_fit() {
     let dir = tempfile::tempdir().unwrap();

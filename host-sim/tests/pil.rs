@@ -296,7 +296,7 @@ fn capture_reads_defmt_print_text_lines_and_refuses_a_missing_sample() {
         &[
             "flipped.txt:7",
             "not a stream record (checksum mismatch: a corrupted byte)",
-            "--split-at-gaps",
+            "--split",
         ],
         &n,
     );
@@ -348,44 +348,45 @@ fn capture_splits_a_run_at_its_gaps_and_names_faulted_ticks() {
     let log = dir.path().join("run.stream");
     std::fs::write(&log, &raw).unwrap();
     let out = dir.path().join("run.csv");
+    let seg = |n: usize| dir.path().join(format!("run-{n}.csv"));
 
     // Without the flag: refused at the first gap, naming the flag; nothing written.
     let r = host_sim(&[&"capture", &"--log", &log, &"--out", &out]);
     assert_refused(
         &r,
-        &["sequence 9 after 7", "1 record(s) lost", "--split-at-gaps"],
+        &["sequence 9 after 7", "1 record(s) lost", "--split"],
         &out,
     );
+    // A file of a segment's name that is not a capture's: overwritten only as an output,
+    // and one beyond this capture's segments (run-5.csv) is named and left alone.
+    std::fs::write(seg(5), "mine\n").unwrap();
 
-    let r = host_sim(&[
-        &"capture",
-        &"--log",
-        &log,
-        &"--out",
-        &out,
-        &"--split-at-gaps",
-    ]);
+    let r = host_sim(&[&"capture", &"--log", &log, &"--out", &out, &"--split"]);
     ok(&r);
     let stdout = String::from_utf8_lossy(&r.stdout).to_string();
-    assert!(!out.exists(), "pieces only");
-    let piece = |n: usize| Recording::read(dir.path().join(format!("run.{n}.csv"))).unwrap();
+    assert!(!out.exists(), "segments only");
+    let piece = |n: usize| Recording::read(seg(n)).unwrap();
     // 0..=7 | 9..=11 | (12 missing) 13..=19 | (20 corrupted) 21..=29
     let lens: Vec<usize> = (1..=4).map(|n| piece(n).len()).collect();
     assert_eq!(lens, [8, 3, 7, 9], "{stdout}");
-    assert!(!dir.path().join("run.5.csv").exists());
     for needle in [
         "sequence 8..=8: 1 record(s) lost",
         "sequence 12: no angle sample",
         "a corrupted record, not a lost one",
-        "4 piece(s)",
+        "4 segment(s)",
         "1 tick(s) without a sensor sample dropped",
+        "run-5.csv is not part of this capture (4 segments)",
     ] {
         assert!(stdout.contains(needle), "{needle:?} in {stdout}");
     }
-    // Each piece starts at t = 0, keeps the firmware's time in its source line, and the
-    // period is the stamped one exactly.
+    assert_eq!(std::fs::read_to_string(seg(5)).unwrap(), "mine\n");
+    // Each segment starts at t = 0, keeps the firmware's time in its source line, and the
+    // period is the stamped one exactly; times carry no float noise.
     let p3 = piece(3);
     assert_eq!(p3.t_s[0], 0.0);
+    assert!(std::fs::read_to_string(seg(3))
+        .unwrap()
+        .contains("\n0.006,"));
     let meta = |r: &Recording, k: &str| {
         r.metadata
             .iter()
@@ -393,13 +394,13 @@ fn capture_splits_a_run_at_its_gaps_and_names_faulted_ticks() {
             .map(|(_, v)| v.clone())
             .unwrap_or_default()
     };
+    let src = meta(&p3, "source");
     assert!(
-        meta(&p3, "source").contains("sequence 13..=19"),
-        "{:?}",
-        p3.metadata
+        src.contains("sequence 13..=19") && src.contains("firmware time 0.0135 s"),
+        "{src}"
     );
     assert_eq!(meta(&p3, "sample_period_s"), "0.001");
-    // The latched fault (from tick 15) is named in the pieces that hold it, not before.
+    // The latched fault (from tick 15) is named in the segments that hold it, not before.
     assert!(meta(&piece(1), "faulted").is_empty());
     let f = meta(&p3, "faulted");
     assert!(
@@ -407,6 +408,70 @@ fn capture_splits_a_run_at_its_gaps_and_names_faulted_ticks() {
         "{f}"
     );
     assert_eq!(meta(&p3, "armed_ticks"), "2 of 7");
+
+    // The same OUT again from a log without gaps: one recording, OUT itself; the earlier
+    // capture's segments are removed (they would pass for part of this run), the user's
+    // file is not.
+    let clean: Vec<u8> = (0..30u32).flat_map(|k| bytes_of(&rec(k))).collect();
+    std::fs::write(&log, &clean).unwrap();
+    let r = host_sim(&[&"capture", &"--log", &log, &"--out", &out, &"--split"]);
+    let stdout = ok(&r);
+    assert_eq!(Recording::read(&out).unwrap().len(), 30);
+    for n in 1..=4 {
+        assert!(!seg(n).exists(), "run-{n}.csv left: {stdout}");
+    }
+    assert!(
+        stdout.contains("removed") && stdout.contains("a segment of an earlier capture"),
+        "{stdout}"
+    );
+    assert!(seg(5).exists());
+
+    // The 32-bit microsecond stamp wraps (every 71.6 min): time goes on across it; a
+    // firmware restart (sequence back to 0) is a new run, refused without --split.
+    let near = u32::MAX - 2_500;
+    let wrapped: Vec<u8> = (0..6u32)
+        .flat_map(|k| {
+            bytes_of(&TickRecord {
+                t_us: near.wrapping_add(1000 * k),
+                ..rec(k)
+            })
+        })
+        .collect();
+    std::fs::write(&log, &wrapped).unwrap();
+    let w = dir.path().join("w.csv");
+    ok(&host_sim(&[&"capture", &"--log", &log, &"--out", &w]));
+    assert_eq!(
+        Recording::read(&w).unwrap().t_s,
+        [0.0, 0.001, 0.002, 0.003, 0.004, 0.005]
+    );
+    let mut restarted = clean[..10 * RECORD_LEN].to_vec();
+    restarted.extend_from_slice(&clean[..5 * RECORD_LEN]);
+    std::fs::write(&log, &restarted).unwrap();
+    let rr = dir.path().join("rr.csv");
+    let r = host_sim(&[&"capture", &"--log", &log, &"--out", &rr]);
+    assert_refused(
+        &r,
+        &["sequence 0 after 9", "firmware that restarted", "--split"],
+        &rr,
+    );
+    let stdout = ok(&host_sim(&[
+        &"capture", &"--log", &log, &"--out", &rr, &"--split",
+    ]));
+    assert!(stdout.contains("the firmware restarted"), "{stdout}");
+    let rr2 = dir.path().join("rr-2.csv");
+    assert_eq!(Recording::read(&rr2).unwrap().len(), 5);
+
+    // A corrupted first record: named, not dropped without a word.
+    let mut first_bad = clean.clone();
+    first_bad[10] ^= 0x40;
+    std::fs::write(&log, &first_bad).unwrap();
+    let fb = dir.path().join("fb.csv");
+    let stdout = ok(&host_sim(&[&"capture", &"--log", &log, &"--out", &fb]));
+    assert!(
+        stdout.contains("before the first record do not decode but hold a record's sync bytes"),
+        "{stdout}"
+    );
+    assert_eq!(Recording::read(&fb).unwrap().len(), 29);
 
     // Text (defmt-print lines): a corrupted line is a gap in split mode, and the log's last
     // line cut inside its record is ignored with a note in either mode.
@@ -427,9 +492,8 @@ fn capture_splits_a_run_at_its_gaps_and_names_faulted_ticks() {
     let txt = dir.path().join("rtt.txt");
     std::fs::write(&txt, &text).unwrap();
     let t = dir.path().join("t.csv");
-    let r = host_sim(&[&"capture", &"--log", &txt, &"--out", &t, &"--split-at-gaps"]);
-    ok(&r);
-    let stdout = String::from_utf8_lossy(&r.stdout).to_string();
+    let r = host_sim(&[&"capture", &"--log", &txt, &"--out", &t, &"--split"]);
+    let stdout = ok(&r);
     assert!(
         stdout.contains("line 5 between them is not a stream record (checksum mismatch"),
         "{stdout}"
@@ -439,11 +503,11 @@ fn capture_splits_a_run_at_its_gaps_and_names_faulted_ticks() {
         "{stdout}"
     );
     assert_eq!(
-        Recording::read(dir.path().join("t.1.csv")).unwrap().len(),
+        Recording::read(dir.path().join("t-1.csv")).unwrap().len(),
         4
     );
     assert_eq!(
-        Recording::read(dir.path().join("t.2.csv")).unwrap().len(),
+        Recording::read(dir.path().join("t-2.csv")).unwrap().len(),
         5
     );
 
@@ -456,11 +520,11 @@ fn capture_splits_a_run_at_its_gaps_and_names_faulted_ticks() {
     }
     std::fs::write(&log, &none).unwrap();
     let n = dir.path().join("n.csv");
-    let r = host_sim(&[&"capture", &"--log", &log, &"--out", &n, &"--split-at-gaps"]);
+    let r = host_sim(&[&"capture", &"--log", &log, &"--out", &n, &"--split"]);
     assert_refused(
         &r,
         &["5 without a sensor sample", "at least 2 consecutive ticks"],
         &n,
     );
-    assert!(!dir.path().join("n.1.csv").exists());
+    assert!(!dir.path().join("n-1.csv").exists());
 }

@@ -11,9 +11,11 @@
 //! Columns: `t_s` from the record's time stamp, the four applied openings, `angle_deg` and
 //! `p1_kpa` / `p2_kpa` from the firmware's scaled values (what the controller saw). Nothing
 //! is interpolated: a gap in the stream (a lost record, a record that does not decode, a
-//! tick without a sensor sample) is an error naming it, or with `--split-at-gaps` the end of
-//! one piece of the run, each piece its own recording. A time stamp that does not increase
-//! or a sequence that goes back is always an error (the log is not one run). Ticks with a
+//! tick without a sensor sample, a restart of the firmware) is an error naming it, or with
+//! `--split` the end of one segment of the run, each segment its own recording
+//! ([`crate::io::segments`], as `import --split`). The 32-bit microsecond time stamp is
+//! counted across its wrap (every 71.6 min); a time stamp that does not advance with the
+//! sequence is always an error. Ticks with a
 //! latched fault are kept (their openings are the safe state's, which the plant saw) and
 //! named in the recording's metadata (`faulted`).
 
@@ -21,7 +23,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
 use pam_firmware::safety::FaultCode;
-use pam_firmware::stream::{scan_records, DecodeError, TickRecord, RECORD_LEN};
+use pam_firmware::stream::{scan_records, DecodeError, TickRecord, RECORD_LEN, RECORD_SYNC};
 
 use crate::io::recording::{Channel, Recording};
 use crate::plant::ValveInputs;
@@ -29,7 +31,7 @@ use crate::plant::ValveInputs;
 /// Arguments of `host-sim capture`.
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Examples:\n  host-sim capture --log pil.stream --out captured.csv\n  host-sim capture --log rtt.log --out run.csv --split-at-gaps   # run.1.csv, run.2.csv, ..."
+    after_help = "Examples:\n  host-sim capture --log pil.stream --out captured.csv\n  host-sim capture --log rtt.log --out run.csv --split   # run-1.csv, run-2.csv, ... at the gaps"
 )]
 pub struct CaptureArgs {
     /// The firmware image that wrote the log (decodes a raw defmt log through defmt-print).
@@ -38,15 +40,16 @@ pub struct CaptureArgs {
     /// The stream: raw records, `stream [..]` text lines, or (with --elf) a raw defmt log.
     #[arg(long, value_name = "LOG")]
     pub log: PathBuf,
-    /// Output recording (RECORDING.md); with --split-at-gaps the pieces go to OUT's name
-    /// numbered: run.csv -> run.1.csv, run.2.csv, ...
+    /// Output recording (RECORDING.md); with --split and gaps, one per segment: REC-1.csv,
+    /// REC-2.csv, ...
     #[arg(long, value_name = "REC.csv")]
     pub out: PathBuf,
-    /// A gap in the stream (lost or corrupted records, a tick without a sensor sample) ends
-    /// one piece of the run instead of refusing the log: each piece of at least 2 ticks is
-    /// written as its own recording (nothing is interpolated across a gap).
+    /// A gap in the stream (lost or corrupted records, a tick without a sensor sample, a
+    /// restart of the firmware) ends one segment of the run instead of refusing the log:
+    /// each segment of at least 2 ticks is written as its own recording (nothing is
+    /// interpolated across a gap), as `import --split` does.
     #[arg(long)]
-    pub split_at_gaps: bool,
+    pub split: bool,
 }
 
 /// Records in the raw bytes of a log, with their byte offsets.
@@ -124,7 +127,7 @@ pub fn records_of_text(text: &str) -> TextRecords {
     out
 }
 
-/// What [`pieces_of`] counted besides the samples.
+/// What [`segments_of`] counted besides the samples.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct CaptureCounts {
     /// Ticks with a latched fault (kept).
@@ -132,15 +135,15 @@ pub struct CaptureCounts {
     /// Records that repeat the one before byte for byte (a logger that read its buffer
     /// twice): dropped, nothing is lost.
     pub repeated: usize,
-    /// Ticks without a sensor sample (split mode: dropped, each ends a piece).
+    /// Ticks without a sensor sample (split mode: dropped, each ends a segment).
     pub missing: usize,
-    /// Ticks in pieces too short to be a recording (split mode: fewer than 2 ticks).
+    /// Ticks in segments too short to be a recording (split mode: fewer than 2 ticks).
     pub too_short: usize,
 }
 
-/// One piece of a captured run: its recording and how it ended.
+/// One segment of a captured run: its recording and how it ended.
 #[derive(Debug)]
-pub struct Piece {
+pub struct Segment {
     pub recording: Recording,
     /// First and last sequence number.
     pub seq: (u32, u32),
@@ -217,49 +220,55 @@ impl Positions<'_> {
     }
 }
 
-/// The pieces of a record sequence. Without `split` a gap is an error (one piece, the
-/// whole run); with it each gap ends a piece and pieces shorter than 2 ticks are dropped
-/// (counted). A sequence that goes back or a time stamp that does not increase is an error
-/// either way.
-pub fn pieces_of(
+/// The segments of a record sequence. Without `split` a gap is an error (one segment, the
+/// whole run); with it each gap ends a segment, a restart of the firmware (its sequence
+/// number going back) starts a new one, and segments shorter than 2 ticks are dropped
+/// (counted). The firmware's 32-bit microsecond time stamp wraps every 71.6 min: time is
+/// counted across the wrap. A time stamp that does not advance while the sequence does is
+/// an error either way.
+pub fn segments_of(
     records: &[(usize, TickRecord)],
     file: &Path,
     pos: &Positions<'_>,
     split: bool,
-) -> anyhow::Result<(Vec<Piece>, CaptureCounts)> {
+) -> anyhow::Result<(Vec<Segment>, CaptureCounts)> {
     let what = pos.what();
     let (records, repeated) = without_repeats(records);
     let mut counts = CaptureCounts {
         repeated,
         ..CaptureCounts::default()
     };
-    let hint = "capture with --split-at-gaps to write the pieces between gaps as recordings";
+    let hint = "capture with --split to write the segments between gaps as recordings";
     if let (false, Positions::Lines(bad)) = (split, pos) {
         if let Some((l, why)) = bad.first() {
             anyhow::bail!("{}:{l}: {why}; {hint}", file.display());
         }
     }
-    let mut pieces = Vec::new();
-    let mut cur: Vec<(usize, TickRecord)> = Vec::new();
-    let close = |cur: &mut Vec<(usize, TickRecord)>,
+    let mut segments = Vec::new();
+    // (position, record, time since the log's first record of this run [us], counted
+    // across the wrap of the 32-bit stamp)
+    let mut cur: Vec<(usize, TickRecord, u64)> = Vec::new();
+    let close = |cur: &mut Vec<(usize, TickRecord, u64)>,
                  ended_by: Option<String>,
-                 pieces: &mut Vec<Piece>,
+                 segments: &mut Vec<Segment>,
                  counts: &mut CaptureCounts| {
         if cur.len() >= 2 {
-            pieces.push(piece_of(cur, file, ended_by));
+            segments.push(segment_of(cur, file, ended_by));
         } else {
             counts.too_short += cur.len();
         }
         cur.clear();
     };
-    let mut prev: Option<(usize, TickRecord)> = None;
+    let mut prev: Option<(usize, TickRecord, u64)> = None;
     for &(at, r) in &records {
-        if let Some((prev_at, p)) = prev {
+        let mut t_us = r.t_us as u64;
+        if let Some((prev_at, p, prev_t_us)) = prev {
             let ahead = r.seq.wrapping_sub(p.seq);
-            if ahead == 0 || ahead > u32::MAX / 2 {
+            let restarted = ahead > u32::MAX / 2;
+            if ahead == 0 || (restarted && !split) {
                 anyhow::bail!(
                     "{}: {what} {at}: sequence {} after {}: a record {} (not a byte-for-byte \
-                     repeat); the log is not one run in order",
+                     repeat); the log is not one run in order{}",
                     file.display(),
                     r.seq,
                     p.seq,
@@ -267,44 +276,70 @@ pub fn pieces_of(
                         "repeated with other content"
                     } else {
                         "out of order"
+                    },
+                    if restarted {
+                        " (a firmware that restarted: --split writes each run on its own)"
+                    } else {
+                        ""
                     }
                 );
             }
-            if r.t_us <= p.t_us {
-                anyhow::bail!(
-                    "{}: {what} {at}: time {} us after {} us",
-                    file.display(),
-                    r.t_us,
-                    p.t_us
-                );
-            }
-            if ahead != 1 {
-                let n = ahead - 1;
-                let gap = match pos.between(prev_at, at) {
-                    Some(c) => format!("{n} record(s) missing; {c}"),
-                    None => format!(
-                        "{n} record(s) lost (capture again with a larger RTT buffer or a \
-                         lower rate)"
-                    ),
-                };
-                if !split {
-                    anyhow::bail!(
-                        "{}: {what} {at}: sequence {} after {}: {gap}; nothing is \
-                         interpolated: {hint}",
-                        file.display(),
-                        r.seq,
-                        p.seq
-                    );
-                }
+            if restarted {
                 close(
                     &mut cur,
-                    Some(format!("sequence {}..={}: {gap}", p.seq + 1, r.seq - 1)),
-                    &mut pieces,
+                    Some(format!(
+                        "sequence {} after {}: the firmware restarted (a new run)",
+                        r.seq, p.seq
+                    )),
+                    &mut segments,
                     &mut counts,
                 );
+            } else {
+                let dt_us = r.t_us.wrapping_sub(p.t_us);
+                if dt_us == 0 || dt_us > u32::MAX / 2 {
+                    anyhow::bail!(
+                        "{}: {what} {at}: sequence {} after {} but time {} us after {} us: the \
+                         time stamp does not advance with the sequence",
+                        file.display(),
+                        r.seq,
+                        p.seq,
+                        r.t_us,
+                        p.t_us
+                    );
+                }
+                t_us = prev_t_us + dt_us as u64;
+                if ahead != 1 {
+                    let n = ahead - 1;
+                    let gap = match pos.between(prev_at, at) {
+                        Some(c) => format!("{n} record(s) missing; {c}"),
+                        None => format!(
+                            "{n} record(s) lost (capture again with a larger RTT buffer or a \
+                             lower rate)"
+                        ),
+                    };
+                    if !split {
+                        anyhow::bail!(
+                            "{}: {what} {at}: sequence {} after {}: {gap}; nothing is \
+                             interpolated: {hint}",
+                            file.display(),
+                            r.seq,
+                            p.seq
+                        );
+                    }
+                    close(
+                        &mut cur,
+                        Some(format!(
+                            "sequence {}..={}: {gap}",
+                            p.seq.wrapping_add(1),
+                            r.seq.wrapping_sub(1)
+                        )),
+                        &mut segments,
+                        &mut counts,
+                    );
+                }
             }
         }
-        prev = Some((at, r));
+        prev = Some((at, r, t_us));
         let missing = [
             ("angle", r.angle_rad),
             ("p1", r.p_gauge_pa[0]),
@@ -326,7 +361,7 @@ pub fn pieces_of(
                 close(
                     &mut cur,
                     Some(format!("sequence {}: no {name} sample", r.seq)),
-                    &mut pieces,
+                    &mut segments,
                     &mut counts,
                 );
             }
@@ -335,10 +370,10 @@ pub fn pieces_of(
         if r.fault != 0 {
             counts.faulted += 1;
         }
-        cur.push((at, r));
+        cur.push((at, r, t_us));
     }
-    close(&mut cur, None, &mut pieces, &mut counts);
-    if pieces.is_empty() {
+    close(&mut cur, None, &mut segments, &mut counts);
+    if segments.is_empty() {
         anyhow::bail!(
             "{}: {} stream record(s){}; a recording needs at least 2 consecutive ticks with \
              every sensor sample",
@@ -351,19 +386,26 @@ pub fn pieces_of(
             }
         );
     }
-    Ok((pieces, counts))
+    Ok((segments, counts))
 }
 
-/// The recording of consecutive, complete records.
-fn piece_of(records: &[(usize, TickRecord)], file: &Path, ended_by: Option<String>) -> Piece {
+/// The recording of consecutive, complete records (with their times counted across the
+/// stamp's wrap).
+fn segment_of(
+    records: &[(usize, TickRecord, u64)],
+    file: &Path,
+    ended_by: Option<String>,
+) -> Segment {
     let mut rec = Recording::default();
     let mut ch: [Vec<f64>; 3] = Default::default();
-    let t0_us = records[0].1.t_us;
+    let t0_us = records[0].2;
     let mut first_fault: Option<(f64, u32, u8)> = None;
     let mut faulted = 0usize;
     let mut armed = 0usize;
-    for (_, r) in records {
-        let t_s = (r.t_us - t0_us) as f64 * 1e-6;
+    // Microseconds to seconds by a division: correctly rounded (0.798, not 0.7979999...).
+    let s_of_us = |us: u64| us as f64 / 1e6;
+    for (_, r, t_us) in records {
+        let t_s = s_of_us(t_us - t0_us);
         ch[0].push((r.angle_rad as f64).to_degrees());
         ch[1].push(r.p_gauge_pa[0] as f64 * 1e-3);
         ch[2].push(r.p_gauge_pa[1] as f64 * 1e-3);
@@ -385,11 +427,10 @@ fn piece_of(records: &[(usize, TickRecord)], file: &Path, ended_by: Option<Strin
     rec.set_channel(Channel::AngleDeg, a);
     rec.set_channel(Channel::P1Kpa, p1);
     rec.set_channel(Channel::P2Kpa, p2);
-    let seq = (records[0].1.seq, records[records.len() - 1].1.seq);
+    let last = records.len() - 1;
+    let seq = (records[0].1.seq, records[last].1.seq);
     // The period to the microsecond the firmware stamps (no float noise of the mean).
-    let period_s =
-        ((records[records.len() - 1].1.t_us - t0_us) as f64 / (records.len() - 1) as f64).round()
-            * 1e-6;
+    let period_us = ((records[last].2 - t0_us) as f64 / last as f64).round() as u64;
     rec.metadata = vec![
         (
             "source".into(),
@@ -400,10 +441,10 @@ fn piece_of(records: &[(usize, TickRecord)], file: &Path, ended_by: Option<Strin
                 file.display(),
                 seq.0,
                 seq.1,
-                t0_us as f64 * 1e-6
+                s_of_us(records[0].1.t_us as u64)
             ),
         ),
-        ("sample_period_s".into(), format!("{period_s}")),
+        ("sample_period_s".into(), format!("{}", s_of_us(period_us))),
         (
             "channels".into(),
             "angle_deg, p1_kpa, p2_kpa as the firmware scaled them".into(),
@@ -425,24 +466,11 @@ fn piece_of(records: &[(usize, TickRecord)], file: &Path, ended_by: Option<Strin
             ),
         ));
     }
-    Piece {
+    Segment {
         recording: rec,
         seq,
         ended_by,
     }
-}
-
-/// `run.csv` -> `run.<n>.csv` (the pieces of `--split-at-gaps`).
-pub fn piece_path(out: &Path, n: usize) -> PathBuf {
-    let stem = out
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let name = match out.extension() {
-        Some(e) => format!("{stem}.{n}.{}", e.to_string_lossy()),
-        None => format!("{stem}.{n}"),
-    };
-    out.with_file_name(name)
 }
 
 /// `host-sim capture`: returns the report printed on stdout.
@@ -463,9 +491,28 @@ pub fn run_capture(a: &CaptureArgs) -> anyhow::Result<String> {
     let bytes = std::fs::read(&a.log).map_err(|e| anyhow::anyhow!("{}: {e}", a.log.display()))?;
     let (raw, skipped) = records_of_bytes(&bytes);
     let mut notes = Vec::new();
-    let (pieces, counts, how) = if !raw.is_empty() {
-        let (p, c) = pieces_of(&raw, &a.log, &Positions::Bytes, a.split_at_gaps)?;
-        (p, c, format!("raw records ({skipped} other bytes skipped)"))
+    let (segments, counts, how) = if !raw.is_empty() {
+        // Bytes before the first record or after the last that do not decode: other output,
+        // or a corrupted first / last record (its tick is then not in the recording).
+        let lead = raw[0].0;
+        let trail = bytes.len() - (raw[raw.len() - 1].0 + RECORD_LEN);
+        for (n, where_, part) in [
+            (lead, "before the first record", &bytes[..lead]),
+            (
+                trail,
+                "after the last record",
+                &bytes[bytes.len() - trail..],
+            ),
+        ] {
+            if part.windows(2).any(|w| w == RECORD_SYNC) {
+                notes.push(format!(
+                    "{n} byte(s) {where_} do not decode but hold a record's sync bytes: a \
+                     corrupted or cut record, its tick is not in the recording"
+                ));
+            }
+        }
+        let (s, c) = segments_of(&raw, &a.log, &Positions::Bytes, a.split)?;
+        (s, c, format!("raw records ({skipped} other bytes skipped)"))
     } else {
         let text = match (&a.elf, std::str::from_utf8(&bytes)) {
             (_, Ok(t)) if t.contains("stream [") => t.to_string(),
@@ -484,7 +531,7 @@ pub fn run_capture(a: &CaptureArgs) -> anyhow::Result<String> {
             ));
         }
         if let Some((l, why)) = t.bad.first() {
-            if a.split_at_gaps {
+            if a.split {
                 notes.push(format!(
                     "{} `stream [` line(s) do not decode (the first: line {l}, {why}); a gap \
                      where they stood between records",
@@ -492,61 +539,58 @@ pub fn run_capture(a: &CaptureArgs) -> anyhow::Result<String> {
                 ));
             }
         }
-        let (p, c) = pieces_of(
-            &t.records,
-            &a.log,
-            &Positions::Lines(&t.bad),
-            a.split_at_gaps,
-        )?;
-        (p, c, "text lines".to_string())
+        let (s, c) = segments_of(&t.records, &a.log, &Positions::Lines(&t.bad), a.split)?;
+        (s, c, "text lines".to_string())
     };
-    let targets: Vec<PathBuf> = if a.split_at_gaps {
-        (1..=pieces.len()).map(|n| piece_path(&a.out, n)).collect()
-    } else {
-        vec![a.out.clone()]
-    };
-    let outs: Vec<(&str, &Path)> = targets.iter().map(|p| ("--out", p.as_path())).collect();
-    crate::validate::distinct_file_outputs(&inputs, &outs).map_err(anyhow::Error::msg)?;
-    let mut report = String::new();
-    for (p, path) in pieces.iter().zip(&targets) {
-        p.recording.write(path)?;
-        report += &format!(
-            "wrote {}: {} ticks (sequence {}..={}), {:.3} s{}\n",
-            path.display(),
-            p.recording.len(),
-            p.seq.0,
-            p.seq.1,
-            p.recording.t_s.last().copied().unwrap_or(0.0),
-            match &p.ended_by {
-                Some(g) => format!("; then a gap: {g}"),
-                None => String::new(),
-            }
-        );
-    }
-    let period_s = pieces[0].recording.sample_period_s();
+    let recordings: Vec<Recording> = segments.iter().map(|s| s.recording.clone()).collect();
+    let (written, stale) = crate::io::segments::write_segments(
+        &a.out,
+        &inputs,
+        &recordings,
+        "capture",
+        |i, p, rec| {
+            let s = &segments[i];
+            format!(
+                "wrote {}: {} ticks (sequence {}..={}), {} s{}",
+                p.display(),
+                rec.len(),
+                s.seq.0,
+                s.seq.1,
+                rec.t_s.last().copied().unwrap_or(0.0),
+                match &s.ended_by {
+                    Some(g) => format!("; then a gap: {g}"),
+                    None => String::new(),
+                }
+            )
+        },
+    )?;
+    let mut report = written;
+    let period_s = segments[0].recording.sample_period_s();
     report += &format!(
-        "{} piece(s) from {how}, {} bytes per record, {:.0} bytes/s at the logged rate; {} \
+        "{} segment(s) from {how}, {} bytes per record, {:.0} bytes/s at the logged rate; {} \
          tick(s) with a latched fault (kept, named in each recording's `faulted` line); {} \
          repeated record(s) dropped",
-        pieces.len(),
+        segments.len(),
         RECORD_LEN,
         RECORD_LEN as f64 / period_s,
         counts.faulted,
         counts.repeated
     );
-    if a.split_at_gaps {
+    if a.split {
         report += &format!(
-            "; {} tick(s) without a sensor sample dropped; {} tick(s) in pieces shorter than \
-             2 ticks dropped",
+            "; {} tick(s) without a sensor sample dropped; {} tick(s) in segments shorter \
+             than 2 ticks dropped",
             counts.missing, counts.too_short
         );
     }
     report.push('\n');
+    report += &stale;
     for n in notes {
         report += &format!("note: {n}\n");
     }
     Ok(report)
 }
+
 /// Runs `defmt-print -e ELF --log-format {s}` on a raw defmt log.
 fn decode_defmt(elf: &Path, log: &Path) -> anyhow::Result<String> {
     let input = std::fs::File::open(log).map_err(|e| anyhow::anyhow!("{}: {e}", log.display()))?;

@@ -1264,33 +1264,6 @@ fn channel_ranges(
     (ranges, warnings)
 }
 
-/// Whether `path` is a recording `host-sim import` wrote (its `# source` metadata line).
-fn is_import_output(path: &Path) -> bool {
-    use std::io::{BufRead as _, Read as _};
-    let Ok(f) = std::fs::File::open(path) else {
-        return false;
-    };
-    let mut first = String::new();
-    std::io::BufReader::new(f.take(4096))
-        .read_line(&mut first)
-        .is_ok()
-        && first.starts_with("# source = host-sim ")
-        && first.contains(" import of ")
-}
-
-/// Output path of segment `i` of `n`: `OUT` itself for one segment, else `OUT-1.csv`, ...
-pub fn segment_path(out: &Path, i: usize, n: usize) -> PathBuf {
-    if n == 1 {
-        return out.to_owned();
-    }
-    let stem = super::file_stem_or(out, "");
-    let ext = out
-        .extension()
-        .map(|s| format!(".{}", s.to_string_lossy()))
-        .unwrap_or_default();
-    out.with_file_name(format!("{stem}-{}{ext}", i + 1))
-}
-
 /// Arguments of `host-sim import`.
 #[derive(clap::Args, Debug)]
 #[command(
@@ -1319,36 +1292,23 @@ pub fn run_import(a: &ImportArgs) -> anyhow::Result<String> {
         .map_err(anyhow::Error::msg)?;
     let mapping = Mapping::load(&a.map)?;
     let imp = import(&mapping, &a.map, &a.input, a.split)?;
-    // With --split the segments have their own names: none may be an input either.
-    let segments: Vec<PathBuf> = (0..imp.segments.len())
-        .map(|i| segment_path(&a.out, i, imp.segments.len()))
-        .collect();
-    let outputs: Vec<(&str, &Path)> = segments.iter().map(|p| ("--out", p.as_path())).collect();
-    crate::validate::distinct_outputs(&inputs, &outputs).map_err(anyhow::Error::msg)?;
-    // Every recording must read back (the same checks simulate / diagnose apply).
-    let n = imp.segments.len();
-    let mut report = String::new();
+    let (written, stale) = crate::io::segments::write_segments(
+        &a.out,
+        &inputs,
+        &imp.segments,
+        "import",
+        |_, p, rec| {
+            format!(
+                "wrote {}: {} samples, {:.3} s, median step {} s",
+                p.display(),
+                rec.len(),
+                rec.t_s[rec.len() - 1],
+                Shown(imp.median_step_s)
+            )
+        },
+    )?;
+    let mut report = written;
     use std::fmt::Write as _;
-    for (i, rec) in imp.segments.iter().enumerate() {
-        let p = segment_path(&a.out, i, n);
-        // Validate through the reader before anything is written.
-        let mut text = Vec::new();
-        rec.write_to(&mut text)
-            .map_err(|e| ImportError(format!("{}: {e}", p.display())))?;
-        Recording::parse(&String::from_utf8_lossy(&text), &p)?;
-    }
-    for (i, rec) in imp.segments.iter().enumerate() {
-        let p = segment_path(&a.out, i, n);
-        rec.write(&p)?;
-        let _ = writeln!(
-            report,
-            "wrote {}: {} samples, {:.3} s, median step {} s",
-            p.display(),
-            rec.len(),
-            rec.t_s[rec.len() - 1],
-            Shown(imp.median_step_s)
-        );
-    }
     let _ = writeln!(
         report,
         "time stamps: max jitter {:.1} % of the median step; {} gap(s){}",
@@ -1370,34 +1330,6 @@ pub fn run_import(a: &ImportArgs) -> anyhow::Result<String> {
     for w in &imp.warnings {
         eprintln!("warning: {w}");
     }
-    // Segments OUT-k.csv beyond this import's: an earlier import into the same OUT with more
-    // segments wrote them (their `# source` line says so) and they would pass for part of
-    // this one: removed. Any other file of that name is the user's: named, left as it was.
-    let first_stale = if n == 1 { 0 } else { n };
-    for k in first_stale..first_stale + 1000 {
-        let p = segment_path(&a.out, k, n.max(2));
-        if !p.exists() {
-            break;
-        }
-        let plural = if n == 1 { "" } else { "s" };
-        if is_import_output(&p) {
-            std::fs::remove_file(&p)
-                .map_err(|e| ImportError(format!("{}: cannot remove: {e}", p.display())))?;
-            let _ = writeln!(
-                report,
-                "removed {}: a segment of an earlier import into {} (this import has {n} \
-                 segment{plural})",
-                p.display(),
-                a.out.display()
-            );
-        } else {
-            let _ = writeln!(
-                report,
-                "note: {} is not part of this import ({n} segment{plural}) and not an import's \
-                 output: left as it was",
-                p.display()
-            );
-        }
-    }
+    report += &stale;
     Ok(report)
 }

@@ -11,6 +11,7 @@ pub mod recording;
 pub mod replay_stream;
 pub mod run_files;
 pub mod scenario;
+pub mod segments;
 
 use std::path::Path;
 

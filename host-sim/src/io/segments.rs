@@ -1,0 +1,92 @@
+//! A run cut at its gaps into segments, each its own recording (`import --split`, `capture
+//! --split`): their file names, the checks before writing, and the removal of an earlier
+//! run's segments that this one no longer has.
+
+use std::path::{Path, PathBuf};
+
+use crate::io::recording::Recording;
+
+/// Output path of segment `i` of `n`: `OUT` itself for one segment, else `OUT-1.csv`, ...
+pub fn segment_path(out: &Path, i: usize, n: usize) -> PathBuf {
+    if n == 1 {
+        return out.to_owned();
+    }
+    let stem = super::file_stem_or(out, "");
+    let ext = out
+        .extension()
+        .map(|s| format!(".{}", s.to_string_lossy()))
+        .unwrap_or_default();
+    out.with_file_name(format!("{stem}-{}{ext}", i + 1))
+}
+
+/// True when `path` is a recording `host-sim <command>` wrote (its first line is the
+/// `# source = host-sim <version> <command> of ...` metadata).
+pub fn is_output_of(path: &Path, command: &str) -> bool {
+    use std::io::{BufRead as _, Read as _};
+    let Ok(f) = std::fs::File::open(path) else {
+        return false;
+    };
+    let mut first = String::new();
+    std::io::BufReader::new(f.take(4096))
+        .read_line(&mut first)
+        .is_ok()
+        && first.starts_with("# source = host-sim ")
+        && first.contains(&format!(" {command} of "))
+}
+
+/// Writes `segments` to their paths ([`segment_path`] of `out`), after checking that none is
+/// one of `inputs` and that each reads back as a recording (nothing is written when one does
+/// not). Returns one line per file (`describe(index, path, recording)`), then the report of the
+/// stale segments: `OUT-k.csv` beyond this run's that an earlier `host-sim <command>` into the
+/// same `OUT` wrote are removed (they would pass for part of this run); any other file of
+/// such a name is named and left as it was.
+pub fn write_segments(
+    out: &Path,
+    inputs: &[(&str, &Path)],
+    segments: &[Recording],
+    command: &str,
+    describe: impl Fn(usize, &Path, &Recording) -> String,
+) -> anyhow::Result<(String, String)> {
+    use anyhow::Context as _;
+    let n = segments.len();
+    let paths: Vec<PathBuf> = (0..n).map(|i| segment_path(out, i, n)).collect();
+    let outputs: Vec<(&str, &Path)> = paths.iter().map(|p| ("--out", p.as_path())).collect();
+    crate::validate::distinct_file_outputs(inputs, &outputs).map_err(anyhow::Error::msg)?;
+    for (rec, p) in segments.iter().zip(&paths) {
+        let mut text = Vec::new();
+        rec.write_to(&mut text)
+            .with_context(|| p.display().to_string())?;
+        Recording::parse(&String::from_utf8_lossy(&text), p)?;
+    }
+    let mut written = String::new();
+    for (i, (rec, p)) in segments.iter().zip(&paths).enumerate() {
+        rec.write(p)?;
+        written += &describe(i, p, rec);
+        written.push('\n');
+    }
+    let mut stale = String::new();
+    let first_stale = if n == 1 { 0 } else { n };
+    let plural = if n == 1 { "" } else { "s" };
+    for k in first_stale..first_stale + 1000 {
+        let p = segment_path(out, k, n.max(2));
+        if !p.exists() {
+            break;
+        }
+        if is_output_of(&p, command) {
+            std::fs::remove_file(&p).with_context(|| format!("{}: cannot remove", p.display()))?;
+            stale += &format!(
+                "removed {}: a segment of an earlier {command} into {} (this {command} has {n} \
+                 segment{plural})\n",
+                p.display(),
+                out.display()
+            );
+        } else {
+            stale += &format!(
+                "note: {} is not part of this {command} ({n} segment{plural}) and not a \
+                 {command}'s output: left as it was\n",
+                p.display()
+            );
+        }
+    }
+    Ok((written, stale))
+}
