@@ -31,13 +31,21 @@ pub fn fit_percent_by<I: Iterator<Item = f64>>(y: impl Fn() -> I, err2: f64) -> 
     let n = y().count() as f64;
     let mean = y().sum::<f64>() / n;
     let spread: f64 = y().map(|a| (a - mean) * (a - mean)).sum::<f64>().sqrt();
-    fit_from_norms(err2.sqrt(), spread)
+    fit_from_norms(err2.sqrt(), spread, n, mean)
 }
 
-/// 100 (1 - err / spread) from `err = ||y - y_hat||` and `spread = ||y - mean(y)||`.
-fn fit_from_norms(err: f64, spread: f64) -> f64 {
-    if spread == 0.0 {
-        return if err == 0.0 { 100.0 } else { f64::NEG_INFINITY };
+/// 100 (1 - err / spread) from `err = ||y - y_hat||`, `spread = ||y - mean(y)||` and the
+/// reference's mean (its scale). A reference whose spread is rounding (1e-12 of its scale:
+/// a constant column read from text, whose mean is not exact) is constant: the fit is then 100
+/// when the prediction matches it as closely, else undefined (`-inf`).
+fn fit_from_norms(err: f64, spread: f64, n: f64, mean: f64) -> f64 {
+    let rounding = 1e-12 * n.sqrt() * mean.abs().max(1e-9);
+    if spread <= rounding {
+        return if err <= rounding {
+            100.0
+        } else {
+            f64::NEG_INFINITY
+        };
     }
     100.0 * (1.0 - err / spread)
 }
@@ -185,7 +193,12 @@ pub fn compare_files(reference: &Path, model: &Path) -> Option<Vec<ChannelFit>> 
                 let i = c.index();
                 ChannelFit {
                     channel: c,
-                    fit_percent: fit_from_norms(err2[i].sqrt(), spread2[i].sqrt()),
+                    fit_percent: fit_from_norms(
+                        err2[i].sqrt(),
+                        spread2[i].sqrt(),
+                        n as f64,
+                        mean[i],
+                    ),
                     mae: abs_err[i] / n as f64,
                     mse: err2[i] / n as f64,
                     samples: n,
@@ -223,6 +236,23 @@ mod tests {
         let y = [1.0, 2.0, 4.0, 3.0];
         assert_eq!(fit_percent(&y, &y), 100.0);
         assert_eq!(mae(&y, &y), 0.0);
+    }
+
+    #[test]
+    fn a_constant_reference_is_constant_despite_the_rounding_of_its_mean() {
+        // -7.380001 read 800 times: the mean is not exact, the spread is rounding only.
+        let y = vec![-7.380001f64; 800];
+        let mean = y.iter().sum::<f64>() / 800.0;
+        assert!(
+            y.iter().any(|v| *v != mean),
+            "the case needs an inexact mean"
+        );
+        assert_eq!(fit_percent(&y, &vec![-7.3; 800]), f64::NEG_INFINITY);
+        assert_eq!(fit_percent(&y, &y), 100.0);
+        // A small real variation is still a fit.
+        let mut z = y.clone();
+        z[400] += 1e-6;
+        assert!(fit_percent(&z, &y).is_finite());
     }
 
     #[test]

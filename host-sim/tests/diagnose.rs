@@ -870,3 +870,33 @@ fn only_channels_that_depart_are_located_on_noise_free_data() {
     assert!(located[0].starts_with("Located: angle_deg"), "{stdout}");
     assert!(!stdout.contains("(fit 100.0 %)"), "{stdout}");
 }
+
+/// A joint resting with its valves shut (a latched fault's safe state, captured): nothing
+/// to judge, said so, exit 2, instead of a verdict on a fit over rounding.
+#[test]
+fn a_recording_in_which_nothing_moves_is_refused_as_nothing_to_judge() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 800;
+    let mut rec = Recording {
+        t_s: (0..n).map(|k| k as f64 * 1e-3).collect(),
+        inputs: vec![host_sim::ValveInputs::default(); n],
+        ..Recording::default()
+    };
+    rec.set_channel(Channel::AngleDeg, vec![-7.380001; n]);
+    rec.set_channel(
+        Channel::P1Kpa,
+        (0..n).map(|k| 312.4 + 0.1 * (k % 3) as f64).collect(),
+    );
+    rec.set_channel(Channel::P2Kpa, vec![288.1; n]);
+    let p = dir.path().join("rest.csv");
+    rec.write(&p).unwrap();
+    let out = dir.path().join("out.json");
+    let r = on_plant("diagnose", &plant(), &[&"--recording", &p, &"--json", &out]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert_eq!(r.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("nothing to judge") && err.contains("never change"),
+        "{err}"
+    );
+    assert!(!out.exists());
+}

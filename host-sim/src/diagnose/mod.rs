@@ -324,6 +324,46 @@ fn dead_channel(rec: &Recording) -> Option<String> {
         })
 }
 
+/// Spreads (max - min) below which a channel holds still: an encoder count or two (0.1 deg),
+/// a pressure sensor's noise (1 kPa), a tension sensor's (2 N).
+const STILL_DEG: f64 = 0.1;
+const STILL_KPA: f64 = 1.0;
+const STILL_N: f64 = 2.0;
+
+/// A recording with nothing to judge: valve openings that never change and every recorded
+/// channel holding still (a joint resting with its valves shut, e.g. the safe state of a
+/// latched fault). Any plant file that rests there fits it, and a fit's percentage over a
+/// spread of rounding is meaningless; `None` when something moves.
+fn unexcited(rec: &Recording) -> Option<String> {
+    if rec.inputs.windows(2).any(|w| w[0] != w[1]) {
+        return None;
+    }
+    let still = |c: Channel, tol: f64| {
+        rec.outputs[c.index()].as_ref().is_none_or(|y| {
+            let (lo, hi) = y
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+                    (lo.min(*v), hi.max(*v))
+                });
+            hi - lo <= tol
+        })
+    };
+    (still(Channel::AngleDeg, STILL_DEG)
+        && still(Channel::P1Kpa, STILL_KPA)
+        && still(Channel::P2Kpa, STILL_KPA)
+        && still(Channel::F1N, STILL_N)
+        && still(Channel::F2N, STILL_N))
+    .then(|| {
+        format!(
+            "nothing to judge: the valve openings never change over its {} samples and every \
+             channel holds still (angle within {STILL_DEG} deg, pressures within {STILL_KPA} \
+             kPa): a joint at rest with its valves shut (e.g. a latched fault's safe state). \
+             Diagnose a recording in which the valves move the joint",
+            rec.len()
+        )
+    })
+}
+
 /// A replay of `cfg` over `rec` (`CHECK`) holding no series: its fits, its plot points
 /// (every [`plot_stride`]-th sample) and ranges, [`Replayed`]; `f(k, channels)` sees every
 /// sample in order.
@@ -857,7 +897,7 @@ pub fn diagnose(
         }
     }
     for (what, r) in [("recording", Some(train)), ("check recording", check)] {
-        if let Some(msg) = r.and_then(dead_channel) {
+        if let Some(msg) = r.and_then(dead_channel).or_else(|| r.and_then(unexcited)) {
             return Err(DiagnoseError::Data(format!("{what}: {msg}")));
         }
     }
