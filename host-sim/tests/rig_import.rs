@@ -355,17 +355,17 @@ fn unit_mistakes_in_a_mapping_are_refused_at_their_line_or_flagged() {
             "rig.csv:5",
             "Zeit [ms]",
             "median time step is 25 s",
-            "ms read as s",
+            "a smaller one, e.g. ms declared s",
         ],
     );
-    // The same column declared as microseconds: a legal 40 kHz step, but 2 s of data
-    // become 2 ms.
+    // The same column declared as microseconds: a 40 kHz step, faster than a PAM rig is
+    // logged, and 40 Hz in ms (whatever the file's length: a long log is no excuse).
     refused(
         &MAP.replace("unit = \"ms\"", "unit = \"us\""),
         &[
             "rig.csv:",
             "Zeit [ms]",
-            "the recording spans 0.00",
+            "faster than a PAM rig is logged",
             "is the time column in ms?",
             "at 40",
         ],

@@ -348,6 +348,9 @@ pub const STEP_RANGE_S: Range = Range::closed(1e-5, 0.1);
 /// few valve pulses): with a time column that, read in the next larger unit, has a plausible
 /// step, the import takes it for a unit off by 1000 (ms read as us, s read as ms).
 pub const SPAN_MIN_S: f64 = 0.5;
+/// A median step below this [s] (above 20 kHz) that reads as a plausible step in the next
+/// larger time unit is taken for a unit off by 1000.
+pub const FAST_STEP_S: f64 = 5e-5;
 /// Highest gauge pressure a mapped column may reach [Pa] (pneumatics runs below 1.6 MPa):
 /// the recording's own limit, so that the import names the raw line and the mapping.
 pub const P_GAUGE_MAX_PA: f64 = crate::io::recording::P_KPA_PLAUSIBLE.1 * 1e3;
@@ -947,11 +950,16 @@ pub fn import(
             time_name,
             format!(
                 "the median time step is {} s (with `time.unit = {:?}` in {}), outside {} s \
-                 (100 kHz .. 10 Hz): is the time column in another unit (ms read as s?)",
+                 (100 kHz .. 10 Hz): is the time column in another unit ({})?",
                 Shown(median),
                 mapping.time.unit,
                 map_path.display(),
-                STEP_RANGE_S
+                STEP_RANGE_S,
+                if median < STEP_RANGE_S.lo {
+                    "a larger one, e.g. ms declared us or s declared ms"
+                } else {
+                    "a smaller one, e.g. ms declared s"
+                }
             ),
         ));
     }
@@ -964,6 +972,29 @@ pub fn import(
         "ms" => Some("s"),
         _ => None,
     };
+    // Likewise a step faster than any PAM rig logs (above 20 kHz: valves switch at a few
+    // hundred Hz, pressure sensors settle in a millisecond) that reads as a plausible rate in
+    // the next larger unit: 40 Hz logged in ms and declared us reads as 40 kHz.
+    if let Some(u) = larger.filter(|_| median < FAST_STEP_S && STEP_RANGE_S.contains(median * 1e3))
+    {
+        return Err(at(
+            lines[1],
+            time_name,
+            format!(
+                "the median time step is {} s ({} kHz, `time.unit = {:?}` in {}), faster than \
+                 a PAM rig is logged (up to {} kHz): is the time column in {u}? With \
+                 `time.unit = \"{u}\"` it spans {} s at {} Hz. (A logger truly this fast: \
+                 decimate its file first.)",
+                Shown(median),
+                Shown(1e-3 / median),
+                mapping.time.unit,
+                map_path.display(),
+                Shown(1e-3 / FAST_STEP_S),
+                Shown(span_s * 1e3),
+                Shown(1.0 / (median * 1e3))
+            ),
+        ));
+    }
     if let Some(u) = larger.filter(|_| span_s < SPAN_MIN_S && STEP_RANGE_S.contains(median * 1e3)) {
         return Err(at(
             lines[n - 1],
