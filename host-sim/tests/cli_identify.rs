@@ -108,6 +108,25 @@ fn sweep_force_then_identify_force_reports_both_models_and_writes_the_firmware_t
     assert_eq!(toml_number(&out, "force_law", "stretch_min"), 0.75);
     assert!(toml_text.contains("# eq. 6    MAE") && toml_text.contains("# Tondu    MAE"));
     assert!(toml_text.contains("# global search:") && toml_text.contains("# held out, one length"));
+    assert!(!s.contains("look absolute"), "{s}");
+
+    // The same bench logged with absolute pressures: the slack threshold lands on one
+    // atmosphere, said so (the law would be written shifted by it).
+    let abs = dir.path().join("F_abs.csv");
+    let text = std::fs::read_to_string(&data).unwrap();
+    let shifted = map_rows(&text, |f| {
+        if f[0] == "p_kpa" {
+            return f.join(",");
+        }
+        let p: f64 = f[0].parse().unwrap();
+        format!("{:.4},{},{}", p + 101.325, f[1], f[2])
+    });
+    std::fs::write(&abs, shifted).unwrap();
+    let s = ok(&identify_force(&abs, &dir.path().join("abs.toml")));
+    assert!(
+        s.contains("warning: the muscle goes taut at p_th = 101") && s.contains("look absolute"),
+        "{s}"
+    );
 }
 
 #[test]

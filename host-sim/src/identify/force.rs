@@ -61,6 +61,12 @@ pub struct ForceSample {
     pub branch: Option<Branch>,
 }
 
+/// A slack threshold within this of one atmosphere, with no pressure below it, reads as
+/// pressures logged absolute [Pa].
+const ABSOLUTE_THRESHOLD_WITHIN_PA: f64 = 10e3;
+/// The standard atmosphere [Pa].
+const STANDARD_ATMOSPHERE_PA: f64 = 101_325.0;
+
 /// Eq. 6 of seed 002 with P in MPa gauge and e = L/L0.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Eq6 {
@@ -961,6 +967,26 @@ pub fn identify(samples: &[ForceSample]) -> Result<ForceIdentification, IdentErr
                 names[i], CHOU_HANNAFORD_BOUNDS.0[i], CHOU_HANNAFORD_BOUNDS.1[i]
             ));
         }
+    }
+    // Pressures logged absolute: no sample below one atmosphere, and the slack threshold
+    // the Chou-Hannaford baseline finds is the atmosphere itself (a gauge-logged muscle goes
+    // taut within some ten kPa). Eq. 6 would be written shifted by one atmosphere.
+    // The data carries no atmosphere of its own: the standard one.
+    let p_atm_pa = STANDARD_ATMOSPHERE_PA;
+    let p_min_pa = samples
+        .iter()
+        .map(|s| s.p_gauge_pa)
+        .fold(f64::INFINITY, f64::min);
+    if (chou_hannaford.p_threshold_pa - p_atm_pa).abs() <= ABSOLUTE_THRESHOLD_WITHIN_PA
+        && p_min_pa >= p_atm_pa - crate::io::import::P_ABSOLUTE_SUSPECT_WITHIN_PA
+    {
+        warnings.push(format!(
+            "the muscle goes taut at p_th = {:.1} kPa, one atmosphere, and no pressure is below \
+             {:.1} kPa: {}",
+            chou_hannaford.p_threshold_pa * 1e-3,
+            p_min_pa * 1e-3,
+            crate::io::import::ABSOLUTE_PRESSURE_HINT
+        ));
     }
     let branch = |b: Branch| -> Vec<ForceSample> {
         samples
