@@ -6,16 +6,31 @@ pub fn half_window_samples(span_s: f64, dt_s: f64) -> usize {
     ((span_s / dt_s).round() as usize).max(1)
 }
 
+/// Longest half window a derivative of a joint's motion may span [s]: a window of 0.2 s
+/// already averages the velocity over a fifth of a second; longer ones smear every reversal
+/// of a sweep (the default windows are 10 and 25 ms).
+pub const HALF_WINDOW_MAX_S: f64 = 0.1;
+
 /// Refuses a Savitzky-Golay half window whose full window (`2 hw + 1` samples) is longer
-/// than the recording `file` of `n` samples: every sample would take a shrunk window, and
-/// the velocity would be a line through the whole run. `option` names the argument.
-pub fn window_fits(option: &str, hw: usize, n: usize, file: &str) -> anyhow::Result<()> {
+/// than the recording `file` of `n` samples (every sample would take a shrunk window, and
+/// the velocity would be a line through the whole run), or whose half spans more than
+/// [`HALF_WINDOW_MAX_S`] at the sample period `dt_s`. `option` names the argument.
+pub fn window_fits(option: &str, hw: usize, n: usize, dt_s: f64, file: &str) -> anyhow::Result<()> {
     anyhow::ensure!(
         2 * hw < n,
         "{option} {hw}: its window of {} samples is longer than {file} ({n} samples); give at \
          most {}",
         2 * hw + 1,
         n.saturating_sub(1) / 2
+    );
+    let max = half_window_samples(HALF_WINDOW_MAX_S, dt_s);
+    anyhow::ensure!(
+        hw <= max,
+        "{option} {hw}: {} s on either side at {file}'s {} s sample period, more than the \
+         {HALF_WINDOW_MAX_S} s a velocity of a moving joint may be averaged over (it would \
+         smear the motion's reversals into the damping terms); give at most {max}",
+        crate::validate::Shown(hw as f64 * dt_s),
+        crate::validate::Shown(dt_s)
     );
     Ok(())
 }

@@ -592,6 +592,17 @@ fn identify_torque_refuses_an_activation_limit_in_mpa_and_a_window_longer_than_t
             "pulses_nominal.csv",
         ],
     );
+    // Shorter than the recording but 8 s on either side: the velocity a line through whole
+    // sweeps, its damping terms fitted to the smear.
+    w.refuses(
+        "identify torque --recording {fixture} --plant {plant} --out {w}/t.toml \
+         --savgol-half-window 8000",
+        &[
+            "--savgol-half-window 8000",
+            "8 s on either side",
+            "give at most 100",
+        ],
+    );
 }
 
 #[test]

@@ -681,7 +681,7 @@ pub fn torque_model_file(a: &IdentifyTorqueArgs) -> Result<TorqueModelFile> {
         .savgol_half_window
         .unwrap_or_else(|| crate::signal::half_window_samples(0.025, dt));
     if a.savgol_half_window.is_some() {
-        crate::signal::window_fits("--savgol-half-window", hw, rec.len(), &file)?;
+        crate::signal::window_fits("--savgol-half-window", hw, rec.len(), dt, &file)?;
     }
     let (mut samples, source) =
         torque::samples_from_recording(&rec, &plant, hw, &file, header_line_of(&a.recording))?;

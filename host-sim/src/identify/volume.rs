@@ -992,7 +992,13 @@ pub fn run_identify_volume(a: &IdentifyVolumeArgs) -> anyhow::Result<String> {
         .savgol_half_window
         .unwrap_or_else(|| half_window_samples(0.010, rec.sample_period_s()));
     if a.savgol_half_window.is_some() {
-        crate::signal::window_fits("--savgol-half-window", hw, rec.len(), &file)?;
+        crate::signal::window_fits(
+            "--savgol-half-window",
+            hw,
+            rec.len(),
+            rec.sample_period_s(),
+            &file,
+        )?;
     }
     let geometry = pam_firmware::constants::JOINT_GEOMETRY;
     let p_atm = pam_firmware::constants::P_ATM_PA as f64;
