@@ -50,7 +50,21 @@ pub fn write_segments(
     use anyhow::Context as _;
     let n = segments.len();
     let paths: Vec<PathBuf> = (0..n).map(|i| segment_path(out, i, n)).collect();
-    let outputs: Vec<(&str, &Path)> = paths.iter().map(|p| ("--out", p.as_path())).collect();
+    // Named as what they are: the user typed OUT, not OUT-2.csv.
+    let labels: Vec<String> = (0..n)
+        .map(|i| {
+            if n == 1 {
+                "--out".to_string()
+            } else {
+                format!("segment {} of --out {}:", i + 1, out.display())
+            }
+        })
+        .collect();
+    let outputs: Vec<(&str, &Path)> = labels
+        .iter()
+        .zip(&paths)
+        .map(|(l, p)| (l.as_str(), p.as_path()))
+        .collect();
     crate::validate::distinct_file_outputs(inputs, &outputs).map_err(anyhow::Error::msg)?;
     for (rec, p) in segments.iter().zip(&paths) {
         let mut text = Vec::new();
