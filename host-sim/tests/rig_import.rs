@@ -783,3 +783,57 @@ fn absolute_pressures_mapped_as_gauge_get_the_hint_on_stderr() {
     let r = import_with(dir.path(), MAP, &raw, &out, false);
     assert!(!text_of(&r.stderr).contains("look absolute"));
 }
+
+/// The independent reference implementation's loaded run: its muscles, stretched with closed
+/// valves, fall to -39 kPa gauge. That is physics, not a unit mistake: imported without a
+/// pressure warning.
+#[test]
+fn a_muscle_stretched_below_the_atmosphere_is_not_a_unit_warning() {
+    let dir = tmp();
+    let map = dir.path().join("recording.toml");
+    let mut text = String::from(
+        "[csv]\ndelimiter = \",\"\nskip_lines = 3\n[time]\ncolumn = \"t_s\"\nunit = \"s\"\n[pressure]\np_atm_pa = 101325.0\n",
+    );
+    for (col, ch, unit) in [
+        ("p1_kpa", "p1", "kPa"),
+        ("p2_kpa", "p2", "kPa"),
+        ("angle_deg", "angle", "deg"),
+        ("u_in1", "u_in1", "onoff"),
+        ("u_ex1", "u_ex1", "onoff"),
+        ("u_in2", "u_in2", "onoff"),
+        ("u_ex2", "u_ex2", "onoff"),
+    ] {
+        text +=
+            &format!("[[channel]]\ncolumn = \"{col}\"\nchannel = \"{ch}\"\nunit = \"{unit}\"\n");
+        if unit == "kPa" {
+            text += "reference = \"gauge\"\n";
+        }
+    }
+    std::fs::write(&map, text).unwrap();
+    let out_path = dir.path().join("loaded.csv");
+    let input = shared().join("conformance/pulses_loaded.csv");
+    let out = host_sim(&[
+        &"import", &"--map", &map, &"--input", &input, &"--out", &out_path,
+    ]);
+    ok(&out);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    // The range is reported, and it does go below the atmosphere.
+    assert!(stdout.contains("p1 (column `p1_kpa`): -38.7"), "{stdout}");
+    assert!(!stderr.contains("warning: p"), "{stderr}");
+    // A gauge sensor mapped as absolute (the atmosphere subtracted from a gauge value: a
+    // vented muscle reads -101.3 kPa) is warned about.
+    let input = shared().join("conformance/pwm_nominal.csv");
+    let twice = std::fs::read_to_string(&map)
+        .unwrap()
+        .replace("reference = \"gauge\"", "reference = \"absolute\"");
+    std::fs::write(&map, twice).unwrap();
+    let out = host_sim(&[
+        &"import", &"--map", &map, &"--input", &input, &"--out", &out_path,
+    ]);
+    let report = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        report.contains("warning: p1 goes down to") && report.contains("gauge mapped as absolute"),
+        "{report}"
+    );
+}

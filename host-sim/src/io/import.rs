@@ -361,9 +361,13 @@ pub const FORCE_MAX_N: f64 = 1e5;
 /// A pressure channel whose |gauge| never reaches this is suspect (a unit too large read
 /// as a smaller one: bar or MPa mapped as kPa) [Pa].
 pub const P_SUSPECT_BELOW_PA: f64 = 10e3;
-/// A muscle exhausts to the atmosphere: a gauge pressure below this is suspect (an absolute
-/// sensor read as gauge, or a unit too large read as a smaller one) [Pa].
-pub const P_SUSPECT_GAUGE_BELOW_PA: f64 = -20e3;
+/// A muscle exhausts to the atmosphere, and one whose valves are closed while the joint
+/// stretches it falls below it only as far as its volume grows (isothermal `p V` constant: a
+/// volume 1.5 times larger takes 0 kPa gauge to about -34 kPa; the reference plant's loaded
+/// conformance run reaches -39 kPa): a gauge pressure below this fraction of the atmosphere
+/// below 0 (a volume doubled) is suspect (a gauge sensor mapped as absolute, an absolute one
+/// with a wrong offset, or a unit too large read as a smaller one).
+pub const P_SUSPECT_GAUGE_BELOW_ATM_FRACTION: f64 = 0.5;
 /// A gauge pressure column whose minimum lies within this of the atmosphere (and so never
 /// vents to 0 kPa gauge) looks like an absolute sensor read as gauge [Pa].
 pub const P_ABSOLUTE_SUSPECT_WITHIN_PA: f64 = 15e3;
@@ -625,8 +629,9 @@ fn implausible(target: Target, v: f64, p_atm_pa: f64) -> Option<String> {
         Target::Output(Channel::P1Kpa | Channel::P2Kpa) | Target::Regulator(_) => {
             if v < -p_atm_pa {
                 Some(format!(
-                    "{} kPa gauge is below vacuum ({} kPa): an absolute sensor mapped with \
-                     `reference = \"gauge\"`, a wrong `pressure.p_atm_pa`, or the wrong `unit`?",
+                    "{} kPa gauge is below vacuum ({} kPa): a gauge sensor mapped with \
+                     `reference = \"absolute\"` (the atmosphere subtracted from a gauge \
+                     value), a wrong `pressure.p_atm_pa` or `offset`, or the wrong `unit`?",
                     Shown(v * 1e-3),
                     Shown(-p_atm_pa * 1e-3)
                 ))
@@ -1275,11 +1280,14 @@ fn channel_ranges(
                     P_SUSPECT_BELOW_PA * 1e-3
                 ))
             }
-            Channel::P1Kpa | Channel::P2Kpa if lo < P_SUSPECT_GAUGE_BELOW_PA => {
+            Channel::P1Kpa | Channel::P2Kpa
+                if lo < -P_SUSPECT_GAUGE_BELOW_ATM_FRACTION * mapping.pressure.p_atm_pa =>
+            {
                 warnings.push(format!(
                     "{} goes down to {:.1} kPa gauge: a muscle exhausts to the atmosphere (0 \
-                     kPa gauge); is `reference` right (absolute read as gauge?), or `unit` (bar \
-                     read as kPa?)",
+                     kPa gauge), and closed valves on a stretched muscle take it a few tens of \
+                     kPa below, not this far; is `reference` right (absolute read as gauge, \
+                     gauge mapped as absolute?), or `unit` (bar read as kPa?)",
                     c.channel,
                     lo * 1e-3
                 ))
