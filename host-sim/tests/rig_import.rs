@@ -481,6 +481,23 @@ fn bad_mapping_and_bad_cells_name_file_line_and_column() {
         e.contains("bad.csv:10") && e.contains("`P1 [bar abs]`"),
         "{e}"
     );
+    // The cell is quoted as the file has it, with what it probably is: a thousands
+    // separator, or decimal commas read with the default `decimal = "."`.
+    let mut lines: Vec<String> = text.lines().map(String::from).collect();
+    let cells: Vec<&str> = lines[9].split(';').collect();
+    let t_ms = cells[0].to_string();
+    lines[9] = lines[9].replacen(&t_ms, "1.234,5", 1);
+    std::fs::write(&bad, lines.join("\n")).unwrap();
+    let e = run(MAP, &bad);
+    assert!(
+        e.contains("bad.csv:10") && e.contains("\"1.234,5\"") && e.contains("thousands separator"),
+        "{e}"
+    );
+    let e = run(&MAP.replace("decimal = \",\"\n", ""), &raw);
+    assert!(
+        e.contains("decimal comma") && e.contains("decimal = \",\""),
+        "{e}"
+    );
 }
 
 #[test]

@@ -622,6 +622,31 @@ fn convert(conv: &Convert, v: f64) -> f64 {
     }
 }
 
+/// What a cell that does not parse as a number probably is, as the tail of the message: a
+/// decimal comma read with `decimal = "."`, or a thousands separator (both separators in the
+/// cell); empty when neither.
+fn number_hint(cell: &str, comma: bool) -> &'static str {
+    let digits_around = |sep: char| {
+        cell.split(sep).count() >= 2
+            && cell.split(sep).all(|p| {
+                !p.is_empty()
+                    && p.trim_start_matches(['-', '+'])
+                        .chars()
+                        .all(|c| c.is_ascii_digit())
+            })
+    };
+    let (has_dot, has_comma) = (cell.contains('.'), cell.contains(','));
+    if has_dot && has_comma {
+        " (a thousands separator? export the numbers without one)"
+    } else if !comma && has_comma && digits_around(',') {
+        " (a decimal comma? set `decimal = \",\"` under [csv] in the mapping file)"
+    } else if comma && has_dot && digits_around('.') {
+        " (a decimal point? this mapping says `decimal = \",\"`; a thousands separator?)"
+    } else {
+        ""
+    }
+}
+
 /// Why a converted value cannot be what the channel says (gauge Pa, rad, N), with the unit
 /// mistake that usually causes it; `None` when it can be.
 fn implausible(target: Target, v: f64, p_atm_pa: f64) -> Option<String> {
@@ -862,6 +887,7 @@ pub fn import(
                     "empty cell (a gap in this channel; import does not fill gaps)".into(),
                 ));
             }
+            let cell = s;
             let owned;
             let s = if comma {
                 owned = s.replace(',', ".");
@@ -869,11 +895,15 @@ pub fn import(
             } else {
                 s
             };
-            let v: f64 = s
-                .parse()
-                .map_err(|_| at(line, name, format!("not a number: {s:?}")))?;
+            let v: f64 = s.parse().map_err(|_| {
+                at(
+                    line,
+                    name,
+                    format!("not a number: {cell:?}{}", number_hint(cell, comma)),
+                )
+            })?;
             if !v.is_finite() {
-                return Err(at(line, name, format!("not a finite number: {s:?}")));
+                return Err(at(line, name, format!("not a finite number: {cell:?}")));
             }
             Ok(v)
         };
