@@ -219,6 +219,16 @@ pub fn plot_path(s: &str) -> Result<PathBuf, String> {
     }
 }
 
+/// Outputs named by labels of their own (`labels[i]` names `paths[i]`), as
+/// [`distinct_file_outputs`] takes them.
+pub fn labelled<'a>(labels: &'a [String], paths: &'a [PathBuf]) -> Vec<(&'a str, &'a Path)> {
+    labels
+        .iter()
+        .zip(paths)
+        .map(|(l, p)| (l.as_str(), p.as_path()))
+        .collect()
+}
+
 /// [`distinct_outputs`] for outputs that are files in directories the command does not
 /// create: also each output's directory exists, checked before the run (not found by the
 /// rename after it).

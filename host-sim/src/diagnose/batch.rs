@@ -260,11 +260,7 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, u8)> {
         .map(|r| format!("the JSON of {}", r.display()))
         .chain(std::iter::once("the summary".to_string()))
         .collect();
-    let outs: Vec<(&str, &Path)> = labels
-        .iter()
-        .zip(&jsons)
-        .map(|(l, p)| (l.as_str(), p.as_path()))
-        .collect();
+    let outs = crate::validate::labelled(&labels, &jsons);
     let ins: Vec<(&str, &Path)> = std::iter::once(("--plant", a.plant.as_path()))
         .chain(recs.iter().map(|p| ("--recordings", p.as_path())))
         .collect();

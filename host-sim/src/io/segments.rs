@@ -60,11 +60,7 @@ pub fn write_segments(
             }
         })
         .collect();
-    let outputs: Vec<(&str, &Path)> = labels
-        .iter()
-        .zip(&paths)
-        .map(|(l, p)| (l.as_str(), p.as_path()))
-        .collect();
+    let outputs = crate::validate::labelled(&labels, &paths);
     crate::validate::distinct_file_outputs(inputs, &outputs).map_err(anyhow::Error::msg)?;
     for (rec, p) in segments.iter().zip(&paths) {
         let mut text = Vec::new();
