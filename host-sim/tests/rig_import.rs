@@ -318,6 +318,25 @@ fn gaps_are_listed_and_refused_or_split_never_filled() {
     let b = Recording::read(dir.path().join("rec-2.csv")).unwrap();
     assert_eq!(a.len(), 100);
     assert_eq!(a.len() + b.len(), 240 - 3);
+    // Data row 103 alone between two gaps (line 104 of the file without the dropped rows):
+    // left out, and said so.
+    let (raw, _) = rig_file(dir.path(), 6.0, 3, &[100, 101, 102, 104, 105, 106]);
+    let out = host_sim(&[
+        &"import",
+        &"--split",
+        &"--map",
+        &map,
+        &"--input",
+        &raw,
+        &"--out",
+        &dir.path().join("alone.csv"),
+    ]);
+    ok(&out);
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        e.contains("rig.csv:104: a single sample between two gaps") && e.contains("left out"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -726,6 +745,20 @@ fn split_removes_its_own_stale_segments_and_a_missing_directory_names_the_users_
     ok(&import_with(dir.path(), map, &raw1, &out, true));
     assert!(out.exists());
     assert!(!dir.path().join("rec-1.csv").exists() && !dir.path().join("rec-2.csv").exists());
+    // Two segments again: OUT of that one-segment import goes (it would pass for this run).
+    let (raw2, _) = rig_file(dir.path(), 6.0, 3, &[100, 101, 102]);
+    let report = ok(&import_with(dir.path(), map, &raw2, &out, true));
+    assert!(!out.exists() && report.contains("removed"), "{report}");
+
+    // A file of a segment's name that no import wrote is the user's: refused, untouched.
+    let mine = dir.path().join("rec-2.csv");
+    std::fs::write(&mine, "my notes\n").unwrap();
+    let e = exits(2, &import_with(dir.path(), map, &raw2, &out, true));
+    assert!(
+        e.contains("segment 2 of --out") && e.contains("was not written by host-sim import"),
+        "{e}"
+    );
+    assert_eq!(std::fs::read_to_string(&mine).unwrap(), "my notes\n");
 
     // A missing output directory: the user's path, not a temporary file's.
     let missing = dir.path().join("no_such_dir").join("rec.csv");

@@ -1100,6 +1100,15 @@ pub fn import(
     for w in cuts.windows(2) {
         let (a, b) = (w[0], w[1]);
         if b - a < 2 {
+            if b > a {
+                warnings.push(format!(
+                    "{}:{}: a single sample between two gaps (t = {} s) is not a recording: \
+                     left out",
+                    input.display(),
+                    lines[a],
+                    Shown(t_s[a])
+                ));
+            }
             continue;
         }
         let mut rec = Recording::default();

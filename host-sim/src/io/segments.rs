@@ -62,6 +62,24 @@ pub fn write_segments(
         .collect();
     let outputs = crate::validate::labelled(&labels, &paths);
     crate::validate::distinct_file_outputs(inputs, &outputs).map_err(anyhow::Error::msg)?;
+    // The user named OUT, not OUT-2.csv: a file of a segment's name that an earlier
+    // `host-sim <command>` did not write is the user's, never replaced.
+    if n > 1 {
+        for (i, p) in paths.iter().enumerate() {
+            if p.exists() && !is_output_of(p, command) {
+                anyhow::bail!(
+                    "segment {} of --out {}: {} exists and was not written by host-sim \
+                     {command}: refusing to replace it (this {command} has {n} segments, \
+                     written as {} .. {}); move that file or give another --out",
+                    i + 1,
+                    out.display(),
+                    p.display(),
+                    segment_path(out, 0, n).display(),
+                    segment_path(out, n - 1, n).display()
+                );
+            }
+        }
+    }
     for (rec, p) in segments.iter().zip(&paths) {
         let mut text = Vec::new();
         rec.write_to(&mut text)
@@ -75,6 +93,26 @@ pub fn write_segments(
         written.push('\n');
     }
     let mut stale = String::new();
+    // OUT itself, from an earlier run of one segment, when this one has several.
+    if n > 1 && out.exists() {
+        if is_output_of(out, command) {
+            std::fs::remove_file(out)
+                .with_context(|| format!("{}: cannot remove", out.display()))?;
+            stale += &format!(
+                "removed {}: an earlier {command} into it (this {command} has {n} segments, \
+                 written as {} .. {})\n",
+                out.display(),
+                segment_path(out, 0, n).display(),
+                segment_path(out, n - 1, n).display()
+            );
+        } else {
+            stale += &format!(
+                "note: {} is not part of this {command} ({n} segments) and not written by \
+                 host-sim {command}: left as it was\n",
+                out.display()
+            );
+        }
+    }
     let first_stale = if n == 1 { 0 } else { n };
     let plural = if n == 1 { "" } else { "s" };
     for k in first_stale..first_stale + 1000 {
@@ -92,8 +130,8 @@ pub fn write_segments(
             );
         } else {
             stale += &format!(
-                "note: {} is not part of this {command} ({n} segment{plural}) and not a \
-                 {command}'s output: left as it was\n",
+                "note: {} is not part of this {command} ({n} segment{plural}) and not written \
+                 by host-sim {command}: left as it was\n",
                 p.display()
             );
         }
