@@ -90,6 +90,28 @@ fn calibrate_writes_the_torque_model_and_refuses_degenerate_data() {
         );
     }
 
+    // Data that fits eq. 11 as well as the good recording but would make the firmware push
+    // the joint away, or run it an atmosphere too high: the angle logged the other way round,
+    // and both pressures logged absolute (the tensions are the gauge pressures' ones).
+    edit_column(&rec, &bad, "angle_deg", |_, v| -v);
+    let flipped = bad.clone();
+    let absolute = dir.path().join("absolute.csv");
+    edit_column(&rec, &absolute, "p1_kpa", |_, v| v + 101.325);
+    edit_column(&absolute, &absolute, "p2_kpa", |_, v| v + 101.325);
+    for (rec, want) in [
+        (&flipped, "the encoder's direction"),
+        (&absolute, "the pressures look absolute"),
+    ] {
+        let r = calibrate(rec, &cfg);
+        let err = text(&r.stderr);
+        assert_eq!(r.status.code(), Some(2), "{want}: {err}");
+        assert!(
+            err.contains(want) && err.contains("nothing written"),
+            "{err}"
+        );
+        assert_eq!(std::fs::read_dir(&cfg).unwrap().count(), 0, "{want}");
+    }
+
     // A good recording: the three files are written and reported as new; a second run
     // reports every constant unchanged.
     let r = calibrate(&rec, &cfg);

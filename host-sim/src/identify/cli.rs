@@ -737,6 +737,64 @@ pub fn torque_model_file(a: &IdentifyTorqueArgs) -> Result<TorqueModelFile> {
             a.plant.display()
         );
     }
+    // The sign of A is physics as well: at equal pressures a muscle that contracts loses
+    // tension, so the pair pulls the joint back (dT/dalpha < 0 for the plant's muscles). The
+    // opposite sign fits as well on data whose angle is logged the other way round (the
+    // encoder's direction) or whose muscles are swapped in every column (pressures, tensions
+    // and valves together: B keeps its sign then); the firmware's inverse model would push the
+    // joint away from where it is.
+    let pair_torque = |angle_rad: f64| {
+        let [c1, c2] = plant.joint.contractions(angle_rad);
+        let p0 = model.p0_gauge_pa;
+        plant.joint.sprocket_radius_m
+            * (plant.muscle.static_force_n(p0, c1) - plant.muscle.static_force_n(p0, c2))
+    };
+    let delta_rad = 0.05;
+    let plant_stiffness = (pair_torque(delta_rad) - pair_torque(-delta_rad)) / (2.0 * delta_rad);
+    let r = model.sprocket_radius_m;
+    let fitted_stiffness = model.a_n_per_m_rad * r * r;
+    if fitted_stiffness * plant_stiffness < 0.0 {
+        bail!(
+            "{file}: the fitted stiffness A r^2 = {fitted_stiffness:.4e} N m/rad has the opposite \
+             sign of the plant's muscles ({plant_stiffness:.4e} N m/rad at p0 = {:.1} kPa of {}: \
+             a contracting muscle loses tension, so the pair pulls the joint back): the angle \
+             is logged the other way round (the encoder's direction: negate angle_deg), or \
+             muscle 1 and 2 are swapped in every column (p1_kpa with p2_kpa, f1_n with f2_n, \
+             and the valves); the firmware would push the joint away; nothing written",
+            model.p0_gauge_pa / 1e3,
+            a.plant.display()
+        );
+    }
+    // Pressures logged absolute, with the tensions measured: the tensions are those of the
+    // true gauge pressures, so the fitted stiffness is the plant's muscles' one an atmosphere
+    // below the data's p0, not at it.
+    if source == TorqueSource::MeasuredTensions {
+        let stiffness_at = |p0_gauge_pa: f64| {
+            let t = |angle_rad: f64| {
+                let [c1, c2] = plant.joint.contractions(angle_rad);
+                plant.joint.sprocket_radius_m
+                    * (plant.muscle.static_force_n(p0_gauge_pa, c1)
+                        - plant.muscle.static_force_n(p0_gauge_pa, c2))
+            };
+            (t(delta_rad) - t(-delta_rad)) / (2.0 * delta_rad)
+        };
+        let at_p0 = fitted_stiffness / plant_stiffness;
+        let below = fitted_stiffness / stiffness_at(model.p0_gauge_pa - plant.p_atm_pa);
+        if (below - 1.0).abs() < 0.05 && (at_p0 - 1.0).abs() > 0.15 {
+            bail!(
+                "{file}: the pressures look absolute, not gauge: the tensions f1_n, f2_n give the \
+                 stiffness A r^2 = {fitted_stiffness:.4e} N m/rad, {:.0} % of the plant's muscles \
+                 at the data's p0 = {:.1} kPa but {:.0} % at {:.1} kPa, one atmosphere ({:.3} \
+                 kPa) lower; RECORDING.md's columns are gauge: subtract the atmosphere from \
+                 p1_kpa and p2_kpa (or import with reference = \"absolute\"); nothing written",
+                100.0 * at_p0,
+                model.p0_gauge_pa / 1e3,
+                100.0 * below,
+                (model.p0_gauge_pa - plant.p_atm_pa) / 1e3,
+                plant.p_atm_pa / 1e3
+            );
+        }
+    }
     // Eq. 11 assumes the symmetric activation p1 + p2 = 2 p0: report how far the data is from it.
     let p0_sd_pa = (samples
         .iter()
