@@ -819,6 +819,36 @@ fn pressures_logged_absolute_get_the_gauge_hint() {
     ] {
         assert!(stdout.contains(n), "`{n}` not in:\n{stdout}");
     }
+    // Without the force columns: the offset alone, every channel at 100 %, nothing
+    // recalibrated. (The calibrated sensors move the replay's start, which is the recording's
+    // first sample as read: the muscles start an atmosphere lower than the columns say. A
+    // shortcut that reused the nominal replay's states missed that, and a braid angle moved
+    // by 0.0 % "explained" the rest.)
+    let no_forces: String = shifted_columns(&text, &["p1_kpa", "p2_kpa"], 101.325)
+        .lines()
+        .map(|l| {
+            if l.starts_with('#') {
+                format!("{l}\n")
+            } else {
+                format!("{}\n", l.split(',').take(8).collect::<Vec<_>>().join(","))
+            }
+        })
+        .collect();
+    std::fs::write(&abs, no_forces).unwrap();
+    let stdout = ok(&on_plant(
+        "diagnose",
+        &plant(),
+        &[&"--recording", &abs, &"--json", &json],
+    ));
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert!(v["recalibrated"].as_array().unwrap().is_empty(), "{stdout}");
+    assert!(
+        stdout.contains("angle_deg 96.4 % -> 100.0 %")
+            && stdout.contains("p1_kpa 58.3 % -> 100.0 %")
+            && stdout.contains("look absolute"),
+        "{stdout}"
+    );
     // A real sensor offset (20 kPa) gets no such hint.
     std::fs::write(&abs, shifted_columns(&text, &["p1_kpa", "p2_kpa"], 20.0)).unwrap();
     let stdout = text_of_any_status(&on_plant(

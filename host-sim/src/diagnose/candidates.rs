@@ -100,6 +100,12 @@ pub trait Candidate: Sync + Send {
     }
     /// One sentence saying what the fitted effect is.
     fn describe(&self, params: &[f64], s: &Setup) -> String;
+    /// True when the fitted parameters leave the model as the plant file has it (a
+    /// recalibration within [`crate::diagnose::recalibrate::RECAL_NEGLIGIBLE`] of the file's
+    /// value): such a part is not an answer, whatever residue it fits.
+    fn changes_nothing(&self, _params: &[f64]) -> bool {
+        false
+    }
 }
 
 /// The full catalogue, in the fixed order of the effect registry

@@ -104,6 +104,16 @@ impl<'a> Problem<'a> {
         cfg
     }
 
+    /// True when the model `parts` moves the plant exactly as the nominal one (its parts
+    /// change only what the sensors make of the states): the nominal states can be reused.
+    /// Not when the replay starts from the recording's first sample as the sensors read it
+    /// (`initial.as_read`): a sensor calibration then moves the start, and with it every
+    /// state after (a pressure column logged absolute, read back to gauge, starts the muscle
+    /// an atmosphere lower).
+    fn sensors_only(&self, parts: &[Part]) -> bool {
+        parts.iter().all(|p| !p.candidate.changes_dynamics()) && !self.nominal.initial.as_read
+    }
+
     /// The simulated channels of the model `parts`; `None` if the simulation fails.
     pub fn predict(&self, parts: &[Part]) -> Option<Vec<Measurement>> {
         self.predict_until(parts, self.inputs.len())
@@ -120,7 +130,7 @@ impl<'a> Problem<'a> {
         let cfg = self.config(parts);
         let plant = Plant::from_config(&cfg);
         let dt = self.setup.dt_s;
-        if parts.iter().all(|p| !p.candidate.changes_dynamics()) && end <= self.base_states.len() {
+        if self.sensors_only(parts) && end <= self.base_states.len() {
             return Some(plant.measure_series(&self.base_states[..end], dt));
         }
         let mut out = Vec::with_capacity(end);
@@ -149,7 +159,7 @@ impl<'a> Problem<'a> {
             k += 1;
         };
         let end = end.min(self.inputs.len());
-        if parts.iter().all(|p| !p.candidate.changes_dynamics()) {
+        if self.sensors_only(parts) {
             // Sensor effects alone: the nominal states, measured by this model's sensors.
             if end <= self.base_states.len() {
                 self.base_states[..end].iter().for_each(visit);

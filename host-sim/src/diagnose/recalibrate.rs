@@ -120,6 +120,12 @@ pub fn candidates(nominal: &PlantConfig) -> Vec<Box<dyn Candidate>> {
         .collect()
 }
 
+/// A recalibration that moves its key by less than this fraction of the plant file's value
+/// leaves the file as it is (0.1 %: finer than a rig's parameter is measured): it is dropped
+/// from the answer, however much residue it fits (it would tell the user to change 25.3 deg
+/// to 25.3 deg).
+pub const RECAL_NEGLIGIBLE: f64 = 1e-3;
+
 /// Whether a candidate id is a recalibrated plant key (dotted) rather than an effect.
 pub fn is_recal_id(id: &str) -> bool {
     id.contains('.')
@@ -165,6 +171,9 @@ impl Candidate for Recal {
     }
     fn apply(&self, cfg: &mut PlantConfig, params: &[f64], _s: &Setup) {
         (self.k.set)(cfg, params[0]);
+    }
+    fn changes_nothing(&self, params: &[f64]) -> bool {
+        (params[0] / self.nominal - 1.0).abs() < RECAL_NEGLIGIBLE
     }
     fn describe(&self, params: &[f64], _s: &Setup) -> String {
         format!(

@@ -329,6 +329,27 @@ pub fn select<'c>(
         current = fitted;
         j_cur = jh;
     }
+    // A part that leaves the plant file as it is (a recalibration by a hair) is no answer:
+    // dropped, the rest refitted without it.
+    while let Some(j) = current
+        .iter()
+        .position(|p| p.candidate.changes_nothing(&p.params))
+    {
+        let mut t = current.clone();
+        t.remove(j);
+        if t.is_empty() {
+            current = t;
+            j_cur = j0_h;
+            chosen_explained.clear();
+            break;
+        }
+        let (fitted, jh, seconds) = trial(&t);
+        scores.push(set_score(&fitted, round + 1, jh, None, seconds));
+        mark_accepted(&mut scores, round + 1, &set_id(&fitted));
+        chosen_explained = round1_shares(&fitted, &round1_explained);
+        current = fitted;
+        j_cur = jh;
+    }
     Selected {
         chosen: current,
         heldout_cost: j_cur,
