@@ -930,3 +930,56 @@ fn a_recording_in_which_nothing_moves_is_refused_as_nothing_to_judge() {
     );
     assert!(!out.exists());
 }
+
+/// The training run fits the nominal model within its noise, but the check run was made with
+/// a load on the joint: "nothing is missing" would be said of the training run alone. The
+/// answer names the check's departing channels and exits 3.
+#[test]
+fn a_check_recording_the_nominal_model_does_not_describe_is_not_nothing_missing() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("d.json");
+    let r = on_plant(
+        "diagnose",
+        &plant(),
+        &[
+            &"--recording",
+            &fixture("pulses_nominal.csv"),
+            &"--check",
+            &fixture("pulses_loaded.csv"),
+            &"--json",
+            &json,
+        ],
+    );
+    let out = text(&r.stdout);
+    exits(3, &r);
+    assert!(
+        out.contains("explains the training recording within its noise")
+            && out.contains("but not the check recording (angle_deg"),
+        "{out}"
+    );
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(v["verdict"], "unexplained");
+    assert!(
+        v["check"]["departs"]
+            .as_str()
+            .unwrap()
+            .contains("angle_deg"),
+        "{v}"
+    );
+    // The same training run checked on another run of the same joint: nothing is missing.
+    let r = on_plant(
+        "diagnose",
+        &plant(),
+        &[
+            &"--recording",
+            &fixture("pulses_nominal.csv"),
+            &"--check",
+            &shared().join("conformance/pwm_nominal.csv"),
+            &"--json",
+            &json,
+        ],
+    );
+    let out = ok(&r);
+    assert!(out.contains("Nothing is missing"), "{out}");
+}

@@ -95,7 +95,12 @@ impl Diagnosis {
                         .chain(self.check_after.iter().flatten())
                         .map(|(_, v)| *v)
                         .fold(f64::INFINITY, f64::min);
-                    if let Some(lost) = &self.check_not_held {
+                    if let Some(departs) = &self.check_departs {
+                        format!(
+                            "Unexplained: the nominal model explains the training recording within its noise (fits {}), but not the check recording ({departs}): the check run went where the training run did not (another load or rig, or an effect the training run's excitation did not reach); no effect is named. Diagnose the check recording itself, or record one run that covers both.",
+                            fits(&self.fit_before)
+                        )
+                    } else if let Some(lost) = &self.check_not_held {
                         format!(
                             "Unexplained: the best answer ({}) fits the training recording but did not hold on the check recording: it makes the check fit worse ({lost}); no effect is named.",
                             self.best_attempt.join(" + ")
@@ -237,6 +242,9 @@ impl Diagnosis {
             out["check"] = serde_json::json!({"before": json_fits(b), "after": json_fits(a)});
             if let Some(lost) = &self.check_not_held {
                 out["check"]["not_held"] = serde_json::Value::String(lost.clone());
+            }
+            if let Some(departs) = &self.check_departs {
+                out["check"]["departs"] = serde_json::Value::String(departs.clone());
             }
         }
         out["black_box"] = self

@@ -248,6 +248,10 @@ pub struct Diagnosis {
     /// When the correction made the CHECK recording worse ([`verdict::check_not_held`]): the
     /// channels that lost fit, "p1_kpa 100.0 % -> 82.8 %" (the verdict is then unexplained).
     pub check_not_held: Option<String>,
+    /// When the nominal model explains TRAIN within its noise but not CHECK
+    /// ([`verdict::check_departs`]): the channels that depart (the verdict is then
+    /// unexplained).
+    pub check_departs: Option<String>,
     pub candidates: Vec<CandidateScore>,
     /// The best set the selection found (ids), also when the verdict names nothing.
     pub best_attempt: Vec<String>,
@@ -1113,8 +1117,15 @@ pub fn diagnose(
         (Some(b), Some(a)) if !fin.chosen.is_empty() => verdict::check_not_held(b, a),
         _ => None,
     };
-    let v = if nothing_missing && hints.is_empty() {
+    // Nothing missing on TRAIN, but CHECK departs from the same model: not an answer.
+    let check_departs = match &check_before {
+        Some(c) if nothing_missing && hints.is_empty() => verdict::check_departs(&fit_before, c),
+        _ => None,
+    };
+    let v = if nothing_missing && hints.is_empty() && check_departs.is_none() {
         Verdict::NothingMissing
+    } else if check_departs.is_some() {
+        Verdict::Unexplained
     } else if !hints.is_empty()
         || (verdict::unlike_plant(&fit_before) && !(min_heldout >= opts.min_heldout_fit_pct))
     {
@@ -1337,6 +1348,7 @@ pub fn diagnose(
         check_before,
         check_after,
         check_not_held: check_not_held.filter(|_| v == Verdict::Unexplained),
+        check_departs,
         candidates: sel.scores,
         best_attempt,
         best_attempt_at_bound,

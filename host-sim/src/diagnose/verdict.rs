@@ -57,6 +57,31 @@ pub fn check_not_held(
     (!lost.is_empty()).then(|| lost.join(", "))
 }
 
+/// A check recording channel whose nominal fit is this many points below the training
+/// recording's, when the nominal model explains the training recording within its noise,
+/// departs: the model does not describe the check run, and "nothing is missing" would be
+/// said of the training run alone. (A check of other excitation fits a few points lower by
+/// its spread and noise alone.)
+pub const CHECK_DEPARTS_PCT: f64 = 10.0;
+
+/// The channels of the check recording the nominal model does not describe
+/// ([`CHECK_DEPARTS_PCT`] below the training fit), "angle_deg 45.5 % (training 99.9 %)";
+/// `None` when every channel holds.
+pub fn check_departs(
+    train: &std::collections::BTreeMap<&'static str, f64>,
+    check: &std::collections::BTreeMap<&'static str, f64>,
+) -> Option<String> {
+    let departs: Vec<String> = check
+        .iter()
+        .filter_map(|(k, c)| {
+            let t = train.get(k).copied()?;
+            (t.is_finite() && !(*c >= t - CHECK_DEPARTS_PCT))
+                .then(|| format!("{k} {c:.1} % (training {t:.1} %)"))
+        })
+        .collect();
+    (!departs.is_empty()).then(|| departs.join(", "))
+}
+
 /// The kind of answer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Verdict {
