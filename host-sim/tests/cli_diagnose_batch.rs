@@ -6,6 +6,22 @@
 mod common;
 use common::*;
 
+/// The summary's rows, read back as CSV (quoted fields unquoted); every row has the header's
+/// seven fields.
+fn rows(summary: &str) -> Vec<Vec<String>> {
+    let mut r = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .from_reader(summary.as_bytes());
+    let rows: Vec<Vec<String>> = r
+        .records()
+        .map(|rec| rec.unwrap().iter().map(String::from).collect())
+        .collect();
+    for row in &rows {
+        assert_eq!(row.len(), 7, "{row:?} in:\n{summary}");
+    }
+    rows
+}
+
 #[test]
 fn a_directory_is_diagnosed_in_parallel_with_one_json_each_and_a_summary() {
     let dir = tempfile::tempdir().unwrap();
@@ -28,17 +44,16 @@ fn a_directory_is_diagnosed_in_parallel_with_one_json_each_and_a_summary() {
         String::from_utf8_lossy(&r.stderr)
     );
     let summary = std::fs::read_to_string(out.join("summary.csv")).unwrap();
-    let lines: Vec<&str> = summary.lines().collect();
+    let lines = rows(&summary);
     assert_eq!(lines.len(), 3, "{summary}");
     assert!(
-        lines[1].starts_with("broken.csv,0,\"error:") && lines[1].contains("u_ex1"),
+        lines[1][..2] == ["broken.csv", "0"]
+            && lines[1][2].starts_with("error:")
+            && lines[1][2].contains("u_ex1"),
         "{summary}"
     );
-    assert!(
-        lines[2].starts_with("nominal.csv,20000,nothing_missing,"),
-        "{summary}"
-    );
-    assert!(lines[0].contains(",verdict,effects,"), "{summary}");
+    assert_eq!(lines[2][..3], ["nominal.csv", "20000", "nothing_missing"]);
+    assert_eq!(lines[0][2..4], ["verdict", "effects"]);
     assert!(
         stdout.contains("nominal.csv") && stdout.contains("broken.csv"),
         "{stdout}"
@@ -90,8 +105,39 @@ fn a_directory_is_diagnosed_in_parallel_with_one_json_each_and_a_summary() {
         let stdout = String::from_utf8_lossy(&r.stdout);
         assert_eq!(r.status.code(), Some(1), "{stdout}");
         let summary = std::fs::read_to_string(o.join("summary.csv")).unwrap();
+        let lines = rows(&summary);
+        for name in ["gone.csv", "sub.csv"] {
+            assert!(
+                lines
+                    .iter()
+                    .any(|l| l[0] == name && l[1] == "0" && l[2].starts_with("error:")),
+                "{summary}"
+            );
+        }
+        // Names with a comma or a quote (a lab's "run 1, left arm.csv"): quoted, seven fields
+        // each, the names read back as they are.
+        let named = dir.path().join("named");
+        std::fs::create_dir(&named).unwrap();
+        std::fs::copy(
+            shared().join("conformance/pulses_nominal.csv"),
+            named.join("run 1, left arm.csv"),
+        )
+        .unwrap();
+        std::fs::write(named.join("bad \"q\".csv"), "t_s,u_in1\n0,0\n").unwrap();
+        let o = dir.path().join("named-out");
+        batch(&plant, &named, &o, &[]);
+        let summary = std::fs::read_to_string(o.join("summary.csv")).unwrap();
+        let lines = rows(&summary);
         assert!(
-            summary.contains("gone.csv,0,\"error:") && summary.contains("sub.csv,0,\"error:"),
+            lines
+                .iter()
+                .any(|l| l[0] == "run 1, left arm.csv" && l[2] == "nothing_missing"),
+            "{summary}"
+        );
+        assert!(
+            lines
+                .iter()
+                .any(|l| l[0] == "bad \"q\".csv" && l[2].contains("bad \"q\".csv")),
             "{summary}"
         );
     }
@@ -139,6 +185,15 @@ fn the_exit_status_follows_the_worst_verdict_and_the_out_dir_may_be_the_recordin
     assert!(!stdout.contains("summary.csv  "), "{stdout}");
     let summary = std::fs::read_to_string(recs.join("summary.csv")).unwrap();
     assert_eq!(summary.lines().count(), 2, "{summary}");
+    // Into another directory: the summary left in the recordings' is skipped, with a note.
+    let r = batch(&plant, &recs, &dir.path().join("elsewhere"), &[]);
+    let stdout = ok(&r);
+    assert!(!stdout.contains("summary.csv  "), "{stdout}");
+    assert!(
+        text(&r.stderr).contains("the summary of an earlier diagnose-batch, not a recording"),
+        "{}",
+        text(&r.stderr)
+    );
     // A recording of another rig (muscles mounted at another initial contraction, a key the
     // diagnosis does not refit; simulated through the CLI): not explained -> 3.
     let other = dir.path().join("other.toml");
@@ -158,12 +213,10 @@ fn the_exit_status_follows_the_worst_verdict_and_the_out_dir_may_be_the_recordin
     ]));
     let r = batch(&plant, &recs, &recs, &[]);
     let summary = std::fs::read_to_string(recs.join("summary.csv")).unwrap();
-    let other_row = summary
-        .lines()
-        .find(|l| l.starts_with("other.csv,"))
-        .unwrap();
+    let lines = rows(&summary);
+    let other_row = lines.iter().find(|l| l[0] == "other.csv").unwrap();
     assert!(
-        other_row.contains(",unexplained,") || other_row.contains(",not_this_plant,"),
+        other_row[2] == "unexplained" || other_row[2] == "not_this_plant",
         "{summary}"
     );
     assert_eq!(r.status.code(), Some(3), "{}", text(&r.stderr));

@@ -145,23 +145,43 @@ impl BatchRow {
 
 /// The summary as CSV (`recording,samples,verdict,effects,worst_fit_before_pct,
 /// worst_fit_after_pct,wall_s`; `effects` joins the named effects and `recalibrate KEY` with
-/// `+`).
+/// `+`). Written by the `csv` crate: a field with a comma, a quote or a line break (a
+/// recording named `run 1, left.csv`, an error message) is quoted as RFC 4180 says, so every
+/// row has the header's seven fields; an error is kept on one line.
 pub fn summary_csv(rows: &[BatchRow]) -> String {
-    format!("{SUMMARY_HEADER}\n")
-        + &summary_lines(
-            rows,
-            |name, samples, d| {
-                let effects = d.effects.join("+").replace(',', ";");
-                format!(
-                    "{name},{samples},{},{effects},{:.2},{:.2},{:.2}\n",
-                    d.verdict, d.worst_fit_before_pct, d.worst_fit_after_pct, d.wall_s
-                )
-            },
-            |name, samples, e| {
-                let e = e.replace('"', "'").replace('\n', " ");
-                format!("{name},{samples},\"error: {e}\",,,,\n")
-            },
-        )
+    let mut w = csv::WriterBuilder::new()
+        .terminator(csv::Terminator::Any(b'\n'))
+        .from_writer(Vec::new());
+    let mut row = |fields: &[&str]| {
+        w.write_record(fields)
+            .expect("writing CSV into memory cannot fail")
+    };
+    row(&SUMMARY_HEADER.split(',').collect::<Vec<_>>());
+    for r in rows {
+        let (name, samples) = (r.name(), r.samples.to_string());
+        match &r.result {
+            Ok(d) => row(&[
+                &name,
+                &samples,
+                d.verdict,
+                &d.effects.join("+"),
+                &format!("{:.2}", d.worst_fit_before_pct),
+                &format!("{:.2}", d.worst_fit_after_pct),
+                &format!("{:.2}", d.wall_s),
+            ]),
+            Err(e) => row(&[
+                &name,
+                &samples,
+                &format!("error: {}", e.replace('\n', " ")),
+                "",
+                "",
+                "",
+                "",
+            ]),
+        }
+    }
+    String::from_utf8(w.into_inner().expect("an in-memory writer flushes"))
+        .expect("the fields are UTF-8")
 }
 
 /// The summary as an aligned table for the terminal.
@@ -242,8 +262,21 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, u8)> {
     // With --out-dir equal to --recordings, an earlier run's summary.csv is listed too: it
     // is this command's output (its header says so), not a recording. A user's recording
     // named summary.csv is kept (and refused below as an output that is an input).
+    // A summary an earlier run left in --recordings with another --out-dir is no recording
+    // either: skipped, and said so on stderr.
     let own_summary = a.out_dir.join(SUMMARY_FILE);
-    recs.retain(|r| !(crate::validate::same_existing_file(r, &own_summary) && is_batch_summary(r)));
+    recs.retain(|r| {
+        if !is_batch_summary(r) {
+            return true;
+        }
+        if !crate::validate::same_existing_file(r, &own_summary) {
+            eprintln!(
+                "note: {}: the summary of an earlier diagnose-batch, not a recording: skipped",
+                r.display()
+            );
+        }
+        false
+    });
     if recs.is_empty() {
         anyhow::bail!(
             "--recordings {}: no *.csv file in it",
