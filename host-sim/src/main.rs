@@ -421,6 +421,8 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
         outputs.push(("--plot", p));
     }
     validate::distinct_file_outputs(&inputs, &outputs).map_err(anyhow::Error::msg)?;
+    validate::replaceable("--out", &a.out, validate::OutputKind::RECORDING)
+        .map_err(anyhow::Error::msg)?;
     if let Some(s) = &a.scenario {
         let sc = host_sim::io::scenario::Scenario::load(s)?;
         sc.run_estimate()
@@ -945,6 +947,14 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
         inputs.push(("--check", c));
     }
     validate::distinct_file_outputs(&inputs, &[("--json", &a.json)]).map_err(anyhow::Error::msg)?;
+    validate::replaceable(
+        "--json",
+        &a.json,
+        validate::OutputKind::Json {
+            what: "a JSON file",
+        },
+    )
+    .map_err(anyhow::Error::msg)?;
     if let Some(dir) = &a.report {
         validate::output_dir("--report", dir).map_err(anyhow::Error::msg)?;
         let report_json = dir.join("diagnosis.json");

@@ -229,6 +229,91 @@ pub fn labelled<'a>(labels: &'a [String], paths: &'a [PathBuf]) -> Vec<(&'a str,
         .collect()
 }
 
+/// What a command writes to a path: an existing file there that is of this kind is an
+/// earlier output (replaced); anything else is a file the user would lose (refused before the
+/// run, [`replaceable`]).
+#[derive(Clone, Copy, Debug)]
+pub enum OutputKind {
+    /// A TOML file with one of these tables; `what` names the kind in the message.
+    Toml {
+        tables: &'static [&'static str],
+        what: &'static str,
+    },
+    /// A CSV file whose header line (the first line that is not a `#` comment) starts with
+    /// the column `first_column`.
+    Csv {
+        first_column: &'static str,
+        what: &'static str,
+    },
+    /// A JSON object.
+    Json { what: &'static str },
+}
+
+impl OutputKind {
+    pub const RECORDING: OutputKind = OutputKind::Csv {
+        first_column: "t_s",
+        what: "a recording",
+    };
+    pub const PLANT: OutputKind = OutputKind::Toml {
+        tables: &["muscle", "joint", "valve", "links"],
+        what: "a plant file",
+    };
+}
+
+/// Largest existing file [`replaceable`] reads whole to recognise a TOML or JSON output;
+/// a larger one is not such an output.
+const REPLACEABLE_READ_MAX_BYTES: u64 = 4 << 20;
+
+/// `Err` naming `flag` and `path` when `path` exists and is not an output of `kind` (a
+/// recording about to be replaced by a force law, a plant file by a recording): the command
+/// would replace it, and the user would lose it. An absent or empty file is replaceable.
+pub fn replaceable(flag: &str, path: &Path, kind: OutputKind) -> Result<(), String> {
+    use std::io::Read as _;
+    let Ok(meta) = std::fs::metadata(path) else {
+        return Ok(());
+    };
+    if !meta.is_file() || meta.len() == 0 {
+        return Ok(());
+    }
+    let mut head = Vec::new();
+    let read_max = match kind {
+        OutputKind::Csv { .. } => 64 << 10,
+        _ => REPLACEABLE_READ_MAX_BYTES,
+    };
+    if std::fs::File::open(path)
+        .and_then(|f| f.take(read_max).read_to_end(&mut head))
+        .is_err()
+    {
+        return Ok(()); // unreadable: the write itself says why
+    }
+    let text = String::from_utf8_lossy(&head);
+    let (ok, what) = match kind {
+        OutputKind::Toml { tables, what } => (
+            meta.len() <= REPLACEABLE_READ_MAX_BYTES
+                && text
+                    .parse::<toml::Table>()
+                    .is_ok_and(|t| tables.iter().any(|k| t.contains_key(*k))),
+            what,
+        ),
+        OutputKind::Csv { first_column, what } => (
+            text.lines()
+                .map(|l| l.trim_start_matches('\u{feff}'))
+                .find(|l| !l.starts_with('#') && !l.trim().is_empty())
+                .is_some_and(|l| l.split(',').next().map(str::trim) == Some(first_column)),
+            what,
+        ),
+        OutputKind::Json { what } => (text.trim_start().starts_with('{'), what),
+    };
+    if ok {
+        return Ok(());
+    }
+    Err(format!(
+        "{flag} {}: exists and is not {what}; this command replaces {flag}: give another file, \
+         or move this one away first",
+        path.display()
+    ))
+}
+
 /// [`distinct_outputs`] for outputs that are files in directories the command does not
 /// create: also each output's directory exists, checked before the run (not found by the
 /// rename after it).
@@ -507,6 +592,40 @@ impl RunEstimate {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_output_replaces_only_an_earlier_output_of_its_kind() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = |name: &str, text: &str| {
+            let p = dir.path().join(name);
+            std::fs::write(&p, text).unwrap();
+            p
+        };
+        let rec = file("rec.csv", "# plant = p.toml\nt_s,u_in1\n0,0\n");
+        let law = file("law.toml", "# identified\n[force_law]\nc = [1.0]\n");
+        let notes = file("notes.txt", "my notes\n");
+        let empty = file("empty.csv", "");
+        let json = file("d.json", "  {\"verdict\": \"explained\"}");
+        let force_law = OutputKind::Toml {
+            tables: &["force_law"],
+            what: "a force-law file",
+        };
+        // Its own kind, an empty file, a missing file: replaced.
+        assert!(replaceable("--out", &rec, OutputKind::RECORDING).is_ok());
+        assert!(replaceable("--out", &law, force_law).is_ok());
+        assert!(replaceable("--out", &empty, force_law).is_ok());
+        assert!(replaceable("--out", &dir.path().join("new.toml"), force_law).is_ok());
+        assert!(replaceable("--json", &json, OutputKind::Json { what: "JSON" }).is_ok());
+        // Another kind: refused, naming the flag, the path and what was expected.
+        let e = replaceable("--out", &rec, force_law).unwrap_err();
+        assert!(
+            e.contains("--out") && e.contains("rec.csv") && e.contains("not a force-law file"),
+            "{e}"
+        );
+        assert!(replaceable("--out", &law, OutputKind::RECORDING).is_err());
+        assert!(replaceable("--out", &notes, OutputKind::PLANT).is_err());
+        assert!(replaceable("--json", &rec, OutputKind::Json { what: "JSON" }).is_err());
+    }
 
     #[test]
     fn an_output_that_is_another_name_of_an_input_is_refused() {

@@ -61,8 +61,18 @@ struct Workspace {
 impl Workspace {
     fn new() -> Workspace {
         let dir = tempfile::tempdir().unwrap();
-        for name in ["out.csv", "out.toml", "out.json", "out.png"] {
-            std::fs::write(dir.path().join(name), format!("precious {name}\n")).unwrap();
+        // Each of the kind a command writes there (commands refuse to replace a file of
+        // another kind before any work; these tests are about the refusals after that).
+        for (name, text) in [
+            ("out.csv", "# precious out.csv\nt_s,u_in1,u_ex1,u_in2,u_ex2\n0,0,0,0,0\n"),
+            (
+                "out.toml",
+                "# precious out.toml\n[force_law]\n[torque_model]\n[volume_fnn]\n[cascade]\n[muscle]\n",
+            ),
+            ("out.json", "{\"precious\": \"out.json\"}\n"),
+            ("out.png", "precious out.png\n"),
+        ] {
+            std::fs::write(dir.path().join(name), text).unwrap();
         }
         Workspace { dir }
     }
@@ -151,7 +161,7 @@ fn sweep_torque_sizes_that_would_exhaust_memory_are_refused_with_the_estimate() 
         &["sweep torque", "of memory", "--allow-large"],
     );
     w.refuses(
-        "sweep force --plant {plant} --out {w}/out.csv --n-stretch 100000 --n-pressure 100000",
+        "sweep force --plant {plant} --out {w}/force.csv --n-stretch 100000 --n-pressure 100000",
         &["sweep force", "1.000e10 samples", "--allow-large"],
     );
 }

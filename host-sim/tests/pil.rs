@@ -426,6 +426,38 @@ fn capture_splits_a_run_at_its_gaps_and_names_faulted_ticks() {
     );
     assert!(seg(5).exists());
 
+    // Consecutive sequence numbers whose stamps jump (a clock set, a late tick): the log's
+    // byte is named, not the recording never written; with --split a gap like the others.
+    let jumped: Vec<u8> = (0..20u32)
+        .flat_map(|k| {
+            bytes_of(&TickRecord {
+                t_us: 1000 * k + if k >= 10 { 100_000 } else { 0 },
+                ..rec(k)
+            })
+        })
+        .collect();
+    std::fs::write(&log, &jumped).unwrap();
+    let j = dir.path().join("j.csv");
+    let r = host_sim(&[&"capture", &"--log", &log, &"--out", &j]);
+    assert_refused(
+        &r,
+        &[
+            "run.stream: byte",
+            "sequence 10 after 9",
+            "moves 101000 us between consecutive ticks (the tick period is 1000 us)",
+            "--split",
+        ],
+        &j,
+    );
+    let stdout = ok(&host_sim(&[
+        &"capture", &"--log", &log, &"--out", &j, &"--split",
+    ]));
+    assert!(stdout.contains("2 segment(s)"), "{stdout}");
+    for n in 1..=2 {
+        let p = dir.path().join(format!("j-{n}.csv"));
+        assert_eq!(Recording::read(&p).unwrap().len(), 10);
+    }
+
     // The 32-bit microsecond stamp wraps (every 71.6 min): time goes on across it; a
     // firmware restart (sequence back to 0) is a new run, refused without --split.
     let near = u32::MAX - 2_500;

@@ -723,18 +723,15 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
     }
     // --out is replaced at the end: an existing file there must be a gains file (a plant
     // file or another config picked by a completion slip would be lost after the run).
-    if let Ok(text) = std::fs::read_to_string(&a.out) {
-        let is_gains = text.parse::<toml::Table>().is_ok_and(|t| {
-            t.contains_key("cascade") || t.contains_key("pd") || t.contains_key("pid")
-        });
-        if !is_gains {
-            bail!(
-                "--out {}: exists and is not a gains file (no [cascade], [pd] or [pid] table); \
-                 tune replaces --out with the tuned gains: give another file, or remove this one",
-                a.out.display()
-            );
-        }
-    }
+    crate::validate::replaceable(
+        "--out",
+        &a.out,
+        crate::validate::OutputKind::Toml {
+            tables: &["cascade", "pd", "pid"],
+            what: "a gains file (no [cascade], [pd] or [pid] table)",
+        },
+    )
+    .map_err(anyhow::Error::msg)?;
     // With --warm-start, the gains stored in the output file are one more start of every search.
     let stored = if a.warm_start {
         match ControlTuning::load(&a.out) {

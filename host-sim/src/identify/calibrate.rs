@@ -89,8 +89,16 @@ pub fn degenerate_reasons(rec: &Recording, plant: &Plant, file: &str) -> Vec<Str
         match p {
             Some(p) => {
                 if !(sd(p) >= MIN_PRESSURE_SD_KPA) {
+                    let p_max = p.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                    let unit = if p_max < 10.0 {
+                        format!(
+                            " (at most {p_max:.3} kPa: logged in bar or MPa? the column is in kPa)"
+                        )
+                    } else {
+                        String::new()
+                    };
                     why.push(format!(
-                        "{file}: {name} is constant (sd {:.3} kPa < {MIN_PRESSURE_SD_KPA} kPa): no activation to identify",
+                        "{file}: {name} is constant (sd {:.3} kPa < {MIN_PRESSURE_SD_KPA} kPa){unit}: no activation to identify",
                         sd(p)
                     ));
                 }
@@ -98,7 +106,10 @@ pub fn degenerate_reasons(rec: &Recording, plant: &Plant, file: &str) -> Vec<Str
                 if !(pmax <= supply_kpa + SUPPLY_MARGIN_KPA) {
                     why.push(format!(
                         "{file}: {name} reaches {pmax:.1} kPa, above the supply {supply_kpa:.1} kPa \
-                         (+{SUPPLY_MARGIN_KPA} kPa): wrong unit, wrong plant file or a broken sensor"
+                         (+{SUPPLY_MARGIN_KPA} kPa), a pressure the controller's activation p0 -+ dp \
+                         never sets: a wrong unit, a plant file of another supply, a broken \
+                         sensor, or a muscle compressed with its valves closed (a run driven by \
+                         valve pulses, not an activation sweep: `host-sim sweep torque` records one)"
                     ));
                 }
             }

@@ -300,6 +300,15 @@ pub fn tondu_of(cfg: &PlantConfig) -> Tondu {
 fn sweep_force(a: &SweepForceArgs) -> Result<String> {
     validate::distinct_file_outputs(&[("--plant", &a.plant)], &[("--out", &a.out)])
         .map_err(anyhow::Error::msg)?;
+    validate::replaceable(
+        "--out",
+        &a.out,
+        validate::OutputKind::Csv {
+            first_column: "p_kpa",
+            what: "a force sweep (p_kpa, stretch, f_n)",
+        },
+    )
+    .map_err(anyhow::Error::msg)?;
     let points =
         a.n_stretch as f64 * a.n_pressure as f64 * if a.hysteresis_gap_n > 0.0 { 2.0 } else { 1.0 };
     RunEstimate {
@@ -428,6 +437,8 @@ const P0_MIN_KPA: f64 = 20.0;
 fn sweep_torque(a: &SweepTorqueArgs) -> Result<String> {
     validate::distinct_file_outputs(&[("--plant", &a.plant)], &[("--out", &a.out)])
         .map_err(anyhow::Error::msg)?;
+    validate::replaceable("--out", &a.out, validate::OutputKind::RECORDING)
+        .map_err(anyhow::Error::msg)?;
     // Each pass -a -> +a -> -a at speed w lasts 4 a / w.
     let samples = a.dp_kpa.len() as f64
         * a.speeds_rad_s
@@ -536,6 +547,15 @@ fn sweep_torque(a: &SweepTorqueArgs) -> Result<String> {
 fn identify_force(a: &IdentifyForceArgs) -> Result<String> {
     validate::distinct_file_outputs(&[("--data", &a.data)], &[("--out", &a.out)])
         .map_err(anyhow::Error::msg)?;
+    validate::replaceable(
+        "--out",
+        &a.out,
+        validate::OutputKind::Toml {
+            tables: &["force_law"],
+            what: "a force-law file ([force_law])",
+        },
+    )
+    .map_err(anyhow::Error::msg)?;
     let data = force::read_force_csv(&a.data)?;
     // The fit refuses maps it cannot determine (too few samples, no positive force, one
     // length, one pressure level, a pressure unit off): the error names the file.
@@ -651,6 +671,15 @@ pub fn torque_model_file(a: &IdentifyTorqueArgs) -> Result<TorqueModelFile> {
         &[("--out", &a.out)],
     )
     .map_err(anyhow::Error::msg)?;
+    validate::replaceable(
+        "--out",
+        &a.out,
+        validate::OutputKind::Toml {
+            tables: &["torque_model"],
+            what: "a torque-model file ([torque_model])",
+        },
+    )
+    .map_err(anyhow::Error::msg)?;
     let plant = Plant::load(&a.plant)?;
     let raw = Recording::read(&a.recording)?;
     let file = a.recording.display().to_string();
@@ -697,6 +726,43 @@ pub fn torque_model_file(a: &IdentifyTorqueArgs) -> Result<TorqueModelFile> {
         bail!(
             "{file}: column `angle_deg`: the joint does not move (angle range below 0.06 degrees); \
              the torque model needs a recording through a range of angles"
+        );
+    }
+    // The same floors as `calibrate`'s (the firmware's constants come from either): a joint
+    // that moved less than half a degree (sd), or an activation dp = (p2 - p1) / 2 that did
+    // not vary, cannot determine A, or B: the least-squares fit would write what the noise
+    // gives (a sweep at dp = 0 fitted B 640 times too small at 97 %).
+    let sd_of = |f: &dyn Fn(&torque::TorqueSample) -> f64| {
+        let n = samples.len() as f64;
+        let m = samples.iter().map(f).sum::<f64>() / n;
+        (samples.iter().map(|s| (f(s) - m).powi(2)).sum::<f64>() / n).sqrt()
+    };
+    let angle_sd_deg = sd_of(&|s| s.angle_rad).to_degrees();
+    if !(angle_sd_deg >= super::calibrate::MIN_ANGLE_SD_DEG) {
+        bail!(
+            "{file}: column `angle_deg`: the joint hardly moves (sd {angle_sd_deg:.3} deg < {} deg; \
+             an angle logged in radians? the column is in degrees); the torque model needs a \
+             recording through a range of angles; nothing written",
+            super::calibrate::MIN_ANGLE_SD_DEG
+        );
+    }
+    let dp_sd_kpa = sd_of(&|s| 0.5 * (s.p2_gauge_pa - s.p1_gauge_pa)) / 1e3;
+    if !(dp_sd_kpa >= super::calibrate::MIN_PRESSURE_SD_KPA) {
+        let p_max_kpa = samples
+            .iter()
+            .map(|s| s.p1_gauge_pa.abs().max(s.p2_gauge_pa.abs()))
+            .fold(0.0, f64::max)
+            / 1e3;
+        let unit = if p_max_kpa < 10.0 {
+            format!(" (pressures up to {p_max_kpa:.3} kPa: logged in bar or MPa? the columns are in kPa)")
+        } else {
+            String::new()
+        };
+        bail!(
+            "{file}: the activation dp = (p2_kpa - p1_kpa) / 2 does not vary (sd {dp_sd_kpa:.3} kPa \
+             < {} kPa){unit}: B of eq. 11 needs a recording at several activations (`host-sim \
+             sweep torque --dp-kpa` takes several levels); nothing written",
+            super::calibrate::MIN_PRESSURE_SD_KPA
         );
     }
     if !(spread(&|s| s.torque_nm) > 1e-6) {
@@ -902,6 +968,8 @@ fn identify_plant(a: &IdentifyPlantArgs) -> Result<String> {
         &[("--out", &a.out)],
     )
     .map_err(anyhow::Error::msg)?;
+    validate::replaceable("--out", &a.out, validate::OutputKind::PLANT)
+        .map_err(anyhow::Error::msg)?;
     if !(a.rtol > 0.0) {
         bail!("--rtol must be > 0");
     }

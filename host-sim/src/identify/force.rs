@@ -884,12 +884,35 @@ fn check_map(samples: &[ForceSample]) -> Result<(), IdentError> {
             samples.len()
         )));
     }
-    let (_, n_lengths) = length_groups(samples);
-    if n_lengths < 2 {
+    let (groups, n_lengths) = length_groups(samples);
+    if n_lengths < 3 {
+        let mut at: Vec<f64> = Vec::new();
+        for (s, g) in samples.iter().zip(&groups) {
+            if at.len() <= *g {
+                at.resize(*g + 1, f64::NAN);
+            }
+            at[*g] = s.stretch;
+        }
+        let listed: Vec<String> = at.iter().map(|e| format!("{e:.4}")).collect();
+        let (at, these) = if n_lengths == 1 {
+            (
+                format!("all samples are at one length (L/L0 = {})", listed[0]),
+                "one length",
+            )
+        } else {
+            (
+                format!(
+                    "the samples are at 2 lengths only (L/L0 = {})",
+                    listed.join(", ")
+                ),
+                "2 lengths",
+            )
+        };
         return Err(IdentError::Data(format!(
-            "all samples are at one length (L/L0 = {:.4}): eq. 6 needs at least 2 lengths \
-             (3 or more for the leave-one-length-out check)",
-            samples[0].stretch
+            "{at}: eq. 6 depends on the length through five terms (e^2, e, P/e, the \
+             denominator's e, the exponential), which {these} cannot tell apart (a law fitted \
+             on 2 lengths fits them and misses between them); sweep at least 3 lengths (more \
+             for the leave-one-length-out check)"
         )));
     }
     let (_, n_levels) = pressure_groups(samples);

@@ -259,6 +259,17 @@ pub fn segments_of(
         }
         cur.clear();
     };
+    // The tick period: the median time step between records of consecutive sequence.
+    let period_us = {
+        let mut steps: Vec<u32> = records
+            .windows(2)
+            .filter(|w| w[1].1.seq.wrapping_sub(w[0].1.seq) == 1)
+            .map(|w| w[1].1.t_us.wrapping_sub(w[0].1.t_us))
+            .filter(|d| *d > 0 && *d <= u32::MAX / 2)
+            .collect();
+        steps.sort_unstable();
+        steps.get(steps.len() / 2).copied()
+    };
     let mut prev: Option<(usize, TickRecord, u64)> = None;
     for &(at, r) in &records {
         let mut t_us = r.t_us as u64;
@@ -308,6 +319,33 @@ pub fn segments_of(
                     );
                 }
                 t_us = prev_t_us + dt_us as u64;
+                // Consecutive ticks whose stamps are not one tick period apart: the clock
+                // jumped (or ticks ran late); a recording's time is uniform.
+                let jumped = period_us.filter(|&per| {
+                    ahead == 1
+                        && (dt_us as f64 > 1.5 * per as f64 || (dt_us as f64) < 0.5 * per as f64)
+                });
+                if let Some(per) = jumped {
+                    let gap = format!(
+                        "the time stamp moves {dt_us} us between consecutive ticks (the tick \
+                         period is {per} us): the firmware's clock jumped or the tick ran late"
+                    );
+                    if !split {
+                        anyhow::bail!(
+                            "{}: {what} {at}: sequence {} after {}: {gap}; nothing is \
+                             interpolated: {hint}",
+                            file.display(),
+                            r.seq,
+                            p.seq
+                        );
+                    }
+                    close(
+                        &mut cur,
+                        Some(format!("sequence {} after {}: {gap}", r.seq, p.seq)),
+                        &mut segments,
+                        &mut counts,
+                    );
+                }
                 if ahead != 1 {
                     let n = ahead - 1;
                     let gap = match pos.between(prev_at, at) {

@@ -62,6 +62,10 @@ pub fn write_segments(
         .collect();
     let outputs = crate::validate::labelled(&labels, &paths);
     crate::validate::distinct_file_outputs(inputs, &outputs).map_err(anyhow::Error::msg)?;
+    if n == 1 {
+        crate::validate::replaceable("--out", out, crate::validate::OutputKind::RECORDING)
+            .map_err(anyhow::Error::msg)?;
+    }
     // The user named OUT, not OUT-2.csv: a file of a segment's name that an earlier
     // `host-sim <command>` did not write is the user's, never replaced.
     if n > 1 {

@@ -124,18 +124,35 @@ pub fn assert_trace_and_plot(dir: &Path, name: &str, ticks: usize) {
 }
 
 /// What a refused run must leave in an output file an earlier good run wrote.
-pub const PREVIOUS_OUTPUT: &str = "previous good output\n";
+/// What an earlier good run left in an output file named `name`: a file of the kind the
+/// command writes there (commands refuse to replace a file of another kind), recognisable.
+pub fn previous_output_text(name: &str) -> &'static str {
+    match name {
+        n if n.ends_with(".csv") => {
+            "# previous good output\nt_s,u_in1,u_ex1,u_in2,u_ex2\n0,0,0,0,0\n"
+        }
+        "force.toml" => "# previous good output\n[force_law]\n",
+        "torque.toml" => "# previous good output\n[torque_model]\n",
+        "volume.toml" => "# previous good output\n[volume_fnn]\n",
+        "fitted.toml" => "# previous good output\n[muscle]\n",
+        _ => "# previous good output\n",
+    }
+}
 
-/// `dir/name` holding [`PREVIOUS_OUTPUT`] (an output file of an earlier good run).
+/// `dir/name` holding [`previous_output_text`] (an output file of an earlier good run).
 pub fn previous_output(dir: &Path, name: &str) -> PathBuf {
     let out = dir.join(name);
-    std::fs::write(&out, PREVIOUS_OUTPUT).unwrap();
+    std::fs::write(&out, previous_output_text(name)).unwrap();
     out
 }
 
-/// Asserts that `out` still holds [`PREVIOUS_OUTPUT`].
+/// Asserts that `out` still holds [`previous_output_text`].
 pub fn assert_kept(out: &Path) {
-    assert_eq!(std::fs::read_to_string(out).unwrap(), PREVIOUS_OUTPUT);
+    let name = out.file_name().unwrap().to_string_lossy();
+    assert_eq!(
+        std::fs::read_to_string(out).unwrap(),
+        previous_output_text(&name)
+    );
 }
 
 /// Runs `host-sim` with `args` and asserts success; its stdout.
