@@ -947,14 +947,8 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
         inputs.push(("--check", c));
     }
     validate::distinct_file_outputs(&inputs, &[("--json", &a.json)]).map_err(anyhow::Error::msg)?;
-    validate::replaceable(
-        "--json",
-        &a.json,
-        validate::OutputKind::Json {
-            what: "a JSON file",
-        },
-    )
-    .map_err(anyhow::Error::msg)?;
+    validate::replaceable("--json", &a.json, validate::OutputKind::JSON)
+        .map_err(anyhow::Error::msg)?;
     if let Some(dir) = &a.report {
         validate::output_dir("--report", dir).map_err(anyhow::Error::msg)?;
         let report_json = dir.join("diagnosis.json");

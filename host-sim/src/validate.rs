@@ -182,6 +182,12 @@ pub fn usize_in(
     hi: usize,
 ) -> impl Fn(&str) -> Result<usize, String> + Clone + Send + Sync + 'static {
     move |s: &str| {
+        // A negative whole number is one, just out of range.
+        if let Ok(v) = s.trim().parse::<i64>() {
+            if v < 0 {
+                return Err(format!("must be within {lo}..={hi}, got {v}"));
+            }
+        }
         let v: usize = parse_trimmed(s, "a whole number", format!("{lo}..={hi}"))?;
         if (lo..=hi).contains(&v) {
             Ok(v)
@@ -257,6 +263,29 @@ impl OutputKind {
     pub const PLANT: OutputKind = OutputKind::Toml {
         tables: &["muscle", "joint", "valve", "links"],
         what: "a plant file",
+    };
+    pub const FORCE_SWEEP: OutputKind = OutputKind::Csv {
+        first_column: "p_kpa",
+        what: "a force sweep (p_kpa, stretch, f_n)",
+    };
+    pub const FORCE_LAW: OutputKind = OutputKind::Toml {
+        tables: &["force_law"],
+        what: "a force-law file ([force_law])",
+    };
+    pub const TORQUE_MODEL: OutputKind = OutputKind::Toml {
+        tables: &["torque_model"],
+        what: "a torque-model file ([torque_model])",
+    };
+    pub const VOLUME_FNN: OutputKind = OutputKind::Toml {
+        tables: &["volume_fnn"],
+        what: "a learned-volume file ([volume_fnn])",
+    };
+    pub const GAINS: OutputKind = OutputKind::Toml {
+        tables: &["cascade", "pd", "pid"],
+        what: "a gains file (no [cascade], [pd] or [pid] table)",
+    };
+    pub const JSON: OutputKind = OutputKind::Json {
+        what: "a JSON file",
     };
 }
 
@@ -682,6 +711,13 @@ mod tests {
         assert!(p("10.5").unwrap_err().contains("(0, 10]"));
         assert!(usize_in(1, 5)("0").is_err());
         assert_eq!(usize_in(1, 5)("5").unwrap(), 5);
+        assert_eq!(
+            usize_in(1, 5)("-1").unwrap_err(),
+            "must be within 1..=5, got -1"
+        );
+        assert!(usize_in(1, 5)("1.5")
+            .unwrap_err()
+            .contains("not a whole number"));
     }
 
     #[test]

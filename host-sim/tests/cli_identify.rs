@@ -412,6 +412,24 @@ fn identify_plant_finds_the_load_inertia_in_the_independent_loaded_fixture() {
         .map(|x| x.parse().unwrap())
         .collect();
     assert!(v[0] < 80.0 && v[1] > 99.5, "{tail}");
+    assert!(!s.contains("ended at its"), "{s}");
+    // Bounds that leave the rig's inertia outside: the fit ends at the upper one and says so.
+    let r = identify(
+        "plant",
+        &fixture("pulses_loaded.csv"),
+        &out,
+        &[
+            "--params",
+            "joint.inertia_kgm2=0.001:0.1",
+            "--allow-poor-fit",
+        ],
+    );
+    let s = text(&r.stdout);
+    assert!(
+        s.contains("warning: joint.inertia_kgm2 ended at its upper bound 1.000000e-1"),
+        "{s}\n{}",
+        text(&r.stderr)
+    );
 }
 
 /// Asserts `value` within the relative tolerance `rel` of `want` (`context` shown otherwise).

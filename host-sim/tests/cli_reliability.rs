@@ -171,7 +171,12 @@ fn sweep_torque_names_a_mid_pressure_in_the_wrong_unit_not_the_levels() {
     let w = Workspace::new();
     w.refuses(
         "sweep torque --plant {plant} --out {w}/out.csv --p0-kpa 0.3",
-        &["--p0-kpa 0.3", "MPa or bar", "0.3 MPa = 300 kPa"],
+        &[
+            "--p0-kpa 0.3",
+            "bar or MPa",
+            "0.3 MPa = 300 kPa",
+            "0.3 bar = 30 kPa",
+        ],
     );
     w.refuses(
         "sweep torque --plant {plant} --out {w}/out.csv --p0-kpa 300 --dp-kpa 400",

@@ -938,18 +938,21 @@ fn a_recording_in_which_nothing_moves_is_refused_as_nothing_to_judge() {
 fn a_check_recording_the_nominal_model_does_not_describe_is_not_nothing_missing() {
     let dir = tempfile::tempdir().unwrap();
     let json = dir.path().join("d.json");
-    let r = on_plant(
-        "diagnose",
-        &plant(),
-        &[
-            &"--recording",
-            &fixture("pulses_nominal.csv"),
-            &"--check",
-            &fixture("pulses_loaded.csv"),
-            &"--json",
-            &json,
-        ],
-    );
+    let with_check = |check: &std::path::Path| {
+        on_plant(
+            "diagnose",
+            &plant(),
+            &[
+                &"--recording",
+                &fixture("pulses_nominal.csv"),
+                &"--check",
+                &check,
+                &"--json",
+                &json,
+            ],
+        )
+    };
+    let r = with_check(&fixture("pulses_loaded.csv"));
     let out = text(&r.stdout);
     exits(3, &r);
     assert!(
@@ -968,18 +971,6 @@ fn a_check_recording_the_nominal_model_does_not_describe_is_not_nothing_missing(
         "{v}"
     );
     // The same training run checked on another run of the same joint: nothing is missing.
-    let r = on_plant(
-        "diagnose",
-        &plant(),
-        &[
-            &"--recording",
-            &fixture("pulses_nominal.csv"),
-            &"--check",
-            &shared().join("conformance/pwm_nominal.csv"),
-            &"--json",
-            &json,
-        ],
-    );
-    let out = ok(&r);
+    let out = ok(&with_check(&shared().join("conformance/pwm_nominal.csv")));
     assert!(out.contains("Nothing is missing"), "{out}");
 }

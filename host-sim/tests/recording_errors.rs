@@ -78,6 +78,22 @@ fn bad_recordings_name_the_file_line_and_field() {
     }
 }
 
+/// A rig logger's own file given where a recording is expected: its banner and columns are
+/// no RECORDING.md columns; the error says where such a file goes (`host-sim import`).
+#[test]
+fn a_rig_loggers_file_is_pointed_to_import() {
+    let e = err("Pr\u{fc}fstand Muskelgelenk, Messung 7\nZeit [ms];P1 [bar abs]\n0,00;6,5\n");
+    assert!(
+        e.contains("run-42.csv:1:")
+            && e.contains("no `t_s` either")
+            && e.contains("host-sim import"),
+        "{e}"
+    );
+    // A recording that lacks one column gets no such advice.
+    let e = err(&GOOD.replace("u_in2", "u_inX"));
+    assert!(!e.contains("host-sim import"), "{e}");
+}
+
 #[test]
 fn short_row_names_the_line() {
     let e = err(&GOOD.replace("0.6,0.25,0.001,0,1,0,y", "0.6,0.25,0.001"));

@@ -887,3 +887,63 @@ fn a_muscle_stretched_below_the_atmosphere_is_not_a_unit_warning() {
         "{report}"
     );
 }
+
+/// What a logger or an editor on a lab PC produces: a Windows (Latin-1) export whose column
+/// names carry a degree sign, an empty file, a `skip_lines` past the end, a directory given
+/// as the file, a mapping saved as Latin-1.
+#[test]
+fn windows_exports_empty_files_and_directories_are_named_for_what_they_are() {
+    let dir = tmp();
+    let map = write_map(
+        dir.path(),
+        "[time]\ncolumn = \"t [s]\"\nunit = \"s\"\n[[channel]]\ncolumn = \"Winkel [\u{b0}]\"\nchannel = \"angle\"\nunit = \"deg\"\n[[channel]]\ncolumn = \"V1\"\nchannel = \"valve1\"\nunit = \"fraction\"\n[[channel]]\ncolumn = \"V2\"\nchannel = \"valve2\"\nunit = \"fraction\"\n",
+    );
+    let raw = dir.path().join("win.csv");
+    // Latin-1: the degree sign is the one byte 0xB0.
+    let mut bytes = b"t [s],Winkel [".to_vec();
+    bytes.push(0xB0);
+    bytes.extend_from_slice(b"],V1,V2\n");
+    for k in 0..100 {
+        bytes.extend_from_slice(
+            format!("{:.3},{:.2},0.5,0\n", k as f64 * 0.01, k as f64 * 0.1).as_bytes(),
+        );
+    }
+    std::fs::write(&raw, &bytes).unwrap();
+    let out = dir.path().join("win.rec.csv");
+    let run = |input: &Path| {
+        host_sim(&[
+            &"import", &"--map", &map, &"--input", &input, &"--out", &out,
+        ])
+    };
+    let r = run(&raw);
+    ok(&r);
+    let e = text_of(&r.stderr);
+    assert!(
+        e.contains("win.csv:1: not UTF-8") && e.contains("read as Latin-1"),
+        "{e}"
+    );
+    assert_eq!(Recording::read(&out).unwrap().len(), 100);
+    // An empty file, a directory.
+    let empty = dir.path().join("empty.csv");
+    std::fs::write(&empty, "").unwrap();
+    assert!(exits(2, &run(&empty)).contains("empty.csv: the file is empty"));
+    assert!(exits(2, &run(dir.path())).contains("is a directory; give the rig logger's CSV file"));
+    // skip_lines past the end.
+    let text = std::fs::read_to_string(&map).unwrap();
+    std::fs::write(&map, format!("[csv]\nskip_lines = 100000\n{text}")).unwrap();
+    let e = exits(2, &run(&raw));
+    assert!(
+        e.contains("skip_lines = 100000") && e.contains("skips the whole file (101 line(s))"),
+        "{e}"
+    );
+    // A mapping saved as Latin-1: its line named.
+    let mut latin = text.replace('\u{b0}', "").into_bytes();
+    let at = latin.windows(7).position(|w| w == b"Winkel ").unwrap() + 7;
+    latin.insert(at, 0xB0);
+    std::fs::write(&map, &latin).unwrap();
+    let e = exits(2, &run(&raw));
+    assert!(
+        e.contains("map.toml:5: not UTF-8") && e.contains("save the mapping file as UTF-8"),
+        "{e}"
+    );
+}

@@ -644,17 +644,28 @@ fn per_scenario_report(
                 .collect::<anyhow::Result<Vec<f64>>>()?;
             writeln!(
                 out,
-                "| {set_name} | {} | {:.3e} | {:.3e} | {:.2}x | {:.3e} | {:.2}x |",
+                "| {set_name} | {} | {:.3e} | {:.3e} | {} | {:.3e} | {} |",
                 s.scenario.name,
                 m[0],
                 m[1],
-                m[0] / m[1],
+                ratio_text(m[0] / m[1]),
                 m[2],
-                m[0] / m[2]
+                ratio_text(m[0] / m[2])
             )?;
         }
     }
     Ok(())
+}
+
+/// A ratio of two MSEs as the tables print it: two decimals ("2.55x"), two significant
+/// digits below 0.1 ("0.0011x", not "0.00x").
+fn ratio_text(r: f64) -> String {
+    if r.is_finite() && r.abs() < 0.1 && r != 0.0 {
+        let decimals = (1.0 - r.abs().log10().floor()).clamp(2.0, 12.0) as usize;
+        format!("{r:.decimals$}x")
+    } else {
+        format!("{r:.2}x")
+    }
 }
 
 /// `host-sim compare-control`: the report and whether the nominal-plant requirement holds.
@@ -827,7 +838,7 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
                     "| {cname} | {set_name} | {:.3e} | {} | {:.1} | {} |",
                     s.position_mse_rad2,
                     if ratio.is_finite() && ratio > 0.0 {
-                        format!("{ratio:.2}x")
+                        ratio_text(ratio)
                     } else {
                         "-".to_string()
                     },
@@ -868,11 +879,13 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
     };
     writeln!(
         out,
-        "\nfor comparison, same gains, nominal plant, suite{which}: P-only position MSE / with the analytical feed-forward (k = 1) = {same_gains_ratio:.2} (the feed-forward added to the cascade tuned without it)"
+        "\nfor comparison, same gains, nominal plant, suite{which}: P-only position MSE / with the analytical feed-forward (k = 1) = {} (the feed-forward added to the cascade tuned without it)",
+        ratio_text(same_gains_ratio)
     )?;
     writeln!(
         out,
-        "verdict (exit status), nominal plant, suite{which}: P-only position MSE / with the analytical feed-forward (k = 1), each cascade at its own tuned gains = {nominal_ratio:.2} (required >= {REQUIRED_RATIO}): {}",
+        "verdict (exit status), nominal plant, suite{which}: P-only position MSE / with the analytical feed-forward (k = 1), each cascade at its gains (the files named at the top) = {} (required >= {REQUIRED_RATIO}x): {}",
+        ratio_text(nominal_ratio),
         if ok { "met" } else { "NOT met" }
     )?;
     Ok((out, ok))

@@ -723,15 +723,8 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
     }
     // --out is replaced at the end: an existing file there must be a gains file (a plant
     // file or another config picked by a completion slip would be lost after the run).
-    crate::validate::replaceable(
-        "--out",
-        &a.out,
-        crate::validate::OutputKind::Toml {
-            tables: &["cascade", "pd", "pid"],
-            what: "a gains file (no [cascade], [pd] or [pid] table)",
-        },
-    )
-    .map_err(anyhow::Error::msg)?;
+    crate::validate::replaceable("--out", &a.out, crate::validate::OutputKind::GAINS)
+        .map_err(anyhow::Error::msg)?;
     // With --warm-start, the gains stored in the output file are one more start of every search.
     let stored = if a.warm_start {
         match ControlTuning::load(&a.out) {

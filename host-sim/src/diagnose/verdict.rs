@@ -46,15 +46,31 @@ pub fn check_not_held(
     before: &std::collections::BTreeMap<&'static str, f64>,
     after: &std::collections::BTreeMap<&'static str, f64>,
 ) -> Option<String> {
-    let lost: Vec<String> = before
+    channels_where(
+        before,
+        after,
+        |b, a| !(a >= b - MAX_CHECK_FIT_LOSS_PCT),
+        |k, b, a| format!("{k} {b:.1} % -> {a:.1} %"),
+    )
+}
+
+/// The channels `k` of `a` (with a finite value in `a` and `b`'s value, NaN where `b` has
+/// none) for which `keep(a[k], b[k])` holds, each as `show(k, a[k], b[k])`, joined by
+/// commas; `None` when there is none.
+fn channels_where(
+    a: &std::collections::BTreeMap<&'static str, f64>,
+    b: &std::collections::BTreeMap<&'static str, f64>,
+    keep: impl Fn(f64, f64) -> bool,
+    show: impl Fn(&str, f64, f64) -> String,
+) -> Option<String> {
+    let listed: Vec<String> = a
         .iter()
-        .filter_map(|(k, b)| {
-            let a = after.get(k).copied().unwrap_or(f64::NAN);
-            (b.is_finite() && !(a >= b - MAX_CHECK_FIT_LOSS_PCT))
-                .then(|| format!("{k} {b:.1} % -> {a:.1} %"))
+        .filter_map(|(k, x)| {
+            let y = b.get(k).copied().unwrap_or(f64::NAN);
+            (x.is_finite() && keep(*x, y)).then(|| show(k, *x, y))
         })
         .collect();
-    (!lost.is_empty()).then(|| lost.join(", "))
+    (!listed.is_empty()).then(|| listed.join(", "))
 }
 
 /// A check recording channel whose nominal fit is this many points below the training
@@ -71,15 +87,13 @@ pub fn check_departs(
     train: &std::collections::BTreeMap<&'static str, f64>,
     check: &std::collections::BTreeMap<&'static str, f64>,
 ) -> Option<String> {
-    let departs: Vec<String> = check
-        .iter()
-        .filter_map(|(k, c)| {
-            let t = train.get(k).copied()?;
-            (t.is_finite() && !(*c >= t - CHECK_DEPARTS_PCT))
-                .then(|| format!("{k} {c:.1} % (training {t:.1} %)"))
-        })
-        .collect();
-    (!departs.is_empty()).then(|| departs.join(", "))
+    // A channel whose fit is undefined (NaN: a constant reference) is not judged.
+    channels_where(
+        check,
+        train,
+        |c, t| t.is_finite() && c < t - CHECK_DEPARTS_PCT,
+        |k, c, t| format!("{k} {c:.1} % (training {t:.1} %)"),
+    )
 }
 
 /// The kind of answer.

@@ -300,15 +300,8 @@ pub fn tondu_of(cfg: &PlantConfig) -> Tondu {
 fn sweep_force(a: &SweepForceArgs) -> Result<String> {
     validate::distinct_file_outputs(&[("--plant", &a.plant)], &[("--out", &a.out)])
         .map_err(anyhow::Error::msg)?;
-    validate::replaceable(
-        "--out",
-        &a.out,
-        validate::OutputKind::Csv {
-            first_column: "p_kpa",
-            what: "a force sweep (p_kpa, stretch, f_n)",
-        },
-    )
-    .map_err(anyhow::Error::msg)?;
+    validate::replaceable("--out", &a.out, validate::OutputKind::FORCE_SWEEP)
+        .map_err(anyhow::Error::msg)?;
     let points =
         a.n_stretch as f64 * a.n_pressure as f64 * if a.hysteresis_gap_n > 0.0 { 2.0 } else { 1.0 };
     RunEstimate {
@@ -486,8 +479,10 @@ fn sweep_torque(a: &SweepTorqueArgs) -> Result<String> {
     if a.p0_kpa < P0_MIN_KPA {
         bail!(
             "--p0-kpa {}: below {P0_MIN_KPA} kPa the muscles are slack around the mid pressure \
-             (a value in MPa or bar? {} MPa = {} kPa)",
+             (a value in bar or MPa? {} bar = {} kPa, {} MPa = {} kPa)",
             a.p0_kpa,
+            a.p0_kpa,
+            a.p0_kpa * 1e2,
             a.p0_kpa,
             a.p0_kpa * 1e3
         );
@@ -547,15 +542,8 @@ fn sweep_torque(a: &SweepTorqueArgs) -> Result<String> {
 fn identify_force(a: &IdentifyForceArgs) -> Result<String> {
     validate::distinct_file_outputs(&[("--data", &a.data)], &[("--out", &a.out)])
         .map_err(anyhow::Error::msg)?;
-    validate::replaceable(
-        "--out",
-        &a.out,
-        validate::OutputKind::Toml {
-            tables: &["force_law"],
-            what: "a force-law file ([force_law])",
-        },
-    )
-    .map_err(anyhow::Error::msg)?;
+    validate::replaceable("--out", &a.out, validate::OutputKind::FORCE_LAW)
+        .map_err(anyhow::Error::msg)?;
     let data = force::read_force_csv(&a.data)?;
     // The fit refuses maps it cannot determine (too few samples, no positive force, one
     // length, one pressure level, a pressure unit off): the error names the file.
@@ -671,15 +659,8 @@ pub fn torque_model_file(a: &IdentifyTorqueArgs) -> Result<TorqueModelFile> {
         &[("--out", &a.out)],
     )
     .map_err(anyhow::Error::msg)?;
-    validate::replaceable(
-        "--out",
-        &a.out,
-        validate::OutputKind::Toml {
-            tables: &["torque_model"],
-            what: "a torque-model file ([torque_model])",
-        },
-    )
-    .map_err(anyhow::Error::msg)?;
+    validate::replaceable("--out", &a.out, validate::OutputKind::TORQUE_MODEL)
+        .map_err(anyhow::Error::msg)?;
     let plant = Plant::load(&a.plant)?;
     let raw = Recording::read(&a.recording)?;
     let file = a.recording.display().to_string();

@@ -1400,7 +1400,10 @@ pub fn read_force_csv(path: &Path) -> Result<Vec<ForceSample>, IdentError> {
                         &file,
                         line,
                         "state",
-                        &format!("unknown branch {other:?}"),
+                        &format!(
+                            "unknown branch {other:?} (pressurising, up, inflate or rising; \
+                             depressurising, down, deflate or falling; empty for none)"
+                        ),
                     ))
                 }
             }

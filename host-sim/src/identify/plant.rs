@@ -46,6 +46,10 @@ pub struct ParamSpec {
     pub upper: f64,
 }
 
+/// A fitted value this close to a finite bound (fraction of the range; of the bound's
+/// magnitude for a one-sided range) ended at it.
+pub const AT_BOUND_FRACTION: f64 = 1e-3;
+
 /// Options of the plant fit.
 #[derive(Clone, Debug)]
 pub struct PlantFitOptions {
@@ -90,6 +94,10 @@ pub struct ChannelScore {
 pub struct PlantFit {
     /// (key, start value, fitted value), in the order of the specs.
     pub params: Vec<(String, f64, f64)>,
+    /// Fitted values that ended at a finite bound of their range (within
+    /// [`AT_BOUND_FRACTION`] of the range, or of the value for a one-sided one): the rig's
+    /// value may lie beyond it; one warning each.
+    pub at_bound: Vec<String>,
     /// Per-channel fit on the training part (head).
     pub train: Vec<ChannelScore>,
     /// Per-channel fit on the held-out tail.
@@ -166,6 +174,9 @@ impl PlantFit {
         }
         if self.holdout.is_empty() {
             let _ = writeln!(s, "fit [%] on the held-out tail: none held out");
+        }
+        for w in &self.at_bound {
+            let _ = writeln!(s, "{w}");
         }
         s
     }
@@ -385,6 +396,16 @@ pub fn fit_plant(
             specs.len()
         )));
     }
+    // A held-out tail of a few samples has no spread to judge a fit by (its fit came out
+    // -inf %).
+    let n_held = n - n_train;
+    if n_held > 0 && n_held < 20 {
+        return Err(IdentError::Data(format!(
+            "recording too short: {n} samples leave {n_held} held out ({:.0} %), too few to \
+             judge the fit by (at least 20); record a longer run",
+            100.0 * opts.holdout_fraction
+        )));
+    }
     let chans = channels_of(rec);
     let doc: DocumentMut = plant_text
         .parse()
@@ -495,12 +516,43 @@ pub fn fit_plant(
             })
             .collect()
     };
+    let at_bound = specs
+        .iter()
+        .zip(&x1)
+        .filter_map(|(s, &v)| {
+            let span = if s.lower.is_finite() && s.upper.is_finite() {
+                s.upper - s.lower
+            } else {
+                f64::NAN
+            };
+            let near = |b: f64| {
+                let tol = if span.is_finite() { span } else { b.abs() } * AT_BOUND_FRACTION;
+                b.is_finite() && (v - b).abs() <= tol
+            };
+            let which = if near(s.lower) {
+                Some(("lower", s.lower))
+            } else if near(s.upper) {
+                Some(("upper", s.upper))
+            } else {
+                None
+            };
+            which.map(|(w, b)| {
+                format!(
+                    "warning: {} ended at its {w} bound {b:.6e}: the rig's value may lie beyond \
+                     it; give a wider range (--params {}=lo:hi) or check the plant file's other \
+                     keys",
+                    s.key, s.key
+                )
+            })
+        })
+        .collect();
     Ok(PlantFit {
         params: specs
             .iter()
             .zip(x0.iter().zip(&x1))
             .map(|(s, (a, b))| (s.key.clone(), *a, *b))
             .collect(),
+        at_bound,
         train: score(0..n_train),
         holdout: if n_train < n {
             score(n_train..n)
@@ -587,6 +639,7 @@ mod tests {
                 ("joint.inertia_kgm2".into(), 0.014, 0.0154),
                 ("initial.angle_rad".into(), 0.0, 0.002),
             ],
+            at_bound: Vec::new(),
             train: vec![score(Channel::AngleDeg)],
             holdout: Vec::new(),
             samples: (100, 0),

@@ -973,15 +973,8 @@ pub fn run_identify_volume(a: &IdentifyVolumeArgs) -> anyhow::Result<String> {
     inputs.extend(a.validate.iter().map(|v| ("--validate", v.as_path())));
     crate::validate::distinct_file_outputs(&inputs, &[("--out", &a.out)])
         .map_err(anyhow::Error::msg)?;
-    crate::validate::replaceable(
-        "--out",
-        &a.out,
-        crate::validate::OutputKind::Toml {
-            tables: &["volume_fnn"],
-            what: "a learned-volume file ([volume_fnn])",
-        },
-    )
-    .map_err(anyhow::Error::msg)?;
+    crate::validate::replaceable("--out", &a.out, crate::validate::OutputKind::VOLUME_FNN)
+        .map_err(anyhow::Error::msg)?;
     // A validation recording is one the network was not trained on.
     if let Some(v) = a
         .validate

@@ -325,55 +325,45 @@ pub fn segments_of(
                     ahead == 1
                         && (dt_us as f64 > 1.5 * per as f64 || (dt_us as f64) < 0.5 * per as f64)
                 });
-                if let Some(per) = jumped {
-                    let gap = format!(
+                // A gap: (what it is, what ended the segment before it).
+                let gap = if let Some(per) = jumped {
+                    let g = format!(
                         "the time stamp moves {dt_us} us between consecutive ticks (the tick \
                          period is {per} us): the firmware's clock jumped or the tick ran late"
                     );
-                    if !split {
-                        anyhow::bail!(
-                            "{}: {what} {at}: sequence {} after {}: {gap}; nothing is \
-                             interpolated: {hint}",
-                            file.display(),
-                            r.seq,
-                            p.seq
-                        );
-                    }
-                    close(
-                        &mut cur,
-                        Some(format!("sequence {} after {}: {gap}", r.seq, p.seq)),
-                        &mut segments,
-                        &mut counts,
-                    );
-                }
-                if ahead != 1 {
+                    Some((
+                        g.clone(),
+                        format!("sequence {} after {}: {g}", r.seq, p.seq),
+                    ))
+                } else if ahead != 1 {
                     let n = ahead - 1;
-                    let gap = match pos.between(prev_at, at) {
+                    let g = match pos.between(prev_at, at) {
                         Some(c) => format!("{n} record(s) missing; {c}"),
                         None => format!(
                             "{n} record(s) lost (capture again with a larger RTT buffer or a \
                              lower rate)"
                         ),
                     };
+                    let ended_by = format!(
+                        "sequence {}..={}: {g}",
+                        p.seq.wrapping_add(1),
+                        r.seq.wrapping_sub(1)
+                    );
+                    Some((g, ended_by))
+                } else {
+                    None
+                };
+                if let Some((g, ended_by)) = gap {
                     if !split {
                         anyhow::bail!(
-                            "{}: {what} {at}: sequence {} after {}: {gap}; nothing is \
+                            "{}: {what} {at}: sequence {} after {}: {g}; nothing is \
                              interpolated: {hint}",
                             file.display(),
                             r.seq,
                             p.seq
                         );
                     }
-                    close(
-                        &mut cur,
-                        Some(format!(
-                            "sequence {}..={}: {gap}",
-                            p.seq.wrapping_add(1),
-                            r.seq.wrapping_sub(1)
-                        )),
-                        &mut segments,
-                        &mut counts,
-                    );
+                    close(&mut cur, Some(ended_by), &mut segments, &mut counts);
                 }
             }
         }

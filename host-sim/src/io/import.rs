@@ -254,8 +254,24 @@ pub struct Imported {
 
 impl Mapping {
     pub fn load(path: &Path) -> Result<Self, ImportError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| ImportError(format!("{}: {e}", path.display())))?;
+        if path.is_dir() {
+            return Err(ImportError(format!(
+                "--map {}: is a directory; give the mapping file (TOML, docs/rig.md)",
+                path.display()
+            )));
+        }
+        let raw =
+            std::fs::read(path).map_err(|e| ImportError(format!("{}: {e}", path.display())))?;
+        let text = String::from_utf8(raw).map_err(|e| {
+            let bytes = e.as_bytes();
+            let valid = e.utf8_error().valid_up_to();
+            let line = bytes[..valid].iter().filter(|&&b| b == b'\n').count() + 1;
+            ImportError(format!(
+                "{}:{line}: not UTF-8 (saved by a Windows editor as Latin-1 or Windows-1252?): \
+                 save the mapping file as UTF-8",
+                path.display()
+            ))
+        })?;
         let mut m: Mapping =
             toml::from_str(&text).map_err(|e| ImportError(format!("{}: {e}", path.display())))?;
         m.text = text;
@@ -794,16 +810,55 @@ pub fn import(
     }
 
     // Read the CSV.
+    if input.is_dir() {
+        return Err(ImportError(format!(
+            "--input {}: is a directory; give the rig logger's CSV file",
+            input.display()
+        )));
+    }
     let raw = std::fs::read(input).map_err(|e| ImportError(format!("{}: {e}", input.display())))?;
-    let text_cow = String::from_utf8_lossy(&raw);
+    // A Windows export (`Winkel [°]` in Windows-1252 / Latin-1) is not UTF-8: read byte for
+    // byte as Latin-1, so that its column names match the mapping's, and said so.
+    let mut encoding_note = None;
+    let text_cow: std::borrow::Cow<str> = match std::str::from_utf8(&raw) {
+        Ok(t) => t.into(),
+        Err(e) => {
+            let line = raw[..e.valid_up_to()]
+                .iter()
+                .filter(|&&b| b == b'\n')
+                .count()
+                + 1;
+            encoding_note = Some(format!(
+                "{}:{line}: not UTF-8 (a Windows or Latin-1 export): read as Latin-1",
+                input.display()
+            ));
+            raw.iter().map(|&b| b as char).collect::<String>().into()
+        }
+    };
     let text: &str = text_cow.as_ref();
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    if text.trim().is_empty() {
+        return Err(ImportError(format!(
+            "{}: the file is empty",
+            input.display()
+        )));
+    }
     let mut offset = 0usize;
     for _ in 0..mapping.csv.skip_lines {
         match text[offset..].find('\n') {
             Some(i) => offset += i + 1,
             None => offset = text.len(),
         }
+    }
+    if text[offset..].trim().is_empty() {
+        return Err(ImportError(format!(
+            "{}: `csv.skip_lines = {}` of {} skips the whole file ({} line(s)): no header line \
+             is left",
+            input.display(),
+            mapping.csv.skip_lines,
+            map_path.display(),
+            text.lines().count()
+        )));
     }
     let skipped = mapping.csv.skip_lines as u64;
     let mut rdr = csv::ReaderBuilder::new()
@@ -841,7 +896,9 @@ pub fn import(
         })
     };
     let t_col = col_of(&mapping.time.column)?;
-    let t_factor = time_factor(&mapping.time.unit).expect("checked");
+    // Stamps per second (1, 1000, 1e6), divided by: 14998 ms is 14.998 s, not the
+    // 14.998000000000001 of a multiplication by 1e-3.
+    let t_per_s = (1.0 / time_factor(&mapping.time.unit).expect("checked")).round();
     let cols: Vec<Option<usize>> = mapping
         .channel
         .iter()
@@ -907,7 +964,7 @@ pub fn import(
             }
             Ok(v)
         };
-        t_s.push(num(t_col)? * t_factor);
+        t_s.push(num(t_col)? / t_per_s);
         for (i, (c, col)) in mapping.channel.iter().zip(&cols).enumerate() {
             let raw = match (col, c.constant) {
                 (Some(col), _) => num(*col)?,
@@ -1092,6 +1149,7 @@ pub fn import(
     }
     cuts.push(n);
     let (ranges, mut warnings) = channel_ranges(mapping, &plans, &values);
+    warnings.extend(encoding_note);
     warnings.extend(stuck_onoff_valves(mapping, map_path, &plans, &values));
 
     // Assemble the recordings.

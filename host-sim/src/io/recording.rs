@@ -1427,6 +1427,12 @@ impl<'t> Table<'t> {
         }
         match self.near_miss(name) {
             Some(h) => format!(" (column `{h}` is there: {})", rename_advice(name)),
+            // Not one of RECORDING.md's columns: a rig logger's own file (its banner line or
+            // its own column names).
+            None if !self.headers.iter().any(|h| h == "t_s") => format!(
+                " (the header has no `t_s` either: not a recording of RECORDING.md; a rig \
+                 logger's file? read it with `host-sim import` and a mapping, docs/rig.md)"
+            ),
             None => String::new(),
         }
     }
