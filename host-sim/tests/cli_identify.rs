@@ -545,3 +545,34 @@ fn identify_force_refuses_a_map_of_two_lengths() {
     );
     assert!(!out.exists());
 }
+
+/// The force column shuffled against the pressures and lengths (rows mixed up by a
+/// spreadsheet sort of one column): eq. 6 cannot describe it; refused, nothing written.
+#[test]
+fn identify_force_refuses_a_map_eq6_does_not_describe() {
+    let (dir, data, _) = swept("force", "force.csv", &[]);
+    let text_of = std::fs::read_to_string(&data).unwrap();
+    let rows: Vec<&str> = text_of
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.starts_with("p_kpa"))
+        .collect();
+    let n = rows.len();
+    let forces: Vec<&str> = rows.iter().map(|r| r.rsplit(',').next().unwrap()).collect();
+    let k = std::cell::Cell::new(0usize);
+    let shuffled = map_rows(&text_of, |f| {
+        if f[0] == "p_kpa" {
+            return f.join(",");
+        }
+        let j = (k.get() * 7919 + 13) % n;
+        k.set(k.get() + 1);
+        format!("{},{},{}", f[0], f[1], forces[j])
+    });
+    let bad = dir.path().join("shuffled.csv");
+    std::fs::write(&bad, shuffled).unwrap();
+    let out = dir.path().join("force.toml");
+    let r = identify_force(&bad, &out);
+    assert_eq!(r.status.code(), Some(2));
+    let e = text(&r.stderr);
+    assert!(e.contains("eq. 6 does not describe this map"), "{e}");
+    assert!(!out.exists());
+}

@@ -544,6 +544,10 @@ pub fn length_groups(samples: &[ForceSample]) -> (Vec<usize>, usize) {
     (keys.into_iter().map(|k| k as usize).collect(), uniq.len())
 }
 
+/// The largest mean error of eq. 6 on its own map [% of the force range] from which a law
+/// is written: a map it fits worse is not a muscle's (shuffled forces fit at 17.7 %).
+pub const MAX_EQ6_MAE_PCT_OF_RANGE: f64 = 10.0;
+
 /// Group index of each sample by pressure level: sorted pressures split where the gap
 /// exceeds 30 % of the largest gap (sensor noise spreads each nominal level).
 pub fn pressure_groups(samples: &[ForceSample]) -> (Vec<usize>, usize) {
@@ -931,6 +935,17 @@ pub fn identify(samples: &[ForceSample]) -> Result<ForceIdentification, IdentErr
     let eq6_fit = fit_eq6_multistart(samples, EQ6_STARTS, &[])?;
     let eq6 = eq6_fit.eq6;
     let eq6_stats = error_stats(samples, |p, e| eq6.force_n(p, e));
+    // A map eq. 6 does not describe (a column of another quantity, rows mixed up): the law
+    // would be written and clamp the firmware's torque estimate to nonsense.
+    if !(eq6_stats.mae_pct_of_range <= MAX_EQ6_MAE_PCT_OF_RANGE) {
+        return Err(IdentError::Data(format!(
+            "eq. 6 does not describe this map: its best fit errs by {:.1} % of the force range \
+             on average (MAE {:.1} N; a bench map fits within a few %, the reference sweep \
+             0.7 %; {MAX_EQ6_MAE_PCT_OF_RANGE} % is the limit): a column mapped to the wrong \
+             quantity, rows mixed up, or forces of another muscle; nothing written",
+            eq6_stats.mae_pct_of_range, eq6_stats.mae_n
+        )));
+    }
     let leave_length_out = held_out_error(samples, "length", length_groups(samples), eq6.c[6]);
     let leave_pressure_out = held_out_error(
         samples,
