@@ -289,8 +289,8 @@ impl OutputKind {
     };
 }
 
-/// Largest existing file [`replaceable`] reads whole to recognise a TOML or JSON output;
-/// a larger one is not such an output.
+/// Largest existing file [`replaceable`] reads whole to recognise a TOML output; a larger
+/// one is not such an output. (A CSV or JSON output is recognised by its head.)
 const REPLACEABLE_READ_MAX_BYTES: u64 = 4 << 20;
 
 /// `Err` naming `flag` and `path` when `path` exists and is not an output of `kind` (a
@@ -306,8 +306,8 @@ pub fn replaceable(flag: &str, path: &Path, kind: OutputKind) -> Result<(), Stri
     }
     let mut head = Vec::new();
     let read_max = match kind {
-        OutputKind::Csv { .. } => 64 << 10,
-        _ => REPLACEABLE_READ_MAX_BYTES,
+        OutputKind::Toml { .. } => REPLACEABLE_READ_MAX_BYTES,
+        OutputKind::Csv { .. } | OutputKind::Json { .. } => 64 << 10,
     };
     if std::fs::File::open(path)
         .and_then(|f| f.take(read_max).read_to_end(&mut head))
@@ -635,16 +635,13 @@ mod tests {
         let notes = file("notes.txt", "my notes\n");
         let empty = file("empty.csv", "");
         let json = file("d.json", "  {\"verdict\": \"explained\"}");
-        let force_law = OutputKind::Toml {
-            tables: &["force_law"],
-            what: "a force-law file",
-        };
+        let force_law = OutputKind::FORCE_LAW;
         // Its own kind, an empty file, a missing file: replaced.
         assert!(replaceable("--out", &rec, OutputKind::RECORDING).is_ok());
         assert!(replaceable("--out", &law, force_law).is_ok());
         assert!(replaceable("--out", &empty, force_law).is_ok());
         assert!(replaceable("--out", &dir.path().join("new.toml"), force_law).is_ok());
-        assert!(replaceable("--json", &json, OutputKind::Json { what: "JSON" }).is_ok());
+        assert!(replaceable("--json", &json, OutputKind::JSON).is_ok());
         // Another kind: refused, naming the flag, the path and what was expected.
         let e = replaceable("--out", &rec, force_law).unwrap_err();
         assert!(
@@ -653,7 +650,7 @@ mod tests {
         );
         assert!(replaceable("--out", &law, OutputKind::RECORDING).is_err());
         assert!(replaceable("--out", &notes, OutputKind::PLANT).is_err());
-        assert!(replaceable("--json", &rec, OutputKind::Json { what: "JSON" }).is_err());
+        assert!(replaceable("--json", &rec, OutputKind::JSON).is_err());
     }
 
     #[test]

@@ -196,36 +196,27 @@ pub fn summary_table(rows: &[BatchRow]) -> String {
         "{:<w$}  {:>8}  {:<14}  {:>12}  {:>11}  effects\n",
         "recording", "samples", "verdict", "worst fit %", "after %"
     );
-    head + &summary_lines(
-        rows,
-        |name, samples, d| {
-            let effects = if d.effects.is_empty() {
-                "-".to_string()
-            } else {
-                d.effects.join(", ")
-            };
-            format!(
-                "{name:<w$}  {samples:>8}  {:<14}  {:>12.2}  {:>11.2}  {effects}\n",
-                d.verdict, d.worst_fit_before_pct, d.worst_fit_after_pct
-            )
-        },
-        |name, samples, e| format!("{name:<w$}  {samples:>8}  error           {e}\n"),
-    )
-}
-
-/// One line per row of a summary: `ok(file name, samples, diagnosis)` for a diagnosed
-/// recording, `failed(file name, samples, error)` for one that failed.
-fn summary_lines(
-    rows: &[BatchRow],
-    ok: impl Fn(&str, usize, &BatchDiagnosis) -> String,
-    failed: impl Fn(&str, usize, &str) -> String,
-) -> String {
-    rows.iter()
-        .map(|r| match &r.result {
-            Ok(d) => ok(&r.name(), r.samples, d),
-            Err(e) => failed(&r.name(), r.samples, e),
+    let lines: String = rows
+        .iter()
+        .map(|r| {
+            let (name, samples) = (r.name(), r.samples);
+            match &r.result {
+                Ok(d) => {
+                    let effects = if d.effects.is_empty() {
+                        "-".to_string()
+                    } else {
+                        d.effects.join(", ")
+                    };
+                    format!(
+                        "{name:<w$}  {samples:>8}  {:<14}  {:>12.2}  {:>11.2}  {effects}\n",
+                        d.verdict, d.worst_fit_before_pct, d.worst_fit_after_pct
+                    )
+                }
+                Err(e) => format!("{name:<w$}  {samples:>8}  error           {e}\n"),
+            }
         })
-        .collect()
+        .collect();
+    head + &lines
 }
 
 /// `host-sim diagnose-batch`: the arguments.

@@ -790,14 +790,18 @@ pub fn torque_model_file(a: &IdentifyTorqueArgs) -> Result<TorqueModelFile> {
     // encoder's direction) or whose muscles are swapped in every column (pressures, tensions
     // and valves together: B keeps its sign then); the firmware's inverse model would push the
     // joint away from where it is.
-    let pair_torque = |angle_rad: f64| {
-        let [c1, c2] = plant.joint.contractions(angle_rad);
-        let p0 = model.p0_gauge_pa;
-        plant.joint.sprocket_radius_m
-            * (plant.muscle.static_force_n(p0, c1) - plant.muscle.static_force_n(p0, c2))
-    };
+    // dT/dalpha of the plant's pair at equal gauge pressures `p_gauge_pa` [N m/rad].
     let delta_rad = 0.05;
-    let plant_stiffness = (pair_torque(delta_rad) - pair_torque(-delta_rad)) / (2.0 * delta_rad);
+    let stiffness_at = |p_gauge_pa: f64| {
+        let t = |angle_rad: f64| {
+            let [c1, c2] = plant.joint.contractions(angle_rad);
+            plant.joint.sprocket_radius_m
+                * (plant.muscle.static_force_n(p_gauge_pa, c1)
+                    - plant.muscle.static_force_n(p_gauge_pa, c2))
+        };
+        (t(delta_rad) - t(-delta_rad)) / (2.0 * delta_rad)
+    };
+    let plant_stiffness = stiffness_at(model.p0_gauge_pa);
     let r = model.sprocket_radius_m;
     let fitted_stiffness = model.a_n_per_m_rad * r * r;
     if fitted_stiffness * plant_stiffness < 0.0 {
@@ -816,15 +820,6 @@ pub fn torque_model_file(a: &IdentifyTorqueArgs) -> Result<TorqueModelFile> {
     // true gauge pressures, so the fitted stiffness is the plant's muscles' one an atmosphere
     // below the data's p0, not at it.
     if source == TorqueSource::MeasuredTensions {
-        let stiffness_at = |p0_gauge_pa: f64| {
-            let t = |angle_rad: f64| {
-                let [c1, c2] = plant.joint.contractions(angle_rad);
-                plant.joint.sprocket_radius_m
-                    * (plant.muscle.static_force_n(p0_gauge_pa, c1)
-                        - plant.muscle.static_force_n(p0_gauge_pa, c2))
-            };
-            (t(delta_rad) - t(-delta_rad)) / (2.0 * delta_rad)
-        };
         let at_p0 = fitted_stiffness / plant_stiffness;
         let below = fitted_stiffness / stiffness_at(model.p0_gauge_pa - plant.p_atm_pa);
         if (below - 1.0).abs() < 0.05 && (at_p0 - 1.0).abs() > 0.15 {

@@ -890,14 +890,11 @@ fn check_map(samples: &[ForceSample]) -> Result<(), IdentError> {
     }
     let (groups, n_lengths) = length_groups(samples);
     if n_lengths < 3 {
-        let mut at: Vec<f64> = Vec::new();
-        for (s, g) in samples.iter().zip(&groups) {
-            if at.len() <= *g {
-                at.resize(*g + 1, f64::NAN);
-            }
-            at[*g] = s.stretch;
-        }
-        let listed: Vec<String> = at.iter().map(|e| format!("{e:.4}")).collect();
+        // Each length once, in the groups' (ascending) order.
+        let listed: Vec<String> = (0..n_lengths)
+            .filter_map(|g| groups.iter().position(|&k| k == g))
+            .map(|i| format!("{:.4}", samples[i].stretch))
+            .collect();
         let (at, these) = if n_lengths == 1 {
             (
                 format!("all samples are at one length (L/L0 = {})", listed[0]),

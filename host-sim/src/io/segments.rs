@@ -65,10 +65,9 @@ pub fn write_segments(
     if n == 1 {
         crate::validate::replaceable("--out", out, crate::validate::OutputKind::RECORDING)
             .map_err(anyhow::Error::msg)?;
-    }
-    // The user named OUT, not OUT-2.csv: a file of a segment's name that an earlier
-    // `host-sim <command>` did not write is the user's, never replaced.
-    if n > 1 {
+    } else {
+        // The user named OUT, not OUT-2.csv: a file of a segment's name that an earlier
+        // `host-sim <command>` did not write is the user's, never replaced.
         for (i, p) in paths.iter().enumerate() {
             if p.exists() && !is_output_of(p, command) {
                 anyhow::bail!(
