@@ -280,9 +280,9 @@ pub fn fit(f: &Residuals<'_>, params: &[OeParam], opts: &OeOptions) -> OeResult 
     let x = problem.x(&z_best);
     let mut evaluations = *problem.evaluations.borrow();
     let ci95 = if opts.ci95 {
-        let (ci, used) = confidence(f, params, &x);
+        let (u, used) = uncertainty(f, params, &x);
         evaluations += used;
-        ci
+        u.ci95(&x)
     } else {
         vec![[f64::NAN; 2]; n]
     };
@@ -298,14 +298,47 @@ pub fn fit(f: &Residuals<'_>, params: &[OeParam], opts: &OeOptions) -> OeResult 
     }
 }
 
-/// 95 % intervals at `x` from a forward-difference Jacobian in x; also the replays used.
-fn confidence(f: &Residuals<'_>, params: &[OeParam], x: &[f64]) -> (Vec<[f64; 2]>, usize) {
+/// How well the residuals determine each parameter at `x` (see [`uncertainty`]).
+#[derive(Debug, Clone)]
+pub struct Uncertainty {
+    /// Standard deviation of each parameter (NaN when the Jacobian is rank deficient there:
+    /// the residuals do not move with some combination of the parameters).
+    pub sd: Vec<f64>,
+    /// Correlation of each pair (NaN as `sd`).
+    pub correlation: DMatrix<f64>,
+}
+
+impl Uncertainty {
+    /// The 95 % interval of each parameter about `x` (`x -+ 1.96 sd`).
+    pub fn ci95(&self, x: &[f64]) -> Vec<[f64; 2]> {
+        x.iter()
+            .zip(&self.sd)
+            .map(|(x, sd)| [x - 1.96 * sd, x + 1.96 * sd])
+            .collect()
+    }
+}
+
+/// The parameters' covariance at `x` from a forward-difference Jacobian in x: `s^2 (J^T
+/// J)^-1` with `s^2 = |r|^2 / (m - n)`, as standard deviations and correlations; also the
+/// replays used. Output errors are correlated in time, so the spreads are optimistic: a
+/// parameter they call loosely determined is, one they call tight may still not be.
+pub fn uncertainty(f: &Residuals<'_>, params: &[OeParam], x: &[f64]) -> (Uncertainty, usize) {
     let n = x.len();
-    let nan = vec![[f64::NAN; 2]; n];
-    let Some(r) = f(x) else { return (nan, 1) };
+    let undetermined = |used| {
+        (
+            Uncertainty {
+                sd: vec![f64::NAN; n],
+                correlation: DMatrix::from_element(n, n, f64::NAN),
+            },
+            used,
+        )
+    };
+    let Some(r) = f(x) else {
+        return undetermined(1);
+    };
     let m = r.len();
     if m <= n {
-        return (nan, 1);
+        return undetermined(1);
     }
     let mut jac = DMatrix::<f64>::zeros(m, n);
     for k in 0..n {
@@ -313,23 +346,33 @@ fn confidence(f: &Residuals<'_>, params: &[OeParam], x: &[f64]) -> (Vec<[f64; 2]
         let mut xp = x.to_vec();
         xp[k] += h;
         let Some(rp) = f(&xp) else {
-            return (nan, 1 + k + 1);
+            return undetermined(1 + k + 1);
         };
         for i in 0..m {
             jac[(i, k)] = (rp[i] - r[i]) / h;
         }
     }
     let s2 = r.iter().map(|v| v * v).sum::<f64>() / (m - n) as f64;
-    let Some(inv) = (jac.transpose() * &jac).try_inverse() else {
-        return (nan, 1 + n);
+    // A parameter the residuals do not move with (its column, scaled by the parameter's
+    // size, vanishes next to the others') is undetermined on its own; the covariance of the
+    // others is taken without it.
+    let size = |k: usize| params[k].scale.abs().max(x[k].abs()).max(1e-300);
+    let norms: Vec<f64> = (0..n).map(|k| jac.column(k).norm() * size(k)).collect();
+    let top = norms.iter().cloned().fold(0.0, f64::max);
+    let kept: Vec<usize> = (0..n).filter(|&k| norms[k] > 1e-9 * top).collect();
+    let j = jac.select_columns(&kept);
+    let Some(inv) = (j.transpose() * &j).try_inverse() else {
+        return undetermined(1 + n);
     };
-    let ci = (0..n)
-        .map(|k| {
-            let sd = (s2 * inv[(k, k)]).max(0.0).sqrt();
-            [x[k] - 1.96 * sd, x[k] + 1.96 * sd]
-        })
-        .collect();
-    (ci, 1 + n)
+    let mut sd = vec![f64::NAN; n];
+    let mut correlation = DMatrix::from_element(n, n, f64::NAN);
+    for (a, &i) in kept.iter().enumerate() {
+        sd[i] = (s2 * inv[(a, a)]).max(0.0).sqrt();
+        for (b, &k) in kept.iter().enumerate() {
+            correlation[(i, k)] = inv[(a, b)] / (inv[(a, a)] * inv[(b, b)]).max(0.0).sqrt();
+        }
+    }
+    (Uncertainty { sd, correlation }, 1 + n)
 }
 
 #[cfg(test)]

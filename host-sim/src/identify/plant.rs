@@ -44,11 +44,25 @@ pub struct ParamSpec {
     pub lower: f64,
     /// Upper bound (may be `inf`).
     pub upper: f64,
+    /// The bounds were given (`key=lo:hi`); else they are the key's physical limits (a
+    /// ratio's 0 and 1, the sign of the start value).
+    pub user_bounds: bool,
 }
 
-/// A fitted value this close to a finite bound (fraction of the range; of the bound's
-/// magnitude for a one-sided range) ended at it.
-pub const AT_BOUND_FRACTION: f64 = 1e-3;
+/// A fitted value this close to a finite bound (fraction of the range; of the bound's or
+/// the start value's magnitude, the larger, for a one-sided range) ended at it. A value the data pushes against a bound
+/// ends far closer (the bounded reparameterisation's tail: the inertia of `pulses_loaded`
+/// fitted within `0.001:0.1` ends at 0.1 to all printed digits), while a true value near
+/// a bound stays clear of it (a laminar ratio of 0.999 in `0..1`).
+pub const AT_BOUND_FRACTION: f64 = 1e-5;
+
+/// A fitted value whose 95 % interval is wider than this fraction of its magnitude (of the
+/// start value's, when larger) is not determined by the recording.
+pub const UNDETERMINED_HALF_WIDTH_FRACTION: f64 = 0.25;
+
+/// Two fitted values whose correlation exceeds this in magnitude are determined only
+/// together.
+pub const CORRELATED_ABOVE: f64 = 0.99;
 
 /// Options of the plant fit.
 #[derive(Clone, Debug)]
@@ -98,6 +112,13 @@ pub struct PlantFit {
     /// [`AT_BOUND_FRACTION`] of the range, or of the value for a one-sided one): the rig's
     /// value may lie beyond it; one warning each.
     pub at_bound: Vec<String>,
+    /// 95 % interval of each fitted value (NaN when the recording does not determine it),
+    /// in the order of the specs; optimistic (output errors are correlated in time).
+    pub ci95: Vec<[f64; 2]>,
+    /// Fitted values the recording does not determine (a 95 % interval wider than
+    /// [`UNDETERMINED_HALF_WIDTH_FRACTION`] of the value, or none), and pairs determined
+    /// only together (correlation beyond [`CORRELATED_ABOVE`]); one warning each.
+    pub undetermined: Vec<String>,
     /// Per-channel fit on the training part (head).
     pub train: Vec<ChannelScore>,
     /// Per-channel fit on the held-out tail.
@@ -135,17 +156,26 @@ impl PlantFit {
         );
         let _ = writeln!(
             s,
-            "{:<44} {:>14} {:>14} {:>9}",
+            "{:<44} {:>14} {:>14} {:>9}  95 % interval",
             "parameter", "start", "fitted", "change"
         );
-        for (k, a, b) in &self.params {
+        let nan = [f64::NAN; 2];
+        for (i, (k, a, b)) in self.params.iter().enumerate() {
             // Relative to the start; from a start of 0 the absolute change.
             let change = if *a != 0.0 {
                 format!("{:>8.2}%", 100.0 * (b / a - 1.0))
             } else {
                 format!("{:+.3e} (from 0)", b - a)
             };
-            let _ = writeln!(s, "{k:<44} {a:>14.6e} {b:>14.6e} {change:>9}");
+            let [lo, hi] = self.ci95.get(i).copied().unwrap_or(nan);
+            let interval = if !(lo.is_finite() && hi.is_finite()) {
+                "none (not determined)".to_string()
+            } else if *b != 0.0 {
+                format!("+-{:.2} %", 100.0 * 0.5 * (hi - lo) / b.abs())
+            } else {
+                format!("+-{:.3e}", 0.5 * (hi - lo))
+            };
+            let _ = writeln!(s, "{k:<44} {a:>14.6e} {b:>14.6e} {change:>9}  {interval}");
         }
         for (name, scores) in [
             ("training part", &self.train),
@@ -175,7 +205,7 @@ impl PlantFit {
         if self.holdout.is_empty() {
             let _ = writeln!(s, "fit [%] on the held-out tail: none held out");
         }
-        for w in &self.at_bound {
+        for w in self.at_bound.iter().chain(&self.undetermined) {
             let _ = writeln!(s, "{w}");
         }
         s
@@ -271,6 +301,7 @@ pub fn parse_param_specs_within(
             key: key.to_string(),
             lower: lo,
             upper: hi,
+            user_bounds: bounds.is_some(),
         });
     }
     if out.is_empty() {
@@ -516,36 +547,10 @@ pub fn fit_plant(
             })
             .collect()
     };
-    let at_bound = specs
-        .iter()
-        .zip(&x1)
-        .filter_map(|(s, &v)| {
-            let span = if s.lower.is_finite() && s.upper.is_finite() {
-                s.upper - s.lower
-            } else {
-                f64::NAN
-            };
-            let near = |b: f64| {
-                let tol = if span.is_finite() { span } else { b.abs() } * AT_BOUND_FRACTION;
-                b.is_finite() && (v - b).abs() <= tol
-            };
-            let which = if near(s.lower) {
-                Some(("lower", s.lower))
-            } else if near(s.upper) {
-                Some(("upper", s.upper))
-            } else {
-                None
-            };
-            which.map(|(w, b)| {
-                format!(
-                    "warning: {} ended at its {w} bound {b:.6e}: the rig's value may lie beyond \
-                     it; give a wider range (--params {}=lo:hi) or check the plant file's other \
-                     keys",
-                    s.key, s.key
-                )
-            })
-        })
-        .collect();
+    let at_bound = at_bound_warnings(specs, &x0, &x1);
+    let (u, used) = output_error::uncertainty(&residuals, &params, &x1);
+    evaluations += used;
+    let undetermined = undetermined_warnings(specs, &x0, &x1, &u);
     Ok(PlantFit {
         params: specs
             .iter()
@@ -553,6 +558,8 @@ pub fn fit_plant(
             .map(|(s, (a, b))| (s.key.clone(), *a, *b))
             .collect(),
         at_bound,
+        ci95: u.ci95(&x1),
+        undetermined,
         train: score(0..n_train),
         holdout: if n_train < n {
             score(n_train..n)
@@ -565,6 +572,105 @@ pub fn fit_plant(
         cost: (cost0, cost1),
         toml,
     })
+}
+
+/// One warning per fitted value that ended at a bound it moved to (a value the plant file
+/// already had there is no news): beyond a bound the user gave, the rig's value may lie; a
+/// physical limit (a ratio's 0 or 1, zero for a signed key) means the recording asks for
+/// more than the key can give.
+fn at_bound_warnings(specs: &[ParamSpec], x0: &[f64], x1: &[f64]) -> Vec<String> {
+    specs
+        .iter()
+        .zip(x0.iter().zip(x1))
+        .filter_map(|(s, (&start, &v))| {
+            let span = if s.lower.is_finite() && s.upper.is_finite() {
+                s.upper - s.lower
+            } else {
+                f64::NAN
+            };
+            // Of the range, else of the bound or the start value (a bound of 0).
+            let near = |x: f64, b: f64| {
+                let size = if span.is_finite() {
+                    span
+                } else {
+                    b.abs().max(start.abs())
+                };
+                let tol = size * AT_BOUND_FRACTION;
+                b.is_finite() && (x - b).abs() <= tol
+            };
+            let which = [("lower", s.lower), ("upper", s.upper)]
+                .into_iter()
+                .find(|&(_, b)| near(v, b) && !near(start, b) && !near(v, start))?;
+            let (w, b) = which;
+            Some(if s.user_bounds {
+                format!(
+                    "warning: {} ended at its {w} bound {b:.6e}: the rig's value may lie beyond \
+                     it; give a wider range (--params {}=lo:hi) or check the plant file's other \
+                     keys",
+                    s.key, s.key
+                )
+            } else {
+                format!(
+                    "warning: {} was pushed to its physical limit {b:.6e}: the recording asks \
+                     for more than this key can give; another key or an effect the plant file \
+                     leaves out is likely off (host-sim diagnose names it)",
+                    s.key
+                )
+            })
+        })
+        .collect()
+}
+
+/// One warning per fitted value the recording does not determine (its 95 % interval wider
+/// than [`UNDETERMINED_HALF_WIDTH_FRACTION`] of the value, or none) and per pair determined
+/// only together (correlation beyond [`CORRELATED_ABOVE`]).
+fn undetermined_warnings(
+    specs: &[ParamSpec],
+    x0: &[f64],
+    x1: &[f64],
+    u: &output_error::Uncertainty,
+) -> Vec<String> {
+    let mut out = Vec::new();
+    for (i, s) in specs.iter().enumerate() {
+        let half = 1.96 * u.sd[i];
+        let size = x1[i].abs().max(x0[i].abs());
+        if half.is_finite() && half <= UNDETERMINED_HALF_WIDTH_FRACTION * size {
+            continue;
+        }
+        let how = if half.is_finite() {
+            let holds = if (x0[i] - x1[i]).abs() <= half {
+                ", and it holds the plant file's value"
+            } else {
+                ""
+            };
+            format!(
+                "its 95 % interval is +-{:.0} % of the value{holds}",
+                100.0 * half / size.max(f64::MIN_POSITIVE)
+            )
+        } else {
+            "the fit does not move with it".to_string()
+        };
+        out.push(format!(
+            "warning: {} is not determined by this recording ({how}): the run does not excite \
+             what it describes, and the written value is where the fit stopped. Fit it on a run \
+             that excites it, or leave it out of --params to keep the plant file's value",
+            s.key
+        ));
+    }
+    for i in 0..specs.len() {
+        for k in i + 1..specs.len() {
+            let r = u.correlation[(i, k)];
+            if r.abs() > CORRELATED_ABOVE {
+                out.push(format!(
+                    "warning: {} and {} are determined only together (correlation {r:+.3}): \
+                     their fitted values can trade off against each other; fit one and keep the \
+                     other at the plant file's value",
+                    specs[i].key, specs[k].key
+                ));
+            }
+        }
+    }
+    out
 }
 
 /// Reads the recording and the plant file and fits: the fit and the fitted plant file's text
@@ -640,6 +746,8 @@ mod tests {
                 ("initial.angle_rad".into(), 0.0, 0.002),
             ],
             at_bound: Vec::new(),
+            ci95: Vec::new(),
+            undetermined: Vec::new(),
             train: vec![score(Channel::AngleDeg)],
             holdout: Vec::new(),
             samples: (100, 0),
@@ -653,6 +761,36 @@ mod tests {
         assert!(s.contains("+2.000e-3 (from 0)"), "{s}");
         assert!(!s.contains("NaN") && !s.contains("-0.000"), "{s}");
         assert!(s.contains("held-out tail: none held out"), "{s}");
+    }
+
+    #[test]
+    fn only_a_value_the_fit_moved_onto_a_bound_is_warned_and_physical_limits_say_so() {
+        let spec = |key: &str, lower, upper, user_bounds| ParamSpec {
+            key: key.into(),
+            lower,
+            upper,
+            user_bounds,
+        };
+        let specs = [
+            spec("joint.inertia_kgm2", 0.001, 0.1, true),
+            spec("valve.laminar_ratio", 0.0, 1.0, false),
+            spec("valve.critical_ratio", 0.0, 1.0, false),
+            spec("muscle.damping_m2s", 0.0, f64::INFINITY, false),
+        ];
+        // inertia pushed onto its given bound; the laminar ratio's true 0.999 is clear of 1;
+        // the critical ratio already sat at the limit in the file; damping pushed to 0.
+        let w = at_bound_warnings(&specs, &[0.014, 0.99, 1.0, 2e-4], &[0.1, 0.999, 1.0, 1e-12]);
+        assert_eq!(w.len(), 2, "{w:?}");
+        assert!(
+            w[0].contains("joint.inertia_kgm2 ended at its upper bound"),
+            "{}",
+            w[0]
+        );
+        assert!(
+            w[1].contains("muscle.damping_m2s was pushed to its physical limit"),
+            "{}",
+            w[1]
+        );
     }
 
     #[test]
