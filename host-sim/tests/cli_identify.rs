@@ -546,6 +546,55 @@ fn identify_force_refuses_a_map_of_two_lengths() {
     assert!(!out.exists());
 }
 
+/// Twelve operating points logged three times each pass the sample count (36 >= 20) but
+/// give eq. 6's 9 constants only 12 equations: refused, naming the distinct points and the
+/// copied rows.
+#[test]
+fn identify_force_refuses_repeated_rows_of_too_few_points() {
+    let (dir, data, _) = swept("force", "force.csv", &[]);
+    let text_of = std::fs::read_to_string(&data).unwrap();
+    let (mut head, mut picked): (String, Vec<&str>) = (String::new(), Vec::new());
+    let mut per_length: Vec<(String, usize)> = Vec::new();
+    for l in text_of.lines() {
+        let f: Vec<&str> = l.split(',').collect();
+        if l.starts_with('#') || f[0] == "p_kpa" {
+            head.push_str(l);
+            head.push('\n');
+            continue;
+        }
+        // Four points (different pressures) at each of the first three lengths.
+        let known = per_length.len();
+        match per_length.iter_mut().find(|(e, _)| e == f[1]) {
+            Some((_, n)) if *n < 4 => {
+                *n += 1;
+                picked.push(l);
+            }
+            None if known < 3 => {
+                per_length.push((f[1].to_string(), 1));
+                picked.push(l);
+            }
+            _ => {}
+        }
+    }
+    assert_eq!(picked.len(), 12);
+    let rows: String = (0..3)
+        .flat_map(|_| picked.iter())
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let thrice = dir.path().join("thrice.csv");
+    std::fs::write(&thrice, format!("{head}{rows}")).unwrap();
+    let out = dir.path().join("force.toml");
+    let r = identify_force(&thrice, &out);
+    assert_eq!(r.status.code(), Some(2));
+    let e = text(&r.stderr);
+    assert!(
+        e.contains("36 samples hold 12 distinct operating points")
+            && e.contains("24 of them exact copies"),
+        "{e}"
+    );
+    assert!(!out.exists());
+}
+
 /// The force column shuffled against the pressures and lengths (rows mixed up by a
 /// spreadsheet sort of one column): eq. 6 cannot describe it; refused, nothing written.
 #[test]

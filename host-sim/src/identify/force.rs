@@ -916,14 +916,46 @@ fn check_map(samples: &[ForceSample]) -> Result<(), IdentError> {
              for the leave-one-length-out check)"
         )));
     }
-    let (_, n_levels) = pressure_groups(samples);
+    let (levels, n_levels) = pressure_groups(samples);
     if n_levels < 2 {
         return Err(IdentError::Data(
             "all samples are at one pressure: eq. 6 needs at least 2 pressure levels".into(),
         ));
     }
+    // Repeats of one operating point average its noise but add no equation.
+    let mut points: Vec<(usize, usize)> = groups.iter().copied().zip(levels).collect();
+    points.sort_unstable();
+    points.dedup();
+    if points.len() < MIN_FORCE_MAP_POINTS {
+        let mut rows: Vec<[u64; 3]> = samples
+            .iter()
+            .map(|s| [s.p_gauge_pa, s.stretch, s.force_n].map(f64::to_bits))
+            .collect();
+        rows.sort_unstable();
+        rows.dedup();
+        let copies = samples.len() - rows.len();
+        let copies = if copies > 0 {
+            format!(
+                ", {copies} of them exact copies of another row (a logger writing a sample twice?)"
+            )
+        } else {
+            String::new()
+        };
+        return Err(IdentError::Data(format!(
+            "the {} samples hold {} distinct operating points (length x pressure level){copies}: \
+             eq. 6 has 9 free constants and needs at least {MIN_FORCE_MAP_POINTS} distinct \
+             points; repeats of a point average its noise but add no equation. Sweep more \
+             pressure levels or lengths",
+            samples.len(),
+            points.len()
+        )));
+    }
     eq6_data_check(samples)
 }
+
+/// Distinct operating points (length group x pressure level) a force map needs for eq. 6's
+/// 9 free constants: as many as samples ([`eq6_data_check`]), repeats not counted.
+pub const MIN_FORCE_MAP_POINTS: usize = 20;
 
 /// Fits eq. 6 (multi-start, firmware law), its held-out errors, the two physical baselines and
 /// (when the data has both branches) one law per branch.
