@@ -707,12 +707,42 @@ fn an_onoff_threshold_that_leaves_a_valve_closed_or_open_is_warned_at_its_line()
         e.contains("read as percent?") && !e.contains("channel[4]"),
         "{e}"
     );
+    // The valve's 0..10 V command mapped as percent: never beyond 10 %.
+    let volts = "[[channel]]\ncolumn = \"MPYE1 [V]\"\nchannel = \"u_in1\"\nunit = \"percent\"\n\n\
+                 [[channel]]\nchannel = \"u_ex1\"\nconstant = 0.0\n";
+    let r = import_with(dir.path(), &MAP.replace(valve1, volts), &raw, &out, false);
+    ok(&r);
+    let e = text_of(&r.stderr);
+    assert!(
+        e.contains("column `MPYE1 [V]` with `unit = \"percent\"` never opens beyond 10 %")
+            && e.contains("valve volts (0..10 V) read as percent?"),
+        "{e}"
+    );
+    // The encoder's counts scaled to radians and mapped as degrees.
+    let encoder =
+        "column = \"Encoder\"\nchannel = \"angle\"\nunit = \"counts\"\ncounts_per_rev = 8000\n";
+    assert!(MAP.contains(encoder));
+    let radians = format!(
+        "column = \"Encoder\"\nchannel = \"angle\"\nunit = \"deg\"\nscale = {}\n",
+        std::f64::consts::TAU / 8000.0
+    );
+    let r = import_with(
+        dir.path(),
+        &MAP.replace(encoder, &radians),
+        &raw,
+        &out,
+        false,
+    );
+    ok(&r);
+    let e = text_of(&r.stderr);
+    assert!(e.contains("the range of an angle logged in radians"), "{e}");
     // The rig's own mapping warns of nothing.
     let r = import_with(dir.path(), MAP, &raw, &out, false);
     ok(&r);
     assert!(
         !text_of(&r.stderr).contains("read as percent")
-            && !text_of(&r.stderr).contains("threshold"),
+            && !text_of(&r.stderr).contains("threshold")
+            && !text_of(&r.stderr).contains("radians"),
         "{}",
         text_of(&r.stderr)
     );

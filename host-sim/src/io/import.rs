@@ -1275,14 +1275,19 @@ fn stuck_onoff_valves(
             (conv, c.column.as_deref(), target)
         {
             let hi = v.iter().fold(0.0f64, |m, u| m.max(u.abs()));
-            if *factor == 0.01 && hi > 0.0 && hi <= 0.01 {
+            // Within 1 %: fractions; within 10 %: a valve's 0..10 V command.
+            let slip = if hi <= 0.01 {
+                "values in 0..1 (`unit = \"fraction\"`) read as percent?"
+            } else {
+                "valve volts (0..10 V) read as percent? (`unit = \"V\"` with a `curve`)"
+            };
+            if *factor == 0.01 && hi > 0.0 && hi <= 0.1 * (1.0 + 1e-9) {
                 let at = crate::validate::toml_key_line(&mapping.text, "channel", i, "unit")
                     .map(|line| format!("{}:{line}", map_path.display()))
                     .unwrap_or_else(|| map_path.display().to_string());
                 warnings.push(format!(
                     "{at}: channel[{i}] (`{}`): column `{col}` with `unit = \"percent\"` never \
-                     opens beyond {} % over the whole file: values in 0..1 (`unit = \"fraction\"`) \
-                     read as percent?",
+                     opens beyond {} % over the whole file: {slip}",
                     c.channel,
                     Shown(hi * 100.0)
                 ));
@@ -1394,6 +1399,21 @@ fn channel_ranges(
                  degrees?)",
                 (hi - lo).to_degrees()
             )),
+            // Read as degrees, it never leaves +-pi "degrees": the range of an angle logged
+            // in radians.
+            Channel::AngleDeg
+                if matches!(plan_conv(plans, ch), Some(Convert::Factor { factor, .. })
+                    if *factor == std::f64::consts::PI / 180.0)
+                    && lo.abs().max(hi.abs()) <= std::f64::consts::PI.to_radians() =>
+            {
+                warnings.push(format!(
+                    "angle stays within {:.4} .. {:.4} deg over the whole file, inside +-3.1416: \
+                     the range of an angle logged in radians. Is `unit = \"deg\"` right \
+                     (radians read as degrees?); if the joint moved this little, ignore this",
+                    lo.to_degrees(),
+                    hi.to_degrees()
+                ))
+            }
             _ => {}
         }
     }
