@@ -718,13 +718,15 @@ fn an_onoff_threshold_that_leaves_a_valve_closed_or_open_is_warned_at_its_line()
             && e.contains("valve volts (0..10 V) read as percent?"),
         "{e}"
     );
-    // The encoder's counts scaled to radians and mapped as degrees.
+    // The encoder's counts scaled to radians and mapped as degrees. The rig's joint spans
+    // 0.8 rad, which the 1-degree span check already catches; x3 (a joint swinging 2.4 rad)
+    // spans more than a degree read as degrees, yet stays inside +-pi.
     let encoder =
         "column = \"Encoder\"\nchannel = \"angle\"\nunit = \"counts\"\ncounts_per_rev = 8000\n";
     assert!(MAP.contains(encoder));
     let radians = format!(
         "column = \"Encoder\"\nchannel = \"angle\"\nunit = \"deg\"\nscale = {}\n",
-        std::f64::consts::TAU / 8000.0
+        3.0 * std::f64::consts::TAU / 8000.0
     );
     let r = import_with(
         dir.path(),
