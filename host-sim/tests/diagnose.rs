@@ -819,6 +819,15 @@ fn pressures_logged_absolute_get_the_gauge_hint() {
     ] {
         assert!(stdout.contains(n), "`{n}` not in:\n{stdout}");
     }
+    // The answer's first words name the absolute logging, before any effect.
+    assert!(
+        stdout.lines().any(|l| l.starts_with(
+            "The pressure columns were logged absolute, not gauge (the fitted offset is one \
+             atmosphere): subtract p_atm or import with reference = \"absolute\". The model \
+             leaves out"
+        )),
+        "{stdout}"
+    );
     // Without the force columns: the offset alone, every channel at 100 %, nothing
     // recalibrated. (The calibrated sensors move the replay's start, which is the recording's
     // first sample as read: the muscles start an atmosphere lower than the columns say. A
@@ -858,6 +867,7 @@ fn pressures_logged_absolute_get_the_gauge_hint() {
     ));
     assert!(stdout.contains("p1_offset_kpa +20.0"), "{stdout}");
     assert!(!stdout.contains("look absolute"), "{stdout}");
+    assert!(!stdout.contains("logged absolute"), "{stdout}");
 }
 
 /// stdout of a run that exited 0 or 3 (an answer either way), without a panic.

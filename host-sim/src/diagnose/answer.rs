@@ -63,8 +63,22 @@ pub fn failure_json(message: &str) -> serde_json::Value {
 }
 
 impl Diagnosis {
-    /// The first line of the answer.
+    /// The first line of the answer; pressures logged absolute come first (the rest of
+    /// the answer is about an offset of one atmosphere).
     pub fn headline(&self) -> String {
+        let answer = self.verdict_line();
+        if self.pressures_absolute {
+            format!(
+                "The pressure columns were logged absolute, not gauge (the fitted offset is one \
+                 atmosphere): subtract p_atm or import with reference = \"absolute\". {answer}"
+            )
+        } else {
+            answer
+        }
+    }
+
+    /// The verdict's sentence.
+    fn verdict_line(&self) -> String {
         match self.verdict {
             Verdict::NothingMissing => format!(
                 "Nothing is missing: the nominal model explains the recording within its noise (fits {}).",

@@ -262,6 +262,9 @@ pub struct Diagnosis {
     pub lookalikes: Vec<String>,
     /// What in the recording itself limits the answer (coarse on/off openings).
     pub data_notes: Vec<String>,
+    /// The fitted pressure offset is one atmosphere: the columns were logged absolute, and
+    /// the headline says so first.
+    pub pressures_absolute: bool,
     /// Why the recording may not be of this plant (units, channel mapping).
     pub hints: Vec<String>,
     /// Failures met on the way (a replay that failed, with its time and state).
@@ -1337,6 +1340,7 @@ pub fn diagnose(
     progress(total, total, "done");
     let absolute_note = verdict::absolute_pressure_note(nominal, &effects);
     Ok(Diagnosis {
+        pressures_absolute: absolute_note.is_some(),
         verdict: v,
         located: g.located,
         effects,
