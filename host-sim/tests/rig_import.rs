@@ -979,3 +979,45 @@ fn windows_exports_empty_files_and_directories_are_named_for_what_they_are() {
         "{e}"
     );
 }
+
+/// Stamps coarser than the sampling (the 40 Hz rig's ms stamps cut to tenths of a second)
+/// repeat on many rows: named as coarse stamps, not as one duplicated row; a single copied
+/// row still is.
+#[test]
+fn coarse_time_stamps_are_told_from_a_duplicated_row() {
+    let dir = tmp();
+    let (raw, _) = rig_file(dir.path(), 2.0, 3, &[]);
+    let text = std::fs::read_to_string(&raw).unwrap();
+    let mut lines: Vec<String> = text.lines().map(String::from).collect();
+    let coarse: String = lines
+        .iter()
+        .enumerate()
+        .map(|(i, l)| {
+            if i < 3 {
+                return format!("{l}\n");
+            }
+            let (t, rest) = l.split_once(';').unwrap();
+            let ms: f64 = t.replace(',', ".").parse().unwrap();
+            format!("{};{rest}\n", (ms / 100.0).floor() * 100.0)
+        })
+        .collect();
+    let out = dir.path().join("rec.csv");
+    let coarse_path = dir.path().join("coarse.csv");
+    std::fs::write(&coarse_path, coarse).unwrap();
+    let e = exits(2, &import_with(dir.path(), MAP, &coarse_path, &out, false));
+    assert!(
+        e.contains("the time stamps are coarser than the sampling") && !e.contains("duplicated"),
+        "{e}"
+    );
+    // One row copied: a duplicated row.
+    let copy = lines[10].clone();
+    lines.insert(11, copy);
+    let once = dir.path().join("once.csv");
+    std::fs::write(&once, lines.join("\n") + "\n").unwrap();
+    let e = exits(2, &import_with(dir.path(), MAP, &once, &out, false));
+    assert!(
+        e.contains("(a duplicated row?)") && !e.contains("coarser"),
+        "{e}"
+    );
+    assert!(!out.exists());
+}

@@ -1012,12 +1012,22 @@ pub fn import(
         )));
     }
     let time_name = mapping.time.column.as_str();
+    // One repeated stamp is a duplicated row; many are stamps coarser than the sampling.
+    let repeats = t_s.windows(2).filter(|w| w[1] == w[0]).count();
     for k in 1..n {
         if !(t_s[k] > t_s[k - 1]) {
             return Err(at(
                 lines[k],
                 time_name,
-                if t_s[k] == t_s[k - 1] {
+                if t_s[k] == t_s[k - 1] && repeats > 1 {
+                    format!(
+                        "time does not increase: time stamp {} s repeated, and {repeats} of the \
+                         {n} rows repeat the stamp before them: the time stamps are coarser than \
+                         the sampling (a logger writing whole milliseconds at more than 1 kHz?); \
+                         log finer time stamps (or in another `time.unit`)",
+                        Shown(t_s[k])
+                    )
+                } else if t_s[k] == t_s[k - 1] {
                     format!(
                         "time does not increase: time stamp {} s repeated (a duplicated row?)",
                         Shown(t_s[k])
