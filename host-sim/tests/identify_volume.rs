@@ -449,3 +449,66 @@ fn a_recording_too_short_or_too_still_is_refused_before_training() {
     }
     assert_kept(&out);
 }
+
+/// Pressures logged absolute (one atmosphere added to both columns): eq. 7 with the
+/// firmware's volume explains the flows far better with it taken off again, so the recording
+/// is refused before any training, naming the gauge columns. The gauge recording itself, and
+/// one of a plant whose volume is not the polynomial, are not.
+#[test]
+fn pressures_logged_absolute_are_refused_by_the_flow_they_explain() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("v.toml");
+    let rec = recording(dir.path());
+    let text = std::fs::read_to_string(&rec).unwrap();
+    let mut cols = Vec::new();
+    let shifted: String = text
+        .lines()
+        .map(|line| {
+            if line.starts_with('#') {
+                return format!("{line}\n");
+            }
+            if line.starts_with("t_s") {
+                cols = (line.split(',').enumerate())
+                    .filter(|(_, c)| *c == "p1_kpa" || *c == "p2_kpa")
+                    .map(|(i, _)| i)
+                    .collect();
+                return format!("{line}\n");
+            }
+            let fields: Vec<String> = (line.split(',').enumerate())
+                .map(|(i, v)| match cols.contains(&i) {
+                    true => format!("{}", v.parse::<f64>().unwrap() + 101.325),
+                    false => v.to_string(),
+                })
+                .collect();
+            fields.join(",") + "\n"
+        })
+        .collect();
+    assert_eq!(cols.len(), 2);
+    let abs = dir.path().join("abs.csv");
+    std::fs::write(&abs, shifted).unwrap();
+    let volume = |r: &std::path::Path| {
+        host_sim(&[
+            &"identify",
+            &"volume",
+            &"--recording",
+            &r,
+            &"--out",
+            &out,
+            &"--max-evals",
+            &"10",
+        ])
+    };
+    assert_refused(
+        &volume(&abs),
+        &[
+            "abs.csv",
+            "the pressure columns look absolute",
+            "times better",
+        ],
+        &out,
+    );
+    for r in [rec, mismatched_recording(dir.path())] {
+        let e = String::from_utf8_lossy(&volume(&r).stderr).to_string();
+        assert!(!e.contains("look absolute"), "{}: {e}", r.display());
+    }
+}

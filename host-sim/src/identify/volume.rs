@@ -947,6 +947,47 @@ pub fn check_training_data(
     Ok(())
 }
 
+/// Eq. 7 with the firmware's volume explaining the flow columns this many times better with
+/// one atmosphere taken off the pressures says the columns were logged absolute.
+pub const ABSOLUTE_FLOW_GAIN_ABOVE: f64 = 4.0;
+
+/// Refuses pressures logged absolute: the network would learn the volume of a muscle one
+/// atmosphere higher than the firmware feeds it. Pressure enters eq. 7 through `P V'` only, so
+/// the test has power where the joint moves; a polynomial unlike the rig's volume does not
+/// gain from the shift.
+pub fn check_gauge_pressures(
+    per_muscle: &[Vec<VolumeSample>; 2],
+    poly: &VolumePoly,
+    thermo: &Thermo,
+    p_atm_pa: f64,
+) -> Result<(), String> {
+    let samples = [per_muscle[0].as_slice(), per_muscle[1].as_slice()].concat();
+    let flow = |s: &VolumeSample| {
+        let (v, vr) = poly.volume_and_rate(s);
+        thermo.mass_flow_kg_s(s, v, vr)
+    };
+    let as_given = mse_kg2_s2(&samples, flow);
+    let lowered: Vec<VolumeSample> = samples
+        .iter()
+        .map(|s| VolumeSample {
+            p_abs_pa: s.p_abs_pa - p_atm_pa,
+            ..*s
+        })
+        .collect();
+    let shifted = mse_kg2_s2(&lowered, flow);
+    if shifted * ABSOLUTE_FLOW_GAIN_ABOVE < as_given {
+        return Err(format!(
+            "the pressure columns look absolute, not gauge: eq. 7 with the firmware's volume \
+             explains the flow columns {:.1} times better with one atmosphere ({:.3} kPa) taken \
+             off them (mass-flow MSE {as_given:.3e} -> {shifted:.3e} (kg/s)^2). RECORDING.md's \
+             columns are gauge: subtract p_atm or import with reference = \"absolute\"",
+            as_given / shifted.max(f64::MIN_POSITIVE),
+            p_atm_pa * 1e-3
+        ));
+    }
+    Ok(())
+}
+
 /// Training and hold-out samples of a recording, thinned to at most `max_samples` training
 /// samples: the tail `holdout_fraction` of each muscle's samples is held out.
 pub fn split_samples(
@@ -1025,6 +1066,8 @@ pub fn run_identify_volume(a: &IdentifyVolumeArgs) -> anyhow::Result<String> {
     let (train_s, held) = split_samples(&per_muscle, a.holdout_fraction, a.max_samples);
     let thermo = Thermo::firmware();
     let poly = VolumePoly::firmware();
+    check_gauge_pressures(&per_muscle, &poly, &thermo, p_atm)
+        .map_err(|e| anyhow::anyhow!("{file}: {e} (nothing written)"))?;
     let opt = TrainOptions {
         weight_decay: a.weight_decay,
         seed: a.seed,
