@@ -753,6 +753,63 @@ fn plant_values_out_of_their_physical_range_are_refused_at_their_line() {
 }
 
 #[test]
+fn plant_valve_ratios_and_the_chamber_volume_out_of_range_quote_the_typed_value() {
+    // As every other key: the key, its line, the allowed range and the value as typed (b0 of
+    // the volume, not its ratio to the muscle's cylinder).
+    let w = Workspace::new();
+    for (key, value, needles) in [
+        (
+            "critical_ratio",
+            "1.433",
+            vec![
+                "plant.toml:27:",
+                "valve.critical_ratio",
+                "[0, 1)",
+                "got 1.433",
+            ],
+        ),
+        (
+            "laminar_ratio",
+            "0.3",
+            vec![
+                "plant.toml:28:",
+                "valve.laminar_ratio",
+                "(0.433, 1)",
+                "above valve.critical_ratio",
+                "got 0.3",
+            ],
+        ),
+        (
+            "volume_poly_m3",
+            "[-79.0e-6, 48.0e-5, -18.0e-6, -11.0e-4]",
+            vec![
+                "plant.toml:18:",
+                "muscle.volume_poly_m3",
+                "[0.0000157, 0.000393] m^3",
+                "got -0.000079",
+            ],
+        ),
+        (
+            "volume_poly_m3",
+            "[79.0e-6, 48.0e-5, -18.0e-6, -11.0e-1]",
+            vec![
+                "plant.toml:18:",
+                "muscle.volume_poly_m3",
+                "[0.000079, 0.00048, -0.000018, -1.1]",
+                "is not > 0",
+            ],
+        ),
+    ] {
+        let p = edited_plant(&w, key, value);
+        w.refuses_with(
+            "simulate --plant {p} --inputs {fixture} --out {w}/out.csv",
+            &[("p", &p)],
+            &needles,
+        );
+    }
+}
+
+#[test]
 fn fit_refuses_a_nan_gate() {
     let w = Workspace::new();
     // A negative number is taken as the value and refused by the range check.
