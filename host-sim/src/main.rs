@@ -247,9 +247,11 @@ fn min_fit_percent(s: &str) -> Result<f64, String> {
     Ok(v)
 }
 
-/// `--opt -1e-6` and `--opt -.5` passed as `--opt=-1e-6`, `--opt=-.5`: clap takes `-1` and
-/// `-0.5` after an option as values, but not a negative number with an exponent or without a
-/// leading digit (it would be read as short flags).
+/// `--opt -1e-6`, `--opt -.5` and `--opts -1,1` passed as `--opt=-1e-6`, `--opt=-.5`,
+/// `--opts=-1,1`: clap takes `-1` and `-0.5` after an option as values, but not a negative
+/// number with an exponent or without a leading digit, nor a comma-separated list that starts
+/// with a negative number (they would be read as short flags). The option's range check then
+/// refuses a negative value where none is allowed.
 fn join_negative_values(args: impl Iterator<Item = std::ffi::OsString>) -> Vec<std::ffi::OsString> {
     let mut out: Vec<std::ffi::OsString> = Vec::new();
     for a in args {
@@ -259,7 +261,7 @@ fn join_negative_values(args: impl Iterator<Item = std::ffi::OsString>) -> Vec<s
                     && opt.len() > 2
                     && !opt.contains('=')
                     && v.starts_with('-')
-                    && v.parse::<f64>().is_ok() =>
+                    && v.split(',').all(|x| x.trim().parse::<f64>().is_ok()) =>
             {
                 Some(format!("{opt}={v}"))
             }

@@ -431,7 +431,31 @@ fn a_negative_number_with_an_exponent_or_no_leading_digit_is_read_as_the_value()
     }
 }
 
-/// The conformance pulses with the `column` set to 0 (a dead sensor), as `dead.csv` in `w`.
+#[test]
+fn a_list_that_starts_with_a_negative_number_is_read_as_the_value() {
+    // `--speeds-rad-s -1,1` was read as the short flag `-1`: now the option's own range
+    // message, as `--speeds-rad-s=-1,1` gives.
+    let w = Workspace::new();
+    for v in ["-1,1", "-1e-3,2", "-.5"] {
+        let err = w.refuses(
+            &format!("sweep torque --plant {{plant}} --out {{w}}/t.csv --speeds-rad-s {v}"),
+            &["--speeds-rad-s", "must be a number within (0, 1000], got -"],
+        );
+        assert!(!err.contains("unexpected argument"), "{err}");
+    }
+    // Where a negative is allowed it is taken (activation levels below p0).
+    let out = w.p("t.csv");
+    ok(&bin()
+        .args(["sweep", "torque", "--plant"])
+        .arg(plant())
+        .arg("--out")
+        .arg(&out)
+        .args(["--dp-kpa", "-100,100", "--speeds-rad-s", "4"])
+        .output()
+        .unwrap());
+    assert!(out.exists());
+}
+
 fn dead_channel_recording(w: &Workspace, column: &str) -> PathBuf {
     let text = std::fs::read_to_string(fixture("pulses_nominal.csv")).unwrap();
     let mut col = usize::MAX;
