@@ -158,17 +158,14 @@ struct DemoArgs {
 #[command(
     after_help = "Examples:\n  host-sim simulate --plant ../shared/plant/reference-1dof.toml --inputs ../shared/conformance/pulses_nominal.csv --out sim.csv --plot sim.png\n  host-sim simulate --plant ../shared/plant/reference-1dof.toml --scenario scenarios/step.toml --out step.csv"
 )]
+// Exactly one of --inputs (open loop) and --scenario (closed loop): a missing one names both.
+#[command(group(clap::ArgGroup::new("run").required(true).args(["inputs", "scenario"])))]
 struct SimulateArgs {
     /// Plant parameter file (TOML, e.g. shared/plant/reference-1dof.toml).
     #[arg(long, value_name = "P.toml")]
     plant: PathBuf,
     /// Recording whose t_s and valve columns are replayed (RECORDING.md).
-    #[arg(
-        long,
-        value_name = "REC.csv",
-        required_unless_present = "scenario",
-        conflicts_with = "scenario"
-    )]
+    #[arg(long, value_name = "REC.csv")]
     inputs: Option<PathBuf>,
     /// Closed-loop scenario (firmware in the loop): OUT.csv is a RECORDING.md recording, the
     /// firmware's set-point, torque estimate and fault code go to OUT.firmware.csv; the

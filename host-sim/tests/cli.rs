@@ -145,6 +145,42 @@ fn scenario_needs_a_plant_and_a_readable_file() {
     assert!(!dir.path().join("o.csv").exists());
 }
 
+#[test]
+fn simulate_without_a_run_names_both_inputs_and_scenario() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("o.csv");
+    let r = on_plant(
+        "simulate",
+        &fixture("reference-1dof.toml"),
+        &[&"--out", &out],
+    );
+    let err = exits(2, &r);
+    for needle in ["--inputs <REC.csv>", "--scenario <S.toml>"] {
+        assert!(err.contains(needle), "`{needle}` not in:\n{err}");
+    }
+    // And one of them only.
+    let r = on_plant(
+        "simulate",
+        &fixture("reference-1dof.toml"),
+        &[
+            &"--inputs",
+            &fixture("pulses_nominal.csv"),
+            &"--scenario",
+            &root().join("scenarios/step.toml"),
+            &"--out",
+            &out,
+        ],
+    );
+    let err = exits(2, &r);
+    assert!(
+        err.contains("--inputs")
+            && err.contains("cannot be used with")
+            && err.contains("--scenario"),
+        "{err}"
+    );
+    assert!(!out.exists());
+}
+
 /// Every subcommand's help (found by walking `host-sim --help`, so a new one is covered) has
 /// a usage example that starts with `host-sim <subcommand>`, and names the paper jargon only
 /// with a plain-words gloss.
