@@ -447,6 +447,7 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
     if a.plot.is_none() {
         if let Some(done) = simulate_streaming(a, &plant, inputs_path, &opts)? {
             warn_other_plant(&done.metadata, plant_path, inputs_path);
+            warn_unused_valve_columns(&done.metadata, inputs_path);
             println!("plant effects: {}", plant.effects_summary());
             eprint_written(&a.out, done.samples, &done.stats);
             return Ok(ExitCode::SUCCESS);
@@ -454,6 +455,7 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
     }
     let rec = Recording::read(inputs_path)?;
     warn_other_plant(&rec.metadata, plant_path, inputs_path);
+    warn_unused_valve_columns(&rec.metadata, inputs_path);
     let dt = rec.sample_period_s();
     let bar = stderr_bar(
         Some(rec.len()),
@@ -598,6 +600,13 @@ fn warn_other_plant(metadata: &[(String, String)], plant_path: &Path, inputs_pat
         inputs_path,
         "simulating",
     ) {
+        eprintln!("{w}");
+    }
+}
+
+/// Warns when the recording's metadata marks its valve columns unused (they are replayed).
+fn warn_unused_valve_columns(metadata: &[(String, String)], inputs_path: &Path) {
+    if let Some(w) = host_sim::io::recording::unused_valve_columns_warning(metadata, inputs_path) {
         eprintln!("{w}");
     }
 }

@@ -40,6 +40,50 @@ pub fn other_plant_warning(
     })
 }
 
+/// What a recording's metadata says when its valve columns hold no openings: `sweep torque`
+/// writes them as 0 (its motion is prescribed, its pressures held by regulators) and says so
+/// in its `# source`.
+pub const VALVE_COLUMNS_UNUSED: &str = "valve columns unused";
+
+/// The warning for a replay of `recording_path` whose metadata marks its valve columns unused
+/// ([`VALVE_COLUMNS_UNUSED`]); `None` when none does. RECORDING.md has the four columns as
+/// required openings and no way to leave them out, so they are replayed as recorded: the
+/// warning names them, the metadata line (read again from the file's head) and what to replay
+/// instead.
+pub fn unused_valve_columns_warning(
+    metadata: &[(String, String)],
+    recording_path: &Path,
+) -> Option<String> {
+    let i = metadata
+        .iter()
+        .position(|(_, v)| v.contains(VALVE_COLUMNS_UNUSED))?;
+    let line = {
+        let mut head = Vec::new();
+        std::fs::File::open(recording_path)
+            .and_then(|f| f.take(64 * 1024).read_to_end(&mut head))
+            .ok()
+            .and_then(|_| {
+                Preamble::of(&String::from_utf8_lossy(&head))
+                    .meta_line_of
+                    .get(i)
+                    .copied()
+            })
+    };
+    let key = match metadata[i].0.as_str() {
+        "" => "#".to_owned(),
+        k => format!("# {k}"),
+    };
+    Some(format!(
+        "warning: {}{}: `{key}` marks the valve columns unused: {} are replayed as recorded, \
+         so the simulation does not reproduce the recorded motion and pressures (a recording \
+         with prescribed motion and regulator-held pressures, as `sweep torque` writes); \
+         replay a recording of the valve openings that drove the joint",
+        recording_path.display(),
+        line.map(|l| format!(":{l}")).unwrap_or_default(),
+        INPUT_COLUMNS.join(", ")
+    ))
+}
+
 /// A measured (or simulated) output channel.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Channel {
