@@ -462,9 +462,9 @@ impl Recording {
             &[]
         };
         write_head(&self.metadata, &present, flow_names, w)?;
-        // The rows: numbers only (nothing to quote), formatted by `numfmt` (byte-identical
-        // to `{}` for time and openings, `{:.6}` for the readings) in blocks, each block's
-        // two halves on two threads, so memory stays one block whatever the length.
+        // The rows: numbers only (nothing to quote), formatted by `numfmt` ([`push_row`]) in
+        // blocks, each block's two halves on two threads, so memory stays one block whatever
+        // the length.
         let outputs: Vec<&[f64]> = present
             .iter()
             .map(|c| self.outputs[c.index()].as_deref().unwrap_or(&[]))
@@ -523,7 +523,8 @@ pub(crate) fn write_head(
 pub(crate) const ROW_BYTES: usize = 10 * (numfmt::NUMBER_BYTES + 1);
 
 /// One data row: numbers only (nothing to quote), formatted by `numfmt` (byte-identical to
-/// `{}` for time and openings, `{:.6}` for the readings), at most 5 readings. The row is
+/// `{}` for the time rounded to the nanosecond ([`numfmt::time_to_ns`]) and the openings,
+/// `{:.6}` for the readings), at most 5 readings. The row is
 /// built on the stack and appended at once; a number the integer path cannot prove (a
 /// rounding tie, a huge value) sends the row through the standard formatter.
 #[inline]
@@ -546,6 +547,7 @@ pub(crate) fn push_row_in(
     u: &ValveInputs,
     outputs: impl Iterator<Item = f64> + Clone,
 ) {
+    let t_s = numfmt::time_to_ns(t_s);
     let openings = [u.u_in1, u.u_ex1, u.u_in2, u.u_ex2];
     let fast = (|| {
         let mut k = numfmt::shortest_into(&mut row[..], t_s)?;

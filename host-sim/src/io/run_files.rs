@@ -90,7 +90,7 @@ pub fn write_firmware_trace(run: &ClosedLoopRun, path: &Path) -> Result<(), Reco
             writeln!(
                 w,
                 "{},{:.6},{:.6},{:.6},{:.3},{:.3},{},{}",
-                r.t_s,
+                crate::io::numfmt::time_to_ns(r.t_s),
                 r.setpoint_rad.to_degrees(),
                 r.out.torque_est_nm,
                 r.out.torque_des_nm,
