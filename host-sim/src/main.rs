@@ -158,17 +158,14 @@ struct DemoArgs {
 #[command(
     after_help = "Examples:\n  host-sim simulate --plant ../shared/plant/reference-1dof.toml --inputs ../shared/conformance/pulses_nominal.csv --out sim.csv --plot sim.png\n  host-sim simulate --plant ../shared/plant/reference-1dof.toml --scenario scenarios/step.toml --out step.csv"
 )]
+// Exactly one of --inputs (open loop) and --scenario (closed loop): a missing one names both.
+#[command(group(clap::ArgGroup::new("run").required(true).args(["inputs", "scenario"])))]
 struct SimulateArgs {
     /// Plant parameter file (TOML, e.g. shared/plant/reference-1dof.toml).
     #[arg(long, value_name = "P.toml")]
     plant: PathBuf,
     /// Recording whose t_s and valve columns are replayed (RECORDING.md).
-    #[arg(
-        long,
-        value_name = "REC.csv",
-        required_unless_present = "scenario",
-        conflicts_with = "scenario"
-    )]
+    #[arg(long, value_name = "REC.csv")]
     inputs: Option<PathBuf>,
     /// Closed-loop scenario (firmware in the loop): OUT.csv is a RECORDING.md recording, the
     /// firmware's set-point, torque estimate and fault code go to OUT.firmware.csv; the
@@ -247,9 +244,11 @@ fn min_fit_percent(s: &str) -> Result<f64, String> {
     Ok(v)
 }
 
-/// `--opt -1e-6` and `--opt -.5` passed as `--opt=-1e-6`, `--opt=-.5`: clap takes `-1` and
-/// `-0.5` after an option as values, but not a negative number with an exponent or without a
-/// leading digit (it would be read as short flags).
+/// `--opt -1e-6`, `--opt -.5` and `--opts -1,1` passed as `--opt=-1e-6`, `--opt=-.5`,
+/// `--opts=-1,1`: clap takes `-1` and `-0.5` after an option as values, but not a negative
+/// number with an exponent or without a leading digit, nor a comma-separated list that starts
+/// with a negative number (they would be read as short flags). The option's range check then
+/// refuses a negative value where none is allowed.
 fn join_negative_values(args: impl Iterator<Item = std::ffi::OsString>) -> Vec<std::ffi::OsString> {
     let mut out: Vec<std::ffi::OsString> = Vec::new();
     for a in args {
@@ -259,7 +258,7 @@ fn join_negative_values(args: impl Iterator<Item = std::ffi::OsString>) -> Vec<s
                     && opt.len() > 2
                     && !opt.contains('=')
                     && v.starts_with('-')
-                    && v.parse::<f64>().is_ok() =>
+                    && v.split(',').all(|x| x.trim().parse::<f64>().is_ok()) =>
             {
                 Some(format!("{opt}={v}"))
             }
@@ -448,6 +447,7 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
     if a.plot.is_none() {
         if let Some(done) = simulate_streaming(a, &plant, inputs_path, &opts)? {
             warn_other_plant(&done.metadata, plant_path, inputs_path);
+            warn_unused_valve_columns(&done.metadata, inputs_path);
             println!("plant effects: {}", plant.effects_summary());
             eprint_written(&a.out, done.samples, &done.stats);
             return Ok(ExitCode::SUCCESS);
@@ -455,6 +455,7 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
     }
     let rec = Recording::read(inputs_path)?;
     warn_other_plant(&rec.metadata, plant_path, inputs_path);
+    warn_unused_valve_columns(&rec.metadata, inputs_path);
     let dt = rec.sample_period_s();
     let bar = stderr_bar(
         Some(rec.len()),
@@ -599,6 +600,13 @@ fn warn_other_plant(metadata: &[(String, String)], plant_path: &Path, inputs_pat
         inputs_path,
         "simulating",
     ) {
+        eprintln!("{w}");
+    }
+}
+
+/// Warns when the recording's metadata marks its valve columns unused (they are replayed).
+fn warn_unused_valve_columns(metadata: &[(String, String)], inputs_path: &Path) {
+    if let Some(w) = host_sim::io::recording::unused_valve_columns_warning(metadata, inputs_path) {
         eprintln!("{w}");
     }
 }

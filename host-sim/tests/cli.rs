@@ -145,6 +145,81 @@ fn scenario_needs_a_plant_and_a_readable_file() {
     assert!(!dir.path().join("o.csv").exists());
 }
 
+#[test]
+fn simulate_without_a_run_names_both_inputs_and_scenario() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("o.csv");
+    let r = on_plant(
+        "simulate",
+        &fixture("reference-1dof.toml"),
+        &[&"--out", &out],
+    );
+    let err = exits(2, &r);
+    for needle in ["--inputs <REC.csv>", "--scenario <S.toml>"] {
+        assert!(err.contains(needle), "`{needle}` not in:\n{err}");
+    }
+    // And one of them only.
+    let r = on_plant(
+        "simulate",
+        &fixture("reference-1dof.toml"),
+        &[
+            &"--inputs",
+            &fixture("pulses_nominal.csv"),
+            &"--scenario",
+            &root().join("scenarios/step.toml"),
+            &"--out",
+            &out,
+        ],
+    );
+    let err = exits(2, &r);
+    assert!(
+        err.contains("--inputs")
+            && err.contains("cannot be used with")
+            && err.contains("--scenario"),
+        "{err}"
+    );
+    assert!(!out.exists());
+}
+
+/// A `sweep torque` recording (prescribed motion, regulator-held pressures) says in its
+/// `# source` that its valve columns are unused: a replay warns, naming the columns and the
+/// line; a recording of valve openings replays without the warning.
+#[test]
+fn replaying_a_recording_whose_valve_columns_are_unused_warns() {
+    let dir = tempfile::tempdir().unwrap();
+    let swept = dir.path().join("torque.csv");
+    ok(&bin()
+        .args(["sweep", "torque", "--plant"])
+        .arg(fixture("reference-1dof.toml"))
+        .arg("--out")
+        .arg(&swept)
+        .args(["--dp-kpa", "0", "--speeds-rad-s", "4"])
+        .output()
+        .unwrap());
+    let out = dir.path().join("sim.csv");
+    let r = on_plant(
+        "simulate",
+        &fixture("reference-1dof.toml"),
+        &[&"--inputs", &swept, &"--out", &out],
+    );
+    ok(&r);
+    let err = text(&r.stderr);
+    for needle in [
+        format!("warning: {}:3:", swept.display()),
+        "`# source` marks the valve columns unused".into(),
+        "u_in1, u_ex1, u_in2, u_ex2 are replayed as recorded".into(),
+    ] {
+        assert!(err.contains(&needle), "`{needle}` not in:\n{err}");
+    }
+    let r = on_plant(
+        "simulate",
+        &fixture("reference-1dof.toml"),
+        &[&"--inputs", &fixture("pulses_nominal.csv"), &"--out", &out],
+    );
+    ok(&r);
+    assert!(!text(&r.stderr).contains("unused"), "{}", text(&r.stderr));
+}
+
 /// Every subcommand's help (found by walking `host-sim --help`, so a new one is covered) has
 /// a usage example that starts with `host-sim <subcommand>`, and names the paper jargon only
 /// with a plain-words gloss.

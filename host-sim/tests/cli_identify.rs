@@ -625,3 +625,25 @@ fn identify_force_refuses_a_map_eq6_does_not_describe() {
     assert!(e.contains("eq. 6 does not describe this map"), "{e}");
     assert!(!out.exists());
 }
+
+#[test]
+fn sweep_torque_writes_its_time_stamps_as_decimals_of_its_grid() {
+    // The stamps were summed steps: 0.030000000000000002 for the 7th at 5 ms.
+    let (_dir, rec, _) = swept(
+        "torque",
+        "R.csv",
+        &["--dp-kpa", "0", "--speeds-rad-s", "1,4", "--dt-s", "0.005"],
+    );
+    let text = std::fs::read_to_string(&rec).unwrap();
+    let stamps: Vec<&str> = text
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .skip(1)
+        .map(|l| l.split(',').next().unwrap())
+        .collect();
+    assert!(stamps.len() > 100, "{}", stamps.len());
+    for (k, t) in stamps.iter().enumerate() {
+        let want = format!("{}", (k as f64 * 5e6).round() / 1e9);
+        assert_eq!(*t, want, "row {k}");
+    }
+}

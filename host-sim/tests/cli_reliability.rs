@@ -431,7 +431,31 @@ fn a_negative_number_with_an_exponent_or_no_leading_digit_is_read_as_the_value()
     }
 }
 
-/// The conformance pulses with the `column` set to 0 (a dead sensor), as `dead.csv` in `w`.
+#[test]
+fn a_list_that_starts_with_a_negative_number_is_read_as_the_value() {
+    // `--speeds-rad-s -1,1` was read as the short flag `-1`: now the option's own range
+    // message, as `--speeds-rad-s=-1,1` gives.
+    let w = Workspace::new();
+    for v in ["-1,1", "-1e-3,2", "-.5"] {
+        let err = w.refuses(
+            &format!("sweep torque --plant {{plant}} --out {{w}}/t.csv --speeds-rad-s {v}"),
+            &["--speeds-rad-s", "must be a number within (0, 1000], got -"],
+        );
+        assert!(!err.contains("unexpected argument"), "{err}");
+    }
+    // Where a negative is allowed it is taken (activation levels below p0).
+    let out = w.p("t.csv");
+    ok(&bin()
+        .args(["sweep", "torque", "--plant"])
+        .arg(plant())
+        .arg("--out")
+        .arg(&out)
+        .args(["--dp-kpa", "-100,100", "--speeds-rad-s", "4"])
+        .output()
+        .unwrap());
+    assert!(out.exists());
+}
+
 fn dead_channel_recording(w: &Workspace, column: &str) -> PathBuf {
     let text = std::fs::read_to_string(fixture("pulses_nominal.csv")).unwrap();
     let mut col = usize::MAX;
@@ -740,6 +764,63 @@ fn plant_values_out_of_their_physical_range_are_refused_at_their_line() {
                 "plant.toml:26:",
                 "valve.sonic_conductance_m3_per_s_pa",
                 "[1e-11, 0.000001] m^3/(s Pa)",
+            ],
+        ),
+    ] {
+        let p = edited_plant(&w, key, value);
+        w.refuses_with(
+            "simulate --plant {p} --inputs {fixture} --out {w}/out.csv",
+            &[("p", &p)],
+            &needles,
+        );
+    }
+}
+
+#[test]
+fn plant_valve_ratios_and_the_chamber_volume_out_of_range_quote_the_typed_value() {
+    // As every other key: the key, its line, the allowed range and the value as typed (b0 of
+    // the volume, not its ratio to the muscle's cylinder).
+    let w = Workspace::new();
+    for (key, value, needles) in [
+        (
+            "critical_ratio",
+            "1.433",
+            vec![
+                "plant.toml:27:",
+                "valve.critical_ratio",
+                "[0, 1)",
+                "got 1.433",
+            ],
+        ),
+        (
+            "laminar_ratio",
+            "0.3",
+            vec![
+                "plant.toml:28:",
+                "valve.laminar_ratio",
+                "(0.433, 1)",
+                "above valve.critical_ratio",
+                "got 0.3",
+            ],
+        ),
+        (
+            "volume_poly_m3",
+            "[-79.0e-6, 48.0e-5, -18.0e-6, -11.0e-4]",
+            vec![
+                "plant.toml:18:",
+                "muscle.volume_poly_m3",
+                "[0.0000157, 0.000393] m^3",
+                "got -0.000079",
+            ],
+        ),
+        (
+            "volume_poly_m3",
+            "[79.0e-6, 48.0e-5, -18.0e-6, -11.0e-1]",
+            vec![
+                "plant.toml:18:",
+                "muscle.volume_poly_m3",
+                "[0.000079, 0.00048, -0.000018, -1.1]",
+                "is not > 0",
             ],
         ),
     ] {

@@ -182,6 +182,17 @@ fn bad_scenario_names_file_line_and_key_and_keeps_the_old_output() {
             "kind = \"stepp\"",
             vec!["line 9", "unknown variant", "stepp"],
         ),
+        // Beyond the firmware's set-point limit (within half a turn): its line too, and the
+        // limit to give.
+        (
+            "final_rad = 0.2",
+            "final_rad = 2.0",
+            vec![
+                "line 11: [setpoint] final_rad",
+                "2 rad is beyond the firmware's set-point limit of +-0.8 rad",
+                "give at most 0.8 rad",
+            ],
+        ),
     ];
     for (from, to, want) in cases {
         let s = dir.path().join("bad.toml");

@@ -466,14 +466,13 @@ pub fn run_pil(a: &PilArgs) -> anyhow::Result<(String, bool)> {
         )
     })?;
     let plant = crate::plant::Plant::load(&a.plant)?;
-    let mut scenario = Scenario::load(&a.scenario)?;
+    let (text, file) = crate::io::scenario::read_scenario_text(&a.scenario)?;
+    let mut scenario = Scenario::from_toml_str(&text, &file)?;
     // The image runs the reference configuration.
     let limit_rad =
         pam_firmware::tick::ControllerConfig::reference(scenario.scenario.tick_hz as f32)
             .angle_setpoint_max_rad;
-    scenario
-        .setpoint
-        .check_within(&a.scenario.display().to_string(), limit_rad)?;
+    scenario.setpoint.check_within(&text, &file, limit_rad)?;
     let forced = !scenario.sensors.board_counts;
     scenario.sensors.board_counts = true;
     let mut opts = PilOptions::new(elf.clone());

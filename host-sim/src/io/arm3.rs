@@ -16,6 +16,7 @@
 use std::path::Path;
 
 use crate::fit::fit_percent;
+use crate::io::numfmt;
 use crate::io::recording::{
     read_text, write_atomically, Channel, Recording, RecordingError, Table, INPUT_COLUMNS,
 };
@@ -249,7 +250,7 @@ impl Arm3Recording {
             let mut row: Vec<String> = Vec::with_capacity(header.len());
             for k in 0..n {
                 row.clear();
-                row.push(format!("{}", self.t_s[k]));
+                row.push(format!("{}", numfmt::time_to_ns(self.t_s[k])));
                 for u in &self.inputs[k] {
                     for v in [u.u_in1, u.u_ex1, u.u_in2, u.u_ex2] {
                         row.push(format!("{v}"));

@@ -115,6 +115,26 @@ pub fn fixed_into_const<const D: usize>(out: &mut [u8], v: f64) -> Option<usize>
     Some(k)
 }
 
+/// Largest |time stamp| [s] [`time_to_ns`] rounds: its nanoseconds stay below 2^53, where
+/// every integer is a double (9e6 s, 104 days).
+const MAX_ROUNDED_TIME_S: f64 = 9.0e6;
+
+/// A time stamp [s] as the files write it: rounded to the nanosecond, so that the float noise
+/// of `k * dt` or of summed steps (`6.0 * 0.005` is 0.030000000000000002) does not reach the
+/// file (nor the slow path of the formatter). The sample periods of this product are at least
+/// a microsecond (the firmware ticks at most at 10 kHz, `sweep torque --dt-s` from 1e-6 s),
+/// so a stamp moves by at most 0.05 % of a step. Beyond [`MAX_ROUNDED_TIME_S`], and NaN or
+/// infinities: `t_s` unchanged.
+#[inline]
+pub fn time_to_ns(t_s: f64) -> f64 {
+    let ns = t_s * 1e9;
+    if ns.abs() < MAX_ROUNDED_TIME_S * 1e9 {
+        ns.round() / 1e9
+    } else {
+        t_s
+    }
+}
+
 /// Appends `v` as `format!("{v}")` would (the shortest decimal that reads back as `v`).
 pub fn push_shortest(buf: &mut Vec<u8>, v: f64) {
     let mut tmp = [0u8; NUMBER_BYTES];
@@ -478,6 +498,31 @@ mod tests {
             let t = k as f64 / 3.0;
             assert_eq!(shortest(t), format!("{t}"));
             assert_eq!(fixed(t, 6), format!("{t:.6}"));
+        }
+    }
+
+    #[test]
+    fn time_stamps_lose_the_float_noise_of_their_grid_and_keep_their_value() {
+        // Summed steps and k * dt: the decimal of the grid, not 0.030000000000000002.
+        let mut summed = 0.0;
+        for k in 0..20_000u32 {
+            for (t, dt) in [(summed, 0.005), (k as f64 * 0.001, 0.001)] {
+                let want = format!("{}", (k as f64 * dt * 1e9).round() / 1e9);
+                assert_eq!(shortest(time_to_ns(t)), want, "k = {k}, dt = {dt}");
+                assert!(want.len() <= 12, "{want}");
+            }
+            summed += 0.005;
+        }
+        assert_eq!(shortest(time_to_ns(6.0 * 0.005)), "0.03");
+        // A stamp that is a decimal of at most 9 places is written as it is.
+        for t in [0.0, 0.014998, 1234.567891, -0.25, 5e-9] {
+            assert_eq!(time_to_ns(t).to_bits(), t.to_bits(), "{t}");
+        }
+        // One off the grid moves by at most half a nanosecond; huge and non-finite ones not.
+        let t = 1.0 / 3000.0;
+        assert!((time_to_ns(t) - t).abs() <= 0.5e-9);
+        for t in [1e7, f64::INFINITY, f64::NAN] {
+            assert_eq!(time_to_ns(t).to_bits(), t.to_bits(), "{t}");
         }
     }
 

@@ -40,6 +40,50 @@ pub fn other_plant_warning(
     })
 }
 
+/// What a recording's metadata says when its valve columns hold no openings: `sweep torque`
+/// writes them as 0 (its motion is prescribed, its pressures held by regulators) and says so
+/// in its `# source`.
+pub const VALVE_COLUMNS_UNUSED: &str = "valve columns unused";
+
+/// The warning for a replay of `recording_path` whose metadata marks its valve columns unused
+/// ([`VALVE_COLUMNS_UNUSED`]); `None` when none does. RECORDING.md has the four columns as
+/// required openings and no way to leave them out, so they are replayed as recorded: the
+/// warning names them, the metadata line (read again from the file's head) and what to replay
+/// instead.
+pub fn unused_valve_columns_warning(
+    metadata: &[(String, String)],
+    recording_path: &Path,
+) -> Option<String> {
+    let i = metadata
+        .iter()
+        .position(|(_, v)| v.contains(VALVE_COLUMNS_UNUSED))?;
+    let line = {
+        let mut head = Vec::new();
+        std::fs::File::open(recording_path)
+            .and_then(|f| f.take(64 * 1024).read_to_end(&mut head))
+            .ok()
+            .and_then(|_| {
+                Preamble::of(&String::from_utf8_lossy(&head))
+                    .meta_line_of
+                    .get(i)
+                    .copied()
+            })
+    };
+    let key = match metadata[i].0.as_str() {
+        "" => "#".to_owned(),
+        k => format!("# {k}"),
+    };
+    Some(format!(
+        "warning: {}{}: `{key}` marks the valve columns unused: {} are replayed as recorded, \
+         so the simulation does not reproduce the recorded motion and pressures (a recording \
+         with prescribed motion and regulator-held pressures, as `sweep torque` writes); \
+         replay a recording of the valve openings that drove the joint",
+        recording_path.display(),
+        line.map(|l| format!(":{l}")).unwrap_or_default(),
+        INPUT_COLUMNS.join(", ")
+    ))
+}
+
 /// A measured (or simulated) output channel.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Channel {
@@ -418,9 +462,9 @@ impl Recording {
             &[]
         };
         write_head(&self.metadata, &present, flow_names, w)?;
-        // The rows: numbers only (nothing to quote), formatted by `numfmt` (byte-identical
-        // to `{}` for time and openings, `{:.6}` for the readings) in blocks, each block's
-        // two halves on two threads, so memory stays one block whatever the length.
+        // The rows: numbers only (nothing to quote), formatted by `numfmt` ([`push_row`]) in
+        // blocks, each block's two halves on two threads, so memory stays one block whatever
+        // the length.
         let outputs: Vec<&[f64]> = present
             .iter()
             .map(|c| self.outputs[c.index()].as_deref().unwrap_or(&[]))
@@ -479,7 +523,8 @@ pub(crate) fn write_head(
 pub(crate) const ROW_BYTES: usize = 10 * (numfmt::NUMBER_BYTES + 1);
 
 /// One data row: numbers only (nothing to quote), formatted by `numfmt` (byte-identical to
-/// `{}` for time and openings, `{:.6}` for the readings), at most 5 readings. The row is
+/// `{}` for the time rounded to the nanosecond ([`numfmt::time_to_ns`]) and the openings,
+/// `{:.6}` for the readings), at most 5 readings. The row is
 /// built on the stack and appended at once; a number the integer path cannot prove (a
 /// rounding tie, a huge value) sends the row through the standard formatter.
 #[inline]
@@ -502,6 +547,7 @@ pub(crate) fn push_row_in(
     u: &ValveInputs,
     outputs: impl Iterator<Item = f64> + Clone,
 ) {
+    let t_s = numfmt::time_to_ns(t_s);
     let openings = [u.u_in1, u.u_ex1, u.u_in2, u.u_ex2];
     let fast = (|| {
         let mut k = numfmt::shortest_into(&mut row[..], t_s)?;

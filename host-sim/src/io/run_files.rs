@@ -90,7 +90,7 @@ pub fn write_firmware_trace(run: &ClosedLoopRun, path: &Path) -> Result<(), Reco
             writeln!(
                 w,
                 "{},{:.6},{:.6},{:.6},{:.3},{:.3},{},{}",
-                r.t_s,
+                crate::io::numfmt::time_to_ns(r.t_s),
                 r.setpoint_rad.to_degrees(),
                 r.out.torque_est_nm,
                 r.out.torque_des_nm,
@@ -366,12 +366,12 @@ pub fn simulate_scenario(
 ) -> anyhow::Result<ScenarioOutcome> {
     use anyhow::Context;
     let plant = Plant::load(plant_path)?;
-    let scenario = Scenario::load(scenario_path)?;
+    let (text, file) = crate::io::scenario::read_scenario_text(scenario_path)?;
+    let scenario = Scenario::from_toml_str(&text, &file)?;
     let cfg = pam_firmware::tick::ControllerConfig::reference(scenario.scenario.tick_hz as f32);
-    scenario.setpoint.check_within(
-        &scenario_path.display().to_string(),
-        cfg.angle_setpoint_max_rad,
-    )?;
+    scenario
+        .setpoint
+        .check_within(&text, &file, cfg.angle_setpoint_max_rad)?;
     let t0 = std::time::Instant::now();
     let run = crate::control::closed_loop::run_with(&plant, &scenario, cfg, progress)
         .with_context(|| format!("{}: closed-loop run failed", scenario_path.display()))?;

@@ -153,17 +153,28 @@ impl SetpointProfile {
     /// Refuses a profile that asks for more than the controller's set-point limit
     /// (`ControllerConfig::angle_setpoint_max_rad`): the firmware would clamp it, and the run
     /// would test a smaller move than the file says (and fail its `[expect]` for that reason).
-    pub fn check_within(&self, file: &str, limit_rad: f32) -> Result<(), ClosedLoopError> {
+    /// `text` is the scenario file's text (the error names the key's line), `file` its name.
+    pub fn check_within(
+        &self,
+        text: &str,
+        file: &str,
+        limit_rad: f32,
+    ) -> Result<(), ClosedLoopError> {
         let (key, v) = self.extreme_rad();
         if v > f64::from(limit_rad) {
+            // A sine's extreme is two keys: the line of the first (`offset_rad`).
+            let first_key = key.split(' ').next().unwrap_or(key);
+            let at = key_line(text, "setpoint", first_key)
+                .map(|l| format!("line {l}: "))
+                .unwrap_or_default();
             return Err(ClosedLoopError::Scenario {
                 file: file.to_string(),
                 msg: format!(
-                    "[setpoint] {key}: {} rad is beyond the firmware's set-point limit of +-{} rad \
-                     (angle_setpoint_max_rad of the controller configuration): the tick would \
-                     clamp it, and the run would test a smaller move than the file asks",
+                    "{at}[setpoint] {key}: {} rad is beyond the firmware's set-point limit of \
+                     +-{limit_rad} rad (angle_setpoint_max_rad of the controller \
+                     configuration): the tick would clamp it, and the run would test a smaller \
+                     move than the file asks; give at most {limit_rad} rad",
                     crate::validate::Shown(v),
-                    limit_rad
                 ),
             });
         }

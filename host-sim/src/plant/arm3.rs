@@ -303,11 +303,9 @@ impl Arm3Config {
                     ),
                 ));
             }
-            if m.volume_poly_m3.iter().any(|v| !v.is_finite()) || m.volume_poly_m3[0] <= 0.0 {
-                return Err(bad(
-                    &format!("{k}muscle.volume_poly_m3"),
-                    "coefficients must be finite, b0 (volume at zero contraction) > 0".into(),
-                ));
+            // (b0 > 0 is the range row's.)
+            if let Some(msg) = crate::plant::config::volume_coefficients_error(&m.volume_poly_m3) {
+                return Err(bad(&format!("{k}muscle.volume_poly_m3"), msg));
             }
         }
         for (i, j) in self.joints().iter().enumerate() {
@@ -352,16 +350,8 @@ impl Arm3Config {
         if let Some(sd) = &self.effects.supply_drop {
             sd.validate(&Check::new(path, "supply_drop"))?;
         }
-        let b = self.valve.critical_ratio;
-        let lr = self.valve.laminar_ratio;
-        if !(b.is_finite() && (0.0..1.0).contains(&b)) {
-            return Err(bad("valve.critical_ratio", "must be in [0, 1)".into()));
-        }
-        if !(lr.is_finite() && lr > b && lr < 1.0) {
-            return Err(bad(
-                "valve.laminar_ratio",
-                "must be in (critical_ratio, 1)".into(),
-            ));
+        if let Some((key, msg)) = crate::plant::config::valve_ratio_error(&self.valve) {
+            return Err(bad(key, msg));
         }
         Ok(())
     }

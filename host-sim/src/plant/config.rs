@@ -266,16 +266,81 @@ pub(crate) fn muscle_range_rows(m: &MuscleConfig, prefix: &str) -> Vec<RangeRow>
         damping_m2s: Range::closed(0.0, 0.01), "m^2 s";
     ];
     // The chamber at zero contraction against the muscle's own cylinder: a volume in cm^3 or
-    // litres typed into the m^3 key is 1e6 or 1e3 times off (the reference: 1.01).
-    let cylinder_m3 = std::f64::consts::PI * m.radius_m * m.radius_m * m.rest_length_m;
+    // litres typed into the m^3 key is 1e6 or 1e3 times off (the reference: 1.01). Checked
+    // on b0 as typed, within the ratios' bounds in m^3 (to 3 significant digits, outward).
     rows.push((
         format!("{prefix}muscle.volume_poly_m3"),
-        m.volume_poly_m3[0] / cylinder_m3,
-        Range::closed(VOLUME_OVER_CYLINDER.0, VOLUME_OVER_CYLINDER.1),
-        "x the cylinder pi radius_m^2 rest_length_m (b0, the chamber at zero contraction, \
-         over the muscle's own size: cm^3 or litres typed as m^3?)",
+        m.volume_poly_m3[0],
+        b0_range_m3(m),
+        "m^3 (b0, the first coefficient: the chamber at zero contraction, 0.2 .. 5 x the \
+         muscle's cylinder pi radius_m^2 rest_length_m; cm^3 or litres typed as m^3?)",
     ));
     rows
+}
+
+/// The allowed `volume_poly_m3` b0 of muscle `m` [m^3]: [`VOLUME_OVER_CYLINDER`] times its
+/// cylinder, the bounds rounded outward to 3 significant digits (as an error message shows
+/// them).
+fn b0_range_m3(m: &MuscleConfig) -> Range {
+    let cylinder_m3 = std::f64::consts::PI * m.radius_m * m.radius_m * m.rest_length_m;
+    let round = |v: f64, f: fn(f64) -> f64| -> f64 {
+        if !(v.is_finite() && v > 0.0) {
+            return v;
+        }
+        let scale = 10f64.powi(2 - v.log10().floor() as i32);
+        f(v * scale) / scale
+    };
+    Range::closed(
+        round(VOLUME_OVER_CYLINDER.0 * cylinder_m3, f64::floor),
+        round(VOLUME_OVER_CYLINDER.1 * cylinder_m3, f64::ceil),
+    )
+}
+
+/// `volume_poly_m3` as typed, for a message: `[7.9e-5, 4.8e-4, -1.8e-5, -1.1e-3]`.
+pub(crate) fn shown_coefficients(v: &[f64; 4]) -> String {
+    use crate::validate::Shown;
+    format!(
+        "[{}, {}, {}, {}]",
+        Shown(v[0]),
+        Shown(v[1]),
+        Shown(v[2]),
+        Shown(v[3])
+    )
+}
+
+/// The message for `volume_poly_m3` coefficients that are not all finite (quoting them).
+pub(crate) fn volume_coefficients_error(v: &[f64; 4]) -> Option<String> {
+    (!v.iter().all(|c| c.is_finite())).then(|| {
+        format!(
+            "the coefficients must be finite numbers [b0, b1, b2, b3] in m^3, got {}",
+            shown_coefficients(v)
+        )
+    })
+}
+
+/// The first `[valve]` pressure ratio outside its range: its key and the message quoting the
+/// typed value and the allowed range (1-DOF and arm files).
+pub(crate) fn valve_ratio_error(v: &ValveConfig) -> Option<(&'static str, String)> {
+    use crate::validate::range_error;
+    let b = v.critical_ratio;
+    range_error(
+        "valve.critical_ratio",
+        b,
+        Range::half_open(0.0, 1.0),
+        "(ISO 6358 b: the downstream over upstream absolute pressure at which the flow \
+         chokes, about 0.2 .. 0.5 on real valves; the reference plant has 0.433)",
+    )
+    .map(|msg| ("valve.critical_ratio", msg))
+    .or_else(|| {
+        range_error(
+            "valve.laminar_ratio",
+            v.laminar_ratio,
+            Range::open(b, 1.0),
+            "(above valve.critical_ratio and below 1: from it the flow falls linearly to 0 at \
+             ratio 1; the reference plant has 0.999)",
+        )
+        .map(|msg| ("valve.laminar_ratio", msg))
+    })
 }
 
 /// Allowed ratio of a muscle's chamber volume at zero contraction (`volume_poly_m3` b0) to the
@@ -311,7 +376,8 @@ impl PlantConfig {
     }
 
     /// The range checks of the file's scalar keys: key, value, allowed range, unit (the
-    /// `muscle.volume_poly_m3` row checks b0 over the muscle's cylinder, not a key's value).
+    /// `muscle.volume_poly_m3` row checks its first coefficient b0, within a range set by the
+    /// muscle's cylinder).
     pub(crate) fn range_rows(&self) -> Vec<RangeRow> {
         let mut rows = environment_range_rows(&self.environment);
         rows.extend(muscle_range_rows(&self.muscle, ""));
@@ -352,16 +418,11 @@ impl PlantConfig {
                 ),
             ));
         }
-        if self.muscle.volume_poly_m3.iter().any(|v| !v.is_finite()) {
-            return Err(bad("muscle.volume_poly_m3", "coefficients must be finite"));
+        if let Some(msg) = volume_coefficients_error(&self.muscle.volume_poly_m3) {
+            return Err(bad("muscle.volume_poly_m3", &msg));
         }
-        let b = self.valve.critical_ratio;
-        let l = self.valve.laminar_ratio;
-        if !(b.is_finite() && (0.0..1.0).contains(&b)) {
-            return Err(bad("valve.critical_ratio", "must be in [0, 1)"));
-        }
-        if !(l.is_finite() && l > b && l < 1.0) {
-            return Err(bad("valve.laminar_ratio", "must be in (critical_ratio, 1)"));
+        if let Some((key, msg)) = valve_ratio_error(&self.valve) {
+            return Err(bad(key, &msg));
         }
         for (key, v) in [
             ("joint.angle_min_rad", self.joint.angle_min_rad),
@@ -403,13 +464,8 @@ impl PlantConfig {
                 ),
             ));
         }
-        if self.muscle.volume_poly_m3[0] <= 0.0 {
-            return Err(bad(
-                "muscle.volume_poly_m3",
-                "b0 (volume at zero contraction) must be > 0",
-            ));
-        }
-        // The chamber volume must stay positive over the contractions the muscles reach.
+        // The chamber volume must stay positive over the contractions the muscles reach (b0
+        // > 0 is the range row's).
         let v = &self.muscle.volume_poly_m3;
         for k in 0..=64 {
             let chi = chi_max * k as f64 / 64.0;
@@ -418,8 +474,10 @@ impl PlantConfig {
                 return Err(bad(
                     "muscle.volume_poly_m3",
                     &format!(
-                        "the volume V(chi) = {vol:.3e} m^3 at contraction {chi:.3} is not > 0 \
-                         (it must stay > 0 up to the maximum contraction {chi_max:.3})"
+                        "{}: the volume V(chi) = {vol:.3e} m^3 at contraction {chi:.3} is not > 0 \
+                         (it must stay > 0 up to the maximum contraction {chi_max:.3}: check the \
+                         signs and the unit, m^3, of b1 .. b3)",
+                        shown_coefficients(v)
                     ),
                 ));
             }
