@@ -273,8 +273,9 @@ pub fn sweep_recording(plant: &crate::Plant, opt: &TorqueSweep) -> crate::Record
             (
                 "source".into(),
                 format!(
-                    "host-sim {} sweep torque: prescribed motion, regulator-held pressures (valve columns unused)",
-                    env!("CARGO_PKG_VERSION")
+                    "host-sim {} sweep torque: prescribed motion, regulator-held pressures ({})",
+                    env!("CARGO_PKG_VERSION"),
+                    crate::io::recording::VALVE_COLUMNS_UNUSED
                 ),
             ),
         ],
