@@ -235,3 +235,52 @@ fn a_key_the_recording_does_not_excite_is_named_not_determined() {
     );
     assert!(fit.summary().contains(&fit.undetermined[0]));
 }
+
+/// A key held by another through the plant file's rules (coulomb friction at most the
+/// breakaway torque, both 0.1 N m in the start file) cannot move up: named with the rule,
+/// not as a key the recording does not excite (the recording has 0.3 N m of friction). The
+/// same fit with room above (breakaway 0.5) moves it.
+#[test]
+fn a_key_another_key_holds_is_named_with_the_rule() {
+    let reference = std::fs::read_to_string(fixture("reference-1dof.toml")).unwrap();
+    let friction = |coulomb: f64, breakaway: f64, viscous: f64| {
+        format!(
+            "{reference}\n[effects.joint_friction]\ncoulomb_nm = {coulomb:e}\nbreakaway_nm = \
+             {breakaway:e}\nstribeck_velocity_rad_s = 0.1\nviscous_nm_s_per_rad = {viscous:e}\n\
+             smoothing_velocity_rad_s = 0.01\n"
+        )
+    };
+    let rec = recording(
+        &friction(0.3, 0.3, 0.02),
+        12_000,
+        &MeasurementNoise::default(),
+    );
+    let keys = [
+        "effects.joint_friction.coulomb_nm",
+        "effects.joint_friction.viscous_nm_s_per_rad",
+    ];
+    let fit = default_fit(&rec, &friction(0.1, 0.1, 0.005), "start.toml", &keys);
+    let all = fit.undetermined.join("\n");
+    assert!(
+        all.contains("effects.joint_friction.coulomb_nm is held at")
+            && all.contains("breakaway_nm")
+            && !all.contains("coulomb_nm is not determined"),
+        "{all}"
+    );
+    let fit = default_fit(&rec, &friction(0.1, 0.5, 0.005), "start.toml", &keys);
+    assert!(
+        !fit.undetermined.iter().any(|w| w.contains("coulomb_nm")),
+        "{:?}",
+        fit.undetermined
+    );
+    // It moves (0.1 -> 0.37: the breakaway left at 0.5 against the truth's 0.3 shapes the
+    // rest), and the fit says the plant file still does not describe the recording.
+    assert!(fit.params[0].2 > 0.2, "{:?}", fit.params[0]);
+    assert!(
+        fit.undetermined
+            .iter()
+            .any(|w| w.contains("times the noise")),
+        "{:?}",
+        fit.undetermined
+    );
+}

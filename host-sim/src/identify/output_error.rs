@@ -343,10 +343,15 @@ pub fn uncertainty(f: &Residuals<'_>, params: &[OeParam], x: &[f64]) -> (Uncerta
     let mut jac = DMatrix::<f64>::zeros(m, n);
     for k in 0..n {
         let h = 1e-4 * params[k].scale.abs().max(x[k].abs()).max(1e-300);
-        let mut xp = x.to_vec();
-        xp[k] += h;
-        let Some(rp) = f(&xp) else {
-            return undetermined(1 + k + 1);
+        // Forward, or backward where the model refuses the step (a value at a limit the
+        // model enforces, e.g. one key bounded by another).
+        let step = |h: f64| {
+            let mut xp = x.to_vec();
+            xp[k] += h;
+            f(&xp).map(|rp| (rp, h))
+        };
+        let Some((rp, h)) = step(h).or_else(|| step(-h)) else {
+            return undetermined(1 + 2 * (k + 1));
         };
         for i in 0..m {
             jac[(i, k)] = (rp[i] - r[i]) / h;
@@ -372,7 +377,7 @@ pub fn uncertainty(f: &Residuals<'_>, params: &[OeParam], x: &[f64]) -> (Uncerta
             correlation[(i, k)] = inv[(a, b)] / (inv[(a, a)] * inv[(b, b)]).max(0.0).sqrt();
         }
     }
-    (Uncertainty { sd, correlation }, 1 + n)
+    (Uncertainty { sd, correlation }, 1 + 2 * n)
 }
 
 #[cfg(test)]

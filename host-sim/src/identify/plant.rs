@@ -170,6 +170,8 @@ impl PlantFit {
             let [lo, hi] = self.ci95.get(i).copied().unwrap_or(nan);
             let interval = if !(lo.is_finite() && hi.is_finite()) {
                 "none (not determined)".to_string()
+            } else if *b != 0.0 && 0.5 * (hi - lo) > 10.0 * b.abs() {
+                "wider than +-1000 %".to_string()
             } else if *b != 0.0 {
                 format!("+-{:.2} %", 100.0 * 0.5 * (hi - lo) / b.abs())
             } else {
@@ -547,10 +549,68 @@ pub fn fit_plant(
             })
             .collect()
     };
-    let at_bound = at_bound_warnings(specs, &x0, &x1);
+    // A key the plant file's rules hold where it is (one key bounded by another: coulomb
+    // friction at most the breakaway) is named with the rule, not as unexcited.
+    let held: Vec<Option<String>> = (0..specs.len())
+        .map(|i| {
+            let step = 1e-6 * x1[i].abs().max(params[i].scale.abs());
+            [("up", step), ("down", -step)]
+                .iter()
+                .find_map(|&(way, h)| {
+                    let mut x = x1.clone();
+                    x[i] += h;
+                    let inside = x[i] > specs[i].lower && x[i] < specs[i].upper;
+                    match model.plant(&x) {
+                        Err(e) if inside => Some(format!(
+                        "warning: {} is held at {:.6e}: the plant file refuses it a step {way} \
+                         ({e}); fit the key it is tied to as well, or give that key room in the \
+                         start file",
+                        specs[i].key, x1[i]
+                    )),
+                        _ => None,
+                    }
+                })
+        })
+        .collect();
     let (u, used) = output_error::uncertainty(&residuals, &params, &x1);
     evaluations += used;
-    let undetermined = undetermined_warnings(specs, &x0, &x1, &u);
+    let mut undetermined = undetermined_warnings(specs, &x0, &x1, &u, &held);
+    undetermined.extend(held.iter().flatten().cloned());
+    // A value the recording does not pin down is not news at a bound.
+    let at_bound = at_bound_warnings(specs, &x0, &x1)
+        .into_iter()
+        .enumerate()
+        .filter(|&(i, _)| held[i].is_none() && determined(&x0, &x1, &u, i))
+        .filter_map(|(_, w)| w)
+        .collect();
+    // The error left on the training part against each channel's own noise (the
+    // diagnosis' measure): a plant that describes the recording leaves a few times the
+    // noise at most; the intervals assume it does.
+    let (x_noise, worst) = chans
+        .iter()
+        .enumerate()
+        .map(|(ci, c)| {
+            let y = &rec.channel(*c).expect("present")[..n_train];
+            let mse = y
+                .iter()
+                .zip(&full1[ci][..n_train])
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f64>()
+                / n_train as f64;
+            let sd = 1.0 / (weights[ci] * ((n_train * chans.len()) as f64).sqrt());
+            let noise = crate::diagnose::differentiate::noise_level(y).max(1e-3 * sd);
+            (mse.sqrt() / noise, c.name())
+        })
+        .fold((0.0, ""), |w, x| if !(x.0 <= w.0) { x } else { w });
+    if !(x_noise <= crate::diagnose::verdict::MAX_RESIDUAL_X_NOISE) {
+        undetermined.push(format!(
+            "warning: the fitted plant still leaves {x_noise:.0} times the noise on {worst} (one \
+             that describes the recording leaves at most {:.0}): the plant file with these keys \
+             does not describe it, and the intervals (which assume it does) mean little. Widen \
+             the bounds, fit other keys, or run `host-sim diagnose`",
+            crate::diagnose::verdict::MAX_RESIDUAL_X_NOISE
+        ));
+    }
     Ok(PlantFit {
         params: specs
             .iter()
@@ -578,11 +638,11 @@ pub fn fit_plant(
 /// already had there is no news): beyond a bound the user gave, the rig's value may lie; a
 /// physical limit (a ratio's 0 or 1, zero for a signed key) means the recording asks for
 /// more than the key can give.
-fn at_bound_warnings(specs: &[ParamSpec], x0: &[f64], x1: &[f64]) -> Vec<String> {
+fn at_bound_warnings(specs: &[ParamSpec], x0: &[f64], x1: &[f64]) -> Vec<Option<String>> {
     specs
         .iter()
         .zip(x0.iter().zip(x1))
-        .filter_map(|(s, (&start, &v))| {
+        .map(|(s, (&start, &v))| {
             let span = if s.lower.is_finite() && s.upper.is_finite() {
                 s.upper - s.lower
             } else {
@@ -621,6 +681,13 @@ fn at_bound_warnings(specs: &[ParamSpec], x0: &[f64], x1: &[f64]) -> Vec<String>
         .collect()
 }
 
+/// The `i`-th value's 95 % interval is within [`UNDETERMINED_HALF_WIDTH_FRACTION`] of its
+/// magnitude (of the start value's, when larger).
+fn determined(x0: &[f64], x1: &[f64], u: &output_error::Uncertainty, i: usize) -> bool {
+    let half = 1.96 * u.sd[i];
+    half.is_finite() && half <= UNDETERMINED_HALF_WIDTH_FRACTION * x1[i].abs().max(x0[i].abs())
+}
+
 /// One warning per fitted value the recording does not determine (its 95 % interval wider
 /// than [`UNDETERMINED_HALF_WIDTH_FRACTION`] of the value, or none) and per pair determined
 /// only together (correlation beyond [`CORRELATED_ABOVE`]).
@@ -629,14 +696,15 @@ fn undetermined_warnings(
     x0: &[f64],
     x1: &[f64],
     u: &output_error::Uncertainty,
+    held: &[Option<String>],
 ) -> Vec<String> {
     let mut out = Vec::new();
     for (i, s) in specs.iter().enumerate() {
-        let half = 1.96 * u.sd[i];
-        let size = x1[i].abs().max(x0[i].abs());
-        if half.is_finite() && half <= UNDETERMINED_HALF_WIDTH_FRACTION * size {
+        if held[i].is_some() || determined(x0, x1, u, i) {
             continue;
         }
+        let half = 1.96 * u.sd[i];
+        let size = x1[i].abs().max(x0[i].abs());
         let how = if half.is_finite() {
             let holds = if (x0[i] - x1[i]).abs() <= half {
                 ", and it holds the plant file's value"
@@ -779,7 +847,11 @@ mod tests {
         ];
         // inertia pushed onto its given bound; the laminar ratio's true 0.999 is clear of 1;
         // the critical ratio already sat at the limit in the file; damping pushed to 0.
-        let w = at_bound_warnings(&specs, &[0.014, 0.99, 1.0, 2e-4], &[0.1, 0.999, 1.0, 1e-12]);
+        let w: Vec<String> =
+            at_bound_warnings(&specs, &[0.014, 0.99, 1.0, 2e-4], &[0.1, 0.999, 1.0, 1e-12])
+                .into_iter()
+                .flatten()
+                .collect();
         assert_eq!(w.len(), 2, "{w:?}");
         assert!(
             w[0].contains("joint.inertia_kgm2 ended at its upper bound"),
