@@ -170,11 +170,10 @@ impl PlantFit {
             let [lo, hi] = self.ci95.get(i).copied().unwrap_or(nan);
             let interval = if !(lo.is_finite() && hi.is_finite()) {
                 "none (not determined)".to_string()
-            } else if *b != 0.0 && 0.5 * (hi - lo) > 10.0 * b.abs() {
-                "wider than +-1000 %".to_string()
-            } else if *b != 0.0 {
+            } else if 0.5 * (hi - lo) <= 10.0 * b.abs() {
                 format!("+-{:.2} %", 100.0 * 0.5 * (hi - lo) / b.abs())
             } else {
+                // About a value of (almost) 0: in the key's unit.
                 format!("+-{:.3e}", 0.5 * (hi - lo))
             };
             let _ = writeln!(s, "{k:<44} {a:>14.6e} {b:>14.6e} {change:>9}  {interval}");
