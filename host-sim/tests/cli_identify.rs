@@ -593,6 +593,27 @@ fn identify_force_refuses_repeated_rows_of_too_few_points() {
         "{e}"
     );
     assert!(!out.exists());
+    // The same repeats with a length sensor's jitter (+-0.0004 L/L0) and pressure noise
+    // (+-0.8 kPa): still 12 points, none an exact copy.
+    let jittered: String = (0..3)
+        .flat_map(|r| picked.iter().map(move |l| (r, l)))
+        .map(|(r, l)| {
+            let f: Vec<&str> = l.split(',').collect();
+            let d = r as f64 - 1.0;
+            let p = f[0].parse::<f64>().unwrap() + 0.8 * d;
+            let e = f[1].parse::<f64>().unwrap() + 0.0004 * d;
+            format!("{p:.3},{e:.6},{}\n", f[2..].join(","))
+        })
+        .collect();
+    std::fs::write(&thrice, format!("{head}{jittered}")).unwrap();
+    let r = identify_force(&thrice, &out);
+    assert_eq!(r.status.code(), Some(2), "{}", text(&r.stderr));
+    let e = text(&r.stderr);
+    assert!(
+        e.contains("36 samples hold 12 distinct operating points") && !e.contains("copies"),
+        "{e}"
+    );
+    assert!(!out.exists());
 }
 
 /// The force column shuffled against the pressures and lengths (rows mixed up by a

@@ -916,14 +916,24 @@ fn check_map(samples: &[ForceSample]) -> Result<(), IdentError> {
              for the leave-one-length-out check)"
         )));
     }
-    let (levels, n_levels) = pressure_groups(samples);
+    let (_, n_levels) = pressure_groups(samples);
     if n_levels < 2 {
         return Err(IdentError::Data(
             "all samples are at one pressure: eq. 6 needs at least 2 pressure levels".into(),
         ));
     }
-    // Repeats of one operating point average its noise but add no equation.
-    let mut points: Vec<(usize, usize)> = groups.iter().copied().zip(levels).collect();
+    // Repeats of one operating point average its noise but add no equation: points are
+    // told apart on cells of the length and pressure resolution a sweep steps by (a length
+    // sensor's jitter or a pressure's noise does not make a repeat a new point).
+    let mut points: Vec<(i64, i64)> = samples
+        .iter()
+        .map(|s| {
+            (
+                (s.stretch / POINT_CELL_STRETCH).round() as i64,
+                (s.p_gauge_pa / POINT_CELL_PA).round() as i64,
+            )
+        })
+        .collect();
     points.sort_unstable();
     points.dedup();
     if points.len() < MIN_FORCE_MAP_POINTS {
@@ -942,7 +952,7 @@ fn check_map(samples: &[ForceSample]) -> Result<(), IdentError> {
             String::new()
         };
         return Err(IdentError::Data(format!(
-            "the {} samples hold {} distinct operating points (length x pressure level){copies}: \
+            "the {} samples hold {} distinct operating points (0.005 L/L0 x 5 kPa cells){copies}: \
              eq. 6 has 9 free constants and needs at least {MIN_FORCE_MAP_POINTS} distinct \
              points; repeats of a point average its noise but add no equation. Sweep more \
              pressure levels or lengths",
@@ -953,9 +963,18 @@ fn check_map(samples: &[ForceSample]) -> Result<(), IdentError> {
     eq6_data_check(samples)
 }
 
-/// Distinct operating points (length group x pressure level) a force map needs for eq. 6's
-/// 9 free constants: as many as samples ([`eq6_data_check`]), repeats not counted.
+/// Distinct operating points (length x pressure cells of [`POINT_CELL_STRETCH`] and
+/// [`POINT_CELL_PA`]) a force map needs for eq. 6's 9 free constants: as many as samples
+/// ([`eq6_data_check`]), repeats not counted.
 pub const MIN_FORCE_MAP_POINTS: usize = 20;
+
+/// The length cell [L/L0] two samples of one operating point share: 0.5 % of the rest
+/// length, well above a length sensor's jitter and below the steps of a length sweep.
+pub const POINT_CELL_STRETCH: f64 = 0.005;
+
+/// The pressure cell [Pa] of one operating point: 5 kPa, above a pressure sensor's noise and
+/// below the steps of a pressure sweep.
+pub const POINT_CELL_PA: f64 = 5e3;
 
 /// Fits eq. 6 (multi-start, firmware law), its held-out errors, the two physical baselines and
 /// (when the data has both branches) one law per branch.
