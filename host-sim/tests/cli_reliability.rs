@@ -766,22 +766,8 @@ fn plant_values_out_of_their_physical_range_are_refused_at_their_line() {
                 "[1e-11, 0.000001] m^3/(s Pa)",
             ],
         ),
-    ] {
-        let p = edited_plant(&w, key, value);
-        w.refuses_with(
-            "simulate --plant {p} --inputs {fixture} --out {w}/out.csv",
-            &[("p", &p)],
-            &needles,
-        );
-    }
-}
-
-#[test]
-fn plant_valve_ratios_and_the_chamber_volume_out_of_range_quote_the_typed_value() {
-    // As every other key: the key, its line, the allowed range and the value as typed (b0 of
-    // the volume, not its ratio to the muscle's cylinder).
-    let w = Workspace::new();
-    for (key, value, needles) in [
+        // The valve ratios and the volume quote the value as typed (b0 of the volume, not
+        // its ratio to the muscle's cylinder).
         (
             "critical_ratio",
             "1.433",

@@ -216,28 +216,11 @@ fn identify_volume_refuses_bad_input_with_status_2_and_writes_nothing() {
     let rec = recording(dir.path());
     // The flows in g/s: a thousand times the valve's.
     let text = std::fs::read_to_string(&rec).unwrap();
-    let mut cols = Vec::new();
-    let grams: String = text
-        .lines()
-        .map(|line| {
-            if line.starts_with('#') {
-                return format!("{line}\n");
-            }
-            if line.starts_with("t_s") {
-                cols = (line.split(',').enumerate())
-                    .filter(|(_, c)| c.starts_with("m_dot_"))
-                    .map(|(i, _)| i)
-                    .collect();
-                return format!("{line}\n");
-            }
-            let fields: Vec<String> = (line.split(',').enumerate())
-                .map(|(i, v)| match cols.contains(&i) {
-                    true => format!("{}", v.parse::<f64>().unwrap() * 1e3),
-                    false => v.to_string(),
-                })
-                .collect();
-            fields.join(",") + "\n"
-        })
+    let grams = with_columns(&text, |c| c.starts_with("m_dot_"), |v| v * 1e3);
+    let header = text.lines().find(|l| l.starts_with("t_s")).unwrap();
+    let cols: Vec<usize> = (header.split(',').enumerate())
+        .filter(|(_, c)| c.starts_with("m_dot_"))
+        .map(|(i, _)| i)
         .collect();
     assert_eq!(cols.len(), 2, "both flow columns");
     // The flows negated (a sensor logging outflow as positive), and the two columns swapped:
@@ -460,30 +443,8 @@ fn pressures_logged_absolute_are_refused_by_the_flow_they_explain() {
     let out = dir.path().join("v.toml");
     let rec = recording(dir.path());
     let text = std::fs::read_to_string(&rec).unwrap();
-    let mut cols = Vec::new();
-    let shifted: String = text
-        .lines()
-        .map(|line| {
-            if line.starts_with('#') {
-                return format!("{line}\n");
-            }
-            if line.starts_with("t_s") {
-                cols = (line.split(',').enumerate())
-                    .filter(|(_, c)| *c == "p1_kpa" || *c == "p2_kpa")
-                    .map(|(i, _)| i)
-                    .collect();
-                return format!("{line}\n");
-            }
-            let fields: Vec<String> = (line.split(',').enumerate())
-                .map(|(i, v)| match cols.contains(&i) {
-                    true => format!("{}", v.parse::<f64>().unwrap() + 101.325),
-                    false => v.to_string(),
-                })
-                .collect();
-            fields.join(",") + "\n"
-        })
-        .collect();
-    assert_eq!(cols.len(), 2);
+    let shifted = with_columns(&text, |c| c == "p1_kpa" || c == "p2_kpa", |v| v + 101.325);
+    assert_ne!(shifted, text);
     let abs = dir.path().join("abs.csv");
     std::fs::write(&abs, shifted).unwrap();
     let volume = |r: &std::path::Path| {
@@ -511,4 +472,31 @@ fn pressures_logged_absolute_are_refused_by_the_flow_they_explain() {
         let e = String::from_utf8_lossy(&volume(&r).stderr).to_string();
         assert!(!e.contains("look absolute"), "{}: {e}", r.display());
     }
+}
+
+/// The recording `text` with the values of the columns whose name passes `pick` mapped by
+/// `f`.
+fn with_columns(text: &str, pick: impl Fn(&str) -> bool, f: impl Fn(f64) -> f64) -> String {
+    let mut cols = Vec::new();
+    text.lines()
+        .map(|line| {
+            if line.starts_with('#') {
+                return format!("{line}\n");
+            }
+            if line.starts_with("t_s") {
+                cols = (line.split(',').enumerate())
+                    .filter(|(_, c)| pick(c))
+                    .map(|(i, _)| i)
+                    .collect();
+                return format!("{line}\n");
+            }
+            let fields: Vec<String> = (line.split(',').enumerate())
+                .map(|(i, v)| match cols.contains(&i) {
+                    true => format!("{}", f(v.parse::<f64>().unwrap())),
+                    false => v.to_string(),
+                })
+                .collect();
+            fields.join(",") + "\n"
+        })
+        .collect()
 }
