@@ -1020,4 +1020,40 @@ fn coarse_time_stamps_are_told_from_a_duplicated_row() {
         "{e}"
     );
     assert!(!out.exists());
+    // The stamps in seconds with two decimals (a spreadsheet's export): none repeats, but
+    // their 10 ms resolution is a third of the step (25 ms, 30 ms once rounded). Imported,
+    // with a warning; the rig's own 0.01 ms stamps get none.
+    let seconds: String = lines
+        .iter()
+        .enumerate()
+        .filter(|&(i, _)| i != 11)
+        .map(|(i, l)| {
+            if i < 3 {
+                return format!("{l}\n");
+            }
+            let (t, rest) = l.split_once(';').unwrap();
+            let s = t.replace(',', ".").parse::<f64>().unwrap() / 1e3;
+            format!("{};{rest}\n", format!("{s:.2}").replace('.', ","))
+        })
+        .collect();
+    let in_s = dir.path().join("seconds.csv");
+    std::fs::write(&in_s, seconds).unwrap();
+    let map_s = MAP.replace("unit = \"ms\"", "unit = \"s\"");
+    assert_ne!(map_s, MAP);
+    let r = import_with(dir.path(), &map_s, &in_s, &out, false);
+    ok(&r);
+    let e = text_of(&r.stderr);
+    assert!(
+        e.contains(
+            "time stamps written to 0.01 s (2 decimals in s), 33 % of the median step 0.03 s"
+        ),
+        "{e}"
+    );
+    let r = import_with(dir.path(), MAP, &raw, &out, false);
+    ok(&r);
+    assert!(
+        !text_of(&r.stderr).contains("time stamps written"),
+        "{}",
+        text_of(&r.stderr)
+    );
 }

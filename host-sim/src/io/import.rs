@@ -392,6 +392,10 @@ pub const P_ABSOLUTE_SUSPECT_WITHIN_PA: f64 = 15e3;
 pub const ABSOLUTE_PRESSURE_HINT: &str = "the pressure columns look absolute, not gauge; \
      RECORDING.md's columns are gauge: subtract p_atm or import with reference = \"absolute\"";
 
+/// Time stamps whose resolution (the decimals they are written with) reaches this fraction of
+/// the median step are warned about.
+pub const COARSE_STAMP_FRACTION: f64 = 0.1;
+
 /// An angle channel that never moves more than this is suspect (radians mapped as degrees)
 /// [rad].
 pub const ANGLE_SPAN_SUSPECT_BELOW_RAD: f64 = 1.0 * std::f64::consts::PI / 180.0;
@@ -908,6 +912,7 @@ pub fn import(
 
     let mut lines: Vec<u64> = Vec::new();
     let mut t_s: Vec<f64> = Vec::new();
+    let mut t_decimals: Option<usize> = Some(0);
     let mut values: Vec<Vec<f64>> = vec![Vec::new(); plans.len()];
     let mut record = csv::StringRecord::new();
     loop {
@@ -965,6 +970,15 @@ pub fn import(
             Ok(v)
         };
         t_s.push(num(t_col)? / t_per_s);
+        // The decimals the time column is written with (its resolution); an exponent
+        // leaves it unknown.
+        let cell = record.get(t_col).unwrap_or("").trim();
+        if cell.contains(['e', 'E']) {
+            t_decimals = None;
+        } else if let Some(d) = t_decimals.as_mut() {
+            let sep = if comma { ',' } else { '.' };
+            *d = (*d).max(cell.find(sep).map_or(0, |i| cell.len() - i - 1));
+        }
         for (i, (c, col)) in mapping.channel.iter().zip(&cols).enumerate() {
             let raw = match (col, c.constant) {
                 (Some(col), _) => num(*col)?,
@@ -1069,6 +1083,23 @@ pub fn import(
     // unit has a plausible step: the unit is off by 1000 (ms read as us, s read as ms). A
     // short file whose unit gives no such reading is left alone.
     let span_s = t_s[n - 1] - t_s[0];
+    // Stamps written with too few decimals (a spreadsheet's two): each sample sits up to half
+    // the resolution off its time, which jitters every step.
+    let coarse_note = t_decimals.and_then(|d| {
+        let resolution_s = 10f64.powi(-(d as i32)) / t_per_s;
+        (resolution_s >= COARSE_STAMP_FRACTION * median).then(|| {
+            format!(
+                "{}: column `{time_name}`: time stamps written to {} s ({d} decimals in {}), {:.0} \
+                 % of the median step {} s: each sample sits up to half of that off its time; \
+                 log (or export) the time with more decimals",
+                input.display(),
+                Shown(resolution_s),
+                mapping.time.unit,
+                100.0 * resolution_s / median,
+                Shown(median)
+            )
+        })
+    });
     let larger = match mapping.time.unit.as_str() {
         "us" => Some("ms"),
         "ms" => Some("s"),
@@ -1160,6 +1191,7 @@ pub fn import(
     cuts.push(n);
     let (ranges, mut warnings) = channel_ranges(mapping, &plans, &values);
     warnings.extend(encoding_note);
+    warnings.extend(coarse_note);
     warnings.extend(stuck_onoff_valves(mapping, map_path, &plans, &values));
 
     // Assemble the recordings.
