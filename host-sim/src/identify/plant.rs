@@ -548,29 +548,7 @@ pub fn fit_plant(
             })
             .collect()
     };
-    // A key the plant file's rules hold where it is (one key bounded by another: coulomb
-    // friction at most the breakaway) is named with the rule, not as unexcited.
-    let held: Vec<Option<String>> = (0..specs.len())
-        .map(|i| {
-            let step = 1e-6 * x1[i].abs().max(params[i].scale.abs());
-            [("up", step), ("down", -step)]
-                .iter()
-                .find_map(|&(way, h)| {
-                    let mut x = x1.clone();
-                    x[i] += h;
-                    let inside = x[i] > specs[i].lower && x[i] < specs[i].upper;
-                    match model.plant(&x) {
-                        Err(e) if inside => Some(format!(
-                        "warning: {} is held at {:.6e}: the plant file refuses it a step {way} \
-                         ({e}); fit the key it is tied to as well, or give that key room in the \
-                         start file",
-                        specs[i].key, x1[i]
-                    )),
-                        _ => None,
-                    }
-                })
-        })
-        .collect();
+    let held = held_warnings(specs, &params, &x1, &model);
     let (u, used) = output_error::uncertainty(&residuals, &params, &x1);
     evaluations += used;
     let mut undetermined = undetermined_warnings(specs, &x0, &x1, &u, &held);
@@ -582,25 +560,7 @@ pub fn fit_plant(
         .filter(|&(i, _)| held[i].is_none() && determined(&x0, &x1, &u, i))
         .filter_map(|(_, w)| w)
         .collect();
-    // The error left on the training part against each channel's own noise (the
-    // diagnosis' measure): a plant that describes the recording leaves a few times the
-    // noise at most; the intervals assume it does.
-    let (x_noise, worst) = chans
-        .iter()
-        .enumerate()
-        .map(|(ci, c)| {
-            let y = &rec.channel(*c).expect("present")[..n_train];
-            let mse = y
-                .iter()
-                .zip(&full1[ci][..n_train])
-                .map(|(a, b)| (a - b).powi(2))
-                .sum::<f64>()
-                / n_train as f64;
-            let sd = 1.0 / (weights[ci] * ((n_train * chans.len()) as f64).sqrt());
-            let noise = crate::diagnose::differentiate::noise_level(y).max(1e-3 * sd);
-            (mse.sqrt() / noise, c.name())
-        })
-        .fold((0.0, ""), |w, x| if !(x.0 <= w.0) { x } else { w });
+    let (x_noise, worst) = residual_over_noise(rec, &chans, &full1, n_train);
     if !(x_noise <= crate::diagnose::verdict::MAX_RESIDUAL_X_NOISE) {
         undetermined.push(format!(
             "warning: the fitted plant still leaves {x_noise:.0} times the noise on {worst} (one \
@@ -631,6 +591,65 @@ pub fn fit_plant(
         cost: (cost0, cost1),
         toml,
     })
+}
+
+/// Per key, a warning when the plant file's rules hold it where the fit ended (one key
+/// bounded by another: coulomb friction at most the breakaway): a step of 1e-6 of its size
+/// up or down, inside its bounds, makes the plant file refuse it. Such a key is named with
+/// the rule, not as one the recording does not excite.
+fn held_warnings(
+    specs: &[ParamSpec],
+    params: &[OeParam],
+    x1: &[f64],
+    model: &Model,
+) -> Vec<Option<String>> {
+    (0..specs.len())
+        .map(|i| {
+            let step = 1e-6 * x1[i].abs().max(params[i].scale.abs());
+            [("up", step), ("down", -step)]
+                .iter()
+                .find_map(|&(way, h)| {
+                    let mut x = x1.to_vec();
+                    x[i] += h;
+                    let inside = x[i] > specs[i].lower && x[i] < specs[i].upper;
+                    let refused = inside.then(|| model.plant(&x).err()).flatten()?;
+                    Some(format!(
+                        "warning: {} is held at {:.6e}: the plant file refuses it a step {way} \
+                     ({refused}); fit the key it is tied to as well, or give that key room in \
+                     the start file",
+                        specs[i].key, x1[i]
+                    ))
+                })
+        })
+        .collect()
+}
+
+/// The worst channel's error on the training part (the first `n_train` samples of the
+/// replay `sim`) in times its own noise (the diagnosis' measure,
+/// [`crate::diagnose::differentiate::noise_level`], at least 1e-3 of the channel's spread):
+/// a plant that describes the recording leaves a few times the noise at most.
+fn residual_over_noise(
+    rec: &Recording,
+    chans: &[Channel],
+    sim: &[Vec<f64>],
+    n_train: usize,
+) -> (f64, &'static str) {
+    chans
+        .iter()
+        .zip(sim)
+        .map(|(c, s)| {
+            let y = &rec.channel(*c).expect("present")[..n_train];
+            let n = n_train as f64;
+            let mse = y.iter().zip(s).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / n;
+            let mean = y.iter().sum::<f64>() / n;
+            let sd = (y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt();
+            // A flat, noise-free channel matched exactly leaves 0 (not 0 / 0).
+            let noise = crate::diagnose::differentiate::noise_level(y)
+                .max(1e-3 * sd)
+                .max(f64::MIN_POSITIVE);
+            (mse.sqrt() / noise, c.name())
+        })
+        .fold((0.0, ""), |w, x| if !(x.0 <= w.0) { x } else { w })
 }
 
 /// One warning per fitted value that ended at a bound it moved to (a value the plant file
