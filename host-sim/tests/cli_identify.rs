@@ -64,6 +64,27 @@ fn identify_force(data: &Path, out: &Path) -> Output {
     host_sim(&[&"identify", &"force", &"--data", &data, &"--out", &out])
 }
 
+/// A force map's head (the `#` comments and the column names, each with its newline) and
+/// its data rows.
+fn force_map_parts(text: &str) -> (String, Vec<&str>) {
+    let (head, rows): (Vec<&str>, Vec<&str>) = text
+        .lines()
+        .partition(|l| l.starts_with('#') || l.starts_with("p_kpa"));
+    (head.iter().map(|l| format!("{l}\n")).collect(), rows)
+}
+
+/// `identify force` on the map `map`, written as `name` in `dir`: refused with status 2 and
+/// nothing written; its stderr.
+fn force_map_refused(dir: &Path, name: &str, map: &str) -> String {
+    let data = dir.join(name);
+    std::fs::write(&data, map).unwrap();
+    let out = dir.join("force.toml");
+    let r = identify_force(&data, &out);
+    assert_eq!(r.status.code(), Some(2), "{}", text(&r.stderr));
+    assert!(!out.exists());
+    text(&r.stderr)
+}
+
 /// `host-sim identify <kind> --recording <recording> --plant <reference plant> --out <out>
 /// <extra>`.
 fn identify(kind: &str, recording: &Path, out: &Path, extra: &[&str]) -> Output {
@@ -533,17 +554,11 @@ fn identify_force_refuses_a_map_of_two_lengths() {
         })
         .map(|l| format!("{l}\n"))
         .collect();
-    let two = dir.path().join("two.csv");
-    std::fs::write(&two, kept).unwrap();
-    let out = dir.path().join("force.toml");
-    let r = identify_force(&two, &out);
-    assert_eq!(r.status.code(), Some(2));
-    let e = text(&r.stderr);
+    let e = force_map_refused(dir.path(), "two.csv", &kept);
     assert!(
         e.contains("2 lengths only") && e.contains("sweep at least 3 lengths"),
         "{e}"
     );
-    assert!(!out.exists());
 }
 
 /// Twelve operating points logged three times each pass the sample count (36 >= 20) but
@@ -553,15 +568,11 @@ fn identify_force_refuses_a_map_of_two_lengths() {
 fn identify_force_refuses_repeated_rows_of_too_few_points() {
     let (dir, data, _) = swept("force", "force.csv", &[]);
     let text_of = std::fs::read_to_string(&data).unwrap();
-    let (mut head, mut picked): (String, Vec<&str>) = (String::new(), Vec::new());
+    let (head, rows) = force_map_parts(&text_of);
+    let mut picked: Vec<&str> = Vec::new();
     let mut per_length: Vec<(String, usize)> = Vec::new();
-    for l in text_of.lines() {
+    for l in rows {
         let f: Vec<&str> = l.split(',').collect();
-        if l.starts_with('#') || f[0] == "p_kpa" {
-            head.push_str(l);
-            head.push('\n');
-            continue;
-        }
         // Four points (different pressures) at each of the first three lengths.
         let known = per_length.len();
         match per_length.iter_mut().find(|(e, _)| e == f[1]) {
@@ -581,18 +592,12 @@ fn identify_force_refuses_repeated_rows_of_too_few_points() {
         .flat_map(|_| picked.iter())
         .map(|l| format!("{l}\n"))
         .collect();
-    let thrice = dir.path().join("thrice.csv");
-    std::fs::write(&thrice, format!("{head}{rows}")).unwrap();
-    let out = dir.path().join("force.toml");
-    let r = identify_force(&thrice, &out);
-    assert_eq!(r.status.code(), Some(2));
-    let e = text(&r.stderr);
+    let e = force_map_refused(dir.path(), "thrice.csv", &format!("{head}{rows}"));
     assert!(
         e.contains("36 samples hold 12 distinct operating points")
             && e.contains("24 of them exact copies"),
         "{e}"
     );
-    assert!(!out.exists());
     // The same repeats with a length sensor's jitter (+-0.0004 L/L0) and pressure noise
     // (+-0.8 kPa): still 12 points, none an exact copy.
     let jittered: String = (0..3)
@@ -605,15 +610,11 @@ fn identify_force_refuses_repeated_rows_of_too_few_points() {
             format!("{p:.3},{e:.6},{}\n", f[2..].join(","))
         })
         .collect();
-    std::fs::write(&thrice, format!("{head}{jittered}")).unwrap();
-    let r = identify_force(&thrice, &out);
-    assert_eq!(r.status.code(), Some(2), "{}", text(&r.stderr));
-    let e = text(&r.stderr);
+    let e = force_map_refused(dir.path(), "thrice.csv", &format!("{head}{jittered}"));
     assert!(
         e.contains("36 samples hold 12 distinct operating points") && !e.contains("copies"),
         "{e}"
     );
-    assert!(!out.exists());
 }
 
 /// The force column shuffled against the pressures and lengths (rows mixed up by a
@@ -622,10 +623,7 @@ fn identify_force_refuses_repeated_rows_of_too_few_points() {
 fn identify_force_refuses_a_map_eq6_does_not_describe() {
     let (dir, data, _) = swept("force", "force.csv", &[]);
     let text_of = std::fs::read_to_string(&data).unwrap();
-    let rows: Vec<&str> = text_of
-        .lines()
-        .filter(|l| !l.starts_with('#') && !l.starts_with("p_kpa"))
-        .collect();
+    let (_, rows) = force_map_parts(&text_of);
     let n = rows.len();
     let forces: Vec<&str> = rows.iter().map(|r| r.rsplit(',').next().unwrap()).collect();
     let k = std::cell::Cell::new(0usize);
@@ -637,14 +635,8 @@ fn identify_force_refuses_a_map_eq6_does_not_describe() {
         k.set(k.get() + 1);
         format!("{},{},{}", f[0], f[1], forces[j])
     });
-    let bad = dir.path().join("shuffled.csv");
-    std::fs::write(&bad, shuffled).unwrap();
-    let out = dir.path().join("force.toml");
-    let r = identify_force(&bad, &out);
-    assert_eq!(r.status.code(), Some(2));
-    let e = text(&r.stderr);
+    let e = force_map_refused(dir.path(), "shuffled.csv", &shuffled);
     assert!(e.contains("eq. 6 does not describe this map"), "{e}");
-    assert!(!out.exists());
 }
 
 #[test]

@@ -989,18 +989,7 @@ fn coarse_time_stamps_are_told_from_a_duplicated_row() {
     let (raw, _) = rig_file(dir.path(), 2.0, 3, &[]);
     let text = std::fs::read_to_string(&raw).unwrap();
     let mut lines: Vec<String> = text.lines().map(String::from).collect();
-    let coarse: String = lines
-        .iter()
-        .enumerate()
-        .map(|(i, l)| {
-            if i < 3 {
-                return format!("{l}\n");
-            }
-            let (t, rest) = l.split_once(';').unwrap();
-            let ms: f64 = t.replace(',', ".").parse().unwrap();
-            format!("{};{rest}\n", (ms / 100.0).floor() * 100.0)
-        })
-        .collect();
+    let coarse = retimed(&lines, |ms| format!("{}", (ms / 100.0).floor() * 100.0));
     let out = dir.path().join("rec.csv");
     let coarse_path = dir.path().join("coarse.csv");
     std::fs::write(&coarse_path, coarse).unwrap();
@@ -1023,19 +1012,8 @@ fn coarse_time_stamps_are_told_from_a_duplicated_row() {
     // The stamps in seconds with two decimals (a spreadsheet's export): none repeats, but
     // their 10 ms resolution is a third of the step (25 ms, 30 ms once rounded). Imported,
     // with a warning; the rig's own 0.01 ms stamps get none.
-    let seconds: String = lines
-        .iter()
-        .enumerate()
-        .filter(|&(i, _)| i != 11)
-        .map(|(i, l)| {
-            if i < 3 {
-                return format!("{l}\n");
-            }
-            let (t, rest) = l.split_once(';').unwrap();
-            let s = t.replace(',', ".").parse::<f64>().unwrap() / 1e3;
-            format!("{};{rest}\n", format!("{s:.2}").replace('.', ","))
-        })
-        .collect();
+    lines.remove(11);
+    let seconds = retimed(&lines, |ms| format!("{:.2}", ms / 1e3).replace('.', ","));
     let in_s = dir.path().join("seconds.csv");
     std::fs::write(&in_s, seconds).unwrap();
     let map_s = MAP.replace("unit = \"ms\"", "unit = \"s\"");
@@ -1056,4 +1034,20 @@ fn coarse_time_stamps_are_told_from_a_duplicated_row() {
         "{}",
         text_of(&r.stderr)
     );
+}
+
+/// The rig file's `lines` (three of head, then data) with each time stamp (ms, decimal
+/// comma) written as `stamp(its ms)`.
+fn retimed(lines: &[String], stamp: impl Fn(f64) -> String) -> String {
+    lines
+        .iter()
+        .enumerate()
+        .map(|(i, l)| {
+            if i < 3 {
+                return format!("{l}\n");
+            }
+            let (t, rest) = l.split_once(';').unwrap();
+            format!("{};{rest}\n", stamp(t.replace(',', ".").parse().unwrap()))
+        })
+        .collect()
 }

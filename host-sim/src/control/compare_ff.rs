@@ -88,10 +88,8 @@ pub fn train_hybrid(
     let (poly, thermo) = (VolumePoly::firmware(), Thermo::firmware());
     let t = train(&samples, &poly, &thermo, &TrainOptions::default(), &|_| {})
         .map_err(anyhow::Error::msg)?;
-    let mse_poly = crate::identify::volume::mse_kg2_s2(&samples, |s| {
-        let (v, vr) = poly.volume_and_rate(s);
-        thermo.mass_flow_kg_s(s, v, vr)
-    });
+    let mse_poly =
+        crate::identify::volume::mse_kg2_s2(&samples, |s| poly.mass_flow_kg_s(s, &thermo));
     let mse_hybrid =
         crate::identify::volume::mse_kg2_s2(&samples, |s| t.net.mass_flow_kg_s(s, &thermo));
     let fw = t.net.to_firmware();

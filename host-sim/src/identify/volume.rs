@@ -106,6 +106,12 @@ impl VolumePoly {
         }
     }
 
+    /// Eq. 7: the analytical model's mass flow [kg/s].
+    pub fn mass_flow_kg_s(&self, s: &VolumeSample, thermo: &Thermo) -> f64 {
+        let (v, vr) = self.volume_and_rate(s);
+        thermo.mass_flow_kg_s(s, v, vr)
+    }
+
     /// `V(e)` floored at `0.1 b0` (as the firmware) and `V' = dV/de e'`.
     pub fn volume_and_rate(&self, s: &VolumeSample) -> (f64, f64) {
         let [b0, b1, b2, b3] = self.coefficients_m3;
@@ -962,10 +968,7 @@ pub fn check_gauge_pressures(
     p_atm_pa: f64,
 ) -> Result<(), String> {
     let samples = [per_muscle[0].as_slice(), per_muscle[1].as_slice()].concat();
-    let flow = |s: &VolumeSample| {
-        let (v, vr) = poly.volume_and_rate(s);
-        thermo.mass_flow_kg_s(s, v, vr)
-    };
+    let flow = |s: &VolumeSample| poly.mass_flow_kg_s(s, thermo);
     let as_given = mse_kg2_s2(&samples, flow);
     let lowered: Vec<VolumeSample> = samples
         .iter()
@@ -1089,10 +1092,7 @@ pub fn run_identify_volume(a: &IdentifyVolumeArgs) -> anyhow::Result<String> {
     })
     .map_err(|e| anyhow::anyhow!("{file}: {e}"))?;
     bar.finish_and_clear();
-    let poly_flow = |s: &VolumeSample| {
-        let (v, vr) = poly.volume_and_rate(s);
-        thermo.mass_flow_kg_s(s, v, vr)
-    };
+    let poly_flow = |s: &VolumeSample| poly.mass_flow_kg_s(s, &thermo);
     let hm = |s: &VolumeSample| t.net.mass_flow_kg_s(s, &thermo);
     let mut sets = vec![
         ("training".to_string(), &train_s),
