@@ -559,6 +559,19 @@ fn identify_force_refuses_a_map_of_two_lengths() {
         e.contains("2 lengths only") && e.contains("sweep at least 3 lengths"),
         "{e}"
     );
+    // The same two lengths read through a length sensor's jitter (+-0.0004 L/L0, each row
+    // a different reading): still 2 lengths, not one per reading.
+    let k = std::cell::Cell::new(0usize);
+    let jittered = map_rows(&kept, |f| {
+        if f[0] == "p_kpa" {
+            return f.join(",");
+        }
+        k.set(k.get() + 1);
+        let e = f[1].parse::<f64>().unwrap() + 0.0004 * ((k.get() % 3) as f64 - 1.0);
+        format!("{},{e:.6},{}", f[0], f[2..].join(","))
+    });
+    let e = force_map_refused(dir.path(), "two.csv", &jittered);
+    assert!(e.contains("2 lengths only"), "{e}");
 }
 
 /// Twelve operating points logged three times each pass the sample count (36 >= 20) but

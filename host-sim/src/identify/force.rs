@@ -529,11 +529,13 @@ pub struct HeldOut {
     pub mae_pct_of_range: f64,
 }
 
-/// Group index of each sample by length L/L0 (to 1e-4).
+/// Group index of each sample by length: cells of [`POINT_CELL_STRETCH`] in L/L0, the
+/// resolution operating points are told apart on (a length sensor's jitter about one
+/// length of a sweep keeps it one length).
 pub fn length_groups(samples: &[ForceSample]) -> (Vec<usize>, usize) {
     let mut keys: Vec<i64> = samples
         .iter()
-        .map(|s| (s.stretch * 1e4).round() as i64)
+        .map(|s| length_cell(s.stretch))
         .collect();
     let mut uniq = keys.clone();
     uniq.sort_unstable();
@@ -929,7 +931,7 @@ fn check_map(samples: &[ForceSample]) -> Result<(), IdentError> {
         .iter()
         .map(|s| {
             (
-                (s.stretch / POINT_CELL_STRETCH).round() as i64,
+                length_cell(s.stretch),
                 (s.p_gauge_pa / POINT_CELL_PA).round() as i64,
             )
         })
@@ -971,6 +973,11 @@ pub const MIN_FORCE_MAP_POINTS: usize = 20;
 /// The length cell [L/L0] two samples of one operating point share: 0.5 % of the rest
 /// length, well above a length sensor's jitter and below the steps of a length sweep.
 pub const POINT_CELL_STRETCH: f64 = 0.005;
+
+/// The length cell of a stretch L/L0 ([`POINT_CELL_STRETCH`] wide).
+fn length_cell(stretch: f64) -> i64 {
+    (stretch / POINT_CELL_STRETCH).round() as i64
+}
 
 /// The pressure cell [Pa] of one operating point: 5 kPa, above a pressure sensor's noise and
 /// below the steps of a pressure sweep.
