@@ -48,6 +48,12 @@ if ! rustup component list --installed 2>/dev/null | grep -q '^llvm-tools'; then
   fi
 fi
 
+# clippy for the lint step of scripts/test.sh.
+if ! cargo clippy --version >/dev/null 2>&1; then
+  say "rustup component add clippy"
+  rustup component add clippy
+fi
+
 # Plots (host-sim --plot, demo, diagnosis reports) lay out text with a TrueType font read at run
 # time (host-sim/src/io/plot.rs): install DejaVu Sans when no usable font is present.
 if [ -z "${HOST_SIM_FONT:-}" ] && ! ls /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf \

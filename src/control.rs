@@ -422,6 +422,8 @@ impl TorqueController {
     /// `dp_limit_pa = self.model.dp_limit_pa()` and `p_set_hi_pa =
     /// clamp_pressure_setpoint_pa(f32::INFINITY, self.gains.p_set_max_gauge_pa)`: then the
     /// same result, bit for bit.
+    // The tick's hot path: the inputs in registers, not packed into a struct for one call.
+    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     pub(crate) fn step_finite(
         &mut self,

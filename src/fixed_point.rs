@@ -327,7 +327,7 @@ impl FixedForceLaw {
         // 1/d: chord seed (Q14) and one Newton step r1 = r0 (1 + (1 - d r0)), Q29.
         let dd = d.wrapping_sub(b.d_lo_q24);
         let sd = &b.seed[(dd >> b.seed_shift) as usize & (SEED_MAX - 1)];
-        let frac = ((dd & ((1 << b.seed_shift) - 1)) >> (b.seed_shift - 15)) as i32;
+        let frac = (dd & ((1 << b.seed_shift) - 1)) >> (b.seed_shift - 15);
         let r0 = sd[0].wrapping_sub(sd[1].wrapping_mul(frac) >> 15) as u32;
         let eps = (1i32 << 30).wrapping_sub(mul_u16::<8>(d, r0));
         let r1 = ((r0 as i32) << 15).wrapping_add(mul_u16::<15>(eps, r0));

@@ -141,15 +141,12 @@ impl ForceLawParams {
 
     /// Tension [N] of a muscle at gauge pressure `p_gauge_pa` and deformation `stretch`
     /// (L/L0), with domain checks. Never panics, never NaN.
-    // `!(x > eps)` is deliberate: it is also true for NaN.
-    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     pub fn force(&self, p_gauge_pa: f32, stretch: f32) -> ForceEstimate {
         self.force_inline(p_gauge_pa, stretch)
     }
 
     /// [`Self::force`], always inlined (the general entry: any input, any parameter set).
     #[inline(always)]
-    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     pub(crate) fn force_inline(&self, p_gauge_pa: f32, stretch: f32) -> ForceEstimate {
         // Both finite, in one test: `x * 0` is +-0 for finite x, NaN for NaN and +-inf.
         if !(p_gauge_pa * 0.0 + stretch * 0.0 == 0.0) {
@@ -233,8 +230,6 @@ impl ForceLawParams {
     /// Then [`Self::force`] never flags SINGULAR for a finite input. The control tick's
     /// configuration requires it ([`Self::force_regular`]); a law that fails it is singular
     /// somewhere it claims to be identified.
-    // `!(x > m)` is deliberate: it is also true for NaN.
-    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     pub fn is_regular(&self) -> bool {
         let fin = |x: f32| x.is_finite();
         if !(self.c.iter().all(|&c| fin(c))

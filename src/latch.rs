@@ -376,7 +376,8 @@ mod tests {
     #[test]
     fn only_a_power_on_with_a_clean_record_arms() {
         let clean = Some(LatchRecord::CLEAN);
-        let faulted = Some(faulted(FaultCode::SupplyLost, [false; 2]));
+        let record = faulted(FaultCode::SupplyLost, [false; 2]);
+        let faulted = Some(record);
         assert_eq!(boot_decision(ResetCause::PowerOn, clean), BootDecision::Arm);
         for cause in NOT_POWER_ON {
             match boot_decision(cause, clean) {
@@ -385,12 +386,12 @@ mod tests {
             }
             assert_eq!(
                 boot_decision(cause, faulted),
-                BootDecision::Safe(faulted.unwrap())
+                BootDecision::Safe(record)
             );
         }
         assert_eq!(
             boot_decision(ResetCause::PowerOn, faulted),
-            BootDecision::Safe(faulted.unwrap())
+            BootDecision::Safe(record)
         );
         match boot_decision(ResetCause::PowerOn, None) {
             BootDecision::Safe(r) => assert_eq!(r.cause, Some(FaultCode::ResetLatched)),

@@ -37,9 +37,6 @@
 //! dropped on every tick at which the measured pressure is at or above the ceiling. The
 //! tracking benefit falls with N much faster than the cost (`docs/control.md`).
 
-// `!(x > y)` is the deliberate NaN-rejecting comparison (NaN fails every comparison).
-#![allow(clippy::neg_cmp_op_on_partial_ord)]
-
 use crate::geometry::JointGeometry;
 use crate::residual::ValveModelParams;
 

@@ -59,9 +59,6 @@
 //!
 //! Cost on the MCU: a few adds per tick (opening sums); the model runs once per window.
 
-// `!(x > y)` is the deliberate NaN-rejecting comparison (NaN fails every comparison).
-#![allow(clippy::neg_cmp_op_on_partial_ord)]
-
 use crate::geometry::JointGeometry;
 use crate::safety::{FaultCode, FaultSet};
 

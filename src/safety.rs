@@ -19,9 +19,6 @@
 //! - Pressure set-points pass through [`clamp_pressure_setpoint_pa`]: never above
 //!   [`crate::P_MUSCLE_MAX_GAUGE_PA`] (600 kPa gauge), never below 0, never NaN.
 
-// `!(x > y)` is the deliberate NaN-rejecting comparison (NaN fails every comparison).
-#![allow(clippy::neg_cmp_op_on_partial_ord)]
-
 use crate::tick::ValveCommand;
 use crate::P_MUSCLE_MAX_GAUGE_PA;
 
@@ -302,8 +299,6 @@ pub fn clamp_pressure_setpoint_pa(p_gauge_pa: f32, limit_pa: f32) -> f32 {
 /// Clamps a pressure set-point [Pa gauge] to `[0, hi]` (`hi` already checked: non-negative,
 /// at most [`P_MUSCLE_MAX_GAUGE_PA`]); NaN and p <= 0 give +0.
 #[inline(always)]
-// `!(p > 0.0)` is deliberate: it is also true for NaN.
-#[allow(clippy::neg_cmp_op_on_partial_ord)]
 pub(crate) fn clamp_setpoint_to(p_gauge_pa: f32, hi: f32) -> f32 {
     if !(p_gauge_pa > 0.0) {
         0.0

@@ -13,9 +13,6 @@
 //! Board code and host-sim fakes implement the traits; the control tick only sees the
 //! converted values (`Option<f32>`), so it never touches a register.
 
-// `!(x > y)` is the deliberate NaN-rejecting comparison (NaN fails every comparison).
-#![allow(clippy::neg_cmp_op_on_partial_ord)]
-
 use core::f32::consts::PI;
 
 /// Linear ADC scaling: `p_gauge_pa = offset_pa + pa_per_count * counts`.

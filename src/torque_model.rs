@@ -167,8 +167,6 @@ impl TorqueModelParams {
     /// Pressure set-points (p1, p2) gauge [Pa] of the symmetric activation
     /// `p1 = p0 - dp`, `p2 = p0 + dp`, each clamped to `[0, P_MUSCLE_MAX_GAUGE_PA]`.
     #[inline]
-    // `!(p >= 0.0)` is deliberate: a NaN pressure maps to 0.
-    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     pub fn pressures_gauge_pa(&self, dp_pa: f32) -> (f32, f32) {
         let clamp = |p: f32| {
             if !(p >= 0.0) {

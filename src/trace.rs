@@ -211,45 +211,6 @@ impl TraceRunner {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn trace_has_one_row_per_tick_with_missing_samples() {
-        assert_eq!(SENSOR_TRACE.len(), 500);
-        assert_eq!(SENSOR_TRACE[0].p1_adc, MISSING_ADC);
-        assert_eq!(SENSOR_TRACE[0].encoder, MISSING_ENCODER);
-        assert_eq!(SENSOR_TRACE[150].p1_adc, MISSING_ADC);
-        assert_eq!(SENSOR_TRACE[460].p2_adc, 4095);
-    }
-
-    #[test]
-    fn replay_arms_controls_and_faults_on_the_shorted_sensor() {
-        let mut r = TraceRunner::new();
-        let recs: heapless::Vec<TickRecord, 500> =
-            core::iter::from_fn(|| r.step()).take(500).collect();
-        assert_eq!(recs.len(), 500);
-        let armed = |t: &TickRecord| t.words[8] >> 8 == 1;
-        assert!(!armed(&recs[0]), "no sensors yet: disarmed");
-        assert!(armed(&recs[10]));
-        // After the set-point step the outer loop asks for torque and the valves move.
-        assert!(recs[60..200]
-            .iter()
-            .any(|t| f32::from_bits(t.words[0]) != 0.0));
-        // Missing samples below the stale limit do not fault.
-        assert!(armed(&recs[152]) && armed(&recs[202]));
-        // The shorted transducer at tick 460 latches a fault: valves closed from then on.
-        for t in &recs[460..] {
-            assert_ne!(t.words[8] & 0xFF, 0, "a fault is latched");
-            assert!(!armed(t));
-            assert_eq!(f32::from_bits(t.words[0]), 0.0);
-            assert_eq!(f32::from_bits(t.words[1]), 0.0);
-        }
-        assert_eq!(recs[499].hash, r.hash());
-    }
-}
-
 /// Muscle 1's force-law inputs over the trace, for every row with a pressure and an angle:
 /// gauge pressure [Pa] and stretch (f32), and both quantised for the fixed-point law (`None`
 /// where either does not fit). The benchmark images and the on-target tests evaluate the
@@ -326,4 +287,43 @@ pub fn fixed_path_digest() -> (u32, u32) {
         }
     }
     (n, h)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn trace_has_one_row_per_tick_with_missing_samples() {
+        assert_eq!(SENSOR_TRACE.len(), 500);
+        assert_eq!(SENSOR_TRACE[0].p1_adc, MISSING_ADC);
+        assert_eq!(SENSOR_TRACE[0].encoder, MISSING_ENCODER);
+        assert_eq!(SENSOR_TRACE[150].p1_adc, MISSING_ADC);
+        assert_eq!(SENSOR_TRACE[460].p2_adc, 4095);
+    }
+
+    #[test]
+    fn replay_arms_controls_and_faults_on_the_shorted_sensor() {
+        let mut r = TraceRunner::new();
+        let recs: heapless::Vec<TickRecord, 500> =
+            core::iter::from_fn(|| r.step()).take(500).collect();
+        assert_eq!(recs.len(), 500);
+        let armed = |t: &TickRecord| t.words[8] >> 8 == 1;
+        assert!(!armed(&recs[0]), "no sensors yet: disarmed");
+        assert!(armed(&recs[10]));
+        // After the set-point step the outer loop asks for torque and the valves move.
+        assert!(recs[60..200]
+            .iter()
+            .any(|t| f32::from_bits(t.words[0]) != 0.0));
+        // Missing samples below the stale limit do not fault.
+        assert!(armed(&recs[152]) && armed(&recs[202]));
+        // The shorted transducer at tick 460 latches a fault: valves closed from then on.
+        for t in &recs[460..] {
+            assert_ne!(t.words[8] & 0xFF, 0, "a fault is latched");
+            assert!(!armed(t));
+            assert_eq!(f32::from_bits(t.words[0]), 0.0);
+            assert_eq!(f32::from_bits(t.words[1]), 0.0);
+        }
+        assert_eq!(recs[499].hash, r.hash());
+    }
 }

@@ -12,9 +12,6 @@
 //! [`ValveOpenings`] reports what the valves are doing this tick: exactly the plant inputs
 //! `u_in1, u_ex1, u_in2, u_ex2` of PLANT.md / RECORDING.md.
 
-// `!(x > y)` is the deliberate NaN-rejecting comparison (NaN fails every comparison).
-#![allow(clippy::neg_cmp_op_on_partial_ord)]
-
 use embedded_hal::digital::OutputPin;
 use embedded_hal::pwm::SetDutyCycle;
 

@@ -928,7 +928,7 @@ fn run_diagnose_arm(
     host_sim::identify::write_atomic(&a.json, json.as_bytes())?;
     use std::io::Write as _;
     let mut out = std::io::stdout().lock();
-    let _ = write!(out, "{}wrote {}\n", d.answer(), a.json.display());
+    let _ = writeln!(out, "{}wrote {}", d.answer(), a.json.display());
     Ok(if d.joints.iter().all(|j| j.verdict.is_answer()) {
         ExitCode::SUCCESS
     } else {
@@ -1031,7 +1031,7 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
         "nominal plant effects: {}",
         Plant::from_config(&cfg).effects_summary()
     );
-    let _ = write!(out, "{}wrote {}\n", d.answer(), a.json.display());
+    let _ = writeln!(out, "{}wrote {}", d.answer(), a.json.display());
     // Exit status 3: the diagnosis names nothing because the recording is unexplained or
     // not of this plant (the JSON says which).
     Ok(if d.verdict.is_answer() {

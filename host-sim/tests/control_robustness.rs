@@ -110,7 +110,7 @@ fn robust_gains_hold_the_lead_on_held_out_sequences() {
 fn a_limit_cycle_inside_the_band_is_unstable() {
     let text = reference_text();
     let stored = robust_gains();
-    let mut earlier = stored.clone();
+    let mut earlier = stored;
     earlier.pid.kp_pa_per_rad = 163199.796875;
     earlier.pid.ki_pa_per_rad_s = 2837019.75;
     earlier.pid.kd_pa_s_per_rad = 10305.80078125;

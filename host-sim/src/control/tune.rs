@@ -40,9 +40,6 @@
 //! 6. The results are written (atomically) with their suite MSE and their suite MSE at the
 //!    margin (the tests re-measure both) and a provenance header.
 
-// `!(x > 0.0)` is deliberate: it also rejects NaN.
-#![allow(clippy::neg_cmp_op_on_partial_ord)]
-
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;

@@ -232,8 +232,8 @@ impl<'b> Rows<'b> {
 /// bit).
 fn dot(x: &[f64], beta: &DVector<f64>) -> f64 {
     let mut acc = x[0] * beta[0];
-    for j in 1..x.len() {
-        acc = x[j] * beta[j] + acc;
+    for (xj, bj) in x.iter().zip(beta.iter()).skip(1) {
+        acc += xj * bj;
     }
     acc
 }

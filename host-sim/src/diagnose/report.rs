@@ -50,7 +50,7 @@ fn channel_svg(
         root.fill(&WHITE).map_err(|e| e.to_string())?;
         let mut chart = crate::io::plot::time_panel(
             &root,
-            &title,
+            title,
             Some(c.name()),
             (t0, t1),
             (lo - pad, hi + pad),

@@ -6,9 +6,6 @@
 //! there. Every file goes through the one atomic writer inside the command's transaction
 //! (`crate::io::atomic`): all files are replaced or none.
 
-// `!(x > 0.0)` is deliberate: it also rejects NaN.
-#![allow(clippy::neg_cmp_op_on_partial_ord)]
-
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};

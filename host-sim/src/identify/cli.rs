@@ -2,8 +2,8 @@
 //! wrappers over [`super::force`], [`super::torque`] and [`super::plant`]. Every output file
 //! is written atomically; bad input gives an error naming the file, the line and the field.
 
-// `!(x > 0.0)` is deliberate: it also rejects NaN.
-#![allow(clippy::neg_cmp_op_on_partial_ord, clippy::nonminimal_bool)]
+// `!(a && b)` spelt out as the rule reads; `!(x > 0.0)` also rejects NaN.
+#![allow(clippy::nonminimal_bool)]
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

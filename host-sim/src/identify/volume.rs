@@ -30,9 +30,6 @@
 //! (`m_dot_1_kg_s`, `m_dot_2_kg_s`: a flow sensor on a rig, the plant's true net flow in
 //! host-sim's recordings), so target and `P'` average over the same window.
 
-// `!(x >= min)` is deliberate: it also refuses NaN.
-#![allow(clippy::neg_cmp_op_on_partial_ord)]
-
 use std::cell::Cell;
 use std::fmt::Write as _;
 

@@ -552,7 +552,7 @@ fn plan(
                         || curve.windows(2).any(|w| !(w[1][0] > w[0][0]))
                         || curve
                             .iter()
-                            .any(|p| !(p[1] >= lo && p[1] <= 1.0) || !p[0].is_finite())
+                            .any(|p| !(p[1] >= lo && p[1] <= 1.0 && p[0].is_finite()))
                     {
                         return Err(ImportError(format!(
                             "{}: needs >= 2 points with increasing volts and openings in [{lo}, 1]",
@@ -869,7 +869,7 @@ pub fn import(
         .delimiter(mapping.csv.delimiter.as_bytes()[0])
         .trim(csv::Trim::All)
         .flexible(false)
-        .from_reader(text[offset..].as_bytes());
+        .from_reader(&text.as_bytes()[offset..]);
     let at = |line: u64, col: &str, msg: String| {
         ImportError(format!("{}:{line}: column `{col}`: {msg}", input.display()))
     };
@@ -906,7 +906,7 @@ pub fn import(
     let cols: Vec<Option<usize>> = mapping
         .channel
         .iter()
-        .map(|c| c.column.as_deref().map(|n| col_of(n)).transpose())
+        .map(|c| c.column.as_deref().map(&col_of).transpose())
         .collect::<Result<_, _>>()?;
     let comma = mapping.csv.decimal == ",";
 

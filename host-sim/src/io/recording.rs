@@ -977,7 +977,7 @@ fn column_stem(name: &str) -> String {
         "pct", "percent",
     ];
     let lower = name.trim().to_ascii_lowercase();
-    let stem = match lower.rsplit_once(|c: char| c == '_' || c == ' ' || c == '[') {
+    let stem = match lower.rsplit_once(['_', ' ', '[']) {
         Some((head, unit)) if UNITS.contains(&unit.trim_end_matches(']')) => head.trim(),
         _ => lower.as_str(),
     };
@@ -1475,10 +1475,11 @@ impl<'t> Table<'t> {
             Some(h) => format!(" (column `{h}` is there: {})", rename_advice(name)),
             // Not one of RECORDING.md's columns: a rig logger's own file (its banner line or
             // its own column names).
-            None if !self.headers.iter().any(|h| h == "t_s") => format!(
+            None if !self.headers.iter().any(|h| h == "t_s") => {
                 " (the header has no `t_s` either: not a recording of RECORDING.md; a rig \
                  logger's file? read it with `host-sim import` and a mapping, docs/rig.md)"
-            ),
+                    .to_string()
+            }
             None => String::new(),
         }
     }

@@ -5,8 +5,8 @@
 //!
 //! so reading, simulating and writing overlap, and memory does not grow with the recording
 //! beyond its time column (kept for the checks that need every stamp: the median step, the
-//! uniform grid). The output is byte-identical to [`Recording::read`](super::recording::Recording::read)
-//! + [`simulate_recording`](crate::sim::simulate_recording) + [`Recording::write`](super::recording::Recording::write):
+//! uniform grid). The output is byte-identical to [`Recording::read`](super::recording::Recording::read),
+//! then [`simulate_recording`](crate::sim::simulate_recording), then [`Recording::write`](super::recording::Recording::write):
 //! the same row parser, the same integrator calls (runs of identical inputs are integrated
 //! as one segment, also across chunk boundaries), the same sensor path and number formatting.
 //!
@@ -429,7 +429,6 @@ fn simulate_chunks(
     if !pending.is_empty() {
         return Err(());
     }
-    drop(advance);
     if !out.rows.is_empty() {
         tx.send(out).map_err(|_| ())?;
     }

@@ -1102,7 +1102,7 @@ pub enum Arm3SimError {
     #[error("integration failed at t = {t_s} s: {message}")]
     Integration { t_s: f64, message: String },
     #[error("state became non-finite at t = {t_s} s (state {state:?})")]
-    NonFinite { t_s: f64, state: Arm3State },
+    NonFinite { t_s: f64, state: Box<Arm3State> },
     #[error("invalid sample period {0} s (must be finite and > 0)")]
     SamplePeriod(f64),
     #[error("joint {joint}: {message}")]
@@ -1222,7 +1222,7 @@ impl<'a> Arm3Integrator<'a> {
         if !end.is_finite() {
             return Err(Arm3SimError::NonFinite {
                 t_s: self.t_s + duration_s,
-                state: end,
+                state: Box::new(end),
             });
         }
         self.state = end;

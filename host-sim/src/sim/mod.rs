@@ -127,6 +127,9 @@ impl<const N: usize> System<f64, SVector<f64, N>> for RhsAux<'_, N> {
     }
 }
 
+/// The solver of one segment ([`dopri_segment`]).
+pub(crate) type Dopri5State<const N: usize, F> = Dopri5<f64, SVector<f64, N>, F>;
+
 /// One `Dopri5` run over a segment of zero-order-held inputs, with the settings every
 /// integrator here uses (safety 0.9, step-size factors, stiffness test off: the laminar patch
 /// keeps |lambda| h small), sparse output for a single sample (the last point is the end of
@@ -140,7 +143,7 @@ pub(crate) fn dopri_segment<const N: usize, F: System<f64, SVector<f64, N>>>(
     dt_s: f64,
     opts: &SolverOptions,
     stats: &mut SimStats,
-) -> Result<(Dopri5<f64, SVector<f64, N>, F>, u32), String> {
+) -> Result<(Dopri5State<N, F>, u32), String> {
     let SegmentPlan {
         single, x_end, h0, ..
     } = *plan;

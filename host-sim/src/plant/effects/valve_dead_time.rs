@@ -42,7 +42,7 @@ impl DeadTimeLine {
     /// rounded to it.
     pub fn new(delay_s: f64, dt_s: f64) -> Option<Self> {
         let samples = delay_s / dt_s;
-        if !(samples >= 0.0 && samples < 1e9) {
+        if !(0.0..1e9).contains(&samples) {
             return None;
         }
         let mut whole = samples.floor();
@@ -81,40 +81,6 @@ impl DeadTimeLine {
             u_in2: a * newer.u_in2 + b * older.u_in2,
             u_ex2: a * newer.u_ex2 + b * older.u_ex2,
         }
-    }
-}
-
-#[cfg(test)]
-mod line_tests {
-    use super::*;
-
-    fn pulse(k: usize) -> ValveInputs {
-        ValveInputs {
-            u_in1: if k == 3 { 1.0 } else { 0.0 },
-            ..ValveInputs::CLOSED
-        }
-    }
-
-    #[test]
-    fn a_whole_sample_delay_shifts_the_commands() {
-        let mut l = DeadTimeLine::new(0.002, 0.001).expect("line");
-        let out: Vec<f64> = (0..8).map(|k| l.push(pulse(k)).u_in1).collect();
-        assert_eq!(out, vec![0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0]);
-        let mut l = DeadTimeLine::new(0.0, 0.001).expect("line");
-        assert_eq!(l.push(pulse(3)).u_in1, 1.0);
-    }
-
-    #[test]
-    fn a_fractional_delay_splits_each_opening_over_two_periods() {
-        // 2.25 samples: the pulse of sample 3 covers 0.75 of period 5 and 0.25 of period 6.
-        let mut l = DeadTimeLine::new(0.00225, 0.001).expect("line");
-        let out: Vec<f64> = (0..8).map(|k| l.push(pulse(k)).u_in1).collect();
-        let want = [0.0, 0.0, 0.0, 0.0, 0.0, 0.75, 0.25, 0.0];
-        for (o, w) in out.iter().zip(want) {
-            assert!((o - w).abs() < 1e-12, "{out:?}");
-        }
-        assert!(DeadTimeLine::new(-0.001, 0.001).is_none());
-        assert!(DeadTimeLine::new(f64::NAN, 0.001).is_none());
     }
 }
 
@@ -229,5 +195,39 @@ impl Candidate for ValveDelayCandidate {
             "a dead time of {:.2} ms between a valve command and the valve opening",
             p[0] * 1e3
         )
+    }
+}
+
+#[cfg(test)]
+mod line_tests {
+    use super::*;
+
+    fn pulse(k: usize) -> ValveInputs {
+        ValveInputs {
+            u_in1: if k == 3 { 1.0 } else { 0.0 },
+            ..ValveInputs::CLOSED
+        }
+    }
+
+    #[test]
+    fn a_whole_sample_delay_shifts_the_commands() {
+        let mut l = DeadTimeLine::new(0.002, 0.001).expect("line");
+        let out: Vec<f64> = (0..8).map(|k| l.push(pulse(k)).u_in1).collect();
+        assert_eq!(out, vec![0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0]);
+        let mut l = DeadTimeLine::new(0.0, 0.001).expect("line");
+        assert_eq!(l.push(pulse(3)).u_in1, 1.0);
+    }
+
+    #[test]
+    fn a_fractional_delay_splits_each_opening_over_two_periods() {
+        // 2.25 samples: the pulse of sample 3 covers 0.75 of period 5 and 0.25 of period 6.
+        let mut l = DeadTimeLine::new(0.00225, 0.001).expect("line");
+        let out: Vec<f64> = (0..8).map(|k| l.push(pulse(k)).u_in1).collect();
+        let want = [0.0, 0.0, 0.0, 0.0, 0.0, 0.75, 0.25, 0.0];
+        for (o, w) in out.iter().zip(want) {
+            assert!((o - w).abs() < 1e-12, "{out:?}");
+        }
+        assert!(DeadTimeLine::new(-0.001, 0.001).is_none());
+        assert!(DeadTimeLine::new(f64::NAN, 0.001).is_none());
     }
 }
