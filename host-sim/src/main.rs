@@ -98,7 +98,8 @@ enum Command {
     /// learned-inverse-thermodynamics paper), firmware in the loop: position MSE and pressure tracking error on the
     /// controller suite and held-out set-points, on the plant and on it with a thermodynamic
     /// chamber, a leak and a supply drop. Exit status 1 when the feed-forward does not improve
-    /// the nominal plant's suite position MSE by >= 1.85x.
+    /// the nominal plant's suite position MSE by >= 1.85x, the P-only cascade at --gains
+    /// against the feed-forward cascade at --ff-gains (each tuned for itself).
     CompareControl(host_sim::control::compare_ff::CompareControlArgs),
 }
 
@@ -178,11 +179,12 @@ struct SimulateArgs {
     /// Also draw the simulated channels (over the measured ones of --inputs) to .png or .svg.
     #[arg(long, value_name = "out.png|svg", value_parser = validate::plot_path)]
     plot: Option<PathBuf>,
-    /// Relative tolerance of the integrator.
-    #[arg(long, default_value_t = SolverOptions::default().rtol, value_parser = f64_in(Range::closed(1e-14, 0.1)))]
+    /// Relative tolerance of the integrator of an --inputs replay (a closed-loop --scenario
+    /// integrates each tick's step with its own fixed tolerances).
+    #[arg(long, default_value_t = SolverOptions::default().rtol, value_parser = f64_in(Range::closed(1e-14, 0.1)), conflicts_with = "scenario")]
     rtol: f64,
-    /// Absolute tolerance of the integrator.
-    #[arg(long, default_value_t = SolverOptions::default().atol, value_parser = f64_in(Range::closed(1e-14, 1e3)))]
+    /// Absolute tolerance of the integrator of an --inputs replay.
+    #[arg(long, default_value_t = SolverOptions::default().atol, value_parser = f64_in(Range::closed(1e-14, 1e3)), conflicts_with = "scenario")]
     atol: f64,
     /// Run even when the estimated memory or time of a closed-loop scenario exceeds the limit
     /// (docs/reliability.md).
@@ -193,7 +195,7 @@ struct SimulateArgs {
     /// a rig that rests elsewhere), else from [initial]; `recording` = always from the first
     /// sample (angle, pressures as the sensors read them, velocity from the angle's first
     /// 20 ms); `file` = always from [initial].
-    #[arg(long, value_enum, default_value_t = StartFrom::Auto, requires = "inputs")]
+    #[arg(long, value_enum, default_value_t = StartFrom::Auto, requires = "inputs", conflicts_with = "scenario")]
     start: StartFrom,
 }
 

@@ -384,6 +384,11 @@ pub fn output_dir(flag: &str, dir: &Path) -> Result<(), String> {
 /// Longest name [`file_name_part`] accepts [characters].
 pub const MAX_NAME_CHARS: usize = 100;
 
+/// Fewest counts per revolution of a joint's angle encoder (0 aside, "not quantised"): one
+/// count a degree. Coarser, the firmware sees a joint that jumps by whole degrees (at 3
+/// counts, 120 deg) and the run or the recording tells nothing about the controller.
+pub const MIN_ENCODER_COUNTS_PER_REV: u32 = 360;
+
 /// Checks a name typed into a file that becomes part of an output file name (a scenario's
 /// `name`): 1 to [`MAX_NAME_CHARS`] characters of `A-Za-z0-9_.-`, not starting with `.`
 /// and without `..`, so that it can never name a path outside the output directory.

@@ -119,10 +119,33 @@ duration_s = 0.01\nchannel = \"p1\"\n\n[expect]\nsettle_after_s = 1.0\nmax_abs_e
     let stdout = text(&r.stdout);
     assert_eq!(r.status.code(), Some(1), "{stdout}\n{}", text(&r.stderr));
     assert!(
-        stdout.contains("no tick without a latched fault after 1 s to bound the angle error"),
+        stdout.contains("no tick without a latched fault after 1 s to bound the angle error")
+            && stdout.contains("(fault PressureInvalid1, code 1, latched at tick 100)")
+            && !stdout.contains("Some("),
         "{stdout}"
     );
     assert!(!stdout.contains("expectations: met"), "{stdout}");
+}
+
+#[test]
+fn a_late_fault_is_said_in_ticks_not_in_debug_notation() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = dir.path().join("late.toml");
+    let dropout = std::fs::read_to_string(root().join("scenarios/sensor_dropout.toml")).unwrap();
+    assert!(dropout.contains("fault_within_ticks = 11"));
+    std::fs::write(
+        &s,
+        dropout.replace("fault_within_ticks = 11", "fault_within_ticks = 0"),
+    )
+    .unwrap();
+    let r = simulate(&s, &dir.path().join("o.csv"), &[]);
+    let stdout = text(&r.stdout);
+    assert_eq!(r.status.code(), Some(1), "{stdout}\n{}", text(&r.stderr));
+    assert!(
+        stdout.contains("fault latched at tick 1210, 10 ticks after the injection of its cause (injected at tick 1200): not within 0 ticks")
+            && !stdout.contains("Some("),
+        "{stdout}"
+    );
 }
 
 #[test]
@@ -193,6 +216,33 @@ fn bad_scenario_names_file_line_and_key_and_keeps_the_old_output() {
                 "give at most 0.8 rad",
             ],
         ),
+        // A move that ends after the run (milliseconds typed into a seconds key): the run
+        // would cover a sliver of it and still meet its bounds.
+        (
+            "at_s = 1.0",
+            "at_s = 1.0\ntransition_s = 150",
+            vec![
+                "line 13: [setpoint] transition_s",
+                "ends at 151 s, after the end of the run",
+                "cover 2.0 % of it",
+            ],
+        ),
+        // Degrees typed into an angle bound, and an encoder coarser than a count a degree.
+        (
+            "max_abs_error_rad = 0.01",
+            "max_abs_error_rad = 57.0",
+            vec!["line 20: [expect] max_abs_error_rad", "within (0, pi]"],
+        ),
+        (
+            "max_abs_error_rad = 0.01",
+            "angle_within_rad = 57.0",
+            vec!["line 20: [expect] angle_within_rad", "degrees typed as radians?"],
+        ),
+        (
+            "angle_counts_per_rev = 8000",
+            "angle_counts_per_rev = 3",
+            vec!["line 16: [sensors] angle_counts_per_rev", ">= 360"],
+        ),
     ];
     for (from, to, want) in cases {
         let s = dir.path().join("bad.toml");
@@ -223,4 +273,33 @@ fn bad_scenario_names_file_line_and_key_and_keeps_the_old_output() {
     assert!(err.contains("[[events]] #1 duration_s"), "{err}");
     let line = step.lines().count() + 5;
     assert!(err.contains(&format!("line {line}:")), "{err}");
+    // A ramp that ends after the run.
+    let ramp = std::fs::read_to_string(root().join("scenarios/ramp.toml")).unwrap();
+    let s = dir.path().join("ramp.toml");
+    std::fs::write(&s, ramp.replace("end_s = 4.0", "end_s = 40.0")).unwrap();
+    let r = simulate(&s, &out, &[]);
+    let err = text(&r.stderr);
+    assert_eq!(r.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("[setpoint] end_s") && err.contains("ends at 40 s, after the end of the run"),
+        "{err}"
+    );
+}
+
+#[test]
+fn replay_only_options_are_refused_with_a_scenario() {
+    // The integrator tolerances and the replay's start belong to an --inputs replay: with a
+    // closed-loop scenario they would be ignored without a word.
+    let dir = tempfile::tempdir().unwrap();
+    let step = root().join("scenarios/step.toml");
+    for extra in [["--rtol", "0.1"], ["--atol", "1e-3"], ["--start", "recording"]] {
+        let r = simulate(&step, &dir.path().join("o.csv"), &extra);
+        let err = text(&r.stderr);
+        assert_eq!(r.status.code(), Some(2), "{extra:?}: {err}");
+        assert!(
+            err.contains("cannot be used with") && err.contains(extra[0]),
+            "{extra:?}: {err}"
+        );
+        assert!(!dir.path().join("o.csv").exists());
+    }
 }

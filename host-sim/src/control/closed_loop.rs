@@ -777,13 +777,16 @@ impl ClosedLoopRun {
         // An error bound with no tick to judge (a fault latched before `settle_after_s` and
         // stayed) is not met: the run shows nothing about the tracking it asks for.
         if (e.max_abs_error_rad.is_some() || e.rms_error_rad.is_some()) && st.n == 0 {
+            let latched = match self.first_latched_fault_tick {
+                Some(l) => match self.rows[l].out.fault {
+                    Some(f) => format!(" (fault {f:?}, code {}, latched at tick {l})", f.code()),
+                    None => format!(" (a fault latched at tick {l})"),
+                },
+                None => String::new(),
+            };
             fails.push(format!(
-                "no tick without a latched fault after {} s to bound the angle error (a fault \
-                 ({:?}) latched at tick {:?})",
+                "no tick without a latched fault after {} s to bound the angle error{latched}",
                 e.settle_after_s,
-                self.first_latched_fault_tick
-                    .map(|l| self.rows[l].out.fault),
-                self.first_latched_fault_tick
             ));
         } else if let Some(b) = e.max_abs_error_rad {
             if !(st.max_abs_rad <= b) {
@@ -802,12 +805,29 @@ impl ClosedLoopRun {
             }
         }
         if let Some(b) = e.fault_within_ticks {
+            let injected = match self.injected_fault_ticks.as_slice() {
+                [] => "nothing injected".to_string(),
+                ticks => format!(
+                    "injected at tick {}",
+                    ticks
+                        .iter()
+                        .map(|k| k.to_string())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            };
             match (self.first_latched_fault_tick, self.fault_latency_ticks()) {
                 (Some(_), Some(d)) if d <= b => {}
-                (l, d) => fails.push(format!(
-                    "fault latched at tick {l:?}, {d:?} ticks after the injection of its cause \
-                     (injections at ticks {:?}): not within {b} ticks",
-                    self.injected_fault_ticks
+                (Some(l), Some(d)) => fails.push(format!(
+                    "fault latched at tick {l}, {d} ticks after the injection of its cause \
+                     ({injected}): not within {b} ticks"
+                )),
+                (Some(l), None) => fails.push(format!(
+                    "fault latched at tick {l}, with no injected cause before it ({injected}): not \
+                     within {b} ticks of an injection"
+                )),
+                (None, _) => fails.push(format!(
+                    "no fault latched ({injected}): expected within {b} ticks"
                 )),
             }
         }

@@ -222,6 +222,24 @@ impl SetpointProfile {
             }
             Ok(())
         };
+        // A change from `from_s` that ends at `to_s`, after the end of the run: refused with the
+        // share of it the run would cover.
+        let ends_within = |key: &str, from_s: f64, to_s: f64| -> Result<(), ClosedLoopError> {
+            if to_s > h.duration_s {
+                let covered = 100.0 * (h.duration_s - from_s) / (to_s - from_s);
+                return Err(bad(
+                    key,
+                    format!(
+                        "the set-point change from {from_s} s ends at {to_s} s, after the end of \
+                         the run ([scenario] duration_s = {} s): the run would cover {covered:.1} % \
+                         of it and test a smaller move than the file asks (milliseconds typed \
+                         as seconds?); end it within the run or lengthen duration_s",
+                        h.duration_s
+                    ),
+                ));
+            }
+            Ok(())
+        };
         // Every profile: its set-point angles, and the time its change starts (before the end).
         let (angles, start): (&[(&str, f64)], (&str, f64)) = match self {
             SetpointProfile::Step {
@@ -266,16 +284,22 @@ impl SetpointProfile {
         before_end(start.0, start.1)?;
         // And its own constraints.
         match *self {
-            SetpointProfile::Step { transition_s, .. } => {
+            SetpointProfile::Step {
+                at_s, transition_s, ..
+            } => {
                 if !(transition_s >= 0.0 && transition_s.is_finite()) {
                     return Err(bad("transition_s", format!("{transition_s} must be >= 0")));
                 }
+                // The move must end within the run, or the run tests part of it and its
+                // `[expect]` bounds judge a move the file did not ask for.
+                ends_within("transition_s", at_s, at_s + transition_s)?;
             }
             SetpointProfile::Ramp { start_s, end_s, .. } => {
                 finite("end_s", end_s)?;
                 if !(end_s > start_s) {
                     return Err(bad("end_s", format!("{end_s} must be > start_s")));
                 }
+                ends_within("end_s", start_s, end_s)?;
             }
             SetpointProfile::Sine { freq_hz, .. } => {
                 finite("freq_hz", freq_hz)?;
@@ -663,15 +687,6 @@ impl Scenario {
         let h = &s.scenario;
         s.setpoint.check(h, &|key, msg| bad("setpoint", key, msg))?;
         s.sensors.check(&|key, msg| bad("sensors", key, msg))?;
-        if let Some(v) = s.expect.angle_within_rad {
-            if !(v > 0.0 && v.is_finite()) {
-                return Err(bad(
-                    "expect",
-                    "angle_within_rad",
-                    format!("{v} must be > 0"),
-                ));
-            }
-        }
         for (i, e) in s.events.iter().enumerate() {
             let ev_bad = |key: &str, msg: String| -> Result<(), ClosedLoopError> {
                 let at = event_key_line(text, i, key)
@@ -765,6 +780,7 @@ impl Scenario {
             &[
                 ("max_abs_error_rad", ex.max_abs_error_rad),
                 ("rms_error_rad", ex.rms_error_rad),
+                ("angle_within_rad", ex.angle_within_rad),
             ],
             &|key, msg| bad("expect", key, msg),
         )?;
@@ -797,6 +813,17 @@ impl SensorModel {
                 return Err(bad(key, msg));
             }
         }
+        let counts = self.angle_counts_per_rev;
+        if counts != 0 && counts < crate::validate::MIN_ENCODER_COUNTS_PER_REV {
+            return Err(bad(
+                "angle_counts_per_rev",
+                format!(
+                    "{counts} counts per revolution is coarser than one a degree (allowed: 0 \
+                     for no quantisation, or >= {})",
+                    crate::validate::MIN_ENCODER_COUNTS_PER_REV
+                ),
+            ));
+        }
         if self.delay_ticks > 10_000 {
             return Err(bad(
                 "delay_ticks",
@@ -808,8 +835,8 @@ impl SensorModel {
 }
 
 /// The `[expect]` values both the 1-DOF and the arm scenarios have: `settle_after_s` before
-/// the end of the run `h`, a gauge pressure bound in kPa, error bounds (`(key, bound)`,
-/// one per joint for the arm) finite and > 0; `bad(key, message)` makes the error.
+/// the end of the run `h`, a gauge pressure bound in kPa, angle bounds (`(key, bound)`,
+/// one per joint for the arm) within (0, pi]; `bad(key, message)` makes the error.
 pub(crate) fn check_expect(
     h: &ScenarioHeader,
     settle_after_s: f64,
@@ -839,10 +866,18 @@ pub(crate) fn check_expect(
             ),
         ));
     }
+    // Angle bounds: above half a turn they are degrees typed into a `_rad` key, as for the
+    // set-point angles.
     for (key, v) in error_bounds_rad {
         if let Some(v) = v {
-            if !(*v > 0.0 && v.is_finite()) {
-                return Err(bad(key, format!("{v} must be a finite number > 0")));
+            if !(*v > 0.0 && *v <= std::f64::consts::PI) {
+                return Err(bad(
+                    key,
+                    format!(
+                        "{} rad must be within (0, pi] (half a turn): degrees typed as radians?",
+                        crate::validate::Shown(*v)
+                    ),
+                ));
             }
         }
     }
