@@ -246,6 +246,8 @@ fn compare_control_outside_the_repository_names_the_gains_it_used() {
     );
     let first = out.lines().next().unwrap_or("");
     assert!(first.contains("gains the shipped gains"), "{first}");
+    // Both tunings the shipped ones: the verdict compares like with like, no warning.
+    assert!(!out.contains("warning: the verdict compares"), "{out}");
     let second = out.lines().nth(1).unwrap_or("");
     assert!(
         second.contains("re-tuned rows: gains the shipped gains (config/control_tuned_ff.toml"),
@@ -269,6 +271,31 @@ fn compare_control_outside_the_repository_names_the_gains_it_used() {
             own.display()
         )),
         "{first}"
+    );
+    // A P-only tuning of the user's own (here: another position gain) against the shipped
+    // feed-forward tuning: the verdict is said to compare tunings of different origin.
+    let shipped = host_sim::control::compare::SHIPPED_CONTROL_TUNED;
+    let kp = shipped
+        .lines()
+        .find(|l| l.starts_with("position_kp_nm_per_rad"))
+        .unwrap();
+    let mine = dir.path().join("mine.toml");
+    std::fs::write(&mine, shipped.replacen(kp, "position_kp_nm_per_rad = 20.0", 1)).unwrap();
+    let r = bin()
+        .current_dir(dir.path())
+        .args(["compare-control", "--quick", "--plant"])
+        .arg(plant())
+        .arg("--gains")
+        .arg(&mine)
+        .output()
+        .unwrap();
+    let out = text(&r.stdout);
+    assert!(
+        out.contains("warning: the verdict compares the gains")
+            && out.contains("with the shipped --ff-gains")
+            && out.contains("host-sim tune --pressure-ff"),
+        "{out}\n{}",
+        text(&r.stderr)
     );
     // A broken file there is an error naming it, not a silent fall-back.
     std::fs::write(dir.path().join("config/control_tuned.toml"), "[cascade\n").unwrap();

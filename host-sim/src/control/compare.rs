@@ -147,7 +147,12 @@ pub struct DpPidToml {
 /// on the MCU): the conversions both ways, from one list of the fields.
 macro_rules! dp_pid_gain_fields {
     ($($field:ident),* $(,)?) => {
-        impl DpPidToml {
+        /// Lowest co-contraction pressure `p0_gauge_pa` of a PD / PID gains table [Pa].
+const P0_MIN_PA: f64 = 1e4;
+/// Lowest activation limit `dp_max_pa` of a PD / PID gains table [Pa].
+const DP_MAX_MIN_PA: f64 = 1e3;
+
+impl DpPidToml {
             /// The firmware's gains.
             pub fn gains(&self) -> DpPidGains {
                 DpPidGains {
@@ -197,7 +202,26 @@ impl DpPidToml {
             ("p0_gauge_pa", self.p0_gauge_pa, 6e5),
         ];
         let suite_mse_rad2 = [self.suite_mse_rad2, self.suite_mse_at_margin_rad2];
-        check_fields(&fields, suite_mse_rad2, table, text, file)
+        check_fields(&fields, suite_mse_rad2, table, text, file)?;
+        // The pressures in Pa: a co-contraction level or an activation limit of a few Pa is
+        // bar or kPa typed into a Pa key (the joint would not move).
+        for (key, v, min_pa) in [
+            ("p0_gauge_pa", self.p0_gauge_pa, P0_MIN_PA),
+            ("dp_max_pa", self.dp_max_pa, DP_MAX_MIN_PA),
+        ] {
+            if v < min_pa {
+                let line = crate::validate::toml_key_line(text, table, 0, key).unwrap_or(0);
+                return Err(IdentError::at(
+                    file,
+                    line,
+                    &format!("{table}.{key}"),
+                    &format!(
+                        "{v} Pa is below {min_pa} Pa: a gauge pressure in Pa (bar or kPa typed?)"
+                    ),
+                ));
+            }
+        }
+        Ok(())
     }
 }
 
@@ -912,6 +936,12 @@ suite_mse_at_margin_rad2 = 0.000001
                 "[pd]\nkp_pa_per_rad = 500000.0".into(),
                 "[pd]\nkp_pa_per_rad = 5e11".into(),
                 "t.toml:2: field `pd.kp_pa_per_rad`: 500000000000 must be a finite number in 0..=10000000000",
+            ),
+            // Bar typed into a Pa key: the joint would not move.
+            (
+                "p0_gauge_pa = 300000.0".into(),
+                "p0_gauge_pa = 3.0".into(),
+                "t.toml:9: field `pd.p0_gauge_pa`: 3 Pa is below 10000 Pa: a gauge pressure in Pa (bar or kPa typed?)",
             ),
             (
                 "i_limit_pa = 0.0".into(),

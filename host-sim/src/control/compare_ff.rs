@@ -42,7 +42,7 @@ use pam_firmware::tick::ControllerConfig;
 use super::closed_loop::{run_with, Scenario};
 use super::compare::{
     at_scenario_rate, default_control_tuning, default_control_tuning_ff, jump_suite_scenarios,
-    suite_scenarios, ControlTuning,
+    suite_scenarios, ControlTuning, SHIPPED_CONTROL_TUNED, SHIPPED_CONTROL_TUNED_FF,
 };
 use super::robustness::held_out_scenarios;
 use crate::identify::volume::{
@@ -112,9 +112,12 @@ pub struct CompareControlArgs {
     /// Plant parameter file (TOML): the nominal plant; the effect variants are added to it.
     #[arg(long, value_name = "P.toml")]
     pub plant: PathBuf,
-    /// Tuned gains [default: config/control_tuned.toml under the working directory if it is
-    /// there, else the shipped gains built into host-sim]; the report's first line names the
-    /// file used.
+    /// Tuned gains of the P-only cascade [default: config/control_tuned.toml under the working
+    /// directory if it is there, else the shipped gains built into host-sim]; the report's
+    /// first line names the file used. The verdict compares the P-only cascade at these gains
+    /// with the feed-forward cascade at --ff-gains (each design tuned for itself, as seed 004
+    /// compares them); give both files, tuned on the same plant, or the verdict compares
+    /// tunings of different origin. The same-gains ratio is printed beside it.
     #[arg(long, value_name = "CONTROL_TUNED.toml")]
     pub gains: Option<PathBuf>,
     /// The cascade's gains tuned with the feed-forward on (`host-sim tune --pressure-ff`), for
@@ -886,5 +889,35 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
         ratio_text(nominal_ratio),
         if ok { "met" } else { "NOT met" }
     )?;
+    let shipped = |t: &ControlTuning, text: &str| {
+        ControlTuning::from_toml_str(text, "shipped").is_ok_and(|s| s == *t)
+    };
+    if let Some(note) = one_sided_gains_note(
+        (&gains, shipped(&tuning, SHIPPED_CONTROL_TUNED)),
+        (&gains_ff, shipped(&tuning_ff, SHIPPED_CONTROL_TUNED_FF)),
+    ) {
+        writeln!(out, "{note}")?;
+    }
     Ok((out, ok))
+}
+
+/// The warning when one of the two tunings is the user's and the other the shipped one:
+/// the verdict then sets the user's tuning against the other design's shipped one, tuned on
+/// the reference plant, and says little about either (a weak P-only tuning inflates it, a
+/// strong one deflates it). Each argument: the label the report's first lines print, and
+/// whether the tuning is the shipped one.
+fn one_sided_gains_note(
+    (gains, gains_shipped): (&str, bool),
+    (gains_ff, ff_shipped): (&str, bool),
+) -> Option<String> {
+    let (given, missing, how) = match (gains_shipped, ff_shipped) {
+        (false, true) => (gains, "--ff-gains", "host-sim tune --pressure-ff"),
+        (true, false) => (gains_ff, "--gains", "host-sim tune"),
+        _ => return None,
+    };
+    Some(format!(
+        "warning: the verdict compares the gains {given} with the shipped {missing} (tuned on \
+         the reference plant, not with yours): tune that design too ({how} --plant P.toml) and \
+         give both files; the same-gains ratio above needs no second file"
+    ))
 }
