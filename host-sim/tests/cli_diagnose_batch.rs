@@ -185,14 +185,25 @@ fn the_exit_status_follows_the_worst_verdict_and_the_out_dir_may_be_the_recordin
     assert!(!stdout.contains("summary.csv  "), "{stdout}");
     let summary = std::fs::read_to_string(recs.join("summary.csv")).unwrap();
     assert_eq!(summary.lines().count(), 2, "{summary}");
-    // Into another directory: the summary left in the recordings' is skipped, with a note.
+    // Into another directory: the summary left in the recordings' is skipped, with a note;
+    // so is the firmware trace `simulate --scenario` writes beside its recording.
+    std::fs::write(
+        recs.join("step.firmware.csv"),
+        format!(
+            "# source = host-sim closed loop\n{}\n0.000,0,0,300,300,0,0,1\n",
+            host_sim::io::run_files::FIRMWARE_COLUMNS.join(",")
+        ),
+    )
+    .unwrap();
     let r = batch(&plant, &recs, &dir.path().join("elsewhere"), &[]);
     let stdout = ok(&r);
     assert!(!stdout.contains("summary.csv  "), "{stdout}");
+    assert!(!stdout.contains("step.firmware"), "{stdout}");
+    let err = text(&r.stderr);
     assert!(
-        text(&r.stderr).contains("the summary of an earlier diagnose-batch, not a recording"),
-        "{}",
-        text(&r.stderr)
+        err.contains("the summary of an earlier diagnose-batch, not a recording")
+            && err.contains("step.firmware.csv: the firmware trace of a host-sim simulate run"),
+        "{err}"
     );
     // A recording of another rig (muscles mounted at another initial contraction, a key the
     // diagnosis does not refit; simulated through the CLI): not explained -> 3.

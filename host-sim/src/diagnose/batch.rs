@@ -257,6 +257,14 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, u8)> {
     // either: skipped, and said so on stderr.
     let own_summary = a.out_dir.join(SUMMARY_FILE);
     recs.retain(|r| {
+        if is_firmware_trace(r) {
+            eprintln!(
+                "note: {}: the firmware trace of a host-sim simulate run (its set-point, torque \
+                 estimate and fault code per tick), not a recording: skipped",
+                r.display()
+            );
+            return false;
+        }
         if !is_batch_summary(r) {
             return true;
         }
@@ -360,14 +368,24 @@ const SUMMARY_HEADER: &str =
 
 /// Whether `path` is a summary this command wrote (its first line is the summary's header).
 fn is_batch_summary(path: &Path) -> bool {
+    header_line(path).is_some_and(|h| h == SUMMARY_HEADER)
+}
+
+/// True when `path` is the firmware trace `simulate --scenario` writes beside its recording
+/// (`OUT.firmware.csv`: set-point, torque estimate, fault code per tick), by its header.
+fn is_firmware_trace(path: &Path) -> bool {
+    header_line(path).is_some_and(|h| h == crate::io::run_files::FIRMWARE_COLUMNS.join(","))
+}
+
+/// The first line of `path` that is not a `#` comment (within its first 64 KiB), without its
+/// line end; `None` when it cannot be read.
+fn header_line(path: &Path) -> Option<String> {
     use std::io::BufRead as _;
-    let Ok(f) = std::fs::File::open(path) else {
-        return false;
-    };
-    let mut first = String::new();
+    let f = std::fs::File::open(path).ok()?;
     std::io::BufReader::new(f)
-        .take(4096)
-        .read_line(&mut first)
-        .is_ok()
-        && first.trim_end() == SUMMARY_HEADER
+        .take(64 * 1024)
+        .lines()
+        .map_while(Result::ok)
+        .find(|l| !l.starts_with('#'))
+        .map(|l| l.trim_end().to_string())
 }
