@@ -176,24 +176,60 @@ pub fn f64_in(
     move |s: &str| range.check(parse_trimmed(s, "a number", range)?)
 }
 
+/// A clap value parser for an `f64` within `range` of `unit` (a physical quantity): both
+/// messages name the unit, so that `150ms` typed for seconds says what to give instead.
+pub fn f64_in_unit(
+    range: Range,
+    unit: &'static str,
+) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync + 'static {
+    move |s: &str| {
+        let v: f64 = s.trim().parse().map_err(|_| {
+            format!("`{s}` is not a number: give {unit} within {range} as a plain number")
+        })?;
+        if range.contains(v) {
+            Ok(v)
+        } else {
+            Err(format!(
+                "must be a number of {unit} within {range}, got {}",
+                Shown(v)
+            ))
+        }
+    }
+}
+
 /// A clap value parser for a whole number within `lo..=hi`.
 pub fn usize_in(
     lo: usize,
     hi: usize,
 ) -> impl Fn(&str) -> Result<usize, String> + Clone + Send + Sync + 'static {
-    move |s: &str| {
-        // A negative whole number is one, just out of range.
-        if let Ok(v) = s.trim().parse::<i64>() {
-            if v < 0 {
-                return Err(format!("must be within {lo}..={hi}, got {v}"));
-            }
+    move |s: &str| whole_in(s, lo, hi)
+}
+
+/// A clap value parser for a whole number within `lo..=hi` (a seed: `0..=u64::MAX`).
+pub fn u64_in(
+    lo: u64,
+    hi: u64,
+) -> impl Fn(&str) -> Result<u64, String> + Clone + Send + Sync + 'static {
+    move |s: &str| whole_in(s, lo, hi)
+}
+
+/// `s` as a whole number within `lo..=hi`; a negative or too large whole number is one, just
+/// out of range (the message gives the range either way).
+fn whole_in<T>(s: &str, lo: T, hi: T) -> Result<T, String>
+where
+    T: std::str::FromStr + PartialOrd + fmt::Display + Copy + TryInto<i128>,
+{
+    let wide = |x: T| x.try_into().unwrap_or(i128::MAX);
+    if let Ok(v) = s.trim().parse::<i128>() {
+        if v < wide(lo) || v > wide(hi) {
+            return Err(format!("must be within {lo}..={hi}, got {v}"));
         }
-        let v: usize = parse_trimmed(s, "a whole number", format!("{lo}..={hi}"))?;
-        if (lo..=hi).contains(&v) {
-            Ok(v)
-        } else {
-            Err(format!("must be within {lo}..={hi}, got {v}"))
-        }
+    }
+    let v: T = parse_trimmed(s, "a whole number", format!("{lo}..={hi}"))?;
+    if lo <= v && v <= hi {
+        Ok(v)
+    } else {
+        Err(format!("must be within {lo}..={hi}, got {v}"))
     }
 }
 
@@ -388,6 +424,28 @@ pub const MAX_NAME_CHARS: usize = 100;
 /// count a degree. Coarser, the firmware sees a joint that jumps by whole degrees (at 3
 /// counts, 120 deg) and the run or the recording tells nothing about the controller.
 pub const MIN_ENCODER_COUNTS_PER_REV: u32 = 360;
+
+/// The value parser of an encoder's counts per revolution (`sweep torque --encoder-counts`):
+/// 0 (no quantisation) or [`MIN_ENCODER_COUNTS_PER_REV`] up to the largest encoder `import`
+/// reads.
+pub fn encoder_counts_per_rev(s: &str) -> Result<u32, String> {
+    let hi = *crate::io::import::COUNTS_PER_REV.end();
+    let allowed = format!(
+        "0 (no angle quantisation) or {MIN_ENCODER_COUNTS_PER_REV}..={hi} counts per turn"
+    );
+    let v: i128 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{s}` is not a whole number (allowed: {allowed})"))?;
+    if v == 0 || (i128::from(MIN_ENCODER_COUNTS_PER_REV)..=i128::from(hi)).contains(&v) {
+        Ok(v as u32)
+    } else {
+        Err(format!(
+            "must be {allowed}, got {v} (fewer than {MIN_ENCODER_COUNTS_PER_REV} counts per turn \
+             read the motion in steps of more than 1 degree)"
+        ))
+    }
+}
 
 /// Checks a name typed into a file that becomes part of an output file name (a scenario's
 /// `name`): 1 to [`MAX_NAME_CHARS`] characters of `A-Za-z0-9_.-`, not starting with `.`

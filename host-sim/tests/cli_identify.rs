@@ -673,3 +673,55 @@ fn sweep_torque_writes_its_time_stamps_as_decimals_of_its_grid() {
         assert_eq!(*t, want, "row {k}");
     }
 }
+
+#[test]
+fn sweep_arguments_out_of_their_physical_range_are_refused_with_the_range() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("sweep.csv");
+    for (kind, args, want) in [
+        // An encoder of 3 counts a turn reads the sweep's +-20 degrees as 0 throughout.
+        (
+            "torque",
+            vec!["--encoder-counts", "3"],
+            "0 (no angle quantisation) or 360..=1073741824 counts per turn, got 3",
+        ),
+        // A branch gap of 10 kN on a muscle of about 1.9 kN: the bound is said in newtons.
+        (
+            "force",
+            vec!["--hysteresis-gap-n", "10000"],
+            "a quarter of the sweep's largest force",
+        ),
+        ("force", vec!["--seed", "-1"], "must be within 0..=18446744073709551615, got -1"),
+        (
+            "force",
+            vec!["--stretch-min", "1.2", "--stretch-max", "1.0"],
+            "--stretch-min 1.2 must be > 0 and below --stretch-max 1",
+        ),
+    ] {
+        let r = bin()
+            .args(["sweep", kind, "--plant"])
+            .arg(plant())
+            .arg("--out")
+            .arg(&out)
+            .args(&args)
+            .output()
+            .unwrap();
+        assert_eq!(r.status.code(), Some(2), "{kind} {args:?}");
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert!(err.contains(want), "{kind} {args:?}: {err}");
+        assert!(!out.exists(), "{kind} {args:?}: an output was written");
+    }
+    // A gap within the bound still sweeps both branches.
+    let text = sweep("force", &out, &["--hysteresis-gap-n", "20"]);
+    assert!(text.contains("both branches"), "{text}");
+    // The force map into a directory that does not exist names the directory, not a
+    // temporary file.
+    let r = bin()
+        .args(["sweep", "force-map", "--out"])
+        .arg(dir.path().join("no_dir/map.csv"))
+        .output()
+        .unwrap();
+    assert_eq!(r.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(err.contains("no_dir") && err.contains("does not exist") && !err.contains(".map.csv."), "{err}");
+}

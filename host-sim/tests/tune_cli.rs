@@ -15,17 +15,27 @@ fn bad_tune_arguments_are_refused_without_touching_the_output() {
         (vec!["--threads", "300"], "must be within 1..=256, got 300"),
         (
             vec!["--transition-s", "5"],
-            "--transition-s 5: allowed 0..=2 s",
+            "must be a number of seconds within [0, 2], got 5",
         ),
         (
             vec!["--setpoint-cutoff-hz", "0"],
             "--setpoint-cutoff-hz 0: allowed 1..=500 Hz",
         ),
         (vec!["--cascade-start", "1,2"], "--cascade-start 1,2"),
+        // A start the gains file could not load (it bounds kp at 1e4 N m/rad).
+        (
+            vec!["--cascade-start", "1e9,1,1"],
+            "position_kp_nm_per_rad 1000000000 is above 1e4",
+        ),
+        // Milliseconds typed with their unit: the message says to give plain seconds.
+        (
+            vec!["--transition-s", "150ms"],
+            "give seconds within [0, 2] as a plain number",
+        ),
         // A negative number is a value out of range, not an unknown argument.
         (
             vec!["--transition-s", "-1"],
-            "--transition-s -1: allowed 0..=2 s",
+            "must be a number of seconds within [0, 2], got -1",
         ),
     ] {
         let r = bin()

@@ -291,20 +291,23 @@ impl CascadeToml {
         }
     }
 
+    /// Largest loadable position kp, ki, kd and torque ki, with their keys (the order of
+    /// `tune --cascade-start`): a search started beyond them would write gains the file
+    /// refuses.
+    pub const GAIN_MAX: [(&'static str, f64); 4] = [
+        ("position_kp_nm_per_rad", 1e4),
+        ("position_ki_nm_per_rad_s", 1e6),
+        ("position_kd_nm_s_per_rad", 1e3),
+        ("torque_ki_per_s", 1e5),
+    ];
+
     fn validate(&self, table: &str, text: &str, file: &str) -> Result<(), IdentError> {
+        let [kp, ki, kd, tki] = Self::GAIN_MAX;
         let fields = [
-            ("position_kp_nm_per_rad", self.position_kp_nm_per_rad, 1e4),
-            (
-                "position_ki_nm_per_rad_s",
-                self.position_ki_nm_per_rad_s,
-                1e6,
-            ),
-            (
-                "position_kd_nm_s_per_rad",
-                self.position_kd_nm_s_per_rad,
-                1e3,
-            ),
-            ("torque_ki_per_s", self.torque_ki_per_s, 1e5),
+            (kp.0, self.position_kp_nm_per_rad, kp.1),
+            (ki.0, self.position_ki_nm_per_rad_s, ki.1),
+            (kd.0, self.position_kd_nm_s_per_rad, kd.1),
+            (tki.0, self.torque_ki_per_s, tki.1),
             (
                 "feedforward_inertia_kgm2",
                 self.feedforward_inertia_kgm2,

@@ -108,9 +108,10 @@ pub struct TuneArgs {
     #[arg(long, default_value_t = 150.0)]
     pub setpoint_cutoff_hz: f32,
     /// Duration of the suite's set-point moves [s] (0..=2, 0 = jumps) [default: the suite's 0.15 s].
-    #[arg(long)]
+    #[arg(long, value_parser = crate::validate::f64_in_unit(crate::validate::Range::closed(0.0, 2.0), "seconds"))]
     pub transition_s: Option<f64>,
-    /// One more cascade start KP,KI,KD[,TORQUE_KI] (repeatable).
+    /// One more cascade start KP,KI,KD[,TORQUE_KI] (repeatable), each > 0 and at most what a
+    /// gains file loads (kp 1e4 N m/rad, ki 1e6 N m/(rad s), kd 1e3 N m s/rad, torque ki 1e5 1/s).
     #[arg(long, value_name = "KP,KI,KD[,TORQUE_KI]")]
     pub cascade_start: Vec<String>,
     /// Do not impose the firmware's step tests on the cascade (report them only).
@@ -366,6 +367,7 @@ fn tune(
             starts.push(("stored gains", gs, cs));
         }
     }
+    let from_stored = starts.len() > 1;
     let t1 = Instant::now();
     let mut best: Option<(DpPidGains, f64)> = None;
     let mut nm_points = 0;
@@ -485,11 +487,16 @@ fn tune(
     ));
     let note = format!(
         "{name}: grid {} points (best cost {:.4e} rad^2), Nelder-Mead {} points from the best grid\n\
-         \x20 point and the stored gains (costs after it: {}),\n\
+         \x20 point{} (costs after it: {}),\n\
          \x20 polish {} points -> cost {:.4e} rad^2 (suite MSE {:.4e} rad^2, at the gain margin {:.4e} rad^2, w = {})",
         grid.len(),
         cbest,
         nm_points,
+        if from_stored {
+            " and the stored gains"
+        } else {
+            ""
+        },
         from.join(", "),
         polish_runs,
         c_check,
@@ -637,6 +644,14 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
             .with_context(|| format!("--cascade-start {s}: KP,KI,KD[,TORQUE_KI], numbers"))?;
         if !(3..=4).contains(&v.len()) || v.iter().any(|x| !(*x > 0.0 && x.is_finite())) {
             bail!("--cascade-start {s}: KP,KI,KD[,TORQUE_KI], each > 0");
+        }
+        for (x, (key, max)) in v.iter().zip(CascadeToml::GAIN_MAX) {
+            if f64::from(*x) > max {
+                bail!(
+                    "--cascade-start {s}: {key} {x} is above {max:e}, the largest a gains file \
+                     loads"
+                );
+            }
         }
         cascade_starts.push((v[0], v[1], v[2], v.get(3).copied()));
     }

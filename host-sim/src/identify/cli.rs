@@ -17,7 +17,7 @@ use super::plant::{identify_plant_text, PlantFitOptions};
 use super::torque::{self, TorqueSource, TorqueSweep};
 use super::{write_atomic, MeasurementNoise};
 use crate::sim::SolverOptions;
-use crate::validate::{self, f64_in, usize_in, Range, RunEstimate};
+use crate::validate::{self, f64_in, u64_in, usize_in, Range, RunEstimate};
 use crate::{Plant, PlantConfig, Recording};
 
 /// `host-sim sweep ...`: synthetic identification data from a plant file.
@@ -82,11 +82,12 @@ pub struct SweepForceArgs {
     #[arg(long, default_value_t = 0.5, value_parser = f64_in(Range::closed(0.0, 100.0)))]
     pub pressure_noise_kpa: f64,
     /// Gap between the pressurising and depressurising branches at full pressure [N]; > 0
-    /// sweeps both branches and writes a `state` column.
+    /// sweeps both branches and writes a `state` column. At most a quarter of the sweep's
+    /// largest force (the plant's muscle at --p-max-kpa; the message gives it).
     #[arg(long, default_value_t = 0.0, value_parser = f64_in(Range::closed(0.0, 1e4)))]
     pub hysteresis_gap_n: f64,
-    /// Random seed of the noise.
-    #[arg(long, default_value_t = 1)]
+    /// Random seed of the noise (0..=18446744073709551615).
+    #[arg(long, default_value_t = 1, value_parser = u64_in(0, u64::MAX))]
     pub seed: u64,
     /// Run even when the estimated memory or time exceeds the limit (docs/reliability.md).
     #[arg(long)]
@@ -99,8 +100,8 @@ pub struct SweepForceMapArgs {
     /// Output CSV.
     #[arg(long, value_name = "F.csv")]
     pub out: PathBuf,
-    /// Seed: the muscle, the grid and the noise.
-    #[arg(long, default_value_t = 1)]
+    /// Seed: the muscle, the grid and the noise (0..=18446744073709551615).
+    #[arg(long, default_value_t = 1, value_parser = u64_in(0, u64::MAX))]
     pub seed: u64,
     /// Sweep every length up and down (rising and falling branches, braid friction).
     #[arg(long)]
@@ -139,8 +140,9 @@ pub struct SweepTorqueArgs {
     /// Sample period [s].
     #[arg(long, default_value_t = 0.005, value_parser = f64_in(Range::closed(1e-6, 1.0)))]
     pub dt_s: f64,
-    /// Encoder counts per turn (0: no angle quantisation).
-    #[arg(long, default_value_t = 8000)]
+    /// Encoder counts per turn: 0 (no angle quantisation) or 360..=1073741824 (a coarser
+    /// encoder reads the motion in steps of more than 1 degree).
+    #[arg(long, default_value_t = 8000, value_parser = validate::encoder_counts_per_rev)]
     pub encoder_counts: u32,
     /// Pressure-sensor noise, standard deviation [kPa].
     #[arg(long, default_value_t = 0.5, value_parser = f64_in(Range::closed(0.0, 100.0)))]
@@ -148,8 +150,8 @@ pub struct SweepTorqueArgs {
     /// Force-sensor noise, standard deviation [N].
     #[arg(long, default_value_t = 2.0, value_parser = f64_in(Range::closed(0.0, 1e4)))]
     pub force_noise_n: f64,
-    /// Random seed of the noise.
-    #[arg(long, default_value_t = 1)]
+    /// Random seed of the noise (0..=18446744073709551615).
+    #[arg(long, default_value_t = 1, value_parser = u64_in(0, u64::MAX))]
     pub seed: u64,
     /// Run even when the estimated memory or time exceeds the limit (docs/reliability.md).
     #[arg(long)]
@@ -315,7 +317,12 @@ fn sweep_force(a: &SweepForceArgs) -> Result<String> {
     .map_err(anyhow::Error::msg)?;
     let cfg = PlantConfig::load(&a.plant)?;
     if !(a.stretch_min > 0.0 && a.stretch_min < a.stretch_max) {
-        bail!("--stretch-min must be > 0 and below --stretch-max");
+        bail!(
+            "--stretch-min {} must be > 0 and below --stretch-max {} (L/L0 from --stretch-min \
+             up to --stretch-max)",
+            validate::Shown(a.stretch_min),
+            validate::Shown(a.stretch_max)
+        );
     }
     if !(a.p_max_kpa > 0.0) || a.n_stretch < 2 || a.n_pressure < 2 {
         bail!("--p-max-kpa must be > 0; --n-stretch and --n-pressure at least 2");
@@ -323,6 +330,7 @@ fn sweep_force(a: &SweepForceArgs) -> Result<String> {
     if !(a.force_noise_n >= 0.0 && a.pressure_noise_kpa >= 0.0 && a.hysteresis_gap_n >= 0.0) {
         bail!("noise levels and the hysteresis gap must be >= 0");
     }
+    let truth = tondu_of(&cfg);
     let opt = ForceSweep {
         n_stretch: a.n_stretch,
         n_pressure: a.n_pressure,
@@ -334,7 +342,24 @@ fn sweep_force(a: &SweepForceArgs) -> Result<String> {
         hysteresis_gap_n: a.hysteresis_gap_n,
         seed: a.seed,
     };
-    let data = force::sweep(&tondu_of(&cfg), &opt);
+    // Braid friction is a share of the force: a gap beyond it makes forces the muscle
+    // cannot give (10 kN on a 2 kN muscle).
+    let (f_max_n, at_stretch) = force::largest_force(&truth, &opt);
+    let gap_max_n = force::HYSTERESIS_GAP_MAX_SHARE * f_max_n;
+    if a.hysteresis_gap_n > gap_max_n {
+        bail!(
+            "--hysteresis-gap-n {} N: must be within 0..={:.1} N here, {} of the sweep's largest \
+             force ({:.1} N, at {} kPa and L/L0 {:.4}; {})",
+            validate::Shown(a.hysteresis_gap_n),
+            gap_max_n,
+            force::HYSTERESIS_GAP_MAX_SHARE_TEXT,
+            f_max_n,
+            validate::Shown(a.p_max_kpa),
+            at_stretch,
+            a.plant.display()
+        );
+    }
+    let data = force::sweep(&truth, &opt);
     let mut meta = BTreeMap::new();
     meta.insert("plant".to_string(), a.plant.display().to_string());
     meta.insert(
@@ -370,6 +395,9 @@ fn sweep_force(a: &SweepForceArgs) -> Result<String> {
 }
 
 fn sweep_force_map(a: &SweepForceMapArgs) -> Result<String> {
+    validate::distinct_file_outputs(&[], &[("--out", &a.out)]).map_err(anyhow::Error::msg)?;
+    validate::replaceable("--out", &a.out, validate::OutputKind::FORCE_SWEEP)
+        .map_err(anyhow::Error::msg)?;
     let map = force_maps::force_map(&force_maps::MapOptions {
         seed: a.seed,
         branches: a.branches,

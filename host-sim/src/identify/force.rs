@@ -1594,6 +1594,31 @@ impl ForceSweep {
     }
 }
 
+/// Largest branch gap of a sweep as a share of its largest force ([`largest_force`]):
+/// braid friction of a braided muscle is a fraction of its force, so a larger gap gives
+/// forces the muscle cannot produce.
+pub const HYSTERESIS_GAP_MAX_SHARE: f64 = 0.25;
+/// [`HYSTERESIS_GAP_MAX_SHARE`] as the messages say it.
+pub const HYSTERESIS_GAP_MAX_SHARE_TEXT: &str = "a quarter";
+
+/// L/L0 of the sweep's stretch level `i` (of `opt.n_stretch`, at least 2).
+fn stretch_level(opt: &ForceSweep, i: usize) -> f64 {
+    let ns = opt.n_stretch.max(2);
+    opt.stretch_min + (opt.stretch_max - opt.stretch_min) * i as f64 / (ns - 1) as f64
+}
+
+/// The largest noise-free force of the sweep without a branch gap [N] and the L/L0 where it
+/// is: at `opt.p_max_pa` (the Tondu force grows in proportion to the pressure), over the
+/// sweep's stretch levels.
+pub fn largest_force(truth: &Tondu, opt: &ForceSweep) -> (f64, f64) {
+    (0..opt.n_stretch.max(2))
+        .map(|i| {
+            let e = stretch_level(opt, i);
+            (truth.force_n(opt.p_max_pa, e), e)
+        })
+        .fold((0.0, opt.stretch_min), |best, x| if x.0 > best.0 { x } else { best })
+}
+
 /// Generates isometric data from a Tondu surface, as seed 002's bench does (fixed length,
 /// pressure swept from maximum to zero, and back up when a hysteresis gap is set).
 pub fn sweep(truth: &Tondu, opt: &ForceSweep) -> Vec<ForceSample> {
@@ -1604,7 +1629,7 @@ pub fn sweep(truth: &Tondu, opt: &ForceSweep) -> Vec<ForceSample> {
     let ns = opt.n_stretch.max(2);
     let np = opt.n_pressure.max(2);
     for i in 0..ns {
-        let e = opt.stretch_min + (opt.stretch_max - opt.stretch_min) * i as f64 / (ns - 1) as f64;
+        let e = stretch_level(opt, i);
         let mut branches = vec![Branch::Depressurising];
         if opt.hysteresis_gap_n > 0.0 {
             branches.push(Branch::Pressurising);

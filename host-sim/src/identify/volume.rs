@@ -856,8 +856,9 @@ pub struct IdentifyVolumeArgs {
     /// Output TOML (the format of config/volume.toml).
     #[arg(long, value_name = "volume.toml")]
     pub out: std::path::PathBuf,
-    /// Seed of the random start (the same seed and recording give the same file).
-    #[arg(long, default_value_t = 1)]
+    /// Seed of the random start (the same seed and recording give the same file;
+    /// 0..=18446744073709551615).
+    #[arg(long, default_value_t = 1, value_parser = crate::validate::u64_in(0, u64::MAX))]
     pub seed: u64,
     /// Weight decay lambda (the penalty on the network's squared weights in the training
     /// loss, eq. 10 of the learned-inverse-thermodynamics paper).
