@@ -93,6 +93,8 @@ fn pil_matches_the_in_process_loop_bit_for_bit_and_capture_replays() {
     );
     let stdout = ok(&r);
     assert!(stdout.contains("bit for bit on all 1500 ticks"), "{stdout}");
+    // The scenario's [expect] is checked on the firmware's run, as simulate does.
+    assert!(stdout.contains("expectations: met"), "{stdout}");
     eprintln!("pil: 1500 ticks in {:.2} s", t0.elapsed().as_secs_f64());
 
     // The recording equals `simulate --scenario`'s on the valve columns and the angle.
@@ -196,6 +198,43 @@ fn a_faulting_firmware_and_a_missing_qemu_are_clear_bounded_errors() {
     let e = run_scenario(&plant, &sc, opts).unwrap_err().to_string();
     assert!(e.contains("tick 0"), "{e}");
     assert!(t0.elapsed() < Duration::from_secs(10), "{:?}", t0.elapsed());
+
+    // A copy of the image cut short (an interrupted download) is refused before QEMU starts
+    // (QEMU aborted on it with a register dump), naming --elf; the output is not written.
+    let bytes = std::fs::read(&elf).unwrap();
+    let cut = dir.path().join("cut.elf");
+    std::fs::write(&cut, &bytes[..bytes.len() / 3]).unwrap();
+    let out = dir.path().join("never.csv");
+    let r = on_plant(
+        "pil",
+        &common::plant(),
+        &[&"--scenario", &scenario(dir.path()), &"--out", &out, &"--elf", &cut],
+    );
+    assert_refused(&r, &["--elf", "cut.elf", "truncated or damaged ELF"], &out);
+}
+
+#[test]
+fn pil_checks_the_scenarios_expectations_on_the_firmwares_run() {
+    let Some(elf) = pil_elf() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let s = scenario(dir.path());
+    // A bound the step cannot meet: 0.1 mrad after 1.2 s.
+    let text = std::fs::read_to_string(&s)
+        .unwrap()
+        .replace("max_abs_error_rad = 0.01", "max_abs_error_rad = 0.0001");
+    std::fs::write(&s, text).unwrap();
+    let out = dir.path().join("pil.csv");
+    let r = on_plant(
+        "pil",
+        &common::plant(),
+        &[&"--scenario", &s, &"--out", &out, &"--elf", &elf],
+    );
+    let stdout = String::from_utf8_lossy(&r.stdout);
+    assert_eq!(r.status.code(), Some(1), "{stdout}");
+    assert!(stdout.contains("expectation not met"), "{stdout}");
+    // The runs still agree; the recording is written.
+    assert!(stdout.contains("bit for bit"), "{stdout}");
+    assert!(out.exists());
 }
 
 #[test]

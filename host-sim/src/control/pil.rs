@@ -403,8 +403,9 @@ pub struct PilArgs {
     /// Plant parameter file (TOML).
     #[arg(long, value_name = "P.toml")]
     pub plant: PathBuf,
-    /// Closed-loop scenario (TOML); its [sensors] must quantise (pressure_lsb_pa > 0,
-    /// angle_counts_per_rev > 0): the firmware gets raw counts.
+    /// Closed-loop scenario (TOML). The firmware gets raw board counts: the scenario's
+    /// [sensors] run with `board_counts = true` (turned on, and said, when the file leaves it
+    /// off). Its [expect] bounds are checked on the firmware's run (exit status 1 if not met).
     #[arg(long, value_name = "S.toml")]
     pub scenario: PathBuf,
     /// Output recording (RECORDING.md), as `simulate --scenario` writes it.
@@ -423,10 +424,11 @@ pub struct PilArgs {
 }
 
 /// `host-sim pil`: runs the scenario with the firmware under QEMU, writes the recording,
-/// then runs the in-process loop on the same scenario and compares them bit for bit (valve
+/// checks the scenario's `[expect]` on it (the summary `simulate --scenario` prints), then
+/// runs the in-process loop on the same scenario and compares them bit for bit (valve
 /// columns and angle). Both run with the sensors in board counts (`[sensors] board_counts`
-/// is turned on when the scenario leaves it off). Returns the report and whether they
-/// matched.
+/// is turned on when the scenario leaves it off). Returns the report and whether the runs
+/// matched and the expectations were met.
 pub fn run_pil(a: &PilArgs) -> anyhow::Result<(String, bool)> {
     use anyhow::Context;
     if !(a.tick_timeout_s >= 1.0 && a.tick_timeout_s <= 600.0) {
@@ -515,6 +517,8 @@ pub fn run_pil(a: &PilArgs) -> anyhow::Result<(String, bool)> {
         log.len(),
         RECORD_LEN
     ));
+    let fails = run.check();
+    report.push_str(&crate::io::run_files::summary(&run, &scenario, &fails));
     let same = match first_difference(&run, &reference) {
         None => {
             report.push_str(&format!(
@@ -533,7 +537,7 @@ pub fn run_pil(a: &PilArgs) -> anyhow::Result<(String, bool)> {
             false
         }
     };
-    Ok((report, same))
+    Ok((report, same && fails.is_empty()))
 }
 
 /// Checks that `elf` can be a firmware image for the board before QEMU is started: an
@@ -597,6 +601,56 @@ pub fn check_elf_for(elf: &std::path::Path, hint: &str) -> Result<(), String> {
             "is a {class} {data} {arch} ELF file, not a 32-bit little-endian ARM (Cortex-M) \
              firmware image ({BUILD})"
         ));
+    }
+    elf32_layout_within(elf, meta.len()).map_err(|why| {
+        format!("is a truncated or damaged ELF file: {why} ({BUILD})")
+    })
+}
+
+/// Checks that the program and section header tables of the 32-bit little-endian ELF file
+/// `elf` (`len` bytes), and every loadable segment's bytes, lie within the file: a copy cut
+/// short passes the header check and makes QEMU abort with a register dump.
+fn elf32_layout_within(elf: &std::path::Path, len: u64) -> Result<(), String> {
+    use std::io::{Read, Seek, SeekFrom};
+    let mut f = std::fs::File::open(elf).map_err(|e| format!("cannot read it: {e}"))?;
+    let mut read_at = |at: u64, n: usize| -> Result<Vec<u8>, String> {
+        let mut b = vec![0u8; n];
+        f.seek(SeekFrom::Start(at))
+            .and_then(|_| f.read_exact(&mut b))
+            .map_err(|_| format!("{n} bytes at offset {at} lie beyond its {len} bytes"))?;
+        Ok(b)
+    };
+    let h = read_at(0, 52).map_err(|_| format!("its {len} bytes hold no complete ELF header"))?;
+    let u16_at = |b: &[u8], i: usize| u64::from(u16::from_le_bytes([b[i], b[i + 1]]));
+    let u32_at =
+        |b: &[u8], i: usize| u64::from(u32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]));
+    let (phoff, shoff) = (u32_at(&h, 28), u32_at(&h, 32));
+    let (phentsize, phnum) = (u16_at(&h, 42), u16_at(&h, 44));
+    let (shentsize, shnum) = (u16_at(&h, 46), u16_at(&h, 48));
+    if phnum == 0 {
+        return Err("it has no program headers (nothing to load)".into());
+    }
+    for (what, off, size, n) in [
+        ("program header table", phoff, phentsize, phnum),
+        ("section header table", shoff, shentsize, shnum),
+    ] {
+        if off + size * n > len {
+            return Err(format!(
+                "its {what} ends at byte {} of a {len}-byte file",
+                off + size * n
+            ));
+        }
+    }
+    const PT_LOAD: u64 = 1;
+    for i in 0..phnum {
+        let ph = read_at(phoff + i * phentsize, 32)?;
+        let (offset, filesz) = (u32_at(&ph, 4), u32_at(&ph, 16));
+        if u32_at(&ph, 0) == PT_LOAD && offset + filesz > len {
+            return Err(format!(
+                "loadable segment {i} ends at byte {} of a {len}-byte file",
+                offset + filesz
+            ));
+        }
     }
     Ok(())
 }
