@@ -479,10 +479,13 @@ fn a_crashing_image_gives_qemus_first_line_and_a_few_lines_of_details() {
         eprintln!("SKIPPED: qemu-system-arm not installed (scripts/setup.sh)");
         return;
     }
-    // An ELF header for 32-bit ARM and nothing else: QEMU loads it and the core locks up.
+    // A well-formed 32-bit ARM ELF whose one segment is a vector table of zeros (stack
+    // pointer 0, reset vector 0): QEMU loads it and the core locks up.
     let mut h = b"\x7fELF\x01\x01\x01\x00".to_vec();
     h.extend([0u8; 8]);
     for (v, bytes) in [
+        // ELF header: type, machine, version, entry, phoff, shoff, flags, ehsize,
+        // phentsize, phnum, shentsize, shnum, shstrndx.
         (2u32, 2),
         (40, 2),
         (1, 4),
@@ -492,13 +495,23 @@ fn a_crashing_image_gives_qemus_first_line_and_a_few_lines_of_details() {
         (0, 4),
         (52, 2),
         (32, 2),
-        (0, 2),
+        (1, 2),
         (40, 2),
         (0, 2),
         (0, 2),
+        // PT_LOAD: offset 84, vaddr, paddr, filesz 8, memsz 8, flags r-x, align 4.
+        (1, 4),
+        (84, 4),
+        (0x0800_0000, 4),
+        (0x0800_0000, 4),
+        (8, 4),
+        (8, 4),
+        (5, 4),
+        (4, 4),
     ] {
         h.extend(&v.to_le_bytes()[..bytes]);
     }
+    h.extend([0u8; 8]);
     let d = tempfile::tempdir().unwrap();
     let elf = d.path().join("hdr.elf");
     std::fs::write(&elf, &h).unwrap();
@@ -522,4 +535,35 @@ fn a_crashing_image_gives_qemus_first_line_and_a_few_lines_of_details() {
     if e.lines().count() > 1 {
         assert!(e.contains("\n  details:"), "{e}");
     }
+}
+
+#[test]
+fn an_arm_scenario_or_the_firmwares_arm_constants_given_to_the_one_dof_loop_are_named() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("out.csv");
+    let arm_scenario = root().join("scenarios/arm3/pick_place.toml");
+    // An arm scenario on the 1-DOF plant (or the arm plant: the scenario is read first).
+    for p in [plant(), arm3_plant()] {
+        let r = on_plant("simulate", &p, &[&"--scenario", &arm_scenario, &"--out", &out]);
+        assert_refused(
+            &r,
+            &[
+                "pick_place.toml",
+                "a 3-DOF arm scenario",
+                "host-sim demo --plant host-sim/plants/arm3-seed001.toml",
+            ],
+            &out,
+        );
+    }
+    // The firmware's arm constants given as a plant.
+    let r = on_plant(
+        "simulate",
+        &root().join("config/arm3.toml"),
+        &[&"--scenario", &root().join("scenarios/step.toml"), &"--out", &out],
+    );
+    assert_refused(
+        &r,
+        &["config/arm3.toml", "the firmware's arm constants", "arm3-seed001.toml"],
+        &out,
+    );
 }

@@ -677,6 +677,19 @@ impl Scenario {
                     );
                 }
             }
+            // An arm scenario (waypoints of three joints) given where a 1-DOF one belongs.
+            let arm = text
+                .parse::<toml::Table>()
+                .ok()
+                .and_then(|d| d.get("setpoint")?.as_table()?.get("waypoints").cloned())
+                .is_some();
+            if arm {
+                msg.push_str(
+                    "\n  this is a 3-DOF arm scenario ([setpoint] waypoints, scenarios/arm3/): it \
+                     runs on an arm plant file with `host-sim demo --plant \
+                     host-sim/plants/arm3-seed001.toml --scenario FILE`",
+                );
+            }
             ClosedLoopError::Scenario {
                 file: file.to_string(),
                 msg,

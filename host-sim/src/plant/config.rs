@@ -147,6 +147,12 @@ pub fn read_plant_text(path: &Path) -> Result<String, ConfigError> {
 fn other_product_file(text: &str) -> Option<&'static str> {
     let doc: toml::Table = text.parse().ok()?;
     let has = |t: &str| doc.contains_key(t);
+    if has("links") && has("joint1") && !has("kind") {
+        return Some(
+            "the firmware's arm constants (config/arm3.toml; the 3-DOF arm plant file is \
+             host-sim/plants/arm3-seed001.toml, kind = \"arm3\")",
+        );
+    }
     if has("muscle") || has("joint") || has("joint1") {
         return None;
     }
