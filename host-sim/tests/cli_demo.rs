@@ -96,3 +96,31 @@ fn demo_into_a_file_is_refused_before_the_runs_and_the_file_kept() {
     );
     assert_eq!(std::fs::read_to_string(&file).unwrap(), "mine\n");
 }
+
+#[test]
+fn demo_with_a_fixture_it_cannot_fit_is_refused_before_any_run() {
+    let dir = tempfile::tempdir().unwrap();
+    // The conformance fixture's valve columns without one measured channel.
+    let text = std::fs::read_to_string(fixture("pulses_nominal.csv")).unwrap();
+    let inputs_only: String = text
+        .lines()
+        .map(|l| {
+            if l.starts_with('#') {
+                l.to_string()
+            } else {
+                l.split(',').take(5).collect::<Vec<_>>().join(",")
+            }
+        })
+        .map(|l| l + "\n")
+        .collect();
+    let fx = dir.path().join("inputs_only.csv");
+    std::fs::write(&fx, inputs_only).unwrap();
+    let out_dir = dir.path().join("d");
+    let r = host_sim(&[&"demo", &"--out-dir", &out_dir, &"--fixture", &fx]);
+    let err = exits(2, &r);
+    assert!(
+        err.contains("inputs_only.csv") && err.contains("no output column"),
+        "{err}"
+    );
+    assert!(!out_dir.exists(), "the scenarios ran and wrote into {}", out_dir.display());
+}
