@@ -46,9 +46,9 @@ enum Command {
     /// The fixture needs t_s, u_in1, u_ex1, u_in2, u_ex2 and at least one measured channel
     /// (angle_deg, p1_kpa, p2_kpa, f1_n, f2_n; RECORDING.md); each one present is fitted.
     ///
-    /// Exit status: 0 when every scenario meets its [expect] and every fixture channel fits
-    /// >= 99.5 %; 1 when one does not (the report says which); 2 when an argument or an input
-    /// file is refused (nothing is written then).
+    /// Exit status: 0 when every scenario meets its [expect] and every fixture channel
+    /// fits at least 99.5 %; 1 when one does not (the report says which); 2 when an argument
+    /// or an input file is refused (nothing is written then).
     Demo(DemoArgs),
     /// Generate identification data from a plant file (force: isometric bench sweep; torque:
     /// constant-speed passes at fixed activations, the torque-model paper's protocol).

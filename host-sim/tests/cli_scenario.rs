@@ -303,3 +303,42 @@ fn replay_only_options_are_refused_with_a_scenario() {
         assert!(!dir.path().join("o.csv").exists());
     }
 }
+
+#[test]
+fn a_misspelt_choice_in_an_event_or_the_setpoint_names_its_own_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out.csv");
+    let dropout = std::fs::read_to_string(root().join("scenarios/sensor_dropout.toml")).unwrap();
+    let step = std::fs::read_to_string(root().join("scenarios/step.toml")).unwrap();
+    for (name, text, typo, key) in [
+        (
+            "channel.toml",
+            dropout.replace("channel = \"angle\"", "channel = \"p9\""),
+            "p9",
+            "channel",
+        ),
+        (
+            "event_kind.toml",
+            dropout.replace("kind = \"sensor_dropout\"", "kind = \"dropout\""),
+            "dropout",
+            "kind",
+        ),
+        ("step_kind.toml", step.replace("kind = \"step\"", "kind = \"stp\""), "stp", "kind"),
+    ] {
+        let line = 1 + text
+            .lines()
+            .position(|l| l.contains(&format!("\"{typo}\"")))
+            .unwrap();
+        let s = dir.path().join(name);
+        std::fs::write(&s, &text).unwrap();
+        let r = simulate(&s, &out, &[]);
+        assert_refused(
+            &r,
+            &[
+                name,
+                &format!("line {line}: key `{key}`: unknown variant `{typo}`"),
+            ],
+            &out,
+        );
+    }
+}

@@ -121,7 +121,7 @@ impl ArmScenario {
     pub fn from_toml_str(text: &str, file: &str) -> Result<Self, ClosedLoopError> {
         let s: ArmScenario = toml::from_str(text).map_err(|e| ClosedLoopError::Scenario {
             file: file.to_string(),
-            msg: e.to_string().trim_end().to_string(),
+            msg: crate::io::scenario::toml_error_message(&e, text),
         })?;
         let bad = key_error(text, file);
         s.scenario.check(&bad)?;

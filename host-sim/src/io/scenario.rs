@@ -642,41 +642,7 @@ impl Scenario {
     /// Parses and validates scenario TOML text (`file` names it in errors).
     pub fn from_toml_str(text: &str, file: &str) -> Result<Self, ClosedLoopError> {
         let s: Scenario = toml::from_str(text).map_err(|e| {
-            let mut msg = e.to_string().trim_end().to_string();
-            // Tagged tables (`[setpoint]`, `[[events]]`) are reported at their header line;
-            // name the offending key's own line instead (the parser's last line is its
-            // message, without the header's line and snippet).
-            let reason = e.message().trim_end().to_string();
-            if let Some(name) = reason
-                .split("unknown field `")
-                .nth(1)
-                .and_then(|r| r.split('`').next())
-            {
-                if let Some((i, _)) = text
-                    .lines()
-                    .enumerate()
-                    .find(|(_, l)| sets_key(l.trim(), name))
-                {
-                    msg = format!("line {}: key `{name}`: {reason}", i + 1);
-                }
-            } else if reason.starts_with("invalid type: string") && reason.contains("expected f64")
-            {
-                // A number typed in quotes: the first quoted value of a key that takes a
-                // number (every such key carries its unit or is a count).
-                if let Some((i, key)) = text.lines().enumerate().find_map(|(i, l)| {
-                    let (k, v) = l.split_once('=')?;
-                    let k = k.trim();
-                    let quoted = v.trim().starts_with('"');
-                    let numeric = !matches!(k, "kind" | "name" | "channel" | "valve" | "state");
-                    (quoted && numeric).then_some((i, k))
-                }) {
-                    msg = format!(
-                        "line {}: key `{key}`: a number is expected, got a string (remove the \
-                         quotes)",
-                        i + 1
-                    );
-                }
-            }
+            let mut msg = toml_error_message(&e, text);
             // An arm scenario (waypoints of three joints) given where a 1-DOF one belongs.
             let arm = text
                 .parse::<toml::Table>()
@@ -1016,4 +982,57 @@ pub(crate) fn event_time(e: &Event) -> f64 {
         | Event::FirmwareReset { at_s, .. }
         | Event::StuckValve { at_s, .. } => at_s,
     }
+}
+
+/// The message of a scenario file's TOML error `e` (1-DOF or arm): tagged tables
+/// (`[setpoint]`, `[[events]]`) are reported at their header line, so an unknown key, a
+/// misspelt choice and a number in quotes are named at their own line instead.
+pub(crate) fn toml_error_message(e: &toml::de::Error, text: &str) -> String {
+    let mut msg = e.to_string().trim_end().to_string();
+    // The parser's last line is its message, without the header's line and snippet.
+    let reason = e.message().trim_end().to_string();
+    if let Some(name) = reason
+        .split("unknown field `")
+        .nth(1)
+        .and_then(|r| r.split('`').next())
+    {
+        if let Some((i, _)) = text
+            .lines()
+            .enumerate()
+            .find(|(_, l)| sets_key(l.trim(), name))
+        {
+            msg = format!("line {}: key `{name}`: {reason}", i + 1);
+        }
+    } else if let Some(value) = reason
+        .strip_prefix("unknown variant `")
+        .and_then(|r| r.split('`').next())
+    {
+        // A misspelt choice inside a tagged table (`channel = "p9"` in [[events]]):
+        // the line that sets it.
+        if let Some((i, key)) = text.lines().enumerate().find_map(|(i, l)| {
+            let (k, v) = l.split_once('=')?;
+            let v = v.split('#').next()?.trim();
+            (v.trim_matches('"') == value && v.starts_with('"')).then(|| (i, k.trim()))
+        }) {
+            msg = format!("line {}: key `{key}`: {reason}", i + 1);
+        }
+    } else if reason.starts_with("invalid type: string") && reason.contains("expected f64")
+    {
+        // A number typed in quotes: the first quoted value of a key that takes a
+        // number (every such key carries its unit or is a count).
+        if let Some((i, key)) = text.lines().enumerate().find_map(|(i, l)| {
+            let (k, v) = l.split_once('=')?;
+            let k = k.trim();
+            let quoted = v.trim().starts_with('"');
+            let numeric = !matches!(k, "kind" | "name" | "channel" | "valve" | "state");
+            (quoted && numeric).then_some((i, k))
+        }) {
+            msg = format!(
+                "line {}: key `{key}`: a number is expected, got a string (remove the \
+                 quotes)",
+                i + 1
+            );
+        }
+    }
+    msg
 }
