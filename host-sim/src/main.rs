@@ -94,8 +94,9 @@ enum Command {
     Capture(host_sim::io::capture::CaptureArgs),
     /// Processor in the loop: the firmware image under qemu-system-arm closes the loop with the
     /// plant, one exchanged sensor frame (board counts) and valve command per tick; writes the
-    /// recording and compares it bit for bit with the in-process loop (exit status 1 on a
-    /// mismatch, named by its first tick and field).
+    /// recording, checks the scenario's [expect] on it and compares it bit for bit with the
+    /// in-process loop (exit status 1 on a mismatch, named by its first tick and field, or an
+    /// unmet [expect]).
     Pil(host_sim::control::pil::PilArgs),
     /// The pressure loop with and without the firmware's inverse thermodynamic feed-forward
     /// (the pressure command from the chamber's gas law, eq. 7 of the
