@@ -38,17 +38,9 @@ fn bad_tune_arguments_are_refused_without_touching_the_output() {
             "must be a number of seconds within [0, 2], got -1",
         ),
     ] {
-        let r = bin()
-            .arg("tune")
-            .arg("--plant")
-            .arg(plant())
-            .arg("--out")
-            .arg(&out)
-            .args(&args)
-            .output()
-            .unwrap();
-        assert_eq!(r.status.code(), Some(2), "{args:?}");
-        let err = String::from_utf8_lossy(&r.stderr);
+        let mut rest: Vec<&dyn AsRef<std::ffi::OsStr>> = vec![&"--out", &out];
+        rest.extend(args.iter().map(|a| a as &dyn AsRef<std::ffi::OsStr>));
+        let err = exits(2, &on_plant("tune", &plant(), &rest));
         assert!(err.contains(want), "{args:?}: {err}");
         assert_eq!(std::fs::read_to_string(&out).unwrap(), "previous\n");
     }
