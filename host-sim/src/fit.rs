@@ -215,10 +215,17 @@ pub fn format_table(fits: &[ChannelFit]) -> String {
         "channel", "fit_%", "MAE", "MSE", "samples"
     );
     for f in fits {
+        // A constant reference has no spread to normalise by: its fit is undefined (the note
+        // under the table says so), not -inf.
+        let fit = if f.fit_percent.is_finite() {
+            format!("{:.4}", f.fit_percent)
+        } else {
+            "undefined".to_string()
+        };
         s += &format!(
-            "{:<10} {:>10.4} {:>14.6e} {:>14.6e} {:>8}\n",
+            "{:<10} {:>10} {:>14.6e} {:>14.6e} {:>8}\n",
             f.channel.name(),
-            f.fit_percent,
+            fit,
             f.mae,
             f.mse,
             f.samples

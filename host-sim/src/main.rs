@@ -1015,8 +1015,14 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
             return Ok(ExitCode::from(3));
         }
         Err(e) => {
-            return Err(anyhow::Error::new(e))
-                .with_context(|| format!("{}: diagnosis failed", a.recording.display()))
+            // An error of the check recording names that file (`--check`), not the training one.
+            let file = match &a.check {
+                Some(c) if e.to_string().starts_with("check recording") => {
+                    format!("--check {}", c.display())
+                }
+                _ => a.recording.display().to_string(),
+            };
+            return Err(anyhow::Error::new(e)).with_context(|| format!("{file}: diagnosis failed"));
         }
     };
     let json = serde_json::to_string_pretty(&d.to_json())? + "\n";

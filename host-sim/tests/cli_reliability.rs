@@ -495,6 +495,9 @@ fn fit_against_a_constant_reference_channel_says_so_instead_of_a_bare_minus_infi
         out.contains("angle_deg: constant in the reference") && out.contains("dead.csv"),
         "{out}"
     );
+    // The table's fit column says it too (it printed -inf).
+    let row = out.lines().find(|l| l.starts_with("angle_deg ")).unwrap();
+    assert!(row.contains("undefined") && !row.contains("inf "), "{row}");
     assert!(
         err.contains("angle_deg: fit undefined (the reference is constant)"),
         "{err}"
@@ -998,6 +1001,14 @@ fn diagnose_refuses_a_check_recording_that_is_the_training_recording() {
             &["--check", "is the same file as --recording"],
         );
     }
+    // A check recording with nothing to judge is named as --check, not as the training file.
+    let text = std::fs::read_to_string(fixture("pulses_nominal.csv")).unwrap();
+    let still = w.write("still.csv", &(text.lines().take(30).collect::<Vec<_>>().join("\n") + "\n"));
+    w.refuses_with(
+        "diagnose --plant {plant} --recording {rec} --check {check} --json {w}/out.json",
+        &[("rec", &rec), ("check", &still)],
+        &["--check", "still.csv: diagnosis failed: check recording: nothing to judge"],
+    );
 }
 
 /// The fixture's text with its header edited by `header` and each line's fields filtered by

@@ -115,8 +115,8 @@ pub struct CompareControlArgs {
     /// Tuned gains of the P-only cascade [default: config/control_tuned.toml under the working
     /// directory if it is there, else the shipped gains built into host-sim]; the report's
     /// first line names the file used. The verdict compares the P-only cascade at these gains
-    /// with the feed-forward cascade at --ff-gains (each design tuned for itself, as seed 004
-    /// compares them); give both files, tuned on the same plant, or the verdict compares
+    /// with the feed-forward cascade at --ff-gains (each design tuned for itself, as the
+    /// learned-inverse-thermodynamics paper compares them); give both files, tuned on the same plant, or the verdict compares
     /// tunings of different origin. The same-gains ratio is printed beside it.
     #[arg(long, value_name = "CONTROL_TUNED.toml")]
     pub gains: Option<PathBuf>,
@@ -401,7 +401,7 @@ pub fn controllers(
 }
 
 /// The row of the analytical feed-forward with the cascade's gains tuned with it on: the
-/// verdict's row (each controller at its own best gains, as seed 004 compares them).
+/// verdict's row (each controller at its own best gains, as the learned-inverse-thermodynamics paper compares them).
 pub const RETUNED_ROW: &str = "+ analytical, k = 1, cascade re-tuned with it on";
 
 /// Where the position error of one controller comes from on one scenario set (sums over the

@@ -475,6 +475,47 @@ mod tests {
     }
 
     #[test]
+    fn intervals_of_parameters_of_very_different_sizes_are_determined() {
+        // A sonic conductance (1e-8 m^3/(s Pa)) fitted with an inertia (1e-2 kg m^2): the
+        // same exponential with a = 2e-8 * 1e8 and b = 0.013 * 100, with a little noise.
+        let t: Vec<f64> = (0..400).map(|k| k as f64 * 0.01).collect();
+        let y: Vec<f64> = t
+            .iter()
+            .enumerate()
+            .map(|(k, t)| 2.0 * (-1.3 * t).exp() + 1e-4 * ((k * 7919 % 400) as f64 / 200.0 - 1.0))
+            .collect();
+        let f = |x: &[f64]| -> Option<Vec<f64>> {
+            Some(
+                t.iter()
+                    .zip(&y)
+                    .map(|(t, y)| 1e8 * x[0] * (-100.0 * x[1] * t).exp() - y)
+                    .collect(),
+            )
+        };
+        let x = [2e-8, 0.013];
+        let params = [
+            OeParam {
+                x0: x[0],
+                lo: 0.0,
+                hi: f64::INFINITY,
+                scale: 1e-8,
+            },
+            OeParam {
+                x0: x[1],
+                lo: 0.0,
+                hi: f64::INFINITY,
+                scale: 1e-2,
+            },
+        ];
+        let (u, _) = uncertainty(&f, &params, &x);
+        for (k, v) in x.iter().enumerate() {
+            let rel = u.sd[k] / v;
+            assert!(rel.is_finite() && rel > 0.0 && rel < 1e-3, "{k}: sd {} ({rel})", u.sd[k]);
+        }
+        assert!(u.correlation[(0, 1)].abs() < 1.0, "{}", u.correlation);
+    }
+
+    #[test]
     fn a_failing_model_region_is_avoided() {
         // The model fails for x > 3; the optimum is at 2.
         let f = |x: &[f64]| -> Option<Vec<f64>> {

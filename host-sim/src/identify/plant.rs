@@ -422,9 +422,11 @@ pub fn fit_plant(
     }
     let n = rec.len();
     let n_train = ((1.0 - opts.holdout_fraction) * n as f64).round() as usize;
-    if n_train < 10 * specs.len().max(1) || n_train < 20 {
+    let n_train_min = (10 * specs.len()).max(20);
+    if n_train < n_train_min {
         return Err(IdentError::Data(format!(
-            "recording too short: {n_train} training samples for {} parameters",
+            "recording too short: {n_train} training samples for {} parameters (at least \
+             {n_train_min}: 20, and 10 a parameter); record a longer run",
             specs.len()
         )));
     }
@@ -486,7 +488,7 @@ pub fn fit_plant(
             x0: *x,
             lo: s.lower,
             hi: s.upper,
-            scale: x.abs().max(1.0),
+            scale: param_scale(*x, s.lower, s.upper),
         })
         .collect();
     let oe = OeOptions {
@@ -699,6 +701,20 @@ fn at_bound_warnings(specs: &[ParamSpec], x0: &[f64], x1: &[f64]) -> Vec<Option<
         .collect()
 }
 
+/// The typical size of a fitted value starting at `x0` within `lower..upper`: its own
+/// magnitude (a sonic conductance of 8e-9 m^3/(s Pa) next to an inertia of 1e-2 kg m^2; a
+/// floor of 1 made the interval's difference step 1e-4, twelve thousand times the
+/// conductance, and every value "not determined"), else the finite range's, else 1.
+fn param_scale(x0: f64, lower: f64, upper: f64) -> f64 {
+    if x0 != 0.0 && x0.is_finite() {
+        x0.abs()
+    } else if (upper - lower).is_finite() && upper > lower {
+        (upper - lower).min(lower.abs().max(upper.abs()))
+    } else {
+        1.0
+    }
+}
+
 /// The `i`-th value's 95 % interval is within [`UNDETERMINED_HALF_WIDTH_FRACTION`] of its
 /// magnitude (of the start value's, when larger).
 fn determined(x0: &[f64], x1: &[f64], u: &output_error::Uncertainty, i: usize) -> bool {
@@ -786,7 +802,13 @@ pub fn identify_plant_text(
             .map(|(_, _, r, unit)| (*r, *unit))
     };
     let specs = parse_param_specs_within(params, &text, &file, &allowed)?;
-    let fit = fit_plant(&rec, &text, &file, &specs, opts)?;
+    let fit = fit_plant(&rec, &text, &file, &specs, opts).map_err(|e| match e {
+        // Name the recording that is too short (`calibrate` passes its --plant-recording).
+        IdentError::Data(m) if m.starts_with("recording too short") => {
+            IdentError::Data(format!("{}: {m}", recording.display()))
+        }
+        e => e,
+    })?;
     let mut body = String::new();
     let _ = writeln!(
         body,
@@ -817,6 +839,16 @@ pub fn identify_plant_text(
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn a_parameters_scale_is_its_own_size_not_a_floor_of_one() {
+        assert_eq!(param_scale(8e-9, 1e-12, 1e-6), 8e-9);
+        assert_eq!(param_scale(-2.5, f64::NEG_INFINITY, 0.0), 2.5);
+        // From 0: the range's size, else 1.
+        assert_eq!(param_scale(0.0, 0.0, 1e-6), 1e-6);
+        assert_eq!(param_scale(0.0, 0.0, f64::INFINITY), 1.0);
+    }
+
     use super::*;
 
     #[test]

@@ -844,6 +844,15 @@ mod tests {
 }
 
 /// Arguments of `host-sim identify volume`.
+/// A path of a comma-separated list without the blanks around it (`"a.csv, b.csv"`).
+fn trimmed_path(s: &str) -> Result<std::path::PathBuf, String> {
+    let t = s.trim();
+    if t.is_empty() {
+        return Err("an empty file name in the list".into());
+    }
+    Ok(t.into())
+}
+
 #[derive(clap::Args, Debug)]
 #[command(
     after_help = "Example:\n  host-sim simulate --plant ../shared/plant/reference-1dof.toml --scenario scenarios/random.toml --out random.csv\n  host-sim identify volume --recording random.csv --out config/volume.toml"
@@ -875,7 +884,7 @@ pub struct IdentifyVolumeArgs {
     pub holdout_fraction: f64,
     /// Also report the mass-flow errors on these recordings (not trained on; comma
     /// separated).
-    #[arg(long, value_name = "R2.csv", value_delimiter = ',')]
+    #[arg(long, value_name = "R2.csv", value_delimiter = ',', value_parser = trimmed_path)]
     pub validate: Vec<std::path::PathBuf>,
     /// At most this many training samples (both muscles; evenly thinned).
     #[arg(long, default_value_t = 4000, value_parser = crate::validate::usize_in(100, 1_000_000))]
