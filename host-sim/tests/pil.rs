@@ -599,3 +599,39 @@ fn capture_splits_a_run_at_its_gaps_and_names_faulted_ticks() {
     );
     assert!(!dir.path().join("n-1.csv").exists());
 }
+
+#[test]
+fn capture_names_the_logs_record_for_an_implausible_reading_not_the_output() {
+    use pam_firmware::stream::{TickRecord, RECORD_LEN};
+    let dir = tempfile::tempdir().unwrap();
+    // 40 ticks; tick 30 scaled p1 to 1e9 Pa (a board configured for another sensor).
+    let mut raw = Vec::new();
+    for seq in 0..40u32 {
+        let r = TickRecord {
+            seq,
+            t_us: 1000 * seq,
+            setpoint_rad: 0.1,
+            openings: [1.0, 0.0, 0.0, 1.0],
+            p_counts: [1547, 1600],
+            encoder_counts: 12,
+            p_gauge_pa: [if seq == 30 { 1e9 } else { 266_601.56 }, 279_541.0],
+            angle_rad: 0.001 * seq as f32,
+            fault: 0,
+            armed: true,
+        };
+        let mut b = [0u8; RECORD_LEN];
+        r.encode(&mut b);
+        raw.extend_from_slice(&b);
+    }
+    let log = dir.path().join("bad.stream");
+    std::fs::write(&log, &raw).unwrap();
+    // An existing good recording as --out stays as it was.
+    let out = previous_output(dir.path(), "rec.csv");
+    let r = host_sim(&[&"capture", &"--log", &log, &"--out", &out]);
+    let err = exits(2, &r);
+    for needle in ["bad.stream: record of sequence 30: p1_kpa", "a value in Pa?"] {
+        assert!(err.contains(needle), "{needle:?} in {err}");
+    }
+    assert!(!err.contains("rec.csv"), "{err}");
+    assert_kept(&out);
+}

@@ -570,6 +570,26 @@ pub fn run_capture(a: &CaptureArgs) -> anyhow::Result<String> {
         let (s, c) = segments_of(&t.records, &a.log, &Positions::Lines(&t.bad), a.split)?;
         (s, c, "text lines".to_string())
     };
+    // A reading the recording format refuses is the log's (a record scaled by a wrong
+    // board configuration, a corrupted field): named by its sequence number in the log, before
+    // anything is written.
+    for s in &segments {
+        for c in crate::Channel::ALL {
+            let Some(y) = s.recording.channel(c) else {
+                continue;
+            };
+            if let Some((k, v)) = y.iter().enumerate().find(|(_, v)| !c.is_plausible(**v)) {
+                anyhow::bail!(
+                    "{}: record of sequence {}: {}: {} (the firmware's scaled reading; nothing \
+                     written)",
+                    a.log.display(),
+                    s.seq.0.wrapping_add(k as u32),
+                    c.name(),
+                    c.implausible(*v)
+                );
+            }
+        }
+    }
     let recordings: Vec<Recording> = segments.iter().map(|s| s.recording.clone()).collect();
     let (written, stale) = crate::io::segments::write_segments(
         &a.out,
