@@ -1228,3 +1228,22 @@ fn identify_torque_refuses_one_tension_column_without_the_other() {
         ],
     );
 }
+
+#[test]
+fn a_plant_file_and_a_recording_given_the_other_way_round_are_named_as_such() {
+    let w = Workspace::new();
+    let swapped = "are the plant file and the recording given the other way round?";
+    for line in [
+        "diagnose --plant {fixture} --recording {plant} --json {w}/out.json",
+        "identify plant --plant {fixture} --recording {plant} --params joint.inertia_kgm2 --out {w}/P.toml",
+        "simulate --plant {fixture} --inputs {plant} --out {w}/out.csv",
+    ] {
+        // Whichever file the command reads first is named with the hint.
+        w.refuses(line, &[swapped]);
+    }
+    // The recording side given the plant file: named as a TOML file.
+    w.refuses(
+        "identify plant --plant {plant} --recording {plant} --params joint.inertia_kgm2 --out {w}/P.toml",
+        &["reference-1dof.toml", "this is a TOML file", swapped],
+    );
+}

@@ -1475,6 +1475,16 @@ impl<'t> Table<'t> {
             Some(h) => format!(" (column `{h}` is there: {})", rename_advice(name)),
             // Not one of RECORDING.md's columns: a rig logger's own file (its banner line or
             // its own column names).
+            // A TOML file (a plant or configuration file) where the recording belongs.
+            None if self
+                .headers
+                .get(0)
+                .is_some_and(|h| h.trim_start().starts_with('[') || h.contains('=')) =>
+            {
+                " (this is a TOML file, a plant or configuration file, not a recording: are \
+                 the plant file and the recording given the other way round?)"
+                    .to_string()
+            }
             None if !self.headers.iter().any(|h| h == "t_s") => {
                 " (the header has no `t_s` either: not a recording of RECORDING.md; a rig \
                  logger's file? read it with `host-sim import` and a mapping, docs/rig.md)"

@@ -404,7 +404,11 @@ pub fn is_arm3_file(path: impl AsRef<Path>) -> Result<bool, ConfigError> {
     })?;
     let v: toml::Table = toml::from_str(&text).map_err(|e| ConfigError::Parse {
         path: path.to_owned(),
-        message: e.to_string().trim_end().replace('\n', "\n  "),
+        message: format!(
+            "{}{}",
+            e.to_string().trim_end().replace('\n', "\n  "),
+            crate::plant::config::not_a_plant_hint(&text)
+        ),
     })?;
     Ok(v.contains_key("kind"))
 }

@@ -142,6 +142,35 @@ pub fn read_plant_text(path: &Path) -> Result<String, ConfigError> {
     })
 }
 
+/// What a file given as a plant file is instead, when it is another of this product's
+/// files or a recording (a line to append to the parse error); empty otherwise.
+pub(crate) fn not_a_plant_hint(text: &str) -> String {
+    other_product_file(text)
+        .map(|kind| {
+            format!(
+                "\n  this is {kind}, not a plant file (PLANT.md: [environment], [muscle], \
+                 [joint], [valve], [initial])"
+            )
+        })
+        .or_else(|| {
+            looks_like_recording(text).then(|| {
+                "\n  this is a recording (CSV), not a plant file (TOML): are the plant file and \
+                 the recording given the other way round?"
+                    .to_string()
+            })
+        })
+        .unwrap_or_default()
+}
+
+/// Whether `text` is a recording (RECORDING.md): its first line that is not a `#` comment
+/// is a comma-separated header starting with `t_s`.
+fn looks_like_recording(text: &str) -> bool {
+    text.lines()
+        .map(str::trim)
+        .find(|l| !l.is_empty() && !l.starts_with('#'))
+        .is_some_and(|l| l.trim_start_matches('\u{feff}').starts_with("t_s,"))
+}
+
 /// What another of this product's TOML files is, told by its tables, when `text` is one
 /// (given where a plant file belongs): `None` for anything else.
 fn other_product_file(text: &str) -> Option<&'static str> {
@@ -202,12 +231,7 @@ pub fn parse_plant_text<T: serde::de::DeserializeOwned>(
         message: format!(
             "{}{}",
             e.to_string().trim_end().replace('\n', "\n  "),
-            other_product_file(text)
-                .map(|kind| format!(
-                    "\n  this is {kind}, not a plant file (PLANT.md: [environment], [muscle], \
-                     [joint], [valve], [initial])"
-                ))
-                .unwrap_or_default()
+            not_a_plant_hint(text)
         ),
     })?;
     validate(&cfg, path).map_err(|e| match e {
