@@ -420,6 +420,16 @@ fn unit_mistakes_in_a_mapping_are_refused_at_their_line_or_flagged() {
             "bar mapped as MPa",
         ],
     );
+    // Millivolts mapped as volts (scale 1000 stands for the logger's mV): every command far
+    // beyond the 0..10 V curve, which would clamp all of them to full opening.
+    refused(
+        &MAP.replacen(
+            "column = \"MPYE1 [V]\"\nchannel = \"valve1\"\nunit = \"V\"",
+            "column = \"MPYE1 [V]\"\nchannel = \"valve1\"\nunit = \"V\"\nscale = 1000.0",
+            1,
+        ),
+        &["rig.csv:", "MPYE1 [V]", "outside its curve's 0..10 V", "a value in mV?"],
+    );
     // A scale of zero would flatten the channel.
     refused(
         &MAP.replacen(

@@ -642,6 +642,10 @@ fn convert(conv: &Convert, v: f64) -> f64 {
     }
 }
 
+/// How far beyond its `curve`'s voltage table a valve command may read before it is refused
+/// rather than clamped to the table's end (a fraction of the table's span).
+pub const CURVE_MARGIN_OF_SPAN: f64 = 0.1;
+
 /// What a cell that does not parse as a number probably is, as the tail of the message: a
 /// decimal comma read with `decimal = "."`, or a thousands separator (both separators in the
 /// cell); empty when neither.
@@ -985,7 +989,32 @@ pub fn import(
                 (None, Some(k)) => k,
                 _ => unreachable!("checked: column or constant"),
             };
-            let v = convert(&plans[i].1, raw * c.scale + c.offset);
+            let x = raw * c.scale + c.offset;
+            // A command far outside its curve's table (millivolts logged for volts) would be
+            // clamped to the table's end on every row: refused. Slightly beyond (a 10.05 V
+            // reading of a 0..10 V command) is clamped.
+            if let Convert::Curve(pts) = &plans[i].1 {
+                let (lo, hi) = (pts[0][0], pts[pts.len() - 1][0]);
+                let margin = CURVE_MARGIN_OF_SPAN * (hi - lo);
+                if !(x >= lo - margin && x <= hi + margin) {
+                    let name = c.column.as_deref().unwrap_or("constant");
+                    return Err(at(
+                        line,
+                        name,
+                        format!(
+                            "channel `{}`: {} V is outside its curve's {}..{} V (by more than \
+                             {:.0} % of the span): a value in mV? (check the column's unit and \
+                             `scale`)",
+                            c.channel,
+                            Shown(x),
+                            Shown(lo),
+                            Shown(hi),
+                            100.0 * CURVE_MARGIN_OF_SPAN
+                        ),
+                    ));
+                }
+            }
+            let v = convert(&plans[i].1, x);
             if let Some(msg) = implausible(plans[i].0, v, mapping.pressure.p_atm_pa) {
                 let name = c.column.as_deref().unwrap_or("constant");
                 return Err(at(line, name, format!("channel `{}`: {msg}", c.channel)));
