@@ -68,6 +68,12 @@ fn calibrate_writes_the_torque_model_and_refuses_degenerate_data() {
             Box::new(|_: usize, _: f64| 3.0) as Box<dyn Fn(usize, f64) -> f64>,
             "angle_deg is constant",
         ),
+        // The sweep's +-20 degrees logged in radians: said as a likely unit slip.
+        (
+            "angle_deg",
+            Box::new(|_: usize, v: f64| v.to_radians()),
+            "or it is logged in radians",
+        ),
         ("p1_kpa", Box::new(|_, v| v + 700.0), "above the supply"),
         (
             "f1_n",

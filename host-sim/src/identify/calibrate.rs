@@ -73,10 +73,23 @@ fn sd(v: &[f64]) -> f64 {
 pub fn degenerate_reasons(rec: &Recording, plant: &Plant, file: &str) -> Vec<String> {
     let mut why = Vec::new();
     match rec.channel(Channel::AngleDeg) {
-        Some(a) if !(sd(a) >= MIN_ANGLE_SD_DEG) => why.push(format!(
-            "{file}: angle_deg is constant (sd {:.3} deg < {MIN_ANGLE_SD_DEG} deg): the joint did not move",
-            sd(a)
-        )),
+        Some(a) if !(sd(a) >= MIN_ANGLE_SD_DEG) => {
+            // A spread that would be a motion in radians: the angle logged in radians.
+            let as_rad_deg = sd(a).to_degrees();
+            let unit = if as_rad_deg >= MIN_ANGLE_SD_DEG {
+                format!(
+                    ", or it is logged in radians (read as radians its sd is {as_rad_deg:.1} \
+                     deg): check the angle unit, angle_deg is in degrees (RECORDING.md)"
+                )
+            } else {
+                String::new()
+            };
+            why.push(format!(
+                "{file}: angle_deg is constant (sd {:.3} deg < {MIN_ANGLE_SD_DEG} deg): the joint \
+                 did not move{unit}",
+                sd(a)
+            ))
+        }
         None => why.push(format!("{file}: no angle_deg column")),
         _ => {}
     }
