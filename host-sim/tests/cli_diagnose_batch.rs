@@ -231,6 +231,15 @@ fn the_exit_status_follows_the_worst_verdict_and_the_out_dir_may_be_the_recordin
         "{summary}"
     );
     assert_eq!(r.status.code(), Some(3), "{}", text(&r.stderr));
+    // The other rig's recording moved away: its earlier answer is named, not taken for this
+    // batch's (the summary does not list it).
+    std::fs::rename(recs.join("other.csv"), dir.path().join("other.csv")).unwrap();
+    let stdout = ok(&batch(&plant, &recs, &recs, &[]));
+    assert!(
+        stdout.contains("other.json is an earlier batch's answer for a recording not in this batch")
+            && !stdout.contains("nominal.json is an earlier"),
+        "{stdout}"
+    );
     // A user's recording that happens to be named summary.csv is not skipped: refused as an
     // input the batch would overwrite.
     std::fs::copy(fixture("pulses_nominal.csv"), recs.join("summary.csv")).unwrap();

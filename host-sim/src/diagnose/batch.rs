@@ -327,6 +327,28 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, u8)> {
             }
         }
     }
+    // Answers of an earlier batch for recordings no longer in --recordings would read as
+    // this batch's: named (left in place; the summary does not list them).
+    let ours: Vec<PathBuf> = rows.iter().map(|r| json_path(&a.out_dir, &r.recording)).collect();
+    let mut earlier: Vec<PathBuf> = std::fs::read_dir(&a.out_dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "json") && !ours.contains(p))
+        .filter(|p| {
+            std::fs::read_to_string(p)
+                .is_ok_and(|t| t.trim_start().starts_with('{') && t.contains("\"verdict\""))
+        })
+        .collect();
+    earlier.sort();
+    for p in &earlier {
+        removed += &format!(
+            "note: {} is an earlier batch's answer for a recording not in this batch (not in \
+             the summary; left as it is)\n",
+            p.display()
+        );
+    }
     let summary = own_summary;
     crate::io::atomic::write_bytes(&summary, summary_csv(&rows).as_bytes())
         .with_context(|| format!("{}", summary.display()))?;
