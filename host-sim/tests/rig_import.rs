@@ -527,6 +527,16 @@ fn bad_mapping_and_bad_cells_name_file_line_and_column() {
         e.contains("decimal comma") && e.contains("decimal = \",\""),
         "{e}"
     );
+    // A binary file: said so in a line, not its bytes on the terminal.
+    let binary = dir.path().join("log.bin");
+    let mut bytes = b"\x04\x00\x00\x12".repeat(300);
+    bytes.extend_from_slice(text.as_bytes());
+    std::fs::write(&binary, bytes).unwrap();
+    let e = run(MAP, &binary);
+    assert!(
+        e.contains("log.bin: not a text file (a NUL byte at byte 1)") && e.lines().count() == 1,
+        "{e}"
+    );
 }
 
 #[test]

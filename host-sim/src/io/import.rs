@@ -825,6 +825,14 @@ pub fn import(
         )));
     }
     let raw = std::fs::read(input).map_err(|e| ImportError(format!("{}: {e}", input.display())))?;
+    // A text export has no NUL bytes (nor does Latin-1 text): a binary log or a UTF-16 export.
+    if let Some(at) = raw.iter().position(|&b| b == 0) {
+        return Err(ImportError(format!(
+            "{}: not a text file (a NUL byte at byte {at}): a binary log or a UTF-16 export? \
+             export the log as CSV text (UTF-8 or Latin-1)",
+            input.display()
+        )));
+    }
     // A Windows export (`Winkel [°]` in Windows-1252 / Latin-1) is not UTF-8: read byte for
     // byte as Latin-1, so that its column names match the mapping's, and said so.
     let mut encoding_note = None;
