@@ -430,6 +430,11 @@ fn unit_mistakes_in_a_mapping_are_refused_at_their_line_or_flagged() {
         ),
         &["rig.csv:", "MPYE1 [V]", "outside its curve's 0..10 V", "a value in mV?"],
     );
+    // Encoder counts mapped as degrees: the hint names the unit the mapping gave.
+    refused(
+        &MAP.replace("unit = \"counts\"\ncounts_per_rev = 8000", "unit = \"deg\""),
+        &["rig.csv:", "Encoder", "encoder counts mapped with `unit = \"deg\"`"],
+    );
     // A scale of zero would flatten the channel.
     refused(
         &MAP.replacen(

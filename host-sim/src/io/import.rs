@@ -673,7 +673,7 @@ fn number_hint(cell: &str, comma: bool) -> &'static str {
 
 /// Why a converted value cannot be what the channel says (gauge Pa, rad, N), with the unit
 /// mistake that usually causes it; `None` when it can be.
-fn implausible(target: Target, v: f64, p_atm_pa: f64) -> Option<String> {
+fn implausible(target: Target, v: f64, p_atm_pa: f64, unit: &str) -> Option<String> {
     match target {
         Target::Output(Channel::P1Kpa | Channel::P2Kpa) | Target::Regulator(_) => {
             if v < -p_atm_pa {
@@ -696,10 +696,17 @@ fn implausible(target: Target, v: f64, p_atm_pa: f64) -> Option<String> {
             }
         }
         Target::Output(Channel::AngleDeg) if v.abs() > ANGLE_MAX_RAD => Some(format!(
-            "{} rad ({} deg) is beyond half a turn: degrees mapped with `unit = \"rad\"`, or \
-             the wrong `counts_per_rev` / `scale`?",
+            "{} rad ({} deg) is beyond half a turn: {}",
             Shown(v),
-            Shown(v.to_degrees())
+            Shown(v.to_degrees()),
+            match unit {
+                "rad" => "degrees mapped with `unit = \"rad\"`, or the wrong `scale`?",
+                "deg" => {
+                    "encoder counts mapped with `unit = \"deg\"` (use `unit = \"counts\"` with \
+                     `counts_per_rev`), or the wrong `scale`?"
+                }
+                _ => "the wrong `counts_per_rev` or `scale`?",
+            }
         )),
         Target::Output(Channel::F1N | Channel::F2N) if v.abs() > FORCE_MAX_N => Some(format!(
             "{} N is beyond {} N: kN mapped as N, or the wrong `scale`?",
@@ -1023,7 +1030,7 @@ pub fn import(
                 }
             }
             let v = convert(&plans[i].1, x);
-            if let Some(msg) = implausible(plans[i].0, v, mapping.pressure.p_atm_pa) {
+            if let Some(msg) = implausible(plans[i].0, v, mapping.pressure.p_atm_pa, c.unit.as_deref().unwrap_or("")) {
                 let name = c.column.as_deref().unwrap_or("constant");
                 return Err(at(line, name, format!("channel `{}`: {msg}", c.channel)));
             }
