@@ -430,6 +430,16 @@ fn unit_mistakes_in_a_mapping_are_refused_at_their_line_or_flagged() {
         ),
         &["rig.csv:", "MPYE1 [V]", "outside its curve's 0..10 V", "a value in mV?"],
     );
+    // Two entries for one channel: both named with their lines.
+    let dup = MAP.replacen("channel = \"p2\"", "channel = \"p1\"", 1);
+    refused(
+        &dup,
+        &[&format!(
+            "channel[1] (line {}) and channel[0] (line {}) both map `p1`",
+            line_of(&dup, "channel = \"p1\"", 1),
+            line_of(&dup, "channel = \"p1\"", 0)
+        )],
+    );
     // Encoder counts mapped as degrees: the hint names the unit the mapping gave.
     refused(
         &MAP.replace("unit = \"counts\"\ncounts_per_rev = 8000", "unit = \"deg\""),

@@ -735,9 +735,15 @@ pub fn import(
     let mut seen: BTreeMap<Target, usize> = BTreeMap::new();
     for (i, (t, _)) in plans.iter().enumerate() {
         if let Some(j) = seen.insert(*t, i) {
+            let line = |k: usize| {
+                crate::validate::toml_key_line(&mapping.text, "channel", k, "channel")
+                    .map_or_else(String::new, |l| format!(" (line {l})"))
+            };
             return Err(ImportError(format!(
-                "{}: channel[{i}] and channel[{j}] both map `{}`",
+                "{}: channel[{i}]{} and channel[{j}]{} both map `{}`",
                 map_path.display(),
+                line(i),
+                line(j),
                 mapping.channel[i].channel
             )));
         }
