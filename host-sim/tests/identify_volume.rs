@@ -370,6 +370,14 @@ fn a_network_no_better_than_the_polynomial_on_held_out_data_is_refused_and_the_o
         figure(&report, held, "hybrid"),
     );
     assert!(h >= p, "refused although the hybrid was better: {report}");
+    // The advice follows the gap: within 20 % the polynomial already describes the muscle
+    // (more recording would not help); further off, record more of the joint's range.
+    let want = if p / h >= 0.8 {
+        "the polynomial already describes this muscle's volume"
+    } else {
+        "record the joint moving over its whole range"
+    };
+    assert!(e.contains(want), "{:.2}x: `{want}` not in:\n{e}", p / h);
     assert!(
         e.contains(&format!("{h:.3e}")) && e.contains(&format!("{p:.3e}")),
         "{e}\n{report}"

@@ -1148,6 +1148,16 @@ pub fn run_identify_volume(a: &IdentifyVolumeArgs) -> anyhow::Result<String> {
                 )
             })
             .collect();
+        // Within 20 % of the polynomial everywhere it is judged: the polynomial volume
+        // already describes this muscle, and more recording would not change that.
+        let close = judged.iter().all(|(_, _, p, h)| p / h >= 0.8);
+        let advice = if close {
+            "the network matches the polynomial volume without beating it: the polynomial \
+             already describes this muscle's volume, and the network has nothing to add; keep \
+             the polynomial volume (--allow-worse writes the network anyway)"
+        } else {
+            advice
+        };
         if !worse.is_empty() {
             anyhow::bail!(
                 "{file}: the trained network's mass-flow error is not below the polynomial \
