@@ -384,10 +384,7 @@ mod tests {
                 BootDecision::Safe(r) => assert_eq!(r.cause, Some(FaultCode::ResetLatched)),
                 d => panic!("{cause:?}: {d:?}"),
             }
-            assert_eq!(
-                boot_decision(cause, faulted),
-                BootDecision::Safe(record)
-            );
+            assert_eq!(boot_decision(cause, faulted), BootDecision::Safe(record));
         }
         assert_eq!(
             boot_decision(ResetCause::PowerOn, faulted),

@@ -115,8 +115,7 @@ pub fn run_arm_demo_with(
         let file = *file;
         let cfg = ArmConfig::reference(s.scenario.tick_hz as f32);
         let t0 = Instant::now();
-        let r =
-            run_arm(&arm, s, cfg).with_context(|| format!("{file}: closed-loop run failed"))?;
+        let r = run_arm(&arm, s, cfg).with_context(|| format!("{file}: closed-loop run failed"))?;
         let wall = t0.elapsed().as_secs_f64();
         let name = &s.scenario.name;
         let rec = r.to_recording(&arm, &plant_path.display().to_string(), file);

@@ -430,9 +430,8 @@ pub const MIN_ENCODER_COUNTS_PER_REV: u32 = 360;
 /// reads.
 pub fn encoder_counts_per_rev(s: &str) -> Result<u32, String> {
     let hi = *crate::io::import::COUNTS_PER_REV.end();
-    let allowed = format!(
-        "0 (no angle quantisation) or {MIN_ENCODER_COUNTS_PER_REV}..={hi} counts per turn"
-    );
+    let allowed =
+        format!("0 (no angle quantisation) or {MIN_ENCODER_COUNTS_PER_REV}..={hi} counts per turn");
     let v: i128 = s
         .trim()
         .parse()

@@ -544,7 +544,11 @@ fn an_arm_scenario_or_the_firmwares_arm_constants_given_to_the_one_dof_loop_are_
     let arm_scenario = root().join("scenarios/arm3/pick_place.toml");
     // An arm scenario on the 1-DOF plant (or the arm plant: the scenario is read first).
     for p in [plant(), arm3_plant()] {
-        let r = on_plant("simulate", &p, &[&"--scenario", &arm_scenario, &"--out", &out]);
+        let r = on_plant(
+            "simulate",
+            &p,
+            &[&"--scenario", &arm_scenario, &"--out", &out],
+        );
         assert_refused(
             &r,
             &[
@@ -559,11 +563,20 @@ fn an_arm_scenario_or_the_firmwares_arm_constants_given_to_the_one_dof_loop_are_
     let r = on_plant(
         "simulate",
         &root().join("config/arm3.toml"),
-        &[&"--scenario", &root().join("scenarios/step.toml"), &"--out", &out],
+        &[
+            &"--scenario",
+            &root().join("scenarios/step.toml"),
+            &"--out",
+            &out,
+        ],
     );
     assert_refused(
         &r,
-        &["config/arm3.toml", "the firmware's arm constants", "arm3-seed001.toml"],
+        &[
+            "config/arm3.toml",
+            "the firmware's arm constants",
+            "arm3-seed001.toml",
+        ],
         &out,
     );
 }

@@ -122,5 +122,9 @@ fn demo_with_a_fixture_it_cannot_fit_is_refused_before_any_run() {
         err.contains("inputs_only.csv") && err.contains("no output column"),
         "{err}"
     );
-    assert!(!out_dir.exists(), "the scenarios ran and wrote into {}", out_dir.display());
+    assert!(
+        !out_dir.exists(),
+        "the scenarios ran and wrote into {}",
+        out_dir.display()
+    );
 }

@@ -236,7 +236,8 @@ fn the_exit_status_follows_the_worst_verdict_and_the_out_dir_may_be_the_recordin
     std::fs::rename(recs.join("other.csv"), dir.path().join("other.csv")).unwrap();
     let stdout = ok(&batch(&plant, &recs, &recs, &[]));
     assert!(
-        stdout.contains("other.json is an earlier batch's answer for a recording not in this batch")
+        stdout
+            .contains("other.json is an earlier batch's answer for a recording not in this batch")
             && !stdout.contains("nominal.json is an earlier"),
         "{stdout}"
     );

@@ -438,7 +438,11 @@ fn identify_plant_finds_the_load_inertia_in_the_independent_loaded_fixture() {
     // each stepped by their own size (a step of 1e-4 for the conductance called all three
     // "not determined").
     assert!(!s.contains("not determined"), "{s}");
-    for key in ["joint.inertia_kgm2", "muscle.damping_m2s", "valve.sonic_conductance_m3_per_s_pa"] {
+    for key in [
+        "joint.inertia_kgm2",
+        "muscle.damping_m2s",
+        "valve.sonic_conductance_m3_per_s_pa",
+    ] {
         let row = s.lines().find(|l| l.starts_with(key)).unwrap();
         assert!(row.trim_end().ends_with('%') && row.contains("+-"), "{row}");
     }
@@ -699,7 +703,11 @@ fn sweep_arguments_out_of_their_physical_range_are_refused_with_the_range() {
             vec!["--hysteresis-gap-n", "10000"],
             "a quarter of the sweep's largest force",
         ),
-        ("force", vec!["--seed", "-1"], "must be within 0..=18446744073709551615, got -1"),
+        (
+            "force",
+            vec!["--seed", "-1"],
+            "must be within 0..=18446744073709551615, got -1",
+        ),
         (
             "force",
             vec!["--stretch-min", "1.2", "--stretch-max", "1.0"],
@@ -728,7 +736,10 @@ fn sweep_arguments_out_of_their_physical_range_are_refused_with_the_range() {
         .unwrap();
     assert_eq!(r.status.code(), Some(2));
     let err = String::from_utf8_lossy(&r.stderr);
-    assert!(err.contains("no_dir") && err.contains("does not exist") && !err.contains(".map.csv."), "{err}");
+    assert!(
+        err.contains("no_dir") && err.contains("does not exist") && !err.contains(".map.csv."),
+        "{err}"
+    );
 }
 
 #[test]
@@ -737,7 +748,11 @@ fn a_recording_too_short_for_identify_plant_is_named_with_the_minimum() {
     // The first 15 samples of the conformance recording (its 3 comment lines and header).
     let text = std::fs::read_to_string(fixture("pulses_nominal.csv")).unwrap();
     let short = dir.path().join("short.csv");
-    std::fs::write(&short, text.lines().take(19).collect::<Vec<_>>().join("\n") + "\n").unwrap();
+    std::fs::write(
+        &short,
+        text.lines().take(19).collect::<Vec<_>>().join("\n") + "\n",
+    )
+    .unwrap();
     let out = dir.path().join("P.toml");
     let r = identify("plant", &short, &out, &["--params", "joint.inertia_kgm2"]);
     assert_refused(&r, &["short.csv: recording too short", "at least 20"], &out);

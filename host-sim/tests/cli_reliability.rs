@@ -1003,11 +1003,17 @@ fn diagnose_refuses_a_check_recording_that_is_the_training_recording() {
     }
     // A check recording with nothing to judge is named as --check, not as the training file.
     let text = std::fs::read_to_string(fixture("pulses_nominal.csv")).unwrap();
-    let still = w.write("still.csv", &(text.lines().take(30).collect::<Vec<_>>().join("\n") + "\n"));
+    let still = w.write(
+        "still.csv",
+        &(text.lines().take(30).collect::<Vec<_>>().join("\n") + "\n"),
+    );
     w.refuses_with(
         "diagnose --plant {plant} --recording {rec} --check {check} --json {w}/out.json",
         &[("rec", &rec), ("check", &still)],
-        &["--check", "still.csv: diagnosis failed: check recording: nothing to judge"],
+        &[
+            "--check",
+            "still.csv: diagnosis failed: check recording: nothing to judge",
+        ],
     );
 }
 

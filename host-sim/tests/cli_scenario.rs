@@ -236,7 +236,10 @@ fn bad_scenario_names_file_line_and_key_and_keeps_the_old_output() {
         (
             "max_abs_error_rad = 0.01",
             "angle_within_rad = 57.0",
-            vec!["line 20: [expect] angle_within_rad", "degrees typed as radians?"],
+            vec![
+                "line 20: [expect] angle_within_rad",
+                "degrees typed as radians?",
+            ],
         ),
         (
             "angle_counts_per_rev = 8000",
@@ -292,7 +295,11 @@ fn replay_only_options_are_refused_with_a_scenario() {
     // closed-loop scenario they would be ignored without a word.
     let dir = tempfile::tempdir().unwrap();
     let step = root().join("scenarios/step.toml");
-    for extra in [["--rtol", "0.1"], ["--atol", "1e-3"], ["--start", "recording"]] {
+    for extra in [
+        ["--rtol", "0.1"],
+        ["--atol", "1e-3"],
+        ["--start", "recording"],
+    ] {
         let r = simulate(&step, &dir.path().join("o.csv"), &extra);
         let err = text(&r.stderr);
         assert_eq!(r.status.code(), Some(2), "{extra:?}: {err}");
@@ -323,7 +330,12 @@ fn a_misspelt_choice_in_an_event_or_the_setpoint_names_its_own_line() {
             "dropout",
             "kind",
         ),
-        ("step_kind.toml", step.replace("kind = \"step\"", "kind = \"stp\""), "stp", "kind"),
+        (
+            "step_kind.toml",
+            step.replace("kind = \"step\"", "kind = \"stp\""),
+            "stp",
+            "kind",
+        ),
     ] {
         let line = 1 + text
             .lines()

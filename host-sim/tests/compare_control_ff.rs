@@ -280,7 +280,11 @@ fn compare_control_outside_the_repository_names_the_gains_it_used() {
         .find(|l| l.starts_with("position_kp_nm_per_rad"))
         .unwrap();
     let mine = dir.path().join("mine.toml");
-    std::fs::write(&mine, shipped.replacen(kp, "position_kp_nm_per_rad = 20.0", 1)).unwrap();
+    std::fs::write(
+        &mine,
+        shipped.replacen(kp, "position_kp_nm_per_rad = 20.0", 1),
+    )
+    .unwrap();
     let r = bin()
         .current_dir(dir.path())
         .args(["compare-control", "--quick", "--plant"])

@@ -208,7 +208,14 @@ fn a_faulting_firmware_and_a_missing_qemu_are_clear_bounded_errors() {
     let r = on_plant(
         "pil",
         &common::plant(),
-        &[&"--scenario", &scenario(dir.path()), &"--out", &out, &"--elf", &cut],
+        &[
+            &"--scenario",
+            &scenario(dir.path()),
+            &"--out",
+            &out,
+            &"--elf",
+            &cut,
+        ],
     );
     assert_refused(&r, &["--elf", "cut.elf", "truncated or damaged ELF"], &out);
 }
@@ -629,7 +636,10 @@ fn capture_names_the_logs_record_for_an_implausible_reading_not_the_output() {
     let out = previous_output(dir.path(), "rec.csv");
     let r = host_sim(&[&"capture", &"--log", &log, &"--out", &out]);
     let err = exits(2, &r);
-    for needle in ["bad.stream: record of sequence 30: p1_kpa", "a value in Pa?"] {
+    for needle in [
+        "bad.stream: record of sequence 30: p1_kpa",
+        "a value in Pa?",
+    ] {
         assert!(err.contains(needle), "{needle:?} in {err}");
     }
     assert!(!err.contains("rec.csv"), "{err}");

@@ -428,7 +428,12 @@ fn unit_mistakes_in_a_mapping_are_refused_at_their_line_or_flagged() {
             "column = \"MPYE1 [V]\"\nchannel = \"valve1\"\nunit = \"V\"\nscale = 1000.0",
             1,
         ),
-        &["rig.csv:", "MPYE1 [V]", "outside its curve's 0..10 V", "a value in mV?"],
+        &[
+            "rig.csv:",
+            "MPYE1 [V]",
+            "outside its curve's 0..10 V",
+            "a value in mV?",
+        ],
     );
     // Two entries for one channel: both named with their lines.
     let dup = MAP.replacen("channel = \"p2\"", "channel = \"p1\"", 1);
@@ -443,7 +448,11 @@ fn unit_mistakes_in_a_mapping_are_refused_at_their_line_or_flagged() {
     // Encoder counts mapped as degrees: the hint names the unit the mapping gave.
     refused(
         &MAP.replace("unit = \"counts\"\ncounts_per_rev = 8000", "unit = \"deg\""),
-        &["rig.csv:", "Encoder", "encoder counts mapped with `unit = \"deg\"`"],
+        &[
+            "rig.csv:",
+            "Encoder",
+            "encoder counts mapped with `unit = \"deg\"`",
+        ],
     );
     // A scale of zero would flatten the channel.
     refused(

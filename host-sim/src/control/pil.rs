@@ -602,9 +602,8 @@ pub fn check_elf_for(elf: &std::path::Path, hint: &str) -> Result<(), String> {
              firmware image ({BUILD})"
         ));
     }
-    elf32_layout_within(elf, meta.len()).map_err(|why| {
-        format!("is a truncated or damaged ELF file: {why} ({BUILD})")
-    })
+    elf32_layout_within(elf, meta.len())
+        .map_err(|why| format!("is a truncated or damaged ELF file: {why} ({BUILD})"))
 }
 
 /// Checks that the program and section header tables of the 32-bit little-endian ELF file

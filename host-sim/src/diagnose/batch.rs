@@ -329,7 +329,10 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, u8)> {
     }
     // Answers of an earlier batch for recordings no longer in --recordings would read as
     // this batch's: named (left in place; the summary does not list them).
-    let ours: Vec<PathBuf> = rows.iter().map(|r| json_path(&a.out_dir, &r.recording)).collect();
+    let ours: Vec<PathBuf> = rows
+        .iter()
+        .map(|r| json_path(&a.out_dir, &r.recording))
+        .collect();
     let mut earlier: Vec<PathBuf> = std::fs::read_dir(&a.out_dir)
         .into_iter()
         .flatten()

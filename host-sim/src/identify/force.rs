@@ -533,10 +533,7 @@ pub struct HeldOut {
 /// resolution operating points are told apart on (a length sensor's jitter about one
 /// length of a sweep keeps it one length).
 pub fn length_groups(samples: &[ForceSample]) -> (Vec<usize>, usize) {
-    let mut keys: Vec<i64> = samples
-        .iter()
-        .map(|s| length_cell(s.stretch))
-        .collect();
+    let mut keys: Vec<i64> = samples.iter().map(|s| length_cell(s.stretch)).collect();
     let mut uniq = keys.clone();
     uniq.sort_unstable();
     uniq.dedup();
@@ -1616,7 +1613,10 @@ pub fn largest_force(truth: &Tondu, opt: &ForceSweep) -> (f64, f64) {
             let e = stretch_level(opt, i);
             (truth.force_n(opt.p_max_pa, e), e)
         })
-        .fold((0.0, opt.stretch_min), |best, x| if x.0 > best.0 { x } else { best })
+        .fold(
+            (0.0, opt.stretch_min),
+            |best, x| if x.0 > best.0 { x } else { best },
+        )
 }
 
 /// Generates isometric data from a Tondu surface, as seed 002's bench does (fixed length,

@@ -510,7 +510,11 @@ mod tests {
         let (u, _) = uncertainty(&f, &params, &x);
         for (k, v) in x.iter().enumerate() {
             let rel = u.sd[k] / v;
-            assert!(rel.is_finite() && rel > 0.0 && rel < 1e-3, "{k}: sd {} ({rel})", u.sd[k]);
+            assert!(
+                rel.is_finite() && rel > 0.0 && rel < 1e-3,
+                "{k}: sd {} ({rel})",
+                u.sd[k]
+            );
         }
         assert!(u.correlation[(0, 1)].abs() < 1.0, "{}", u.correlation);
     }

@@ -1036,7 +1036,12 @@ pub fn import(
                 }
             }
             let v = convert(&plans[i].1, x);
-            if let Some(msg) = implausible(plans[i].0, v, mapping.pressure.p_atm_pa, c.unit.as_deref().unwrap_or("")) {
+            if let Some(msg) = implausible(
+                plans[i].0,
+                v,
+                mapping.pressure.p_atm_pa,
+                c.unit.as_deref().unwrap_or(""),
+            ) {
                 let name = c.column.as_deref().unwrap_or("constant");
                 return Err(at(line, name, format!("channel `{}`: {msg}", c.channel)));
             }

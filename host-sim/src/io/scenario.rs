@@ -1016,8 +1016,7 @@ pub(crate) fn toml_error_message(e: &toml::de::Error, text: &str) -> String {
         }) {
             msg = format!("line {}: key `{key}`: {reason}", i + 1);
         }
-    } else if reason.starts_with("invalid type: string") && reason.contains("expected f64")
-    {
+    } else if reason.starts_with("invalid type: string") && reason.contains("expected f64") {
         // A number typed in quotes: the first quoted value of a key that takes a
         // number (every such key carries its unit or is a count).
         if let Some((i, key)) = text.lines().enumerate().find_map(|(i, l)| {
