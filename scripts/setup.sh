@@ -53,6 +53,11 @@ if ! cargo clippy --version >/dev/null 2>&1; then
   say "rustup component add clippy"
   rustup component add clippy
 fi
+# rustfmt for the formatting check of scripts/test.sh.
+if ! cargo fmt --version >/dev/null 2>&1; then
+  say "rustup component add rustfmt"
+  rustup component add rustfmt
+fi
 
 # Plots (host-sim --plot, demo, diagnosis reports) lay out text with a TrueType font read at run
 # time (host-sim/src/io/plot.rs): install DejaVu Sans when no usable font is present.

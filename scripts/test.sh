@@ -11,8 +11,9 @@ bash scripts/check-fixed-no-float.sh >/dev/null
 # Firmware images: the QEMU image and the STM32F407 board image (flip-link), no hardware needed.
 cargo build -p pam-firmware --bin qemu --features pam-firmware/firmware --release --target thumbv7em-none-eabihf
 cargo flash-build
-# Lints (the allowed ones and why: the workspace's Cargo.toml): the host workspace with its
-# tests, and the firmware's bare-metal images.
+# Formatting (rustfmt's defaults), then lints (the allowed ones and why: the workspace's
+# Cargo.toml): the host workspace with its tests, and the firmware's bare-metal images.
+cargo fmt --all --check
 cargo clippy -q --workspace --all-targets -- -D warnings
 cargo clippy -q -p pam-firmware --release --target thumbv7em-none-eabihf --features firmware --lib --bins -- -D warnings
 cargo clippy -q -p pam-firmware --release --target thumbv7em-none-eabihf --features board --lib --bins -- -D warnings
