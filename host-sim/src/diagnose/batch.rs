@@ -315,9 +315,7 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, u8)> {
             // An earlier run's answer for a recording that now fails would read as this
             // run's: removed (only a diagnosis JSON, this command's own output).
             Err(_) => {
-                let stale = std::fs::read_to_string(&p)
-                    .is_ok_and(|t| t.trim_start().starts_with('{') && t.contains("\"verdict\""));
-                if stale {
+                if is_diagnosis_json(&p) {
                     std::fs::remove_file(&p).with_context(|| format!("{}", p.display()))?;
                     removed += &format!(
                         "removed {}: an earlier run's answer for a recording that now fails\n",
@@ -339,10 +337,7 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, u8)> {
         .flatten()
         .map(|e| e.path())
         .filter(|p| p.extension().is_some_and(|x| x == "json") && !ours.contains(p))
-        .filter(|p| {
-            std::fs::read_to_string(p)
-                .is_ok_and(|t| t.trim_start().starts_with('{') && t.contains("\"verdict\""))
-        })
+        .filter(|p| is_diagnosis_json(p))
         .collect();
     earlier.sort();
     for p in &earlier {
@@ -390,6 +385,13 @@ pub const SUMMARY_FILE: &str = "summary.csv";
 /// The first line of [`summary_csv`].
 const SUMMARY_HEADER: &str =
     "recording,samples,verdict,effects,worst_fit_before_pct,worst_fit_after_pct,wall_s";
+
+/// Whether `path` holds a diagnosis JSON (this command's own output, as `diagnose --json`
+/// writes it): the only kind of file the batch removes or names as an earlier answer.
+fn is_diagnosis_json(path: &Path) -> bool {
+    std::fs::read_to_string(path)
+        .is_ok_and(|t| t.trim_start().starts_with('{') && t.contains("\"verdict\""))
+}
 
 /// Whether `path` is a summary this command wrote (its first line is the summary's header).
 fn is_batch_summary(path: &Path) -> bool {
