@@ -132,6 +132,13 @@ struct ControllerFile {
     torque: TorqueGains,
     pressure: PressureGains,
     feedforward: FeedforwardGains,
+    rates: LoopRates,
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LoopRates {
+    outer_period_ticks: u16,
 }
 
 #[derive(serde::Deserialize)]
@@ -355,6 +362,11 @@ fn main() {
             C,
             &keyed!("feedforward.", ctl.feedforward; rate_weight, cutoff_hz, limit_nm),
         );
+        assert!(
+            (1..=10).contains(&ctl.rates.outer_period_ticks),
+            "{C}: [rates] outer_period_ticks = {} must be in [1, 10]",
+            ctl.rates.outer_period_ticks
+        );
         check(
             ctl.pressure.full_opening_error_pa > 0.0,
             C,
@@ -497,6 +509,12 @@ fn main() {
          /// f32 constants of [`TORQUE_MODEL`].\n\
          pub const FIXED_TORQUE_MODEL: crate::fixed_point::FixedTorqueModel = crate::fixed_point::FixedTorqueModel::from_bits(\n\
          \x20   crate::fixed_point::prescale::{tb:?});\n"
+    );
+    let src = format!(
+        "{src}\
+         /// The cascade's outer loops run on one tick in this many (config/controller.toml [rates]).\n\
+         pub const OUTER_PERIOD_TICKS: u16 = {};\n",
+        ctl.rates.outer_period_ticks
     );
     let src = src + &pressure_ff::constants() + &volume_fnn::constants();
     let out = PathBuf::from(env::var("OUT_DIR").unwrap()).join("constants.rs");

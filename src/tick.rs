@@ -108,6 +108,8 @@ pub enum ControlLaw {
 pub const TICK_HZ_MIN: f32 = 200.0;
 /// Highest tick rate accepted [Hz] (the board's timer range).
 pub const TICK_HZ_MAX: f32 = 10_000.0;
+/// Largest [`ControllerConfig::outer_period_ticks`].
+pub const OUTER_PERIOD_TICKS_MAX: u16 = 10;
 
 /// Configuration of the control tick.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -162,6 +164,13 @@ pub struct ControllerConfig {
     pub valve_model: ValveModelParams,
     /// Bumpless take-over at power-up and after every accepted reset.
     pub start: StartRamp,
+    /// The cascade's outer loops (set-point derivatives, position loop, trajectory
+    /// feed-forward, force-law torque estimate, torque loop) run on one tick in this many, with
+    /// the time since their last run as their `dt`; the pressure loops, their feed-forward,
+    /// the validators and the supervision run every tick on the held pressure set-points.
+    /// 1 = every loop every tick. In `1..=`[`OUTER_PERIOD_TICKS_MAX`], and the outer loops no
+    /// slower than [`TICK_HZ_MIN`] (validated). The model-free law ignores it.
+    pub outer_period_ticks: u16,
     /// Inverse thermodynamic feed-forward of the pressure loops ([`crate::pressure_ff`];
     /// cascade only), added to the P loop's valve command when `enabled`. Only with the
     /// `pressure-ff` feature: the default MCU tick carries none of it.
@@ -363,6 +372,7 @@ impl ControllerConfig {
                 ..ValveModelParams::REFERENCE
             },
             start: StartRamp::REFERENCE,
+            outer_period_ticks: crate::constants::OUTER_PERIOD_TICKS,
         }
     }
 
@@ -430,6 +440,8 @@ impl ControllerConfig {
             && self.feedforward.is_valid()
             && self.valve_model.is_valid()
             && self.start.is_valid()
+            && (1..=OUTER_PERIOD_TICKS_MAX).contains(&self.outer_period_ticks)
+            && self.tick_hz / self.outer_period_ticks as f32 >= TICK_HZ_MIN
             && match self.law {
                 ControlLaw::Cascade => true,
                 ControlLaw::DirectPid(g) => g.is_valid(),
@@ -491,6 +503,13 @@ pub struct ControlTick {
     pressure_ff_on: bool,
     #[cfg(feature = "pressure-ff")]
     pressure_ff: crate::pressure_ff::PressureFeedforward,
+    /// `cfg.outer_period_ticks` (at least 1), the ticks until the outer loops run next (0:
+    /// this tick), the time since their last run [s] and what they held for the ticks in
+    /// between.
+    outer_period_ticks: u16,
+    outer_countdown: u16,
+    outer_dt_s: f32,
+    outer_held: OuterHeld,
     /// Anti-windup state: which way the valves were fully open last tick, as a joint-torque
     /// [`crate::control::Shortfall`] (see [`valve_shortfall`]).
     valve_shortfall: f32,
@@ -506,6 +525,21 @@ pub struct ControlTick {
     /// The last command, and whether its openings still have to be given to the residual.
     last_command: ValveCommand,
     pending_command: bool,
+}
+
+/// What the cascade's outer loops computed on their last tick, held for the ticks in between
+/// ([`ControllerConfig::outer_period_ticks`]).
+#[derive(Clone, Copy, Debug, Default)]
+struct OuterHeld {
+    /// Desired joint torque [N m].
+    torque_des_nm: f32,
+    /// The torque loop's pressure set-points [Pa gauge] and force-law torque [N m].
+    p1_set_gauge_pa: f32,
+    p2_set_gauge_pa: f32,
+    torque_est_nm: f32,
+    /// The set-point's filtered rate [rad/s] and acceleration [rad/s^2].
+    sp_rate_rad_s: f32,
+    sp_accel_rad_s2: f32,
 }
 
 /// The fault codes of the channels pressure 1, pressure 2 and angle, each in
@@ -651,6 +685,10 @@ impl ControlTick {
                 let ff = ff.with_volume_fnn(cfg.volume_fnn);
                 ff
             },
+            outer_period_ticks: cfg.outer_period_ticks.max(1),
+            outer_countdown: 0,
+            outer_dt_s: 0.0,
+            outer_held: OuterHeld::default(),
             valve_shortfall: 0.0,
             torque_sign: if cfg.torque_model.b_m2 * cfg.torque_model.sprocket_radius_m < 0.0 {
                 -1.0
@@ -808,6 +846,9 @@ impl ControlTick {
         #[cfg(feature = "pressure-ff")]
         self.pressure_ff.reset();
         self.valve_shortfall = 0.0;
+        // The next armed tick runs the outer loops.
+        self.outer_countdown = 0;
+        self.outer_dt_s = 0.0;
         // The next armed tick starts a new start phase.
         self.sp_fast_max_rad = -1.0;
         self.start_init = false;
@@ -1076,22 +1117,18 @@ impl ControlTick {
         }
 
         let angle_est = self.angle.last().unwrap_or(0.0);
-        // The force-law torque estimate, computed once per tick: it is both the logged
+        // The force-law torque estimate, computed once per tick on the ticks the outer loops
+        // run (every tick that does not arm is one: `reset_laws`): it is both the logged
         // `torque_est_nm` and, when all channels are fresh this tick (then `last_*` are this
-        // tick's values), the torque loop's feedback.
-        let estimate = match (self.p1.last(), self.p2.last(), self.angle.last()) {
-            (Some(p1), Some(p2), Some(a)) => Some(torque_from(
-                |p, e| self.cfg.force_law.force_regular(p, e),
-                &self.cfg.geometry,
-                p1,
-                p2,
-                a,
-            )),
-            _ => None,
-        };
-        let torque_est = match estimate {
-            Some((t, flags)) if !flags.contains_any(ForceFlags::FATAL) && t.is_finite() => t,
-            _ => 0.0,
+        // tick's values), the torque loop's feedback. In between, the last one is held.
+        // A faulted tick computes it too (its output and the numeric fault's persistence).
+        let outer = self.outer_countdown == 0;
+        let fresh = outer || self.safety.fault().is_some();
+        let estimate = if fresh { self.estimate() } else { None };
+        let torque_est = if fresh {
+            usable_torque(estimate)
+        } else {
+            self.outer_held.torque_est_nm
         };
         // `vel` is finite: the estimator stores only finite velocities (starts at 0).
 
@@ -1165,72 +1202,58 @@ impl ControlTick {
                     u2,
                 ));
             }
-            let ff = &self.cfg.feedforward;
-            // Valid configuration here: `ff.cutoff_hz` is finite (>= 0).
-            let (rate, accel) =
-                self.setpoint_derivatives
-                    .update_finite(sp, dt_s, ff.cutoff_hz, self.ff_tau_s)?;
-            // Anti-windup from downstream: the torque loop's and the valves' saturation of
-            // the last tick, in joint-torque direction.
-            let t_pid = self.position.step_finite(
-                JointState {
-                    angle_rad: angle,
-                    velocity_rad_s: vel,
-                },
-                sp,
-                dt_s,
-                self.torque.shortfall_nm() + self.valve_shortfall,
-            )?;
-            // Trajectory feed-forward (derivative on the error, inertia of the desired
-            // motion), within the position loop's output limit.
-            let t_ff = feedforward_torque_nm(ff, self.cfg.position.kd_nm_s_per_rad, rate, accel);
-            let t_lim = libm::fabsf(self.cfg.position.out_limit_nm);
-            let t_sum = t_pid + t_ff;
-            // In range (the usual case, one comparison; NaN fails it) or the full clamp.
-            let t_des = if libm::fabsf(t_sum) <= t_lim {
-                t_sum
-            } else if t_sum > t_lim {
-                t_lim
-            } else if t_sum < -t_lim {
-                -t_lim
-            } else {
-                t_sum
-            };
-            // The external feed-forward (finite), only in `step_with_torque`.
-            let t_des = match torque_ff_nm {
-                Some(t) => t_des + t,
-                None => t_des,
-            };
             let meas = TorqueMeasurement {
                 p1_gauge_pa: p1,
                 p2_gauge_pa: p2,
                 angle_rad: angle,
                 velocity_rad_s: vel,
             };
-            let ps = match estimate {
-                // Armed implies all three channels valid this tick, so `estimate` was
-                // computed from exactly `meas`; the torque loop reuses it (the loop's own force
-                // law is the configuration's, see `ControlTick::new`).
-                Some(est) => self.torque.step_finite(
-                    meas,
-                    est,
+            // The outer loops on one tick in `outer_period_ticks` (`outer`: the estimate was
+            // computed), with the time since their last run; in between, their held output.
+            let (t_des, ps, rate, accel) = if outer {
+                self.outer_countdown = self.outer_period_ticks - 1;
+                // `0.0 + dt_s` is `dt_s` (dt_s > 0): every tick's bits when the period is 1.
+                let dt_outer_s = self.outer_dt_s + dt_s;
+                self.outer_dt_s = 0.0;
+                let (t_des, ps, rate, accel) =
+                    self.outer_loops(&meas, sp, torque_ff_nm, estimate, dt_outer_s)?;
+                if self.outer_period_ticks > 1 {
+                    self.outer_held = OuterHeld {
+                        torque_des_nm: t_des,
+                        p1_set_gauge_pa: ps.p1_gauge_pa,
+                        p2_set_gauge_pa: ps.p2_gauge_pa,
+                        torque_est_nm: ps.torque_est_nm,
+                        sp_rate_rad_s: rate,
+                        sp_accel_rad_s2: accel,
+                    };
+                }
+                (
                     t_des,
-                    dt_s,
-                    self.dp_limit_pa,
-                    self.p_set_hi_pa,
-                    self.valve_shortfall,
-                )?,
-                None => self.torque.step(meas, t_des, dt_s)?,
+                    [ps.p1_gauge_pa, ps.p2_gauge_pa, ps.torque_est_nm],
+                    rate,
+                    accel,
+                )
+            } else {
+                self.outer_countdown -= 1;
+                self.outer_dt_s += dt_s;
+                let h = self.outer_held;
+                (
+                    h.torque_des_nm,
+                    [h.p1_set_gauge_pa, h.p2_set_gauge_pa, h.torque_est_nm],
+                    h.sp_rate_rad_s,
+                    h.sp_accel_rad_s2,
+                )
             };
-            let u1 = self.pressure1.step_finite(p1, ps.p1_gauge_pa, dt_s)?;
-            let u2 = self.pressure2.step_finite(p2, ps.p2_gauge_pa, dt_s)?;
+            let [p1_set, p2_set, t_est] = ps;
+            let u1 = self.pressure1.step_finite(p1, p1_set, dt_s)?;
+            let u2 = self.pressure2.step_finite(p2, p2_set, dt_s)?;
             // Compiled in with the `pressure-ff` feature only (the default MCU tick has none of
             // it), and run when the configuration enables it.
             #[cfg(feature = "pressure-ff")]
             let (u1, u2) = if self.pressure_ff_on {
                 self.add_pressure_ff(
                     (u1, u2),
-                    [ps.p1_gauge_pa, ps.p2_gauge_pa],
+                    [p1_set, p2_set],
                     &meas,
                     JointState {
                         angle_rad: sp,
@@ -1241,15 +1264,10 @@ impl ControlTick {
             } else {
                 (u1, u2)
             };
+            #[cfg(not(feature = "pressure-ff"))]
+            let _ = (rate, accel);
             self.valve_shortfall = valve_shortfall(u1, u2, self.torque_sign);
-            Ok((
-                t_des,
-                ps.p1_gauge_pa,
-                ps.p2_gauge_pa,
-                ps.torque_est_nm,
-                u1,
-                u2,
-            ))
+            Ok((t_des, p1_set, p2_set, t_est, u1, u2))
         })();
         match result {
             Ok((t_des, p1_set, p2_set, t_est, u1, u2)) => {
@@ -1311,6 +1329,91 @@ impl ControlTick {
         }
     }
 
+    /// The force-law torque estimate of the last samples (`None` until all three channels
+    /// delivered) and its flags.
+    #[inline(always)]
+    fn estimate(&self) -> Option<(f32, ForceFlags)> {
+        match (self.p1.last(), self.p2.last(), self.angle.last()) {
+            (Some(p1), Some(p2), Some(a)) => Some(torque_from(
+                |p, e| self.cfg.force_law.force_regular(p, e),
+                &self.cfg.geometry,
+                p1,
+                p2,
+                a,
+            )),
+            _ => None,
+        }
+    }
+
+    /// The cascade's outer loops of an armed tick (inputs finite, `dt_s` the time since their
+    /// last run): the set-point's rate and acceleration, the position loop with the trajectory
+    /// feed-forward (and the external one of `step_with_torque`) within its limit, and the
+    /// torque loop on the force-law `estimate` of this tick's measurements `meas`. Returns the
+    /// desired torque, the pressure set-points, the set-point's rate and acceleration.
+    #[inline(always)]
+    fn outer_loops(
+        &mut self,
+        meas: &TorqueMeasurement,
+        sp: f32,
+        torque_ff_nm: Option<f32>,
+        estimate: Option<(f32, ForceFlags)>,
+        dt_s: f32,
+    ) -> Result<(f32, crate::control::PressureSetpoints, f32, f32), crate::control::ControlError>
+    {
+        let ff = &self.cfg.feedforward;
+        // Valid configuration here: `ff.cutoff_hz` is finite (>= 0).
+        let (rate, accel) =
+            self.setpoint_derivatives
+                .update_finite(sp, dt_s, ff.cutoff_hz, self.ff_tau_s)?;
+        // Anti-windup from downstream: the torque loop's and the valves' saturation of
+        // the last tick, in joint-torque direction.
+        let t_pid = self.position.step_finite(
+            JointState {
+                angle_rad: meas.angle_rad,
+                velocity_rad_s: meas.velocity_rad_s,
+            },
+            sp,
+            dt_s,
+            self.torque.shortfall_nm() + self.valve_shortfall,
+        )?;
+        // Trajectory feed-forward (derivative on the error, inertia of the desired
+        // motion), within the position loop's output limit.
+        let t_ff = feedforward_torque_nm(ff, self.cfg.position.kd_nm_s_per_rad, rate, accel);
+        let t_lim = libm::fabsf(self.cfg.position.out_limit_nm);
+        let t_sum = t_pid + t_ff;
+        // In range (the usual case, one comparison; NaN fails it) or the full clamp.
+        let t_des = if libm::fabsf(t_sum) <= t_lim {
+            t_sum
+        } else if t_sum > t_lim {
+            t_lim
+        } else if t_sum < -t_lim {
+            -t_lim
+        } else {
+            t_sum
+        };
+        // The external feed-forward (finite), only in `step_with_torque`.
+        let t_des = match torque_ff_nm {
+            Some(t) => t_des + t,
+            None => t_des,
+        };
+        let ps = match estimate {
+            // Armed implies all three channels valid this tick, so `estimate` was
+            // computed from exactly `meas`; the torque loop reuses it (the loop's own force
+            // law is the configuration's, see `ControlTick::new`).
+            Some(est) => self.torque.step_finite(
+                *meas,
+                est,
+                t_des,
+                dt_s,
+                self.dp_limit_pa,
+                self.p_set_hi_pa,
+                self.valve_shortfall,
+            )?,
+            None => self.torque.step(*meas, t_des, dt_s)?,
+        };
+        Ok((t_des, ps, rate, accel))
+    }
+
     fn safe_output(&mut self, mut out: TickOutput) -> TickOutput {
         self.reset_laws();
         out.valves = self.safety.safe_command();
@@ -1329,6 +1432,15 @@ impl ControlTick {
         out.active = self.active;
         out.armed = false;
         out
+    }
+}
+
+/// The logged torque of a force-law estimate: 0 when there is none or it is unusable.
+#[inline(always)]
+fn usable_torque(estimate: Option<(f32, ForceFlags)>) -> f32 {
+    match estimate {
+        Some((t, flags)) if !flags.contains_any(ForceFlags::FATAL) && t.is_finite() => t,
+        _ => 0.0,
     }
 }
 
@@ -1763,6 +1875,134 @@ mod tests {
             let mut c = ControllerConfig::reference(1000.0);
             c.start.precharge_rate_pa_s = bad;
             assert!(!c.is_valid());
+        }
+    }
+
+    /// A split cascade (`outer_period_ticks = 2`) and an unsplit one, instant start.
+    fn split_and_whole() -> (ControlTick, ControlTick) {
+        let cfg = |n: u16| {
+            reference_with(|c| {
+                c.start = StartRamp::INSTANT;
+                c.outer_period_ticks = n;
+                // Open loop: the pressures do not follow the valves; the valve supervision
+                // runs but never judges.
+                c.valve_model.residual_abs_pa_s = f32::MAX;
+                c.valve_model.integral_min_pa = f32::MAX;
+            })
+        };
+        (ControlTick::new(cfg(2)), ControlTick::new(cfg(1)))
+    }
+
+    #[test]
+    fn outer_loops_run_on_one_tick_in_n_with_the_time_since_their_last_run() {
+        // The split tick at 1 ms against the whole cascade stepped only on the split one's
+        // outer ticks, at 2 ms: the same set-points, desired torques and estimates, bit for
+        // bit (the joint and the pressures at rest, so the velocity estimate is 0 in both);
+        // in between the split tick holds them while its pressure loops follow the measured
+        // pressures every tick.
+        let (mut split, mut whole) = split_and_whole();
+        assert_eq!(split.outer_period_ticks, 2);
+        let mut n_outer = 0;
+        let mut prev: Option<TickOutput> = None;
+        for k in 0..400 {
+            let sp = Setpoint {
+                angle_rad: 0.02 * libm::sinf(k as f32 * 0.01),
+            };
+            // The pressures alternate by 8 kPa from tick to tick (the valves never saturate
+            // here, so the anti-windup sees the same in both).
+            // The muscles follow the last set-points (a stand-in for the pressure dynamics).
+            let wobble = if k % 2 == 0 { 0.0 } else { 8e3 };
+            let (p1, p2) = prev.map_or((300e3, 300e3), |h| (h.p1_set_gauge_pa, h.p2_set_gauge_pa));
+            let f = frame(p1 + wobble, p2 - wobble, 0.0);
+            let o = split.step(&f, &sp, DT);
+            assert!(o.armed, "tick {k}");
+            assert!(o.valves.muscle1.abs() < 1.0 && o.valves.muscle2.abs() < 1.0);
+            if k % 2 == 0 {
+                // The first outer run has only its own tick behind it.
+                let w = whole.step(&f, &sp, if k == 0 { DT } else { 2.0 * DT });
+                assert!(w.armed);
+                assert_eq!(
+                    (
+                        o.p1_set_gauge_pa,
+                        o.p2_set_gauge_pa,
+                        o.torque_des_nm,
+                        o.torque_est_nm
+                    ),
+                    (
+                        w.p1_set_gauge_pa,
+                        w.p2_set_gauge_pa,
+                        w.torque_des_nm,
+                        w.torque_est_nm
+                    ),
+                    "outer tick {k}"
+                );
+                n_outer += 1;
+            } else {
+                let h = prev.unwrap();
+                assert_eq!(
+                    (
+                        o.p1_set_gauge_pa,
+                        o.p2_set_gauge_pa,
+                        o.torque_des_nm,
+                        o.torque_est_nm
+                    ),
+                    (
+                        h.p1_set_gauge_pa,
+                        h.p2_set_gauge_pa,
+                        h.torque_des_nm,
+                        h.torque_est_nm
+                    ),
+                    "held on tick {k}"
+                );
+                // The pressure loops ran on this tick's pressures: the commands moved.
+                assert_ne!(o.valves, h.valves, "tick {k}");
+            }
+            prev = Some(o);
+        }
+        assert_eq!(n_outer, 200);
+        // The set-point moved: the held values were not all the same.
+        assert!(prev.unwrap().torque_des_nm != 0.0);
+    }
+
+    #[test]
+    fn a_fault_between_outer_runs_gives_the_safe_state_in_the_same_tick_and_restarts_them() {
+        let (mut t, _) = split_and_whole();
+        let f = frame(300e3, 300e3, 0.0);
+        assert!(t.step(&f, &SP0, DT).armed); // outer
+        assert!(t.step(&f, &SP0, DT).armed); // held
+        assert!(t.step(&f, &SP0, DT).armed); // outer
+        let o = t.step(&frame(f32::NAN, 300e3, 0.1), &SP0, DT); // would be held
+        assert!(!o.armed);
+        assert_eq!(o.fault, Some(FaultCode::PressureInvalid1));
+        assert_eq!(o.valves, t.safety.safe_command());
+        // The estimate of the last valid samples (300 kPa, 0 rad), not the held one.
+        let (e, _) = t.estimate().unwrap();
+        assert_eq!(o.torque_est_nm, e);
+        // After the reset the first armed tick runs the outer loops again.
+        for _ in 0..3 {
+            t.step(&f, &SP0, DT);
+        }
+        assert!(t.reset());
+        let a = t.step(&f, &Setpoint { angle_rad: 0.2 }, DT);
+        assert!(a.armed && a.torque_des_nm > 0.0, "{a:?}");
+    }
+
+    #[test]
+    fn the_outer_period_is_bounded_and_keeps_the_outer_loops_at_200_hz_or_faster() {
+        for (hz, n, ok) in [
+            (1000.0, 1, true),
+            (1000.0, 2, true),
+            (1000.0, 5, true),
+            (1000.0, 0, false),
+            (1000.0, 6, false),
+            (2000.0, 10, true),
+            (2000.0, 11, false),
+            (500.0, 2, true),
+            (500.0, 3, false),
+        ] {
+            let mut c = ControllerConfig::reference(hz);
+            c.outer_period_ticks = n;
+            assert_eq!(c.is_valid(), ok, "{hz} Hz, {n} ticks");
         }
     }
 }

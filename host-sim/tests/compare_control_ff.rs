@@ -149,6 +149,32 @@ fn compare_control_prints_the_tables_and_exits_by_its_verdict() {
     }
 }
 
+/// The feed-forward within the MCU budget: the outer loops on every second tick and the
+/// feed-forward evaluated on every second tick (`bash scripts/bench-mcu.sh`, "ff split
+/// tick"). Every row runs at those rates, and the verdict still holds.
+#[test]
+fn compare_control_at_half_rate_outer_loops_keeps_the_verdict() {
+    let r = on_plant(
+        "compare-control",
+        &plant(),
+        &[
+            &"--quick",
+            &"--outer-period-ticks",
+            &"2",
+            &"--ff-update-ticks",
+            &"2",
+        ],
+    );
+    let out = text(&r.stdout);
+    assert!(
+        out.contains("evaluated every 2 tick(s); outer loops (position, torque) every 2 tick(s)"),
+        "{out}"
+    );
+    let q = ratio(&out);
+    assert_eq!(r.status.code(), Some(0), "{q}\n{out}\n{}", text(&r.stderr));
+    assert!(q >= 1.85, "{q}\n{out}");
+}
+
 #[test]
 fn compare_control_refuses_bad_arguments_with_status_2() {
     // A bad value of each feed-forward option: the error names the option (and the range).
@@ -163,6 +189,12 @@ fn compare_control_refuses_bad_arguments_with_status_2() {
             &["--ff-update-ticks 0", "1..=100"],
         ),
         ("--ff-update-ticks", "2.5", &["--ff-update-ticks"]),
+        (
+            "--outer-period-ticks",
+            "6",
+            &["--outer-period-ticks 6", "1..=5"],
+        ),
+        ("--outer-period-ticks", "0", &["--outer-period-ticks 0"]),
     ] {
         let e = exits(
             2,

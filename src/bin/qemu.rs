@@ -166,6 +166,20 @@ mod bench {
                 c
             };
             bench_ticks("ff tick", ff_on(None));
+            // The same with the outer loops at half the tick rate and the feed-forward
+            // evaluated on every second tick (config/controller.toml [rates],
+            // config/pressure_ff.toml update_period_ticks).
+            bench_ticks("ff split tick", {
+                let mut c = ff_on(None);
+                c.outer_period_ticks = 2;
+                c.pressure_ff.update_period_ticks = 2;
+                c
+            });
+            bench_ticks("split tick", {
+                let mut c = pam_firmware::trace::trace_config();
+                c.outer_period_ticks = 2;
+                c
+            });
             bench_ticks(
                 "hybrid tick",
                 ff_on(Some(&pam_firmware::constants::VOLUME_FNN)),

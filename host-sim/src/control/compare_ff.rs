@@ -128,6 +128,12 @@ pub struct CompareControlArgs {
     pub ff_gains: Option<PathBuf>,
     #[command(flatten)]
     pub ff: FfOverrides,
+    /// Run the cascade's outer loops (position loop, trajectory feed-forward, torque
+    /// estimate, torque loop) on one tick in N, the pressure loops every tick, in every row
+    /// (1..=5 at the 1 kHz tick; 1 = every tick) [default: config/controller.toml [rates]
+    /// outer_period_ticks].
+    #[arg(long, value_name = "N")]
+    pub outer_period_ticks: Option<u16>,
     /// Only the nominal plant and the suite's first scenario of each set (the CI run).
     #[arg(long)]
     pub quick: bool,
@@ -707,9 +713,19 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
     );
     let mut base = tuning.cascade.config(1000.0);
     a.ff.apply(&mut base.pressure_ff)?;
-    // The re-tuned cascade runs the feed-forward with the same options as the other rows.
+    if let Some(n) = a.outer_period_ticks {
+        anyhow::ensure!(
+            (1..=5).contains(&n),
+            "--outer-period-ticks {n}: outside the allowed range 1..=5 (the outer loops at \
+             200 Hz or faster at the 1 kHz tick)"
+        );
+        base.outer_period_ticks = n;
+    }
+    // The re-tuned cascade runs the feed-forward with the same options and rates as the other
+    // rows.
     let retuned = ControllerConfig {
         pressure_ff: base.pressure_ff,
+        outer_period_ticks: base.outer_period_ticks,
         ..tuning_ff.cascade.config(1000.0)
     };
     let mut suite = suite_scenarios()?;
@@ -773,7 +789,7 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
     writeln!(
         out,
         "feed-forward: P' of the {}, V' of the {}, rate cut-off {} Hz, gain {}, minimum duty {}, \
-         evaluated every {} tick(s)",
+         evaluated every {} tick(s); outer loops (position, torque) every {} tick(s)",
         if f.rate_from_reference {
             "reference trajectory"
         } else {
@@ -787,7 +803,8 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
         f.rate_cutoff_hz,
         f.gain,
         f.min_duty,
-        f.update_period_ticks
+        f.update_period_ticks,
+        base.outer_period_ticks
     )?;
     writeln!(
         out,
