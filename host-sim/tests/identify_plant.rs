@@ -95,6 +95,29 @@ fn perturbed_conductance_damping_and_inertia_are_recovered_from_a_noisy_recordin
 }
 
 #[test]
+fn a_recording_in_which_nothing_moves_is_refused_as_no_excitation() {
+    let reference = std::fs::read_to_string(fixture("reference-1dof.toml")).unwrap();
+    let mut rec = recording(&reference, 200, &MeasurementNoise::NONE);
+    // The joint at rest: every channel holds its first value.
+    for c in Channel::ALL {
+        if let Some(y) = rec.channel(c).map(|y| vec![y[0]; y.len()]) {
+            rec.set_channel(c, y);
+        }
+    }
+    let specs = parse_param_specs(&["joint.inertia_kgm2".into()], &reference, "r.toml").unwrap();
+    let e = fit_plant(
+        &rec,
+        &reference,
+        "r.toml",
+        &specs,
+        &PlantFitOptions::default(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("no excitation") && e.contains("constant"), "{e}");
+}
+
+#[test]
 fn a_short_recording_or_a_bad_holdout_is_an_error() {
     let reference = std::fs::read_to_string(fixture("reference-1dof.toml")).unwrap();
     let rec = recording(&reference, 15, &MeasurementNoise::NONE);

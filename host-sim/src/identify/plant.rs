@@ -460,6 +460,24 @@ pub fn fit_plant(
             "{plant_file}: the start plant cannot replay the recording"
         )));
     }
+    // A recording in which nothing moves has nothing to identify (and no spread to judge a
+    // fit by): every channel constant over the training part.
+    let flat = |c: &Channel| {
+        let y = &rec.channel(*c).expect("present")[..n_train];
+        y.iter().all(|v| *v == y[0])
+    };
+    if chans.iter().all(flat) {
+        return Err(IdentError::Data(format!(
+            "no excitation: every channel ({}) is constant over the {n_train} training \
+             samples, so no parameter shows in them; record a run in which the valves move \
+             the joint",
+            chans
+                .iter()
+                .map(|c| c.name())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )));
+    }
     let weights: Vec<f64> = chans
         .iter()
         .map(|c| {
