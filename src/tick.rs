@@ -533,9 +533,18 @@ pub struct ControlTick {
 struct OuterHeld {
     /// Desired joint torque [N m].
     torque_des_nm: f32,
-    /// The torque loop's pressure set-points [Pa gauge] and force-law torque [N m].
+    /// The torque loop's pressure set-points [Pa gauge] of the last outer run, and their
+    /// change per tick since the run before [Pa]: the ticks in between extrapolate them, so
+    /// the pressure loops follow a set-point that moves every tick (held, they would see it
+    /// jump once per period and answer with one-tick valve pulses).
     p1_set_gauge_pa: f32,
     p2_set_gauge_pa: f32,
+    p1_step_pa: f32,
+    p2_step_pa: f32,
+    /// Whether the set-points above are of an outer run since the last reset (else the
+    /// next run's steps are 0).
+    primed: bool,
+    /// The force-law torque of the last outer run [N m].
     torque_est_nm: f32,
     /// The set-point's filtered rate [rad/s] and acceleration [rad/s^2].
     sp_rate_rad_s: f32,
@@ -846,9 +855,10 @@ impl ControlTick {
         #[cfg(feature = "pressure-ff")]
         self.pressure_ff.reset();
         self.valve_shortfall = 0.0;
-        // The next armed tick runs the outer loops.
+        // The next armed tick runs the outer loops, with no set-point history.
         self.outer_countdown = 0;
         self.outer_dt_s = 0.0;
+        self.outer_held.primed = false;
         // The next armed tick starts a new start phase.
         self.sp_fast_max_rad = -1.0;
         self.start_init = false;
@@ -1218,10 +1228,23 @@ impl ControlTick {
                 let (t_des, ps, rate, accel) =
                     self.outer_loops(&meas, sp, torque_ff_nm, estimate, dt_outer_s)?;
                 if self.outer_period_ticks > 1 {
+                    let h = &self.outer_held;
+                    let (s1, s2) = if h.primed {
+                        let per_tick = 1.0 / self.outer_period_ticks as f32;
+                        (
+                            (ps.p1_gauge_pa - h.p1_set_gauge_pa) * per_tick,
+                            (ps.p2_gauge_pa - h.p2_set_gauge_pa) * per_tick,
+                        )
+                    } else {
+                        (0.0, 0.0)
+                    };
                     self.outer_held = OuterHeld {
                         torque_des_nm: t_des,
                         p1_set_gauge_pa: ps.p1_gauge_pa,
                         p2_set_gauge_pa: ps.p2_gauge_pa,
+                        p1_step_pa: s1,
+                        p2_step_pa: s2,
+                        primed: true,
                         torque_est_nm: ps.torque_est_nm,
                         sp_rate_rad_s: rate,
                         sp_accel_rad_s2: accel,
@@ -1234,15 +1257,7 @@ impl ControlTick {
                     accel,
                 )
             } else {
-                self.outer_countdown -= 1;
-                self.outer_dt_s += dt_s;
-                let h = self.outer_held;
-                (
-                    h.torque_des_nm,
-                    [h.p1_set_gauge_pa, h.p2_set_gauge_pa, h.torque_est_nm],
-                    h.sp_rate_rad_s,
-                    h.sp_accel_rad_s2,
-                )
+                self.between_outer_runs(dt_s)
             };
             let [p1_set, p2_set, t_est] = ps;
             let u1 = self.pressure1.step_finite(p1, p1_set, dt_s)?;
@@ -1327,6 +1342,30 @@ impl ControlTick {
                 self.safe_output(out)
             }
         }
+    }
+
+    /// A tick between two runs of the outer loops: their held torques and set-point
+    /// derivatives, and the pressure set-points extrapolated by their change over the last
+    /// period, within the torque loop's bounds (its ceiling, 0). Not inlined: inlined, the
+    /// compiler copies the rest of the tick into both branches (+760 B of board flash).
+    #[inline(never)]
+    fn between_outer_runs(&mut self, dt_s: f32) -> (f32, [f32; 3], f32, f32) {
+        self.outer_countdown -= 1;
+        self.outer_dt_s += dt_s;
+        let h = self.outer_held;
+        // Ticks since the outer run (1 on the first tick after it).
+        let k = (self.outer_period_ticks - self.outer_countdown - 1) as f32;
+        let hi = self.p_set_hi_pa;
+        (
+            h.torque_des_nm,
+            [
+                crate::safety::clamp_setpoint_to(h.p1_set_gauge_pa + k * h.p1_step_pa, hi),
+                crate::safety::clamp_setpoint_to(h.p2_set_gauge_pa + k * h.p2_step_pa, hi),
+                h.torque_est_nm,
+            ],
+            h.sp_rate_rad_s,
+            h.sp_accel_rad_s2,
+        )
     }
 
     /// The force-law torque estimate of the last samples (`None` until all three channels
@@ -1897,13 +1936,15 @@ mod tests {
     fn outer_loops_run_on_one_tick_in_n_with_the_time_since_their_last_run() {
         // The split tick at 1 ms against the whole cascade stepped only on the split one's
         // outer ticks, at 2 ms: the same set-points, desired torques and estimates, bit for
-        // bit (the joint and the pressures at rest, so the velocity estimate is 0 in both);
-        // in between the split tick holds them while its pressure loops follow the measured
-        // pressures every tick.
+        // bit (the joint at rest, so the velocity estimate is 0 in both). In between, the
+        // split tick holds the torques and extrapolates the pressure set-points by their last
+        // change, while its pressure loops follow the measured pressures every tick.
         let (mut split, mut whole) = split_and_whole();
         assert_eq!(split.outer_period_ticks, 2);
         let mut n_outer = 0;
         let mut prev: Option<TickOutput> = None;
+        // The last two outer runs' set-points.
+        let mut outer_sets: [Option<(f32, f32)>; 2] = [None; 2];
         for k in 0..400 {
             let sp = Setpoint {
                 angle_rad: 0.02 * libm::sinf(k as f32 * 0.01),
@@ -1937,22 +1978,20 @@ mod tests {
                     "outer tick {k}"
                 );
                 n_outer += 1;
+                outer_sets = [outer_sets[1], Some((o.p1_set_gauge_pa, o.p2_set_gauge_pa))];
             } else {
                 let h = prev.unwrap();
                 assert_eq!(
-                    (
-                        o.p1_set_gauge_pa,
-                        o.p2_set_gauge_pa,
-                        o.torque_des_nm,
-                        o.torque_est_nm
-                    ),
-                    (
-                        h.p1_set_gauge_pa,
-                        h.p2_set_gauge_pa,
-                        h.torque_des_nm,
-                        h.torque_est_nm
-                    ),
+                    (o.torque_des_nm, o.torque_est_nm),
+                    (h.torque_des_nm, h.torque_est_nm),
                     "held on tick {k}"
+                );
+                let (c1, c2) = outer_sets[1].unwrap();
+                let (b1, b2) = outer_sets[0].unwrap_or((c1, c2));
+                assert_eq!(
+                    (o.p1_set_gauge_pa, o.p2_set_gauge_pa),
+                    (c1 + (c1 - b1) * 0.5, c2 + (c2 - b2) * 0.5),
+                    "extrapolated on tick {k}"
                 );
                 // The pressure loops ran on this tick's pressures: the commands moved.
                 assert_ne!(o.valves, h.valves, "tick {k}");
@@ -1962,6 +2001,31 @@ mod tests {
         assert_eq!(n_outer, 200);
         // The set-point moved: the held values were not all the same.
         assert!(prev.unwrap().torque_des_nm != 0.0);
+    }
+
+    #[test]
+    fn extrapolated_pressure_set_points_stay_within_the_ceiling_and_above_zero() {
+        // Set-points driven hard both ways: the pressures rise and fall by the most the torque
+        // loop allows per outer run, so the extrapolation would overshoot the bounds unclamped.
+        let (mut t, _) = split_and_whole();
+        let (mut p1, mut p2) = (300e3f32, 300e3f32);
+        let (mut hit_hi, mut hit_lo) = (false, false);
+        for k in 0..3000 {
+            let sp = Setpoint {
+                angle_rad: if (k / 500) % 2 == 0 { 0.8 } else { -0.8 },
+            };
+            let o = t.step(&frame(p1, p2, 0.0), &sp, DT);
+            assert!(o.armed, "tick {k}");
+            for p in [o.p1_set_gauge_pa, o.p2_set_gauge_pa] {
+                assert!((0.0..=P_MUSCLE_MAX_GAUGE_PA).contains(&p), "tick {k}: {p}");
+                hit_hi |= p == P_MUSCLE_MAX_GAUGE_PA;
+                hit_lo |= p == 0.0;
+            }
+            // The muscles follow their set-points within 20 kPa a tick.
+            p1 += (o.p1_set_gauge_pa - p1).clamp(-20e3, 20e3);
+            p2 += (o.p2_set_gauge_pa - p2).clamp(-20e3, 20e3);
+        }
+        assert!(hit_hi && hit_lo, "the bounds were not reached");
     }
 
     #[test]
