@@ -727,8 +727,18 @@ fn a_recording_that_starts_away_from_the_files_initial_state_is_replayed_from_it
     );
 }
 
+/// `text` (a recording) with every cell of `columns` multiplied by `factor`.
+fn scaled_columns(text: &str, columns: &[&str], factor: f64) -> String {
+    mapped_columns(text, columns, |v| v * factor)
+}
+
 /// `text` (a recording) with `add` added to every cell of `columns`.
 fn shifted_columns(text: &str, columns: &[&str], add: f64) -> String {
+    mapped_columns(text, columns, |v| v + add)
+}
+
+/// `text` (a recording) with `f` applied to every cell of `columns`.
+fn mapped_columns(text: &str, columns: &[&str], f: impl Fn(f64) -> f64) -> String {
     let mut header: Option<Vec<&str>> = None;
     let mut out = String::new();
     for l in text.lines() {
@@ -740,7 +750,7 @@ fn shifted_columns(text: &str, columns: &[&str], add: f64) -> String {
                 .zip(h)
                 .map(|(v, name)| {
                     if columns.contains(name) {
-                        format!("{:.6}", v.parse::<f64>().unwrap() + add)
+                        format!("{:.6}", f(v.parse::<f64>().unwrap()))
                     } else {
                         v.to_string()
                     }
@@ -754,6 +764,42 @@ fn shifted_columns(text: &str, columns: &[&str], add: f64) -> String {
         out.push('\n');
     }
     out
+}
+
+#[test]
+fn a_unit_slip_in_the_check_recording_is_named_as_such_not_as_a_departure() {
+    // TRAIN is the nominal rig's recording; CHECK the same run with its angle logged in
+    // radians: the answer names CHECK's unit, not a rig that "went elsewhere".
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(fixture("pulses_nominal.csv")).unwrap();
+    let check = dir.path().join("check_rad.csv");
+    std::fs::write(
+        &check,
+        scaled_columns(&text, &["angle_deg"], 1f64.to_radians()),
+    )
+    .unwrap();
+    let json = dir.path().join("d.json");
+    let r = on_plant(
+        "diagnose",
+        &plant(),
+        &[
+            &"--recording",
+            &fixture("pulses_nominal.csv"),
+            &"--check",
+            &check,
+            &"--json",
+            &json,
+        ],
+    );
+    let out = text_of_any_status(&r);
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(v["verdict"], "not_this_plant", "{out}");
+    assert!(
+        out.contains("in the check recording (--check): angle_deg fits the model")
+            && out.contains("read as radians"),
+        "{out}"
+    );
 }
 
 #[test]

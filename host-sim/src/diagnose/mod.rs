@@ -1079,11 +1079,21 @@ pub fn diagnose(
             p.candidate.apply(&mut ccfg, &p.params, &csetup);
         }
         let ccfg = from_check(&ccfg);
+        // The unit and wiring checks on CHECK too: a slip there is no departure of the rig.
+        let mut check_plausibility = verdict::PlausibilitySums::default();
+        let check_start = from_check(nominal);
         match (
-            replay_recording(&from_check(nominal), rec, &opts.solver, |_, _| {}),
+            replay_recording(&check_start, rec, &opts.solver, |k, m| {
+                check_plausibility.push(rec, k, m)
+            }),
             replay_recording(&ccfg, rec, &opts.solver, |_, _| {}),
         ) {
             (Ok(before), Ok(after)) => {
+                hints.extend(
+                    verdict::plausibility_hints(&check_start, rec, &check_plausibility)
+                        .into_iter()
+                        .map(|h| format!("in the check recording (--check): {h}")),
+                );
                 check_before = Some(before.fits.clone());
                 check_after = Some(after.fits.clone());
                 check_series = Some(Series::thinned(rec, plot_stride(rec.len()), &before, after));
