@@ -677,6 +677,27 @@ fn a_key_that_does_nothing_for_its_channel_is_refused_at_its_line() {
 }
 
 #[test]
+fn a_constant_that_is_not_a_number_is_refused_at_its_line() {
+    let dir = tmp();
+    let (raw, _) = rig_file(dir.path(), 2.0, 1, &[]);
+    let out = dir.path().join("never.csv");
+    for value in ["nan", "inf", "-inf"] {
+        let text =
+            format!("{MAP}\n[[channel]]\nchannel = \"f1\"\nconstant = {value}\nunit = \"N\"\n");
+        let r = import_with(dir.path(), &text, &raw, &out, false);
+        let e = exits(2, &r);
+        let line = line_of(&text, &format!("constant = {value}"), 0);
+        assert!(
+            e.contains(&format!(
+                "map.toml:{line}: channel[5] (`f1`): `constant`: must be a finite number"
+            )),
+            "{e}"
+        );
+        assert!(!out.exists());
+    }
+}
+
+#[test]
 fn a_column_mapped_twice_is_refused_at_its_line() {
     let dir = tmp();
     let (raw, _) = rig_file(dir.path(), 2.0, 1, &[]);

@@ -467,6 +467,13 @@ fn plan(
             c.offset
         )));
     }
+    if let Some(v) = c.constant.filter(|v| !v.is_finite()) {
+        return Err(ImportError(format!(
+            "{}: must be a finite number (the channel's raw value on every row), got {}",
+            key("constant"),
+            Shown(v)
+        )));
+    }
     let unit = c.unit.as_deref().unwrap_or(match target {
         Target::Opening(_) | Target::Signed(_) => "fraction",
         _ => "",
