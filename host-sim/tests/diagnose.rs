@@ -727,6 +727,22 @@ fn a_recording_that_starts_away_from_the_files_initial_state_is_replayed_from_it
     );
 }
 
+/// `diagnose` of the nominal rig's recording with `check` as the check recording.
+fn nominal_with_check(check: &std::path::Path, json: &std::path::Path) -> std::process::Output {
+    on_plant(
+        "diagnose",
+        &plant(),
+        &[
+            &"--recording",
+            &fixture("pulses_nominal.csv"),
+            &"--check",
+            &check,
+            &"--json",
+            &json,
+        ],
+    )
+}
+
 /// `text` (a recording) with every cell of `columns` multiplied by `factor`.
 fn scaled_columns(text: &str, columns: &[&str], factor: f64) -> String {
     mapped_columns(text, columns, |v| v * factor)
@@ -779,19 +795,7 @@ fn a_unit_slip_in_the_check_recording_is_named_as_such_not_as_a_departure() {
     )
     .unwrap();
     let json = dir.path().join("d.json");
-    let r = on_plant(
-        "diagnose",
-        &plant(),
-        &[
-            &"--recording",
-            &fixture("pulses_nominal.csv"),
-            &"--check",
-            &check,
-            &"--json",
-            &json,
-        ],
-    );
-    let out = text_of_any_status(&r);
+    let out = text_of_any_status(&nominal_with_check(&check, &json));
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(v["verdict"], "not_this_plant", "{out}");
@@ -1007,20 +1011,7 @@ fn a_recording_in_which_nothing_moves_is_refused_as_nothing_to_judge() {
 fn a_check_recording_the_nominal_model_does_not_describe_is_not_nothing_missing() {
     let dir = tempfile::tempdir().unwrap();
     let json = dir.path().join("d.json");
-    let with_check = |check: &std::path::Path| {
-        on_plant(
-            "diagnose",
-            &plant(),
-            &[
-                &"--recording",
-                &fixture("pulses_nominal.csv"),
-                &"--check",
-                &check,
-                &"--json",
-                &json,
-            ],
-        )
-    };
+    let with_check = |check: &std::path::Path| nominal_with_check(check, &json);
     let r = with_check(&fixture("pulses_loaded.csv"));
     let out = text(&r.stdout);
     exits(3, &r);

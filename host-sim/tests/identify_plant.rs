@@ -104,33 +104,31 @@ fn a_recording_in_which_nothing_moves_is_refused_as_no_excitation() {
             rec.set_channel(c, y);
         }
     }
-    let specs = parse_param_specs(&["joint.inertia_kgm2".into()], &reference, "r.toml").unwrap();
-    let e = fit_plant(
-        &rec,
-        &reference,
+    let e = inertia_fit_error(&rec, &reference);
+    assert!(e.contains("no excitation") && e.contains("constant"), "{e}");
+}
+
+/// The error of fitting the inertia alone to `rec` from `reference`, default options.
+fn inertia_fit_error(rec: &Recording, reference: &str) -> String {
+    let specs = parse_param_specs(&["joint.inertia_kgm2".into()], reference, "r.toml").unwrap();
+    fit_plant(
+        rec,
+        reference,
         "r.toml",
         &specs,
         &PlantFitOptions::default(),
     )
     .unwrap_err()
-    .to_string();
-    assert!(e.contains("no excitation") && e.contains("constant"), "{e}");
+    .to_string()
 }
 
 #[test]
 fn a_short_recording_or_a_bad_holdout_is_an_error() {
     let reference = std::fs::read_to_string(fixture("reference-1dof.toml")).unwrap();
     let rec = recording(&reference, 15, &MeasurementNoise::NONE);
+    let e = inertia_fit_error(&rec, &reference);
+    assert!(e.contains("too short"), "{e}");
     let specs = parse_param_specs(&["joint.inertia_kgm2".into()], &reference, "r.toml").unwrap();
-    let e = fit_plant(
-        &rec,
-        &reference,
-        "r.toml",
-        &specs,
-        &PlantFitOptions::default(),
-    )
-    .unwrap_err();
-    assert!(e.to_string().contains("too short"), "{e}");
     let opts = PlantFitOptions {
         holdout_fraction: 1.0,
         ..PlantFitOptions::default()
