@@ -507,6 +507,8 @@ pub struct ControlTick {
     /// this tick), the time since their last run [s] and what they held for the ticks in
     /// between.
     outer_period_ticks: u16,
+    /// `1 / outer_period_ticks`: a set-point's change over a period, per tick.
+    outer_per_tick: f32,
     outer_countdown: u16,
     outer_dt_s: f32,
     outer_held: OuterHeld,
@@ -695,6 +697,7 @@ impl ControlTick {
                 ff
             },
             outer_period_ticks: cfg.outer_period_ticks.max(1),
+            outer_per_tick: 1.0 / cfg.outer_period_ticks.max(1) as f32,
             outer_countdown: 0,
             outer_dt_s: 0.0,
             outer_held: OuterHeld::default(),
@@ -1136,7 +1139,7 @@ impl ControlTick {
         let fresh = outer || self.safety.fault().is_some();
         let estimate = if fresh { self.estimate() } else { None };
         let torque_est = if fresh {
-            usable_torque(estimate)
+            usable_torque(estimate).unwrap_or(0.0)
         } else {
             self.outer_held.torque_est_nm
         };
@@ -1161,7 +1164,7 @@ impl ControlTick {
             // A numeric fault persists while the force-law estimate of the current
             // measurements is unusable.
             if self.safety.seen().contains(FaultCode::ControllerNumeric)
-                && !matches!(estimate, Some((t, flags)) if !flags.contains_any(ForceFlags::FATAL) && t.is_finite())
+                && usable_torque(estimate).is_none()
             {
                 self.active.insert(FaultCode::ControllerNumeric);
             }
@@ -1230,7 +1233,7 @@ impl ControlTick {
                 if self.outer_period_ticks > 1 {
                     let h = &self.outer_held;
                     let (s1, s2) = if h.primed {
-                        let per_tick = 1.0 / self.outer_period_ticks as f32;
+                        let per_tick = self.outer_per_tick;
                         (
                             (ps.p1_gauge_pa - h.p1_set_gauge_pa) * per_tick,
                             (ps.p2_gauge_pa - h.p2_set_gauge_pa) * per_tick,
@@ -1474,12 +1477,12 @@ impl ControlTick {
     }
 }
 
-/// The logged torque of a force-law estimate: 0 when there is none or it is unusable.
+/// The torque of a force-law estimate, `None` when there is none or it is unusable.
 #[inline(always)]
-fn usable_torque(estimate: Option<(f32, ForceFlags)>) -> f32 {
+fn usable_torque(estimate: Option<(f32, ForceFlags)>) -> Option<f32> {
     match estimate {
-        Some((t, flags)) if !flags.contains_any(ForceFlags::FATAL) && t.is_finite() => t,
-        _ => 0.0,
+        Some((t, flags)) if !flags.contains_any(ForceFlags::FATAL) && t.is_finite() => Some(t),
+        _ => None,
     }
 }
 
