@@ -97,6 +97,14 @@ const fn parse_hz(s: &str) -> u32 {
     v
 }
 
+// The outer loops of the cascade no slower than 200 Hz: a build that breaks it would latch a
+// configuration fault at every power-up (`ControllerConfig::is_valid`).
+const _: () = assert!(
+    TICK_HZ / pam_firmware::constants::OUTER_PERIOD_TICKS as u32 >= 200,
+    "config/controller.toml [rates] outer_period_ticks: at this PAM_TICK_HZ the outer loops \
+     would run below 200 Hz (at most PAM_TICK_HZ / 200 ticks, 5 at 1000 Hz)"
+);
+
 /// A tick must end within this share of its period [%] to count as on time.
 const DEADLINE_PERCENT: u32 = 80;
 /// The tick deadline [us] (soft check in the tick, hard check by the TIM5 monitor).
