@@ -46,15 +46,19 @@
 //!
 //! What the integrated check does not know is also taken in the judged valve's favour, never
 //! against it:
-//! - The other valve's term (both valves of one muscle open in one window, as a pressure
-//!   loop flipping across its deadband does) at the threshold's relative margin
+//! - For the exhaust, the inflow's term (both valves of one muscle open in one window, as a
+//!   pressure loop flipping across its deadband does) at the threshold's relative margin
 //!   `residual_rel`: a polytropic fill raises the pressure up to 1.4 times the isothermal
-//!   model's change, which would otherwise count as an exhaust that did not vent.
+//!   model's change, which would otherwise count as an exhaust that did not vent. Not the
+//!   other way round: a vent larger than modelled is what a stuck-open exhaust is, and the
+//!   inlet's check is what sees it while the loop fills against it.
 //! - The muscle's trend at rest: the measured rate net of the volume term over the windows in
 //!   which both its valves were closed (and not just closed), an exponential mean over about
 //!   four windows. A leak makes it negative (the inlet is credited with what the leak took), a
 //!   chamber warming back after a vent positive (the exhaust is credited). A stuck valve still
-//!   shows: net of the trend, nothing of the expected change is seen.
+//!   shows: net of the trend, nothing of the expected change is seen. A trend beyond the
+//!   threshold's absolute part (`residual_abs_pa_s`) is no leak but an open path, a stuck-open
+//!   exhaust venting at megapascals per second, and is not credited.
 //!
 //! The price: an exhaust opened only in windows with a much larger inflow, or an inlet held
 //! against a leak that needs a pulse in every window, is not judged by the integrated check; a
@@ -478,22 +482,29 @@ impl ResidualMonitor {
             let in_open = u_in > 0.0 && q_in > 0.0;
             // (`d_out`, `d_in`: the last window's term minus this one's.)
             let q_out_other = if d_out < 0.0 { q_out + d_out } else { q_out };
-            // The other valve's term is as uncertain as the per-window threshold allows (a
-            // polytropic fill or vent moves the pressure up to 1.4 times the isothermal
-            // model's change): taken at its upper margin, in the favour of the valve judged.
+            // The inflow's term is as uncertain as the per-window threshold allows (a
+            // polytropic fill raises the pressure up to 1.4 times the isothermal model's
+            // change): the exhaust is judged against it at its upper margin. Not the other
+            // way round: a vent larger than modelled is what a stuck-open exhaust is, and the
+            // inlet's check is what sees it while the loop fills against it.
             let rel = self.params.residual_rel;
             // The muscle's trend at rest counts in the valve's favour only: a leak the inlet
             // makes up for, a warming the exhaust works against. A stuck valve still shows:
-            // net of its trend, nothing of the expected change is seen.
-            let trend = w.trend_pa_s;
+            // net of its trend, nothing of the expected change is seen. A trend beyond the
+            // threshold's absolute part is no leak but an open path (a stuck-open exhaust
+            // vents at megapascals per second), and is not credited.
+            let trend = if libm::fabsf(w.trend_pa_s) <= self.params.residual_abs_pa_s {
+                w.trend_pa_s
+            } else {
+                0.0
+            };
             let resting = !(u_in > 0.0 || u_ex > 0.0 || w.inlet.was_open || w.exhaust.was_open);
             // (Out of line, called only when there is something to add.)
             let (in_lost, _) = if in_open || w.inlet.was_open {
                 w.inlet.add(
                     in_open,
                     q_in,
-                    measured - q_vol - q_out_other + rel * libm::fabsf(q_out_other)
-                        - trend.min(0.0),
+                    measured - q_vol - q_out_other - trend.min(0.0),
                     t,
                     &self.params,
                 )

@@ -378,3 +378,31 @@ fn fault_campaign() {
         failures.join("\n")
     );
 }
+
+/// A stuck-open exhaust while the set-point moves: the pressure loop keeps the inlet open
+/// against it, and the muscle's pressure falls between the inlet's openings at megapascals
+/// per second. The supervision's integrated inlet check credits a muscle's trend at rest (a
+/// leak) to its inlet; a trend that large is no leak and must not hide the open path.
+#[test]
+fn an_exhaust_stuck_open_during_a_sine_is_seen_within_40_ms_at_either_fault_time() {
+    let plant = fixture_plant("reference-1dof.toml");
+    for t in [0.8, 1.33] {
+        let text = format!(
+            "[scenario]\nname = \"campaign\"\nduration_s = {}\nseed = 3\n\n[setpoint]\n\
+             kind = \"sine\"\noffset_rad = 0.0\namplitude_rad = 0.3\nfreq_hz = 1.0\n\n\
+             [[events]]\nkind = \"stuck_valve\"\nat_s = {t}\nvalve = \"ex2\"\nopen = true\n",
+            t + 0.8
+        );
+        let s = Scenario::from_toml_str(&text, "campaign").unwrap();
+        let r = run(&plant, &s).unwrap();
+        let injected = r.injected_fault_ticks[0];
+        let seen = r
+            .first_latched_fault_tick
+            .unwrap_or_else(|| panic!("t = {t}: never seen"));
+        assert!(
+            seen >= injected && seen - injected <= 40,
+            "t = {t}: seen {} ticks after the injection",
+            seen as i64 - injected as i64
+        );
+    }
+}
