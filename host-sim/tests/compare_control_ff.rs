@@ -154,20 +154,39 @@ fn compare_control_prints_the_tables_and_exits_by_its_verdict() {
 /// tick"). Every row runs at those rates, and the verdict still holds.
 #[test]
 fn compare_control_at_half_rate_outer_loops_keeps_the_verdict() {
+    // The P-only gains file records the rate it was tuned at (as `tune --outer-period-ticks 2`
+    // writes it): with no --outer-period-ticks, every row runs at that rate, and the report
+    // says that the re-tuned gains were tuned at another.
+    let dir = tempfile::tempdir().unwrap();
+    let gains = dir.path().join("control_tuned_split.toml");
+    let shipped = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/control_tuned.toml"),
+    )
+    .unwrap();
+    assert!(shipped.contains("\n[cascade]\n"));
+    std::fs::write(
+        &gains,
+        shipped.replacen("\n[cascade]\n", "\n[cascade]\nouter_period_ticks = 2\n", 1),
+    )
+    .unwrap();
     let r = on_plant(
         "compare-control",
         &plant(),
-        &[
-            &"--quick",
-            &"--outer-period-ticks",
-            &"2",
-            &"--ff-update-ticks",
-            &"2",
-        ],
+        &[&"--quick", &"--gains", &gains, &"--ff-update-ticks", &"2"],
     );
     let out = text(&r.stdout);
     assert!(
         out.contains("evaluated every 2 tick(s); outer loops (position, torque) every 2 tick(s)"),
+        "{out}"
+    );
+    let notes: Vec<&str> = out
+        .lines()
+        .filter(|l| l.starts_with("note: gains"))
+        .collect();
+    assert!(
+        notes.len() == 1
+            && notes[0].contains("control_tuned_ff.toml")
+            && notes[0].contains("were tuned with the outer loops every 1 tick(s)"),
         "{out}"
     );
     let q = ratio(&out);

@@ -37,6 +37,15 @@ fn bad_tune_arguments_are_refused_without_touching_the_output() {
             vec!["--transition-s", "-1"],
             "must be a number of seconds within [0, 2], got -1",
         ),
+        // The outer loops below 200 Hz at the 1 kHz tick.
+        (
+            vec!["--outer-period-ticks", "6"],
+            "--outer-period-ticks 6: allowed 1..=5",
+        ),
+        (
+            vec!["--outer-period-ticks", "0"],
+            "--outer-period-ticks 0: allowed 1..=5",
+        ),
     ] {
         let mut rest: Vec<&dyn AsRef<std::ffi::OsStr>> = vec![&"--out", &out];
         rest.extend(args.iter().map(|a| a as &dyn AsRef<std::ffi::OsStr>));

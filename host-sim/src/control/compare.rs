@@ -225,6 +225,10 @@ impl DpPidToml {
     }
 }
 
+/// The outer loops' periods host-sim tunes and compares at [ticks of the 1 kHz tick]: the
+/// position and torque loops at 200 Hz or faster.
+pub const OUTER_PERIOD_TICKS: std::ops::RangeInclusive<u16> = 1..=5;
+
 /// The cascade's suite tuning as stored in the TOML file: the gains the tuner chooses, on top
 /// of [`ControllerConfig::reference`] (everything else, the pressure loops, valves, limits and
 /// safety path included, is the reference's).
@@ -249,6 +253,11 @@ pub struct CascadeToml {
     /// off).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub pressure_feedforward: bool,
+    /// The outer loops' period [ticks] these gains were tuned at and run with in
+    /// [`CascadeToml::config`] (`host-sim tune --outer-period-ticks`, 1..=5; absent = the
+    /// reference's, `config/controller.toml` `[rates]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub outer_period_ticks: Option<u16>,
     /// Suite MSE the tuner measured with these gains [rad^2] (checked by the tests).
     pub suite_mse_rad2: f64,
     /// Suite MSE with the position gains scaled by [`GAIN_MARGIN`] [rad^2] (checked by the
@@ -267,6 +276,9 @@ impl CascadeToml {
         c.feedforward.inertia_kgm2 = self.feedforward_inertia_kgm2 as f32;
         c.feedforward.cutoff_hz = self.setpoint_rate_cutoff_hz as f32;
         c.pressure_ff.enabled = self.pressure_feedforward;
+        if let Some(n) = self.outer_period_ticks {
+            c.outer_period_ticks = n;
+        }
         // The analytical model (the firmware's volume polynomial), as tuned.
         c.volume_fnn = None;
         c
@@ -286,6 +298,9 @@ impl CascadeToml {
             feedforward_inertia_kgm2: c.feedforward.inertia_kgm2 as f64,
             setpoint_rate_cutoff_hz: c.feedforward.cutoff_hz as f64,
             pressure_feedforward: c.pressure_ff.enabled,
+            outer_period_ticks: (c.outer_period_ticks
+                != ControllerConfig::reference(1000.0).outer_period_ticks)
+                .then_some(c.outer_period_ticks),
             suite_mse_rad2,
             suite_mse_at_margin_rad2,
         }
@@ -315,6 +330,23 @@ impl CascadeToml {
             ),
             ("setpoint_rate_cutoff_hz", self.setpoint_rate_cutoff_hz, 1e4),
         ];
+        if let Some(n) = self.outer_period_ticks {
+            if !OUTER_PERIOD_TICKS.contains(&n) {
+                let line = crate::validate::toml_key_line(text, table, 0, "outer_period_ticks")
+                    .unwrap_or(0);
+                return Err(IdentError::at(
+                    file,
+                    line,
+                    &format!("{table}.outer_period_ticks"),
+                    &format!(
+                        "{n} must be in {}..={} (the outer loops at 200 Hz or faster at the \
+                         1 kHz tick)",
+                        OUTER_PERIOD_TICKS.start(),
+                        OUTER_PERIOD_TICKS.end()
+                    ),
+                ));
+            }
+        }
         let suite_mse_rad2 = [self.suite_mse_rad2, self.suite_mse_at_margin_rad2];
         check_fields(&fields, suite_mse_rad2, table, text, file)
     }
@@ -913,6 +945,24 @@ suite_mse_at_margin_rad2 = 0.000001
             (0.015625, 150.0)
         );
         assert_eq!(CascadeToml::from_config(&c, 1e-6, 1e-6), t.cascade);
+        // Absent, the outer loops run at the reference's rate and nothing is written; tuned at
+        // another rate, the file records it and the cascade runs at it.
+        assert_eq!(
+            c.outer_period_ticks,
+            ControllerConfig::reference(1000.0).outer_period_ticks
+        );
+        assert!(!t.to_toml_string("").contains("outer_period_ticks"));
+        let other = c.outer_period_ticks % 5 + 1;
+        let split = CascadeToml::from_config(
+            &ControllerConfig {
+                outer_period_ticks: other,
+                ..c
+            },
+            1e-6,
+            1e-6,
+        );
+        assert_eq!(split.outer_period_ticks, Some(other));
+        assert_eq!(split.config(1000.0).outer_period_ticks, other);
         let text = t.to_toml_string("provenance\nline two");
         assert!(text.starts_with("# provenance\n# line two\n"));
         assert_eq!(ControlTuning::from_toml_str(&text, "t.toml").unwrap(), t);
@@ -955,6 +1005,17 @@ suite_mse_at_margin_rad2 = 0.000001
                 "torque_ki_per_s = 2.0".into(),
                 "torque_ki_per_s = nan".into(),
                 "t.toml:29: field `cascade.torque_ki_per_s`",
+            ),
+            // The outer loops below 200 Hz at the 1 kHz tick.
+            (
+                "torque_ki_per_s = 2.0".into(),
+                "torque_ki_per_s = 2.0\nouter_period_ticks = 6".into(),
+                "t.toml:30: field `cascade.outer_period_ticks`: 6 must be in 1..=5",
+            ),
+            (
+                "torque_ki_per_s = 2.0".into(),
+                "torque_ki_per_s = 2.0\nouter_period_ticks = 0".into(),
+                "t.toml:30: field `cascade.outer_period_ticks`: 0 must be in 1..=5",
             ),
             (
                 "setpoint_rate_weight = 1.0\n".into(),

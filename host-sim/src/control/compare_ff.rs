@@ -42,7 +42,8 @@ use pam_firmware::tick::ControllerConfig;
 use super::closed_loop::{run_with, Scenario};
 use super::compare::{
     at_scenario_rate, default_control_tuning, default_control_tuning_ff, jump_suite_scenarios,
-    suite_scenarios, ControlTuning, SHIPPED_CONTROL_TUNED, SHIPPED_CONTROL_TUNED_FF,
+    suite_scenarios, ControlTuning, OUTER_PERIOD_TICKS, SHIPPED_CONTROL_TUNED,
+    SHIPPED_CONTROL_TUNED_FF,
 };
 use super::robustness::held_out_scenarios;
 use crate::identify::volume::{
@@ -130,7 +131,8 @@ pub struct CompareControlArgs {
     pub ff: FfOverrides,
     /// Run the cascade's outer loops (position loop, trajectory feed-forward, torque
     /// estimate, torque loop) on one tick in N, the pressure loops every tick, in every row
-    /// (1..=5 at the 1 kHz tick; 1 = every tick) [default: config/controller.toml [rates]
+    /// (1..=5 at the 1 kHz tick; 1 = every tick) [default: the rate --gains were tuned at
+    /// (`host-sim tune --outer-period-ticks`), else config/controller.toml [rates]
     /// outer_period_ticks].
     #[arg(long, value_name = "N")]
     pub outer_period_ticks: Option<u16>,
@@ -715,12 +717,24 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
     a.ff.apply(&mut base.pressure_ff)?;
     if let Some(n) = a.outer_period_ticks {
         anyhow::ensure!(
-            (1..=5).contains(&n),
-            "--outer-period-ticks {n}: outside the allowed range 1..=5 (the outer loops at \
-             200 Hz or faster at the 1 kHz tick)"
+            OUTER_PERIOD_TICKS.contains(&n),
+            "--outer-period-ticks {n}: outside the allowed range {}..={} (the outer loops at \
+             200 Hz or faster at the 1 kHz tick)",
+            OUTER_PERIOD_TICKS.start(),
+            OUTER_PERIOD_TICKS.end()
         );
         base.outer_period_ticks = n;
     }
+    // The rates each gains file was tuned at, when they are not the rate of this run.
+    let tuned_at = |t: &ControlTuning| t.cascade.config(1000.0).outer_period_ticks;
+    let rate_notes: Vec<String> = [
+        (&gains, tuned_at(&tuning)),
+        (&gains_ff, tuned_at(&tuning_ff)),
+    ]
+    .into_iter()
+    .filter(|(_, n)| *n != base.outer_period_ticks)
+    .map(|(g, n)| format!("gains {g} were tuned with the outer loops every {n} tick(s)"))
+    .collect();
     // The re-tuned cascade runs the feed-forward with the same options and rates as the other
     // rows.
     let retuned = ControllerConfig {
@@ -806,6 +820,12 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
         f.update_period_ticks,
         base.outer_period_ticks
     )?;
+    for n in &rate_notes {
+        writeln!(
+            out,
+            "note: {n}; every row here runs them at the rates above"
+        )?;
+    }
     writeln!(
         out,
         "hybrid model: volume network trained per plant on the P-only cascade's run of {} (seed 1)",

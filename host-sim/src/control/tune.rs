@@ -134,6 +134,12 @@ pub struct TuneArgs {
     /// Keeps gains tuned on the smooth suite from limit-cycling after a set-point jump.
     #[arg(long)]
     pub stable_on_jumps: bool,
+    /// Tune the cascade with its outer loops (position loop, trajectory feed-forward, torque
+    /// estimate, torque loop) on one tick in N (1..=5 at the 1 kHz tick); the gains file
+    /// records it, and compare-control runs those gains at that rate [default:
+    /// config/controller.toml [rates] outer_period_ticks]. The PD / PID do not use it.
+    #[arg(long, value_name = "N")]
+    pub outer_period_ticks: Option<u16>,
 }
 
 const KP_GRID: [f64; 7] = [3e4, 1e5, 2e5, 5e5, 1e6, 2e6, 5e6];
@@ -633,6 +639,17 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
             bail!("--transition-s {t}: allowed 0..=2 s");
         }
     }
+    if let Some(n) = a.outer_period_ticks {
+        let r = crate::control::compare::OUTER_PERIOD_TICKS;
+        if !r.contains(&n) {
+            bail!(
+                "--outer-period-ticks {n}: allowed {}..={} (the outer loops at 200 Hz or faster \
+                 at the 1 kHz tick)",
+                r.start(),
+                r.end()
+            );
+        }
+    }
     crate::validate::distinct_file_outputs(&[("--plant", &a.plant)], &[("--out", &a.out)])
         .map_err(anyhow::Error::msg)?;
     let mut cascade_starts: Vec<(f32, f32, f32, Option<f32>)> = Vec::new();
@@ -755,6 +772,12 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
     // feed-forward existed, the firmware's default gains, the stored tuning, any given with
     // --cascade-start; each with the inertia feed-forward off and on (J of the plant).
     let mut reference = ControllerConfig::reference(1000.0);
+    if let Some(n) = a.outer_period_ticks {
+        reference.outer_period_ticks = n;
+        ctx.say(format!(
+            "cascade tuned with its outer loops every {n} tick(s)"
+        ));
+    }
     if a.pressure_ff {
         reference.pressure_ff.enabled = true;
         reference.volume_fnn = None;
@@ -856,7 +879,7 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
     let header = format!(
         "The three laws of the closed-loop comparison, each tuned on the suite\n\
          (host-sim control::compare::SUITE) by the same procedure and cost. Written by\n\
-         \x20 host-sim tune --plant {} --out {}{}{}{}{}{}{}\n\
+         \x20 host-sim tune --plant {} --out {}{}{}{}{}{}{}{}\n\
          with the firmware in the loop. Suite MSE = mean over the step_move, sine and\n\
          random_move scenarios of the MSE of the angle over every tick (a latched fault = infinite);\n\
          cost = the worse of the suite MSE at the gains and with the feedback gains x {}\n\
@@ -884,6 +907,9 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
         if a.robust { " --robust" } else { "" },
         if a.no_step_constraints { " --no-step-constraints" } else { "" },
         if a.pressure_ff { " --pressure-ff" } else { "" },
+        a.outer_period_ticks
+            .map(|n| format!(" --outer-period-ticks {n}"))
+            .unwrap_or_default(),
         if a.stable_on_jumps {
             " --stable-on-jumps"
         } else {

@@ -448,6 +448,7 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
             robust: false,
             pressure_ff: false,
             stable_on_jumps: false,
+            outer_period_ticks: None,
         })
         .context("tuning the gains")?;
         out += &format!("{r}{}:\n{}", control.display(), changes(&control, &text));
