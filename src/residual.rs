@@ -498,13 +498,19 @@ impl ResidualMonitor {
             } else {
                 0.0
             };
+            // (Comparisons, not f32::min / max: those carry NaN handling the gate made moot.)
+            let (leak, warming) = if trend < 0.0 {
+                (-trend, 0.0)
+            } else {
+                (0.0, trend)
+            };
             let resting = !(u_in > 0.0 || u_ex > 0.0 || w.inlet.was_open || w.exhaust.was_open);
             // (Out of line, called only when there is something to add.)
             let (in_lost, _) = if in_open || w.inlet.was_open {
                 w.inlet.add(
                     in_open,
                     q_in,
-                    measured - q_vol - q_out_other - trend.min(0.0),
+                    measured - q_vol - q_out_other + leak,
                     t,
                     &self.params,
                 )
@@ -518,7 +524,7 @@ impl ResidualMonitor {
                 w.exhaust.add(
                     ex_open,
                     -q_out,
-                    q_vol + q_in_other + rel * libm::fabsf(q_in_other) - measured + trend.max(0.0),
+                    q_vol + q_in_other + rel * libm::fabsf(q_in_other) - measured + warming,
                     t,
                     &self.params,
                 )
