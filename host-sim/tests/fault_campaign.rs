@@ -231,6 +231,21 @@ const SETPOINTS: &[(&str, &str, bool)] = &[
     ),
 ];
 
+/// A campaign run: set-point `sp` (its TOML table body), the fault `events` (with `{t}` for
+/// the injection time; empty = none) injected at `t` s, and 0.8 s after it.
+fn campaign_scenario(sp: &str, events: &str, t: f64) -> Scenario {
+    let text = format!(
+        "[scenario]\nname = \"campaign\"\nduration_s = {}\nseed = 3\n\n[setpoint]\n{sp}\n\n{}\n",
+        t + 0.8,
+        if events.is_empty() {
+            String::new()
+        } else {
+            format!("[[events]]\n{}", events.replace("{t}", &format!("{t}")))
+        }
+    );
+    Scenario::from_toml_str(&text, "campaign").unwrap()
+}
+
 #[derive(Default)]
 struct KindStats {
     runs: usize,
@@ -257,16 +272,7 @@ fn fault_campaign() {
             }
             for &t in fault_times {
                 for f in FAULTS {
-                    let text = format!(
-                        "[scenario]\nname = \"campaign\"\nduration_s = {}\nseed = 3\n\n[setpoint]\n{sp}\n\n{}\n",
-                        t + 0.8,
-                        if f.events.is_empty() {
-                            String::new()
-                        } else {
-                            format!("[[events]]\n{}", f.events.replace("{t}", &format!("{t}")))
-                        }
-                    );
-                    let s = Scenario::from_toml_str(&text, "campaign").unwrap();
+                    let s = campaign_scenario(sp, f.events, t);
                     let what = format!("{} / {sp_name} / {plant_name} / t = {t}", f.name);
                     let r = match run(plant, &s) {
                         Ok(r) => r,
@@ -387,13 +393,11 @@ fn fault_campaign() {
 fn an_exhaust_stuck_open_during_a_sine_is_seen_within_40_ms_at_either_fault_time() {
     let plant = fixture_plant("reference-1dof.toml");
     for t in [0.8, 1.33] {
-        let text = format!(
-            "[scenario]\nname = \"campaign\"\nduration_s = {}\nseed = 3\n\n[setpoint]\n\
-             kind = \"sine\"\noffset_rad = 0.0\namplitude_rad = 0.3\nfreq_hz = 1.0\n\n\
-             [[events]]\nkind = \"stuck_valve\"\nat_s = {t}\nvalve = \"ex2\"\nopen = true\n",
-            t + 0.8
+        let s = campaign_scenario(
+            "kind = \"sine\"\noffset_rad = 0.0\namplitude_rad = 0.3\nfreq_hz = 1.0",
+            "kind = \"stuck_valve\"\nat_s = {t}\nvalve = \"ex2\"\nopen = true",
+            t,
         );
-        let s = Scenario::from_toml_str(&text, "campaign").unwrap();
         let r = run(&plant, &s).unwrap();
         let injected = r.injected_fault_ticks[0];
         let seen = r

@@ -229,6 +229,15 @@ impl DpPidToml {
 /// position and torque loops at 200 Hz or faster.
 pub const OUTER_PERIOD_TICKS: std::ops::RangeInclusive<u16> = 1..=5;
 
+/// [`OUTER_PERIOD_TICKS`] and why, for the messages that refuse a period outside it.
+pub fn outer_period_range() -> String {
+    format!(
+        "{}..={} (the outer loops at 200 Hz or faster at the 1 kHz tick)",
+        OUTER_PERIOD_TICKS.start(),
+        OUTER_PERIOD_TICKS.end()
+    )
+}
+
 /// The cascade's suite tuning as stored in the TOML file: the gains the tuner chooses, on top
 /// of [`ControllerConfig::reference`] (everything else, the pressure loops, valves, limits and
 /// safety path included, is the reference's).
@@ -338,12 +347,7 @@ impl CascadeToml {
                     file,
                     line,
                     &format!("{table}.outer_period_ticks"),
-                    &format!(
-                        "{n} must be in {}..={} (the outer loops at 200 Hz or faster at the \
-                         1 kHz tick)",
-                        OUTER_PERIOD_TICKS.start(),
-                        OUTER_PERIOD_TICKS.end()
-                    ),
+                    &format!("{n} must be in {}", outer_period_range()),
                 ));
             }
         }

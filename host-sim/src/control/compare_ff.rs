@@ -42,7 +42,7 @@ use pam_firmware::tick::ControllerConfig;
 use super::closed_loop::{run_with, Scenario};
 use super::compare::{
     at_scenario_rate, default_control_tuning, default_control_tuning_ff, jump_suite_scenarios,
-    suite_scenarios, ControlTuning, OUTER_PERIOD_TICKS, SHIPPED_CONTROL_TUNED,
+    outer_period_range, suite_scenarios, ControlTuning, OUTER_PERIOD_TICKS, SHIPPED_CONTROL_TUNED,
     SHIPPED_CONTROL_TUNED_FF,
 };
 use super::robustness::held_out_scenarios;
@@ -718,10 +718,8 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
     if let Some(n) = a.outer_period_ticks {
         anyhow::ensure!(
             OUTER_PERIOD_TICKS.contains(&n),
-            "--outer-period-ticks {n}: outside the allowed range {}..={} (the outer loops at \
-             200 Hz or faster at the 1 kHz tick)",
-            OUTER_PERIOD_TICKS.start(),
-            OUTER_PERIOD_TICKS.end()
+            "--outer-period-ticks {n}: outside the allowed range {}",
+            outer_period_range()
         );
         base.outer_period_ticks = n;
     }

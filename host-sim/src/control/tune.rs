@@ -640,14 +640,9 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
         }
     }
     if let Some(n) = a.outer_period_ticks {
-        let r = crate::control::compare::OUTER_PERIOD_TICKS;
-        if !r.contains(&n) {
-            bail!(
-                "--outer-period-ticks {n}: allowed {}..={} (the outer loops at 200 Hz or faster \
-                 at the 1 kHz tick)",
-                r.start(),
-                r.end()
-            );
+        use crate::control::compare::{outer_period_range, OUTER_PERIOD_TICKS};
+        if !OUTER_PERIOD_TICKS.contains(&n) {
+            bail!("--outer-period-ticks {n}: allowed {}", outer_period_range());
         }
     }
     crate::validate::distinct_file_outputs(&[("--plant", &a.plant)], &[("--out", &a.out)])
