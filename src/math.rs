@@ -38,6 +38,15 @@ pub fn sqrtf(x: f32) -> f32 {
     }
 }
 
+/// `lo <= x <= hi`: false for NaN (every comparison with NaN is), and for the infinities
+/// with finite bounds, so `within(x, 0.0, f32::MAX)` is "finite and not negative". One
+/// out-of-line copy for the parameter checks: inlined `is_finite` tests cost flash on the
+/// board image.
+#[inline(never)]
+pub fn within(x: f32, lo: f32, hi: f32) -> bool {
+    x >= lo && x <= hi
+}
+
 #[cfg(test)]
 mod tests {
     /// The host build runs libm; the MCU build's VSQRT is checked against it on target by

@@ -22,6 +22,7 @@
 //! returns [`ControlError`] and resets the internal state; no allocation, no panic, libm only.
 
 use crate::control::{ControlError, JointState};
+use crate::math::within;
 use crate::safety::clamp_pressure_setpoint_pa;
 use crate::P_MUSCLE_MAX_GAUGE_PA;
 
@@ -52,17 +53,15 @@ impl DpPidGains {
     /// True when every gain and limit is finite and non-negative, `w` is in [0, 1] and p0 is
     /// within [0, 600 kPa].
     pub fn is_valid(&self) -> bool {
-        let nonneg = |x: f32| x.is_finite() && x >= 0.0;
+        let nonneg = |x: f32| within(x, 0.0, f32::MAX);
         nonneg(self.kp_pa_per_rad)
             && nonneg(self.ki_pa_per_rad_s)
             && nonneg(self.kd_pa_s_per_rad)
-            && nonneg(self.setpoint_rate_weight)
-            && self.setpoint_rate_weight <= 1.0
+            && within(self.setpoint_rate_weight, 0.0, 1.0)
             && nonneg(self.setpoint_rate_cutoff_hz)
             && nonneg(self.i_limit_pa)
             && nonneg(self.dp_max_pa)
-            && nonneg(self.p0_gauge_pa)
-            && self.p0_gauge_pa <= P_MUSCLE_MAX_GAUGE_PA
+            && within(self.p0_gauge_pa, 0.0, P_MUSCLE_MAX_GAUGE_PA)
     }
 
     /// The usable |dp| [Pa]: `dp_max_pa`, and no more than keeps `p0 +- dp` in [0, 600 kPa].

@@ -60,6 +60,18 @@
 //!   threshold's absolute part (`residual_abs_pa_s`) is no leak but an open path, a stuck-open
 //!   exhaust venting at megapascals per second, and is not credited.
 //!
+//! - The gas's heat after a long opening: a fill heats the gas (the pressure rises up to 1.4
+//!   times the isothermal model's change) and it cools back in the windows after, taking that
+//!   surplus away again. A judged batch that was due at least three times `integral_min_pa`
+//!   carries what it delivered beyond the model's expectation into the next batch, up to
+//!   `integral_min_pa` (so a valve sticking right after it delivered is judged at most one
+//!   batch later). An inlet opened in a window in which the exhaust's term is the larger is
+//!   not judged in that window: the vent of a gas still hot from the fill drops the pressure
+//!   faster than the model says and would swamp the inlet's share. Checked against a chamber
+//!   exchanging heat with its wall (a model the monitor does not share) with thermal time
+//!   constants from 0.2 s to 2 s; below about 0.15 s the cooling after a fill outruns what is
+//!   carried and a loop refilling against it reads as a stuck-closed inlet.
+//!
 //! The price: an exhaust opened only in windows with a much larger inflow, or an inlet held
 //! against a leak that needs a pulse in every window, is not judged by the integrated check; a
 //! pressure loop that finds the valve stuck keeps opening it alone, and the per-window check
@@ -81,6 +93,7 @@
 //! Cost on the MCU: a few adds per tick (opening sums); the model runs once per window.
 
 use crate::geometry::JointGeometry;
+use crate::math::within;
 use crate::safety::{FaultCode, FaultSet};
 
 /// The firmware's model of one muscle's pressure dynamics (both muscles are identical) and
@@ -141,24 +154,23 @@ impl ValveModelParams {
 
     /// True when every parameter is usable.
     pub fn is_valid(&self) -> bool {
-        let pos = |x: f32| x.is_finite() && x > 0.0;
+        let pos = |x: f32| x > 0.0 && within(x, 0.0, f32::MAX);
         pos(self.p_atm_pa)
-            && self.supply_gauge_pa.is_finite()
-            && self.supply_gauge_pa >= 0.0
+            && within(self.supply_gauge_pa, 0.0, f32::MAX)
             && pos(self.conductance_m3_per_s_pa)
-            && self.critical_ratio.is_finite()
-            && self.critical_ratio >= 0.0
+            && within(self.critical_ratio, 0.0, 1.0)
             && self.critical_ratio < 1.0
-            && self.volume_poly_m3.iter().all(|b| b.is_finite())
+            && self
+                .volume_poly_m3
+                .iter()
+                .all(|&b| within(b, -f32::MAX, f32::MAX))
             && self.volume_poly_m3[0] > 0.0
             && pos(self.residual_abs_pa_s)
-            && self.residual_rel.is_finite()
-            && self.residual_rel >= 0.0
+            && within(self.residual_rel, 0.0, f32::MAX)
             && self.window_ticks >= 1
             && self.persist_windows >= 1
             && pos(self.integral_min_pa)
-            && self.integral_fraction.is_finite()
-            && self.integral_fraction > 0.0
+            && pos(self.integral_fraction)
             && self.integral_fraction < 1.0
     }
 
@@ -288,14 +300,38 @@ impl Integral {
         let lost = judged && !(self.seen_pa >= p.integral_fraction * due_pa);
         let rose = self.seen_pa < -p.integral_fraction * due_pa;
         if judged {
+            // What a long opening delivered beyond the model's expectation is carried into
+            // the next sums, up to `integral_min_pa`: a polytropic fill raises the pressure
+            // above the isothermal model's change, and the gas cooling back takes that
+            // surplus away in the windows after (a short pulse right after a long fill would
+            // otherwise look lost). Only after a long opening (at least
+            // `CARRY_MIN_BATCHES` times `integral_min_pa` due), which moves the gas's
+            // temperature: the surplus of short pulses is noise and PWM edges, and carried
+            // it would hide the small deficit of an inlet filling against a stuck-open
+            // exhaust. Capped, a valve sticking right after it delivered is judged at most
+            // one batch later; a stuck valve leaves no surplus to carry.
+            let surplus = self.seen_pa - self.expected_pa;
             *self = Integral {
                 was_open: self.was_open,
+                seen_pa: if !(due_pa >= CARRY_MIN_BATCHES * p.integral_min_pa) {
+                    0.0
+                } else if surplus > p.integral_min_pa {
+                    p.integral_min_pa
+                } else if surplus > 0.0 {
+                    surplus
+                } else {
+                    0.0
+                },
                 ..Integral::default()
             };
         }
         (lost, rose)
     }
 }
+
+/// A judged batch carries its surplus into the next only when at least this many times
+/// `integral_min_pa` was due (a fill or vent of 15 kPa and more at the reference's 5 kPa).
+const CARRY_MIN_BATCHES: f32 = 3.0;
 
 /// Weight of a resting window in the muscle's trend (an exponential mean over about four
 /// windows: the 70 kPa/s of sensor noise on one window's rate falls to about 25 kPa/s).
@@ -479,9 +515,13 @@ impl ResidualMonitor {
             // other valve's taken with or without its late flow, whichever leaves more to the
             // valve judged (an exhaust still venting while the inlet opens must not count
             // against the inlet).
-            let in_open = u_in > 0.0 && q_in > 0.0;
             // (`d_out`, `d_in`: the last window's term minus this one's.)
             let q_out_other = if d_out < 0.0 { q_out + d_out } else { q_out };
+            // An inlet opened beside a larger vent is not judged in that window: a vent of
+            // hot gas after a fill drops the pressure up to 1.4 times the isothermal model's
+            // change, which swamps the inlet's share. A loop that finds its inlet stuck
+            // closed opens it alone.
+            let in_open = u_in > 0.0 && q_in > 0.0 && !(q_out_other < -q_in);
             // The inflow's term is as uncertain as the per-window threshold allows (a
             // polytropic fill raises the pressure up to 1.4 times the isothermal model's
             // change): the exhaust is judged against it at its upper margin. Not the other
@@ -858,6 +898,71 @@ mod tests {
         assert_eq!(leak_held_by_pulses(300_000.0, 1.0, 5_000), None);
         // ... while the same leak with the inlet stuck closed is seen within 30 ms.
         let (k, f) = leak_held_by_pulses(300_000.0, 0.0, 5_000).expect("a stuck inlet is seen");
+        assert!(k <= 30, "seen after {k} ticks");
+        assert!(
+            f.contains(FaultCode::InletStuckClosed1) || f.contains(FaultCode::SupplyLost),
+            "{f:?}"
+        );
+    }
+
+    /// Muscle 1 as a chamber of fixed volume whose gas exchanges heat with its wall (not the
+    /// monitor's isothermal model): `p_m` is the pressure the gas would have at the wall
+    /// temperature (the mass, moved by the valves at the model's isothermal rates), `theta`
+    /// the gas's temperature over the wall's; air comes in at the wall temperature, the
+    /// outflow leaves at the gas's, and `tau_s` is the thermal time constant. A pressure
+    /// loop (proportional valves, 20 kPa to full opening) follows a set-point stepping
+    /// between 150 and 400 kPa every 120 ms; `inlet_works`: the inlet lets air in.
+    /// Returns the first fault.
+    fn thermal_chamber_loop(tau_s: f32, inlet_works: bool) -> Option<(u32, FaultSet)> {
+        const KAPPA: f32 = 1.4;
+        let g = JointGeometry::REFERENCE;
+        let params = ValveModelParams::REFERENCE;
+        let p_atm = params.p_atm_pa;
+        let mut m = ResidualMonitor::new(params, &g);
+        let (mut p_m, mut theta) = (p_atm + 150_000.0, 1.0f32);
+        for k in 0..2_000u32 {
+            let p = p_m * theta - p_atm;
+            let f = m.observe(true, p, 300_000.0, 0.0, DT);
+            if !f.is_empty() {
+                return Some((k, f));
+            }
+            let set = if (k / 120) % 2 == 0 {
+                400_000.0
+            } else {
+                150_000.0
+            };
+            let u = ((set - p) / 20_000.0).clamp(-1.0, 1.0);
+            let (u_in, u_ex) = if u > 0.0 { (u, 0.0) } else { (0.0, -u) };
+            m.openings(u_in, u_ex, 0.0, 0.0);
+            let (q_in, q_out, _) =
+                params.rate_terms_pa_s(p, g.initial_contraction, 0.0, u_in, u_ex);
+            let q_in = if inlet_works { q_in } else { 0.0 };
+            // Energy of the gas (p V = m R T): air in at the wall temperature, out at the gas's
+            // (a choked mass flow goes as 1 / sqrt(T)), heat to the wall.
+            let p_abs = p_m * theta;
+            let sqrt_theta = libm::sqrtf(theta);
+            let dp = KAPPA * (q_in + sqrt_theta * q_out) + p_m * (1.0 - theta) / tau_s;
+            let dp_m = q_in + q_out / sqrt_theta;
+            p_m += dp_m * DT;
+            theta = (p_abs + dp * DT) / p_m;
+        }
+        None
+    }
+
+    #[test]
+    fn a_pressure_loop_on_a_chamber_exchanging_heat_is_no_fault() {
+        // Thermal time constants of 0.2 s to 2 s (0.24 s: the reference muscle at 300 kPa with
+        // hA = 2 W/K). Below about 0.15 s the gas cooling after a fill outruns what is carried,
+        // the loop refills against it in every window, and that reads as a stuck inlet. After
+        // a fill the gas cools back and the pressure falls faster than the isothermal model
+        // says; a loop overshooting then pulses both valves: read as a stuck-closed inlet
+        // without the carried surplus of the fill and without leaving a pulse beside a larger
+        // vent unjudged.
+        for tau_s in [0.2, 0.24, 0.5, 2.0] {
+            assert_eq!(thermal_chamber_loop(tau_s, true), None, "tau {tau_s} s");
+        }
+        // ... while the same loop with its inlet stuck closed is seen within 30 ms.
+        let (k, f) = thermal_chamber_loop(0.15, false).expect("a stuck inlet is seen");
         assert!(k <= 30, "seen after {k} ticks");
         assert!(
             f.contains(FaultCode::InletStuckClosed1) || f.contains(FaultCode::SupplyLost),
