@@ -151,7 +151,8 @@ fn compare_control_prints_the_tables_and_exits_by_its_verdict() {
 
 /// The feed-forward within the MCU budget: the outer loops on every second tick and the
 /// feed-forward evaluated on every second tick (`bash scripts/bench-mcu.sh`, "ff split
-/// tick"). Every row runs at those rates, and the verdict still holds.
+/// tick"), both as the gains files record them. Every row runs at those rates, and the
+/// verdict still holds.
 #[test]
 fn compare_control_at_half_rate_outer_loops_keeps_the_verdict() {
     // The P-only gains file records the rate it was tuned at (as `tune --outer-period-ticks 2`
@@ -169,10 +170,27 @@ fn compare_control_at_half_rate_outer_loops_keeps_the_verdict() {
         shipped.replacen("\n[cascade]\n", "\n[cascade]\nouter_period_ticks = 2\n", 1),
     )
     .unwrap();
+    // The re-tuned gains file records the feed-forward's evaluation period (as `tune
+    // --pressure-ff --ff-update-ticks 2` writes it): the feed-forward rows run at it.
+    let ff_gains = dir.path().join("control_tuned_ff.toml");
+    let shipped_ff = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/control_tuned_ff.toml"),
+    )
+    .unwrap();
+    assert!(shipped_ff.contains("\n[cascade]\n"));
+    std::fs::write(
+        &ff_gains,
+        shipped_ff.replacen(
+            "\n[cascade]\n",
+            "\n[cascade]\npressure_ff_update_period_ticks = 2\n",
+            1,
+        ),
+    )
+    .unwrap();
     let r = on_plant(
         "compare-control",
         &plant(),
-        &[&"--quick", &"--gains", &gains, &"--ff-update-ticks", &"2"],
+        &[&"--quick", &"--gains", &gains, &"--ff-gains", &ff_gains],
     );
     let out = text(&r.stdout);
     assert!(

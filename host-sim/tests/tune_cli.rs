@@ -46,6 +46,12 @@ fn bad_tune_arguments_are_refused_without_touching_the_output() {
             vec!["--outer-period-ticks", "0"],
             "--outer-period-ticks 0: allowed 1..=5",
         ),
+        (
+            vec!["--pressure-ff", "--ff-update-ticks", "101"],
+            "--ff-update-ticks 101: allowed 1..=100",
+        ),
+        // The feed-forward's period means nothing without it.
+        (vec!["--ff-update-ticks", "2"], "--pressure-ff"),
     ] {
         let mut rest: Vec<&dyn AsRef<std::ffi::OsStr>> = vec![&"--out", &out];
         rest.extend(args.iter().map(|a| a as &dyn AsRef<std::ffi::OsStr>));

@@ -229,6 +229,15 @@ impl DpPidToml {
 /// position and torque loops at 200 Hz or faster.
 pub const OUTER_PERIOD_TICKS: std::ops::RangeInclusive<u16> = 1..=5;
 
+/// The pressure feed-forward's evaluation periods [ticks] that `--ff-update-ticks` and a
+/// gains file accept (1 = every tick; 100 = every 0.1 s at the 1 kHz tick).
+pub const FF_UPDATE_TICKS: std::ops::RangeInclusive<u16> = 1..=100;
+
+/// [`FF_UPDATE_TICKS`], for the messages that refuse a period outside it.
+pub fn ff_update_range() -> String {
+    format!("{}..={}", FF_UPDATE_TICKS.start(), FF_UPDATE_TICKS.end())
+}
+
 /// [`OUTER_PERIOD_TICKS`] and why, for the messages that refuse a period outside it.
 pub fn outer_period_range() -> String {
     format!(
@@ -267,6 +276,11 @@ pub struct CascadeToml {
     /// reference's, `config/controller.toml` `[rates]`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub outer_period_ticks: Option<u16>,
+    /// The pressure feed-forward's evaluation period [ticks] these gains were tuned at and run
+    /// with (`host-sim tune --pressure-ff --ff-update-ticks`, in [`FF_UPDATE_TICKS`]; absent =
+    /// `config/pressure_ff.toml`'s `update_period_ticks`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pressure_ff_update_period_ticks: Option<u16>,
     /// Suite MSE the tuner measured with these gains [rad^2] (checked by the tests).
     pub suite_mse_rad2: f64,
     /// Suite MSE with the position gains scaled by [`GAIN_MARGIN`] [rad^2] (checked by the
@@ -287,6 +301,9 @@ impl CascadeToml {
         c.pressure_ff.enabled = self.pressure_feedforward;
         if let Some(n) = self.outer_period_ticks {
             c.outer_period_ticks = n;
+        }
+        if let Some(n) = self.pressure_ff_update_period_ticks {
+            c.pressure_ff.update_period_ticks = n;
         }
         // The analytical model (the firmware's volume polynomial), as tuned.
         c.volume_fnn = None;
@@ -310,6 +327,12 @@ impl CascadeToml {
             outer_period_ticks: (c.outer_period_ticks
                 != ControllerConfig::reference(1000.0).outer_period_ticks)
                 .then_some(c.outer_period_ticks),
+            pressure_ff_update_period_ticks: (c.pressure_ff.enabled
+                && c.pressure_ff.update_period_ticks
+                    != ControllerConfig::reference(1000.0)
+                        .pressure_ff
+                        .update_period_ticks)
+                .then_some(c.pressure_ff.update_period_ticks),
             suite_mse_rad2,
             suite_mse_at_margin_rad2,
         }
@@ -339,15 +362,28 @@ impl CascadeToml {
             ),
             ("setpoint_rate_cutoff_hz", self.setpoint_rate_cutoff_hz, 1e4),
         ];
-        if let Some(n) = self.outer_period_ticks {
-            if !OUTER_PERIOD_TICKS.contains(&n) {
-                let line = crate::validate::toml_key_line(text, table, 0, "outer_period_ticks")
-                    .unwrap_or(0);
+        let periods = [
+            (
+                "outer_period_ticks",
+                self.outer_period_ticks,
+                &OUTER_PERIOD_TICKS,
+                outer_period_range(),
+            ),
+            (
+                "pressure_ff_update_period_ticks",
+                self.pressure_ff_update_period_ticks,
+                &FF_UPDATE_TICKS,
+                ff_update_range(),
+            ),
+        ];
+        for (key, n, allowed, range) in periods {
+            if let Some(n) = n.filter(|n| !allowed.contains(n)) {
+                let line = crate::validate::toml_key_line(text, table, 0, key).unwrap_or(0);
                 return Err(IdentError::at(
                     file,
                     line,
-                    &format!("{table}.outer_period_ticks"),
-                    &format!("{n} must be in {}", outer_period_range()),
+                    &format!("{table}.{key}"),
+                    &format!("{n} must be in {range}"),
                 ));
             }
         }
@@ -967,6 +1003,27 @@ suite_mse_at_margin_rad2 = 0.000001
         );
         assert_eq!(split.outer_period_ticks, Some(other));
         assert_eq!(split.config(1000.0).outer_period_ticks, other);
+        // The feed-forward's evaluation period likewise, recorded only with it on.
+        assert!(!t.to_toml_string("").contains("update_period_ticks"));
+        let ff_every = c.pressure_ff.update_period_ticks % 100 + 1;
+        let with_ff = |enabled: bool| {
+            CascadeToml::from_config(
+                &ControllerConfig {
+                    pressure_ff: pam_firmware::pressure_ff::PressureFfParams {
+                        enabled,
+                        update_period_ticks: ff_every,
+                        ..c.pressure_ff
+                    },
+                    ..c
+                },
+                1e-6,
+                1e-6,
+            )
+        };
+        assert_eq!(with_ff(false).pressure_ff_update_period_ticks, None);
+        let ff = with_ff(true);
+        assert_eq!(ff.pressure_ff_update_period_ticks, Some(ff_every));
+        assert_eq!(ff.config(1000.0).pressure_ff.update_period_ticks, ff_every);
         let text = t.to_toml_string("provenance\nline two");
         assert!(text.starts_with("# provenance\n# line two\n"));
         assert_eq!(ControlTuning::from_toml_str(&text, "t.toml").unwrap(), t);
@@ -1020,6 +1077,11 @@ suite_mse_at_margin_rad2 = 0.000001
                 "torque_ki_per_s = 2.0".into(),
                 "torque_ki_per_s = 2.0\nouter_period_ticks = 0".into(),
                 "t.toml:30: field `cascade.outer_period_ticks`: 0 must be in 1..=5",
+            ),
+            (
+                "torque_ki_per_s = 2.0".into(),
+                "torque_ki_per_s = 2.0\npressure_ff_update_period_ticks = 101".into(),
+                "t.toml:30: field `cascade.pressure_ff_update_period_ticks`: 101 must be in 1..=100",
             ),
             (
                 "setpoint_rate_weight = 1.0\n".into(),

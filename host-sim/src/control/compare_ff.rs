@@ -41,9 +41,9 @@ use pam_firmware::tick::ControllerConfig;
 
 use super::closed_loop::{run_with, Scenario};
 use super::compare::{
-    at_scenario_rate, default_control_tuning, default_control_tuning_ff, jump_suite_scenarios,
-    outer_period_range, suite_scenarios, ControlTuning, OUTER_PERIOD_TICKS, SHIPPED_CONTROL_TUNED,
-    SHIPPED_CONTROL_TUNED_FF,
+    at_scenario_rate, default_control_tuning, default_control_tuning_ff, ff_update_range,
+    jump_suite_scenarios, outer_period_range, suite_scenarios, ControlTuning, FF_UPDATE_TICKS,
+    OUTER_PERIOD_TICKS, SHIPPED_CONTROL_TUNED, SHIPPED_CONTROL_TUNED_FF,
 };
 use super::robustness::held_out_scenarios;
 use crate::identify::volume::{
@@ -205,8 +205,9 @@ impl FfOverrides {
         }
         if let Some(n) = self.update_ticks {
             anyhow::ensure!(
-                (1..=100).contains(&n),
-                "--ff-update-ticks {n}: outside the allowed range 1..=100"
+                FF_UPDATE_TICKS.contains(&n),
+                "--ff-update-ticks {n}: outside the allowed range {}",
+                ff_update_range()
             );
             ff.update_period_ticks = n;
         }
@@ -714,6 +715,14 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
          --pressure-ff"
     );
     let mut base = tuning.cascade.config(1000.0);
+    // The feed-forward is evaluated at the period its gains were tuned at (a re-tuned file
+    // records it when it is not config/pressure_ff.toml's), unless --ff-update-ticks says.
+    let ff_tuned_every = tuning_ff
+        .cascade
+        .config(1000.0)
+        .pressure_ff
+        .update_period_ticks;
+    base.pressure_ff.update_period_ticks = ff_tuned_every;
     a.ff.apply(&mut base.pressure_ff)?;
     if let Some(n) = a.outer_period_ticks {
         anyhow::ensure!(
@@ -732,6 +741,14 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
     .into_iter()
     .filter(|(_, n)| *n != base.outer_period_ticks)
     .map(|(g, n)| format!("gains {g} were tuned with the outer loops every {n} tick(s)"))
+    .chain(
+        (ff_tuned_every != base.pressure_ff.update_period_ticks).then(|| {
+            format!(
+                "gains {gains_ff} were tuned with the feed-forward evaluated every \
+                 {ff_tuned_every} tick(s)"
+            )
+        }),
+    )
     .collect();
     // The re-tuned cascade runs the feed-forward with the same options and rates as the other
     // rows.

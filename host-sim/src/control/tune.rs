@@ -140,6 +140,11 @@ pub struct TuneArgs {
     /// config/controller.toml [rates] outer_period_ticks]. The PD / PID do not use it.
     #[arg(long, value_name = "N")]
     pub outer_period_ticks: Option<u16>,
+    /// With --pressure-ff: evaluate the feed-forward once every N ticks and hold it in between
+    /// (1..=100); the gains file records it, and compare-control runs those gains so [default:
+    /// config/pressure_ff.toml update_period_ticks].
+    #[arg(long = "ff-update-ticks", value_name = "N", requires = "pressure_ff")]
+    pub ff_update_ticks: Option<u16>,
 }
 
 const KP_GRID: [f64; 7] = [3e4, 1e5, 2e5, 5e5, 1e6, 2e6, 5e6];
@@ -645,6 +650,12 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
             bail!("--outer-period-ticks {n}: allowed {}", outer_period_range());
         }
     }
+    if let Some(n) = a.ff_update_ticks {
+        use crate::control::compare::{ff_update_range, FF_UPDATE_TICKS};
+        if !FF_UPDATE_TICKS.contains(&n) {
+            bail!("--ff-update-ticks {n}: allowed {}", ff_update_range());
+        }
+    }
     crate::validate::distinct_file_outputs(&[("--plant", &a.plant)], &[("--out", &a.out)])
         .map_err(anyhow::Error::msg)?;
     let mut cascade_starts: Vec<(f32, f32, f32, Option<f32>)> = Vec::new();
@@ -777,6 +788,10 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
         reference.pressure_ff.enabled = true;
         reference.volume_fnn = None;
         ctx.say("cascade tuned with the pressure feed-forward on (config/pressure_ff.toml)".into());
+        if let Some(n) = a.ff_update_ticks {
+            reference.pressure_ff.update_period_ticks = n;
+            ctx.say(format!("feed-forward evaluated every {n} tick(s)"));
+        }
     }
     let mut starts = vec![
         (11.0, 8.0, 0.8, None),

@@ -449,6 +449,7 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
             pressure_ff: false,
             stable_on_jumps: false,
             outer_period_ticks: None,
+            ff_update_ticks: None,
         })
         .context("tuning the gains")?;
         out += &format!("{r}{}:\n{}", control.display(), changes(&control, &text));
