@@ -40,15 +40,15 @@ fn bad_tune_arguments_are_refused_without_touching_the_output() {
         // The outer loops below 200 Hz at the 1 kHz tick.
         (
             vec!["--outer-period-ticks", "6"],
-            "--outer-period-ticks 6: allowed 1..=5",
+            "--outer-period-ticks 6: outside the allowed range 1..=5",
         ),
         (
             vec!["--outer-period-ticks", "0"],
-            "--outer-period-ticks 0: allowed 1..=5",
+            "--outer-period-ticks 0: outside the allowed range 1..=5",
         ),
         (
             vec!["--pressure-ff", "--ff-update-ticks", "101"],
-            "--ff-update-ticks 101: allowed 1..=100",
+            "--ff-update-ticks 101: outside the allowed range 1..=100",
         ),
         // The feed-forward's period means nothing without it.
         (vec!["--ff-update-ticks", "2"], "--pressure-ff"),

@@ -238,6 +238,21 @@ pub fn ff_update_range() -> String {
     format!("{}..={}", FF_UPDATE_TICKS.start(), FF_UPDATE_TICKS.end())
 }
 
+/// `n` of the command-line option `option` if it is in `allowed`, else the error that names
+/// the option and the range (`range`: [`outer_period_range`] or [`ff_update_range`]).
+pub fn checked_period(
+    option: &str,
+    n: u16,
+    allowed: &std::ops::RangeInclusive<u16>,
+    range: String,
+) -> anyhow::Result<u16> {
+    anyhow::ensure!(
+        allowed.contains(&n),
+        "{option} {n}: outside the allowed range {range}"
+    );
+    Ok(n)
+}
+
 /// [`OUTER_PERIOD_TICKS`] and why, for the messages that refuse a period outside it.
 pub fn outer_period_range() -> String {
     format!(

@@ -644,16 +644,21 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
             bail!("--transition-s {t}: allowed 0..=2 s");
         }
     }
-    if let Some(n) = a.outer_period_ticks {
-        use crate::control::compare::{outer_period_range, OUTER_PERIOD_TICKS};
-        if !OUTER_PERIOD_TICKS.contains(&n) {
-            bail!("--outer-period-ticks {n}: allowed {}", outer_period_range());
+    {
+        use crate::control::compare::{
+            checked_period, ff_update_range, outer_period_range, FF_UPDATE_TICKS,
+            OUTER_PERIOD_TICKS,
+        };
+        if let Some(n) = a.outer_period_ticks {
+            checked_period(
+                "--outer-period-ticks",
+                n,
+                &OUTER_PERIOD_TICKS,
+                outer_period_range(),
+            )?;
         }
-    }
-    if let Some(n) = a.ff_update_ticks {
-        use crate::control::compare::{ff_update_range, FF_UPDATE_TICKS};
-        if !FF_UPDATE_TICKS.contains(&n) {
-            bail!("--ff-update-ticks {n}: allowed {}", ff_update_range());
+        if let Some(n) = a.ff_update_ticks {
+            checked_period("--ff-update-ticks", n, &FF_UPDATE_TICKS, ff_update_range())?;
         }
     }
     crate::validate::distinct_file_outputs(&[("--plant", &a.plant)], &[("--out", &a.out)])
