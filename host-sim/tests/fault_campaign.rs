@@ -21,6 +21,22 @@ use host_sim::plant::ValveInputs;
 use host_sim::Plant;
 
 /// A plant file of `tests/fixtures/` (copies of the shared reference plants).
+/// On the thermal chamber the residual's isothermal model is off by the gas's heating and
+/// cooling, and the valve faults it sees (stuck closed, stuck open, supply lost) may take this
+/// long [ticks] (measured: stuck-closed exhaust 456, stuck-closed inlet 249, stuck-open
+/// exhaust 80 on the full campaign); everything else keeps its own limit, and no fault-free run
+/// may latch anything.
+const THERMAL_VALVE_LATENCY_TICKS: usize = 500;
+
+/// The nominal joint with the plant's thermal chamber (hA 2 W/K, kappa 1.4): the gas heats on
+/// fills and cools on vents, which the supervision's isothermal model does not know.
+fn thermal_plant() -> Plant {
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/reference-1dof.toml");
+    let text = std::fs::read_to_string(&p).unwrap()
+        + "\n[effects.thermal_chamber]\nheat_transfer_w_per_k = 2.0\nkappa = 1.4\n";
+    Plant::from_config(&host_sim::PlantConfig::from_toml_str(&text, &p).unwrap())
+}
+
 fn fixture_plant(name: &str) -> Plant {
     let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("tests/fixtures")
@@ -257,15 +273,32 @@ struct KindStats {
 #[test]
 fn fault_campaign() {
     let full = std::env::var("FAULT_CAMPAIGN").is_ok_and(|v| v == "full");
+    // (name, plant, the longest latency allowed for the valve faults the residual sees, when
+    // not each fault's own)
     let plants = [
-        ("nominal", fixture_plant("reference-1dof.toml")),
-        ("loaded 11x", fixture_plant("reference-1dof-loaded.toml")),
+        ("nominal", fixture_plant("reference-1dof.toml"), None),
+        (
+            "loaded 11x",
+            fixture_plant("reference-1dof-loaded.toml"),
+            None,
+        ),
+        (
+            "thermal chamber",
+            thermal_plant(),
+            Some(THERMAL_VALVE_LATENCY_TICKS),
+        ),
     ];
     let fault_times: &[f64] = if full { &[0.8, 1.33] } else { &[1.0] };
     let mut stats: BTreeMap<&str, KindStats> = BTreeMap::new();
+    let mut stats_thermal: BTreeMap<&str, KindStats> = BTreeMap::new();
     let mut runs = 0;
     let mut failures = Vec::new();
-    for (plant_name, plant) in &plants {
+    for (plant_name, plant, valve_latency) in &plants {
+        let stats = if valve_latency.is_some() {
+            &mut stats_thermal
+        } else {
+            &mut stats
+        };
         for &(sp_name, sp, short) in SETPOINTS {
             if !short && !full {
                 continue;
@@ -342,10 +375,15 @@ fn fault_campaign() {
                         Some(d) => {
                             st.detected += 1;
                             st.max_latency_ticks = st.max_latency_ticks.max(d);
-                            if d > f.max_latency_ticks {
+                            let by_residual =
+                                f.exercised_by.is_some() || f.name.contains("stuck open");
+                            let max = match valve_latency {
+                                Some(m) if by_residual => f.max_latency_ticks.max(*m),
+                                _ => f.max_latency_ticks,
+                            };
+                            if d > max {
                                 failures.push(format!(
-                                    "{what}: detected {d} ticks after injection / first exercise (> {})",
-                                    f.max_latency_ticks
+                                    "{what}: detected {d} ticks after injection / first exercise (> {max})"
                                 ));
                             }
                         }
@@ -369,13 +407,19 @@ fn fault_campaign() {
         if full { "full" } else { "short" },
         FAULTS.len()
     );
-    eprintln!("| fault | runs | detected | max latency [ticks = ms] | max pressure [kPa] |");
-    eprintln!("|---|---|---|---|---|");
-    for (name, s) in &stats {
-        eprintln!(
-            "| {name} | {} | {} | {} | {:.1} |",
-            s.runs, s.detected, s.max_latency_ticks, s.max_p_kpa
-        );
+    for (plants, stats) in [
+        ("nominal and loaded 11x", &stats),
+        ("thermal chamber", &stats_thermal),
+    ] {
+        eprintln!("\n{plants}:\n");
+        eprintln!("| fault | runs | detected | max latency [ticks = ms] | max pressure [kPa] |");
+        eprintln!("|---|---|---|---|---|");
+        for (name, s) in stats {
+            eprintln!(
+                "| {name} | {} | {} | {} | {:.1} |",
+                s.runs, s.detected, s.max_latency_ticks, s.max_p_kpa
+            );
+        }
     }
     assert!(
         failures.is_empty(),
