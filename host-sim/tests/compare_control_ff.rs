@@ -223,15 +223,23 @@ fn compare_control_refuses_bad_arguments_with_status_2() {
         (
             "--ff-update-ticks",
             "0",
-            &["--ff-update-ticks 0", "1..=100"],
+            &["'0' for '--ff-update-ticks <N>'", "1..=100"],
         ),
-        ("--ff-update-ticks", "2.5", &["--ff-update-ticks"]),
+        (
+            "--ff-update-ticks",
+            "2.5",
+            &["--ff-update-ticks", "not a whole number", "1..=100"],
+        ),
         (
             "--outer-period-ticks",
             "6",
-            &["--outer-period-ticks 6", "1..=5"],
+            &["'6' for '--outer-period-ticks <N>'", "1..=5"],
         ),
-        ("--outer-period-ticks", "0", &["--outer-period-ticks 0"]),
+        (
+            "--outer-period-ticks",
+            "-1",
+            &["'-1' for '--outer-period-ticks <N>'", "1..=5"],
+        ),
     ] {
         let e = exits(
             2,

@@ -20,7 +20,6 @@ use host_sim::control::closed_loop::{run, ClosedLoopRun, Scenario};
 use host_sim::plant::ValveInputs;
 use host_sim::Plant;
 
-/// A plant file of `tests/fixtures/` (copies of the shared reference plants).
 /// On the thermal chamber the residual's isothermal model is off by the gas's heating and
 /// cooling, and the valve faults it sees (stuck closed, stuck open, supply lost) may take this
 /// long [ticks] (measured: stuck-closed exhaust 456, stuck-closed inlet 249, stuck-open
@@ -32,11 +31,10 @@ const THERMAL_VALVE_LATENCY_TICKS: usize = 500;
 /// fills and cools on vents, which the supervision's isothermal model does not know.
 fn thermal_plant() -> Plant {
     let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/reference-1dof.toml");
-    let text = std::fs::read_to_string(&p).unwrap()
-        + "\n[effects.thermal_chamber]\nheat_transfer_w_per_k = 2.0\nkappa = 1.4\n";
-    Plant::from_config(&host_sim::PlantConfig::from_toml_str(&text, &p).unwrap())
+    host_sim::control::compare_ff::variant_plant(&p, "thermal chamber").unwrap()
 }
 
+/// A plant file of `tests/fixtures/` (copies of the shared reference plants).
 fn fixture_plant(name: &str) -> Plant {
     let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("tests/fixtures")

@@ -9,18 +9,15 @@ use host_sim::control::closed_loop::Scenario;
 use host_sim::control::compare::{
     default_control_tuning, default_control_tuning_ff, jump_suite_scenarios,
 };
-use host_sim::control::compare_ff::{controllers, score, VARIANTS};
+use host_sim::control::compare_ff::{controllers, score, variant_plant};
 use host_sim::control::robustness::held_out_scenarios;
-use host_sim::{Plant, PlantConfig};
+use host_sim::Plant;
 use pam_firmware::tick::ControllerConfig;
 
 fn thermal_plant() -> Plant {
     let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("tests/fixtures/reference-1dof.toml");
-    let (name, table) = VARIANTS[1];
-    assert!(name.starts_with("thermal chamber"), "{name}");
-    let text = format!("{}\n{table}", std::fs::read_to_string(&path).unwrap());
-    Plant::from_config(&PlantConfig::from_toml_str(&text, &path).unwrap())
+    variant_plant(&path, "thermal chamber").unwrap()
 }
 
 fn row(name: &str) -> ControllerConfig {

@@ -40,15 +40,23 @@ fn bad_tune_arguments_are_refused_without_touching_the_output() {
         // The outer loops below 200 Hz at the 1 kHz tick.
         (
             vec!["--outer-period-ticks", "6"],
-            "--outer-period-ticks 6: outside the allowed range 1..=5",
+            "invalid value '6' for '--outer-period-ticks <N>': outside the allowed range 1..=5",
         ),
         (
             vec!["--outer-period-ticks", "0"],
-            "--outer-period-ticks 0: outside the allowed range 1..=5",
+            "invalid value '0' for '--outer-period-ticks <N>': outside the allowed range 1..=5",
         ),
         (
             vec!["--pressure-ff", "--ff-update-ticks", "101"],
-            "--ff-update-ticks 101: outside the allowed range 1..=100",
+            "invalid value '101' for '--ff-update-ticks <N>': outside the allowed range 1..=100",
+        ),
+        (
+            vec!["--pressure-ff", "--ff-update-ticks", "-3"],
+            "outside the allowed range 1..=100",
+        ),
+        (
+            vec!["--pressure-ff", "--ff-update-ticks", "two"],
+            "not a whole number of ticks; allowed 1..=100",
         ),
         // The feed-forward's period means nothing without it.
         (vec!["--ff-update-ticks", "2"], "--pressure-ff"),

@@ -253,6 +253,32 @@ pub fn checked_period(
     Ok(n)
 }
 
+/// The command-line parser of `--outer-period-ticks`: a whole number in [`OUTER_PERIOD_TICKS`].
+pub fn outer_period_arg(s: &str) -> Result<u16, String> {
+    period_arg(s, &OUTER_PERIOD_TICKS, outer_period_range())
+}
+
+/// The command-line parser of `--ff-update-ticks`: a whole number in [`FF_UPDATE_TICKS`].
+pub fn ff_update_ticks_arg(s: &str) -> Result<u16, String> {
+    period_arg(s, &FF_UPDATE_TICKS, ff_update_range())
+}
+
+/// `s` as a whole number of ticks in `allowed`, else the reason with the range (`range`).
+fn period_arg(
+    s: &str,
+    allowed: &std::ops::RangeInclusive<u16>,
+    range: String,
+) -> Result<u16, String> {
+    let n: i64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("not a whole number of ticks; allowed {range}"))?;
+    u16::try_from(n)
+        .ok()
+        .filter(|n| allowed.contains(n))
+        .ok_or_else(|| format!("outside the allowed range {range}"))
+}
+
 /// [`OUTER_PERIOD_TICKS`] and why, for the messages that refuse a period outside it.
 pub fn outer_period_range() -> String {
     format!(

@@ -134,7 +134,7 @@ pub struct CompareControlArgs {
     /// (1..=5 at the 1 kHz tick; 1 = every tick) [default: the rate --gains were tuned at
     /// (`host-sim tune --outer-period-ticks`), else config/controller.toml [rates]
     /// outer_period_ticks].
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", value_parser = super::compare::outer_period_arg)]
     pub outer_period_ticks: Option<u16>,
     /// Only the nominal plant and the suite's first scenario of each set (the CI run).
     #[arg(long)]
@@ -175,9 +175,14 @@ pub struct FfOverrides {
     /// config/pressure_ff.toml min_duty].
     #[arg(long = "ff-min-duty", value_name = "D")]
     pub min_duty: Option<f32>,
-    /// Evaluate the feed-forward once every N ticks and hold it in between (1..=100; 1 =
-    /// every tick) [default: config/pressure_ff.toml update_period_ticks].
-    #[arg(long = "ff-update-ticks", value_name = "N")]
+    /// Evaluate the feed-forward once every N ticks and hold it in between (1..=100 at the
+    /// 1 kHz tick; 1 = every tick) [default: the period the --ff-gains were tuned at (`host-sim
+    /// tune --ff-update-ticks`), else config/pressure_ff.toml update_period_ticks].
+    #[arg(
+        long = "ff-update-ticks",
+        value_name = "N",
+        value_parser = super::compare::ff_update_ticks_arg
+    )]
     pub update_ticks: Option<u16>,
 }
 
@@ -233,6 +238,19 @@ pub const VARIANTS: [(&str, &str); 4] = [
         "[effects.supply_drop]\nmodel = \"static\"\nresistance_pa_s_per_m3 = 2.0e7\n",
     ),
 ];
+
+/// The plant file at `path` with the effect of [`VARIANTS`] whose name starts with `variant`
+/// added (e.g. `"thermal chamber"`).
+pub fn variant_plant(path: &std::path::Path, variant: &str) -> anyhow::Result<Plant> {
+    let (_, table) = VARIANTS
+        .iter()
+        .find(|(n, _)| n.starts_with(variant))
+        .ok_or_else(|| anyhow::anyhow!("no plant variant {variant}"))?;
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    let cfg = PlantConfig::from_toml_str(&format!("{text}\n{table}"), path)?;
+    Ok(Plant::from_config(&cfg))
+}
 
 /// The variant whose chamber volume law differs from the firmware's polynomial (the
 /// hybrid model's case): `b0` x 1.3 (dead volume of a longer tube to the valve), `b1..b3` x 0.7

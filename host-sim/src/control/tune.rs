@@ -138,12 +138,18 @@ pub struct TuneArgs {
     /// estimate, torque loop) on one tick in N (1..=5 at the 1 kHz tick); the gains file
     /// records it, and compare-control runs those gains at that rate [default:
     /// config/controller.toml [rates] outer_period_ticks]. The PD / PID do not use it.
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", value_parser = crate::control::compare::outer_period_arg)]
     pub outer_period_ticks: Option<u16>,
     /// With --pressure-ff: evaluate the feed-forward once every N ticks and hold it in between
-    /// (1..=100); the gains file records it, and compare-control runs those gains so [default:
-    /// config/pressure_ff.toml update_period_ticks].
-    #[arg(long = "ff-update-ticks", value_name = "N", requires = "pressure_ff")]
+    /// (1..=100 at the 1 kHz tick; 1 = every tick); the gains file records it, and
+    /// compare-control runs those gains at that period [default: config/pressure_ff.toml
+    /// update_period_ticks, 1 as shipped].
+    #[arg(
+        long = "ff-update-ticks",
+        value_name = "N",
+        requires = "pressure_ff",
+        value_parser = crate::control::compare::ff_update_ticks_arg
+    )]
     pub ff_update_ticks: Option<u16>,
 }
 
