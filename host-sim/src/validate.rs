@@ -513,6 +513,28 @@ pub fn toml_key_line(text: &str, table: &str, index: usize, key: &str) -> Option
     None
 }
 
+/// The dotted key (`table.key`, or `key` at the top level) of the `key = value` line of TOML
+/// `text` that holds byte `offset` (a parser's error span), if that line is one.
+pub fn toml_key_at(text: &str, offset: usize) -> Option<String> {
+    let offset = offset.min(text.len());
+    let start = text[..offset].rfind('\n').map_or(0, |i| i + 1);
+    let line = text[start..].lines().next().unwrap_or("");
+    let (key, _) = line.split('#').next()?.split_once('=')?;
+    let key = key.trim();
+    if key.is_empty() || key.starts_with('[') {
+        return None;
+    }
+    let table = text[..start]
+        .lines()
+        .map(|l| l.split('#').next().unwrap_or("").trim())
+        .rfind(|l| l.starts_with('['))
+        .map(|l| l.trim_start_matches('[').trim_end_matches(']').trim());
+    Some(match table {
+        Some(t) if !t.is_empty() => format!("{t}.{key}"),
+        _ => key.to_string(),
+    })
+}
+
 /// "file:line: key `table.key` = v: message" (the line when it is found in `text`).
 pub fn file_value_error(file: &Path, text: &str, dotted: &str, message: &str) -> String {
     let (table, key) = dotted.rsplit_once('.').unwrap_or(("", dotted));
@@ -683,6 +705,17 @@ impl RunEstimate {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_key_of_an_error_span_is_its_lines_dotted_key() {
+        let text = "a = 1 # top\n\n[cascade] # gains\nkp = \"x\"\n[[rows]]\n";
+        let at = |needle: &str| toml_key_at(text, text.find(needle).unwrap());
+        assert_eq!(at("1 #").as_deref(), Some("a"));
+        assert_eq!(at("\"x\"").as_deref(), Some("cascade.kp"));
+        assert_eq!(at("[cascade]"), None);
+        assert_eq!(at("[[rows]]"), None);
+        assert_eq!(toml_key_at(text, 10_000), None);
+    }
 
     #[test]
     fn an_output_replaces_only_an_earlier_output_of_its_kind() {

@@ -495,13 +495,22 @@ impl ControlTuning {
                 .span()
                 .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1)
                 .unwrap_or(0);
-            let msg = e.message().trim_end().to_string();
+            // A value of the wrong type: the key of its line, and the type in words.
+            let msg = e
+                .message()
+                .trim_end()
+                .replace("expected u16", "expected a whole number in 0..=65535")
+                .replace("expected f64", "expected a number");
             let field = msg
                 .split('`')
                 .nth(1)
                 .filter(|_| msg.contains("field"))
-                .unwrap_or("")
-                .to_string();
+                .map(str::to_string)
+                .or_else(|| {
+                    e.span()
+                        .and_then(|s| crate::validate::toml_key_at(text, s.start))
+                })
+                .unwrap_or_default();
             IdentError::at(file, line, &field, &msg)
         })?;
         t.cascade.validate("cascade", text, file)?;
@@ -1118,6 +1127,17 @@ suite_mse_at_margin_rad2 = 0.000001
                 "torque_ki_per_s = 2.0".into(),
                 "torque_ki_per_s = 2.0\nouter_period_ticks = 0".into(),
                 "t.toml:30: field `cascade.outer_period_ticks`: 0 must be in 1..=5",
+            ),
+            // A value of the wrong type: named by its key and the type in words.
+            (
+                "torque_ki_per_s = 2.0".into(),
+                "torque_ki_per_s = 2.0\npressure_ff_update_period_ticks = 2.5".into(),
+                "t.toml:30: field `cascade.pressure_ff_update_period_ticks`: invalid type: floating point `2.5`, expected a whole number in 0..=65535",
+            ),
+            (
+                "torque_ki_per_s = 2.0".into(),
+                "torque_ki_per_s = \"2\"".into(),
+                "t.toml:29: field `cascade.torque_ki_per_s`: invalid type: string \"2\", expected a number",
             ),
             (
                 "torque_ki_per_s = 2.0".into(),
