@@ -816,7 +816,7 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
         || a.ff.rate_from.is_some()
         || a.ff.volume_rate_from.is_some()
         || a.ff.min_duty.is_some()
-        || a.ff.update_ticks.is_some();
+        || a.ff.update_ticks.is_some_and(|n| n != ff_tuned_every);
     writeln!(
         out,
         "re-tuned rows: gains {gains_ff} (the cascade tuned with the pressure feed-forward on, \
