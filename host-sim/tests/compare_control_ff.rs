@@ -149,6 +149,30 @@ fn compare_control_prints_the_tables_and_exits_by_its_verdict() {
     }
 }
 
+/// The shipped gains file `config/<shipped>` copied to `dir/<name>` with `line` added at the
+/// top of its `[cascade]` table.
+fn shipped_gains_with(
+    dir: &std::path::Path,
+    shipped: &str,
+    name: &str,
+    line: &str,
+) -> std::path::PathBuf {
+    let text = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../config")
+            .join(shipped),
+    )
+    .unwrap();
+    assert!(text.contains("\n[cascade]\n"));
+    let path = dir.join(name);
+    std::fs::write(
+        &path,
+        text.replacen("\n[cascade]\n", &format!("\n[cascade]\n{line}\n"), 1),
+    )
+    .unwrap();
+    path
+}
+
 /// The feed-forward within the MCU budget: the outer loops on every second tick and the
 /// feed-forward evaluated on every second tick (`bash scripts/bench-mcu.sh`, "ff split
 /// tick"), both as the gains files record them. Every row runs at those rates, and the
@@ -159,34 +183,20 @@ fn compare_control_at_half_rate_outer_loops_keeps_the_verdict() {
     // writes it): with no --outer-period-ticks, every row runs at that rate, and the report
     // says that the re-tuned gains were tuned at another.
     let dir = tempfile::tempdir().unwrap();
-    let gains = dir.path().join("control_tuned_split.toml");
-    let shipped = std::fs::read_to_string(
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/control_tuned.toml"),
-    )
-    .unwrap();
-    assert!(shipped.contains("\n[cascade]\n"));
-    std::fs::write(
-        &gains,
-        shipped.replacen("\n[cascade]\n", "\n[cascade]\nouter_period_ticks = 2\n", 1),
-    )
-    .unwrap();
+    let gains = shipped_gains_with(
+        dir.path(),
+        "control_tuned.toml",
+        "control_tuned_split.toml",
+        "outer_period_ticks = 2",
+    );
     // The re-tuned gains file records the feed-forward's evaluation period (as `tune
     // --pressure-ff --ff-update-ticks 2` writes it): the feed-forward rows run at it.
-    let ff_gains = dir.path().join("control_tuned_ff.toml");
-    let shipped_ff = std::fs::read_to_string(
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/control_tuned_ff.toml"),
-    )
-    .unwrap();
-    assert!(shipped_ff.contains("\n[cascade]\n"));
-    std::fs::write(
-        &ff_gains,
-        shipped_ff.replacen(
-            "\n[cascade]\n",
-            "\n[cascade]\npressure_ff_update_period_ticks = 2\n",
-            1,
-        ),
-    )
-    .unwrap();
+    let ff_gains = shipped_gains_with(
+        dir.path(),
+        "control_tuned_ff.toml",
+        "control_tuned_ff.toml",
+        "pressure_ff_update_period_ticks = 2",
+    );
     let r = on_plant(
         "compare-control",
         &plant(),

@@ -238,21 +238,6 @@ pub fn ff_update_range() -> String {
     format!("{}..={}", FF_UPDATE_TICKS.start(), FF_UPDATE_TICKS.end())
 }
 
-/// `n` of the command-line option `option` if it is in `allowed`, else the error that names
-/// the option and the range (`range`: [`outer_period_range`] or [`ff_update_range`]).
-pub fn checked_period(
-    option: &str,
-    n: u16,
-    allowed: &std::ops::RangeInclusive<u16>,
-    range: String,
-) -> anyhow::Result<u16> {
-    anyhow::ensure!(
-        allowed.contains(&n),
-        "{option} {n}: outside the allowed range {range}"
-    );
-    Ok(n)
-}
-
 /// The command-line parser of `--outer-period-ticks`: a whole number in [`OUTER_PERIOD_TICKS`].
 pub fn outer_period_arg(s: &str) -> Result<u16, String> {
     period_arg(s, &OUTER_PERIOD_TICKS, outer_period_range())

@@ -41,9 +41,8 @@ use pam_firmware::tick::ControllerConfig;
 
 use super::closed_loop::{run_with, Scenario};
 use super::compare::{
-    at_scenario_rate, checked_period, default_control_tuning, default_control_tuning_ff,
-    ff_update_range, jump_suite_scenarios, outer_period_range, suite_scenarios, ControlTuning,
-    FF_UPDATE_TICKS, OUTER_PERIOD_TICKS, SHIPPED_CONTROL_TUNED, SHIPPED_CONTROL_TUNED_FF,
+    at_scenario_rate, default_control_tuning, default_control_tuning_ff, jump_suite_scenarios,
+    suite_scenarios, ControlTuning, SHIPPED_CONTROL_TUNED, SHIPPED_CONTROL_TUNED_FF,
 };
 use super::robustness::held_out_scenarios;
 use crate::identify::volume::{
@@ -208,9 +207,9 @@ impl FfOverrides {
         if let Some(d) = self.min_duty {
             ff.min_duty = checked("--ff-min-duty", d, 0.0..=1.0)?;
         }
+        // (In range: its parser, `compare::ff_update_ticks_arg`, refuses the rest.)
         if let Some(n) = self.update_ticks {
-            ff.update_period_ticks =
-                checked_period("--ff-update-ticks", n, &FF_UPDATE_TICKS, ff_update_range())?;
+            ff.update_period_ticks = n;
         }
         if let Some(src) = &self.rate_from {
             ff.rate_from_reference = src == "reference";
@@ -738,13 +737,9 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
         .update_period_ticks;
     base.pressure_ff.update_period_ticks = ff_tuned_every;
     a.ff.apply(&mut base.pressure_ff)?;
+    // (In range: its parser, `compare::outer_period_arg`, refuses the rest.)
     if let Some(n) = a.outer_period_ticks {
-        base.outer_period_ticks = checked_period(
-            "--outer-period-ticks",
-            n,
-            &OUTER_PERIOD_TICKS,
-            outer_period_range(),
-        )?;
+        base.outer_period_ticks = n;
     }
     // The rates each gains file was tuned at, when they are not the rate of this run.
     let tuned_at = |t: &ControlTuning| t.cascade.config(1000.0).outer_period_ticks;

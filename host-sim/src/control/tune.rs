@@ -650,23 +650,6 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
             bail!("--transition-s {t}: allowed 0..=2 s");
         }
     }
-    {
-        use crate::control::compare::{
-            checked_period, ff_update_range, outer_period_range, FF_UPDATE_TICKS,
-            OUTER_PERIOD_TICKS,
-        };
-        if let Some(n) = a.outer_period_ticks {
-            checked_period(
-                "--outer-period-ticks",
-                n,
-                &OUTER_PERIOD_TICKS,
-                outer_period_range(),
-            )?;
-        }
-        if let Some(n) = a.ff_update_ticks {
-            checked_period("--ff-update-ticks", n, &FF_UPDATE_TICKS, ff_update_range())?;
-        }
-    }
     crate::validate::distinct_file_outputs(&[("--plant", &a.plant)], &[("--out", &a.out)])
         .map_err(anyhow::Error::msg)?;
     let mut cascade_starts: Vec<(f32, f32, f32, Option<f32>)> = Vec::new();
