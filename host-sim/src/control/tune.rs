@@ -883,7 +883,7 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
     let header = format!(
         "The three laws of the closed-loop comparison, each tuned on the suite\n\
          (host-sim control::compare::SUITE) by the same procedure and cost. Written by\n\
-         \x20 host-sim tune --plant {} --out {}{}{}{}{}{}{}{}\n\
+         \x20 host-sim tune --plant {} --out {}{}{}{}{}{}{}{}{}\n\
          with the firmware in the loop. Suite MSE = mean over the step_move, sine and\n\
          random_move scenarios of the MSE of the angle over every tick (a latched fault = infinite);\n\
          cost = the worse of the suite MSE at the gains and with the feedback gains x {}\n\
@@ -913,6 +913,9 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
         if a.pressure_ff { " --pressure-ff" } else { "" },
         a.outer_period_ticks
             .map(|n| format!(" --outer-period-ticks {n}"))
+            .unwrap_or_default(),
+        a.ff_update_ticks
+            .map(|n| format!(" --ff-update-ticks {n}"))
             .unwrap_or_default(),
         if a.stable_on_jumps {
             " --stable-on-jumps"
