@@ -661,7 +661,8 @@ fn simulate_metadata(
 /// (columns with `_j1`..`_j3` suffixes, `host_sim::io::arm3`).
 fn run_simulate_arm3(a: &SimulateArgs, inputs_path: &Path) -> Result<ExitCode> {
     use host_sim::io::arm3::{fits, plot_arm3, Arm3Recording};
-    use host_sim::plant::arm3::{simulate_arm3, Arm3};
+    use host_sim::plant::arm3::Arm3;
+    use host_sim::sim::arm3::simulate_arm3;
     let arm = Arm3::load(&a.plant)?;
     let rec = Arm3Recording::read(inputs_path)?;
     let opts = a.solver_options()?;

@@ -93,6 +93,72 @@ pub fn correlation(x: &[f64], y: &[f64]) -> f64 {
     }
 }
 
+/// An answer leaves TRAIN's error within this many times each channel's noise (or, on
+/// noise-free data, of `crate::diagnose::verdict::FIT_FLOOR_REL`): beyond it, something else is off and the answer
+/// is not called an explanation (`unexplained`, its best attempt reported).
+pub const MAX_RESIDUAL_X_NOISE: f64 = 5.0;
+
+/// Robust noise level of a sampled channel: the spread of its second differences (MAD,
+/// white noise of standard deviation s gives second differences of spread s sqrt(6)),
+/// floored by the quantisation step's uniform noise q / sqrt(12) (q: the smallest step the
+/// channel takes).
+pub fn noise_level(y: &[f64]) -> f64 {
+    if y.len() < 4 {
+        return 0.0;
+    }
+    let d2 = || y.windows(3).map(|w| (w[2] - 2.0 * w[1] + w[0]).abs());
+    let mad = kth_smallest_nonneg(d2, (y.len() - 2) / 2);
+    let sigma_mad = 1.4826 * mad / 6f64.sqrt();
+    let steps = || {
+        y.windows(2)
+            .map(|w| (w[1] - w[0]).abs())
+            .filter(|d| *d > 1e-12)
+    };
+    let n_steps = steps().count();
+    let q = if n_steps == 0 {
+        0.0
+    } else {
+        kth_smallest_nonneg(steps, n_steps / 20)
+    };
+    sigma_mad.max(q / 12f64.sqrt())
+}
+
+/// The `k`-th smallest (from 0) of the values `values()` yields, all of them non-negative
+/// (a NaN ranks above infinity, as in `f64::total_cmp`), so that their bit patterns sort as
+/// the values do: the element a sort of a copy would put at `k`, found 16 bits at a time
+/// in four passes over `values()` with 65 536 counters instead of the copy (a channel of a
+/// long recording is not duplicated). `k` must be below the number of values.
+pub(crate) fn kth_smallest_nonneg<I: Iterator<Item = f64>>(
+    values: impl Fn() -> I,
+    mut k: usize,
+) -> f64 {
+    const DIGIT_BITS: u32 = 16;
+    let mut counts = vec![0usize; 1 << DIGIT_BITS];
+    // The bits fixed so far (the high ones) and their mask.
+    let (mut prefix, mut mask) = (0u64, 0u64);
+    for pass in 1..=64 / DIGIT_BITS {
+        let shift = 64 - pass * DIGIT_BITS;
+        counts.fill(0);
+        for v in values() {
+            let b = v.to_bits();
+            if b & mask == prefix {
+                counts[((b >> shift) & 0xFFFF) as usize] += 1;
+            }
+        }
+        let mut below = 0;
+        for (digit, &c) in counts.iter().enumerate() {
+            if k < below + c {
+                prefix |= (digit as u64) << shift;
+                k -= below;
+                break;
+            }
+            below += c;
+        }
+        mask |= 0xFFFF << shift;
+    }
+    f64::from_bits(prefix)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

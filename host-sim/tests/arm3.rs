@@ -8,9 +8,8 @@ use common::*;
 use host_sim::fit::fit_percent;
 use host_sim::io::arm3::PressureStepScenario;
 use host_sim::io::recording::Channel;
-use host_sim::plant::arm3::{
-    simulate_arm3, Arm3, Arm3Config, Arm3Inputs, Arm3Integrator, Arm3State, Links,
-};
+use host_sim::plant::arm3::{Arm3, Arm3Config, Arm3Inputs, Arm3State, Links};
+use host_sim::sim::arm3::{simulate_arm3, Arm3Integrator};
 use host_sim::sim::{simulate, SolverOptions};
 use host_sim::{Plant, PlantConfig, Recording, ValveInputs};
 use nalgebra::{Matrix3, SVector, Vector3};
@@ -643,7 +642,7 @@ fn joint1_travel(arm: &Arm3, delta_rad: f64) -> (f64, f64, f64) {
     let mut x = arm.initial;
     x.angles_rad[0] += delta_rad;
     let tau = arm.muscle_torques_nm(&x)[0];
-    let mut it = host_sim::plant::arm3::Arm3Integrator::new(arm, x, SolverOptions::default());
+    let mut it = host_sim::sim::arm3::Arm3Integrator::new(arm, x, SolverOptions::default());
     let closed = [ValveInputs::CLOSED; 3];
     it.advance_samples(closed, 1e-3, 5_000, |_| {}).unwrap();
     let q5 = it.state().angles_rad[0];

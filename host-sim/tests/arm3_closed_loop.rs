@@ -9,7 +9,8 @@ use common::*;
 
 use host_sim::control::arm3_loop::{run_arm, ArmScenario};
 use host_sim::io::arm3::Arm3Recording;
-use host_sim::plant::arm3::{simulate_arm3, Arm3, Arm3Config};
+use host_sim::plant::arm3::{Arm3, Arm3Config};
+use host_sim::sim::arm3::simulate_arm3;
 use host_sim::sim::SolverOptions;
 use pam_firmware::arm::ArmConfig;
 
@@ -92,7 +93,7 @@ fn a_missed_expectation_exits_1_and_a_bad_scenario_exits_2() {
 fn replay(
     arm: &Arm3,
     run: &host_sim::control::arm3_loop::ArmRun,
-) -> (Arm3Recording, host_sim::plant::arm3::Arm3Simulation, f64) {
+) -> (Arm3Recording, host_sim::sim::arm3::Arm3Simulation, f64) {
     let rec = run.to_recording(arm, "arm", "sine");
     let sim = simulate_arm3(
         arm,

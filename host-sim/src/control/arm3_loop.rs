@@ -41,8 +41,9 @@ use crate::io::scenario::{
     check_expect, key_error, key_line, read_scenario_text, ClosedLoopError, ScenarioHeader,
     SensorModel, SetpointProfile,
 };
-use crate::plant::arm3::{Arm3, Arm3Inputs, Arm3Integrator, Arm3State};
+use crate::plant::arm3::{Arm3, Arm3Inputs, Arm3State};
 use crate::plant::ValveInputs;
+use crate::sim::arm3::Arm3Integrator;
 use crate::sim::SolverOptions;
 
 /// An arm scenario (TOML). Unknown keys are errors.

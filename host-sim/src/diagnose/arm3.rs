@@ -33,11 +33,12 @@ use std::sync::Arc;
 use crate::diagnose::{diagnose, DiagnoseError, DiagnoseOptions, Diagnosis, Differentiator};
 use crate::io::arm3::{Arm3Recording, JOINTS};
 use crate::io::recording::{Channel, Recording};
-use crate::plant::arm3::{simulate_arm3, Arm3, Arm3Config, ArmJointConfig};
+use crate::plant::arm3::{Arm3, Arm3Config, ArmJointConfig};
 use crate::plant::config::{InitialConfig, JointConfig, PlantConfig};
 use crate::plant::effects::{ChannelCalibration, EffectsConfig};
 use crate::plant::effects::{SupplyDrop, SupplyDropModel};
 use crate::plant::LoadTorque;
+use crate::sim::arm3::simulate_arm3;
 
 /// A joint is explained by the nominal model within its noise only when no channel's error
 /// is above this many times the channel's noise. On the 36-case arm matrix a joint the

@@ -2,131 +2,16 @@
 //! law, tension law) and output-side evidence (residual lags, offsets), against which every
 //! candidate's signature is regressed to rank it and seed its parameters.
 
-use crate::io::recording::{Channel, Recording};
+use crate::io::recording::Recording;
+use crate::plant::channel::Channel;
 use crate::plant::config::PlantConfig;
 use crate::plant::{Measurement, Plant, PlantState, ValveInputs};
 
 use super::differentiate::Differentiator;
 
-/// Residual against a regressor, subsampled for a plot.
-#[derive(Debug, Clone)]
-pub struct Scatter {
-    pub x_label: String,
-    pub y_label: String,
-    pub points: Vec<(f64, f64)>,
-}
-
-impl Scatter {
-    pub fn new(x_label: &str, y_label: &str, x: &[f64], y: &[f64]) -> Self {
-        let n = x.len().min(y.len());
-        let stride = (n / 1500).max(1);
-        Self {
-            x_label: x_label.into(),
-            y_label: y_label.into(),
-            points: (0..n)
-                .step_by(stride)
-                .filter(|k| x[*k].is_finite() && y[*k].is_finite())
-                .map(|k| (x[k], y[k]))
-                .collect(),
-        }
-    }
-}
-
-/// Least squares y ~ sum_j c_j x_j (no intercept: the signatures are physical); returns the
-/// coefficients and R^2 = 1 - SS_res / SS_y (uncentred, clipped to [0, 1]).
-pub fn regress(y: &[f64], xs: &[&[f64]]) -> (Vec<f64>, f64) {
-    let m = xs.len();
-    let n = y.len();
-    let mut a = nalgebra::DMatrix::<f64>::zeros(m, m);
-    let mut b = nalgebra::DVector::<f64>::zeros(m);
-    let mut ss = 0.0;
-    for k in 0..n {
-        if !y[k].is_finite() || xs.iter().any(|x| !x[k].is_finite()) {
-            continue;
-        }
-        ss += y[k] * y[k];
-        for i in 0..m {
-            b[i] += xs[i][k] * y[k];
-            for j in 0..m {
-                a[(i, j)] += xs[i][k] * xs[j][k];
-            }
-        }
-    }
-    if ss == 0.0 {
-        return (vec![0.0; m], 0.0);
-    }
-    // Scale-invariant ridge on the diagonal against collinear regressors.
-    for i in 0..m {
-        a[(i, i)] *= 1.0 + 1e-9;
-        if a[(i, i)] == 0.0 {
-            a[(i, i)] = 1.0;
-        }
-    }
-    let Some(c) = a.clone().cholesky().map(|ch| ch.solve(&b)) else {
-        return (vec![0.0; m], 0.0);
-    };
-    let explained = (c.transpose() * &b)[(0, 0)];
-    let r2 = (explained / ss).clamp(0.0, 1.0);
-    (c.iter().copied().collect(), r2)
-}
-
-/// The evidence the candidates screen.
-#[derive(Debug, Clone)]
-pub struct Evidence {
-    pub dt_s: f64,
-    pub angle_rad: Vec<f64>,
-    pub omega_rad_s: Vec<f64>,
-    pub alpha_rad_s2: Vec<f64>,
-    pub dchi1_per_s: Vec<f64>,
-    /// Gauge pressures (measured, else simulated).
-    pub p_gauge_pa: [Vec<f64>; 2],
-    /// J alpha - r (F1 - F2), F measured when both force channels are, else from the
-    /// nominal tension law at the measured state.
-    pub torque_residual_nm: Vec<f64>,
-    /// dp/dt measured - dp/dt nominal at the measured state (where the channel was measured).
-    pub pressure_residual_pa_s: [Option<Vec<f64>>; 2],
-    /// Nominal dp/dt at the measured state.
-    pub nominal_dp: [Vec<f64>; 2],
-    /// F measured - F nominal at the measured state (when any force channel was measured).
-    pub force_residual_n: Option<[Option<Vec<f64>>; 2]>,
-    /// Measured - nominal simulation, per channel present.
-    pub residual: [Option<Vec<f64>>; 5],
-    /// The nominal simulation of each channel present.
-    pub nominal: [Option<Vec<f64>>; 5],
-    /// d/dt of the nominal simulation of each measured channel (a lag tau leaves a
-    /// residual of about -tau times it).
-    pub nominal_rate: [Option<Vec<f64>>; 5],
-    /// Standard deviation of each measured channel (1 when absent).
-    pub spread: [f64; 5],
-    /// Shift (samples) by which the nominal simulation best matches each channel.
-    pub lag_samples: [usize; 5],
-    /// Share of the residual energy that shift removes.
-    pub lag_gain: [f64; 5],
-    pub inertia_kgm2: f64,
-    pub sprocket_radius_m: f64,
-    /// The nominal plant.
-    pub plant: Plant,
-    /// The measured state at every sample (angle, its smoothed derivative, pressures
-    /// measured else simulated), for candidates that build their own regressors.
-    pub states: Vec<PlantState>,
-    /// The recording's valve inputs.
-    pub inputs: Vec<ValveInputs>,
-}
-
-/// Longest lag searched by cross-correlation.
-pub const MAX_LAG_S: f64 = 0.05;
+pub use crate::plant::effects::candidate::{regress, Evidence, Scatter, MAX_LAG_S};
 
 impl Evidence {
-    /// Residual of channel `c` against its nominal rate (the lag signature).
-    pub fn lag_scatter(&self, c: Channel) -> Option<Scatter> {
-        Some(Scatter::new(
-            &format!("nominal d({})/dt [{} per s]", c.name(), c.name()),
-            &format!("{} residual, measured - nominal", c.name()),
-            self.nominal_rate[c.index()].as_ref()?,
-            self.residual[c.index()].as_ref()?,
-        ))
-    }
-
     pub fn build(
         cfg: &PlantConfig,
         rec: &Recording,

@@ -30,10 +30,7 @@ pub const MIN_HELDOUT_FIT_PCT: f64 = 50.0;
 /// 99.8 %.
 pub const FIT_FLOOR_REL: f64 = 2e-3;
 
-/// An answer leaves TRAIN's error within this many times each channel's noise (or, on
-/// noise-free data, of [`FIT_FLOOR_REL`]): beyond it, something else is off and the answer
-/// is not called an explanation (`unexplained`, its best attempt reported).
-pub const MAX_RESIDUAL_X_NOISE: f64 = 5.0;
+pub use crate::signal::MAX_RESIDUAL_X_NOISE;
 
 /// A correction that lowers a channel's fit on the CHECK recording by more than this (in
 /// percentage points) did not hold there: the verdict is `unexplained`.

@@ -581,13 +581,13 @@ pub fn fit_plant(
         .filter_map(|(_, w)| w)
         .collect();
     let (x_noise, worst) = residual_over_noise(rec, &chans, &full1, n_train);
-    if !(x_noise <= crate::diagnose::verdict::MAX_RESIDUAL_X_NOISE) {
+    if !(x_noise <= crate::signal::MAX_RESIDUAL_X_NOISE) {
         undetermined.push(format!(
             "warning: the fitted plant still leaves {x_noise:.0} times the noise on {worst} (one \
              that describes the recording leaves at most {:.0}): the plant file with these keys \
              does not describe it, and the intervals (which assume it does) mean little. Widen \
              the bounds, fit other keys, or run `host-sim diagnose`",
-            crate::diagnose::verdict::MAX_RESIDUAL_X_NOISE
+            crate::signal::MAX_RESIDUAL_X_NOISE
         ));
     }
     Ok(PlantFit {
@@ -646,7 +646,7 @@ fn held_warnings(
 
 /// The worst channel's error on the training part (the first `n_train` samples of the
 /// replay `sim`) in times its own noise (the diagnosis' measure,
-/// [`crate::diagnose::differentiate::noise_level`], at least 1e-3 of the channel's spread):
+/// [`crate::signal::noise_level`], at least 1e-3 of the channel's spread):
 /// a plant that describes the recording leaves a few times the noise at most.
 fn residual_over_noise(
     rec: &Recording,
@@ -664,7 +664,7 @@ fn residual_over_noise(
             let mean = y.iter().sum::<f64>() / n;
             let sd = (y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt();
             // A flat, noise-free channel matched exactly leaves 0 (not 0 / 0).
-            let noise = crate::diagnose::differentiate::noise_level(y)
+            let noise = crate::signal::noise_level(y)
                 .max(1e-3 * sd)
                 .max(f64::MIN_POSITIVE);
             (mse.sqrt() / noise, c.name())

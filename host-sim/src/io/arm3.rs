@@ -20,8 +20,9 @@ use crate::io::numfmt;
 use crate::io::recording::{
     read_text, write_atomically, Channel, Recording, RecordingError, Table, INPUT_COLUMNS,
 };
-use crate::plant::arm3::{Arm3, Arm3Inputs, Arm3Integrator, Arm3SimError, Arm3State};
+use crate::plant::arm3::{Arm3, Arm3Inputs, Arm3State};
 use crate::plant::ValveInputs;
+use crate::sim::arm3::{Arm3Integrator, Arm3SimError};
 use crate::sim::SolverOptions;
 
 /// Number of joints.

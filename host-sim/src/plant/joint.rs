@@ -19,7 +19,7 @@
 //! torque, more than the reference pair gives at 6 bar, pushes 0.02 rad into the stop), `c`
 //! to a damping ratio of 0.7 with the joint inertia (`2 0.7 sqrt(k J)`).
 
-use crate::plant::config::JointConfig;
+use crate::plant::tables::JointConfig;
 
 /// Default end-stop angle [rad] (module documentation).
 pub const DEFAULT_END_STOP_RAD: f64 = 2.6;

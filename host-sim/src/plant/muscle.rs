@@ -1,7 +1,7 @@
 //! One McKibben muscle: Tondu-Lopez static force with end-effect factor, pressure
 //! proportional damper, cable tension, chamber volume polynomial (PLANT.md "Muscle i").
 
-use crate::plant::config::MuscleConfig;
+use crate::plant::tables::MuscleConfig;
 
 /// The Tondu-Lopez static force law with the end-effect factor k (PLANT.md "Muscle i", seed
 /// 002 eq. 1): F = pi r0^2 pg (a (1 - k chi)^2 - b), a = 3 / tan^2(alpha0),

@@ -17,6 +17,7 @@ use ode_solvers::{Dopri5, OutputType, System};
 
 use crate::plant::{AuxLayout, AuxState, Plant, PlantState, ValveInputs};
 
+pub mod arm3;
 pub mod signal_path;
 pub use signal_path::{ActuatorPath, SensorPath};
 

@@ -118,3 +118,13 @@ impl SensorPath {
         })
     }
 }
+
+impl Plant {
+    /// The recorded channels of a sampled run (`states[k]` at `t_k = k dt`), with the
+    /// sensor effects (lag, then calibration) if enabled: the [`SensorPath`] every
+    /// mode uses.
+    pub fn measure_series(&self, states: &[PlantState], dt_s: f64) -> Vec<Measurement> {
+        let mut path = SensorPath::new(self, dt_s);
+        states.iter().map(|x| path.push(self, x)).collect()
+    }
+}

@@ -7,10 +7,11 @@ use std::f64::consts::PI;
 
 use serde::Deserialize;
 
-use super::{Check, Effect, enabled_default, Hooks, Truth, torque_residual_scatter};
-use crate::diagnose::candidates::{clamp_to, Candidate, Screening, Setup};
-use crate::diagnose::screen::{regress, Evidence};
-use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
+use super::{Check, Effect, enabled_default, Hooks, Truth};
+use crate::plant::effects::candidate::{torque_residual_scatter, clamp_to, Candidate, Screening, Setup};
+use crate::plant::effects::candidate::{regress, Evidence};
+use crate::plant::config::PlantConfig;
+use crate::plant::tables::{ConfigError, ValveConfig};
 
 /// The `[effects.gravity]` table.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -54,7 +55,7 @@ impl Hooks for Gravity {
 
 impl Effect for Gravity {
     const TRUTHS: &'static [Truth] = &[Truth::new("gravity", "gravity", |_| "[effects.gravity]\nmass_kg = 1.0\ncom_distance_m = 0.1\nhanging_angle_rad = 0.0\n".into())];
-    table_effect!(GravityCandidate);
+    table_effect!();
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
         use crate::validate::Range;
         c.within("mass_kg", self.mass_kg, Range::closed(0.0, 100.0), "kg (the load on the joint)")?;
@@ -74,6 +75,8 @@ impl Effect for Gravity {
         Ok(())
     }
 }
+
+effect_candidates!(Gravity => GravityCandidate);
 
 /// Lever of the gravity candidate (the fit gives the mass at this distance: only m l counts).
 pub const GRAVITY_COM_DISTANCE_M: f64 = 0.1;

@@ -7,10 +7,11 @@
 
 use serde::{Deserialize, Deserializer};
 
-use super::{Check, Effect, Hooks, Truth, torque_residual_scatter};
-use crate::diagnose::candidates::{clamp_to, Candidate, Screening, Setup};
-use crate::diagnose::screen::{regress, Evidence};
-use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
+use super::{Check, Effect, Hooks, Truth};
+use crate::plant::effects::candidate::{EffectCandidates, torque_residual_scatter, clamp_to, Candidate, Screening, Setup};
+use crate::plant::effects::candidate::{regress, Evidence};
+use crate::plant::config::PlantConfig;
+use crate::plant::tables::{ConfigError, ValveConfig};
 
 /// Registry entry of the inertia mismatch. There is no `[effects.inertia]` table: giving
 /// one is an error that points at `joint.inertia_kgm2`.
@@ -47,6 +48,9 @@ impl Effect for InertiaMismatch {
     fn activate(&self, _valve: &ValveConfig) -> Self {
         Self
     }
+}
+
+impl EffectCandidates for InertiaMismatch {
     fn candidates() -> Vec<Box<dyn Candidate>> {
         vec![Box::new(InertiaCandidate)]
     }

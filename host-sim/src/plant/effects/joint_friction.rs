@@ -11,9 +11,10 @@
 use serde::Deserialize;
 
 use super::{Check, Effect, enabled_default, Hooks, Truth};
-use crate::diagnose::candidates::{clamp_to, Candidate, Screening, Setup};
-use crate::diagnose::screen::{regress, Evidence, Scatter};
-use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
+use crate::plant::effects::candidate::{clamp_to, Candidate, Screening, Setup};
+use crate::plant::effects::candidate::{regress, Evidence, Scatter};
+use crate::plant::config::PlantConfig;
+use crate::plant::tables::{ConfigError, ValveConfig};
 
 /// The `[effects.joint_friction]` table.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -57,7 +58,7 @@ impl Effect for JointFriction {
         Truth::new("joint_friction", "joint_friction", |_| "[effects.joint_friction]\ncoulomb_nm = 0.35\nbreakaway_nm = 0.35\nstribeck_velocity_rad_s = 1.0\nviscous_nm_s_per_rad = 0.08\nsmoothing_velocity_rad_s = 0.01\n".into()),
         Truth::new("joint_friction_stribeck", "joint_friction", |_| "[effects.joint_friction]\ncoulomb_nm = 0.25\nbreakaway_nm = 0.5\nstribeck_velocity_rad_s = 0.3\nviscous_nm_s_per_rad = 0.05\nsmoothing_velocity_rad_s = 0.01\n".into()),
     ];
-    table_effect!(JointFrictionCandidate);
+    table_effect!();
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
         check_fields!(self, c, positive: stribeck_velocity_rad_s, smoothing_velocity_rad_s);
         use crate::validate::Range;
@@ -82,6 +83,8 @@ impl Effect for JointFriction {
         Ok(())
     }
 }
+
+effect_candidates!(JointFriction => JointFrictionCandidate);
 
 /// Regularisation velocity of the friction sign function used by the candidate.
 pub const FRICTION_SMOOTHING_RAD_S: f64 = 0.02;

@@ -10,11 +10,12 @@
 use serde::Deserialize;
 
 use super::{enabled_default, params, Check, Effect, Hooks, Truth};
-use crate::diagnose::candidates::{
+use crate::plant::effects::candidate::{EffectCandidates, 
     clamp_to, pressure_scatter, regress_pressure, Candidate, ParamSpec, Screening, Setup,
 };
-use crate::diagnose::screen::Evidence;
-use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
+use crate::plant::effects::candidate::Evidence;
+use crate::plant::config::PlantConfig;
+use crate::plant::tables::{ConfigError, ValveConfig};
 use crate::plant::valve::Iso6358Valve;
 
 /// The `[effects.leakage]` table.
@@ -92,6 +93,9 @@ impl Effect for Leakage {
             only: self.muscle.map(|m| m as usize - 1),
         }
     }
+}
+
+impl EffectCandidates for Leakage {
     fn candidates() -> Vec<Box<dyn Candidate>> {
         vec![
             Box::new(LeakageCandidate { only: None }),

@@ -8,13 +8,13 @@
 //! - its physics, as the hooks of [`Hooks`] it overrides in its run-time form
 //!   ([`Effect::Active`]): joint torque, chamber flow, pressure-rate factor, muscle friction,
 //!   supply model, valve dead time, sensor dynamics, sensor calibration;
-//! - the diagnosis candidate(s) that can name it in a recording ([`Effect::candidates`]:
+//! - the diagnosis candidate(s) that can name it in a recording ([`candidate::EffectCandidates`]:
 //!   parameters, bounds, screening signature, how to switch it on in a `PlantConfig`);
 //! - the synthetic truths the diagnosis tests conceal in generated recordings, at a
 //!   realistic size ([`Effect::truths`]).
 //!
 //! The registry generates [`EffectsConfig`] (the `[effects]` table), [`Effects`] (the enabled
-//! effects the right-hand side iterates), the diagnosis catalogue ([`candidates`]) and the
+//! effects the right-hand side iterates), the diagnosis catalogue ([`catalogue::candidates`]) and the
 //! synthetic truths ([`truths`]), always in registry order. Adding an effect is one new file
 //! and one line in the registry (see `docs/adding-an-effect.md`).
 //!
@@ -32,9 +32,8 @@ use std::path::Path;
 use serde::de::DeserializeOwned;
 use serde::Deserialize;
 
-use crate::diagnose::candidates::Candidate;
-use crate::plant::config::{ConfigError, ValveConfig};
-use crate::plant::Measurement;
+use crate::plant::state::Measurement;
+use crate::plant::tables::{ConfigError, ValveConfig};
 
 pub use sensor::ChannelCalibration;
 pub use sensor_lag::SensorLagFilter;
@@ -51,18 +50,16 @@ pub trait Effect: Debug + Clone + PartialEq + DeserializeOwned {
     fn validate(&self, check: &Check) -> Result<(), ConfigError>;
     /// The run-time form (`valve`: the plant's valves, for orifice-like effects).
     fn activate(&self, valve: &ValveConfig) -> Self::Active;
-    /// The diagnosis candidates that can name this effect (usually one), in catalogue order.
-    fn candidates() -> Vec<Box<dyn Candidate>>;
     /// The synthetic truths that conceal this effect in generated recordings.
     const TRUTHS: &'static [Truth];
 }
 
 /// The [`Effect`] items of an effect whose run-time form is its own table (`Active = Self`,
-/// activated by a copy), switched by its `enabled` key, with its diagnosis candidates: write
-/// `table_effect!(TheCandidate);` (or several, comma-separated) inside
-/// `impl Effect for TheTable`, after `TRUTHS`, then `validate`.
+/// activated by a copy), switched by its `enabled` key: write `table_effect!();` inside
+/// `impl Effect for TheTable`, after `TRUTHS`, then `validate`. Its diagnosis candidates
+/// follow the impl: `effect_candidates!(TheTable => TheCandidate);`.
 macro_rules! table_effect {
-    ($($candidate:expr),+ $(,)?) => {
+    () => {
         type Active = Self;
         fn enabled(&self) -> bool {
             self.enabled
@@ -70,54 +67,6 @@ macro_rules! table_effect {
         fn activate(&self, _valve: &ValveConfig) -> Self {
             self.clone()
         }
-        fn candidates() -> Vec<Box<dyn Candidate>> {
-            vec![$(Box::new($candidate)),+]
-        }
-    };
-}
-
-/// The fixed part of a diagnosis candidate, written inside `impl Candidate for TheCandidate`:
-/// [`Candidate::id`] (the effect id of the diagnosis JSON), [`Candidate::label`] (its name in
-/// sentences) and, when they do not depend on the recording, [`Candidate::params`] (name,
-/// bounds and typical size, as `ParamSpec::new` takes them) and [`Candidate::fixed`]:
-///
-/// ```text
-/// candidate_spec! {
-///     id: "gravity",
-///     label: "gravity load",
-///     params: [("mass_kg", 0.0, 20.0, 1.0)],
-///     fixed: [("com_distance_m", GRAVITY_COM_DISTANCE_M)],
-/// }
-/// ```
-///
-/// A candidate whose id depends on its fields (`leakage.rs`) writes the methods by hand.
-macro_rules! candidate_spec {
-    (
-        id: $id:literal,
-        label: $label:literal
-        $(, params: [$(($name:literal, $lo:expr, $hi:expr, $scale:expr)),+ $(,)?])?
-        $(, fixed: [$(($key:literal, $value:expr)),+ $(,)?])?
-        $(,)?
-    ) => {
-        fn id(&self) -> &'static str {
-            $id
-        }
-        fn label(&self) -> &'static str {
-            $label
-        }
-        $(
-            fn params(
-                &self,
-                _s: &$crate::diagnose::candidates::Setup,
-            ) -> Vec<$crate::diagnose::candidates::ParamSpec> {
-                vec![$($crate::diagnose::candidates::ParamSpec::new($name, $lo, $hi, $scale)),+]
-            }
-        )?
-        $(
-            fn fixed(&self) -> Vec<(&'static str, f64)> {
-                vec![$(($key, $value)),+]
-            }
-        )?
     };
 }
 
@@ -304,21 +253,6 @@ pub(crate) fn params(p: &[(&str, f64)]) -> Vec<(String, String)> {
         .collect()
 }
 
-/// The joint torque balance residual drawn against the regressor `x` (`x_label`): the scatter
-/// of the joint-torque candidates' screening.
-pub(crate) fn torque_residual_scatter(
-    ev: &crate::diagnose::screen::Evidence,
-    x_label: &str,
-    x: &[f64],
-) -> Option<crate::diagnose::screen::Scatter> {
-    Some(crate::diagnose::screen::Scatter::new(
-        x_label,
-        "torque balance residual [N m]",
-        x,
-        &ev.torque_residual_nm,
-    ))
-}
-
 pub(crate) fn enabled_default() -> bool {
     true
 }
@@ -330,7 +264,8 @@ pub trait Visit<'e> {
 }
 
 /// Generates, from the one list of effect modules, the `[effects]` table, the run-time
-/// [`Effects`], validation, and the diagnosis catalogue and truths (all in list order).
+/// [`Effects`], validation and the truths (all in list order); [`catalogue`] the diagnosis
+/// catalogue from the same list.
 /// An entry is `module::TableStruct`; attributes (e.g. `#[cfg(test)]`) apply to all of it.
 macro_rules! registry {
     ($( $(#[$attr:meta])* $module:ident :: $ty:ident ),* $(,)?) => {
@@ -390,13 +325,6 @@ macro_rules! registry {
             }
         }
 
-        /// The diagnosis catalogue: every registered effect's candidates, in registry order.
-        pub fn candidates() -> Vec<Box<dyn Candidate>> {
-            let mut v: Vec<Box<dyn Candidate>> = Vec::new();
-            $( $(#[$attr])* v.extend(<$ty as Effect>::candidates()); )*
-            v
-        }
-
         /// Every synthetic truth of every registered effect, in registry order.
         pub fn truths() -> Vec<Truth> {
             let mut v = Vec::new();
@@ -407,22 +335,34 @@ macro_rules! registry {
 }
 
 // The registry: one line per effect. The order is the order of the diagnosis catalogue (its
-// tie-breaks and report) and of the sums in the right-hand side.
-registry! {
-    joint_friction::JointFriction,
-    muscle_hysteresis::MuscleHysteresis,
-    sensor_lag::SensorLag,
-    valve_dead_time::ValveDeadTime,
-    supply_drop::SupplyDrop,
-    polytropic::Polytropic,
-    gravity::Gravity,
-    inertia::InertiaMismatch,
-    leakage::Leakage,
-    sensor::SensorCalibration,
-    thermal_chamber::ThermalChamber,
-    #[cfg(test)]
-    toy_spring::ToySpring,
+// tie-breaks and report) and of the sums in the right-hand side. `effect_list!(m)` hands the
+// list to the macro `m`: `registry` here, the catalogue in [`catalogue`].
+macro_rules! effect_list {
+    ($then:ident) => {
+        $then! {
+            joint_friction::JointFriction,
+            muscle_hysteresis::MuscleHysteresis,
+            sensor_lag::SensorLag,
+            valve_dead_time::ValveDeadTime,
+            supply_drop::SupplyDrop,
+            polytropic::Polytropic,
+            gravity::Gravity,
+            inertia::InertiaMismatch,
+            leakage::Leakage,
+            sensor::SensorCalibration,
+            thermal_chamber::ThermalChamber,
+            #[cfg(test)]
+            toy_spring::ToySpring,
+        }
+    };
 }
+
+#[macro_use]
+pub mod candidate;
+
+effect_list!(registry);
+
+pub mod catalogue;
 
 /// The first enabled effect's `Some` answer, in registry order, to `hook`, a [`Hooks`] method
 /// returning `Option<&T>`: `first_answer!(effects, supply -> Supply)`.

@@ -20,9 +20,10 @@
 use serde::Deserialize;
 
 use super::{Check, Effect, enabled_default, Hooks, Truth};
-use crate::diagnose::candidates::{clamp_to, Candidate, Screening, Setup};
-use crate::diagnose::screen::{regress, Evidence, Scatter};
-use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
+use crate::plant::effects::candidate::{clamp_to, Candidate, Screening, Setup};
+use crate::plant::effects::candidate::{regress, Evidence, Scatter};
+use crate::plant::config::PlantConfig;
+use crate::plant::tables::{ConfigError, ValveConfig};
 
 /// The `[effects.muscle_hysteresis]` table.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -59,7 +60,7 @@ impl Hooks for MuscleHysteresis {
 
 impl Effect for MuscleHysteresis {
     const TRUTHS: &'static [Truth] = &[Truth::new("muscle_hysteresis", "muscle_hysteresis", |_| "[effects.muscle_hysteresis]\nbase_force_n = 6.0\npressure_gain_n_per_pa = 2.0e-5\nsmoothing_rate_per_s = 0.02\n".into())];
-    table_effect!(MuscleHysteresisCandidate);
+    table_effect!();
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
         check_fields!(self, c, positive: smoothing_rate_per_s);
         use crate::validate::Range;
@@ -78,6 +79,8 @@ impl Effect for MuscleHysteresis {
         Ok(())
     }
 }
+
+effect_candidates!(MuscleHysteresis => MuscleHysteresisCandidate);
 
 /// Contraction-rate scale of the braid-friction candidate.
 pub const HYSTERESIS_SMOOTHING_PER_S: f64 = 0.01;

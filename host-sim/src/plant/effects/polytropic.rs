@@ -8,11 +8,12 @@
 use serde::Deserialize;
 
 use super::{Check, Effect, enabled_default, Hooks, params, Truth};
-use crate::diagnose::candidates::{
+use crate::plant::effects::candidate::{
     clamp_to, pressure_scatter, regress_pressure, Candidate, Screening, Setup,
 };
-use crate::diagnose::screen::Evidence;
-use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
+use crate::plant::effects::candidate::Evidence;
+use crate::plant::config::PlantConfig;
+use crate::plant::tables::{ConfigError, ValveConfig};
 
 /// The `[effects.polytropic]` table.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -36,12 +37,14 @@ impl Hooks for Polytropic {
 
 impl Effect for Polytropic {
     const TRUTHS: &'static [Truth] = &[Truth::new("polytropic", "polytropic", |_| "[effects.polytropic]\nexponent = 1.3\n".into())];
-    table_effect!(PolytropicCandidate);
+    table_effect!();
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
         check_fields!(self, c, positive: exponent);
         Ok(())
     }
 }
+
+effect_candidates!(Polytropic => PolytropicCandidate);
 
 /// A constant polytropic exponent.
 pub struct PolytropicCandidate;

@@ -11,11 +11,12 @@
 use serde::Deserialize;
 
 use super::{enabled_default, Check, Effect, Hooks, Truth};
-use crate::diagnose::candidates::{clamp_to, Candidate, ParamSpec, Screening, Setup};
-use crate::diagnose::screen::Evidence;
-use crate::io::recording::Channel;
-use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
-use crate::plant::Measurement;
+use crate::plant::effects::candidate::{EffectCandidates, clamp_to, Candidate, ParamSpec, Screening, Setup};
+use crate::plant::effects::candidate::Evidence;
+use crate::plant::channel::Channel;
+use crate::plant::config::PlantConfig;
+use crate::plant::tables::{ConfigError, ValveConfig};
+use crate::plant::state::Measurement;
 
 /// Offset and gain of one measured channel: reported = gain * true + offset (channel units).
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
@@ -135,6 +136,9 @@ impl Effect for SensorCalibration {
             self.f2_n.unwrap_or(id),
         ])
     }
+}
+
+impl EffectCandidates for SensorCalibration {
     fn candidates() -> Vec<Box<dyn Candidate>> {
         vec![
             Box::new(SensorOffsetCandidate),

@@ -14,10 +14,11 @@
 use serde::Deserialize;
 
 use super::{ChannelFilter, Check, Effect, enabled_default, Hooks, Truth};
-use crate::diagnose::candidates::{clamp_to, Candidate, ParamSpec, Screening, Setup};
-use crate::diagnose::screen::Evidence;
-use crate::io::recording::Channel;
-use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
+use crate::plant::effects::candidate::{clamp_to, Candidate, ParamSpec, Screening, Setup};
+use crate::plant::effects::candidate::Evidence;
+use crate::plant::channel::Channel;
+use crate::plant::config::PlantConfig;
+use crate::plant::tables::{ConfigError, ValveConfig};
 
 /// The `[effects.sensor_lag]` table.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -124,15 +125,7 @@ impl Effect for SensorLag {
             "[effects.sensor_lag]\np2_time_constant_s = 0.02\n".into()
         }),
     ];
-    table_effect!(
-        SensorLagCandidate,
-        PressureSensorLagCandidate {
-            channel: Channel::P1Kpa
-        },
-        PressureSensorLagCandidate {
-            channel: Channel::P2Kpa
-        },
-    );
+    table_effect!();
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
         for (key, tau) in [
             ("angle_time_constant_s", self.angle_time_constant_s),
@@ -148,6 +141,8 @@ impl Effect for SensorLag {
         Ok(())
     }
 }
+
+effect_candidates!(SensorLag => SensorLagCandidate, PressureSensorLagCandidate { channel: Channel::P1Kpa }, PressureSensorLagCandidate { channel: Channel::P2Kpa });
 
 /// One time constant per measured channel group.
 pub struct SensorLagCandidate;

@@ -22,11 +22,12 @@
 use serde::Deserialize;
 
 use super::{enabled_default, Check, Effect, Hooks, Truth};
-use crate::diagnose::candidates::{
+use crate::plant::effects::candidate::{EffectCandidates, 
     clamp_to, pressure_scatter, regress_pressure, Candidate, Screening, Setup,
 };
-use crate::diagnose::screen::Evidence;
-use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
+use crate::plant::effects::candidate::Evidence;
+use crate::plant::config::PlantConfig;
+use crate::plant::tables::{ConfigError, ValveConfig};
 use crate::plant::valve::Iso6358Valve;
 
 /// Form of [`SupplyDrop`].
@@ -301,6 +302,9 @@ impl Effect for SupplyDrop {
             },
         }
     }
+}
+
+impl EffectCandidates for SupplyDrop {
     fn candidates() -> Vec<Box<dyn Candidate>> {
         vec![Box::new(SupplyDropCandidate), Box::new(SupplyReservoirCandidate)]
     }

@@ -24,11 +24,12 @@
 use serde::Deserialize;
 
 use super::{Check, Effect, enabled_default, Hooks, Truth};
-use crate::diagnose::candidates::{
+use crate::plant::effects::candidate::{
     clamp_to, pressure_scatter, regress_pressure, Candidate, Screening, Setup,
 };
-use crate::diagnose::screen::Evidence;
-use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
+use crate::plant::effects::candidate::Evidence;
+use crate::plant::config::PlantConfig;
+use crate::plant::tables::{ConfigError, ValveConfig};
 
 /// Specific gas constant of air [J/(kg K)].
 pub const GAS_CONSTANT_AIR_J_PER_KG_K: f64 = 287.05;
@@ -105,7 +106,7 @@ impl Effect for ThermalChamber {
     const TRUTHS: &'static [Truth] = &[Truth::new("thermal_chamber", "heat_transfer", |_| {
         "[effects.thermal_chamber]\nheat_transfer_w_per_k = 2.0\nkappa = 1.4\n".into()
     })];
-    table_effect!(HeatTransferCandidate);
+    table_effect!();
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
         check_fields!(self, c, finite: kappa);
         c.within(
@@ -135,6 +136,8 @@ impl Effect for ThermalChamber {
         Ok(())
     }
 }
+
+effect_candidates!(ThermalChamber => HeatTransferCandidate);
 
 /// Heat exchange of the chamber gas with the wall, kappa of air.
 pub struct HeatTransferCandidate;

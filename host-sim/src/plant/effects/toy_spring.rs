@@ -7,10 +7,11 @@
 
 use serde::Deserialize;
 
-use super::{Check, Effect, enabled_default, Hooks, Truth, torque_residual_scatter};
-use crate::diagnose::candidates::{clamp_to, Candidate, Screening, Setup};
-use crate::diagnose::screen::{regress, Evidence};
-use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
+use super::{Check, Effect, enabled_default, Hooks, Truth};
+use crate::plant::effects::candidate::{torque_residual_scatter, clamp_to, Candidate, Screening, Setup};
+use crate::plant::effects::candidate::{regress, Evidence};
+use crate::plant::config::PlantConfig;
+use crate::plant::tables::{ConfigError, ValveConfig};
 
 /// The `[effects.toy_spring]` table.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -33,7 +34,7 @@ impl Hooks for ToySpring {
 
 impl Effect for ToySpring {
     const TRUTHS: &'static [Truth] = &[Truth::new("toy_spring", "toy_spring", |_| "[effects.toy_spring]\nstiffness_nm_per_rad = 2.0\nrest_angle_rad = 0.0\n".into())];
-    table_effect!(ToySpringCandidate);
+    table_effect!();
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
         use crate::validate::Range;
         c.within(
@@ -51,6 +52,8 @@ impl Effect for ToySpring {
         Ok(())
     }
 }
+
+effect_candidates!(ToySpring => ToySpringCandidate);
 
 /// The spring's stiffness, relaxed at angle 0.
 pub struct ToySpringCandidate;
@@ -87,7 +90,7 @@ impl Candidate for ToySpringCandidate {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diagnose::screen::Evidence;
+    use crate::plant::effects::candidate::Evidence;
     use crate::diagnose::synth::{generate, plant_with, truth_names, Excitation, SynthSpec};
     use crate::diagnose::{catalogue, SavitzkyGolay};
     use crate::plant::{Plant, PlantState, ValveInputs};
@@ -191,7 +194,7 @@ mod tests {
         let angle_err = |p: &Plant| {
             let sim = simulate(p, &rec.inputs, dt, &SolverOptions::default()).unwrap();
             let m = p.measure_series(&sim.states, dt);
-            let y = rec.channel(crate::io::recording::Channel::AngleDeg).unwrap();
+            let y = rec.channel(crate::plant::channel::Channel::AngleDeg).unwrap();
             m.iter().zip(y).map(|(a, b)| (a.angle_deg - b).powi(2)).sum::<f64>()
         };
         let before = angle_err(&nominal);

@@ -11,11 +11,12 @@
 use serde::Deserialize;
 
 use super::{Check, Effect, enabled_default, Hooks, params, Truth};
-use crate::diagnose::candidates::{Candidate, ParamSpec, Screening, Setup};
-use crate::diagnose::screen::Evidence;
-use crate::io::recording::Channel;
-use crate::plant::config::{ConfigError, PlantConfig, ValveConfig};
-use crate::plant::ValveInputs;
+use crate::plant::effects::candidate::{Candidate, ParamSpec, Screening, Setup};
+use crate::plant::effects::candidate::Evidence;
+use crate::plant::channel::Channel;
+use crate::plant::config::PlantConfig;
+use crate::plant::tables::{ConfigError, ValveConfig};
+use crate::plant::state::ValveInputs;
 
 /// The `[effects.valve_dead_time]` table.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -100,7 +101,7 @@ impl Effect for ValveDeadTime {
             (0.008 / dt_s).round().max(1.0) * dt_s
         )
     })];
-    table_effect!(ValveDelayCandidate);
+    table_effect!();
     fn validate(&self, c: &Check) -> Result<(), ConfigError> {
         check_fields!(self, c, non_negative: delay_s);
         if self.delay_s > MAX_PLAUSIBLE_DELAY_S {
@@ -116,6 +117,8 @@ impl Effect for ValveDeadTime {
         Ok(())
     }
 }
+
+effect_candidates!(ValveDeadTime => ValveDelayCandidate);
 
 /// Longest valve dead time a plant file may state [s]: a pneumatic valve answers within tens
 /// of milliseconds; more is a unit mistake.
