@@ -6,7 +6,7 @@
 //! [`TickRecord::words`]) must be bit-for-bit identical between the Cortex-M4F build and the
 //! host build.
 
-// The control tick driven by the trace: the real one of `docs/tick-contract.md` (src/tick.rs).
+// The control tick driven by the trace: the real one of `docs/tick-contract.md` (src/tick/).
 use crate::tick;
 
 pub use tick::{ControlTick, ControllerConfig, SensorFrame, Setpoint, TickOutput};
@@ -151,7 +151,7 @@ fn open_loop_replay(cfg: &mut ControllerConfig) {
     cfg.valve_model.integral_min_pa = f32::MAX;
     // Nor does its angle follow a ramped set-point: the start phase (a transient of at most
     // ~1 s after arming, measured on its own by `bench-mcu.sh`) is skipped.
-    cfg.start = crate::tick::StartRamp::INSTANT;
+    cfg.start = crate::tick::config::StartRamp::INSTANT;
 }
 
 /// Steps a control tick through [`SENSOR_TRACE`].
