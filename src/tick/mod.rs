@@ -16,12 +16,15 @@
 //!
 //! The configuration is in [`config`], the tick's inputs and output in [`io`], its state
 //! (and how it is built and reset) in `state.rs`, the fault conditions and the safe output in
-//! `faults.rs`; this file is the state machine of one tick.
+//! `faults.rs`, the steps of one tick in `steps.rs`; this file is the state machine of one
+//! tick.
 
 pub mod config;
 mod faults;
 pub mod io;
 mod state;
+#[macro_use]
+mod steps;
 
 use crate::control::{torque_from, JointState, TorqueMeasurement};
 use crate::feedforward::feedforward_torque_nm;
@@ -236,6 +239,10 @@ impl ControlTick {
         out
     }
 
+    /// One tick in named steps (the macros of `steps.rs`, expanded in place: the tick's code
+    /// is what it was as one function): sample and validate the inputs, latch this tick's
+    /// fault conditions, estimate the torque, then the safe state (faulted), closed valves
+    /// (start-up) or the control laws and the tracking supervision (armed).
     #[inline(always)]
     fn step_inner(
         &mut self,
@@ -247,115 +254,10 @@ impl ControlTick {
         // Scalars read once; the configuration (with its force-law and torque-model tables) is
         // not copied: a whole-struct copy cost ~190 instructions per tick on the Cortex-M4.
         let p_over_gauge_pa = self.cfg.p_over_gauge_pa;
-        // `dt_s.is_finite() && dt_s >= dt_min_s && dt_s <= dt_max_s` (see `dt_limit_s`).
-        let dt_ok = dt_s >= self.dt_floor_s && dt_s <= self.dt_limit_s;
-        // Channels are aged by the nominal period when dt itself is bad.
-        let dt_age = if dt_ok { dt_s } else { self.dt_fallback_s };
-
-        // `dt_age.is_finite() && dt_age > 0.0`, decided once (`dt_ok` implies it).
-        let dt_age_good = dt_ok || self.dt_fallback_good;
-        let s1 = self.p1.update_with(frame.p1_gauge_pa, dt_age, dt_age_good);
-        let s2 = self.p2.update_with(frame.p2_gauge_pa, dt_age, dt_age_good);
-        let sa = self.angle.update_with(frame.angle_rad, dt_age, dt_age_good);
-        let new_angle = match sa {
-            ChannelStatus::Valid {
-                value,
-                age_ticks: 0,
-            } => Some(value),
-            _ => None,
-        };
-        let vel = self.velocity.update_with(new_angle, dt_age, dt_age_good);
-        // Valve / supply supervision on this tick's fresh samples.
-        let residual = match (s1, s2, new_angle) {
-            (
-                ChannelStatus::Valid {
-                    value: p1,
-                    age_ticks: 0,
-                },
-                ChannelStatus::Valid {
-                    value: p2,
-                    age_ticks: 0,
-                },
-                Some(a),
-            ) if dt_ok => self.residual.observe(true, p1, p2, a, dt_s),
-            _ => self.residual.observe(false, 0.0, 0.0, 0.0, dt_s),
-        };
-
-        // Fault conditions of this tick (the first one found is reported). Fast path: one
-        // branch-free test of all of them; the ordered search runs only when one holds.
-        let over1 = matches!(s1.value(), Some(p) if p > p_over_gauge_pa);
-        let over2 = matches!(s2.value(), Some(p) if p > p_over_gauge_pa);
-        let sp_ok = setpoint.angle_rad.is_finite();
-        let any = !self.config_ok
-            | !dt_ok
-            | matches!(s1, ChannelStatus::Fault(_))
-            | matches!(s2, ChannelStatus::Fault(_))
-            | matches!(sa, ChannelStatus::Fault(_))
-            | over1
-            | over2
-            | !sp_ok;
-        self.active = residual;
-        if !residual.is_empty() {
-            self.residual_fault(residual);
-        }
-        if any {
-            let (set, first) = conditions(self.config_ok, dt_ok, s1, s2, sa, over1, over2, sp_ok);
-            self.active = set.union(residual);
-            if let Some(c) = first {
-                self.safety.raise(c);
-            }
-            self.safety.raise_all(set);
-            // Escalation: a muscle above the over-pressure limit is vented (this tick: the
-            // over-pressure fault itself puts the valves in the safe state).
-            if over1 {
-                self.safety.escalate_vent(0);
-            }
-            if over2 {
-                self.safety.escalate_vent(1);
-            }
-        }
-
-        let angle_est = self.angle.last().unwrap_or(0.0);
-        // The force-law torque estimate, computed once per tick on the ticks the outer loops
-        // run (every tick that does not arm is one: `reset_laws`): it is both the logged
-        // `torque_est_nm` and, when all channels are fresh this tick (then `last_*` are this
-        // tick's values), the torque loop's feedback. In between, the last one is held.
-        // A faulted tick computes it too (its output and the numeric fault's persistence).
-        let outer = self.outer_countdown == 0;
-        let fresh = outer || self.safety.fault().is_some();
-        let estimate = if fresh { self.estimate() } else { None };
-        let torque_est = if fresh {
-            usable_torque(estimate).unwrap_or(0.0)
-        } else {
-            self.outer_held.torque_est_nm
-        };
-        // `vel` is finite: the estimator stores only finite velocities (starts at 0).
-
-        // The output of a tick that does not arm; the armed path builds its own (no field
-        // written twice on the hot path).
-        let out = TickOutput {
-            valves: ValveCommand::default(),
-            p1_set_gauge_pa: 0.0,
-            p2_set_gauge_pa: 0.0,
-            torque_des_nm: 0.0,
-            torque_est_nm: torque_est,
-            angle_est_rad: angle_est,
-            velocity_est_rad_s: vel,
-            fault: None,
-            active: FaultSet::EMPTY,
-            armed: false,
-        };
-
-        if self.safety.fault().is_some() {
-            // A numeric fault persists while the force-law estimate of the current
-            // measurements is unusable.
-            if self.safety.seen().contains(FaultCode::ControllerNumeric)
-                && usable_torque(estimate).is_none()
-            {
-                self.active.insert(FaultCode::ControllerNumeric);
-            }
-            return self.safe_output(out);
-        }
+        sample_inputs!(self, frame, dt_s, dt_ok, s1, s2, sa, vel, residual);
+        latch_conditions!(self, setpoint, p_over_gauge_pa, dt_ok, s1, s2, sa, residual);
+        idle_output!(self, vel, outer, estimate, torque_est, out);
+        return_if_faulted!(self, estimate, out);
 
         let (Some(p1), Some(p2), Some(angle)) = (s1.value(), s2.value(), sa.value()) else {
             // Start-up: some channel has not delivered yet. Valves closed, not armed.
@@ -379,158 +281,20 @@ impl ControlTick {
         // channels, sanitised velocity, finite set-point, `dt_ok`; `t_des` is the clamped sum
         // of two finite torques), so the laws run without their own input checks
         // (`step_finite`: bit-identical to `step` for such inputs).
-        let result = (|| {
-            if let Some(pid) = self.dp_pid.as_mut() {
-                // Model-free baseline: angle -> dp -> pressure set-points, no torque level.
-                let c = pid.step(
-                    JointState {
-                        angle_rad: angle,
-                        velocity_rad_s: vel,
-                    },
-                    sp,
-                    dt_s,
-                )?;
-                let u1 = self.pressure1.step(p1, c.p1_gauge_pa, dt_s)?;
-                let u2 = self.pressure2.step(p2, c.p2_gauge_pa, dt_s)?;
-                return Ok::<_, crate::control::ControlError>((
-                    0.0,
-                    c.p1_gauge_pa,
-                    c.p2_gauge_pa,
-                    torque_est,
-                    u1,
-                    u2,
-                ));
-            }
-            let meas = TorqueMeasurement {
-                p1_gauge_pa: p1,
-                p2_gauge_pa: p2,
-                angle_rad: angle,
-                velocity_rad_s: vel,
-            };
-            // The outer loops on one tick in `outer_period_ticks` (`outer`: the estimate was
-            // computed), with the time since their last run; in between, their held output.
-            let (t_des, ps, rate, accel) = if outer {
-                self.outer_countdown = self.outer_period_ticks - 1;
-                // `0.0 + dt_s` is `dt_s` (dt_s > 0): every tick's bits when the period is 1.
-                let dt_outer_s = self.outer_dt_s + dt_s;
-                self.outer_dt_s = 0.0;
-                let (t_des, ps, rate, accel) =
-                    self.outer_loops(&meas, sp, torque_ff_nm, estimate, dt_outer_s)?;
-                if self.outer_period_ticks > 1 {
-                    let h = &self.outer_held;
-                    let (s1, s2) = if h.primed {
-                        let per_tick = self.outer_per_tick;
-                        (
-                            (ps.p1_gauge_pa - h.p1_set_gauge_pa) * per_tick,
-                            (ps.p2_gauge_pa - h.p2_set_gauge_pa) * per_tick,
-                        )
-                    } else {
-                        (0.0, 0.0)
-                    };
-                    self.outer_held = OuterHeld {
-                        torque_des_nm: t_des,
-                        p1_set_gauge_pa: ps.p1_gauge_pa,
-                        p2_set_gauge_pa: ps.p2_gauge_pa,
-                        p1_step_pa: s1,
-                        p2_step_pa: s2,
-                        primed: true,
-                        torque_est_nm: ps.torque_est_nm,
-                        sp_rate_rad_s: rate,
-                        sp_accel_rad_s2: accel,
-                    };
-                }
-                (
-                    t_des,
-                    [ps.p1_gauge_pa, ps.p2_gauge_pa, ps.torque_est_nm],
-                    rate,
-                    accel,
-                )
-            } else {
-                self.between_outer_runs(dt_s)
-            };
-            let [p1_set, p2_set, t_est] = ps;
-            let u1 = self.pressure1.step_finite(p1, p1_set, dt_s)?;
-            let u2 = self.pressure2.step_finite(p2, p2_set, dt_s)?;
-            // Compiled in with the `pressure-ff` feature only (the default MCU tick has none of
-            // it), and run when the configuration enables it.
-            #[cfg(feature = "pressure-ff")]
-            let (u1, u2) = if self.pressure_ff_on {
-                self.add_pressure_ff(
-                    (u1, u2),
-                    [p1_set, p2_set],
-                    &meas,
-                    JointState {
-                        angle_rad: sp,
-                        velocity_rad_s: rate,
-                    },
-                    accel,
-                )
-            } else {
-                (u1, u2)
-            };
-            #[cfg(not(feature = "pressure-ff"))]
-            let _ = (rate, accel);
-            self.valve_shortfall = valve_shortfall(u1, u2, self.torque_sign);
-            Ok((t_des, p1_set, p2_set, t_est, u1, u2))
-        })();
-        match result {
-            Ok((t_des, p1_set, p2_set, t_est, u1, u2)) => {
-                let (e_pa, n) = (self.cfg.tracking_error_pa, self.cfg.tracking_ticks);
-                let lost1 = self.tracking1.update(p1_set, p1, u1, e_pa, n);
-                let lost2 = self.tracking2.update(p2_set, p2, u2, e_pa, n);
-                if lost1 || lost2 {
-                    let f = if lost1 {
-                        FaultCode::PressureTrackingLost1
-                    } else {
-                        FaultCode::PressureTrackingLost2
-                    };
-                    warn!("pressure tracking lost: {}", f);
-                    self.safety.raise(f);
-                    if lost1 {
-                        self.active.insert(FaultCode::PressureTrackingLost1);
-                    }
-                    if lost2 {
-                        self.active.insert(FaultCode::PressureTrackingLost2);
-                        self.safety.raise(FaultCode::PressureTrackingLost2);
-                    }
-                    return self.safe_output(out);
-                }
-                // What `self.safety.gate(cmd)` and `clamp_pressure_setpoint_pa(p, P_MAX)` return
-                // here, without recomputing it: no fault is latched (checked above, tracking
-                // returned early), u1/u2 are finite and in [-1, 1] (pressure loop output),
-                // and both laws' set-points are already in [0, P_MUSCLE_MAX] (the torque loop's
-                // clamp, `DpPid::step`'s `clamp_pressure_setpoint_pa`).
-                let armed = TickOutput {
-                    valves: ValveCommand {
-                        muscle1: u1,
-                        muscle2: u2,
-                    },
-                    p1_set_gauge_pa: p1_set,
-                    p2_set_gauge_pa: p2_set,
-                    torque_des_nm: t_des,
-                    torque_est_nm: t_est,
-                    armed: true,
-                    ..out
-                };
-                trace!(
-                    "tick sp={} a={} T*={} p*=({}, {}) u=({}, {})",
-                    sp,
-                    angle,
-                    t_des,
-                    p1_set,
-                    p2_set,
-                    u1,
-                    u2
-                );
-                armed
-            }
-            Err(e) => {
-                warn!("control law error: {}", e);
-                self.active.insert(FaultCode::ControllerNumeric);
-                self.safety.raise(FaultCode::ControllerNumeric);
-                self.safe_output(out)
-            }
-        }
+        let result = control_laws!(
+            self,
+            p1,
+            p2,
+            angle,
+            vel,
+            sp,
+            outer,
+            estimate,
+            torque_est,
+            torque_ff_nm,
+            dt_s
+        );
+        armed_output!(self, result, p1, p2, sp, angle, out)
     }
 
     /// A tick between two runs of the outer loops: their held torques and set-point
