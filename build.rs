@@ -27,19 +27,19 @@ macro_rules! keyed {
 mod prescale;
 
 // The board's set-point scenario: parsing shared with tests/board_profile.rs.
-#[path = "build/board_profile.rs"]
+#[path = "src/build/board_profile.rs"]
 mod board_profile_spec;
 
 // The 3-DOF arm's per-joint constants (config/arm3.toml).
-#[path = "build/arm3.rs"]
+#[path = "src/build/arm3.rs"]
 mod arm3;
 
 // The pressure loop's inverse thermodynamic feed-forward (config/pressure_ff.toml).
-#[path = "build/pressure_ff.rs"]
+#[path = "src/build/pressure_ff.rs"]
 mod pressure_ff;
 
 // The hybrid model's learned volume (config/volume.toml).
-#[path = "build/volume_fnn.rs"]
+#[path = "src/build/volume_fnn.rs"]
 mod volume_fnn;
 
 #[derive(serde::Deserialize)]
@@ -273,8 +273,8 @@ fn inline_fields(fields: &[(&str, String)]) -> String {
 
 fn main() {
     println!("cargo:rerun-if-changed=src/fixed_point/prescale.rs");
-    println!("cargo:rerun-if-changed=build/pressure_ff.rs");
-    println!("cargo:rerun-if-changed=build/volume_fnn.rs");
+    println!("cargo:rerun-if-changed=src/build/pressure_ff.rs");
+    println!("cargo:rerun-if-changed=src/build/volume_fnn.rs");
     let force: ForceFile = read("config/force_law.toml");
     let torque: TorqueFile = read("config/torque_model.toml");
     let geometry: GeometryFile = read("config/joint_geometry.toml");
@@ -302,13 +302,13 @@ fn main() {
     fs::write(&out, arm).expect("write arm3_constants.rs");
 
     sensor_trace(
-        "traces/qemu_sensor_trace.csv",
+        "tests/traces/qemu_sensor_trace.csv",
         1,
         "SENSOR_TRACE",
         "sensor_trace.rs",
     );
     sensor_trace(
-        "traces/arm3_sensor_trace.csv",
+        "tests/traces/arm3_sensor_trace.csv",
         3,
         "ARM3_SENSOR_TRACE",
         "arm3_sensor_trace.rs",
@@ -581,14 +581,14 @@ fn link_args() {
         // memory.x: the top-level one (STM32F405/F407: QEMU netduinoplus2 and the board) is
         // the default; the linker finds it in its working directory (the workspace root) and
         // through this search path. Cortex-M0 builds (thumbv6m, the FPU-less benchmark image
-        // under QEMU `microbit`) use memory/nrf51/memory.x: their linker
+        // under QEMU `microbit`) use scripts/nrf51/memory.x: their linker
         // (scripts/ld-nrf51.sh, .cargo/config.toml) runs in that directory, because an
         // INCLUDEd file in the working directory would shadow any search path.
         let mem = if env::var("TARGET")
             .unwrap_or_default()
             .starts_with("thumbv6m")
         {
-            dir.join("memory/nrf51")
+            dir.join("scripts/nrf51")
         } else {
             dir.clone()
         };
@@ -721,11 +721,11 @@ fn sensor_trace(path: &str, joints: usize, name: &str, out_file: &str) {
 /// The board's compiled-in set-point (`OUT_DIR/board_profile.rs`, included by
 /// `src/bin/board.rs`): the `[setpoint]` of the scenario TOML named by `PAM_BOARD_SCENARIO`
 /// (a path relative to the crate root), else a hold at 0 rad. Parsing and validation:
-/// `build/board_profile.rs` (shared with `tests/board_profile.rs`). A bad file stops the
+/// `src/build/board_profile.rs` (shared with `tests/board_profile.rs`). A bad file stops the
 /// build with the file, the key and the reason.
 fn board_profile() {
     println!("cargo:rerun-if-env-changed=PAM_BOARD_SCENARIO");
-    println!("cargo:rerun-if-changed=build/board_profile.rs");
+    println!("cargo:rerun-if-changed=src/build/board_profile.rs");
     let (name, expr) = match env::var("PAM_BOARD_SCENARIO") {
         Err(_) => (
             "none (hold 0 rad)".to_string(),
