@@ -27,19 +27,19 @@ macro_rules! keyed {
 mod prescale;
 
 // The board's set-point scenario: parsing shared with tests/board_profile.rs.
-#[path = "build/board_profile.rs"]
+#[path = "src/build/board_profile.rs"]
 mod board_profile_spec;
 
 // The 3-DOF arm's per-joint constants (config/arm3.toml).
-#[path = "build/arm3.rs"]
+#[path = "src/build/arm3.rs"]
 mod arm3;
 
 // The pressure loop's inverse thermodynamic feed-forward (config/pressure_ff.toml).
-#[path = "build/pressure_ff.rs"]
+#[path = "src/build/pressure_ff.rs"]
 mod pressure_ff;
 
 // The hybrid model's learned volume (config/volume.toml).
-#[path = "build/volume_fnn.rs"]
+#[path = "src/build/volume_fnn.rs"]
 mod volume_fnn;
 
 #[derive(serde::Deserialize)]
@@ -273,14 +273,53 @@ fn inline_fields(fields: &[(&str, String)]) -> String {
 
 fn main() {
     println!("cargo:rerun-if-changed=src/fixed_point/prescale.rs");
-    println!("cargo:rerun-if-changed=build/pressure_ff.rs");
-    println!("cargo:rerun-if-changed=build/volume_fnn.rs");
+    println!("cargo:rerun-if-changed=src/build/pressure_ff.rs");
+    println!("cargo:rerun-if-changed=src/build/volume_fnn.rs");
     let force: ForceFile = read("config/force_law.toml");
     let torque: TorqueFile = read("config/torque_model.toml");
     let geometry: GeometryFile = read("config/joint_geometry.toml");
     let f = force.force_law;
     let t = torque.torque_model;
     let g = geometry.joint_geometry;
+    check_model(&f, &t, &g);
+    let plant: PlantFile = read("config/plant_constants.toml");
+    let ctl: ControllerFile = read("config/controller.toml");
+    check_plant_and_controller(&plant, &ctl);
+    let src = model_constants(&f, &t, &g)
+        + &plant_and_loop_constants(&plant, &ctl)
+        + &fixed_point_constants(&f, &t, &ctl)
+        + &pressure_ff::constants()
+        + &volume_fnn::constants();
+    let out = PathBuf::from(env::var("OUT_DIR").unwrap()).join("constants.rs");
+    fs::write(&out, src).expect("write constants.rs");
+    let arm = arm3::constants(&arm3::Reference {
+        c: f.c,
+        abcd: [t.a_n_per_m_rad, t.b_m2, t.c_nms3_per_rad3, t.d_nms_per_rad],
+        r_m: g.sprocket_radius_m,
+        l_m: g.rest_length_m,
+    });
+    let out = PathBuf::from(env::var("OUT_DIR").unwrap()).join("arm3_constants.rs");
+    fs::write(&out, arm).expect("write arm3_constants.rs");
+
+    sensor_trace(
+        "tests/traces/qemu_sensor_trace.csv",
+        1,
+        "SENSOR_TRACE",
+        "sensor_trace.rs",
+    );
+    sensor_trace(
+        "tests/traces/arm3_sensor_trace.csv",
+        3,
+        "ARM3_SENSOR_TRACE",
+        "arm3_sensor_trace.rs",
+    );
+    board_profile();
+    link_args();
+}
+
+/// Stops the build when the force law, the torque model or the joint geometry is unusable
+/// (the file and the field in the message).
+fn check_model(f: &ForceLaw, t: &TorqueModel, g: &Geometry) {
     assert!(
         g.sprocket_radius_m > 0.0 && g.rest_length_m > 0.0,
         "config/joint_geometry.toml: sprocket_radius_m and rest_length_m must be > 0"
@@ -315,73 +354,77 @@ fn main() {
         t.b_m2 != 0.0,
         "config/torque_model.toml: b_m2 must not be 0 (the model could not be inverted)"
     );
+}
 
-    let plant: PlantFile = read("config/plant_constants.toml");
-    let ctl: ControllerFile = read("config/controller.toml");
-    {
-        const P: &str = "config/plant_constants.toml";
-        let (j, m, e, v) = (
-            &plant.joint,
-            &plant.muscle,
-            &plant.environment,
-            &plant.valve,
-        );
-        for (field, x) in [
-            ("joint.inertia_kgm2", j.inertia_kgm2),
-            ("muscle.p_max_gauge_pa", m.p_max_gauge_pa),
-            ("muscle.volume_poly_m3[0]", m.volume_poly_m3[0]),
-            ("environment.p_atm_pa", e.p_atm_pa),
-        ] {
-            check(x > 0.0, P, field, x, "> 0");
-        }
-        let supply = e.supply_gauge_pa;
-        check(
-            supply >= 0.0,
-            P,
-            "environment.supply_gauge_pa",
-            supply,
-            ">= 0",
-        );
-        check_valve(P, v.sonic_conductance_m3_per_s_pa, v.critical_ratio);
-        const C: &str = "config/controller.toml";
-        check_non_negative(
-            C,
-            &keyed!("position.", ctl.position;
-            kp_nm_per_rad, ki_nm_per_rad_s, kd_nm_s_per_rad, i_limit_nm, out_limit_nm,
-            velocity_cutoff_hz),
-        );
-        check_non_negative(
-            C,
-            &keyed!("torque.", ctl.torque; kp, ki_per_s, corr_limit_nm),
-        );
-        check_non_negative(
-            C,
-            &keyed!("pressure.", ctl.pressure; ki_per_pa_s, deadband_pa, i_limit),
-        );
-        check_non_negative(
-            C,
-            &keyed!("feedforward.", ctl.feedforward; rate_weight, cutoff_hz, limit_nm),
-        );
-        assert!(
-            (1..=10).contains(&ctl.rates.outer_period_ticks),
-            "{C}: [rates] outer_period_ticks = {} must be in [1, 10]",
-            ctl.rates.outer_period_ticks
-        );
-        check(
-            ctl.pressure.full_opening_error_pa > 0.0,
-            C,
-            "pressure.full_opening_error_pa",
-            ctl.pressure.full_opening_error_pa,
-            "> 0",
-        );
+/// Stops the build when a plant constant or a controller gain is out of its range (the
+/// file, the field and the value in the message).
+fn check_plant_and_controller(plant: &PlantFile, ctl: &ControllerFile) {
+    const P: &str = "config/plant_constants.toml";
+    let (j, m, e, v) = (
+        &plant.joint,
+        &plant.muscle,
+        &plant.environment,
+        &plant.valve,
+    );
+    for (field, x) in [
+        ("joint.inertia_kgm2", j.inertia_kgm2),
+        ("muscle.p_max_gauge_pa", m.p_max_gauge_pa),
+        ("muscle.volume_poly_m3[0]", m.volume_poly_m3[0]),
+        ("environment.p_atm_pa", e.p_atm_pa),
+    ] {
+        check(x > 0.0, P, field, x, "> 0");
     }
+    let supply = e.supply_gauge_pa;
+    check(
+        supply >= 0.0,
+        P,
+        "environment.supply_gauge_pa",
+        supply,
+        ">= 0",
+    );
+    check_valve(P, v.sonic_conductance_m3_per_s_pa, v.critical_ratio);
+    const C: &str = "config/controller.toml";
+    check_non_negative(
+        C,
+        &keyed!("position.", ctl.position;
+        kp_nm_per_rad, ki_nm_per_rad_s, kd_nm_s_per_rad, i_limit_nm, out_limit_nm,
+        velocity_cutoff_hz),
+    );
+    check_non_negative(
+        C,
+        &keyed!("torque.", ctl.torque; kp, ki_per_s, corr_limit_nm),
+    );
+    check_non_negative(
+        C,
+        &keyed!("pressure.", ctl.pressure; ki_per_pa_s, deadband_pa, i_limit),
+    );
+    check_non_negative(
+        C,
+        &keyed!("feedforward.", ctl.feedforward; rate_weight, cutoff_hz, limit_nm),
+    );
+    assert!(
+        (1..=10).contains(&ctl.rates.outer_period_ticks),
+        "{C}: [rates] outer_period_ticks = {} must be in [1, 10]",
+        ctl.rates.outer_period_ticks
+    );
+    check(
+        ctl.pressure.full_opening_error_pa > 0.0,
+        C,
+        "pressure.full_opening_error_pa",
+        ctl.pressure.full_opening_error_pa,
+        "> 0",
+    );
+}
+
+/// The generated joint geometry, force law and torque model (`constants.rs`, first part).
+fn model_constants(f: &ForceLaw, t: &TorqueModel, g: &Geometry) -> String {
     let c: Vec<String> = f.c.iter().map(|&x| lit(x)).collect();
     let force_law = [
         vec![("c", format!("[{}]", c.join(", ")))],
         lits(keyed!(f; p_gauge_max_pa, stretch_min, stretch_max)),
     ]
     .concat();
-    let src = format!(
+    format!(
         "// @generated by build.rs from config/force_law.toml, config/torque_model.toml,\n\
          // config/joint_geometry.toml, config/plant_constants.toml and config/controller.toml.\n\
          // Do not edit: change the config file (each states where its numbers come from).\n\
@@ -405,7 +448,11 @@ fn main() {
                 sprocket_radius_m, p0_gauge_pa, dp_max_pa)
             ),
         ),
-    );
+    )
+}
+
+/// The generated plant constants and the default gains of the cascade's loops.
+fn plant_and_loop_constants(plant: &PlantFile, ctl: &ControllerFile) -> String {
     let (pm, env_, val, pos, tq, pr, ff) = (
         &plant.muscle,
         &plant.environment,
@@ -435,8 +482,8 @@ fn main() {
         ("cutoff_hz", lit(ff.cutoff_hz)),
         ("limit_nm", lit(ff.limit_nm)),
     ];
-    let src = format!(
-        "{src}\
+    format!(
+        "\
          // From config/plant_constants.toml.\n\
          /// Joint inertia [kg m^2] (config/plant_constants.toml [joint]).\n\
          pub const JOINT_INERTIA_KGM2: f32 = {};\n\
@@ -482,7 +529,12 @@ fn main() {
         const_struct("TORQUE_LOOP", "crate::control::TorqueLoopGains", &torque_loop),
         const_struct("PRESSURE_LOOP", "crate::control::PressureLoopGains", &pressure_loop),
         const_struct("FEEDFORWARD", "crate::feedforward::FeedforwardGains", &feedforward),
-    );
+    )
+}
+
+/// The fixed-point force law and torque model pre-scaled from the f32 constants, and the
+/// outer loops' period.
+fn fixed_point_constants(f: &ForceLaw, t: &TorqueModel, ctl: &ControllerFile) -> String {
     let fb = prescale::force_law_bits(
         f.c.map(f32w),
         f32w(f.p_gauge_max_pa),
@@ -499,8 +551,8 @@ fn main() {
         f32w(t.p0_gauge_pa),
         f32w(t.dp_max_pa),
     );
-    let src = format!(
-        "{src}\
+    let fixed = format!(
+        "\
          /// Fixed-point force law pre-scaled (in f64, by `src/fixed_point/prescale.rs`) from the\n\
          /// f32 constants of [`FORCE_LAW`].\n\
          pub const FIXED_FORCE_LAW: crate::fixed_point::FixedForceLaw = crate::fixed_point::FixedForceLaw::from_bits(\n\
@@ -510,39 +562,18 @@ fn main() {
          pub const FIXED_TORQUE_MODEL: crate::fixed_point::FixedTorqueModel = crate::fixed_point::FixedTorqueModel::from_bits(\n\
          \x20   crate::fixed_point::prescale::{tb:?});\n"
     );
-    let src = format!(
-        "{src}\
+    let rates = format!(
+        "\
          /// The cascade's outer loops run on one tick in this many (config/controller.toml [rates]).\n\
          pub const OUTER_PERIOD_TICKS: u16 = {};\n",
         ctl.rates.outer_period_ticks
     );
-    let src = src + &pressure_ff::constants() + &volume_fnn::constants();
-    let out = PathBuf::from(env::var("OUT_DIR").unwrap()).join("constants.rs");
-    fs::write(&out, src).expect("write constants.rs");
-    let arm = arm3::constants(&arm3::Reference {
-        c: f.c,
-        abcd: [t.a_n_per_m_rad, t.b_m2, t.c_nms3_per_rad3, t.d_nms_per_rad],
-        r_m: g.sprocket_radius_m,
-        l_m: g.rest_length_m,
-    });
-    let out = PathBuf::from(env::var("OUT_DIR").unwrap()).join("arm3_constants.rs");
-    fs::write(&out, arm).expect("write arm3_constants.rs");
+    fixed + &rates
+}
 
-    sensor_trace(
-        "traces/qemu_sensor_trace.csv",
-        1,
-        "SENSOR_TRACE",
-        "sensor_trace.rs",
-    );
-    sensor_trace(
-        "traces/arm3_sensor_trace.csv",
-        3,
-        "ARM3_SENSOR_TRACE",
-        "arm3_sensor_trace.rs",
-    );
-    board_profile();
-
-    // Bare-metal firmware binaries only (the `firmware` feature gates them): linker scripts (cortex-m-rt's link.x, defmt's defmt.x).
+/// Bare-metal firmware binaries only (the `firmware` feature gates them): linker scripts
+/// (cortex-m-rt's link.x, defmt's defmt.x) and the memory map's search path.
+fn link_args() {
     if env::var("CARGO_CFG_TARGET_OS").as_deref() == Ok("none")
         && env::var("CARGO_FEATURE_FIRMWARE").is_ok()
     {
@@ -550,14 +581,14 @@ fn main() {
         // memory.x: the top-level one (STM32F405/F407: QEMU netduinoplus2 and the board) is
         // the default; the linker finds it in its working directory (the workspace root) and
         // through this search path. Cortex-M0 builds (thumbv6m, the FPU-less benchmark image
-        // under QEMU `microbit`) use memory/nrf51/memory.x: their linker
+        // under QEMU `microbit`) use scripts/nrf51/memory.x: their linker
         // (scripts/ld-nrf51.sh, .cargo/config.toml) runs in that directory, because an
         // INCLUDEd file in the working directory would shadow any search path.
         let mem = if env::var("TARGET")
             .unwrap_or_default()
             .starts_with("thumbv6m")
         {
-            dir.join("memory/nrf51")
+            dir.join("scripts/nrf51")
         } else {
             dir.clone()
         };
@@ -690,11 +721,11 @@ fn sensor_trace(path: &str, joints: usize, name: &str, out_file: &str) {
 /// The board's compiled-in set-point (`OUT_DIR/board_profile.rs`, included by
 /// `src/bin/board.rs`): the `[setpoint]` of the scenario TOML named by `PAM_BOARD_SCENARIO`
 /// (a path relative to the crate root), else a hold at 0 rad. Parsing and validation:
-/// `build/board_profile.rs` (shared with `tests/board_profile.rs`). A bad file stops the
+/// `src/build/board_profile.rs` (shared with `tests/board_profile.rs`). A bad file stops the
 /// build with the file, the key and the reason.
 fn board_profile() {
     println!("cargo:rerun-if-env-changed=PAM_BOARD_SCENARIO");
-    println!("cargo:rerun-if-changed=build/board_profile.rs");
+    println!("cargo:rerun-if-changed=src/build/board_profile.rs");
     let (name, expr) = match env::var("PAM_BOARD_SCENARIO") {
         Err(_) => (
             "none (hold 0 rad)".to_string(),

@@ -137,7 +137,7 @@ calibration: $cal_insns instructions = $((cal_counts - empty)) SysTick counts (k
 | full f32 control tick, mean over $tick_n armed ticks | $tick_mean instructions | <= 1000 | $(check "$tick_mean" 1000) |
 | full f32 control tick, worst tick of the trace | $tick_worst instructions | | |
 | the same trace with the reference start phase (ramped set-point and pressure ceiling for up to ~1 s after arming), mean / worst over $st_n armed ticks | $st_mean / $st_worst instructions | | |
-| 3-DOF arm tick (three joint ticks, rigid-body gravity and inertia feed-forward, three valve drivers; traces/arm3_sensor_trace.csv), mean / worst over $arm_n of $arm_ticks ticks with all joints armed | $arm_mean / $arm_worst instructions | | |
+| 3-DOF arm tick (three joint ticks, rigid-body gravity and inertia feed-forward, three valve drivers; tests/traces/arm3_sensor_trace.csv), mean / worst over $arm_n of $arm_ticks ticks with all joints armed | $arm_mean / $arm_worst instructions | | |
 | image with the feature volume-fnn, pressure feed-forward off (as the default), mean / worst | $fnn_tick0_mean / $fnn_tick0_worst instructions | | |
 | the same image, pressure feed-forward on, analytical (volume polynomial, seed 004 eq. 7), mean / worst over $ff_tick_n armed ticks | $ff_tick_mean / $ff_tick_worst instructions | | |
 | the same image, pressure feed-forward on, analytical, within the budget: outer loops (position, torque) and feed-forward on every second tick (config/controller.toml [rates] outer_period_ticks = 2, config/pressure_ff.toml update_period_ticks = 2), mean / worst over $ffs_tick_n armed ticks | $ffs_tick_mean / $ffs_tick_worst instructions | <= 1000 mean | $(check "$ffs_tick_mean" 1000) |
@@ -173,7 +173,7 @@ if [ "$breakdown" = 1 ]; then
     -semihosting-config enable=on,target=native -singlestep -d exec,nochain -D "$exec_log" \
     -kernel "$qemu_elf" >/dev/null
   echo
-  python3 scripts/tick-profile.py "$(grep -c . traces/qemu_sensor_trace.csv | awk '{print $1 - 3}')" \
+  python3 scripts/tick-profile.py "$(grep -c . tests/traces/qemu_sensor_trace.csv | awk '{print $1 - 3}')" \
     bench_ticks bench_force_law <"$exec_log"
   echo
   python3 scripts/tick-profile.py "$fx_n" bench_force_law_fixed _defmt_acquire <"$exec_log"

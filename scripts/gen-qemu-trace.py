@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Generates traces/qemu_sensor_trace.csv: the deterministic raw-sensor trace that the QEMU
+"""Generates tests/traces/qemu_sensor_trace.csv: the deterministic raw-sensor trace that the QEMU
 firmware (src/bin/qemu.rs) and tests/qemu_trace.rs feed to the control tick.
 
 One row per control tick (1 kHz). Raw counts, as the board delivers them: 12-bit ADC counts of
@@ -56,7 +56,7 @@ for k in range(N):
         a2 = "4095"
     rows.append(f"{k},{int(round(sp * 1000))},{a1},{a2},{e}")
 
-out = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "traces", "qemu_sensor_trace.csv")
+out = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests", "traces", "qemu_sensor_trace.csv")
 tmp = out + ".tmp"
 with open(tmp, "w") as f:
     f.write("# Raw sensor trace for the QEMU run and tests/qemu_trace.rs (scripts/gen-qemu-trace.py).\n")

@@ -796,7 +796,7 @@ mod tests {
     /// The same bound for any accepted model with coefficients up to 2x the reference's
     /// (`accepted_torque_models_never_overflow`): the coefficient quantisation error grows
     /// with the coefficients' size (a model with coefficients at 1.4-1.9x exceeded 1e-5 N m:
-    /// `proptest-regressions/fixed_point.txt`), the output rounding does not.
+    /// `src/fixed_point.proptest-regressions`), the output rounding does not.
     const ACCEPTED_TORQUE_BOUND_NM: f64 = 2e-5;
     /// ... and of its inverse against the exact (f64) inverse: half a pascal of the output
     /// rounding plus the reciprocal's rounding, asserted <= 0.55 Pa.
@@ -1114,7 +1114,14 @@ mod tests {
     }
 
     proptest! {
-        #![proptest_config(ProptestConfig::with_cases(4096))]
+        // The failure cases found so far are re-run first; they live next to this file
+        // (`src/fixed_point.proptest-regressions`), not in a top-level folder.
+        #![proptest_config(ProptestConfig {
+            failure_persistence: Some(std::boxed::Box::new(
+                proptest::test_runner::FileFailurePersistence::WithSource("proptest-regressions"),
+            )),
+            ..ProptestConfig::with_cases(4096)
+        })]
 
         /// Any f32 bit pattern: never panics, force >= 0, flags as the f32 law would set them
         /// for the quantised inputs, INVALID_INPUT exactly for non-finite inputs.

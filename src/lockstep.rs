@@ -23,7 +23,9 @@ use crate::stream::{
     SensorInput, FLAG_NAN_SHIFT, FLAG_STALE_SHIFT, MISSING_COUNTS, MISSING_ENCODER, RESET_POWER_ON,
     RESET_WATCHDOG,
 };
-use crate::tick::{ControlTick, ControllerConfig, SensorFrame, Setpoint, TickOutput};
+use crate::tick::config::ControllerConfig;
+use crate::tick::io::{SensorFrame, Setpoint, TickOutput};
+use crate::tick::ControlTick;
 use crate::valves::{OnOffPwmConfig, OnOffValves};
 
 /// Raw counts to the tick's sensor frame, with a sequence gate per channel (p1, p2, angle).

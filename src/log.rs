@@ -8,7 +8,8 @@
 
 use heapless::HistoryBuffer;
 
-use crate::tick::{SensorFrame, Setpoint, TickOutput, ValveCommand};
+use crate::tick::io::{SensorFrame, Setpoint, TickOutput};
+use crate::valves::ValveCommand;
 
 /// One control tick as logged. Missing samples are stored as NaN (so a log dump shows
 /// them); every other field is copied from the tick's output.
@@ -133,7 +134,7 @@ impl<const N: usize> TickLog<N> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::tick::FaultCode;
+    use crate::safety::FaultCode;
 
     fn out(fault: Option<FaultCode>) -> TickOutput {
         TickOutput {

@@ -19,7 +19,7 @@
 //! - Pressure set-points pass through [`clamp_pressure_setpoint_pa`]: never above
 //!   [`crate::P_MUSCLE_MAX_GAUGE_PA`] (600 kPa gauge), never below 0, never NaN.
 
-use crate::tick::ValveCommand;
+use crate::valves::ValveCommand;
 use crate::P_MUSCLE_MAX_GAUGE_PA;
 
 /// Latched fault codes. The numbers are stable (they appear in logs and recordings).

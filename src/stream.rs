@@ -196,8 +196,8 @@ impl TickRecord {
         setpoint_rad: f32,
         p_counts: [u16; 2],
         encoder_counts: i32,
-        frame: &crate::tick::SensorFrame,
-        out: &crate::tick::TickOutput,
+        frame: &crate::tick::io::SensorFrame,
+        out: &crate::tick::io::TickOutput,
         openings: [f32; 4],
     ) -> Self {
         let nan_if_none = |v: Option<f32>| v.unwrap_or(f32::NAN);
@@ -330,7 +330,7 @@ pub fn frame_of(
     input: &SensorInput,
     scaling: &crate::sensors::PressureScaling,
     counts_per_rev: u32,
-) -> crate::tick::SensorFrame {
+) -> crate::tick::io::SensorFrame {
     let p = |i: usize| {
         if input.flags & (1 << i) != 0 {
             Some(f32::NAN)
@@ -350,7 +350,7 @@ pub fn frame_of(
             counts_per_rev,
         ))
     };
-    crate::tick::SensorFrame {
+    crate::tick::io::SensorFrame {
         p1_gauge_pa: p(0),
         p2_gauge_pa: p(1),
         angle_rad: angle,

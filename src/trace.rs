@@ -1,4 +1,4 @@
-//! Replays the embedded raw sensor trace (`traces/qemu_sensor_trace.csv`, compiled in by
+//! Replays the embedded raw sensor trace (`tests/traces/qemu_sensor_trace.csv`, compiled in by
 //! `build.rs`) through sensor scaling and the control tick, one row per tick.
 //!
 //! The QEMU firmware (`src/bin/qemu.rs`) and the host test (`tests/qemu_trace.rs`) both run
@@ -6,7 +6,7 @@
 //! [`TickRecord::words`]) must be bit-for-bit identical between the Cortex-M4F build and the
 //! host build.
 
-// The control tick driven by the trace: the real one of `docs/tick-contract.md` (src/tick.rs).
+// The control tick driven by the trace: the real one of `docs/tick-contract.md` (src/tick/).
 use crate::tick;
 
 pub use tick::{ControlTick, ControllerConfig, SensorFrame, Setpoint, TickOutput};
@@ -34,7 +34,7 @@ pub const MISSING_ENCODER: i16 = i16::MIN;
 
 include!(concat!(env!("OUT_DIR"), "/sensor_trace.rs"));
 
-// `ARM3_SENSOR_TRACE`: the 3-DOF arm's raw sensor trace (traces/arm3_sensor_trace.csv, made
+// `ARM3_SENSOR_TRACE`: the 3-DOF arm's raw sensor trace (tests/traces/arm3_sensor_trace.csv, made
 // by host-sim/examples/gen_arm3_trace.rs), one row of three joints per tick, for the arm
 // tick's MCU benchmark. A `const`: it takes flash only in an image that uses it.
 include!(concat!(env!("OUT_DIR"), "/arm3_sensor_trace.rs"));
@@ -151,7 +151,7 @@ fn open_loop_replay(cfg: &mut ControllerConfig) {
     cfg.valve_model.integral_min_pa = f32::MAX;
     // Nor does its angle follow a ramped set-point: the start phase (a transient of at most
     // ~1 s after arming, measured on its own by `bench-mcu.sh`) is skipped.
-    cfg.start = crate::tick::StartRamp::INSTANT;
+    cfg.start = crate::tick::config::StartRamp::INSTANT;
 }
 
 /// Steps a control tick through [`SENSOR_TRACE`].

@@ -1,10 +1,10 @@
 //! The board's compiled-in set-point: every shipped scenario's `[setpoint]` through the
-//! build script's parser (`build/board_profile.rs`) into `pam_firmware::profile`, compared
+//! build script's parser (`src/build/board_profile.rs`) into `pam_firmware::profile`, compared
 //! with the closed forms of host-sim's scenario documentation evaluated here in f64; the
 //! parser's refusals name the file and the key.
 
 #[allow(dead_code)]
-#[path = "../build/board_profile.rs"]
+#[path = "../src/build/board_profile.rs"]
 mod spec;
 
 use pam_firmware::profile::SetpointProfile;

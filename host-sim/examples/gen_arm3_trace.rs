@@ -1,4 +1,4 @@
-//! Writes `traces/arm3_sensor_trace.csv`: the raw sensor trace of the 3-DOF arm that the QEMU
+//! Writes `tests/traces/arm3_sensor_trace.csv`: the raw sensor trace of the 3-DOF arm that the QEMU
 //! benchmark image feeds to the firmware's arm tick (`scripts/bench-mcu.sh`, row "arm tick").
 //!
 //! The trace is a closed-loop run of `scenarios/arm3/step.toml` (the firmware's `ArmTick` on
@@ -68,7 +68,7 @@ fn main() -> anyhow::Result<()> {
         }
         csv.push('\n');
     }
-    let out = root.join("traces/arm3_sensor_trace.csv");
+    let out = root.join("tests/traces/arm3_sensor_trace.csv");
     host_sim::io::atomic::write_bytes(&out, csv.as_bytes())?;
     println!("{}: {TICKS} ticks", out.display());
     Ok(())

@@ -137,6 +137,69 @@ unsafe fn force_safe_valve_pins() {
         .modify(|r, w| unsafe { w.bits(wiring::valve_moder_output(r.bits())) });
 }
 
+/// Init step: ADC1 scanning IN11 (PC1) and IN12 (PC2) on each TIM3 TRGO, results by DMA2;
+/// declares the transfer `$adc` and the spare buffer `$spare`. A macro expanded in place in
+/// `init`: as a function the compiler lays `init` out differently (+4 B of flash, measured).
+macro_rules! start_adc {
+    ($dp:ident, $rcc:ident, $gpioc:ident, $adc:ident, $spare:ident) => {
+        // ADC1: scan IN11 (PC1), IN12 (PC2) on each TIM3 TRGO, results by DMA.
+        let adc_config = AdcConfig::default()
+            .dma(Dma::Continuous)
+            .scan(Scan::Enabled)
+            .external_trigger(TriggerMode::RisingEdge, ExternalTrigger::Tim_3_trgo);
+        let mut $adc = Adc::new($dp.ADC1, true, adc_config, &mut $rcc);
+        let p1_pin = $gpioc.pc1.into_analog();
+        let p2_pin = $gpioc.pc2.into_analog();
+        $adc.configure_channel(&p1_pin, Sequence::One, SampleTime::Cycles_84);
+        $adc.configure_channel(&p2_pin, Sequence::Two, SampleTime::Cycles_84);
+        let dma = StreamsTuple::new($dp.DMA2, &mut $rcc);
+        // Both buffers carry the fill marker: an entry the DMA did not write reads as missing.
+        let first = cortex_m::singleton!(: [u16; 2] = [wiring::ADC_NOT_WRITTEN; 2]);
+        let $spare = cortex_m::singleton!(: [u16; 2] = [wiring::ADC_NOT_WRITTEN; 2]);
+        let (Some(first), Some($spare)) = (first, $spare) else {
+            // init runs once: not reachable.
+            cortex_m::asm::udf()
+        };
+        let dma_config = DmaConfig::default()
+            .transfer_complete_interrupt(true)
+            .memory_increment(true)
+            .double_buffer(false);
+        let mut $adc = Transfer::init_peripheral_to_memory(dma.0, $adc, first, None, dma_config);
+    };
+}
+
+/// Init step: the start phase from the boot decision (an expression): the pressure zero
+/// calibration after a clean power-on, else the control tick in the stored latched state (the
+/// safe state until the reset button). A macro expanded in place in `init`: as a function the
+/// compiler lays `init` out differently (-12 B of flash, measured).
+macro_rules! boot_phase {
+    ($boot:ident, $kept:ident, $reset:ident, $tick:ident) => {
+        match $boot {
+            BootDecision::Arm => {
+                defmt::info!("power-on with a clean latch: pressure zero calibration");
+                Phase::Calibrating {
+                    ticks: 0,
+                    sum_counts: [0; 2],
+                    n: [0; 2],
+                }
+            }
+            BootDecision::Safe(record) => {
+                match $kept {
+                    Some(c) => defmt::info!("encoder count {=i32} kept across the reset", c),
+                    None => defmt::warn!("encoder zero is the pose at this reset"),
+                }
+                defmt::error!(
+                    "boot after {} with latch {}: safe state until the reset button",
+                    $reset,
+                    record
+                );
+                $tick.restore_latch(&record);
+                Phase::Running
+            }
+        }
+    };
+}
+
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true)]
 mod app {
     use core::cell::Cell;
@@ -149,12 +212,14 @@ mod app {
             Adc,
         },
         dma::{config::DmaConfig, PeripheralToMemory, Stream0, StreamsTuple, Transfer},
-        gpio::{Input, Output, PinState, PushPull, PA0, PD11},
+        gpio::{
+            self, Input, Output, PinState, PushPull, PA0, PA15, PB3, PD11, PD12, PD13, PD14, PD15,
+        },
         hal_02::Qei as _,
         pac::{self, Interrupt, ADC1, DMA2, TIM2, TIM3, TIM4, TIM5},
         prelude::*,
         qei::Qei,
-        rcc::Config,
+        rcc::{Config, Rcc},
         timer::{CounterHz, CounterUs, ErasedChannel, Event},
         watchdog::IndependentWatchdog,
     };
@@ -177,6 +242,13 @@ mod app {
     type AdcDma = Transfer<Stream0<DMA2>, 0, Adc<ADC1>, PeripheralToMemory, &'static mut [u16; 2]>;
     type Valve = ErasedChannel<TIM4>;
     type Valves = ProportionalValves<Valve, Valve, Valve, Valve>;
+    /// The valve pins PD12..PD15 at their safe levels, before they switch to the timer.
+    type ValvePins = (
+        PD12<Output<PushPull>>,
+        PD13<Output<PushPull>>,
+        PD14<Output<PushPull>>,
+        PD15<Output<PushPull>>,
+    );
 
     /// [`Clock`] over the DWT cycle counter, extended to 64 bits (read at least every 25 s:
     /// every tick reads it).
@@ -255,17 +327,7 @@ mod app {
 
         // 1. Valve pins to the safe state before anything else (still on the 16 MHz HSI).
         let mut rcc = dp.RCC.constrain();
-        let gpiod = dp.GPIOD.split(&mut rcc);
-        let lv = wiring::safe_valve_levels(SAFE_STATE);
-        let st = |b: bool| if b { PinState::High } else { PinState::Low };
-        // The valve-driver supply first: off unless the safe state holds a valve open.
-        let valve_enable = gpiod
-            .pd11
-            .into_push_pull_output_in_state(st(wiring::safe_valve_enable(SAFE_STATE)));
-        let pd12 = gpiod.pd12.into_push_pull_output_in_state(st(lv[0]));
-        let pd13 = gpiod.pd13.into_push_pull_output_in_state(st(lv[1]));
-        let pd14 = gpiod.pd14.into_push_pull_output_in_state(st(lv[2]));
-        let pd15 = gpiod.pd15.into_push_pull_output_in_state(st(lv[3]));
+        let (valve_enable, valve_pins) = safe_valve_pins(dp.GPIOD.split(&mut rcc));
 
         // 2. Reset cause and latch record (RCC_CSR and the backup SRAM; the HAL does not touch
         //    the reset flags).
@@ -287,69 +349,20 @@ mod app {
         cfg.safe_state = SAFE_STATE;
         let mut tick = ControlTick::new(cfg);
 
-        // Valves: TIM4 CH1..CH4 on PD12..PD15 (inflate 1, exhaust 1, inflate 2, exhaust 2),
-        // duties at the safe state before the pins switch to the timer.
-        let (_, (c1, c2, c3, c4)) = dp.TIM4.pwm_hz(VALVE_PWM_HZ.Hz(), &mut rcc);
-        let mut chans = [
-            c1.with(pd12).erase(),
-            c2.with(pd13).erase(),
-            c3.with(pd14).erase(),
-            c4.with(pd15).erase(),
-        ];
-        for c in chans.iter_mut() {
-            c.enable();
-        }
-        let [c1, c2, c3, c4] = chans;
-        let mut valves: Valves = ProportionalValves::new(c1, c2, c3, c4);
-        let _ = valves.apply(&SAFE_STATE.command());
-
+        let valves = start_valves(dp.TIM4, valve_pins, &mut rcc);
         let gpioa = dp.GPIOA.split(&mut rcc);
         let gpiob = dp.GPIOB.split(&mut rcc);
         let gpioc = dp.GPIOC.split(&mut rcc);
         // PA15 / PB3 boot as JTAG (AF0); SWD does not need them. Internal pull-ups for
-        // open-collector encoder outputs. The counter starts at 0: the encoder zero is the
-        // pose at reset.
-        let qei = Qei::new(
-            dp.TIM2,
-            (
-                gpioa.pa15.into_pull_up_input(),
-                gpiob.pb3.into_pull_up_input(),
-            ),
-            &mut rcc,
+        // open-collector encoder outputs.
+        let encoder_pins = (
+            gpioa.pa15.into_pull_up_input(),
+            gpiob.pb3.into_pull_up_input(),
         );
-        // After a reset that is not a power-on, the angle carries on from the count kept in
-        // the backup SRAM (the joint does not move in the milliseconds of a reset).
-        let kept = latch::encoder_at_boot(encoder_keep.read(), reset);
-        if let Some(c) = kept {
-            // SAFETY: TIM2's counter register, owned by `qei`, written once before it is read.
-            unsafe { (*pac::TIM2::ptr()).cnt().write(|w| w.bits(c as u32)) };
-        }
+        let (qei, kept) = start_encoder(dp.TIM2, encoder_pins, &mut rcc, &encoder_keep, reset);
         // User button B1 (PA0, high when pressed; pull-down on the board and here).
         let button_pin = gpioa.pa0.into_pull_down_input();
-
-        // ADC1: scan IN11 (PC1), IN12 (PC2) on each TIM3 TRGO, results by DMA.
-        let adc_config = AdcConfig::default()
-            .dma(Dma::Continuous)
-            .scan(Scan::Enabled)
-            .external_trigger(TriggerMode::RisingEdge, ExternalTrigger::Tim_3_trgo);
-        let mut adc = Adc::new(dp.ADC1, true, adc_config, &mut rcc);
-        let p1_pin = gpioc.pc1.into_analog();
-        let p2_pin = gpioc.pc2.into_analog();
-        adc.configure_channel(&p1_pin, Sequence::One, SampleTime::Cycles_84);
-        adc.configure_channel(&p2_pin, Sequence::Two, SampleTime::Cycles_84);
-        let dma = StreamsTuple::new(dp.DMA2, &mut rcc);
-        // Both buffers carry the fill marker: an entry the DMA did not write reads as missing.
-        let first = cortex_m::singleton!(: [u16; 2] = [wiring::ADC_NOT_WRITTEN; 2]);
-        let spare = cortex_m::singleton!(: [u16; 2] = [wiring::ADC_NOT_WRITTEN; 2]);
-        let (Some(first), Some(spare)) = (first, spare) else {
-            // init runs once: not reachable.
-            cortex_m::asm::udf()
-        };
-        let dma_config = DmaConfig::default()
-            .transfer_complete_interrupt(true)
-            .memory_increment(true)
-            .double_buffer(false);
-        let mut adc = Transfer::init_peripheral_to_memory(dma.0, adc, first, None, dma_config);
+        start_adc!(dp, rcc, gpioc, adc, spare);
 
         core.DCB.enable_trace();
         core.DWT.enable_cycle_counter();
@@ -358,30 +371,7 @@ mod app {
             high: Cell::new(0),
         };
         let mut period = TickTimer::new();
-
-        let phase = match boot {
-            BootDecision::Arm => {
-                defmt::info!("power-on with a clean latch: pressure zero calibration");
-                Phase::Calibrating {
-                    ticks: 0,
-                    sum_counts: [0; 2],
-                    n: [0; 2],
-                }
-            }
-            BootDecision::Safe(record) => {
-                match kept {
-                    Some(c) => defmt::info!("encoder count {=i32} kept across the reset", c),
-                    None => defmt::warn!("encoder zero is the pose at this reset"),
-                }
-                defmt::error!(
-                    "boot after {} with latch {}: safe state until the reset button",
-                    reset,
-                    record
-                );
-                tick.restore_latch(&record);
-                Phase::Running
-            }
-        };
+        let phase = boot_phase!(boot, kept, reset, tick);
 
         // Tick monitor: TIM5 at 1 MHz, started by each tick, stopped when it ends.
         let mut monitor = dp.TIM5.counter_us(&mut rcc);
@@ -389,22 +379,7 @@ mod app {
 
         period.dt_s(&clock); // start the period measurement now
         adc.start(|_| {});
-        let mut sampler = dp.TIM3.counter_hz(&mut rcc);
-        // TRGO on update: each period starts one ADC scan.
-        // SAFETY: CR2.MMS of TIM3, which `sampler` owns and does not use otherwise.
-        unsafe { (*pac::TIM3::ptr()).cr2().modify(|_, w| w.mms().update()) };
-        if sampler.start(TICK_HZ.Hz()).is_err() {
-            // No ticks: the watchdog is not fed and resets into a latched safe boot.
-            defmt::error!("TIM3 did not start");
-        }
-        defmt::info!(
-            "pam-firmware board (RTIC 2): tick {=u32} Hz from TIM3 -> ADC1 -> DMA2, \
-             deadline {=u32} us, watchdog {=u32} ms, scenario {=str}",
-            TICK_HZ,
-            DEADLINE_US,
-            WATCHDOG_MS,
-            BOARD_SCENARIO
-        );
+        let sampler = start_sampler(dp.TIM3, &mut rcc);
 
         (
             Shared {},
@@ -431,6 +406,88 @@ mod app {
                 ticks: 0,
             },
         )
+    }
+
+    /// The valve pins PD12..PD15 (inflate 1, exhaust 1, inflate 2, exhaust 2) and the
+    /// valve-driver enable PD11 as outputs at the safe state's levels: the driver's supply
+    /// first, off unless the safe state holds a valve open.
+    #[inline(always)]
+    fn safe_valve_pins(gpiod: gpio::gpiod::Parts) -> (PD11<Output<PushPull>>, ValvePins) {
+        let lv = wiring::safe_valve_levels(SAFE_STATE);
+        let st = |b: bool| if b { PinState::High } else { PinState::Low };
+        let valve_enable = gpiod
+            .pd11
+            .into_push_pull_output_in_state(st(wiring::safe_valve_enable(SAFE_STATE)));
+        let pd12 = gpiod.pd12.into_push_pull_output_in_state(st(lv[0]));
+        let pd13 = gpiod.pd13.into_push_pull_output_in_state(st(lv[1]));
+        let pd14 = gpiod.pd14.into_push_pull_output_in_state(st(lv[2]));
+        let pd15 = gpiod.pd15.into_push_pull_output_in_state(st(lv[3]));
+        (valve_enable, (pd12, pd13, pd14, pd15))
+    }
+
+    /// The valves on TIM4 CH1..CH4 (PD12..PD15), duties at the safe state before the pins
+    /// switch to the timer.
+    #[inline(always)]
+    fn start_valves(tim4: TIM4, pins: ValvePins, rcc: &mut Rcc) -> Valves {
+        let (pd12, pd13, pd14, pd15) = pins;
+        let (_, (c1, c2, c3, c4)) = tim4.pwm_hz(VALVE_PWM_HZ.Hz(), rcc);
+        let mut chans = [
+            c1.with(pd12).erase(),
+            c2.with(pd13).erase(),
+            c3.with(pd14).erase(),
+            c4.with(pd15).erase(),
+        ];
+        for c in chans.iter_mut() {
+            c.enable();
+        }
+        let [c1, c2, c3, c4] = chans;
+        let mut valves: Valves = ProportionalValves::new(c1, c2, c3, c4);
+        let _ = valves.apply(&SAFE_STATE.command());
+        valves
+    }
+
+    /// The encoder on TIM2 (PA15 / PB3). The counter starts at 0 (the encoder zero is the
+    /// pose at reset), or, after a reset that is not a power-on, carries on from the count
+    /// kept in the backup SRAM (the joint does not move in the milliseconds of a reset);
+    /// returns that count too.
+    #[inline(always)]
+    fn start_encoder(
+        tim2: TIM2,
+        pins: (PA15<Input>, PB3<Input>),
+        rcc: &mut Rcc,
+        encoder_keep: &EncoderKeep,
+        reset: latch::ResetCause,
+    ) -> (Qei<TIM2>, Option<i32>) {
+        let qei = Qei::new(tim2, pins, rcc);
+        let kept = latch::encoder_at_boot(encoder_keep.read(), reset);
+        if let Some(c) = kept {
+            // SAFETY: TIM2's counter register, owned by `qei`, written once before it is read.
+            unsafe { (*pac::TIM2::ptr()).cnt().write(|w| w.bits(c as u32)) };
+        }
+        (qei, kept)
+    }
+
+    /// TIM3 at the tick rate, its update as TRGO: each period starts one ADC scan (and so one
+    /// tick). Logs the board's configuration.
+    #[inline(always)]
+    fn start_sampler(tim3: TIM3, rcc: &mut Rcc) -> CounterHz<TIM3> {
+        let mut sampler = tim3.counter_hz(rcc);
+        // TRGO on update: each period starts one ADC scan.
+        // SAFETY: CR2.MMS of TIM3, which `sampler` owns and does not use otherwise.
+        unsafe { (*pac::TIM3::ptr()).cr2().modify(|_, w| w.mms().update()) };
+        if sampler.start(TICK_HZ.Hz()).is_err() {
+            // No ticks: the watchdog is not fed and resets into a latched safe boot.
+            defmt::error!("TIM3 did not start");
+        }
+        defmt::info!(
+            "pam-firmware board (RTIC 2): tick {=u32} Hz from TIM3 -> ADC1 -> DMA2, \
+             deadline {=u32} us, watchdog {=u32} ms, scenario {=str}",
+            TICK_HZ,
+            DEADLINE_US,
+            WATCHDOG_MS,
+            BOARD_SCENARIO
+        );
+        sampler
     }
 
     #[idle]

@@ -1,6 +1,6 @@
 //! The firmware under QEMU (`cargo qemu`): `netduinoplus2` (STM32F405, Cortex-M4F).
 //!
-//! 1. Replays the embedded raw sensor trace (`traces/qemu_sensor_trace.csv`) through sensor
+//! 1. Replays the embedded raw sensor trace (`tests/traces/qemu_sensor_trace.csv`) through sensor
 //!    scaling and the control tick, logging every tick's outputs as f32 bit patterns plus a
 //!    running FNV-1a hash (`tests/qemu_trace.rs` requires them bit-for-bit equal to a host run).
 //! 2. Reports the stack high-water mark (the free RAM is painted at start-up).

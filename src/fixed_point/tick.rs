@@ -25,7 +25,7 @@
 
 use super::prescale::{round_i64, sat_i32, term_bits};
 use super::{clamp_i32, term, FixedForceLaw, FixedTorqueModel, PressurePa, Stretch, TorqueNm};
-use crate::tick::ControllerConfig;
+use crate::tick::config::ControllerConfig;
 
 /// One coefficient of `term(c, s, x)`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
