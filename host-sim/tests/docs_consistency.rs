@@ -382,3 +382,49 @@ fn the_effect_list_is_the_registry() {
         "{EFFECTS_DOC}: the diagnosis candidates (second column) are not the registry's"
     );
 }
+
+/// The registry entries a paragraph names, as `name` or as `[effects.name]` /
+/// `[effects.name.<channel>]`.
+fn effects_named_in(paragraph: &str, entries: &[String]) -> Vec<String> {
+    entries
+        .iter()
+        .filter(|n| {
+            paragraph.contains(&format!("`{n}`"))
+                || paragraph.contains(&format!("effects.{n}]"))
+                || paragraph.contains(&format!("effects.{n}."))
+        })
+        .cloned()
+        .collect()
+}
+
+#[test]
+fn no_other_doc_keeps_a_copy_of_the_effect_list() {
+    // A paragraph that names five or more registry entries outside docs/effects.md is a second
+    // copy of the list (it drifts: the copies of the README, simulator.md and diagnosis.md
+    // lacked the thermal chamber or the inertia); link to docs/effects.md instead.
+    let entries = registry_entries();
+    let old_copy = "`[effects.joint_friction]`, `[effects.gravity]`, `[effects.leakage]`,\n\
+                    `[effects.polytropic]`, `[effects.sensor.<channel>]`, `[effects.sensor_lag]`";
+    assert_eq!(
+        effects_named_in(old_copy, &entries).len(),
+        6,
+        "the check finds a copy"
+    );
+    let mut copies = Vec::new();
+    for doc in docs().into_iter().filter(|d| d != EFFECTS_DOC) {
+        let text = read(&doc);
+        let mut line = 1;
+        for paragraph in text.split("\n\n") {
+            let named = effects_named_in(paragraph, &entries);
+            if named.len() >= 5 {
+                copies.push(format!("{doc}:{line}: names {}", named.join(", ")));
+            }
+            line += paragraph.matches('\n').count() + 2;
+        }
+    }
+    assert!(
+        copies.is_empty(),
+        "copies of the effect list of {EFFECTS_DOC}:\n{}",
+        copies.join("\n")
+    );
+}
