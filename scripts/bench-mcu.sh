@@ -16,6 +16,8 @@
 #   word after the trace and the benchmarks ran (stack painting, measured at run time).
 # - --breakdown: also runs QEMU with -singlestep -d exec (one log line per instruction, a few
 #   hundred MB under /tmp) and prints where a tick's instructions go (scripts/tick-profile.py).
+# --write-docs: also writes the rows to docs/figures/mcu.tsv, their table into
+# docs/performance.md and every quote of a row in the docs (scripts/figures.py).
 # Exit status 1 if a target is missed (<= 1000 instructions per f32 tick, <= 600 per fixed-point
 # force law on the Cortex-M0, worst fixed-point tick on the M0 <= 24000 = half the 48000
 # instructions of a 1 kHz tick on a 48 MHz M0, <= 28 KiB flash = 4 KiB headroom in 32 KiB,
@@ -33,6 +35,10 @@ for arg in "$@"; do
     *) echo "bench-mcu.sh: unknown argument '$arg' (allowed: --breakdown, --write-docs)" >&2; exit 2 ;;
   esac
 done
+if [ "$write_docs" = 1 ] && [ -n "${BENCH_EXTRA_FEATURES:-}" ]; then
+  echo "bench-mcu.sh: --write-docs records the default images; run it without BENCH_EXTRA_FEATURES" >&2
+  exit 2
+fi
 
 sysroot=$(rustc --print sysroot)
 host=$(rustc -vV | sed -n 's/^host: //p')
