@@ -16,6 +16,8 @@
 #   word after the trace and the benchmarks ran (stack painting, measured at run time).
 # - --breakdown: also runs QEMU with -singlestep -d exec (one log line per instruction, a few
 #   hundred MB under /tmp) and prints where a tick's instructions go (scripts/tick-profile.py).
+# --write-docs: also writes the rows to docs/figures/mcu.tsv, their table into
+# docs/performance.md and every quote of a row in the docs (scripts/figures.py).
 # Exit status 1 if a target is missed (<= 1000 instructions per f32 tick, <= 600 per fixed-point
 # force law on the Cortex-M0, worst fixed-point tick on the M0 <= 24000 = half the 48000
 # instructions of a 1 kHz tick on a 48 MHz M0, <= 28 KiB flash = 4 KiB headroom in 32 KiB,
@@ -25,7 +27,18 @@ set -euo pipefail
 # (e.g. the pressure loop's feed-forward, with config/pressure_ff.toml enabled = true).
 cd "$(dirname "$0")/.."
 breakdown=0
-[ "${1:-}" = "--breakdown" ] && breakdown=1
+write_docs=0
+for arg in "$@"; do
+  case "$arg" in
+    --breakdown) breakdown=1 ;;
+    --write-docs) write_docs=1 ;;
+    *) echo "bench-mcu.sh: unknown argument '$arg' (allowed: --breakdown, --write-docs)" >&2; exit 2 ;;
+  esac
+done
+if [ "$write_docs" = 1 ] && [ -n "${BENCH_EXTRA_FEATURES:-}" ]; then
+  echo "bench-mcu.sh: --write-docs records the default images; run it without BENCH_EXTRA_FEATURES" >&2
+  exit 2
+fi
 
 sysroot=$(rustc --print sysroot)
 host=$(rustc -vV | sed -n 's/^host: //p')
@@ -127,39 +140,41 @@ fail=0
 check() { # check <value> <limit>
   if [ "$1" -le "$2" ]; then echo "ok"; else echo "OVER"; fail=1; fi
 }
-cat <<REPORT
-## MCU cost (scripts/bench-mcu.sh, $(qemu-system-arm --version | head -1 | sed 's/ *(.*//'), netduinoplus2, -icount shift=0)
-
-calibration: $cal_insns instructions = $((cal_counts - empty)) SysTick counts (k = $k instructions/count)
-
-| figure | measured | target | |
-|---|---|---|---|
-| full f32 control tick, mean over $tick_n armed ticks | $tick_mean instructions | <= 1000 | $(check "$tick_mean" 1000) |
-| full f32 control tick, worst tick of the trace | $tick_worst instructions | | |
-| the same trace with the reference start phase (ramped set-point and pressure ceiling for up to ~1 s after arming), mean / worst over $st_n armed ticks | $st_mean / $st_worst instructions | | |
-| 3-DOF arm tick (three joint ticks, rigid-body gravity and inertia feed-forward, three valve drivers; tests/traces/arm3_sensor_trace.csv), mean / worst over $arm_n of $arm_ticks ticks with all joints armed | $arm_mean / $arm_worst instructions | | |
-| image with the feature volume-fnn, pressure feed-forward off (as the default), mean / worst | $fnn_tick0_mean / $fnn_tick0_worst instructions | | |
-| the same image, pressure feed-forward on, analytical (volume polynomial, seed 004 eq. 7), mean / worst over $ff_tick_n armed ticks | $ff_tick_mean / $ff_tick_worst instructions | | |
-| the same image, pressure feed-forward on, analytical, within the budget: outer loops (position, torque) and feed-forward on every second tick (config/controller.toml [rates] outer_period_ticks = 2, config/pressure_ff.toml update_period_ticks = 2), mean / worst over $ffs_tick_n armed ticks | $ffs_tick_mean / $ffs_tick_worst instructions | <= 1000 mean | $(check "$ffs_tick_mean" 1000) |
-| the same image, feed-forward off, outer loops on every second tick, mean / worst | $sp_tick_mean / $sp_tick_worst instructions | | |
-| the same image, pressure feed-forward on, hybrid (learned volume, 2 x 8 units, seed 004 eq. 12), mean / worst over $hm_tick_n armed ticks | $hm_tick_mean / $hm_tick_worst instructions | reported separately | |
-| hybrid volume network alone (one muscle: V and its eq. 9 rate), mean / worst over $fnn_n calls | $fnn_mean / $fnn_worst instructions | | |
-| force law alone (f32, one muscle), mean over $fl_n calls | $fl_mean instructions | | |
-| force law alone (f32), worst call | $fl_worst instructions | | |
-| force law fixed point (32-bit integers, same inputs quantised), mean over $fx_n calls ($fx_off off the f32 law by > 0.1 N) | $fx_mean instructions | | |
-| force law fixed point, worst call | $fx_worst instructions | | |
-| Cortex-M0 (QEMU microbit, no FPU): force law fixed point, mean / worst over $m0_n calls | $m0_fx_mean / $m0_fx_worst instructions | <= 600 mean | $(check "$m0_fx_mean" 600) |
-| Cortex-M0: force law f32 in soft-float, mean / worst | $m0_fl_mean / $m0_fl_worst instructions | | |
-| Cortex-M0: torque model fixed point, forward, mean / worst over $m0_ft_n calls | $m0_tf_mean / $m0_tf_worst instructions | | |
-| Cortex-M0: torque model fixed point, inverse, mean / worst | $m0_ti_mean / $m0_ti_worst instructions | | |
-| Cortex-M0: full fixed-point control tick (raw counts -> valve commands), mean / worst over $m0_ft_n armed ticks | $m0_ft_mean / $m0_ft_worst instructions | worst <= 24000 (half of 48000 = 1 kHz on a 48 MHz M0 at 1 cycle each) | $(check "$m0_ft_worst" 24000) |
-| Cortex-M0: full control tick (f32 in soft-float), mean / worst over $m0_tk_n armed ticks | $m0_tk_mean / $m0_tk_worst instructions | < 48000 (1 kHz at 48 MHz if 1 cycle each; see docs/firmware.md) | $(check "$m0_tk_worst" 48000) |
-| QEMU image flash (shipped: no benchmarks) | $qemu_flash B | <= 28672 (32 KiB - 4 KiB headroom) | $(check "$qemu_flash" 28672) |
-| QEMU image static RAM | $qemu_ram B | <= 8192 | $(check "$qemu_ram" 8192) |
-| board image flash | $board_flash B | <= 28672 (32 KiB - 4 KiB headroom) | $(check "$board_flash" 28672) |
-| board image static RAM | $board_ram B | <= 8192 | $(check "$board_ram" 8192) |
-| worst-case stack (QEMU image, painted) | $stack B | | |
-REPORT
+qemu_version=$(qemu-system-arm --version | head -1 | sed 's/ *(.*//')
+tsv=$'key\tfigure\tmeasured\ttarget\tcheck'
+row() { # row <key> <figure> <measured> [<target> <check>]: one row of the table
+  tsv+=$'\n'"$1"$'\t'"$2"$'\t'"$3"$'\t'"${4:-}"$'\t'"${5:-}"
+}
+row setup "QEMU, machine, time base" "$qemu_version, netduinoplus2, -icount shift=0"
+row calibration "calibration (asm loop)" "$cal_insns instructions = $((cal_counts - empty)) SysTick counts (k = $k instructions/count)"
+row tick_mean "full f32 control tick, mean over $tick_n armed ticks" "$tick_mean instructions" "<= 1000" "$(check "$tick_mean" 1000)"
+row tick_worst "full f32 control tick, worst tick of the trace" "$tick_worst instructions"
+row start_tick "the same trace with the reference start phase (ramped set-point and pressure ceiling for up to ~1 s after arming), mean / worst over $st_n armed ticks" "$st_mean / $st_worst instructions"
+row arm_tick "3-DOF arm tick (three joint ticks, rigid-body gravity and inertia feed-forward, three valve drivers; tests/traces/arm3_sensor_trace.csv), mean / worst over $arm_n of $arm_ticks ticks with all joints armed" "$arm_mean / $arm_worst instructions"
+row fnn_tick_off "image with the feature volume-fnn, pressure feed-forward off (as the default), mean / worst" "$fnn_tick0_mean / $fnn_tick0_worst instructions"
+row ff_tick "the same image, pressure feed-forward on, analytical (volume polynomial, seed 004 eq. 7), mean / worst over $ff_tick_n armed ticks" "$ff_tick_mean / $ff_tick_worst instructions"
+row ff_split_tick "the same image, pressure feed-forward on, analytical, within the budget: outer loops (position, torque) and feed-forward on every second tick (config/controller.toml [rates] outer_period_ticks = 2, config/pressure_ff.toml update_period_ticks = 2), mean / worst over $ffs_tick_n armed ticks" "$ffs_tick_mean / $ffs_tick_worst instructions" "<= 1000 mean" "$(check "$ffs_tick_mean" 1000)"
+row split_tick "the same image, feed-forward off, outer loops on every second tick, mean / worst" "$sp_tick_mean / $sp_tick_worst instructions"
+row hybrid_tick "the same image, pressure feed-forward on, hybrid (learned volume, 2 x 8 units, seed 004 eq. 12), mean / worst over $hm_tick_n armed ticks" "$hm_tick_mean / $hm_tick_worst instructions" "reported separately" ""
+row fnn_alone "hybrid volume network alone (one muscle: V and its eq. 9 rate), mean / worst over $fnn_n calls" "$fnn_mean / $fnn_worst instructions"
+row force_law_f32_mean "force law alone (f32, one muscle), mean over $fl_n calls" "$fl_mean instructions"
+row force_law_f32_worst "force law alone (f32), worst call" "$fl_worst instructions"
+row force_law_fixed_mean "force law fixed point (32-bit integers, same inputs quantised), mean over $fx_n calls ($fx_off off the f32 law by > 0.1 N)" "$fx_mean instructions"
+row force_law_fixed_worst "force law fixed point, worst call" "$fx_worst instructions"
+row m0_force_law_fixed "Cortex-M0 (QEMU microbit, no FPU): force law fixed point, mean / worst over $m0_n calls" "$m0_fx_mean / $m0_fx_worst instructions" "<= 600 mean" "$(check "$m0_fx_mean" 600)"
+row m0_force_law_soft "Cortex-M0: force law f32 in soft-float, mean / worst" "$m0_fl_mean / $m0_fl_worst instructions"
+row m0_torque_forward "Cortex-M0: torque model fixed point, forward, mean / worst over $m0_ft_n calls" "$m0_tf_mean / $m0_tf_worst instructions"
+row m0_torque_inverse "Cortex-M0: torque model fixed point, inverse, mean / worst" "$m0_ti_mean / $m0_ti_worst instructions"
+row m0_tick_fixed "Cortex-M0: full fixed-point control tick (raw counts -> valve commands), mean / worst over $m0_ft_n armed ticks" "$m0_ft_mean / $m0_ft_worst instructions" "worst <= 24000 (half of 48000 = 1 kHz on a 48 MHz M0 at 1 cycle each)" "$(check "$m0_ft_worst" 24000)"
+row m0_tick_soft "Cortex-M0: full control tick (f32 in soft-float), mean / worst over $m0_tk_n armed ticks" "$m0_tk_mean / $m0_tk_worst instructions" "< 48000 (1 kHz at 48 MHz if 1 cycle each; see docs/firmware.md)" "$(check "$m0_tk_worst" 48000)"
+row qemu_flash "QEMU image flash (shipped: no benchmarks)" "$qemu_flash B" "<= 28672 (32 KiB - 4 KiB headroom)" "$(check "$qemu_flash" 28672)"
+row qemu_ram "QEMU image static RAM" "$qemu_ram B" "<= 8192" "$(check "$qemu_ram" 8192)"
+row board_flash "board image flash" "$board_flash B" "<= 28672 (32 KiB - 4 KiB headroom)" "$(check "$board_flash" 28672)"
+row board_ram "board image static RAM" "$board_ram B" "<= 8192" "$(check "$board_ram" 8192)"
+row stack "worst-case stack (QEMU image, painted)" "$stack B"
+printf '## MCU cost (scripts/bench-mcu.sh)\n\n'
+python3 scripts/figures.py render <<<"$tsv"
+if [ "$write_docs" = 1 ]; then python3 scripts/figures.py write mcu <<<"$tsv"; fi
 # check() runs inside the report's command substitutions (subshells): decide the exit status here.
 for pair in "$tick_mean 1000" "$ffs_tick_mean 1000" "$m0_fx_mean 600" "$m0_ft_worst 24000" "$qemu_flash 28672" "$qemu_ram 8192" \
   "$board_flash 28672" "$board_ram 8192"; do

@@ -9,15 +9,27 @@
 # copy of `main`'s target/release/host-sim) in the same script run, its runs alternating
 # with this build's, against the same peer run: a before/after under the same load.
 # Exit status 1 when host-sim (this build) is less than 500x faster.
+#
+# --write-docs: also writes the rows to docs/figures/scale.tsv and their table into
+# docs/performance.md (scripts/figures.py), the one place the figures are quoted from.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 plant=../shared/plant/reference-1dof.toml
 fixture=../shared/conformance/pulses_nominal.csv
-other=${1:-}
+write_docs=0
+other=
+for arg in "$@"; do
+  case "$arg" in
+    --write-docs) write_docs=1 ;;
+    -*) echo "bench-scale.sh: unknown option '$arg' (allowed: --write-docs, OTHER_HOST_SIM)" >&2; exit 2 ;;
+    *) other=$arg ;;
+  esac
+done
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
 cargo build -q --release -p host-sim --bin host-sim
-echo "load average: $(cut -d' ' -f1-3 /proc/loadavg)"
+load=$(cut -d' ' -f1-3 /proc/loadavg)
+echo "load average: $load"
 times=$(python3 - "$plant" "$fixture" "$out/sim.csv" target/release/host-sim $other <<'PY'
 import statistics, subprocess, sys, time
 plant, fixture, dest, *bins = sys.argv[1:]
@@ -39,19 +51,29 @@ subprocess.run([sys.executable, "scripts/rk45_peer.py", *sys.argv[1:4]], check=T
 print(time.perf_counter() - t0)
 PY
 )
-python3 - "$peer" "${other:-}" $times <<'PY'
+status=0
+tsv=$(python3 - "$peer" "$load" "${other:-}" $times <<'PY'
 import sys
-peer, other = float(sys.argv[1]), sys.argv[2]
-t = [float(a) for a in sys.argv[3:]]
+peer, load, other = float(sys.argv[1]), sys.argv[2], sys.argv[3]
+t = [float(a) for a in sys.argv[4:]]
 sim, mean, sd = t[0:3]
 ratio = peer / sim
-print(f"host-sim simulate, 20 s fixture end to end (best of 10): {sim * 1e3:.1f} ms "
-      f"(mean {mean * 1e3:.1f} ms, sd {sd * 1e3:.1f} ms: {peer / mean:.0f}x on the mean)")
+rows = [("key", "figure", "measured", "target", "check"),
+        ("load", "load average at the start (1, 5, 15 min)", load, "", ""),
+        ("simulate_ms", "host-sim simulate, 20 s fixture end to end, best of 10 (mean, sd)",
+         f"{sim * 1e3:.1f} ms ({mean * 1e3:.1f} ms, sd {sd * 1e3:.1f} ms)", "", "")]
 if other:
     o_sim, o_mean, o_sd = t[3:6]
-    print(f"{other} (alternating with it):  {o_sim * 1e3:.1f} ms (mean {o_mean * 1e3:.1f} ms, "
-          f"sd {o_sd * 1e3:.1f} ms): {peer / o_sim:.0f}x")
-print(f"SciPy RK45 peer, same file end to end:                 {peer:.2f} s")
-print(f"ratio: {ratio:.0f}x (target >= 500x): {'met' if ratio >= 500 else 'NOT met'}")
-sys.exit(0 if ratio >= 500 else 1)
+    rows.append(("other_ms", f"{other}, alternating with it, best of 10 (mean, sd)",
+                 f"{o_sim * 1e3:.1f} ms ({o_mean * 1e3:.1f} ms, sd {o_sd * 1e3:.1f} ms)", "", ""))
+rows += [("peer_s", "SciPy RK45 peer (rtol = atol = 1e-6), same file end to end", f"{peer:.2f} s", "", ""),
+         ("ratio", "peer time / host-sim best time", f"{ratio:.0f}x", ">= 500x",
+          "met" if ratio >= 500 else "NOT met")]
+print("\n".join("\t".join(r) for r in rows))
 PY
+)
+printf '## host-sim simulate vs the SciPy RK45 peer (scripts/bench-scale.sh)\n\n'
+python3 scripts/figures.py render <<<"$tsv"
+if [ "$write_docs" = 1 ]; then python3 scripts/figures.py write scale <<<"$tsv"; fi
+grep -q $'^ratio\t.*\tmet$' <<<"$tsv" || status=1
+exit $status
