@@ -14,6 +14,8 @@ cargo flash-build
 # Formatting (rustfmt's defaults), then lints (the allowed ones and why: the workspace's
 # Cargo.toml): the host workspace with its tests, and the firmware's bare-metal images.
 cargo fmt --all --check
+# No function over 150 lines outside tests and tables (each orchestrator a list of named steps).
+python3 scripts/check-fn-length.py
 cargo clippy -q --workspace --all-targets -- -D warnings
 cargo clippy -q -p pam-firmware --release --target thumbv7em-none-eabihf --features firmware --lib --bins -- -D warnings
 cargo clippy -q -p pam-firmware --release --target thumbv7em-none-eabihf --features board --lib --bins -- -D warnings

@@ -267,7 +267,10 @@ pub fn in_process_firmware(cfg: ControllerConfig) -> FirmwareNode<FakePin> {
     )
 }
 
-/// Runs `scenario` with the given firmware side (in process or under an emulator).
+/// Runs `scenario` with the given firmware side (in process or under an emulator). Per tick:
+/// the plant version due, the scenario's events at the tick, the fake sensors' input to the
+/// firmware, the firmware's tick, the valve commands (stuck valves override their pins)
+/// through the actuator path, the plant integrated over the tick.
 pub fn run_with_firmware(
     plant: &Plant,
     scenario: &Scenario,
@@ -277,9 +280,82 @@ pub fn run_with_firmware(
     let dt_s = 1.0 / scenario.scenario.tick_hz;
     let n_ticks = (scenario.scenario.duration_s / dt_s).round() as usize;
     let mut rng = rand::rngs::StdRng::seed_from_u64(scenario.scenario.seed);
+    let levels = random_levels(scenario, &mut rng);
+    let plants = plant_versions(plant, scenario, dt_s);
+    let mut fake = FakeSensors::new(scenario);
+    let mut integration = Integration::new(&plants, plant.initial_state());
+    // The plant's effects outside its right-hand side, kept across plant changes.
+    let mut actuator = ActuatorPath::new(plant, dt_s, "closed loop")?;
+    let mut sensor_path = SensorPath::new(plant, dt_s);
+    let mut tally = Tally::new(n_ticks);
+    let mut stuck: [Option<bool>; 4] = [None; 4];
 
-    // Random set-point levels, drawn once.
-    let levels: Vec<f64> = match scenario.setpoint {
+    for k in 0..n_ticks {
+        let t_s = k as f64 * dt_s;
+        integration.switch_to(k);
+        let p = integration.plant();
+        let x = integration.integ.state();
+        let m = sensor_path.push(p, &x);
+        tally.max_p = tally
+            .max_p
+            .max((x.p1_abs_pa - p.p_atm_pa).max(x.p2_abs_pa - p.p_atm_pa));
+        tally.max_abs_angle = tally.max_abs_angle.max(x.angle_rad.abs());
+        let ev = TickEvents::at(scenario, k, dt_s);
+        tally.injected.extend((0..ev.faults_starting).map(|_| k));
+        tally.resets.extend((0..ev.resets).map(|_| k));
+        let setpoint_rad = scenario.setpoint.at(t_s, &levels);
+        let input = fake.input(scenario, k, &m, &ev, setpoint_rad, &mut rng);
+        let ft = firmware.tick(k, &input)?;
+        let out = ft.out;
+        tally.max_p_set = tally
+            .max_p_set
+            .max(out.p1_set_gauge_pa.max(out.p2_set_gauge_pa) as f64);
+        if out.fault.is_some() {
+            tally.first_latched.get_or_insert(k);
+        }
+        update_stuck_valves(scenario, t_s, dt_s, &mut stuck);
+        let command = valve_command(&stuck, &ft.pins);
+        let inputs = actuator.push(command);
+        let mass_flow_kg_s = p.chamber_mass_flows_kg_s(&x, &integration.integ.aux(), &inputs);
+        tally.rows.push(TickRow {
+            t_s,
+            setpoint_rad,
+            state: x,
+            measured: m,
+            pins: ft.pins,
+            command,
+            inputs,
+            mass_flow_kg_s,
+            out,
+        });
+        integration.advance(&x, inputs, dt_s, t_s)?;
+        if k % 1000 == 0 {
+            progress(k as f64 / n_ticks.max(1) as f64);
+        }
+    }
+    progress(1.0);
+    let fallback_ticks = integration.fallback_ticks;
+    Ok(ClosedLoopRun {
+        name: scenario.scenario.name.clone(),
+        dt_s,
+        rows: tally.rows,
+        injected_fault_ticks: tally.injected,
+        reset_ticks: tally.resets,
+        first_latched_fault_tick: tally.first_latched,
+        expect: scenario.expect.clone(),
+        max_p_gauge_pa: tally.max_p,
+        max_abs_angle_rad: tally.max_abs_angle,
+        fallback_ticks,
+        max_p_set_gauge_pa: tally.max_p_set,
+        sim_stats: integration.finish(),
+        effects: plant.effects_summary(),
+    })
+}
+
+/// The random set-point profile's levels, drawn once before the run (none for the other
+/// profiles).
+fn random_levels(scenario: &Scenario, rng: &mut rand::rngs::StdRng) -> Vec<f64> {
+    match scenario.setpoint {
         SetpointProfile::Random {
             amplitude_rad,
             hold_s,
@@ -288,12 +364,16 @@ pub fn run_with_firmware(
             let n = (scenario.scenario.duration_s / hold_s).ceil() as usize + 1;
             let u = rand_distr::Uniform::new_inclusive(-amplitude_rad, amplitude_rad)
                 .expect("finite amplitude");
-            (0..n).map(|_| u.sample(&mut rng)).collect()
+            (0..n).map(|_| u.sample(rng)).collect()
         }
         _ => Vec::new(),
-    };
+    }
+}
 
-    // Plant versions: one per plant-changing event, in time order.
+/// The plant versions of the run, each from its tick: `plant` from 0, then one per
+/// plant-changing event (load inertia, supply loss) in time order, each event applied on
+/// top of the ones before.
+fn plant_versions(plant: &Plant, scenario: &Scenario, dt_s: f64) -> Vec<(usize, Plant)> {
     let mut changes: Vec<(usize, Plant)> = Vec::new();
     let mut current = plant.clone();
     let mut plant_events: Vec<&Event> = scenario
@@ -320,61 +400,145 @@ pub fn run_with_firmware(
     }
     let mut plants: Vec<(usize, Plant)> = vec![(0, plant.clone())];
     plants.extend(changes);
+    plants
+}
 
-    let mut resets: Vec<usize> = Vec::new();
-    let mut seq = [0u32; 3];
-    let mut last_values = [0.0f32; 3];
-    let mut gates = [SequenceGate::new(); 3];
-    // Board units: the last raw reading per channel (a frozen sensor repeats it).
-    let board = scenario.sensors.board_counts;
-    let wiring_scaling = pam_firmware::wiring::pressure_scaling();
-    let mut raw_last: ([u16; 2], i32) = (
-        [
-            pressure_counts(&wiring_scaling, 0.0),
-            pressure_counts(&wiring_scaling, 0.0),
-        ],
-        encoder_counts(0.0),
-    );
-    let mut raw_delay: VecDeque<([u16; 2], i32, u8)> = VecDeque::new();
-    let mut stuck: [Option<bool>; 4] = [None; 4];
-    let opts = SolverOptions {
-        rtol: 1e-6,
-        atol: 1e-6,
-        ..SolverOptions::default()
-    };
-    let mut plant_idx = 0;
-    let mut stats_done = SimStats::default();
-    let mut integ = Integrator::new(&plants[0].1, plant.initial_state(), opts);
-    // The plant's effects outside its right-hand side, kept across plant changes.
-    let mut actuator = ActuatorPath::new(plant, dt_s, "closed loop")?;
-    let mut sensor_path = SensorPath::new(plant, dt_s);
-    let p_noise =
-        Normal::new(0.0, scenario.sensors.pressure_noise_pa.max(0.0)).expect("finite noise");
-    let mut delay: VecDeque<SensorFrame> = VecDeque::new();
-    let mut rows = Vec::with_capacity(n_ticks);
-    let mut first_latched = None;
-    let mut injected: Vec<usize> = Vec::new();
-    let mut max_abs_angle: f64 = 0.0;
-    let mut fallback_ticks = 0;
-    let mut max_p = f64::NEG_INFINITY;
-    let mut max_p_set = f64::NEG_INFINITY;
+/// What the run records besides the integration: the tick rows and the run's extremes,
+/// fault, injection and reset ticks.
+struct Tally {
+    rows: Vec<TickRow>,
+    first_latched: Option<usize>,
+    injected: Vec<usize>,
+    resets: Vec<usize>,
+    max_abs_angle: f64,
+    max_p: f64,
+    max_p_set: f64,
+}
 
-    for k in 0..n_ticks {
-        let t_s = k as f64 * dt_s;
-        while plant_idx + 1 < plants.len() && plants[plant_idx + 1].0 <= k {
-            plant_idx += 1;
-            let x = integ.state();
-            let aux = integ.aux();
-            stats_done.add(&integ.stats());
-            integ = Integrator::new(&plants[plant_idx].1, x, opts);
-            integ.set_aux(aux); // a supply reservoir keeps its pressure, the gas its temperature
+impl Tally {
+    fn new(n_ticks: usize) -> Self {
+        Tally {
+            rows: Vec::with_capacity(n_ticks),
+            first_latched: None,
+            injected: Vec::new(),
+            resets: Vec::new(),
+            max_abs_angle: 0.0,
+            max_p: f64::NEG_INFINITY,
+            max_p_set: f64::NEG_INFINITY,
         }
-        let p = &plants[plant_idx].1;
-        let x = integ.state();
-        let m = sensor_path.push(p, &x);
-        max_p = max_p.max((x.p1_abs_pa - p.p_atm_pa).max(x.p2_abs_pa - p.p_atm_pa));
-        max_abs_angle = max_abs_angle.max(x.angle_rad.abs());
-        // Injection ticks of the faults that start at this tick.
+    }
+}
+
+/// The plant's integration over the run: the integrator of the current plant version, its
+/// work so far, and the ticks the fallback integrator took.
+struct Integration<'a> {
+    plants: &'a [(usize, Plant)],
+    plant_idx: usize,
+    integ: Integrator<'a>,
+    opts: SolverOptions,
+    stats_done: SimStats,
+    fallback_ticks: usize,
+}
+
+impl<'a> Integration<'a> {
+    fn new(plants: &'a [(usize, Plant)], initial: PlantState) -> Self {
+        let opts = SolverOptions {
+            rtol: 1e-6,
+            atol: 1e-6,
+            ..SolverOptions::default()
+        };
+        Integration {
+            plants,
+            plant_idx: 0,
+            integ: Integrator::new(&plants[0].1, initial, opts),
+            opts,
+            stats_done: SimStats::default(),
+            fallback_ticks: 0,
+        }
+    }
+
+    /// The plant version in use.
+    fn plant(&self) -> &'a Plant {
+        &self.plants[self.plant_idx].1
+    }
+
+    /// Swaps in the plant versions due by tick `k`, carrying the state over (a supply
+    /// reservoir keeps its pressure, the gas its temperature).
+    fn switch_to(&mut self, k: usize) {
+        let plants = self.plants;
+        while self.plant_idx + 1 < plants.len() && plants[self.plant_idx + 1].0 <= k {
+            self.plant_idx += 1;
+            let x = self.integ.state();
+            let aux = self.integ.aux();
+            self.stats_done.add(&self.integ.stats());
+            self.integ = Integrator::new(&plants[self.plant_idx].1, x, self.opts);
+            self.integ.set_aux(aux);
+        }
+    }
+
+    /// Integrates the tick from `x` with `inputs` held. Fallback: the tick again from its
+    /// start state with fixed-step RK4 substeps (a fault combination can make the adaptive
+    /// step collapse); a real failure names the run time and the state.
+    fn advance(
+        &mut self,
+        x: &PlantState,
+        inputs: ValveInputs,
+        dt_s: f64,
+        t_s: f64,
+    ) -> Result<(), ClosedLoopError> {
+        if let Err(e) = self.integ.advance(inputs, dt_s) {
+            let p = self.plant();
+            let aux = self.integ.aux();
+            let end = fallback_tick(p, x, &aux, &inputs, dt_s).ok_or(ClosedLoopError::SimAt {
+                t_s,
+                state: *x,
+                source: e,
+            })?;
+            self.stats_done.add(&self.integ.stats());
+            self.integ = Integrator::new(p, end, self.opts);
+            self.integ.set_aux(aux);
+            self.fallback_ticks += 1;
+        }
+        Ok(())
+    }
+
+    /// The integrator work over the whole run.
+    fn finish(mut self) -> SimStats {
+        self.stats_done.add(&self.integ.stats());
+        self.stats_done
+    }
+}
+
+/// The scenario's events in effect at one tick.
+#[derive(Default)]
+struct TickEvents {
+    /// Faults (every event but plant changes) starting at this tick.
+    faults_starting: usize,
+    /// Persistent sensor offsets (sensor steps) so far, per channel (p1, p2, angle).
+    offsets: [f64; 3],
+    /// Frozen sensors (repeating their value and sequence number).
+    frozen: [bool; 3],
+    /// Channels without a sample (dropout).
+    dropped: [bool; 3],
+    /// Channels reading NaN.
+    nan: [bool; 3],
+    /// An MCU reset before this tick (the last one of the tick's reset events).
+    reset: Option<ResetCause>,
+    /// Reset events at this tick.
+    resets: usize,
+    /// The period the firmware measures (longer on a late tick) [s].
+    dt_meas_s: f64,
+}
+
+impl TickEvents {
+    /// The events of `scenario` at tick `k` of period `dt_s`: an event at `at_s` acts from
+    /// the tick nearest to it (within half a tick), for its duration.
+    fn at(scenario: &Scenario, k: usize, dt_s: f64) -> Self {
+        let t_s = k as f64 * dt_s;
+        let mut ev = TickEvents {
+            dt_meas_s: dt_s,
+            ..Default::default()
+        };
         for e in &scenario.events {
             let starts = match *e {
                 Event::SupplyLoss { at_s, .. } => (at_s / dt_s).round() as usize == k,
@@ -385,15 +549,12 @@ pub fn run_with_firmware(
                 }
             };
             if starts {
-                injected.push(k);
+                ev.faults_starting += 1;
             }
         }
-
         // Sensor steps (persistent offsets) and frozen sensors: a frozen sensor repeats its
         // value and sequence number; the firmware's sequence gate turns that into "no new
         // sample" as on the board.
-        let mut offsets = [0.0f64; 3];
-        let mut frozen = [false; 3];
         for e in &scenario.events {
             match *e {
                 Event::SensorStep {
@@ -401,21 +562,19 @@ pub fn run_with_firmware(
                     channel,
                     offset,
                 } if t_s + 0.5 * dt_s >= at_s => {
-                    offsets[channel as usize] += offset;
+                    ev.offsets[channel as usize] += offset;
                 }
                 Event::SensorStuck {
                     at_s,
                     duration_s,
                     channel,
                 } if t_s + 0.5 * dt_s >= at_s && t_s < at_s + duration_s => {
-                    frozen[channel as usize] = true;
+                    ev.frozen[channel as usize] = true;
                 }
                 _ => {}
             }
         }
         // Injected sensor faults (dropout: no sample; NaN).
-        let mut dropped = [false; 3];
-        let mut nan = [false; 3];
         for e in &scenario.events {
             let (at_s, duration_s, channel, is_nan) = match *e {
                 Event::SensorDropout {
@@ -437,238 +596,265 @@ pub fn run_with_firmware(
                     SensorChannel::Angle => 2,
                 };
                 // The later event of a channel wins, as when they overwrote the frame.
-                nan[i] = is_nan;
-                dropped[i] = !is_nan;
+                ev.nan[i] = is_nan;
+                ev.dropped[i] = !is_nan;
             }
         }
         // MCU resets: the firmware restarts; its latch decides the boot.
-        let mut reset = None;
         for e in &scenario.events {
             if let Event::FirmwareReset { at_s, power_on } = *e {
                 if (at_s / dt_s).round() as usize == k {
-                    reset = Some(if power_on {
+                    ev.reset = Some(if power_on {
                         ResetCause::PowerOn
                     } else {
                         ResetCause::Watchdog
                     });
-                    resets.push(k);
+                    ev.resets += 1;
                 }
             }
         }
         // A late tick: the firmware measures a longer period.
-        let mut dt_meas_s = dt_s;
         for e in &scenario.events {
             if let Event::TickOverrun { at_s, factor } = *e {
                 if (at_s / dt_s).round() as usize == k {
-                    dt_meas_s = dt_s * factor;
+                    ev.dt_meas_s = dt_s * factor;
                 }
             }
         }
-        let setpoint_rad = scenario.setpoint.at(t_s, &levels);
+        ev
+    }
+}
 
-        let ft = if !board {
-            // Fake sensors in SI: noise, quantisation, offsets, sequence gates, faults.
-            let quant_p = |pa: f64, rng: &mut rand::rngs::StdRng| {
-                let v = pa + p_noise.sample(rng);
-                let lsb = scenario.sensors.pressure_lsb_pa;
-                (if lsb > 0.0 {
-                    (v / lsb).round() * lsb
-                } else {
-                    v
-                }) as f32
-            };
-            let p1 = quant_p(m.p1_kpa * 1e3, &mut rng);
-            let p2 = quant_p(m.p2_kpa * 1e3, &mut rng);
-            let angle_rad = m.angle_deg.to_radians();
-            let counts = scenario.sensors.angle_counts_per_rev;
-            let angle = if counts > 0 {
-                let c = (angle_rad / (2.0 * std::f64::consts::PI) * counts as f64).floor() as i32;
-                pam_firmware::sensors::counts_to_rad(c, counts)
-            } else {
-                angle_rad as f32
-            };
-            let mut values = [p1, p2, angle];
-            for e in &scenario.events {
-                if let Event::SensorStep {
-                    at_s,
-                    channel,
-                    offset,
-                } = *e
-                {
-                    if t_s + 0.5 * dt_s >= at_s {
-                        values[channel as usize] += offset as f32;
-                    }
-                }
-            }
-            let mut gated = [None; 3];
-            for i in 0..3 {
-                if !frozen[i] {
-                    seq[i] = seq[i].wrapping_add(1);
-                    last_values[i] = values[i];
-                }
-                gated[i] = gates[i].gate(seq[i], last_values[i]);
-                if nan[i] {
-                    gated[i] = Some(f32::NAN);
-                } else if dropped[i] {
-                    gated[i] = None;
-                }
-            }
-            let frame = SensorFrame {
-                p1_gauge_pa: gated[0],
-                p2_gauge_pa: gated[1],
-                angle_rad: gated[2],
-            };
-            // Transport delay.
-            delay.push_back(frame);
-            let frame = if delay.len() > scenario.sensors.delay_ticks {
-                delay.pop_front().unwrap_or_default()
-            } else {
-                SensorFrame::default()
-            };
-            firmware.tick(
-                k,
-                &FirmwareInput::Si {
-                    frame,
-                    setpoint_rad: setpoint_rad as f32,
-                    dt_s: dt_meas_s as f32,
-                    reset,
-                },
-            )?
-        } else {
-            // Board units: ADC and encoder counts; the firmware scales and gates them.
-            let p1 = m.p1_kpa * 1e3 + p_noise.sample(&mut rng) + offsets[0];
-            let p2 = m.p2_kpa * 1e3 + p_noise.sample(&mut rng) + offsets[1];
-            let angle_rad = m.angle_deg.to_radians() + offsets[2];
-            let mut flags = 0u8;
-            for (i, f) in frozen.iter().enumerate() {
-                if *f {
-                    flags |= 1 << (pam_firmware::stream::FLAG_STALE_SHIFT + i as u8);
-                }
-            }
-            if !frozen[0] {
-                raw_last.0[0] = pressure_counts(&wiring_scaling, p1);
-            }
-            if !frozen[1] {
-                raw_last.0[1] = pressure_counts(&wiring_scaling, p2);
-            }
-            if !frozen[2] {
-                raw_last.1 = encoder_counts(angle_rad);
-            }
-            let (mut pc, mut ec) = raw_last;
-            for i in 0..3 {
-                if nan[i] {
-                    flags |= 1 << (pam_firmware::stream::FLAG_NAN_SHIFT + i as u8);
-                } else if dropped[i] {
-                    match i {
-                        0 | 1 => pc[i] = pam_firmware::stream::MISSING_COUNTS,
-                        _ => ec = pam_firmware::stream::MISSING_ENCODER,
-                    }
-                }
-            }
-            // Transport delay (of the sensor data only; set-point, period and reset are the
-            // tick's own).
-            raw_delay.push_back((pc, ec, flags));
-            let (pc, ec, flags) = if raw_delay.len() > scenario.sensors.delay_ticks {
-                raw_delay.pop_front().unwrap_or(NO_RAW_SAMPLE)
-            } else {
-                NO_RAW_SAMPLE
-            };
-            let input = SensorInput {
-                seq: k as u32,
-                setpoint_rad: setpoint_rad as f32,
-                p_counts: pc,
-                encoder_counts: ec,
-                flags,
-                reset: match reset {
-                    None => pam_firmware::stream::RESET_NONE,
-                    Some(ResetCause::PowerOn) => pam_firmware::stream::RESET_POWER_ON,
-                    Some(_) => pam_firmware::stream::RESET_WATCHDOG,
-                },
-                dt_s: dt_meas_s as f32,
-            };
-            firmware.tick(k, &FirmwareInput::Raw(input))?
-        };
-        let out = ft.out;
-        max_p_set = max_p_set.max(out.p1_set_gauge_pa.max(out.p2_set_gauge_pa) as f64);
-        if out.fault.is_some() {
-            first_latched.get_or_insert(k);
-        }
-        // Stuck valves from their time on: the valve ignores its pin.
-        for e in &scenario.events {
-            if let Event::StuckValve { at_s, valve, open } = *e {
-                if t_s + 0.5 * dt_s >= at_s {
-                    let i = match valve {
-                        ValveId::In1 => 0,
-                        ValveId::Ex1 => 1,
-                        ValveId::In2 => 2,
-                        ValveId::Ex2 => 3,
-                    };
-                    stuck[i] = Some(open);
-                }
-            }
-        }
-        let b = |i: usize| {
-            if stuck[i].unwrap_or(ft.pins[i]) {
-                1.0
-            } else {
-                0.0
-            }
-        };
-        let command = ValveInputs {
-            u_in1: b(0),
-            u_ex1: b(1),
-            u_in2: b(2),
-            u_ex2: b(3),
-        };
-        let inputs = actuator.push(command);
-        let mass_flow_kg_s = p.chamber_mass_flows_kg_s(&x, &integ.aux(), &inputs);
-        rows.push(TickRow {
-            t_s,
-            setpoint_rad,
-            state: x,
-            measured: m,
-            pins: ft.pins,
-            command,
-            inputs,
-            mass_flow_kg_s,
-            out,
-        });
-        if let Err(e) = integ.advance(inputs, dt_s) {
-            // Fallback: the tick again from its start state with fixed-step RK4 substeps
-            // (a fault combination can make the adaptive step collapse); a real failure
-            // names the run time and the state.
-            let aux = integ.aux();
-            let end = fallback_tick(p, &x, &aux, &inputs, dt_s).ok_or(ClosedLoopError::SimAt {
-                t_s,
-                state: x,
-                source: e,
-            })?;
-            stats_done.add(&integ.stats());
-            integ = Integrator::new(p, end, opts);
-            integ.set_aux(aux);
-            fallback_ticks += 1;
-        }
-        if k % 1000 == 0 {
-            progress(k as f64 / n_ticks.max(1) as f64);
+/// The fake sensors between the plant's measurement and the firmware: SI values (noise,
+/// quantisation, offsets, sequence gates, faults) or the board's raw counts, then the
+/// transport delay.
+struct FakeSensors {
+    board: bool,
+    p_noise: Normal<f64>,
+    seq: [u32; 3],
+    last_values: [f32; 3],
+    gates: [SequenceGate; 3],
+    delay: VecDeque<SensorFrame>,
+    wiring_scaling: PressureScaling,
+    /// Board units: the last raw reading per channel (a frozen sensor repeats it).
+    raw_last: ([u16; 2], i32),
+    raw_delay: VecDeque<([u16; 2], i32, u8)>,
+}
+
+impl FakeSensors {
+    fn new(scenario: &Scenario) -> Self {
+        let wiring_scaling = pam_firmware::wiring::pressure_scaling();
+        FakeSensors {
+            board: scenario.sensors.board_counts,
+            p_noise: Normal::new(0.0, scenario.sensors.pressure_noise_pa.max(0.0))
+                .expect("finite noise"),
+            seq: [0u32; 3],
+            last_values: [0.0f32; 3],
+            gates: [SequenceGate::new(); 3],
+            delay: VecDeque::new(),
+            raw_last: (
+                [
+                    pressure_counts(&wiring_scaling, 0.0),
+                    pressure_counts(&wiring_scaling, 0.0),
+                ],
+                encoder_counts(0.0),
+            ),
+            wiring_scaling,
+            raw_delay: VecDeque::new(),
         }
     }
-    progress(1.0);
-    stats_done.add(&integ.stats());
-    Ok(ClosedLoopRun {
-        name: scenario.scenario.name.clone(),
-        dt_s,
-        rows,
-        injected_fault_ticks: injected,
-        reset_ticks: resets,
-        first_latched_fault_tick: first_latched,
-        expect: scenario.expect.clone(),
-        max_p_gauge_pa: max_p,
-        max_abs_angle_rad: max_abs_angle,
-        fallback_ticks,
-        max_p_set_gauge_pa: max_p_set,
-        sim_stats: stats_done,
-        effects: plant.effects_summary(),
-    })
+
+    /// The firmware's input at tick `k` from the measurement `m` and the tick's events.
+    fn input(
+        &mut self,
+        scenario: &Scenario,
+        k: usize,
+        m: &Measurement,
+        ev: &TickEvents,
+        setpoint_rad: f64,
+        rng: &mut rand::rngs::StdRng,
+    ) -> FirmwareInput {
+        if !self.board {
+            FirmwareInput::Si {
+                frame: self.si_frame(scenario, k, m, ev, rng),
+                setpoint_rad: setpoint_rad as f32,
+                dt_s: ev.dt_meas_s as f32,
+                reset: ev.reset,
+            }
+        } else {
+            FirmwareInput::Raw(self.raw_input(scenario, k, m, ev, setpoint_rad, rng))
+        }
+    }
+
+    /// Fake sensors in SI: noise, quantisation, offsets, sequence gates, faults, delay.
+    fn si_frame(
+        &mut self,
+        scenario: &Scenario,
+        k: usize,
+        m: &Measurement,
+        ev: &TickEvents,
+        rng: &mut rand::rngs::StdRng,
+    ) -> SensorFrame {
+        let dt_s = 1.0 / scenario.scenario.tick_hz;
+        let t_s = k as f64 * dt_s;
+        let p_noise = &self.p_noise;
+        let quant_p = |pa: f64, rng: &mut rand::rngs::StdRng| {
+            let v = pa + p_noise.sample(rng);
+            let lsb = scenario.sensors.pressure_lsb_pa;
+            (if lsb > 0.0 {
+                (v / lsb).round() * lsb
+            } else {
+                v
+            }) as f32
+        };
+        let p1 = quant_p(m.p1_kpa * 1e3, rng);
+        let p2 = quant_p(m.p2_kpa * 1e3, rng);
+        let angle_rad = m.angle_deg.to_radians();
+        let counts = scenario.sensors.angle_counts_per_rev;
+        let angle = if counts > 0 {
+            let c = (angle_rad / (2.0 * std::f64::consts::PI) * counts as f64).floor() as i32;
+            pam_firmware::sensors::counts_to_rad(c, counts)
+        } else {
+            angle_rad as f32
+        };
+        let mut values = [p1, p2, angle];
+        for e in &scenario.events {
+            if let Event::SensorStep {
+                at_s,
+                channel,
+                offset,
+            } = *e
+            {
+                if t_s + 0.5 * dt_s >= at_s {
+                    values[channel as usize] += offset as f32;
+                }
+            }
+        }
+        let mut gated = [None; 3];
+        for i in 0..3 {
+            if !ev.frozen[i] {
+                self.seq[i] = self.seq[i].wrapping_add(1);
+                self.last_values[i] = values[i];
+            }
+            gated[i] = self.gates[i].gate(self.seq[i], self.last_values[i]);
+            if ev.nan[i] {
+                gated[i] = Some(f32::NAN);
+            } else if ev.dropped[i] {
+                gated[i] = None;
+            }
+        }
+        let frame = SensorFrame {
+            p1_gauge_pa: gated[0],
+            p2_gauge_pa: gated[1],
+            angle_rad: gated[2],
+        };
+        // Transport delay.
+        self.delay.push_back(frame);
+        if self.delay.len() > scenario.sensors.delay_ticks {
+            self.delay.pop_front().unwrap_or_default()
+        } else {
+            SensorFrame::default()
+        }
+    }
+
+    /// Board units: ADC and encoder counts (the firmware scales and gates them), stale and
+    /// NaN flags, missing-sample markers, delay.
+    fn raw_input(
+        &mut self,
+        scenario: &Scenario,
+        k: usize,
+        m: &Measurement,
+        ev: &TickEvents,
+        setpoint_rad: f64,
+        rng: &mut rand::rngs::StdRng,
+    ) -> SensorInput {
+        let (offsets, frozen) = (ev.offsets, ev.frozen);
+        let p1 = m.p1_kpa * 1e3 + self.p_noise.sample(rng) + offsets[0];
+        let p2 = m.p2_kpa * 1e3 + self.p_noise.sample(rng) + offsets[1];
+        let angle_rad = m.angle_deg.to_radians() + offsets[2];
+        let mut flags = 0u8;
+        for (i, f) in frozen.iter().enumerate() {
+            if *f {
+                flags |= 1 << (pam_firmware::stream::FLAG_STALE_SHIFT + i as u8);
+            }
+        }
+        if !frozen[0] {
+            self.raw_last.0[0] = pressure_counts(&self.wiring_scaling, p1);
+        }
+        if !frozen[1] {
+            self.raw_last.0[1] = pressure_counts(&self.wiring_scaling, p2);
+        }
+        if !frozen[2] {
+            self.raw_last.1 = encoder_counts(angle_rad);
+        }
+        let (mut pc, mut ec) = self.raw_last;
+        for i in 0..3 {
+            if ev.nan[i] {
+                flags |= 1 << (pam_firmware::stream::FLAG_NAN_SHIFT + i as u8);
+            } else if ev.dropped[i] {
+                match i {
+                    0 | 1 => pc[i] = pam_firmware::stream::MISSING_COUNTS,
+                    _ => ec = pam_firmware::stream::MISSING_ENCODER,
+                }
+            }
+        }
+        // Transport delay (of the sensor data only; set-point, period and reset are the
+        // tick's own).
+        self.raw_delay.push_back((pc, ec, flags));
+        let (pc, ec, flags) = if self.raw_delay.len() > scenario.sensors.delay_ticks {
+            self.raw_delay.pop_front().unwrap_or(NO_RAW_SAMPLE)
+        } else {
+            NO_RAW_SAMPLE
+        };
+        SensorInput {
+            seq: k as u32,
+            setpoint_rad: setpoint_rad as f32,
+            p_counts: pc,
+            encoder_counts: ec,
+            flags,
+            reset: match ev.reset {
+                None => pam_firmware::stream::RESET_NONE,
+                Some(ResetCause::PowerOn) => pam_firmware::stream::RESET_POWER_ON,
+                Some(_) => pam_firmware::stream::RESET_WATCHDOG,
+            },
+            dt_s: ev.dt_meas_s as f32,
+        }
+    }
+}
+
+/// Stuck valves from their time on: the valve ignores its pin (`stuck[i]`: the valve's fixed
+/// state, in the order in1, ex1, in2, ex2).
+fn update_stuck_valves(scenario: &Scenario, t_s: f64, dt_s: f64, stuck: &mut [Option<bool>; 4]) {
+    for e in &scenario.events {
+        if let Event::StuckValve { at_s, valve, open } = *e {
+            if t_s + 0.5 * dt_s >= at_s {
+                let i = match valve {
+                    ValveId::In1 => 0,
+                    ValveId::Ex1 => 1,
+                    ValveId::In2 => 2,
+                    ValveId::Ex2 => 3,
+                };
+                stuck[i] = Some(open);
+            }
+        }
+    }
+}
+
+/// The valve commands: each pin's state, unless its valve is stuck.
+fn valve_command(stuck: &[Option<bool>; 4], pins: &[bool; 4]) -> ValveInputs {
+    let b = |i: usize| {
+        if stuck[i].unwrap_or(pins[i]) {
+            1.0
+        } else {
+            0.0
+        }
+    };
+    ValveInputs {
+        u_in1: b(0),
+        u_ex1: b(1),
+        u_in2: b(2),
+        u_ex2: b(3),
+    }
 }
 
 /// Tracking statistics of a run.
@@ -905,5 +1091,48 @@ impl ClosedLoopRun {
         }
         rec.mass_flow_kg_s = Some(flows);
         rec
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scenario(events: &str) -> Scenario {
+        let text = format!(
+            "[scenario]\nname = \"t\"\nduration_s = 1.0\nseed = 1\n\n[setpoint]\nkind = \"step\"\n\
+             initial_rad = 0.0\nfinal_rad = 0.1\nat_s = 0.5\n{events}"
+        );
+        Scenario::from_toml_str(&text, "t.toml").expect("a valid scenario")
+    }
+
+    #[test]
+    fn a_stuck_valve_overrides_its_pin_and_the_others_follow_theirs() {
+        let command = valve_command(
+            &[None, Some(true), Some(false), None],
+            &[true, false, true, false],
+        );
+        assert_eq!(
+            [command.u_in1, command.u_ex1, command.u_in2, command.u_ex2],
+            [1.0, 1.0, 0.0, 0.0]
+        );
+    }
+
+    #[test]
+    fn the_later_sensor_fault_of_a_channel_wins_and_acts_for_its_duration() {
+        let s = scenario(
+            "[[events]]\nkind = \"sensor_dropout\"\nat_s = 0.1\nduration_s = 0.5\nchannel = \"p2\"\n\
+             [[events]]\nkind = \"sensor_nan\"\nat_s = 0.2\nduration_s = 0.1\nchannel = \"p2\"\n",
+        );
+        let dt_s = 1.0 / s.scenario.tick_hz;
+        let tick = |t_s: f64| (t_s / dt_s).round() as usize;
+        let both = TickEvents::at(&s, tick(0.25), dt_s);
+        assert!(both.nan[1] && !both.dropped[1]);
+        let dropout_only = TickEvents::at(&s, tick(0.4), dt_s);
+        assert!(!dropout_only.nan[1] && dropout_only.dropped[1]);
+        let after = TickEvents::at(&s, tick(0.7), dt_s);
+        assert!(!after.nan[1] && !after.dropped[1]);
+        assert_eq!(TickEvents::at(&s, tick(0.1), dt_s).faults_starting, 1);
+        assert_eq!(TickEvents::at(&s, tick(0.1) + 1, dt_s).faults_starting, 0);
     }
 }

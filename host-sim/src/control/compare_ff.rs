@@ -692,12 +692,69 @@ fn ratio_text(r: f64) -> String {
 }
 
 /// `host-sim compare-control`: the report and whether the nominal-plant requirement holds.
+/// Steps: the plant and both gains files checked, the run's configurations, the scenario
+/// sets and plant variants, the report's header, one table per variant, the verdict.
 pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bool)> {
     // Arguments first: a bad one touches nothing and costs no run.
+    let t = load_tunings(a)?;
+    let cfg = run_configs(a, &t)?;
+    let sets = ScenarioSets::new(a, &t.text)?;
+    let mut out = String::new();
+    write_header(&mut out, a, &t, &cfg, &sets)?;
+    let mut ratios = SuiteRatios {
+        nominal: f64::NAN,
+        same_gains: f64::NAN,
+    };
+    for (vname, plant_text) in &sets.variants {
+        variant_report(&mut out, a, (vname, plant_text), &sets, &cfg, &mut ratios)?;
+    }
+    let ok = ratios.nominal >= REQUIRED_RATIO;
+    let which = if a.quick {
+        format!(" (--quick: {} only)", scenario_names(&sets.suite))
+    } else {
+        String::new()
+    };
+    writeln!(
+        out,
+        "\nfor comparison, same gains, nominal plant, suite{which}: P-only position MSE / with the analytical feed-forward (k = 1) = {} (the feed-forward added to the cascade tuned without it)",
+        ratio_text(ratios.same_gains)
+    )?;
+    writeln!(
+        out,
+        "verdict (exit status), nominal plant, suite{which}: P-only position MSE / with the analytical feed-forward (k = 1), each cascade at its gains (the files named at the top) = {} (required >= {REQUIRED_RATIO}x): {}",
+        ratio_text(ratios.nominal),
+        if ok { "met" } else { "NOT met" }
+    )?;
+    let shipped = |tuning: &ControlTuning, text: &str| {
+        ControlTuning::from_toml_str(text, "shipped").is_ok_and(|s| s == *tuning)
+    };
+    if let Some(note) = one_sided_gains_note(
+        (&t.gains, shipped(&t.tuning, SHIPPED_CONTROL_TUNED)),
+        (&t.gains_ff, shipped(&t.tuning_ff, SHIPPED_CONTROL_TUNED_FF)),
+    ) {
+        writeln!(out, "{note}")?;
+    }
+    Ok((out, ok))
+}
+
+/// The plant file's text and the two tunings of the comparison, each with its label.
+struct Tunings {
+    text: String,
+    /// The P-only cascade's gains (`--gains` or the shipped ones).
+    tuning: ControlTuning,
+    gains: String,
+    /// The cascade re-tuned with the feed-forward on (`--ff-gains` or the shipped ones).
+    tuning_ff: ControlTuning,
+    gains_ff: String,
+}
+
+/// Reads the plant file (valid itself before its variants are made from it: an error then
+/// names its own key, not one of a variant's edits) and the two gains files, each of which
+/// must hold the cascade its rows say (a mix-up would print a verdict on the wrong
+/// comparison).
+fn load_tunings(a: &CompareControlArgs) -> anyhow::Result<Tunings> {
     let text = std::fs::read_to_string(&a.plant)
         .with_context(|| format!("--plant {}: cannot read", a.plant.display()))?;
-    // The plant file itself valid before its variants are made from it (an error then names
-    // its own key, not one of a variant's edits).
     PlantConfig::from_toml_str(&text, &a.plant).context("--plant")?;
     let (tuning, gains) = match &a.gains {
         Some(p) => (
@@ -713,8 +770,6 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
         ),
         None => default_control_tuning_ff()?,
     };
-    // Each file must hold the cascade its rows say: a mix-up would print a verdict on the
-    // wrong comparison.
     anyhow::ensure!(
         !tuning.cascade.pressure_feedforward,
         "gains {gains}: its cascade was tuned with the pressure feed-forward on \
@@ -727,10 +782,35 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
          (no pressure_feedforward = true); --ff-gains needs the output of host-sim tune \
          --pressure-ff"
     );
-    let mut base = tuning.cascade.config(1000.0);
-    // The feed-forward is evaluated at the period its gains were tuned at (a re-tuned file
-    // records it when it is not config/pressure_ff.toml's), unless --ff-update-ticks says.
-    let ff_tuned_every = tuning_ff
+    Ok(Tunings {
+        text,
+        tuning,
+        gains,
+        tuning_ff,
+        gains_ff,
+    })
+}
+
+/// The configurations every row runs.
+struct RunConfigs {
+    /// The P-only cascade with the run's feed-forward options and rates.
+    base: ControllerConfig,
+    /// The re-tuned cascade with the same options and rates.
+    retuned: ControllerConfig,
+    /// The feed-forward period the re-tuned gains were tuned at [ticks].
+    ff_tuned_every: u16,
+    /// The rates each gains file was tuned at, when they are not the rate of this run.
+    rate_notes: Vec<String>,
+}
+
+/// The run's configurations: the feed-forward evaluated at the period its gains were tuned
+/// at (a re-tuned file records it when it is not config/pressure_ff.toml's) unless
+/// `--ff-update-ticks` says, the `--ff-*` options, `--outer-period-ticks`; and a note per
+/// gains file tuned at other rates.
+fn run_configs(a: &CompareControlArgs, t: &Tunings) -> anyhow::Result<RunConfigs> {
+    let mut base = t.tuning.cascade.config(1000.0);
+    let ff_tuned_every = t
+        .tuning_ff
         .cascade
         .config(1000.0)
         .pressure_ff
@@ -741,11 +821,10 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
     if let Some(n) = a.outer_period_ticks {
         base.outer_period_ticks = n;
     }
-    // The rates each gains file was tuned at, when they are not the rate of this run.
     let tuned_at = |t: &ControlTuning| t.cascade.config(1000.0).outer_period_ticks;
     let rate_notes: Vec<String> = [
-        (&gains, tuned_at(&tuning)),
-        (&gains_ff, tuned_at(&tuning_ff)),
+        (&t.gains, tuned_at(&t.tuning)),
+        (&t.gains_ff, tuned_at(&t.tuning_ff)),
     ]
     .into_iter()
     .filter(|(_, n)| *n != base.outer_period_ticks)
@@ -753,65 +832,111 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
     .chain(
         (ff_tuned_every != base.pressure_ff.update_period_ticks).then(|| {
             format!(
-                "gains {gains_ff} were tuned with the feed-forward evaluated every \
-                 {ff_tuned_every} tick(s)"
+                "gains {} were tuned with the feed-forward evaluated every \
+                 {ff_tuned_every} tick(s)",
+                t.gains_ff
             )
         }),
     )
     .collect();
-    // The re-tuned cascade runs the feed-forward with the same options and rates as the other
-    // rows.
     let retuned = ControllerConfig {
         pressure_ff: base.pressure_ff,
         outer_period_ticks: base.outer_period_ticks,
-        ..tuning_ff.cascade.config(1000.0)
+        ..t.tuning_ff.cascade.config(1000.0)
     };
-    let mut suite = suite_scenarios()?;
-    let mut moves = held_out_scenarios()?;
-    let mut jumps = jump_suite_scenarios()?;
-    let mut variants: Vec<(&str, String)> = VARIANTS
-        .iter()
-        .map(|(n, t)| (*n, format!("{text}\n{t}")))
-        .collect();
-    variants.push((
-        VOLUME_VARIANT,
-        with_volume_mismatch(&text).with_context(|| a.plant.display().to_string())?,
-    ));
-    if a.quick {
-        suite.truncate(1);
-        moves.truncate(1);
-        jumps.truncate(1);
+    Ok(RunConfigs {
+        base,
+        retuned,
+        ff_tuned_every,
+        rate_notes,
+    })
+}
+
+/// The comparison's scenario sets and plant variants.
+struct ScenarioSets {
+    suite: Vec<Scenario>,
+    moves: Vec<Scenario>,
+    jumps: Vec<Scenario>,
+    /// (name, plant file text) of each plant variant, the nominal plant first.
+    variants: Vec<(&'static str, String)>,
+}
+
+impl ScenarioSets {
+    /// The suite (tuned on), the held-out moves and the jumps; the plant variants made from
+    /// the plant file's `text` (with `--quick` one scenario of each set, and with it or
+    /// `--nominal-only` the nominal plant alone).
+    fn new(a: &CompareControlArgs, text: &str) -> anyhow::Result<Self> {
+        let mut suite = suite_scenarios()?;
+        let mut moves = held_out_scenarios()?;
+        let mut jumps = jump_suite_scenarios()?;
+        let mut variants: Vec<(&str, String)> = VARIANTS
+            .iter()
+            .map(|(n, t)| (*n, format!("{text}\n{t}")))
+            .collect();
+        variants.push((
+            VOLUME_VARIANT,
+            with_volume_mismatch(text).with_context(|| a.plant.display().to_string())?,
+        ));
+        if a.quick {
+            suite.truncate(1);
+            moves.truncate(1);
+            jumps.truncate(1);
+        }
+        if a.quick || a.nominal_only {
+            variants.truncate(1);
+        }
+        Ok(ScenarioSets {
+            suite,
+            moves,
+            jumps,
+            variants,
+        })
     }
-    if a.quick || a.nominal_only {
-        variants.truncate(1);
+
+    /// The sets with their names, in the report's order.
+    fn named(&self) -> [(&'static str, &Vec<Scenario>); 3] {
+        [
+            ("suite", &self.suite),
+            ("held-out moves", &self.moves),
+            ("jumps", &self.jumps),
+        ]
     }
-    let sets = [
-        ("suite", &suite),
-        ("held-out moves", &moves),
-        ("jumps", &jumps),
-    ];
-    let names = |v: &Vec<Scenario>| {
-        v.iter()
-            .map(|s| s.scenario.name.as_str())
-            .collect::<Vec<_>>()
-            .join(", ")
-    };
-    let mut out = String::new();
+}
+
+/// The scenarios' names, comma-separated.
+fn scenario_names(v: &[Scenario]) -> String {
+    v.iter()
+        .map(|s| s.scenario.name.as_str())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// The report's first lines: the plant, the gains files and the sets; whether `--ff-*`
+/// options move the re-tuned rows off their tuned optimum; the feed-forward and loop rates;
+/// the rate notes; the hybrid model's training run.
+fn write_header(
+    out: &mut String,
+    a: &CompareControlArgs,
+    t: &Tunings,
+    cfg: &RunConfigs,
+    sets: &ScenarioSets,
+) -> anyhow::Result<()> {
+    let (gains, gains_ff, base) = (&t.gains, &t.gains_ff, &cfg.base);
     writeln!(
         out,
         "plant {}, gains {gains} (tuned cascade), suite (tuned on): {}; held-out moves (never \
          tuned on): {}; jumps (held out, valve-limited): {}",
         a.plant.display(),
-        names(&suite),
-        names(&moves),
-        names(&jumps),
+        scenario_names(&sets.suite),
+        scenario_names(&sets.moves),
+        scenario_names(&sets.jumps),
     )?;
     let overridden = a.ff.gain.is_some()
         || a.ff.cutoff_hz.is_some()
         || a.ff.rate_from.is_some()
         || a.ff.volume_rate_from.is_some()
         || a.ff.min_duty.is_some()
-        || a.ff.update_ticks.is_some_and(|n| n != ff_tuned_every);
+        || a.ff.update_ticks.is_some_and(|n| n != cfg.ff_tuned_every);
     writeln!(
         out,
         "re-tuned rows: gains {gains_ff} (the cascade tuned with the pressure feed-forward on, \
@@ -844,7 +969,7 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
         f.update_period_ticks,
         base.outer_period_ticks
     )?;
-    for n in &rate_notes {
+    for n in &cfg.rate_notes {
         writeln!(
             out,
             "note: {n}; every row here runs them at the rates above"
@@ -855,111 +980,106 @@ pub fn run_compare_control(a: &CompareControlArgs) -> anyhow::Result<(String, bo
         "hybrid model: volume network trained per plant on the P-only cascade's run of {} (seed 1)",
         TRAINING_SCENARIO.0
     )?;
-    let (mut nominal_ratio, mut same_gains_ratio) = (f64::NAN, f64::NAN);
-    for (vname, plant_text) in &variants {
-        let cfg = PlantConfig::from_toml_str(plant_text, &a.plant)
-            .with_context(|| format!("--plant {} with the {vname} variant", a.plant.display()))?;
-        let plant = Plant::from_config(&cfg);
-        if a.breakdown && *vname == "nominal" {
-            breakdown_report(&mut out, &plant, &sets, base, retuned)?;
-        }
-        writeln!(out, "\n### {vname}\n")?;
-        let (hybrid, mse_poly, mse_hybrid) = train_hybrid(&plant, base)
-            .with_context(|| format!("training the hybrid volume on the {vname} plant"))?;
-        writeln!(
-            out,
-            "hybrid volume training run: mass-flow MSE polynomial volume {mse_poly:.3e}, hybrid {mse_hybrid:.3e} (kg/s)^2\n"
-        )?;
-        writeln!(
-            out,
-            "vs P only = the P-only row's MSE / this row's (above 1: better than P only); pressure RMS error over every armed tick, the start's fill included (its share of the slow error while moving is in --breakdown)\n\n\
-             | controller | set | position MSE [rad^2] | vs P only | pressure RMS error [kPa] | latched faults |"
-        )?;
-        writeln!(out, "|---|---|---:|---:|---:|---|")?;
-        for (set_name, sc) in &sets {
-            let mut p_only = f64::NAN;
-            for (i, (cname, c)) in controllers(base, Some(hybrid), Some(retuned))
-                .into_iter()
-                .enumerate()
-            {
-                let s = score(&plant, sc, c)?;
-                if i == 0 {
-                    p_only = s.position_mse_rad2;
-                }
-                let ratio = p_only / s.position_mse_rad2;
-                if *vname == "nominal" && *set_name == "suite" {
-                    if i == 1 {
-                        same_gains_ratio = ratio;
-                    }
-                    if cname == RETUNED_ROW {
-                        nominal_ratio = ratio;
-                    }
-                }
-                writeln!(
-                    out,
-                    "| {cname} | {set_name} | {:.3e} | {} | {:.1} | {} |",
-                    s.position_mse_rad2,
-                    if ratio.is_finite() && ratio > 0.0 {
-                        ratio_text(ratio)
-                    } else {
-                        "-".to_string()
-                    },
-                    s.pressure_rms_pa / 1e3,
-                    if s.faults.is_empty() {
-                        "none".to_string()
-                    } else {
-                        s.faults
-                            .iter()
-                            .map(|(n, f)| format!("{n}: {f}"))
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    }
-                )?;
+    Ok(())
+}
+
+/// The P-only / feed-forward MSE ratios of the nominal plant's suite the verdict reads.
+struct SuiteRatios {
+    /// With the re-tuned cascade.
+    nominal: f64,
+    /// With the P-only cascade's gains.
+    same_gains: f64,
+}
+
+/// One plant variant's section: the breakdown (`--breakdown`, nominal plant), the hybrid
+/// volume trained on it, the table of every controller on every set, and for the nominal
+/// plant the per-scenario table; the nominal suite's ratios kept in `ratios`.
+fn variant_report(
+    out: &mut String,
+    a: &CompareControlArgs,
+    (vname, plant_text): (&str, &str),
+    sets: &ScenarioSets,
+    cfg: &RunConfigs,
+    ratios: &mut SuiteRatios,
+) -> anyhow::Result<()> {
+    let (base, retuned) = (cfg.base, cfg.retuned);
+    let sets = sets.named();
+    let config = PlantConfig::from_toml_str(plant_text, &a.plant)
+        .with_context(|| format!("--plant {} with the {vname} variant", a.plant.display()))?;
+    let plant = Plant::from_config(&config);
+    if a.breakdown && vname == "nominal" {
+        breakdown_report(out, &plant, &sets, base, retuned)?;
+    }
+    writeln!(out, "\n### {vname}\n")?;
+    let (hybrid, mse_poly, mse_hybrid) = train_hybrid(&plant, base)
+        .with_context(|| format!("training the hybrid volume on the {vname} plant"))?;
+    writeln!(
+        out,
+        "hybrid volume training run: mass-flow MSE polynomial volume {mse_poly:.3e}, hybrid {mse_hybrid:.3e} (kg/s)^2\n"
+    )?;
+    writeln!(
+        out,
+        "vs P only = the P-only row's MSE / this row's (above 1: better than P only); pressure RMS error over every armed tick, the start's fill included (its share of the slow error while moving is in --breakdown)\n\n\
+         | controller | set | position MSE [rad^2] | vs P only | pressure RMS error [kPa] | latched faults |"
+    )?;
+    writeln!(out, "|---|---|---:|---:|---:|---|")?;
+    for (set_name, sc) in &sets {
+        let mut p_only = f64::NAN;
+        for (i, (cname, c)) in controllers(base, Some(hybrid), Some(retuned))
+            .into_iter()
+            .enumerate()
+        {
+            let s = score(&plant, sc, c)?;
+            if i == 0 {
+                p_only = s.position_mse_rad2;
             }
-        }
-        if *vname == "nominal" {
-            let ctl = controllers(base, None, Some(retuned));
-            let pick = |name: &str| {
-                ctl.iter()
-                    .find(|(n, _)| *n == name)
-                    .map(|(_, c)| *c)
-                    .expect("controllers() has this row")
-            };
-            let rows = [
-                pick("P only"),
-                pick("+ analytical inverse model, k = 1 (isothermal)"),
-                pick(RETUNED_ROW),
-            ];
-            per_scenario_report(&mut out, &plant, &sets, rows)?;
+            let ratio = p_only / s.position_mse_rad2;
+            if vname == "nominal" && *set_name == "suite" {
+                if i == 1 {
+                    ratios.same_gains = ratio;
+                }
+                if cname == RETUNED_ROW {
+                    ratios.nominal = ratio;
+                }
+            }
+            writeln!(
+                out,
+                "| {cname} | {set_name} | {:.3e} | {} | {:.1} | {} |",
+                s.position_mse_rad2,
+                if ratio.is_finite() && ratio > 0.0 {
+                    ratio_text(ratio)
+                } else {
+                    "-".to_string()
+                },
+                s.pressure_rms_pa / 1e3,
+                if s.faults.is_empty() {
+                    "none".to_string()
+                } else {
+                    s.faults
+                        .iter()
+                        .map(|(n, f)| format!("{n}: {f}"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                }
+            )?;
         }
     }
-    let ok = nominal_ratio >= REQUIRED_RATIO;
-    let which = if a.quick {
-        format!(" (--quick: {} only)", names(&suite))
-    } else {
-        String::new()
-    };
-    writeln!(
-        out,
-        "\nfor comparison, same gains, nominal plant, suite{which}: P-only position MSE / with the analytical feed-forward (k = 1) = {} (the feed-forward added to the cascade tuned without it)",
-        ratio_text(same_gains_ratio)
-    )?;
-    writeln!(
-        out,
-        "verdict (exit status), nominal plant, suite{which}: P-only position MSE / with the analytical feed-forward (k = 1), each cascade at its gains (the files named at the top) = {} (required >= {REQUIRED_RATIO}x): {}",
-        ratio_text(nominal_ratio),
-        if ok { "met" } else { "NOT met" }
-    )?;
-    let shipped = |t: &ControlTuning, text: &str| {
-        ControlTuning::from_toml_str(text, "shipped").is_ok_and(|s| s == *t)
-    };
-    if let Some(note) = one_sided_gains_note(
-        (&gains, shipped(&tuning, SHIPPED_CONTROL_TUNED)),
-        (&gains_ff, shipped(&tuning_ff, SHIPPED_CONTROL_TUNED_FF)),
-    ) {
-        writeln!(out, "{note}")?;
+    if vname == "nominal" {
+        let ctl = controllers(base, None, Some(retuned));
+        let pick = |name: &str| {
+            ctl.iter()
+                .find(|(n, _)| *n == name)
+                .map(|(_, c)| *c)
+                .expect("controllers() has this row")
+        };
+        let rows = [
+            pick("P only"),
+            pick("+ analytical inverse model, k = 1 (isothermal)"),
+            pick(RETUNED_ROW),
+        ];
+        per_scenario_report(out, &plant, &sets, rows)?;
     }
-    Ok((out, ok))
+    Ok(())
 }
 
 /// The warning when one of the two tunings is the user's and the other the shipped one:

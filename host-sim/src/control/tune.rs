@@ -332,6 +332,10 @@ fn polish<T: Copy>(
     (r.point, r.cost, r.evaluations)
 }
 
+/// Tunes the PD (`ki_on` false) or the PID: the best point of a coarse grid, Nelder-Mead on
+/// log10 gains from it and from the `stored` gains, restarted, then the x0.7 / x1.4 polish;
+/// the result re-measured. Returns the gains, their (suite MSE, MSE at the gain margin) and
+/// the note for the gains file.
 fn tune(
     ctx: &Ctx,
     ki_on: bool,
@@ -339,22 +343,92 @@ fn tune(
     stored: Option<DpPidGains>,
 ) -> (DpPidGains, (f64, f64), String) {
     let name = if ki_on { "PID" } else { "PD" };
+    let grid = pid_grid(ki_on, ctx.cutoff_hz);
+    let (g0, cbest) = best_of_grid(ctx, name, &grid, threads);
+    let starts = pid_starts(ctx, name, (g0, cbest), stored);
+    let from_stored = starts.len() > 1;
+    let t1 = Instant::now();
+    let mut nm = nm_from_starts(ctx, name, ki_on, starts);
+    let (g, c) = nm.best;
+    // Nelder-Mead restarted from its own result until a restart gains less than 1 % (a
+    // simplex that has collapsed in one direction stalls; a fresh one does not).
+    let (g, c) = restarted_nm(
+        ctx,
+        |g: &DpPidGains| pid_log10_gains(g, ki_on),
+        |x: &[f64]| pid_from_log10(x, ki_on, &g),
+        |g: &DpPidGains| ctx.cost(ControlLaw::DirectPid(*g)),
+        g,
+        c,
+        &mut nm.points,
+        name,
+    );
+    // Polish: pattern search with the moves the local-optimum test checks, accepting any
+    // improvement, until no move improves.
+    let (g, c, polish_runs) = polish(
+        g,
+        c,
+        |g: &DpPidGains| pid_polish_moves(g, ki_on),
+        |moves: &[DpPidGains]| ctx.costs(moves, threads),
+    );
+    // Re-measure the stored point (f32 rounding of the gains).
+    let (c_check, c_nominal, c_margin) = ctx.cost_cfg(config_for(ControlLaw::DirectPid(g), 1000.0));
+    ctx.say(format!(
+        "{name}: Nelder-Mead {} points in {:.0} s + polish: cost {:.3e} rad^2 (re-measured {:.3e}) at kp {:.4e} kd {:.4e} ki {:.4e} w {}",
+        nm.points,
+        t1.elapsed().as_secs_f64(),
+        c,
+        c_check,
+        g.kp_pa_per_rad,
+        g.kd_pa_s_per_rad,
+        g.ki_pa_per_rad_s,
+        g.setpoint_rate_weight
+    ));
+    let note = format!(
+        "{name}: grid {} points (best cost {:.4e} rad^2), Nelder-Mead {} points from the best grid\n\
+         \x20 point{} (costs after it: {}),\n\
+         \x20 polish {} points -> cost {:.4e} rad^2 (suite MSE {:.4e} rad^2, at the gain margin {:.4e} rad^2, w = {})",
+        grid.len(),
+        cbest,
+        nm.points,
+        if from_stored {
+            " and the stored gains"
+        } else {
+            ""
+        },
+        nm.from.join(", "),
+        polish_runs,
+        c_check,
+        c_nominal,
+        c_margin,
+        g.setpoint_rate_weight
+    );
+    (g, (c_nominal, c_margin), note)
+}
+
+/// The coarse grid of the PD / PID search: each set-point rate weight (0, 1) by
+/// [`KP_GRID`] by [`KD_GRID`] (by [`KI_GRID`] with `ki_on`, else ki 0).
+fn pid_grid(ki_on: bool, cutoff_hz: f32) -> Vec<DpPidGains> {
     let mut grid = Vec::new();
     for w in [0.0f32, 1.0] {
         for kp in KP_GRID {
             for kd in KD_GRID {
                 if ki_on {
                     for ki in KI_GRID {
-                        grid.push(gains(true, ctx.cutoff_hz, w, kp, kd, ki));
+                        grid.push(gains(true, cutoff_hz, w, kp, kd, ki));
                     }
                 } else {
-                    grid.push(gains(false, ctx.cutoff_hz, w, kp, kd, 0.0));
+                    grid.push(gains(false, cutoff_hz, w, kp, kd, 0.0));
                 }
             }
         }
     }
+    grid
+}
+
+/// The grid's lowest-cost point and its cost (said in the log).
+fn best_of_grid(ctx: &Ctx, name: &str, grid: &[DpPidGains], threads: usize) -> (DpPidGains, f64) {
     let t0 = Instant::now();
-    let costs = ctx.costs(&grid, threads);
+    let costs = ctx.costs(grid, threads);
     let (ibest, &cbest) = costs
         .iter()
         .enumerate()
@@ -371,9 +445,19 @@ fn tune(
         g0.ki_pa_per_rad_s,
         g0.setpoint_rate_weight
     ));
-    // Nelder-Mead from the best grid point and, when there is one, from the stored gains (the
-    // previous tuning: a search from the grid alone once found a PID 1.8x worse than them).
-    let mut starts = vec![("grid", g0, cbest)];
+    (g0, cbest)
+}
+
+/// The starts of Nelder-Mead: the best grid point and, when there is one with a finite cost,
+/// the stored gains (the previous tuning: a search from the grid alone once found a PID 1.8x
+/// worse than them).
+fn pid_starts(
+    ctx: &Ctx,
+    name: &str,
+    grid_best: (DpPidGains, f64),
+    stored: Option<DpPidGains>,
+) -> Vec<(&'static str, DpPidGains, f64)> {
+    let mut starts = vec![("grid", grid_best.0, grid_best.1)];
     if let Some(gs) = stored {
         let cs = ctx.cost(ControlLaw::DirectPid(gs));
         ctx.say(format!(
@@ -384,38 +468,41 @@ fn tune(
             starts.push(("stored gains", gs, cs));
         }
     }
-    let from_stored = starts.len() > 1;
-    let t1 = Instant::now();
+    starts
+}
+
+/// The Nelder-Mead searches from each start: the best result, the points evaluated, and
+/// each start's cost after its search ("label cost").
+struct NmFromStarts {
+    best: (DpPidGains, f64),
+    points: usize,
+    from: Vec<String>,
+}
+
+/// Nelder-Mead on log10 gains from each start (costs relative to the start's); a search
+/// that does not improve on its start keeps the start.
+fn nm_from_starts(
+    ctx: &Ctx,
+    name: &str,
+    ki_on: bool,
+    starts: Vec<(&'static str, DpPidGains, f64)>,
+) -> NmFromStarts {
     let mut best: Option<(DpPidGains, f64)> = None;
-    let mut nm_points = 0;
+    let mut points = 0;
     let mut from = Vec::new();
     for (label, gs, cs) in starts {
-        let w = gs.setpoint_rate_weight;
-        let to_gains = |x: &[f64]| DpPidGains {
-            kp_pa_per_rad: 10f64.powf(x[0]) as f32,
-            kd_pa_s_per_rad: 10f64.powf(x[1]) as f32,
-            ki_pa_per_rad_s: if ki_on { 10f64.powf(x[2]) as f32 } else { 0.0 },
-            setpoint_rate_weight: w,
-            ..gs
-        };
-        let mut x0 = vec![
-            (gs.kp_pa_per_rad as f64).log10(),
-            (gs.kd_pa_s_per_rad as f64).log10(),
-        ];
-        if ki_on {
-            x0.push((gs.ki_pa_per_rad_s as f64).log10());
-        }
+        let x0 = pid_log10_gains(&gs, ki_on);
         let step = vec![0.2; x0.len()];
         let r = nelder_mead(
-            |x| ctx.cost(ControlLaw::DirectPid(to_gains(x))) / cs,
+            |x| ctx.cost(ControlLaw::DirectPid(pid_from_log10(x, ki_on, &gs))) / cs,
             &x0,
             &step,
             2e-3,
             120,
         );
-        nm_points += r.evaluations;
+        points += r.evaluations;
         let (g, c) = if r.cost < 1.0 {
-            (to_gains(&r.x), r.cost * cs)
+            (pid_from_log10(&r.x, ki_on, &gs), r.cost * cs)
         } else {
             (gs, cs)
         };
@@ -428,100 +515,62 @@ fn tune(
             best = Some((g, c));
         }
     }
-    let (g, c) = best.expect("at least the grid start");
-    // Nelder-Mead restarted from its own result until a restart gains less than 1 % (a
-    // simplex that has collapsed in one direction stalls; a fresh one does not).
-    let w = g.setpoint_rate_weight;
-    let (g, c) = restarted_nm(
-        ctx,
-        |g: &DpPidGains| {
-            let mut x = vec![
-                (g.kp_pa_per_rad as f64).log10(),
-                (g.kd_pa_s_per_rad as f64).log10(),
-            ];
-            if ki_on {
-                x.push((g.ki_pa_per_rad_s as f64).log10());
-            }
-            x
-        },
-        |x: &[f64]| DpPidGains {
-            kp_pa_per_rad: 10f64.powf(x[0]) as f32,
-            kd_pa_s_per_rad: 10f64.powf(x[1]) as f32,
-            ki_pa_per_rad_s: if ki_on { 10f64.powf(x[2]) as f32 } else { 0.0 },
-            setpoint_rate_weight: w,
-            ..g
-        },
-        |g: &DpPidGains| ctx.cost(ControlLaw::DirectPid(*g)),
-        g,
-        c,
-        &mut nm_points,
-        name,
-    );
-    // Polish: pattern search with the moves the local-optimum test checks (each gain x0.7 /
-    // x1.4, the derivative's set-point weight flipped), accepting any improvement, until no
-    // move improves.
-    let (g, c, polish_runs) = polish(
-        g,
-        c,
-        |g: &DpPidGains| {
-            let mut moves = Vec::new();
-            for f in [0.7f32, 1.4] {
-                moves.push(DpPidGains {
-                    kp_pa_per_rad: g.kp_pa_per_rad * f,
-                    ..*g
-                });
-                moves.push(DpPidGains {
-                    kd_pa_s_per_rad: g.kd_pa_s_per_rad * f,
-                    ..*g
-                });
-                if ki_on {
-                    moves.push(DpPidGains {
-                        ki_pa_per_rad_s: g.ki_pa_per_rad_s * f,
-                        ..*g
-                    });
-                }
-            }
+    NmFromStarts {
+        best: best.expect("at least the grid start"),
+        points,
+        from,
+    }
+}
+
+/// The search coordinates of PD / PID gains: log10 of kp, kd (and ki with `ki_on`).
+fn pid_log10_gains(g: &DpPidGains, ki_on: bool) -> Vec<f64> {
+    let mut x = vec![
+        (g.kp_pa_per_rad as f64).log10(),
+        (g.kd_pa_s_per_rad as f64).log10(),
+    ];
+    if ki_on {
+        x.push((g.ki_pa_per_rad_s as f64).log10());
+    }
+    x
+}
+
+/// The gains at search coordinates `x` ([`pid_log10_gains`]), the rest (set-point weight,
+/// cut-off, ...) from `base`; ki 0 without `ki_on`.
+fn pid_from_log10(x: &[f64], ki_on: bool, base: &DpPidGains) -> DpPidGains {
+    DpPidGains {
+        kp_pa_per_rad: 10f64.powf(x[0]) as f32,
+        kd_pa_s_per_rad: 10f64.powf(x[1]) as f32,
+        ki_pa_per_rad_s: if ki_on { 10f64.powf(x[2]) as f32 } else { 0.0 },
+        setpoint_rate_weight: base.setpoint_rate_weight,
+        ..*base
+    }
+}
+
+/// The PD / PID polish moves (the local-optimum test's): each gain x0.7, then each x1.4
+/// (kp, kd, and ki with `ki_on`), then the derivative's set-point weight flipped.
+fn pid_polish_moves(g: &DpPidGains, ki_on: bool) -> Vec<DpPidGains> {
+    let mut moves = Vec::new();
+    for f in [0.7f32, 1.4] {
+        moves.push(DpPidGains {
+            kp_pa_per_rad: g.kp_pa_per_rad * f,
+            ..*g
+        });
+        moves.push(DpPidGains {
+            kd_pa_s_per_rad: g.kd_pa_s_per_rad * f,
+            ..*g
+        });
+        if ki_on {
             moves.push(DpPidGains {
-                setpoint_rate_weight: 1.0 - g.setpoint_rate_weight,
+                ki_pa_per_rad_s: g.ki_pa_per_rad_s * f,
                 ..*g
             });
-            moves
-        },
-        |moves: &[DpPidGains]| ctx.costs(moves, threads),
-    );
-    // Re-measure the stored point (f32 rounding of the gains).
-    let (c_check, c_nominal, c_margin) = ctx.cost_cfg(config_for(ControlLaw::DirectPid(g), 1000.0));
-    ctx.say(format!(
-        "{name}: Nelder-Mead {} points in {:.0} s + polish: cost {:.3e} rad^2 (re-measured {:.3e}) at kp {:.4e} kd {:.4e} ki {:.4e} w {}",
-        nm_points,
-        t1.elapsed().as_secs_f64(),
-        c,
-        c_check,
-        g.kp_pa_per_rad,
-        g.kd_pa_s_per_rad,
-        g.ki_pa_per_rad_s,
-        g.setpoint_rate_weight
-    ));
-    let note = format!(
-        "{name}: grid {} points (best cost {:.4e} rad^2), Nelder-Mead {} points from the best grid\n\
-         \x20 point{} (costs after it: {}),\n\
-         \x20 polish {} points -> cost {:.4e} rad^2 (suite MSE {:.4e} rad^2, at the gain margin {:.4e} rad^2, w = {})",
-        grid.len(),
-        cbest,
-        nm_points,
-        if from_stored {
-            " and the stored gains"
-        } else {
-            ""
-        },
-        from.join(", "),
-        polish_runs,
-        c_check,
-        c_nominal,
-        c_margin,
-        g.setpoint_rate_weight
-    );
-    (g, (c_nominal, c_margin), note)
+        }
+    }
+    moves.push(DpPidGains {
+        setpoint_rate_weight: 1.0 - g.setpoint_rate_weight,
+        ..*g
+    });
+    moves
 }
 
 /// The cascade's position-loop gains and torque-loop integral gain, with the feed-forward of
@@ -634,8 +683,105 @@ pub fn run_tune(a: &TuneArgs) -> Result<String> {
     run_tune_text(a).map(|(report, _)| report)
 }
 
-/// [`run_tune`], also returning the text of the gains file it wrote.
+/// [`run_tune`], also returning the text of the gains file it wrote. Steps: the arguments
+/// checked, the tuning context (plant, suites, robust plants), the stored gains, the
+/// cascade from each start, the PD and the PID, the firmware's step tests, the gains file
+/// with its header.
 pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
+    let cascade_starts = check_tune_args(a)?;
+    let ctx = tuning_context(a)?;
+    // --out is replaced at the end: an existing file there must be a gains file (a plant
+    // file or another config picked by a completion slip would be lost after the run).
+    crate::validate::replaceable("--out", &a.out, crate::validate::OutputKind::GAINS)
+        .map_err(anyhow::Error::msg)?;
+    // With --warm-start, the gains stored in the output file are one more start of every search.
+    let stored = if a.warm_start {
+        match ControlTuning::load(&a.out) {
+            Ok(t) => Some(t),
+            Err(e) => {
+                ctx.say(format!("no stored gains to start from ({e})"));
+                None
+            }
+        }
+    } else {
+        None
+    };
+    let t0 = Instant::now();
+    let reference = reference_config(a, &ctx);
+    let starts = cascade_start_points(&reference, stored.as_ref(), cascade_starts);
+    ctx.progress.set_length(2 * starts.len() as u64 + 2);
+    let (cascade, c_best, cascade_from) = best_cascade(&ctx, &reference, starts);
+    if !c_best.is_finite() {
+        ctx.progress.finish_and_clear();
+        bail!(
+            "{}: no cascade gains found that meet the firmware's step tests and keep the suite \
+             stable; nothing written",
+            a.plant.display()
+        );
+    }
+    let (_, c_cascade, c_cascade_margin) = ctx.cost_cfg(cascade);
+    let cutoff_hz = a.setpoint_cutoff_hz;
+    let with_cutoff = |g: DpPidGains| DpPidGains {
+        setpoint_rate_cutoff_hz: cutoff_hz,
+        ..g
+    };
+    let threads = a.threads;
+    // The PD (no integral) then the PID, each from the stored law of its kind with --warm-start.
+    let [(pd, c_pd, note_pd), (pid, c_pid, note_pid)] = [false, true].map(|ki_on| {
+        let start = stored
+            .as_ref()
+            .map(|t| with_cutoff(if ki_on { t.pid.gains() } else { t.pd.gains() }));
+        let tuned = tune(&ctx, ki_on, threads, start);
+        ctx.progress.inc(1);
+        tuned
+    });
+    let (_, c_default, c_default_margin) = ctx.cost_cfg(reference);
+    let step_tests = step_test_lines(
+        &ctx,
+        [
+            ("cascade", cascade),
+            ("PD", config_for(ControlLaw::DirectPid(pd), 1000.0)),
+            ("PID", config_for(ControlLaw::DirectPid(pid), 1000.0)),
+        ],
+    );
+    let tuning = ControlTuning {
+        cascade: CascadeToml::from_config(&cascade, c_cascade, c_cascade_margin),
+        pd: DpPidToml::from_gains(&pd, c_pd.0, c_pd.1),
+        pid: DpPidToml::from_gains(&pid, c_pid.0, c_pid.1),
+    };
+    let header = gains_header(
+        a,
+        &HeaderNotes {
+            step_constraints: ctx.cascade_step_constraints,
+            cascade_from,
+            from_stored: stored.is_some(),
+            note_pd,
+            note_pid,
+            step_tests: step_tests.clone(),
+            c_default,
+            c_default_margin,
+        },
+    );
+    ctx.progress.finish_and_clear();
+    tuning.write(&a.out, &header)?;
+    let text = tuning.to_toml_string(&header);
+    let log = ctx.log.lock().expect("log lock").join("\n");
+    let report = format!(
+        "{log}\n{}\nwrote {} ({} suite runs, {:.0} s)\n",
+        step_tests.join("\n"),
+        a.out.display(),
+        ctx.runs.load(Ordering::Relaxed),
+        t0.elapsed().as_secs_f64()
+    );
+    Ok((report, text))
+}
+
+/// A cascade start point: kp, ki, kd and, when given, the torque loop's ki.
+type CascadeStart = (f32, f32, f32, Option<f32>);
+
+/// Checks the ranges of `--threads`, `--setpoint-cutoff-hz` and `--transition-s` and that
+/// `--out` is not `--plant`; returns the `--cascade-start` points.
+fn check_tune_args(a: &TuneArgs) -> Result<Vec<CascadeStart>> {
     if !(1..=256).contains(&a.threads) {
         bail!("--threads {}: allowed 1..=256", a.threads);
     }
@@ -652,27 +798,38 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
     }
     crate::validate::distinct_file_outputs(&[("--plant", &a.plant)], &[("--out", &a.out)])
         .map_err(anyhow::Error::msg)?;
-    let mut cascade_starts: Vec<(f32, f32, f32, Option<f32>)> = Vec::new();
-    for s in &a.cascade_start {
-        let v: Vec<f32> = s
-            .split(',')
-            .map(|x| x.trim().parse::<f32>())
-            .collect::<Result<_, _>>()
-            .with_context(|| format!("--cascade-start {s}: KP,KI,KD[,TORQUE_KI], numbers"))?;
-        if !(3..=4).contains(&v.len()) || v.iter().any(|x| !(*x > 0.0 && x.is_finite())) {
-            bail!("--cascade-start {s}: KP,KI,KD[,TORQUE_KI], each > 0");
-        }
-        for (x, (key, max)) in v.iter().zip(CascadeToml::GAIN_MAX) {
-            if f64::from(*x) > max {
-                bail!(
-                    "--cascade-start {s}: {key} {x} is above {max:e}, the largest a gains file \
-                     loads"
-                );
-            }
-        }
-        cascade_starts.push((v[0], v[1], v[2], v.get(3).copied()));
+    a.cascade_start
+        .iter()
+        .map(|s| parse_cascade_start(s))
+        .collect()
+}
+
+/// One `--cascade-start KP,KI,KD[,TORQUE_KI]`: 3 or 4 finite numbers, each > 0 and at most
+/// what a gains file loads ([`CascadeToml::GAIN_MAX`]).
+fn parse_cascade_start(s: &str) -> Result<CascadeStart> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("--cascade-start {s}: KP,KI,KD[,TORQUE_KI], numbers"))?;
+    if !(3..=4).contains(&v.len()) || v.iter().any(|x| !(*x > 0.0 && x.is_finite())) {
+        bail!("--cascade-start {s}: KP,KI,KD[,TORQUE_KI], each > 0");
     }
-    let cutoff_hz = a.setpoint_cutoff_hz;
+    for (x, (key, max)) in v.iter().zip(CascadeToml::GAIN_MAX) {
+        if f64::from(*x) > max {
+            bail!(
+                "--cascade-start {s}: {key} {x} is above {max:e}, the largest a gains file \
+                 loads"
+            );
+        }
+    }
+    Ok((v[0], v[1], v[2], v.get(3).copied()))
+}
+
+/// The tuning's context: the plant, the suite (with `--transition-s`), the progress bar, the
+/// `--robust` condition plants and the stability suite; the log opened with what the run
+/// tunes on.
+fn tuning_context(a: &TuneArgs) -> Result<Ctx> {
     let plant = Plant::load(&a.plant)?;
     let mut scenarios = suite_scenarios()?;
     if let Some(t) = a.transition_s {
@@ -691,25 +848,7 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
         .progress_chars("=> "),
     );
     progress.enable_steady_tick(std::time::Duration::from_millis(200));
-    let (mut robust_cost, mut robust_stable) = (Vec::new(), Vec::new());
-    if a.robust {
-        let text = std::fs::read_to_string(&a.plant)
-            .with_context(|| format!("reading {}", a.plant.display()))?;
-        let file = a.plant.display().to_string();
-        for (which, out) in [
-            (&ROBUST_COST_CONDITIONS[..], &mut robust_cost),
-            (&ROBUST_STABLE_CONDITIONS[..], &mut robust_stable),
-        ] {
-            for &i in which.iter().filter(|&&i| i != 0) {
-                let (name, effects, inertia) = CONDITIONS[i];
-                out.push((
-                    try_condition_plant(&text, effects, inertia, &file)
-                        .with_context(|| format!("--robust: {file} with {name}"))?,
-                    name,
-                ));
-            }
-        }
-    }
+    let (robust_cost, mut robust_stable) = robust_plants(a)?;
     if a.stable_on_jumps {
         robust_stable.push((Plant::load(&a.plant)?, "nominal"));
     }
@@ -725,7 +864,7 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
         scenarios,
         stability_scenarios,
         runs: AtomicUsize::new(0),
-        cutoff_hz,
+        cutoff_hz: a.setpoint_cutoff_hz,
         progress,
         log: Mutex::new(Vec::new()),
         cascade_step_constraints: !a.no_step_constraints,
@@ -750,27 +889,40 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
                 .into(),
         );
     }
-    // --out is replaced at the end: an existing file there must be a gains file (a plant
-    // file or another config picked by a completion slip would be lost after the run).
-    crate::validate::replaceable("--out", &a.out, crate::validate::OutputKind::GAINS)
-        .map_err(anyhow::Error::msg)?;
-    // With --warm-start, the gains stored in the output file are one more start of every search.
-    let stored = if a.warm_start {
-        match ControlTuning::load(&a.out) {
-            Ok(t) => Some(t),
-            Err(e) => {
-                ctx.say(format!("no stored gains to start from ({e})"));
-                None
+    Ok(ctx)
+}
+
+/// A plant of the tuning with the name of its condition.
+type ConditionPlant = (Plant, &'static str);
+
+/// With `--robust`: the plants of [`ROBUST_COST_CONDITIONS`] and of
+/// [`ROBUST_STABLE_CONDITIONS`] (the nominal one left out), from the plant file.
+fn robust_plants(a: &TuneArgs) -> Result<(Vec<ConditionPlant>, Vec<ConditionPlant>)> {
+    let (mut robust_cost, mut robust_stable) = (Vec::new(), Vec::new());
+    if a.robust {
+        let text = std::fs::read_to_string(&a.plant)
+            .with_context(|| format!("reading {}", a.plant.display()))?;
+        let file = a.plant.display().to_string();
+        for (which, out) in [
+            (&ROBUST_COST_CONDITIONS[..], &mut robust_cost),
+            (&ROBUST_STABLE_CONDITIONS[..], &mut robust_stable),
+        ] {
+            for &i in which.iter().filter(|&&i| i != 0) {
+                let (name, effects, inertia) = CONDITIONS[i];
+                out.push((
+                    try_condition_plant(&text, effects, inertia, &file)
+                        .with_context(|| format!("--robust: {file} with {name}"))?,
+                    name,
+                ));
             }
         }
-    } else {
-        None
-    };
-    let t0 = Instant::now();
+    }
+    Ok((robust_cost, robust_stable))
+}
 
-    // The cascade: start points (kp, ki, kd[, torque ki]) = the gains tuned before the
-    // feed-forward existed, the firmware's default gains, the stored tuning, any given with
-    // --cascade-start; each with the inertia feed-forward off and on (J of the plant).
+/// The cascade's reference configuration: the firmware's, with `--outer-period-ticks`, and
+/// with `--pressure-ff` the pressure feed-forward on (evaluated every `--ff-update-ticks`).
+fn reference_config(a: &TuneArgs, ctx: &Ctx) -> ControllerConfig {
     let mut reference = ControllerConfig::reference(1000.0);
     if let Some(n) = a.outer_period_ticks {
         reference.outer_period_ticks = n;
@@ -787,6 +939,17 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
             ctx.say(format!("feed-forward evaluated every {n} tick(s)"));
         }
     }
+    reference
+}
+
+/// The cascade's start points (kp, ki, kd[, torque ki]): the gains tuned before the
+/// feed-forward existed, the firmware's default gains, the stored tuning, then any given
+/// with --cascade-start.
+fn cascade_start_points(
+    reference: &ControllerConfig,
+    stored: Option<&ControlTuning>,
+    given: Vec<CascadeStart>,
+) -> Vec<CascadeStart> {
     let mut starts = vec![
         (11.0, 8.0, 0.8, None),
         (
@@ -796,7 +959,7 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
             Some(reference.torque.ki_per_s),
         ),
     ];
-    if let Some(t) = &stored {
+    if let Some(t) = stored {
         let c = t.cascade.config(1000.0);
         starts.push((
             c.position.kp_nm_per_rad,
@@ -805,21 +968,30 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
             Some(c.torque.ki_per_s),
         ));
     }
-    starts.extend(cascade_starts);
-    ctx.progress.set_length(2 * starts.len() as u64 + 2);
+    starts.extend(given);
+    starts
+}
+
+/// The cascade tuned ([`tune_cascade`]) from each start with the inertia feed-forward off
+/// and on (J of the plant): the best configuration, its cost and one line per start.
+fn best_cascade(
+    ctx: &Ctx,
+    reference: &ControllerConfig,
+    starts: Vec<CascadeStart>,
+) -> (ControllerConfig, f64, Vec<String>) {
     let j_plant = ctx.plant.joint.inertia_kgm2 as f32;
     let mut best_cascade: Option<(ControllerConfig, f64)> = None;
     let mut cascade_from = Vec::new();
     for (kp, ki, kd, torque_ki) in starts {
         for j_kgm2 in [0.0f32, j_plant] {
-            let mut start = reference;
+            let mut start = *reference;
             start.position.kp_nm_per_rad = kp;
             start.position.ki_nm_per_rad_s = ki;
             start.position.kd_nm_s_per_rad = kd;
             start.torque.ki_per_s = torque_ki.unwrap_or(reference.torque.ki_per_s);
             start.feedforward.inertia_kgm2 = j_kgm2;
-            start.feedforward.cutoff_hz = cutoff_hz;
-            let (cfg, c) = tune_cascade(&ctx, start);
+            start.feedforward.cutoff_hz = ctx.cutoff_hz;
+            let (cfg, c) = tune_cascade(ctx, start);
             ctx.progress.inc(1);
             cascade_from.push(format!(
                 "({kp:.4}, {ki:.4}, {kd:.4}, {:.4}, J {j_kgm2}) -> {c:.4e}",
@@ -831,37 +1003,13 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
         }
     }
     let (cascade, c_best) = best_cascade.expect("at least one start");
-    if !c_best.is_finite() {
-        ctx.progress.finish_and_clear();
-        bail!(
-            "{}: no cascade gains found that meet the firmware's step tests and keep the suite \
-             stable; nothing written",
-            a.plant.display()
-        );
-    }
-    let (_, c_cascade, c_cascade_margin) = ctx.cost_cfg(cascade);
+    (cascade, c_best, cascade_from)
+}
 
-    let with_cutoff = |g: DpPidGains| DpPidGains {
-        setpoint_rate_cutoff_hz: cutoff_hz,
-        ..g
-    };
-    let threads = a.threads;
-    // The PD (no integral) then the PID, each from the stored law of its kind with --warm-start.
-    let [(pd, c_pd, note_pd), (pid, c_pid, note_pid)] = [false, true].map(|ki_on| {
-        let start = stored
-            .as_ref()
-            .map(|t| with_cutoff(if ki_on { t.pid.gains() } else { t.pd.gains() }));
-        let tuned = tune(&ctx, ki_on, threads, start);
-        ctx.progress.inc(1);
-        tuned
-    });
-    let (_, c_default, c_default_margin) = ctx.cost_cfg(reference);
+/// One line per law: the firmware's step tests ([`STEP_REQUIREMENTS`]) passed or failed.
+fn step_test_lines(ctx: &Ctx, laws: [(&str, ControllerConfig); 3]) -> Vec<String> {
     let mut step_tests = Vec::new();
-    for (name, cfg) in [
-        ("cascade", cascade),
-        ("PD", config_for(ControlLaw::DirectPid(pd), 1000.0)),
-        ("PID", config_for(ControlLaw::DirectPid(pid), 1000.0)),
-    ] {
+    for (name, cfg) in laws {
         let passed: Vec<String> = STEP_REQUIREMENTS
             .iter()
             .map(|r| {
@@ -875,12 +1023,31 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
             .collect();
         step_tests.push(format!("{name}: {}", passed.join(", ")));
     }
-    let tuning = ControlTuning {
-        cascade: CascadeToml::from_config(&cascade, c_cascade, c_cascade_margin),
-        pd: DpPidToml::from_gains(&pd, c_pd.0, c_pd.1),
-        pid: DpPidToml::from_gains(&pid, c_pid.0, c_pid.1),
-    };
-    let header = format!(
+    step_tests
+}
+
+/// What the gains file's header reports of the run besides its arguments.
+struct HeaderNotes {
+    /// The cascade had to meet the firmware's step tests.
+    step_constraints: bool,
+    /// One line per cascade start.
+    cascade_from: Vec<String>,
+    /// The searches also started from the stored gains.
+    from_stored: bool,
+    note_pd: String,
+    note_pid: String,
+    step_tests: Vec<String>,
+    /// The cascade's cost with the firmware's default gains, and at the gain margin.
+    c_default: f64,
+    c_default_margin: f64,
+}
+
+/// The gains file's header: what each law is, how it was tuned, the command that wrote the
+/// file (every option that changes the result), the step tests and the default gains' cost.
+fn gains_header(a: &TuneArgs, notes: &HeaderNotes) -> String {
+    let cutoff_hz = a.setpoint_cutoff_hz;
+    let (note_pd, note_pid) = (&notes.note_pd, &notes.note_pid);
+    format!(
         "The three laws of the closed-loop comparison, each tuned on the suite\n\
          (host-sim control::compare::SUITE) by the same procedure and cost. Written by\n\
          \x20 host-sim tune --plant {} --out {}{}{}{}{}{}{}{}{}\n\
@@ -936,36 +1103,77 @@ pub fn run_tune_text(a: &TuneArgs) -> Result<(String, String)> {
         .filter(|(on, _)| *on)
         .map(|(_, note)| format!("\n{note}"))
         .collect::<String>(),
-        if ctx.cascade_step_constraints {
+        if notes.step_constraints {
             ", the firmware's step tests imposed"
         } else {
             ""
         },
-        cascade_from.join("\n  "),
-        if stored.is_some() {
+        notes.cascade_from.join("\n  "),
+        if notes.from_stored {
             " and from the stored gains"
         } else {
             ""
         },
-        if ctx.cascade_step_constraints {
+        if notes.step_constraints {
             ""
         } else {
             ", reported, not imposed (--no-step-constraints)"
         },
-        step_tests.join("\n  "),
-        c_default,
-        c_default_margin
-    );
-    ctx.progress.finish_and_clear();
-    tuning.write(&a.out, &header)?;
-    let text = tuning.to_toml_string(&header);
-    let log = ctx.log.lock().expect("log lock").join("\n");
-    let report = format!(
-        "{log}\n{}\nwrote {} ({} suite runs, {:.0} s)\n",
-        step_tests.join("\n"),
-        a.out.display(),
-        ctx.runs.load(Ordering::Relaxed),
-        t0.elapsed().as_secs_f64()
-    );
-    Ok((report, text))
+        notes.step_tests.join("\n  "),
+        notes.c_default,
+        notes.c_default_margin
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_cascade_start_takes_three_or_four_positive_gains_within_a_gains_files_range() {
+        assert_eq!(
+            parse_cascade_start("11, 8,0.8").unwrap(),
+            (11.0, 8.0, 0.8, None)
+        );
+        assert_eq!(
+            parse_cascade_start("11,8,0.8,40").unwrap(),
+            (11.0, 8.0, 0.8, Some(40.0))
+        );
+        for bad in [
+            "11,8",
+            "11,8,0.8,40,1",
+            "11,-8,0.8",
+            "11,eight,0.8",
+            "11,8,inf",
+        ] {
+            assert!(parse_cascade_start(bad).is_err(), "{bad}");
+        }
+        let (key, max) = CascadeToml::GAIN_MAX[0];
+        let err = parse_cascade_start(&format!("{},1,1", 2.0 * max)).unwrap_err();
+        assert!(err.to_string().contains(key), "{err}");
+    }
+
+    #[test]
+    fn the_pid_polish_moves_each_gain_both_ways_and_flips_the_rate_weight() {
+        let g = gains(true, 20.0, 0.0, 1e5, 1e3, 1e4);
+        let moves = pid_polish_moves(&g, true);
+        assert_eq!(moves.len(), 7);
+        assert_eq!(moves[0].kp_pa_per_rad, g.kp_pa_per_rad * 0.7);
+        assert_eq!(moves[5].ki_pa_per_rad_s, g.ki_pa_per_rad_s * 1.4);
+        assert_eq!(moves[6].setpoint_rate_weight, 1.0);
+        // Without an integral the ki moves are left out.
+        assert_eq!(pid_polish_moves(&g, false).len(), 5);
+    }
+
+    #[test]
+    fn pid_search_coordinates_are_log10_gains_and_ki_is_zero_without_an_integral() {
+        let g = gains(true, 20.0, 1.0, 1e5, 1e3, 1e4);
+        let x = pid_log10_gains(&g, true);
+        assert_eq!(x.len(), 3);
+        assert!((x[0] - 5.0).abs() < 1e-6 && (x[2] - 4.0).abs() < 1e-6);
+        let back = pid_from_log10(&x, true, &g);
+        assert!((back.kd_pa_s_per_rad / g.kd_pa_s_per_rad - 1.0).abs() < 1e-6);
+        assert_eq!(back.setpoint_rate_weight, 1.0);
+        assert_eq!(pid_from_log10(&x[..2], false, &g).ki_pa_per_rad_s, 0.0);
+    }
 }

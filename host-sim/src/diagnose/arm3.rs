@@ -223,7 +223,8 @@ const SUPPLY_KEY: &str = "environment.supply_gauge_pa";
 /// the supply, or when the best form does not raise the mean held-out fit of the whole-arm
 /// replay by at least one point, lowers any channel's by more than half a point, or leaves
 /// any channel's held-out fit below the 1-DOF verdict's `min_heldout_fit_pct` (an answer
-/// that does not reproduce the held-out data is not an answer).
+/// that does not reproduce the held-out data is not an answer). Steps: the joints that name
+/// the supply, the arm's start, each form fitted, the best replayed and judged.
 pub fn shared_supply(
     cfg: &Arm3Config,
     rec: &Arm3Recording,
@@ -239,26 +240,117 @@ pub fn shared_supply(
     if named_by.len() < 2 {
         return Ok(None);
     }
-    let n = rec.len();
-    let n_fit = ((n as f64 * opts.fit_fraction).round() as usize).clamp(2, n.saturating_sub(2));
-    let dt = rec.sample_period_s();
-    let solver = crate::sim::SolverOptions::default();
-    // Every recorded channel with its spread over the whole recording.
-    let mut channels = Vec::new();
-    for j in 0..JOINTS {
-        for ch in Channel::ALL {
-            let Some(y) = rec.channel(j, ch) else {
-                continue;
-            };
-            let mean = y.iter().sum::<f64>() / n as f64;
-            let sd = (y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n as f64).sqrt();
-            channels.push((j, ch, y, if sd > 0.0 { sd } else { 1.0 }));
+    let arm = ArmReplay::new(rec, opts);
+    // The arm starts as the file says, or (when another key is off, e.g. the initial
+    // pressures with the supply) from the recording's first sample, whichever the nominal
+    // arm replays better: the joints' stage makes the same choice.
+    let Some(from_file) = arm.fits(cfg) else {
+        return Ok(None);
+    };
+    let recorded = arm_started_as_recorded(cfg, rec);
+    let (base, before) = match arm.fits(&recorded) {
+        Some(v) if mean_fit(&v, false) > mean_fit(&from_file, false) => (recorded, v),
+        _ => (cfg.clone(), from_file),
+    };
+    let nominal_gauge_pa = cfg.environment.supply_gauge_pa;
+    let cost = |f: SupplyForm| match arm.fits(&with_supply_form(&base, &f)) {
+        Some(v) => -mean_fit(&v, false),
+        None => f64::INFINITY,
+    };
+    let start_pa = named_supply_pa(joints).unwrap_or(nominal_gauge_pa).max(1.0);
+    // Starts: the median supply pressure the joints named (the nominal one if none named
+    // a value); 3e6 Pa s/m^3; a 1 L tank fed through 3e-8 m^3/(s Pa).
+    let fits = [
+        crate::optimize::nelder_mead(
+            |x| cost(supply_form(0, x, nominal_gauge_pa)),
+            &[start_pa.log10()],
+            &[0.02],
+            1e-3,
+            30,
+        ),
+        crate::optimize::nelder_mead(
+            |x| cost(supply_form(1, x, nominal_gauge_pa)),
+            &[6.5],
+            &[0.5],
+            1e-3,
+            40,
+        ),
+        crate::optimize::nelder_mead(
+            |x| cost(supply_form(2, x, nominal_gauge_pa)),
+            &[-3.0, -7.5],
+            &[0.5, 0.5],
+            1e-3,
+            60,
+        ),
+    ];
+    let evaluations = 1 + fits.iter().map(|f| f.evaluations).sum::<usize>();
+    let Some((which, best)) = fits
+        .iter()
+        .enumerate()
+        .min_by(|a, b| a.1.cost.total_cmp(&b.1.cost))
+    else {
+        return Ok(None);
+    };
+    let form = supply_form(which, &best.x, nominal_gauge_pa);
+    let Some(after) = arm.fits(&with_supply_form(&base, &form)) else {
+        return Ok(None);
+    };
+    Ok(
+        supply_answer_holds(&before, &after, opts.min_heldout_fit_pct).then(|| SharedSupply {
+            form,
+            named_by,
+            heldout_fits: before
+                .iter()
+                .zip(&after)
+                .map(|(b, a)| (b.0.clone(), b.2, a.2))
+                .collect(),
+            evaluations,
+        }),
+    )
+}
+
+/// Per channel of a whole-arm replay: (column, head fit, tail fit) [%].
+type ChannelFits = Vec<(String, f64, f64)>;
+
+/// The whole-arm replay of a recording, scored per channel on its head and its tail.
+struct ArmReplay<'a> {
+    rec: &'a Arm3Recording,
+    /// Every recorded channel: (joint, channel, values, spread over the whole recording).
+    channels: Vec<(usize, Channel, &'a [f64], f64)>,
+    /// Samples of the head (the rest is held out).
+    n_fit: usize,
+    dt: f64,
+    solver: crate::sim::SolverOptions,
+}
+
+impl<'a> ArmReplay<'a> {
+    fn new(rec: &'a Arm3Recording, opts: &DiagnoseOptions) -> Self {
+        let n = rec.len();
+        let mut channels = Vec::new();
+        for j in 0..JOINTS {
+            for ch in Channel::ALL {
+                let Some(y) = rec.channel(j, ch) else {
+                    continue;
+                };
+                let mean = y.iter().sum::<f64>() / n as f64;
+                let sd = (y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n as f64).sqrt();
+                channels.push((j, ch, y, if sd > 0.0 { sd } else { 1.0 }));
+            }
+        }
+        ArmReplay {
+            rec,
+            channels,
+            n_fit: ((n as f64 * opts.fit_fraction).round() as usize).clamp(2, n.saturating_sub(2)),
+            dt: rec.sample_period_s(),
+            solver: crate::sim::SolverOptions::default(),
         }
     }
-    // Per channel: (column, head fit, tail fit) of the arm replay under `c`.
-    let replay = |c: &Arm3Config| -> Option<Vec<(String, f64, f64)>> {
+
+    /// The channels' fits of the arm replay under `c`; `None` when it does not replay.
+    fn fits(&self, c: &Arm3Config) -> Option<ChannelFits> {
+        let (dt, n_fit) = (self.dt, self.n_fit);
         let arm = Arm3::from_config(c).ok()?;
-        let sim = simulate_arm3(&arm, &rec.inputs, dt, &solver, |_| {}).ok()?;
+        let sim = simulate_arm3(&arm, &self.rec.inputs, dt, &self.solver, |_| {}).ok()?;
         let meas = arm.measure_run(&sim.states, dt);
         let fit = |y: &[f64], k0: usize, j: usize, ch: Channel, sd: f64| {
             let sum_sq: f64 = y
@@ -269,7 +361,7 @@ pub fn shared_supply(
             crate::diagnose::verdict::fit_vs_spread_of_sum(sum_sq, y.len(), sd)
         };
         Some(
-            channels
+            self.channels
                 .iter()
                 .map(|(j, ch, y, sd)| {
                     (
@@ -280,61 +372,55 @@ pub fn shared_supply(
                 })
                 .collect(),
         )
-    };
-    let mean = |v: &[(String, f64, f64)], tail: bool| {
-        v.iter().map(|c| if tail { c.2 } else { c.1 }).sum::<f64>() / v.len().max(1) as f64
-    };
-    // The arm starts as the file says, or (when another key is off, e.g. the initial
-    // pressures with the supply) from the recording's first sample, whichever the nominal
-    // arm replays better: the joints' stage makes the same choice.
-    let Some(from_file) = replay(cfg) else {
-        return Ok(None);
-    };
-    let recorded = arm_started_as_recorded(cfg, rec);
-    let (base, before) = match replay(&recorded) {
-        Some(v) if mean(&v, false) > mean(&from_file, false) => (recorded, v),
-        _ => (cfg.clone(), from_file),
-    };
-    let with_form = |form: &SupplyForm| {
-        let mut c = base.clone();
-        match form {
-            SupplyForm::Pressure {
-                fitted_gauge_pa, ..
-            } => c.environment.supply_gauge_pa = *fitted_gauge_pa,
-            SupplyForm::Drop(t) => c.effects.supply_drop = Some(t.clone()),
-        }
-        c
-    };
-    // log10 of the parameters -> the form.
-    let nominal_gauge_pa = cfg.environment.supply_gauge_pa;
-    let pressure_form = |x: &[f64]| SupplyForm::Pressure {
-        nominal_gauge_pa,
-        fitted_gauge_pa: 10f64.powf(x[0]),
-    };
-    let static_form = |x: &[f64]| {
-        SupplyForm::Drop(SupplyDrop {
+    }
+}
+
+/// The mean over the channels of the head fits (or, `tail`, the tail fits).
+fn mean_fit(v: &[(String, f64, f64)], tail: bool) -> f64 {
+    v.iter().map(|c| if tail { c.2 } else { c.1 }).sum::<f64>() / v.len().max(1) as f64
+}
+
+/// `base` with the supply of `form`.
+fn with_supply_form(base: &Arm3Config, form: &SupplyForm) -> Arm3Config {
+    let mut c = base.clone();
+    match form {
+        SupplyForm::Pressure {
+            fitted_gauge_pa, ..
+        } => c.environment.supply_gauge_pa = *fitted_gauge_pa,
+        SupplyForm::Drop(t) => c.effects.supply_drop = Some(t.clone()),
+    }
+    c
+}
+
+/// Supply form `which` at search coordinates `x` (log10 of its parameters): 0 a supply
+/// pressure [Pa gauge], 1 a static drop (its resistance [Pa s/m^3]), 2 a reservoir (its tank
+/// volume [m^3] and feed conductance [m^3/(s Pa)]).
+fn supply_form(which: usize, x: &[f64], nominal_gauge_pa: f64) -> SupplyForm {
+    match which {
+        0 => SupplyForm::Pressure {
+            nominal_gauge_pa,
+            fitted_gauge_pa: 10f64.powf(x[0]),
+        },
+        1 => SupplyForm::Drop(SupplyDrop {
             enabled: true,
             model: SupplyDropModel::Static,
             resistance_pa_s_per_m3: Some(10f64.powf(x[0])),
             tank_volume_m3: None,
             feed_conductance_m3_per_s_pa: None,
-        })
-    };
-    let tank_form = |x: &[f64]| {
-        SupplyForm::Drop(SupplyDrop {
+        }),
+        _ => SupplyForm::Drop(SupplyDrop {
             enabled: true,
             model: SupplyDropModel::Reservoir,
             resistance_pa_s_per_m3: None,
             tank_volume_m3: Some(10f64.powf(x[0])),
             feed_conductance_m3_per_s_pa: Some(10f64.powf(x[1])),
-        })
-    };
-    let cost = |f: SupplyForm| match replay(&with_form(&f)) {
-        Some(v) => -mean(&v, false),
-        None => f64::INFINITY,
-    };
-    // Starts: the median supply pressure the joints named (the nominal one if none named
-    // a value); 3e6 Pa s/m^3; a 1 L tank fed through 3e-8 m^3/(s Pa).
+        }),
+    }
+}
+
+/// The median supply pressure the joints' answers recalibrated [Pa gauge] (the upper of the
+/// two middle ones); `None` when none named a value.
+fn named_supply_pa(joints: &[Diagnosis]) -> Option<f64> {
     let mut named_pa: Vec<f64> = joints
         .iter()
         .filter(|d| !d.nothing_missing)
@@ -343,64 +429,22 @@ pub fn shared_supply(
         .map(|r| r.fitted)
         .collect();
     named_pa.sort_by(f64::total_cmp);
-    let start_pa = named_pa
-        .get(named_pa.len() / 2)
-        .copied()
-        .unwrap_or(nominal_gauge_pa)
-        .max(1.0);
-    let fits = [
-        (
-            crate::optimize::nelder_mead(
-                |x| cost(pressure_form(x)),
-                &[start_pa.log10()],
-                &[0.02],
-                1e-3,
-                30,
-            ),
-            0,
-        ),
-        (
-            crate::optimize::nelder_mead(|x| cost(static_form(x)), &[6.5], &[0.5], 1e-3, 40),
-            1,
-        ),
-        (
-            crate::optimize::nelder_mead(
-                |x| cost(tank_form(x)),
-                &[-3.0, -7.5],
-                &[0.5, 0.5],
-                1e-3,
-                60,
-            ),
-            2,
-        ),
-    ];
-    let evaluations = 1 + fits.iter().map(|f| f.0.evaluations).sum::<usize>();
-    let Some((best, which)) = fits.iter().min_by(|a, b| a.0.cost.total_cmp(&b.0.cost)) else {
-        return Ok(None);
-    };
-    let form = match which {
-        0 => pressure_form(&best.x),
-        1 => static_form(&best.x),
-        _ => tank_form(&best.x),
-    };
-    let Some(after) = replay(&with_form(&form)) else {
-        return Ok(None);
-    };
-    let improves = mean(&after, true) >= mean(&before, true) + 1.0
+    named_pa.get(named_pa.len() / 2).copied()
+}
+
+/// The shared supply is an answer when it raises the mean held-out fit by at least one
+/// point, lowers no channel's by more than half a point, and leaves every channel's at least
+/// `min_heldout_fit_pct`.
+fn supply_answer_holds(
+    before: &[(String, f64, f64)],
+    after: &[(String, f64, f64)],
+    min_heldout_fit_pct: f64,
+) -> bool {
+    mean_fit(after, true) >= mean_fit(before, true) + 1.0
         && after
             .iter()
-            .zip(&before)
-            .all(|(a, b)| a.2 >= b.2 - 0.5 && a.2 >= opts.min_heldout_fit_pct);
-    Ok(improves.then(|| SharedSupply {
-        form,
-        named_by,
-        heldout_fits: before
-            .iter()
-            .zip(&after)
-            .map(|(b, a)| (b.0.clone(), b.2, a.2))
-            .collect(),
-        evaluations,
-    }))
+            .zip(before)
+            .all(|(a, b)| a.2 >= b.2 - 0.5 && a.2 >= min_heldout_fit_pct)
 }
 
 impl ArmDiagnosis {
@@ -830,4 +874,47 @@ pub fn diagnose_arm(
         shared_supply,
         angle_misrecorded: offending.iter().map(|j| j + 1).collect(),
     })
+}
+
+#[cfg(test)]
+mod supply_tests {
+    use super::*;
+
+    fn fits(tail: &[f64]) -> Vec<(String, f64, f64)> {
+        tail.iter()
+            .enumerate()
+            .map(|(i, t)| (format!("c{i}"), 0.0, *t))
+            .collect()
+    }
+
+    #[test]
+    fn a_shared_supply_must_raise_the_mean_held_out_fit_a_point_and_hold_every_channel() {
+        let before = fits(&[80.0, 90.0]);
+        assert!(supply_answer_holds(&before, &fits(&[82.0, 90.0]), 50.0));
+        // Half a point more on the mean is not enough.
+        assert!(!supply_answer_holds(&before, &fits(&[81.0, 90.0]), 50.0));
+        // One channel losing more than half a point is refused whatever the mean gains.
+        assert!(!supply_answer_holds(&before, &fits(&[95.0, 89.4]), 50.0));
+        // Every channel must reach the verdict's floor.
+        assert!(!supply_answer_holds(&before, &fits(&[82.0, 90.0]), 85.0));
+    }
+
+    #[test]
+    fn supply_forms_take_log10_parameters() {
+        match supply_form(0, &[5.0], 6e5) {
+            SupplyForm::Pressure {
+                nominal_gauge_pa,
+                fitted_gauge_pa,
+            } => {
+                assert_eq!(nominal_gauge_pa, 6e5);
+                assert!((fitted_gauge_pa / 1e5 - 1.0).abs() < 1e-12);
+            }
+            SupplyForm::Drop(_) => panic!("a pressure"),
+        }
+        let tank = supply_form(2, &[-3.0, -7.5], 6e5);
+        let t = tank.supply_drop().expect("a drop");
+        assert_eq!(t.model, SupplyDropModel::Reservoir);
+        assert!((t.tank_volume_m3.unwrap() / 1e-3 - 1.0).abs() < 1e-12);
+        assert!(t.resistance_pa_s_per_m3.is_none());
+    }
 }

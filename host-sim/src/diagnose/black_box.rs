@@ -275,7 +275,9 @@ pub fn fit(
 
 /// [`fit`] from nominal runs that are streamed (TRAIN's head is held for the fit): the
 /// regressor matrices of the fit range only, the held-out tail and CHECK (its nominal
-/// stream) scored row by row. `None` also when a stream's simulation fails.
+/// stream) scored row by row. `None` also when a stream's simulation fails. Steps: the
+/// bases with their ridge factors, every channel's candidate coefficients, their held-out
+/// scores, the choice per channel, CHECK scored.
 pub fn fit_streamed(
     train: &Recording,
     train_nominal: &NominalRun,
@@ -283,20 +285,95 @@ pub fn fit_streamed(
     held: Range<usize>,
     check: Option<(&Recording, NominalStream)>,
 ) -> Option<BlackBox> {
-    // Two bases: the valve inputs alone, and with the nominal channels. Each with its
-    // fit matrix and the Cholesky factors of its ridge-regularised normal matrices.
-    struct Variant {
-        basis: Basis,
-        x_fit: DMatrix<f64>,
-        chols: Vec<(f64, nalgebra::Cholesky<f64, nalgebra::Dyn>)>,
-    }
     if held.is_empty() || train_nominal.head.len() < fit.end {
         return None;
     }
     let scales = Basis::scales(train, train_nominal)?;
+    let variants = fit_variants(train, train_nominal, &scales, &fit);
+    if variants.is_empty() {
+        return None;
+    }
+    let trials = candidate_coefficients(train, train_nominal, &fit, &variants);
+    // The fit matrices are no longer needed.
+    let bases: Vec<Basis> = variants.into_iter().map(|v| v.basis).collect();
+    // The held-out scores of every trial, summed row by row over the tail of TRAIN:
+    // `fit_percent` of the nominal and of the corrected channel (their error sums).
+    let scored = score(train, train_nominal.stream, held.clone(), &bases, &trials)?;
+    let mut b = BlackBox {
+        heldout: BTreeMap::new(),
+        check: None,
+        corrected: Vec::new(),
+        regressors: BTreeMap::new(),
+        ridge: BTreeMap::new(),
+    };
+    let mut chosen: Vec<(Channel, usize, usize)> = Vec::new();
+    for c in Channel::ALL {
+        let Some(y) = train.channel(c) else {
+            continue;
+        };
+        let ys = &y[held.clone()];
+        let fits = |t: usize| {
+            let (nom, after) = scored[t];
+            (fit_percent_of_err2(ys, nom), fit_percent_of_err2(ys, after))
+        };
+        // Per basis the trial with the best held-out fit.
+        let per_basis: Vec<Option<(usize, (f64, f64))>> = (0..bases.len())
+            .map(|vi| {
+                let mut own: Option<(usize, (f64, f64))> = None;
+                for (t, _) in trials
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, tr)| tr.0 == c && tr.1 == vi)
+                {
+                    let h = fits(t);
+                    if own.as_ref().is_none_or(|b| h.1 > b.1 .1) {
+                        own = Some((t, h));
+                    }
+                }
+                own
+            })
+            .collect();
+        let Some((t, h)) = pick_basis(&per_basis) else {
+            continue;
+        };
+        let (_, vi, rel, _) = &trials[t];
+        b.regressors.insert(c.name(), bases[*vi].width());
+        b.heldout.insert(c.name(), h);
+        b.ridge.insert(c.name(), *rel);
+        chosen.push((c, *vi, t));
+        if h.1 > h.0 {
+            b.corrected.push(c.name());
+        }
+    }
+    b.check = match check {
+        Some((rec, stream)) => Some(check_fits(rec, stream, &bases, &trials, &chosen)?),
+        None => None,
+    };
+    Some(b)
+}
+
+/// One basis with its fit matrix and the Cholesky factors of its ridge-regularised normal
+/// matrices (one per [`RIDGE_REL`] that factors).
+struct Variant {
+    basis: Basis,
+    x_fit: DMatrix<f64>,
+    chols: Vec<(f64, nalgebra::Cholesky<f64, nalgebra::Dyn>)>,
+}
+
+/// Candidate coefficients of one channel: (channel, variant, ridge, beta).
+type Trial = (Channel, usize, f64, DVector<f64>);
+
+/// Two bases: the valve inputs alone, and with the nominal channels; each kept when the fit
+/// range has at least 4 rows per regressor and a ridge weight factors.
+fn fit_variants(
+    train: &Recording,
+    train_nominal: &NominalRun,
+    scales: &[Option<f64>; 9],
+    fit: &Range<usize>,
+) -> Vec<Variant> {
     let mut variants = Vec::new();
     for channels in [false, true] {
-        let basis = Basis::new(train, &scales, channels);
+        let basis = Basis::new(train, scales, channels);
         let w = basis.width();
         if fit.len() < 4 * w {
             continue;
@@ -319,11 +396,19 @@ pub fn fit_streamed(
             });
         }
     }
-    if variants.is_empty() {
-        return None;
-    }
-    // Every channel's candidate coefficients: (channel, variant, ridge, beta).
-    let mut trials: Vec<(Channel, usize, f64, DVector<f64>)> = Vec::new();
+    variants
+}
+
+/// Every recorded channel's candidate coefficients: the ridge solution of its nominal
+/// residual over the fit range in each variant at each ridge weight (non-finite ones left
+/// out).
+fn candidate_coefficients(
+    train: &Recording,
+    train_nominal: &NominalRun,
+    fit: &Range<usize>,
+    variants: &[Variant],
+) -> Vec<Trial> {
+    let mut trials: Vec<Trial> = Vec::new();
     for c in Channel::ALL {
         let Some(y) = train.channel(c) else {
             continue;
@@ -343,91 +428,51 @@ pub fn fit_streamed(
             }
         }
     }
-    // The fit matrices are no longer needed.
-    let bases: Vec<Basis> = variants.into_iter().map(|v| v.basis).collect();
-    // The held-out scores of every trial, summed row by row over the tail of TRAIN:
-    // `fit_percent` of the nominal and of the corrected channel (their error sums).
-    let scored = score(train, train_nominal.stream, held.clone(), &bases, &trials)?;
-    let mut heldout = BTreeMap::new();
-    let mut chosen: Vec<(Channel, usize, usize)> = Vec::new();
-    let mut ridge = BTreeMap::new();
-    let mut regressors = BTreeMap::new();
-    let mut corrected = Vec::new();
-    for c in Channel::ALL {
-        let Some(y) = train.channel(c) else {
-            continue;
+    trials
+}
+
+/// The chosen trial of a channel from each basis's best (trial, (nominal, corrected)
+/// held-out fit), in basis order: a larger basis only when it gains more than
+/// [`LARGER_BASIS_GAIN_PCT`] of held-out fit over the one before.
+fn pick_basis(per_basis: &[Option<(usize, (f64, f64))>]) -> Option<(usize, (f64, f64))> {
+    let mut best: Option<(usize, (f64, f64))> = None;
+    for o in per_basis.iter().flatten() {
+        let gain = if best.is_some() {
+            LARGER_BASIS_GAIN_PCT
+        } else {
+            0.0
         };
-        let ys = &y[held.clone()];
-        let fits = |t: usize| {
-            let (nom, after) = scored[t];
-            (fit_percent_of_err2(ys, nom), fit_percent_of_err2(ys, after))
-        };
-        // Per basis the ridge weight with the best held-out fit; the larger basis only when
-        // it gains more than `LARGER_BASIS_GAIN_PCT` of held-out fit over the inputs alone.
-        let mut best: Option<(usize, (f64, f64))> = None;
-        for vi in 0..bases.len() {
-            let mut own: Option<(usize, (f64, f64))> = None;
-            for (t, _) in trials
-                .iter()
-                .enumerate()
-                .filter(|(_, tr)| tr.0 == c && tr.1 == vi)
-            {
-                let h = fits(t);
-                if own.as_ref().is_none_or(|b| h.1 > b.1 .1) {
-                    own = Some((t, h));
-                }
-            }
-            if let Some(o) = own {
-                let gain = if best.is_some() {
-                    LARGER_BASIS_GAIN_PCT
-                } else {
-                    0.0
-                };
-                if best.as_ref().is_none_or(|b| o.1 .1 > b.1 .1 + gain) {
-                    best = Some(o);
-                }
-            }
-        }
-        let Some((t, h)) = best else {
-            continue;
-        };
-        let (_, vi, rel, _) = &trials[t];
-        regressors.insert(c.name(), bases[*vi].width());
-        heldout.insert(c.name(), h);
-        ridge.insert(c.name(), *rel);
-        chosen.push((c, *vi, t));
-        if h.1 > h.0 {
-            corrected.push(c.name());
+        if best.as_ref().is_none_or(|b| o.1 .1 > b.1 .1 + gain) {
+            best = Some(*o);
         }
     }
-    let check_fits = match check {
-        Some((rec, stream)) => {
-            // The chosen trial of every channel CHECK records, scored over all of it.
-            let picked: Vec<(Channel, usize, f64, DVector<f64>)> = chosen
-                .iter()
-                .filter(|(c, _, _)| rec.channel(*c).is_some())
-                .map(|(_, _, t)| trials[*t].clone())
-                .collect();
-            let sums = score(rec, stream, 0..rec.len(), &bases, &picked)?;
-            let mut m = BTreeMap::new();
-            for ((c, ..), (nom, after)) in picked.iter().zip(sums) {
-                let yc = rec.channel(*c).expect("picked: recorded");
-                m.insert(
-                    c.name(),
-                    (fit_percent_of_err2(yc, nom), fit_percent_of_err2(yc, after)),
-                );
-            }
-            Some(m)
-        }
-        None => None,
-    };
-    Some(BlackBox {
-        heldout,
-        check: check_fits,
-        corrected,
-        regressors,
-        ridge,
-    })
+    best
+}
+
+/// The chosen trial of every channel CHECK records, scored over all of it: (nominal,
+/// corrected) fit per channel; `None` when CHECK's nominal stream fails.
+fn check_fits(
+    rec: &Recording,
+    stream: NominalStream,
+    bases: &[Basis],
+    trials: &[Trial],
+    chosen: &[(Channel, usize, usize)],
+) -> Option<BTreeMap<&'static str, (f64, f64)>> {
+    let picked: Vec<Trial> = chosen
+        .iter()
+        .filter(|(c, _, _)| rec.channel(*c).is_some())
+        .map(|(_, _, t)| trials[*t].clone())
+        .collect();
+    let sums = score(rec, stream, 0..rec.len(), bases, &picked)?;
+    let mut m = BTreeMap::new();
+    for ((c, ..), (nom, after)) in picked.iter().zip(sums) {
+        let yc = rec.channel(*c).expect("picked: recorded");
+        m.insert(
+            c.name(),
+            (fit_percent_of_err2(yc, nom), fit_percent_of_err2(yc, after)),
+        );
+    }
+    Some(m)
 }
 
 /// Per trial (channel, variant, ridge, coefficients): the error sums over `range` of `rec`,
@@ -616,5 +661,22 @@ mod tests {
         let b = fit(&rec, &nominal, 0..4000, 4000..6000, None).expect("fitted");
         let (before, after) = b.heldout["angle_deg"];
         assert!((after - before).abs() < 1.0, "{before} -> {after}");
+    }
+}
+
+#[cfg(test)]
+mod pick_tests {
+    use super::*;
+
+    #[test]
+    fn the_larger_basis_is_chosen_only_when_it_gains_more_than_its_margin() {
+        let inputs = Some((0, (10.0, 60.0)));
+        let small_gain = Some((1, (10.0, 60.0 + 0.5 * LARGER_BASIS_GAIN_PCT)));
+        let large_gain = Some((1, (10.0, 60.0 + 2.0 * LARGER_BASIS_GAIN_PCT)));
+        assert_eq!(pick_basis(&[inputs, small_gain]), inputs);
+        assert_eq!(pick_basis(&[inputs, large_gain]), large_gain);
+        // Without the inputs' basis the larger one needs no margin.
+        assert_eq!(pick_basis(&[None, small_gain]), small_gain);
+        assert_eq!(pick_basis(&[None, None]), None);
     }
 }

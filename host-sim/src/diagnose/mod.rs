@@ -874,7 +874,11 @@ pub struct BoundHit {
     pub nominal: Option<f64>,
 }
 
-/// Runs the diagnosis. `progress(done, total, stage)` is called as it goes.
+/// Runs the diagnosis. `progress(done, total, stage)` is called as it goes. The stages of
+/// the module doc, in order: the data checked ([`check_data`]), 1. [`gather_evidence`],
+/// 2. [`screen_candidates`], 3. [`select_stage`] (and [`heldout_fits_after`]),
+/// 4. [`final_refit`] (and [`bound_hits`], then CHECK: [`replay_check`]), 5. [`judge`] and
+/// the answer ([`answer_of`], [`black_box_fallback`], [`lookalike_notes`], [`named_effects`]).
 pub fn diagnose(
     nominal: &PlantConfig,
     train: &Recording,
@@ -890,6 +894,134 @@ pub fn diagnose(
     let (train_u, check_u) = (uniform(train), check.and_then(uniform));
     let train = train_u.as_ref().unwrap_or(train);
     let check = check.map(|c| check_u.as_ref().unwrap_or(c));
+    let n = train.len();
+    check_data(train, check)?;
+    // A recording that starts away from the file's `[initial]` is replayed from its first
+    // sample when that replays it better (`start`): the departure of the first seconds is
+    // then not answered as the model's.
+    let recorded_start = start::for_diagnosis(nominal, train, opts);
+    let file_nominal = nominal;
+    let nominal = recorded_start.as_ref().unwrap_or(nominal);
+    // Stage 2's pool is known before stage 1 runs (for the progress total).
+    let cands = candidates_of(nominal, opts);
+    let total = 4 + 2 * cands.len() as u64;
+    let done = AtomicU64::new(0);
+    let step = |msg: &str| {
+        let d = done.fetch_add(1, Ordering::Relaxed) + 1;
+        progress(d.min(total), total, msg);
+    };
+    progress(0, total, "nominal simulation");
+
+    // 1. Evidence.
+    let g = gather_evidence(nominal, train, opts)?;
+    step("screening");
+    // 2. Candidates, screened.
+    let mut s = screen_candidates(&g, &cands, nominal, train, opts);
+    step("screening done");
+    // 3. Selection.
+    let sel = select_stage(&g, &cands, &s, opts, &step);
+    let heldout_before = g.nominal.heldout_fits(train, &g.spread);
+    let heldout_after = heldout_fits_after(&g, &sel.chosen, train, &heldout_before);
+    let best_attempt: Vec<String> = sel.chosen.iter().map(|p| p.candidate.id().into()).collect();
+    // 4. Recalibration and final refit, then CHECK.
+    let mut fin = final_refit(&g, sel.chosen, n, opts);
+    step("final refit");
+    let best_attempt_at_bound = bound_hits(&fin.chosen, &g.problem.setup);
+    let mut failures = std::mem::take(&mut fin.failures);
+    let from = CheckStart {
+        file_nominal,
+        nominal,
+        train_own_start: recorded_start.is_some(),
+    };
+    let mut chk = replay_check(&from, check, &fin.chosen, g.present, opts);
+    s.hints.append(&mut chk.hints);
+    failures.append(&mut chk.failures);
+    step("check");
+    // 5. Verdict and answer.
+    let j = judge(&s, &heldout_after, &chk, &fin, &g, &failures, opts);
+    let v = j.verdict;
+    let fit_best_attempt = fin.replay.fits.clone();
+    let (chosen, ci95, corrected, corrected_replay) = answer_of(v, fin, nominal, &g, train);
+    if v != Verdict::Explained {
+        chk.show_nominal(check);
+    }
+    // The unnamed fallback when nothing explains the residual.
+    let black_box = if v == Verdict::Unexplained {
+        black_box_fallback(
+            &g,
+            train,
+            check.filter(|_| chk.series.is_some()),
+            nominal,
+            opts,
+        )
+    } else {
+        None
+    };
+    let named: Vec<&str> = chosen.iter().map(|p| p.candidate.id()).collect();
+    let lookalikes = lookalike_notes(&named, &cands, &sel.round1_explained, &g, v);
+    let named_out = named_effects(&chosen, &cands, &sel.explained, &ci95, &g, &s, &lookalikes);
+    progress(total, total, "done");
+    let absolute_note = verdict::absolute_pressure_note(nominal, &named_out.effects);
+    Ok(Diagnosis {
+        pressures_absolute: absolute_note.is_some(),
+        verdict: v,
+        located: g.located,
+        effects: named_out.effects,
+        recalibrated: named_out.recalibrated,
+        fit_before: s.fit_before,
+        fit_after: corrected_replay.fits.clone(),
+        heldout_before,
+        heldout_after,
+        check_before: chk.before,
+        check_after: chk.after,
+        check_not_held: j.check_not_held.filter(|_| v == Verdict::Unexplained),
+        check_departs: j.check_departs,
+        candidates: sel.scores,
+        best_attempt,
+        best_attempt_at_bound,
+        lookalikes,
+        data_notes: [
+            verdict::coarse_onoff_note(train),
+            verdict::start_note(file_nominal, train, recorded_start.is_some()),
+            chk.start_note,
+            absolute_note,
+        ]
+        .into_iter()
+        .flatten()
+        .collect(),
+        hints: s.hints,
+        failures,
+        nothing_missing: v == Verdict::NothingMissing,
+        residual_x_noise: j.residual_x_noise,
+        max_residual_x_noise: opts.max_residual_x_noise,
+        fit_best_attempt,
+        black_box,
+        noise: g.noise,
+        nominal_cost: s.nominal_cost,
+        noise_cost: s.noise_cost,
+        corrected,
+        train: Series::thinned(
+            train,
+            plot_stride(n),
+            &g.nominal.replayed(train),
+            corrected_replay,
+        ),
+        check: chk.series,
+        scatters: named_out.scatters,
+    })
+}
+
+/// The candidate pool ([`selection::candidate_pool`]) without
+/// [`DiagnoseOptions::exclude_candidates`].
+fn candidates_of(nominal: &PlantConfig, opts: &DiagnoseOptions) -> Vec<Box<dyn Candidate>> {
+    selection::candidate_pool(nominal)
+        .into_iter()
+        .filter(|c| !opts.exclude_candidates.iter().any(|x| x == c.id()))
+        .collect()
+}
+
+/// The recordings are long enough and every channel of them alive and excited.
+fn check_data(train: &Recording, check: Option<&Recording>) -> Result<(), DiagnoseError> {
     let n = train.len();
     if n < MIN_SAMPLES {
         return Err(DiagnoseError::Data(format!(
@@ -908,64 +1040,82 @@ pub fn diagnose(
             return Err(DiagnoseError::Data(format!("{what}: {msg}")));
         }
     }
-    // A recording that starts away from the file's `[initial]` is replayed from its first
-    // sample when that replays it better (`start`): the departure of the first seconds is
-    // then not answered as the model's.
-    let recorded_start = start::for_diagnosis(nominal, train, opts);
-    let file_nominal = nominal;
-    let nominal = recorded_start.as_ref().unwrap_or(nominal);
-    // Stage 2's pool is known before stage 1 runs (for the progress total).
-    let cands: Vec<_> = selection::candidate_pool(nominal)
-        .into_iter()
-        .filter(|c| !opts.exclude_candidates.iter().any(|x| x == c.id()))
-        .collect();
-    let total = 4 + 2 * cands.len() as u64;
-    let done = AtomicU64::new(0);
-    let step = |msg: &str| {
-        let d = done.fetch_add(1, Ordering::Relaxed) + 1;
-        progress(d.min(total), total, msg);
-    };
-    progress(0, total, "nominal simulation");
+    Ok(())
+}
 
-    // 1. Evidence.
-    let g = gather_evidence(nominal, train, opts)?;
-    let setup = g.problem.setup.clone();
+/// Output of stage 2: the candidates screened, and the nominal model against the noise.
+pub struct Screened {
+    pub screenings: Vec<Screening>,
+    /// TRAIN's fits under the nominal model.
+    pub fit_before: BTreeMap<&'static str, f64>,
+    pub noise_cost: f64,
+    pub nominal_cost: f64,
+    /// Held-out cost of the nominal model.
+    pub j0_h: f64,
+    /// The nominal model explains TRAIN within its noise.
+    pub nothing_missing: bool,
+    /// Unit and wiring mistakes seen on the nominal replay (and the caller's extra hints).
+    pub hints: Vec<String>,
+}
+
+/// Stage 2: screens every candidate on the evidence; judges the nominal model against the
+/// noise (nothing missing: its cost within [`DiagnoseOptions::null_ratio`] times the
+/// noise's and no channel's residual over [`DiagnoseOptions::max_nothing_missing_x_noise`]
+/// times its noise) and looks for unit and wiring mistakes (a pressure in Pa, an angle in
+/// radians, swapped channels), which are seen on the nominal replay alone.
+pub fn screen_candidates(
+    g: &Gathered,
+    cands: &[Box<dyn Candidate>],
+    nominal: &PlantConfig,
+    train: &Recording,
+    opts: &DiagnoseOptions,
+) -> Screened {
     let fit_before = g.nominal.fits(train);
-    step("screening");
-
-    // 2. Candidates, screened.
     let screenings: Vec<Screening> = cands
         .iter()
-        .map(|c| c.screen(&g.evidence, &setup))
+        .map(|c| c.screen(&g.evidence, &g.problem.setup))
         .collect();
-    let n_fit = g.n_fit;
-    let fit_range = 0..n_fit;
-    let held = g.nominal.held.clone();
     let noise_cost = noise_cost(&g.present, &g.noise, &g.spread);
     let nominal_cost = g.nominal.cost(false);
     let j0_h = g.nominal.cost(true);
     let nothing_missing = nominal_cost <= opts.null_ratio * noise_cost
         && !(verdict::residual_over_noise(&fit_before, &g.noise, &g.spread).0
             > opts.max_nothing_missing_x_noise);
-    // Unit and wiring mistakes (a pressure in Pa, an angle in radians, swapped channels) are
-    // seen on the nominal replay alone: the answer is then `not_this_plant` whatever the
-    // selection finds, so the selection does not run (seconds instead of minutes).
     let mut hints = verdict::plausibility_hints(nominal, train, &g.nominal.plausibility);
     hints.extend(opts.extra_hints.iter().cloned());
-    step("screening done");
+    Screened {
+        screenings,
+        fit_before,
+        noise_cost,
+        nominal_cost,
+        j0_h,
+        nothing_missing,
+        hints,
+    }
+}
 
-    // 3. Selection.
+/// Stage 3: the selection ([`selection::select`]) under the acceptance rule; skipped (an
+/// empty set at the nominal held-out cost) when nothing is missing or a unit or wiring
+/// mistake makes the answer `not_this_plant` whatever it finds (seconds instead of minutes).
+pub fn select_stage<'c>(
+    g: &Gathered,
+    cands: &'c [Box<dyn Candidate>],
+    s: &Screened,
+    opts: &DiagnoseOptions,
+    step: &(dyn Fn(&str) + Sync),
+) -> selection::Selected<'c> {
+    let held = g.nominal.held.clone();
     let rule = selection::Rule {
         min_explained: opts.min_explained,
         min_gain_noise: opts.min_gain_noise,
-        noise_cost,
+        noise_cost: s.noise_cost,
         n_heldout: held.len() as f64,
-        explained_cost: opts.null_ratio * noise_cost,
+        explained_cost: opts.null_ratio * s.noise_cost,
     };
-    let sel = if nothing_missing || !hints.is_empty() {
+    if s.nothing_missing || !s.hints.is_empty() {
         selection::Selected {
             chosen: Vec::new(),
-            heldout_cost: j0_h,
+            heldout_cost: s.j0_h,
             explained: Vec::new(),
             round1_explained: BTreeMap::new(),
             scores: Vec::new(),
@@ -973,67 +1123,67 @@ pub fn diagnose(
     } else {
         selection::select(
             &g.problem,
-            &cands,
-            &screenings,
-            fit_range,
-            held.clone(),
-            j0_h,
+            cands,
+            &s.screenings,
+            0..g.n_fit,
+            held,
+            s.j0_h,
             &rule,
             opts,
-            &step,
+            step,
         )
-    };
+    }
+}
 
-    // Held-out fits of the selection's best set (fitted on the head only).
-    let heldout_before = g.nominal.heldout_fits(train, &g.spread);
-    // The same sums as `heldout_before`, from a replay that is not held (no part: the nominal
-    // replay, whose fits are `heldout_before`).
-    let heldout_after = if sel.chosen.is_empty() {
-        heldout_before.clone()
-    } else {
-        let mut sum_sq = [0.0f64; 5];
-        let ok = g.problem.replay_each(&sel.chosen, n, |k, m| {
-            if held.contains(&k) {
-                for c in Channel::ALL {
-                    if let Some(y) = train.channel(c) {
-                        sum_sq[c.index()] += (c.of(m) - y[k]).powi(2);
-                    }
+/// The held-out fits of the selection's best set (fitted on the head only): the same sums
+/// as `heldout_before` (the nominal replay's, also when no part is chosen or the replay
+/// fails), from a replay that is not held.
+fn heldout_fits_after(
+    g: &Gathered,
+    chosen: &[Part],
+    train: &Recording,
+    heldout_before: &BTreeMap<&'static str, f64>,
+) -> BTreeMap<&'static str, f64> {
+    if chosen.is_empty() {
+        return heldout_before.clone();
+    }
+    let held = &g.nominal.held;
+    let mut sum_sq = [0.0f64; 5];
+    let ok = g.problem.replay_each(chosen, train.len(), |k, m| {
+        if held.contains(&k) {
+            for c in Channel::ALL {
+                if let Some(y) = train.channel(c) {
+                    sum_sq[c.index()] += (c.of(m) - y[k]).powi(2);
                 }
             }
-        });
-        if ok {
-            Channel::ALL
-                .iter()
-                .filter(|c| train.channel(**c).is_some())
-                .map(|c| {
-                    let fit = verdict::fit_vs_spread_of_sum(
-                        sum_sq[c.index()],
-                        held.len(),
-                        g.spread[c.index()],
-                    );
-                    (c.name(), fit)
-                })
-                .collect()
-        } else {
-            heldout_before.clone()
         }
-    };
-    let best_attempt: Vec<String> = sel
-        .chosen
-        .iter()
-        .map(|p| p.candidate.id().to_string())
-        .collect();
+    });
+    if ok {
+        Channel::ALL
+            .iter()
+            .filter(|c| train.channel(**c).is_some())
+            .map(|c| {
+                let fit = verdict::fit_vs_spread_of_sum(
+                    sum_sq[c.index()],
+                    held.len(),
+                    g.spread[c.index()],
+                );
+                (c.name(), fit)
+            })
+            .collect()
+    } else {
+        heldout_before.clone()
+    }
+}
 
-    // 4. Recalibration and final refit.
-    let fin = final_refit(&g, sel.chosen, n, opts);
-    step("final refit");
-    let best_attempt_at_bound: Vec<BoundHit> = fin
-        .chosen
+/// The parameters of the best set that ended at a bound of their search range.
+fn bound_hits(chosen: &[Part], setup: &Setup) -> Vec<BoundHit> {
+    chosen
         .iter()
         .flat_map(|p| {
             let c = p.candidate;
-            let specs = c.params(&setup);
-            recalibrate::at_bounds(c, &p.params, &setup)
+            let specs = c.params(setup);
+            recalibrate::at_bounds(c, &p.params, setup)
                 .into_iter()
                 .map(move |(param, bound)| {
                     let i = specs.iter().position(|s| s.name == param).unwrap_or(0);
@@ -1046,174 +1196,312 @@ pub fn diagnose(
                     }
                 })
         })
-        .collect();
-    let mut failures = fin.failures;
+        .collect()
+}
 
-    // Check recording: same rig, its own sample period.
-    // Both replays are summed as they run (plot points, ranges, fits): no CHECK series is
-    // held.
-    let mut check_series = None;
-    let mut check_nominal = None;
-    let mut check_start_note = None;
-    let (mut check_before, mut check_after) = (None, None);
-    if let Some(rec) = check {
-        let csetup = Setup {
-            dt_s: rec.sample_period_s(),
-            present: g.present,
-        };
-        // CHECK starts from its own first sample when TRAIN did from its own, or when CHECK
-        // itself starts away from the file's `[initial]` (a check cut from later in a run)
-        // and replays better from there: decided on CHECK as on TRAIN.
-        let check_own_start =
-            recorded_start.is_some() || start::for_diagnosis(file_nominal, rec, opts).is_some();
-        check_start_note = verdict::check_start_note(file_nominal, rec, check_own_start);
-        let from_check = |c: &PlantConfig| {
-            if check_own_start {
-                start::as_recorded(c, rec)
-            } else {
-                c.clone()
-            }
-        };
-        let mut ccfg = nominal.clone();
-        for p in &fin.chosen {
-            p.candidate.apply(&mut ccfg, &p.params, &csetup);
-        }
-        let ccfg = from_check(&ccfg);
-        // The unit and wiring checks on CHECK too: a slip there is no departure of the rig.
-        let mut check_plausibility = verdict::PlausibilitySums::default();
-        let check_start = from_check(nominal);
-        match (
-            replay_recording(&check_start, rec, &opts.solver, |k, m| {
-                check_plausibility.push(rec, k, m)
-            }),
-            replay_recording(&ccfg, rec, &opts.solver, |_, _| {}),
-        ) {
-            (Ok(before), Ok(after)) => {
-                hints.extend(
-                    verdict::plausibility_hints(&check_start, rec, &check_plausibility)
-                        .into_iter()
-                        .map(|h| format!("in the check recording (--check): {h}")),
-                );
-                check_before = Some(before.fits.clone());
-                check_after = Some(after.fits.clone());
-                check_series = Some(Series::thinned(rec, plot_stride(rec.len()), &before, after));
-                check_nominal = Some(before);
-            }
-            (b, a) => {
-                for (which, r) in [("nominal", b.err()), ("corrected", a.err())] {
-                    if let Some(e) = r {
-                        failures.push(format!("the {which} model could not replay CHECK: {e}"));
-                    }
-                }
-            }
+/// Where the models replaying CHECK come from.
+struct CheckStart<'a> {
+    /// The plant file's model.
+    file_nominal: &'a PlantConfig,
+    /// The model TRAIN was replayed with (from its own first sample or the file's).
+    nominal: &'a PlantConfig,
+    /// TRAIN was replayed from its own first sample.
+    train_own_start: bool,
+}
+
+/// CHECK's replays by the nominal and the corrected model.
+#[derive(Default)]
+struct CheckReplay {
+    series: Option<Series>,
+    /// The nominal model's replay.
+    nominal: Option<Replayed>,
+    start_note: Option<String>,
+    before: Option<BTreeMap<&'static str, f64>>,
+    after: Option<BTreeMap<&'static str, f64>>,
+    /// Unit and wiring mistakes seen on CHECK.
+    hints: Vec<String>,
+    /// Replays that failed.
+    failures: Vec<String>,
+}
+
+impl CheckReplay {
+    /// Shows CHECK under the nominal model as the corrected one too (the answer names
+    /// nothing).
+    fn show_nominal(&mut self, check: Option<&Recording>) {
+        if let (Some(b), Some(cs), Some(rec)) = (&self.before, &mut self.series, check) {
+            self.after = Some(b.clone());
+            let nom = self.nominal.as_ref().expect("replayed with the series");
+            *cs = Series::thinned(rec, cs.stride, nom, nom.clone());
         }
     }
-    step("check");
+}
 
-    // 5. Verdict.
-    let min_heldout = heldout_after
-        .values()
-        .chain(check_after.iter().flat_map(|m| m.values()))
-        .copied()
-        .fold(f64::INFINITY, |a, b| {
-            if b.is_nan() {
-                f64::NEG_INFINITY
-            } else {
-                a.min(b)
-            }
-        });
-    // What the answer leaves of TRAIN's error, against the noise.
-    let residual_x_noise = verdict::residual_over_noise(&fin.replay.fits, &g.noise, &g.spread);
-    let fit_best_attempt = fin.replay.fits.clone();
-    // A correction that makes the check recording worse did not hold there.
-    let check_not_held = match (&check_before, &check_after) {
-        (Some(b), Some(a)) if !fin.chosen.is_empty() => verdict::check_not_held(b, a),
-        _ => None,
-    };
-    // Nothing missing on TRAIN, but CHECK departs from the same model: not an answer.
-    let check_departs = match &check_before {
-        Some(c) if nothing_missing && hints.is_empty() => verdict::check_departs(&fit_before, c),
-        _ => None,
-    };
-    let v = if nothing_missing && hints.is_empty() && check_departs.is_none() {
-        Verdict::NothingMissing
-    } else if check_departs.is_some() {
-        Verdict::Unexplained
-    } else if !hints.is_empty()
-        || (verdict::unlike_plant(&fit_before) && !(min_heldout >= opts.min_heldout_fit_pct))
-    {
-        Verdict::NotThisPlant
-    } else if fin.chosen.is_empty()
-        || !(min_heldout >= opts.min_heldout_fit_pct)
-        || !(residual_x_noise.0 <= opts.max_residual_x_noise)
-        || !failures.is_empty()
-        || check_not_held.is_some()
-    {
-        Verdict::Unexplained
-    } else {
-        Verdict::Explained
-    };
-    let (chosen, ci95, corrected, corrected_replay) = if v == Verdict::Explained {
+/// The answer's parts from the final refit: its set, intervals, corrected model and replay
+/// when the verdict is `explained`; otherwise nothing named and the nominal model (whose
+/// replay is held).
+#[allow(clippy::type_complexity)]
+fn answer_of<'c>(
+    v: Verdict,
+    fin: Final<'c>,
+    nominal: &PlantConfig,
+    g: &Gathered,
+    train: &Recording,
+) -> (Vec<Part<'c>>, Vec<Vec<[f64; 2]>>, PlantConfig, Replayed) {
+    if v == Verdict::Explained {
         (fin.chosen, fin.ci95, fin.corrected, fin.replay)
     } else {
-        // Name nothing: the corrected model is the nominal one.
         (
             Vec::new(),
             Vec::new(),
             nominal.clone(),
             g.nominal.replayed(train),
         )
+    }
+}
+
+/// Replays the check recording `rec` (none: nothing) (same rig, its own sample period) with the nominal
+/// model and the one corrected by `chosen`. Both replays are summed as they run (plot
+/// points, ranges, fits): no CHECK series is held. CHECK starts from its own first sample
+/// when TRAIN did from its own, or when CHECK itself starts away from the file's
+/// `[initial]` (a check cut from later in a run) and replays better from there: decided on
+/// CHECK as on TRAIN. The unit and wiring checks run on CHECK too: a slip there is no
+/// departure of the rig.
+fn replay_check(
+    from: &CheckStart,
+    rec: Option<&Recording>,
+    chosen: &[Part],
+    present: [bool; 5],
+    opts: &DiagnoseOptions,
+) -> CheckReplay {
+    let mut out = CheckReplay::default();
+    let Some(rec) = rec else {
+        return out;
     };
-    if v != Verdict::Explained {
-        if let (Some(b), Some(cs), Some(rec)) = (&check_before, &mut check_series, check) {
-            check_after = Some(b.clone());
-            let nom = check_nominal.as_ref().expect("replayed with the series");
-            *cs = Series::thinned(rec, cs.stride, nom, nom.clone());
+    let csetup = Setup {
+        dt_s: rec.sample_period_s(),
+        present,
+    };
+    let check_own_start =
+        from.train_own_start || start::for_diagnosis(from.file_nominal, rec, opts).is_some();
+    out.start_note = verdict::check_start_note(from.file_nominal, rec, check_own_start);
+    let from_check = |c: &PlantConfig| {
+        if check_own_start {
+            start::as_recorded(c, rec)
+        } else {
+            c.clone()
+        }
+    };
+    let mut ccfg = from.nominal.clone();
+    for p in chosen {
+        p.candidate.apply(&mut ccfg, &p.params, &csetup);
+    }
+    let ccfg = from_check(&ccfg);
+    let mut check_plausibility = verdict::PlausibilitySums::default();
+    let check_start = from_check(from.nominal);
+    match (
+        replay_recording(&check_start, rec, &opts.solver, |k, m| {
+            check_plausibility.push(rec, k, m)
+        }),
+        replay_recording(&ccfg, rec, &opts.solver, |_, _| {}),
+    ) {
+        (Ok(before), Ok(after)) => {
+            out.hints.extend(
+                verdict::plausibility_hints(&check_start, rec, &check_plausibility)
+                    .into_iter()
+                    .map(|h| format!("in the check recording (--check): {h}")),
+            );
+            out.before = Some(before.fits.clone());
+            out.after = Some(after.fits.clone());
+            out.series = Some(Series::thinned(rec, plot_stride(rec.len()), &before, after));
+            out.nominal = Some(before);
+        }
+        (b, a) => {
+            for (which, r) in [("nominal", b.err()), ("corrected", a.err())] {
+                if let Some(e) = r {
+                    out.failures
+                        .push(format!("the {which} model could not replay CHECK: {e}"));
+                }
+            }
         }
     }
-    let fit_after = corrected_replay.fits.clone();
-    // The unnamed fallback when nothing explains the residual.
-    let black_box = if v == Verdict::Unexplained {
-        // TRAIN's nominal replay (its head held, the rest replayed) and CHECK's.
-        let train_stream =
-            |f: &mut dyn FnMut(usize, &Measurement)| g.problem.replay_each(&[], n, |k, m| f(k, m));
-        let check_rec = check.filter(|_| check_series.is_some());
-        let check_stream = |f: &mut dyn FnMut(usize, &Measurement)| match check_rec {
-            Some(rec) => replay_recording(nominal, rec, &opts.solver, |k, m| f(k, m)).is_ok(),
-            None => false,
-        };
-        black_box::fit_streamed(
-            train,
-            &black_box::NominalRun {
-                head: &g.nominal.head,
-                channel_sum: g.nominal.channel_sum,
-                stream: &train_stream,
-            },
-            0..n_fit,
-            n_fit..n,
-            check_rec.map(|r| (r, &check_stream as black_box::NominalStream)),
-        )
-    } else {
-        None
-    };
+    out
+}
 
-    // Look-alikes.
+/// Stage 5's verdict and what it rests on.
+struct Judged {
+    verdict: Verdict,
+    residual_x_noise: (f64, &'static str),
+    check_not_held: Option<String>,
+    check_departs: Option<String>,
+}
+
+/// Stage 5: the verdict ([`verdict_of`]) from the fits the answer reaches on the held-out
+/// tail and CHECK, what it leaves of TRAIN's error, and whether CHECK holds or departs.
+fn judge(
+    s: &Screened,
+    heldout_after: &BTreeMap<&'static str, f64>,
+    chk: &CheckReplay,
+    fin: &Final,
+    g: &Gathered,
+    failures: &[String],
+    opts: &DiagnoseOptions,
+) -> Judged {
+    let (nothing_missing, hints) = (s.nothing_missing, &s.hints);
+    let min_heldout = lowest_fit(
+        heldout_after
+            .values()
+            .chain(chk.after.iter().flat_map(|m| m.values()))
+            .copied(),
+    );
+    // What the answer leaves of TRAIN's error, against the noise.
+    let residual_x_noise = verdict::residual_over_noise(&fin.replay.fits, &g.noise, &g.spread);
+    // A correction that makes the check recording worse did not hold there.
+    let check_not_held = match (&chk.before, &chk.after) {
+        (Some(b), Some(a)) if !fin.chosen.is_empty() => verdict::check_not_held(b, a),
+        _ => None,
+    };
+    // Nothing missing on TRAIN, but CHECK departs from the same model: not an answer.
+    let check_departs = match &chk.before {
+        Some(c) if nothing_missing && hints.is_empty() => verdict::check_departs(&s.fit_before, c),
+        _ => None,
+    };
+    let facts = VerdictFacts {
+        nothing_missing,
+        hints: !hints.is_empty(),
+        check_departs: check_departs.is_some(),
+        unlike_plant: verdict::unlike_plant(&s.fit_before),
+        min_heldout_fit_pct: min_heldout,
+        chosen: !fin.chosen.is_empty(),
+        residual_x_noise: residual_x_noise.0,
+        failures: !failures.is_empty(),
+        check_not_held: check_not_held.is_some(),
+    };
+    Judged {
+        verdict: verdict_of(&facts, opts),
+        residual_x_noise,
+        check_not_held,
+        check_departs,
+    }
+}
+
+/// The lowest of `fits` [%]; a NaN fit (a channel that could not be scored) is the lowest
+/// of all; `+inf` without any.
+fn lowest_fit(fits: impl Iterator<Item = f64>) -> f64 {
+    fits.fold(f64::INFINITY, |a, b| {
+        if b.is_nan() {
+            f64::NEG_INFINITY
+        } else {
+            a.min(b)
+        }
+    })
+}
+
+/// What the verdict is decided from.
+struct VerdictFacts {
+    /// The nominal model explains TRAIN within its noise.
+    nothing_missing: bool,
+    /// A unit or wiring hint was found.
+    hints: bool,
+    /// CHECK departs from the nominal model that explains TRAIN.
+    check_departs: bool,
+    /// TRAIN's nominal fits are unlike this plant's.
+    unlike_plant: bool,
+    /// The lowest held-out (and CHECK) fit of the answer [%].
+    min_heldout_fit_pct: f64,
+    /// The selection chose a set.
+    chosen: bool,
+    /// What the answer leaves of TRAIN's error on its worst channel, in times its noise.
+    residual_x_noise: f64,
+    /// A replay failed.
+    failures: bool,
+    /// The correction made CHECK worse.
+    check_not_held: bool,
+}
+
+/// The verdict: `nothing_missing` when the nominal model explains TRAIN within its noise,
+/// no hint objects and CHECK does not depart; `unexplained` when CHECK departs;
+/// `not_this_plant` on a unit or wiring hint, or when the recording is unlike the plant and
+/// the held-out fits stay under [`DiagnoseOptions::min_heldout_fit_pct`]; `explained` when a
+/// set was chosen, its fits reach that, its residual stays within
+/// [`DiagnoseOptions::max_residual_x_noise`], nothing failed and CHECK holds; otherwise
+/// `unexplained`.
+fn verdict_of(f: &VerdictFacts, opts: &DiagnoseOptions) -> Verdict {
+    if f.nothing_missing && !f.hints && !f.check_departs {
+        Verdict::NothingMissing
+    } else if f.check_departs {
+        Verdict::Unexplained
+    } else if f.hints || (f.unlike_plant && !(f.min_heldout_fit_pct >= opts.min_heldout_fit_pct)) {
+        Verdict::NotThisPlant
+    } else if !f.chosen
+        || !(f.min_heldout_fit_pct >= opts.min_heldout_fit_pct)
+        || !(f.residual_x_noise <= opts.max_residual_x_noise)
+        || f.failures
+        || f.check_not_held
+    {
+        Verdict::Unexplained
+    } else {
+        Verdict::Explained
+    }
+}
+
+/// The unnamed black-box correction ([`black_box::fit_streamed`]) on TRAIN's nominal replay
+/// (its head held, the rest replayed) and CHECK's (`check`: when it was replayed).
+fn black_box_fallback(
+    g: &Gathered,
+    train: &Recording,
+    check: Option<&Recording>,
+    nominal: &PlantConfig,
+    opts: &DiagnoseOptions,
+) -> Option<black_box::BlackBox> {
+    let (n, n_fit) = (train.len(), g.n_fit);
+    let train_stream =
+        |f: &mut dyn FnMut(usize, &Measurement)| g.problem.replay_each(&[], n, |k, m| f(k, m));
+    let check_stream = |f: &mut dyn FnMut(usize, &Measurement)| match check {
+        Some(rec) => replay_recording(nominal, rec, &opts.solver, |k, m| f(k, m)).is_ok(),
+        None => false,
+    };
+    black_box::fit_streamed(
+        train,
+        &black_box::NominalRun {
+            head: &g.nominal.head,
+            channel_sum: g.nominal.channel_sum,
+            stream: &train_stream,
+        },
+        0..n_fit,
+        n_fit..n,
+        check.map(|r| (r, &check_stream as black_box::NominalStream)),
+    )
+}
+
+/// The label of candidate `id` ("?" when it is not in the pool).
+fn label_of<'a>(cands: &'a [Box<dyn Candidate>], id: &str) -> &'a str {
+    cands
+        .iter()
+        .find(|c| c.id() == id)
+        .map(|c| c.label())
+        .unwrap_or("?")
+}
+
+/// The look-alike statements of the answer: for each named member of a [`LOOKALIKES`] pair,
+/// how much each of the pair removed in round 1 (and what tells them apart), then what the
+/// recording's channels leave undecided (no force, no pressure).
+fn lookalike_notes(
+    named: &[&str],
+    cands: &[Box<dyn Candidate>],
+    round1_explained: &BTreeMap<&'static str, f64>,
+    g: &Gathered,
+    v: Verdict,
+) -> Vec<String> {
+    let setup = &g.problem.setup;
     let has_force = setup.has_force();
     let mut lookalikes = Vec::new();
     let pct = |id: &str| {
-        sel.round1_explained
+        round1_explained
             .get(id)
             .map(|v| 100.0 * v.max(0.0))
             .unwrap_or(0.0)
     };
-    let named: Vec<&str> = chosen.iter().map(|p| p.candidate.id()).collect();
-    let label_of = |id: &str| {
-        cands
-            .iter()
-            .find(|c| c.id() == id)
-            .map(|c| c.label())
-            .unwrap_or("?")
-    };
+    let label_of = |id: &str| label_of(cands, id);
     for (a, b) in LOOKALIKES {
         let (e, other) = if named.contains(&a) {
             (a, b)
@@ -1274,8 +1562,32 @@ pub fn diagnose(
     if v.is_answer() && !setup.has_pressure() {
         lookalikes.push("No pressure channel was measured: leakage, supply drop and polytropic behaviour are judged from the angle alone and may not be told apart.".into());
     }
+    lookalikes
+}
 
-    // Effects and recalibrations.
+/// The named parts of the answer, as the report shows them.
+struct NamedParts {
+    effects: Vec<NamedEffect>,
+    recalibrated: Vec<Recalibrated>,
+    /// Residual vs regressor of the named effects (id, scatter).
+    scatters: Vec<(String, Scatter)>,
+}
+
+/// The answer's parts: a recalibrated key with its fitted value and 95 % interval, or a
+/// named effect with its parameters, its description (a parameter at its physical bound
+/// said), its evidence (its screening, its share of the held-out error, its look-alike
+/// statement) and its scatter.
+fn named_effects(
+    chosen: &[Part],
+    cands: &[Box<dyn Candidate>],
+    explained: &[f64],
+    ci95: &[Vec<[f64; 2]>],
+    g: &Gathered,
+    s: &Screened,
+    lookalikes: &[String],
+) -> NamedParts {
+    let setup = &g.problem.setup;
+    let screenings = &s.screenings;
     let mut effects = Vec::new();
     let mut recalibrated = Vec::new();
     let mut scatters = Vec::new();
@@ -1285,10 +1597,10 @@ pub fn diagnose(
             .iter()
             .position(|x| x.id() == c.id())
             .expect("from the pool");
-        let score = sel.explained.get(k).copied().unwrap_or(0.0).clamp(0.0, 1.0);
-        let at_bound = recalibrate::at_bounds(c, &p.params, &setup);
+        let score = explained.get(k).copied().unwrap_or(0.0).clamp(0.0, 1.0);
+        let at_bound = recalibrate::at_bounds(c, &p.params, setup);
         if recalibrate::is_recal_id(c.id()) {
-            let spec = &c.params(&setup)[0];
+            let spec = &c.params(setup)[0];
             recalibrated.push(Recalibrated {
                 key: c.id().to_string(),
                 label: c.label().to_string(),
@@ -1305,7 +1617,7 @@ pub fn diagnose(
             continue;
         }
         let mut params: Vec<(String, f64)> = c
-            .params(&setup)
+            .params(setup)
             .iter()
             .zip(&p.params)
             .map(|(s, v)| (s.name.clone(), *v))
@@ -1313,7 +1625,7 @@ pub fn diagnose(
         for (name, v) in c.fixed() {
             params.push((name.into(), v));
         }
-        let mut description = c.describe(&p.params, &setup);
+        let mut description = c.describe(&p.params, setup);
         for (name, b) in &at_bound {
             description += &format!(" ({name} at its physical bound {b})");
         }
@@ -1328,7 +1640,9 @@ pub fn diagnose(
             .find(|(a, b)| *a == c.id() || *b == c.id())
             .and_then(|(a, b)| {
                 let other = if *a == c.id() { b } else { a };
-                lookalikes.iter().find(|s| s.contains(label_of(other)))
+                lookalikes
+                    .iter()
+                    .find(|s| s.contains(label_of(cands, other)))
             })
         {
             evidence.push(' ');
@@ -1347,53 +1661,76 @@ pub fn diagnose(
             at_bound,
         });
     }
-    progress(total, total, "done");
-    let absolute_note = verdict::absolute_pressure_note(nominal, &effects);
-    Ok(Diagnosis {
-        pressures_absolute: absolute_note.is_some(),
-        verdict: v,
-        located: g.located,
+    NamedParts {
         effects,
         recalibrated,
-        fit_before,
-        fit_after,
-        heldout_before,
-        heldout_after,
-        check_before,
-        check_after,
-        check_not_held: check_not_held.filter(|_| v == Verdict::Unexplained),
-        check_departs,
-        candidates: sel.scores,
-        best_attempt,
-        best_attempt_at_bound,
-        lookalikes,
-        data_notes: [
-            verdict::coarse_onoff_note(train),
-            verdict::start_note(file_nominal, train, recorded_start.is_some()),
-            check_start_note,
-            absolute_note,
-        ]
-        .into_iter()
-        .flatten()
-        .collect(),
-        hints,
-        failures,
-        nothing_missing: v == Verdict::NothingMissing,
-        residual_x_noise,
-        max_residual_x_noise: opts.max_residual_x_noise,
-        fit_best_attempt,
-        black_box,
-        noise: g.noise,
-        nominal_cost,
-        noise_cost,
-        corrected,
-        train: Series::thinned(
-            train,
-            plot_stride(n),
-            &g.nominal.replayed(train),
-            corrected_replay,
-        ),
-        check: check_series,
         scatters,
-    })
+    }
+}
+
+#[cfg(test)]
+mod verdict_rule_tests {
+    use super::*;
+
+    /// A set that explains: chosen, fits and residual within the options, nothing failed.
+    fn explaining() -> VerdictFacts {
+        let o = DiagnoseOptions::default();
+        VerdictFacts {
+            nothing_missing: false,
+            hints: false,
+            check_departs: false,
+            unlike_plant: false,
+            min_heldout_fit_pct: o.min_heldout_fit_pct + 1.0,
+            chosen: true,
+            residual_x_noise: 0.5 * o.max_residual_x_noise,
+            failures: false,
+            check_not_held: false,
+        }
+    }
+
+    #[test]
+    fn a_chosen_set_within_every_limit_explains_and_any_one_lapse_leaves_it_unexplained() {
+        let o = DiagnoseOptions::default();
+        assert_eq!(verdict_of(&explaining(), &o), Verdict::Explained);
+        let lapses: [fn(&mut VerdictFacts); 5] = [
+            |f| f.chosen = false,
+            |f| f.min_heldout_fit_pct = f64::NAN,
+            |f| f.residual_x_noise = f64::INFINITY,
+            |f| f.failures = true,
+            |f| f.check_not_held = true,
+        ];
+        for lapse in lapses {
+            let mut f = explaining();
+            lapse(&mut f);
+            assert_eq!(verdict_of(&f, &o), Verdict::Unexplained);
+        }
+    }
+
+    #[test]
+    fn a_hint_is_not_this_plant_unless_check_departs_and_nothing_missing_needs_neither() {
+        let o = DiagnoseOptions::default();
+        let mut f = explaining();
+        f.nothing_missing = true;
+        assert_eq!(verdict_of(&f, &o), Verdict::NothingMissing);
+        f.hints = true;
+        assert_eq!(verdict_of(&f, &o), Verdict::NotThisPlant);
+        f.hints = false;
+        f.check_departs = true;
+        assert_eq!(verdict_of(&f, &o), Verdict::Unexplained);
+        let mut unlike = explaining();
+        unlike.unlike_plant = true;
+        assert_eq!(verdict_of(&unlike, &o), Verdict::Explained);
+        unlike.min_heldout_fit_pct = o.min_heldout_fit_pct - 1.0;
+        assert_eq!(verdict_of(&unlike, &o), Verdict::NotThisPlant);
+    }
+
+    #[test]
+    fn lowest_fit_takes_a_nan_for_the_lowest_of_all() {
+        assert_eq!(lowest_fit([90.0, 40.0, 70.0].into_iter()), 40.0);
+        assert_eq!(
+            lowest_fit([90.0, f64::NAN, 40.0].into_iter()),
+            f64::NEG_INFINITY
+        );
+        assert_eq!(lowest_fit(std::iter::empty()), f64::INFINITY);
+    }
 }

@@ -126,7 +126,8 @@ pub struct Selected<'c> {
 /// Round-1 candidates (best held-out cost first) the swap pass draws from.
 const SWAP_TOP: usize = 5;
 
-/// Forward selection and the swap pass.
+/// Forward selection, the swap pass, the backward pass, then the parts that change nothing
+/// dropped.
 #[allow(clippy::too_many_arguments)]
 pub fn select<'c>(
     problem: &Problem,
@@ -139,48 +140,128 @@ pub fn select<'c>(
     opts: &DiagnoseOptions,
     step: &(dyn Fn(&str) + Sync),
 ) -> Selected<'c> {
-    let setup = &problem.setup;
-    let mut scores: Vec<CandidateScore> = Vec::new();
-    let mut round1_explained: BTreeMap<&'static str, f64> = BTreeMap::new();
-    let mut chosen_explained: Vec<f64> = Vec::new();
-    let mut current: Vec<Part<'c>> = Vec::new();
-    let mut j_cur = j0_h;
-    let trial = |parts: &[Part<'c>]| -> (Vec<Part<'c>>, f64, f64) {
+    let t = Trials {
+        problem,
+        cands,
+        screenings,
+        fit_range,
+        held,
+        rule,
+        opts,
+    };
+    let mut s = Search {
+        scores: Vec::new(),
+        round1_explained: BTreeMap::new(),
+        chosen_explained: Vec::new(),
+        current: Vec::new(),
+        j_cur: j0_h,
+    };
+    forward_selection(&t, &mut s, step);
+    swap_pass(&t, &mut s);
+    backward_pass(&t, &mut s);
+    drop_parts_that_change_nothing(&t, &mut s, j0_h);
+    Selected {
+        chosen: s.current,
+        heldout_cost: s.j_cur,
+        explained: s.chosen_explained,
+        round1_explained: s.round1_explained,
+        scores: s.scores,
+    }
+}
+
+/// What every trial of the selection shares: the problem, the pool, the ranges it is fitted
+/// on and scored on, the acceptance rule.
+struct Trials<'a, 'c> {
+    problem: &'a Problem<'a>,
+    cands: &'c [Box<dyn Candidate>],
+    screenings: &'a [Screening],
+    fit_range: std::ops::Range<usize>,
+    held: std::ops::Range<usize>,
+    rule: &'a Rule,
+    opts: &'a DiagnoseOptions,
+}
+
+impl<'c> Trials<'_, 'c> {
+    /// Fits `parts` on the fit range and scores them on the held-out tail by a replay that
+    /// is not held: (fitted parts, held-out cost (infinite when the replay fails), seconds).
+    fn trial(&self, parts: &[Part<'c>]) -> (Vec<Part<'c>>, f64, f64) {
         let t0 = std::time::Instant::now();
-        let (fitted, _) = problem.fit(parts, fit_range.clone(), opts.max_iter);
-        // Scored on the held-out tail by a replay that is not held.
-        let jh = match problem.replay_costs(&fitted, held.clone()) {
+        let (fitted, _) = self
+            .problem
+            .fit(parts, self.fit_range.clone(), self.opts.max_iter);
+        let jh = match self.problem.replay_costs(&fitted, self.held.clone()) {
             Some(c) => c.iter().sum(),
             None => f64::INFINITY,
         };
         (fitted, jh, t0.elapsed().as_secs_f64())
-    };
+    }
+
+    /// Candidate `i` at its screening's start values.
+    fn part(&self, i: usize) -> Part<'c> {
+        Part {
+            candidate: self.cands[i].as_ref(),
+            params: self.screenings[i].initial.clone(),
+        }
+    }
+
+    /// The held-out cost counts as explained within the noise.
+    fn explained(&self, j: f64) -> bool {
+        j <= self.opts.null_ratio * self.rule.noise_cost
+    }
+}
+
+/// The selection's state: the chosen set, its held-out cost, each chosen part's share, and
+/// the score rows so far.
+struct Search<'c> {
+    scores: Vec<CandidateScore>,
+    round1_explained: BTreeMap<&'static str, f64>,
+    chosen_explained: Vec<f64>,
+    current: Vec<Part<'c>>,
+    j_cur: f64,
+}
+
+impl<'c> Search<'c> {
+    /// Takes `fitted` (held-out cost `jh`) as the chosen set, its row of `round` marked
+    /// accepted and the shares re-read from round 1.
+    fn replace(&mut self, round: usize, fitted: Vec<Part<'c>>, jh: f64) {
+        mark_accepted(&mut self.scores, round, &set_id(&fitted));
+        self.chosen_explained = round1_shares(&fitted, &self.round1_explained);
+        self.current = fitted;
+        self.j_cur = jh;
+    }
+}
+
+/// Forward selection: each round adds to the chosen set the candidate the rule accepts
+/// ([`pick`] among the accepted), until none is accepted, [`DiagnoseOptions::max_effects`]
+/// are chosen or the held-out cost is within the noise. Round 1's shares are kept per
+/// candidate.
+fn forward_selection<'c>(t: &Trials<'_, 'c>, s: &mut Search<'c>, step: &(dyn Fn(&str) + Sync)) {
+    let (cands, screenings, rule, opts) = (t.cands, t.screenings, t.rule, t.opts);
+    let setup = &t.problem.setup;
     for round in 1..=opts.max_effects {
-        if j_cur <= opts.null_ratio * rule.noise_cost {
+        if t.explained(s.j_cur) {
             break;
         }
         let todo: Vec<usize> = (0..cands.len())
-            .filter(|i| !current.iter().any(|p| p.candidate.id() == cands[*i].id()))
+            .filter(|i| !s.current.iter().any(|p| p.candidate.id() == cands[*i].id()))
             .collect();
+        let current = &s.current;
         let results = par_map(&todo, opts.threads, |&i| {
             let mut parts = current.clone();
-            parts.push(Part {
-                candidate: cands[i].as_ref(),
-                params: screenings[i].initial.clone(),
-            });
-            let r = trial(&parts);
+            parts.push(t.part(i));
+            let r = t.trial(&parts);
             step(&format!("round {round}: {}", cands[i].id()));
             (i, r)
         });
-        let k_cur = n_params(&current);
+        let k_cur = n_params(&s.current);
         let mut accepted: Vec<(Vec<Part<'c>>, f64)> = Vec::new();
         for (i, (fitted, jh, seconds)) in results {
-            let j = rule.judge(j_cur, k_cur, jh, n_params(&fitted));
+            let j = rule.judge(s.j_cur, k_cur, jh, n_params(&fitted));
             if round == 1 {
-                round1_explained.insert(cands[i].id(), j.explained);
+                s.round1_explained.insert(cands[i].id(), j.explained);
             }
             let last = fitted.last().expect("one part added");
-            scores.push(CandidateScore {
+            s.scores.push(CandidateScore {
                 id: cands[i].id().into(),
                 round,
                 screening: screenings[i].score,
@@ -204,20 +285,19 @@ pub fn select<'c>(
             break;
         };
         let id = fitted.last().expect("one part added").candidate.id();
-        let explained = rule.judge(j_cur, k_cur, jh, n_params(&fitted)).explained;
-        if let Some(s) = scores.iter_mut().find(|s| s.round == round && s.id == id) {
-            s.accepted = true;
+        let explained = rule.judge(s.j_cur, k_cur, jh, n_params(&fitted)).explained;
+        if let Some(row) = s.scores.iter_mut().find(|r| r.round == round && r.id == id) {
+            row.accepted = true;
         }
-        current = fitted;
-        j_cur = jh;
-        chosen_explained.push(explained);
+        s.current = fitted;
+        s.j_cur = jh;
+        s.chosen_explained.push(explained);
     }
-    // Swap pass (stepwise selection): forward selection is greedy, and a first pick that
-    // stands in for two effects at once (supply drop for friction + leakage without force
-    // channels) blocks the right pair. While the held-out error is still clearly above
-    // noise, try the sets the greedy path skipped: each chosen part replaced by one of the
-    // SWAP_TOP best round-1 candidates, and (below max_effects) every pair of those that
-    // leaves the chosen ones out. Judged by the same rule; repeated while it helps.
+}
+
+/// The [`SWAP_TOP`] best round-1 candidates (pool indices with their held-out cost, best
+/// first, each once).
+fn swap_top(scores: &[CandidateScore], cands: &[Box<dyn Candidate>]) -> Vec<(usize, f64)> {
     let mut top: Vec<(usize, f64)> = scores
         .iter()
         .filter(|s| s.round == 1 && s.heldout_cost.is_finite())
@@ -237,23 +317,33 @@ pub fn select<'c>(
         new
     });
     top.truncate(SWAP_TOP);
+    top
+}
+
+/// Swap pass (stepwise selection): forward selection is greedy, and a first pick that
+/// stands in for two effects at once (supply drop for friction + leakage without force
+/// channels) blocks the right pair. While the held-out error is still clearly above noise,
+/// try the sets the greedy path skipped: each chosen part replaced by one of the
+/// [`SWAP_TOP`] best round-1 candidates, and (below max_effects) every pair of those that
+/// leaves the chosen ones out. Judged by the same rule; repeated while it helps (3 passes
+/// at most, no set tried twice).
+fn swap_pass<'c>(t: &Trials<'_, 'c>, s: &mut Search<'c>) {
+    let (cands, rule, opts) = (t.cands, t.rule, t.opts);
+    let top = swap_top(&s.scores, cands);
     let mut tried: Vec<Vec<&str>> = Vec::new();
     for pass in 1..=3 {
-        if current.is_empty() || j_cur <= opts.null_ratio * rule.noise_cost {
+        if s.current.is_empty() || t.explained(s.j_cur) {
             break;
         }
+        let current = &s.current;
         let in_current = |i: usize| current.iter().any(|p| p.candidate.id() == cands[i].id());
-        let part = |i: usize| Part {
-            candidate: cands[i].as_ref(),
-            params: screenings[i].initial.clone(),
-        };
         let mut trials: Vec<Vec<Part<'c>>> = Vec::new();
         for j in 0..current.len() {
             for &(i, _) in &top {
                 if !in_current(i) {
-                    let mut t = current.clone();
-                    t[j] = part(i);
-                    trials.push(t);
+                    let mut tr = current.clone();
+                    tr[j] = t.part(i);
+                    trials.push(tr);
                 }
             }
         }
@@ -262,13 +352,13 @@ pub fn select<'c>(
                 for &(k, _) in &top[a + 1..] {
                     // Pairs that keep a chosen part were the forward step's.
                     if !in_current(i) && !in_current(k) {
-                        trials.push(vec![part(i), part(k)]);
+                        trials.push(vec![t.part(i), t.part(k)]);
                     }
                 }
             }
         }
-        trials.retain(|t| {
-            let mut ids: Vec<&str> = t.iter().map(|p| p.candidate.id()).collect();
+        trials.retain(|tr| {
+            let mut ids: Vec<&str> = tr.iter().map(|p| p.candidate.id()).collect();
             ids.sort();
             let new = !tried.contains(&ids);
             if new {
@@ -279,13 +369,14 @@ pub fn select<'c>(
         if trials.is_empty() {
             break;
         }
-        let results = par_map(&trials, opts.threads, |parts| trial(parts));
-        let k_cur = n_params(&current);
+        let results = par_map(&trials, opts.threads, |parts| t.trial(parts));
+        let k_cur = n_params(&s.current);
         let round = opts.max_effects + pass;
         let mut accepted: Vec<(Vec<Part<'c>>, f64)> = Vec::new();
         for (fitted, jh, seconds) in results {
-            let j = rule.judge(j_cur, k_cur, jh, n_params(&fitted));
-            scores.push(set_score(&fitted, round, jh, Some(j), seconds));
+            let j = rule.judge(s.j_cur, k_cur, jh, n_params(&fitted));
+            s.scores
+                .push(set_score(&fitted, round, jh, Some(j), seconds));
             if j.accepted {
                 accepted.push((fitted, jh));
             }
@@ -293,30 +384,31 @@ pub fn select<'c>(
         let Some((fitted, jh)) = pick(rule, accepted) else {
             break;
         };
-        mark_accepted(&mut scores, round, &set_id(&fitted));
-        chosen_explained = round1_shares(&fitted, &round1_explained);
-        current = fitted;
-        j_cur = jh;
+        s.replace(round, fitted, jh);
     }
-    // Backward pass: a part the others do without is dropped. Each part is left out in turn
-    // and the rest refitted from their current values; when the current set does not beat
-    // such a reduced set under the same rule (e.g. the reduced set already explains the
-    // data within its noise), the best reduced set replaces it: the simpler explanation.
+}
+
+/// Backward pass: a part the others do without is dropped. Each part is left out in turn
+/// and the rest refitted from their current values; when the current set does not beat
+/// such a reduced set under the same rule (e.g. the reduced set already explains the data
+/// within its noise), the best reduced set replaces it: the simpler explanation.
+fn backward_pass<'c>(t: &Trials<'_, 'c>, s: &mut Search<'c>) {
+    let (rule, opts) = (t.rule, t.opts);
     let round = opts.max_effects + 4;
-    while current.len() > 1 {
-        let trials: Vec<Vec<Part<'c>>> = (0..current.len())
+    while s.current.len() > 1 {
+        let trials: Vec<Vec<Part<'c>>> = (0..s.current.len())
             .map(|j| {
-                let mut t = current.clone();
-                t.remove(j);
-                t
+                let mut tr = s.current.clone();
+                tr.remove(j);
+                tr
             })
             .collect();
-        let results = par_map(&trials, opts.threads, |parts| trial(parts));
-        let k_cur = n_params(&current);
+        let results = par_map(&trials, opts.threads, |parts| t.trial(parts));
+        let k_cur = n_params(&s.current);
         let mut best: Option<(Vec<Part<'c>>, f64)> = None;
         for (fitted, jh, seconds) in results {
-            let kept = rule.judge(jh, n_params(&fitted), j_cur, k_cur).accepted;
-            scores.push(set_score(&fitted, round, jh, None, seconds));
+            let kept = rule.judge(jh, n_params(&fitted), s.j_cur, k_cur).accepted;
+            s.scores.push(set_score(&fitted, round, jh, None, seconds));
             if !kept && jh.is_finite() && best.as_ref().is_none_or(|b| jh < b.1) {
                 best = Some((fitted, jh));
             }
@@ -324,38 +416,31 @@ pub fn select<'c>(
         let Some((fitted, jh)) = best else {
             break;
         };
-        mark_accepted(&mut scores, round, &set_id(&fitted));
-        chosen_explained = round1_shares(&fitted, &round1_explained);
-        current = fitted;
-        j_cur = jh;
+        s.replace(round, fitted, jh);
     }
-    // A part that leaves the plant file as it is (a recalibration by a hair) is no answer:
-    // dropped, the rest refitted without it.
-    while let Some(j) = current
+}
+
+/// A part that leaves the plant file as it is (a recalibration by a hair) is no answer:
+/// dropped, the rest refitted without it (nothing left: the nominal held-out cost `j0_h`).
+fn drop_parts_that_change_nothing<'c>(t: &Trials<'_, 'c>, s: &mut Search<'c>, j0_h: f64) {
+    let round = t.opts.max_effects + 4;
+    while let Some(j) = s
+        .current
         .iter()
         .position(|p| p.candidate.changes_nothing(&p.params))
     {
-        let mut t = current.clone();
-        t.remove(j);
-        if t.is_empty() {
-            current = t;
-            j_cur = j0_h;
-            chosen_explained.clear();
+        let mut tr = s.current.clone();
+        tr.remove(j);
+        if tr.is_empty() {
+            s.current = tr;
+            s.j_cur = j0_h;
+            s.chosen_explained.clear();
             break;
         }
-        let (fitted, jh, seconds) = trial(&t);
-        scores.push(set_score(&fitted, round + 1, jh, None, seconds));
-        mark_accepted(&mut scores, round + 1, &set_id(&fitted));
-        chosen_explained = round1_shares(&fitted, &round1_explained);
-        current = fitted;
-        j_cur = jh;
-    }
-    Selected {
-        chosen: current,
-        heldout_cost: j_cur,
-        explained: chosen_explained,
-        round1_explained,
-        scores,
+        let (fitted, jh, seconds) = t.trial(&tr);
+        s.scores
+            .push(set_score(&fitted, round + 1, jh, None, seconds));
+        s.replace(round + 1, fitted, jh);
     }
 }
 

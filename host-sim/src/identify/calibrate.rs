@@ -269,105 +269,19 @@ fn plant_constants_toml(plant: &Plant, plant_path: &Path, old: &Path) -> String 
     )
 }
 
-/// Runs `host-sim calibrate`; returns the report for stdout. Fails (nothing written) on
-/// degenerate data or a poor torque fit.
 /// Least mean held-out fit of the identified plant (`--identify-plant`) for its values to
 /// reach the firmware [%].
 pub const MIN_IDENTIFIED_HELDOUT_FIT_PCT: f64 = 50.0;
 
+/// Runs `host-sim calibrate`; returns the report for stdout. Fails (nothing written) on
+/// degenerate data or a poor torque fit. Stages: the outputs checked, 0. the plant-file keys
+/// identified (optional), the recording checked, 1. the torque model, 2. the plant-derived
+/// constants, 3. the gains (optional); then every file replaced.
 pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
-    if !a.out_dir.is_dir() {
-        bail!(
-            "--out-dir {}: does not exist or is not a directory (the firmware's config/ directory)",
-            a.out_dir.display()
-        );
-    }
-    let file = a.recording.display().to_string();
     let dest = |name: &str| a.out_dir.join(name);
-    // No file it replaces may be one it reads (e.g. --plant config/plant_constants.toml).
-    let mut inputs = vec![
-        ("--recording", a.recording.as_path()),
-        ("--plant", a.plant.as_path()),
-    ];
-    if let Some(r) = &a.plant_recording {
-        inputs.push(("--plant-recording", r.as_path()));
-    }
-    let written: Vec<PathBuf> = [
-        ("plant_identified.toml", !a.identify_plant.is_empty()),
-        ("torque_model.toml", true),
-        ("joint_geometry.toml", true),
-        ("plant_constants.toml", true),
-        ("control_tuned.toml", a.tune),
-    ]
-    .iter()
-    .filter(|(_, on)| *on)
-    .map(|(n, _)| dest(n))
-    .collect();
-    let outputs: Vec<(&str, &Path)> = written.iter().map(|p| ("--out-dir", p.as_path())).collect();
-    crate::validate::distinct_outputs(&inputs, &outputs).map_err(anyhow::Error::msg)?;
-    // A file it replaces must parse: its values are what the report compares with, and the
-    // muscle's pressure rating is kept from plant_constants.toml (a file that does not parse
-    // would silently reset the rating to 600 kPa).
-    for p in &written {
-        if let Ok(text) = std::fs::read_to_string(p) {
-            if let Err(e) = text.parse::<toml::Table>() {
-                let at = e
-                    .span()
-                    .map(|s| format!(":{}", text[..s.start].matches('\n').count() + 1))
-                    .unwrap_or_default();
-                bail!(
-                    "{}{at}: the file calibrate would replace does not parse ({}); nothing \
-                     written: fix or remove it first (calibrate keeps the muscle's pressure \
-                     rating muscle.p_max_gauge_pa from plant_constants.toml and reports every \
-                     change against these files)",
-                    p.display(),
-                    e.message()
-                );
-            }
-        }
-    }
-    // Stage 0 (optional): identify plant-file keys; the identified file is staged in a
-    // temporary file beside the config for the later stages, and written at the end.
+    check_calibrate_outputs(a)?;
     let mut out = String::new();
-    let identified = if a.identify_plant.is_empty() {
-        None
-    } else {
-        let valve_rec = a.plant_recording.as_ref().unwrap_or(&a.recording);
-        let (fit, body) = super::plant::identify_plant_text(
-            valve_rec,
-            &a.plant,
-            &a.identify_plant,
-            &super::plant::PlantFitOptions::default(),
-        )
-        .map_err(|e| {
-            anyhow::anyhow!("refusing to write firmware constants (nothing written): {e:#}")
-        })?;
-        let (hb, ha) = fit.holdout_mean_pct();
-        if !(ha >= MIN_IDENTIFIED_HELDOUT_FIT_PCT) {
-            bail!(
-                "refusing to write firmware constants (nothing written): the identified plant \
-                 does not describe {} (held-out fit {hb:.1} % -> {ha:.1} %, at least \
-                 {MIN_IDENTIFIED_HELDOUT_FIT_PCT} % needed): the recording does not excite \
-                 these keys, it is not a valve-driven recording, or another part of the plant \
-                 file is wrong",
-                valve_rec.display()
-            );
-        }
-        out += &format!(
-            "plant identified from {} (held-out fit {hb:.3} % -> {ha:.3} %):\n",
-            valve_rec.display()
-        );
-        for (k, old, new) in &fit.params {
-            out += &format!("  {k}: {old:e} -> {new:e}\n");
-        }
-        let tmp = tempfile::Builder::new()
-            .prefix(".plant_identified.")
-            .suffix(".toml")
-            .tempfile_in(&a.out_dir)
-            .with_context(|| format!("--out-dir {}", a.out_dir.display()))?;
-        std::fs::write(tmp.path(), &body).with_context(|| format!("{}", tmp.path().display()))?;
-        Some((tmp, body))
-    };
+    let identified = identify_plant_stage(a, &mut out)?;
     let final_plant = dest("plant_identified.toml");
     // The plant file of the later stages, and the name their provenance headers give it.
     let (plant_path, plant_name) = match &identified {
@@ -386,7 +300,7 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
     ) {
         eprintln!("{w}");
     }
-    let why = degenerate_reasons(&rec, &plant, &file);
+    let why = degenerate_reasons(&rec, &plant, &a.recording.display().to_string());
     if !why.is_empty() {
         bail!(
             "refusing to write firmware constants (nothing written):\n  {}",
@@ -394,10 +308,151 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
         );
     }
     // Stage 1: the torque model.
+    let torque_toml = torque_stage(a, &plant_path, &plant_name, &mut out)?;
+    // Stage 2: the plant-derived constants.
+    let files = [
+        ("torque_model.toml", torque_toml),
+        ("joint_geometry.toml", geometry_toml(&plant, &plant_name)),
+        (
+            "plant_constants.toml",
+            plant_constants_toml(&plant, &plant_name, &dest("plant_constants.toml")),
+        ),
+    ];
+    for (name, text) in &files {
+        out += &format!("{}:\n{}", dest(name).display(), changes(&dest(name), text));
+    }
+    // Stage 3: the gains (optional, minutes). Written (staged) by the tuner itself.
+    if a.tune {
+        out += &tune_stage(a, &plant_path)?;
+    }
+    // Every stage passed: replace the files (staged in the command's transaction: all or none).
+    for (name, text) in &files {
+        write_atomic(&dest(name), text.as_bytes())?;
+    }
+    if let Some((_, body)) = &identified {
+        write_atomic(&final_plant, body.as_bytes())?;
+    }
+    out += &format!(
+        "wrote {} files in {}; rebuild the firmware (`cargo flash-build` / `cargo flash`) to use them\n",
+        files.len() + usize::from(a.tune) + usize::from(identified.is_some()),
+        a.out_dir.display()
+    );
+    Ok(out)
+}
+
+/// The files calibrate writes: `--out-dir` is a directory, no file it replaces is one it
+/// reads (e.g. --plant config/plant_constants.toml), and every file it replaces parses (its
+/// values are what the report compares with, and the muscle's pressure rating is kept from
+/// plant_constants.toml: a file that does not parse would silently reset the rating to
+/// 600 kPa).
+fn check_calibrate_outputs(a: &CalibrateArgs) -> Result<()> {
+    if !a.out_dir.is_dir() {
+        bail!(
+            "--out-dir {}: does not exist or is not a directory (the firmware's config/ directory)",
+            a.out_dir.display()
+        );
+    }
+    let mut inputs = vec![
+        ("--recording", a.recording.as_path()),
+        ("--plant", a.plant.as_path()),
+    ];
+    if let Some(r) = &a.plant_recording {
+        inputs.push(("--plant-recording", r.as_path()));
+    }
+    let written: Vec<PathBuf> = [
+        ("plant_identified.toml", !a.identify_plant.is_empty()),
+        ("torque_model.toml", true),
+        ("joint_geometry.toml", true),
+        ("plant_constants.toml", true),
+        ("control_tuned.toml", a.tune),
+    ]
+    .iter()
+    .filter(|(_, on)| *on)
+    .map(|(n, _)| a.out_dir.join(n))
+    .collect();
+    let outputs: Vec<(&str, &Path)> = written.iter().map(|p| ("--out-dir", p.as_path())).collect();
+    crate::validate::distinct_outputs(&inputs, &outputs).map_err(anyhow::Error::msg)?;
+    for p in &written {
+        if let Ok(text) = std::fs::read_to_string(p) {
+            if let Err(e) = text.parse::<toml::Table>() {
+                let at = e
+                    .span()
+                    .map(|s| format!(":{}", text[..s.start].matches('\n').count() + 1))
+                    .unwrap_or_default();
+                bail!(
+                    "{}{at}: the file calibrate would replace does not parse ({}); nothing \
+                     written: fix or remove it first (calibrate keeps the muscle's pressure \
+                     rating muscle.p_max_gauge_pa from plant_constants.toml and reports every \
+                     change against these files)",
+                    p.display(),
+                    e.message()
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Stage 0 (with `--identify-plant`): identifies plant-file keys from the valve recording;
+/// refused under [`MIN_IDENTIFIED_HELDOUT_FIT_PCT`]. The identified file is staged in a
+/// temporary file beside the config for the later stages (returned with its text), and
+/// written at the end.
+fn identify_plant_stage(
+    a: &CalibrateArgs,
+    out: &mut String,
+) -> Result<Option<(tempfile::NamedTempFile, String)>> {
+    if a.identify_plant.is_empty() {
+        return Ok(None);
+    }
+    let valve_rec = a.plant_recording.as_ref().unwrap_or(&a.recording);
+    let (fit, body) = super::plant::identify_plant_text(
+        valve_rec,
+        &a.plant,
+        &a.identify_plant,
+        &super::plant::PlantFitOptions::default(),
+    )
+    .map_err(|e| {
+        anyhow::anyhow!("refusing to write firmware constants (nothing written): {e:#}")
+    })?;
+    let (hb, ha) = fit.holdout_mean_pct();
+    if !(ha >= MIN_IDENTIFIED_HELDOUT_FIT_PCT) {
+        bail!(
+            "refusing to write firmware constants (nothing written): the identified plant \
+             does not describe {} (held-out fit {hb:.1} % -> {ha:.1} %, at least \
+             {MIN_IDENTIFIED_HELDOUT_FIT_PCT} % needed): the recording does not excite \
+             these keys, it is not a valve-driven recording, or another part of the plant \
+             file is wrong",
+            valve_rec.display()
+        );
+    }
+    *out += &format!(
+        "plant identified from {} (held-out fit {hb:.3} % -> {ha:.3} %):\n",
+        valve_rec.display()
+    );
+    for (k, old, new) in &fit.params {
+        *out += &format!("  {k}: {old:e} -> {new:e}\n");
+    }
+    let tmp = tempfile::Builder::new()
+        .prefix(".plant_identified.")
+        .suffix(".toml")
+        .tempfile_in(&a.out_dir)
+        .with_context(|| format!("--out-dir {}", a.out_dir.display()))?;
+    std::fs::write(tmp.path(), &body).with_context(|| format!("{}", tmp.path().display()))?;
+    Ok(Some((tmp, body)))
+}
+
+/// Stage 1: the torque model of the recording on the plant at `plant_path` (named
+/// `plant_name` in its provenance), refused under [`MIN_TORQUE_FIT_PCT`]; its file's text.
+fn torque_stage(
+    a: &CalibrateArgs,
+    plant_path: &Path,
+    plant_name: &Path,
+    out: &mut String,
+) -> Result<String> {
     let mut torque = torque_model_file(&IdentifyTorqueArgs {
         recording: a.recording.clone(),
-        plant: plant_path.clone(),
-        out: dest("torque_model.toml"),
+        plant: plant_path.to_path_buf(),
+        out: a.out_dir.join("torque_model.toml"),
         savgol_half_window: None,
         dp_max_kpa: None,
         max_accel_rad_s2: None,
@@ -417,54 +472,36 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
         &plant_path.display().to_string(),
         &plant_name.display().to_string(),
     );
-    out += &format!(
+    *out += &format!(
         "torque model: fit {:.3} % (>= {MIN_TORQUE_FIT_PCT} %)\n",
         torque.fit_pct
     );
-    // Stage 2: the plant-derived constants.
-    let files = [
-        ("torque_model.toml", torque.toml),
-        ("joint_geometry.toml", geometry_toml(&plant, &plant_name)),
-        (
-            "plant_constants.toml",
-            plant_constants_toml(&plant, &plant_name, &dest("plant_constants.toml")),
-        ),
-    ];
-    for (name, text) in &files {
-        out += &format!("{}:\n{}", dest(name).display(), changes(&dest(name), text));
-    }
-    // Stage 3: the gains (optional, minutes). Written (staged) by the tuner itself.
-    if a.tune {
-        let control = dest("control_tuned.toml");
-        let (r, text) = crate::control::tune::run_tune_text(&crate::control::tune::TuneArgs {
-            plant: plant_path.clone(),
-            out: control.clone(),
-            threads: a.threads,
-            warm_start: false,
-            setpoint_cutoff_hz: 150.0,
-            transition_s: None,
-            cascade_start: Vec::new(),
-            no_step_constraints: false,
-            robust: false,
-            pressure_ff: false,
-            stable_on_jumps: false,
-            outer_period_ticks: None,
-            ff_update_ticks: None,
-        })
-        .context("tuning the gains")?;
-        out += &format!("{r}{}:\n{}", control.display(), changes(&control, &text));
-    }
-    // Every stage passed: replace the files (staged in the command's transaction: all or none).
-    for (name, text) in &files {
-        write_atomic(&dest(name), text.as_bytes())?;
-    }
-    if let Some((_, body)) = &identified {
-        write_atomic(&final_plant, body.as_bytes())?;
-    }
-    out += &format!(
-        "wrote {} files in {}; rebuild the firmware (`cargo flash-build` / `cargo flash`) to use them\n",
-        files.len() + usize::from(a.tune) + usize::from(identified.is_some()),
-        a.out_dir.display()
-    );
-    Ok(out)
+    Ok(torque.toml)
+}
+
+/// Stage 3 (`--tune`): the gains tuned on the plant at `plant_path` and written by the tuner
+/// itself; its report and the changes to control_tuned.toml.
+fn tune_stage(a: &CalibrateArgs, plant_path: &Path) -> Result<String> {
+    let control = a.out_dir.join("control_tuned.toml");
+    let (r, text) = crate::control::tune::run_tune_text(&crate::control::tune::TuneArgs {
+        plant: plant_path.to_path_buf(),
+        out: control.clone(),
+        threads: a.threads,
+        warm_start: false,
+        setpoint_cutoff_hz: 150.0,
+        transition_s: None,
+        cascade_start: Vec::new(),
+        no_step_constraints: false,
+        robust: false,
+        pressure_ff: false,
+        stable_on_jumps: false,
+        outer_period_ticks: None,
+        ff_update_ticks: None,
+    })
+    .context("tuning the gains")?;
+    Ok(format!(
+        "{r}{}:\n{}",
+        control.display(),
+        changes(&control, &text)
+    ))
 }

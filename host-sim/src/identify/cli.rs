@@ -681,6 +681,9 @@ pub struct TorqueModelFile {
 }
 
 /// `host-sim identify torque` without the write: the file content, the report, the fit.
+/// Steps: the files and pressure columns checked, the samples (velocity filtered), their
+/// excitation checked, the fit, its signs checked against the plant's muscles, the
+/// activation limit, the file and the report.
 pub fn torque_model_file(a: &IdentifyTorqueArgs) -> Result<TorqueModelFile> {
     validate::distinct_file_outputs(
         &[("--recording", &a.recording), ("--plant", &a.plant)],
@@ -692,26 +695,7 @@ pub fn torque_model_file(a: &IdentifyTorqueArgs) -> Result<TorqueModelFile> {
     let plant = Plant::load(&a.plant)?;
     let raw = Recording::read(&a.recording)?;
     let file = a.recording.display().to_string();
-    // A pressure beyond what a muscle bears is a unit mistake (Pa or MPa written for kPa).
-    for (c, name) in [
-        (crate::io::recording::Channel::P1Kpa, "p1_kpa"),
-        (crate::io::recording::Channel::P2Kpa, "p2_kpa"),
-    ] {
-        let Some(p) = raw.channel(c) else { continue };
-        if let Some(k) = p
-            .iter()
-            .position(|v| !(force::P_KPA_MIN..=force::P_KPA_MAX).contains(v))
-        {
-            bail!(
-                "{file}:{}: column `{name}`: {} is outside {}..{} kPa gauge (a value in Pa? the \
-                 column is in kPa); nothing written",
-                header_line_of(&a.recording) + 1 + k,
-                p[k],
-                force::P_KPA_MIN,
-                force::P_KPA_MAX
-            );
-        }
-    }
+    check_pressure_range(&raw, &a.recording)?;
     // Jittered time stamps go on the uniform grid the velocity filter needs.
     let rec = raw.to_uniform();
     let dt = rec.sample_period_s();
@@ -724,62 +708,7 @@ pub fn torque_model_file(a: &IdentifyTorqueArgs) -> Result<TorqueModelFile> {
     let (mut samples, source) =
         torque::samples_from_recording(&rec, &plant, hw, &file, header_line_of(&a.recording))?;
     let n_all = samples.len();
-    // A recording without motion or without activation cannot determine the model (the fit
-    // would write zeros and call them a perfect fit).
-    let spread = |f: &dyn Fn(&torque::TorqueSample) -> f64| {
-        let lo = samples.iter().map(f).fold(f64::INFINITY, f64::min);
-        let hi = samples.iter().map(f).fold(f64::NEG_INFINITY, f64::max);
-        hi - lo
-    };
-    if !(spread(&|s| s.angle_rad) > 1e-3) {
-        bail!(
-            "{file}: column `angle_deg`: the joint does not move (angle range below 0.06 degrees); \
-             the torque model needs a recording through a range of angles"
-        );
-    }
-    // The same floors as `calibrate`'s (the firmware's constants come from either): a joint
-    // that moved less than half a degree (sd), or an activation dp = (p2 - p1) / 2 that did
-    // not vary, cannot determine A, or B: the least-squares fit would write what the noise
-    // gives (a sweep at dp = 0 fitted B 640 times too small at 97 %).
-    let sd_of = |f: &dyn Fn(&torque::TorqueSample) -> f64| {
-        let n = samples.len() as f64;
-        let m = samples.iter().map(f).sum::<f64>() / n;
-        (samples.iter().map(|s| (f(s) - m).powi(2)).sum::<f64>() / n).sqrt()
-    };
-    let angle_sd_deg = sd_of(&|s| s.angle_rad).to_degrees();
-    if !(angle_sd_deg >= super::calibrate::MIN_ANGLE_SD_DEG) {
-        bail!(
-            "{file}: column `angle_deg`: the joint hardly moves (sd {angle_sd_deg:.3} deg < {} deg; \
-             an angle logged in radians? the column is in degrees); the torque model needs a \
-             recording through a range of angles; nothing written",
-            super::calibrate::MIN_ANGLE_SD_DEG
-        );
-    }
-    let dp_sd_kpa = sd_of(&|s| 0.5 * (s.p2_gauge_pa - s.p1_gauge_pa)) / 1e3;
-    if !(dp_sd_kpa >= super::calibrate::MIN_PRESSURE_SD_KPA) {
-        let p_max_kpa = samples
-            .iter()
-            .map(|s| s.p1_gauge_pa.abs().max(s.p2_gauge_pa.abs()))
-            .fold(0.0, f64::max)
-            / 1e3;
-        let unit = if p_max_kpa < 10.0 {
-            format!(" (pressures up to {p_max_kpa:.3} kPa: logged in bar or MPa? the columns are in kPa)")
-        } else {
-            String::new()
-        };
-        bail!(
-            "{file}: the activation dp = (p2_kpa - p1_kpa) / 2 does not vary (sd {dp_sd_kpa:.3} kPa \
-             < {} kPa){unit}: B of eq. 11 needs a recording at several activations (`host-sim \
-             sweep torque --dp-kpa` takes several levels); nothing written",
-            super::calibrate::MIN_PRESSURE_SD_KPA
-        );
-    }
-    if !(spread(&|s| s.torque_nm) > 1e-6) {
-        bail!(
-            "{file}: the torque (f1_n - f2_n) r is constant; the torque model needs a recording \
-             with varying torque"
-        );
-    }
+    check_torque_excitation(&samples, &file)?;
     if let Some(max) = a.max_accel_rad_s2 {
         if !(max > 0.0) {
             bail!("--max-accel-rad-s2 must be > 0");
@@ -791,133 +720,10 @@ pub fn torque_model_file(a: &IdentifyTorqueArgs) -> Result<TorqueModelFile> {
     // p0 is the controller's mid pressure: the data mean to 0.1 kPa (the mean of noisy
     // readings is not meaningful below that).
     model.p0_gauge_pa = (model.p0_gauge_pa / 100.0).round() * 100.0;
-    // The sign of B r is physics, not data: dp raises p2 and lowers p1, so the plant's own
-    // muscles at angle 0 say which way the torque goes. The opposite sign fits as well on data
-    // whose p1 and p2 (or valves, or tension columns) are the other muscle's, and would make
-    // the firmware drive the joint the wrong way.
-    let chi0 = plant.joint.initial_contraction;
-    let delta_pa = 10e3;
-    let f = |p: f64| plant.muscle.static_force_n(p, chi0);
-    let plant_gain = plant.joint.sprocket_radius_m
-        * (f(model.p0_gauge_pa - delta_pa) - f(model.p0_gauge_pa + delta_pa))
-        / (2.0 * delta_pa);
-    let fitted_gain = model.b_m2 * model.sprocket_radius_m;
-    if fitted_gain * plant_gain < 0.0 {
-        bail!(
-            "{file}: the fitted B r = {fitted_gain:.4e} m^3 has the opposite sign of the plant's \
-             muscles ({plant_gain:.4e} m^3 at angle 0 and p0 = {:.1} kPa of {}): the recording's \
-             muscle 1 and 2 are swapped (p1_kpa / p2_kpa, the valve columns, or f1_n / f2_n); \
-             nothing written",
-            model.p0_gauge_pa / 1e3,
-            a.plant.display()
-        );
-    }
-    // The sign of A is physics as well: at equal pressures a muscle that contracts loses
-    // tension, so the pair pulls the joint back (dT/dalpha < 0 for the plant's muscles). The
-    // opposite sign fits as well on data whose angle is logged the other way round (the
-    // encoder's direction) or whose muscles are swapped in every column (pressures, tensions
-    // and valves together: B keeps its sign then); the firmware's inverse model would push the
-    // joint away from where it is.
-    // dT/dalpha of the plant's pair at equal gauge pressures `p_gauge_pa` [N m/rad].
-    let delta_rad = 0.05;
-    let stiffness_at = |p_gauge_pa: f64| {
-        let t = |angle_rad: f64| {
-            let [c1, c2] = plant.joint.contractions(angle_rad);
-            plant.joint.sprocket_radius_m
-                * (plant.muscle.static_force_n(p_gauge_pa, c1)
-                    - plant.muscle.static_force_n(p_gauge_pa, c2))
-        };
-        (t(delta_rad) - t(-delta_rad)) / (2.0 * delta_rad)
-    };
-    let plant_stiffness = stiffness_at(model.p0_gauge_pa);
-    let r = model.sprocket_radius_m;
-    let fitted_stiffness = model.a_n_per_m_rad * r * r;
-    if fitted_stiffness * plant_stiffness < 0.0 {
-        bail!(
-            "{file}: the fitted stiffness A r^2 = {fitted_stiffness:.4e} N m/rad has the opposite \
-             sign of the plant's muscles ({plant_stiffness:.4e} N m/rad at p0 = {:.1} kPa of {}: \
-             a contracting muscle loses tension, so the pair pulls the joint back): the angle \
-             is logged the other way round (the encoder's direction: negate angle_deg), or \
-             muscle 1 and 2 are swapped in every column (p1_kpa with p2_kpa, f1_n with f2_n, \
-             and the valves); the firmware would push the joint away; nothing written",
-            model.p0_gauge_pa / 1e3,
-            a.plant.display()
-        );
-    }
-    // Pressures logged absolute, with the tensions measured: the tensions are those of the
-    // true gauge pressures, so the fitted stiffness is the plant's muscles' one an atmosphere
-    // below the data's p0, not at it.
-    if source == TorqueSource::MeasuredTensions {
-        let at_p0 = fitted_stiffness / plant_stiffness;
-        let below = fitted_stiffness / stiffness_at(model.p0_gauge_pa - plant.p_atm_pa);
-        if (below - 1.0).abs() < 0.05 && (at_p0 - 1.0).abs() > 0.15 {
-            bail!(
-                "{file}: the pressures look absolute, not gauge: the tensions f1_n, f2_n give the \
-                 stiffness A r^2 = {fitted_stiffness:.4e} N m/rad, {:.0} % of the plant's muscles \
-                 at the data's p0 = {:.1} kPa but {:.0} % at {:.1} kPa, one atmosphere ({:.3} \
-                 kPa) lower; RECORDING.md's columns are gauge: subtract the atmosphere from \
-                 p1_kpa and p2_kpa (or import with reference = \"absolute\"); nothing written",
-                100.0 * at_p0,
-                model.p0_gauge_pa / 1e3,
-                100.0 * below,
-                (model.p0_gauge_pa - plant.p_atm_pa) / 1e3,
-                plant.p_atm_pa / 1e3
-            );
-        }
-    }
-    // Eq. 11 assumes the symmetric activation p1 + p2 = 2 p0: report how far the data is from it.
-    let p0_sd_pa = (samples
-        .iter()
-        .map(|s| (0.5 * (s.p1_gauge_pa + s.p2_gauge_pa) - model.p0_gauge_pa).powi(2))
-        .sum::<f64>()
-        / samples.len() as f64)
-        .sqrt();
-    let symmetric_note = if p0_sd_pa > 0.05 * model.p0_gauge_pa.abs().max(1e3) {
-        format!(
-            "warning: (p1 + p2) / 2 spreads by {:.1} kPa (sd) around p0 = {:.1} kPa; eq. 11 assumes the \
-             symmetric activation p1 = p0 - dp, p2 = p0 + dp (seed 003), so its fit is poor on such data\n",
-            p0_sd_pa / 1e3,
-            model.p0_gauge_pa / 1e3
-        )
-    } else {
-        String::new()
-    };
+    check_torque_signs(&model, &plant, source, &file, &a.plant)?;
+    let symmetric_note = symmetric_activation_note(&samples, &model);
     let supply_gauge_pa = plant.p_supply_abs_pa - plant.p_atm_pa;
-    let dp_max_pa = match a.dp_max_kpa {
-        Some(v) => {
-            // p1 = p0 - dp and p2 = p0 + dp must stay between atmosphere and the supply.
-            let limit_kpa = model.p0_gauge_pa.min(supply_gauge_pa - model.p0_gauge_pa) / 1e3;
-            if v < DP_MAX_KPA_MIN && v <= limit_kpa {
-                bail!(
-                    "--dp-max-kpa {v}: below {DP_MAX_KPA_MIN} kPa the controller can hardly \
-                     activate the joint (within (0, {limit_kpa:.1}] kPa here): a value in MPa or \
-                     bar? 0.2 MPa = 2 bar = 200 kPa"
-                );
-            }
-            if !(v > 0.0 && v <= limit_kpa) {
-                bail!(
-                    "--dp-max-kpa {v}: must be within (0, {limit_kpa:.1}] kPa: p0 -+ dp must stay \
-                     between atmosphere and the supply ({:.1} kPa gauge, p0 = {:.1} kPa)",
-                    supply_gauge_pa / 1e3,
-                    model.p0_gauge_pa / 1e3
-                );
-            }
-            v * 1e3
-        }
-        None => {
-            // 20 kPa of headroom to atmosphere and to the supply, to whole kPa.
-            let v = ((model.p0_gauge_pa.min(supply_gauge_pa - model.p0_gauge_pa) - 20e3) / 1e3)
-                .round()
-                * 1e3;
-            if !(v > 0.0) {
-                bail!(
-                    "p0 = {:.1} kPa of the data leaves no activation range below the supply; give --dp-max-kpa",
-                    model.p0_gauge_pa / 1e3
-                );
-            }
-            v
-        }
-    };
+    let dp_max_pa = dp_max_pa(a.dp_max_kpa, model.p0_gauge_pa, supply_gauge_pa)?;
     let src = match source {
         TorqueSource::MeasuredTensions => format!("{file} (torque from f1_n, f2_n)"),
         TorqueSource::PlantForceModel => format!(
@@ -960,6 +766,245 @@ pub fn torque_model_file(a: &IdentifyTorqueArgs) -> Result<TorqueModelFile> {
         report,
         fit_pct: q.fit_pct,
         warnings: symmetric_note,
+    })
+}
+
+/// A pressure beyond what a muscle bears is a unit mistake (Pa or MPa written for kPa):
+/// refused at its line.
+fn check_pressure_range(raw: &Recording, path: &Path) -> Result<()> {
+    let file = path.display().to_string();
+    for (c, name) in [
+        (crate::io::recording::Channel::P1Kpa, "p1_kpa"),
+        (crate::io::recording::Channel::P2Kpa, "p2_kpa"),
+    ] {
+        let Some(p) = raw.channel(c) else { continue };
+        if let Some(k) = p
+            .iter()
+            .position(|v| !(force::P_KPA_MIN..=force::P_KPA_MAX).contains(v))
+        {
+            bail!(
+                "{file}:{}: column `{name}`: {} is outside {}..{} kPa gauge (a value in Pa? the \
+                 column is in kPa); nothing written",
+                header_line_of(path) + 1 + k,
+                p[k],
+                force::P_KPA_MIN,
+                force::P_KPA_MAX
+            );
+        }
+    }
+    Ok(())
+}
+
+/// A recording without motion or without activation cannot determine the model (the fit
+/// would write zeros and call them a perfect fit). The same floors as `calibrate`'s (the
+/// firmware's constants come from either): a joint that moved less than half a degree (sd),
+/// or an activation dp = (p2 - p1) / 2 that did not vary, cannot determine A, or B: the
+/// least-squares fit would write what the noise gives (a sweep at dp = 0 fitted B 640 times
+/// too small at 97 %). The torque must vary too.
+fn check_torque_excitation(samples: &[torque::TorqueSample], file: &str) -> Result<()> {
+    let spread = |f: &dyn Fn(&torque::TorqueSample) -> f64| {
+        let lo = samples.iter().map(f).fold(f64::INFINITY, f64::min);
+        let hi = samples.iter().map(f).fold(f64::NEG_INFINITY, f64::max);
+        hi - lo
+    };
+    if !(spread(&|s| s.angle_rad) > 1e-3) {
+        bail!(
+            "{file}: column `angle_deg`: the joint does not move (angle range below 0.06 degrees); \
+             the torque model needs a recording through a range of angles"
+        );
+    }
+    let sd_of = |f: &dyn Fn(&torque::TorqueSample) -> f64| {
+        let n = samples.len() as f64;
+        let m = samples.iter().map(f).sum::<f64>() / n;
+        (samples.iter().map(|s| (f(s) - m).powi(2)).sum::<f64>() / n).sqrt()
+    };
+    let angle_sd_deg = sd_of(&|s| s.angle_rad).to_degrees();
+    if !(angle_sd_deg >= super::calibrate::MIN_ANGLE_SD_DEG) {
+        bail!(
+            "{file}: column `angle_deg`: the joint hardly moves (sd {angle_sd_deg:.3} deg < {} deg; \
+             an angle logged in radians? the column is in degrees); the torque model needs a \
+             recording through a range of angles; nothing written",
+            super::calibrate::MIN_ANGLE_SD_DEG
+        );
+    }
+    let dp_sd_kpa = sd_of(&|s| 0.5 * (s.p2_gauge_pa - s.p1_gauge_pa)) / 1e3;
+    if !(dp_sd_kpa >= super::calibrate::MIN_PRESSURE_SD_KPA) {
+        let p_max_kpa = samples
+            .iter()
+            .map(|s| s.p1_gauge_pa.abs().max(s.p2_gauge_pa.abs()))
+            .fold(0.0, f64::max)
+            / 1e3;
+        let unit = if p_max_kpa < 10.0 {
+            format!(" (pressures up to {p_max_kpa:.3} kPa: logged in bar or MPa? the columns are in kPa)")
+        } else {
+            String::new()
+        };
+        bail!(
+            "{file}: the activation dp = (p2_kpa - p1_kpa) / 2 does not vary (sd {dp_sd_kpa:.3} kPa \
+             < {} kPa){unit}: B of eq. 11 needs a recording at several activations (`host-sim \
+             sweep torque --dp-kpa` takes several levels); nothing written",
+            super::calibrate::MIN_PRESSURE_SD_KPA
+        );
+    }
+    if !(spread(&|s| s.torque_nm) > 1e-6) {
+        bail!(
+            "{file}: the torque (f1_n - f2_n) r is constant; the torque model needs a recording \
+             with varying torque"
+        );
+    }
+    Ok(())
+}
+
+/// dT/dalpha of the plant's pair at equal gauge pressures `p_gauge_pa` [N m/rad] (negative:
+/// a contracting muscle loses tension).
+fn plant_stiffness_nm_per_rad(plant: &Plant, p_gauge_pa: f64) -> f64 {
+    let delta_rad = 0.05;
+    let t = |angle_rad: f64| {
+        let [c1, c2] = plant.joint.contractions(angle_rad);
+        plant.joint.sprocket_radius_m
+            * (plant.muscle.static_force_n(p_gauge_pa, c1)
+                - plant.muscle.static_force_n(p_gauge_pa, c2))
+    };
+    (t(delta_rad) - t(-delta_rad)) / (2.0 * delta_rad)
+}
+
+/// The fitted model's signs are physics, not data: refused when B r or A r^2 has the sign
+/// opposite to the plant's muscles', or when measured tensions give the stiffness of the
+/// plant's muscles an atmosphere below the data's p0 (pressures logged absolute).
+fn check_torque_signs(
+    model: &torque::TorqueModelFit,
+    plant: &Plant,
+    source: TorqueSource,
+    file: &str,
+    plant_path: &Path,
+) -> Result<()> {
+    // The sign of B r: dp raises p2 and lowers p1, so the plant's own muscles at angle 0 say
+    // which way the torque goes. The opposite sign fits as well on data whose p1 and p2 (or
+    // valves, or tension columns) are the other muscle's, and would make the firmware drive
+    // the joint the wrong way.
+    let chi0 = plant.joint.initial_contraction;
+    let delta_pa = 10e3;
+    let f = |p: f64| plant.muscle.static_force_n(p, chi0);
+    let plant_gain = plant.joint.sprocket_radius_m
+        * (f(model.p0_gauge_pa - delta_pa) - f(model.p0_gauge_pa + delta_pa))
+        / (2.0 * delta_pa);
+    let fitted_gain = model.b_m2 * model.sprocket_radius_m;
+    if fitted_gain * plant_gain < 0.0 {
+        bail!(
+            "{file}: the fitted B r = {fitted_gain:.4e} m^3 has the opposite sign of the plant's \
+             muscles ({plant_gain:.4e} m^3 at angle 0 and p0 = {:.1} kPa of {}): the recording's \
+             muscle 1 and 2 are swapped (p1_kpa / p2_kpa, the valve columns, or f1_n / f2_n); \
+             nothing written",
+            model.p0_gauge_pa / 1e3,
+            plant_path.display()
+        );
+    }
+    // The sign of A: at equal pressures a muscle that contracts loses tension, so the pair
+    // pulls the joint back (dT/dalpha < 0 for the plant's muscles). The opposite sign fits as
+    // well on data whose angle is logged the other way round (the encoder's direction) or
+    // whose muscles are swapped in every column (pressures, tensions and valves together: B
+    // keeps its sign then); the firmware's inverse model would push the joint away from
+    // where it is.
+    let plant_stiffness = plant_stiffness_nm_per_rad(plant, model.p0_gauge_pa);
+    let r = model.sprocket_radius_m;
+    let fitted_stiffness = model.a_n_per_m_rad * r * r;
+    if fitted_stiffness * plant_stiffness < 0.0 {
+        bail!(
+            "{file}: the fitted stiffness A r^2 = {fitted_stiffness:.4e} N m/rad has the opposite \
+             sign of the plant's muscles ({plant_stiffness:.4e} N m/rad at p0 = {:.1} kPa of {}: \
+             a contracting muscle loses tension, so the pair pulls the joint back): the angle \
+             is logged the other way round (the encoder's direction: negate angle_deg), or \
+             muscle 1 and 2 are swapped in every column (p1_kpa with p2_kpa, f1_n with f2_n, \
+             and the valves); the firmware would push the joint away; nothing written",
+            model.p0_gauge_pa / 1e3,
+            plant_path.display()
+        );
+    }
+    // Pressures logged absolute, with the tensions measured: the tensions are those of the
+    // true gauge pressures, so the fitted stiffness is the plant's muscles' one an atmosphere
+    // below the data's p0, not at it.
+    if source == TorqueSource::MeasuredTensions {
+        let at_p0 = fitted_stiffness / plant_stiffness;
+        let below = fitted_stiffness
+            / plant_stiffness_nm_per_rad(plant, model.p0_gauge_pa - plant.p_atm_pa);
+        if (below - 1.0).abs() < 0.05 && (at_p0 - 1.0).abs() > 0.15 {
+            bail!(
+                "{file}: the pressures look absolute, not gauge: the tensions f1_n, f2_n give the \
+                 stiffness A r^2 = {fitted_stiffness:.4e} N m/rad, {:.0} % of the plant's muscles \
+                 at the data's p0 = {:.1} kPa but {:.0} % at {:.1} kPa, one atmosphere ({:.3} \
+                 kPa) lower; RECORDING.md's columns are gauge: subtract the atmosphere from \
+                 p1_kpa and p2_kpa (or import with reference = \"absolute\"); nothing written",
+                100.0 * at_p0,
+                model.p0_gauge_pa / 1e3,
+                100.0 * below,
+                (model.p0_gauge_pa - plant.p_atm_pa) / 1e3,
+                plant.p_atm_pa / 1e3
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Eq. 11 assumes the symmetric activation p1 + p2 = 2 p0: a warning (ending in a newline)
+/// when (p1 + p2) / 2 spreads by more than 5 % of p0 (at least 50 Pa) around it; empty
+/// otherwise.
+fn symmetric_activation_note(
+    samples: &[torque::TorqueSample],
+    model: &torque::TorqueModelFit,
+) -> String {
+    let p0_sd_pa = (samples
+        .iter()
+        .map(|s| (0.5 * (s.p1_gauge_pa + s.p2_gauge_pa) - model.p0_gauge_pa).powi(2))
+        .sum::<f64>()
+        / samples.len() as f64)
+        .sqrt();
+    if p0_sd_pa > 0.05 * model.p0_gauge_pa.abs().max(1e3) {
+        format!(
+            "warning: (p1 + p2) / 2 spreads by {:.1} kPa (sd) around p0 = {:.1} kPa; eq. 11 assumes the \
+             symmetric activation p1 = p0 - dp, p2 = p0 + dp (seed 003), so its fit is poor on such data\n",
+            p0_sd_pa / 1e3,
+            model.p0_gauge_pa / 1e3
+        )
+    } else {
+        String::new()
+    }
+}
+
+/// The activation limit written with the model [Pa]: `--dp-max-kpa` (`given_kpa`), within
+/// (0, limit] where p1 = p0 - dp and p2 = p0 + dp stay between atmosphere and the supply (and
+/// not under [`DP_MAX_KPA_MIN`] when the limit allows it: a value in MPa or bar); by default
+/// 20 kPa of headroom to atmosphere and to the supply, to whole kPa.
+fn dp_max_pa(given_kpa: Option<f64>, p0_gauge_pa: f64, supply_gauge_pa: f64) -> Result<f64> {
+    Ok(match given_kpa {
+        Some(v) => {
+            let limit_kpa = p0_gauge_pa.min(supply_gauge_pa - p0_gauge_pa) / 1e3;
+            if v < DP_MAX_KPA_MIN && v <= limit_kpa {
+                bail!(
+                    "--dp-max-kpa {v}: below {DP_MAX_KPA_MIN} kPa the controller can hardly \
+                     activate the joint (within (0, {limit_kpa:.1}] kPa here): a value in MPa or \
+                     bar? 0.2 MPa = 2 bar = 200 kPa"
+                );
+            }
+            if !(v > 0.0 && v <= limit_kpa) {
+                bail!(
+                    "--dp-max-kpa {v}: must be within (0, {limit_kpa:.1}] kPa: p0 -+ dp must stay \
+                     between atmosphere and the supply ({:.1} kPa gauge, p0 = {:.1} kPa)",
+                    supply_gauge_pa / 1e3,
+                    p0_gauge_pa / 1e3
+                );
+            }
+            v * 1e3
+        }
+        None => {
+            let v = ((p0_gauge_pa.min(supply_gauge_pa - p0_gauge_pa) - 20e3) / 1e3).round() * 1e3;
+            if !(v > 0.0) {
+                bail!(
+                    "p0 = {:.1} kPa of the data leaves no activation range below the supply; give --dp-max-kpa",
+                    p0_gauge_pa / 1e3
+                );
+            }
+            v
+        }
     })
 }
 
@@ -1025,4 +1070,27 @@ fn identify_plant(a: &IdentifyPlantArgs) -> Result<String> {
         a.out.display(),
         t0.elapsed().as_secs_f64()
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_default_activation_limit_leaves_20_kpa_to_atmosphere_and_supply() {
+        // p0 300 kPa, supply 500 kPa gauge: 200 kPa to the supply, 180 kPa with headroom.
+        assert_eq!(dp_max_pa(None, 300e3, 500e3).unwrap(), 180e3);
+        // Rounded to whole kPa.
+        assert_eq!(dp_max_pa(None, 100.4e3, 500e3).unwrap(), 80e3);
+        assert!(dp_max_pa(None, 15e3, 500e3).is_err());
+    }
+
+    #[test]
+    fn a_given_activation_limit_is_refused_beyond_the_range_or_when_it_looks_like_mpa() {
+        assert_eq!(dp_max_pa(Some(150.0), 300e3, 500e3).unwrap(), 150e3);
+        let too_far = dp_max_pa(Some(250.0), 300e3, 500e3).unwrap_err();
+        assert!(too_far.to_string().contains("(0, 200.0]"), "{too_far}");
+        let mpa = dp_max_pa(Some(0.2), 300e3, 500e3).unwrap_err();
+        assert!(mpa.to_string().contains("MPa"), "{mpa}");
+    }
 }

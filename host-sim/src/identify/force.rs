@@ -981,23 +981,14 @@ fn length_cell(stretch: f64) -> i64 {
 pub const POINT_CELL_PA: f64 = 5e3;
 
 /// Fits eq. 6 (multi-start, firmware law), its held-out errors, the two physical baselines and
-/// (when the data has both branches) one law per branch.
+/// (when the data has both branches) one law per branch. Steps: eq. 6 fitted and checked to
+/// describe the map, its held-out errors, the baselines, the warnings, the branches.
 pub fn identify(samples: &[ForceSample]) -> Result<ForceIdentification, IdentError> {
     check_map(samples)?;
     let eq6_fit = fit_eq6_multistart(samples, EQ6_STARTS, &[])?;
     let eq6 = eq6_fit.eq6;
     let eq6_stats = error_stats(samples, |p, e| eq6.force_n(p, e));
-    // A map eq. 6 does not describe (a column of another quantity, rows mixed up): the law
-    // would be written and clamp the firmware's torque estimate to nonsense.
-    if !(eq6_stats.mae_pct_of_range <= MAX_EQ6_MAE_PCT_OF_RANGE) {
-        return Err(IdentError::Data(format!(
-            "eq. 6 does not describe this map: its best fit errs by {:.1} % of the force range \
-             on average (MAE {:.1} N; a bench map fits within a few %, the reference sweep \
-             0.7 %; {MAX_EQ6_MAE_PCT_OF_RANGE} % is the limit): a column mapped to the wrong \
-             quantity, rows mixed up, or forces of another muscle; nothing written",
-            eq6_stats.mae_pct_of_range, eq6_stats.mae_n
-        )));
-    }
+    check_eq6_describes(&eq6_stats)?;
     let leave_length_out = held_out_error(samples, "length", length_groups(samples), eq6.c[6]);
     let leave_pressure_out = held_out_error(
         samples,
@@ -1009,11 +1000,59 @@ pub fn identify(samples: &[ForceSample]) -> Result<ForceIdentification, IdentErr
     let tondu_stats = error_stats(samples, |p, e| tondu.force_n(p, e));
     let chou_hannaford = fit_chou_hannaford(samples)?;
     let chou_hannaford_stats = error_stats(samples, |p, e| chou_hannaford.force_n(p, e));
+    let mut warnings = overfit_warnings(&[&leave_length_out, &leave_pressure_out], &eq6_stats);
+    warnings.extend(baseline_bound_warnings(&tondu, &chou_hannaford));
+    warnings.extend(absolute_pressure_warning(samples, &chou_hannaford));
+    let hysteresis = fit_hysteresis(samples, eq6.c[6])?;
+    let pmax = samples
+        .iter()
+        .map(|s| s.p_gauge_pa)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let emin = samples
+        .iter()
+        .map(|s| s.stretch)
+        .fold(f64::INFINITY, f64::min);
+    let emax = samples
+        .iter()
+        .map(|s| s.stretch)
+        .fold(f64::NEG_INFINITY, f64::max);
+    Ok(ForceIdentification {
+        eq6,
+        eq6_fit,
+        eq6_stats,
+        leave_length_out,
+        leave_pressure_out,
+        tondu,
+        tondu_stats,
+        chou_hannaford,
+        chou_hannaford_stats,
+        hysteresis,
+        domain: (pmax, emin, emax),
+        n_samples: samples.len(),
+        n_slack: samples.iter().filter(|s| is_slack(s)).count(),
+        warnings,
+    })
+}
+
+/// A map eq. 6 does not describe (a column of another quantity, rows mixed up) is refused:
+/// the law would be written and clamp the firmware's torque estimate to nonsense.
+fn check_eq6_describes(eq6_stats: &ErrorStats) -> Result<(), IdentError> {
+    if !(eq6_stats.mae_pct_of_range <= MAX_EQ6_MAE_PCT_OF_RANGE) {
+        return Err(IdentError::Data(format!(
+            "eq. 6 does not describe this map: its best fit errs by {:.1} % of the force range \
+             on average (MAE {:.1} N; a bench map fits within a few %, the reference sweep \
+             0.7 %; {MAX_EQ6_MAE_PCT_OF_RANGE} % is the limit): a column mapped to the wrong \
+             quantity, rows mixed up, or forces of another muscle; nothing written",
+            eq6_stats.mae_pct_of_range, eq6_stats.mae_n
+        )));
+    }
+    Ok(())
+}
+
+/// A warning per held-out error more than twice the fitted data's: eq. 6 likely over-fitted.
+fn overfit_warnings(held: &[&Option<HeldOut>], eq6_stats: &ErrorStats) -> Vec<String> {
     let mut warnings = Vec::new();
-    for h in [&leave_length_out, &leave_pressure_out]
-        .into_iter()
-        .flatten()
-    {
+    for h in held.iter().copied().flatten() {
         if h.mae_n > 2.0 * eq6_stats.mae_n {
             warnings.push(format!(
                 "eq. 6 errs {:.2}x more on held-out {}s ({:.3} % of range) than on the fitted \
@@ -1025,6 +1064,13 @@ pub fn identify(samples: &[ForceSample]) -> Result<ForceIdentification, IdentErr
             ));
         }
     }
+    warnings
+}
+
+/// A warning per baseline parameter on its bound (the Chou-Hannaford threshold left out);
+/// the Tondu radius pinned at an end names the force unit it suggests.
+fn baseline_bound_warnings(tondu: &Tondu, chou_hannaford: &ChouHannaford) -> Vec<String> {
+    let mut warnings = Vec::new();
     let tx = [tondu.r0_m * 1e3, tondu.alpha0_rad.to_degrees(), tondu.k];
     let cx = [
         chou_hannaford.r0_m * 1e3,
@@ -1058,26 +1104,38 @@ pub fn identify(samples: &[ForceSample]) -> Result<ForceIdentification, IdentErr
             ));
         }
     }
-    // Pressures logged absolute: no sample below one atmosphere, and the slack threshold
-    // the Chou-Hannaford baseline finds is the atmosphere itself (a gauge-logged muscle goes
-    // taut within some ten kPa). Eq. 6 would be written shifted by one atmosphere.
-    // The data carries no atmosphere of its own: the standard one.
+    warnings
+}
+
+/// Pressures logged absolute: no sample below one atmosphere, and the slack threshold the
+/// Chou-Hannaford baseline finds is the atmosphere itself (a gauge-logged muscle goes taut
+/// within some ten kPa). Eq. 6 would be written shifted by one atmosphere. The data carries
+/// no atmosphere of its own: the standard one.
+fn absolute_pressure_warning(
+    samples: &[ForceSample],
+    chou_hannaford: &ChouHannaford,
+) -> Option<String> {
     let p_atm_pa = STANDARD_ATMOSPHERE_PA;
     let p_min_pa = samples
         .iter()
         .map(|s| s.p_gauge_pa)
         .fold(f64::INFINITY, f64::min);
-    if (chou_hannaford.p_threshold_pa - p_atm_pa).abs() <= ABSOLUTE_THRESHOLD_WITHIN_PA
-        && p_min_pa >= p_atm_pa - crate::io::import::P_ABSOLUTE_SUSPECT_WITHIN_PA
-    {
-        warnings.push(format!(
-            "the muscle goes taut at p_th = {:.1} kPa, one atmosphere, and no pressure is below \
-             {:.1} kPa: {}",
-            chou_hannaford.p_threshold_pa * 1e-3,
-            p_min_pa * 1e-3,
-            crate::io::import::ABSOLUTE_PRESSURE_HINT
-        ));
-    }
+    ((chou_hannaford.p_threshold_pa - p_atm_pa).abs() <= ABSOLUTE_THRESHOLD_WITHIN_PA
+        && p_min_pa >= p_atm_pa - crate::io::import::P_ABSOLUTE_SUSPECT_WITHIN_PA)
+        .then(|| {
+            format!(
+                "the muscle goes taut at p_th = {:.1} kPa, one atmosphere, and no pressure is \
+                 below {:.1} kPa: {}",
+                chou_hannaford.p_threshold_pa * 1e-3,
+                p_min_pa * 1e-3,
+                crate::io::import::ABSOLUTE_PRESSURE_HINT
+            )
+        })
+}
+
+/// With at least 20 samples on each branch: one eq. 6 law per branch (the exponent `c6`
+/// of the whole map kept) and the gap between them over the taut samples.
+fn fit_hysteresis(samples: &[ForceSample], c6: f64) -> Result<Option<Hysteresis>, IdentError> {
     let branch = |b: Branch| -> Vec<ForceSample> {
         samples
             .iter()
@@ -1086,60 +1144,31 @@ pub fn identify(samples: &[ForceSample]) -> Result<ForceIdentification, IdentErr
             .collect()
     };
     let (up, down) = (branch(Branch::Pressurising), branch(Branch::Depressurising));
-    let hysteresis = if up.len() >= 20 && down.len() >= 20 {
-        let mu = fit_eq6_multistart(&up, EQ6_STARTS, &[eq6.c[6]])?;
-        let md = fit_eq6_multistart(&down, EQ6_STARTS, &[eq6.c[6]])?;
-        let su = error_stats(&up, |p, e| mu.eq6.force_n(p, e));
-        let sd = error_stats(&down, |p, e| md.eq6.force_n(p, e));
-        let gaps: Vec<f64> = samples
-            .iter()
-            .filter_map(|s| {
-                let (fu, fd) = (
-                    mu.eq6.force_n(s.p_gauge_pa, s.stretch),
-                    md.eq6.force_n(s.p_gauge_pa, s.stretch),
-                );
-                (fu > 0.0 || fd > 0.0).then_some((fu - fd).abs())
-            })
-            .collect();
-        let n = gaps.len().max(1) as f64;
-        Some(Hysteresis {
-            gap_mean_n: gaps.iter().sum::<f64>() / n,
-            gap_max_n: gaps.iter().cloned().fold(0.0, f64::max),
-            samples: (up.len(), down.len()),
-            rising: (mu, su),
-            falling: (md, sd),
+    if !(up.len() >= 20 && down.len() >= 20) {
+        return Ok(None);
+    }
+    let mu = fit_eq6_multistart(&up, EQ6_STARTS, &[c6])?;
+    let md = fit_eq6_multistart(&down, EQ6_STARTS, &[c6])?;
+    let su = error_stats(&up, |p, e| mu.eq6.force_n(p, e));
+    let sd = error_stats(&down, |p, e| md.eq6.force_n(p, e));
+    let gaps: Vec<f64> = samples
+        .iter()
+        .filter_map(|s| {
+            let (fu, fd) = (
+                mu.eq6.force_n(s.p_gauge_pa, s.stretch),
+                md.eq6.force_n(s.p_gauge_pa, s.stretch),
+            );
+            (fu > 0.0 || fd > 0.0).then_some((fu - fd).abs())
         })
-    } else {
-        None
-    };
-    let pmax = samples
-        .iter()
-        .map(|s| s.p_gauge_pa)
-        .fold(f64::NEG_INFINITY, f64::max);
-    let emin = samples
-        .iter()
-        .map(|s| s.stretch)
-        .fold(f64::INFINITY, f64::min);
-    let emax = samples
-        .iter()
-        .map(|s| s.stretch)
-        .fold(f64::NEG_INFINITY, f64::max);
-    Ok(ForceIdentification {
-        eq6,
-        eq6_fit,
-        eq6_stats,
-        leave_length_out,
-        leave_pressure_out,
-        tondu,
-        tondu_stats,
-        chou_hannaford,
-        chou_hannaford_stats,
-        hysteresis,
-        domain: (pmax, emin, emax),
-        n_samples: samples.len(),
-        n_slack: samples.iter().filter(|s| is_slack(s)).count(),
-        warnings,
-    })
+        .collect();
+    let n = gaps.len().max(1) as f64;
+    Ok(Some(Hysteresis {
+        gap_mean_n: gaps.iter().sum::<f64>() / n,
+        gap_max_n: gaps.iter().cloned().fold(0.0, f64::max),
+        samples: (up.len(), down.len()),
+        rising: (mu, su),
+        falling: (md, sd),
+    }))
 }
 
 /// The two report lines of one model's errors.
@@ -1358,7 +1387,8 @@ pub const F_N_KPA_FOR_AT_LEAST: f64 = 200.0;
 
 /// Reads isometric force data: columns `p_kpa` (gauge), `stretch` (L/L0), `f_n`, and
 /// optionally `state` (`pressurising|up|inflate` / `depressurising|down|deflate`) or
-/// `direction` (+1 / -1). Comment lines start with `#`.
+/// `direction` (+1 / -1). Comment lines start with `#`. Steps: the columns, each row read and
+/// range-checked ([`force_row`]), then the map's scale ([`check_force_map_scale`]).
 pub fn read_force_csv(path: &Path) -> Result<Vec<ForceSample>, IdentError> {
     let file = path.display().to_string();
     let text = std::fs::read_to_string(path).map_err(|e| IdentError::Io {
@@ -1379,12 +1409,16 @@ pub fn read_force_csv(path: &Path) -> Result<Vec<ForceSample>, IdentError> {
             IdentError::at(&file, header_line(&text), name, "missing required column")
         })
     };
-    let (ip, ie, iff) = (need("p_kpa")?, need("stretch")?, need("f_n")?);
-    let istate = col("state");
-    let idir = col("direction");
+    let cols = ForceColumns {
+        p: need("p_kpa")?,
+        stretch: need("stretch")?,
+        f: need("f_n")?,
+        state: col("state"),
+        direction: col("direction"),
+    };
     let mut out = Vec::new();
-    // Largest pressure and its line: a map whose largest pressure is a few units is in MPa or
-    // bar, not kPa.
+    // Largest pressure and force with their lines: a map whose largest pressure is a few
+    // units is in MPa or bar, not kPa.
     let mut max_p = (f64::NEG_INFINITY, 0usize);
     let mut max_f = (f64::NEG_INFINITY, 0usize);
     for rec in rdr.records() {
@@ -1393,105 +1427,14 @@ pub fn read_force_csv(path: &Path) -> Result<Vec<ForceSample>, IdentError> {
             IdentError::at(&file, line, "row", &e.to_string())
         })?;
         let line = rec.position().map(|p| p.line() as usize).unwrap_or(0);
-        let num = |i: usize, name: &str| -> Result<f64, IdentError> {
-            let raw = rec.get(i).unwrap_or("");
-            let v: f64 = raw.parse().map_err(|_| {
-                IdentError::at(&file, line, name, &format!("not a number: {raw:?}"))
-            })?;
-            if v.is_finite() {
-                Ok(v)
-            } else {
-                Err(IdentError::at(
-                    &file,
-                    line,
-                    name,
-                    &format!("not finite: {raw:?}"),
-                ))
-            }
-        };
-        let p_kpa = num(ip, "p_kpa")?;
-        let stretch = num(ie, "stretch")?;
-        let f_n = num(iff, "f_n")?;
-        // `hint` follows the range in the message: the unit mistake such a value suggests.
-        let in_range = |name: &str, v: f64, range: RangeInclusive<f64>, hint: &str| {
-            if range.contains(&v) {
-                return Ok(());
-            }
-            let (lo, hi) = range.into_inner();
-            let msg = format!("{v} is outside {lo}..{hi}{hint}");
-            Err(IdentError::at(&file, line, name, &msg))
-        };
-        // Below the range and under 0.5: a contraction 1 - L/L0; above it: a percentage.
-        let stretch_hint = if (0.0..STRETCH_MIN).contains(&stretch) {
-            format!(
-                ": the column is L/L0, the deformation; a contraction 1 - L/L0 instead? \
-                 contraction {stretch} is L/L0 = {}",
-                crate::validate::Shown(1.0 - stretch)
-            )
-        } else {
-            ": the column is L/L0, a ratio (contraction 0..0.5); a percentage? 75 % is 0.75"
-                .to_string()
-        };
-        in_range("stretch", stretch, STRETCH_MIN..=STRETCH_MAX, &stretch_hint)?;
-        in_range(
-            "p_kpa",
-            p_kpa,
-            P_KPA_MIN..=P_KPA_MAX,
-            " kPa gauge (a value in Pa? the column is in kPa)",
-        )?;
-        in_range(
-            "f_n",
-            f_n,
-            F_N_MIN..=F_N_MAX,
-            " N (the column is the tension in N, positive; the largest fluidic muscles pull \
-             ~6 kN: a value in mN, or a load cell logging tension negative?)",
-        )?;
+        let (p_kpa, s) = force_row(&rec, &cols, &file, line)?;
         if p_kpa > max_p.0 {
             max_p = (p_kpa, line);
         }
-        if f_n > max_f.0 {
-            max_f = (f_n, line);
+        if s.force_n > max_f.0 {
+            max_f = (s.force_n, line);
         }
-        let branch = if let Some(i) = istate {
-            let v = rec.get(i).unwrap_or("").to_ascii_lowercase();
-            match v.as_str() {
-                "pressurising" | "pressurizing" | "up" | "inflate" | "rising" => {
-                    Some(Branch::Pressurising)
-                }
-                "depressurising" | "depressurizing" | "down" | "deflate" | "falling" => {
-                    Some(Branch::Depressurising)
-                }
-                "" => None,
-                other => {
-                    return Err(IdentError::at(
-                        &file,
-                        line,
-                        "state",
-                        &format!(
-                            "unknown branch {other:?} (pressurising, up, inflate or rising; \
-                             depressurising, down, deflate or falling; empty for none)"
-                        ),
-                    ))
-                }
-            }
-        } else if let Some(i) = idir {
-            let d = num(i, "direction")?;
-            if d > 0.0 {
-                Some(Branch::Pressurising)
-            } else if d < 0.0 {
-                Some(Branch::Depressurising)
-            } else {
-                None
-            }
-        } else {
-            None
-        };
-        out.push(ForceSample {
-            p_gauge_pa: p_kpa * 1e3,
-            stretch,
-            force_n: f_n,
-            branch,
-        });
+        out.push(s);
     }
     if out.is_empty() {
         return Err(IdentError::at(
@@ -1501,9 +1444,135 @@ pub fn read_force_csv(path: &Path) -> Result<Vec<ForceSample>, IdentError> {
             "no data rows",
         ));
     }
+    check_force_map_scale(&file, max_p, max_f)?;
+    Ok(out)
+}
+
+/// The columns of a force map.
+struct ForceColumns {
+    p: usize,
+    stretch: usize,
+    f: usize,
+    state: Option<usize>,
+    direction: Option<usize>,
+}
+
+/// One row of a force map at `line` (with its pressure as written [kPa]): finite numbers,
+/// each within its physical range (the message names the unit mistake a value outside
+/// suggests), and its branch.
+fn force_row(
+    rec: &csv::StringRecord,
+    cols: &ForceColumns,
+    file: &str,
+    line: usize,
+) -> Result<(f64, ForceSample), IdentError> {
+    let num = |i: usize, name: &str| -> Result<f64, IdentError> {
+        let raw = rec.get(i).unwrap_or("");
+        let v: f64 = raw
+            .parse()
+            .map_err(|_| IdentError::at(file, line, name, &format!("not a number: {raw:?}")))?;
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(IdentError::at(
+                file,
+                line,
+                name,
+                &format!("not finite: {raw:?}"),
+            ))
+        }
+    };
+    let p_kpa = num(cols.p, "p_kpa")?;
+    let stretch = num(cols.stretch, "stretch")?;
+    let f_n = num(cols.f, "f_n")?;
+    // `hint` follows the range in the message: the unit mistake such a value suggests.
+    let in_range = |name: &str, v: f64, range: RangeInclusive<f64>, hint: &str| {
+        if range.contains(&v) {
+            return Ok(());
+        }
+        let (lo, hi) = range.into_inner();
+        let msg = format!("{v} is outside {lo}..{hi}{hint}");
+        Err(IdentError::at(file, line, name, &msg))
+    };
+    // Below the range and under 0.5: a contraction 1 - L/L0; above it: a percentage.
+    let stretch_hint = if (0.0..STRETCH_MIN).contains(&stretch) {
+        format!(
+            ": the column is L/L0, the deformation; a contraction 1 - L/L0 instead? \
+             contraction {stretch} is L/L0 = {}",
+            crate::validate::Shown(1.0 - stretch)
+        )
+    } else {
+        ": the column is L/L0, a ratio (contraction 0..0.5); a percentage? 75 % is 0.75".to_string()
+    };
+    in_range("stretch", stretch, STRETCH_MIN..=STRETCH_MAX, &stretch_hint)?;
+    in_range(
+        "p_kpa",
+        p_kpa,
+        P_KPA_MIN..=P_KPA_MAX,
+        " kPa gauge (a value in Pa? the column is in kPa)",
+    )?;
+    in_range(
+        "f_n",
+        f_n,
+        F_N_MIN..=F_N_MAX,
+        " N (the column is the tension in N, positive; the largest fluidic muscles pull \
+         ~6 kN: a value in mN, or a load cell logging tension negative?)",
+    )?;
+    let branch = if let Some(i) = cols.state {
+        branch_of_state(rec.get(i).unwrap_or(""))
+            .map_err(|msg| IdentError::at(file, line, "state", &msg))?
+    } else if let Some(i) = cols.direction {
+        let d = num(i, "direction")?;
+        if d > 0.0 {
+            Some(Branch::Pressurising)
+        } else if d < 0.0 {
+            Some(Branch::Depressurising)
+        } else {
+            None
+        }
+    } else {
+        None
+    };
+    Ok((
+        p_kpa,
+        ForceSample {
+            p_gauge_pa: p_kpa * 1e3,
+            stretch,
+            force_n: f_n,
+            branch,
+        },
+    ))
+}
+
+/// The branch a `state` cell names (any case; empty: none), or why it names none.
+fn branch_of_state(cell: &str) -> Result<Option<Branch>, String> {
+    match cell.to_ascii_lowercase().as_str() {
+        "pressurising" | "pressurizing" | "up" | "inflate" | "rising" => {
+            Ok(Some(Branch::Pressurising))
+        }
+        "depressurising" | "depressurizing" | "down" | "deflate" | "falling" => {
+            Ok(Some(Branch::Depressurising))
+        }
+        "" => Ok(None),
+        other => Err(format!(
+            "unknown branch {other:?} (pressurising, up, inflate or rising; \
+             depressurising, down, deflate or falling; empty for none)"
+        )),
+    }
+}
+
+/// The map's largest pressure (and force) with its line: a map that never reaches
+/// [`P_KPA_MAX_AT_LEAST`] is in MPa or bar; one that reaches [`F_N_KPA_FOR_AT_LEAST`] but
+/// pulls less than [`F_N_MAX_AT_LEAST`] is in kN (no positive force at all has its own
+/// message, after the read).
+fn check_force_map_scale(
+    file: &str,
+    max_p: (f64, usize),
+    max_f: (f64, usize),
+) -> Result<(), IdentError> {
     if max_p.0 < P_KPA_MAX_AT_LEAST {
         return Err(IdentError::at(
-            &file,
+            file,
             max_p.1,
             "p_kpa",
             &format!(
@@ -1513,10 +1582,9 @@ pub fn read_force_csv(path: &Path) -> Result<Vec<ForceSample>, IdentError> {
             ),
         ));
     }
-    // (No positive force at all has its own message, after the read.)
     if max_f.0 > 0.0 && max_f.0 < F_N_MAX_AT_LEAST && max_p.0 >= F_N_KPA_FOR_AT_LEAST {
         return Err(IdentError::at(
-            &file,
+            file,
             max_f.1,
             "f_n",
             &format!(
@@ -1527,7 +1595,7 @@ pub fn read_force_csv(path: &Path) -> Result<Vec<ForceSample>, IdentError> {
             ),
         ));
     }
-    Ok(out)
+    Ok(())
 }
 
 fn header_line(text: &str) -> usize {
@@ -1788,5 +1856,30 @@ mod tests {
     fn too_few_samples_is_an_error() {
         let data = sweep(&reference(), &grid_sweep(2, 3));
         assert!(matches!(fit_eq6(&data), Err(IdentError::Data(_))));
+    }
+}
+
+#[cfg(test)]
+mod read_tests {
+    use super::*;
+
+    #[test]
+    fn a_state_cell_names_its_branch_in_any_case_and_an_unknown_one_is_refused() {
+        assert_eq!(branch_of_state("UP"), Ok(Some(Branch::Pressurising)));
+        assert_eq!(branch_of_state("Deflate"), Ok(Some(Branch::Depressurising)));
+        assert_eq!(branch_of_state(""), Ok(None));
+        let err = branch_of_state("sideways").unwrap_err();
+        assert!(err.starts_with("unknown branch \"sideways\""), "{err}");
+    }
+
+    #[test]
+    fn a_force_map_in_mpa_or_in_kn_is_refused_at_the_line_of_its_largest_value() {
+        assert!(check_force_map_scale("m.csv", (600.0, 9), (900.0, 9)).is_ok());
+        let mpa = check_force_map_scale("m.csv", (0.6, 7), (900.0, 9)).unwrap_err();
+        assert!(mpa.to_string().contains(":7"), "{mpa}");
+        let kn = check_force_map_scale("m.csv", (600.0, 7), (0.9, 4)).unwrap_err();
+        assert!(kn.to_string().contains(":4"), "{kn}");
+        // Under the pressure at which a muscle must pull a newton, a small force is allowed.
+        assert!(check_force_map_scale("m.csv", (100.0, 7), (0.9, 4)).is_ok());
     }
 }

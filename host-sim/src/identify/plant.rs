@@ -408,6 +408,9 @@ fn replay(plant: &Plant, rec: &Recording, n: usize, opts: &SolverOptions) -> Opt
 pub const RESTART_ABOVE_REL_RMS: f64 = 0.1;
 
 /// Fits `specs` of the plant file `plant_text` (named `plant_file` in messages) to `rec`.
+/// Steps: the training / hold-out split, the start plant (it must replay the recording),
+/// the excitation, the channel weights, the output-error fit (restarted when it stays
+/// far off), the whole recording replayed before and after, the warnings.
 pub fn fit_plant(
     rec: &Recording,
     plant_text: &str,
@@ -415,31 +418,8 @@ pub fn fit_plant(
     specs: &[ParamSpec],
     opts: &PlantFitOptions,
 ) -> Result<PlantFit, IdentError> {
-    if !(opts.holdout_fraction >= 0.0 && opts.holdout_fraction < 1.0) {
-        return Err(IdentError::Data(
-            "hold-out fraction must be in [0, 1)".into(),
-        ));
-    }
     let n = rec.len();
-    let n_train = ((1.0 - opts.holdout_fraction) * n as f64).round() as usize;
-    let n_train_min = (10 * specs.len()).max(20);
-    if n_train < n_train_min {
-        return Err(IdentError::Data(format!(
-            "recording too short: {n_train} training samples for {} parameters (at least \
-             {n_train_min}: 20, and 10 a parameter); record a longer run",
-            specs.len()
-        )));
-    }
-    // A held-out tail of a few samples has no spread to judge a fit by (its fit came out
-    // -inf %).
-    let n_held = n - n_train;
-    if n_held > 0 && n_held < 20 {
-        return Err(IdentError::Data(format!(
-            "recording too short: {n} samples leave {n_held} held out ({:.0} %), too few to \
-             judge the fit by (at least 20); record a longer run",
-            100.0 * opts.holdout_fraction
-        )));
-    }
+    let n_train = training_samples(n, specs.len(), opts.holdout_fraction)?;
     let chans = channels_of(rec);
     let doc: DocumentMut = plant_text
         .parse()
@@ -460,35 +440,8 @@ pub fn fit_plant(
             "{plant_file}: the start plant cannot replay the recording"
         )));
     }
-    // A recording in which nothing moves has nothing to identify (and no spread to judge a
-    // fit by): every channel constant over the training part.
-    let flat = |c: &Channel| {
-        let y = &rec.channel(*c).expect("present")[..n_train];
-        y.iter().all(|v| *v == y[0])
-    };
-    if chans.iter().all(flat) {
-        return Err(IdentError::Data(format!(
-            "no excitation: every channel ({}) is constant over the {n_train} training \
-             samples, so no parameter shows in them; record a run in which the valves move \
-             the joint",
-            chans
-                .iter()
-                .map(|c| c.name())
-                .collect::<Vec<_>>()
-                .join(", ")
-        )));
-    }
-    let weights: Vec<f64> = chans
-        .iter()
-        .map(|c| {
-            let y = &rec.channel(*c).expect("present")[..n_train];
-            let mean = y.iter().sum::<f64>() / y.len() as f64;
-            let var = y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / y.len() as f64;
-            // A flat channel is weighted by a unit spread.
-            let sd = if var > 0.0 { var.sqrt() } else { 1.0 };
-            1.0 / (sd * ((n_train * chans.len()) as f64).sqrt())
-        })
-        .collect();
+    check_excitation(rec, &chans, n_train)?;
+    let weights = channel_weights(rec, &chans, n_train);
     let residuals = |xs: &[f64]| -> Option<Vec<f64>> {
         let (plant, _) = model.plant(xs).ok()?;
         let sim = replay(&plant, rec, n_train, &opts.solver)?;
@@ -515,36 +468,8 @@ pub fn fit_plant(
         patience: opts.patience,
         ..OeOptions::default()
     };
-    let mut result = output_error::fit(&residuals, &params, &oe);
-    let cost0 = result.cost.0;
-    let mut evaluations = result.evaluations;
-    // A local search from the plant file's values can stop in a local minimum when a value is
-    // far off (an inertia 11 x the file's stops at 1.6 x). When the fit leaves more than 10 %
-    // relative RMS error, start again with each value x 10 and / 10 (inside its bounds) and
-    // keep the lowest cost.
-    let rel_rms = |cost: f64| (2.0 * cost).sqrt();
-    let mut starts_note = String::new();
-    let first_rel_rms = rel_rms(result.cost.1);
-    if !(first_rel_rms <= RESTART_ABOVE_REL_RMS) {
-        let mut tried = 1;
-        for i in 0..params.len() {
-            for f in [10.0, 0.1] {
-                let mut p = params.clone();
-                p[i].x0 *= f;
-                let r = output_error::fit(&residuals, &p, &oe);
-                evaluations += r.evaluations;
-                tried += 1;
-                if r.cost.1 < result.cost.1 {
-                    result = r;
-                }
-            }
-        }
-        starts_note = format!(
-            "; {tried} starts (the first left {:.1} % relative RMS error, the best {:.1} %)",
-            100.0 * first_rel_rms,
-            100.0 * rel_rms(result.cost.1)
-        );
-    }
+    let fit = fit_with_restarts(&residuals, &params, &oe);
+    let (result, mut evaluations) = (fit.result, fit.evaluations);
     let cost1 = result.cost.1;
     let x1 = result.x.clone();
     let (plant1, toml) = model.plant(&x1)?;
@@ -606,11 +531,132 @@ pub fn fit_plant(
             Vec::new()
         },
         samples: (n_train, n - n_train),
-        termination: format!("{}{starts_note}", result.termination),
+        termination: format!("{}{}", result.termination, fit.starts_note),
         evaluations,
-        cost: (cost0, cost1),
+        cost: (fit.cost0, cost1),
         toml,
     })
+}
+
+/// The training samples of a recording of `n` (the head; the rest is held out): the
+/// hold-out fraction in [0, 1), at least 20 training samples and 10 per parameter, and a
+/// held-out tail of none or at least 20 samples (a tail of a few has no spread to judge a
+/// fit by: its fit came out -inf %).
+fn training_samples(n: usize, n_params: usize, holdout_fraction: f64) -> Result<usize, IdentError> {
+    if !(0.0..1.0).contains(&holdout_fraction) {
+        return Err(IdentError::Data(
+            "hold-out fraction must be in [0, 1)".into(),
+        ));
+    }
+    let n_train = ((1.0 - holdout_fraction) * n as f64).round() as usize;
+    let n_train_min = (10 * n_params).max(20);
+    if n_train < n_train_min {
+        return Err(IdentError::Data(format!(
+            "recording too short: {n_train} training samples for {n_params} parameters (at least \
+             {n_train_min}: 20, and 10 a parameter); record a longer run"
+        )));
+    }
+    let n_held = n - n_train;
+    if n_held > 0 && n_held < 20 {
+        return Err(IdentError::Data(format!(
+            "recording too short: {n} samples leave {n_held} held out ({:.0} %), too few to \
+             judge the fit by (at least 20); record a longer run",
+            100.0 * holdout_fraction
+        )));
+    }
+    Ok(n_train)
+}
+
+/// A recording in which nothing moves has nothing to identify (and no spread to judge a fit
+/// by): refused when every channel is constant over the training part.
+fn check_excitation(rec: &Recording, chans: &[Channel], n_train: usize) -> Result<(), IdentError> {
+    let flat = |c: &Channel| {
+        let y = &rec.channel(*c).expect("present")[..n_train];
+        y.iter().all(|v| *v == y[0])
+    };
+    if chans.iter().all(flat) {
+        return Err(IdentError::Data(format!(
+            "no excitation: every channel ({}) is constant over the {n_train} training \
+             samples, so no parameter shows in them; record a run in which the valves move \
+             the joint",
+            chans
+                .iter()
+                .map(|c| c.name())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )));
+    }
+    Ok(())
+}
+
+/// The residual weight of each channel: 1 / (its spread (sd) over the training part, a flat
+/// channel's taken as 1) / sqrt(training samples x channels), so every channel counts alike
+/// whatever its unit.
+fn channel_weights(rec: &Recording, chans: &[Channel], n_train: usize) -> Vec<f64> {
+    chans
+        .iter()
+        .map(|c| {
+            let y = &rec.channel(*c).expect("present")[..n_train];
+            let mean = y.iter().sum::<f64>() / y.len() as f64;
+            let var = y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / y.len() as f64;
+            // A flat channel is weighted by a unit spread.
+            let sd = if var > 0.0 { var.sqrt() } else { 1.0 };
+            1.0 / (sd * ((n_train * chans.len()) as f64).sqrt())
+        })
+        .collect()
+}
+
+/// The output-error fit and how it was reached.
+struct RestartedFit {
+    result: output_error::OeResult,
+    /// The cost at the plant file's values.
+    cost0: f64,
+    evaluations: usize,
+    /// What the restarts did ("; N starts (...)"), empty without them.
+    starts_note: String,
+}
+
+/// The output-error fit from the plant file's values. A local search from them can stop in
+/// a local minimum when a value is far off (an inertia 11 x the file's stops at 1.6 x): when
+/// the fit leaves more than [`RESTART_ABOVE_REL_RMS`] relative RMS error, it starts again with
+/// each value x 10 and / 10 (inside its bounds) and keeps the lowest cost.
+fn fit_with_restarts(
+    residuals: &output_error::Residuals<'_>,
+    params: &[OeParam],
+    oe: &OeOptions,
+) -> RestartedFit {
+    let mut result = output_error::fit(residuals, params, oe);
+    let cost0 = result.cost.0;
+    let mut evaluations = result.evaluations;
+    let rel_rms = |cost: f64| (2.0 * cost).sqrt();
+    let mut starts_note = String::new();
+    let first_rel_rms = rel_rms(result.cost.1);
+    if !(first_rel_rms <= RESTART_ABOVE_REL_RMS) {
+        let mut tried = 1;
+        for i in 0..params.len() {
+            for f in [10.0, 0.1] {
+                let mut p = params.to_vec();
+                p[i].x0 *= f;
+                let r = output_error::fit(residuals, &p, oe);
+                evaluations += r.evaluations;
+                tried += 1;
+                if r.cost.1 < result.cost.1 {
+                    result = r;
+                }
+            }
+        }
+        starts_note = format!(
+            "; {tried} starts (the first left {:.1} % relative RMS error, the best {:.1} %)",
+            100.0 * first_rel_rms,
+            100.0 * rel_rms(result.cost.1)
+        );
+    }
+    RestartedFit {
+        result,
+        cost0,
+        evaluations,
+        starts_note,
+    }
 }
 
 /// Per key, a warning when the plant file's rules hold it where the fit ended (one key
@@ -961,5 +1007,23 @@ mod tests {
         set_number(&mut doc, "a.x", 6.5e-9);
         assert!(doc.to_string().contains("x = 6.5e-9   # the x"));
         assert_eq!(get_number(&doc, "a.x", "p.toml").unwrap(), 6.5e-9);
+    }
+}
+
+#[cfg(test)]
+mod split_tests {
+    use super::*;
+
+    #[test]
+    fn the_training_head_needs_20_samples_and_10_a_parameter_and_a_judgeable_tail() {
+        assert_eq!(training_samples(1000, 3, 0.25).unwrap(), 750);
+        assert_eq!(training_samples(100, 2, 0.0).unwrap(), 100);
+        // 3 parameters need 30 training samples.
+        assert!(training_samples(35, 3, 0.2).is_err());
+        // A tail of 10 samples is too few to judge a fit by.
+        let err = training_samples(100, 1, 0.1).unwrap_err();
+        assert!(err.to_string().contains("10 held out"), "{err}");
+        assert!(training_samples(1000, 1, 1.0).is_err());
+        assert!(training_samples(1000, 1, f64::NAN).is_err());
     }
 }

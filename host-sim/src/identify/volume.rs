@@ -1017,28 +1017,13 @@ pub fn split_samples(
     (train, held)
 }
 
-/// `host-sim identify volume`: trains, writes the TOML, returns the report.
+/// `host-sim identify volume`: trains, writes the TOML, returns the report. Steps: the files
+/// checked, the samples of the recording and of the validation recordings, the training
+/// data checked, the network trained, judged against the polynomial volume on data it was
+/// not trained on, then written with its header.
 pub fn run_identify_volume(a: &IdentifyVolumeArgs) -> anyhow::Result<String> {
     use anyhow::Context;
-    let mut inputs = vec![("--recording", a.recording.as_path())];
-    inputs.extend(a.validate.iter().map(|v| ("--validate", v.as_path())));
-    crate::validate::distinct_file_outputs(&inputs, &[("--out", &a.out)])
-        .map_err(anyhow::Error::msg)?;
-    crate::validate::replaceable("--out", &a.out, crate::validate::OutputKind::VOLUME_FNN)
-        .map_err(anyhow::Error::msg)?;
-    // A validation recording is one the network was not trained on.
-    if let Some(v) = a
-        .validate
-        .iter()
-        .find(|v| crate::validate::same_existing_file(v, &a.recording))
-    {
-        anyhow::bail!(
-            "--validate {}: is the same file as --recording {}; give a recording the network \
-             is not trained on (its own held-out part is already reported)",
-            v.display(),
-            a.recording.display()
-        );
-    }
+    check_volume_files(a)?;
     let rec = Recording::read(&a.recording)?.to_uniform();
     let file = a.recording.display().to_string();
     let hw = a
@@ -1058,19 +1043,7 @@ pub fn run_identify_volume(a: &IdentifyVolumeArgs) -> anyhow::Result<String> {
     let per_muscle = samples_from_recording(&rec, &geometry, p_atm, hw)
         .map_err(|e| anyhow::anyhow!("{file}: {e}"))?;
     // The validation recordings are read (and refused) before any training.
-    let mut validation = Vec::new();
-    for v in &a.validate {
-        let r = Recording::read(v)?.to_uniform();
-        let hw_v = a
-            .savgol_half_window
-            .unwrap_or_else(|| half_window_samples(0.010, r.sample_period_s()));
-        let [m1, m2] = samples_from_recording(&r, &geometry, p_atm, hw_v)
-            .map_err(|e| anyhow::anyhow!("{}: {e}", v.display()))?;
-        validation.push((
-            format!("{} (not trained on)", v.display()),
-            [m1, m2].concat(),
-        ));
-    }
+    let validation = validation_samples(a, &geometry, p_atm)?;
     check_training_data(&per_muscle, a.holdout_fraction, &geometry)
         .map_err(|e| anyhow::anyhow!("{file}: {e} (nothing written)"))?;
     let (train_s, held) = split_samples(&per_muscle, a.holdout_fraction, a.max_samples);
@@ -1078,6 +1051,106 @@ pub fn run_identify_volume(a: &IdentifyVolumeArgs) -> anyhow::Result<String> {
     let poly = VolumePoly::firmware();
     check_gauge_pressures(&per_muscle, &poly, &thermo, p_atm)
         .map_err(|e| anyhow::anyhow!("{file}: {e} (nothing written)"))?;
+    let t =
+        train_with_bar(a, &train_s, &poly, &thermo).map_err(|e| anyhow::anyhow!("{file}: {e}"))?;
+    let mut sets = vec![
+        ("training".to_string(), &train_s),
+        ("held out (recording tail)".to_string(), &held),
+    ];
+    sets.extend(validation.iter().map(|(n, s)| (n.clone(), s)));
+    sets.retain(|(_, s)| !s.is_empty());
+    let poly_flow = |s: &VolumeSample| poly.mass_flow_kg_s(s, &thermo);
+    let hm = |s: &VolumeSample| t.net.mass_flow_kg_s(s, &thermo);
+    let errors: Vec<SetErrors> = sets
+        .into_iter()
+        .map(|(name, s)| SetErrors {
+            name,
+            samples: s.len(),
+            poly_mse: mse_kg2_s2(s, poly_flow),
+            hybrid_mse: mse_kg2_s2(s, hm),
+        })
+        .collect();
+    let figures: Vec<String> = errors.iter().map(SetErrors::figure).collect();
+    if !a.allow_worse {
+        network_beats_polynomial(&errors).map_err(|e| anyhow::anyhow!("{file}: {e}"))?;
+    }
+    let fw = t.net.to_firmware();
+    anyhow::ensure!(
+        fw.is_valid(),
+        "{file}: the trained weights do not fit the firmware's f32 (try another --seed)"
+    );
+    let header = volume_header(a, hw, &thermo, &t, &rec, &figures);
+    let text = format!("{header}\n{}", t.net.toml_table());
+    super::write_atomic(&a.out, text.as_bytes()).context("--out")?;
+    let mut report = String::new();
+    let _ = writeln!(
+        report,
+        "{}: hybrid volume, 2 x {HIDDEN} softsign units, {PARAMETERS} weights; loss {:.4e} -> {:.4e} in {} evaluations ({})",
+        a.out.display(),
+        t.loss_start,
+        t.loss_end,
+        t.evaluations,
+        t.termination
+    );
+    for f in &figures {
+        let _ = writeln!(report, "{f}");
+    }
+    Ok(report)
+}
+
+/// No output is an input, `--out` may be replaced, and no validation recording is the
+/// training one (a validation recording is one the network was not trained on).
+fn check_volume_files(a: &IdentifyVolumeArgs) -> anyhow::Result<()> {
+    let mut inputs = vec![("--recording", a.recording.as_path())];
+    inputs.extend(a.validate.iter().map(|v| ("--validate", v.as_path())));
+    crate::validate::distinct_file_outputs(&inputs, &[("--out", &a.out)])
+        .map_err(anyhow::Error::msg)?;
+    crate::validate::replaceable("--out", &a.out, crate::validate::OutputKind::VOLUME_FNN)
+        .map_err(anyhow::Error::msg)?;
+    if let Some(v) = a
+        .validate
+        .iter()
+        .find(|v| crate::validate::same_existing_file(v, &a.recording))
+    {
+        anyhow::bail!(
+            "--validate {}: is the same file as --recording {}; give a recording the network \
+             is not trained on (its own held-out part is already reported)",
+            v.display(),
+            a.recording.display()
+        );
+    }
+    Ok(())
+}
+
+/// The samples of each `--validate` recording (both muscles), named for the report.
+fn validation_samples(
+    a: &IdentifyVolumeArgs,
+    geometry: &JointGeometry,
+    p_atm: f64,
+) -> anyhow::Result<Vec<(String, Vec<VolumeSample>)>> {
+    let mut validation = Vec::new();
+    for v in &a.validate {
+        let r = Recording::read(v)?.to_uniform();
+        let hw_v = a
+            .savgol_half_window
+            .unwrap_or_else(|| half_window_samples(0.010, r.sample_period_s()));
+        let [m1, m2] = samples_from_recording(&r, geometry, p_atm, hw_v)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", v.display()))?;
+        validation.push((
+            format!("{} (not trained on)", v.display()),
+            [m1, m2].concat(),
+        ));
+    }
+    Ok(validation)
+}
+
+/// Trains the network on `train_s` with a progress bar over the loss evaluations.
+fn train_with_bar(
+    a: &IdentifyVolumeArgs,
+    train_s: &[VolumeSample],
+    poly: &VolumePoly,
+    thermo: &Thermo,
+) -> Result<Trained, String> {
     let opt = TrainOptions {
         weight_decay: a.weight_decay,
         seed: a.seed,
@@ -1094,84 +1167,89 @@ pub fn run_identify_volume(a: &IdentifyVolumeArgs) -> anyhow::Result<String> {
         .expect("static template")
         .progress_chars("=> "),
     );
-    let t = train(&train_s, &poly, &thermo, &opt, &|n| {
-        bar.set_position(n as u64)
-    })
-    .map_err(|e| anyhow::anyhow!("{file}: {e}"))?;
+    let t = train(train_s, poly, thermo, &opt, &|n| bar.set_position(n as u64))?;
     bar.finish_and_clear();
-    let poly_flow = |s: &VolumeSample| poly.mass_flow_kg_s(s, &thermo);
-    let hm = |s: &VolumeSample| t.net.mass_flow_kg_s(s, &thermo);
-    let mut sets = vec![
-        ("training".to_string(), &train_s),
-        ("held out (recording tail)".to_string(), &held),
-    ];
-    sets.extend(validation.iter().map(|(n, s)| (n.clone(), s)));
-    sets.retain(|(_, s)| !s.is_empty());
-    // (name, samples, polynomial MSE, hybrid MSE) of each data set.
-    let errors: Vec<(String, usize, f64, f64)> = sets
-        .into_iter()
-        .map(|(name, s)| (name, s.len(), mse_kg2_s2(s, poly_flow), mse_kg2_s2(s, hm)))
-        .collect();
-    let figures: Vec<String> = errors
+    Ok(t)
+}
+
+/// The mass-flow errors of the polynomial volume and of the network on one data set.
+struct SetErrors {
+    name: String,
+    samples: usize,
+    /// Mass-flow MSE [(kg/s)^2].
+    poly_mse: f64,
+    hybrid_mse: f64,
+}
+
+impl SetErrors {
+    /// The report's line of the set.
+    fn figure(&self) -> String {
+        let (name, n, a, h) = (&self.name, self.samples, self.poly_mse, self.hybrid_mse);
+        format!(
+            "{name}: {n} samples, mass-flow MSE polynomial volume {a:.3e}, hybrid {h:.3e} (kg/s)^2 ({:.2}x)",
+            a / h
+        )
+    }
+}
+
+/// The network is judged on data it was not trained on (every set but "training"): there
+/// must be some, and it must beat the polynomial volume on each; the refusal says why (within
+/// 20 % of the polynomial everywhere: the polynomial already describes this muscle).
+fn network_beats_polynomial(errors: &[SetErrors]) -> Result<(), String> {
+    let judged: Vec<&SetErrors> = errors.iter().filter(|e| e.name != "training").collect();
+    if judged.is_empty() {
+        return Err(
+            "nothing held out to judge the network by (--holdout-fraction 0 and no \
+             --validate); nothing written. Give --holdout-fraction > 0 or --validate R2.csv; \
+             --allow-worse writes the network anyway"
+                .into(),
+        );
+    }
+    let worse: Vec<String> = judged
         .iter()
-        .map(|(name, n, a, h)| {
+        .filter(|e| !(e.hybrid_mse < e.poly_mse))
+        .map(|e| {
+            let (name, p, h) = (&e.name, e.poly_mse, e.hybrid_mse);
             format!(
-                "{name}: {n} samples, mass-flow MSE polynomial volume {a:.3e}, hybrid {h:.3e} (kg/s)^2 ({:.2}x)",
-                a / h
+                "{name}: hybrid {h:.3e} vs polynomial {p:.3e} (kg/s)^2 ({:.2}x)",
+                p / h
             )
         })
         .collect();
-    // The network is judged on data it was not trained on: it must beat the polynomial there.
-    let judged: Vec<&(String, usize, f64, f64)> = errors
-        .iter()
-        .filter(|(name, ..)| name != "training")
-        .collect();
-    if !a.allow_worse {
-        let advice =
-            "record the joint moving over its whole range with varying pressures, and more \
+    // Within 20 % of the polynomial everywhere it is judged: the polynomial volume already
+    // describes this muscle, and more recording would not change that.
+    let close = judged.iter().all(|e| e.poly_mse / e.hybrid_mse >= 0.8);
+    let advice = if close {
+        "the network matches the polynomial volume without beating it: the polynomial \
+         already describes this muscle's volume, and the network has nothing to add; keep \
+         the polynomial volume (--allow-worse writes the network anyway)"
+    } else {
+        "record the joint moving over its whole range with varying pressures, and more \
                       of it (e.g. `host-sim simulate --scenario scenarios/volume_training.toml`); \
-                      or keep the polynomial volume; --allow-worse writes the network anyway";
-        if judged.is_empty() {
-            anyhow::bail!(
-                "{file}: nothing held out to judge the network by (--holdout-fraction 0 and no \
-                 --validate); nothing written. Give --holdout-fraction > 0 or --validate R2.csv; \
-                 --allow-worse writes the network anyway"
-            );
-        }
-        let worse: Vec<String> = judged
-            .iter()
-            .filter(|(_, _, p, h)| !(h < p))
-            .map(|(name, _, p, h)| {
-                format!(
-                    "{name}: hybrid {h:.3e} vs polynomial {p:.3e} (kg/s)^2 ({:.2}x)",
-                    p / h
-                )
-            })
-            .collect();
-        // Within 20 % of the polynomial everywhere it is judged: the polynomial volume
-        // already describes this muscle, and more recording would not change that.
-        let close = judged.iter().all(|(_, _, p, h)| p / h >= 0.8);
-        let advice = if close {
-            "the network matches the polynomial volume without beating it: the polynomial \
-             already describes this muscle's volume, and the network has nothing to add; keep \
-             the polynomial volume (--allow-worse writes the network anyway)"
-        } else {
-            advice
-        };
-        if !worse.is_empty() {
-            anyhow::bail!(
-                "{file}: the trained network's mass-flow error is not below the polynomial \
-                 volume's on data it was not trained on, so it would make the feed-forward worse; \
-                 nothing written.\n  {}\n{advice}",
-                worse.join("\n  ")
-            );
-        }
+                      or keep the polynomial volume; --allow-worse writes the network anyway"
+    };
+    if !worse.is_empty() {
+        return Err(format!(
+            "the trained network's mass-flow error is not below the polynomial \
+             volume's on data it was not trained on, so it would make the feed-forward worse; \
+             nothing written.\n  {}\n{advice}",
+            worse.join("\n  ")
+        ));
     }
-    let fw = t.net.to_firmware();
-    anyhow::ensure!(
-        fw.is_valid(),
-        "{file}: the trained weights do not fit the firmware's f32 (try another --seed)"
-    );
+    Ok(())
+}
+
+/// The volume file's header: what the network is, the command that wrote it, the training,
+/// the recording's provenance and the error of each data set.
+fn volume_header(
+    a: &IdentifyVolumeArgs,
+    hw: usize,
+    thermo: &Thermo,
+    t: &Trained,
+    rec: &Recording,
+    figures: &[String],
+) -> String {
+    let file = a.recording.display().to_string();
     let mut header = String::new();
     let _ = writeln!(
         header,
@@ -1205,23 +1283,45 @@ pub fn run_identify_volume(a: &IdentifyVolumeArgs) -> anyhow::Result<String> {
     if !meta.is_empty() {
         let _ = writeln!(header, "# The recording's {}.", meta.join(", "));
     }
-    for f in &figures {
+    for f in figures {
         let _ = writeln!(header, "# {f}");
     }
-    let text = format!("{header}\n{}", t.net.toml_table());
-    super::write_atomic(&a.out, text.as_bytes()).context("--out")?;
-    let mut report = String::new();
-    let _ = writeln!(
-        report,
-        "{}: hybrid volume, 2 x {HIDDEN} softsign units, {PARAMETERS} weights; loss {:.4e} -> {:.4e} in {} evaluations ({})",
-        a.out.display(),
-        t.loss_start,
-        t.loss_end,
-        t.evaluations,
-        t.termination
-    );
-    for f in &figures {
-        let _ = writeln!(report, "{f}");
+    header
+}
+
+#[cfg(test)]
+mod judge_tests {
+    use super::*;
+
+    fn set(name: &str, poly_mse: f64, hybrid_mse: f64) -> SetErrors {
+        SetErrors {
+            name: name.into(),
+            samples: 100,
+            poly_mse,
+            hybrid_mse,
+        }
     }
-    Ok(report)
+
+    #[test]
+    fn the_network_must_beat_the_polynomial_on_every_set_it_was_not_trained_on() {
+        assert!(
+            network_beats_polynomial(&[set("training", 1.0, 2.0), set("held out", 2.0, 1.0)])
+                .is_ok()
+        );
+        let only_training = network_beats_polynomial(&[set("training", 2.0, 1.0)]).unwrap_err();
+        assert!(
+            only_training.starts_with("nothing held out"),
+            "{only_training}"
+        );
+        let worse = network_beats_polynomial(&[set("held out", 1.0, 2.0), set("R2", 2.0, 1.0)])
+            .unwrap_err();
+        assert!(
+            worse.contains("held out: hybrid") && !worse.contains("R2:"),
+            "{worse}"
+        );
+        assert!(worse.contains("record the joint moving"), "{worse}");
+        // Within 20 % of the polynomial everywhere: the polynomial already describes it.
+        let close = network_beats_polynomial(&[set("held out", 1.0, 1.1)]).unwrap_err();
+        assert!(close.contains("nothing to add"), "{close}");
+    }
 }

@@ -225,149 +225,171 @@ impl Positions<'_> {
 /// number going back) starts a new one, and segments shorter than 2 ticks are dropped
 /// (counted). The firmware's 32-bit microsecond time stamp wraps every 71.6 min: time is
 /// counted across the wrap. A time stamp that does not advance while the sequence does is
-/// an error either way.
+/// an error either way. Per record: its place after the one before ([`Segmenter::follow`]),
+/// then its samples ([`Segmenter::take`]).
 pub fn segments_of(
     records: &[(usize, TickRecord)],
     file: &Path,
     pos: &Positions<'_>,
     split: bool,
 ) -> anyhow::Result<(Vec<Segment>, CaptureCounts)> {
-    let what = pos.what();
     let (records, repeated) = without_repeats(records);
-    let mut counts = CaptureCounts {
-        repeated,
-        ..CaptureCounts::default()
-    };
-    let hint = "capture with --split to write the segments between gaps as recordings";
     if let (false, Positions::Lines(bad)) = (split, pos) {
         if let Some((l, why)) = bad.first() {
-            anyhow::bail!("{}:{l}: {why}; {hint}", file.display());
+            anyhow::bail!("{}:{l}: {why}; {SPLIT_HINT}", file.display());
         }
     }
-    let mut segments = Vec::new();
-    // (position, record, time since the log's first record of this run [us], counted
-    // across the wrap of the 32-bit stamp)
-    let mut cur: Vec<(usize, TickRecord, u64)> = Vec::new();
-    let close = |cur: &mut Vec<(usize, TickRecord, u64)>,
-                 ended_by: Option<String>,
-                 segments: &mut Vec<Segment>,
-                 counts: &mut CaptureCounts| {
-        if cur.len() >= 2 {
-            segments.push(segment_of(cur, file, ended_by));
-        } else {
-            counts.too_short += cur.len();
-        }
-        cur.clear();
-    };
-    // The tick period: the median time step between records of consecutive sequence.
-    let period_us = {
-        let mut steps: Vec<u32> = records
-            .windows(2)
-            .filter(|w| w[1].1.seq.wrapping_sub(w[0].1.seq) == 1)
-            .map(|w| w[1].1.t_us.wrapping_sub(w[0].1.t_us))
-            .filter(|d| *d > 0 && *d <= u32::MAX / 2)
-            .collect();
-        steps.sort_unstable();
-        steps.get(steps.len() / 2).copied()
+    let mut s = Segmenter {
+        file,
+        pos,
+        split,
+        period_us: tick_period_us(&records),
+        segments: Vec::new(),
+        cur: Vec::new(),
+        counts: CaptureCounts {
+            repeated,
+            ..CaptureCounts::default()
+        },
     };
     let mut prev: Option<(usize, TickRecord, u64)> = None;
     for &(at, r) in &records {
-        let mut t_us = r.t_us as u64;
-        if let Some((prev_at, p, prev_t_us)) = prev {
-            let ahead = r.seq.wrapping_sub(p.seq);
-            let restarted = ahead > u32::MAX / 2;
-            if ahead == 0 || (restarted && !split) {
+        let t_us = match prev {
+            Some(p) => s.follow(p, at, r)?,
+            None => r.t_us as u64,
+        };
+        prev = Some((at, r, t_us));
+        s.take(at, r, t_us)?;
+    }
+    s.close(None);
+    if s.segments.is_empty() {
+        anyhow::bail!(
+            "{}: {} stream record(s){}; a recording needs at least 2 consecutive ticks with \
+             every sensor sample",
+            file.display(),
+            records.len(),
+            if s.counts.missing > 0 {
+                format!(", {} without a sensor sample", s.counts.missing)
+            } else {
+                String::new()
+            }
+        );
+    }
+    Ok((s.segments, s.counts))
+}
+
+/// What a refusal for a gap suggests.
+const SPLIT_HINT: &str = "capture with --split to write the segments between gaps as recordings";
+
+/// The tick period [us]: the median time step between records of consecutive sequence
+/// (steps of 0 or beyond half the stamp's range left out); `None` without any.
+fn tick_period_us(records: &[(usize, TickRecord)]) -> Option<u32> {
+    let mut steps: Vec<u32> = records
+        .windows(2)
+        .filter(|w| w[1].1.seq.wrapping_sub(w[0].1.seq) == 1)
+        .map(|w| w[1].1.t_us.wrapping_sub(w[0].1.t_us))
+        .filter(|d| *d > 0 && *d <= u32::MAX / 2)
+        .collect();
+    steps.sort_unstable();
+    steps.get(steps.len() / 2).copied()
+}
+
+/// Cuts a record sequence into segments.
+struct Segmenter<'a> {
+    file: &'a Path,
+    pos: &'a Positions<'a>,
+    split: bool,
+    period_us: Option<u32>,
+    segments: Vec<Segment>,
+    /// The segment being built: (position, record, time since the log's first record of this
+    /// run [us], counted across the wrap of the 32-bit stamp).
+    cur: Vec<(usize, TickRecord, u64)>,
+    counts: CaptureCounts,
+}
+
+impl Segmenter<'_> {
+    /// Ends the current segment (`ended_by` the gap after it): kept with at least 2 ticks,
+    /// counted as too short otherwise.
+    fn close(&mut self, ended_by: Option<String>) {
+        if self.cur.len() >= 2 {
+            self.segments
+                .push(segment_of(&self.cur, self.file, ended_by));
+        } else {
+            self.counts.too_short += self.cur.len();
+        }
+        self.cur.clear();
+    }
+
+    /// Record `r` at `at` after `prev`: its time counted on from `prev`'s [us]. A repeated
+    /// sequence with other content, or one going back without `split`, is refused; a restart
+    /// (the sequence going back) ends the segment; a time stamp that does not advance is
+    /// refused; a gap ([`gap_after`]) is refused without `split` and ends the segment with it.
+    fn follow(
+        &mut self,
+        (prev_at, p, prev_t_us): (usize, TickRecord, u64),
+        at: usize,
+        r: TickRecord,
+    ) -> anyhow::Result<u64> {
+        let (file, what) = (self.file, self.pos.what());
+        let ahead = r.seq.wrapping_sub(p.seq);
+        let restarted = ahead > u32::MAX / 2;
+        if ahead == 0 || (restarted && !self.split) {
+            anyhow::bail!(
+                "{}: {what} {at}: sequence {} after {}: a record {} (not a byte-for-byte \
+                 repeat); the log is not one run in order{}",
+                file.display(),
+                r.seq,
+                p.seq,
+                if ahead == 0 {
+                    "repeated with other content"
+                } else {
+                    "out of order"
+                },
+                if restarted {
+                    " (a firmware that restarted: --split writes each run on its own)"
+                } else {
+                    ""
+                }
+            );
+        }
+        if restarted {
+            self.close(Some(format!(
+                "sequence {} after {}: the firmware restarted (a new run)",
+                r.seq, p.seq
+            )));
+            return Ok(r.t_us as u64);
+        }
+        let dt_us = r.t_us.wrapping_sub(p.t_us);
+        if dt_us == 0 || dt_us > u32::MAX / 2 {
+            anyhow::bail!(
+                "{}: {what} {at}: sequence {} after {} but time {} us after {} us: the \
+                 time stamp does not advance with the sequence",
+                file.display(),
+                r.seq,
+                p.seq,
+                r.t_us,
+                p.t_us
+            );
+        }
+        let pos = self.pos;
+        if let Some((g, ended_by)) = gap_after(&p, &r, self.period_us, || pos.between(prev_at, at))
+        {
+            if !self.split {
                 anyhow::bail!(
-                    "{}: {what} {at}: sequence {} after {}: a record {} (not a byte-for-byte \
-                     repeat); the log is not one run in order{}",
+                    "{}: {what} {at}: sequence {} after {}: {g}; nothing is \
+                     interpolated: {SPLIT_HINT}",
                     file.display(),
                     r.seq,
-                    p.seq,
-                    if ahead == 0 {
-                        "repeated with other content"
-                    } else {
-                        "out of order"
-                    },
-                    if restarted {
-                        " (a firmware that restarted: --split writes each run on its own)"
-                    } else {
-                        ""
-                    }
+                    p.seq
                 );
             }
-            if restarted {
-                close(
-                    &mut cur,
-                    Some(format!(
-                        "sequence {} after {}: the firmware restarted (a new run)",
-                        r.seq, p.seq
-                    )),
-                    &mut segments,
-                    &mut counts,
-                );
-            } else {
-                let dt_us = r.t_us.wrapping_sub(p.t_us);
-                if dt_us == 0 || dt_us > u32::MAX / 2 {
-                    anyhow::bail!(
-                        "{}: {what} {at}: sequence {} after {} but time {} us after {} us: the \
-                         time stamp does not advance with the sequence",
-                        file.display(),
-                        r.seq,
-                        p.seq,
-                        r.t_us,
-                        p.t_us
-                    );
-                }
-                t_us = prev_t_us + dt_us as u64;
-                // Consecutive ticks whose stamps are not one tick period apart: the clock
-                // jumped (or ticks ran late); a recording's time is uniform.
-                let jumped = period_us.filter(|&per| {
-                    ahead == 1
-                        && (dt_us as f64 > 1.5 * per as f64 || (dt_us as f64) < 0.5 * per as f64)
-                });
-                // A gap: (what it is, what ended the segment before it).
-                let gap = if let Some(per) = jumped {
-                    let g = format!(
-                        "the time stamp moves {dt_us} us between consecutive ticks (the tick \
-                         period is {per} us): the firmware's clock jumped or the tick ran late"
-                    );
-                    Some((
-                        g.clone(),
-                        format!("sequence {} after {}: {g}", r.seq, p.seq),
-                    ))
-                } else if ahead != 1 {
-                    let n = ahead - 1;
-                    let g = match pos.between(prev_at, at) {
-                        Some(c) => format!("{n} record(s) missing; {c}"),
-                        None => format!(
-                            "{n} record(s) lost (capture again with a larger RTT buffer or a \
-                             lower rate)"
-                        ),
-                    };
-                    let ended_by = format!(
-                        "sequence {}..={}: {g}",
-                        p.seq.wrapping_add(1),
-                        r.seq.wrapping_sub(1)
-                    );
-                    Some((g, ended_by))
-                } else {
-                    None
-                };
-                if let Some((g, ended_by)) = gap {
-                    if !split {
-                        anyhow::bail!(
-                            "{}: {what} {at}: sequence {} after {}: {g}; nothing is \
-                             interpolated: {hint}",
-                            file.display(),
-                            r.seq,
-                            p.seq
-                        );
-                    }
-                    close(&mut cur, Some(ended_by), &mut segments, &mut counts);
-                }
-            }
+            self.close(Some(ended_by));
         }
-        prev = Some((at, r, t_us));
+        Ok(prev_t_us + dt_us as u64)
+    }
+
+    /// Adds record `r` to the current segment; a record without a sensor sample (dropout or
+    /// NaN) is refused without `split`, and with it ends the segment (counted, left out).
+    fn take(&mut self, at: usize, r: TickRecord, t_us: u64) -> anyhow::Result<()> {
         let missing = [
             ("angle", r.angle_rad),
             ("p1", r.p_gauge_pa[0]),
@@ -376,45 +398,72 @@ pub fn segments_of(
         .into_iter()
         .find(|(_, v)| !v.is_finite());
         if let Some((name, _)) = missing {
-            if !split {
+            if !self.split {
                 anyhow::bail!(
-                    "{}: {what} {at} (sequence {}): no {name} sample (dropout or NaN); a \
-                     missing sample is not filled: {hint}",
-                    file.display(),
+                    "{}: {} {at} (sequence {}): no {name} sample (dropout or NaN); a \
+                     missing sample is not filled: {SPLIT_HINT}",
+                    self.file.display(),
+                    self.pos.what(),
                     r.seq
                 );
             }
-            counts.missing += 1;
-            if !cur.is_empty() {
-                close(
-                    &mut cur,
-                    Some(format!("sequence {}: no {name} sample", r.seq)),
-                    &mut segments,
-                    &mut counts,
-                );
+            self.counts.missing += 1;
+            if !self.cur.is_empty() {
+                self.close(Some(format!("sequence {}: no {name} sample", r.seq)));
             }
-            continue;
+            return Ok(());
         }
         if r.fault != 0 {
-            counts.faulted += 1;
+            self.counts.faulted += 1;
         }
-        cur.push((at, r, t_us));
+        self.cur.push((at, r, t_us));
+        Ok(())
     }
-    close(&mut cur, None, &mut segments, &mut counts);
-    if segments.is_empty() {
-        anyhow::bail!(
-            "{}: {} stream record(s){}; a recording needs at least 2 consecutive ticks with \
-             every sensor sample",
-            file.display(),
-            records.len(),
-            if counts.missing > 0 {
-                format!(", {} without a sensor sample", counts.missing)
-            } else {
-                String::new()
-            }
+}
+
+/// The gap between consecutive records `p` and `r` (the sequence advanced, the time too):
+/// (what it is, what ended the segment before it), `None` when there is none. Consecutive
+/// ticks whose stamps are not within 0.5..1.5 tick periods apart: the clock jumped (or ticks
+/// ran late), and a recording's time is uniform. A sequence that skips: records lost, or
+/// (`between`: what lies between them) corrupted.
+fn gap_after(
+    p: &TickRecord,
+    r: &TickRecord,
+    period_us: Option<u32>,
+    between: impl FnOnce() -> Option<String>,
+) -> Option<(String, String)> {
+    let ahead = r.seq.wrapping_sub(p.seq);
+    let dt_us = r.t_us.wrapping_sub(p.t_us);
+    let jumped = period_us.filter(|&per| {
+        ahead == 1 && (dt_us as f64 > 1.5 * per as f64 || (dt_us as f64) < 0.5 * per as f64)
+    });
+    if let Some(per) = jumped {
+        let g = format!(
+            "the time stamp moves {dt_us} us between consecutive ticks (the tick \
+             period is {per} us): the firmware's clock jumped or the tick ran late"
         );
+        Some((
+            g.clone(),
+            format!("sequence {} after {}: {g}", r.seq, p.seq),
+        ))
+    } else if ahead != 1 {
+        let n = ahead - 1;
+        let g = match between() {
+            Some(c) => format!("{n} record(s) missing; {c}"),
+            None => format!(
+                "{n} record(s) lost (capture again with a larger RTT buffer or a \
+                 lower rate)"
+            ),
+        };
+        let ended_by = format!(
+            "sequence {}..={}: {g}",
+            p.seq.wrapping_add(1),
+            r.seq.wrapping_sub(1)
+        );
+        Some((g, ended_by))
+    } else {
+        None
     }
-    Ok((segments, counts))
 }
 
 /// The recording of consecutive, complete records (with their times counted across the
@@ -665,4 +714,56 @@ fn decode_defmt(elf: &Path, log: &Path) -> anyhow::Result<String> {
         );
     }
     Ok(String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn record(seq: u32, t_us: u32) -> TickRecord {
+        TickRecord {
+            seq,
+            t_us,
+            setpoint_rad: 0.0,
+            openings: [0.0; 4],
+            p_counts: [0; 2],
+            encoder_counts: 0,
+            p_gauge_pa: [0.0; 2],
+            angle_rad: 0.0,
+            fault: 0,
+            armed: true,
+        }
+    }
+
+    #[test]
+    fn the_tick_period_is_the_median_step_of_consecutive_sequence_numbers() {
+        let records: Vec<(usize, TickRecord)> =
+            [(1, 0), (2, 1000), (3, 2000), (7, 9000), (8, 10_100)]
+                .iter()
+                .enumerate()
+                .map(|(k, &(seq, t))| (k, record(seq, t)))
+                .collect();
+        // Steps of consecutive records: 1000, 1000, 1100 (the skip 3 -> 7 left out).
+        assert_eq!(tick_period_us(&records), Some(1000));
+        assert_eq!(tick_period_us(&records[..1]), None);
+    }
+
+    #[test]
+    fn a_gap_is_a_skipped_sequence_or_a_step_outside_half_to_one_and_a_half_periods() {
+        let p = record(10, 50_000);
+        let none = || None;
+        assert!(gap_after(&p, &record(11, 51_000), Some(1000), none).is_none());
+        assert!(gap_after(&p, &record(11, 51_400), Some(1000), none).is_none());
+        let (late, ended_by) = gap_after(&p, &record(11, 51_600), Some(1000), none).unwrap();
+        assert!(late.contains("1600 us"), "{late}");
+        assert!(ended_by.starts_with("sequence 11 after 10"), "{ended_by}");
+        let (lost, ended_by) = gap_after(&p, &record(13, 53_000), Some(1000), none).unwrap();
+        assert!(lost.starts_with("2 record(s) lost"), "{lost}");
+        assert!(ended_by.starts_with("sequence 11..=12"), "{ended_by}");
+        let (bad, _) = gap_after(&p, &record(12, 52_000), Some(1000), || {
+            Some("corrupt".into())
+        })
+        .unwrap();
+        assert_eq!(bad, "1 record(s) missing; corrupt");
+    }
 }

@@ -420,14 +420,19 @@ fn pressure_factor(unit: &str) -> Option<f64> {
     }
 }
 
-/// Checks one channel entry and gives its target and conversion.
-fn plan(
-    m: &Mapping,
+/// Where one channel entry of the mapping file is, for its messages.
+struct EntryAt<'a> {
+    m: &'a Mapping,
     i: usize,
-    c: &ChannelMap,
-    path: &Path,
-) -> Result<(Target, Convert), ImportError> {
-    let key = |k: &str| {
+    c: &'a ChannelMap,
+    path: &'a Path,
+}
+
+impl EntryAt<'_> {
+    /// "file:line: channel[i] (`name`): `k`", the line of key `k` (or of the entry's
+    /// `channel` key) when it is found.
+    fn key(&self, k: &str) -> String {
+        let (m, i, c, path) = (self.m, self.i, self.c, self.path);
         let at = match crate::validate::toml_key_line(&m.text, "channel", i, k)
             .or_else(|| crate::validate::toml_key_line(&m.text, "channel", i, "channel"))
         {
@@ -435,69 +440,102 @@ fn plan(
             None => path.display().to_string(),
         };
         format!("{at}: channel[{i}] (`{}`): `{k}`", c.channel)
-    };
+    }
+
+    /// The error for a unit this channel does not take.
+    fn unit_error(&self, unit: &str, allowed: &str) -> ImportError {
+        ImportError(format!(
+            "{}: {unit:?} is not a unit of this channel (use {allowed})",
+            self.key("unit")
+        ))
+    }
+}
+
+/// Checks one channel entry and gives its target and conversion.
+fn plan(
+    m: &Mapping,
+    i: usize,
+    c: &ChannelMap,
+    path: &Path,
+) -> Result<(Target, Convert), ImportError> {
+    let at = EntryAt { m, i, c, path };
     let target = Target::parse(&c.channel).ok_or_else(|| {
         ImportError(format!(
             "{}: {:?} is not a channel (p1 p2 angle f1 f2 u_in1 u_ex1 u_in2 u_ex2 valve1 valve2 \
              regulator1 regulator2)",
-            key("channel"),
+            at.key("channel"),
             c.channel
         ))
     })?;
+    check_entry_numbers(&at)?;
+    let unit = c.unit.as_deref().unwrap_or(match target {
+        Target::Opening(_) | Target::Signed(_) => "fraction",
+        _ => "",
+    });
+    let reference = c.reference.as_deref().unwrap_or("gauge");
+    if !matches!(reference, "gauge" | "absolute") {
+        return Err(ImportError(format!(
+            "{}: {reference:?}: use \"gauge\" or \"absolute\"",
+            at.key("reference")
+        )));
+    }
+    let conv = conversion(&at, target, unit, reference)?;
+    refuse_stray_keys(&at, target, &conv, unit)?;
+    Ok((target, conv))
+}
+
+/// The entry's source (exactly one of `column` and `constant`) and its numbers (`scale`,
+/// `offset`, `constant`) are usable.
+fn check_entry_numbers(at: &EntryAt) -> Result<(), ImportError> {
+    let c = at.c;
     match (&c.column, c.constant) {
         (Some(_), None) | (None, Some(_)) => {}
         _ => {
             return Err(ImportError(format!(
                 "{}: give exactly one of `column` and `constant`",
-                key("column")
+                at.key("column")
             )))
         }
     }
     if !(c.scale.is_finite() && c.scale != 0.0) {
         return Err(ImportError(format!(
             "{}: must be a finite number other than 0 (value = raw * scale + offset), got {}",
-            key("scale"),
+            at.key("scale"),
             Shown(c.scale)
         )));
     }
     if !c.offset.is_finite() {
         return Err(ImportError(format!(
             "{}: must be a finite number, got {}",
-            key("offset"),
+            at.key("offset"),
             c.offset
         )));
     }
     if let Some(v) = c.constant.filter(|v| !v.is_finite()) {
         return Err(ImportError(format!(
             "{}: must be a finite number (the channel's raw value on every row), got {}",
-            key("constant"),
+            at.key("constant"),
             Shown(v)
         )));
     }
-    let unit = c.unit.as_deref().unwrap_or(match target {
-        Target::Opening(_) | Target::Signed(_) => "fraction",
-        _ => "",
-    });
-    let unit_err = |allowed: &str| {
-        ImportError(format!(
-            "{}: {unit:?} is not a unit of this channel (use {allowed})",
-            key("unit")
-        ))
-    };
-    let reference = c.reference.as_deref().unwrap_or("gauge");
-    if !matches!(reference, "gauge" | "absolute") {
-        return Err(ImportError(format!(
-            "{}: {reference:?}: use \"gauge\" or \"absolute\"",
-            key("reference")
-        )));
-    }
-    let conv = match target {
+    Ok(())
+}
+
+/// How the entry's values become SI, from its target, `unit` and pressure `reference`.
+fn conversion(
+    at: &EntryAt,
+    target: Target,
+    unit: &str,
+    reference: &str,
+) -> Result<Convert, ImportError> {
+    Ok(match target {
         Target::Output(Channel::P1Kpa | Channel::P2Kpa) | Target::Regulator(_) => {
-            let f = pressure_factor(unit).ok_or_else(|| unit_err("Pa, kPa, bar, MPa, psi"))?;
+            let f = pressure_factor(unit)
+                .ok_or_else(|| at.unit_error(unit, "Pa, kPa, bar, MPa, psi"))?;
             Convert::Factor {
                 factor: f,
                 minus_pa: if reference == "absolute" {
-                    m.pressure.p_atm_pa
+                    at.m.pressure.p_atm_pa
                 } else {
                     0.0
                 },
@@ -506,80 +544,102 @@ fn plan(
         Target::Output(Channel::AngleDeg) => match unit {
             "rad" => Convert::scale(1.0),
             "deg" => Convert::scale(std::f64::consts::PI / 180.0),
-            "counts" => {
-                let cpr = c
-                    .counts_per_rev
-                    .filter(|n| {
-                        n.fract() == 0.0
-                            && (f64::from(*COUNTS_PER_REV.start())
-                                ..=f64::from(*COUNTS_PER_REV.end()))
-                                .contains(n)
-                    })
-                    .map(|n| n as u32)
-                    .ok_or_else(|| {
-                        ImportError(format!(
-                            "{}: angle in counts needs counts_per_rev, an integer in [{}, {}] \
-                             (encoder counts per turn){}",
-                            key("counts_per_rev"),
-                            COUNTS_PER_REV.start(),
-                            COUNTS_PER_REV.end(),
-                            c.counts_per_rev
-                                .map(|n| format!(", got {}", Shown(n)))
-                                .unwrap_or_else(|| ", not given".into())
-                        ))
-                    })?;
-                Convert::Counts {
-                    counts_per_rev: cpr,
-                }
-            }
-            _ => return Err(unit_err("rad, deg, counts")),
+            "counts" => counts_conversion(at)?,
+            _ => return Err(at.unit_error(unit, "rad, deg, counts")),
         },
         Target::Output(_) => match unit {
             "N" => Convert::scale(1.0),
             "kN" => Convert::scale(1e3),
-            _ => return Err(unit_err("N, kN")),
+            _ => return Err(at.unit_error(unit, "N, kN")),
         },
         Target::Opening(_) | Target::Signed(_) => {
-            let signed = matches!(target, Target::Signed(_));
-            match unit {
-                "fraction" => Convert::scale(1.0),
-                "percent" => Convert::scale(0.01),
-                "onoff" if !signed => Convert::OnOff {
-                    threshold: c.threshold.unwrap_or(0.5),
-                },
-                "V" => {
-                    let curve = c.curve.clone().ok_or_else(|| {
-                        ImportError(format!(
-                            "{}: a valve command in volts needs `curve = [[volts, opening], ...]`",
-                            key("curve")
-                        ))
-                    })?;
-                    let lo = if signed { -1.0 } else { 0.0 };
-                    if curve.len() < 2
-                        || curve.windows(2).any(|w| !(w[1][0] > w[0][0]))
-                        || curve
-                            .iter()
-                            .any(|p| !(p[1] >= lo && p[1] <= 1.0 && p[0].is_finite()))
-                    {
-                        return Err(ImportError(format!(
-                            "{}: needs >= 2 points with increasing volts and openings in [{lo}, 1]",
-                            key("curve")
-                        )));
-                    }
-                    Convert::Curve(curve)
-                }
-                _ => {
-                    return Err(unit_err(if signed {
-                        "fraction, percent, V"
-                    } else {
-                        "fraction, percent, onoff, V"
-                    }))
-                }
-            }
+            opening_conversion(at, matches!(target, Target::Signed(_)), unit)?
         }
-    };
-    // A key that does nothing for this channel and unit is a mistake somewhere (the unit it
-    // was meant for, or the channel): refused rather than ignored.
+    })
+}
+
+/// An angle in encoder counts: `counts_per_rev` a whole number in [`COUNTS_PER_REV`].
+fn counts_conversion(at: &EntryAt) -> Result<Convert, ImportError> {
+    let c = at.c;
+    let cpr = c
+        .counts_per_rev
+        .filter(|n| {
+            n.fract() == 0.0
+                && (f64::from(*COUNTS_PER_REV.start())..=f64::from(*COUNTS_PER_REV.end()))
+                    .contains(n)
+        })
+        .map(|n| n as u32)
+        .ok_or_else(|| {
+            ImportError(format!(
+                "{}: angle in counts needs counts_per_rev, an integer in [{}, {}] \
+                 (encoder counts per turn){}",
+                at.key("counts_per_rev"),
+                COUNTS_PER_REV.start(),
+                COUNTS_PER_REV.end(),
+                c.counts_per_rev
+                    .map(|n| format!(", got {}", Shown(n)))
+                    .unwrap_or_else(|| ", not given".into())
+            ))
+        })?;
+    Ok(Convert::Counts {
+        counts_per_rev: cpr,
+    })
+}
+
+/// A valve opening (`signed`: a 5/3 valve's signed command): fraction, percent, on/off
+/// (not signed) or volts through a `curve` of >= 2 points, volts increasing, openings in
+/// [0, 1] ([-1, 1] signed).
+fn opening_conversion(at: &EntryAt, signed: bool, unit: &str) -> Result<Convert, ImportError> {
+    let c = at.c;
+    Ok(match unit {
+        "fraction" => Convert::scale(1.0),
+        "percent" => Convert::scale(0.01),
+        "onoff" if !signed => Convert::OnOff {
+            threshold: c.threshold.unwrap_or(0.5),
+        },
+        "V" => {
+            let curve = c.curve.clone().ok_or_else(|| {
+                ImportError(format!(
+                    "{}: a valve command in volts needs `curve = [[volts, opening], ...]`",
+                    at.key("curve")
+                ))
+            })?;
+            let lo = if signed { -1.0 } else { 0.0 };
+            if curve.len() < 2
+                || curve.windows(2).any(|w| !(w[1][0] > w[0][0]))
+                || curve
+                    .iter()
+                    .any(|p| !(p[1] >= lo && p[1] <= 1.0 && p[0].is_finite()))
+            {
+                return Err(ImportError(format!(
+                    "{}: needs >= 2 points with increasing volts and openings in [{lo}, 1]",
+                    at.key("curve")
+                )));
+            }
+            Convert::Curve(curve)
+        }
+        _ => {
+            return Err(at.unit_error(
+                unit,
+                if signed {
+                    "fraction, percent, V"
+                } else {
+                    "fraction, percent, onoff, V"
+                },
+            ))
+        }
+    })
+}
+
+/// A key that does nothing for this channel and unit is a mistake somewhere (the unit it was
+/// meant for, or the channel): refused rather than ignored.
+fn refuse_stray_keys(
+    at: &EntryAt,
+    target: Target,
+    conv: &Convert,
+    unit: &str,
+) -> Result<(), ImportError> {
+    let c = at.c;
     let is_pressure = matches!(
         target,
         Target::Output(Channel::P1Kpa | Channel::P2Kpa) | Target::Regulator(_)
@@ -614,11 +674,11 @@ fn plan(
             return Err(ImportError(format!(
                 "{}: applies to {what} only, not to this channel with `unit = {unit:?}`: is the \
                  unit or the channel wrong? (remove the key otherwise)",
-                key(k)
+                at.key(k)
             )));
         }
     }
-    Ok((target, conv))
+    Ok(())
 }
 
 fn convert(conv: &Convert, v: f64) -> f64 {
@@ -725,20 +785,134 @@ fn implausible(target: Target, v: f64, p_atm_pa: f64, unit: &str) -> Option<Stri
 }
 
 /// Reads `input` through `mapping`; `split`: gaps cut the run into segments instead of
-/// failing.
+/// failing. Steps: the mapping's channels planned, the file read as text, its rows converted,
+/// its time column checked, then one recording per gap-free segment.
 pub fn import(
     mapping: &Mapping,
     map_path: &Path,
     input: &Path,
     split: bool,
 ) -> Result<Imported, ImportError> {
+    let files = Files {
+        mapping,
+        map_path,
+        input,
+    };
+    let plans = plan_channels(mapping, map_path)?;
+    let (text, encoding_note) = read_text(input)?;
+    let table = read_table(&files, &plans, &text)?;
+    let timing = check_time(&files, &table)?;
+    if !timing.gaps.is_empty() && !split {
+        return Err(gaps_error(&files, &timing));
+    }
+    let (ranges, mut warnings) = channel_ranges(mapping, &plans, &table.values);
+    warnings.extend(encoding_note);
+    warnings.extend(timing.coarse_note.clone());
+    warnings.extend(stuck_onoff_valves(mapping, map_path, &plans, &table.values));
+    let segments = assemble_segments(&files, &plans, &table, &timing, &mut warnings)?;
+    Ok(Imported {
+        segments,
+        gaps: timing.gaps,
+        max_jitter: timing.max_jitter,
+        median_step_s: timing.median_s,
+        ranges,
+        warnings,
+    })
+}
+
+/// The files of one import: the mapping (and its path) and the rig's CSV file.
+struct Files<'a> {
+    mapping: &'a Mapping,
+    map_path: &'a Path,
+    input: &'a Path,
+}
+
+impl Files<'_> {
+    /// "input:line: column `col`: msg".
+    fn at(&self, line: u64, col: &str, msg: String) -> ImportError {
+        ImportError(format!(
+            "{}:{line}: column `{col}`: {msg}",
+            self.input.display()
+        ))
+    }
+}
+
+/// The CSV file's rows, converted: line numbers, times [s] and each channel's values (SI).
+struct Table {
+    lines: Vec<u64>,
+    t_s: Vec<f64>,
+    /// The most decimals a time stamp is written with; `None` when one has an exponent.
+    t_decimals: Option<usize>,
+    /// Time stamps per second (1, 1000, 1e6).
+    t_per_s: f64,
+    /// One column per mapping channel.
+    values: Vec<Vec<f64>>,
+}
+
+/// The time column's verdict: its median step, its gaps and the cuts they make.
+struct Timing {
+    median_s: f64,
+    gaps: Vec<(u64, f64, f64)>,
+    /// Row indices where segments start, and the row count last.
+    cuts: Vec<usize>,
+    max_jitter: f64,
+    coarse_note: Option<String>,
+}
+
+/// The gaps of the time column (see [`find_gaps`]).
+struct Gaps {
+    gaps: Vec<(u64, f64, f64)>,
+    cuts: Vec<usize>,
+    max_jitter: f64,
+}
+
+/// Each mapping channel's target and conversion, checked as a set: each target once, one
+/// channel per column and not the time column, each valve input given once, a regulator's
+/// pressure mapped, and at least one output.
+fn plan_channels(
+    mapping: &Mapping,
+    map_path: &Path,
+) -> Result<Vec<(Target, Convert)>, ImportError> {
     let plans: Vec<(Target, Convert)> = mapping
         .channel
         .iter()
         .enumerate()
         .map(|(i, c)| plan(mapping, i, c, map_path))
         .collect::<Result<_, _>>()?;
-    // Each target once; valve inputs complete; regulators need their pressure.
+    let seen = targets_once(mapping, map_path, &plans)?;
+    columns_once(mapping, map_path)?;
+    valve_inputs_once(map_path, &seen)?;
+    for m in 0..2 {
+        let p = if m == 0 {
+            Channel::P1Kpa
+        } else {
+            Channel::P2Kpa
+        };
+        if seen.contains_key(&Target::Regulator(m)) && !seen.contains_key(&Target::Output(p)) {
+            return Err(ImportError(format!(
+                "{}: regulator{} needs the measured pressure `p{}` mapped (the regulator model \
+                 opens in proportion to set-point minus pressure)",
+                map_path.display(),
+                m + 1,
+                m + 1
+            )));
+        }
+    }
+    if !plans.iter().any(|(t, _)| matches!(t, Target::Output(_))) {
+        return Err(ImportError(format!(
+            "{}: no output channel mapped (need at least one of angle, p1, p2, f1, f2)",
+            map_path.display()
+        )));
+    }
+    Ok(plans)
+}
+
+/// Each target mapped once: the channel index of each.
+fn targets_once(
+    mapping: &Mapping,
+    map_path: &Path,
+    plans: &[(Target, Convert)],
+) -> Result<BTreeMap<Target, usize>, ImportError> {
     let mut seen: BTreeMap<Target, usize> = BTreeMap::new();
     for (i, (t, _)) in plans.iter().enumerate() {
         if let Some(j) = seen.insert(*t, i) {
@@ -755,8 +929,12 @@ pub fn import(
             )));
         }
     }
-    // One source column, one meaning: the time column is not a channel, and no column is
-    // read as two channels.
+    Ok(seen)
+}
+
+/// One source column, one meaning: the time column is not a channel, and no column is read
+/// as two channels.
+fn columns_once(mapping: &Mapping, map_path: &Path) -> Result<(), ImportError> {
     let column_at =
         |i: usize| match crate::validate::toml_key_line(&mapping.text, "channel", i, "column") {
             Some(line) => format!("{}:{line}", map_path.display()),
@@ -787,6 +965,12 @@ pub fn import(
             )));
         }
     }
+    Ok(())
+}
+
+/// Each valve input (`u_in1` .. `u_ex2`) given by exactly one of its own channel, its
+/// muscle's signed valve and its muscle's regulator.
+fn valve_inputs_once(map_path: &Path, seen: &BTreeMap<Target, usize>) -> Result<(), ImportError> {
     let names = ["u_in1", "u_ex1", "u_in2", "u_ex2"];
     for (k, name) in names.iter().enumerate() {
         let m = k / 2;
@@ -814,30 +998,14 @@ pub fn import(
             )));
         }
     }
-    for m in 0..2 {
-        let p = if m == 0 {
-            Channel::P1Kpa
-        } else {
-            Channel::P2Kpa
-        };
-        if seen.contains_key(&Target::Regulator(m)) && !seen.contains_key(&Target::Output(p)) {
-            return Err(ImportError(format!(
-                "{}: regulator{} needs the measured pressure `p{}` mapped (the regulator model \
-                 opens in proportion to set-point minus pressure)",
-                map_path.display(),
-                m + 1,
-                m + 1
-            )));
-        }
-    }
-    if !plans.iter().any(|(t, _)| matches!(t, Target::Output(_))) {
-        return Err(ImportError(format!(
-            "{}: no output channel mapped (need at least one of angle, p1, p2, f1, f2)",
-            map_path.display()
-        )));
-    }
+    Ok(())
+}
 
-    // Read the CSV.
+/// The rig's file as text, without a byte-order mark, and a note when it was not UTF-8: a
+/// Windows export (`Winkel [°]` in Windows-1252 / Latin-1) is read byte for byte as Latin-1,
+/// so that its column names match the mapping's. A directory, a binary file (a NUL byte: a
+/// binary log or a UTF-16 export) and an empty file are refused.
+fn read_text(input: &Path) -> Result<(String, Option<String>), ImportError> {
     if input.is_dir() {
         return Err(ImportError(format!(
             "--input {}: is a directory; give the rig logger's CSV file",
@@ -845,7 +1013,6 @@ pub fn import(
         )));
     }
     let raw = std::fs::read(input).map_err(|e| ImportError(format!("{}: {e}", input.display())))?;
-    // A text export has no NUL bytes (nor does Latin-1 text): a binary log or a UTF-16 export.
     if let Some(at) = raw.iter().position(|&b| b == 0) {
         return Err(ImportError(format!(
             "{}: not a text file (a NUL byte at byte {at}): a binary log or a UTF-16 export? \
@@ -853,32 +1020,40 @@ pub fn import(
             input.display()
         )));
     }
-    // A Windows export (`Winkel [°]` in Windows-1252 / Latin-1) is not UTF-8: read byte for
-    // byte as Latin-1, so that its column names match the mapping's, and said so.
-    let mut encoding_note = None;
-    let text_cow: std::borrow::Cow<str> = match std::str::from_utf8(&raw) {
-        Ok(t) => t.into(),
+    let (mut text, encoding_note) = match String::from_utf8(raw) {
+        Ok(t) => (t, None),
         Err(e) => {
-            let line = raw[..e.valid_up_to()]
+            let raw = e.as_bytes();
+            let line = raw[..e.utf8_error().valid_up_to()]
                 .iter()
                 .filter(|&&b| b == b'\n')
                 .count()
                 + 1;
-            encoding_note = Some(format!(
-                "{}:{line}: not UTF-8 (a Windows or Latin-1 export): read as Latin-1",
-                input.display()
-            ));
-            raw.iter().map(|&b| b as char).collect::<String>().into()
+            (
+                raw.iter().map(|&b| b as char).collect::<String>(),
+                Some(format!(
+                    "{}:{line}: not UTF-8 (a Windows or Latin-1 export): read as Latin-1",
+                    input.display()
+                )),
+            )
         }
     };
-    let text: &str = text_cow.as_ref();
-    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    if text.starts_with('\u{feff}') {
+        text.drain(..'\u{feff}'.len_utf8());
+    }
     if text.trim().is_empty() {
         return Err(ImportError(format!(
             "{}: the file is empty",
             input.display()
         )));
     }
+    Ok((text, encoding_note))
+}
+
+/// The byte offset of the header line: after the mapping's `csv.skip_lines`, which must leave
+/// one.
+fn header_offset(files: &Files, text: &str) -> Result<usize, ImportError> {
+    let mapping = files.mapping;
     let mut offset = 0usize;
     for _ in 0..mapping.csv.skip_lines {
         match text[offset..].find('\n') {
@@ -890,210 +1065,302 @@ pub fn import(
         return Err(ImportError(format!(
             "{}: `csv.skip_lines = {}` of {} skips the whole file ({} line(s)): no header line \
              is left",
-            input.display(),
+            files.input.display(),
             mapping.csv.skip_lines,
-            map_path.display(),
+            files.map_path.display(),
             text.lines().count()
         )));
     }
+    Ok(offset)
+}
+
+/// The index of column `name` in the header, which must hold it once.
+fn column_index(
+    files: &Files,
+    headers: &csv::StringRecord,
+    header_line: u64,
+    name: &str,
+) -> Result<usize, ImportError> {
+    let mut it = headers.iter().enumerate().filter(|(_, h)| *h == name);
+    let first = it.next().map(|(i, _)| i);
+    if it.next().is_some() {
+        return Err(files.at(
+            header_line,
+            name,
+            "column appears twice in the header".into(),
+        ));
+    }
+    first.ok_or_else(|| {
+        files.at(
+            header_line,
+            name,
+            format!(
+                "not in the header (columns: {})",
+                headers.iter().collect::<Vec<_>>().join(", ")
+            ),
+        )
+    })
+}
+
+/// Reads the rows of `text`: each time stamp in seconds and each channel's value converted
+/// and checked (see [`channel_value`]).
+fn read_table(
+    files: &Files,
+    plans: &[(Target, Convert)],
+    text: &str,
+) -> Result<Table, ImportError> {
+    let (mapping, input) = (files.mapping, files.input);
+    let offset = header_offset(files, text)?;
     let skipped = mapping.csv.skip_lines as u64;
     let mut rdr = csv::ReaderBuilder::new()
         .delimiter(mapping.csv.delimiter.as_bytes()[0])
         .trim(csv::Trim::All)
         .flexible(false)
         .from_reader(&text.as_bytes()[offset..]);
-    let at = |line: u64, col: &str, msg: String| {
-        ImportError(format!("{}:{line}: column `{col}`: {msg}", input.display()))
-    };
     let headers = rdr
         .headers()
         .map_err(|e| ImportError(format!("{}:{}: {e}", input.display(), skipped + 1)))?
         .clone();
     let header_line = skipped + 1;
-    let col_of = |name: &str| -> Result<usize, ImportError> {
-        let mut it = headers.iter().enumerate().filter(|(_, h)| *h == name);
-        let first = it.next().map(|(i, _)| i);
-        if it.next().is_some() {
-            return Err(at(
-                header_line,
-                name,
-                "column appears twice in the header".into(),
-            ));
-        }
-        first.ok_or_else(|| {
-            at(
-                header_line,
-                name,
-                format!(
-                    "not in the header (columns: {})",
-                    headers.iter().collect::<Vec<_>>().join(", ")
-                ),
-            )
-        })
-    };
-    let t_col = col_of(&mapping.time.column)?;
+    let t_col = column_index(files, &headers, header_line, &mapping.time.column)?;
     // Stamps per second (1, 1000, 1e6), divided by: 14998 ms is 14.998 s, not the
     // 14.998000000000001 of a multiplication by 1e-3.
     let t_per_s = (1.0 / time_factor(&mapping.time.unit).expect("checked")).round();
     let cols: Vec<Option<usize>> = mapping
         .channel
         .iter()
-        .map(|c| c.column.as_deref().map(&col_of).transpose())
+        .map(|c| {
+            c.column
+                .as_deref()
+                .map(|name| column_index(files, &headers, header_line, name))
+                .transpose()
+        })
         .collect::<Result<_, _>>()?;
     let comma = mapping.csv.decimal == ",";
 
-    let mut lines: Vec<u64> = Vec::new();
-    let mut t_s: Vec<f64> = Vec::new();
-    let mut t_decimals: Option<usize> = Some(0);
-    let mut values: Vec<Vec<f64>> = vec![Vec::new(); plans.len()];
+    let mut table = Table {
+        lines: Vec::new(),
+        t_s: Vec::new(),
+        t_decimals: Some(0),
+        t_per_s,
+        values: vec![Vec::new(); plans.len()],
+    };
     let mut record = csv::StringRecord::new();
     loop {
         match rdr.read_record(&mut record) {
             Ok(false) => break,
             Ok(true) => {}
-            Err(e) => {
-                let line = e
-                    .position()
-                    .map(|p| p.line() + skipped)
-                    .unwrap_or(header_line);
-                let message = match e.kind() {
-                    csv::ErrorKind::UnequalLengths {
-                        expected_len, len, ..
-                    } => {
-                        format!("{len} fields, the header has {expected_len}")
-                    }
-                    _ => e.to_string(),
-                };
-                return Err(ImportError(format!(
-                    "{}:{line}: {message}",
-                    input.display()
-                )));
-            }
+            Err(e) => return Err(record_error(input, &e, skipped, header_line)),
         }
-        let line = record.position().map(|p| p.line()).unwrap_or(0) + skipped;
-        let num = |col: usize| -> Result<f64, ImportError> {
-            let name = &headers[col];
-            let s = record.get(col).unwrap_or("");
-            if s.is_empty() {
-                return Err(at(
-                    line,
-                    name,
-                    "empty cell (a gap in this channel; import does not fill gaps)".into(),
-                ));
-            }
-            let cell = s;
-            let owned;
-            let s = if comma {
-                owned = s.replace(',', ".");
-                owned.as_str()
-            } else {
-                s
-            };
-            let v: f64 = s.parse().map_err(|_| {
-                at(
-                    line,
-                    name,
-                    format!("not a number: {cell:?}{}", number_hint(cell, comma)),
-                )
-            })?;
-            if !v.is_finite() {
-                return Err(at(line, name, format!("not a finite number: {cell:?}")));
-            }
-            Ok(v)
+        let row = Row {
+            files,
+            headers: &headers,
+            record: &record,
+            line: record.position().map(|p| p.line()).unwrap_or(0) + skipped,
+            comma,
         };
-        t_s.push(num(t_col)? / t_per_s);
-        // The decimals the time column is written with (its resolution); an exponent
-        // leaves it unknown.
+        table.t_s.push(row.number(t_col)? / t_per_s);
         let cell = record.get(t_col).unwrap_or("").trim();
-        if cell.contains(['e', 'E']) {
-            t_decimals = None;
-        } else if let Some(d) = t_decimals.as_mut() {
-            let sep = if comma { ',' } else { '.' };
-            *d = (*d).max(cell.find(sep).map_or(0, |i| cell.len() - i - 1));
-        }
+        table.t_decimals = match (table.t_decimals, stamp_decimals(cell, comma)) {
+            (Some(d), Some(e)) => Some(d.max(e)),
+            _ => None,
+        };
         for (i, (c, col)) in mapping.channel.iter().zip(&cols).enumerate() {
             let raw = match (col, c.constant) {
-                (Some(col), _) => num(*col)?,
+                (Some(col), _) => row.number(*col)?,
                 (None, Some(k)) => k,
                 _ => unreachable!("checked: column or constant"),
             };
-            let x = raw * c.scale + c.offset;
-            // A command far outside its curve's table (millivolts logged for volts) would be
-            // clamped to the table's end on every row: refused. Slightly beyond (a 10.05 V
-            // reading of a 0..10 V command) is clamped.
-            if let Convert::Curve(pts) = &plans[i].1 {
-                let (lo, hi) = (pts[0][0], pts[pts.len() - 1][0]);
-                let margin = CURVE_MARGIN_OF_SPAN * (hi - lo);
-                if !(x >= lo - margin && x <= hi + margin) {
-                    let name = c.column.as_deref().unwrap_or("constant");
-                    return Err(at(
-                        line,
-                        name,
-                        format!(
-                            "channel `{}`: {} V is outside its curve's {}..{} V (by more than \
-                             {:.0} % of the span): a value in mV? (check the column's unit and \
-                             `scale`)",
-                            c.channel,
-                            Shown(x),
-                            Shown(lo),
-                            Shown(hi),
-                            100.0 * CURVE_MARGIN_OF_SPAN
-                        ),
-                    ));
-                }
-            }
-            let v = convert(&plans[i].1, x);
-            if let Some(msg) = implausible(
-                plans[i].0,
-                v,
-                mapping.pressure.p_atm_pa,
-                c.unit.as_deref().unwrap_or(""),
-            ) {
-                let name = c.column.as_deref().unwrap_or("constant");
-                return Err(at(line, name, format!("channel `{}`: {msg}", c.channel)));
-            }
-            // Openings must end up in range: say where they do not.
-            if let Target::Opening(_) = plans[i].0 {
-                if !(0.0..=1.0).contains(&v) {
-                    let name = c.column.as_deref().unwrap_or("constant");
-                    return Err(at(
-                        line,
-                        name,
-                        format!("opening {} outside [0, 1] after the mapping", Shown(v)),
-                    ));
-                }
-            }
-            if let Target::Signed(_) = plans[i].0 {
-                if !(-1.0..=1.0).contains(&v) {
-                    let name = c.column.as_deref().unwrap_or("constant");
-                    return Err(at(
-                        line,
-                        name,
-                        format!(
-                            "signed opening {} outside [-1, 1] after the mapping",
-                            Shown(v)
-                        ),
-                    ));
-                }
-            }
-            values[i].push(v);
+            let v = channel_value(&row, c, &plans[i], raw)?;
+            table.values[i].push(v);
         }
-        lines.push(line);
+        table.lines.push(row.line);
     }
-    let n = t_s.len();
+    Ok(table)
+}
+
+/// The message of a row the CSV reader refuses, at its line.
+fn record_error(input: &Path, e: &csv::Error, skipped: u64, header_line: u64) -> ImportError {
+    let line = e
+        .position()
+        .map(|p| p.line() + skipped)
+        .unwrap_or(header_line);
+    let message = match e.kind() {
+        csv::ErrorKind::UnequalLengths {
+            expected_len, len, ..
+        } => {
+            format!("{len} fields, the header has {expected_len}")
+        }
+        _ => e.to_string(),
+    };
+    ImportError(format!("{}:{line}: {message}", input.display()))
+}
+
+/// The decimals a time stamp is written with (its resolution); `None` for one with an
+/// exponent, whose resolution is unknown.
+fn stamp_decimals(cell: &str, comma: bool) -> Option<usize> {
+    if cell.contains(['e', 'E']) {
+        return None;
+    }
+    let sep = if comma { ',' } else { '.' };
+    Some(cell.find(sep).map_or(0, |i| cell.len() - i - 1))
+}
+
+/// One data row of the CSV file, at its line.
+struct Row<'a> {
+    files: &'a Files<'a>,
+    headers: &'a csv::StringRecord,
+    record: &'a csv::StringRecord,
+    line: u64,
+    /// The mapping's decimal separator is a comma.
+    comma: bool,
+}
+
+impl Row<'_> {
+    /// The number in column `col`: not empty (gaps are not filled), a finite number.
+    fn number(&self, col: usize) -> Result<f64, ImportError> {
+        let (line, comma) = (self.line, self.comma);
+        let name = &self.headers[col];
+        let s = self.record.get(col).unwrap_or("");
+        if s.is_empty() {
+            return Err(self.files.at(
+                line,
+                name,
+                "empty cell (a gap in this channel; import does not fill gaps)".into(),
+            ));
+        }
+        let cell = s;
+        let owned;
+        let s = if comma {
+            owned = s.replace(',', ".");
+            owned.as_str()
+        } else {
+            s
+        };
+        let v: f64 = s.parse().map_err(|_| {
+            self.files.at(
+                line,
+                name,
+                format!("not a number: {cell:?}{}", number_hint(cell, comma)),
+            )
+        })?;
+        if !v.is_finite() {
+            return Err(self
+                .files
+                .at(line, name, format!("not a finite number: {cell:?}")));
+        }
+        Ok(v)
+    }
+}
+
+/// Channel `c`'s value on `row` from its `raw` reading, through its `plan`: a volts command
+/// within its curve's table (plus [`CURVE_MARGIN_OF_SPAN`]), a plausible value (see
+/// [`implausible`]), an opening within [0, 1] (signed: [-1, 1]).
+fn channel_value(
+    row: &Row,
+    c: &ChannelMap,
+    plan: &(Target, Convert),
+    raw: f64,
+) -> Result<f64, ImportError> {
+    let (files, line) = (row.files, row.line);
+    let name = c.column.as_deref().unwrap_or("constant");
+    let x = raw * c.scale + c.offset;
+    // A command far outside its curve's table (millivolts logged for volts) would be clamped
+    // to the table's end on every row: refused. Slightly beyond (a 10.05 V reading of a
+    // 0..10 V command) is clamped.
+    if let Convert::Curve(pts) = &plan.1 {
+        let (lo, hi) = (pts[0][0], pts[pts.len() - 1][0]);
+        let margin = CURVE_MARGIN_OF_SPAN * (hi - lo);
+        if !(x >= lo - margin && x <= hi + margin) {
+            return Err(files.at(
+                line,
+                name,
+                format!(
+                    "channel `{}`: {} V is outside its curve's {}..{} V (by more than {:.0} % of \
+                     the span): a value in mV? (check the column's unit and `scale`)",
+                    c.channel,
+                    Shown(x),
+                    Shown(lo),
+                    Shown(hi),
+                    100.0 * CURVE_MARGIN_OF_SPAN
+                ),
+            ));
+        }
+    }
+    let v = convert(&plan.1, x);
+    if let Some(msg) = implausible(
+        plan.0,
+        v,
+        files.mapping.pressure.p_atm_pa,
+        c.unit.as_deref().unwrap_or(""),
+    ) {
+        return Err(files.at(line, name, format!("channel `{}`: {msg}", c.channel)));
+    }
+    // Openings must end up in range: say where they do not.
+    if let Target::Opening(_) = plan.0 {
+        if !(0.0..=1.0).contains(&v) {
+            return Err(files.at(
+                line,
+                name,
+                format!("opening {} outside [0, 1] after the mapping", Shown(v)),
+            ));
+        }
+    }
+    if let Target::Signed(_) = plan.0 {
+        if !(-1.0..=1.0).contains(&v) {
+            return Err(files.at(
+                line,
+                name,
+                format!(
+                    "signed opening {} outside [-1, 1] after the mapping",
+                    Shown(v)
+                ),
+            ));
+        }
+    }
+    Ok(v)
+}
+
+/// Checks the time column: at least 2 rows, increasing, a median step of a PAM rig in the
+/// declared unit, no step far under the median; finds the gaps.
+fn check_time(files: &Files, table: &Table) -> Result<Timing, ImportError> {
+    let n = table.t_s.len();
     if n < 2 {
         return Err(ImportError(format!(
             "{}: {n} data rows; a recording needs at least 2",
-            input.display()
+            files.input.display()
         )));
     }
-    let time_name = mapping.time.column.as_str();
-    // One repeated stamp is a duplicated row; many are stamps coarser than the sampling.
+    check_increasing(files, table)?;
+    let mut steps: Vec<f64> = table.t_s.windows(2).map(|w| w[1] - w[0]).collect();
+    steps.sort_by(f64::total_cmp);
+    let median_s = steps[steps.len() / 2];
+    check_time_unit(files, table, median_s)?;
+    let coarse_note = coarse_stamps_note(files, table, median_s);
+    let Gaps {
+        gaps,
+        cuts,
+        max_jitter,
+    } = find_gaps(files, table, median_s)?;
+    Ok(Timing {
+        median_s,
+        gaps,
+        cuts,
+        max_jitter,
+        coarse_note,
+    })
+}
+
+/// Time increases row by row. One repeated stamp is a duplicated row; many are stamps
+/// coarser than the sampling.
+fn check_increasing(files: &Files, table: &Table) -> Result<(), ImportError> {
+    let (t_s, n) = (&table.t_s, table.t_s.len());
+    let time_name = files.mapping.time.column.as_str();
     let repeats = t_s.windows(2).filter(|w| w[1] == w[0]).count();
     for k in 1..n {
         if !(t_s[k] > t_s[k - 1]) {
-            return Err(at(
-                lines[k],
+            return Err(files.at(
+                table.lines[k],
                 time_name,
                 if t_s[k] == t_s[k - 1] && repeats > 1 {
                     format!(
@@ -1119,11 +1386,19 @@ pub fn import(
             ));
         }
     }
-    let mut steps: Vec<f64> = t_s.windows(2).map(|w| w[1] - w[0]).collect();
-    steps.sort_by(f64::total_cmp);
-    let median = steps[steps.len() / 2];
+    Ok(())
+}
+
+/// The declared time unit fits the median step: within [`STEP_RANGE_S`]; a step faster than
+/// [`FAST_STEP_S`], or a span under [`SPAN_MIN_S`], that reads as a plausible step in the
+/// next larger unit is a unit off by 1000 (ms read as us, s read as ms). A short file whose
+/// unit gives no such reading is left alone.
+fn check_time_unit(files: &Files, table: &Table, median: f64) -> Result<(), ImportError> {
+    let (mapping, map_path) = (files.mapping, files.map_path);
+    let (t_s, lines, n) = (&table.t_s, &table.lines, table.t_s.len());
+    let time_name = mapping.time.column.as_str();
     if !STEP_RANGE_S.contains(median) {
-        return Err(at(
+        return Err(files.at(
             lines[1],
             time_name,
             format!(
@@ -1141,27 +1416,7 @@ pub fn import(
             ),
         ));
     }
-    // A span too short to study a joint from, whose time column read in the next larger
-    // unit has a plausible step: the unit is off by 1000 (ms read as us, s read as ms). A
-    // short file whose unit gives no such reading is left alone.
     let span_s = t_s[n - 1] - t_s[0];
-    // Stamps written with too few decimals (a spreadsheet's two): each sample sits up to half
-    // the resolution off its time, which jitters every step.
-    let coarse_note = t_decimals.and_then(|d| {
-        let resolution_s = 10f64.powi(-(d as i32)) / t_per_s;
-        (resolution_s >= COARSE_STAMP_FRACTION * median).then(|| {
-            format!(
-                "{}: column `{time_name}`: time stamps written to {} s ({d} decimals in {}), {:.0} \
-                 % of the median step {} s: each sample sits up to half of that off its time; \
-                 log (or export) the time with more decimals",
-                input.display(),
-                Shown(resolution_s),
-                mapping.time.unit,
-                100.0 * resolution_s / median,
-                Shown(median)
-            )
-        })
-    });
     let larger = match mapping.time.unit.as_str() {
         "us" => Some("ms"),
         "ms" => Some("s"),
@@ -1172,7 +1427,7 @@ pub fn import(
     // the next larger unit: 40 Hz logged in ms and declared us reads as 40 kHz.
     if let Some(u) = larger.filter(|_| median < FAST_STEP_S && STEP_RANGE_S.contains(median * 1e3))
     {
-        return Err(at(
+        return Err(files.at(
             lines[1],
             time_name,
             format!(
@@ -1191,7 +1446,7 @@ pub fn import(
         ));
     }
     if let Some(u) = larger.filter(|_| span_s < SPAN_MIN_S && STEP_RANGE_S.contains(median * 1e3)) {
-        return Err(at(
+        return Err(files.at(
             lines[n - 1],
             time_name,
             format!(
@@ -1207,6 +1462,36 @@ pub fn import(
             ),
         ));
     }
+    Ok(())
+}
+
+/// A note when the stamps are written with too few decimals (a spreadsheet's two): each
+/// sample sits up to half the resolution off its time, which jitters every step.
+fn coarse_stamps_note(files: &Files, table: &Table, median: f64) -> Option<String> {
+    let mapping = files.mapping;
+    let time_name = mapping.time.column.as_str();
+    table.t_decimals.and_then(|d| {
+        let resolution_s = 10f64.powi(-(d as i32)) / table.t_per_s;
+        (resolution_s >= COARSE_STAMP_FRACTION * median).then(|| {
+            format!(
+                "{}: column `{time_name}`: time stamps written to {} s ({d} decimals in {}), {:.0} \
+                 % of the median step {} s: each sample sits up to half of that off its time; \
+                 log (or export) the time with more decimals",
+                files.input.display(),
+                Shown(resolution_s),
+                mapping.time.unit,
+                100.0 * resolution_s / median,
+                Shown(median)
+            )
+        })
+    })
+}
+
+/// The gaps (steps over [`MAX_STEP_RATIO`] median steps), the cuts they make (starting with
+/// row 0, ending with the row count) and the largest jitter of the other steps; a step under
+/// [`MIN_STEP_RATIO`] median steps is refused.
+fn find_gaps(files: &Files, table: &Table, median: f64) -> Result<Gaps, ImportError> {
+    let (t_s, lines, n) = (&table.t_s, &table.lines, table.t_s.len());
     let mut gaps = Vec::new();
     let mut cuts = vec![0usize];
     let mut max_jitter: f64 = 0.0;
@@ -1216,9 +1501,9 @@ pub fn import(
             gaps.push((lines[k], t_s[k - 1] - t_s[0], t_s[k] - t_s[0]));
             cuts.push(k);
         } else if step < MIN_STEP_RATIO * median {
-            return Err(at(
+            return Err(files.at(
                 lines[k],
-                time_name,
+                files.mapping.time.column.as_str(),
                 format!(
                     "step {} s is less than {MIN_STEP_RATIO} median steps ({} s): a doubled or \
                      misordered time stamp",
@@ -1230,133 +1515,168 @@ pub fn import(
             max_jitter = max_jitter.max((step - median).abs() / median);
         }
     }
-    if !gaps.is_empty() && !split {
-        let list: Vec<String> = gaps
-            .iter()
-            .map(|(l, a, b)| {
-                format!(
-                    "  line {l}: {a:.6} s -> {b:.6} s ({:.6} s missing)",
-                    b - a - median
-                )
-            })
-            .collect();
-        return Err(ImportError(format!(
-            "{}: {} gap(s) in column `{time_name}` (steps over {MAX_STEP_RATIO} median steps of \
-             {} s); gaps are not filled: cut the file, or pass --split to write one \
-             recording per gap-free segment\n{}",
-            input.display(),
-            gaps.len(),
-            Shown(median),
-            list.join("\n")
-        )));
-    }
     cuts.push(n);
-    let (ranges, mut warnings) = channel_ranges(mapping, &plans, &values);
-    warnings.extend(encoding_note);
-    warnings.extend(coarse_note);
-    warnings.extend(stuck_onoff_valves(mapping, map_path, &plans, &values));
+    Ok(Gaps {
+        gaps,
+        cuts,
+        max_jitter,
+    })
+}
 
-    // Assemble the recordings.
-    let find = |t: Target| plans.iter().position(|(p, _)| *p == t);
+/// The refusal of a file with gaps (without `--split`), listing them.
+fn gaps_error(files: &Files, timing: &Timing) -> ImportError {
+    let median = timing.median_s;
+    let list: Vec<String> = timing
+        .gaps
+        .iter()
+        .map(|(l, a, b)| {
+            format!(
+                "  line {l}: {a:.6} s -> {b:.6} s ({:.6} s missing)",
+                b - a - median
+            )
+        })
+        .collect();
+    ImportError(format!(
+        "{}: {} gap(s) in column `{}` (steps over {MAX_STEP_RATIO} median steps of {} s); gaps \
+         are not filled: cut the file, or pass --split to write one recording per gap-free \
+         segment\n{}",
+        files.input.display(),
+        timing.gaps.len(),
+        files.mapping.time.column,
+        Shown(median),
+        list.join("\n")
+    ))
+}
+
+/// One recording per gap-free segment of at least 2 samples (a single sample between two
+/// gaps is left out with a warning); none is an error.
+fn assemble_segments(
+    files: &Files,
+    plans: &[(Target, Convert)],
+    table: &Table,
+    timing: &Timing,
+    warnings: &mut Vec<String>,
+) -> Result<Vec<Recording>, ImportError> {
     let mut segments = Vec::new();
-    for w in cuts.windows(2) {
+    for w in timing.cuts.windows(2) {
         let (a, b) = (w[0], w[1]);
         if b - a < 2 {
             if b > a {
                 warnings.push(format!(
                     "{}:{}: a single sample between two gaps (t = {} s) is not a recording: \
                      left out",
-                    input.display(),
-                    lines[a],
-                    Shown(t_s[a])
+                    files.input.display(),
+                    table.lines[a],
+                    Shown(table.t_s[a])
                 ));
             }
             continue;
         }
-        let mut rec = Recording::default();
-        let t0 = t_s[a];
-        rec.t_s = t_s[a..b].iter().map(|t| t - t0).collect();
-        for c in Channel::ALL {
-            if let Some(i) = find(Target::Output(c)) {
-                let scale = match c {
-                    Channel::AngleDeg => 180.0 / std::f64::consts::PI,
-                    Channel::P1Kpa | Channel::P2Kpa => 1e-3,
-                    _ => 1.0,
-                };
-                rec.set_channel(c, values[i][a..b].iter().map(|v| v * scale).collect());
-            }
-        }
-        for k in a..b {
-            let mut u = [0.0f64; 4];
-            for (j, uj) in u.iter_mut().enumerate() {
-                let m = j / 2;
-                let inflate = j % 2 == 0;
-                *uj = if let Some(i) = find(Target::Opening(j)) {
-                    values[i][k]
-                } else if let Some(i) = find(Target::Signed(m)) {
-                    let s = values[i][k];
-                    if inflate {
-                        s.max(0.0)
-                    } else {
-                        (-s).max(0.0)
-                    }
-                } else {
-                    let i = find(Target::Regulator(m)).expect("checked: one source per input");
-                    let p = if m == 0 {
-                        Channel::P1Kpa
-                    } else {
-                        Channel::P2Kpa
-                    };
-                    let ip =
-                        find(Target::Output(p)).expect("checked: regulator needs its pressure");
-                    let err = values[i][k] - values[ip][k];
-                    let e = if inflate { err } else { -err };
-                    (e / mapping.pressure.regulator_band_pa).clamp(0.0, 1.0)
-                };
-            }
-            rec.inputs.push(ValveInputs::from_openings(u));
-        }
-        rec.metadata = vec![
-            (
-                "source".into(),
-                format!(
-                    "host-sim {} import of {} (lines {}..={}) with {}",
-                    env!("CARGO_PKG_VERSION"),
-                    input.display(),
-                    lines[a],
-                    lines[b - 1],
-                    map_path.display()
-                ),
-            ),
-            (
-                "sample_period_s".into(),
-                format!("{}", rec.sample_period_s()),
-            ),
-            (
-                "time_stamps".into(),
-                format!(
-                    "as logged, max |step - median| = {:.1} % of the median step {} s",
-                    100.0 * max_jitter,
-                    Shown(median)
-                ),
-            ),
-        ];
-        segments.push(rec);
+        segments.push(segment(files, plans, table, timing, a..b));
     }
     if segments.is_empty() {
         return Err(ImportError(format!(
             "{}: no gap-free segment of at least 2 samples",
-            input.display()
+            files.input.display()
         )));
     }
-    Ok(Imported {
-        segments,
-        gaps,
-        max_jitter,
-        median_step_s: median,
-        ranges,
-        warnings,
-    })
+    Ok(segments)
+}
+
+/// The recording of rows `rows`: time from 0, the output channels in recording units, the
+/// valve inputs and the metadata saying where it came from.
+fn segment(
+    files: &Files,
+    plans: &[(Target, Convert)],
+    table: &Table,
+    timing: &Timing,
+    rows: std::ops::Range<usize>,
+) -> Recording {
+    let (a, b) = (rows.start, rows.end);
+    let (t_s, values, lines) = (&table.t_s, &table.values, &table.lines);
+    let find = |t: Target| plans.iter().position(|(p, _)| *p == t);
+    let mut rec = Recording::default();
+    let t0 = t_s[a];
+    rec.t_s = t_s[a..b].iter().map(|t| t - t0).collect();
+    for c in Channel::ALL {
+        if let Some(i) = find(Target::Output(c)) {
+            let scale = match c {
+                Channel::AngleDeg => 180.0 / std::f64::consts::PI,
+                Channel::P1Kpa | Channel::P2Kpa => 1e-3,
+                _ => 1.0,
+            };
+            rec.set_channel(c, values[i][a..b].iter().map(|v| v * scale).collect());
+        }
+    }
+    for k in a..b {
+        let u = valve_openings(plans, values, k, files.mapping.pressure.regulator_band_pa);
+        rec.inputs.push(ValveInputs::from_openings(u));
+    }
+    rec.metadata = vec![
+        (
+            "source".into(),
+            format!(
+                "host-sim {} import of {} (lines {}..={}) with {}",
+                env!("CARGO_PKG_VERSION"),
+                files.input.display(),
+                lines[a],
+                lines[b - 1],
+                files.map_path.display()
+            ),
+        ),
+        (
+            "sample_period_s".into(),
+            format!("{}", rec.sample_period_s()),
+        ),
+        (
+            "time_stamps".into(),
+            format!(
+                "as logged, max |step - median| = {:.1} % of the median step {} s",
+                100.0 * timing.max_jitter,
+                Shown(timing.median_s)
+            ),
+        ),
+    ];
+    rec
+}
+
+/// The four valve openings (`u_in1`, `u_ex1`, `u_in2`, `u_ex2`) of row `k`: each from its
+/// own channel, its muscle's signed valve (`s > 0` inflates, `s < 0` exhausts) or its
+/// muscle's regulator (the pressure error over `band_pa`, clamped to [0, 1]).
+fn valve_openings(
+    plans: &[(Target, Convert)],
+    values: &[Vec<f64>],
+    k: usize,
+    band_pa: f64,
+) -> [f64; 4] {
+    let find = |t: Target| plans.iter().position(|(p, _)| *p == t);
+    let mut u = [0.0f64; 4];
+    for (j, uj) in u.iter_mut().enumerate() {
+        let m = j / 2;
+        let inflate = j % 2 == 0;
+        *uj = if let Some(i) = find(Target::Opening(j)) {
+            values[i][k]
+        } else if let Some(i) = find(Target::Signed(m)) {
+            let s = values[i][k];
+            if inflate {
+                s.max(0.0)
+            } else {
+                (-s).max(0.0)
+            }
+        } else {
+            let i = find(Target::Regulator(m)).expect("checked: one source per input");
+            let p = if m == 0 {
+                Channel::P1Kpa
+            } else {
+                Channel::P2Kpa
+            };
+            let ip = find(Target::Output(p)).expect("checked: regulator needs its pressure");
+            let err = values[i][k] - values[ip][k];
+            let e = if inflate { err } else { -err };
+            (e / band_pa).clamp(0.0, 1.0)
+        };
+    }
+    u
 }
 
 /// A warning for each on/off valve column whose `threshold` leaves it closed (or open) over
@@ -1592,4 +1912,36 @@ pub fn run_import(a: &ImportArgs) -> anyhow::Result<String> {
     }
     report += &stale;
     Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stamp_decimals_counts_the_digits_after_the_mappings_separator() {
+        assert_eq!(stamp_decimals("12.345", false), Some(3));
+        assert_eq!(stamp_decimals("12,5", true), Some(1));
+        assert_eq!(stamp_decimals("12", false), Some(0));
+        // A comma is no separator in a point mapping.
+        assert_eq!(stamp_decimals("12,5", false), Some(0));
+        assert_eq!(stamp_decimals("1.5e-3", false), None);
+    }
+
+    #[test]
+    fn valve_openings_split_a_signed_valve_and_model_a_regulator() {
+        let plans = vec![
+            (Target::Signed(0), Convert::scale(1.0)),
+            (Target::Regulator(1), Convert::scale(1.0)),
+            (Target::Output(Channel::P2Kpa), Convert::scale(1.0)),
+        ];
+        let band_pa = 20e3;
+        // Row 0: valve1 exhausts at 0.4; regulator2 10 kPa above p2 (half the band).
+        // Row 1: valve1 inflates at 0.7; regulator2 50 kPa under p2 (beyond the band).
+        let values = vec![vec![-0.4, 0.7], vec![310e3, 250e3], vec![300e3, 300e3]];
+        let u0 = valve_openings(&plans, &values, 0, band_pa);
+        assert_eq!(u0, [0.0, 0.4, 0.5, 0.0]);
+        let u1 = valve_openings(&plans, &values, 1, band_pa);
+        assert_eq!(u1, [0.7, 0.0, 0.0, 1.0]);
+    }
 }
