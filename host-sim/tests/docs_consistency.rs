@@ -373,7 +373,7 @@ fn the_effect_list_is_the_registry() {
         "{EFFECTS_DOC}: the effect list (first column) is not the registry's, in its order"
     );
     let ids: Vec<String> = documented.into_iter().flat_map(|(_, ids)| ids).collect();
-    let registry_ids: Vec<String> = host_sim::plant::effects::candidates()
+    let registry_ids: Vec<String> = host_sim::plant::effects::catalogue::candidates()
         .iter()
         .map(|c| c.id().to_string())
         .collect();
