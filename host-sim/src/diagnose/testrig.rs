@@ -719,26 +719,7 @@ fn closed_loop(
         } else {
             setpoint_deg
         };
-        let e = r - y[0];
-        let m = (gain_per_deg * e).clamp(-1.0, 1.0);
-        let m = if m.abs() < 0.02 { 0.0 } else { m };
-        let mean_kpa = 0.5 * (y[1] + y[2]);
-        let top = if mean_kpa < 250.0 { 0.3 } else { 0.0 };
-        let u = if m >= 0.0 {
-            ValveInputs {
-                u_in1: (m + top).min(1.0),
-                u_ex1: 0.0,
-                u_in2: top,
-                u_ex2: m,
-            }
-        } else {
-            ValveInputs {
-                u_in1: top,
-                u_ex1: -m,
-                u_in2: (-m + top).min(1.0),
-                u_ex2: 0.0,
-            }
-        };
+        let u = position_command(r, &y, gain_per_deg);
         t_s.push(t);
         inputs.push(u);
         for c in 0..5 {
@@ -763,6 +744,32 @@ fn closed_loop(
         inputs,
         outputs,
         mass_flow_kg_s: None,
+    }
+}
+
+/// The rig's position controller: the measured angle error (deg) times the gain opens one
+/// muscle's inlet and the other's exhaust (a deadband of 2 % opening), and both inlets top
+/// up while the mean pressure is below 250 kPa.
+fn position_command(r_deg: f64, y: &[f64; 5], gain_per_deg: f64) -> ValveInputs {
+    let e = r_deg - y[0];
+    let m = (gain_per_deg * e).clamp(-1.0, 1.0);
+    let m = if m.abs() < 0.02 { 0.0 } else { m };
+    let mean_kpa = 0.5 * (y[1] + y[2]);
+    let top = if mean_kpa < 250.0 { 0.3 } else { 0.0 };
+    if m >= 0.0 {
+        ValveInputs {
+            u_in1: (m + top).min(1.0),
+            u_ex1: 0.0,
+            u_in2: top,
+            u_ex2: m,
+        }
+    } else {
+        ValveInputs {
+            u_in1: top,
+            u_ex1: -m,
+            u_in2: (-m + top).min(1.0),
+            u_ex2: 0.0,
+        }
     }
 }
 
@@ -1710,26 +1717,7 @@ fn record(p: &RigPhysics, dt_s: f64, plan: &Plan, rng: &mut StdRng) -> Recording
                 } else {
                     setpoint_deg
                 };
-                let e = r - y[0];
-                let m = (gain_per_deg * e).clamp(-1.0, 1.0);
-                let m = if m.abs() < 0.02 { 0.0 } else { m };
-                let mean_kpa = 0.5 * (y[1] + y[2]);
-                let top = if mean_kpa < 250.0 { 0.3 } else { 0.0 };
-                if m >= 0.0 {
-                    ValveInputs {
-                        u_in1: (m + top).min(1.0),
-                        u_ex1: 0.0,
-                        u_in2: top,
-                        u_ex2: m,
-                    }
-                } else {
-                    ValveInputs {
-                        u_in1: top,
-                        u_ex1: -m,
-                        u_in2: (-m + top).min(1.0),
-                        u_ex2: 0.0,
-                    }
-                }
+                position_command(r, &y, gain_per_deg)
             }
         };
         inputs.push(u);
