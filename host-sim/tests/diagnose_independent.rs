@@ -11,6 +11,10 @@
 //! - `full_matrix` (ignored; the documented command):
 //!   `cargo test -p host-sim --test diagnose_independent -- --ignored --nocapture full_matrix`
 //!   every kind on the tuning seeds and on the held-out seeds, rates printed separately.
+//! - The evidence base (`testrig::CASES`, the second half of this file): forms unlike the
+//!   candidates', mis-set keys, nominal data on jittered and gappy time bases,
+//!   out-of-catalogue forms; sensitivity and honesty rates per seed set
+//!   (`evidence_reduced_matrix` in CI, `evidence_full_matrix` and `discovery_matrix` ignored).
 //!
 //! A case passes when its verdict is the expected one (`explained` with exactly the expected
 //! effect ids and recalibrated keys and every CHECK channel >= 95 % after; `nothing_missing`;
@@ -220,4 +224,414 @@ fn full_matrix() {
         100.0 * tp as f64 / tt as f64,
         100.0 * hp as f64 / ht as f64
     );
+}
+
+// ---------------------------------------------------------------------------------------
+// The evidence base (`testrig::CASES`): catalogue effects in forms unlike their candidates',
+// mis-set keys, nominal data on several time bases, out-of-catalogue forms. Each case names
+// its category and expected answer in the table, so the rates below are computed from the
+// table alone.
+//
+// - Sensitivity (catalogue forms): `explained`, the first named item one of the expected
+//   ones, and the CHECK fit of the departing channel (the channel the nominal model fits
+//   worst on CHECK) lifted by at least half of its gap to 100 %.
+// - Honesty: a mis-set key recalibrated (named first, `explained`); nominal data
+//   `nothing_missing` (pure noise: nothing named); an out-of-catalogue form `unexplained`
+//   with nothing named.
+// A refused input (an error from `diagnose`) fails its case; the error is printed.
+//
+// `evidence_full_matrix` (ignored; every case on the tuning and the held-out seeds):
+//   cargo test --release -p host-sim --test diagnose_independent -- --ignored --nocapture evidence_full_matrix
+// `discovery_matrix` (ignored; the out-of-catalogue cases only), `evidence_reduced_matrix`
+// (CI: the cases marked `reduced`, one held-out seed). Each case prints a table row and a
+// line `EVIDENCE {json}` for scripts.
+// ---------------------------------------------------------------------------------------
+
+use host_sim::diagnose::candidates::catalogue;
+use host_sim::diagnose::recalibrate;
+use host_sim::diagnose::testrig::{
+    case_spec, evidence_case, CaseSpec, Category, EvidenceCase, Expect, TimeBase, CASES,
+    CASE_TABLE_HEADER,
+};
+
+/// The result of one evidence case.
+struct EvOutcome {
+    pass: bool,
+    category: Category,
+}
+
+/// Named items in the order the selection accepted them (effects and recalibrated keys).
+fn named_in_order(d: &Diagnosis) -> Vec<String> {
+    let named: Vec<String> = d
+        .effects
+        .iter()
+        .map(|e| e.id.clone())
+        .chain(d.recalibrated.iter().map(|r| r.key.clone()))
+        .collect();
+    let mut accepted: Vec<(usize, String)> = d
+        .candidates
+        .iter()
+        .filter(|s| s.accepted && named.contains(&s.id))
+        .map(|s| (s.round, s.id.clone()))
+        .collect();
+    accepted.sort_by_key(|(r, _)| *r);
+    let mut order: Vec<String> = Vec::new();
+    for id in accepted.into_iter().map(|(_, id)| id).chain(named) {
+        if !order.contains(&id) {
+            order.push(id);
+        }
+    }
+    order
+}
+
+fn evidence_run(c: &EvidenceCase) -> EvOutcome {
+    let t0 = std::time::Instant::now();
+    let d = diagnose(
+        &nominal(),
+        &c.train,
+        Some(&c.check),
+        &DiagnoseOptions::default(),
+        &|_, _, _| {},
+    );
+    let secs = t0.elapsed().as_secs_f64();
+    let spec = c.spec;
+    let (pass, verdict, named, depart, why) = match &d {
+        Err(e) => (
+            false,
+            "error".to_string(),
+            Vec::new(),
+            None,
+            format!("refused: {e}"),
+        ),
+        Ok(d) => {
+            let named = named_in_order(d);
+            // The departing channel: the one the nominal model fits worst on CHECK.
+            let depart = d.check_before.as_ref().and_then(|b| {
+                b.iter()
+                    .min_by(|x, y| x.1.total_cmp(y.1))
+                    .map(|(ch, before)| {
+                        let after = d
+                            .check_after
+                            .as_ref()
+                            .and_then(|a| a.get(ch).copied())
+                            .unwrap_or(f64::NAN);
+                        (*ch, *before, after)
+                    })
+            });
+            let lifted = depart.is_some_and(|(_, b, a)| a - b >= 0.5 * (100.0 - b));
+            let first_ok = |ids: &[&str]| named.first().is_some_and(|f| ids.contains(&f.as_str()));
+            let (pass, why) = match spec.expect {
+                Expect::First(ids) | Expect::FirstWith(ids, _) => {
+                    let with: &[&str] = match spec.expect {
+                        Expect::FirstWith(_, with) => with,
+                        _ => &[],
+                    };
+                    let all_named = with.iter().all(|w| named.iter().any(|n| n == w));
+                    let explained = d.verdict == Verdict::Explained;
+                    let need_lift = spec.category.is_sensitivity();
+                    let pass = explained && first_ok(ids) && all_named && (!need_lift || lifted);
+                    let why = if pass {
+                        String::new()
+                    } else if !explained {
+                        "not explained".into()
+                    } else if !first_ok(ids) {
+                        "wrong item first".into()
+                    } else if !all_named {
+                        format!("{} not named", with.join(", "))
+                    } else {
+                        "CHECK lift < half the gap".into()
+                    };
+                    (pass, why)
+                }
+                Expect::NothingMissing => (d.verdict == Verdict::NothingMissing, String::new()),
+                Expect::NothingNamed => (
+                    named.is_empty() && d.verdict != Verdict::Explained,
+                    String::new(),
+                ),
+                Expect::Unexplained => (
+                    d.verdict == Verdict::Unexplained && named.is_empty(),
+                    String::new(),
+                ),
+            };
+            (pass, d.verdict.as_str().to_string(), named, depart, why)
+        }
+    };
+    let (dch, db, da) = depart.unwrap_or(("-", f64::NAN, f64::NAN));
+    println!(
+        "| {} | {} | {} | {:.0} | {} | {} | {} | {verdict} | {} | {dch} {db:.1} -> {da:.1} | {secs:.1} | {}{} |",
+        spec.name,
+        spec.category.as_str(),
+        c.seed,
+        c.dt_s * 1e3,
+        if c.force_channels { "yes" } else { "no" },
+        c.sizes,
+        spec.expect.describe(),
+        if named.is_empty() { "(none)".into() } else { named.join(" > ") },
+        if pass { "pass" } else { "FAIL" },
+        if why.is_empty() { String::new() } else { format!(" ({why})") },
+    );
+    let json = serde_json::json!({
+        "case": spec.name,
+        "category": spec.category.as_str(),
+        "slot": spec.slot,
+        "expect": spec.expect.describe(),
+        "seed": c.seed,
+        "check_seed": c.check_seed,
+        "dt_s": c.dt_s,
+        "forces": c.force_channels,
+        "sizes": c.sizes,
+        "verdict": verdict,
+        "named": named,
+        "departing_channel": dch,
+        "check_before": db,
+        "check_after": da,
+        "pass": pass,
+        "why": why,
+        "seconds": secs,
+    });
+    println!("EVIDENCE {json}");
+    EvOutcome {
+        pass,
+        category: spec.category,
+    }
+}
+
+/// Passes and totals of the sensitivity and the honesty cases.
+#[derive(Default, Debug)]
+struct Rates {
+    sensitivity: (usize, usize),
+    honesty: (usize, usize),
+    /// Passes and totals per category.
+    by_category: std::collections::BTreeMap<&'static str, (usize, usize)>,
+}
+
+impl Rates {
+    fn line(&self) -> String {
+        let pct = |(p, t): (usize, usize)| 100.0 * p as f64 / (t.max(1)) as f64;
+        let cats: Vec<String> = self
+            .by_category
+            .iter()
+            .map(|(c, (p, t))| format!("{c} {p}/{t}"))
+            .collect();
+        format!(
+            "sensitivity {}/{} ({:.0} %), honesty {}/{} ({:.0} %); {}",
+            self.sensitivity.0,
+            self.sensitivity.1,
+            pct(self.sensitivity),
+            self.honesty.0,
+            self.honesty.1,
+            pct(self.honesty),
+            cats.join(", ")
+        )
+    }
+}
+
+fn evidence_matrix(cases: &[&'static CaseSpec], seeds: &[u64]) -> Rates {
+    let cfg = nominal();
+    let mut rates = Rates::default();
+    println!("| case | category | seed | dt ms | forces | drawn sizes | expected | verdict | named (order) | departing CHECK channel, fit % before -> after | s | result |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for &seed in seeds {
+        for spec in cases {
+            let o = evidence_run(&evidence_case(&cfg, spec, seed));
+            let r = if o.category.is_sensitivity() {
+                &mut rates.sensitivity
+            } else {
+                &mut rates.honesty
+            };
+            r.0 += usize::from(o.pass);
+            r.1 += 1;
+            let c = rates.by_category.entry(o.category.as_str()).or_default();
+            c.0 += usize::from(o.pass);
+            c.1 += 1;
+        }
+    }
+    rates
+}
+
+fn all_cases(keep: impl Fn(&CaseSpec) -> bool) -> Vec<&'static CaseSpec> {
+    CASES.iter().filter(|c| keep(c)).collect()
+}
+
+#[test]
+fn evidence_table_covers_every_catalogue_effect_and_key() {
+    println!("{CASE_TABLE_HEADER}");
+    for c in CASES {
+        println!("{}", c.tsv());
+    }
+    let expected_ids: Vec<&str> = CASES
+        .iter()
+        .filter(|c| c.category == Category::CatalogueForm)
+        .flat_map(|c| match c.expect {
+            Expect::First(ids) => ids.to_vec(),
+            Expect::FirstWith(_, with) => with.to_vec(),
+            _ => Vec::new(),
+        })
+        .collect();
+    // Every effect family of the catalogue is the expected answer of some form.
+    let family = |id: &str| -> String {
+        match id {
+            "leakage_muscle1" | "leakage_muscle2" => "leakage".into(),
+            "sensor_lag_p1" | "sensor_lag_p2" => "sensor_lag".into(),
+            "sensor_gain" => "sensor_offset".into(),
+            "heat_transfer" => "polytropic".into(),
+            other => other.into(),
+        }
+    };
+    let covered: Vec<String> = expected_ids.iter().map(|id| family(id)).collect();
+    for cand in catalogue() {
+        let f = family(cand.id());
+        assert!(
+            covered.contains(&f),
+            "catalogue effect {} has no form in the evidence base",
+            cand.id()
+        );
+    }
+    for slot in ["polytropic", "thermal_chamber", "sensor", "sensor_lag"] {
+        assert!(
+            CASES
+                .iter()
+                .any(|c| c.slot == slot && c.category == Category::CatalogueForm),
+            "slot {slot} has no form"
+        );
+    }
+    for k in recalibrate::keys() {
+        assert!(
+            CASES
+                .iter()
+                .any(|c| c.category == Category::MisSetKey && c.slot == k.key),
+            "key {} has no mis-set case",
+            k.key
+        );
+    }
+    let ooc = CASES
+        .iter()
+        .filter(|c| c.category == Category::OutOfCatalogue)
+        .count();
+    assert!(ooc >= 8, "{ooc} out-of-catalogue forms");
+    for tb in [TimeBase::Jittered, TimeBase::Gappy] {
+        assert!(CASES
+            .iter()
+            .any(|c| c.category == Category::Nominal && c.time_base == tb));
+    }
+    let mut names: Vec<&str> = CASES.iter().map(|c| c.name).collect();
+    names.sort();
+    names.dedup();
+    assert_eq!(names.len(), CASES.len(), "case names are unique");
+}
+
+#[test]
+fn every_evidence_case_is_generated_with_its_recording_features() {
+    let cfg = nominal();
+    for spec in CASES {
+        let c = evidence_case(&cfg, spec, HELD_OUT_SEEDS[0]);
+        for r in [&c.train, &c.check] {
+            assert!(r.t_s.windows(2).all(|w| w[1] > w[0]), "{}", spec.name);
+            for ch in Channel::ALL {
+                if let Some(y) = r.channel(ch) {
+                    assert!(
+                        y.iter().all(|v| v.is_finite()),
+                        "{} {}",
+                        spec.name,
+                        ch.name()
+                    );
+                }
+            }
+            assert_eq!(r.channel(Channel::F1N).is_some(), c.force_channels);
+            let steps: Vec<f64> = r.t_s.windows(2).map(|w| w[1] - w[0]).collect();
+            let max_ratio = steps.iter().fold(0.0f64, |m, s| m.max(s / c.dt_s));
+            match spec.time_base {
+                TimeBase::Uniform => assert!(r.is_uniform(), "{}", spec.name),
+                TimeBase::Jittered => {
+                    assert!(!r.is_uniform() && max_ratio < 1.41, "{}", spec.name)
+                }
+                TimeBase::Gappy => {
+                    assert!(max_ratio > 1.9 && max_ratio < 11.1, "{}", spec.name);
+                    let expected_rows =
+                        (if std::ptr::eq(r, &c.train) { 10.0 } else { 8.0 } / c.dt_s).round();
+                    assert!(r.t_s.len() as f64 >= 0.95 * expected_rows, "{}", spec.name);
+                }
+            }
+        }
+        assert_ne!(c.seed, c.check_seed);
+    }
+}
+
+#[test]
+fn every_evidence_form_departs_from_the_nominal_rig() {
+    // The TRAIN recording of each uniform case against the nominal rig's replay of its own
+    // valve columns: a form that changes nothing would be no evidence.
+    let cfg = nominal();
+    let rig = RigPhysics::from_config(&cfg);
+    let nominal_fit = |c: &EvidenceCase| -> f64 {
+        let y = rig.replay(&c.train.inputs, c.dt_s);
+        Channel::ALL
+            .iter()
+            .filter_map(|&ch| {
+                let m = c.train.channel(ch)?;
+                let ours: Vec<f64> = y.iter().map(|v| v[ch.index()]).collect();
+                Some(fit_percent(m, &ours))
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    let floor = nominal_fit(&evidence_case(&cfg, case_spec("nominal").unwrap(), 11));
+    for spec in CASES {
+        if spec.category == Category::Nominal || spec.time_base != TimeBase::Uniform {
+            continue;
+        }
+        let f = nominal_fit(&evidence_case(&cfg, spec, 11));
+        println!(
+            "{}: worst channel fit {f:.2} % (nominal data {floor:.2} %)",
+            spec.name
+        );
+        assert!(
+            f < floor - 0.5,
+            "{}: {f:.2} % vs nominal {floor:.2} %",
+            spec.name
+        );
+    }
+}
+
+/// Passes of the reduced evidence matrix on the diagnosis as it was when the evidence base
+/// was written (cases marked `reduced`, held-out seed 9101: sensitivity 2 of 4 - the
+/// second-order angle lag and the dead time with an opening ramp are unexplained -, honesty
+/// 7 of 8 - the gappy nominal recording is unexplained). These are floors: later work on
+/// the diagnosis raises them as it passes more cases, and never lowers them.
+const EVIDENCE_REDUCED_SENSITIVITY_FLOOR: usize = 2;
+const EVIDENCE_REDUCED_HONESTY_FLOOR: usize = 7;
+
+#[test]
+fn evidence_reduced_matrix() {
+    let rates = evidence_matrix(&all_cases(|c| c.reduced), &HELD_OUT_SEEDS[..1]);
+    println!("evidence reduced matrix: {}", rates.line());
+    assert!(
+        rates.sensitivity.0 >= EVIDENCE_REDUCED_SENSITIVITY_FLOOR,
+        "{}",
+        rates.line()
+    );
+    assert!(
+        rates.honesty.0 >= EVIDENCE_REDUCED_HONESTY_FLOOR,
+        "{}",
+        rates.line()
+    );
+}
+
+#[test]
+#[ignore = "every evidence case on every seed: minutes in release"]
+fn evidence_full_matrix() {
+    let cases = all_cases(|_| true);
+    let t = evidence_matrix(&cases, &TUNING_SEEDS);
+    let h = evidence_matrix(&cases, &HELD_OUT_SEEDS);
+    println!("evidence, tuning seeds {TUNING_SEEDS:?}: {}", t.line());
+    println!("evidence, held-out seeds {HELD_OUT_SEEDS:?}: {}", h.line());
+}
+
+#[test]
+#[ignore = "the out-of-catalogue cases on every seed"]
+fn discovery_matrix() {
+    let cases = all_cases(|c| c.category == Category::OutOfCatalogue);
+    let t = evidence_matrix(&cases, &TUNING_SEEDS);
+    let h = evidence_matrix(&cases, &HELD_OUT_SEEDS);
+    println!("discovery, tuning seeds {TUNING_SEEDS:?}: {}", t.line());
+    println!("discovery, held-out seeds {HELD_OUT_SEEDS:?}: {}", h.line());
 }
