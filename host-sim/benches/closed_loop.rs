@@ -20,7 +20,7 @@ fn root() -> PathBuf {
 fn closed_loop(c: &mut Criterion) {
     let mut group = c.benchmark_group("closed_loop");
     group.sample_size(20);
-    let plant = Plant::load(root().join("../shared/plant/reference-1dof.toml"))
+    let plant = Plant::load(root().join("host-sim/plants/reference-1dof.toml"))
         .unwrap_or_else(|e| panic!("{e}"));
     for name in ["step", "sine", "random"] {
         let scenario = Scenario::load(root().join(format!("scenarios/{name}.toml")))

@@ -11,17 +11,18 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use host_sim::sim::{simulate, Integrator, SolverOptions};
 use host_sim::{Plant, Recording};
 
-fn shared() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared")
+/// The in-repo copies of the shared fixtures and plants (`tests/fixtures/README.md`).
+fn fixtures() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures")
 }
 
 fn replay(c: &mut Criterion) {
     let mut group = c.benchmark_group("replay");
     group.sample_size(50);
     for name in ["pulses_nominal", "pulses_loaded", "pwm_nominal"] {
-        let rec = Recording::read(shared().join(format!("conformance/{name}.csv")))
+        let rec = Recording::read(fixtures().join(format!("{name}.csv")))
             .unwrap_or_else(|e| panic!("{e}"));
-        let plant = Plant::load(shared().join("plant").join(rec.meta("plant").unwrap()))
+        let plant = Plant::load(fixtures().join(rec.meta("plant").unwrap()))
             .unwrap_or_else(|e| panic!("{e}"));
         let dt = rec.sample_period_s();
         for (label, rtol) in [("rtol1e-6", 1e-6), ("rtol1e-8", 1e-8)] {
@@ -49,8 +50,8 @@ fn replay(c: &mut Criterion) {
 fn per_tick(c: &mut Criterion) {
     let mut group = c.benchmark_group("per_tick");
     group.sample_size(20);
-    let rec = Recording::read(shared().join("conformance/pulses_nominal.csv")).unwrap();
-    let plant = Plant::load(shared().join("plant/reference-1dof.toml")).unwrap();
+    let rec = Recording::read(fixtures().join("pulses_nominal.csv")).unwrap();
+    let plant = Plant::load(fixtures().join("reference-1dof.toml")).unwrap();
     let dt = rec.sample_period_s();
     group.bench_function("pulses_nominal/rtol1e-6", |b| {
         b.iter(|| {

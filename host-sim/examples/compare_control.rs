@@ -36,7 +36,7 @@ fn run() -> Result<ExitCode> {
     let plant_path = match args.next() {
         Some(p) => PathBuf::from(p),
         None => reference_plant_path()
-            .context("cannot find ../shared/plant/reference-1dof.toml; pass PLANT.toml")?,
+            .context("cannot find host-sim/plants/reference-1dof.toml; pass PLANT.toml")?,
     };
     let tuning_path = args
         .next()

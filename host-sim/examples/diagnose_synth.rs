@@ -44,8 +44,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .get(1)
         .map(|s| s.split(',').filter(|t| !t.is_empty()).collect())
         .unwrap_or_default();
-    let root =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant/reference-1dof.toml");
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("plants/reference-1dof.toml");
     let cfg = plant_with(&std::fs::read_to_string(&root)?, &truths, dt)?;
     std::fs::create_dir_all(&out)?;
     let channels = [true, true, true, force, force];

@@ -43,8 +43,7 @@ fn columns(m: &[host_sim::Measurement]) -> [Option<Vec<f64>>; 5] {
 }
 
 fn main() {
-    let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant/reference-1dof.toml");
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("plants/reference-1dof.toml");
     let text = std::fs::read_to_string(&path).unwrap();
     let nominal = PlantConfig::load(&path).unwrap();
     let cases: [&[&str]; 6] = [

@@ -14,7 +14,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 
 use crate::control::closed_loop::{run, Scenario};
 use crate::fit::{compare, ChannelFit};
@@ -89,53 +89,48 @@ pub struct FixtureReplay {
     pub speed_x: f64,
 }
 
-/// `shared/<rel>` candidates: `../shared/<rel>` from the working directory, then from the
-/// source tree.
-fn shared_candidates(rel: &str) -> Vec<PathBuf> {
-    vec![
-        PathBuf::from("../shared").join(rel),
-        PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-            .join("../../shared")
-            .join(rel),
-    ]
-}
-
-fn first_existing(what: &str, flag: &str, candidates: Vec<PathBuf>) -> Result<PathBuf> {
-    if let Some(p) = candidates.iter().find(|p| p.is_file()) {
-        return Ok(p.clone());
-    }
-    let tried: Vec<String> = candidates.iter().map(|p| p.display().to_string()).collect();
-    bail!(
-        "cannot find the {what} (tried {}); pass {flag} PATH",
-        tried.join(", ")
-    )
-}
-
 /// Runs the demo, writing into `opts.out_dir`.
 pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
     // Before the runs: an --out-dir that is a file is refused by name (not "File exists"
     // from the directory creation after them).
     crate::validate::output_dir("--out-dir", &opts.out_dir).map_err(anyhow::Error::msg)?;
-    let plant_path = match &opts.plant {
-        Some(p) => p.clone(),
-        None => first_existing(
-            "reference plant",
-            "--plant",
-            shared_candidates("plant/reference-1dof.toml"),
-        )?,
+    // Without --plant / --fixture: the repository's copies from the working directory, else
+    // the ones built into host-sim (`defaults`); the fixture is first looked for beside a
+    // --plant's folder (`shared/plant/X.toml` -> `shared/conformance/pulses_nominal.csv`).
+    use crate::defaults::{Found, PULSES_NOMINAL, REFERENCE_PLANT};
+    let given = |p: &PathBuf| Found {
+        path: p.clone(),
+        builtin: None,
+        tried: Vec::new(),
     };
-    let fixture_path = match &opts.fixture {
-        Some(p) => p.clone(),
-        None => {
+    let plant_file = opts
+        .plant
+        .as_ref()
+        .map_or_else(|| REFERENCE_PLANT.find(), given);
+    let fixture_file = opts.fixture.as_ref().map_or_else(
+        || {
             let mut c = Vec::new();
-            if let Some(dir) = plant_path.parent().and_then(Path::parent) {
+            if let Some(dir) = opts.plant.as_ref().and_then(|p| p.parent()?.parent()) {
                 c.push(dir.join("conformance/pulses_nominal.csv"));
             }
-            c.extend(shared_candidates("conformance/pulses_nominal.csv"));
-            first_existing("conformance fixture pulses_nominal.csv", "--fixture", c)?
+            c.extend(PULSES_NOMINAL.candidates());
+            PULSES_NOMINAL.find_among(c)
+        },
+        given,
+    );
+    for (f, what) in [
+        (&plant_file, "default plant"),
+        (&fixture_file, "default fixture"),
+    ] {
+        if let Some(n) = f.note(what) {
+            eprintln!("{n}");
         }
+    }
+    let (plant_path, fixture_path) = (plant_file.path.clone(), fixture_file.path.clone());
+    let plant = match plant_file.builtin {
+        Some(text) => Plant::from_config(&crate::PlantConfig::from_toml_str(text, &plant_path)?),
+        None => Plant::load(&plant_path)?,
     };
-    let plant = Plant::load(&plant_path)?;
     let parsed = SCENARIOS
         .iter()
         .map(|(file, text)| Ok((*file, Scenario::from_toml_str(text, file)?)))
@@ -165,8 +160,11 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
         &flagged,
     )
     .map_err(anyhow::Error::msg)?;
+    let all: Vec<PathBuf> = flagged.iter().map(|(_, p)| p.to_path_buf()).collect();
+    crate::io::output::check_dir("--out-dir", &opts.out_dir, &all).map_err(anyhow::Error::msg)?;
     crate::io::atomic::create_dir_all(&opts.out_dir)
         .with_context(|| format!("{}: cannot create the directory", opts.out_dir.display()))?;
+    crate::io::output::write_manifest(&opts.out_dir, &all)?;
 
     let mut scenarios = Vec::new();
     for ((file, s), [trace, png, csv]) in parsed.iter().zip(files) {
@@ -195,7 +193,10 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
     }
 
     // Open-loop replay of the conformance fixture and its fit.
-    let fixture = Recording::read(&fixture_path)?;
+    let fixture = match fixture_file.builtin {
+        Some(text) => Recording::parse(text, &fixture_path)?,
+        None => Recording::read(&fixture_path)?,
+    };
     let dt = fixture.sample_period_s();
     let t0 = Instant::now();
     let sim = simulate(&plant, &fixture.inputs, dt, &SolverOptions::default())

@@ -14,6 +14,7 @@
 //! - [`demo`]: the main job (closed-loop scenarios and a conformance replay).
 
 pub mod control;
+pub mod defaults;
 pub mod demo;
 pub mod demo_arm3;
 pub mod diagnose;

@@ -24,6 +24,10 @@ use host_sim::{Plant, Recording};
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Replace existing output files that host-sim did not write, or that are read-only
+    /// (without it such a file is refused before any work; docs/reliability.md).
+    #[arg(long, global = true)]
+    force: bool,
 }
 
 #[derive(Subcommand)]
@@ -147,11 +151,14 @@ struct DemoArgs {
     /// Output directory (created if missing).
     #[arg(long, value_name = "DIR", default_value = "target/demo")]
     out_dir: PathBuf,
-    /// Plant file [default: ../shared/plant/reference-1dof.toml]; a 3-DOF arm file
+    /// Plant file [default: host-sim/plants/reference-1dof.toml or plants/reference-1dof.toml
+    /// from the working directory, else the copy built into host-sim]; a 3-DOF arm file
     /// (`kind = "arm3"`) runs the arm tick on the arm scenarios (scenarios/arm3/).
     #[arg(long, value_name = "P.toml")]
     plant: Option<PathBuf>,
-    /// Conformance fixture replayed open loop [default: pulses_nominal.csv in shared/conformance].
+    /// Conformance fixture replayed open loop [default: conformance/pulses_nominal.csv beside
+    /// the --plant file's folder, else host-sim/tests/fixtures/pulses_nominal.csv (or
+    /// tests/fixtures/...) from the working directory, else the copy built into host-sim].
     #[arg(long, value_name = "REC.csv")]
     fixture: Option<PathBuf>,
     /// Arm plants only: run these arm scenario files (scenarios/arm3/ format) instead of the
@@ -286,6 +293,8 @@ fn main() -> ExitCode {
             .get_matches_from(join_negative_values(std::env::args_os()));
         Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit())
     };
+    host_sim::io::output::set_force(cli.force);
+    host_sim::io::output::install_interrupt_cleanup();
     if let Err(e) = refuse_arm_files(&cli.command) {
         eprintln!("error: {e}");
         return ExitCode::from(2);
@@ -971,6 +980,22 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
         let index = dir.join("index.html");
         validate::distinct_outputs(&inputs, &[("--report", &report_json), ("--report", &index)])
             .map_err(anyhow::Error::msg)?;
+        // The report's own files (arm plants: one folder per joint).
+        let files: Vec<PathBuf> = [
+            PathBuf::new(),
+            "joint1".into(),
+            "joint2".into(),
+            "joint3".into(),
+        ]
+        .iter()
+        .flat_map(|sub| {
+            [
+                dir.join(sub).join("diagnosis.json"),
+                dir.join(sub).join("index.html"),
+            ]
+        })
+        .collect();
+        host_sim::io::output::check_dir("--report", dir, &files).map_err(anyhow::Error::msg)?;
     }
     let bar = stderr_bar(
         Some(100),

@@ -102,6 +102,24 @@ impl fmt::Display for Range {
 /// UNIT, got v", with a hint when `v` kPa (or bar) typed into a Pa key would have been in range);
 /// `None` inside it.
 pub fn range_error(key: &str, v: f64, range: Range, unit: &str) -> Option<String> {
+    // An initial pressure typed in kPa (a few hundred) reads as a few hundred pascals, inside
+    // the range: such a small gauge pressure is atmospheric (0 says that), so it is refused
+    // with the hint the other pressure keys give.
+    if key.contains("initial.")
+        && key.ends_with("_gauge_pa")
+        && v != 0.0
+        && v.abs() < INITIAL_PRESSURE_MIN_ABS_PA
+        && range.contains(v * 1e3)
+    {
+        return Some(format!(
+            "must be 0 or at least {} Pa in magnitude ({range} {unit}), got {} (kPa typed into \
+             a Pa key? {} kPa is {} Pa)",
+            Shown(INITIAL_PRESSURE_MIN_ABS_PA),
+            Shown(v),
+            Shown(v),
+            Shown(v * 1e3)
+        ));
+    }
     if range.contains(v) {
         return None;
     }
@@ -121,6 +139,10 @@ pub fn range_error(key: &str, v: f64, range: Range, unit: &str) -> Option<String
     }
     Some(msg)
 }
+
+/// Smallest non-zero magnitude of an `[initial]` gauge pressure [Pa]: below it, a value is
+/// a pressure in kPa typed into the Pa key.
+pub const INITIAL_PRESSURE_MIN_ABS_PA: f64 = 1000.0;
 
 /// One range check of a file value: its key, the value, the allowed range and the unit the
 /// message names.
@@ -332,11 +354,15 @@ const REPLACEABLE_READ_MAX_BYTES: u64 = 4 << 20;
 /// `Err` naming `flag` and `path` when `path` exists and is not an output of `kind` (a
 /// recording about to be replaced by a force law, a plant file by a recording): the command
 /// would replace it, and the user would lose it. An absent or empty file is replaceable.
+/// `--force` lets any file be replaced ([`crate::io::output`]).
 pub fn replaceable(flag: &str, path: &Path, kind: OutputKind) -> Result<(), String> {
     use std::io::Read as _;
     let Ok(meta) = std::fs::metadata(path) else {
         return Ok(());
     };
+    if crate::io::output::forced() {
+        return Ok(());
+    }
     if !meta.is_file() || meta.len() == 0 {
         return Ok(());
     }
@@ -380,8 +406,9 @@ pub fn replaceable(flag: &str, path: &Path, kind: OutputKind) -> Result<(), Stri
 }
 
 /// [`distinct_outputs`] for outputs that are files in directories the command does not
-/// create: also each output's directory exists, checked before the run (not found by the
-/// rename after it).
+/// create: also each output's directory exists and can be written, and an existing file
+/// there is one host-sim wrote ([`crate::io::output::check_file`]), checked before the run
+/// (not found by the rename after it).
 pub fn distinct_file_outputs(
     inputs: &[(&str, &Path)],
     outputs: &[(&str, &Path)],
@@ -389,6 +416,7 @@ pub fn distinct_file_outputs(
     distinct_outputs(inputs, outputs)?;
     for (flag, p) in outputs {
         output_parent_exists(flag, p)?;
+        crate::io::output::check_file(flag, p)?;
     }
     Ok(())
 }
@@ -705,6 +733,35 @@ impl RunEstimate {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_initial_pressure_typed_in_kpa_is_refused_with_the_kpa_hint() {
+        let text = std::fs::read_to_string(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/plants/reference-1dof.toml"
+        ))
+        .unwrap()
+        .replace("p1_gauge_pa = 550000.0", "p1_gauge_pa = 550");
+        let e = crate::PlantConfig::from_toml_str(&text, "kpa.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("kpa.toml:33") && e.contains("initial.p1_gauge_pa"),
+            "{e}"
+        );
+        assert!(
+            e.contains("kPa typed into a Pa key? 550 kPa is 550000 Pa"),
+            "{e}"
+        );
+        // 0 (atmospheric) and a real pressure in Pa are accepted.
+        for ok in ["p1_gauge_pa = 0.0", "p1_gauge_pa = 1500.0"] {
+            let t = text.replace("p1_gauge_pa = 550", ok);
+            assert!(
+                crate::PlantConfig::from_toml_str(&t, "ok.toml").is_ok(),
+                "{ok}"
+            );
+        }
+    }
 
     #[test]
     fn the_key_of_an_error_span_is_its_lines_dotted_key() {

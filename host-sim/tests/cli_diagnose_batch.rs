@@ -27,14 +27,10 @@ fn a_directory_is_diagnosed_in_parallel_with_one_json_each_and_a_summary() {
     let dir = tempfile::tempdir().unwrap();
     let recs = dir.path().join("recs");
     std::fs::create_dir(&recs).unwrap();
-    std::fs::copy(
-        shared().join("conformance/pulses_nominal.csv"),
-        recs.join("nominal.csv"),
-    )
-    .unwrap();
+    std::fs::copy(fixture("pulses_nominal.csv"), recs.join("nominal.csv")).unwrap();
     std::fs::write(recs.join("broken.csv"), "t_s,u_in1\n0,0\n").unwrap();
     let out = dir.path().join("out");
-    let plant = shared().join("plant/reference-1dof.toml");
+    let plant = fixture("reference-1dof.toml");
     let r = batch(&plant, &recs, &out, &[&"--jobs", &"2"]);
     let stdout = String::from_utf8_lossy(&r.stdout);
     assert_eq!(
@@ -119,7 +115,7 @@ fn a_directory_is_diagnosed_in_parallel_with_one_json_each_and_a_summary() {
         let named = dir.path().join("named");
         std::fs::create_dir(&named).unwrap();
         std::fs::copy(
-            shared().join("conformance/pulses_nominal.csv"),
+            fixture("pulses_nominal.csv"),
             named.join("run 1, left arm.csv"),
         )
         .unwrap();
@@ -143,11 +139,7 @@ fn a_directory_is_diagnosed_in_parallel_with_one_json_each_and_a_summary() {
     }
     // Two recordings whose names differ only in their extension's case share a JSON: both
     // named, nothing run.
-    std::fs::copy(
-        shared().join("conformance/pulses_nominal.csv"),
-        recs.join("nominal.CSV"),
-    )
-    .unwrap();
+    std::fs::copy(fixture("pulses_nominal.csv"), recs.join("nominal.CSV")).unwrap();
     let r = batch(&plant, &recs, &out, &[]);
     let err = String::from_utf8_lossy(&r.stderr);
     assert_eq!(r.status.code(), Some(2), "{err}");

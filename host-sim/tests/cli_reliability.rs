@@ -61,16 +61,23 @@ struct Workspace {
 impl Workspace {
     fn new() -> Workspace {
         let dir = tempfile::tempdir().unwrap();
-        // Each of the kind a command writes there (commands refuse to replace a file of
-        // another kind before any work; these tests are about the refusals after that).
+        // Each of the kind a command writes there and with host-sim's mark, as an earlier
+        // run left it (commands refuse to replace a file of another kind, or one host-sim
+        // did not write, before any work; these tests are about the refusals after that).
         for (name, text) in [
-            ("out.csv", "# precious out.csv\nt_s,u_in1,u_ex1,u_in2,u_ex2\n0,0,0,0,0\n"),
+            (
+                "out.csv",
+                "# generator = host-sim (an earlier run)\n# precious out.csv\nt_s,u_in1,u_ex1,u_in2,u_ex2\n0,0,0,0,0\n",
+            ),
             (
                 "out.toml",
-                "# precious out.toml\n[force_law]\n[torque_model]\n[volume_fnn]\n[cascade]\n[muscle]\n",
+                "# generator = host-sim (an earlier run)\n# precious out.toml\n[force_law]\n[torque_model]\n[volume_fnn]\n[cascade]\n[muscle]\n",
             ),
-            ("out.json", "{\"precious\": \"out.json\"}\n"),
-            ("out.png", "precious out.png\n"),
+            (
+                "out.json",
+                "{\"generator\": \"host-sim (an earlier run)\", \"precious\": \"out.json\"}\n",
+            ),
+            ("out.png", "precious out.png (tEXt generator\0host-sim)\n"),
         ] {
             std::fs::write(dir.path().join(name), text).unwrap();
         }
@@ -379,8 +386,14 @@ fn no_command_writes_over_one_of_its_inputs() {
 #[test]
 fn an_output_that_cannot_be_written_is_refused_before_the_run() {
     let w = Workspace::new();
-    w.write("out.csv", "previous\n");
-    w.write("old.json", "{}\n");
+    w.write(
+        "out.csv",
+        "# generator = host-sim (an earlier run)\nprevious\n",
+    );
+    w.write(
+        "old.json",
+        "{\"generator\": \"host-sim (an earlier run)\"}\n",
+    );
     std::fs::create_dir_all(w.dir.path().join("d.png")).unwrap();
     std::fs::create_dir_all(w.dir.path().join("rd/index.html")).unwrap();
     for (line, needles) in [
@@ -1210,8 +1223,12 @@ fn calibrate_refuses_a_config_file_it_replaces_that_does_not_parse() {
 #[test]
 fn tune_refuses_an_out_that_is_not_a_gains_file() {
     let w = Workspace::new();
-    let copy = w.p("plant-copy.toml");
-    std::fs::copy(plant(), &copy).unwrap();
+    // A plant file host-sim wrote (`identify plant --out`): its, but of another kind.
+    let text = std::fs::read_to_string(plant()).unwrap();
+    w.write(
+        "plant-copy.toml",
+        &format!("# generator = host-sim (an earlier run)\n{text}"),
+    );
     w.refuses(
         "tune --plant {plant} --out {w}/plant-copy.toml --warm-start",
         &["--out", "plant-copy.toml", "not a gains file"],

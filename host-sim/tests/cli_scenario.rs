@@ -172,7 +172,11 @@ fn unmet_expectation_exits_with_status_1_and_says_why() {
 fn bad_scenario_names_file_line_and_key_and_keeps_the_old_output() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("o.csv");
-    std::fs::write(&out, "# good old file\nt_s,u_in1\n0,0\n").unwrap();
+    std::fs::write(
+        &out,
+        "# generator = host-sim (an earlier run)\n# good old file\nt_s,u_in1\n0,0\n",
+    )
+    .unwrap();
     let step = std::fs::read_to_string(root().join("scenarios/step.toml")).unwrap();
     let cases = [
         // (replace, with, expected fragments)
@@ -260,7 +264,7 @@ fn bad_scenario_names_file_line_and_key_and_keeps_the_old_output() {
         }
         assert_eq!(
             std::fs::read_to_string(&out).unwrap(),
-            "# good old file\nt_s,u_in1\n0,0\n"
+            "# generator = host-sim (an earlier run)\n# good old file\nt_s,u_in1\n0,0\n"
         );
     }
     // A bad event names its [[events]] entry and line.

@@ -951,7 +951,7 @@ fn text_of_any_status(r: &std::process::Output) -> String {
 #[test]
 fn only_channels_that_depart_are_located_on_noise_free_data() {
     let dir = tempfile::tempdir().unwrap();
-    let mut rec = Recording::read(shared().join("conformance/pulses_nominal.csv")).unwrap();
+    let mut rec = Recording::read(fixture("pulses_nominal.csv")).unwrap();
     let t = rec.t_s.clone();
     let mut angle = rec.channel(Channel::AngleDeg).unwrap().to_vec();
     for (a, t) in angle.iter_mut().zip(&t) {
@@ -1031,6 +1031,6 @@ fn a_check_recording_the_nominal_model_does_not_describe_is_not_nothing_missing(
         "{v}"
     );
     // The same training run checked on another run of the same joint: nothing is missing.
-    let out = ok(&with_check(&shared().join("conformance/pwm_nominal.csv")));
+    let out = ok(&with_check(&fixture("pwm_nominal.csv")));
     assert!(out.contains("Nothing is missing"), "{out}");
 }

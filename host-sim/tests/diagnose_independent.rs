@@ -36,14 +36,15 @@ const TUNING_SEEDS: [u64; 2] = [11, 12];
 /// Seeds fixed before the diagnosis code was final and never tuned on.
 const HELD_OUT_SEEDS: [u64; 3] = [9101, 9102, 9103];
 
-fn shared(rel: &str) -> PathBuf {
+/// A file of `host-sim/tests/fixtures/` (copies of the shared material, see its README).
+fn fixture(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared")
-        .join(rel)
+        .join("tests/fixtures")
+        .join(name)
 }
 
 fn nominal() -> PlantConfig {
-    PlantConfig::load(shared("plant/reference-1dof.toml")).unwrap()
+    PlantConfig::load(fixture("reference-1dof.toml")).unwrap()
 }
 
 #[test]
@@ -65,7 +66,7 @@ fn rig_agrees_with_the_simulator_on_the_nominal_plant() {
 
 #[test]
 fn rig_thermal_chamber_reproduces_the_conformance_fixture() {
-    let rec = Recording::read(shared("conformance/pulses_thermal.csv")).unwrap();
+    let rec = Recording::read(fixture("pulses_thermal.csv")).unwrap();
     let mut rig = RigPhysics::from_config(&nominal());
     rig.thermal = Some([2.0, 1.4]);
     let y = rig.replay(&rec.inputs, rec.sample_period_s());

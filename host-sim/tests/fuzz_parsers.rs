@@ -251,7 +251,7 @@ fn fuzz_recording_csv() {
     let mut seeds: Vec<String> = ["pulses_nominal", "pwm_nominal", "pulses_loaded"]
         .iter()
         .map(|f| {
-            read(shared().join(format!("conformance/{f}.csv")))
+            read(fixture(&format!("{f}.csv")))
                 .lines()
                 .take(45)
                 .collect::<Vec<_>>()
@@ -277,10 +277,10 @@ fn fuzz_recording_csv() {
 }
 
 fn plant_seeds() -> Vec<String> {
-    let nominal = read(shared().join("plant/reference-1dof.toml"));
+    let nominal = read(fixture("reference-1dof.toml"));
     vec![
         nominal.clone(),
-        read(shared().join("plant/reference-1dof-loaded.toml")),
+        read(fixture("reference-1dof-loaded.toml")),
         format!(
             "{nominal}\n[effects.joint_friction]\ncoulomb_nm = 0.2\nbreakaway_nm = 0.3\n\
              stribeck_velocity_rad_s = 0.1\nviscous_nm_s_per_rad = 0.05\nsmoothing_velocity_rad_s = 0.01\n\

@@ -235,3 +235,31 @@ fn swapped_or_repeated_rows_are_named_as_such() {
     assert_names(&e, 13, "t_s");
     assert!(e.contains("repeated"), "{e}");
 }
+
+/// A recording that is not UTF-8: refused at the line of the first such byte (with the byte
+/// and the remedy), unless only `#` comment lines are (read as Latin-1, as `import` does).
+#[test]
+fn a_non_utf8_recording_is_named_by_line_and_a_latin1_comment_is_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let head = b"# sample_period_s = 0.01\nt_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg\n".to_vec();
+    let row = |t: &str| format!("{t},0,0,0,0,1.0\n").into_bytes();
+    let mut bad = head.clone();
+    bad.extend(row("0"));
+    bad.extend(b"0.01,0,0,0,0,1.0\xb0\n");
+    let p = dir.path().join("bad.csv");
+    std::fs::write(&p, &bad).unwrap();
+    let e = host_sim::Recording::read(&p).unwrap_err().to_string();
+    assert!(
+        e.contains("bad.csv:4") && e.contains("0xB0") && e.contains("not UTF-8"),
+        "{e}"
+    );
+    let mut latin = b"# operator: J\xfcrgen, 20 \xb0C\n".to_vec();
+    latin.extend(head);
+    latin.extend(row("0"));
+    latin.extend(row("0.01"));
+    latin.extend(row("0.02"));
+    let p = dir.path().join("latin.csv");
+    std::fs::write(&p, &latin).unwrap();
+    let r = host_sim::Recording::read(&p).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(r.len(), 3);
+}

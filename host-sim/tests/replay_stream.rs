@@ -140,7 +140,7 @@ fn gen(rows: usize, seed: u64) -> Gen {
 #[test]
 fn conformance_fixtures_are_streamed_byte_identical() {
     let plant = Plant::load(plant()).unwrap();
-    let mut files: Vec<PathBuf> = std::fs::read_dir(shared().join("conformance"))
+    let mut files: Vec<PathBuf> = std::fs::read_dir(fixture(""))
         .unwrap()
         .map(|e| e.unwrap().path())
         .filter(|p| p.extension().is_some_and(|x| x == "csv"))

@@ -852,7 +852,8 @@ fn split_removes_its_own_stale_segments_and_a_missing_directory_names_the_users_
     std::fs::write(&mine, "my notes\n").unwrap();
     let e = exits(2, &import_with(dir.path(), map, &raw2, &out, true));
     assert!(
-        e.contains("segment 2 of --out") && e.contains("was not written by host-sim import"),
+        e.contains("segment 2 of --out")
+            && e.contains("rec-2.csv: exists and was not written by host-sim"),
         "{e}"
     );
     assert_eq!(std::fs::read_to_string(&mine).unwrap(), "my notes\n");
@@ -958,7 +959,7 @@ fn a_muscle_stretched_below_the_atmosphere_is_not_a_unit_warning() {
     }
     std::fs::write(&map, text).unwrap();
     let out_path = dir.path().join("loaded.csv");
-    let input = shared().join("conformance/pulses_loaded.csv");
+    let input = fixture("pulses_loaded.csv");
     let out = host_sim(&[
         &"import", &"--map", &map, &"--input", &input, &"--out", &out_path,
     ]);
@@ -970,7 +971,7 @@ fn a_muscle_stretched_below_the_atmosphere_is_not_a_unit_warning() {
     assert!(!stderr.contains("warning: p"), "{stderr}");
     // A gauge sensor mapped as absolute (the atmosphere subtracted from a gauge value: a
     // vented muscle reads -101.3 kPa) is warned about.
-    let input = shared().join("conformance/pwm_nominal.csv");
+    let input = fixture("pwm_nominal.csv");
     let twice = std::fs::read_to_string(&map)
         .unwrap()
         .replace("reference = \"gauge\"", "reference = \"absolute\"");

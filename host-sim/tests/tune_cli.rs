@@ -9,7 +9,7 @@ use common::*;
 fn bad_tune_arguments_are_refused_without_touching_the_output() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("control.toml");
-    std::fs::write(&out, "previous\n").unwrap();
+    std::fs::write(&out, "# generator = host-sim (an earlier run)\nprevious\n").unwrap();
     for (args, want) in [
         (vec!["--threads", "0"], "must be within 1..=256, got 0"),
         (vec!["--threads", "300"], "must be within 1..=256, got 300"),
@@ -65,7 +65,10 @@ fn bad_tune_arguments_are_refused_without_touching_the_output() {
         rest.extend(args.iter().map(|a| a as &dyn AsRef<std::ffi::OsStr>));
         let err = exits(2, &on_plant("tune", &plant(), &rest));
         assert!(err.contains(want), "{args:?}: {err}");
-        assert_eq!(std::fs::read_to_string(&out).unwrap(), "previous\n");
+        assert_eq!(
+            std::fs::read_to_string(&out).unwrap(),
+            "# generator = host-sim (an earlier run)\nprevious\n"
+        );
     }
     // The plant file as the output is refused before any work: the gains would replace it.
     let plant_copy = dir.path().join("plant.toml");

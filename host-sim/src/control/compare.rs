@@ -106,15 +106,12 @@ pub fn control_tuned_path() -> std::path::PathBuf {
         .join(CONTROL_TUNED_TOML)
 }
 
-/// The reference plant `shared/plant/reference-1dof.toml`: `../shared/...` from the working
-/// directory, else next to this crate's repository checkout.
+/// The reference plant, the repository's copy `host-sim/plants/reference-1dof.toml`: from the
+/// working directory, else in this crate's source tree (for the examples).
 pub fn reference_plant_path() -> Option<std::path::PathBuf> {
-    [
-        Path::new("../shared/plant/reference-1dof.toml").to_path_buf(),
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/plant/reference-1dof.toml"),
-    ]
-    .into_iter()
-    .find(|p| p.is_file())
+    let mut c = crate::defaults::REFERENCE_PLANT.candidates();
+    c.push(Path::new(env!("CARGO_MANIFEST_DIR")).join(crate::defaults::REFERENCE_PLANT.rel));
+    c.into_iter().find(|p| p.is_file())
 }
 
 /// One tuned law as stored in the TOML file (SI units, names with units).

@@ -46,6 +46,10 @@ pub fn recordings_in(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
     let mut v: Vec<PathBuf> = std::fs::read_dir(dir)?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("csv")))
+        .filter(|p| {
+            !p.file_name()
+                .is_some_and(|n| crate::io::output::is_temp_name(&n.to_string_lossy()))
+        })
         .collect();
     v.sort();
     Ok(v)
@@ -297,6 +301,7 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, u8)> {
         .chain(recs.iter().map(|p| ("--recordings", p.as_path())))
         .collect();
     crate::validate::distinct_outputs(&ins, &outs).map_err(anyhow::Error::msg)?;
+    crate::io::output::check_dir("--out-dir", &a.out_dir, &jsons).map_err(anyhow::Error::msg)?;
     let n = recs.len();
     let count = std::sync::atomic::AtomicUsize::new(0);
     let rows = diagnose_all(&cfg, &recs, &DiagnoseOptions::default(), a.jobs, &|p| {
@@ -306,6 +311,7 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, u8)> {
     .map_err(anyhow::Error::msg)?;
     crate::io::atomic::create_dir_all(&a.out_dir)
         .with_context(|| format!("{}: cannot create the directory", a.out_dir.display()))?;
+    crate::io::output::write_manifest(&a.out_dir, &jsons)?;
     let mut removed = String::new();
     for r in &rows {
         let p = json_path(&a.out_dir, &r.recording);
@@ -315,7 +321,7 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, u8)> {
             // An earlier run's answer for a recording that now fails would read as this
             // run's: removed (only a diagnosis JSON, this command's own output).
             Err(_) => {
-                if is_diagnosis_json(&p) {
+                if is_diagnosis_json(&p) && crate::io::output::is_own(&p) {
                     std::fs::remove_file(&p).with_context(|| format!("{}", p.display()))?;
                     removed += &format!(
                         "removed {}: an earlier run's answer for a recording that now fails\n",
@@ -337,6 +343,11 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, u8)> {
         .flatten()
         .map(|e| e.path())
         .filter(|p| p.extension().is_some_and(|x| x == "json") && !ours.contains(p))
+        // The run's own temporary files (`.NAME.json.PID.XXXXXX.tmp.json`) are no answers.
+        .filter(|p| {
+            !p.file_name()
+                .is_some_and(|n| crate::io::output::is_temp_name(&n.to_string_lossy()))
+        })
         .filter(|p| is_diagnosis_json(p))
         .collect();
     earlier.sort();
@@ -348,7 +359,8 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, u8)> {
         );
     }
     let summary = own_summary;
-    crate::io::atomic::write_bytes(&summary, summary_csv(&rows).as_bytes())
+    // Unmarked (a table for spreadsheets): the folder's manifest lists it.
+    crate::io::atomic::write_bytes_unmarked(&summary, summary_csv(&rows).as_bytes())
         .with_context(|| format!("{}", summary.display()))?;
     Ok((
         format!(

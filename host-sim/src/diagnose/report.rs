@@ -144,7 +144,8 @@ fn scatter_svg(s: &Scatter, title: &str) -> Result<String, String> {
     Ok(svg)
 }
 
-/// Writes `DIR/index.html` and `DIR/diagnosis.json` (each atomically).
+/// Writes `DIR/index.html` and `DIR/diagnosis.json` (each atomically) and lists them in the
+/// folder's manifest (`io::output`).
 pub fn write_report(
     dir: &Path,
     d: &Diagnosis,
@@ -270,6 +271,8 @@ pub fn write_report(
     crate::identify::write_atomic(&dir.join("diagnosis.json"), json.as_bytes())
         .map_err(|e| e.to_string())?;
     crate::identify::write_atomic(&dir.join("index.html"), h.as_bytes())
+        .map_err(|e| e.to_string())?;
+    crate::io::output::write_manifest(dir, &[dir.join("diagnosis.json"), dir.join("index.html")])
         .map_err(|e| e.to_string())?;
     Ok(())
 }

@@ -168,14 +168,7 @@ impl PlantFit {
                 format!("{:+.3e} (from 0)", b - a)
             };
             let [lo, hi] = self.ci95.get(i).copied().unwrap_or(nan);
-            let interval = if !(lo.is_finite() && hi.is_finite()) {
-                "none (not determined)".to_string()
-            } else if 0.5 * (hi - lo) <= 10.0 * b.abs() {
-                format!("+-{:.2} %", 100.0 * 0.5 * (hi - lo) / b.abs())
-            } else {
-                // About a value of (almost) 0: in the key's unit.
-                format!("+-{:.3e}", 0.5 * (hi - lo))
-            };
+            let interval = interval_text(lo, hi, *b);
             let _ = writeln!(s, "{k:<44} {a:>14.6e} {b:>14.6e} {change:>9}  {interval}");
         }
         for (name, scores) in [
@@ -897,8 +890,51 @@ pub fn identify_plant_text(
             fit.samples.1
         );
     }
-    body.push_str(&fit.toml);
+    body.push_str(&fitted_comments(
+        &fit.toml,
+        &fit.params,
+        &recording.display().to_string(),
+    ));
     Ok((fit, body))
+}
+
+/// The summary's 95 % interval of a fitted value `b`: `+-x %`, in the key's unit about a
+/// value of (almost) 0, `none` when not determined, and said not estimable when it rounds to
+/// zero width (a noise-free recording: the residual left is the integrator's error, not
+/// noise, and an interval from it is no uncertainty of the value).
+fn interval_text(lo: f64, hi: f64, b: f64) -> String {
+    let half = 0.5 * (hi - lo);
+    if !(lo.is_finite() && hi.is_finite()) {
+        "none (not determined)".to_string()
+    } else if half < 5e-5 * b.abs() || half == 0.0 {
+        "not estimable (noise-free recording: no measurement noise in the residual)".to_string()
+    } else if half <= 10.0 * b.abs() {
+        format!("+-{:.2} %", 100.0 * half / b.abs())
+    } else {
+        // About a value of (almost) 0: in the key's unit.
+        format!("+-{half:.3e}")
+    }
+}
+
+/// `toml` with the comment after each fitted value replaced by where it came from: the start
+/// file's comment described the start value (`# J_n (no load weight)` next to a fitted load
+/// inertia misled).
+fn fitted_comments(toml: &str, params: &[(String, f64, f64)], recording: &str) -> String {
+    let Ok(mut doc) = toml.parse::<DocumentMut>() else {
+        return toml.to_string();
+    };
+    for (key, start, _) in params {
+        let mut it: &mut Item = doc.as_item_mut();
+        for part in key.split('.') {
+            it = &mut it[part];
+        }
+        if let Some(v) = it.as_value_mut() {
+            v.decor_mut().set_suffix(format!(
+                "   # fitted by host-sim identify plant to {recording} (start {start:e})"
+            ));
+        }
+    }
+    doc.to_string()
 }
 
 #[cfg(test)]
@@ -914,6 +950,38 @@ mod tests {
     }
 
     use super::*;
+
+    #[test]
+    fn a_zero_width_interval_is_called_not_estimable_not_plus_minus_zero() {
+        assert!(interval_text(0.155, 0.155, 0.155).contains("not estimable"));
+        assert!(interval_text(0.155 - 1e-9, 0.155 + 1e-9, 0.155).contains("not estimable"));
+        assert_eq!(interval_text(0.15, 0.16, 0.155), "+-3.23 %");
+        assert_eq!(
+            interval_text(f64::NAN, f64::NAN, 0.155),
+            "none (not determined)"
+        );
+    }
+
+    #[test]
+    fn a_fitted_value_loses_the_start_files_comment() {
+        let toml =
+            "[joint]\ninertia_kgm2 = 1.55e-1         # J_n (no load weight)\nr = 1.0 # kept\n";
+        let out = fitted_comments(
+            toml,
+            &[("joint.inertia_kgm2".into(), 0.014, 0.155)],
+            "rec.csv",
+        );
+        assert!(!out.contains("no load weight"), "{out}");
+        assert!(
+            out.contains("fitted by host-sim identify plant to rec.csv (start 1.4e-2)"),
+            "{out}"
+        );
+        assert!(out.contains("r = 1.0 # kept"), "{out}");
+        assert_eq!(
+            out.parse::<toml::Table>().unwrap()["joint"]["inertia_kgm2"].as_float(),
+            Some(0.155)
+        );
+    }
 
     #[test]
     fn the_summary_reports_a_start_of_zero_and_nothing_held_out_in_words() {

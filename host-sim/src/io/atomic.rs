@@ -11,6 +11,9 @@
 //! transaction without committing (an error anywhere in the run) deletes the staged files and
 //! the directories the run created: a failed run leaves nothing behind and the user's files as
 //! they were. Without a transaction (library use, tests) each write is renamed at once.
+//!
+//! Every file written here carries host-sim's mark, and temporary files are registered for
+//! removal on an interrupt: the rules of [`crate::io::output`].
 
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
@@ -50,13 +53,38 @@ pub fn write_with(
     path: &Path,
     fill: impl FnOnce(&mut Output<'_>) -> std::io::Result<()>,
 ) -> std::io::Result<()> {
+    write_marked_with(path, true, fill)
+}
+
+/// Writes `bytes` to `path` atomically without host-sim's mark in it, for a table other
+/// programs read (a spreadsheet takes a `#` line for a row): the caller lists it in its
+/// folder's manifest (`io::output::write_manifest`), which marks it as host-sim's.
+pub fn write_bytes_unmarked(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    write_marked_with(path, false, |w| w.write_all(bytes))
+}
+
+fn write_marked_with(
+    path: &Path,
+    mark: bool,
+    fill: impl FnOnce(&mut Output<'_>) -> std::io::Result<()>,
+) -> std::io::Result<()> {
     let tmp = temp_for(path)?;
-    {
-        let mut w = std::io::BufWriter::new(Writeback::new(tmp.as_file()));
+    let binary = {
+        let mut wb = Writeback::new(tmp.as_file());
+        wb.marked = !mark;
+        let mut w = std::io::BufWriter::new(wb);
         fill(&mut w)?;
         w.flush()?;
+        w.get_ref().binary
+    };
+    finish(tmp, path)?;
+    if binary {
+        // No mark fits in a binary file (a firmware stream log): its folder's manifest
+        // names it as host-sim's.
+        let dir = crate::io::output::dir_of(path);
+        crate::io::output::write_manifest(&dir, &[path.to_path_buf()])?;
     }
-    finish(tmp, path)
+    Ok(())
 }
 
 /// The temporary file of [`write_with`]: on Linux, every [`Writeback::EVERY_BYTES`] written
@@ -67,6 +95,10 @@ pub struct Writeback<'a> {
     file: &'a std::fs::File,
     written: u64,
     started_to: u64,
+    /// The first bytes were written (with host-sim's mark inserted where their format takes it).
+    marked: bool,
+    /// The content is binary (no mark fits in it): listed in its folder's manifest instead.
+    binary: bool,
 }
 
 impl<'a> Writeback<'a> {
@@ -78,6 +110,8 @@ impl<'a> Writeback<'a> {
             file,
             written: 0,
             started_to: 0,
+            marked: false,
+            binary: false,
         }
     }
 
@@ -109,6 +143,18 @@ impl<'a> Writeback<'a> {
 
 impl std::io::Write for Writeback<'_> {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        if !self.marked && !buf.is_empty() {
+            self.marked = true;
+            self.binary = crate::io::output::is_binary(buf);
+            if let Some((at, mark)) = crate::io::output::mark_for(buf) {
+                let mut f = self.file;
+                f.write_all(&buf[..at])?;
+                f.write_all(&mark)?;
+                f.write_all(&buf[at..])?;
+                self.written += (buf.len() + mark.len()) as u64;
+                return Ok(buf.len());
+            }
+        }
         let n = self.file.write(buf)?;
         self.written += n as u64;
         if self.written - self.started_to >= Self::EVERY_BYTES {
@@ -130,6 +176,7 @@ pub fn write_via_path<E>(
 ) -> Result<(), ViaPathError<E>> {
     let tmp = temp_for(path).map_err(ViaPathError::Io)?;
     draw(tmp.path()).map_err(ViaPathError::Write)?;
+    crate::io::output::mark_file(tmp.path()).map_err(ViaPathError::Io)?;
     finish(tmp, path).map_err(ViaPathError::Io)
 }
 
@@ -180,11 +227,19 @@ fn temp_for(path: &Path) -> std::io::Result<tempfile::NamedTempFile> {
         .extension()
         .map(|e| format!(".{}", e.to_string_lossy()))
         .unwrap_or_default();
-    // The target's extension is kept: plotters picks the image encoder from it.
-    tempfile::Builder::new()
-        .prefix(&format!(".{}.", name.to_string_lossy()))
+    // The target's extension is kept: plotters picks the image encoder from it. The process
+    // id tells a killed run's temporary file from a running one's (`output::temp_name_pid`).
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!(
+            ".{}.{}.",
+            name.to_string_lossy(),
+            std::process::id()
+        ))
+        .rand_bytes(crate::io::output::TEMP_RANDOM_LEN)
         .suffix(&format!(".tmp{ext}"))
-        .tempfile_in(dir_of(path))
+        .tempfile_in(dir_of(path))?;
+    crate::io::output::register_temp(tmp.path())?;
+    Ok(tmp)
 }
 
 fn finish(tmp: tempfile::NamedTempFile, path: &Path) -> std::io::Result<()> {
@@ -211,7 +266,10 @@ fn finish(tmp: tempfile::NamedTempFile, path: &Path) -> std::io::Result<()> {
         }
         None => {
             drop(guard);
-            tmp.persist(path).map_err(|e| e.error)
+            let t = tmp.to_path_buf();
+            let r = tmp.persist(path).map_err(|e| e.error);
+            crate::io::output::forget_temp(&t);
+            r
         }
     }
 }
@@ -260,6 +318,8 @@ impl Transaction {
         let stage = stage_lock().take().unwrap_or_default();
         std::mem::forget(self);
         for (tmp, target) in stage.files {
+            let t = tmp.to_path_buf();
+            crate::io::output::forget_temp(&t);
             tmp.persist(&target).map_err(|e| {
                 std::io::Error::new(e.error.kind(), format!("{}: {}", target.display(), e.error))
             })?;
@@ -270,11 +330,17 @@ impl Transaction {
 
 impl Drop for Transaction {
     fn drop(&mut self) {
-        if let Some(stage) = stage_lock().take() {
-            drop(stage.files); // TempPath deletes its file
-            for d in stage.dirs.iter().rev() {
-                let _ = std::fs::remove_dir(d); // only if empty
-            }
+        discard_staged();
+    }
+}
+
+/// Deletes the staged files of the open transaction and the directories the run created
+/// (a failed or interrupted run).
+pub(crate) fn discard_staged() {
+    if let Some(stage) = stage_lock().take() {
+        drop(stage.files); // TempPath deletes its file
+        for d in stage.dirs.iter().rev() {
+            let _ = std::fs::remove_dir(d); // only if empty
         }
     }
 }

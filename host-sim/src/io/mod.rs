@@ -6,6 +6,7 @@ pub mod atomic;
 pub mod capture;
 pub mod import;
 pub mod numfmt;
+pub mod output;
 pub mod plot;
 pub mod recording;
 pub mod replay_stream;

@@ -837,10 +837,18 @@ impl Preamble {
             if let Some(c) = trimmed.strip_prefix('#') {
                 let c = c.trim();
                 match c.split_once('=') {
-                    Some((k, v)) => p.metadata.push((k.trim().to_owned(), v.trim().to_owned())),
-                    None => p.metadata.push((String::new(), c.to_owned())),
+                    // host-sim's mark says who wrote the file, not what it holds: not kept
+                    // (a recording written from it gets its own).
+                    Some((k, _)) if k.trim() == crate::io::output::MARK_KEY => {}
+                    Some((k, v)) => {
+                        p.metadata.push((k.trim().to_owned(), v.trim().to_owned()));
+                        p.meta_line_of.push(p.lines + 1);
+                    }
+                    None => {
+                        p.metadata.push((String::new(), c.to_owned()));
+                        p.meta_line_of.push(p.lines + 1);
+                    }
                 }
-                p.meta_line_of.push(p.lines + 1);
             } else if !trimmed.is_empty() {
                 break;
             }
@@ -1114,12 +1122,38 @@ pub(crate) fn read_text(path: &Path) -> Result<String, RecordingError> {
             break;
         }
     }
-    String::from_utf8(text).map_err(|_| {
-        io(std::io::Error::new(
-            std::io::ErrorKind::InvalidData,
-            "stream did not contain valid UTF-8",
-        ))
-    })
+    String::from_utf8(text).or_else(|e| decode_non_utf8(path, e.into_bytes()))
+}
+
+/// A recording that is not UTF-8: accepted when every line that is not UTF-8 is a `#`
+/// comment (a note typed in a Latin-1 editor; those lines are read as Latin-1, as `import`
+/// reads a whole file), else refused at the first such line with the byte and the remedy.
+fn decode_non_utf8(path: &Path, bytes: Vec<u8>) -> Result<String, RecordingError> {
+    let mut out = String::with_capacity(bytes.len() + 64);
+    for (i, line) in bytes.split_inclusive(|&b| b == b'\n').enumerate() {
+        match std::str::from_utf8(line) {
+            Ok(l) => out.push_str(l),
+            Err(e) if line.trim_ascii_start().starts_with(b"#") => {
+                let _ = e;
+                out.extend(line.iter().map(|&b| char::from(b)));
+            }
+            Err(e) => {
+                let at = e.valid_up_to();
+                return Err(RecordingError::Line {
+                    path: path.to_owned(),
+                    line: i as u64 + 1,
+                    message: format!(
+                        "not UTF-8 (byte 0x{:02X} at column {}; saved as Latin-1 or \
+                         Windows-1252?): save the recording as UTF-8, or convert it with \
+                         `host-sim import` (which reads Latin-1)",
+                        line[at],
+                        String::from_utf8_lossy(&line[..at]).chars().count() + 1
+                    ),
+                });
+            }
+        }
+    }
+    Ok(out)
 }
 
 impl<'t> Table<'t> {

@@ -151,6 +151,17 @@ fn tracking_line(label: &str, st: &TrackingStats) -> String {
     }
 }
 
+/// The summary's highest pressure set-point: in kPa, or said unknown (NaN: a processor-in-
+/// the-loop run whose stream does not carry the set-points, not confirmed by the in-process
+/// run).
+fn max_set_point_text(p_set_gauge_pa: f64) -> String {
+    if p_set_gauge_pa.is_finite() {
+        format!("{:.1} kPa", p_set_gauge_pa / 1e3)
+    } else {
+        "unknown (not in the firmware's stream)".to_string()
+    }
+}
+
 /// The tracking summary of a run: error over the whole run and after the scenario's settle
 /// time, fault changes with tick and time, and the `[expect]` verdict (`fails` from
 /// [`ClosedLoopRun::check`]).
@@ -202,9 +213,9 @@ pub fn summary(run: &ClosedLoopRun, scenario: &Scenario, fails: &[String]) -> St
     }
     let _ = writeln!(
         s,
-        "max muscle pressure {:.1} kPa, max pressure set-point {:.1} kPa",
+        "max muscle pressure {:.1} kPa, max pressure set-point {}",
         run.max_p_gauge_pa / 1e3,
-        run.max_p_set_gauge_pa / 1e3
+        max_set_point_text(run.max_p_set_gauge_pa)
     );
     if scenario.expect.is_empty() {
         s += "expectations: none given (no [expect] bounds in the scenario)\n";
@@ -398,4 +409,16 @@ pub fn simulate_scenario(
         trace_path,
         wall_s,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_unknown_pressure_set_point_is_said_unknown_not_zero() {
+        assert_eq!(max_set_point_text(470_000.0), "470.0 kPa");
+        let t = max_set_point_text(f64::NAN);
+        assert!(t.contains("unknown") && !t.contains("0.0"), "{t}");
+    }
 }

@@ -19,19 +19,19 @@ pub fn segment_path(out: &Path, i: usize, n: usize) -> PathBuf {
     out.with_file_name(format!("{stem}-{}{ext}", i + 1))
 }
 
-/// True when `path` is a recording `host-sim <command>` wrote (its first line is the
+/// True when `path` is a recording `host-sim <command>` wrote (a leading comment line is the
 /// `# source = host-sim <version> <command> of ...` metadata).
 pub fn is_output_of(path: &Path, command: &str) -> bool {
     use std::io::{BufRead as _, Read as _};
     let Ok(f) = std::fs::File::open(path) else {
         return false;
     };
-    let mut first = String::new();
+    // Among the leading comment lines (host-sim's mark comes first, `io::output`).
     std::io::BufReader::new(f.take(4096))
-        .read_line(&mut first)
-        .is_ok()
-        && first.starts_with("# source = host-sim ")
-        && first.contains(&format!(" {command} of "))
+        .lines()
+        .map_while(Result::ok)
+        .take_while(|l| l.starts_with('#'))
+        .any(|l| l.starts_with("# source = host-sim ") && l.contains(&format!(" {command} of ")))
 }
 
 /// Writes `segments` to their paths ([`segment_path`] of `out`), after checking that none is

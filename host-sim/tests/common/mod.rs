@@ -129,13 +129,13 @@ pub fn assert_trace_and_plot(dir: &Path, name: &str, ticks: usize) {
 pub fn previous_output_text(name: &str) -> &'static str {
     match name {
         n if n.ends_with(".csv") => {
-            "# previous good output\nt_s,u_in1,u_ex1,u_in2,u_ex2\n0,0,0,0,0\n"
+            "# generator = host-sim (an earlier run)\n# previous good output\nt_s,u_in1,u_ex1,u_in2,u_ex2\n0,0,0,0,0\n"
         }
-        "force.toml" => "# previous good output\n[force_law]\n",
-        "torque.toml" => "# previous good output\n[torque_model]\n",
-        "volume.toml" => "# previous good output\n[volume_fnn]\n",
-        "fitted.toml" => "# previous good output\n[muscle]\n",
-        _ => "# previous good output\n",
+        "force.toml" => "# generator = host-sim (an earlier run)\n# previous good output\n[force_law]\n",
+        "torque.toml" => "# generator = host-sim (an earlier run)\n# previous good output\n[torque_model]\n",
+        "volume.toml" => "# generator = host-sim (an earlier run)\n# previous good output\n[volume_fnn]\n",
+        "fitted.toml" => "# generator = host-sim (an earlier run)\n# previous good output\n[muscle]\n",
+        _ => "# generator = host-sim (an earlier run)\n# previous good output\n",
     }
 }
 
