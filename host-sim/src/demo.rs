@@ -211,7 +211,7 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
         ),
         ("effects".into(), plant.effects_summary()),
     ];
-    let out = crate::sim::replay_recording(&plant, &fixture, &sim.states, metadata);
+    let out = crate::io::replay_stream::replay_recording(&plant, &fixture, &sim.states, metadata);
     out.write(&replay_csv)?;
     let fits = compare(&fixture, &out)
         .with_context(|| format!("cannot compare {} with the replay", fixture_path.display()))?;

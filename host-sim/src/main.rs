@@ -468,14 +468,15 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
         Some(rec.len()),
         "{spinner} simulate [{bar:40}] {pos}/{len} samples {elapsed}",
     );
-    let sim =
-        host_sim::sim::simulate_recording(&plant, &rec, &opts, |k| bar.set_position(k as u64))
-            .with_context(|| format!("{}: simulation failed", inputs_path.display()))?;
+    let sim = host_sim::io::replay_stream::simulate_recording(&plant, &rec, &opts, |k| {
+        bar.set_position(k as u64)
+    })
+    .with_context(|| format!("{}: simulation failed", inputs_path.display()))?;
     bar.finish_and_clear();
 
     let mut metadata = simulate_metadata(plant_path, inputs_path, dt, &opts, "simulate");
     metadata.push(("effects".into(), plant.effects_summary()));
-    let out = host_sim::sim::replay_recording(&plant, &rec, &sim.states, metadata);
+    let out = host_sim::io::replay_stream::replay_recording(&plant, &rec, &sim.states, metadata);
     out.write(&a.out)?;
     println!("plant effects: {}", plant.effects_summary());
     eprint_written(&a.out, out.len(), &sim.stats);

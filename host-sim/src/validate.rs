@@ -420,6 +420,9 @@ pub fn output_dir(flag: &str, dir: &Path) -> Result<(), String> {
 /// Longest name [`file_name_part`] accepts [characters].
 pub const MAX_NAME_CHARS: usize = 100;
 
+/// Encoder counts per turn an angle in `counts` may give (1 to 2^30: a 30-bit encoder).
+pub const COUNTS_PER_REV: std::ops::RangeInclusive<u32> = 1..=1 << 30;
+
 /// Fewest counts per revolution of a joint's angle encoder (0 aside, "not quantised"): one
 /// count a degree. Coarser, the firmware sees a joint that jumps by whole degrees (at 3
 /// counts, 120 deg) and the run or the recording tells nothing about the controller.
@@ -429,7 +432,7 @@ pub const MIN_ENCODER_COUNTS_PER_REV: u32 = 360;
 /// 0 (no quantisation) or [`MIN_ENCODER_COUNTS_PER_REV`] up to the largest encoder `import`
 /// reads.
 pub fn encoder_counts_per_rev(s: &str) -> Result<u32, String> {
-    let hi = *crate::io::import::COUNTS_PER_REV.end();
+    let hi = *COUNTS_PER_REV.end();
     let allowed =
         format!("0 (no angle quantisation) or {MIN_ENCODER_COUNTS_PER_REV}..={hi} counts per turn");
     let v: i128 = s

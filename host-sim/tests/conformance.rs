@@ -86,7 +86,8 @@ fn check(file: &PathBuf, opts: &SolverOptions, with_options: bool) -> Vec<(Chann
     };
     let sim = simulate(&plant, &reference.inputs, reference.sample_period_s(), opts)
         .unwrap_or_else(|e| panic!("{}: {e}", file.display()));
-    let model = host_sim::sim::replay_recording(&plant, &reference, &sim.states, Vec::new());
+    let model =
+        host_sim::io::replay_stream::replay_recording(&plant, &reference, &sim.states, Vec::new());
     let fits = compare(&reference, &model).unwrap();
     println!(
         "{} (plant {plant_name}, {} samples, {:?}):\n{}",

@@ -260,7 +260,8 @@ fn stamped_replay_beats_treating_jittered_stamps_as_uniform() {
         }
         compare(rec, &m).unwrap()
     };
-    let stamped = host_sim::sim::simulate_recording(&plant, rec, &opts, |_| {}).unwrap();
+    let stamped =
+        host_sim::io::replay_stream::simulate_recording(&plant, rec, &opts, |_| {}).unwrap();
     let uniform = simulate(&plant, &rec.inputs, rec.sample_period_s(), &opts).unwrap();
     let (a, b) = (fit_of(&stamped.states), fit_of(&uniform.states));
     let p1 = |f: &Vec<host_sim::fit::ChannelFit>| {

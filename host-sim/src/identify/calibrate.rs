@@ -13,17 +13,12 @@ use clap::Args;
 
 use super::cli::{torque_model_file, IdentifyTorqueArgs};
 use super::write_atomic;
+pub use super::{
+    MIN_ANGLE_SD_DEG, MIN_IDENTIFIED_HELDOUT_FIT_PCT, MIN_PRESSURE_SD_KPA, MIN_TORQUE_FIT_PCT,
+};
 use crate::io::recording::Channel;
 use crate::{Plant, Recording};
 
-/// Lowest torque-model fit [%] (against the force-derived torque) from which constants are
-/// written. The reference joint's sweep fits 98.96 %; 90 % leaves room for sensor noise and
-/// refuses a recording eq. 11 does not describe.
-pub const MIN_TORQUE_FIT_PCT: f64 = 90.0;
-/// A joint angle whose standard deviation is below this did not move [deg].
-pub const MIN_ANGLE_SD_DEG: f64 = 0.5;
-/// A pressure whose standard deviation is below this was not activated [kPa].
-pub const MIN_PRESSURE_SD_KPA: f64 = 5.0;
 /// Margin above the supply before a pressure reading is refused [kPa] (sensor noise, droop).
 pub const SUPPLY_MARGIN_KPA: f64 = 20.0;
 
@@ -271,10 +266,6 @@ fn plant_constants_toml(plant: &Plant, plant_path: &Path, old: &Path) -> String 
 
 /// Runs `host-sim calibrate`; returns the report for stdout. Fails (nothing written) on
 /// degenerate data or a poor torque fit.
-/// Least mean held-out fit of the identified plant (`--identify-plant`) for its values to
-/// reach the firmware [%].
-pub const MIN_IDENTIFIED_HELDOUT_FIT_PCT: f64 = 50.0;
-
 pub fn run_calibrate(a: &CalibrateArgs) -> Result<String> {
     if !a.out_dir.is_dir() {
         bail!(

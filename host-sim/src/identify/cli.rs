@@ -649,7 +649,7 @@ fn header_line_of(path: &Path) -> usize {
 }
 
 fn identify_torque(a: &IdentifyTorqueArgs) -> Result<String> {
-    use super::calibrate::MIN_TORQUE_FIT_PCT;
+    use super::MIN_TORQUE_FIT_PCT;
     let t = torque_model_file(a)?;
     if !a.allow_poor_fit && !(t.fit_pct >= MIN_TORQUE_FIT_PCT) {
         bail!(
@@ -747,16 +747,16 @@ pub fn torque_model_file(a: &IdentifyTorqueArgs) -> Result<TorqueModelFile> {
         (samples.iter().map(|s| (f(s) - m).powi(2)).sum::<f64>() / n).sqrt()
     };
     let angle_sd_deg = sd_of(&|s| s.angle_rad).to_degrees();
-    if !(angle_sd_deg >= super::calibrate::MIN_ANGLE_SD_DEG) {
+    if !(angle_sd_deg >= super::MIN_ANGLE_SD_DEG) {
         bail!(
             "{file}: column `angle_deg`: the joint hardly moves (sd {angle_sd_deg:.3} deg < {} deg; \
              an angle logged in radians? the column is in degrees); the torque model needs a \
              recording through a range of angles; nothing written",
-            super::calibrate::MIN_ANGLE_SD_DEG
+            super::MIN_ANGLE_SD_DEG
         );
     }
     let dp_sd_kpa = sd_of(&|s| 0.5 * (s.p2_gauge_pa - s.p1_gauge_pa)) / 1e3;
-    if !(dp_sd_kpa >= super::calibrate::MIN_PRESSURE_SD_KPA) {
+    if !(dp_sd_kpa >= super::MIN_PRESSURE_SD_KPA) {
         let p_max_kpa = samples
             .iter()
             .map(|s| s.p1_gauge_pa.abs().max(s.p2_gauge_pa.abs()))
@@ -771,7 +771,7 @@ pub fn torque_model_file(a: &IdentifyTorqueArgs) -> Result<TorqueModelFile> {
             "{file}: the activation dp = (p2_kpa - p1_kpa) / 2 does not vary (sd {dp_sd_kpa:.3} kPa \
              < {} kPa){unit}: B of eq. 11 needs a recording at several activations (`host-sim \
              sweep torque --dp-kpa` takes several levels); nothing written",
-            super::calibrate::MIN_PRESSURE_SD_KPA
+            super::MIN_PRESSURE_SD_KPA
         );
     }
     if !(spread(&|s| s.torque_nm) > 1e-6) {
@@ -996,7 +996,7 @@ fn identify_plant(a: &IdentifyPlantArgs) -> Result<String> {
     } else {
         ("held-out", fit.holdout_mean_pct())
     };
-    let min = super::calibrate::MIN_IDENTIFIED_HELDOUT_FIT_PCT;
+    let min = super::MIN_IDENTIFIED_HELDOUT_FIT_PCT;
     if !a.allow_poor_fit && !(after >= min) && after < before {
         // Worse than where it started: the search left the start's basin, the recording is
         // not to blame.

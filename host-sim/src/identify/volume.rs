@@ -906,7 +906,7 @@ pub const MIN_TRAINING_ANGLE_RANGE_DEG: f64 = 5.0;
 /// Refuses training data that cannot determine the network (before any training): fewer
 /// than [`MIN_SAMPLES_PER_WEIGHT`] samples per weight, a joint that moves less than
 /// [`MIN_TRAINING_ANGLE_RANGE_DEG`], or a pressure that does not vary (sd below
-/// [`super::calibrate::MIN_PRESSURE_SD_KPA`]) in the training part of the recording.
+/// [`super::MIN_PRESSURE_SD_KPA`]) in the training part of the recording.
 pub fn check_training_data(
     per_muscle: &[Vec<VolumeSample>; 2],
     holdout_fraction: f64,
@@ -948,7 +948,7 @@ pub fn check_training_data(
         let sd_kpa = (m.iter().map(|s| (s.p_abs_pa - mean).powi(2)).sum::<f64>() / m.len() as f64)
             .sqrt()
             / 1e3;
-        let min_kpa = super::calibrate::MIN_PRESSURE_SD_KPA;
+        let min_kpa = super::MIN_PRESSURE_SD_KPA;
         if !(sd_kpa >= min_kpa) {
             return Err(format!(
                 "column `p{}_kpa`: sd {sd_kpa:.3} kPa in the training part, below {min_kpa} kPa: \

@@ -6,7 +6,7 @@
 //! so reading, simulating and writing overlap, and memory does not grow with the recording
 //! beyond its time column (kept for the checks that need every stamp: the median step, the
 //! uniform grid). The output is byte-identical to [`Recording::read`](super::recording::Recording::read),
-//! then [`simulate_recording`](crate::sim::simulate_recording), then [`Recording::write`](super::recording::Recording::write):
+//! then [`simulate_recording`], then [`Recording::write`](super::recording::Recording::write):
 //! the same row parser, the same integrator calls (runs of identical inputs are integrated
 //! as one segment, also across chunk boundaries), the same sensor path and number formatting.
 //!
@@ -25,15 +25,17 @@
 //! path, which reports the error with its file, line and field exactly as before (the
 //! caller discards what was written).
 
-use std::collections::VecDeque;
 use std::io::{Read as _, Seek as _, Write};
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
 
-use crate::io::recording::{self, Channel, RowParser, RowSink, Table};
-use crate::plant::{Plant, ValveInputs};
-use crate::sim::{ActuatorPath, Integrator, SensorPath, SimStats, SolverOptions};
+use crate::io::recording::{self, Channel, RecordingError, RowParser, RowSink, Table};
+use crate::plant::{Plant, PlantState, ValveInputs};
+use crate::sim::replay::{simulate_chunks, OutChunk, RowChunk, CHUNK_ROWS};
+use crate::sim::{
+    simulate_stamped, simulate_with_progress, SimError, SimStats, Simulation, SolverOptions,
+};
 
 /// Bytes read from the file at a time (whole lines) by [`RowStream`].
 const BLOCK_BYTES: usize = 4 << 20;
@@ -41,11 +43,45 @@ const BLOCK_BYTES: usize = 4 << 20;
 /// enough that the buffer's pages are faulted in once (a block of the whole file would take
 /// a page fault per 4 KiB of it), large enough that the read calls cost little.
 const REPLAY_BLOCK_BYTES: usize = 64 << 10;
-/// Rows per chunk passed between the threads (small chunks: the buffers in flight are
-/// reused instead of faulted in fresh, and the pipeline fills and drains sooner).
-const CHUNK_ROWS: usize = 256;
 /// Chunks in flight between two threads (bounds the memory of the pipeline).
 const CHANNEL_CHUNKS: usize = 8;
+
+/// The recording of a replay of `source`: its time stamps and valve inputs, the channels
+/// `plant` measures along the simulated `states` (one per sample), and `metadata`.
+pub fn replay_recording(
+    plant: &Plant,
+    source: &crate::io::recording::Recording,
+    states: &[PlantState],
+    metadata: Vec<(String, String)>,
+) -> crate::io::recording::Recording {
+    use crate::io::recording::{Channel, Recording};
+    let mut out = Recording {
+        metadata,
+        t_s: source.t_s.clone(),
+        inputs: source.inputs.clone(),
+        ..Default::default()
+    };
+    let meas = plant.measure_series(states, source.sample_period_s());
+    for c in Channel::ALL {
+        out.set_channel(c, meas.iter().map(|m| c.of(m)).collect());
+    }
+    out
+}
+
+/// Replays a recording's valve inputs open loop: [`simulate_with_progress`] on a uniform
+/// recording, [`simulate_stamped`] on a jittered one (inputs held between its stamps).
+pub fn simulate_recording(
+    plant: &Plant,
+    rec: &crate::io::recording::Recording,
+    opts: &SolverOptions,
+    progress: impl FnMut(usize),
+) -> Result<Simulation, SimError> {
+    if rec.is_uniform() {
+        simulate_with_progress(plant, &rec.inputs, rec.sample_period_s(), opts, progress)
+    } else {
+        simulate_stamped(plant, &rec.t_s, &rec.inputs, opts, progress)
+    }
+}
 
 /// What a streamed replay did.
 #[derive(Debug, Clone)]
@@ -358,83 +394,6 @@ fn count_rows(
     (dt_s > 0.0).then_some((n, dt_s))
 }
 
-/// The simulator stage: [`crate::sim::simulate_with_progress`] over the rows as they come,
-/// then the sensor path, sending the simulated rows on (`spent_rows`: parsed rows back to
-/// the reader; `spent_out`: output chunks back from the writer).
-#[allow(clippy::too_many_arguments)]
-fn simulate_chunks(
-    plant: &Plant,
-    dt_s: f64,
-    opts: &SolverOptions,
-    rx: mpsc::Receiver<RowChunk>,
-    tx: &mpsc::SyncSender<OutChunk>,
-    spent_rows: &mpsc::Sender<RowChunk>,
-    spent_out: &mpsc::Receiver<OutChunk>,
-    abort: &AtomicBool,
-) -> Result<SimStats, ()> {
-    let mut actuator = ActuatorPath::new(plant, dt_s, "open-loop replay").map_err(|_| ())?;
-    let delayed = actuator.delay_samples() != 0;
-    let mut integ = Integrator::new(plant, plant.initial_state(), *opts);
-    let mut sensor = SensorPath::new(plant, dt_s);
-    // Rows read but not yet simulated (the current run of identical inputs).
-    let mut pending: VecDeque<(f64, ValveInputs)> = VecDeque::new();
-    let mut run: Option<(ValveInputs, usize)> = None;
-    let mut out = OutChunk::with_capacity(CHUNK_ROWS);
-    let mut advance = |u: ValveInputs,
-                       len: usize,
-                       pending: &mut VecDeque<(f64, ValveInputs)>,
-                       out: &mut OutChunk|
-     -> Result<(), ()> {
-        integ
-            .advance_samples(u, dt_s, len, |x| {
-                let (t, u) = pending.pop_front().unwrap_or_default();
-                let m = sensor.push(plant, x);
-                out.rows.push((t, u, m.to_array()));
-            })
-            .map_err(|_| ())
-    };
-    for chunk in rx {
-        if abort.load(Ordering::Relaxed) {
-            return Err(());
-        }
-        for (&t, &u) in chunk.t_s.iter().zip(&chunk.inputs) {
-            pending.push_back((t, u));
-            let d = if delayed { actuator.push(u) } else { u };
-            match &mut run {
-                Some((ru, len)) if *ru == d => *len += 1,
-                _ => {
-                    if let Some((ru, len)) = run.take() {
-                        advance(ru, len, &mut pending, &mut out)?;
-                    }
-                    run = Some((d, 1));
-                }
-            }
-        }
-        let _ = spent_rows.send(chunk);
-        if out.rows.len() >= CHUNK_ROWS {
-            let next = match spent_out.try_recv() {
-                Ok(mut c) => {
-                    c.rows.clear();
-                    c
-                }
-                Err(_) => OutChunk::with_capacity(CHUNK_ROWS),
-            };
-            let full = std::mem::replace(&mut out, next);
-            tx.send(full).map_err(|_| ())?;
-        }
-    }
-    if let Some((ru, len)) = run.take() {
-        advance(ru, len, &mut pending, &mut out)?;
-    }
-    if !pending.is_empty() {
-        return Err(());
-    }
-    if !out.rows.is_empty() {
-        tx.send(out).map_err(|_| ())?;
-    }
-    Ok(integ.stats())
-}
-
 /// The rows of a recording file one at a time, read block by block (memory: one block and
 /// one chunk of parsed rows), for the streaming commands that need every column (`fit`).
 /// Rows are parsed by the fast path ([`RowParser::parse_plain_rows`]), a chunk it does not
@@ -534,6 +493,20 @@ impl RowStream {
     }
 }
 
+impl recording::Recording {
+    /// Reads and validates a recording file.
+    ///
+    /// Memory: the columns the file has; a plain file is parsed block by block without its
+    /// text (`replay_stream::read_recording`), anything else is read whole.
+    pub fn read(path: impl AsRef<Path>) -> Result<Self, RecordingError> {
+        let path = path.as_ref();
+        if let Some(rec) = read_recording(path) {
+            return Ok(rec);
+        }
+        Self::parse(&recording::read_text(path)?, path)
+    }
+}
+
 /// [`Recording::read`](super::recording::Recording::read) of a file without holding its
 /// text: the rows are parsed block by block ([`RowStream`]) into the columns the file has
 /// (time, openings and the output channels present: 8 + 32 + 8 per channel bytes a row).
@@ -584,13 +557,6 @@ pub(crate) fn read_recording(path: &Path) -> Option<recording::Recording> {
     Some(rec)
 }
 
-/// Rows as the reader passes them on: time stamps and valve openings.
-#[derive(Default)]
-struct RowChunk {
-    t_s: Vec<f64>,
-    inputs: Vec<ValveInputs>,
-}
-
 impl RowSink<(f64, [f64; 4], [f64; 5])> for RowChunk {
     // The replay reads the readings only to refuse a file `Recording::read` would refuse.
     const WANTS_OUTPUTS: bool = false;
@@ -605,20 +571,6 @@ impl RowSink<(f64, [f64; 4], [f64; 5])> for RowChunk {
     fn append(&mut self, mut other: Self) {
         self.t_s.append(&mut other.t_s);
         self.inputs.append(&mut other.inputs);
-    }
-}
-
-/// Simulated rows, for the writer to format: the input's time and openings with the
-/// simulated channels (by [`Channel::index`]).
-struct OutChunk {
-    rows: Vec<(f64, ValveInputs, [f64; 5])>,
-}
-
-impl OutChunk {
-    fn with_capacity(rows: usize) -> Self {
-        Self {
-            rows: Vec::with_capacity(rows),
-        }
     }
 }
 
