@@ -395,31 +395,22 @@ pub fn first_difference(
 /// `pil`'s firmware image without `--elf`, relative to the working directory.
 pub const DEFAULT_ELF_IN_WORKING_DIR: &str = "target/thumbv7em-none-eabihf/release/pil";
 
-#[derive(clap::Args, Debug)]
-#[command(
-    after_help = "Example (build the image first):\n  cargo build -p pam-firmware --bin pil --features pam-firmware/firmware --release --target thumbv7em-none-eabihf\n  host-sim pil --plant ../shared/plant/reference-1dof.toml --scenario scenarios/step.toml --out pil.csv --log pil.stream"
-)]
+#[derive(Debug)]
 pub struct PilArgs {
     /// Plant parameter file (TOML).
-    #[arg(long, value_name = "P.toml")]
     pub plant: PathBuf,
     /// Closed-loop scenario (TOML). The firmware gets raw board counts: the scenario's
     /// [sensors] run with `board_counts = true` (turned on, and said, when the file leaves it
     /// off). Its [expect] bounds are checked on the firmware's run (exit status 1 if not met).
-    #[arg(long, value_name = "S.toml")]
     pub scenario: PathBuf,
     /// Output recording (RECORDING.md), as `simulate --scenario` writes it.
-    #[arg(long, value_name = "REC.csv")]
     pub out: PathBuf,
     /// Firmware image [default: target/thumbv7em-none-eabihf/release/pil under the working
     /// directory].
-    #[arg(long, value_name = "ELF")]
     pub elf: Option<PathBuf>,
     /// Also write the firmware's per-tick stream (binary records) here, for `host-sim capture`.
-    #[arg(long, value_name = "LOG")]
     pub log: Option<PathBuf>,
     /// Longest wait for one tick's answer from QEMU [s] (1..=600).
-    #[arg(long, value_name = "S", default_value_t = 20.0)]
     pub tick_timeout_s: f64,
 }
 

@@ -220,25 +220,18 @@ pub fn summary_table(rows: &[BatchRow]) -> String {
 }
 
 /// `host-sim diagnose-batch`: the arguments.
-#[derive(clap::Args, Debug)]
-#[command(
-    after_help = "Example:\n  host-sim diagnose-batch --plant ../shared/plant/reference-1dof.toml --recordings ../shared/conformance --out-dir diagnoses/"
-)]
+#[derive(Debug)]
 pub struct BatchArgs {
     /// Nominal plant file (TOML) the user believes in.
-    #[arg(long, value_name = "P.toml")]
     pub plant: PathBuf,
     /// Directory of recordings (every `*.csv` in it, RECORDING.md columns t_s, u_in1, u_ex1,
     /// u_in2, u_ex2, angle_deg, p1_kpa, p2_kpa[, f1_n, f2_n]).
-    #[arg(long, value_name = "DIR")]
     pub recordings: PathBuf,
     /// Output directory (created if missing): one `<recording>.json` each and `summary.csv`;
     /// it may be --recordings itself (an earlier run's summary.csv there is not read as a
     /// recording).
-    #[arg(long, value_name = "OUT_DIR")]
     pub out_dir: PathBuf,
     /// Recordings diagnosed at once (worker threads).
-    #[arg(long, default_value_t = 2, value_parser = crate::validate::usize_in(1, 256))]
     pub jobs: usize,
 }
 

@@ -9,7 +9,6 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use clap::Args;
 
 use super::cli::{torque_model_file, IdentifyTorqueArgs};
 use super::write_atomic;
@@ -23,38 +22,28 @@ use crate::{Plant, Recording};
 pub const SUPPLY_MARGIN_KPA: f64 = 20.0;
 
 /// `host-sim calibrate`.
-#[derive(Args, Debug)]
-#[command(
-    after_help = "Example:\n  host-sim calibrate --recording rec.csv --plant ../shared/plant/reference-1dof.toml --out-dir config/ --tune"
-)]
+#[derive(Debug)]
 pub struct CalibrateArgs {
     /// Recording of the joint (RECORDING.md: angle_deg, p1_kpa, p2_kpa, optionally f1_n, f2_n):
     /// a motion through a range of angles under varying activation (e.g. `host-sim sweep torque`).
-    #[arg(long, value_name = "REC.csv")]
     pub recording: PathBuf,
     /// Plant file (PLANT.md format; e.g. the output of `host-sim identify plant`): geometry,
     /// inertia, supply, valve, and the force model when the recording has no tensions.
-    #[arg(long, value_name = "P.toml")]
     pub plant: PathBuf,
     /// Directory of the firmware's constants (config/): torque_model.toml,
     /// joint_geometry.toml, plant_constants.toml (and with --tune control_tuned.toml) are
     /// replaced there.
-    #[arg(long, value_name = "DIR")]
     pub out_dir: PathBuf,
     /// Also tune the control gains on the plant file (`host-sim tune`, minutes).
-    #[arg(long)]
     pub tune: bool,
     /// Worker threads of the tuner (with --tune; 1..=256, as every command's --threads).
-    #[arg(long, default_value_t = 2, value_parser = crate::validate::usize_in(1, 256))]
     pub threads: usize,
     /// First identify these plant-file keys (comma separated, `key` or `key=lo:hi`, as
     /// `host-sim identify plant --params`) by replaying a valve-driven recording; the
     /// identified plant file (plant_identified.toml in --out-dir) then feeds every later stage.
-    #[arg(long, value_name = "KEYS", value_delimiter = ',')]
     pub identify_plant: Vec<String>,
     /// The valve-driven recording of --identify-plant (columns t_s, u_in1, u_ex1, u_in2,
     /// u_ex2 and the measured channels) [default: --recording].
-    #[arg(long, value_name = "R.csv", requires = "identify_plant")]
     pub plant_recording: Option<PathBuf>,
 }
 

@@ -29,26 +29,19 @@ use crate::io::recording::{Channel, Recording};
 use crate::plant::ValveInputs;
 
 /// Arguments of `host-sim capture`.
-#[derive(clap::Args, Debug)]
-#[command(
-    after_help = "Examples:\n  host-sim capture --log pil.stream --out captured.csv\n  host-sim capture --log rtt.log --out run.csv --split   # run-1.csv, run-2.csv, ... at the gaps"
-)]
+#[derive(Debug)]
 pub struct CaptureArgs {
     /// The firmware image that wrote the log (decodes a raw defmt log through defmt-print).
-    #[arg(long, value_name = "ELF")]
     pub elf: Option<PathBuf>,
     /// The stream: raw records, `stream [..]` text lines, or (with --elf) a raw defmt log.
-    #[arg(long, value_name = "LOG")]
     pub log: PathBuf,
     /// Output recording (RECORDING.md); with --split and gaps, one per segment: REC-1.csv,
     /// REC-2.csv, ...
-    #[arg(long, value_name = "REC.csv")]
     pub out: PathBuf,
     /// A gap in the stream (lost or corrupted records, a tick without a sensor sample, a
     /// restart of the firmware) ends one segment of the run instead of refusing the log:
     /// each segment of at least 2 ticks is written as its own recording (nothing is
     /// interpolated across a gap), as `import --split` does.
-    #[arg(long)]
     pub split: bool,
 }
 

@@ -1523,23 +1523,16 @@ fn channel_ranges(
 }
 
 /// Arguments of `host-sim import`.
-#[derive(clap::Args, Debug)]
-#[command(
-    after_help = "Example (docs/rig.md has the mapping file):\n  host-sim import --map festo-joint.toml --input messung7.csv --out messung7.rec.csv"
-)]
+#[derive(Debug)]
 pub struct ImportArgs {
     /// Mapping file (TOML): rig columns -> recording channels and units (docs/rig.md).
-    #[arg(long, value_name = "MAP.toml")]
     pub map: PathBuf,
     /// The rig logger's CSV file.
-    #[arg(long, value_name = "RAW.csv")]
     pub input: PathBuf,
     /// Output recording (RECORDING.md).
-    #[arg(long, value_name = "REC.csv")]
     pub out: PathBuf,
     /// Write one recording per gap-free segment (REC-1.csv, REC-2.csv, ...) instead of
     /// refusing a file with gaps.
-    #[arg(long)]
     pub split: bool,
 }
 
