@@ -17,10 +17,12 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 
 use crate::control::closed_loop::{run, Scenario};
+use crate::control::run_files::{
+    firmware_trace_path, plot_run, run_recording, write_firmware_trace,
+};
 use crate::fit::{compare, ChannelFit};
 use crate::io::plot::plot_comparison;
 use crate::io::recording::Recording;
-use crate::io::run_files::{firmware_trace_path, plot_run, run_recording, write_firmware_trace};
 use crate::plant::Plant;
 use crate::sim::{simulate, SolverOptions};
 
@@ -184,7 +186,7 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
             settle_after_s: s.expect.settle_after_s,
             rms_error_rad: st.rms_rad,
             max_abs_error_rad: st.max_abs_rad,
-            faults: crate::io::run_files::fault_changes(&r)
+            faults: crate::control::run_files::fault_changes(&r)
                 .iter()
                 .filter(|c| c.fault.is_some())
                 .count(),

@@ -427,7 +427,7 @@ fn run_simulate(a: &SimulateArgs) -> Result<ExitCode> {
         inputs.push(("--scenario", s));
     }
     let mut outputs: Vec<(&str, &Path)> = vec![("--out", a.out.as_path())];
-    let trace = host_sim::io::run_files::firmware_trace_path(&a.out);
+    let trace = host_sim::control::run_files::firmware_trace_path(&a.out);
     if a.scenario.is_some() {
         outputs.push(("the firmware trace", &trace));
     }
@@ -704,10 +704,13 @@ fn run_simulate_arm3(a: &SimulateArgs, inputs_path: &Path) -> Result<ExitCode> {
 fn run_closed_loop(a: &SimulateArgs, scenario: &Path) -> Result<ExitCode> {
     let bar = ProgressBar::with_draw_target(Some(1000), ProgressDrawTarget::stderr());
     let plot = a.plot.as_deref();
-    let r =
-        host_sim::io::run_files::simulate_scenario(&a.plant, scenario, &a.out, plot, &mut |f| {
-            bar.set_position((f * 1000.0) as u64)
-        })?;
+    let r = host_sim::control::run_files::simulate_scenario(
+        &a.plant,
+        scenario,
+        &a.out,
+        plot,
+        &mut |f| bar.set_position((f * 1000.0) as u64),
+    )?;
     bar.finish_and_clear();
     print!("{}", r.summary);
     println!("wrote {} and {}", a.out.display(), r.trace_path.display());

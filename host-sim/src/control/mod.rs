@@ -7,4 +7,5 @@ pub mod compare;
 pub mod compare_ff;
 pub mod pil;
 pub mod robustness;
+pub mod run_files;
 pub mod tune;

@@ -394,7 +394,7 @@ fn is_batch_summary(path: &Path) -> bool {
 /// True when `path` is the firmware trace `simulate --scenario` writes beside its recording
 /// (`OUT.firmware.csv`: set-point, torque estimate, fault code per tick), by its header.
 fn is_firmware_trace(path: &Path) -> bool {
-    header_line(path).is_some_and(|h| h == crate::io::run_files::FIRMWARE_COLUMNS.join(","))
+    header_line(path).is_some_and(|h| h == crate::control::run_files::FIRMWARE_COLUMNS.join(","))
 }
 
 /// The first line of `path` that is not a `#` comment (within its first 64 KiB), without its

@@ -9,7 +9,6 @@ pub mod numfmt;
 pub mod plot;
 pub mod recording;
 pub mod replay_stream;
-pub mod run_files;
 pub mod scenario;
 pub mod segments;
 
