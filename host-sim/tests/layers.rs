@@ -196,9 +196,9 @@ impl Source {
 }
 
 #[test]
-#[ignore = "plant/ still imports diagnose/ and sim/ (the effect candidate contract, Channel, the \
-            arm's integration: moved on the plant branch), and control/, io/, identify/ and fit.rs \
-            each still import a room above: run with --ignored to list them"]
+#[ignore = "plant/ still imports diagnose/, io/ and sim/ (moved on the plant branch), control/ \
+            imports identify/ and demo, identify/plant.rs imports diagnose/, fit.rs imports io/: \
+            run with --ignored to list them"]
 fn rooms_import_only_rooms_below_them() {
     let s = read_source();
     let mut wrong = BTreeSet::new();
