@@ -17,28 +17,16 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 
 use crate::control::closed_loop::{run, Scenario};
-use crate::fit::{compare, ChannelFit};
+use crate::control::run_files::{
+    firmware_trace_path, plot_run, run_recording, write_firmware_trace,
+};
+use crate::io::compare::{compare, ChannelFit};
 use crate::io::plot::plot_comparison;
 use crate::io::recording::Recording;
-use crate::io::run_files::{firmware_trace_path, plot_run, run_recording, write_firmware_trace};
 use crate::plant::Plant;
 use crate::sim::{simulate, SolverOptions};
 
-/// The demo's scenarios: (file name in `scenarios/`, its text).
-pub const SCENARIOS: [(&str, &str); 3] = [
-    (
-        "scenarios/step.toml",
-        include_str!("../../scenarios/step.toml"),
-    ),
-    (
-        "scenarios/sine.toml",
-        include_str!("../../scenarios/sine.toml"),
-    ),
-    (
-        "scenarios/random.toml",
-        include_str!("../../scenarios/random.toml"),
-    ),
-];
+pub use crate::io::scenario::SCENARIOS;
 
 /// Inputs and output directory of a demo run.
 #[derive(Debug, Clone)]
@@ -161,10 +149,10 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
     )
     .map_err(anyhow::Error::msg)?;
     let all: Vec<PathBuf> = flagged.iter().map(|(_, p)| p.to_path_buf()).collect();
-    crate::io::output::check_dir("--out-dir", &opts.out_dir, &all).map_err(anyhow::Error::msg)?;
+    crate::output::check_dir("--out-dir", &opts.out_dir, &all).map_err(anyhow::Error::msg)?;
     crate::io::atomic::create_dir_all(&opts.out_dir)
         .with_context(|| format!("{}: cannot create the directory", opts.out_dir.display()))?;
-    crate::io::output::write_manifest(&opts.out_dir, &all)?;
+    crate::io::atomic::write_manifest(&opts.out_dir, &all)?;
 
     let mut scenarios = Vec::new();
     for ((file, s), [trace, png, csv]) in parsed.iter().zip(files) {
@@ -182,7 +170,7 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
             settle_after_s: s.expect.settle_after_s,
             rms_error_rad: st.rms_rad,
             max_abs_error_rad: st.max_abs_rad,
-            faults: crate::io::run_files::fault_changes(&r)
+            faults: crate::control::run_files::fault_changes(&r)
                 .iter()
                 .filter(|c| c.fault.is_some())
                 .count(),
@@ -212,7 +200,7 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport> {
         ),
         ("effects".into(), plant.effects_summary()),
     ];
-    let out = crate::sim::replay_recording(&plant, &fixture, &sim.states, metadata);
+    let out = crate::io::replay_stream::replay_recording(&plant, &fixture, &sim.states, metadata);
     out.write(&replay_csv)?;
     let fits = compare(&fixture, &out)
         .with_context(|| format!("cannot compare {} with the replay", fixture_path.display()))?;

@@ -109,10 +109,10 @@ pub fn run_arm_demo_with(
     crate::validate::distinct_outputs(&[("--plant", plant_path)], &flagged)
         .map_err(anyhow::Error::msg)?;
     let all: Vec<PathBuf> = flagged.iter().map(|(_, p)| p.to_path_buf()).collect();
-    crate::io::output::check_dir("--out-dir", out_dir, &all).map_err(anyhow::Error::msg)?;
+    crate::output::check_dir("--out-dir", out_dir, &all).map_err(anyhow::Error::msg)?;
     crate::io::atomic::create_dir_all(out_dir)
         .with_context(|| format!("{}: cannot create the directory", out_dir.display()))?;
-    crate::io::output::write_manifest(out_dir, &all)?;
+    crate::io::atomic::write_manifest(out_dir, &all)?;
     let mut results = Vec::new();
     for ((file, s), [csv, trace, png]) in parsed.iter().zip(files) {
         let file = *file;

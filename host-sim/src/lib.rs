@@ -22,6 +22,7 @@ pub mod fit;
 pub mod identify;
 pub mod io;
 pub mod optimize;
+pub mod output;
 pub mod plant;
 pub mod signal;
 pub mod sim;

@@ -354,13 +354,13 @@ const REPLACEABLE_READ_MAX_BYTES: u64 = 4 << 20;
 /// `Err` naming `flag` and `path` when `path` exists and is not an output of `kind` (a
 /// recording about to be replaced by a force law, a plant file by a recording): the command
 /// would replace it, and the user would lose it. An absent or empty file is replaceable.
-/// `--force` lets any file be replaced ([`crate::io::output`]).
+/// `--force` lets any file be replaced ([`crate::output`]).
 pub fn replaceable(flag: &str, path: &Path, kind: OutputKind) -> Result<(), String> {
     use std::io::Read as _;
     let Ok(meta) = std::fs::metadata(path) else {
         return Ok(());
     };
-    if crate::io::output::forced() {
+    if crate::output::forced() {
         return Ok(());
     }
     if !meta.is_file() || meta.len() == 0 {
@@ -407,7 +407,7 @@ pub fn replaceable(flag: &str, path: &Path, kind: OutputKind) -> Result<(), Stri
 
 /// [`distinct_outputs`] for outputs that are files in directories the command does not
 /// create: also each output's directory exists and can be written, and an existing file
-/// there is one host-sim wrote ([`crate::io::output::check_file`]), checked before the run
+/// there is one host-sim wrote ([`crate::output::check_file`]), checked before the run
 /// (not found by the rename after it).
 pub fn distinct_file_outputs(
     inputs: &[(&str, &Path)],
@@ -416,7 +416,7 @@ pub fn distinct_file_outputs(
     distinct_outputs(inputs, outputs)?;
     for (flag, p) in outputs {
         output_parent_exists(flag, p)?;
-        crate::io::output::check_file(flag, p)?;
+        crate::output::check_file(flag, p)?;
     }
     Ok(())
 }
@@ -448,6 +448,9 @@ pub fn output_dir(flag: &str, dir: &Path) -> Result<(), String> {
 /// Longest name [`file_name_part`] accepts [characters].
 pub const MAX_NAME_CHARS: usize = 100;
 
+/// Encoder counts per turn an angle in `counts` may give (1 to 2^30: a 30-bit encoder).
+pub const COUNTS_PER_REV: std::ops::RangeInclusive<u32> = 1..=1 << 30;
+
 /// Fewest counts per revolution of a joint's angle encoder (0 aside, "not quantised"): one
 /// count a degree. Coarser, the firmware sees a joint that jumps by whole degrees (at 3
 /// counts, 120 deg) and the run or the recording tells nothing about the controller.
@@ -457,7 +460,7 @@ pub const MIN_ENCODER_COUNTS_PER_REV: u32 = 360;
 /// 0 (no quantisation) or [`MIN_ENCODER_COUNTS_PER_REV`] up to the largest encoder `import`
 /// reads.
 pub fn encoder_counts_per_rev(s: &str) -> Result<u32, String> {
-    let hi = *crate::io::import::COUNTS_PER_REV.end();
+    let hi = *COUNTS_PER_REV.end();
     let allowed =
         format!("0 (no angle quantisation) or {MIN_ENCODER_COUNTS_PER_REV}..={hi} counts per turn");
     let v: i128 = s

@@ -7,7 +7,7 @@ use host_sim::io::atomic::{create_dir_all, write_bytes, Transaction};
 /// The content of `path` after host-sim's mark line, which every write puts first.
 fn body(path: &std::path::Path) -> String {
     let t = std::fs::read_to_string(path).unwrap();
-    let mark = format!("# generator = {}\n", host_sim::io::output::MARK);
+    let mark = format!("# generator = {}\n", host_sim::output::MARK);
     t.strip_prefix(&mark)
         .unwrap_or_else(|| panic!("no mark in {t:?}"))
         .to_string()

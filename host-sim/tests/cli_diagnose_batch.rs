@@ -183,7 +183,7 @@ fn the_exit_status_follows_the_worst_verdict_and_the_out_dir_may_be_the_recordin
         recs.join("step.firmware.csv"),
         format!(
             "# source = host-sim closed loop\n{}\n0.000,0,0,300,300,0,0,1\n",
-            host_sim::io::run_files::FIRMWARE_COLUMNS.join(",")
+            host_sim::control::run_files::FIRMWARE_COLUMNS.join(",")
         ),
     )
     .unwrap();

@@ -1,4 +1,4 @@
-//! The rule of every output (`io::output`): host-sim replaces only files it wrote (its mark,
+//! The rule of every output (`output`): host-sim replaces only files it wrote (its mark,
 //! or a report folder's manifest) unless `--force`; read-only files and folders that cannot
 //! be written are refused before the work; an interrupted run leaves no temporary file and a
 //! killed run's are removed by the next run; without the repository's files in the working
@@ -14,7 +14,7 @@ fn temps_in(dir: &Path) -> Vec<PathBuf> {
     std::fs::read_dir(dir)
         .unwrap()
         .map(|e| e.unwrap().path())
-        .filter(|p| host_sim::io::output::is_temp_name(&p.file_name().unwrap().to_string_lossy()))
+        .filter(|p| host_sim::output::is_temp_name(&p.file_name().unwrap().to_string_lossy()))
         .collect()
 }
 
@@ -51,7 +51,7 @@ fn a_users_file_is_not_replaced_without_force_and_host_sims_own_output_is() {
         "{}",
         &first[..80]
     );
-    assert!(host_sim::io::output::written_by_host_sim(&out));
+    assert!(host_sim::output::written_by_host_sim(&out));
     ok(&simulate(&out, &[]));
     assert!(temps_in(dir.path()).is_empty());
 }
@@ -114,7 +114,7 @@ fn host_sims_plot_carries_its_mark_and_is_replaced() {
                 .arg(&p)
                 .output()
                 .unwrap());
-            assert!(host_sim::io::output::written_by_host_sim(&p), "{name}");
+            assert!(host_sim::output::written_by_host_sim(&p), "{name}");
         }
     }
 }

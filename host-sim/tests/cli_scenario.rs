@@ -6,8 +6,8 @@ use common::*;
 use std::path::Path;
 use std::process::Output;
 
+use host_sim::control::run_files::FIRMWARE_COLUMNS;
 use host_sim::io::recording::Recording;
-use host_sim::io::run_files::FIRMWARE_COLUMNS;
 
 fn simulate(scenario: &Path, out: &Path, extra: &[&str]) -> Output {
     bin()

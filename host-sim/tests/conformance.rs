@@ -16,7 +16,7 @@ use common::*;
 
 use std::path::PathBuf;
 
-use host_sim::fit::{compare, format_table};
+use host_sim::io::compare::{compare, format_table};
 use host_sim::io::recording::Channel;
 use host_sim::plant::config::PlantConfig;
 use host_sim::sim::{simulate, SolverOptions};
@@ -106,7 +106,8 @@ fn check(file: &PathBuf, opts: &SolverOptions, with_options: bool) -> Vec<(Chann
     };
     let sim = simulate(&plant, &reference.inputs, reference.sample_period_s(), opts)
         .unwrap_or_else(|e| panic!("{}: {e}", file.display()));
-    let model = host_sim::sim::replay_recording(&plant, &reference, &sim.states, Vec::new());
+    let model =
+        host_sim::io::replay_stream::replay_recording(&plant, &reference, &sim.states, Vec::new());
     let fits = compare(&reference, &model).unwrap();
     println!(
         "{} (plant {plant_name}, {} samples, {:?}):\n{}",

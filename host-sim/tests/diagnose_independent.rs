@@ -1,5 +1,5 @@
 //! The diagnosis against recordings it was not written against: the independent test rig
-//! (`host_sim::diagnose::testrig`: its own plant code, RK4, effect forms unlike the
+//! (`tests/support/testrig.rs`: its own plant code, RK4, effect forms unlike the
 //! candidates', closed-loop excitation, 1-3 ms sampling, cases with and without force
 //! channels, parameter mismatches, pure noise, noise-free nominal data).
 //!
@@ -22,14 +22,17 @@
 //! muscle hysteresis count as one answer, and so do the recalibrations of the valve
 //! conductance and of the chamber volume (the diagnosis says they cannot be told apart).
 
+#[path = "support/testrig.rs"]
+mod testrig;
+
 use std::path::PathBuf;
 
-use host_sim::diagnose::testrig::{case, Case, Expected, RigPhysics, KINDS};
 use host_sim::diagnose::{diagnose, DiagnoseOptions, Diagnosis, Verdict};
 use host_sim::fit::fit_percent;
 use host_sim::io::recording::Channel;
 use host_sim::sim::{simulate, SolverOptions};
 use host_sim::{Plant, PlantConfig, Recording};
+use testrig::{case, Case, Expected, RigPhysics, KINDS};
 
 /// Seeds used while tuning thresholds and the rig.
 const TUNING_SEEDS: [u64; 2] = [11, 12];
@@ -250,7 +253,7 @@ fn full_matrix() {
 
 use host_sim::diagnose::candidates::catalogue;
 use host_sim::diagnose::recalibrate;
-use host_sim::diagnose::testrig::{
+use testrig::{
     case_spec, evidence_case, CaseSpec, Category, EvidenceCase, Expect, TimeBase, CASES,
     CASE_TABLE_HEADER,
 };

@@ -1,6 +1,7 @@
 //! Fit metrics (PLANT.md / Cakurda et al. eqs. 23-24) and recording comparison.
 
-use host_sim::fit::{compare, fit_percent, mae, mse, FitError};
+use host_sim::fit::{fit_percent, mae, mse};
+use host_sim::io::compare::{compare, FitError};
 use host_sim::io::recording::Channel;
 use host_sim::{Recording, ValveInputs};
 
@@ -72,7 +73,7 @@ fn write_file(path: &std::path::Path, header: &str, rows: impl Iterator<Item = S
 
 #[test]
 fn streamed_file_comparison_equals_compare_to_the_bit() {
-    use host_sim::fit::compare_files;
+    use host_sim::io::compare::compare_files;
     let dir = tempfile::tempdir().unwrap();
     let (a, b, c) = (
         dir.path().join("a.csv"),

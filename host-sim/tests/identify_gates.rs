@@ -100,7 +100,7 @@ fn identify_torque_refuses_a_fit_below_the_calibrate_gate_and_keeps_the_old_file
         .find(|l| l.starts_with("fit against"))
         .unwrap();
     let fit: f64 = fit_line.split_whitespace().nth(5).unwrap().parse().unwrap();
-    let gate = host_sim::identify::calibrate::MIN_TORQUE_FIT_PCT;
+    let gate = host_sim::control::calibrate::MIN_TORQUE_FIT_PCT;
     assert!(
         fit < gate,
         "{fit_line}: not a poor fit, the test data changed"
@@ -204,7 +204,7 @@ fn identify_plant_refuses_a_fit_below_the_calibrate_gate() {
         c.output().unwrap()
     };
     let e = exits(2, &args(&out, ""));
-    let gate = host_sim::identify::calibrate::MIN_IDENTIFIED_HELDOUT_FIT_PCT;
+    let gate = host_sim::control::calibrate::MIN_IDENTIFIED_HELDOUT_FIT_PCT;
     for n in [
         "sweep.csv",
         "held-out",

@@ -15,7 +15,8 @@ use std::path::{Path, PathBuf};
 
 use host_sim::io::recording::Recording;
 use host_sim::io::replay_stream::replay_file;
-use host_sim::sim::{simulate_recording, SolverOptions};
+use host_sim::io::replay_stream::simulate_recording;
+use host_sim::sim::SolverOptions;
 use host_sim::Plant;
 use rand::{Rng, SeedableRng};
 
@@ -32,7 +33,7 @@ fn whole(plant: &Plant, input: &Path) -> Vec<u8> {
     let opts = SolverOptions::default();
     let sim = simulate_recording(plant, &rec, &opts, |_| {}).unwrap();
     let metadata = metadata(rec.sample_period_s());
-    let out = host_sim::sim::replay_recording(plant, &rec, &sim.states, metadata);
+    let out = host_sim::io::replay_stream::replay_recording(plant, &rec, &sim.states, metadata);
     let mut bytes = Vec::new();
     out.write_to(&mut bytes).unwrap();
     bytes

@@ -12,7 +12,7 @@ mod common;
 use common::*;
 use std::path::{Path, PathBuf};
 
-use host_sim::fit::compare;
+use host_sim::io::compare::compare;
 use host_sim::{simulate, Plant, Recording, SolverOptions, ValveInputs};
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
@@ -260,10 +260,11 @@ fn stamped_replay_beats_treating_jittered_stamps_as_uniform() {
         }
         compare(rec, &m).unwrap()
     };
-    let stamped = host_sim::sim::simulate_recording(&plant, rec, &opts, |_| {}).unwrap();
+    let stamped =
+        host_sim::io::replay_stream::simulate_recording(&plant, rec, &opts, |_| {}).unwrap();
     let uniform = simulate(&plant, &rec.inputs, rec.sample_period_s(), &opts).unwrap();
     let (a, b) = (fit_of(&stamped.states), fit_of(&uniform.states));
-    let p1 = |f: &Vec<host_sim::fit::ChannelFit>| {
+    let p1 = |f: &Vec<host_sim::io::compare::ChannelFit>| {
         f.iter()
             .find(|c| c.channel == host_sim::Channel::P1Kpa)
             .unwrap()

@@ -240,6 +240,31 @@ pub struct ClosedLoopRun {
     pub effects: String,
 }
 
+/// Wall time of one closed-loop tick (plant integration and firmware), an upper figure of
+/// the measurement in docs/reliability.md.
+pub const CLOSED_LOOP_S_PER_TICK: f64 = 20e-6;
+
+impl Scenario {
+    /// The size of a closed-loop run of this scenario, from its length and tick rate (and
+    /// the random set-point levels it draws), for [`crate::validate::RunEstimate::check`].
+    pub fn run_estimate(&self) -> crate::validate::RunEstimate {
+        let ticks = self.scenario.duration_s * self.scenario.tick_hz;
+        let levels = match self.setpoint {
+            SetpointProfile::Random { hold_s, .. } => self.scenario.duration_s / hold_s,
+            _ => 0.0,
+        };
+        // Per tick: the run's row, the recording (t_s, 4 inputs, 5 channels) and the
+        // formatted CSV lines; measured time per tick in docs/reliability.md.
+        let row_bytes = std::mem::size_of::<TickRow>() as f64 + 80.0;
+        crate::validate::RunEstimate {
+            what: format!("closed-loop run `{}`", self.scenario.name),
+            samples: ticks + levels,
+            bytes: ticks * row_bytes + levels * 8.0,
+            seconds: ticks * CLOSED_LOOP_S_PER_TICK,
+        }
+    }
+}
+
 /// Runs `scenario` with the firmware's reference controller on `plant`.
 pub fn run(plant: &Plant, scenario: &Scenario) -> Result<ClosedLoopRun, ClosedLoopError> {
     let cfg = ControllerConfig::reference(scenario.scenario.tick_hz as f32);

@@ -742,7 +742,7 @@ pub struct SuiteScore {
 /// The jump suite: the demo's step, sine and random scenarios, set-point changes as jumps
 /// (reported beside the suite: there the first ~30 ms after each jump, valves fully open in
 /// every law, bound what any controller can reach).
-pub const JUMP_SUITE: [(&str, &str); 3] = crate::demo::SCENARIOS;
+pub const JUMP_SUITE: [(&str, &str); 3] = crate::io::scenario::SCENARIOS;
 
 /// The parsed jump-suite scenarios.
 pub fn jump_suite_scenarios() -> Result<Vec<Scenario>, ClosedLoopError> {

@@ -104,13 +104,9 @@ pub fn train_hybrid(
 pub const REQUIRED_RATIO: f64 = 1.85;
 
 /// Arguments of `host-sim compare-control`.
-#[derive(clap::Args, Debug)]
-#[command(
-    after_help = "Example:\n  host-sim compare-control --plant ../shared/plant/reference-1dof.toml"
-)]
+#[derive(Debug)]
 pub struct CompareControlArgs {
     /// Plant parameter file (TOML): the nominal plant; the effect variants are added to it.
-    #[arg(long, value_name = "P.toml")]
     pub plant: PathBuf,
     /// Tuned gains of the P-only cascade [default: config/control_tuned.toml under the working
     /// directory if it is there, else the shipped gains built into host-sim]; the report's
@@ -118,70 +114,53 @@ pub struct CompareControlArgs {
     /// with the feed-forward cascade at --ff-gains (each design tuned for itself, as the
     /// learned-inverse-thermodynamics paper compares them); give both files, tuned on the same plant, or the verdict compares
     /// tunings of different origin. The same-gains ratio is printed beside it.
-    #[arg(long, value_name = "CONTROL_TUNED.toml")]
     pub gains: Option<PathBuf>,
     /// The cascade's gains tuned with the feed-forward on (`host-sim tune --pressure-ff`), for
     /// the rows where each controller runs at its own best gains [default:
     /// config/control_tuned_ff.toml under the working directory if it is there, else the shipped
     /// ones built into host-sim].
-    #[arg(long, value_name = "CONTROL_TUNED_FF.toml")]
     pub ff_gains: Option<PathBuf>,
-    #[command(flatten)]
     pub ff: FfOverrides,
     /// Run the cascade's outer loops (position loop, trajectory feed-forward, torque
     /// estimate, torque loop) on one tick in N, the pressure loops every tick, in every row
     /// (1..=5 at the 1 kHz tick; 1 = every tick) [default: the rate --gains were tuned at
     /// (`host-sim tune --outer-period-ticks`), else config/controller.toml [rates]
     /// outer_period_ticks].
-    #[arg(long, value_name = "N", value_parser = super::compare::outer_period_arg)]
     pub outer_period_ticks: Option<u16>,
     /// Only the nominal plant and the suite's first scenario of each set (the CI run).
-    #[arg(long)]
     pub quick: bool,
     /// Only the nominal plant, every scenario of both sets.
-    #[arg(long, conflicts_with = "quick")]
     pub nominal_only: bool,
     /// Also print, per scenario set on the nominal plant, where the P-only cascade's position
     /// error comes from (moves / rest, pressure lag, ripple, deadband, saturation) and the
     /// same cascade with the pressure loop's deadband removed or its gain x4 (diagnostics
     /// only: those change the cascade).
-    #[arg(long)]
     pub breakdown: bool,
 }
 
 /// The `--ff-*` options of `host-sim compare-control`: values that replace those of
 /// config/pressure_ff.toml.
-#[derive(clap::Args, Debug)]
+#[derive(Debug)]
 pub struct FfOverrides {
     /// Scale of the feed-forward duty (0..=2) [default: config/pressure_ff.toml gain].
-    #[arg(long = "ff-gain", value_name = "G")]
     pub gain: Option<f32>,
     /// Cut-off of the set-point rate filter [Hz] (1..=500) [default: config/pressure_ff.toml].
-    #[arg(long = "ff-cutoff-hz", value_name = "HZ")]
     pub cutoff_hz: Option<f32>,
     /// Where the feed-forward takes its desired pressure rate P' and volume rate V' from:
     /// `reference` (the set-point trajectory through the inverse torque model) or
     /// `set-point` (the torque loop's pressure set-point and the measured velocity)
     /// [default: config/pressure_ff.toml rate_from_reference].
-    #[arg(long = "ff-rate-from", value_name = "SOURCE", value_parser = ["reference", "set-point"])]
     pub rate_from: Option<String>,
     /// Where the feed-forward takes the volume rate V' from: `reference` (the set-point's
     /// rate) or `measured` (the velocity estimate) [default: config/pressure_ff.toml
     /// volume_rate_from_reference].
-    #[arg(long = "ff-volume-rate-from", value_name = "SOURCE", value_parser = ["reference", "measured"])]
     pub volume_rate_from: Option<String>,
     /// Feed-forward duties of a smaller magnitude are dropped (0..=1) [default:
     /// config/pressure_ff.toml min_duty].
-    #[arg(long = "ff-min-duty", value_name = "D")]
     pub min_duty: Option<f32>,
     /// Evaluate the feed-forward once every N ticks and hold it in between (1..=100 at the
     /// 1 kHz tick; 1 = every tick) [default: the period the --ff-gains were tuned at (`host-sim
     /// tune --ff-update-ticks`), else config/pressure_ff.toml update_period_ticks].
-    #[arg(
-        long = "ff-update-ticks",
-        value_name = "N",
-        value_parser = super::compare::ff_update_ticks_arg
-    )]
     pub update_ticks: Option<u16>,
 }
 

@@ -31,6 +31,7 @@ use pam_firmware::tick::{TickOutput, ValveCommand};
 use crate::control::closed_loop::{
     ClosedLoopError, Firmware, FirmwareInput, FirmwareTick, Scenario,
 };
+pub use crate::io::capture::check_elf_for;
 
 /// How the emulator is run.
 #[derive(Debug, Clone)]
@@ -395,31 +396,22 @@ pub fn first_difference(
 /// `pil`'s firmware image without `--elf`, relative to the working directory.
 pub const DEFAULT_ELF_IN_WORKING_DIR: &str = "target/thumbv7em-none-eabihf/release/pil";
 
-#[derive(clap::Args, Debug)]
-#[command(
-    after_help = "Example (build the image first):\n  cargo build -p pam-firmware --bin pil --features pam-firmware/firmware --release --target thumbv7em-none-eabihf\n  host-sim pil --plant ../shared/plant/reference-1dof.toml --scenario scenarios/step.toml --out pil.csv --log pil.stream"
-)]
+#[derive(Debug)]
 pub struct PilArgs {
     /// Plant parameter file (TOML).
-    #[arg(long, value_name = "P.toml")]
     pub plant: PathBuf,
     /// Closed-loop scenario (TOML). The firmware gets raw board counts: the scenario's
     /// [sensors] run with `board_counts = true` (turned on, and said, when the file leaves it
     /// off). Its [expect] bounds are checked on the firmware's run (exit status 1 if not met).
-    #[arg(long, value_name = "S.toml")]
     pub scenario: PathBuf,
     /// Output recording (RECORDING.md), as `simulate --scenario` writes it.
-    #[arg(long, value_name = "REC.csv")]
     pub out: PathBuf,
     /// Firmware image [default: target/thumbv7em-none-eabihf/release/pil under the working
     /// directory].
-    #[arg(long, value_name = "ELF")]
     pub elf: Option<PathBuf>,
     /// Also write the firmware's per-tick stream (binary records) here, for `host-sim capture`.
-    #[arg(long, value_name = "LOG")]
     pub log: Option<PathBuf>,
     /// Longest wait for one tick's answer from QEMU [s] (1..=600).
-    #[arg(long, value_name = "S", default_value_t = 20.0)]
     pub tick_timeout_s: f64,
 }
 
@@ -486,7 +478,7 @@ pub fn run_pil(a: &PilArgs) -> anyhow::Result<(String, bool)> {
             a.scenario.display()
         )
     })?;
-    let mut rec = crate::io::run_files::run_recording(
+    let mut rec = crate::control::run_files::run_recording(
         &run,
         &a.plant.display().to_string(),
         &a.scenario.display().to_string(),
@@ -527,7 +519,7 @@ pub fn run_pil(a: &PilArgs) -> anyhow::Result<(String, bool)> {
         Some(_) => f64::NAN,
     };
     let fails = run.check();
-    report.push_str(&crate::io::run_files::summary(&run, &scenario, &fails));
+    report.push_str(&crate::control::run_files::summary(&run, &scenario, &fails));
     let same = match difference {
         None => {
             report.push_str(&format!(
@@ -558,109 +550,6 @@ pub fn check_elf(elf: &std::path::Path) -> Result<(), String> {
         "build it: cargo build -p pam-firmware --bin pil --features pam-firmware/firmware \
          --release --target thumbv7em-none-eabihf",
     )
-}
-
-/// [`check_elf`] with `hint` (what the image should be) in place of the PIL image's build
-/// command.
-pub fn check_elf_for(elf: &std::path::Path, hint: &str) -> Result<(), String> {
-    use std::io::Read;
-    #[allow(non_snake_case)]
-    let BUILD = hint;
-    let meta = std::fs::metadata(elf).map_err(|e| format!("cannot read it: {e} ({BUILD})"))?;
-    if !meta.is_file() {
-        return Err("is not a regular file: give the firmware image (an ELF file)".into());
-    }
-    if meta.len() == 0 {
-        return Err(format!("is empty, not a firmware image ({BUILD})"));
-    }
-    let mut head = Vec::with_capacity(20);
-    std::fs::File::open(elf)
-        .and_then(|f| f.take(20).read_to_end(&mut head))
-        .map_err(|e| format!("cannot read it: {e}"))?;
-    if !head.starts_with(b"\x7fELF") {
-        return Err(format!(
-            "is not an ELF file (it does not start with the ELF magic bytes) ({BUILD})"
-        ));
-    }
-    // e_ident[EI_CLASS] = 1 (32-bit), e_ident[EI_DATA] = 1 (little endian), e_machine = 40
-    // (EM_ARM) at byte 18.
-    const EM_ARM: u16 = 40;
-    let machine = (head.len() >= 20).then(|| u16::from_le_bytes([head[18], head[19]]));
-    if head.get(4) != Some(&1) || head.get(5) != Some(&1) || machine != Some(EM_ARM) {
-        let class = match head.get(4) {
-            Some(1) => "32-bit",
-            Some(2) => "64-bit",
-            _ => "unknown class",
-        };
-        let data = match head.get(5) {
-            Some(1) => "little-endian",
-            Some(2) => "big-endian",
-            _ => "unknown byte order",
-        };
-        let arch = match machine {
-            Some(3) => "x86".to_string(),
-            Some(40) => "ARM".to_string(),
-            Some(62) => "x86-64".to_string(),
-            Some(183) => "AArch64".to_string(),
-            Some(243) => "RISC-V".to_string(),
-            Some(m) => format!("machine {m}"),
-            None => "no machine field".to_string(),
-        };
-        return Err(format!(
-            "is a {class} {data} {arch} ELF file, not a 32-bit little-endian ARM (Cortex-M) \
-             firmware image ({BUILD})"
-        ));
-    }
-    elf32_layout_within(elf, meta.len())
-        .map_err(|why| format!("is a truncated or damaged ELF file: {why} ({BUILD})"))
-}
-
-/// Checks that the program and section header tables of the 32-bit little-endian ELF file
-/// `elf` (`len` bytes), and every loadable segment's bytes, lie within the file: a copy cut
-/// short passes the header check and makes QEMU abort with a register dump.
-fn elf32_layout_within(elf: &std::path::Path, len: u64) -> Result<(), String> {
-    use std::io::{Read, Seek, SeekFrom};
-    let mut f = std::fs::File::open(elf).map_err(|e| format!("cannot read it: {e}"))?;
-    let mut read_at = |at: u64, n: usize| -> Result<Vec<u8>, String> {
-        let mut b = vec![0u8; n];
-        f.seek(SeekFrom::Start(at))
-            .and_then(|_| f.read_exact(&mut b))
-            .map_err(|_| format!("{n} bytes at offset {at} lie beyond its {len} bytes"))?;
-        Ok(b)
-    };
-    let h = read_at(0, 52).map_err(|_| format!("its {len} bytes hold no complete ELF header"))?;
-    let u16_at = |b: &[u8], i: usize| u64::from(u16::from_le_bytes([b[i], b[i + 1]]));
-    let u32_at =
-        |b: &[u8], i: usize| u64::from(u32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]));
-    let (phoff, shoff) = (u32_at(&h, 28), u32_at(&h, 32));
-    let (phentsize, phnum) = (u16_at(&h, 42), u16_at(&h, 44));
-    let (shentsize, shnum) = (u16_at(&h, 46), u16_at(&h, 48));
-    if phnum == 0 {
-        return Err("it has no program headers (nothing to load)".into());
-    }
-    for (what, off, size, n) in [
-        ("program header table", phoff, phentsize, phnum),
-        ("section header table", shoff, shentsize, shnum),
-    ] {
-        if off + size * n > len {
-            return Err(format!(
-                "its {what} ends at byte {} of a {len}-byte file",
-                off + size * n
-            ));
-        }
-    }
-    const PT_LOAD: u64 = 1;
-    for i in 0..phnum {
-        let ph = read_at(phoff + i * phentsize, 32)?;
-        let (offset, filesz) = (u32_at(&ph, 4), u32_at(&ph, 16));
-        if u32_at(&ph, 0) == PT_LOAD && offset + filesz > len {
-            return Err(format!(
-                "loadable segment {i} ends at byte {} of a {len}-byte file",
-                offset + filesz
-            ));
-        }
-    }
-    Ok(())
 }
 
 /// Runs `scenario` on `plant` with the firmware under QEMU; returns the run and the stream.

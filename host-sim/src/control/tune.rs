@@ -46,7 +46,6 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use pam_firmware::pid::DpPidGains;
 use pam_firmware::tick::{ControlLaw, ControllerConfig};
@@ -86,70 +85,49 @@ inertia: no fault, |error| < 0.5 rad, and a run that ends in a hold comes to res
 (spread of the error over its last 0.5 s <= 0.01 rad: no limit cycle).";
 
 /// `host-sim tune`.
-#[derive(Args, Debug)]
-#[command(
-    after_help = "Example:\n  host-sim tune --plant ../shared/plant/reference-1dof.toml --out control_tuned.toml"
-)]
+#[derive(Debug)]
 pub struct TuneArgs {
     /// Plant file the gains are tuned on.
-    #[arg(long, value_name = "P.toml")]
     pub plant: PathBuf,
     /// Output gains file (the format of config/control_tuned.toml), written atomically.
-    #[arg(long, value_name = "control.toml")]
     pub out: PathBuf,
     /// Threads for the PD / PID grids and polish (1..=256, as every command's --threads).
-    #[arg(long, default_value_t = 2, value_parser = crate::validate::usize_in(1, 256))]
     pub threads: usize,
     /// Also start every search from the gains stored in --out (when it loads); without it the
     /// search is reproducible from scratch.
-    #[arg(long)]
     pub warm_start: bool,
     /// Cut-off of every law's set-point differentiators [Hz] (1..=500).
-    #[arg(long, default_value_t = 150.0)]
     pub setpoint_cutoff_hz: f32,
     /// Duration of the suite's set-point moves [s] (0..=2, 0 = jumps) [default: the suite's 0.15 s].
-    #[arg(long, value_parser = crate::validate::f64_in_unit(crate::validate::Range::closed(0.0, 2.0), "seconds"))]
     pub transition_s: Option<f64>,
     /// One more cascade start KP,KI,KD[,TORQUE_KI] (repeatable), each > 0 and at most what a
     /// gains file loads (kp 1e4 N m/rad, ki 1e6 N m/(rad s), kd 1e3 N m s/rad, torque ki 1e5 1/s).
-    #[arg(long, value_name = "KP,KI,KD[,TORQUE_KI]")]
     pub cascade_start: Vec<String>,
     /// Do not impose the firmware's step tests on the cascade (report them only).
-    #[arg(long)]
     pub no_step_constraints: bool,
     /// Robustness term in every law's cost: the worse of the cost on the plant and on the
     /// plant with an 8 ms valve dead time (valve supervision off), and infinite unless the suite and the jump
     /// suite (the demo's set-points) stay stable on the plant with 11 x its inertia (no fault, |error| <
     /// 0.5 rad, no limit cycle at rest).
-    #[arg(long)]
     pub robust: bool,
     /// Tune the cascade with the pressure loops' inverse thermodynamic feed-forward on
     /// (config/pressure_ff.toml's options; the gains file records it), so that it can be
     /// compared at its own best gains (`compare-control --ff-gains`). The PD / PID do not use it.
-    #[arg(long)]
     pub pressure_ff: bool,
     /// Infinite cost unless the suite and the jump suite (the demo's step, sine and random
     /// set-points) stay stable on the plant itself: no fault, |error| < 0.5 rad, and a run that
     /// ends in a hold comes to rest (spread of the error over its last 0.5 s <= 0.01 rad).
     /// Keeps gains tuned on the smooth suite from limit-cycling after a set-point jump.
-    #[arg(long)]
     pub stable_on_jumps: bool,
     /// Tune the cascade with its outer loops (position loop, trajectory feed-forward, torque
     /// estimate, torque loop) on one tick in N (1..=5 at the 1 kHz tick); the gains file
     /// records it, and compare-control runs those gains at that rate [default:
     /// config/controller.toml [rates] outer_period_ticks]. The PD / PID do not use it.
-    #[arg(long, value_name = "N", value_parser = crate::control::compare::outer_period_arg)]
     pub outer_period_ticks: Option<u16>,
     /// With --pressure-ff: evaluate the feed-forward once every N ticks and hold it in between
     /// (1..=100 at the 1 kHz tick; 1 = every tick); the gains file records it, and
     /// compare-control runs those gains at that period [default: config/pressure_ff.toml
     /// update_period_ticks, 1 as shipped].
-    #[arg(
-        long = "ff-update-ticks",
-        value_name = "N",
-        requires = "pressure_ff",
-        value_parser = crate::control::compare::ff_update_ticks_arg
-    )]
     pub ff_update_ticks: Option<u16>,
 }
 

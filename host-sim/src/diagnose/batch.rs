@@ -48,7 +48,7 @@ pub fn recordings_in(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
         .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("csv")))
         .filter(|p| {
             !p.file_name()
-                .is_some_and(|n| crate::io::output::is_temp_name(&n.to_string_lossy()))
+                .is_some_and(|n| crate::output::is_temp_name(&n.to_string_lossy()))
         })
         .collect();
     v.sort();
@@ -224,25 +224,18 @@ pub fn summary_table(rows: &[BatchRow]) -> String {
 }
 
 /// `host-sim diagnose-batch`: the arguments.
-#[derive(clap::Args, Debug)]
-#[command(
-    after_help = "Example:\n  host-sim diagnose-batch --plant ../shared/plant/reference-1dof.toml --recordings ../shared/conformance --out-dir diagnoses/"
-)]
+#[derive(Debug)]
 pub struct BatchArgs {
     /// Nominal plant file (TOML) the user believes in.
-    #[arg(long, value_name = "P.toml")]
     pub plant: PathBuf,
     /// Directory of recordings (every `*.csv` in it, RECORDING.md columns t_s, u_in1, u_ex1,
     /// u_in2, u_ex2, angle_deg, p1_kpa, p2_kpa[, f1_n, f2_n]).
-    #[arg(long, value_name = "DIR")]
     pub recordings: PathBuf,
     /// Output directory (created if missing): one `<recording>.json` each and `summary.csv`;
     /// it may be --recordings itself (an earlier run's summary.csv there is not read as a
     /// recording).
-    #[arg(long, value_name = "OUT_DIR")]
     pub out_dir: PathBuf,
     /// Recordings diagnosed at once (worker threads).
-    #[arg(long, default_value_t = 2, value_parser = crate::validate::usize_in(1, 256))]
     pub jobs: usize,
 }
 
@@ -301,7 +294,7 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, u8)> {
         .chain(recs.iter().map(|p| ("--recordings", p.as_path())))
         .collect();
     crate::validate::distinct_outputs(&ins, &outs).map_err(anyhow::Error::msg)?;
-    crate::io::output::check_dir("--out-dir", &a.out_dir, &jsons).map_err(anyhow::Error::msg)?;
+    crate::output::check_dir("--out-dir", &a.out_dir, &jsons).map_err(anyhow::Error::msg)?;
     let n = recs.len();
     let count = std::sync::atomic::AtomicUsize::new(0);
     let rows = diagnose_all(&cfg, &recs, &DiagnoseOptions::default(), a.jobs, &|p| {
@@ -311,7 +304,7 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, u8)> {
     .map_err(anyhow::Error::msg)?;
     crate::io::atomic::create_dir_all(&a.out_dir)
         .with_context(|| format!("{}: cannot create the directory", a.out_dir.display()))?;
-    crate::io::output::write_manifest(&a.out_dir, &jsons)?;
+    crate::io::atomic::write_manifest(&a.out_dir, &jsons)?;
     let mut removed = String::new();
     for r in &rows {
         let p = json_path(&a.out_dir, &r.recording);
@@ -321,7 +314,7 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, u8)> {
             // An earlier run's answer for a recording that now fails would read as this
             // run's: removed (only a diagnosis JSON, this command's own output).
             Err(_) => {
-                if is_diagnosis_json(&p) && crate::io::output::is_own(&p) {
+                if is_diagnosis_json(&p) && crate::output::is_own(&p) {
                     std::fs::remove_file(&p).with_context(|| format!("{}", p.display()))?;
                     removed += &format!(
                         "removed {}: an earlier run's answer for a recording that now fails\n",
@@ -346,7 +339,7 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, u8)> {
         // The run's own temporary files (`.NAME.json.PID.XXXXXX.tmp.json`) are no answers.
         .filter(|p| {
             !p.file_name()
-                .is_some_and(|n| crate::io::output::is_temp_name(&n.to_string_lossy()))
+                .is_some_and(|n| crate::output::is_temp_name(&n.to_string_lossy()))
         })
         .filter(|p| is_diagnosis_json(p))
         .collect();
@@ -413,7 +406,7 @@ fn is_batch_summary(path: &Path) -> bool {
 /// True when `path` is the firmware trace `simulate --scenario` writes beside its recording
 /// (`OUT.firmware.csv`: set-point, torque estimate, fault code per tick), by its header.
 fn is_firmware_trace(path: &Path) -> bool {
-    header_line(path).is_some_and(|h| h == crate::io::run_files::FIRMWARE_COLUMNS.join(","))
+    header_line(path).is_some_and(|h| h == crate::control::run_files::FIRMWARE_COLUMNS.join(","))
 }
 
 /// The first line of `path` that is not a `#` comment (within its first 64 KiB), without its

@@ -33,7 +33,6 @@ pub mod screen;
 pub mod selection;
 pub mod start;
 pub mod synth;
-pub mod testrig;
 pub mod verdict;
 
 use std::collections::BTreeMap;

@@ -145,7 +145,7 @@ fn scatter_svg(s: &Scatter, title: &str) -> Result<String, String> {
 }
 
 /// Writes `DIR/index.html` and `DIR/diagnosis.json` (each atomically) and lists them in the
-/// folder's manifest (`io::output`).
+/// folder's manifest (`output`).
 pub fn write_report(
     dir: &Path,
     d: &Diagnosis,
@@ -272,7 +272,7 @@ pub fn write_report(
         .map_err(|e| e.to_string())?;
     crate::identify::write_atomic(&dir.join("index.html"), h.as_bytes())
         .map_err(|e| e.to_string())?;
-    crate::io::output::write_manifest(dir, &[dir.join("diagnosis.json"), dir.join("index.html")])
+    crate::io::atomic::write_manifest(dir, &[dir.join("diagnosis.json"), dir.join("index.html")])
         .map_err(|e| e.to_string())?;
     Ok(())
 }

@@ -9,7 +9,6 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use clap::{Args, Subcommand};
 
 use super::force::{self, ForceSweep, Tondu};
 use super::force_maps;
@@ -17,20 +16,16 @@ use super::plant::{identify_plant_text, PlantFitOptions};
 use super::torque::{self, TorqueSource, TorqueSweep};
 use super::{write_atomic, MeasurementNoise};
 use crate::sim::SolverOptions;
-use crate::validate::{self, f64_in, u64_in, usize_in, Range, RunEstimate};
+use crate::validate::{self, RunEstimate};
 use crate::{Plant, PlantConfig, Recording};
 
 /// `host-sim sweep ...`: synthetic identification data from a plant file.
-#[derive(Args, Debug)]
-#[command(
-    after_help = "Examples:\n  host-sim sweep force --plant ../shared/plant/reference-1dof.toml --out force.csv\n  host-sim sweep torque --plant ../shared/plant/reference-1dof.toml --out torque.csv"
-)]
+#[derive(Debug)]
 pub struct SweepArgs {
-    #[command(subcommand)]
     pub what: SweepWhat,
 }
 
-#[derive(Subcommand, Debug)]
+#[derive(Debug)]
 pub enum SweepWhat {
     /// Isometric force data (writes columns p_kpa, stretch, f_n[, state]) from the plant's
     /// Tondu surface: at each L/L0 the pressure is swept from the maximum to 0 (and back up
@@ -48,127 +43,83 @@ pub enum SweepWhat {
     Torque(SweepTorqueArgs),
 }
 
-#[derive(Args, Debug)]
-#[command(
-    after_help = "Example:\n  host-sim sweep force --plant ../shared/plant/reference-1dof.toml --out force.csv"
-)]
+#[derive(Debug)]
 pub struct SweepForceArgs {
     /// Plant file: the muscle's Tondu parameters (radius_m, braid_angle_deg, end_factor).
-    #[arg(long, value_name = "P.toml")]
     pub plant: PathBuf,
     /// Output CSV.
-    #[arg(long, value_name = "F.csv")]
     pub out: PathBuf,
     /// Number of L/L0 levels.
-    #[arg(long, default_value_t = 31, value_parser = usize_in(2, 100_000))]
     pub n_stretch: usize,
     /// Number of pressure levels per sweep.
-    #[arg(long, default_value_t = 31, value_parser = usize_in(2, 100_000))]
     pub n_pressure: usize,
     /// Lowest L/L0.
-    #[arg(long, default_value_t = 0.75, value_parser = f64_in(Range::closed(force::STRETCH_MIN, force::STRETCH_MAX)))]
     pub stretch_min: f64,
     /// Highest L/L0.
-    #[arg(long, default_value_t = 1.05, value_parser = f64_in(Range::closed(force::STRETCH_MIN, force::STRETCH_MAX)))]
     pub stretch_max: f64,
     /// Highest gauge pressure [kPa] (20..=2000: `identify force` needs a map reaching 20 kPa;
     /// less is a value in MPa or bar).
-    #[arg(long, default_value_t = 600.0, value_parser = f64_in(Range::closed(force::P_KPA_MAX_AT_LEAST, 2000.0)))]
     pub p_max_kpa: f64,
     /// Load-cell noise, standard deviation [N].
-    #[arg(long, default_value_t = 3.0, value_parser = f64_in(Range::closed(0.0, 1e4)))]
     pub force_noise_n: f64,
     /// Pressure-sensor noise, standard deviation [kPa].
-    #[arg(long, default_value_t = 0.5, value_parser = f64_in(Range::closed(0.0, 100.0)))]
     pub pressure_noise_kpa: f64,
     /// Gap between the pressurising and depressurising branches at full pressure [N]; > 0
     /// sweeps both branches and writes a `state` column. At most a quarter of the sweep's
     /// largest force (the plant's muscle at --p-max-kpa; the message gives it).
-    #[arg(long, default_value_t = 0.0, value_parser = f64_in(Range::closed(0.0, 1e4)))]
     pub hysteresis_gap_n: f64,
     /// Random seed of the noise (0..=18446744073709551615).
-    #[arg(long, default_value_t = 1, value_parser = u64_in(0, u64::MAX))]
     pub seed: u64,
     /// Run even when the estimated memory or time exceeds the limit (docs/reliability.md).
-    #[arg(long)]
     pub allow_large: bool,
 }
 
-#[derive(Args, Debug)]
-#[command(after_help = "Example:\n  host-sim sweep force-map --seed 3 --branches --out map.csv")]
+#[derive(Debug)]
 pub struct SweepForceMapArgs {
     /// Output CSV.
-    #[arg(long, value_name = "F.csv")]
     pub out: PathBuf,
     /// Seed: the muscle, the grid and the noise (0..=18446744073709551615).
-    #[arg(long, default_value_t = 1, value_parser = u64_in(0, u64::MAX))]
     pub seed: u64,
     /// Sweep every length up and down (rising and falling branches, braid friction).
-    #[arg(long)]
     pub branches: bool,
 }
 
-#[derive(Args, Debug)]
-#[command(
-    after_help = "Example:\n  host-sim sweep torque --plant ../shared/plant/reference-1dof.toml --out torque.csv --dt-s 0.001"
-)]
+#[derive(Debug)]
 pub struct SweepTorqueArgs {
     /// Plant file.
-    #[arg(long, value_name = "P.toml")]
     pub plant: PathBuf,
     /// Output recording.
-    #[arg(long, value_name = "R.csv")]
     pub out: PathBuf,
     /// Mid pressure p0, gauge [kPa].
-    #[arg(long, default_value_t = 300.0, value_parser = f64_in(Range::positive(2000.0)))]
     pub p0_kpa: f64,
     /// Activation levels dp [kPa], comma separated.
-    #[arg(
-        long,
-        value_delimiter = ',',
-        allow_hyphen_values = true,
-        default_value = "-200,-100,0,100,200",
-        value_parser = f64_in(Range::closed(-2000.0, 2000.0))
-    )]
     pub dp_kpa: Vec<f64>,
     /// Angle amplitude of the motion [rad].
-    #[arg(long, default_value_t = 0.35, value_parser = f64_in(Range::positive(std::f64::consts::PI)))]
     pub amplitude_rad: f64,
     /// Constant speeds of the passes [rad/s], comma separated (the first quasi-static).
-    #[arg(long, value_delimiter = ',', default_value = "0.1,1,2,4", value_parser = f64_in(Range::positive(1000.0)))]
     pub speeds_rad_s: Vec<f64>,
     /// Sample period [s].
-    #[arg(long, default_value_t = 0.005, value_parser = f64_in(Range::closed(1e-6, 1.0)))]
     pub dt_s: f64,
     /// Encoder counts per turn: 0 (no angle quantisation) or 360..=1073741824 (a coarser
     /// encoder reads the motion in steps of more than 1 degree).
-    #[arg(long, default_value_t = 8000, value_parser = validate::encoder_counts_per_rev)]
     pub encoder_counts: u32,
     /// Pressure-sensor noise, standard deviation [kPa].
-    #[arg(long, default_value_t = 0.5, value_parser = f64_in(Range::closed(0.0, 100.0)))]
     pub pressure_noise_kpa: f64,
     /// Force-sensor noise, standard deviation [N].
-    #[arg(long, default_value_t = 2.0, value_parser = f64_in(Range::closed(0.0, 1e4)))]
     pub force_noise_n: f64,
     /// Random seed of the noise (0..=18446744073709551615).
-    #[arg(long, default_value_t = 1, value_parser = u64_in(0, u64::MAX))]
     pub seed: u64,
     /// Run even when the estimated memory or time exceeds the limit (docs/reliability.md).
-    #[arg(long)]
     pub allow_large: bool,
 }
 
 /// `host-sim identify ...`.
-#[derive(Args, Debug)]
-#[command(
-    after_help = "Examples:\n  host-sim identify force --data force.csv --out force_law.toml\n  host-sim identify torque --recording torque.csv --plant ../shared/plant/reference-1dof.toml --out torque_model.toml\n  host-sim identify plant --recording ../shared/conformance/pulses_loaded.csv --plant ../shared/plant/reference-1dof.toml --params joint.inertia_kgm2 --out fitted.toml"
-)]
+#[derive(Debug)]
 pub struct IdentifyArgs {
-    #[command(subcommand)]
     pub what: IdentifyWhat,
 }
 
-#[derive(Subcommand, Debug)]
+#[derive(Debug)]
 pub enum IdentifyWhat {
     /// Fit the static force law (the ten-constant polynomial in pressure and L/L0 of the
     /// force-law paper, its eq. 6, constants c1..c10) and the Tondu baseline to isometric data
@@ -190,84 +141,59 @@ pub enum IdentifyWhat {
     Volume(super::volume::IdentifyVolumeArgs),
 }
 
-#[derive(Args, Debug)]
-#[command(after_help = "Example:\n  host-sim identify force --data force.csv --out force_law.toml")]
+#[derive(Debug)]
 pub struct IdentifyForceArgs {
     /// Isometric data CSV.
-    #[arg(long, value_name = "F.csv")]
     pub data: PathBuf,
     /// Output TOML (the format of config/force_law.toml).
-    #[arg(long, value_name = "force.toml")]
     pub out: PathBuf,
     /// Upper end of the pressure domain written for the firmware [kPa] (20..=2000: less is a
     /// value in MPa or bar) [default: the largest pressure in the data, which sensor noise
     /// pushes above the sweep's nominal maximum].
-    #[arg(long, value_parser = f64_in(Range::closed(force::P_KPA_MAX_AT_LEAST, 2000.0)))]
     pub p_gauge_max_kpa: Option<f64>,
 }
 
-#[derive(Args, Debug)]
-#[command(
-    after_help = "Example:\n  host-sim identify torque --recording torque.csv --plant ../shared/plant/reference-1dof.toml --out torque_model.toml"
-)]
+#[derive(Debug)]
 pub struct IdentifyTorqueArgs {
     /// Recording (RECORDING.md).
-    #[arg(long, value_name = "R.csv")]
     pub recording: PathBuf,
     /// Plant file: the sprocket radius r (and the force model when the recording has no tensions).
-    #[arg(long, value_name = "P.toml")]
     pub plant: PathBuf,
     /// Output TOML (the format of config/torque_model.toml).
-    #[arg(long, value_name = "torque.toml")]
     pub out: PathBuf,
     /// Half window of the Savitzky-Golay velocity estimate [samples] [default: 25 ms worth].
-    #[arg(long, value_parser = usize_in(1, 100_000))]
     pub savgol_half_window: Option<usize>,
     /// Activation limit the controller may command [kPa], at most min(p0, supply - p0)
     /// [default: min(p0, supply - p0) - 20 kPa].
-    #[arg(long, value_parser = f64_in(Range::positive(2000.0)))]
     pub dp_max_kpa: Option<f64>,
     /// Fit only the samples of (nearly) constant velocity, as the torque-model paper does: |acceleration|
     /// averaged over the velocity window at most this [rad/s^2] [default: all samples].
-    #[arg(long, value_parser = f64_in(Range::positive(1e6)))]
     pub max_accel_rad_s2: Option<f64>,
     /// Write the model even when its fit is below the trustworthy fit that `calibrate`
     /// requires (docs/identification.md).
-    #[arg(long)]
     pub allow_poor_fit: bool,
 }
 
-#[derive(Args, Debug)]
-#[command(
-    after_help = "Example:\n  host-sim identify plant --recording ../shared/conformance/pulses_loaded.csv --plant ../shared/plant/reference-1dof.toml --params joint.inertia_kgm2 --out fitted.toml"
-)]
+#[derive(Debug)]
 pub struct IdentifyPlantArgs {
     /// Recording whose valve inputs are replayed and whose channels are fitted.
-    #[arg(long, value_name = "R.csv")]
     pub recording: PathBuf,
     /// Start plant file.
-    #[arg(long, value_name = "P.toml")]
     pub plant: PathBuf,
     /// Dotted keys to fit, comma separated, each optionally with bounds `key=lo:hi`
     /// (e.g. valve.sonic_conductance_m3_per_s_pa,muscle.damping_m2s,joint.inertia_kgm2).
-    #[arg(long, value_delimiter = ',', required = true)]
     pub params: Vec<String>,
     /// Output plant file (the input with the fitted values replaced).
-    #[arg(long, value_name = "P2.toml")]
     pub out: PathBuf,
     /// Fraction of the recording (its tail) held out for validation.
-    #[arg(long, default_value_t = 0.25, value_parser = f64_in(Range::half_open(0.0, 0.9)))]
     pub holdout_fraction: f64,
     /// Relative (and absolute) tolerance of the replays.
-    #[arg(long, default_value_t = 1e-9, value_parser = f64_in(Range::closed(1e-14, 0.1)))]
     pub rtol: f64,
     /// Levenberg-Marquardt patience: at most this many model evaluations per fitted
     /// parameter (plus one).
-    #[arg(long, default_value_t = 40, value_parser = usize_in(1, 100_000))]
     pub patience: usize,
     /// Write the plant file even when its mean held-out fit is below the one `calibrate`
     /// requires of an identified plant (docs/identification.md).
-    #[arg(long)]
     pub allow_poor_fit: bool,
 }
 
@@ -649,7 +575,7 @@ fn header_line_of(path: &Path) -> usize {
 }
 
 fn identify_torque(a: &IdentifyTorqueArgs) -> Result<String> {
-    use super::calibrate::MIN_TORQUE_FIT_PCT;
+    use super::MIN_TORQUE_FIT_PCT;
     let t = torque_model_file(a)?;
     if !a.allow_poor_fit && !(t.fit_pct >= MIN_TORQUE_FIT_PCT) {
         bail!(
@@ -819,16 +745,16 @@ fn check_torque_excitation(samples: &[torque::TorqueSample], file: &str) -> Resu
         (samples.iter().map(|s| (f(s) - m).powi(2)).sum::<f64>() / n).sqrt()
     };
     let angle_sd_deg = sd_of(&|s| s.angle_rad).to_degrees();
-    if !(angle_sd_deg >= super::calibrate::MIN_ANGLE_SD_DEG) {
+    if !(angle_sd_deg >= super::MIN_ANGLE_SD_DEG) {
         bail!(
             "{file}: column `angle_deg`: the joint hardly moves (sd {angle_sd_deg:.3} deg < {} deg; \
              an angle logged in radians? the column is in degrees); the torque model needs a \
              recording through a range of angles; nothing written",
-            super::calibrate::MIN_ANGLE_SD_DEG
+            super::MIN_ANGLE_SD_DEG
         );
     }
     let dp_sd_kpa = sd_of(&|s| 0.5 * (s.p2_gauge_pa - s.p1_gauge_pa)) / 1e3;
-    if !(dp_sd_kpa >= super::calibrate::MIN_PRESSURE_SD_KPA) {
+    if !(dp_sd_kpa >= super::MIN_PRESSURE_SD_KPA) {
         let p_max_kpa = samples
             .iter()
             .map(|s| s.p1_gauge_pa.abs().max(s.p2_gauge_pa.abs()))
@@ -843,7 +769,7 @@ fn check_torque_excitation(samples: &[torque::TorqueSample], file: &str) -> Resu
             "{file}: the activation dp = (p2_kpa - p1_kpa) / 2 does not vary (sd {dp_sd_kpa:.3} kPa \
              < {} kPa){unit}: B of eq. 11 needs a recording at several activations (`host-sim \
              sweep torque --dp-kpa` takes several levels); nothing written",
-            super::calibrate::MIN_PRESSURE_SD_KPA
+            super::MIN_PRESSURE_SD_KPA
         );
     }
     if !(spread(&|s| s.torque_nm) > 1e-6) {
@@ -1041,7 +967,7 @@ fn identify_plant(a: &IdentifyPlantArgs) -> Result<String> {
     } else {
         ("held-out", fit.holdout_mean_pct())
     };
-    let min = super::calibrate::MIN_IDENTIFIED_HELDOUT_FIT_PCT;
+    let min = super::MIN_IDENTIFIED_HELDOUT_FIT_PCT;
     if !a.allow_poor_fit && !(after >= min) && after < before {
         // Worse than where it started: the search left the start's basin, the recording is
         // not to blame.

@@ -844,55 +844,33 @@ mod tests {
 }
 
 /// Arguments of `host-sim identify volume`.
-/// A path of a comma-separated list without the blanks around it (`"a.csv, b.csv"`).
-fn trimmed_path(s: &str) -> Result<std::path::PathBuf, String> {
-    let t = s.trim();
-    if t.is_empty() {
-        return Err("an empty file name in the list".into());
-    }
-    Ok(t.into())
-}
-
-#[derive(clap::Args, Debug)]
-#[command(
-    after_help = "Example:\n  host-sim simulate --plant ../shared/plant/reference-1dof.toml --scenario scenarios/random.toml --out random.csv\n  host-sim identify volume --recording random.csv --out config/volume.toml"
-)]
+#[derive(Debug)]
 pub struct IdentifyVolumeArgs {
     /// Recording with angle_deg, p1_kpa, p2_kpa and the mass-flow columns m_dot_1_kg_s,
     /// m_dot_2_kg_s (RECORDING.md; `host-sim simulate --scenario` writes them).
-    #[arg(long, value_name = "R.csv")]
     pub recording: std::path::PathBuf,
     /// Output TOML (the format of config/volume.toml).
-    #[arg(long, value_name = "volume.toml")]
     pub out: std::path::PathBuf,
     /// Seed of the random start (the same seed and recording give the same file;
     /// 0..=18446744073709551615).
-    #[arg(long, default_value_t = 1, value_parser = crate::validate::u64_in(0, u64::MAX))]
     pub seed: u64,
     /// Weight decay lambda (the penalty on the network's squared weights in the training
     /// loss, eq. 10 of the learned-inverse-thermodynamics paper).
-    #[arg(long, default_value_t = 1e-5, value_parser = crate::validate::f64_in(crate::validate::Range::closed(0.0, 1.0)))]
     pub weight_decay: f64,
     /// Levenberg-Marquardt budget [loss evaluations].
-    #[arg(long, default_value_t = 2000, value_parser = crate::validate::usize_in(10, 1_000_000))]
     pub max_evals: usize,
     /// Half window of the Savitzky-Golay derivatives [samples] [default: 10 ms worth].
-    #[arg(long, value_parser = crate::validate::usize_in(1, 100_000))]
     pub savgol_half_window: Option<usize>,
     /// Fraction of the recording (its tail) held out for the validation figures.
-    #[arg(long, default_value_t = 0.25, value_parser = crate::validate::f64_in(crate::validate::Range::half_open(0.0, 0.9)))]
     pub holdout_fraction: f64,
     /// Also report the mass-flow errors on these recordings (not trained on; comma
     /// separated).
-    #[arg(long, value_name = "R2.csv", value_delimiter = ',', value_parser = trimmed_path)]
     pub validate: Vec<std::path::PathBuf>,
     /// At most this many training samples (both muscles; evenly thinned).
-    #[arg(long, default_value_t = 4000, value_parser = crate::validate::usize_in(100, 1_000_000))]
     pub max_samples: usize,
     /// Write the network even when its mass-flow error on the held-out tail (or on a
     /// --validate recording) is not below the polynomial volume's, or when nothing is held out
     /// to judge it by (docs/identification.md).
-    #[arg(long)]
     pub allow_worse: bool,
 }
 
@@ -906,7 +884,7 @@ pub const MIN_TRAINING_ANGLE_RANGE_DEG: f64 = 5.0;
 /// Refuses training data that cannot determine the network (before any training): fewer
 /// than [`MIN_SAMPLES_PER_WEIGHT`] samples per weight, a joint that moves less than
 /// [`MIN_TRAINING_ANGLE_RANGE_DEG`], or a pressure that does not vary (sd below
-/// [`super::calibrate::MIN_PRESSURE_SD_KPA`]) in the training part of the recording.
+/// [`super::MIN_PRESSURE_SD_KPA`]) in the training part of the recording.
 pub fn check_training_data(
     per_muscle: &[Vec<VolumeSample>; 2],
     holdout_fraction: f64,
@@ -948,7 +926,7 @@ pub fn check_training_data(
         let sd_kpa = (m.iter().map(|s| (s.p_abs_pa - mean).powi(2)).sum::<f64>() / m.len() as f64)
             .sqrt()
             / 1e3;
-        let min_kpa = super::calibrate::MIN_PRESSURE_SD_KPA;
+        let min_kpa = super::MIN_PRESSURE_SD_KPA;
         if !(sd_kpa >= min_kpa) {
             return Err(format!(
                 "column `p{}_kpa`: sd {sd_kpa:.3} kPa in the training part, below {min_kpa} kPa: \

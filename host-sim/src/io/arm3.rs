@@ -84,7 +84,7 @@ impl Arm3Recording {
     }
 
     /// Joint `joint` (0-based) as a 1-DOF [`Recording`] (columns without the suffix), for
-    /// [`crate::fit::compare`] and [`crate::io::plot::plot_comparison`].
+    /// [`crate::io::compare::compare`] and [`crate::io::plot::plot_comparison`].
     pub fn joint_recording(&self, joint: usize) -> Recording {
         Recording {
             metadata: self.metadata.clone(),

@@ -13,7 +13,7 @@
 //! they were. Without a transaction (library use, tests) each write is renamed at once.
 //!
 //! Every file written here carries host-sim's mark, and temporary files are registered for
-//! removal on an interrupt: the rules of [`crate::io::output`].
+//! removal on an interrupt: the rules of [`crate::output`].
 
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
@@ -58,7 +58,7 @@ pub fn write_with(
 
 /// Writes `bytes` to `path` atomically without host-sim's mark in it, for a table other
 /// programs read (a spreadsheet takes a `#` line for a row): the caller lists it in its
-/// folder's manifest (`io::output::write_manifest`), which marks it as host-sim's.
+/// folder's manifest ([`write_manifest`]), which marks it as host-sim's.
 pub fn write_bytes_unmarked(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     write_marked_with(path, false, |w| w.write_all(bytes))
 }
@@ -81,8 +81,8 @@ fn write_marked_with(
     if binary {
         // No mark fits in a binary file (a firmware stream log): its folder's manifest
         // names it as host-sim's.
-        let dir = crate::io::output::dir_of(path);
-        crate::io::output::write_manifest(&dir, &[path.to_path_buf()])?;
+        let dir = crate::output::dir_of(path);
+        write_manifest(&dir, &[path.to_path_buf()])?;
     }
     Ok(())
 }
@@ -145,8 +145,8 @@ impl std::io::Write for Writeback<'_> {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
         if !self.marked && !buf.is_empty() {
             self.marked = true;
-            self.binary = crate::io::output::is_binary(buf);
-            if let Some((at, mark)) = crate::io::output::mark_for(buf) {
+            self.binary = crate::output::is_binary(buf);
+            if let Some((at, mark)) = crate::output::mark_for(buf) {
                 let mut f = self.file;
                 f.write_all(&buf[..at])?;
                 f.write_all(&mark)?;
@@ -176,7 +176,7 @@ pub fn write_via_path<E>(
 ) -> Result<(), ViaPathError<E>> {
     let tmp = temp_for(path).map_err(ViaPathError::Io)?;
     draw(tmp.path()).map_err(ViaPathError::Write)?;
-    crate::io::output::mark_file(tmp.path()).map_err(ViaPathError::Io)?;
+    crate::output::mark_file(tmp.path()).map_err(ViaPathError::Io)?;
     finish(tmp, path).map_err(ViaPathError::Io)
 }
 
@@ -235,10 +235,10 @@ fn temp_for(path: &Path) -> std::io::Result<tempfile::NamedTempFile> {
             name.to_string_lossy(),
             std::process::id()
         ))
-        .rand_bytes(crate::io::output::TEMP_RANDOM_LEN)
+        .rand_bytes(crate::output::TEMP_RANDOM_LEN)
         .suffix(&format!(".tmp{ext}"))
         .tempfile_in(dir_of(path))?;
-    crate::io::output::register_temp(tmp.path())?;
+    crate::output::register_temp(tmp.path())?;
     Ok(tmp)
 }
 
@@ -268,7 +268,7 @@ fn finish(tmp: tempfile::NamedTempFile, path: &Path) -> std::io::Result<()> {
             drop(guard);
             let t = tmp.to_path_buf();
             let r = tmp.persist(path).map_err(|e| e.error);
-            crate::io::output::forget_temp(&t);
+            crate::output::forget_temp(&t);
             r
         }
     }
@@ -319,7 +319,7 @@ impl Transaction {
         std::mem::forget(self);
         for (tmp, target) in stage.files {
             let t = tmp.to_path_buf();
-            crate::io::output::forget_temp(&t);
+            crate::output::forget_temp(&t);
             tmp.persist(&target).map_err(|e| {
                 std::io::Error::new(e.error.kind(), format!("{}: {}", target.display(), e.error))
             })?;
@@ -343,4 +343,40 @@ pub(crate) fn discard_staged() {
             let _ = std::fs::remove_dir(d); // only if empty
         }
     }
+}
+
+/// Writes the manifest of `dir`: the files it listed already and `files` (paths inside
+/// `dir`), atomically through the run's transaction.
+pub fn write_manifest(dir: &Path, files: &[PathBuf]) -> std::io::Result<()> {
+    let (path, text) = crate::output::manifest_with(dir, files);
+    write_bytes(&path, text.as_bytes())
+}
+
+/// On SIGINT or SIGTERM: removes the run's temporary files and the folders it created (the
+/// user's files stay as they were: nothing was renamed yet), then exits with status 130
+/// (SIGINT) or 143 (SIGTERM). Installed once by the command line. (Elsewhere than Unix the
+/// default action applies; the next run removes the temporary files.)
+#[cfg(not(unix))]
+pub fn install_interrupt_cleanup() {}
+
+/// On SIGINT or SIGTERM: removes the run's temporary files and the folders it created (the
+/// user's files stay as they were: nothing was renamed yet), then exits with status 130
+/// (SIGINT) or 143 (SIGTERM). Installed once by the command line.
+#[cfg(unix)]
+pub fn install_interrupt_cleanup() {
+    use signal_hook::consts::{SIGINT, SIGTERM};
+    let Ok(mut signals) = signal_hook::iterator::Signals::new([SIGINT, SIGTERM]) else {
+        return; // no handler: the default action (temporaries are then removed next run)
+    };
+    std::thread::spawn(move || {
+        if let Some(sig) = signals.forever().next() {
+            crate::output::mark_interrupted();
+            crate::output::remove_live_temps();
+            discard_staged();
+            crate::output::remove_live_temps();
+            let what = if sig == SIGINT { "SIGINT" } else { "SIGTERM" };
+            eprintln!("\ninterrupted ({what}): nothing written, temporary files removed");
+            std::process::exit(128 + sig);
+        }
+    });
 }

@@ -355,11 +355,9 @@ impl Mapping {
 pub const P_ATM_RANGE_PA: Range = Range::closed(50_000.0, 110_000.0);
 /// Proportional band of a pressure regulator [Pa].
 pub const REGULATOR_BAND_RANGE_PA: Range = Range::closed(100.0, 1e6);
-/// Encoder counts per turn an angle in `counts` may give (1 to 2^30: a 30-bit encoder).
-pub const COUNTS_PER_REV: std::ops::RangeInclusive<u32> = 1..=1 << 30;
+pub use crate::validate::COUNTS_PER_REV;
 
-/// Median time step of a recording a PAM joint can be studied from: 100 kHz .. 10 Hz [s].
-pub const STEP_RANGE_S: Range = Range::closed(1e-5, 0.1);
+pub use crate::io::recording::STEP_RANGE_S;
 /// A recording shorter than this [s] is too short to identify or diagnose a joint from (a
 /// few valve pulses): with a time column that, read in the next larger unit, has a plausible
 /// step, the import takes it for a unit off by 1000 (ms read as us, s read as ms).
@@ -1845,23 +1843,16 @@ fn channel_ranges(
 }
 
 /// Arguments of `host-sim import`.
-#[derive(clap::Args, Debug)]
-#[command(
-    after_help = "Example (docs/rig.md has the mapping file):\n  host-sim import --map festo-joint.toml --input messung7.csv --out messung7.rec.csv"
-)]
+#[derive(Debug)]
 pub struct ImportArgs {
     /// Mapping file (TOML): rig columns -> recording channels and units (docs/rig.md).
-    #[arg(long, value_name = "MAP.toml")]
     pub map: PathBuf,
     /// The rig logger's CSV file.
-    #[arg(long, value_name = "RAW.csv")]
     pub input: PathBuf,
     /// Output recording (RECORDING.md).
-    #[arg(long, value_name = "REC.csv")]
     pub out: PathBuf,
     /// Write one recording per gap-free segment (REC-1.csv, REC-2.csv, ...) instead of
     /// refusing a file with gaps.
-    #[arg(long)]
     pub split: bool,
 }
 

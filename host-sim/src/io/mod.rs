@@ -4,13 +4,12 @@
 pub mod arm3;
 pub mod atomic;
 pub mod capture;
+pub mod compare;
 pub mod import;
 pub mod numfmt;
-pub mod output;
 pub mod plot;
 pub mod recording;
 pub mod replay_stream;
-pub mod run_files;
 pub mod scenario;
 pub mod segments;
 

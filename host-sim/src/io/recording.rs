@@ -90,6 +90,9 @@ pub use crate::plant::channel::{Channel, P_KPA_PLAUSIBLE};
 /// 0.05 kg/s).
 pub const MASS_FLOW_RANGE_KG_S: (f64, f64) = (-10.0, 10.0);
 
+/// Median time step of a recording a PAM joint can be studied from: 100 kHz .. 10 Hz [s].
+pub const STEP_RANGE_S: crate::validate::Range = crate::validate::Range::closed(1e-5, 0.1);
+
 /// Largest accepted step between two time stamps, in median steps: a longer step is a gap.
 pub const MAX_STEP_RATIO: f64 = 1.5;
 /// Smallest accepted step between two time stamps, in median steps.
@@ -161,7 +164,7 @@ impl Recording {
 
     /// Whether the time stamps are uniform (each step within [`UNIFORM_TOLERANCE`] of the
     /// median step, each stamp within it of the uniform grid from the first to the last).
-    /// A jittered recording is not: [`crate::sim::simulate_recording`] integrates it between
+    /// A jittered recording is not: [`crate::io::replay_stream::simulate_recording`] integrates it between
     /// its own stamps, and the tools that need a uniform grid take [`Self::to_uniform`].
     pub fn is_uniform(&self) -> bool {
         stamps_uniform(&self.t_s)
@@ -273,18 +276,6 @@ impl Recording {
             .iter()
             .find(|(k, _)| k == key)
             .map(|(_, v)| v.as_str())
-    }
-
-    /// Reads and validates a recording file.
-    ///
-    /// Memory: the columns the file has; a plain file is parsed block by block without its
-    /// text (`replay_stream::read_recording`), anything else is read whole.
-    pub fn read(path: impl AsRef<Path>) -> Result<Self, RecordingError> {
-        let path = path.as_ref();
-        if let Some(rec) = super::replay_stream::read_recording(path) {
-            return Ok(rec);
-        }
-        Self::parse(&read_text(path)?, path)
     }
 
     /// Parses recording text; `path` is used in error messages.
@@ -839,7 +830,7 @@ impl Preamble {
                 match c.split_once('=') {
                     // host-sim's mark says who wrote the file, not what it holds: not kept
                     // (a recording written from it gets its own).
-                    Some((k, _)) if k.trim() == crate::io::output::MARK_KEY => {}
+                    Some((k, _)) if k.trim() == crate::output::MARK_KEY => {}
                     Some((k, v)) => {
                         p.metadata.push((k.trim().to_owned(), v.trim().to_owned()));
                         p.meta_line_of.push(p.lines + 1);
@@ -1546,7 +1537,7 @@ impl<'t> Table<'t> {
         }
         // A time column in another unit (ms written under `t_s`): the step range of a rig's
         // import, 100 kHz .. 10 Hz.
-        let range = crate::io::import::STEP_RANGE_S;
+        let range = STEP_RANGE_S;
         if n >= 2 && !range.contains(median_step) {
             return Err(self.field_err(
                 line_of(1),

@@ -6,7 +6,7 @@
 //! so reading, simulating and writing overlap, and memory does not grow with the recording
 //! beyond its time column (kept for the checks that need every stamp: the median step, the
 //! uniform grid). The output is byte-identical to [`Recording::read`](super::recording::Recording::read),
-//! then [`simulate_recording`](crate::sim::simulate_recording), then [`Recording::write`](super::recording::Recording::write):
+//! then [`simulate_recording`], then [`Recording::write`](super::recording::Recording::write):
 //! the same row parser, the same integrator calls (runs of identical inputs are integrated
 //! as one segment, also across chunk boundaries), the same sensor path and number formatting.
 //!
@@ -25,15 +25,17 @@
 //! path, which reports the error with its file, line and field exactly as before (the
 //! caller discards what was written).
 
-use std::collections::VecDeque;
 use std::io::{Read as _, Seek as _, Write};
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
 
-use crate::io::recording::{self, Channel, RowParser, RowSink, Table};
-use crate::plant::{Plant, ValveInputs};
-use crate::sim::{ActuatorPath, Integrator, SensorPath, SimStats, SolverOptions};
+use crate::io::recording::{self, Channel, RecordingError, RowParser, RowSink, Table};
+use crate::plant::{Plant, PlantState, ValveInputs};
+use crate::sim::replay::{simulate_chunks, OutChunk, RowChunk, CHUNK_ROWS};
+use crate::sim::{
+    simulate_stamped, simulate_with_progress, SimError, SimStats, Simulation, SolverOptions,
+};
 
 /// Bytes read from the file at a time (whole lines) by [`RowStream`].
 const BLOCK_BYTES: usize = 4 << 20;
@@ -41,11 +43,45 @@ const BLOCK_BYTES: usize = 4 << 20;
 /// enough that the buffer's pages are faulted in once (a block of the whole file would take
 /// a page fault per 4 KiB of it), large enough that the read calls cost little.
 const REPLAY_BLOCK_BYTES: usize = 64 << 10;
-/// Rows per chunk passed between the threads (small chunks: the buffers in flight are
-/// reused instead of faulted in fresh, and the pipeline fills and drains sooner).
-const CHUNK_ROWS: usize = 256;
 /// Chunks in flight between two threads (bounds the memory of the pipeline).
 const CHANNEL_CHUNKS: usize = 8;
+
+/// The recording of a replay of `source`: its time stamps and valve inputs, the channels
+/// `plant` measures along the simulated `states` (one per sample), and `metadata`.
+pub fn replay_recording(
+    plant: &Plant,
+    source: &crate::io::recording::Recording,
+    states: &[PlantState],
+    metadata: Vec<(String, String)>,
+) -> crate::io::recording::Recording {
+    use crate::io::recording::{Channel, Recording};
+    let mut out = Recording {
+        metadata,
+        t_s: source.t_s.clone(),
+        inputs: source.inputs.clone(),
+        ..Default::default()
+    };
+    let meas = plant.measure_series(states, source.sample_period_s());
+    for c in Channel::ALL {
+        out.set_channel(c, meas.iter().map(|m| c.of(m)).collect());
+    }
+    out
+}
+
+/// Replays a recording's valve inputs open loop: [`simulate_with_progress`] on a uniform
+/// recording, [`simulate_stamped`] on a jittered one (inputs held between its stamps).
+pub fn simulate_recording(
+    plant: &Plant,
+    rec: &crate::io::recording::Recording,
+    opts: &SolverOptions,
+    progress: impl FnMut(usize),
+) -> Result<Simulation, SimError> {
+    if rec.is_uniform() {
+        simulate_with_progress(plant, &rec.inputs, rec.sample_period_s(), opts, progress)
+    } else {
+        simulate_stamped(plant, &rec.t_s, &rec.inputs, opts, progress)
+    }
+}
 
 /// What a streamed replay did.
 #[derive(Debug, Clone)]
@@ -118,67 +154,15 @@ pub fn replay_file(
             let reader = std::thread::Builder::new()
                 .name("replay-reader".into())
                 .spawn_scoped(s, move || {
-                    let mut t_all: Vec<f64> = Vec::new();
-                    let mut line = data_line;
-                    let mut feed = |bytes: &[u8]| -> bool {
-                        if memchr::memchr(b'"', bytes).is_some()
-                            || std::str::from_utf8(bytes).is_err()
-                        {
-                            return false;
-                        }
-                        let mut start = 0;
-                        while start < bytes.len() {
-                            if abort.load(Ordering::Relaxed) {
-                                return false;
-                            }
-                            let rest = &bytes[start..];
-                            let (end, lines) = match memchr::memchr_iter(b'\n', rest)
-                                .nth(CHUNK_ROWS - 1)
-                            {
-                                Some(i) => (start + i + 1, CHUNK_ROWS as u64),
-                                None => {
-                                    (bytes.len(), memchr::memchr_iter(b'\n', rest).count() as u64)
-                                }
-                            };
-                            let piece = &bytes[start..end];
-                            let mut chunk = match rx_spent_rows.try_recv() {
-                                Ok(mut c) => {
-                                    c.t_s.clear();
-                                    c.inputs.clear();
-                                    c
-                                }
-                                Err(_) => RowChunk::default(),
-                            };
-                            chunk.reserve(CHUNK_ROWS);
-                            if !parser.parse_plain_rows(piece, &mut chunk) {
-                                match table
-                                    .read_chunk::<_, RowChunk>(piece, line, 0, &|r| parser.parse(r))
-                                {
-                                    Ok((c, _)) => chunk = c,
-                                    Err(_) => return false,
-                                }
-                            }
-                            line += lines;
-                            t_all.extend_from_slice(&chunk.t_s);
-                            if tx_rows.send(chunk).is_err() {
-                                return false;
-                            }
-                            start = end;
-                        }
-                        true
+                    let source = ReaderSource {
+                        input,
+                        first_len: first.len() as u64,
+                        data,
+                        data_line,
+                        table,
+                        parser,
                     };
-                    // The first block is in memory (and UTF-8: it was checked for the table).
-                    let fed = feed(data) && stream_blocks(input, first.len() as u64, &mut feed);
-                    drop(tx_rows);
-                    let Ok((n, dt_s)) = rx_n_dt_reader.recv() else {
-                        return false;
-                    };
-                    // The checks of `Recording::parse` that need the whole time column, and the
-                    // uniform grid the replay assumed.
-                    fed && t_all.len() == n
-                        && recording::mean_step_s(&t_all) == dt_s
-                        && table.check_time(&t_all, |_| 0).is_ok()
-                        && recording::stamps_uniform(&t_all)
+                    read_rows(&source, abort, tx_rows, &rx_spent_rows, &rx_n_dt_reader)
                 })?;
             let simulator = std::thread::Builder::new()
                 .name("replay-simulator".into())
@@ -208,7 +192,6 @@ pub fn replay_file(
                 Some(n_dt) => Some(n_dt),
                 None => count_rows(&mut blocks, first_count, table, parser),
             };
-            let mut written = 0usize;
             let mut write_result = Ok(());
             if let Some((n, dt_s)) = n_dt {
                 let _ = tx_dt_sim.send(dt_s);
@@ -220,26 +203,15 @@ pub fn replay_file(
             drop((tx_dt_sim, tx_n_dt_reader));
             // The writer formats the simulated rows (the simulator and the reader keep the two
             // cores busy; this thread would otherwise wait).
-            let mut text = Vec::with_capacity(CHUNK_ROWS * 80);
-            let mut row = [0u8; recording::ROW_BYTES];
-            for chunk in rx_out {
-                if write_result.is_err() || n_dt.is_none() {
-                    abort.store(true, Ordering::Relaxed);
-                    break;
-                }
-                text.clear();
-                for (t, u, m) in &chunk.rows {
-                    recording::push_row_in(&mut row, &mut text, *t, u, m.iter().copied());
-                }
-                if let Err(e) = w.write_all(&text) {
-                    abort.store(true, Ordering::Relaxed);
-                    write_result = Err(e);
-                    break;
-                }
-                written += chunk.rows.len();
-                progress(written);
-                let _ = tx_spent.send(chunk);
-            }
+            let written = write_rows(
+                rx_out,
+                w,
+                &mut write_result,
+                n_dt.is_some(),
+                abort,
+                progress,
+                &tx_spent,
+            );
             let valid = reader.join().unwrap_or(false);
             let sim = simulator.join().unwrap_or(Err(()));
             Ok((valid, sim, written, write_result, n_dt))
@@ -254,6 +226,129 @@ pub fn replay_file(
         })),
         _ => Ok(None),
     }
+}
+
+/// The input file as the reader thread sees it: the first block's data rows (already read)
+/// and where the rest of the file starts.
+struct ReaderSource<'a, 't> {
+    input: &'a Path,
+    first_len: u64,
+    data: &'a [u8],
+    data_line: u64,
+    table: &'a Table<'t>,
+    parser: &'a RowParser,
+}
+
+/// The reader thread: parses the data rows chunk by chunk into `tx_rows` (reusing the
+/// buffers that come back on `rx_spent_rows`), then checks the whole time column against the
+/// row count and mean step the counting pass sends on `rx_n_dt` (the checks of
+/// `Recording::parse` that need the whole column, and the uniform grid the replay assumed).
+/// `false`: not a recording the stream can replay.
+fn read_rows(
+    source: &ReaderSource<'_, '_>,
+    abort: &AtomicBool,
+    tx_rows: mpsc::SyncSender<RowChunk>,
+    rx_spent_rows: &mpsc::Receiver<RowChunk>,
+    rx_n_dt: &mpsc::Receiver<(usize, f64)>,
+) -> bool {
+    let ReaderSource {
+        input,
+        first_len,
+        data,
+        data_line,
+        table,
+        parser,
+    } = *source;
+    let mut t_all: Vec<f64> = Vec::new();
+    let mut line = data_line;
+    let mut feed = |bytes: &[u8]| -> bool {
+        if memchr::memchr(b'"', bytes).is_some() || std::str::from_utf8(bytes).is_err() {
+            return false;
+        }
+        let mut start = 0;
+        while start < bytes.len() {
+            if abort.load(Ordering::Relaxed) {
+                return false;
+            }
+            let rest = &bytes[start..];
+            let (end, lines) = match memchr::memchr_iter(b'\n', rest).nth(CHUNK_ROWS - 1) {
+                Some(i) => (start + i + 1, CHUNK_ROWS as u64),
+                None => (bytes.len(), memchr::memchr_iter(b'\n', rest).count() as u64),
+            };
+            let piece = &bytes[start..end];
+            let mut chunk = match rx_spent_rows.try_recv() {
+                Ok(mut c) => {
+                    c.t_s.clear();
+                    c.inputs.clear();
+                    c
+                }
+                Err(_) => RowChunk::default(),
+            };
+            chunk.reserve(CHUNK_ROWS);
+            if !parser.parse_plain_rows(piece, &mut chunk) {
+                match table.read_chunk::<_, RowChunk>(piece, line, 0, &|r| parser.parse(r)) {
+                    Ok((c, _)) => chunk = c,
+                    Err(_) => return false,
+                }
+            }
+            line += lines;
+            t_all.extend_from_slice(&chunk.t_s);
+            if tx_rows.send(chunk).is_err() {
+                return false;
+            }
+            start = end;
+        }
+        true
+    };
+    // The first block is in memory (and UTF-8: it was checked for the table).
+    let fed = feed(data) && stream_blocks(input, first_len, &mut feed);
+    drop(tx_rows);
+    let Ok((n, dt_s)) = rx_n_dt.recv() else {
+        return false;
+    };
+    // The checks of `Recording::parse` that need the whole time column, and the
+    // uniform grid the replay assumed.
+    fed && t_all.len() == n
+        && recording::mean_step_s(&t_all) == dt_s
+        && table.check_time(&t_all, |_| 0).is_ok()
+        && recording::stamps_uniform(&t_all)
+}
+
+/// The writer: formats the simulated rows of `rx_out` to `w` until they end or writing
+/// fails (then `write_result` holds the error and the run is aborted); `counted`: the row
+/// count is known (else nothing is written). Returns the rows written; `rx_out` is dropped
+/// on return, so a simulator still sending stops.
+fn write_rows(
+    rx_out: mpsc::Receiver<OutChunk>,
+    w: &mut impl Write,
+    write_result: &mut std::io::Result<()>,
+    counted: bool,
+    abort: &AtomicBool,
+    progress: &(dyn Fn(usize) + Sync),
+    tx_spent: &mpsc::Sender<OutChunk>,
+) -> usize {
+    let mut written = 0usize;
+    let mut text = Vec::with_capacity(CHUNK_ROWS * 80);
+    let mut row = [0u8; recording::ROW_BYTES];
+    for chunk in rx_out {
+        if write_result.is_err() || !counted {
+            abort.store(true, Ordering::Relaxed);
+            break;
+        }
+        text.clear();
+        for (t, u, m) in &chunk.rows {
+            recording::push_row_in(&mut row, &mut text, *t, u, m.iter().copied());
+        }
+        if let Err(e) = w.write_all(&text) {
+            abort.store(true, Ordering::Relaxed);
+            *write_result = Err(e);
+            break;
+        }
+        written += chunk.rows.len();
+        progress(written);
+        let _ = tx_spent.send(chunk);
+    }
+    written
 }
 
 /// The time stamp of the data row `line` (the general row reader's), `None` if it does not
@@ -358,83 +453,6 @@ fn count_rows(
     (dt_s > 0.0).then_some((n, dt_s))
 }
 
-/// The simulator stage: [`crate::sim::simulate_with_progress`] over the rows as they come,
-/// then the sensor path, sending the simulated rows on (`spent_rows`: parsed rows back to
-/// the reader; `spent_out`: output chunks back from the writer).
-#[allow(clippy::too_many_arguments)]
-fn simulate_chunks(
-    plant: &Plant,
-    dt_s: f64,
-    opts: &SolverOptions,
-    rx: mpsc::Receiver<RowChunk>,
-    tx: &mpsc::SyncSender<OutChunk>,
-    spent_rows: &mpsc::Sender<RowChunk>,
-    spent_out: &mpsc::Receiver<OutChunk>,
-    abort: &AtomicBool,
-) -> Result<SimStats, ()> {
-    let mut actuator = ActuatorPath::new(plant, dt_s, "open-loop replay").map_err(|_| ())?;
-    let delayed = actuator.delay_samples() != 0;
-    let mut integ = Integrator::new(plant, plant.initial_state(), *opts);
-    let mut sensor = SensorPath::new(plant, dt_s);
-    // Rows read but not yet simulated (the current run of identical inputs).
-    let mut pending: VecDeque<(f64, ValveInputs)> = VecDeque::new();
-    let mut run: Option<(ValveInputs, usize)> = None;
-    let mut out = OutChunk::with_capacity(CHUNK_ROWS);
-    let mut advance = |u: ValveInputs,
-                       len: usize,
-                       pending: &mut VecDeque<(f64, ValveInputs)>,
-                       out: &mut OutChunk|
-     -> Result<(), ()> {
-        integ
-            .advance_samples(u, dt_s, len, |x| {
-                let (t, u) = pending.pop_front().unwrap_or_default();
-                let m = sensor.push(plant, x);
-                out.rows.push((t, u, m.to_array()));
-            })
-            .map_err(|_| ())
-    };
-    for chunk in rx {
-        if abort.load(Ordering::Relaxed) {
-            return Err(());
-        }
-        for (&t, &u) in chunk.t_s.iter().zip(&chunk.inputs) {
-            pending.push_back((t, u));
-            let d = if delayed { actuator.push(u) } else { u };
-            match &mut run {
-                Some((ru, len)) if *ru == d => *len += 1,
-                _ => {
-                    if let Some((ru, len)) = run.take() {
-                        advance(ru, len, &mut pending, &mut out)?;
-                    }
-                    run = Some((d, 1));
-                }
-            }
-        }
-        let _ = spent_rows.send(chunk);
-        if out.rows.len() >= CHUNK_ROWS {
-            let next = match spent_out.try_recv() {
-                Ok(mut c) => {
-                    c.rows.clear();
-                    c
-                }
-                Err(_) => OutChunk::with_capacity(CHUNK_ROWS),
-            };
-            let full = std::mem::replace(&mut out, next);
-            tx.send(full).map_err(|_| ())?;
-        }
-    }
-    if let Some((ru, len)) = run.take() {
-        advance(ru, len, &mut pending, &mut out)?;
-    }
-    if !pending.is_empty() {
-        return Err(());
-    }
-    if !out.rows.is_empty() {
-        tx.send(out).map_err(|_| ())?;
-    }
-    Ok(integ.stats())
-}
-
 /// The rows of a recording file one at a time, read block by block (memory: one block and
 /// one chunk of parsed rows), for the streaming commands that need every column (`fit`).
 /// Rows are parsed by the fast path ([`RowParser::parse_plain_rows`]), a chunk it does not
@@ -534,6 +552,20 @@ impl RowStream {
     }
 }
 
+impl recording::Recording {
+    /// Reads and validates a recording file.
+    ///
+    /// Memory: the columns the file has; a plain file is parsed block by block without its
+    /// text (`replay_stream::read_recording`), anything else is read whole.
+    pub fn read(path: impl AsRef<Path>) -> Result<Self, RecordingError> {
+        let path = path.as_ref();
+        if let Some(rec) = read_recording(path) {
+            return Ok(rec);
+        }
+        Self::parse(&recording::read_text(path)?, path)
+    }
+}
+
 /// [`Recording::read`](super::recording::Recording::read) of a file without holding its
 /// text: the rows are parsed block by block ([`RowStream`]) into the columns the file has
 /// (time, openings and the output channels present: 8 + 32 + 8 per channel bytes a row).
@@ -584,13 +616,6 @@ pub(crate) fn read_recording(path: &Path) -> Option<recording::Recording> {
     Some(rec)
 }
 
-/// Rows as the reader passes them on: time stamps and valve openings.
-#[derive(Default)]
-struct RowChunk {
-    t_s: Vec<f64>,
-    inputs: Vec<ValveInputs>,
-}
-
 impl RowSink<(f64, [f64; 4], [f64; 5])> for RowChunk {
     // The replay reads the readings only to refuse a file `Recording::read` would refuse.
     const WANTS_OUTPUTS: bool = false;
@@ -605,20 +630,6 @@ impl RowSink<(f64, [f64; 4], [f64; 5])> for RowChunk {
     fn append(&mut self, mut other: Self) {
         self.t_s.append(&mut other.t_s);
         self.inputs.append(&mut other.inputs);
-    }
-}
-
-/// Simulated rows, for the writer to format: the input's time and openings with the
-/// simulated channels (by [`Channel::index`]).
-struct OutChunk {
-    rows: Vec<(f64, ValveInputs, [f64; 5])>,
-}
-
-impl OutChunk {
-    fn with_capacity(rows: usize) -> Self {
-        Self {
-            rows: Vec::with_capacity(rows),
-        }
     }
 }
 

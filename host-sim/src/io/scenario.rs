@@ -12,10 +12,6 @@ use crate::sim::SimError;
 // ---------------------------------------------------------------------------------------
 // Scenario files.
 
-/// Wall time of one closed-loop tick (plant integration and firmware), an upper figure of
-/// the measurement in docs/reliability.md.
-pub const CLOSED_LOOP_S_PER_TICK: f64 = 20e-6;
-
 /// A closed-loop scenario (TOML). Unknown keys are errors.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -614,25 +610,6 @@ impl Scenario {
         }
     }
 
-    /// The size of a closed-loop run of this scenario, from its length and tick rate (and
-    /// the random set-point levels it draws), for [`crate::validate::RunEstimate::check`].
-    pub fn run_estimate(&self) -> crate::validate::RunEstimate {
-        let ticks = self.scenario.duration_s * self.scenario.tick_hz;
-        let levels = match self.setpoint {
-            SetpointProfile::Random { hold_s, .. } => self.scenario.duration_s / hold_s,
-            _ => 0.0,
-        };
-        // Per tick: the run's row, the recording (t_s, 4 inputs, 5 channels) and the
-        // formatted CSV lines; measured time per tick in docs/reliability.md.
-        let row_bytes = std::mem::size_of::<crate::control::closed_loop::TickRow>() as f64 + 80.0;
-        crate::validate::RunEstimate {
-            what: format!("closed-loop run `{}`", self.scenario.name),
-            samples: ticks + levels,
-            bytes: ticks * row_bytes + levels * 8.0,
-            seconds: ticks * CLOSED_LOOP_S_PER_TICK,
-        }
-    }
-
     /// Reads and validates a scenario TOML file.
     pub fn load(path: impl AsRef<Path>) -> Result<Self, ClosedLoopError> {
         let (text, file) = read_scenario_text(path.as_ref())?;
@@ -1035,3 +1012,19 @@ pub(crate) fn toml_error_message(e: &toml::de::Error, text: &str) -> String {
     }
     msg
 }
+
+/// The bundled scenarios (the demo's, and the comparison's jump suite): (file name in `scenarios/`, its text).
+pub const SCENARIOS: [(&str, &str); 3] = [
+    (
+        "scenarios/step.toml",
+        include_str!("../../../scenarios/step.toml"),
+    ),
+    (
+        "scenarios/sine.toml",
+        include_str!("../../../scenarios/sine.toml"),
+    ),
+    (
+        "scenarios/random.toml",
+        include_str!("../../../scenarios/random.toml"),
+    ),
+];

@@ -26,7 +26,7 @@ pub fn is_output_of(path: &Path, command: &str) -> bool {
     let Ok(f) = std::fs::File::open(path) else {
         return false;
     };
-    // Among the leading comment lines (host-sim's mark comes first, `io::output`).
+    // Among the leading comment lines (host-sim's mark comes first, `output`).
     std::io::BufReader::new(f.take(4096))
         .lines()
         .map_while(Result::ok)

@@ -18,6 +18,7 @@ use ode_solvers::{Dopri5, OutputType, System};
 use crate::plant::{AuxLayout, AuxState, Plant, PlantState, ValveInputs};
 
 pub mod arm3;
+pub(crate) mod replay;
 pub mod signal_path;
 pub use signal_path::{ActuatorPath, SensorPath};
 
@@ -738,41 +739,4 @@ pub fn simulate_stamped(
         final_state: integ.state(),
         stats: integ.stats(),
     })
-}
-
-/// The recording of a replay of `source`: its time stamps and valve inputs, the channels
-/// `plant` measures along the simulated `states` (one per sample), and `metadata`.
-pub fn replay_recording(
-    plant: &Plant,
-    source: &crate::io::recording::Recording,
-    states: &[PlantState],
-    metadata: Vec<(String, String)>,
-) -> crate::io::recording::Recording {
-    use crate::io::recording::{Channel, Recording};
-    let mut out = Recording {
-        metadata,
-        t_s: source.t_s.clone(),
-        inputs: source.inputs.clone(),
-        ..Default::default()
-    };
-    let meas = plant.measure_series(states, source.sample_period_s());
-    for c in Channel::ALL {
-        out.set_channel(c, meas.iter().map(|m| c.of(m)).collect());
-    }
-    out
-}
-
-/// Replays a recording's valve inputs open loop: [`simulate_with_progress`] on a uniform
-/// recording, [`simulate_stamped`] on a jittered one (inputs held between its stamps).
-pub fn simulate_recording(
-    plant: &Plant,
-    rec: &crate::io::recording::Recording,
-    opts: &SolverOptions,
-    progress: impl FnMut(usize),
-) -> Result<Simulation, SimError> {
-    if rec.is_uniform() {
-        simulate_with_progress(plant, &rec.inputs, rec.sample_period_s(), opts, progress)
-    } else {
-        simulate_stamped(plant, &rec.t_s, &rec.inputs, opts, progress)
-    }
 }

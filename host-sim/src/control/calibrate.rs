@@ -9,57 +9,41 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use clap::Args;
 
-use super::cli::{torque_model_file, IdentifyTorqueArgs};
-use super::write_atomic;
+use crate::identify::cli::{torque_model_file, IdentifyTorqueArgs};
+use crate::identify::write_atomic;
+pub use crate::identify::{
+    MIN_ANGLE_SD_DEG, MIN_IDENTIFIED_HELDOUT_FIT_PCT, MIN_PRESSURE_SD_KPA, MIN_TORQUE_FIT_PCT,
+};
 use crate::io::recording::Channel;
 use crate::{Plant, Recording};
 
-/// Lowest torque-model fit [%] (against the force-derived torque) from which constants are
-/// written. The reference joint's sweep fits 98.96 %; 90 % leaves room for sensor noise and
-/// refuses a recording eq. 11 does not describe.
-pub const MIN_TORQUE_FIT_PCT: f64 = 90.0;
-/// A joint angle whose standard deviation is below this did not move [deg].
-pub const MIN_ANGLE_SD_DEG: f64 = 0.5;
-/// A pressure whose standard deviation is below this was not activated [kPa].
-pub const MIN_PRESSURE_SD_KPA: f64 = 5.0;
 /// Margin above the supply before a pressure reading is refused [kPa] (sensor noise, droop).
 pub const SUPPLY_MARGIN_KPA: f64 = 20.0;
 
 /// `host-sim calibrate`.
-#[derive(Args, Debug)]
-#[command(
-    after_help = "Example:\n  host-sim calibrate --recording rec.csv --plant ../shared/plant/reference-1dof.toml --out-dir config/ --tune"
-)]
+#[derive(Debug)]
 pub struct CalibrateArgs {
     /// Recording of the joint (RECORDING.md: angle_deg, p1_kpa, p2_kpa, optionally f1_n, f2_n):
     /// a motion through a range of angles under varying activation (e.g. `host-sim sweep torque`).
-    #[arg(long, value_name = "REC.csv")]
     pub recording: PathBuf,
     /// Plant file (PLANT.md format; e.g. the output of `host-sim identify plant`): geometry,
     /// inertia, supply, valve, and the force model when the recording has no tensions.
-    #[arg(long, value_name = "P.toml")]
     pub plant: PathBuf,
     /// Directory of the firmware's constants (config/): torque_model.toml,
     /// joint_geometry.toml, plant_constants.toml (and with --tune control_tuned.toml) are
     /// replaced there.
-    #[arg(long, value_name = "DIR")]
     pub out_dir: PathBuf,
     /// Also tune the control gains on the plant file (`host-sim tune`, minutes).
-    #[arg(long)]
     pub tune: bool,
     /// Worker threads of the tuner (with --tune; 1..=256, as every command's --threads).
-    #[arg(long, default_value_t = 2, value_parser = crate::validate::usize_in(1, 256))]
     pub threads: usize,
     /// First identify these plant-file keys (comma separated, `key` or `key=lo:hi`, as
     /// `host-sim identify plant --params`) by replaying a valve-driven recording; the
     /// identified plant file (plant_identified.toml in --out-dir) then feeds every later stage.
-    #[arg(long, value_name = "KEYS", value_delimiter = ',')]
     pub identify_plant: Vec<String>,
     /// The valve-driven recording of --identify-plant (columns t_s, u_in1, u_ex1, u_in2,
     /// u_ex2 and the measured channels) [default: --recording].
-    #[arg(long, value_name = "R.csv", requires = "identify_plant")]
     pub plant_recording: Option<PathBuf>,
 }
 
@@ -269,10 +253,6 @@ fn plant_constants_toml(plant: &Plant, plant_path: &Path, old: &Path) -> String 
     )
 }
 
-/// Least mean held-out fit of the identified plant (`--identify-plant`) for its values to
-/// reach the firmware [%].
-pub const MIN_IDENTIFIED_HELDOUT_FIT_PCT: f64 = 50.0;
-
 /// Runs `host-sim calibrate`; returns the report for stdout. Fails (nothing written) on
 /// degenerate data or a poor torque fit. Stages: the outputs checked, 0. the plant-file keys
 /// identified (optional), the recording checked, 1. the torque model, 2. the plant-derived
@@ -405,11 +385,11 @@ fn identify_plant_stage(
         return Ok(None);
     }
     let valve_rec = a.plant_recording.as_ref().unwrap_or(&a.recording);
-    let (fit, body) = super::plant::identify_plant_text(
+    let (fit, body) = crate::identify::plant::identify_plant_text(
         valve_rec,
         &a.plant,
         &a.identify_plant,
-        &super::plant::PlantFitOptions::default(),
+        &crate::identify::plant::PlantFitOptions::default(),
     )
     .map_err(|e| {
         anyhow::anyhow!("refusing to write firmware constants (nothing written): {e:#}")

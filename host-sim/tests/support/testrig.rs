@@ -1,5 +1,5 @@
 //! An independent test rig for the diagnosis: recordings from a plant written again here,
-//! NOT through [`crate::plant`], [`crate::sim`] or the candidates' effect code, with effect
+//! NOT through `host_sim::plant`, `host_sim::sim` or the candidates' effect code, with effect
 //! forms unlike the candidates' (Stribeck friction, a supply reservoir, a choked leak in one
 //! muscle, the thermodynamic chamber with wall heat transfer of seed 004, a valve dead time
 //! of a fraction of a sample, an offset on one sensor), parameter mismatches of the plant
@@ -30,9 +30,9 @@
 use rand::{rngs::StdRng, Rng, SeedableRng};
 use rand_distr::StandardNormal;
 
-use crate::io::recording::{Channel, Recording};
-use crate::plant::config::PlantConfig;
-use crate::plant::ValveInputs;
+use host_sim::io::recording::{Channel, Recording};
+use host_sim::plant::config::PlantConfig;
+use host_sim::plant::ValveInputs;
 
 /// Gas constant of air, J/(kg K).
 const R_AIR: f64 = 287.05;

@@ -14,7 +14,7 @@
 //!   before the work.
 //! - **Temporary files do not outlive the run**: they are named `.NAME.XXXXXX.tmp.EXT`
 //!   `.NAME.PID.XXXXXX.tmp.EXT` ([`temp_name_pid`]); SIGINT and SIGTERM remove the run's own
-//!   ([`install_interrupt_cleanup`]), and those of a killed run (SIGKILL, power loss: its
+//!   ([`crate::io::atomic::install_interrupt_cleanup`]), and those of a killed run (SIGKILL, power loss: its
 //!   process is gone) are removed by the next run writing in that folder
 //!   ([`remove_stale_temps`]).
 
@@ -183,9 +183,9 @@ pub fn manifest_of(dir: &Path) -> Vec<String> {
         .unwrap_or_default()
 }
 
-/// Writes the manifest of `dir`: the files it listed already and `files` (paths inside
-/// `dir`), atomically through the run's transaction.
-pub fn write_manifest(dir: &Path, files: &[PathBuf]) -> std::io::Result<()> {
+/// The manifest of `dir` once `files` (paths inside `dir`) are added to the files it listed
+/// already: its path and its text (written by [`crate::io::atomic::write_manifest`]).
+pub fn manifest_with(dir: &Path, files: &[PathBuf]) -> (PathBuf, String) {
     let mut names = manifest_of(dir);
     for f in files {
         let rel = f.strip_prefix(dir).unwrap_or(f);
@@ -200,7 +200,7 @@ pub fn write_manifest(dir: &Path, files: &[PathBuf]) -> std::io::Result<()> {
          are never touched).\n{}\n",
         names.join("\n")
     );
-    crate::io::atomic::write_bytes(&dir.join(MANIFEST), text.as_bytes())
+    (dir.join(MANIFEST), text)
 }
 
 /// Whether `path`'s permission bits let no one write it (0444): refused, not renamed over.
@@ -484,33 +484,9 @@ pub fn remove_live_temps() {
     }
 }
 
-/// On SIGINT or SIGTERM: removes the run's temporary files and the folders it created (the
-/// user's files stay as they were: nothing was renamed yet), then exits with status 130
-/// (SIGINT) or 143 (SIGTERM). Installed once by the command line. (Elsewhere than Unix the
-/// default action applies; the next run removes the temporary files.)
-#[cfg(not(unix))]
-pub fn install_interrupt_cleanup() {}
-
-/// On SIGINT or SIGTERM: removes the run's temporary files and the folders it created (the
-/// user's files stay as they were: nothing was renamed yet), then exits with status 130
-/// (SIGINT) or 143 (SIGTERM). Installed once by the command line.
-#[cfg(unix)]
-pub fn install_interrupt_cleanup() {
-    use signal_hook::consts::{SIGINT, SIGTERM};
-    let Ok(mut signals) = signal_hook::iterator::Signals::new([SIGINT, SIGTERM]) else {
-        return; // no handler: the default action (temporaries are then removed next run)
-    };
-    std::thread::spawn(move || {
-        if let Some(sig) = signals.forever().next() {
-            INTERRUPTED.store(true, Ordering::SeqCst);
-            remove_live_temps();
-            crate::io::atomic::discard_staged();
-            remove_live_temps();
-            let what = if sig == SIGINT { "SIGINT" } else { "SIGTERM" };
-            eprintln!("\ninterrupted ({what}): nothing written, temporary files removed");
-            std::process::exit(128 + sig);
-        }
-    });
+/// Marks the run as interrupted: temporary files registered from now on are removed at once.
+pub fn mark_interrupted() {
+    INTERRUPTED.store(true, Ordering::SeqCst);
 }
 
 #[cfg(test)]

@@ -41,7 +41,7 @@ pub const FIRMWARE_COLUMNS: [&str; 8] = [
 
 /// `dir/name.csv` -> `dir/name.firmware.csv` (the firmware trace next to a recording).
 pub fn firmware_trace_path(recording: &Path) -> PathBuf {
-    let stem = super::file_stem_or(recording, "out");
+    let stem = crate::io::file_stem_or(recording, "out");
     recording.with_file_name(format!("{stem}.firmware.csv"))
 }
 
