@@ -127,8 +127,12 @@ fn recording_round_trips_and_bad_files_name_file_line_field() {
     )
     .unwrap_err()
     .to_string();
+    let period_line = 1 + text
+        .lines()
+        .position(|l| l.contains("sample_period_s = 0.001"))
+        .unwrap();
     assert!(
-        e.contains("bad.csv:2") && e.contains("sample_period_s"),
+        e.contains(&format!("bad.csv:{period_line}")) && e.contains("sample_period_s"),
         "{e}"
     );
     // A valve opening out of range.

@@ -8,7 +8,7 @@ use clap::Args;
 /// Arguments of `host-sim compare-control`.
 #[derive(Args, Debug)]
 #[command(
-    after_help = "Example:\n  host-sim compare-control --plant ../shared/plant/reference-1dof.toml"
+    after_help = "Example:\n  host-sim compare-control --plant host-sim/plants/reference-1dof.toml"
 )]
 pub struct CompareControlArgs {
     /// Plant parameter file (TOML): the nominal plant; the effect variants are added to it.
@@ -89,7 +89,7 @@ pub struct FfOverrides {
 
 #[derive(Args, Debug)]
 #[command(
-    after_help = "Example (build the image first):\n  cargo build -p pam-firmware --bin pil --features pam-firmware/firmware --release --target thumbv7em-none-eabihf\n  host-sim pil --plant ../shared/plant/reference-1dof.toml --scenario scenarios/step.toml --out pil.csv --log pil.stream"
+    after_help = "Example (build the image first):\n  cargo build -p pam-firmware --bin pil --features pam-firmware/firmware --release --target thumbv7em-none-eabihf\n  host-sim pil --plant host-sim/plants/reference-1dof.toml --scenario scenarios/step.toml --out pil.csv --log pil.stream"
 )]
 pub struct PilArgs {
     /// Plant parameter file (TOML).
@@ -118,7 +118,7 @@ pub struct PilArgs {
 /// `host-sim tune`.
 #[derive(Args, Debug)]
 #[command(
-    after_help = "Example:\n  host-sim tune --plant ../shared/plant/reference-1dof.toml --out control_tuned.toml"
+    after_help = "Example:\n  host-sim tune --plant host-sim/plants/reference-1dof.toml --out control_tuned.toml"
 )]
 pub struct TuneArgs {
     /// Plant file the gains are tuned on.

@@ -8,7 +8,7 @@ use clap::Args;
 /// `host-sim diagnose-batch`: the arguments.
 #[derive(Args, Debug)]
 #[command(
-    after_help = "Example:\n  host-sim diagnose-batch --plant ../shared/plant/reference-1dof.toml --recordings ../shared/conformance --out-dir diagnoses/"
+    after_help = "Example:\n  host-sim diagnose-batch --plant host-sim/plants/reference-1dof.toml --recordings host-sim/tests/fixtures --out-dir diagnoses/"
 )]
 pub struct BatchArgs {
     /// Nominal plant file (TOML) the user believes in.

@@ -10,7 +10,7 @@ use host_sim::validate::{self, f64_in, u64_in, usize_in, Range};
 /// `host-sim calibrate`.
 #[derive(Args, Debug)]
 #[command(
-    after_help = "Example:\n  host-sim calibrate --recording rec.csv --plant ../shared/plant/reference-1dof.toml --out-dir config/ --tune"
+    after_help = "Example:\n  host-sim calibrate --recording rec.csv --plant host-sim/plants/reference-1dof.toml --out-dir config/ --tune"
 )]
 pub struct CalibrateArgs {
     /// Recording of the joint (RECORDING.md: angle_deg, p1_kpa, p2_kpa, optionally f1_n, f2_n):
@@ -46,7 +46,7 @@ pub struct CalibrateArgs {
 /// `host-sim sweep ...`: synthetic identification data from a plant file.
 #[derive(Args, Debug)]
 #[command(
-    after_help = "Examples:\n  host-sim sweep force --plant ../shared/plant/reference-1dof.toml --out force.csv\n  host-sim sweep torque --plant ../shared/plant/reference-1dof.toml --out torque.csv"
+    after_help = "Examples:\n  host-sim sweep force --plant host-sim/plants/reference-1dof.toml --out force.csv\n  host-sim sweep torque --plant host-sim/plants/reference-1dof.toml --out torque.csv"
 )]
 pub struct SweepArgs {
     #[command(subcommand)]
@@ -73,7 +73,7 @@ pub enum SweepWhat {
 
 #[derive(Args, Debug)]
 #[command(
-    after_help = "Example:\n  host-sim sweep force --plant ../shared/plant/reference-1dof.toml --out force.csv"
+    after_help = "Example:\n  host-sim sweep force --plant host-sim/plants/reference-1dof.toml --out force.csv"
 )]
 pub struct SweepForceArgs {
     /// Plant file: the muscle's Tondu parameters (radius_m, braid_angle_deg, end_factor).
@@ -133,7 +133,7 @@ pub struct SweepForceMapArgs {
 
 #[derive(Args, Debug)]
 #[command(
-    after_help = "Example:\n  host-sim sweep torque --plant ../shared/plant/reference-1dof.toml --out torque.csv --dt-s 0.001"
+    after_help = "Example:\n  host-sim sweep torque --plant host-sim/plants/reference-1dof.toml --out torque.csv --dt-s 0.001"
 )]
 pub struct SweepTorqueArgs {
     /// Plant file.
@@ -184,7 +184,7 @@ pub struct SweepTorqueArgs {
 /// `host-sim identify ...`.
 #[derive(Args, Debug)]
 #[command(
-    after_help = "Examples:\n  host-sim identify force --data force.csv --out force_law.toml\n  host-sim identify torque --recording torque.csv --plant ../shared/plant/reference-1dof.toml --out torque_model.toml\n  host-sim identify plant --recording ../shared/conformance/pulses_loaded.csv --plant ../shared/plant/reference-1dof.toml --params joint.inertia_kgm2 --out fitted.toml"
+    after_help = "Examples:\n  host-sim identify force --data force.csv --out force_law.toml\n  host-sim identify torque --recording torque.csv --plant host-sim/plants/reference-1dof.toml --out torque_model.toml\n  host-sim identify plant --recording host-sim/tests/fixtures/pulses_loaded.csv --plant host-sim/plants/reference-1dof.toml --params joint.inertia_kgm2 --out fitted.toml"
 )]
 pub struct IdentifyArgs {
     #[command(subcommand)]
@@ -231,7 +231,7 @@ pub struct IdentifyForceArgs {
 
 #[derive(Args, Debug)]
 #[command(
-    after_help = "Example:\n  host-sim identify torque --recording torque.csv --plant ../shared/plant/reference-1dof.toml --out torque_model.toml"
+    after_help = "Example:\n  host-sim identify torque --recording torque.csv --plant host-sim/plants/reference-1dof.toml --out torque_model.toml"
 )]
 pub struct IdentifyTorqueArgs {
     /// Recording (RECORDING.md).
@@ -262,7 +262,7 @@ pub struct IdentifyTorqueArgs {
 
 #[derive(Args, Debug)]
 #[command(
-    after_help = "Example:\n  host-sim identify plant --recording ../shared/conformance/pulses_loaded.csv --plant ../shared/plant/reference-1dof.toml --params joint.inertia_kgm2 --out fitted.toml"
+    after_help = "Example:\n  host-sim identify plant --recording host-sim/tests/fixtures/pulses_loaded.csv --plant host-sim/plants/reference-1dof.toml --params joint.inertia_kgm2 --out fitted.toml"
 )]
 pub struct IdentifyPlantArgs {
     /// Recording whose valve inputs are replayed and whose channels are fitted.
@@ -296,7 +296,7 @@ pub struct IdentifyPlantArgs {
 
 #[derive(Args, Debug)]
 #[command(
-    after_help = "Example:\n  host-sim simulate --plant ../shared/plant/reference-1dof.toml --scenario scenarios/random.toml --out random.csv\n  host-sim identify volume --recording random.csv --out config/volume.toml"
+    after_help = "Example:\n  host-sim simulate --plant host-sim/plants/reference-1dof.toml --scenario scenarios/random.toml --out random.csv\n  host-sim identify volume --recording random.csv --out config/volume.toml"
 )]
 pub struct IdentifyVolumeArgs {
     /// Recording with angle_deg, p1_kpa, p2_kpa and the mass-flow columns m_dot_1_kg_s,

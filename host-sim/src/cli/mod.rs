@@ -120,7 +120,7 @@ enum Command {
 
 #[derive(Args)]
 #[command(
-    after_help = "Examples:\n  host-sim diagnose --plant ../shared/plant/reference-1dof.toml --recording ../shared/conformance/pulses_thermal.csv --json diagnosis.json --report report/\n  host-sim diagnose --plant host-sim/plants/arm3-seed001.toml --recording target/demo/arm_sine.csv --json arm.json"
+    after_help = "Examples:\n  host-sim diagnose --plant host-sim/plants/reference-1dof.toml --recording host-sim/tests/fixtures/pulses_thermal.csv --json diagnosis.json --report report/\n  host-sim diagnose --plant host-sim/plants/arm3-seed001.toml --recording target/demo/arm_sine.csv --json arm.json"
 )]
 struct DiagnoseArgs {
     /// Nominal plant file (TOML) the user believes in. A 3-DOF arm file (`kind = "arm3"`)
@@ -175,12 +175,12 @@ struct DemoArgs {
 
 #[derive(Args)]
 #[command(
-    after_help = "Examples:\n  host-sim simulate --plant ../shared/plant/reference-1dof.toml --inputs ../shared/conformance/pulses_nominal.csv --out sim.csv --plot sim.png\n  host-sim simulate --plant ../shared/plant/reference-1dof.toml --scenario scenarios/step.toml --out step.csv"
+    after_help = "Examples:\n  host-sim simulate --plant host-sim/plants/reference-1dof.toml --inputs host-sim/tests/fixtures/pulses_nominal.csv --out sim.csv --plot sim.png\n  host-sim simulate --plant host-sim/plants/reference-1dof.toml --scenario scenarios/step.toml --out step.csv"
 )]
 // Exactly one of --inputs (open loop) and --scenario (closed loop): a missing one names both.
 #[command(group(clap::ArgGroup::new("run").required(true).args(["inputs", "scenario"])))]
 struct SimulateArgs {
-    /// Plant parameter file (TOML, e.g. shared/plant/reference-1dof.toml).
+    /// Plant parameter file (TOML, e.g. host-sim/plants/reference-1dof.toml).
     #[arg(long, value_name = "P.toml")]
     plant: PathBuf,
     /// Recording whose t_s and valve columns are replayed (RECORDING.md).
@@ -227,7 +227,7 @@ enum StartFrom {
 
 #[derive(Args)]
 #[command(
-    after_help = "Example:\n  host-sim fit ../shared/conformance/pulses_nominal.csv sim.csv --min-fit 99.5 --plot fit.png"
+    after_help = "Example:\n  host-sim fit host-sim/tests/fixtures/pulses_nominal.csv sim.csv --min-fit 99.5 --plot fit.png"
 )]
 struct FitArgs {
     /// Reference (measured) recording.
