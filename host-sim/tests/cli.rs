@@ -204,8 +204,14 @@ fn replaying_a_recording_whose_valve_columns_are_unused_warns() {
     );
     ok(&r);
     let err = text(&r.stderr);
+    // The line of the `# source` comment (after host-sim's mark).
+    let source_line = 1 + std::fs::read_to_string(&swept)
+        .unwrap()
+        .lines()
+        .position(|l| l.starts_with("# source"))
+        .unwrap();
     for needle in [
-        format!("warning: {}:3:", swept.display()),
+        format!("warning: {}:{source_line}:", swept.display()),
         "`# source` marks the valve columns unused".into(),
         "u_in1, u_ex1, u_in2, u_ex2 are replayed as recorded".into(),
     ] {
