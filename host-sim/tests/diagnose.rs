@@ -807,6 +807,36 @@ fn a_unit_slip_in_the_check_recording_is_named_as_such_not_as_a_departure() {
 }
 
 #[test]
+fn pressures_logged_in_psi_or_bar_and_read_as_kpa_are_named_as_such() {
+    // The nominal rig's recording (the independent reference implementation) with both
+    // pressure columns written in psi, then in bar, but read as kPa: the answer names the
+    // unit, not a plant-file key.
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(fixture("pulses_nominal.csv")).unwrap();
+    for (unit, kpa_per_unit) in [("psi", 6.894_757_293_168), ("bar", 100.0)] {
+        let train = dir.path().join(format!("train_{unit}.csv"));
+        std::fs::write(
+            &train,
+            scaled_columns(&text, &["p1_kpa", "p2_kpa"], 1.0 / kpa_per_unit),
+        )
+        .unwrap();
+        let json = dir.path().join(format!("d_{unit}.json"));
+        let out = text_of_any_status(&on_plant(
+            "diagnose",
+            &plant(),
+            &[&"--recording", &train, &"--json", &json],
+        ));
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        assert_eq!(v["verdict"], "not_this_plant", "{unit}: {out}");
+        assert!(
+            out.contains(&format!("pressures logged in {unit} and read as kPa")),
+            "{unit}: {out}"
+        );
+    }
+}
+
+#[test]
 fn a_correction_that_makes_the_check_recording_worse_is_not_named() {
     // TRAIN from a rig with twice the inertia (the simulator, through the CLI); CHECK is the
     // nominal rig's recording (the independent reference implementation): the inertia the

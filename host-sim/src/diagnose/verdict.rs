@@ -169,7 +169,24 @@ pub struct PlausibilitySums {
     angle_flipped_err2: f64,
     /// The angle read as radians (converted to degrees) against the simulated angle.
     angle_as_rad_err2: f64,
+    /// Per measured channel: `sum y sim`, `sum sim^2` and `sum y^2` (the least-squares scale
+    /// of the measured channel on the simulated one, and the error it leaves).
+    scale_sums: [[f64; 3]; 5],
 }
+
+/// Pressure units a logger may write that a `*_kpa` column reads as kPa: (name, kPa per
+/// unit, as written in a message). Logged in `unit`, the column reads `1 / kpa_per_unit`
+/// times the pressure in kPa.
+pub const PRESSURE_UNITS_READ_AS_KPA: [(&str, f64, &str); 4] = [
+    ("Pa", 1e-3, "0.001"),
+    ("psi", 6.894_757_293_168, "6.895"),
+    ("bar", 100.0, "100"),
+    ("MPa", 1000.0, "1000"),
+];
+
+/// A measured pressure whose least-squares scale on the nominal one lies within this
+/// relative distance of a unit's (and whose scaled fit is good) is named as that unit.
+pub const PRESSURE_UNIT_SCALE_TOLERANCE: f64 = 0.2;
 
 /// The other muscle's channel of a pressure or force channel (`None` for the angle).
 fn pair_of(c: Channel) -> Option<Channel> {
@@ -190,6 +207,7 @@ impl Default for PlausibilitySums {
             crossed_err2: [0.0; 5],
             angle_flipped_err2: 0.0,
             angle_as_rad_err2: 0.0,
+            scale_sums: [[0.0; 3]; 5],
         }
     }
 }
@@ -204,6 +222,9 @@ impl PlausibilitySums {
             let Some(y) = rec.channel(c) else { continue };
             let a = y[k];
             self.straight_err2[i] += sq(a, c.of(m));
+            self.scale_sums[i][0] += a * c.of(m);
+            self.scale_sums[i][1] += c.of(m) * c.of(m);
+            self.scale_sums[i][2] += a * a;
             if let Some(p) = pair_of(c) {
                 self.crossed_err2[i] += sq(a, p.of(m));
             } else {
@@ -250,6 +271,10 @@ pub fn plausibility_hints(
                 c.name()
             ));
         }
+        if let Some(h) = pressure_unit_hint(c, y, sums) {
+            hints.push(h);
+            continue;
+        }
         let nom_hi = sums.nominal_max[c.index()];
         if nom_hi > 50.0 && hi.abs() < nom_hi / 50.0 && hi - lo < nom_hi / 50.0 {
             hints.push(format!(
@@ -294,6 +319,34 @@ pub fn plausibility_hints(
         }
     }
     hints
+}
+
+/// A pressure channel `y` that is the nominal simulation's times the factor of another unit
+/// read as kPa ([`PRESSURE_UNITS_READ_AS_KPA`]: psi, bar, MPa, Pa), within
+/// [`PRESSURE_UNIT_SCALE_TOLERANCE`], and fits the model far better so scaled than as
+/// recorded: the hint naming the unit and the fix.
+fn pressure_unit_hint(c: Channel, y: &[f64], sums: &PlausibilitySums) -> Option<String> {
+    let [ys, ss, yy] = sums.scale_sums[c.index()];
+    if !(ss > 0.0) {
+        return None;
+    }
+    let scale = ys / ss;
+    let straight = fit_percent_by(|| y.iter().copied(), sums.straight_err2[c.index()]);
+    let scaled_err2 = (yy - 2.0 * scale * ys + scale * scale * ss).max(0.0);
+    let scaled = fit_percent_by(|| y.iter().copied(), scaled_err2);
+    if !(scaled > 50.0 && scaled > straight + 30.0) {
+        return None;
+    }
+    let (unit, _, kpa_per_unit) = PRESSURE_UNITS_READ_AS_KPA
+        .into_iter()
+        .find(|(_, k, _)| (scale * k - 1.0).abs() <= PRESSURE_UNIT_SCALE_TOLERANCE)?;
+    Some(format!(
+        "{} reads {scale:.4} times the nominal model's pressure (it fits the model {scaled:.0} % so \
+         scaled and {straight:.0} % as recorded): pressures logged in {unit} and read as kPa? \
+         (1 {unit} = {kpa_per_unit} kPa): map the column with `unit = \"{unit}\"` in `host-sim \
+         import`, or convert it to kPa gauge",
+        c.name()
+    ))
 }
 
 /// Whether the nominal fits say the recording is nothing like the plant: every recorded
