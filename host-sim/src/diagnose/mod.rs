@@ -20,6 +20,7 @@
 
 pub mod answer;
 pub mod arm3;
+#[cfg(any(test, feature = "test-support"))]
 pub mod baseline;
 pub mod batch;
 pub mod black_box;
@@ -32,6 +33,7 @@ pub mod report;
 pub mod screen;
 pub mod selection;
 pub mod start;
+#[cfg(any(test, feature = "test-support"))]
 pub mod synth;
 pub mod verdict;
 
