@@ -246,6 +246,8 @@ fn full_matrix() {
 //
 // `evidence_full_matrix` (ignored; every case on the tuning and the held-out seeds):
 //   cargo test --release -p host-sim --test diagnose_independent -- --ignored --nocapture evidence_full_matrix
+// `EVIDENCE_CASES=name,name` narrows the ignored matrices to those cases, and
+// `EVIDENCE_SEEDS=11` runs them on those seeds only (printed as the tuning set).
 // `discovery_matrix` (ignored; the out-of-catalogue cases only), `evidence_reduced_matrix`
 // (CI: the cases marked `reduced`, one held-out seed). Each case prints a table row and a
 // line `EVIDENCE {json}` for scripts.
@@ -453,8 +455,25 @@ fn evidence_matrix(cases: &[&'static CaseSpec], seeds: &[u64]) -> Rates {
     rates
 }
 
+/// The cases `keep` selects, narrowed to the names listed in `EVIDENCE_CASES`
+/// (comma-separated) when that variable is set: one case re-run while working on it.
 fn all_cases(keep: impl Fn(&CaseSpec) -> bool) -> Vec<&'static CaseSpec> {
-    CASES.iter().filter(|c| keep(c)).collect()
+    let only = std::env::var("EVIDENCE_CASES").ok();
+    CASES
+        .iter()
+        .filter(|c| keep(c))
+        .filter(|c| only.as_ref().is_none_or(|o| o.split(',').any(|n| n.trim() == c.name)))
+        .collect()
+}
+
+/// `seeds`, or when `EVIDENCE_SEEDS` (comma-separated) is set: those seeds for the tuning
+/// set (`first`) and none for the held-out one.
+fn seeds_or_env(seeds: &[u64], first: bool) -> Vec<u64> {
+    match std::env::var("EVIDENCE_SEEDS") {
+        Ok(s) if first => s.split(',').filter_map(|v| v.trim().parse().ok()).collect(),
+        Ok(_) => Vec::new(),
+        Err(_) => seeds.to_vec(),
+    }
 }
 
 #[test]
@@ -624,8 +643,8 @@ fn evidence_reduced_matrix() {
 #[ignore = "every evidence case on every seed: minutes in release"]
 fn evidence_full_matrix() {
     let cases = all_cases(|_| true);
-    let t = evidence_matrix(&cases, &TUNING_SEEDS);
-    let h = evidence_matrix(&cases, &HELD_OUT_SEEDS);
+    let t = evidence_matrix(&cases, &seeds_or_env(&TUNING_SEEDS, true));
+    let h = evidence_matrix(&cases, &seeds_or_env(&HELD_OUT_SEEDS, false));
     println!("evidence, tuning seeds {TUNING_SEEDS:?}: {}", t.line());
     println!("evidence, held-out seeds {HELD_OUT_SEEDS:?}: {}", h.line());
 }
@@ -634,8 +653,8 @@ fn evidence_full_matrix() {
 #[ignore = "the out-of-catalogue cases on every seed"]
 fn discovery_matrix() {
     let cases = all_cases(|c| c.category == Category::OutOfCatalogue);
-    let t = evidence_matrix(&cases, &TUNING_SEEDS);
-    let h = evidence_matrix(&cases, &HELD_OUT_SEEDS);
+    let t = evidence_matrix(&cases, &seeds_or_env(&TUNING_SEEDS, true));
+    let h = evidence_matrix(&cases, &seeds_or_env(&HELD_OUT_SEEDS, false));
     println!("discovery, tuning seeds {TUNING_SEEDS:?}: {}", t.line());
     println!("discovery, held-out seeds {HELD_OUT_SEEDS:?}: {}", h.line());
 }
