@@ -333,7 +333,8 @@ fn evidence_run(c: &EvidenceCase) -> EvOutcome {
                         _ => &[],
                     };
                     let all_named = with.iter().all(|w| named.iter().any(|n| n == w));
-                    let explained = d.verdict == Verdict::Explained;
+                    // A graded answer: explained, or partly explained with the right items.
+                    let explained = d.verdict.names_items();
                     let need_lift = spec.category.is_sensitivity();
                     let pass = explained && first_ok(ids) && all_named && (!need_lift || lifted);
                     let why = if pass {
@@ -350,10 +351,9 @@ fn evidence_run(c: &EvidenceCase) -> EvOutcome {
                     (pass, why)
                 }
                 Expect::NothingMissing => (d.verdict == Verdict::NothingMissing, String::new()),
-                Expect::NothingNamed => (
-                    named.is_empty() && d.verdict != Verdict::Explained,
-                    String::new(),
-                ),
+                Expect::NothingNamed => {
+                    (named.is_empty() && !d.verdict.names_items(), String::new())
+                }
                 Expect::Unexplained => (
                     d.verdict == Verdict::Unexplained && named.is_empty(),
                     String::new(),
@@ -391,6 +391,11 @@ fn evidence_run(c: &EvidenceCase) -> EvOutcome {
         "departing_channel": dch,
         "check_before": db,
         "check_after": da,
+        "removed_check": d.as_ref().ok().and_then(|d| d.grade.removed_check_total),
+        "removed_heldout": d.as_ref().ok().map(|d| d.grade.removed_heldout_total),
+        "graded": d.as_ref().ok().map(|d| d.grade.items.iter().map(|i| format!("{}:{}:{:.3}", i.id, i.accepted, i.share_check.unwrap_or(i.share_heldout))).collect::<Vec<_>>()),
+        "residual_x_noise": d.as_ref().ok().map(|d| d.residual_x_noise.0),
+        "round1": d.as_ref().ok().map(|d| { let mut r: Vec<_> = d.candidates.iter().filter(|c| c.round == 1).map(|c| (c.explained, c.id.clone())).collect(); r.sort_by(|a, b| b.0.total_cmp(&a.0)); r.into_iter().take(5).map(|(e, id)| format!("{id}:{e:.3}")).collect::<Vec<_>>() }),
         "pass": pass,
         "why": why,
         "seconds": secs,
@@ -462,7 +467,10 @@ fn all_cases(keep: impl Fn(&CaseSpec) -> bool) -> Vec<&'static CaseSpec> {
     CASES
         .iter()
         .filter(|c| keep(c))
-        .filter(|c| only.as_ref().is_none_or(|o| o.split(',').any(|n| n.trim() == c.name)))
+        .filter(|c| {
+            only.as_ref()
+                .is_none_or(|o| o.split(',').any(|n| n.trim() == c.name))
+        })
         .collect()
 }
 
@@ -647,6 +655,52 @@ fn evidence_full_matrix() {
     let h = evidence_matrix(&cases, &seeds_or_env(&HELD_OUT_SEEDS, false));
     println!("evidence, tuning seeds {TUNING_SEEDS:?}: {}", t.line());
     println!("evidence, held-out seeds {HELD_OUT_SEEDS:?}: {}", h.line());
+    // The rows scripts/bench-evidence.sh writes to docs/figures/evidence.tsv.
+    for row in figure_rows(&t, &h) {
+        println!("FIGURE\t{row}");
+    }
+}
+
+/// The rates as figure rows (`key<TAB>figure<TAB>measured<TAB>target<TAB>check`): tuning
+/// and held-out apart, the held-out ones against the targets.
+fn figure_rows(t: &Rates, h: &Rates) -> Vec<String> {
+    let rate =
+        |(p, n): (usize, usize)| format!("{p}/{n} ({:.0} %)", 100.0 * p as f64 / n.max(1) as f64);
+    let check = |(p, n): (usize, usize), min: f64| {
+        if n > 0 && p as f64 >= min * n as f64 {
+            "met"
+        } else {
+            "missed"
+        }
+    };
+    let mut rows = vec![
+        format!(
+            "sensitivity_tuning\tsensitivity, tuning seeds {TUNING_SEEDS:?}: forms unlike the candidates, right item first (explained or partly explained), CHECK's departing channel lifted by half its gap\t{}\t\t",
+            rate(t.sensitivity)
+        ),
+        format!(
+            "sensitivity_heldout\tsensitivity, held-out seeds {HELD_OUT_SEEDS:?}\t{}\t>= 90 %\t{}",
+            rate(h.sensitivity),
+            check(h.sensitivity, 0.9)
+        ),
+        format!(
+            "honesty_tuning\thonesty, tuning seeds: mis-set keys recalibrated, nominal data nothing missing, pure noise and out-of-catalogue forms nothing named\t{}\t\t",
+            rate(t.honesty)
+        ),
+        format!(
+            "honesty_heldout\thonesty, held-out seeds\t{}\t>= 95 %\t{}",
+            rate(h.honesty),
+            check(h.honesty, 0.95)
+        ),
+    ];
+    for (cat, pn) in &h.by_category {
+        rows.push(format!(
+            "heldout_{cat}\theld-out seeds, {}\t{}\t\t",
+            cat.replace('_', " "),
+            rate(*pn)
+        ));
+    }
+    rows
 }
 
 #[test]

@@ -956,11 +956,18 @@ fn run_diagnose_arm(
     use std::io::Write as _;
     let mut out = std::io::stdout().lock();
     let _ = writeln!(out, "{}wrote {}", d.answer(), a.json.display());
-    Ok(if d.joints.iter().all(|j| j.verdict.is_answer()) {
-        ExitCode::SUCCESS
-    } else {
-        ExitCode::from(3)
-    })
+    // The joints' worst status: 3 before 4 before 0.
+    let status = d
+        .joints
+        .iter()
+        .map(|j| j.verdict.exit_status())
+        .max_by_key(|s| match s {
+            3 => 2,
+            4 => 1,
+            _ => 0,
+        })
+        .unwrap_or(0);
+    Ok(ExitCode::from(status))
 }
 
 fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
@@ -1081,11 +1088,7 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
         Plant::from_config(&cfg).effects_summary()
     );
     let _ = writeln!(out, "{}wrote {}", d.answer(), a.json.display());
-    // Exit status 3: the diagnosis names nothing because the recording is unexplained or
-    // not of this plant (the JSON says which).
-    Ok(if d.verdict.is_answer() {
-        ExitCode::SUCCESS
-    } else {
-        ExitCode::from(3)
-    })
+    // Exit status 4: partly explained; 3: the diagnosis names nothing because the recording
+    // is unexplained or not of this plant (the JSON says which).
+    Ok(ExitCode::from(d.verdict.exit_status()))
 }

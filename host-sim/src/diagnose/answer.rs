@@ -62,7 +62,67 @@ pub fn failure_json(message: &str) -> serde_json::Value {
     })
 }
 
+/// When a located mismatch happens: a regime ("mostly during high speed") or "throughout
+/// the run".
+fn when(regime: &str) -> String {
+    if regime.starts_with("throughout") {
+        regime.to_string()
+    } else {
+        format!("mostly during {regime}")
+    }
+}
+
+fn located_json(located: &[super::Located]) -> Vec<serde_json::Value> {
+    located
+        .iter()
+        .map(|l| {
+            serde_json::json!({
+                "channel": l.channel.name(),
+                "fit_pct": json_num(l.fit_pct, 2),
+                "windows_s": l.windows_s.iter().map(|w| [json_num(w[0], 4), json_num(w[1], 4)]).collect::<Vec<_>>(),
+                "regime": l.regime,
+            })
+        })
+        .collect()
+}
+
+fn json_shares(m: &BTreeMap<&'static str, f64>) -> serde_json::Value {
+    serde_json::Value::Object(
+        m.iter()
+            .map(|(k, v)| (k.to_string(), json_num(*v, 4)))
+            .collect(),
+    )
+}
+
 impl Diagnosis {
+    /// ", removes 62 % of the mismatch (angle_deg 70 %, p1_kpa 10 %)" for the graded item
+    /// `id` (empty when it was not graded).
+    fn share_note(&self, id: &str) -> String {
+        let Some(i) = self.grade.items.iter().find(|i| i.id == id && i.accepted) else {
+            return String::new();
+        };
+        let total = i.share_check.unwrap_or(i.share_heldout);
+        if !total.is_finite() {
+            return String::new();
+        }
+        let per: Vec<String> = i
+            .share
+            .iter()
+            .filter(|(_, v)| v.is_finite())
+            .map(|(k, v)| format!("{k} {:.0} %", 100.0 * v))
+            .collect();
+        format!(
+            "; removes {:.0} % of the mismatch{} ({})",
+            100.0 * total,
+            if i.share_check.is_some() {
+                " on the check recording"
+            } else {
+                " on the held-out tail"
+            },
+            per.join(", ")
+        )
+    }
+
     /// The first line of the answer; pressures logged absolute come first (the rest of
     /// the answer is about an offset of one atmosphere).
     pub fn headline(&self) -> String {
@@ -100,6 +160,32 @@ impl Diagnosis {
                         if self.recalibrated.len() == 1 { "is" } else { "are" }
                     ),
                 }
+            }
+            Verdict::PartlyExplained => {
+                let mut names: Vec<String> =
+                    self.effects.iter().map(|e| e.label.clone()).collect();
+                names.extend(self.recalibrated.iter().map(|r| format!("{} off", r.key)));
+                let (x, channel) = self.residual_x_noise;
+                let removed = match self.grade.removed_check_total {
+                    Some(c) => format!(
+                        "{:.0} % of the mismatch on the check recording ({:.0} % on the held-out tail of the training one)",
+                        100.0 * c,
+                        100.0 * self.grade.removed_heldout_total
+                    ),
+                    None => format!(
+                        "{:.0} % of the mismatch on the held-out tail of the training recording",
+                        100.0 * self.grade.removed_heldout_total
+                    ),
+                };
+                let (holds, removes) = if names.len() == 1 {
+                    ("holds", "it removes")
+                } else {
+                    ("hold", "together they remove")
+                };
+                format!(
+                    "Partly explained: {} {holds} on the held-out data; {removes} {removed}, but {x:.0} times the noise remains on {channel}: something else is missing too (where it remains is located below).",
+                    names.join(" and "),
+                )
             }
             Verdict::Unexplained => {
                 let message = {
@@ -176,18 +262,7 @@ impl Diagnosis {
 
     /// The JSON of the diagnosis.
     pub fn to_json(&self) -> serde_json::Value {
-        let located: Vec<serde_json::Value> = self
-            .located
-            .iter()
-            .map(|l| {
-                serde_json::json!({
-                    "channel": l.channel.name(),
-                    "fit_pct": json_num(l.fit_pct, 2),
-                    "windows_s": l.windows_s.iter().map(|w| [json_num(w[0], 4), json_num(w[1], 4)]).collect::<Vec<_>>(),
-                    "regime": l.regime,
-                })
-            })
-            .collect();
+        let located = located_json(&self.located);
         let effects: Vec<serde_json::Value> = self
             .effects
             .iter()
@@ -248,6 +323,25 @@ impl Diagnosis {
                 "times_noise": json_num(self.residual_x_noise.0, 2),
                 "limit": json_num(self.max_residual_x_noise, 2),
             },
+            "grade": {
+                "items": self.grade.items.iter().map(|i| serde_json::json!({
+                    "id": i.id,
+                    "accepted": i.accepted,
+                    "share_by_channel": json_shares(&i.share),
+                    "share_heldout": json_num(i.share_heldout, 4),
+                    "share_check": i.share_check.map(|v| json_num(v, 4)).unwrap_or(serde_json::Value::Null),
+                    "gain_pts": json_num(i.gain_pts, 2),
+                    "ci_excludes_null": i.ci_excludes_null,
+                    "why_not": i.why_not,
+                })).collect::<Vec<_>>(),
+                "removed": {
+                    "heldout": json_shares(&self.grade.removed_heldout),
+                    "check": self.grade.removed_check.as_ref().map(json_shares).unwrap_or(serde_json::Value::Null),
+                    "heldout_total": json_num(self.grade.removed_heldout_total, 4),
+                    "check_total": self.grade.removed_check_total.map(|v| json_num(v, 4)).unwrap_or(serde_json::Value::Null),
+                },
+            },
+            "remaining": located_json(&self.remaining),
             "lookalikes": self.lookalikes,
             "hints": self.hints,
             "failures": self.failures,
@@ -283,9 +377,15 @@ impl Diagnosis {
                 }
                 return s;
             }
-            Verdict::Explained => {
+            Verdict::Explained | Verdict::PartlyExplained => {
                 for e in &self.effects {
-                    s += &format!("  - {} ({}): {}\n", e.label, e.id, e.description);
+                    s += &format!(
+                        "  - {} ({}): {}{}\n",
+                        e.label,
+                        e.id,
+                        e.description,
+                        self.share_note(&e.id)
+                    );
                 }
                 for r in &self.recalibrated {
                     let bound = r
@@ -293,14 +393,24 @@ impl Diagnosis {
                         .map(|b| format!(", at its bound {b:.4e}: the true value may lie beyond"))
                         .unwrap_or_default();
                     s += &format!(
-                        "  - recalibrate {} ({}): {:.4e} -> {:.4e} ({:+.1} %), 95 % interval [{:.4e}, {:.4e}]{bound}\n",
+                        "  - recalibrate {} ({}): {:.4e} -> {:.4e} ({:+.1} %), 95 % interval [{:.4e}, {:.4e}]{bound}{}\n",
                         r.key,
                         r.label,
                         r.nominal,
                         r.fitted,
                         100.0 * (r.fitted / r.nominal - 1.0),
                         r.ci95[0],
-                        r.ci95[1]
+                        r.ci95[1],
+                        self.share_note(&r.key)
+                    );
+                }
+                for i in self.grade.items.iter().filter(|i| !i.accepted) {
+                    s += &format!(
+                        "  - tried {}, not kept: {}\n",
+                        i.id,
+                        i.why_not
+                            .as_deref()
+                            .unwrap_or("it did not hold on the held-out data")
                     );
                 }
                 s += &format!(
@@ -309,6 +419,15 @@ impl Diagnosis {
                 );
                 if let (Some(b), Some(a)) = (&self.check_before, &self.check_after) {
                     s += &format!("Fit on the check recording: {}.\n", change(b, a));
+                }
+                for l in &self.remaining {
+                    s += &format!(
+                        "Remains: {} (fit {:.1} % after the correction) in {} window(s), {}.\n",
+                        l.channel.name(),
+                        l.fit_pct,
+                        l.windows_s.len(),
+                        when(&l.regime)
+                    );
                 }
             }
             Verdict::Unexplained | Verdict::NotThisPlant => {
@@ -331,17 +450,12 @@ impl Diagnosis {
                 .first_departure_s
                 .map(|t| format!(", first departs at {t:.3} s"))
                 .unwrap_or_default();
-            // A regime ("high speed") or "throughout the run".
-            let when = if l.regime.starts_with("throughout") {
-                l.regime.clone()
-            } else {
-                format!("mostly during {}", l.regime)
-            };
             s += &format!(
-                "Located: {} (fit {:.1} %) in {} window(s), {when}{first}.\n",
+                "Located: {} (fit {:.1} %) in {} window(s), {}{first}.\n",
                 l.channel.name(),
                 l.fit_pct,
                 l.windows_s.len(),
+                when(&l.regime)
             );
         }
         if let Some(first) = self

@@ -27,7 +27,8 @@ pub struct BatchRow {
 pub struct BatchDiagnosis {
     /// Pretty JSON (as `diagnose --json` writes it).
     pub json: String,
-    /// The verdict (`explained`, `nothing_missing`, `unexplained`, `not_this_plant`).
+    /// The verdict (`explained`, `partly_explained`, `nothing_missing`, `unexplained`,
+    /// `not_this_plant`).
     pub verdict: &'static str,
     /// Labels of the named effects, then `recalibrate KEY` for each recalibrated key.
     pub effects: Vec<String>,
@@ -368,17 +369,22 @@ pub fn run_batch(a: &BatchArgs) -> anyhow::Result<(String, u8)> {
 
 /// The batch's exit status, the worst over its recordings: 1 if one could not be diagnosed
 /// (its error is in the summary), else 3 if one is `unexplained` or `not_this_plant` (as
-/// `diagnose` exits 3 on them), else 0.
+/// `diagnose` exits 3 on them), else 4 if one is `partly_explained`, else 0.
 pub fn exit_status(rows: &[BatchRow]) -> u8 {
     if rows.iter().any(|r| r.result.is_err()) {
         1
     } else if rows.iter().any(|r| {
         matches!(
             &r.result,
-            Ok(d) if !matches!(d.verdict, "explained" | "nothing_missing")
+            Ok(d) if !matches!(d.verdict, "explained" | "nothing_missing" | "partly_explained")
         )
     }) {
         3
+    } else if rows
+        .iter()
+        .any(|r| matches!(&r.result, Ok(d) if d.verdict == "partly_explained"))
+    {
+        4
     } else {
         0
     }

@@ -15,7 +15,13 @@
 //!   fits no channel, or a plausibility check on the units and the channel mapping fires):
 //!   no effect is named and the likely cause is pointed at.
 //!
-//! The CLI exits with status 3 on `unexplained` and `not_this_plant` (the JSON is written).
+//! - `partly_explained`: named items each earned their place on held-out data and remove
+//!   most of the mismatch, but what remains is above the noise floor: the remaining
+//!   mismatch is located (channel, windows, regime), not named.
+//!
+//! The CLI exits with status 0 on `explained` and `nothing_missing`, 4 on
+//! `partly_explained`, 3 on `unexplained` and `not_this_plant` (the JSON is written in every
+//! case), 2 on bad input.
 
 use crate::fit::fit_percent_by;
 use crate::io::recording::{Channel, Recording};
@@ -97,6 +103,9 @@ pub fn check_departs(
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Verdict {
     Explained,
+    /// Named items that each earned their place on held-out data and remove most of the
+    /// mismatch, but leave more than the noise: the rest is located, not named.
+    PartlyExplained,
     NothingMissing,
     Unexplained,
     NotThisPlant,
@@ -107,15 +116,31 @@ impl Verdict {
     pub fn as_str(self) -> &'static str {
         match self {
             Verdict::Explained => "explained",
+            Verdict::PartlyExplained => "partly_explained",
             Verdict::NothingMissing => "nothing_missing",
             Verdict::Unexplained => "unexplained",
             Verdict::NotThisPlant => "not_this_plant",
         }
     }
 
-    /// Whether the answer names effects / recalibrations (the CLI exits 0) or refuses (3).
+    /// Whether the answer is complete: explained, or nothing is missing (the CLI exits 0).
     pub fn is_answer(self) -> bool {
         matches!(self, Verdict::Explained | Verdict::NothingMissing)
+    }
+
+    /// Whether the answer names effects or recalibrated keys (explained, partly explained).
+    pub fn names_items(self) -> bool {
+        matches!(self, Verdict::Explained | Verdict::PartlyExplained)
+    }
+
+    /// The command line's exit status: 0 explained or nothing missing, 4 partly explained,
+    /// 3 unexplained or not this plant (2 is bad input, before any verdict).
+    pub fn exit_status(self) -> u8 {
+        match self {
+            Verdict::Explained | Verdict::NothingMissing => 0,
+            Verdict::PartlyExplained => 4,
+            Verdict::Unexplained | Verdict::NotThisPlant => 3,
+        }
     }
 }
 
