@@ -20,7 +20,9 @@
 //! effect ids and recalibrated keys and every CHECK channel >= 95 % after; `nothing_missing`;
 //! or a refusal, exit status 3, for pure noise). Without force channels joint friction and
 //! muscle hysteresis count as one answer, and so do the recalibrations of the valve
-//! conductance and of the chamber volume (the diagnosis says they cannot be told apart).
+//! conductance and of the chamber volume (the diagnosis says they cannot be told apart), and
+//! the keys of one group of `recalibrate::GROUPS` (radius or braid angle; end factor,
+//! initial contraction or rest length).
 
 #[path = "support/testrig.rs"]
 mod testrig;
@@ -711,4 +713,52 @@ fn discovery_matrix() {
     let h = evidence_matrix(&cases, &seeds_or_env(&HELD_OUT_SEEDS, false));
     println!("discovery, tuning seeds {TUNING_SEEDS:?}: {}", t.line());
     println!("discovery, held-out seeds {HELD_OUT_SEEDS:?}: {}", h.line());
+}
+
+/// The sensitivity regressions the pool's per-valve and per-muscle keys are screened by
+/// (`diagnose::key_screen`), per case and seed: the numbers its thresholds were chosen on
+/// (tuning seeds only: `EVIDENCE_SEEDS=11,12`).
+#[test]
+#[ignore = "prints the key screening's R^2 of the cases selected by EVIDENCE_CASES"]
+fn key_screen_values() {
+    use host_sim::diagnose::key_screen::{key_evidence, retain_indicated};
+    use host_sim::diagnose::{gather_evidence, selection::candidate_pool};
+    let cfg = nominal();
+    let keys = recalibrate::keys();
+    for seed in seeds_or_env(&TUNING_SEEDS, true) {
+        for spec in all_cases(|c| c.category == Category::MisSetKey) {
+            let c = evidence_case(&cfg, spec, seed);
+            let train = if c.train.is_uniform() {
+                c.train.clone()
+            } else {
+                c.train.to_uniform()
+            };
+            let opts = DiagnoseOptions::default();
+            let Ok(g) = gather_evidence(&cfg, &train, &opts) else {
+                continue;
+            };
+            let r2 = |k: &str| {
+                keys.iter()
+                    .find(|x| x.key == k)
+                    .and_then(|x| key_evidence(&cfg, &g.evidence, x))
+                    .map_or(f64::NAN, |e| e.r2)
+            };
+            let row: Vec<String> = keys
+                .iter()
+                .map(|k| format!("{} {:.3}", k.key, r2(k.key)))
+                .collect();
+            let kept: Vec<String> = retain_indicated(candidate_pool(&cfg), &cfg, &g.evidence)
+                .iter()
+                .map(|c| c.id().to_string())
+                .filter(|id| recalibrate::is_part_key(id))
+                .collect();
+            println!(
+                "KEYSCREEN {} seed {seed} ({}): kept {:?}\n  {}",
+                spec.name,
+                c.sizes,
+                kept,
+                row.join(", ")
+            );
+        }
+    }
 }

@@ -243,6 +243,59 @@ impl<'a> Problem<'a> {
         Some(r)
     }
 
+    /// Cost of the model `parts` over `head` from a replay of `0..head.end` only (the
+    /// ranking of a start grid: cheap, not the cost a fit reports); infinite when the replay
+    /// fails.
+    pub fn head_cost(&self, parts: &[Part], head: std::ops::Range<usize>) -> f64 {
+        let mut sums = [0.0f64; 5];
+        let ok = self.replay_each(parts, head.end, |k, m| {
+            if head.contains(&k) {
+                for c in Channel::ALL {
+                    if let Some(y) = self.measured[c.index()] {
+                        sums[c.index()] += ((c.of(m) - y[k]) / self.scale[c.index()]).powi(2);
+                    }
+                }
+            }
+        });
+        let total: f64 = sums.iter().sum::<f64>() / head.len().max(1) as f64;
+        if ok && total.is_finite() {
+            total
+        } else {
+            f64::INFINITY
+        }
+    }
+
+    /// Far-off values: each recalibrated key with a wide search range
+    /// ([`super::start::log_grid`]) starts from the best point of its grid, ranked on a short
+    /// head of `range` with the other parts held, when that point's cost is below
+    /// [`super::start::GRID_SWITCH`] times the current start's.
+    fn start_far_off(&self, parts: &mut [Part], range: &std::ops::Range<usize>) {
+        let head = super::start::grid_head(range, self.setup.dt_s);
+        if head.is_empty() {
+            return;
+        }
+        for i in 0..parts.len() {
+            let Some(grid) = super::start::log_grid(parts[i].candidate, &self.setup) else {
+                continue;
+            };
+            let mut trial = parts.to_vec();
+            let mut cost_at = |v: f64| {
+                trial[i].params[0] = v;
+                self.head_cost(&trial, head.clone())
+            };
+            let c0 = cost_at(parts[i].params[0]);
+            let best = grid
+                .into_iter()
+                .map(|v| (cost_at(v), v))
+                .min_by(|a, b| a.0.total_cmp(&b.0));
+            if let Some((cb, v)) = best {
+                if cb < super::start::GRID_SWITCH * c0 {
+                    parts[i].params[0] = v;
+                }
+            }
+        }
+    }
+
     /// Fits the parameters of `parts` on `range` starting from their current values: first
     /// every discrete parameter over its grid (the others held), then the continuous ones
     /// with the shared output-error fitter ([`crate::identify::output_error::fit`]). Returns
@@ -281,6 +334,7 @@ impl<'a> Problem<'a> {
                 parts[i].params = best.1;
             }
         }
+        self.start_far_off(&mut parts, &range);
         // Continuous parameters: (part, index) and their bounds.
         let mut slots: Vec<(usize, usize)> = Vec::new();
         let mut oe: Vec<OeParam> = Vec::new();

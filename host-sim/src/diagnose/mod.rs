@@ -28,6 +28,7 @@ pub mod candidates;
 pub mod differentiate;
 pub mod fitting;
 pub mod grade;
+pub mod key_screen;
 pub mod locate;
 pub mod recalibrate;
 pub mod report;
@@ -932,6 +933,8 @@ pub fn diagnose(
 
     // 1. Evidence.
     let g = gather_evidence(nominal, train, opts)?;
+    // Keys of one valve or one muscle only where the evidence points at that part.
+    let cands = key_screen::retain_indicated(cands, nominal, &g.evidence);
     step("screening");
     // 2. Candidates, screened.
     let mut s = screen_candidates(&g, &cands, nominal, train, opts);
@@ -1743,6 +1746,9 @@ fn lookalike_notes(
         };
         lookalikes.push(s);
     }
+    lookalikes.extend(recalibrate::group_notes(named, |k| {
+        round1_explained.get(k).copied()
+    }));
     if named.contains(&"sensor_gain") {
         lookalikes.push("A sensor gain on the angle, with or without a changed inertia, is also what a wrong sprocket radius or muscle rest length does to the model (the angle scales with the muscle travel over the radius): check `joint.sprocket_radius_m` and `muscle.rest_length_m` before trusting the gain (`host-sim identify plant --params KEY` fits one key).".into());
     }

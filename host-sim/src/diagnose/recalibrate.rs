@@ -22,8 +22,8 @@ pub struct RecalKey {
     /// Bounds as factors of the nominal value (for a zero nominal value: absolute).
     pub lo_factor: f64,
     pub hi_factor: f64,
-    get: fn(&PlantConfig) -> f64,
-    set: fn(&mut PlantConfig, f64),
+    pub(crate) get: fn(&PlantConfig) -> f64,
+    pub(crate) set: fn(&mut PlantConfig, f64),
 }
 
 /// A [`RecalKey`] for a plain field `table.key` of the plant file.
@@ -40,17 +40,80 @@ macro_rules! field_key {
     };
 }
 
-/// The keys the diagnosis may recalibrate.
+/// A [`RecalKey`] for key `$field` of valve `$i` (`[valve.inlet1]` ...: [`VALVE_TABLES`]
+/// order), read through the valve's overrides and written into its own table.
+macro_rules! valve_key {
+    ($i:literal, $name:literal, $field:ident, $label:expr, $lo:expr, $hi:expr) => {
+        RecalKey {
+            key: concat!("valve.", $name, ".", stringify!($field)),
+            label: $label,
+            lo_factor: $lo,
+            hi_factor: $hi,
+            get: |c| c.valve.of($i).$field,
+            set: |c, v| c.valve.override_mut($i).$field = Some(v),
+        }
+    };
+}
+
+/// A [`RecalKey`] for key `$field` of muscle `$i` (`[muscle.m1]`, `[muscle.m2]`), read
+/// through the muscle's overrides and written into its own table.
+macro_rules! muscle_key {
+    ($i:literal, $name:literal, $field:ident, $label:expr, $lo:expr, $hi:expr) => {
+        RecalKey {
+            key: concat!("muscle.", $name, ".", stringify!($field)),
+            label: $label,
+            lo_factor: $lo,
+            hi_factor: $hi,
+            get: |c| c.muscle.of($i).$field,
+            set: |c, v| c.muscle.override_mut($i).$field = Some(v),
+        }
+    };
+}
+
+/// A [`RecalKey`] for the initial contraction of muscle `$i` alone.
+macro_rules! muscle_chi0_key {
+    ($i:literal, $name:literal, $label:expr) => {
+        RecalKey {
+            key: concat!("muscle.", $name, ".initial_contraction"),
+            label: $label,
+            lo_factor: CHI0_FACTORS.0,
+            hi_factor: CHI0_FACTORS.1,
+            get: |c| {
+                c.muscle
+                    .initial_contraction_of($i, c.joint.initial_contraction)
+            },
+            set: |c, v| c.muscle.override_mut($i).initial_contraction = Some(v),
+        }
+    };
+}
+
+/// Search range of the muscles' geometry keys (rest length, end factor, sprocket radius) as
+/// factors of the file's value: a tape measure is rarely 20 % off.
+const GEOMETRY_FACTORS: (f64, f64) = (0.8, 1.25);
+/// Search range of the initial contraction (chi0 0.14 -> 0.084 .. 0.196; it must stay below
+/// the force law's maximum contraction, about 0.25 on the reference muscles).
+const CHI0_FACTORS: (f64, f64) = (0.6, 1.4);
+/// Search range of the Tondu force keys (radius, braid angle).
+const FORCE_FACTORS: (f64, f64) = (0.7, 1.3);
+/// Search range of a valve's sonic conductance.
+const CONDUCTANCE_FACTORS: (f64, f64) = (0.2, 5.0);
+
+/// The keys the diagnosis may recalibrate: the shared keys first, then the keys of one valve
+/// or one muscle ([`is_part_key`]), which the pool keeps only when the evidence points at
+/// that valve or muscle ([`super::key_screen::retain_indicated`]).
 pub fn keys() -> Vec<RecalKey> {
+    let (cl, ch) = CONDUCTANCE_FACTORS;
+    let (fl, fh) = FORCE_FACTORS;
+    let (gl, gh) = GEOMETRY_FACTORS;
     vec![
         field_key!(
             valve.sonic_conductance_m3_per_s_pa,
             "valve sonic conductance",
-            0.2,
-            5.0
+            cl,
+            ch
         ),
-        field_key!(muscle.radius_m, "muscle radius", 0.7, 1.3),
-        field_key!(muscle.braid_angle_deg, "braid angle", 0.7, 1.3),
+        field_key!(muscle.radius_m, "muscle radius", fl, fh),
+        field_key!(muscle.braid_angle_deg, "braid angle", fl, fh),
         RecalKey {
             // The whole volume polynomial is scaled; reported as its constant term b0.
             key: "muscle.volume_poly_m3",
@@ -77,7 +140,180 @@ pub fn keys() -> Vec<RecalKey> {
         // on a recording of the bare one).
         field_key!(joint.inertia_kgm2, "joint inertia (load)", 1.0 / 30.0, 30.0),
         field_key!(environment.supply_gauge_pa, "supply pressure", 0.5, 1.3),
+        field_key!(muscle.rest_length_m, "muscle rest length", gl, gh),
+        field_key!(
+            joint.initial_contraction,
+            "initial contraction",
+            CHI0_FACTORS.0,
+            CHI0_FACTORS.1
+        ),
+        field_key!(muscle.end_factor, "muscle end factor", gl, gh),
+        field_key!(joint.sprocket_radius_m, "sprocket radius", gl, gh),
+        // 0.433 -> 0.22 .. 0.69 (ISO 6358 b of real valves: about 0.2 .. 0.5).
+        field_key!(valve.critical_ratio, "valve critical ratio", 0.5, 1.6),
+        valve_key!(
+            0,
+            "inlet1",
+            sonic_conductance_m3_per_s_pa,
+            "inlet valve 1 conductance",
+            cl,
+            ch
+        ),
+        valve_key!(
+            1,
+            "exhaust1",
+            sonic_conductance_m3_per_s_pa,
+            "exhaust valve 1 conductance",
+            cl,
+            ch
+        ),
+        valve_key!(
+            2,
+            "inlet2",
+            sonic_conductance_m3_per_s_pa,
+            "inlet valve 2 conductance",
+            cl,
+            ch
+        ),
+        valve_key!(
+            3,
+            "exhaust2",
+            sonic_conductance_m3_per_s_pa,
+            "exhaust valve 2 conductance",
+            cl,
+            ch
+        ),
+        muscle_key!(0, "m1", radius_m, "muscle 1 radius", fl, fh),
+        muscle_key!(1, "m2", radius_m, "muscle 2 radius", fl, fh),
+        muscle_key!(0, "m1", braid_angle_deg, "muscle 1 braid angle", fl, fh),
+        muscle_key!(1, "m2", braid_angle_deg, "muscle 2 braid angle", fl, fh),
+        muscle_key!(0, "m1", end_factor, "muscle 1 end factor", gl, gh),
+        muscle_key!(1, "m2", end_factor, "muscle 2 end factor", gl, gh),
+        muscle_key!(0, "m1", rest_length_m, "muscle 1 rest length", gl, gh),
+        muscle_key!(1, "m2", rest_length_m, "muscle 2 rest length", gl, gh),
+        muscle_chi0_key!(0, "m1", "muscle 1 initial contraction"),
+        muscle_chi0_key!(1, "m2", "muscle 2 initial contraction"),
     ]
+}
+
+/// Whether `key` belongs to one valve or one muscle (`valve.inlet1.*`, `muscle.m2.*`).
+pub fn is_part_key(key: &str) -> bool {
+    part_of(key).is_some()
+}
+
+/// The shared key a key of one valve or one muscle refines, with the part's index:
+/// `valve.inlet1.sonic_conductance_m3_per_s_pa` -> (`valve.sonic_conductance_m3_per_s_pa`,
+/// valve 0); `muscle.m2.initial_contraction` -> (`joint.initial_contraction`, muscle 1).
+pub fn part_of(key: &str) -> Option<(String, usize)> {
+    let mut it = key.splitn(3, '.');
+    let (table, part, field) = (it.next()?, it.next()?, it.next()?);
+    let i = match table {
+        "valve" => crate::plant::config::VALVE_TABLES
+            .iter()
+            .position(|t| *t == part)?,
+        "muscle" => crate::plant::config::MUSCLE_TABLES
+            .iter()
+            .position(|t| *t == part)?,
+        _ => return None,
+    };
+    let shared = if table == "muscle" && field == "initial_contraction" {
+        "joint.initial_contraction".to_string()
+    } else {
+        format!("{table}.{field}")
+    };
+    Some((shared, i))
+}
+
+/// Keys a recording cannot tell apart, each group with the name the answer gives it: the
+/// Tondu force keys scale the force alike, and the contraction keys all move the muscles'
+/// operating point on the force law. Per muscle the same groups hold within that muscle.
+/// (The valve conductance and the chamber volume are a look-alike pair of the answer too.)
+pub const GROUPS: &[(&str, &[&str])] = &[
+    (
+        "muscle radius or braid angle",
+        &["muscle.radius_m", "muscle.braid_angle_deg"],
+    ),
+    (
+        "muscle 1 radius or braid angle",
+        &["muscle.m1.radius_m", "muscle.m1.braid_angle_deg"],
+    ),
+    (
+        "muscle 2 radius or braid angle",
+        &["muscle.m2.radius_m", "muscle.m2.braid_angle_deg"],
+    ),
+    (
+        "muscle end factor, initial contraction or rest length",
+        &[
+            "muscle.end_factor",
+            "joint.initial_contraction",
+            "muscle.rest_length_m",
+        ],
+    ),
+    (
+        "muscle 1 end factor, initial contraction or rest length",
+        &[
+            "muscle.m1.end_factor",
+            "muscle.m1.initial_contraction",
+            "muscle.m1.rest_length_m",
+        ],
+    ),
+    (
+        "muscle 2 end factor, initial contraction or rest length",
+        &[
+            "muscle.m2.end_factor",
+            "muscle.m2.initial_contraction",
+            "muscle.m2.rest_length_m",
+        ],
+    ),
+];
+
+/// The group of [`GROUPS`] `key` belongs to: its name and members.
+pub fn group_of(key: &str) -> Option<(&'static str, &'static [&'static str])> {
+    GROUPS
+        .iter()
+        .find(|(_, members)| members.contains(&key))
+        .copied()
+}
+
+/// A round-1 share within this many points of the named key's makes a group member as
+/// likely as the named key: the recording did not tell them apart.
+pub const GROUP_TIE_POINTS: f64 = 10.0;
+
+/// The answer's statement for each named key of a [`GROUPS`] group: the group's name, what
+/// each member removed alone in round 1 (`share(key)`, 0..1; `None`: not refitted) and
+/// whether the recording told them apart.
+pub fn group_notes(named: &[&str], share: impl Fn(&str) -> Option<f64>) -> Vec<String> {
+    let pct = |k: &str| share(k).map(|v| 100.0 * v.max(0.0));
+    named
+        .iter()
+        .filter_map(|k| {
+            let (name, members) = group_of(k)?;
+            let own = pct(k).unwrap_or(0.0);
+            let others: Vec<String> = members
+                .iter()
+                .filter(|m| *m != k)
+                .map(|m| match pct(m) {
+                    Some(p) => format!("{m} {p:.0} %"),
+                    None => format!("{m} not refitted"),
+                })
+                .collect();
+            let tied = members
+                .iter()
+                .filter(|m| *m != k)
+                .any(|m| pct(m).is_some_and(|p| own - p < GROUP_TIE_POINTS));
+            Some(format!(
+                "{k} is one of a group of keys this plant model moves alike ({name}): \
+                 recalibrating it removes {own:.0} % of the held-out error beyond noise, {}; {}",
+                others.join(", "),
+                if tied {
+                    "this recording cannot tell them apart: read the answer as the group, and \
+                     measure one of them to fix the others."
+                } else {
+                    "this recording prefers it, but measure it before trusting it over the others."
+                }
+            ))
+        })
+        .collect()
 }
 
 /// A recalibration candidate: one key, its nominal value and bounds.
@@ -328,6 +564,66 @@ mod tests {
         {
             assert!((a - 2.0 * b).abs() <= 1e-15 * b.abs().max(1.0));
         }
+    }
+
+    #[test]
+    fn a_key_of_one_part_writes_its_own_table_and_names_its_shared_key() {
+        let cfg = nominal();
+        let s = Setup {
+            dt_s: 1e-3,
+            present: [true; 5],
+        };
+        let pool = candidates(&cfg);
+        let find = |id: &str| pool.iter().find(|c| c.id() == id).unwrap();
+        let mut m = cfg.clone();
+        find("valve.exhaust2.sonic_conductance_m3_per_s_pa").apply(&mut m, &[4e-9], &s);
+        assert_eq!(m.valve.sonic_conductance_m3_per_s_pa, 8e-9);
+        assert_eq!(m.valve.of(3).sonic_conductance_m3_per_s_pa, 4e-9);
+        assert_eq!(m.valve.of(2).sonic_conductance_m3_per_s_pa, 8e-9);
+        find("muscle.m1.initial_contraction").apply(&mut m, &[0.12], &s);
+        assert_eq!(
+            m.muscle
+                .initial_contraction_of(0, m.joint.initial_contraction),
+            0.12
+        );
+        assert_eq!(m.joint.initial_contraction, 0.14);
+        assert_eq!(
+            part_of("muscle.m2.initial_contraction"),
+            Some(("joint.initial_contraction".into(), 1))
+        );
+        assert_eq!(
+            part_of("valve.inlet2.sonic_conductance_m3_per_s_pa"),
+            Some(("valve.sonic_conductance_m3_per_s_pa".into(), 2))
+        );
+        assert_eq!(part_of("muscle.radius_m"), None);
+        assert!(!is_part_key("joint.inertia_kgm2"));
+        // Every group member is a key.
+        let ids: Vec<&str> = keys().iter().map(|k| k.key).collect();
+        for (_, members) in GROUPS {
+            assert!(members.iter().all(|m| ids.contains(m)), "{members:?}");
+        }
+    }
+
+    #[test]
+    fn a_named_key_of_a_group_is_reported_with_the_group() {
+        let share = |k: &str| match k {
+            "muscle.radius_m" => Some(0.9),
+            "muscle.braid_angle_deg" => Some(0.85),
+            _ => None,
+        };
+        let notes = group_notes(&["muscle.radius_m", "leakage"], share);
+        assert_eq!(notes.len(), 1);
+        assert!(
+            notes[0].contains("muscle radius or braid angle"),
+            "{}",
+            notes[0]
+        );
+        assert!(notes[0].contains("cannot tell them apart"), "{}", notes[0]);
+        let clear = group_notes(&["muscle.radius_m"], |k| {
+            (k == "muscle.radius_m").then_some(0.9)
+        });
+        assert!(clear[0].contains("not refitted"), "{}", clear[0]);
+        assert!(clear[0].contains("prefers it"), "{}", clear[0]);
     }
 
     #[test]

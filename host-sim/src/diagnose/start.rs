@@ -8,6 +8,10 @@
 //! sensors read it (a sensor calibration the diagnosis fits moves the start with it:
 //! `InitialConfig::as_read`). A 3-DOF arm's joints make the same choice against the arm's
 //! settled state.
+//!
+//! Also here: where a fit of a wide-ranging key starts ([`log_grid`]): a key far off the
+//! file's value (a joint with 11 times the inertia) is found from a coarse logarithmic grid
+//! over its search range, ranked on a short head of the recording, before the local search.
 
 use crate::diagnose::DiagnoseOptions;
 use crate::io::recording::{Channel, Recording};
@@ -124,4 +128,103 @@ pub fn for_diagnosis(
         return None;
     }
     better_from_recording(nominal, train, opts)
+}
+
+/// A recalibrated key's search range spanning at least this ratio (hi / lo) is gridded
+/// before the local search ([`log_grid`]): the inertia (1/30 .. 30x), the conductances
+/// (0.2 .. 5x) and the damping (0 .. 20x); the narrow geometry keys are not.
+pub const GRID_MIN_SPAN: f64 = 10.0;
+/// A range starting at 0 is gridded from this share of its upper bound.
+pub const GRID_ZERO_FLOOR: f64 = 1.0 / 400.0;
+/// The best grid point replaces the start when its cost on the head is below this share of
+/// the start's (the start stays unless the grid is clearly better: a start near the optimum
+/// is the common case, and its fit stays as it was).
+pub const GRID_SWITCH: f64 = 0.8;
+/// The head the grid is ranked on: this share of the fitted range ...
+pub const GRID_HEAD_SHARE: f64 = 1.0 / 3.0;
+/// ... but at least this many seconds (or the whole range).
+pub const GRID_HEAD_MIN_S: f64 = 1.5;
+
+/// The grid of a one-parameter recalibration whose range spans [`GRID_MIN_SPAN`] or more:
+/// about one point per factor 2, log-spaced in the middle of equal cells (never on a bound);
+/// `None` for any other candidate.
+pub fn log_grid(
+    c: &dyn crate::diagnose::candidates::Candidate,
+    s: &crate::diagnose::candidates::Setup,
+) -> Option<Vec<f64>> {
+    if !crate::diagnose::recalibrate::is_recal_id(c.id()) || c.grid(&[], s).is_some() {
+        return None;
+    }
+    let specs = c.params(s);
+    let [p] = specs.as_slice() else {
+        return None;
+    };
+    if !(p.hi.is_finite() && p.hi > 0.0 && p.lo >= 0.0) {
+        return None;
+    }
+    let lo = if p.lo > 0.0 {
+        p.lo
+    } else {
+        p.hi * GRID_ZERO_FLOOR
+    };
+    let span = p.hi / lo;
+    if !(span >= GRID_MIN_SPAN) {
+        return None;
+    }
+    let n = (span.log2().ceil() as usize).clamp(4, 12);
+    Some(
+        (0..n)
+            .map(|j| lo * span.powf((j as f64 + 0.5) / n as f64))
+            .collect(),
+    )
+}
+
+/// The head of `range` a grid is ranked on ([`GRID_HEAD_SHARE`], [`GRID_HEAD_MIN_S`]).
+pub fn grid_head(range: &std::ops::Range<usize>, dt_s: f64) -> std::ops::Range<usize> {
+    let min = (GRID_HEAD_MIN_S / dt_s.max(1e-9)).round() as usize;
+    let len = ((range.len() as f64 * GRID_HEAD_SHARE) as usize)
+        .max(min)
+        .min(range.len());
+    range.start..range.start + len
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::candidates::Setup;
+
+    #[test]
+    fn wide_keys_get_a_log_grid_inside_their_range_and_narrow_ones_none() {
+        let nominal = PlantConfig::from_toml_str(
+            &std::fs::read_to_string(
+                std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                    .join("tests/fixtures/reference-1dof.toml"),
+            )
+            .unwrap(),
+            "p.toml",
+        )
+        .unwrap();
+        let s = Setup {
+            dt_s: 1e-3,
+            present: [true; 5],
+        };
+        let pool = crate::diagnose::recalibrate::candidates(&nominal);
+        let grid = |id: &str| log_grid(pool.iter().find(|c| c.id() == id).unwrap().as_ref(), &s);
+        let g = grid("joint.inertia_kgm2").unwrap();
+        let (lo, hi) = (0.014 / 30.0, 0.014 * 30.0);
+        assert!(
+            g.len() >= 8 && g.iter().all(|v| *v > lo && *v < hi),
+            "{g:?}"
+        );
+        // 11 times the file's inertia lies within a factor 1.5 of a grid point.
+        assert!(g
+            .iter()
+            .any(|v| (v / (11.0 * 0.014)).ln().abs() < 1.5f64.ln()));
+        assert!(grid("muscle.damping_m2s").is_some());
+        assert!(grid("valve.sonic_conductance_m3_per_s_pa").is_some());
+        assert!(grid("muscle.radius_m").is_none());
+        assert!(grid("environment.supply_gauge_pa").is_none());
+        assert_eq!(grid_head(&(0..9000), 1e-3), 0..3000);
+        assert_eq!(grid_head(&(100..1100), 1e-3), 100..1100);
+    }
 }

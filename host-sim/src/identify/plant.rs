@@ -324,8 +324,29 @@ fn item_at<'a>(doc: &'a DocumentMut, key: &str) -> Option<&'a Item> {
     Some(it)
 }
 
+/// The shared key a key of one valve or one muscle inherits while its table does not set it
+/// (`valve.inlet1.critical_ratio` -> `valve.critical_ratio`, `muscle.m2.initial_contraction`
+/// -> `joint.initial_contraction`): fitting it starts from that value and writes the part's
+/// own table.
+fn inherited_key(key: &str) -> Option<String> {
+    use crate::plant::config::{MUSCLE_TABLES, VALVE_TABLES};
+    let mut it = key.splitn(3, '.');
+    let (table, part, field) = (it.next()?, it.next()?, it.next()?);
+    match table {
+        "valve" if VALVE_TABLES.contains(&part) => Some(format!("valve.{field}")),
+        "muscle" if MUSCLE_TABLES.contains(&part) && field == "initial_contraction" => {
+            Some("joint.initial_contraction".into())
+        }
+        "muscle" if MUSCLE_TABLES.contains(&part) => Some(format!("muscle.{field}")),
+        _ => None,
+    }
+}
+
 fn get_number(doc: &DocumentMut, key: &str, file: &str) -> Result<f64, IdentError> {
-    let item = item_at(doc, key).ok_or_else(|| {
+    let item = item_at(doc, key)
+        .filter(|i| !i.is_none())
+        .or_else(|| item_at(doc, &inherited_key(key)?));
+    let item = item.ok_or_else(|| {
         IdentError::Data(format!(
             "{file}: key `{key}`: no such key in the plant file"
         ))

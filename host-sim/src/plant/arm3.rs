@@ -349,7 +349,21 @@ impl Arm3Config {
             sd.validate(&Check::new(path, "supply_drop"))?;
         }
         if let Some((key, msg)) = crate::plant::config::valve_ratio_error(&self.valve) {
-            return Err(bad(key, msg));
+            return Err(bad(&key, msg));
+        }
+        if let Some((key, msg)) = crate::plant::config::valve_override_error(&self.valve) {
+            return Err(bad(&key, msg));
+        }
+        for (i, j) in self.joints().iter().enumerate() {
+            if j.muscle.has_overrides() {
+                let name = if j.muscle.m1.is_some() { "m1" } else { "m2" };
+                return Err(bad(
+                    &format!("joint{}.muscle.{name}", i + 1),
+                    "per-muscle tables are read by the 1-DOF plant only: the arm's joints \
+                     have one [jointN.muscle] table for both muscles"
+                        .into(),
+                ));
+            }
         }
         Ok(())
     }
@@ -736,6 +750,9 @@ pub struct Arm3 {
     pub p_atm_pa: f64,
     pub p_supply_abs_pa: f64,
     pub valve: Iso6358Valve,
+    /// The valves of every joint's muscle 1 and 2: inlet 1, exhaust 1, inlet 2, exhaust 2
+    /// (`[valve]` with its per-valve tables, the same on each joint).
+    pub valves: [Iso6358Valve; 4],
     pub links: Links,
     pub pairs: [MusclePair; 3],
     pub friction: [Eq7Friction; 3],
@@ -782,11 +799,8 @@ impl Arm3 {
         let mut arm = Self {
             p_atm_pa,
             p_supply_abs_pa: c.environment.supply_gauge_pa + p_atm_pa,
-            valve: Iso6358Valve::new(
-                c.valve.sonic_conductance_m3_per_s_pa,
-                c.valve.critical_ratio,
-                c.valve.laminar_ratio,
-            ),
+            valve: crate::plant::valve_of(&c.valve),
+            valves: [0, 1, 2, 3].map(|v| crate::plant::valve_of(&c.valve.of(v))),
             links: Links::from_config(&c.links),
             pairs: joints.map(pair),
             friction: joints.map(|j| Eq7Friction::from_config(&j.friction)),
@@ -864,8 +878,9 @@ impl Arm3 {
             ..Default::default()
         };
         let mut tau = [0.0; 3];
+        let (inlet1, inlet2) = (&self.valves[0], &self.valves[2]);
         let p_supply = self.supply.pressure_abs_pa(
-            &self.valve,
+            [inlet1, inlet2, inlet1, inlet2, inlet1, inlet2],
             self.p_supply_abs_pa,
             x.supply_abs_pa,
             [
@@ -894,12 +909,12 @@ impl Arm3 {
                 f[m] = self.tension_n(i, p - self.p_atm_pa, chi[m], dchi[m]);
                 let mut q = effects.chamber_flow_m3_s(m, p, self.p_atm_pa);
                 if u_in[m] != 0.0 {
-                    let q_in = u_in[m] * self.valve.flow_m3_s(p_supply, p);
+                    let q_in = u_in[m] * self.valves[2 * m].flow_m3_s(p_supply, p);
                     q += q_in;
                     q_inlet += q_in;
                 }
                 if u_ex[m] != 0.0 {
-                    q -= u_ex[m] * self.valve.flow_m3_s(p, self.p_atm_pa);
+                    q -= u_ex[m] * self.valves[2 * m + 1].flow_m3_s(p, self.p_atm_pa);
                 }
                 d.p_abs_pa[i][m] = pressure_factor
                     * pressure::pressure_rate_pa_s(

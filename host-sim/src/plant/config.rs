@@ -10,7 +10,8 @@ use serde::Deserialize;
 
 use crate::plant::effects::EffectsConfig;
 pub use crate::plant::tables::{
-    ConfigError, EnvironmentConfig, InitialConfig, JointConfig, MuscleConfig, ValveConfig,
+    ConfigError, EnvironmentConfig, InitialConfig, JointConfig, MuscleConfig, MuscleOverride,
+    ValveConfig, ValveOverride, MUSCLE_TABLES, VALVE_TABLES,
 };
 use crate::validate::{range_rows, Range, RangeRow};
 
@@ -248,26 +249,89 @@ pub(crate) fn volume_coefficients_error(v: &[f64; 4]) -> Option<String> {
 
 /// The first `[valve]` pressure ratio outside its range: its key and the message quoting the
 /// typed value and the allowed range (1-DOF and arm files).
-pub(crate) fn valve_ratio_error(v: &ValveConfig) -> Option<(&'static str, String)> {
+pub(crate) fn valve_ratio_error(v: &ValveConfig) -> Option<(String, String)> {
+    valve_ratio_error_in(v, "valve")
+}
+
+/// [`valve_ratio_error`] of the valve table `table` (`valve`, `valve.inlet1`, ...).
+fn valve_ratio_error_in(v: &ValveConfig, table: &str) -> Option<(String, String)> {
     use crate::validate::range_error;
     let b = v.critical_ratio;
+    let critical = format!("{table}.critical_ratio");
+    let laminar = format!("{table}.laminar_ratio");
     range_error(
-        "valve.critical_ratio",
+        &critical,
         b,
         Range::half_open(0.0, 1.0),
         "(ISO 6358 b: the downstream over upstream absolute pressure at which the flow \
          chokes, about 0.2 .. 0.5 on real valves; the reference plant has 0.433)",
     )
-    .map(|msg| ("valve.critical_ratio", msg))
+    .map(|msg| (critical.clone(), msg))
     .or_else(|| {
         range_error(
-            "valve.laminar_ratio",
+            &laminar,
             v.laminar_ratio,
             Range::open(b, 1.0),
             "(above valve.critical_ratio and below 1: from it the flow falls linearly to 0 at \
              ratio 1; the reference plant has 0.999)",
         )
-        .map(|msg| ("valve.laminar_ratio", msg))
+        .map(|msg| (laminar.clone(), msg))
+    })
+}
+
+/// The first invalid key of the per-valve tables (`[valve.inlet1]` ...): its dotted key and
+/// the message. A table's missing keys are the `[valve]` table's, checked there.
+pub(crate) fn valve_override_error(v: &ValveConfig) -> Option<(String, String)> {
+    (0..4).find_map(|i| {
+        v.override_of(i)?;
+        let table = format!("valve.{}", VALVE_TABLES[i]);
+        let one = v.of(i);
+        let rows: Vec<RangeRow> = vec![(
+            format!("{table}.sonic_conductance_m3_per_s_pa"),
+            one.sonic_conductance_m3_per_s_pa,
+            SONIC_CONDUCTANCE_M3_PER_S_PA,
+            SONIC_CONDUCTANCE_UNIT,
+        )];
+        crate::validate::first_range_error(&rows)
+            .map(|(k, m)| (k.to_string(), m))
+            .or_else(|| valve_ratio_error_in(&one, &table))
+    })
+}
+
+/// The range rows of the per-muscle tables (`[muscle.m1]`, `[muscle.m2]`, `prefix` `""` or
+/// the arm's `jointN.`): each present table's muscle as the physics sees it, under the
+/// table's keys.
+pub(crate) fn muscle_override_rows(m: &MuscleConfig, prefix: &str) -> Vec<RangeRow> {
+    let mut rows = Vec::new();
+    for (i, name) in MUSCLE_TABLES.iter().enumerate() {
+        if m.override_of(i).is_none() {
+            continue;
+        }
+        for (key, v, r, unit) in muscle_range_rows(&m.of(i), prefix) {
+            let key = key.replacen(
+                &format!("{prefix}muscle."),
+                &format!("{prefix}muscle.{name}."),
+                1,
+            );
+            rows.push((key, v, r, unit));
+        }
+    }
+    rows
+}
+
+/// The message for a volume polynomial `v` that is not > 0 somewhere in `0..=chi_max`.
+fn volume_positive_error(v: &[f64; 4], chi_max: f64) -> Option<String> {
+    (0..=64).find_map(|k| {
+        let chi = chi_max * k as f64 / 64.0;
+        let vol = v[0] + chi * (v[1] + chi * (v[2] + chi * v[3]));
+        (!(vol > 0.0)).then(|| {
+            format!(
+                "{}: the volume V(chi) = {vol:.3e} m^3 at contraction {chi:.3} is not > 0 \
+                 (it must stay > 0 up to the maximum contraction {chi_max:.3}: check the \
+                 signs and the unit, m^3, of b1 .. b3)",
+                shown_coefficients(v)
+            )
+        })
     })
 }
 
@@ -315,6 +379,21 @@ impl PlantConfig {
             joint.initial_contraction: Range::half_open(0.0, 1.0), "fraction";
             valve.sonic_conductance_m3_per_s_pa: SONIC_CONDUCTANCE_M3_PER_S_PA, SONIC_CONDUCTANCE_UNIT;
         ]);
+        rows.extend(muscle_override_rows(&self.muscle, ""));
+        for (i, name) in MUSCLE_TABLES.iter().enumerate() {
+            if let Some(chi0) = self
+                .muscle
+                .override_of(i)
+                .and_then(|o| o.initial_contraction)
+            {
+                rows.push((
+                    format!("muscle.{name}.initial_contraction"),
+                    chi0,
+                    Range::half_open(0.0, 1.0),
+                    "fraction",
+                ));
+            }
+        }
         rows.extend(initial_range_rows(&self.initial, &self.environment, ""));
         rows
     }
@@ -334,8 +413,10 @@ impl PlantConfig {
         }
         // The Tondu force vanishes at the maximum contraction
         // (1 - 1 / (sqrt(3) cos alpha0)) / k: the muscles must start below it.
-        let chi_max = (1.0 - 1.0 / (3f64.sqrt() * self.muscle.braid_angle_deg.to_radians().cos()))
-            / self.muscle.end_factor;
+        let chi_max_of = |m: &MuscleConfig| {
+            (1.0 - 1.0 / (3f64.sqrt() * m.braid_angle_deg.to_radians().cos())) / m.end_factor
+        };
+        let chi_max = chi_max_of(&self.muscle);
         if !(self.joint.initial_contraction < chi_max) {
             return Err(bad(
                 "joint.initial_contraction",
@@ -346,11 +427,45 @@ impl PlantConfig {
                 ),
             ));
         }
+        for (i, name) in MUSCLE_TABLES.iter().enumerate() {
+            let Some(o) = self.muscle.override_of(i) else {
+                continue;
+            };
+            let m = self.muscle.of(i);
+            let chi0 = self
+                .muscle
+                .initial_contraction_of(i, self.joint.initial_contraction);
+            let chi_max = chi_max_of(&m);
+            if !(chi0 < chi_max) {
+                let key = if o.initial_contraction.is_some() {
+                    format!("muscle.{name}.initial_contraction")
+                } else {
+                    "joint.initial_contraction".to_string()
+                };
+                return Err(bad(
+                    &key,
+                    &format!(
+                        "must be within [0, {chi_max:.4}) (below muscle {}'s maximum contraction \
+                         (1 - 1/(sqrt(3) cos braid_angle)) / end_factor of [muscle.{name}]), got {chi0}",
+                        i + 1
+                    ),
+                ));
+            }
+            if let Some(msg) = volume_coefficients_error(&m.volume_poly_m3) {
+                return Err(bad(&format!("muscle.{name}.volume_poly_m3"), &msg));
+            }
+            if let Some(msg) = volume_positive_error(&m.volume_poly_m3, chi_max) {
+                return Err(bad(&format!("muscle.{name}.volume_poly_m3"), &msg));
+            }
+        }
         if let Some(msg) = volume_coefficients_error(&self.muscle.volume_poly_m3) {
             return Err(bad("muscle.volume_poly_m3", &msg));
         }
         if let Some((key, msg)) = valve_ratio_error(&self.valve) {
-            return Err(bad(key, &msg));
+            return Err(bad(&key, &msg));
+        }
+        if let Some((key, msg)) = valve_override_error(&self.valve) {
+            return Err(bad(&key, &msg));
         }
         for (key, v) in [
             ("joint.angle_min_rad", self.joint.angle_min_rad),
@@ -394,21 +509,8 @@ impl PlantConfig {
         }
         // The chamber volume must stay positive over the contractions the muscles reach (b0
         // > 0 is the range row's).
-        let v = &self.muscle.volume_poly_m3;
-        for k in 0..=64 {
-            let chi = chi_max * k as f64 / 64.0;
-            let vol = v[0] + chi * (v[1] + chi * (v[2] + chi * v[3]));
-            if !(vol > 0.0) {
-                return Err(bad(
-                    "muscle.volume_poly_m3",
-                    &format!(
-                        "{}: the volume V(chi) = {vol:.3e} m^3 at contraction {chi:.3} is not > 0 \
-                         (it must stay > 0 up to the maximum contraction {chi_max:.3}: check the \
-                         signs and the unit, m^3, of b1 .. b3)",
-                        shown_coefficients(v)
-                    ),
-                ));
-            }
+        if let Some(msg) = volume_positive_error(&self.muscle.volume_poly_m3, chi_max) {
+            return Err(bad("muscle.volume_poly_m3", &msg));
         }
         self.effects.validate(path)?;
         let on = |e: Option<bool>| e.unwrap_or(false);

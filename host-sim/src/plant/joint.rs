@@ -86,6 +86,12 @@ pub struct Joint {
     pub initial_contraction: f64,
     /// r / l_n: contraction per radian.
     pub contraction_per_rad: f64,
+    /// chi0 of each muscle (both [`Self::initial_contraction`] unless a per-muscle table
+    /// sets one: [`Self::with_muscles`]).
+    pub initial_contraction_each: [f64; 2],
+    /// r / l_n of each muscle (both [`Self::contraction_per_rad`] unless a per-muscle table
+    /// sets a rest length).
+    pub contraction_per_rad_each: [f64; 2],
     /// Mechanical end stops.
     pub stops: EndStops,
 }
@@ -97,22 +103,33 @@ impl Joint {
             inertia_kgm2: c.inertia_kgm2,
             initial_contraction: c.initial_contraction,
             contraction_per_rad: c.sprocket_radius_m / muscle_rest_length_m,
+            initial_contraction_each: [c.initial_contraction; 2],
+            contraction_per_rad_each: [c.sprocket_radius_m / muscle_rest_length_m; 2],
             stops: EndStops::from_config(c, muscle_rest_length_m),
         }
+    }
+
+    /// The joint with each muscle's own chi0 and rest length (a plant file's per-muscle
+    /// tables); the same values as the shared ones leave it as it was.
+    pub fn with_muscles(mut self, initial_contraction: [f64; 2], rest_length_m: [f64; 2]) -> Self {
+        self.initial_contraction_each = initial_contraction;
+        self.contraction_per_rad_each = rest_length_m.map(|l| self.sprocket_radius_m / l);
+        self
     }
 
     /// (chi1, chi2): muscle 1 contracts when the angle grows, muscle 2 when it shrinks.
     #[inline(always)]
     pub fn contractions(&self, angle_rad: f64) -> [f64; 2] {
-        let d = self.contraction_per_rad * angle_rad;
-        [self.initial_contraction + d, self.initial_contraction - d]
+        let [g1, g2] = self.contraction_per_rad_each;
+        let [c1, c2] = self.initial_contraction_each;
+        [c1 + g1 * angle_rad, c2 - g2 * angle_rad]
     }
 
     /// (dchi1/dt, dchi2/dt).
     #[inline(always)]
     pub fn contraction_rates(&self, velocity_rad_s: f64) -> [f64; 2] {
-        let d = self.contraction_per_rad * velocity_rad_s;
-        [d, -d]
+        let [g1, g2] = self.contraction_per_rad_each;
+        [g1 * velocity_rad_s, -(g2 * velocity_rad_s)]
     }
 
     /// Muscle torque T = (F1 - F2) r.

@@ -34,13 +34,30 @@ pub struct Plant {
     pub p_atm_pa: f64,
     /// p_s, absolute supply pressure.
     pub p_supply_abs_pa: f64,
+    /// The `[muscle]` table's muscle (both muscles without per-muscle tables).
     pub muscle: Muscle,
+    /// Muscle 1 and muscle 2 as the physics uses them (`[muscle]` with `[muscle.m1]`,
+    /// `[muscle.m2]`).
+    pub muscles: [Muscle; 2],
     pub joint: Joint,
+    /// The `[valve]` table's valve (all four without per-valve tables).
     pub valve: Iso6358Valve,
+    /// The four valves as the physics uses them: inlet 1, exhaust 1, inlet 2, exhaust 2
+    /// (`[valve]` with `[valve.inlet1]` ...).
+    pub valves: [Iso6358Valve; 4],
     pub effects: Effects,
     pub initial: PlantState,
     /// An external torque series an open-loop replay applies ([`LoadTorque`]); `None`: none.
     pub load: Option<LoadTorque>,
+}
+
+/// The ISO 6358 valve of a (resolved) `[valve]` table.
+pub fn valve_of(v: &crate::plant::config::ValveConfig) -> Iso6358Valve {
+    Iso6358Valve::new(
+        v.sonic_conductance_m3_per_s_pa,
+        v.critical_ratio,
+        v.laminar_ratio,
+    )
 }
 
 impl Plant {
@@ -67,12 +84,16 @@ impl Plant {
             p_atm_pa,
             p_supply_abs_pa: c.environment.supply_gauge_pa + p_atm_pa,
             muscle: Muscle::from_config(&c.muscle),
-            joint: Joint::from_config(&c.joint, c.muscle.rest_length_m),
-            valve: Iso6358Valve::new(
-                c.valve.sonic_conductance_m3_per_s_pa,
-                c.valve.critical_ratio,
-                c.valve.laminar_ratio,
+            muscles: [0, 1].map(|i| Muscle::from_config(&c.muscle.of(i))),
+            joint: Joint::from_config(&c.joint, c.muscle.rest_length_m).with_muscles(
+                [0, 1].map(|i| {
+                    c.muscle
+                        .initial_contraction_of(i, c.joint.initial_contraction)
+                }),
+                [0, 1].map(|i| c.muscle.of(i).rest_length_m),
             ),
+            valve: valve_of(&c.valve),
+            valves: [0, 1, 2, 3].map(|i| valve_of(&c.valve.of(i))),
             effects,
             initial,
             load: c.load.clone(),
@@ -96,22 +117,27 @@ impl Plant {
         let chi = self.joint.contractions(x.angle_rad);
         let dchi = self.joint.contraction_rates(x.velocity_rad_s);
         [
-            self.tension_n(x.p1_abs_pa - self.p_atm_pa, chi[0], dchi[0]),
-            self.tension_n(x.p2_abs_pa - self.p_atm_pa, chi[1], dchi[1]),
+            self.tension_n(0, x.p1_abs_pa - self.p_atm_pa, chi[0], dchi[0]),
+            self.tension_n(1, x.p2_abs_pa - self.p_atm_pa, chi[1], dchi[1]),
         ]
     }
 
-    /// Tension of one muscle: the nominal one, minus the braid friction if enabled.
+    /// Tension of muscle `i`: the nominal one, minus the braid friction if enabled.
     #[inline(always)]
-    fn tension_n(&self, p_gauge_pa: f64, contraction: f64, contraction_rate_per_s: f64) -> f64 {
+    fn tension_n(
+        &self,
+        i: usize,
+        p_gauge_pa: f64,
+        contraction: f64,
+        contraction_rate_per_s: f64,
+    ) -> f64 {
+        let muscle = &self.muscles[i];
         match self
             .effects
             .muscle_friction_n(p_gauge_pa, contraction_rate_per_s)
         {
-            None => self
-                .muscle
-                .tension_n(p_gauge_pa, contraction, contraction_rate_per_s),
-            Some(friction_n) => self.muscle.tension_with_friction_n(
+            None => muscle.tension_n(p_gauge_pa, contraction, contraction_rate_per_s),
+            Some(friction_n) => muscle.tension_with_friction_n(
                 p_gauge_pa,
                 contraction,
                 contraction_rate_per_s,
@@ -195,7 +221,7 @@ impl Plant {
     #[inline(always)]
     fn supply_abs_pa(&self, p_abs_pa: [f64; 2], aux: &AuxState, u: &ValveInputs) -> f64 {
         self.effects.supply().pressure_abs_pa(
-            &self.valve,
+            [&self.valves[0], &self.valves[2]],
             self.p_supply_abs_pa,
             aux.supply_abs_pa,
             p_abs_pa,
@@ -223,10 +249,10 @@ impl Plant {
         let mut q_in = 0.0;
         let mut q_out = 0.0;
         if u_in != 0.0 {
-            q_in = u_in * self.valve.flow_m3_s(p_supply_abs_pa, p_abs_pa);
+            q_in = u_in * self.valves[2 * i].flow_m3_s(p_supply_abs_pa, p_abs_pa);
         }
         if u_ex != 0.0 {
-            q_out = -u_ex * self.valve.flow_m3_s(p_abs_pa, self.p_atm_pa);
+            q_out = -u_ex * self.valves[2 * i + 1].flow_m3_s(p_abs_pa, self.p_atm_pa);
         }
         [q_leak, q_in, q_out]
     }
@@ -277,13 +303,13 @@ impl Plant {
         let mut dt = [0.0; 2];
         for i in 0..2 {
             let pg = p[i] - self.p_atm_pa;
-            tension[i] = self.tension_n(pg, chi[i], dchi[i]);
+            tension[i] = self.tension_n(i, pg, chi[i], dchi[i]);
             // The signed standard flows into the chamber: leak, inlet, exhaust. A closed
             // valve contributes nothing (skip the flow function).
             let [q_leak, q_in, q_out] = self.chamber_flows_m3_s(i, p[i], p_supply, u);
             q_supply += q_in;
-            let volume = self.muscle.volume_m3(chi[i]);
-            let volume_rate = self.muscle.volume_rate_m3_s(chi[i], dchi[i]);
+            let volume = self.muscles[i].volume_m3(chi[i]);
+            let volume_rate = self.muscles[i].volume_rate_m3_s(chi[i], dchi[i]);
             match thermal {
                 None => {
                     dp[i] = pressure_factor

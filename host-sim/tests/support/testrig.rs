@@ -22,8 +22,8 @@
 //! with an opening ramp, a gravity load that brings its own inertia, a supply behind a
 //! reservoir and a line, large inertia factors; and outside the catalogue velocity-squared
 //! damping, a hardening spring, a quadratic transducer, a stretching cable, backlash, end
-//! stops, an eccentric sprocket, a valve dead zone, one weak valve, valve columns logged
-//! late. Recordings: closed-loop or open-loop excitation (CHECK always another signal, from
+//! stops, an eccentric sprocket, a valve dead zone, valve columns logged late; mis-set keys
+//! of the whole plant, of one valve (one weak valve) or of one muscle (its own geometry). Recordings: closed-loop or open-loop excitation (CHECK always another signal, from
 //! its own seed), with or without force channels, uniform, jittered (+-20 % of the period)
 //! or gappy (dropped rows) time bases.
 
@@ -108,6 +108,9 @@ pub struct Forms {
     pub valve_dead_zone: f64,
     /// Conductance factor of each valve (inlet 1, exhaust 1, inlet 2, exhaust 2).
     pub valve_factor: [f64; 4],
+    /// Factors on one muscle's own geometry, per muscle: rest length, radius, braid angle,
+    /// end factor, initial contraction (indices [`M_REST`] .. [`M_CHI0`]); all 1 by default.
+    pub muscle_factor: [[f64; 5]; 2],
     /// A supply line between the reservoir and the valves: (line volume m^3, laminar line
     /// conductance m^3/(s Pa)); needs the reservoir.
     pub supply_line: Option<[f64; 2]>,
@@ -144,6 +147,7 @@ impl Default for Forms {
             valve_ramp_per_s: None,
             valve_dead_zone: 0.0,
             valve_factor: [1.0; 4],
+            muscle_factor: [[1.0; 5]; 2],
             supply_line: None,
             gravity: None,
             velocity_squared_nms2: 0.0,
@@ -155,6 +159,13 @@ impl Default for Forms {
         }
     }
 }
+
+/// Indices of [`Forms::muscle_factor`].
+pub const M_REST: usize = 0;
+pub const M_RADIUS: usize = 1;
+pub const M_BRAID: usize = 2;
+pub const M_END: usize = 3;
+pub const M_CHI0: usize = 4;
 
 /// Size of the rig's state: beta, omega, p1, p2, T1, T2, tank pressure, friction state,
 /// Bouc-Wen states (2), supply-line pressure, cable stretches (2), sprocket angle and rate.
@@ -223,11 +234,14 @@ impl RigPhysics {
         )
     }
 
-    /// Tension of one muscle (Tondu with the pressure-proportional damper).
-    fn tension(&self, p_gauge: f64, chi: f64, dchi: f64) -> f64 {
-        let a0 = self.braid_angle_deg.to_radians();
-        let area = std::f64::consts::PI * self.radius_m * self.radius_m;
-        let e = 1.0 - self.end_factor * chi;
+    /// Tension of muscle `i` (Tondu with the pressure-proportional damper), with its own
+    /// geometry factors.
+    fn tension(&self, i: usize, p_gauge: f64, chi: f64, dchi: f64) -> f64 {
+        let mf = &self.forms.muscle_factor[i];
+        let a0 = (self.braid_angle_deg * mf[M_BRAID]).to_radians();
+        let radius = self.radius_m * mf[M_RADIUS];
+        let area = std::f64::consts::PI * radius * radius;
+        let e = 1.0 - self.end_factor * mf[M_END] * chi;
         let f_static =
             (area * p_gauge * (3.0 / a0.tan().powi(2) * e * e - 1.0 / a0.sin().powi(2))).max(0.0);
         (f_static - self.damping_m2s * p_gauge * dchi).max(0.0)
@@ -247,15 +261,15 @@ impl RigPhysics {
     fn kinematics(&self, x: &[f64; NX]) -> ([f64; 2], [f64; 2], f64) {
         let (theta, omega) = self.sprocket(x);
         let l = self.rest_length_m;
+        let mf = &self.forms.muscle_factor;
         let (mut chi, dchi, lever) = match self.forms.eccentric {
             None => {
-                let g = self.sprocket_radius_m / self.rest_length_m;
+                // Each muscle's own rest length and initial contraction.
+                let g = [0, 1].map(|i| self.sprocket_radius_m / (l * mf[i][M_REST]));
+                let chi0 = [0, 1].map(|i| self.initial_contraction * mf[i][M_CHI0]);
                 (
-                    [
-                        self.initial_contraction + g * theta,
-                        self.initial_contraction - g * theta,
-                    ],
-                    [g * omega, -g * omega],
+                    [chi0[0] + g[0] * theta, chi0[1] - g[1] * theta],
+                    [g[0] * omega, -g[1] * omega],
                     self.sprocket_radius_m,
                 )
             }
@@ -284,7 +298,7 @@ impl RigPhysics {
     /// The tension of each muscle in state `x`.
     fn muscle_forces(&self, x: &[f64; NX], chi: &[f64; 2], dchi: &[f64; 2]) -> [f64; 2] {
         std::array::from_fn(|i| {
-            let f = self.tension(x[2 + i] - self.p_atm_pa, chi[i], dchi[i]);
+            let f = self.tension(i, x[2 + i] - self.p_atm_pa, chi[i], dchi[i]);
             match self.forms.bouc_wen {
                 Some([amp, _]) => (f - amp * x[8 + i]).max(0.0),
                 None => f,
@@ -1151,6 +1165,25 @@ const CONDUCTANCE: &[&str] = &[
     "muscle.volume_poly_m3",
 ];
 const INERTIA: &[&str] = &["joint.inertia_kgm2", "inertia"];
+/// Keys the diagnosis documents as one group (`recalibrate::GROUPS`): the muscles'
+/// operating contraction, and per muscle its force keys and its contraction keys.
+const CONTRACTION: &[&str] = &[
+    "muscle.end_factor",
+    "joint.initial_contraction",
+    "muscle.rest_length_m",
+];
+const M1_FORCE: &[&str] = &["muscle.m1.radius_m", "muscle.m1.braid_angle_deg"];
+const M2_FORCE: &[&str] = &["muscle.m2.radius_m", "muscle.m2.braid_angle_deg"];
+const M1_CONTRACTION: &[&str] = &[
+    "muscle.m1.end_factor",
+    "muscle.m1.initial_contraction",
+    "muscle.m1.rest_length_m",
+];
+const M2_CONTRACTION: &[&str] = &[
+    "muscle.m2.end_factor",
+    "muscle.m2.initial_contraction",
+    "muscle.m2.rest_length_m",
+];
 const CHAMBER_HEAT: &[&str] = &["polytropic", "heat_transfer"];
 
 /// The evidence base. Every catalogue effect has at least one form unlike its candidate's;
@@ -1230,6 +1263,51 @@ pub const CASES: &[CaseSpec] = &[
     spec("key_supply", MisSetKey, "environment.supply_gauge_pa",
         "supply pressure 75-85 % of the file's, open loop",
         Expect::First(&["environment.supply_gauge_pa"])).excite(Excitation::OpenPulses),
+    spec("key_rest_length", MisSetKey, "muscle.rest_length_m",
+        "both muscles' rest length 6-10 % above the file's", Expect::First(CONTRACTION)),
+    spec("key_initial_contraction", MisSetKey, "joint.initial_contraction",
+        "both muscles' initial contraction 15-25 % below the file's", Expect::First(CONTRACTION)),
+    spec("key_end_factor", MisSetKey, "muscle.end_factor",
+        "both muscles' end factor 6-10 % above the file's", Expect::First(CONTRACTION)),
+    spec("key_sprocket_radius", MisSetKey, "joint.sprocket_radius_m",
+        "sprocket radius 6-10 % above the file's", Expect::First(&["joint.sprocket_radius_m"])),
+    spec("key_critical_ratio", MisSetKey, "valve.critical_ratio",
+        "all four valves' critical ratio 60-70 % of the file's, open loop",
+        Expect::First(&["valve.critical_ratio"])).excite(Excitation::OpenPulses),
+    spec("key_exhaust1", MisSetKey, "valve.exhaust1.sonic_conductance_m3_per_s_pa",
+        "the exhaust valve of muscle 1 at 55-70 % of the file's conductance, the other three as the file's, open loop",
+        Expect::First(&["valve.exhaust1.sonic_conductance_m3_per_s_pa"])).excite(Excitation::OpenPulses),
+    spec("key_inlet2", MisSetKey, "valve.inlet2.sonic_conductance_m3_per_s_pa",
+        "the inlet valve of muscle 2 at 55-70 % of the file's conductance, open loop",
+        Expect::First(&["valve.inlet2.sonic_conductance_m3_per_s_pa"])).excite(Excitation::OpenPulses),
+    spec("key_exhaust2", MisSetKey, "valve.exhaust2.sonic_conductance_m3_per_s_pa",
+        "the exhaust valve of muscle 2 at 55-70 % of the file's conductance, open loop",
+        Expect::First(&["valve.exhaust2.sonic_conductance_m3_per_s_pa"])).excite(Excitation::OpenPulses),
+    spec("key_m1_radius", MisSetKey, "muscle.m1.radius_m",
+        "muscle 1's radius 6-10 % above the file's (muscle 2 as the file's)", Expect::First(M1_FORCE)),
+    spec("key_m2_radius", MisSetKey, "muscle.m2.radius_m",
+        "muscle 2's radius 6-10 % above the file's", Expect::First(M2_FORCE)),
+    spec("key_m1_braid_angle", MisSetKey, "muscle.m1.braid_angle_deg",
+        "muscle 1's braid angle 3-5 % above the file's", Expect::First(M1_FORCE)),
+    spec("key_m2_braid_angle", MisSetKey, "muscle.m2.braid_angle_deg",
+        "muscle 2's braid angle 3-5 % above the file's", Expect::First(M2_FORCE)),
+    spec("key_m1_end_factor", MisSetKey, "muscle.m1.end_factor",
+        "muscle 1's end factor 6-10 % above the file's", Expect::First(M1_CONTRACTION)),
+    spec("key_m2_end_factor", MisSetKey, "muscle.m2.end_factor",
+        "muscle 2's end factor 6-10 % above the file's", Expect::First(M2_CONTRACTION)),
+    spec("key_m1_rest_length", MisSetKey, "muscle.m1.rest_length_m",
+        "muscle 1's rest length 8-12 % above the file's", Expect::First(M1_CONTRACTION)),
+    spec("key_m2_rest_length", MisSetKey, "muscle.m2.rest_length_m",
+        "muscle 2's rest length 8-12 % above the file's", Expect::First(M2_CONTRACTION)),
+    spec("key_m1_initial_contraction", MisSetKey, "muscle.m1.initial_contraction",
+        "muscle 1's initial contraction 15-25 % below the file's", Expect::First(M1_CONTRACTION)),
+    spec("key_m2_initial_contraction", MisSetKey, "muscle.m2.initial_contraction",
+        "muscle 2's initial contraction 15-25 % below the file's", Expect::First(M2_CONTRACTION)),
+    // Out of the catalogue while the plant file had one [valve] table for all four valves;
+    // a mis-set key of the inlet valve's own table since per-valve tables exist.
+    spec("ooc_one_valve_weak", MisSetKey, "valve.inlet1.sonic_conductance_m3_per_s_pa",
+        "the inlet valve of muscle 1 is 25 % weaker than the other three (the shared conductance key scales all four)",
+        Expect::First(&["valve.inlet1.sonic_conductance_m3_per_s_pa"])),
     // --- nominal physics ----------------------------------------------------------------
     spec("nominal_noise_free", Nominal, "none", "nominal physics, no noise",
         Expect::NothingMissing).reduced(),
@@ -1268,9 +1346,7 @@ pub const CASES: &[CaseSpec] = &[
     spec("ooc_valve_dead_zone", OutOfCatalogue, "valve",
         "valve commands below 15-25 % opening do not open the valve",
         Expect::Unexplained),
-    spec("ooc_one_valve_weak", OutOfCatalogue, "valve",
-        "the inlet valve of muscle 1 is 25 % weaker than the other three (the conductance key scales all four)",
-        Expect::Unexplained),
+
     spec("ooc_valves_logged_late", OutOfCatalogue, "logging",
         "nominal plant, valve columns logged 50 ms late against the sensor columns (a negative valve delay)",
         Expect::Unexplained).late(0.05),
@@ -1456,6 +1532,66 @@ fn apply_form(name: &str, p: &mut RigPhysics, rng: &mut StdRng) -> String {
             let k = rng.random_range(0.75..0.85);
             p.supply_gauge_pa *= k;
             format!("x{k:.3}")
+        }
+        "key_rest_length" => {
+            let k = rng.random_range(1.06..1.10);
+            p.rest_length_m *= k;
+            format!("x{k:.3}")
+        }
+        "key_initial_contraction" => {
+            let k = rng.random_range(0.75..0.85);
+            p.initial_contraction *= k;
+            format!("x{k:.3}")
+        }
+        "key_end_factor" => {
+            let k = rng.random_range(1.06..1.10);
+            p.end_factor *= k;
+            format!("x{k:.3}")
+        }
+        "key_sprocket_radius" => {
+            let k = rng.random_range(1.06..1.10);
+            p.sprocket_radius_m *= k;
+            format!("x{k:.3}")
+        }
+        "key_critical_ratio" => {
+            let k = rng.random_range(0.6..0.7);
+            p.critical_ratio *= k;
+            format!("x{k:.3}")
+        }
+        "key_exhaust1" | "key_inlet2" | "key_exhaust2" => {
+            let v = match name {
+                "key_exhaust1" => 1,
+                "key_inlet2" => 2,
+                _ => 3,
+            };
+            let k = rng.random_range(0.55..0.7);
+            f.valve_factor[v] = k;
+            format!("valve {v} x{k:.3}")
+        }
+        "key_m1_radius"
+        | "key_m2_radius"
+        | "key_m1_braid_angle"
+        | "key_m2_braid_angle"
+        | "key_m1_end_factor"
+        | "key_m2_end_factor"
+        | "key_m1_rest_length"
+        | "key_m2_rest_length"
+        | "key_m1_initial_contraction"
+        | "key_m2_initial_contraction" => {
+            let m = usize::from(name.starts_with("key_m2"));
+            let (field, k) = if name.ends_with("radius") {
+                (M_RADIUS, rng.random_range(1.06..1.10))
+            } else if name.ends_with("braid_angle") {
+                (M_BRAID, rng.random_range(1.03..1.05))
+            } else if name.ends_with("end_factor") {
+                (M_END, rng.random_range(1.06..1.10))
+            } else if name.ends_with("rest_length") {
+                (M_REST, rng.random_range(1.08..1.12))
+            } else {
+                (M_CHI0, rng.random_range(0.75..0.85))
+            };
+            f.muscle_factor[m][field] = k;
+            format!("muscle {} x{k:.3}", m + 1)
         }
         "nominal_noise_free"
         | "nominal"

@@ -117,7 +117,7 @@ pub fn leak_signature(ev: &Evidence) -> [Vec<f64>; 2] {
         let chi = plant.joint.contractions(x.angle_rad);
         let p = [x.p1_abs_pa, x.p2_abs_pa];
         for i in 0..2 {
-            let v = plant.muscle.volume_m3(chi[i]);
+            let v = plant.muscles[i].volume_m3(chi[i]);
             leak[i][k] = -p_atm * unit_leak.flow_m3_s(p[i], p_atm) / v;
         }
     }

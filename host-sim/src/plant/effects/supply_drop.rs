@@ -78,12 +78,12 @@ impl Supply {
     }
 
     /// The supply pressure the inlet valves see [Pa abs]: p_s0 (ideal), the static drop's
-    /// root for the `N` chambers at `p_chamber_pa` drawing through inlet openings `u_in`,
-    /// or the tank pressure `p_tank_abs_pa` (reservoir).
+    /// root for the `N` chambers at `p_chamber_pa` drawing through their inlet valves
+    /// `inlets` with openings `u_in`, or the tank pressure `p_tank_abs_pa` (reservoir).
     #[inline(always)]
     pub fn pressure_abs_pa<const N: usize>(
         &self,
-        valve: &Iso6358Valve,
+        inlets: [&Iso6358Valve; N],
         p_s0_pa: f64,
         p_tank_abs_pa: f64,
         p_chamber_pa: [f64; N],
@@ -93,8 +93,8 @@ impl Supply {
             Supply::Ideal => p_s0_pa,
             Supply::Static {
                 resistance_pa_s_per_m3,
-            } => static_supply_pressure_pa(
-                valve,
+            } => static_supply_pressure_each_pa(
+                inlets,
                 p_s0_pa,
                 *resistance_pa_s_per_m3,
                 p_chamber_pa,
@@ -174,6 +174,18 @@ pub fn static_supply_pressure_pa<const N: usize>(
     p_chamber_pa: [f64; N],
     u_in: [f64; N],
 ) -> f64 {
+    static_supply_pressure_each_pa([valve; N], p_s0_pa, resistance_pa_s_per_m3, p_chamber_pa, u_in)
+}
+
+/// [`static_supply_pressure_pa`] with each chamber's own inlet valve (a plant file's
+/// per-valve tables).
+pub fn static_supply_pressure_each_pa<const N: usize>(
+    inlets: [&Iso6358Valve; N],
+    p_s0_pa: f64,
+    resistance_pa_s_per_m3: f64,
+    p_chamber_pa: [f64; N],
+    u_in: [f64; N],
+) -> f64 {
     if resistance_pa_s_per_m3 == 0.0 || u_in.iter().all(|u| *u == 0.0) {
         return p_s0_pa;
     }
@@ -181,7 +193,7 @@ pub fn static_supply_pressure_pa<const N: usize>(
         let mut q = 0.0;
         for i in 0..N {
             if u_in[i] != 0.0 {
-                q += u_in[i] * valve.flow_m3_s(p, p_chamber_pa[i]);
+                q += u_in[i] * inlets[i].flow_m3_s(p, p_chamber_pa[i]);
             }
         }
         p - p_s0_pa + resistance_pa_s_per_m3 * q
@@ -328,7 +340,7 @@ pub fn supply_signature(ev: &Evidence) -> [Vec<f64>; 2] {
             .sum();
         let delta = 1.0; // Pa s/m^3 of line resistance
         for i in 0..2 {
-            let v = plant.muscle.volume_m3(chi[i]);
+            let v = plant.muscles[i].volume_m3(chi[i]);
             if u_in[i] != 0.0 && q_tot > 0.0 {
                 let dq = plant.valve.flow_m3_s(p_s0 - delta * 1e4 * q_tot, p[i])
                     - plant.valve.flow_m3_s(p_s0, p[i]);
