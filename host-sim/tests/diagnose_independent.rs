@@ -462,7 +462,10 @@ fn all_cases(keep: impl Fn(&CaseSpec) -> bool) -> Vec<&'static CaseSpec> {
     CASES
         .iter()
         .filter(|c| keep(c))
-        .filter(|c| only.as_ref().is_none_or(|o| o.split(',').any(|n| n.trim() == c.name)))
+        .filter(|c| {
+            only.as_ref()
+                .is_none_or(|o| o.split(',').any(|n| n.trim() == c.name))
+        })
         .collect()
 }
 
