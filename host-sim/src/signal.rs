@@ -123,6 +123,38 @@ pub fn noise_level(y: &[f64]) -> f64 {
     sigma_mad.max(q / 12f64.sqrt())
 }
 
+/// [`noise_level`] of a channel some of whose rows are not measurements (`measured(k)`
+/// false: a row filled in a gap of the log): only second differences of three measured rows
+/// in a row and steps between two measured rows count, so a gap's jump (or its filling) is
+/// not taken for noise.
+pub fn noise_level_where(y: &[f64], measured: impl Fn(usize) -> bool) -> f64 {
+    let ok3: Vec<usize> = (2..y.len())
+        .filter(|&k| measured(k) && measured(k - 1) && measured(k - 2))
+        .collect();
+    if ok3.len() < 2 {
+        return 0.0;
+    }
+    let d2 = || {
+        ok3.iter()
+            .map(|&k| (y[k] - 2.0 * y[k - 1] + y[k - 2]).abs())
+    };
+    let mad = kth_smallest_nonneg(d2, ok3.len() / 2);
+    let sigma_mad = 1.4826 * mad / 6f64.sqrt();
+    let steps = || {
+        (1..y.len())
+            .filter(|&k| measured(k) && measured(k - 1))
+            .map(|k| (y[k] - y[k - 1]).abs())
+            .filter(|d| *d > 1e-12)
+    };
+    let n_steps = steps().count();
+    let q = if n_steps == 0 {
+        0.0
+    } else {
+        kth_smallest_nonneg(steps, n_steps / 20)
+    };
+    sigma_mad.max(q / 12f64.sqrt())
+}
+
 /// The `k`-th smallest (from 0) of the values `values()` yields, all of them non-negative
 /// (a NaN ranks above infinity, as in `f64::total_cmp`), so that their bit patterns sort as
 /// the values do: the element a sort of a copy would put at `k`, found 16 bits at a time
@@ -181,6 +213,21 @@ mod tests {
         for (k, vk) in v.iter().enumerate().take(46).skip(4) {
             assert!((vk - 2.0 * k as f64 * dt).abs() < 1e-9);
         }
+    }
+
+    /// A jump over rows that are not measured is not noise: the level of a smooth ramp
+    /// with jumps at unmeasured rows is that of the ramp alone, the same as where every row
+    /// is measured and there is no jump.
+    #[test]
+    fn a_gaps_jump_is_not_noise() {
+        let mut y: Vec<f64> = (0..400).map(|k| (k as f64 * 0.01).sin()).collect();
+        let clean = noise_level(&y);
+        let holes = |k: usize| k % 50 == 25;
+        for k in (0..400).filter(|&k| holes(k)) {
+            y[k] += 5.0;
+        }
+        assert!(noise_level_where(&y, |k| !holes(k)) <= clean * 1.01 + 1e-12);
+        assert!(noise_level_where(&y, |_| true) >= noise_level(&y) * 0.99);
     }
 
     #[test]

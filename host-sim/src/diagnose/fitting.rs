@@ -7,6 +7,7 @@
 //! ([`crate::identify::output_error`]); failed simulations count as large residuals.
 
 use crate::io::recording::{Channel, Recording};
+use crate::io::timebase::MeasuredRows;
 use crate::plant::config::PlantConfig;
 use crate::plant::{Measurement, Plant, PlantState, ValveInputs};
 use crate::sim::{simulate_each, SensorPath, SolverOptions};
@@ -41,6 +42,9 @@ pub struct Problem<'a> {
     /// than the fit budget; a replay of a head can differ from the same samples of a full
     /// replay within the solver tolerance, so short recordings keep full replays).
     pub replay_heads: bool,
+    /// The rows that hold measurements: rows filled in a gap of the log are replayed (the
+    /// plant ran through them) but left out of every cost.
+    pub rows: MeasuredRows,
 }
 
 impl<'a> Problem<'a> {
@@ -92,6 +96,7 @@ impl<'a> Problem<'a> {
             base_states,
             opts,
             replay_heads: keep < n,
+            rows: MeasuredRows::of(rec),
         })
     }
 
@@ -179,7 +184,7 @@ impl<'a> Problem<'a> {
     pub fn replay_costs(&self, parts: &[Part], range: std::ops::Range<usize>) -> Option<[f64; 5]> {
         let mut sums = [0.0f64; 5];
         let ok = self.replay_each(parts, self.inputs.len(), |k, m| {
-            if range.contains(&k) {
+            if range.contains(&k) && self.rows.has(k) {
                 for c in Channel::ALL {
                     if let Some(y) = self.measured[c.index()] {
                         sums[c.index()] += ((c.of(m) - y[k]) / self.scale[c.index()]).powi(2);
@@ -187,19 +192,20 @@ impl<'a> Problem<'a> {
                 }
             }
         });
-        let n = range.len().max(1) as f64;
+        let n = self.rows.count(range).max(1) as f64;
         ok.then(|| sums.map(|s| s / n))
     }
 
     /// Per-channel mean squared normalised error over `range` (0 for absent channels).
     pub fn channel_costs(&self, pred: &[Measurement], range: std::ops::Range<usize>) -> [f64; 5] {
         let mut out = [0.0; 5];
-        let n = range.len().max(1) as f64;
+        let n = self.rows.count(range.clone()).max(1) as f64;
         for c in Channel::ALL {
             if let Some(y) = self.measured[c.index()] {
                 let s = self.scale[c.index()];
                 out[c.index()] = range
                     .clone()
+                    .filter(|&k| self.rows.has(k))
                     .map(|k| ((c.of(&pred[k]) - y[k]) / s).powi(2))
                     .sum::<f64>()
                     / n;
@@ -225,7 +231,11 @@ impl<'a> Problem<'a> {
         stride: usize,
     ) -> Option<Vec<f64>> {
         let pred = self.predict_until(parts, range.end)?;
-        let idx: Vec<usize> = range.clone().step_by(stride).collect();
+        let idx: Vec<usize> = range
+            .clone()
+            .step_by(stride)
+            .filter(|&k| self.rows.has(k))
+            .collect();
         let w = 1.0 / (idx.len() as f64).sqrt();
         let mut r = Vec::with_capacity(idx.len() * 5);
         for c in Channel::ALL {

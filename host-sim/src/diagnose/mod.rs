@@ -37,6 +37,7 @@ pub mod selection;
 pub mod start;
 #[cfg(any(test, feature = "test-support"))]
 pub mod synth;
+pub mod timebase;
 pub mod verdict;
 
 use std::collections::BTreeMap;
@@ -44,6 +45,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::fit::fit_percent_of_err2;
 use crate::io::recording::{Channel, Recording};
+use crate::io::timebase::MeasuredRows;
 use crate::plant::config::PlantConfig;
 use crate::plant::{Measurement, Plant};
 use crate::sim::SolverOptions;
@@ -405,6 +407,8 @@ fn replay_recording(
 
 /// The fits, plot points and ranges of a replay ([`Replayed`]), summed sample by sample.
 struct ReplaySums {
+    /// The rows that hold measurements (rows filled in a gap are left out of the fits).
+    rows: MeasuredRows,
     err2: [f64; 5],
     range: [[f64; 2]; 5],
     thinned: Vec<Measurement>,
@@ -414,6 +418,7 @@ struct ReplaySums {
 impl ReplaySums {
     fn new(rec: &Recording, stride: usize) -> Self {
         Self {
+            rows: MeasuredRows::of(rec),
             err2: [0.0; 5],
             range: [[f64::INFINITY, f64::NEG_INFINITY]; 5],
             thinned: Vec::with_capacity(rec.len() / stride + 1),
@@ -424,10 +429,13 @@ impl ReplaySums {
     /// Adds sample `k` (in order from 0) with its simulated channels `m`: the sums of
     /// `fit_percent` for every measured channel and its range.
     fn push(&mut self, rec: &Recording, k: usize, m: &Measurement) {
+        let measured = self.rows.has(k);
         for c in Channel::ALL {
             if let Some(y) = rec.channel(c) {
                 let (a, b) = (y[k], c.of(m));
-                self.err2[c.index()] += (a - b) * (a - b);
+                if measured {
+                    self.err2[c.index()] += (a - b) * (a - b);
+                }
                 widen(&mut self.range[c.index()], b);
             }
         }
@@ -438,7 +446,13 @@ impl ReplaySums {
 
     /// The fit of measured channel `c` (`fit_percent` to the bit).
     fn fit(&self, rec: &Recording, c: Channel) -> Option<f64> {
-        Some(fit_percent_of_err2(rec.channel(c)?, self.err2[c.index()]))
+        let y = rec.channel(c)?;
+        let err2 = self.err2[c.index()];
+        Some(if self.rows.any_filled() {
+            crate::fit::fit_percent_by(|| self.rows.values(y), err2)
+        } else {
+            fit_percent_of_err2(y, err2)
+        })
     }
 
     fn fits(&self, rec: &Recording) -> BTreeMap<&'static str, f64> {
@@ -482,6 +496,9 @@ pub struct NominalReplay {
     /// Sum of every nominal channel over all samples.
     pub channel_sum: [f64; 5],
     pub plausibility: verdict::PlausibilitySums,
+    /// Measured rows (not filled in a gap) of TRAIN and of `held`: the costs' divisors.
+    measured_n: usize,
+    measured_held_n: usize,
 }
 
 impl NominalReplay {
@@ -497,6 +514,8 @@ impl NominalReplay {
             held_sq: [0.0; 5],
             channel_sum: [0.0; 5],
             plausibility: verdict::PlausibilitySums::default(),
+            measured_n: 0,
+            measured_held_n: 0,
         }
     }
 
@@ -505,10 +524,16 @@ impl NominalReplay {
             self.head.push(*m);
         }
         self.sums.push(rec, k, m);
+        let measured = self.sums.rows.has(k);
         let in_held = self.held.contains(&k);
+        self.measured_n += usize::from(measured);
+        self.measured_held_n += usize::from(measured && in_held);
         for c in Channel::ALL {
             let i = c.index();
             self.channel_sum[i] += c.of(m);
+            if !measured {
+                continue;
+            }
             if let Some(y) = rec.channel(c) {
                 let e = c.of(m) - y[k];
                 let q = (e / spread[i]).powi(2);
@@ -536,9 +561,9 @@ impl NominalReplay {
     /// held-out tail), summed over the channels.
     pub fn cost(&self, held: bool) -> f64 {
         let (sums, n) = if held {
-            (&self.held_cost_sum, self.held.len())
+            (&self.held_cost_sum, self.measured_held_n)
         } else {
-            (&self.cost_sum, self.len)
+            (&self.cost_sum, self.measured_n)
         };
         let n = n.max(1) as f64;
         sums.map(|s| s / n).iter().sum()
@@ -558,7 +583,7 @@ impl NominalReplay {
             .map(|c| {
                 let i = c.index();
                 let fit =
-                    verdict::fit_vs_spread_of_sum(self.held_sq[i], self.held.len(), spread[i]);
+                    verdict::fit_vs_spread_of_sum(self.held_sq[i], self.measured_held_n, spread[i]);
                 (c.name(), fit)
             })
             .collect()
@@ -618,16 +643,7 @@ pub fn gather_evidence<'a>(
 ) -> Result<Gathered<'a>, DiagnoseError> {
     let n = train.len();
     let present: [bool; 5] = std::array::from_fn(|i| train.outputs[i].is_some());
-    let mut spread = [1.0; 5];
-    let mut noise = [0.0; 5];
-    for c in Channel::ALL {
-        if let Some(y) = train.channel(c) {
-            let mean = y.iter().sum::<f64>() / n as f64;
-            let sd = (y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n as f64).sqrt();
-            spread[c.index()] = if sd > 0.0 { sd } else { 1.0 };
-            noise[c.index()] = noise_level(y);
-        }
-    }
+    let (spread, noise) = timebase::spread_and_noise(train);
     let fit_budget_n = fit_budget_samples(opts, train.sample_period_s());
     let n_fit = ((n as f64 * opts.fit_fraction).round() as usize)
         .min(fit_budget_n)
@@ -905,6 +921,20 @@ pub fn diagnose(
     opts: &DiagnoseOptions,
     progress: &(dyn Fn(u64, u64, &str) + Sync),
 ) -> Result<Diagnosis, DiagnoseError> {
+    timebase::diagnose_through_gaps(nominal, train, check, opts, progress, diagnose_pass)
+}
+
+/// One pass of [`diagnose`]: the openings over the gaps of a log that dropped rows are
+/// estimated on `gap_model` (the nominal model when `None`). Returns the diagnosis and the
+/// model of its best attempt (what the selection chose, whatever the verdict).
+pub(crate) fn diagnose_pass(
+    nominal: &PlantConfig,
+    train: &Recording,
+    check: Option<&Recording>,
+    opts: &DiagnoseOptions,
+    progress: &(dyn Fn(u64, u64, &str) + Sync),
+    gap_model: Option<&PlantConfig>,
+) -> Result<(Diagnosis, PlantConfig), DiagnoseError> {
     // Derivatives, lags and refits work on a uniform grid: jittered recordings are put on it
     // (openings time-averaged per cell, outputs interpolated; `Recording::to_uniform`).
     // A recording already on its grid is used as it is (no copy of a long recording).
@@ -921,6 +951,15 @@ pub fn diagnose(
     let recorded_start = start::for_diagnosis(nominal, train, opts);
     let file_nominal = nominal;
     let nominal = recorded_start.as_ref().unwrap_or(nominal);
+    // Rows the logger dropped: the openings over each gap estimated from the pressures
+    // after it (`timebase::openings_over_gaps`); the rows stay out of every cost and fit.
+    let gap_model = gap_model.unwrap_or(nominal);
+    let (train_g, check_g) = (
+        timebase::openings_over_gaps(gap_model, train, &opts.solver),
+        check.and_then(|c| timebase::openings_over_gaps(gap_model, c, &opts.solver)),
+    );
+    let train = train_g.as_ref().unwrap_or(train);
+    let check = check.map(|c| check_g.as_ref().unwrap_or(c));
     // Stage 2's pool is known before stage 1 runs (for the progress total).
     let cands = candidates_of(nominal, opts);
     let total = 4 + 2 * cands.len() as u64;
@@ -970,6 +1009,7 @@ pub fn diagnose(
     let check_not_held = j.check_not_held.clone().or(not_held_before_grading);
     let v = j.verdict;
     let fit_best_attempt = fin.replay.fits.clone();
+    let attempt_model = fin.corrected.clone();
     let (chosen, ci95, corrected, corrected_replay) = answer_of(v, fin, nominal, &g, train);
     let remaining = if v == Verdict::PartlyExplained {
         remaining_mismatch(&g, &chosen, train)
@@ -996,7 +1036,7 @@ pub fn diagnose(
     let named_out = named_effects(&chosen, &cands, &sel.explained, &ci95, &g, &s, &lookalikes);
     progress(total, total, "done");
     let absolute_note = verdict::absolute_pressure_note(nominal, &named_out.effects);
-    Ok(Diagnosis {
+    let d = Diagnosis {
         pressures_absolute: absolute_note.is_some(),
         verdict: v,
         located: g.located,
@@ -1044,7 +1084,8 @@ pub fn diagnose(
         ),
         check: chk.series,
         scatters: named_out.scatters,
-    })
+    };
+    Ok((d, attempt_model))
 }
 
 /// The candidate pool ([`selection::candidate_pool`]) without
@@ -1145,7 +1186,7 @@ pub fn select_stage<'c>(
         min_explained: opts.min_explained,
         min_gain_noise: opts.min_gain_noise,
         noise_cost: s.noise_cost,
-        n_heldout: held.len() as f64,
+        n_heldout: g.problem.rows.count(held.clone()) as f64,
         explained_cost: opts.null_ratio * s.noise_cost,
     };
     if s.nothing_missing || !s.hints.is_empty() {
@@ -1184,9 +1225,10 @@ fn heldout_fits_after(
         return heldout_before.clone();
     }
     let held = &g.nominal.held;
+    let rows = &g.problem.rows;
     let mut sum_sq = [0.0f64; 5];
     let ok = g.problem.replay_each(chosen, train.len(), |k, m| {
-        if held.contains(&k) {
+        if held.contains(&k) && rows.has(k) {
             for c in Channel::ALL {
                 if let Some(y) = train.channel(c) {
                     sum_sq[c.index()] += (c.of(m) - y[k]).powi(2);
@@ -1201,7 +1243,7 @@ fn heldout_fits_after(
             .map(|c| {
                 let fit = verdict::fit_vs_spread_of_sum(
                     sum_sq[c.index()],
-                    held.len(),
+                    rows.count(held.clone()),
                     g.spread[c.index()],
                 );
                 (c.name(), fit)

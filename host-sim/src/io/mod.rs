@@ -12,6 +12,7 @@ pub mod recording;
 pub mod replay_stream;
 pub mod scenario;
 pub mod segments;
+pub mod timebase;
 
 use std::path::Path;
 

@@ -3,7 +3,9 @@
 //! - leading comment lines `# key = value` are metadata, kept in order (unknown keys too);
 //! - one header line, columns by name in any order;
 //! - required: `t_s` (increasing; uniform steps or stamps that jitter by less than half a
-//!   median step, see [`Recording::is_uniform`]; a gap is refused), `u_in1`, `u_ex1`,
+//!   median step, see [`Recording::is_uniform`]; a few short gaps of dropped rows are
+//!   accepted and filled by [`Recording::to_uniform`], see [`crate::io::timebase`]; a longer
+//!   one is refused), `u_in1`, `u_ex1`,
 //!   `u_in2`, `u_ex2` (in [0, 1]) and at least one of `angle_deg`, `p1_kpa`, `p2_kpa`,
 //!   `f1_n`, `f2_n`; optional `m_dot_1_kg_s`, `m_dot_2_kg_s` (both or neither: the net mass
 //!   flow into each muscle, a flow sensor's reading on a rig, the plant's true flow in
@@ -170,81 +172,20 @@ impl Recording {
         stamps_uniform(&self.t_s)
     }
 
-    /// The recording on the uniform grid `t_0 + k dt` (`dt` the mean step, same number of
-    /// samples): each grid cell's valve opening is the time average of the openings held
-    /// between the original stamps over that cell (the opening-time a valve delivers is
-    /// kept; an on/off edge between grid points becomes one fractional opening), and each
-    /// output channel is linearly interpolated between the two stamps around the grid point.
-    /// A uniform recording is returned unchanged.
+    /// The recording on the uniform grid `t_0 + k dt` ([`crate::io::timebase::on_grid`]):
+    /// each grid cell's valve opening is the time average of the openings held between the
+    /// original stamps over that cell (the opening-time a valve delivers is kept; an on/off
+    /// edge between grid points becomes one fractional opening), and each output channel is
+    /// linearly interpolated between the two stamps around the grid point. Rows the logger
+    /// dropped (a step of a whole number of periods) are filled (the last logged opening
+    /// held) and listed under [`crate::io::timebase::FILLED_ROWS_KEY`]: the diagnosis leaves
+    /// them out of its fits. Without gaps `dt` is the mean step and the number of samples
+    /// is kept. A uniform recording is returned unchanged.
     pub fn to_uniform(&self) -> Recording {
         if self.is_uniform() {
             return self.clone();
         }
-        let n = self.t_s.len();
-        let t0 = self.t_s[0];
-        let dt = self.sample_period_s();
-        let grid: Vec<f64> = (0..n).map(|k| t0 + k as f64 * dt).collect();
-        // Input k is held over [t_k, t_{k+1}); the last one over [t_{n-1}, end of the grid).
-        let t_end = (t0 + n as f64 * dt).max(self.t_s[n - 1]);
-        let hold_end = |k: usize| if k + 1 < n { self.t_s[k + 1] } else { t_end };
-        let mut inputs = Vec::with_capacity(n);
-        let mut j = 0usize;
-        for &g in &grid {
-            let (a, b) = (g, g + dt);
-            while j + 1 < n && self.t_s[j + 1] <= a {
-                j += 1;
-            }
-            let mut acc = [0.0f64; 4];
-            let mut i = j;
-            loop {
-                let lo = self.t_s[i].max(a);
-                let hi = hold_end(i).min(b);
-                if hi > lo {
-                    let u = self.inputs[i];
-                    for (s, v) in acc.iter_mut().zip([u.u_in1, u.u_ex1, u.u_in2, u.u_ex2]) {
-                        *s += v * (hi - lo);
-                    }
-                }
-                if i + 1 >= n || self.t_s[i + 1] >= b {
-                    break;
-                }
-                i += 1;
-            }
-            let f = |s: f64| (s / dt).clamp(0.0, 1.0);
-            inputs.push(ValveInputs {
-                u_in1: f(acc[0]),
-                u_ex1: f(acc[1]),
-                u_in2: f(acc[2]),
-                u_ex2: f(acc[3]),
-            });
-        }
-        let mut out = Recording {
-            metadata: self.metadata.clone(),
-            t_s: grid.clone(),
-            inputs,
-            outputs: Default::default(),
-            mass_flow_kg_s: self.mass_flow_kg_s.as_ref().map(|[a, b]| {
-                [
-                    interpolate(&self.t_s, a, &grid),
-                    interpolate(&self.t_s, b, &grid),
-                ]
-            }),
-        };
-        out.metadata.retain(|(k, _)| k != "sample_period_s");
-        out.metadata
-            .push(("sample_period_s".into(), format!("{dt}")));
-        out.metadata.push((
-            "resampled".into(),
-            "jittered time stamps put on the uniform grid (openings time-averaged, outputs \
-             linearly interpolated)"
-                .into(),
-        ));
-        for c in Channel::ALL {
-            if let Some(y) = self.channel(c) {
-                out.set_channel(c, interpolate(&self.t_s, y, &grid));
-            }
-        }
-        out
+        crate::io::timebase::on_grid(self)
     }
 
     pub fn channel(&self, c: Channel) -> Option<&[f64]> {
@@ -1474,7 +1415,9 @@ impl<'t> Table<'t> {
 
     /// The time column `t_s` of a 1-DOF recording (`line_of(k)`: the file line of row `k`):
     /// at least two rows, increasing, each step within [[`MIN_STEP_RATIO`],
-    /// [`MAX_STEP_RATIO`]] median steps (jitter is accepted, a gap is refused, never filled),
+    /// [`MAX_STEP_RATIO`]] median steps (jitter is accepted), or a gap of a whole number of
+    /// median steps within the limits of [`crate::io::timebase`] (filled by
+    /// [`Recording::to_uniform`], left out of the diagnosis's fits; a longer one is refused),
     /// and a declared `sample_period_s` that agrees with the mean step.
     pub(crate) fn check_time(
         &self,
@@ -1488,7 +1431,6 @@ impl<'t> Table<'t> {
             line_of(n - 1)
         };
         let dt = self.sample_period_s(t_s, &[last_line])?;
-        let tol = 0.01 * dt;
         let mut steps: Vec<f64> = t_s.windows(2).map(|w| w[1] - w[0]).collect();
         let half = steps.len() / 2;
         let median_step = *steps.select_nth_unstable_by(half, f64::total_cmp).1;
@@ -1515,7 +1457,7 @@ impl<'t> Table<'t> {
             if !(step > 0.0) {
                 return Err(order_err(k));
             }
-            if step > MAX_STEP_RATIO * median_step || step < MIN_STEP_RATIO * median_step {
+            if let Some(why) = crate::io::timebase::step_refused(step, median_step) {
                 // Two swapped rows first show as a double step: name the swap, not a gap.
                 if k + 1 < n && !(t_s[k + 1] > t_s[k]) {
                     return Err(order_err(k + 1));
@@ -1524,9 +1466,7 @@ impl<'t> Table<'t> {
                     line_of(k),
                     "t_s",
                     format!(
-                        "non-uniform time: {} after {} (step {} s, median step {} s; jitter \
-                         within [{MIN_STEP_RATIO}, {MAX_STEP_RATIO}] median steps is accepted, \
-                         a gap is not filled: split the recording)",
+                        "non-uniform time: {} after {} (step {} s, median step {} s): {why}",
                         t_s[k],
                         t_s[k - 1],
                         crate::validate::Shown(step),
@@ -1535,6 +1475,27 @@ impl<'t> Table<'t> {
                 ));
             }
         }
+        // Gaps (rows the logger dropped) are filled when they are few; the declared period is
+        // then the grid's, not the mean step.
+        let grid = crate::io::timebase::Grid::of(t_s);
+        let dt = if grid.filled() > 0 {
+            if let Some(why) = crate::io::timebase::gaps_refused(&grid) {
+                let first = grid
+                    .index
+                    .windows(2)
+                    .position(|w| w[1] > w[0] + 1)
+                    .unwrap_or(0);
+                return Err(self.field_err(
+                    line_of(first + 1),
+                    "t_s",
+                    format!("non-uniform time: {why}"),
+                ));
+            }
+            grid.dt_s
+        } else {
+            dt
+        };
+        let tol = 0.01 * dt;
         // A time column in another unit (ms written under `t_s`): the step range of a rig's
         // import, 100 kHz .. 10 Hz.
         let range = STEP_RANGE_S;

@@ -248,7 +248,9 @@ fn valid_inputs(u: &ValveInputs) -> bool {
 }
 
 /// A plant state advanced piecewise under zero-order-held inputs. Keeps the step size
-/// between calls, so it also serves closed-loop use (one call per control tick).
+/// between calls, so it also serves closed-loop use (one call per control tick). A clone
+/// continues from the same point (to try several inputs from one state).
+#[derive(Clone)]
 pub struct Integrator<'a> {
     plant: &'a Plant,
     state: PlantState,

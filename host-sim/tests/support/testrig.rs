@@ -1229,6 +1229,9 @@ pub const CASES: &[CaseSpec] = &[
     spec("valve_dead_time_ramp", CatalogueForm, "valve_dead_time",
         "valve dead time plus an opening ramp (slew-limited opening, immediate closing); the candidate is a pure delay",
         Expect::First(&["valve_delay"])).reduced(),
+    spec("valve_dead_time_80ms", CatalogueForm, "valve_dead_time",
+        "a valve dead time of 75-85 ms, longer than the 50 ms the lag search once stopped at",
+        Expect::First(&["valve_delay"])),
     spec("valve_dead_time_ramp_open_loop", CatalogueForm, "valve_dead_time",
         "valve dead time plus opening ramp, angle and pressures only, open loop",
         Expect::First(&["valve_delay"])).forces(Forces::No).excite(Excitation::OpenPulses),
@@ -1462,6 +1465,11 @@ fn apply_form(name: &str, p: &mut RigPhysics, rng: &mut StdRng) -> String {
                 d * 1e3,
                 ramp_s * 1e3
             )
+        }
+        "valve_dead_time_80ms" => {
+            let d = rng.random_range(75e-3..85e-3);
+            p.dead_time_s = d;
+            format!("dead time {:.2} ms", d * 1e3)
         }
         "gravity_offset_load" => {
             let m = rng.random_range(0.3..0.6);

@@ -124,8 +124,36 @@ effect_candidates!(ValveDeadTime => ValveDelayCandidate);
 /// of milliseconds; more is a unit mistake.
 pub const MAX_PLAUSIBLE_DELAY_S: f64 = 1.0;
 
-/// Longest valve dead time tried.
-pub const MAX_VALVE_DELAY_S: f64 = 0.05;
+/// Longest valve dead time tried: the longest a plant file may state, so that every dead
+/// time the plant can have can be found.
+pub const MAX_VALVE_DELAY_S: f64 = MAX_PLAUSIBLE_DELAY_S;
+
+/// The shift (samples, `1..=max`) by which the nominal channel `c` best matches the
+/// measured one (least squares over the samples after the longest shift), and the share of
+/// the residual energy it removes: the evidence's own search
+/// ([`crate::plant::effects::candidate::MAX_LAG_S`]) carried on to `max` samples when it
+/// ended at its bound.
+fn longer_lag(ev: &Evidence, c: Channel, max: usize) -> Option<(usize, f64)> {
+    let yn = ev.nominal[c.index()].as_ref()?;
+    let r = ev.residual[c.index()].as_ref()?;
+    let n = yn.len();
+    let max = max.min(n / 4);
+    if max == 0 {
+        return None;
+    }
+    let y: Vec<f64> = r.iter().zip(yn).map(|(a, b)| a + b).collect();
+    let cost = |s: usize| (max..n).map(|k| (y[k] - yn[k - s]).powi(2)).sum::<f64>();
+    let c0 = cost(0);
+    let (mut best, mut best_cost) = (0, c0);
+    for s in 1..=max {
+        let cs = cost(s);
+        if cs < best_cost {
+            best = s;
+            best_cost = cs;
+        }
+    }
+    Some((best, if c0 > 0.0 { 1.0 - best_cost / c0 } else { 0.0 }))
+}
 
 /// A dead time in front of every valve.
 pub struct ValveDelayCandidate;
@@ -144,17 +172,33 @@ impl Candidate for ValveDelayCandidate {
             .into_iter()
             .find(|c| s.has(*c))
             .unwrap_or(Channel::AngleDeg);
-        let lags: Vec<usize> = Channel::ALL
+        // The evidence searches lags up to its own bound; a channel whose lag ended there is
+        // searched on to the longest dead time a plant file may state.
+        let at_cap = ((crate::plant::effects::candidate::MAX_LAG_S / s.dt_s).round() as usize)
+            .min(ev.nominal[ch.index()].as_ref().map_or(0, |v| v.len() / 4));
+        let max_n = (MAX_VALVE_DELAY_S / s.dt_s).floor() as usize;
+        let lag_of = |c: Channel| -> (usize, f64) {
+            let (l, g) = (ev.lag_samples[c.index()], ev.lag_gain[c.index()]);
+            if l > 0 && l >= at_cap {
+                longer_lag(ev, c, max_n).unwrap_or((l, g))
+            } else {
+                (l, g)
+            }
+        };
+        let found: Vec<(Channel, usize, f64)> = Channel::ALL
             .iter()
             .filter(|c| s.has(**c))
-            .map(|c| ev.lag_samples[c.index()])
+            .map(|c| {
+                let (l, g) = lag_of(*c);
+                (*c, l, g)
+            })
             .collect();
+        let lags: Vec<usize> = found.iter().map(|f| f.1).collect();
         let all_lag = !lags.is_empty() && lags.iter().all(|l| *l > 0);
-        let gains: Vec<f64> = Channel::ALL
-            .iter()
-            .filter(|c| s.has(**c))
-            .map(|c| ev.lag_gain[c.index()])
-            .collect();
+        let gains: Vec<f64> = found.iter().map(|f| f.2).collect();
+        let ch_lag = found.iter().find(|f| f.0 == ch).map_or(0, |f| f.1);
+        let len = ev.nominal[ch.index()].as_ref().map_or(0, Vec::len);
+        let searched_to_bound = ch_lag > 0 && ch_lag >= max_n.min(len / 4);
         let score = if all_lag {
             gains.iter().copied().fold(f64::INFINITY, f64::min)
         } else {
@@ -162,8 +206,17 @@ impl Candidate for ValveDelayCandidate {
         };
         Screening {
             score,
-            initial: vec![ev.lag_samples[ch.index()] as f64 * s.dt_s],
-            note: if all_lag {
+            initial: vec![ch_lag as f64 * s.dt_s],
+            note: if all_lag && searched_to_bound {
+                format!(
+                    "every measured channel lags the nominal simulation, {} ms on {}: the \
+                     search ended at its bound ({} ms, the longest valve dead time a plant \
+                     file may state); the true delay may be longer",
+                    ch_lag as f64 * s.dt_s * 1e3,
+                    ch.name(),
+                    MAX_VALVE_DELAY_S * 1e3
+                )
+            } else if all_lag {
                 "every measured channel lags the nominal simulation, as when the valves act late"
                     .into()
             } else {
