@@ -10,9 +10,10 @@
 //! - **an interval that excludes the null value**: the 95 % interval of a parameter whose
 //!   null value is in range (a recalibrated key's file value, an effect's zero) must not
 //!   hold it (an interval the recording does not determine is not held against it);
-//! - a value inside the candidate's physical bounds (the search cannot leave them), and
-//!   for a recalibrated key not at the end of the range the diagnosis searches (the file's
-//!   value is then off by more than the range: the bound note says so).
+//! - a value inside the candidate's physical bounds (the search cannot leave them). A
+//!   recalibrated key at the end of the range the diagnosis searches is kept only in a
+//!   complete answer: the file's value is off by more than the
+//!   range, and the bound note says so.
 //!
 //! Never on a multiple of the noise alone: the noise only grades the accepted answer into
 //! `explained` (what remains is at the noise floor) or `partly_explained`.
@@ -151,15 +152,10 @@ fn null_value(c: &dyn Candidate, setup: &Setup, i: usize) -> Option<f64> {
     }
 }
 
-/// A recalibrated key whose value ended at a bound of its search range: (parameter, bound).
-/// Not a value the recording determines, so not an answer (the bound note says so).
-fn recal_at_bound(part: &Part, setup: &Setup) -> Option<(String, f64)> {
-    if !super::recalibrate::is_recal_id(part.candidate.id()) {
-        return None;
-    }
-    super::recalibrate::at_bounds(part.candidate, &part.params, setup)
-        .into_iter()
-        .next()
+/// Whether `part` is a recalibrated key whose value ended at a bound of its search range.
+pub fn recal_at_bound(part: &Part, setup: &Setup) -> bool {
+    super::recalibrate::is_recal_id(part.candidate.id())
+        && !super::recalibrate::at_bounds(part.candidate, &part.params, setup).is_empty()
 }
 
 /// Whether a parameter of `part` has a 95 % interval `ci` that excludes its null value;
@@ -373,11 +369,6 @@ fn item_grade(
         ))
     } else if ci_ok == Some(false) {
         Some("its 95 % interval holds the value that changes nothing".to_string())
-    } else if let Some((param, bound)) = recal_at_bound(part, setup) {
-        Some(format!(
-            "its {param} ended at the end of the range the diagnosis searches ({}): the file's value is off by more than that range, or the key stands in for something else",
-            crate::validate::Shown(bound)
-        ))
     } else {
         None
     };

@@ -1605,6 +1605,10 @@ fn judge(
         failures: !failures.is_empty(),
         check_not_held: check_not_held.is_some(),
         removes_most: graded.removes_most(),
+        key_at_bound: fin
+            .chosen
+            .iter()
+            .any(|p| grade::recal_at_bound(p, &g.problem.setup)),
     };
     Judged {
         verdict: verdict_of(&facts, opts),
@@ -1649,6 +1653,9 @@ struct VerdictFacts {
     /// The accepted items remove most of the mismatch on the held-out tail and on CHECK
     /// ([`grade::Grade::removes_most`]).
     removes_most: bool,
+    /// A recalibrated key of the answer ended at the end of its search range: the file's
+    /// value is off by more than the range; only a complete answer may rest on it.
+    key_at_bound: bool,
 }
 
 /// The verdict: `nothing_missing` when the nominal model explains TRAIN within its noise,
@@ -1675,7 +1682,7 @@ fn verdict_of(f: &VerdictFacts, opts: &DiagnoseOptions) -> Verdict {
         Verdict::Unexplained
     } else if f.residual_x_noise <= opts.max_residual_x_noise {
         Verdict::Explained
-    } else if f.removes_most {
+    } else if f.removes_most && !f.key_at_bound {
         Verdict::PartlyExplained
     } else {
         Verdict::Unexplained
@@ -1927,6 +1934,7 @@ mod verdict_rule_tests {
             failures: false,
             check_not_held: false,
             removes_most: true,
+            key_at_bound: false,
         }
     }
 
@@ -1957,6 +1965,10 @@ mod verdict_rule_tests {
         // A remainder of any size: the items held, so they are named.
         f.residual_x_noise = f64::INFINITY;
         assert_eq!(verdict_of(&f, &o), Verdict::PartlyExplained);
+        // A key at the end of its search range does not carry a partial answer.
+        f.key_at_bound = true;
+        assert_eq!(verdict_of(&f, &o), Verdict::Unexplained);
+        f.key_at_bound = false;
         // Removing a little of the mismatch is no answer.
         f.removes_most = false;
         assert_eq!(verdict_of(&f, &o), Verdict::Unexplained);
