@@ -1103,3 +1103,46 @@ fn a_check_recording_the_nominal_model_does_not_describe_is_not_nothing_missing(
     let out = ok(&with_check(&fixture("pwm_nominal.csv")));
     assert!(out.contains("Nothing is missing"), "{out}");
 }
+
+#[test]
+fn far_off_keys_are_found_from_the_grid_before_the_local_search() {
+    // A plant file whose valve conductance is 4.4 times the rig's, or whose muscle damping is
+    // 1/15 of it, against the independent nominal recording: the local search from the
+    // file's value alone stopped far off (unexplained); the log grid over the key's range
+    // starts it near the truth (8e-9, 2e-4).
+    let train = Recording::read(fixture("pulses_nominal.csv")).unwrap();
+    for (from, to, key, truth, tol) in [
+        (
+            "sonic_conductance_m3_per_s_pa = 8.0e-9",
+            "sonic_conductance_m3_per_s_pa = 3.5e-8",
+            "valve.sonic_conductance_m3_per_s_pa",
+            8.0e-9,
+            0.01,
+        ),
+        (
+            "damping_m2s = 2.0e-4",
+            "damping_m2s = 1.33e-5",
+            "muscle.damping_m2s",
+            2.0e-4,
+            0.1,
+        ),
+    ] {
+        let text = nominal_text();
+        assert!(text.contains(from), "{from}");
+        let cfg = PlantConfig::from_toml_str(&text.replace(from, to), "far.toml").unwrap();
+        let d = diagnose(
+            &cfg,
+            &train,
+            None,
+            &DiagnoseOptions::default(),
+            &|_, _, _| {},
+        )
+        .unwrap();
+        let answer = d.answer();
+        assert_eq!(d.verdict, Verdict::Explained, "{answer}");
+        let r = &d.recalibrated[0];
+        assert_eq!(r.key, key, "{answer}");
+        assert!((r.fitted / truth - 1.0).abs() < tol, "{answer}");
+        assert!(r.at_bound.is_none(), "{answer}");
+    }
+}

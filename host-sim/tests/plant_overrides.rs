@@ -168,3 +168,32 @@ fn invalid_overrides_name_their_table_and_key() {
     let e = err("[muscle.m1]\nbraid_angle_deg = 0.44\n");
     assert!(e.contains("muscle.m1.braid_angle_deg"), "{e}");
 }
+
+#[test]
+fn identify_fits_a_key_of_one_valve_into_its_own_table() {
+    // The reference file has no [valve.inlet1]: the key starts from the [valve] value it
+    // inherits, and the fitted file gets the table (a valid plant file, the fit in it).
+    let dir = std::env::temp_dir().join(format!("plant_overrides_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("fitted.toml");
+    let _ = std::fs::remove_file(&out);
+    run_ok(&[
+        &"identify",
+        &"plant",
+        &"--plant",
+        &plant(),
+        &"--recording",
+        &fixture("pulses_nominal.csv"),
+        &"--params",
+        &"valve.inlet1.sonic_conductance_m3_per_s_pa,muscle.m2.radius_m",
+        &"--out",
+        &out,
+    ]);
+    let cfg = host_sim::PlantConfig::load(&out).unwrap_or_else(|e| panic!("{e}"));
+    let c = cfg.valve.of(0).sonic_conductance_m3_per_s_pa;
+    assert!((c / 8.0e-9 - 1.0).abs() < 1e-3, "{c}");
+    assert!(cfg.valve.inlet1.is_some() && cfg.valve.exhaust1.is_none());
+    let r = cfg.muscle.of(1).radius_m;
+    assert!((r / 0.01 - 1.0).abs() < 1e-3, "{r}");
+    assert!(cfg.muscle.m2.is_some() && cfg.muscle.m1.is_none());
+}

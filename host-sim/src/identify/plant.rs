@@ -360,10 +360,16 @@ fn get_number(doc: &DocumentMut, key: &str, file: &str) -> Result<f64, IdentErro
     }
 }
 
-/// Sets a numeric key, keeping the comment that follows the value.
+/// Sets a numeric key, keeping the comment that follows the value. A missing table on the
+/// way (a part's own table, `[valve.inlet1]`, for a key it inherited) is added as a table of
+/// its own, not an inline one (a comment after the value would end an inline table's line).
 fn set_number(doc: &mut DocumentMut, key: &str, x: f64) {
     let mut it: &mut Item = doc.as_item_mut();
-    for part in key.split('.') {
+    let parts: Vec<&str> = key.split('.').collect();
+    for (n, part) in parts.iter().enumerate() {
+        if n + 1 < parts.len() && it.get(part).is_none_or(|i| i.is_none()) {
+            it[part] = Item::Table(toml_edit::Table::new());
+        }
         it = &mut it[part];
     }
     let decor = it.as_value().map(|v| v.decor().clone());
