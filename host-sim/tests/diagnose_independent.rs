@@ -360,6 +360,27 @@ fn evidence_run(c: &EvidenceCase) -> EvOutcome {
                     d.verdict == Verdict::Unexplained && named.is_empty(),
                     String::new(),
                 ),
+                Expect::ValvesLoggedLate => {
+                    // The shift the hint names, against the case's (whole samples).
+                    let truth_ms = (spec.valves_logged_late_s / c.dt_s).round() * c.dt_s * 1e3;
+                    let named_ms = d.hints.iter().find_map(|h| {
+                        let at = h.find("--shift-valves-ms ")? + "--shift-valves-ms ".len();
+                        let num: String = h[at..]
+                            .chars()
+                            .take_while(|ch| ch.is_ascii_digit() || *ch == '.' || *ch == '-')
+                            .collect();
+                        num.parse::<f64>().ok()
+                    });
+                    let ok_value =
+                        named_ms.is_some_and(|v| (v - truth_ms).abs() <= c.dt_s * 1e3 + 0.5);
+                    let pass = d.verdict == Verdict::NotThisPlant && named.is_empty() && ok_value;
+                    let why = match named_ms {
+                        None => "no --shift-valves-ms hint".into(),
+                        Some(v) if !ok_value => format!("named {v} ms, logged {truth_ms} ms late"),
+                        Some(v) => format!("named {v} ms"),
+                    };
+                    (pass, if pass { String::new() } else { why })
+                }
             };
             (pass, d.verdict.as_str().to_string(), named, depart, why)
         }

@@ -48,6 +48,11 @@ pub struct ImportArgs {
     /// refusing a file with gaps.
     #[arg(long)]
     pub split: bool,
+    /// The valve columns were logged this late against the sensor columns [ms]: write them
+    /// moved earlier by it (-1000..=1000; negative: logged early; the rows left without a
+    /// valve opening at the end are dropped).
+    #[arg(long, value_name = "MS", allow_negative_numbers = true)]
+    pub shift_valves_ms: Option<f64>,
 }
 
 impl From<CaptureArgs> for host_sim::io::capture::CaptureArgs {
@@ -68,6 +73,7 @@ impl From<ImportArgs> for host_sim::io::import::ImportArgs {
             input: a.input,
             out: a.out,
             split: a.split,
+            shift_valves_ms: a.shift_valves_ms,
         }
     }
 }

@@ -149,6 +149,11 @@ struct DiagnoseArgs {
     /// the estimate is printed on stderr when the run is long.
     #[arg(long)]
     allow_large: bool,
+    /// The valve columns were logged this late against the sensor columns [ms]: move them
+    /// earlier by it (-1000..=1000; negative: logged early) in --recording and --check
+    /// before diagnosing. The diagnosis names such an offset when it finds one.
+    #[arg(long, value_name = "MS", allow_negative_numbers = true)]
+    shift_valves_ms: Option<f64>,
 }
 
 #[derive(Args)]
@@ -1026,8 +1031,15 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
         return run_diagnose_arm(a, &opts, &bar);
     }
     let cfg = host_sim::PlantConfig::load(&a.plant)?;
-    let train = Recording::read(&a.recording)?;
-    let check = a.check.as_ref().map(Recording::read).transpose()?;
+    let mut train = Recording::read(&a.recording)?;
+    let mut check = a.check.as_ref().map(Recording::read).transpose()?;
+    if let Some(ms) = a.shift_valves_ms {
+        let shift = |r: &Recording| {
+            host_sim::io::timebase::shift_valves(r, ms * 1e-3).map_err(anyhow::Error::msg)
+        };
+        train = shift(&train)?;
+        check = check.as_ref().map(shift).transpose()?;
+    }
     let estimate = host_sim::diagnose::run_estimate(&train, check.as_ref(), &opts);
     estimate.check(a.allow_large).map_err(anyhow::Error::msg)?;
     if estimate.seconds > 30.0 {

@@ -38,6 +38,7 @@ pub mod start;
 #[cfg(any(test, feature = "test-support"))]
 pub mod synth;
 pub mod timebase;
+pub mod valve_offset;
 pub mod verdict;
 
 use std::collections::BTreeMap;
@@ -921,6 +922,19 @@ pub fn diagnose(
     opts: &DiagnoseOptions,
     progress: &(dyn Fn(u64, u64, &str) + Sync),
 ) -> Result<Diagnosis, DiagnoseError> {
+    // Valve columns logged late against the sensors: named with the fix, as a unit slip is
+    // (a plausibility hint: not this plant as logged, no search).
+    let with_hint;
+    let opts = match valve_offset::find_in(nominal, train, &opts.solver) {
+        Some(off) => {
+            with_hint = DiagnoseOptions {
+                extra_hints: [opts.extra_hints.clone(), vec![off.hint()]].concat(),
+                ..opts.clone()
+            };
+            &with_hint
+        }
+        None => opts,
+    };
     timebase::diagnose_through_gaps(nominal, train, check, opts, progress, diagnose_pass)
 }
 

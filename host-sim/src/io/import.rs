@@ -1854,6 +1854,9 @@ pub struct ImportArgs {
     /// Write one recording per gap-free segment (REC-1.csv, REC-2.csv, ...) instead of
     /// refusing a file with gaps.
     pub split: bool,
+    /// Valve columns logged this late against the sensor columns [ms]: moved earlier by it
+    /// ([`crate::io::timebase::shift_valves`]).
+    pub shift_valves_ms: Option<f64>,
 }
 
 /// `host-sim import`: returns the report printed on stdout.
@@ -1862,7 +1865,12 @@ pub fn run_import(a: &ImportArgs) -> anyhow::Result<String> {
     crate::validate::distinct_file_outputs(&inputs, &[("--out", &a.out)])
         .map_err(anyhow::Error::msg)?;
     let mapping = Mapping::load(&a.map)?;
-    let imp = import(&mapping, &a.map, &a.input, a.split)?;
+    let mut imp = import(&mapping, &a.map, &a.input, a.split)?;
+    if let Some(ms) = a.shift_valves_ms {
+        for seg in &mut imp.segments {
+            *seg = crate::io::timebase::shift_valves(seg, ms * 1e-3).map_err(anyhow::Error::msg)?;
+        }
+    }
     let (written, stale) = crate::io::segments::write_segments(
         &a.out,
         &inputs,

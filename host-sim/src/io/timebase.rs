@@ -347,6 +347,65 @@ impl MeasuredRows {
     }
 }
 
+/// The range of a valve-column shift ([`shift_valves`]) [ms]: the longest valve dead time
+/// a plant file may state, either way.
+pub const SHIFT_VALVES_MS: crate::validate::Range = crate::validate::Range::closed(-1000.0, 1000.0);
+
+/// `rec` with its valve columns moved `shift_s` earlier against the sensor columns (valves
+/// logged `shift_s` late; a negative shift: logged early): the row stamped `t` gets the
+/// openings logged at `t + shift_s` (the last row at or before it). Rows that have no
+/// opening left (the last `shift_s` of the run; the first `-shift_s` for a negative shift)
+/// are dropped. Refused outside [`SHIFT_VALVES_MS`] or when fewer than two rows are left.
+pub fn shift_valves(rec: &Recording, shift_s: f64) -> Result<Recording, String> {
+    let ms = shift_s * 1e3;
+    if !SHIFT_VALVES_MS.contains(ms) {
+        return Err(format!(
+            "--shift-valves-ms {ms}: outside {SHIFT_VALVES_MS} ms (the longest valve dead \
+             time a plant file may state, either way)"
+        ));
+    }
+    let n = rec.len();
+    let (t_first, t_last) = (rec.t_s[0], rec.t_s[n - 1]);
+    let keep: Vec<usize> = (0..n)
+        .filter(|&k| {
+            let t = rec.t_s[k] + shift_s;
+            t >= t_first - 1e-9 * shift_s.abs() && t <= t_last + 1e-9 * shift_s.abs()
+        })
+        .collect();
+    if keep.len() < 2 {
+        return Err(format!(
+            "--shift-valves-ms {ms}: leaves {} rows of {n} (the shift is longer than the \
+             recording)",
+            keep.len()
+        ));
+    }
+    let mut j = 0usize;
+    let inputs = keep
+        .iter()
+        .map(|&k| {
+            let t = rec.t_s[k] + shift_s + 1e-9 * (t_last - t_first) / n as f64;
+            while j + 1 < n && rec.t_s[j + 1] <= t {
+                j += 1;
+            }
+            rec.inputs[j]
+        })
+        .collect();
+    let pick = |v: &[f64]| keep.iter().map(|&k| v[k]).collect::<Vec<f64>>();
+    let mut out = Recording {
+        metadata: rec.metadata.clone(),
+        t_s: pick(&rec.t_s),
+        inputs,
+        outputs: std::array::from_fn(|i| rec.outputs[i].as_deref().map(pick)),
+        mass_flow_kg_s: rec.mass_flow_kg_s.as_ref().map(|[a, b]| [pick(a), pick(b)]),
+    };
+    out.metadata.retain(|(k, _)| k != FILLED_ROWS_KEY);
+    out.metadata.push((
+        "valves_shifted_ms".into(),
+        format!("{ms} (valve columns moved {ms} ms earlier against the sensor columns)"),
+    ));
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -406,6 +465,26 @@ mod tests {
         assert_eq!(u.inputs[3].u_in1, 1.0);
         assert_eq!(u.inputs[4].u_in1, 1.0);
         assert!((u.inputs[5].u_in1 - 0.2).abs() < 1e-9, "{:?}", u.inputs[5]);
+    }
+
+    /// Valves logged two samples late are moved back: the row at t gets the openings
+    /// logged at t + 2 dt, the last two rows (no opening left) are dropped; a shift outside
+    /// the range is refused with the range named.
+    #[test]
+    fn valve_columns_shift_earlier_by_whole_rows() {
+        let r = rec((0..10).map(|k| k as f64 * 0.01).collect());
+        let s = shift_valves(&r, 0.02).unwrap();
+        assert_eq!(s.len(), 8);
+        for k in 0..8 {
+            assert_eq!(s.inputs[k], r.inputs[k + 2], "{k}");
+            assert_eq!(s.t_s[k], r.t_s[k]);
+        }
+        let back = shift_valves(&r, -0.02).unwrap();
+        assert_eq!(back.t_s[0], r.t_s[2]);
+        assert_eq!(back.inputs[0], r.inputs[0]);
+        let e = shift_valves(&r, 1.5).unwrap_err();
+        assert!(e.contains("-1000") && e.contains("1000"), "{e}");
+        assert!(shift_valves(&r, 0.095).is_err());
     }
 
     /// Steps that are neither jitter nor a gap of whole samples, gaps too long and too many
