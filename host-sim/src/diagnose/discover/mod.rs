@@ -468,6 +468,27 @@ pub fn discover(
     Ok(d)
 }
 
+/// The hook for the diagnosis: after `diagnosis` answered TRAIN (and CHECK), run the
+/// discovery when the catalogue did not explain the recording (verdict `unexplained`; a
+/// verdict that names a partial answer can call [`discover`] on the plant it corrected), with
+/// no second comparison with the catalogue (the diagnosis made it). `None` for the other
+/// verdicts: nothing is missing, the answer is named, or the recording is not of this plant.
+pub fn after_diagnosis(
+    nominal: &PlantConfig,
+    train: &Recording,
+    check: Option<&Recording>,
+    diagnosis: &super::Diagnosis,
+    opts: &DiscoverOptions,
+) -> Option<Result<Discovery, DiagnoseError>> {
+    (diagnosis.verdict == super::Verdict::Unexplained).then(|| {
+        let opts = DiscoverOptions {
+            catalogue_share: None,
+            ..opts.clone()
+        };
+        discover(nominal, train, check, &opts)
+    })
+}
+
 /// The best catalogue refit (effects and recalibrations, the diagnosis's candidate pool, top
 /// [`DiscoverOptions::catalogue_top`] by screening score, fitted alone on the head): its id
 /// and the share of the discovered term's tail gain it reaches.

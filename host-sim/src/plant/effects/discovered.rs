@@ -135,8 +135,8 @@ impl Slot {
                 let mut v = vec![Speed, SignSpeed];
                 v.extend([0.05, 0.2, 1.0].map(TanhSpeed));
                 v.extend([SpeedAbsSpeed, Angle, AngleSq, AngleCubed]);
-                v.extend([6.0f64, 10.0, 14.0, 18.0, 22.0].map(|d| DeadbandAngle(d.to_radians())));
-                v.extend([10.0f64, 20.0].map(|d| SaturationAngle(d.to_radians())));
+                v.extend([0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4].map(DeadbandAngle));
+                v.extend([0.2, 0.35].map(SaturationAngle));
                 v.extend([Force1, Force2, ForceDiff]);
                 v
             }
@@ -528,11 +528,10 @@ impl Term {
     }
 }
 
-/// A parameter in a symbol: up to 4 significant digits, no trailing zeros.
+/// A parameter in a symbol: the shortest text that reads back as the same number (the
+/// plant file written replays exactly what the discovery scored).
 fn fmt_param(v: f64) -> String {
-    let s = format!("{v:.4}");
-    let s = s.trim_end_matches('0').trim_end_matches('.');
-    s.to_string()
+    format!("{v}")
 }
 
 impl<'de> Deserialize<'de> for Term {
