@@ -367,3 +367,80 @@ fn discovery_speed_30_s_at_1_khz() {
     );
     assert!(d.found.is_some(), "{}", d.text());
 }
+
+/// `host-sim discover`: exit status 0 with the JSON's "discovered" object and the plant file
+/// written when a term is found; 3 with "discovered": null and no plant file when nothing is;
+/// 2 when --check is --recording.
+#[test]
+fn the_command_line_answers_with_its_exit_status_json_and_plant_file() {
+    let dir = std::env::temp_dir().join(format!("host-sim-discover-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cfg = nominal();
+    let mut truth = cfg.clone();
+    truth.effects.discovered = Some(Discovered {
+        enabled: true,
+        slot: Slot::Joint,
+        terms: vec![Term::SpeedAbsSpeed],
+        coefficients: vec![-0.12],
+    });
+    let dt = 2e-3;
+    let p = |n: &str| dir.join(n);
+    record(&truth, pulses(6.0, dt, 1), dt, 2)
+        .write(p("train.csv"))
+        .unwrap();
+    record(&truth, pulses(4.0, dt, 3), dt, 4)
+        .write(p("check.csv"))
+        .unwrap();
+    record(&cfg, pulses(6.0, dt, 5), dt, 6)
+        .write(p("nominal.csv"))
+        .unwrap();
+    record(&cfg, pulses(4.0, dt, 7), dt, 8)
+        .write(p("nominal_check.csv"))
+        .unwrap();
+    let run = |rec: &str, check: &str, json: &str, plant: &str| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_host-sim"))
+            .arg("discover")
+            .arg("--plant")
+            .arg(fixture("reference-1dof.toml"))
+            .arg("--recording")
+            .arg(p(rec))
+            .arg("--check")
+            .arg(p(check))
+            .arg("--json")
+            .arg(p(json))
+            .arg("--write-plant")
+            .arg(p(plant))
+            .arg("--no-catalogue")
+            .output()
+            .unwrap()
+    };
+    let read_json = |n: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(p(n)).unwrap()).unwrap()
+    };
+    let out = run("train.csv", "check.csv", "found.json", "found.toml");
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert_eq!(out.status.code(), Some(0), "{text}");
+    let j = read_json("found.json");
+    assert_eq!(j["discovered"]["slot"], "joint", "{j}");
+    assert_eq!(
+        j["discovered"]["terms"][0]["symbol"], "speed*|speed|",
+        "{j}"
+    );
+    let written = PlantConfig::load(p("found.toml")).unwrap();
+    assert_eq!(
+        written.effects.discovered.as_ref().map(|d| d.slot),
+        Some(Slot::Joint)
+    );
+    let out = run("nominal.csv", "nominal_check.csv", "none.json", "none.toml");
+    assert_eq!(
+        out.status.code(),
+        Some(3),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    assert!(read_json("none.json")["discovered"].is_null());
+    assert!(!p("none.toml").exists());
+    let out = run("train.csv", "train.csv", "same.json", "same.toml");
+    assert_eq!(out.status.code(), Some(2));
+    std::fs::remove_dir_all(&dir).ok();
+}

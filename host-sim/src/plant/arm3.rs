@@ -345,9 +345,9 @@ impl Arm3Config {
             {
                 return Err(bad(
                     &format!("{prefix}effects.discovered"),
-                    "a discovered term of the muscle tensions or the valves is not modelled on \
-                     the 3-DOF arm (terms of the angle, the speed, the chamber pressures and the \
-                     sensors are)"
+                    "a discovered transmission term, or a term of the muscle tensions, the \
+                     valves or a sensor's rate, is not modelled on the 3-DOF arm (terms of the \
+                     angle, the speed, the chamber pressures and the sensor maps are)"
                         .into(),
                 ));
             }

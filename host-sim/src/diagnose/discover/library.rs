@@ -115,6 +115,7 @@ pub fn design(
             };
             let res = ev.residual[c.index()].as_ref()?;
             let nom = ev.nominal[c.index()].as_ref()?;
+            let rate = ev.nominal_rate[c.index()].as_ref()?;
             (
                 res[idx.clone()].to_vec(),
                 library
@@ -124,6 +125,7 @@ pub fn design(
                             .map(|k| {
                                 t.eval(&TermInput {
                                     reading: nom[k],
+                                    reading_rate: rate[k],
                                     ..TermInput::default()
                                 })
                             })

@@ -10,7 +10,7 @@
 //! | `joint` | J omega' = T | a torque [N m] of the angle, the speed or the muscle tensions |
 //! | `transmission` | chi = chi0 +- r beta / l, T = r (F1 - F2) | a change of the muscles' travel [m] with the angle (the lever follows as its derivative), or a cable's stretch under the muscle force |
 //! | `chamber_p1`, `chamber_p2`, `chambers` (both, one term) | dp/dt = (p_atm Q - p dV) / V | a standard volume flow into that chamber [m^3/s ANR] of its gauge pressure, or of its valves' openings and nominal flows |
-//! | `sensor_angle`, `sensor_p1`, `sensor_p2` | reading = x | a reading error [deg or kPa] of the true value |
+//! | `sensor_angle`, `sensor_p1`, `sensor_p2` | reading = x | a reading error [deg or kPa] of the true value or of its rate (a lag) |
 //!
 //! ```toml
 //! [effects.discovered]
@@ -28,7 +28,7 @@
 
 use serde::{Deserialize, Deserializer};
 
-use super::{enabled_default, Check, Effect, Hooks, Truth};
+use super::{enabled_default, ChannelFilter, Check, Effect, Hooks, Truth};
 use crate::plant::effects::candidate::{Candidate, EffectCandidates};
 use crate::plant::state::Measurement;
 use crate::plant::tables::{ConfigError, ValveConfig};
@@ -148,7 +148,7 @@ impl Slot {
                 v
             }
             Slot::SensorAngle | Slot::SensorP1 | Slot::SensorP2 => {
-                vec![Reading, ReadingSq, ReadingCubed]
+                vec![Reading, ReadingSq, ReadingCubed, ReadingRate]
             }
         }
     }
@@ -219,6 +219,9 @@ pub enum Term {
     ReadingSq,
     /// x^3.
     ReadingCubed,
+    /// dx/dt, the rate of the sensor's channel (a coefficient of -tau: a first-order lag of
+    /// tau seconds, for tau small against the signal's time scale).
+    ReadingRate,
 }
 
 /// What a term is computed from.
@@ -231,6 +234,8 @@ pub struct TermInput {
     pub p_gauge_kpa: f64,
     /// The sensor's channel (deg, kPa).
     pub reading: f64,
+    /// Its rate (deg/s, kPa/s).
+    pub reading_rate: f64,
     /// The chamber's valve openings (inlet, exhaust) and their nominal signed flows [m^3/s
     /// ANR] (inlet >= 0, exhaust <= 0).
     pub openings: [f64; 2],
@@ -269,6 +274,7 @@ impl Term {
             Reading => "x".into(),
             ReadingSq => "x^2".into(),
             ReadingCubed => "x^3".into(),
+            ReadingRate => "dx/dt".into(),
         }
     }
 
@@ -303,6 +309,7 @@ impl Term {
             "x" => Reading,
             "x^2" => ReadingSq,
             "x^3" => ReadingCubed,
+            "dx/dt" => ReadingRate,
             _ => {
                 if let Some(v) = param("tanh(speed/", ")") {
                     TanhSpeed(v)
@@ -349,6 +356,10 @@ impl Term {
             ReadingCubed => match slot {
                 Slot::SensorAngle => "deg^3",
                 _ => "kPa^3",
+            },
+            ReadingRate => match slot {
+                Slot::SensorAngle => "deg/s",
+                _ => "kPa/s",
             },
         }
     }
@@ -407,6 +418,9 @@ impl Term {
             Reading => "a gain error of the sensor".into(),
             ReadingSq => "a quadratic (curved) transducer characteristic".into(),
             ReadingCubed => "a cubic transducer characteristic".into(),
+            ReadingRate => {
+                "a lag of the sensor: the reading trails the value by -coefficient seconds".into()
+            }
         }
     }
 
@@ -473,6 +487,7 @@ impl Term {
             Reading => y,
             ReadingSq => y * y,
             ReadingCubed => y * y * y,
+            ReadingRate => x.reading_rate,
         }
     }
 
@@ -523,7 +538,7 @@ impl Term {
                     | InletDeadZone(_)
                     | ExhaustDeadZone(_)
             ),
-            _ => matches!(self, Reading | ReadingSq | ReadingCubed),
+            _ => matches!(self, Reading | ReadingSq | ReadingCubed | ReadingRate),
         }
     }
 }
@@ -588,7 +603,20 @@ impl Discovered {
     /// True when the 3-DOF arm cannot run the table (terms of the tensions or the valves:
     /// the arm runs the angle, speed, pressure and sensor hooks only).
     pub fn arm_refuses(&self) -> bool {
-        self.needs_tensions() || self.needs_valves() || self.slot == Slot::Transmission
+        self.needs_tensions()
+            || self.needs_valves()
+            || self.slot == Slot::Transmission
+            || self.terms.contains(&Term::ReadingRate)
+    }
+
+    /// The channel index (angle, p1, p2) of a sensor slot.
+    fn sensor_channel(&self) -> Option<usize> {
+        match self.slot {
+            Slot::SensorAngle => Some(0),
+            Slot::SensorP1 => Some(1),
+            Slot::SensorP2 => Some(2),
+            _ => None,
+        }
     }
 
     /// The chamber index (0, 1) the slot acts on.
@@ -738,6 +766,22 @@ impl Hooks for Discovered {
             .map(|(_, c)| *c)
     }
 
+    fn sensor_filter(&self, dt_s: f64) -> Option<Box<dyn ChannelFilter>> {
+        let channel = self.sensor_channel()?;
+        let c = self
+            .terms
+            .iter()
+            .zip(&self.coefficients)
+            .find(|(t, _)| **t == Term::ReadingRate)
+            .map(|(_, c)| *c)?;
+        Some(Box::new(RateFilter {
+            channel,
+            c,
+            dt_s,
+            prev: None,
+        }))
+    }
+
     fn calibrate(&self, mut m: Measurement) -> Measurement {
         let field = match self.slot {
             Slot::SensorAngle => &mut m.angle_deg,
@@ -751,6 +795,25 @@ impl Hooks for Discovered {
             ..TermInput::default()
         });
         m
+    }
+}
+
+/// The rate term of a sensor slot: reading = x + c dx/dt, dx/dt by the backward difference
+/// of the samples (0 at the first).
+struct RateFilter {
+    channel: usize,
+    c: f64,
+    dt_s: f64,
+    prev: Option<f64>,
+}
+
+impl ChannelFilter for RateFilter {
+    fn push(&mut self, mut x: [f64; 5]) -> [f64; 5] {
+        let v = x[self.channel];
+        let rate = self.prev.map_or(0.0, |p| (v - p) / self.dt_s);
+        self.prev = Some(v);
+        x[self.channel] = v + self.c * rate;
+        x
     }
 }
 
@@ -881,6 +944,24 @@ mod tests {
         let m = p.measure(&x);
         assert!((m.p1_kpa - 204.0).abs() < 1e-9, "{}", m.p1_kpa);
         assert!((m.p2_kpa - 100.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_rate_term_lags_the_reading() {
+        let table = "[effects.discovered]\nslot = \"sensor_p1\"\nterms = [\"dx/dt\"]\ncoefficients = [-0.01]\n";
+        let p = Plant::from_config(&plant_with(table).unwrap());
+        // p1 rising at 100 kPa/s: read 1 kPa low (10 ms of lag) after the first sample.
+        let states: Vec<PlantState> = (0..5)
+            .map(|k| PlantState {
+                angle_rad: 0.0,
+                velocity_rad_s: 0.0,
+                p1_abs_pa: p.p_atm_pa + 100e3 + 100e3 * k as f64 * 1e-3,
+                p2_abs_pa: p.p_atm_pa + 100e3,
+            })
+            .collect();
+        let m = p.measure_series(&states, 1e-3);
+        assert!((m[0].p1_kpa - 100.0).abs() < 1e-9);
+        assert!((m[3].p1_kpa - (100.3 - 1.0)).abs() < 1e-6, "{}", m[3].p1_kpa);
     }
 
     #[test]
