@@ -18,6 +18,7 @@ use host_sim::{Plant, Recording};
 
 mod control;
 mod diagnose;
+mod discover;
 mod identify;
 mod io;
 
@@ -90,6 +91,12 @@ enum Command {
     /// Each recording needs t_s,u_in1,u_ex1,u_in2,u_ex2 and the measured angle_deg,p1_kpa,
     /// p2_kpa (f1_n,f2_n used when present), as in RECORDING.md.
     DiagnoseBatch(diagnose::BatchArgs),
+    /// Discovery: find the missing term in closed form when the catalogue does not explain a
+    /// recording: a sparse regression of each slot's equation residual (joint, transmission,
+    /// chambers, sensors) on a library of physical terms, refined by output error, kept only
+    /// if it improves the tail of --recording and --check. Exit status 0: a term discovered;
+    /// 3: nothing discovered (the JSON is written); 2: bad input.
+    Discover(discover::DiscoverArgs),
     /// Import a rig logger's CSV (other column names, units, time base) into a recording,
     /// through a mapping file (docs/rig.md).
     ///
@@ -318,6 +325,7 @@ pub fn main() -> ExitCode {
         Command::Fit(a) => run_fit(&a),
         Command::Demo(a) => run_demo(&a),
         Command::Diagnose(a) => run_diagnose(&a),
+        Command::Discover(a) => discover::run(&a),
         Command::DiagnoseBatch(a) => {
             host_sim::diagnose::batch::run_batch(&a.into()).map(|(report, code)| {
                 print!("{report}");
@@ -356,6 +364,7 @@ fn refuse_arm_files(c: &Command) -> Result<(), String> {
         Command::Tune(a) => ("tune", vec![&a.plant], vec![]),
         Command::Pil(a) => ("pil", vec![&a.plant], vec![]),
         Command::DiagnoseBatch(a) => ("diagnose-batch", vec![&a.plant], vec![]),
+        Command::Discover(a) => ("discover", vec![&a.plant], vec![&a.recording]),
         Command::CompareControl(a) => ("compare-control", vec![&a.plant], vec![]),
         Command::Fit(a) => ("fit", vec![], vec![&a.a, &a.b]),
         Command::Calibrate(a) => {

@@ -26,6 +26,7 @@ pub mod batch;
 pub mod black_box;
 pub mod candidates;
 pub mod differentiate;
+pub mod discover;
 pub mod fitting;
 pub mod grade;
 pub mod key_screen;

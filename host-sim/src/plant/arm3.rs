@@ -338,6 +338,19 @@ impl Arm3Config {
                         .into(),
                 ));
             }
+            if j.effects
+                .discovered
+                .as_ref()
+                .is_some_and(|d| d.arm_refuses())
+            {
+                return Err(bad(
+                    &format!("{prefix}effects.discovered"),
+                    "a discovered transmission term, or a term of the muscle tensions, the \
+                     valves or a sensor's rate, is not modelled on the 3-DOF arm (terms of the \
+                     angle, the speed, the chamber pressures and the sensor maps are)"
+                        .into(),
+                ));
+            }
             if active.thermal_chamber().is_some() {
                 return Err(bad(
                     &format!("{prefix}effects.thermal_chamber"),

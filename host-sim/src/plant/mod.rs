@@ -114,12 +114,62 @@ impl Plant {
     /// enabled: these are the measured `f1_n`, `f2_n`).
     #[inline(always)]
     pub fn tensions_n(&self, x: &PlantState) -> [f64; 2] {
-        let chi = self.joint.contractions(x.angle_rad);
-        let dchi = self.joint.contraction_rates(x.velocity_rad_s);
-        [
-            self.tension_n(0, x.p1_abs_pa - self.p_atm_pa, chi[0], dchi[0]),
-            self.tension_n(1, x.p2_abs_pa - self.p_atm_pa, chi[1], dchi[1]),
-        ]
+        let (chi, dchi, _) = self.kinematics(x.angle_rad, x.velocity_rad_s);
+        let pg = [x.p1_abs_pa - self.p_atm_pa, x.p2_abs_pa - self.p_atm_pa];
+        self.tensions_and_contractions(pg, chi, dchi).0
+    }
+
+    /// Contractions (chi1, chi2), their rates and the lever [m] at a joint angle and speed:
+    /// the joint's kinematics, with a discovered transmission map if enabled (the muscles'
+    /// travel r (beta + shift(beta)), lever r (1 + shift'(beta))).
+    #[inline(always)]
+    pub fn kinematics(&self, angle_rad: f64, velocity_rad_s: f64) -> ([f64; 2], [f64; 2], f64) {
+        let chi = self.joint.contractions(angle_rad);
+        let dchi = self.joint.contraction_rates(velocity_rad_s);
+        let r = self.joint.sprocket_radius_m;
+        match self.effects.transmission_map(angle_rad, r) {
+            None => (chi, dchi, r),
+            Some([shift_m, slope_m]) => {
+                let l = r / self.joint.contraction_per_rad;
+                let g = 1.0 + slope_m / r;
+                (
+                    [chi[0] + shift_m / l, chi[1] - shift_m / l],
+                    [dchi[0] * g, dchi[1] * g],
+                    r * g,
+                )
+            }
+        }
+    }
+
+    /// The tensions at gauge pressures `pg` and contractions `chi` (rates `dchi`), and the
+    /// contractions the muscles take: with a discovered cable compliance (m/N) each muscle
+    /// contracts further by its cable's stretch F c (quasi-static, three fixed-point steps).
+    #[inline(always)]
+    pub fn tensions_and_contractions(
+        &self,
+        pg: [f64; 2],
+        chi: [f64; 2],
+        dchi: [f64; 2],
+    ) -> ([f64; 2], [f64; 2]) {
+        let f = |chi: [f64; 2]| {
+            [
+                self.tension_n(0, pg[0], chi[0], dchi[0]),
+                self.tension_n(1, pg[1], chi[1], dchi[1]),
+            ]
+        };
+        let mut t = f(chi);
+        match self.effects.cable_compliance_m_per_n() {
+            None => (t, chi),
+            Some(c) => {
+                let l = [0, 1].map(|i| self.muscles[i].rest_length_m);
+                let mut chi_s = chi;
+                for _ in 0..3 {
+                    chi_s = [chi[0] + c * t[0] / l[0], chi[1] + c * t[1] / l[1]];
+                    t = f(chi_s);
+                }
+                (t, chi_s)
+            }
+        }
     }
 
     /// Tension of muscle `i`: the nominal one, minus the braid friction if enabled.
@@ -254,6 +304,15 @@ impl Plant {
         if u_ex != 0.0 {
             q_out = -u_ex * self.valves[2 * i + 1].flow_m3_s(p_abs_pa, self.p_atm_pa);
         }
+        if u_in != 0.0 || u_ex != 0.0 {
+            q_in += self.effects.chamber_valve_flow_m3_s(
+                i,
+                p_abs_pa,
+                self.p_atm_pa,
+                [u_in, u_ex],
+                [q_in, q_out],
+            );
+        }
         [q_leak, q_in, q_out]
     }
 
@@ -289,21 +348,19 @@ impl Plant {
         aux: &AuxState,
         u: &ValveInputs,
     ) -> (PlantState, AuxState) {
-        let chi = self.joint.contractions(x.angle_rad);
-        let dchi = self.joint.contraction_rates(x.velocity_rad_s);
+        let (chi, dchi, lever) = self.kinematics(x.angle_rad, x.velocity_rad_s);
         let p = [x.p1_abs_pa, x.p2_abs_pa];
+        let (tension, chi) =
+            self.tensions_and_contractions([p[0] - self.p_atm_pa, p[1] - self.p_atm_pa], chi, dchi);
         let supply = self.effects.supply();
         let reservoir_abs_pa = aux.supply_abs_pa;
         let p_supply = self.supply_abs_pa(p, aux, u);
         let pressure_factor = self.effects.pressure_rate_factor();
         let thermal = self.effects.thermal_chamber();
         let mut q_supply = 0.0;
-        let mut tension = [0.0; 2];
         let mut dp = [0.0; 2];
         let mut dt = [0.0; 2];
         for i in 0..2 {
-            let pg = p[i] - self.p_atm_pa;
-            tension[i] = self.tension_n(i, pg, chi[i], dchi[i]);
             // The signed standard flows into the chamber: leak, inlet, exhaust. A closed
             // valve contributes nothing (skip the flow function).
             let [q_leak, q_in, q_out] = self.chamber_flows_m3_s(i, p[i], p_supply, u);
@@ -333,8 +390,14 @@ impl Plant {
                 }
             }
         }
-        let torque = self.joint.muscle_torque_nm(tension)
+        let torque = (tension[0] - tension[1]) * lever
             + self.effects.joint_torque_nm(x.angle_rad, x.velocity_rad_s)
+            + self.effects.joint_torque_tensions_nm(
+                x.angle_rad,
+                x.velocity_rad_s,
+                tension,
+                self.joint.sprocket_radius_m,
+            )
             + self.joint.end_stop_torque_nm(x.angle_rad, x.velocity_rad_s)
             + aux.load_torque_nm;
         let d_reservoir = supply.tank_rate_pa_s(

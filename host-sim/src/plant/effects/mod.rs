@@ -24,7 +24,8 @@
 //! [`ThermalChamber`] (gas temperatures with wall heat transfer, two more ODE states);
 //! [`SupplyDrop`] (the supply pressure, either a static flow-dependent drop or a reservoir
 //! with its own pressure state, the fifth ODE state, see [`crate::sim::Integrator`]);
-//! [`InertiaMismatch`] (not a table: the diagnosis candidate for a wrong `joint.inertia_kgm2`).
+//! [`InertiaMismatch`] (not a table: the diagnosis candidate for a wrong `joint.inertia_kgm2`);
+//! [`Discovered`] (a term `host-sim discover` found, in one slot of the equations).
 
 use std::fmt::Debug;
 use std::path::Path;
@@ -103,11 +104,54 @@ pub trait Hooks: Debug + Clone + PartialEq {
     fn joint_torque_nm(&self, _angle_rad: f64, _velocity_rad_s: f64) -> f64 {
         0.0
     }
+    /// Torque on the joint (N m) that also depends on the muscle tensions `tensions_n` and the
+    /// sprocket radius (a discovered transmission term); added to the muscles' torque. The
+    /// 3-DOF arm does not run this hook (`Arm3Config::validate` refuses such a table).
+    #[inline(always)]
+    fn joint_torque_tensions_nm(
+        &self,
+        _angle_rad: f64,
+        _velocity_rad_s: f64,
+        _tensions_n: [f64; 2],
+        _sprocket_radius_m: f64,
+    ) -> f64 {
+        0.0
+    }
     /// Extra standard volume flow into the chamber of `muscle` (0 or 1) at absolute pressure
     /// `p_abs_pa` (m^3/s, negative: out of it).
     #[inline(always)]
     fn chamber_flow_m3_s(&self, _muscle: usize, _p_abs_pa: f64, _p_atm_pa: f64) -> f64 {
         0.0
+    }
+    /// Extra standard volume flow into the chamber of `muscle` that depends on its valves:
+    /// their `openings` (inlet, exhaust) and nominal signed flows `valve_flows_m3_s` (the
+    /// inlet's into the chamber, the exhaust's out of it, negative; a discovered valve term).
+    /// Added to the inlet's flow. The 3-DOF arm does not run this hook
+    /// (`Arm3Config::validate` refuses such a table).
+    #[inline(always)]
+    fn chamber_valve_flow_m3_s(
+        &self,
+        _muscle: usize,
+        _p_abs_pa: f64,
+        _p_atm_pa: f64,
+        _openings: [f64; 2],
+        _valve_flows_m3_s: [f64; 2],
+    ) -> f64 {
+        0.0
+    }
+    /// A change of the transmission at joint angle `angle_rad`: the muscles' extra travel
+    /// [m] and its derivative by the angle [m/rad] (muscle 1 contracts by it, muscle 2
+    /// extends; the lever grows by the derivative). `None`: the sprocket's r beta. The 3-DOF
+    /// arm does not run this hook.
+    #[inline(always)]
+    fn transmission_map(&self, _angle_rad: f64, _sprocket_radius_m: f64) -> Option<[f64; 2]> {
+        None
+    }
+    /// A compliance of the cables between the muscles and the sprocket [m/N] (each muscle
+    /// contracts further by F times it). The 3-DOF arm does not run this hook.
+    #[inline(always)]
+    fn cable_compliance_m_per_n(&self) -> Option<f64> {
+        None
     }
     /// Factor on the isothermal pressure rate (the polytropic exponent).
     #[inline(always)]
@@ -351,6 +395,7 @@ macro_rules! effect_list {
             leakage::Leakage,
             sensor::SensorCalibration,
             thermal_chamber::ThermalChamber,
+            discovered::Discovered,
             #[cfg(test)]
             toy_spring::ToySpring,
         }
@@ -399,6 +444,33 @@ impl Effects {
         s.0
     }
 
+    /// Sum of the effect torques on the joint that depend on the muscle tensions.
+    #[inline(always)]
+    pub fn joint_torque_tensions_nm(
+        &self,
+        angle_rad: f64,
+        velocity_rad_s: f64,
+        tensions_n: [f64; 2],
+        sprocket_radius_m: f64,
+    ) -> f64 {
+        struct Sum(f64, f64, f64, [f64; 2], f64);
+        impl Visit<'_> for Sum {
+            #[inline(always)]
+            fn visit<A: Hooks>(&mut self, a: &A) {
+                self.0 += a.joint_torque_tensions_nm(self.1, self.2, self.3, self.4);
+            }
+        }
+        let mut s = Sum(
+            0.0,
+            angle_rad,
+            velocity_rad_s,
+            tensions_n,
+            sprocket_radius_m,
+        );
+        self.visit(&mut s);
+        s.0
+    }
+
     /// Extra standard volume flow into the chamber of `muscle` (0 or 1; negative: out).
     #[inline(always)]
     pub fn chamber_flow_m3_s(&self, muscle: usize, p_abs_pa: f64, p_atm_pa: f64) -> f64 {
@@ -412,6 +484,66 @@ impl Effects {
         let mut s = Sum(0.0, muscle, p_abs_pa, p_atm_pa);
         self.visit(&mut s);
         s.0
+    }
+
+    /// Extra standard volume flow into the chamber of `muscle` from its valves' openings and
+    /// nominal flows ([`Hooks::chamber_valve_flow_m3_s`]).
+    #[inline(always)]
+    pub fn chamber_valve_flow_m3_s(
+        &self,
+        muscle: usize,
+        p_abs_pa: f64,
+        p_atm_pa: f64,
+        openings: [f64; 2],
+        valve_flows_m3_s: [f64; 2],
+    ) -> f64 {
+        struct Sum(f64, usize, f64, f64, [f64; 2], [f64; 2]);
+        impl Visit<'_> for Sum {
+            #[inline(always)]
+            fn visit<A: Hooks>(&mut self, a: &A) {
+                self.0 += a.chamber_valve_flow_m3_s(self.1, self.2, self.3, self.4, self.5);
+            }
+        }
+        let mut s = Sum(0.0, muscle, p_abs_pa, p_atm_pa, openings, valve_flows_m3_s);
+        self.visit(&mut s);
+        s.0
+    }
+
+    /// The transmission's extra travel and its slope ([`Hooks::transmission_map`], summed);
+    /// `None` when no effect changes it.
+    #[inline(always)]
+    pub fn transmission_map(&self, angle_rad: f64, sprocket_radius_m: f64) -> Option<[f64; 2]> {
+        struct Sum(Option<[f64; 2]>, f64, f64);
+        impl Visit<'_> for Sum {
+            #[inline(always)]
+            fn visit<A: Hooks>(&mut self, a: &A) {
+                if let Some([d, s]) = a.transmission_map(self.1, self.2) {
+                    let o = self.0.get_or_insert([0.0; 2]);
+                    o[0] += d;
+                    o[1] += s;
+                }
+            }
+        }
+        let mut s = Sum(None, angle_rad, sprocket_radius_m);
+        self.visit(&mut s);
+        s.0
+    }
+
+    /// The cables' compliance [m/N], if an effect models it.
+    #[inline(always)]
+    pub fn cable_compliance_m_per_n(&self) -> Option<f64> {
+        struct First(Option<f64>);
+        impl Visit<'_> for First {
+            #[inline(always)]
+            fn visit<A: Hooks>(&mut self, a: &A) {
+                if self.0.is_none() {
+                    self.0 = a.cable_compliance_m_per_n();
+                }
+            }
+        }
+        let mut f = First(None);
+        self.visit(&mut f);
+        f.0
     }
 
     /// Factor on the isothermal pressure rate (1 without a polytropic effect).

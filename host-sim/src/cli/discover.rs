@@ -1,0 +1,126 @@
+//! The command line of `discover`: its arguments, their checks, and the call of the library's
+//! [`host_sim::diagnose::discover::discover`].
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{Context, Result};
+use clap::Args;
+
+use host_sim::validate;
+use host_sim::Recording;
+
+/// `host-sim discover`: the arguments.
+#[derive(Args, Debug)]
+#[command(
+    after_help = "Example:\n  host-sim discover --plant host-sim/plants/reference-1dof.toml --recording train.csv --check check.csv --json discovery.json --write-plant discovered.toml\n\nSlots: joint, transmission, chamber_p1, chamber_p2, sensor_angle, sensor_p1, sensor_p2 (docs/diagnosis.md \"Discovering a missing term\")."
+)]
+pub struct DiscoverArgs {
+    /// Nominal plant file (TOML) the user believes in (1-DOF).
+    #[arg(long, value_name = "P.toml")]
+    pub plant: PathBuf,
+    /// Training recording (t_s,u_in1,u_ex1,u_in2,u_ex2 and the measured angle_deg,p1_kpa,
+    /// p2_kpa; f1_n,f2_n used when present): the terms are fitted on its first 70 % and
+    /// scored on the rest.
+    #[arg(long, value_name = "R.csv")]
+    pub recording: PathBuf,
+    /// A recording of the same rig with another excitation: a term is kept only if it also
+    /// improves this one.
+    #[arg(long, value_name = "C.csv")]
+    pub check: Option<PathBuf>,
+    /// Write the answer as JSON (key "discovered": the term, or null).
+    #[arg(long, value_name = "OUT.json")]
+    pub json: Option<PathBuf>,
+    /// Write the plant file with the discovered term as its [effects.discovered] table
+    /// (only when a term is discovered).
+    #[arg(long, value_name = "OUT.toml")]
+    pub write_plant: Option<PathBuf>,
+    /// Skip the comparison with the catalogue (effects and recalibrations): use when the
+    /// diagnosis already answered `unexplained`.
+    #[arg(long)]
+    pub no_catalogue: bool,
+    /// Worker threads.
+    #[arg(long, default_value_t = 2, value_parser = host_sim::validate::usize_in(1, 256))]
+    pub threads: usize,
+}
+
+/// Runs `discover`: exit status 0 when a term is discovered, 3 when nothing is (the JSON is
+/// written), 2 on bad input.
+pub fn run(a: &DiscoverArgs) -> Result<ExitCode> {
+    use host_sim::diagnose::discover::{discover, DiscoverOptions};
+    let mut inputs: Vec<(&str, &Path)> = vec![("--plant", &a.plant), ("--recording", &a.recording)];
+    if let Some(c) = &a.check {
+        if validate::same_existing_file(c, &a.recording) {
+            anyhow::bail!(
+                "--check {}: is the same file as --recording {}; give a recording of the same rig \
+                 with another excitation",
+                c.display(),
+                a.recording.display()
+            );
+        }
+        inputs.push(("--check", c));
+    }
+    let mut outputs: Vec<(&str, &Path)> = Vec::new();
+    if let Some(j) = &a.json {
+        validate::replaceable("--json", j, validate::OutputKind::JSON)
+            .map_err(anyhow::Error::msg)?;
+        outputs.push(("--json", j));
+    }
+    if let Some(p) = &a.write_plant {
+        validate::replaceable("--write-plant", p, validate::OutputKind::PLANT)
+            .map_err(anyhow::Error::msg)?;
+        outputs.push(("--write-plant", p));
+    }
+    validate::distinct_file_outputs(&inputs, &outputs).map_err(anyhow::Error::msg)?;
+    let plant_text = std::fs::read_to_string(&a.plant)
+        .with_context(|| format!("--plant {}", a.plant.display()))?;
+    let cfg = host_sim::PlantConfig::from_toml_str(&plant_text, &a.plant)?;
+    if a.write_plant.is_some() && plant_text.contains("[effects.discovered]") {
+        anyhow::bail!(
+            "--write-plant: {} already has an [effects.discovered] table; remove it (or \
+             discover against the file without it) so that the written file has one",
+            a.plant.display()
+        );
+    }
+    let train = Recording::read(&a.recording)?;
+    let check = a.check.as_ref().map(Recording::read).transpose()?;
+    let opts = DiscoverOptions {
+        threads: a.threads,
+        catalogue_share: if a.no_catalogue {
+            None
+        } else {
+            DiscoverOptions::default().catalogue_share
+        },
+        ..DiscoverOptions::default()
+    };
+    let d = discover(&cfg, &train, check.as_ref(), &opts)
+        .with_context(|| format!("{}: discovery failed", a.recording.display()))?;
+    use std::io::Write as _;
+    let mut out = std::io::stdout().lock();
+    let _ = write!(out, "{}", d.text());
+    if let Some(j) = &a.json {
+        let json = serde_json::to_string_pretty(&d.to_json())? + "\n";
+        host_sim::identify::write_atomic(j, json.as_bytes())?;
+        let _ = writeln!(out, "wrote {}", j.display());
+    }
+    if let (Some(p), Some(f)) = (&a.write_plant, &d.found) {
+        let text = format!(
+            "{}\n# Found by `host-sim discover` on {}: {}\n{}",
+            plant_text.trim_end(),
+            a.recording.display(),
+            host_sim::diagnose::discover::formula(&f.table),
+            f.table.to_toml()
+        );
+        // The written file must read back as the plant the discovery scored.
+        host_sim::PlantConfig::from_toml_str(&text, p)?;
+        host_sim::identify::write_atomic(p, text.as_bytes())?;
+        let _ = writeln!(out, "wrote {}", p.display());
+    } else if let Some(p) = &a.write_plant {
+        let _ = writeln!(out, "nothing discovered: {} not written", p.display());
+    }
+    Ok(if d.found.is_some() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(3)
+    })
+}

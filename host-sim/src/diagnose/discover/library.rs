@@ -1,0 +1,344 @@
+//! Each slot's regression: the residual of the slot's equation on the head of TRAIN (computed
+//! from the measured states and their Savitzky-Golay derivatives, the diagnosis's
+//! [`Evidence`]) and the library's columns (each term at the measured states, mapped into the
+//! equation's units), then the sparse supports STLSQ finds over a grid of thresholds.
+
+use crate::plant::channel::Channel;
+use crate::plant::effects::candidate::Evidence;
+use crate::plant::effects::discovered::{Slot, Term, TermInput};
+
+use super::sparse::{stlsq, Design, SparseFit};
+
+/// Samples left out at each end of the head (the smoothed derivatives' edges).
+const EDGE: usize = 20;
+
+/// A sparse model of one slot from the equation error.
+#[derive(Debug, Clone)]
+pub struct SlotModel {
+    pub slot: Slot,
+    pub terms: Vec<Term>,
+    /// Coefficients in the slot's unit over each term's.
+    pub coefficients: Vec<f64>,
+    /// Share of the equation residual's energy explained (uncentred R^2).
+    pub r2: f64,
+}
+
+/// The residual of `slot`'s equation and its library's columns on samples `range` of the
+/// evidence; `None` when the slot's channel was not measured.
+pub fn design(
+    ev: &Evidence,
+    slot: Slot,
+    library: &[Term],
+    range: std::ops::Range<usize>,
+) -> Option<Design> {
+    let n = ev.angle_rad.len();
+    let lo = range.start + EDGE;
+    let hi = range.end.min(n).saturating_sub(EDGE);
+    if hi <= lo + 50 {
+        return None;
+    }
+    let plant = &ev.plant;
+    let r = plant.joint.sprocket_radius_m;
+    // The tensions the torque residual used: measured when both force channels were, else
+    // the nominal tension law at the measured state.
+    let forces = |k: usize| -> [f64; 2] {
+        let model = plant.tensions_n(&ev.states[k]);
+        match ev.force_residual_n.as_ref() {
+            Some([Some(a), Some(b)]) => [model[0] + a[k], model[1] + b[k]],
+            _ => model,
+        }
+    };
+    let input = |k: usize| TermInput {
+        angle_rad: ev.angle_rad[k],
+        speed_rad_s: ev.omega_rad_s[k],
+        tensions_n: forces(k),
+        sprocket_radius_m: r,
+        ..TermInput::default()
+    };
+    let idx = lo..hi;
+    let (y, columns): (Vec<f64>, Vec<Vec<f64>>) = match slot {
+        Slot::Transmission => transmission_design(ev, library, idx.clone(), &forces),
+        Slot::Joint => {
+            let inputs: Vec<TermInput> = idx.clone().map(input).collect();
+            (
+                ev.torque_residual_nm[idx.clone()].to_vec(),
+                library
+                    .iter()
+                    .map(|t| inputs.iter().map(|x| t.eval(x)).collect())
+                    .collect(),
+            )
+        }
+        Slot::ChamberP1 | Slot::ChamberP2 | Slot::Chambers => {
+            let chambers: &[usize] = match slot {
+                Slot::ChamberP1 => &[0],
+                Slot::ChamberP2 => &[1],
+                _ => &[0, 1],
+            };
+            let factor = plant.effects.pressure_rate_factor();
+            let mut y = Vec::new();
+            let mut columns: Vec<Vec<f64>> = vec![Vec::new(); library.len()];
+            for &i in chambers {
+                let res = ev.pressure_residual_pa_s[i].as_ref()?;
+                y.extend_from_slice(&res[idx.clone()]);
+                for k in idx.clone() {
+                    // dp/dt gains p_atm Q / V from an added standard flow Q.
+                    let chi = plant.joint.contractions(ev.angle_rad[k])[i];
+                    let g = factor * plant.p_atm_pa / plant.muscle.volume_m3(chi);
+                    let p_abs = ev.p_gauge_pa[i][k] + plant.p_atm_pa;
+                    let u = &ev.inputs[k];
+                    let (u_in, u_ex) = if i == 0 {
+                        (u.u_in1, u.u_ex1)
+                    } else {
+                        (u.u_in2, u.u_ex2)
+                    };
+                    let x = TermInput {
+                        p_gauge_kpa: ev.p_gauge_pa[i][k] * 1e-3,
+                        openings: [u_in, u_ex],
+                        valve_flows_m3_s: [
+                            u_in * plant.valve.flow_m3_s(plant.p_supply_abs_pa, p_abs),
+                            -u_ex * plant.valve.flow_m3_s(p_abs, plant.p_atm_pa),
+                        ],
+                        ..TermInput::default()
+                    };
+                    for (col, t) in columns.iter_mut().zip(library) {
+                        col.push(g * t.eval(&x));
+                    }
+                }
+            }
+            (y, columns)
+        }
+        Slot::SensorAngle | Slot::SensorP1 | Slot::SensorP2 => {
+            let c = match slot {
+                Slot::SensorAngle => Channel::AngleDeg,
+                Slot::SensorP1 => Channel::P1Kpa,
+                _ => Channel::P2Kpa,
+            };
+            let res = ev.residual[c.index()].as_ref()?;
+            let nom = ev.nominal[c.index()].as_ref()?;
+            let rate = ev.nominal_rate[c.index()].as_ref()?;
+            (
+                res[idx.clone()].to_vec(),
+                library
+                    .iter()
+                    .map(|t| {
+                        idx.clone()
+                            .map(|k| {
+                                t.eval(&TermInput {
+                                    reading: nom[k],
+                                    reading_rate: rate[k],
+                                    ..TermInput::default()
+                                })
+                            })
+                            .collect()
+                    })
+                    .collect(),
+            )
+        }
+    };
+    if y.iter()
+        .chain(columns.iter().flatten())
+        .any(|v| !v.is_finite())
+    {
+        return None;
+    }
+    Some(block_average(
+        Design { y, columns },
+        hi - lo,
+        block_len(ev.dt_s),
+    ))
+}
+
+/// Length in time of the blocks [`block_average`] averages over.
+pub const BLOCK_S: f64 = 0.02;
+
+/// Samples per block at sample period `dt_s`.
+fn block_len(dt_s: f64) -> usize {
+    ((BLOCK_S / dt_s).round() as usize).max(1)
+}
+
+/// The design averaged over blocks of `b` samples within each segment of `seg` rows (the
+/// rows of each chamber or channel, stacked): the same low-pass on the residual and on the
+/// columns (the integral or "weak" form of the equation), so that the smoothing of the
+/// differentiated residual meets the same smoothing of the terms, and the noise of the
+/// second derivative averages out.
+fn block_average(d: Design, seg: usize, b: usize) -> Design {
+    if b <= 1 || seg < b {
+        return d;
+    }
+    let avg = |v: &[f64]| -> Vec<f64> {
+        v.chunks(seg)
+            .flat_map(|s| s.chunks_exact(b).map(|c| c.iter().sum::<f64>() / b as f64))
+            .collect()
+    };
+    Design {
+        y: avg(&d.y),
+        columns: d.columns.iter().map(|c| avg(c)).collect(),
+    }
+}
+
+/// The transmission's regression: the torque balance's residual and, where a tension was
+/// measured, the tension's residual (times r, in N m), against what each travel or stretch
+/// term changes in them (to first order: a tension changes by its slope dF/dchi times the
+/// extra contraction).
+fn transmission_design(
+    ev: &Evidence,
+    library: &[Term],
+    idx: std::ops::Range<usize>,
+    forces: &dyn Fn(usize) -> [f64; 2],
+) -> (Vec<f64>, Vec<Vec<f64>>) {
+    let plant = &ev.plant;
+    let r = plant.joint.sprocket_radius_m;
+    let l = plant.muscle.rest_length_m;
+    let measured: [Option<&Vec<f64>>; 2] = match ev.force_residual_n.as_ref() {
+        Some([a, b]) => [a.as_ref(), b.as_ref()],
+        None => [None, None],
+    };
+    let both = measured.iter().all(Option::is_some);
+    let mut y = Vec::new();
+    let mut columns: Vec<Vec<f64>> = vec![Vec::new(); library.len()];
+    // Per sample: tensions used, slopes dF/dchi, the term inputs.
+    let rows: Vec<([f64; 2], [f64; 2], TermInput)> = idx
+        .clone()
+        .map(|k| {
+            let f = forces(k);
+            let chi = plant.joint.contractions(ev.angle_rad[k]);
+            let dchi = plant.joint.contraction_rates(ev.omega_rad_s[k]);
+            let h = 1e-4;
+            let slope: [f64; 2] = std::array::from_fn(|i| {
+                let pg = ev.p_gauge_pa[i][k];
+                (plant.muscle.tension_n(pg, chi[i] + h, dchi[i])
+                    - plant.muscle.tension_n(pg, chi[i] - h, dchi[i]))
+                    / (2.0 * h)
+            });
+            let x = TermInput {
+                angle_rad: ev.angle_rad[k],
+                speed_rad_s: ev.omega_rad_s[k],
+                tensions_n: f,
+                sprocket_radius_m: r,
+                ..TermInput::default()
+            };
+            (f, slope, x)
+        })
+        .collect();
+    y.extend_from_slice(&ev.torque_residual_nm[idx.clone()]);
+    for (col, t) in columns.iter_mut().zip(library) {
+        for (f, s, x) in &rows {
+            let v = if *t == Term::Stretch {
+                if both {
+                    0.0
+                } else {
+                    r * (s[0] * f[0] - s[1] * f[1]) / l
+                }
+            } else {
+                let val = t.eval(x);
+                let mut v = (f[0] - f[1]) * t.travel_slope(x.angle_rad, r);
+                if !both {
+                    v += r * (s[0] + s[1]) * val / l;
+                }
+                v
+            };
+            col.push(v);
+        }
+    }
+    for (i, m) in measured.iter().enumerate() {
+        let Some(res) = m else { continue };
+        y.extend(idx.clone().map(|k| r * res[k]));
+        let sign = if i == 0 { 1.0 } else { -1.0 };
+        for (col, t) in columns.iter_mut().zip(library) {
+            for (f, s, x) in &rows {
+                col.push(if *t == Term::Stretch {
+                    r * s[i] * f[i] / l
+                } else {
+                    r * s[i] * sign * t.eval(x) / l
+                });
+            }
+        }
+    }
+    (y, columns)
+}
+
+/// The variants of a slot's library with at most one member of each parametrised family
+/// (one smoothing speed of tanh, one dead band, one saturation): members of a family are
+/// nearly collinear, and least squares would spread a term over them.
+fn variants(library: &[Term]) -> Vec<Vec<Term>> {
+    let family = |t: &Term| -> Option<u8> {
+        match t {
+            Term::TanhSpeed(_) => Some(0),
+            Term::DeadbandAngle(_) => Some(1),
+            Term::SaturationAngle(_) => Some(2),
+            Term::InletDeadZone(_) => Some(3),
+            Term::ExhaustDeadZone(_) => Some(4),
+            _ => None,
+        }
+    };
+    let plain: Vec<Term> = library
+        .iter()
+        .filter(|t| family(t).is_none())
+        .copied()
+        .collect();
+    let mut out = vec![plain];
+    for f in 0..5u8 {
+        let members: Vec<Term> = library
+            .iter()
+            .filter(|t| family(t) == Some(f))
+            .copied()
+            .collect();
+        if members.is_empty() {
+            continue;
+        }
+        out = out
+            .into_iter()
+            .flat_map(|v| {
+                members.iter().map(move |m| {
+                    let mut w = v.clone();
+                    w.push(*m);
+                    w
+                })
+            })
+            .collect();
+    }
+    out
+}
+
+/// STLSQ thresholds tried (coefficients of unit-RMS columns on a unit-RMS residual).
+pub const THRESHOLDS: [f64; 6] = [0.03, 0.06, 0.1, 0.2, 0.35, 0.6];
+
+/// The distinct sparse models of `slot` with at most `max_terms` terms, best R^2 first.
+pub fn slot_models(
+    ev: &Evidence,
+    slot: Slot,
+    range: std::ops::Range<usize>,
+    max_terms: usize,
+) -> Vec<SlotModel> {
+    let mut out: Vec<SlotModel> = Vec::new();
+    for lib in variants(&slot.library()) {
+        let Some(d) = design(ev, slot, &lib, range.clone()) else {
+            return out;
+        };
+        for lambda in THRESHOLDS {
+            let Some(SparseFit {
+                support,
+                coefficients,
+                r2,
+            }) = stlsq(&d, lambda)
+            else {
+                continue;
+            };
+            if support.len() > max_terms {
+                continue;
+            }
+            let terms: Vec<Term> = support.iter().map(|&i| lib[i]).collect();
+            if out.iter().any(|m| m.terms == terms) {
+                continue;
+            }
+            out.push(SlotModel {
+                slot,
+                terms,
+                coefficients,
+                r2,
+            });
+        }
+    }
+    out.sort_by(|a, b| b.r2.total_cmp(&a.r2));
+    out
+}
