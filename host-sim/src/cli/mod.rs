@@ -1089,7 +1089,24 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
             return Err(anyhow::Error::new(e)).with_context(|| format!("{file}: diagnosis failed"));
         }
     };
-    let json = serde_json::to_string_pretty(&d.to_json())? + "\n";
+    // What the catalogue left: the missing term in closed form, held-out checked.
+    let discovered = host_sim::diagnose::discover::after_diagnosis(
+        &cfg,
+        &train,
+        check.as_ref(),
+        &d,
+        &host_sim::diagnose::discover::DiscoverOptions {
+            threads: a.threads,
+            ..Default::default()
+        },
+    )
+    .and_then(|r| r.ok());
+    let mut json_value = d.to_json();
+    json_value["discovered"] = discovered
+        .as_ref()
+        .map(|x| x.to_json())
+        .unwrap_or(serde_json::Value::Null);
+    let json = serde_json::to_string_pretty(&json_value)? + "\n";
     host_sim::identify::write_atomic(&a.json, json.as_bytes())?;
     if let Some(dir) = &a.report {
         write_report(
@@ -1108,7 +1125,11 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
         "nominal plant effects: {}",
         Plant::from_config(&cfg).effects_summary()
     );
-    let _ = writeln!(out, "{}wrote {}", d.answer(), a.json.display());
+    let _ = write!(out, "{}", d.answer());
+    if let Some(x) = &discovered {
+        let _ = write!(out, "Discovery (what the catalogue leaves):\n{}", x.text());
+    }
+    let _ = writeln!(out, "wrote {}", a.json.display());
     // Exit status 4: partly explained; 3: the diagnosis names nothing because the recording
     // is unexplained or not of this plant (the JSON says which).
     Ok(ExitCode::from(d.verdict.exit_status()))

@@ -1009,13 +1009,9 @@ pub(crate) fn diagnose_pass(
         train_own_start: recorded_start.is_some(),
     };
     let mut chk = replay_check(&from, check, &fin.chosen, g.present, opts);
-    // The selection's set made CHECK worse (said even when the grading then drops it).
-    let not_held_before_grading = match (&chk.before, &chk.after) {
-        (Some(b), Some(a)) if !fin.chosen.is_empty() => verdict::check_not_held(b, a),
-        _ => None,
-    };
     // 5. Grading: every item earns its place on held-out data, or is dropped.
-    let graded = grade_stage(&g, &from, check, &mut fin, &mut chk, opts, train);
+    let (graded, not_held_before_grading) =
+        grade_stage(&g, &from, check, &mut fin, &mut chk, opts, train);
     s.hints.append(&mut chk.hints);
     failures.append(&mut chk.failures);
     step("check");
@@ -1026,26 +1022,13 @@ pub(crate) fn diagnose_pass(
     let fit_best_attempt = fin.replay.fits.clone();
     let attempt_model = fin.corrected.clone();
     let (chosen, ci95, corrected, corrected_replay) = answer_of(v, fin, nominal, &g, train);
-    let remaining = if v == Verdict::PartlyExplained {
-        remaining_mismatch(&g, &chosen, train)
-    } else {
-        Vec::new()
-    };
+    let remaining = remaining_mismatch(v, &g, &chosen, train);
     if !v.names_items() {
         chk.show_nominal(check);
     }
     // The unnamed fallback when nothing explains the residual.
-    let black_box = if v == Verdict::Unexplained {
-        black_box_fallback(
-            &g,
-            train,
-            check.filter(|_| chk.series.is_some()),
-            nominal,
-            opts,
-        )
-    } else {
-        None
-    };
+    let bb_check = check.filter(|_| chk.series.is_some());
+    let black_box = black_box_fallback(v, &g, train, bb_check, nominal, opts);
     let named: Vec<&str> = chosen.iter().map(|p| p.candidate.id()).collect();
     let lookalikes = lookalike_notes(&named, &cands, &sel.round1_explained, &g, v);
     let named_out = named_effects(&chosen, &cands, &sel.explained, &ci95, &g, &s, &lookalikes);
@@ -1457,7 +1440,8 @@ fn check_config(
 
 /// Stage 5: grades every item of the final set on the held-out tail of TRAIN and on CHECK
 /// ([`grade::grade`]); items that do not earn their place are dropped, and the corrected
-/// model and CHECK's replays are then those of the rest.
+/// model and CHECK's replays are then those of the rest. Also returns the CHECK channels the
+/// selection's set made worse ([`verdict::check_not_held`]), said even when it is dropped.
 fn grade_stage(
     g: &Gathered,
     from: &CheckStart,
@@ -1466,9 +1450,14 @@ fn grade_stage(
     chk: &mut CheckReplay,
     opts: &DiagnoseOptions,
     train: &Recording,
-) -> grade::Grade {
+) -> (grade::Grade, Option<String>) {
+    // The selection's set made CHECK worse (said even when the grading then drops it).
+    let not_held = match (&chk.before, &chk.after) {
+        (Some(b), Some(a)) if !fin.chosen.is_empty() => verdict::check_not_held(b, a),
+        _ => None,
+    };
     if fin.chosen.is_empty() {
-        return grade::Grade::default();
+        return (grade::Grade::default(), not_held);
     }
     let held = g.nominal.held.clone();
     let n_held = held.len() as f64;
@@ -1529,12 +1518,21 @@ fn grade_stage(
         };
         *chk = replay_check(from, check, &fin.chosen, g.present, opts);
     }
-    graded
+    (graded, not_held)
 }
 
-/// Where the mismatch the answer `chosen` leaves remains: [`locate::locate`] on the
-/// corrected model's replay of the head of TRAIN the evidence was built on.
-fn remaining_mismatch(g: &Gathered, chosen: &[Part], train: &Recording) -> Vec<Located> {
+/// Where the mismatch a `partly_explained` answer `chosen` leaves remains
+/// ([`locate::locate`] on the corrected model's replay of the head of TRAIN the evidence
+/// was built on); nothing for another verdict.
+fn remaining_mismatch(
+    v: Verdict,
+    g: &Gathered,
+    chosen: &[Part],
+    train: &Recording,
+) -> Vec<Located> {
+    if v != Verdict::PartlyExplained {
+        return Vec::new();
+    }
     let n = train.len().min(g.fit_budget_n);
     let head_rec;
     let rec = if n < train.len() {
@@ -1707,12 +1705,16 @@ fn verdict_of(f: &VerdictFacts, opts: &DiagnoseOptions) -> Verdict {
 /// The unnamed black-box correction ([`black_box::fit_streamed`]) on TRAIN's nominal replay
 /// (its head held, the rest replayed) and CHECK's (`check`: when it was replayed).
 fn black_box_fallback(
+    v: Verdict,
     g: &Gathered,
     train: &Recording,
     check: Option<&Recording>,
     nominal: &PlantConfig,
     opts: &DiagnoseOptions,
 ) -> Option<black_box::BlackBox> {
+    if v != Verdict::Unexplained {
+        return None;
+    }
     let (n, n_fit) = (train.len(), g.n_fit);
     let train_stream =
         |f: &mut dyn FnMut(usize, &Measurement)| g.problem.replay_each(&[], n, |k, m| f(k, m));

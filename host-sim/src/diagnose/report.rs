@@ -144,6 +144,42 @@ fn scatter_svg(s: &Scatter, title: &str) -> Result<String, String> {
     Ok(svg)
 }
 
+/// The share of the mismatch each graded item removes, as an HTML table (empty without
+/// graded items).
+fn grade_table(d: &Diagnosis) -> String {
+    let mut h = String::new();
+    if d.grade.items.is_empty() {
+        return h;
+    }
+    h += "<h2>Share of the mismatch removed (held-out data)</h2>\n<table><tr><th>item</th><th>kept</th><th>CHECK</th><th>held-out tail</th><th>per channel</th><th>why not kept</th></tr>\n";
+    let pct = |v: f64| {
+        if v.is_finite() {
+            format!("{:.1} %", 100.0 * v)
+        } else {
+            "-".into()
+        }
+    };
+    for i in &d.grade.items {
+        let per: Vec<String> = i
+            .share
+            .iter()
+            .map(|(k, v)| format!("{k} {}", pct(*v)))
+            .collect();
+        let _ = writeln!(
+            h,
+            "<tr><td><code>{}</code></td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            i.id,
+            if i.accepted { "yes" } else { "no" },
+            i.share_check.map(pct).unwrap_or_else(|| "-".into()),
+            pct(i.share_heldout),
+            per.join(", "),
+            esc(i.why_not.as_deref().unwrap_or(""))
+        );
+    }
+    h += "</table>\n";
+    h
+}
+
 /// Writes `DIR/index.html` and `DIR/diagnosis.json` (each atomically) and lists them in the
 /// folder's manifest (`output`).
 pub fn write_report(
@@ -197,34 +233,7 @@ pub fn write_report(
         }
         h += "</ul>\n";
     }
-    if !d.grade.items.is_empty() {
-        h += "<h2>Share of the mismatch removed (held-out data)</h2>\n<table><tr><th>item</th><th>kept</th><th>CHECK</th><th>held-out tail</th><th>per channel</th><th>why not kept</th></tr>\n";
-        let pct = |v: f64| {
-            if v.is_finite() {
-                format!("{:.1} %", 100.0 * v)
-            } else {
-                "-".into()
-            }
-        };
-        for i in &d.grade.items {
-            let per: Vec<String> = i
-                .share
-                .iter()
-                .map(|(k, v)| format!("{k} {}", pct(*v)))
-                .collect();
-            let _ = writeln!(
-                h,
-                "<tr><td><code>{}</code></td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
-                i.id,
-                if i.accepted { "yes" } else { "no" },
-                i.share_check.map(pct).unwrap_or_else(|| "-".into()),
-                pct(i.share_heldout),
-                per.join(", "),
-                esc(i.why_not.as_deref().unwrap_or(""))
-            );
-        }
-        h += "</table>\n";
-    }
+    h += &grade_table(d);
     let _ = write!(h, "<h2>Fits (%)</h2>\n<table><tr><th>channel</th><th>TRAIN nominal</th><th>TRAIN corrected</th><th>CHECK nominal</th><th>CHECK corrected</th></tr>\n");
     for (k, v) in &d.fit_before {
         let a = d.fit_after.get(k).copied().unwrap_or(f64::NAN);

@@ -319,6 +319,39 @@ impl Arm3Config {
                 }
             }
         }
+        self.validate_joint_effects(path)?;
+        if let Some(sd) = &self.effects.supply_drop {
+            sd.validate(&Check::new(path, "supply_drop"))?;
+        }
+        if let Some((key, msg)) = crate::plant::config::valve_ratio_error(&self.valve) {
+            return Err(bad(&key, msg));
+        }
+        if let Some((key, msg)) = crate::plant::config::valve_override_error(&self.valve) {
+            return Err(bad(&key, msg));
+        }
+        for (i, j) in self.joints().iter().enumerate() {
+            if j.muscle.has_overrides() {
+                let name = if j.muscle.m1.is_some() { "m1" } else { "m2" };
+                return Err(bad(
+                    &format!("joint{}.muscle.{name}", i + 1),
+                    "per-muscle tables are read by the 1-DOF plant only: the arm's joints \
+                     have one [jointN.muscle] table for both muscles"
+                        .into(),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Every joint's `[jointN.effects]`: valid, and none the arm does not model (a supply
+    /// drop per joint, a discovered term of the transmission, the tensions, the valves or a
+    /// rate, the thermal chamber).
+    fn validate_joint_effects(&self, path: &Path) -> Result<(), ConfigError> {
+        let bad = |key: &str, message: String| ConfigError::Invalid {
+            path: path.to_path_buf(),
+            key: key.to_string(),
+            message,
+        };
         for (i, j) in self.joints().iter().enumerate() {
             let prefix = format!("joint{}.", i + 1);
             j.effects.validate(path).map_err(|e| match e {
@@ -355,26 +388,6 @@ impl Arm3Config {
                 return Err(bad(
                     &format!("{prefix}effects.thermal_chamber"),
                     "is not modelled on the 3-DOF arm (every other effect is)".into(),
-                ));
-            }
-        }
-        if let Some(sd) = &self.effects.supply_drop {
-            sd.validate(&Check::new(path, "supply_drop"))?;
-        }
-        if let Some((key, msg)) = crate::plant::config::valve_ratio_error(&self.valve) {
-            return Err(bad(&key, msg));
-        }
-        if let Some((key, msg)) = crate::plant::config::valve_override_error(&self.valve) {
-            return Err(bad(&key, msg));
-        }
-        for (i, j) in self.joints().iter().enumerate() {
-            if j.muscle.has_overrides() {
-                let name = if j.muscle.m1.is_some() { "m1" } else { "m2" };
-                return Err(bad(
-                    &format!("joint{}.muscle.{name}", i + 1),
-                    "per-muscle tables are read by the 1-DOF plant only: the arm's joints \
-                     have one [jointN.muscle] table for both muscles"
-                        .into(),
                 ));
             }
         }

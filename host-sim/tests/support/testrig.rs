@@ -1607,13 +1607,8 @@ fn apply_form(name: &str, p: &mut RigPhysics, rng: &mut StdRng) -> String {
             f.muscle_factor[m][field] = k;
             format!("muscle {} x{k:.3}", m + 1)
         }
-        "nominal_noise_free"
-        | "nominal"
-        | "nominal_jittered"
-        | "nominal_gappy"
-        | "nominal_open_loop"
-        | "pure_noise"
-        | "valves_logged_late" => String::new(),
+        "nominal_noise_free" | "nominal" | "nominal_jittered" | "nominal_gappy"
+        | "nominal_open_loop" | "pure_noise" | "valves_logged_late" => String::new(),
         "ooc_velocity_squared_damping" => {
             let c = rng.random_range(0.05..0.15);
             f.velocity_squared_nms2 = c;

@@ -226,34 +226,11 @@ pub fn discover(
         .sum();
     let heldout_before = fits(train, &nominal_pred, tail.clone());
     // CHECK: its own problem (its spread, its noise).
-    let check_problem = match check {
-        Some(c) => {
-            let (sc, nc) = scales(c);
-            let p = Problem::new(nominal, c, sc, opts.solver)?;
-            let pred = p
-                .predict(&[])
-                .ok_or_else(|| DiagnoseError::Data("the nominal replay of CHECK failed".into()))?;
-            Some((p, pred, nc))
-        }
-        None => None,
-    };
+    let check_problem = check_problem_of(nominal, check, opts)?;
     let check_before = check_problem
         .as_ref()
         .map(|(p, pred, _)| fits(p.recording, pred, 0..p.recording.len()));
-    let mut d = Discovery {
-        found: None,
-        best: None,
-        reason: String::new(),
-        heldout_before: heldout_before.clone(),
-        heldout_after: heldout_before,
-        check_before: check_before.clone(),
-        check_after: check_before,
-        heldout_explained: 0.0,
-        check_explained: None,
-        catalogue_best: None,
-        tried: Vec::new(),
-        seconds: 0.0,
-    };
+    let mut d = Discovery::before(heldout_before, check_before);
     let excess = nom_tail - noise_cost;
     let check_departs = check_problem.as_ref().is_some_and(|(p, pred, nc)| {
         let c: f64 = p.channel_costs(pred, 0..p.recording.len()).iter().sum();
@@ -270,16 +247,7 @@ pub fn discover(
     // Channels that are noise (the noise level of each at half its spread or more: pure
     // noise, a dead rig) carry no equation to complete: a term fitted to them would only
     // flatten the replay.
-    let noisy: Vec<String> = Channel::ALL
-        .iter()
-        .filter_map(|c| {
-            let y = &train.channel(*c)?[tail.clone()];
-            let sd = spread_of(y);
-            Some((c.name(), noise_level(y), sd))
-        })
-        .filter(|(_, nl, sd)| *nl >= 0.5 * sd)
-        .map(|(k, nl, sd)| format!("{k} noise {nl:.3} of spread {sd:.3}"))
-        .collect();
+    let noisy = noisy_channels(train, tail.clone());
     if noisy.len() == problem.setup.present.iter().filter(|p| **p).count() {
         d.reason = format!(
             "nothing discovered: every channel is noise ({}); the recording does not look like \
@@ -316,43 +284,8 @@ pub fn discover(
         }];
         problem.cost(&parts, tail.clone())
     });
-    d.tried = models
-        .iter()
-        .zip(&cands)
-        .zip(&tail_costs)
-        .map(|((m, c), tc)| Tried {
-            slot: m.slot,
-            formula: formula(&c.table(&c.start)),
-            r2: m.r2,
-            tail_cost: *tc,
-            refined_tail_cost: None,
-        })
-        .collect();
-    let mut order: Vec<usize> = (0..cands.len())
-        .filter(|&i| tail_costs[i].is_finite())
-        .collect();
-    order.sort_by(|&a, &b| tail_costs[a].total_cmp(&tail_costs[b]));
-    order.truncate(opts.refine_top);
-    let refined: Vec<Refined> = par_map(&order, opts.threads, |&i| {
-        let c = &cands[i];
-        let parts = [Part {
-            candidate: c as &dyn Candidate,
-            params: c.start.clone(),
-        }];
-        let (fitted, _, ci) = problem.fit_with_ci(&parts, 0..n_fit, opts.max_iter, true);
-        let cost = problem.cost(&fitted, tail.clone());
-        // Keep the equation-error coefficients when the refinement did not help the tail.
-        if cost <= tail_costs[i] {
-            (i, fitted[0].params.clone(), ci[0].clone(), cost)
-        } else {
-            (
-                i,
-                c.start.clone(),
-                vec![[f64::NAN; 2]; c.start.len()],
-                tail_costs[i],
-            )
-        }
-    });
+    d.tried = tried_rows(&models, &cands, &tail_costs);
+    let refined = refine_best(&problem, &cands, &tail_costs, n_fit, tail.clone(), opts);
     for (i, p, _, cost) in &refined {
         d.tried[*i].refined_tail_cost = Some(*cost);
         d.tried[*i].formula = formula(&cands[*i].table(p));
@@ -390,62 +323,177 @@ pub fn discover(
             100.0 * opts.min_explained
         ));
     }
-    if let Some((p, pred0, nc)) = &check_problem {
-        let m = p.recording.len();
-        let c0: f64 = p.channel_costs(pred0, 0..m).iter().sum();
-        match p.predict(&parts) {
-            Some(pred) => {
-                let c1: f64 = p.channel_costs(&pred, 0..m).iter().sum();
-                let ex = (c0 - c1) / (c0 - nc).max(1e-300);
-                d.check_explained = Some(ex);
-                let after = fits(p.recording, &pred, 0..m);
-                let before = d.check_before.clone().unwrap_or_default();
-                let lost: Vec<String> = before
-                    .iter()
-                    .filter(|(k, b)| {
-                        after
-                            .get(*k)
-                            .is_some_and(|a| *a < **b - opts.max_check_loss_pct)
-                    })
-                    .map(|(k, b)| format!("{k} {b:.1} % -> {:.1} %", after[k]))
-                    .collect();
-                d.check_after = Some(after);
-                if !(ex >= opts.min_explained && c1 < 0.98 * c0) {
-                    why_not.push(format!(
-                        "on CHECK it removes {:.0} % of the error beyond noise (needs {:.0} %)",
-                        100.0 * ex,
-                        100.0 * opts.min_explained
-                    ));
-                }
-                if !lost.is_empty() {
-                    why_not.push(format!("it makes CHECK worse: {}", lost.join(", ")));
-                }
-            }
-            None => why_not.push("the plant with the term cannot replay CHECK".into()),
-        }
+    if let Some(cp) = &check_problem {
+        check_holds(cp, &parts, &mut d, opts, &mut why_not);
     }
     // The catalogue first: a known effect or a recalibration that does nearly as well is
     // the diagnosis's answer, not a new term.
-    if let (true, Some(share)) = (why_not.is_empty(), opts.catalogue_share) {
-        if let Some((id, reach)) =
-            catalogue_reach(nominal, &problem, &ev, n_fit, nom_tail, best_tail, opts)
-        {
-            d.catalogue_best = Some((id.clone(), reach));
-            // The term must remove a share of what the catalogue's best leaves beyond noise,
-            // as a catalogue effect must of the nominal model's.
-            let cat_tail = nom_tail - reach * (nom_tail - best_tail);
-            let beats =
-                ((cat_tail - best_tail) / (cat_tail - noise_cost).max(1e-300)).clamp(-1.0, 1.0);
-            if reach >= share && beats < opts.min_explained {
+    if why_not.is_empty() {
+        let costs = (nom_tail, best_tail, noise_cost);
+        why_not.extend(catalogue_objection(
+            nominal, &problem, &ev, n_fit, costs, &mut d, opts,
+        ));
+    }
+    conclude(&mut d, &best, &why_not);
+    d.best = Some(best);
+    d.seconds = t0.elapsed().as_secs_f64();
+    Ok(d)
+}
+
+/// CHECK's own problem (its spread), its nominal replay and its noise cost.
+#[allow(clippy::type_complexity)]
+fn check_problem_of<'a>(
+    nominal: &'a PlantConfig,
+    check: Option<&'a Recording>,
+    opts: &DiscoverOptions,
+) -> Result<Option<(Problem<'a>, Vec<Measurement>, f64)>, DiagnoseError> {
+    Ok(match check {
+        Some(c) => {
+            let (sc, nc) = scales(c);
+            let p = Problem::new(nominal, c, sc, opts.solver)?;
+            let pred = p
+                .predict(&[])
+                .ok_or_else(|| DiagnoseError::Data("the nominal replay of CHECK failed".into()))?;
+            Some((p, pred, nc))
+        }
+        None => None,
+    })
+}
+
+/// The channels of `train` whose noise level over `tail` is half their spread or more
+/// ("p1_kpa noise 0.512 of spread 0.9").
+fn noisy_channels(train: &Recording, tail: std::ops::Range<usize>) -> Vec<String> {
+    Channel::ALL
+        .iter()
+        .filter_map(|c| {
+            let y = &train.channel(*c)?[tail.clone()];
+            let sd = spread_of(y);
+            Some((c.name(), noise_level(y), sd))
+        })
+        .filter(|(_, nl, sd)| *nl >= 0.5 * sd)
+        .map(|(k, nl, sd)| format!("{k} noise {nl:.3} of spread {sd:.3}"))
+        .collect()
+}
+
+/// The held-out check on CHECK: the term `parts` must remove
+/// [`DiscoverOptions::min_explained`] of CHECK's error beyond noise and cost no channel more
+/// than [`DiscoverOptions::max_check_loss_pct`]; `d` gets CHECK's fits, `why_not` the reasons.
+fn check_holds(
+    cp: &(Problem, Vec<Measurement>, f64),
+    parts: &[Part],
+    d: &mut Discovery,
+    opts: &DiscoverOptions,
+    why_not: &mut Vec<String>,
+) {
+    let (p, pred0, nc) = (&cp.0, &cp.1, &cp.2);
+    let m = p.recording.len();
+    let c0: f64 = p.channel_costs(pred0, 0..m).iter().sum();
+    match p.predict(parts) {
+        Some(pred) => {
+            let c1: f64 = p.channel_costs(&pred, 0..m).iter().sum();
+            let ex = (c0 - c1) / (c0 - nc).max(1e-300);
+            d.check_explained = Some(ex);
+            let after = fits(p.recording, &pred, 0..m);
+            let before = d.check_before.clone().unwrap_or_default();
+            let lost: Vec<String> = before
+                .iter()
+                .filter(|(k, b)| {
+                    after
+                        .get(*k)
+                        .is_some_and(|a| *a < **b - opts.max_check_loss_pct)
+                })
+                .map(|(k, b)| format!("{k} {b:.1} % -> {:.1} %", after[k]))
+                .collect();
+            d.check_after = Some(after);
+            if !(ex >= opts.min_explained && c1 < 0.98 * c0) {
                 why_not.push(format!(
-                    "the catalogue's `{id}` does {:.0} % as well on TRAIN's tail (the term removes \
-                     only {:.0} % of what it leaves): run `host-sim diagnose`, which names it",
-                    100.0 * reach,
-                    100.0 * beats
+                    "on CHECK it removes {:.0} % of the error beyond noise (needs {:.0} %)",
+                    100.0 * ex,
+                    100.0 * opts.min_explained
                 ));
             }
+            if !lost.is_empty() {
+                why_not.push(format!("it makes CHECK worse: {}", lost.join(", ")));
+            }
+        }
+        None => why_not.push("the plant with the term cannot replay CHECK".into()),
+    }
+}
+
+/// The [`DiscoverOptions::refine_top`] candidates best on TRAIN's tail (`tail_costs`)
+/// refined by output error on `0..n_fit`: (index, coefficients, 95 % intervals, tail cost);
+/// a refinement that does not help the tail keeps the equation-error coefficients.
+fn refine_best(
+    problem: &Problem,
+    cands: &[TermsCandidate],
+    tail_costs: &[f64],
+    n_fit: usize,
+    tail: std::ops::Range<usize>,
+    opts: &DiscoverOptions,
+) -> Vec<Refined> {
+    let mut order: Vec<usize> = (0..cands.len())
+        .filter(|&i| tail_costs[i].is_finite())
+        .collect();
+    order.sort_by(|&a, &b| tail_costs[a].total_cmp(&tail_costs[b]));
+    order.truncate(opts.refine_top);
+    par_map(&order, opts.threads, |&i| {
+        let c = &cands[i];
+        let parts = [Part {
+            candidate: c as &dyn Candidate,
+            params: c.start.clone(),
+        }];
+        let (fitted, _, ci) = problem.fit_with_ci(&parts, 0..n_fit, opts.max_iter, true);
+        let cost = problem.cost(&fitted, tail.clone());
+        // Keep the equation-error coefficients when the refinement did not help the tail.
+        if cost <= tail_costs[i] {
+            (i, fitted[0].params.clone(), ci[0].clone(), cost)
+        } else {
+            (
+                i,
+                c.start.clone(),
+                vec![[f64::NAN; 2]; c.start.len()],
+                tail_costs[i],
+            )
+        }
+    })
+}
+
+/// Why a term is not kept when the catalogue's best refit does nearly as well on TRAIN's
+/// tail (`costs`: the nominal model's, the term's and the noise's tail cost); `d` gets the
+/// catalogue's best. `None` when the term beats it or the comparison is off.
+fn catalogue_objection(
+    nominal: &PlantConfig,
+    problem: &Problem,
+    ev: &Evidence,
+    n_fit: usize,
+    costs: (f64, f64, f64),
+    d: &mut Discovery,
+    opts: &DiscoverOptions,
+) -> Option<String> {
+    let (nom_tail, best_tail, noise_cost) = costs;
+    let share = opts.catalogue_share?;
+    if let Some((id, reach)) =
+        catalogue_reach(nominal, &problem, &ev, n_fit, nom_tail, best_tail, opts)
+    {
+        d.catalogue_best = Some((id.clone(), reach));
+        // The term must remove a share of what the catalogue's best leaves beyond noise,
+        // as a catalogue effect must of the nominal model's.
+        let cat_tail = nom_tail - reach * (nom_tail - best_tail);
+        let beats = ((cat_tail - best_tail) / (cat_tail - noise_cost).max(1e-300)).clamp(-1.0, 1.0);
+        if reach >= share && beats < opts.min_explained {
+            return Some(format!(
+                "the catalogue's `{id}` does {:.0} % as well on TRAIN's tail (the term removes \
+                 only {:.0} % of what it leaves): run `host-sim diagnose`, which names it",
+                100.0 * reach,
+                100.0 * beats
+            ));
         }
     }
+    None
+}
+
+/// The discovery's reason, and its term when `why_not` is empty.
+fn conclude(d: &mut Discovery, best: &Found, why_not: &[String]) {
     let f = formula(&best.table);
     if why_not.is_empty() {
         d.reason = format!(
@@ -463,16 +511,57 @@ pub fn discover(
             why_not.join("; ")
         );
     }
-    d.best = Some(best);
-    d.seconds = t0.elapsed().as_secs_f64();
-    Ok(d)
+}
+
+/// A row per tried candidate: its slot, formula, equation-error R² and tail cost.
+fn tried_rows(
+    models: &[library::SlotModel],
+    cands: &[TermsCandidate],
+    tail_costs: &[f64],
+) -> Vec<Tried> {
+    models
+        .iter()
+        .zip(cands)
+        .zip(tail_costs)
+        .map(|((m, c), tc)| Tried {
+            slot: m.slot,
+            formula: formula(&c.table(&c.start)),
+            r2: m.r2,
+            tail_cost: *tc,
+            refined_tail_cost: None,
+        })
+        .collect()
+}
+
+impl Discovery {
+    /// Nothing found yet: the fits before (and after) are the nominal model's.
+    fn before(
+        heldout_before: BTreeMap<&'static str, f64>,
+        check_before: Option<BTreeMap<&'static str, f64>>,
+    ) -> Self {
+        Discovery {
+            found: None,
+            best: None,
+            reason: String::new(),
+            heldout_before: heldout_before.clone(),
+            heldout_after: heldout_before,
+            check_before: check_before.clone(),
+            check_after: check_before,
+            heldout_explained: 0.0,
+            check_explained: None,
+            catalogue_best: None,
+            tried: Vec::new(),
+            seconds: 0.0,
+        }
+    }
 }
 
 /// The hook for the diagnosis: after `diagnosis` answered TRAIN (and CHECK), run the
-/// discovery when the catalogue did not explain the recording (verdict `unexplained`; a
-/// verdict that names a partial answer can call [`discover`] on the plant it corrected), with
-/// no second comparison with the catalogue (the diagnosis made it). `None` for the other
-/// verdicts: nothing is missing, the answer is named, or the recording is not of this plant.
+/// discovery when the catalogue did not explain the recording: verdict `unexplained` (on the
+/// nominal plant) or `partly_explained` (on the plant its named items corrected, for what
+/// they leave), with no second comparison with the catalogue (the diagnosis made it). `None`
+/// for the other verdicts: nothing is missing, the answer is complete, or the recording is
+/// not of this plant.
 pub fn after_diagnosis(
     nominal: &PlantConfig,
     train: &Recording,
@@ -480,13 +569,18 @@ pub fn after_diagnosis(
     diagnosis: &super::Diagnosis,
     opts: &DiscoverOptions,
 ) -> Option<Result<Discovery, DiagnoseError>> {
-    (diagnosis.verdict == super::Verdict::Unexplained).then(|| {
-        let opts = DiscoverOptions {
-            catalogue_share: None,
-            ..opts.clone()
-        };
-        discover(nominal, train, check, &opts)
-    })
+    let opts = DiscoverOptions {
+        catalogue_share: None,
+        ..opts.clone()
+    };
+    match diagnosis.verdict {
+        super::Verdict::Unexplained => Some(discover(nominal, train, check, &opts)),
+        // What the named items leave: discovered on the plant they corrected.
+        super::Verdict::PartlyExplained => {
+            Some(discover(&diagnosis.corrected, train, check, &opts))
+        }
+        _ => None,
+    }
 }
 
 /// The best catalogue refit (effects and recalibrations, the diagnosis's candidate pool, top
