@@ -29,12 +29,20 @@ struct Log {
     dropped: f64,
     /// Valve columns written this late [s] (whole samples).
     valves_late_s: f64,
+    /// A real valve dead time of the plant [s].
+    dead_time_s: f64,
 }
 
 /// 10 s of valve pulses on the nominal plant at 2 ms, simulated at the logged stamps,
 /// pressures with 0.5 kPa of noise, the angle quantised to 0.01 deg.
 fn run(seed: u64, log: &Log) -> Recording {
-    let cfg = nominal();
+    let mut cfg = nominal();
+    if log.dead_time_s > 0.0 {
+        cfg.effects.valve_dead_time = Some(host_sim::plant::effects::ValveDeadTime {
+            enabled: true,
+            delay_s: log.dead_time_s,
+        });
+    }
     let plant = Plant::from_config(&cfg);
     let mut rng = StdRng::seed_from_u64(seed);
     let dt = 2e-3;
@@ -137,6 +145,7 @@ const PLAIN: Log = Log {
     jitter: 0.0,
     dropped: 0.0,
     valves_late_s: 0.0,
+    dead_time_s: 0.0,
 };
 
 /// Stamps jittered by up to +-20 % of the period: nothing is missing.
@@ -211,4 +220,28 @@ fn valves_logged_late_are_named_with_the_shift_that_fixes_them() {
         d.fit_before,
         d.hints
     );
+}
+
+/// A real valve dead time of 80 ms (the sensors answer late) is no logging offset: the
+/// search for valve columns logged late finds nothing, and the diagnosis names the dead
+/// time, found beyond the 50 ms its search once stopped at.
+#[test]
+fn a_real_80_ms_dead_time_is_found_and_not_taken_for_a_logging_offset() {
+    let log = Log {
+        dead_time_s: 0.08,
+        ..PLAIN
+    };
+    let (train, check) = (run(7, &log), run(8, &log));
+    let found =
+        host_sim::diagnose::valve_offset::find_in(&nominal(), &train, &SolverOptions::default());
+    assert!(found.is_none(), "{found:?}");
+    let d = diag(&train, &check);
+    assert_eq!(d.verdict, Verdict::Explained, "{:?}", d.hints);
+    let e = d
+        .effects
+        .iter()
+        .find(|e| e.id == "valve_delay")
+        .expect("valve_delay named");
+    let delay = e.params.iter().find(|p| p.0 == "delay_s").unwrap().1;
+    assert!((delay - 0.08).abs() < 0.004, "{delay}");
 }
