@@ -245,3 +245,41 @@ fn a_real_80_ms_dead_time_is_found_and_not_taken_for_a_logging_offset() {
     let delay = e.params.iter().find(|p| p.0 == "delay_s").unwrap().1;
     assert!((delay - 0.08).abs() < 0.004, "{delay}");
 }
+
+/// `diagnose --shift-valves-ms`: out of range refused (exit status 2, the range named);
+/// the reference fixture with its valve columns moved 20 ms late by the option is named as
+/// logged 20 ms late, with the fix (exit status 3).
+#[test]
+fn the_cli_option_is_validated_and_the_offset_it_makes_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("out.json");
+    let run = |ms: &str| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_host-sim"))
+            .args(["diagnose", "--plant"])
+            .arg(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/tests/fixtures/reference-1dof.toml"
+            ))
+            .arg("--recording")
+            .arg(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/tests/fixtures/pulses_nominal.csv"
+            ))
+            .arg("--json")
+            .arg(&json)
+            .args(["--shift-valves-ms", ms])
+            .output()
+            .unwrap()
+    };
+    let out = run("5000");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("[-1000, 1000] ms"), "{err}");
+    let out = run("-20");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(3), "{text}");
+    assert!(
+        text.contains("logged 20 ms late") && text.contains("--shift-valves-ms 20"),
+        "{text}"
+    );
+}
