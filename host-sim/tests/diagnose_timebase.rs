@@ -29,12 +29,20 @@ struct Log {
     dropped: f64,
     /// Valve columns written this late [s] (whole samples).
     valves_late_s: f64,
+    /// A real valve dead time of the plant [s].
+    dead_time_s: f64,
 }
 
 /// 10 s of valve pulses on the nominal plant at 2 ms, simulated at the logged stamps,
 /// pressures with 0.5 kPa of noise, the angle quantised to 0.01 deg.
 fn run(seed: u64, log: &Log) -> Recording {
-    let cfg = nominal();
+    let mut cfg = nominal();
+    if log.dead_time_s > 0.0 {
+        cfg.effects.valve_dead_time = Some(host_sim::plant::effects::ValveDeadTime {
+            enabled: true,
+            delay_s: log.dead_time_s,
+        });
+    }
     let plant = Plant::from_config(&cfg);
     let mut rng = StdRng::seed_from_u64(seed);
     let dt = 2e-3;
@@ -137,6 +145,7 @@ const PLAIN: Log = Log {
     jitter: 0.0,
     dropped: 0.0,
     valves_late_s: 0.0,
+    dead_time_s: 0.0,
 };
 
 /// Stamps jittered by up to +-20 % of the period: nothing is missing.
@@ -210,5 +219,67 @@ fn valves_logged_late_are_named_with_the_shift_that_fixes_them() {
         "{:?} {:?}",
         d.fit_before,
         d.hints
+    );
+}
+
+/// A real valve dead time of 80 ms (the sensors answer late) is no logging offset: the
+/// search for valve columns logged late finds nothing, and the diagnosis names the dead
+/// time, found beyond the 50 ms its search once stopped at.
+#[test]
+fn a_real_80_ms_dead_time_is_found_and_not_taken_for_a_logging_offset() {
+    let log = Log {
+        dead_time_s: 0.08,
+        ..PLAIN
+    };
+    let (train, check) = (run(7, &log), run(8, &log));
+    let found =
+        host_sim::diagnose::valve_offset::find_in(&nominal(), &train, &SolverOptions::default());
+    assert!(found.is_none(), "{found:?}");
+    let d = diag(&train, &check);
+    assert_eq!(d.verdict, Verdict::Explained, "{:?}", d.hints);
+    let e = d
+        .effects
+        .iter()
+        .find(|e| e.id == "valve_delay")
+        .expect("valve_delay named");
+    let delay = e.params.iter().find(|p| p.0 == "delay_s").unwrap().1;
+    assert!((delay - 0.08).abs() < 0.004, "{delay}");
+}
+
+/// `diagnose --shift-valves-ms`: out of range refused (exit status 2, the range named);
+/// the reference fixture with its valve columns moved 20 ms late by the option is named as
+/// logged 20 ms late, with the fix (exit status 3).
+#[test]
+fn the_cli_option_is_validated_and_the_offset_it_makes_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("out.json");
+    let run = |ms: &str| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_host-sim"))
+            .args(["diagnose", "--plant"])
+            .arg(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/tests/fixtures/reference-1dof.toml"
+            ))
+            .arg("--recording")
+            .arg(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/tests/fixtures/pulses_nominal.csv"
+            ))
+            .arg("--json")
+            .arg(&json)
+            .args(["--shift-valves-ms", ms])
+            .output()
+            .unwrap()
+    };
+    let out = run("5000");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("[-1000, 1000] ms"), "{err}");
+    let out = run("-20");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(3), "{text}");
+    assert!(
+        text.contains("logged 20 ms late") && text.contains("--shift-valves-ms 20"),
+        "{text}"
     );
 }

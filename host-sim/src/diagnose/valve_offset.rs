@@ -92,32 +92,36 @@ pub fn find(nominal: &PlantConfig, rec: &Recording, opts: &SolverOptions) -> Opt
     let yn = replay(&head)?;
     let (spread, _) = super::timebase::spread_and_noise(&head);
     let rows = MeasuredRows::of(&head);
-    // The lead of every channel together: y[k] against yn[k + s].
-    let lead_cost = |s: usize| -> f64 {
+    // Every channel together, y[k] against yn[k + s]: s > 0 a lead (the sensors answer
+    // before the logged command), s < 0 a lag (a valve dead time), over the same samples.
+    let shift_cost = |s: isize| -> f64 {
         let mut sum = 0.0;
         for c in Channel::ALL {
             if let Some(y) = head.channel(c) {
                 let w = spread[c.index()].powi(-2);
-                sum += (0..n - max_lead)
+                sum += (max_lead..n - max_lead)
                     .filter(|&k| rows.has(k))
-                    .map(|k| (y[k] - c.of(&yn[k + s])).powi(2))
+                    .map(|k| (y[k] - c.of(&yn[(k as isize + s) as usize])).powi(2))
                     .sum::<f64>()
                     * w;
             }
         }
         sum
     };
-    let (mut best, mut best_cost) = (0usize, lead_cost(0));
-    for s in 1..=max_lead {
-        let c = lead_cost(s);
+    let m = max_lead as isize;
+    let (mut best, mut best_cost) = (0isize, shift_cost(0));
+    for s in (-m..=m).filter(|s| *s != 0) {
+        let c = shift_cost(s);
         if c < best_cost {
             best = s;
             best_cost = c;
         }
     }
-    if best == 0 {
+    // Only a lead that beats every lag is a logging offset: a lag is what a dead time does.
+    if best <= 0 {
         return None;
     }
+    let best = best as usize;
     // Verified by a replay with the valve columns moved earlier.
     let late_s = best as f64 * dt;
     let shifted = shift_valves(&head, late_s).ok()?;

@@ -15,6 +15,7 @@
 use nalgebra::SVector;
 use ode_solvers::{Dopri5, OutputType, System};
 
+use crate::plant::effects::ShiftedCommands;
 use crate::plant::{AuxLayout, AuxState, Plant, PlantState, ValveInputs};
 
 pub mod arm3;
@@ -688,26 +689,15 @@ pub fn simulate_stamped(
         }
     }
     let delay_s = plant.effects.valve_dead_time_s().unwrap_or(0.0);
-    // The input in force at time t: the sample of the last stamp <= t - delay (all valves
-    // closed before the first delayed edge, as the dead-time line starts).
-    let closed = ValveInputs {
-        u_in1: 0.0,
-        u_ex1: 0.0,
-        u_in2: 0.0,
-        u_ex2: 0.0,
-    };
-    // Breakpoints: the stamps, the delayed stamps, the end.
-    let mut cuts: Vec<f64> = t_s.to_vec();
-    if delay_s > 0.0 {
-        cuts.extend(t_s.iter().map(|t| t + delay_s).filter(|t| *t < t_end));
-        cuts.sort_by(f64::total_cmp);
-        cuts.dedup_by(|a, b| (*a - *b).abs() <= 1e-12 * mean_step);
-    }
-    cuts.push(t_end);
+    // The dead time is its effect's (`ShiftedCommands`): the input in force at time t is
+    // the sample of the last stamp <= t - delay (all valves closed before the first delayed
+    // edge, as the dead-time line starts). Breakpoints: the stamps, the delayed stamps, the
+    // end.
+    let mut shifted = ShiftedCommands::new(t_s, inputs, delay_s, 1e-12 * mean_step);
+    let cuts = shifted.breakpoints(t_end);
     let mut integ = Integrator::new(plant, plant.initial_state(), *opts);
     let mut states = Vec::with_capacity(n);
     let mut next_stamp = 0usize;
-    let mut src = 0usize; // index into t_s of the input in force (delayed)
     for w in cuts.windows(2) {
         let (a, b) = (w[0], w[1]);
         if next_stamp < n && (t_s[next_stamp] - a).abs() <= 1e-12 * mean_step {
@@ -718,15 +708,7 @@ pub fn simulate_stamped(
             }
         }
         let u = if delay_s > 0.0 {
-            let td = a - delay_s;
-            while src + 1 < n && t_s[src + 1] <= td + 1e-12 * mean_step {
-                src += 1;
-            }
-            if t_s[src] <= td + 1e-12 * mean_step {
-                inputs[src]
-            } else {
-                closed
-            }
+            shifted.at(a)
         } else {
             inputs[next_stamp.saturating_sub(1)]
         };

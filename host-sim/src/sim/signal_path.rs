@@ -5,7 +5,8 @@
 //!
 //! - [`ActuatorPath`]: valve command -> valve opening. The actuator-side effect is the valve
 //!   dead time ([`crate::plant::effects::ValveDeadTime`], whole samples and a fraction of one
-//!   through a [`DeadTimeLine`]). Open-loop replay feeds it the recorded commands; the closed loop feeds
+//!   through a [`DeadTimeLine`]; a replay at a recording's own stamps shifts the commands
+//!   exactly through [`crate::plant::effects::ShiftedCommands`], the same effect's). Open-loop replay feeds it the recorded commands; the closed loop feeds
 //!   it the firmware's pin states, tick by tick.
 //! - [`SensorPath`]: plant state -> reported channels. The sensor-side effects are the sensor
 //!   lag ([`crate::plant::effects::SensorLag`], a sampled first-order low-pass per channel

@@ -39,7 +39,7 @@ use crate::plant::tables::{ConfigError, ValveConfig};
 pub use sensor::ChannelCalibration;
 pub use sensor_lag::SensorLagFilter;
 pub use supply_drop::{static_supply_pressure_pa, Supply, SupplyDropModel};
-pub use valve_dead_time::{DeadTimeLine, MAX_PLAUSIBLE_DELAY_S};
+pub use valve_dead_time::{DeadTimeLine, ShiftedCommands, MAX_PLAUSIBLE_DELAY_S};
 
 /// One effect: its `[effects.<name>]` table. Implemented by the table's struct.
 pub trait Effect: Debug + Clone + PartialEq + DeserializeOwned {

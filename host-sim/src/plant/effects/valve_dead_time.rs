@@ -27,6 +27,68 @@ pub struct ValveDeadTime {
     pub delay_s: f64,
 }
 
+/// The valve commands of a recording at its own stamps (uniform or jittered) shifted by the
+/// dead time `delay_s` exactly: the command logged at `t_s[i]` is in force from
+/// `t_s[i] + delay_s` until the next one's; valves closed before the first arrives. This is
+/// the dead time itself; [`DeadTimeLine`] is the same shift on a uniform grid, each
+/// period's opening the time average of the shifted commands over it (a test checks the
+/// two agree).
+#[derive(Debug, Clone)]
+pub struct ShiftedCommands<'a> {
+    t_s: &'a [f64],
+    inputs: &'a [ValveInputs],
+    delay_s: f64,
+    /// Two times closer than this are one (a rounding of the stamps).
+    tol_s: f64,
+    /// Index of the command in force at the last time asked.
+    src: usize,
+}
+
+impl<'a> ShiftedCommands<'a> {
+    pub fn new(t_s: &'a [f64], inputs: &'a [ValveInputs], delay_s: f64, tol_s: f64) -> Self {
+        Self {
+            t_s,
+            inputs,
+            delay_s,
+            tol_s,
+            src: 0,
+        }
+    }
+
+    /// The times the openings may change before `t_end`: the stamps and the delayed
+    /// stamps, sorted, those within the tolerance of each other merged; then `t_end`.
+    pub fn breakpoints(&self, t_end: f64) -> Vec<f64> {
+        let mut cuts: Vec<f64> = self.t_s.to_vec();
+        if self.delay_s > 0.0 {
+            cuts.extend(
+                self.t_s
+                    .iter()
+                    .map(|t| t + self.delay_s)
+                    .filter(|t| *t < t_end),
+            );
+            cuts.sort_by(f64::total_cmp);
+            let tol = self.tol_s;
+            cuts.dedup_by(|a, b| (*a - *b).abs() <= tol);
+        }
+        cuts.push(t_end);
+        cuts
+    }
+
+    /// The opening in force from time `t` on (asked at increasing times).
+    pub fn at(&mut self, t: f64) -> ValveInputs {
+        let td = t - self.delay_s;
+        let n = self.t_s.len();
+        while self.src + 1 < n && self.t_s[self.src + 1] <= td + self.tol_s {
+            self.src += 1;
+        }
+        if self.t_s[self.src] <= td + self.tol_s {
+            self.inputs[self.src]
+        } else {
+            ValveInputs::CLOSED
+        }
+    }
+}
+
 /// A delay line between valve commands and valve openings: `whole` samples and a fraction
 /// `frac` of one.
 #[derive(Debug, Clone)]
@@ -262,6 +324,30 @@ mod line_tests {
         ValveInputs {
             u_in1: if k == 3 { 1.0 } else { 0.0 },
             ..ValveInputs::CLOSED
+        }
+    }
+
+    /// The line's opening over each period is the time average of the exactly shifted
+    /// commands over it: one dead time, two views.
+    #[test]
+    fn the_line_is_the_shift_averaged_over_each_period() {
+        let dt = 0.001;
+        let cmds: Vec<ValveInputs> = (0..12).map(pulse).collect();
+        let t: Vec<f64> = (0..12).map(|k| k as f64 * dt).collect();
+        for delay in [0.0, 0.002, 0.00225, 0.0037] {
+            let mut line = DeadTimeLine::new(delay, dt).expect("line");
+            let mut shift = ShiftedCommands::new(&t, &cmds, delay, 1e-12 * dt);
+            for (k, c) in cmds.iter().enumerate() {
+                let got = line.push(*c).u_in1;
+                // Average of the shifted command over [k dt, (k+1) dt), at the midpoints of
+                // 20 sub-intervals (exact for delays of whole twentieths of a sample).
+                let m = 20;
+                let avg = (0..m)
+                    .map(|j| shift.at((k as f64 + (j as f64 + 0.5) / m as f64) * dt).u_in1)
+                    .sum::<f64>()
+                    / m as f64;
+                assert!((got - avg).abs() < 1e-9, "delay {delay}, k {k}: {got} vs {avg}");
+            }
         }
     }
 
