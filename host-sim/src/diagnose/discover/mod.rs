@@ -473,7 +473,7 @@ fn catalogue_objection(
     let (nom_tail, best_tail, noise_cost) = costs;
     let share = opts.catalogue_share?;
     if let Some((id, reach)) =
-        catalogue_reach(nominal, &problem, &ev, n_fit, nom_tail, best_tail, opts)
+        catalogue_reach(nominal, problem, ev, n_fit, nom_tail, best_tail, opts)
     {
         d.catalogue_best = Some((id.clone(), reach));
         // The term must remove a share of what the catalogue's best leaves beyond noise,
