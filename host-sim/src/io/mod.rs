@@ -5,6 +5,7 @@ pub mod arm3;
 pub mod atomic;
 pub mod capture;
 pub mod compare;
+pub mod grid;
 pub mod import;
 pub mod numfmt;
 pub mod plot;

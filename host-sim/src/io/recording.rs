@@ -4,7 +4,7 @@
 //! - one header line, columns by name in any order;
 //! - required: `t_s` (increasing; uniform steps or stamps that jitter by less than half a
 //!   median step, see [`Recording::is_uniform`]; a few short gaps of dropped rows are
-//!   accepted and filled by [`Recording::to_uniform`], see [`crate::io::timebase`]; a longer
+//!   accepted and filled by [`Recording::to_uniform`], see `io/timebase.rs`; a longer
 //!   one is refused), `u_in1`, `u_ex1`,
 //!   `u_in2`, `u_ex2` (in [0, 1]) and at least one of `angle_deg`, `p1_kpa`, `p2_kpa`,
 //!   `f1_n`, `f2_n`; optional `m_dot_1_kg_s`, `m_dot_2_kg_s` (both or neither: the net mass
@@ -95,10 +95,7 @@ pub const MASS_FLOW_RANGE_KG_S: (f64, f64) = (-10.0, 10.0);
 /// Median time step of a recording a PAM joint can be studied from: 100 kHz .. 10 Hz [s].
 pub const STEP_RANGE_S: crate::validate::Range = crate::validate::Range::closed(1e-5, 0.1);
 
-/// Largest accepted step between two time stamps, in median steps: a longer step is a gap.
-pub const MAX_STEP_RATIO: f64 = 1.5;
-/// Smallest accepted step between two time stamps, in median steps.
-pub const MIN_STEP_RATIO: f64 = 0.5;
+pub use crate::io::grid::{MAX_STEP_RATIO, MIN_STEP_RATIO};
 /// Steps within this share of the median step (and stamps within it of the uniform grid)
 /// count as uniform: such a recording is used as it is.
 pub const UNIFORM_TOLERANCE: f64 = 0.01;
@@ -170,22 +167,6 @@ impl Recording {
     /// its own stamps, and the tools that need a uniform grid take [`Self::to_uniform`].
     pub fn is_uniform(&self) -> bool {
         stamps_uniform(&self.t_s)
-    }
-
-    /// The recording on the uniform grid `t_0 + k dt` ([`crate::io::timebase::on_grid`]):
-    /// each grid cell's valve opening is the time average of the openings held between the
-    /// original stamps over that cell (the opening-time a valve delivers is kept; an on/off
-    /// edge between grid points becomes one fractional opening), and each output channel is
-    /// linearly interpolated between the two stamps around the grid point. Rows the logger
-    /// dropped (a step of a whole number of periods) are filled (the last logged opening
-    /// held) and listed under [`crate::io::timebase::FILLED_ROWS_KEY`]: the diagnosis leaves
-    /// them out of its fits. Without gaps `dt` is the mean step and the number of samples
-    /// is kept. A uniform recording is returned unchanged.
-    pub fn to_uniform(&self) -> Recording {
-        if self.is_uniform() {
-            return self.clone();
-        }
-        crate::io::timebase::on_grid(self)
     }
 
     pub fn channel(&self, c: Channel) -> Option<&[f64]> {
@@ -1416,7 +1397,7 @@ impl<'t> Table<'t> {
     /// The time column `t_s` of a 1-DOF recording (`line_of(k)`: the file line of row `k`):
     /// at least two rows, increasing, each step within [[`MIN_STEP_RATIO`],
     /// [`MAX_STEP_RATIO`]] median steps (jitter is accepted), or a gap of a whole number of
-    /// median steps within the limits of [`crate::io::timebase`] (filled by
+    /// median steps within the limits of `io/timebase.rs` (filled by
     /// [`Recording::to_uniform`], left out of the diagnosis's fits; a longer one is refused),
     /// and a declared `sample_period_s` that agrees with the mean step.
     pub(crate) fn check_time(
@@ -1457,7 +1438,7 @@ impl<'t> Table<'t> {
             if !(step > 0.0) {
                 return Err(order_err(k));
             }
-            if let Some(why) = crate::io::timebase::step_refused(step, median_step) {
+            if let Some(why) = crate::io::grid::step_refused(step, median_step) {
                 // Two swapped rows first show as a double step: name the swap, not a gap.
                 if k + 1 < n && !(t_s[k + 1] > t_s[k]) {
                     return Err(order_err(k + 1));
@@ -1477,9 +1458,9 @@ impl<'t> Table<'t> {
         }
         // Gaps (rows the logger dropped) are filled when they are few; the declared period is
         // then the grid's, not the mean step.
-        let grid = crate::io::timebase::Grid::of(t_s);
+        let grid = crate::io::grid::Grid::of(t_s);
         let dt = if grid.filled() > 0 {
-            if let Some(why) = crate::io::timebase::gaps_refused(&grid) {
+            if let Some(why) = crate::io::grid::gaps_refused(&grid) {
                 let first = grid
                     .index
                     .windows(2)
