@@ -342,6 +342,9 @@ impl Diagnosis {
                 },
             },
             "remaining": located_json(&self.remaining),
+            // The discovery stage's answer, set by the command that runs it after the
+            // diagnosis (`host-sim diagnose`); null when it did not run or found nothing.
+            "discovered": serde_json::Value::Null,
             "lookalikes": self.lookalikes,
             "hints": self.hints,
             "failures": self.failures,
