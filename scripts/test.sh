@@ -3,6 +3,11 @@
 # the firmware library built for the bare-metal targets.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# Lean on disk: a CI machine's disk may be small, and the workspace's ~40 test binaries each link
+# the simulator. No incremental caches, line tables only (enough for a backtrace) in host builds.
+export CARGO_INCREMENTAL=0
+export CARGO_PROFILE_DEV_DEBUG=line-tables-only
+export CARGO_PROFILE_TEST_DEBUG=line-tables-only
 bash scripts/setup.sh
 cargo build -p pam-firmware --lib --target thumbv7em-none-eabihf --release
 cargo build -p pam-firmware --lib --target thumbv6m-none-eabi --release
