@@ -9,13 +9,7 @@
 # docs/performance.md (scripts/figures.py), the one place the figures are quoted from.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-write_docs=0
-for arg in "$@"; do
-  case "$arg" in
-    --write-docs) write_docs=1 ;;
-    *) echo "bench-evidence.sh: unknown option '$arg' (allowed: --write-docs)" >&2; exit 2 ;;
-  esac
-done
+source scripts/write-docs-arg.sh
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT
 cargo test -q --release -p host-sim --features test-support --test diagnose_independent -- \

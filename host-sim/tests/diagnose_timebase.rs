@@ -62,21 +62,7 @@ fn run(seed: u64, log: &Log) -> Recording {
     for &t in &t_s {
         if t >= until {
             let m: f64 = rng.random_range(-0.6..0.6);
-            u = if m >= 0.0 {
-                ValveInputs {
-                    u_in1: m,
-                    u_ex1: 0.0,
-                    u_in2: 0.0,
-                    u_ex2: m,
-                }
-            } else {
-                ValveInputs {
-                    u_in1: 0.0,
-                    u_ex1: -m,
-                    u_in2: -m,
-                    u_ex2: 0.0,
-                }
-            };
+            u = ValveInputs::antagonistic(m);
             until = t + rng.random_range(0.08..0.4);
         }
         inputs.push(u);
@@ -141,6 +127,18 @@ fn diag(train: &Recording, check: &Recording) -> Diagnosis {
     .unwrap()
 }
 
+/// The verdict is `nothing_missing`; else the fits, the residual per noise and the hints.
+fn assert_nothing_missing(d: &Diagnosis) {
+    assert_eq!(
+        d.verdict,
+        Verdict::NothingMissing,
+        "{:?} {:?} {:?}",
+        d.fit_before,
+        d.residual_x_noise,
+        d.hints
+    );
+}
+
 const PLAIN: Log = Log {
     jitter: 0.0,
     dropped: 0.0,
@@ -158,13 +156,7 @@ fn nominal_data_jittered_by_20_percent_misses_nothing() {
     let (train, check) = (run(1, &log), run(2, &log));
     assert!(!train.is_uniform());
     let d = diag(&train, &check);
-    assert_eq!(
-        d.verdict,
-        Verdict::NothingMissing,
-        "{:?} {:?}",
-        d.fit_before,
-        d.residual_x_noise
-    );
+    assert_nothing_missing(&d);
 }
 
 /// 5 % of the rows dropped in gaps of 1-9 rows (and +-20 % jitter): the gaps are filled on
@@ -180,13 +172,7 @@ fn nominal_data_with_dropped_rows_misses_nothing() {
     let u = train.to_uniform();
     assert!(u.len() > train.len() && MeasuredRows::of(&u).count(0..u.len()) == train.len());
     let d = diag(&train, &check);
-    assert_eq!(
-        d.verdict,
-        Verdict::NothingMissing,
-        "{:?} {:?}",
-        d.fit_before,
-        d.residual_x_noise
-    );
+    assert_nothing_missing(&d);
 }
 
 /// Valve columns logged 50 ms late: named as a logging misalignment with its value and the
@@ -213,13 +199,7 @@ fn valves_logged_late_are_named_with_the_shift_that_fixes_them() {
     );
     let fixed = |r: &Recording| shift_valves(r, 0.05).unwrap();
     let d = diag(&fixed(&train), &fixed(&check));
-    assert_eq!(
-        d.verdict,
-        Verdict::NothingMissing,
-        "{:?} {:?}",
-        d.fit_before,
-        d.hints
-    );
+    assert_nothing_missing(&d);
 }
 
 /// A real valve dead time of 80 ms (the sensors answer late) is no logging offset: the

@@ -231,21 +231,7 @@ fn pulses(seconds: f64, dt_s: f64, seed: u64) -> Vec<ValveInputs> {
         let t = k as f64 * dt_s;
         if t >= until {
             let m: f64 = rng.random_range(-0.8..0.8);
-            u = if m >= 0.0 {
-                ValveInputs {
-                    u_in1: m,
-                    u_ex1: 0.0,
-                    u_in2: 0.0,
-                    u_ex2: m,
-                }
-            } else {
-                ValveInputs {
-                    u_in1: 0.0,
-                    u_ex1: -m,
-                    u_in2: -m,
-                    u_ex2: 0.0,
-                }
-            };
+            u = ValveInputs::antagonistic(m);
             until = t + rng.random_range(0.1..0.4);
         }
         out.push(u);
@@ -284,16 +270,23 @@ fn record(cfg: &PlantConfig, inputs: Vec<ValveInputs>, dt_s: f64, seed: u64) -> 
     }
 }
 
-#[test]
-fn a_joint_term_is_discovered_and_written_back() {
-    let cfg = nominal();
+/// `cfg` with the joint torque term `coefficient * speed * |speed|` (N m s^2 / rad^2), the
+/// ground truth of the recovery tests below.
+fn with_speed_squared_damping(cfg: &PlantConfig, coefficient: f64) -> PlantConfig {
     let mut truth = cfg.clone();
     truth.effects.discovered = Some(Discovered {
         enabled: true,
         slot: Slot::Joint,
         terms: vec![Term::SpeedAbsSpeed],
-        coefficients: vec![-0.12],
+        coefficients: vec![coefficient],
     });
+    truth
+}
+
+#[test]
+fn a_joint_term_is_discovered_and_written_back() {
+    let cfg = nominal();
+    let truth = with_speed_squared_damping(&cfg, -0.12);
     let dt = 2e-3;
     let train = record(&truth, pulses(6.0, dt, 1), dt, 2);
     let check = record(&truth, pulses(4.0, dt, 3), dt, 4);
@@ -340,13 +333,7 @@ fn d_solver() -> SolverOptions {
 #[ignore = "timed benchmark: run in release"]
 fn discovery_speed_30_s_at_1_khz() {
     let cfg = nominal();
-    let mut truth = cfg.clone();
-    truth.effects.discovered = Some(Discovered {
-        enabled: true,
-        slot: Slot::Joint,
-        terms: vec![Term::SpeedAbsSpeed],
-        coefficients: vec![-0.1],
-    });
+    let truth = with_speed_squared_damping(&cfg, -0.1);
     let dt = 1e-3;
     let train = record(&truth, pulses(30.0, dt, 7), dt, 8);
     let check = record(&truth, pulses(10.0, dt, 9), dt, 10);
@@ -376,13 +363,7 @@ fn the_command_line_answers_with_its_exit_status_json_and_plant_file() {
     let dir = std::env::temp_dir().join(format!("host-sim-discover-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let cfg = nominal();
-    let mut truth = cfg.clone();
-    truth.effects.discovered = Some(Discovered {
-        enabled: true,
-        slot: Slot::Joint,
-        terms: vec![Term::SpeedAbsSpeed],
-        coefficients: vec![-0.12],
-    });
+    let truth = with_speed_squared_damping(&cfg, -0.12);
     let dt = 2e-3;
     let p = |n: &str| dir.join(n);
     record(&truth, pulses(6.0, dt, 1), dt, 2)

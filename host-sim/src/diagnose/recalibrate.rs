@@ -523,15 +523,7 @@ mod tests {
     use super::*;
 
     fn nominal() -> PlantConfig {
-        PlantConfig::from_toml_str(
-            &std::fs::read_to_string(
-                std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-                    .join("tests/fixtures/reference-1dof.toml"),
-            )
-            .unwrap(),
-            "reference-1dof.toml",
-        )
-        .unwrap()
+        PlantConfig::reference()
     }
 
     #[test]

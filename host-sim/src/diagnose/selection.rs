@@ -527,15 +527,7 @@ mod tests {
 
     #[test]
     fn a_recalibration_wins_unless_an_effect_beats_it_clearly() {
-        let nominal = PlantConfig::from_toml_str(
-            &std::fs::read_to_string(
-                std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-                    .join("tests/fixtures/reference-1dof.toml"),
-            )
-            .unwrap(),
-            "p.toml",
-        )
-        .unwrap();
+        let nominal = PlantConfig::reference();
         let recal: Vec<Box<dyn Candidate>> = recalibrate::candidates(&nominal);
         let friction: Box<dyn Candidate> = Box::new(JointFrictionCandidate);
         let rc: &dyn Candidate = recal[0].as_ref();

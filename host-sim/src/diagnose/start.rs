@@ -195,15 +195,7 @@ mod tests {
 
     #[test]
     fn wide_keys_get_a_log_grid_inside_their_range_and_narrow_ones_none() {
-        let nominal = PlantConfig::from_toml_str(
-            &std::fs::read_to_string(
-                std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-                    .join("tests/fixtures/reference-1dof.toml"),
-            )
-            .unwrap(),
-            "p.toml",
-        )
-        .unwrap();
+        let nominal = PlantConfig::reference();
         let s = Setup {
             dt_s: 1e-3,
             present: [true; 5],

@@ -362,6 +362,14 @@ impl PlantConfig {
         Self::from_toml_str(&read_plant_text(path)?, path)
     }
 
+    /// The reference plant of the shared specification (`host-sim/plants/reference-1dof.toml`,
+    /// built into the binary; `tests/conformance.rs` checks it against the specification).
+    pub fn reference() -> Self {
+        let builtin = crate::defaults::REFERENCE_PLANT;
+        Self::from_toml_str(builtin.text, builtin.rel)
+            .expect("the built-in reference plant is a valid plant file")
+    }
+
     /// Parses and validates plant TOML text; `path` is only used in error messages.
     pub fn from_toml_str(text: &str, path: impl AsRef<Path>) -> Result<Self, ConfigError> {
         parse_plant_text(text, path.as_ref(), Self::validate)

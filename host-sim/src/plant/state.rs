@@ -151,6 +151,17 @@ impl ValveInputs {
             u_ex2: u[3],
         }
     }
+
+    /// A differential command `m` in [-1, 1]: m > 0 opens muscle 1's inlet and muscle 2's
+    /// exhaust by m (the joint turns towards muscle 1), m < 0 the other pair by -m.
+    #[inline]
+    pub fn antagonistic(m: f64) -> Self {
+        if m >= 0.0 {
+            Self::from_openings([m, 0.0, 0.0, m])
+        } else {
+            Self::from_openings([0.0, -m, -m, 0.0])
+        }
+    }
 }
 
 /// What the sensors of a recording report (PLANT.md "Measured channels").

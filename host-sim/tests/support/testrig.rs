@@ -1819,34 +1819,12 @@ fn record(p: &RigPhysics, dt_s: f64, plan: &Plan, rng: &mut StdRng) -> Recording
                         // Both muscles together: fill or vent.
                         let a = rng.random_range(0.2..0.6);
                         if rng.random_bool(0.5) {
-                            ValveInputs {
-                                u_in1: a,
-                                u_ex1: 0.0,
-                                u_in2: a,
-                                u_ex2: 0.0,
-                            }
+                            ValveInputs::from_openings([a, 0.0, a, 0.0])
                         } else {
-                            ValveInputs {
-                                u_in1: 0.0,
-                                u_ex1: a,
-                                u_in2: 0.0,
-                                u_ex2: a,
-                            }
-                        }
-                    } else if m >= 0.0 {
-                        ValveInputs {
-                            u_in1: m,
-                            u_ex1: 0.0,
-                            u_in2: 0.0,
-                            u_ex2: m,
+                            ValveInputs::from_openings([0.0, a, 0.0, a])
                         }
                     } else {
-                        ValveInputs {
-                            u_in1: 0.0,
-                            u_ex1: -m,
-                            u_in2: -m,
-                            u_ex2: 0.0,
-                        }
+                        ValveInputs::antagonistic(m)
                     };
                     open = (u, t + rng.random_range(0.08..0.4));
                 }
