@@ -425,3 +425,130 @@ fn the_command_line_answers_with_its_exit_status_json_and_plant_file() {
     assert_eq!(out.status.code(), Some(2));
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `host-sim diagnose --write-plant --report`: an unexplained recording of a velocity-squared
+/// damping gets the discovered term written into a plant file and a report with the
+/// residual plotted against the term's argument; diagnosed again from the written file, the
+/// same recordings miss nothing (exit status 0). A plant that already has a discovered table
+/// is refused before the diagnosis runs (exit status 2).
+#[test]
+fn diagnose_writes_the_discovered_term_and_the_next_diagnosis_starts_from_it() {
+    let dir = std::env::temp_dir().join(format!("host-sim-diagnose-write-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = |n: &str| dir.join(n);
+    let truth = with_speed_squared_damping(&nominal(), -0.12);
+    let dt = 2e-3;
+    record(&truth, pulses(6.0, dt, 1), dt, 2)
+        .write(p("train.csv"))
+        .unwrap();
+    record(&truth, pulses(4.0, dt, 3), dt, 4)
+        .write(p("check.csv"))
+        .unwrap();
+    let diagnose = |plant: &std::path::Path, json: &str, extra: &[&std::ffi::OsStr]| {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_host-sim"))
+            .arg("diagnose")
+            .arg("--plant")
+            .arg(plant)
+            .arg("--recording")
+            .arg(p("train.csv"))
+            .arg("--check")
+            .arg(p("check.csv"))
+            .arg("--json")
+            .arg(p(json))
+            .args(extra)
+            .output()
+            .unwrap();
+        let text = format!(
+            "{}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        (out.status.code(), text)
+    };
+    let (report, written) = (p("report"), p("written.toml"));
+    let (code, text) = diagnose(
+        &fixture("reference-1dof.toml"),
+        "first.json",
+        &[
+            "--report".as_ref(),
+            report.as_os_str(),
+            "--write-plant".as_ref(),
+            written.as_os_str(),
+        ],
+    );
+    assert_eq!(code, Some(3), "{text}");
+    assert!(
+        text.contains(&format!("wrote {}", written.display())),
+        "{text}"
+    );
+    let plant = PlantConfig::load(&written).unwrap();
+    let table = plant
+        .effects
+        .discovered
+        .as_ref()
+        .expect("a discovered table");
+    assert_eq!(table.slot, Slot::Joint);
+    assert!(table.terms.contains(&Term::SpeedAbsSpeed), "{text}");
+    let html = std::fs::read_to_string(report.join("index.html")).unwrap();
+    let at = html
+        .find("Discovery: what the catalogue leaves")
+        .expect("a discovery section");
+    let section = &html[at..];
+    assert!(
+        section.contains("<svg") && section.contains("speed [rad/s]"),
+        "no plot of the residual against speed"
+    );
+    // The next diagnosis starts from the written file: nothing is missing any more.
+    let (code, text) = diagnose(&written, "second.json", &[]);
+    assert_eq!(code, Some(0), "{text}");
+    // A plant that already holds a discovered table is refused, nothing written.
+    let again = p("again.toml");
+    let (code, text) = diagnose(
+        &written,
+        "third.json",
+        &["--write-plant".as_ref(), again.as_os_str()],
+    );
+    assert_eq!(code, Some(2), "{text}");
+    assert!(
+        text.contains("already has an [effects.discovered] table"),
+        "{text}"
+    );
+    assert!(!again.exists() && !p("third.json").exists());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The discovery's plot data: the joint's torque residual against speed, with the
+/// velocity-squared term as its curve; the residual opposes the motion (the damping's sign).
+#[test]
+fn the_residual_is_plotted_against_the_terms_argument() {
+    let cfg = nominal();
+    let truth = with_speed_squared_damping(&cfg, -0.12);
+    let dt = 2e-3;
+    let train = record(&truth, pulses(6.0, dt, 1), dt, 2);
+    let check = record(&truth, pulses(4.0, dt, 3), dt, 4);
+    let opts = DiscoverOptions {
+        catalogue_share: None,
+        ..DiscoverOptions::default()
+    };
+    let d = discover(&cfg, &train, Some(&check), &opts).unwrap();
+    let s = d.scatter.as_ref().expect("a scatter of the best term");
+    assert_eq!(s.x_label, "speed [rad/s]");
+    assert!(s.points.len() > 100 && s.curve.len() > 100);
+    let mut speeds: Vec<f64> = s.points.iter().map(|(x, _)| x.abs()).collect();
+    speeds.sort_by(f64::total_cmp);
+    let fast = speeds[speeds.len() / 2];
+    let moving: Vec<&(f64, f64)> = s.points.iter().filter(|(x, _)| x.abs() > fast).collect();
+    let opposing = moving.iter().filter(|(x, y)| x * y < 0.0).count();
+    assert!(
+        opposing as f64 >= 0.8 * moving.len() as f64,
+        "{opposing} of {} fast points oppose the motion",
+        moving.len()
+    );
+    // The curve is the term: -0.12 speed |speed| within the fit's tolerance, by increasing speed.
+    assert!(s.curve.windows(2).all(|w| w[0].0 <= w[1].0));
+    let (x, v) = *s.curve.last().unwrap();
+    assert!(
+        v < 0.0 && (v / (x * x.abs()) + 0.12).abs() < 0.03,
+        "{x} {v}"
+    );
+}

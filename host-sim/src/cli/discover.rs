@@ -104,15 +104,14 @@ pub fn run(a: &DiscoverArgs) -> Result<ExitCode> {
         let _ = writeln!(out, "wrote {}", j.display());
     }
     if let (Some(p), Some(f)) = (&a.write_plant, &d.found) {
-        let text = format!(
-            "{}\n# Found by `host-sim discover` on {}: {}\n{}",
-            plant_text.trim_end(),
-            a.recording.display(),
-            host_sim::diagnose::discover::formula(&f.table),
-            f.table.to_toml()
-        );
-        // The written file must read back as the plant the discovery scored.
-        host_sim::PlantConfig::from_toml_str(&text, p)?;
+        let found_by = format!("`host-sim discover` on {}", a.recording.display());
+        let text = host_sim::diagnose::discover::plant_text_with(
+            &plant_text,
+            &a.plant,
+            &found_by,
+            &f.table,
+        )
+        .map_err(|e| anyhow::anyhow!("--write-plant: {e}"))?;
         host_sim::identify::write_atomic(p, text.as_bytes())?;
         let _ = writeln!(out, "wrote {}", p.display());
     } else if let Some(p) = &a.write_plant {

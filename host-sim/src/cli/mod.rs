@@ -161,6 +161,11 @@ struct DiagnoseArgs {
     /// before diagnosing. The diagnosis names such an offset when it finds one.
     #[arg(long, value_name = "MS", allow_negative_numbers = true)]
     shift_valves_ms: Option<f64>,
+    /// Write the plant file with the discovered term as its [effects.discovered] table, when
+    /// the answer is unexplained and the discovery finds a term (1-DOF plants): the next
+    /// diagnosis of the rig starts from it.
+    #[arg(long, value_name = "OUT.toml")]
+    write_plant: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -927,6 +932,36 @@ fn only_common(model: &Recording, reference: &Recording) -> Recording {
     r
 }
 
+/// `diagnose --write-plant`: the plant file with the discovered term, when the answer is
+/// unexplained and the discovery (on the nominal plant) found one; else why nothing is
+/// written. Returns the line to print.
+fn write_discovered_plant(
+    a: &DiagnoseArgs,
+    out: &Path,
+    plant_text: &str,
+    d: &host_sim::diagnose::Diagnosis,
+    discovered: Option<&host_sim::diagnose::discover::Discovery>,
+) -> Result<String> {
+    use host_sim::diagnose::Verdict;
+    let found = discovered.and_then(|x| x.found.as_ref());
+    let Some(f) = found.filter(|_| d.verdict == Verdict::Unexplained) else {
+        let why = match (d.verdict, found) {
+            (Verdict::PartlyExplained, Some(_)) => {
+                "the term completes the named items (write their values from the JSON into \
+                 the plant file, then diagnose again)"
+            }
+            _ => "nothing discovered",
+        };
+        return Ok(format!("{why}: {} not written", out.display()));
+    };
+    let found_by = format!("`host-sim diagnose` on {}", a.recording.display());
+    let text =
+        host_sim::diagnose::discover::plant_text_with(plant_text, &a.plant, &found_by, &f.table)
+            .map_err(|e| anyhow::anyhow!("--write-plant: {e}"))?;
+    host_sim::identify::write_atomic(out, text.as_bytes())?;
+    Ok(format!("wrote {}", out.display()))
+}
+
 /// `diagnose` with a 3-DOF arm plant file: every joint through the 1-DOF pipeline
 /// (`host_sim::diagnose::arm3`); one JSON for the arm, a report per joint (DIR/jointN/).
 fn run_diagnose_arm(
@@ -959,6 +994,7 @@ fn run_diagnose_arm(
             write_report(
                 &sub,
                 j,
+                None,
                 &joint_json,
                 &format!("{} (joint {})", a.recording.display(), i + 1),
                 None,
@@ -984,10 +1020,9 @@ fn run_diagnose_arm(
     Ok(ExitCode::from(status))
 }
 
-fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
-    use host_sim::diagnose::{
-        answer::failure_json, diagnose, report::write_report, DiagnoseError, DiagnoseOptions,
-    };
+/// `diagnose`'s files before anything runs: --check is not --recording, no output is an
+/// input or another output, every output may be replaced, the report folder can be written.
+fn check_diagnose_files(a: &DiagnoseArgs) -> Result<()> {
     let mut inputs: Vec<(&str, &Path)> = vec![("--plant", &a.plant), ("--recording", &a.recording)];
     if let Some(c) = &a.check {
         // The check recording validates the answer on data it was not fitted to.
@@ -1002,7 +1037,13 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
         }
         inputs.push(("--check", c));
     }
-    validate::distinct_file_outputs(&inputs, &[("--json", &a.json)]).map_err(anyhow::Error::msg)?;
+    let mut outputs: Vec<(&str, &Path)> = vec![("--json", &a.json)];
+    if let Some(p) = &a.write_plant {
+        validate::replaceable("--write-plant", p, validate::OutputKind::PLANT)
+            .map_err(anyhow::Error::msg)?;
+        outputs.push(("--write-plant", p));
+    }
+    validate::distinct_file_outputs(&inputs, &outputs).map_err(anyhow::Error::msg)?;
     validate::replaceable("--json", &a.json, validate::OutputKind::JSON)
         .map_err(anyhow::Error::msg)?;
     if let Some(dir) = &a.report {
@@ -1028,6 +1069,14 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
         .collect();
         host_sim::output::check_dir("--report", dir, &files).map_err(anyhow::Error::msg)?;
     }
+    Ok(())
+}
+
+fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
+    use host_sim::diagnose::{
+        answer::failure_json, diagnose, report::write_report, DiagnoseError, DiagnoseOptions,
+    };
+    check_diagnose_files(a)?;
     let bar = stderr_bar(
         Some(100),
         "{spinner} diagnose [{bar:40}] {pos}/{len} {msg} {elapsed}",
@@ -1037,9 +1086,21 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
         ..DiagnoseOptions::default()
     };
     if host_sim::plant::arm3::is_arm3_file(&a.plant)? {
+        if a.write_plant.is_some() {
+            anyhow::bail!("--write-plant: not supported with an arm plant (1-DOF plants only)");
+        }
         return run_diagnose_arm(a, &opts, &bar);
     }
     let cfg = host_sim::PlantConfig::load(&a.plant)?;
+    let plant_text = std::fs::read_to_string(&a.plant)
+        .with_context(|| format!("--plant {}", a.plant.display()))?;
+    if a.write_plant.is_some() && plant_text.contains("[effects.discovered]") {
+        anyhow::bail!(
+            "--write-plant: {} already has an [effects.discovered] table; remove it (or \
+             diagnose against the file without it) so that the written file has one",
+            a.plant.display()
+        );
+    }
     let mut train = Recording::read(&a.recording)?;
     let mut check = a.check.as_ref().map(Recording::read).transpose()?;
     if let Some(ms) = a.shift_valves_ms {
@@ -1112,6 +1173,7 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
         write_report(
             dir,
             &d,
+            discovered.as_ref(),
             &json,
             &a.recording.display().to_string(),
             a.check.as_ref().map(|c| c.display().to_string()).as_deref(),
@@ -1130,6 +1192,10 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
         let _ = write!(out, "Discovery (what the catalogue leaves):\n{}", x.text());
     }
     let _ = writeln!(out, "wrote {}", a.json.display());
+    if let Some(p) = &a.write_plant {
+        let line = write_discovered_plant(a, p, &plant_text, &d, discovered.as_ref())?;
+        let _ = writeln!(out, "{line}");
+    }
     // Exit status 4: partly explained; 3: the diagnosis names nothing because the recording
     // is unexplained or not of this plant (the JSON says which).
     Ok(ExitCode::from(d.verdict.exit_status()))

@@ -10,6 +10,7 @@ use plotters::prelude::*;
 
 use crate::io::recording::Channel;
 
+use super::discover::Discovery;
 use super::screen::Scatter;
 use super::{Diagnosis, Series};
 
@@ -104,7 +105,7 @@ fn scatter_svg(s: &Scatter, title: &str) -> Result<String, String> {
         f64::INFINITY,
         f64::NEG_INFINITY,
     );
-    for (x, y) in &s.points {
+    for (x, y) in s.points.iter().chain(&s.curve) {
         x0 = x0.min(*x);
         x1 = x1.max(*x);
         y0 = y0.min(*y);
@@ -139,9 +140,39 @@ fn scatter_svg(s: &Scatter, title: &str) -> Result<String, String> {
                     .map(|p| Circle::new(*p, 2, BLUE.mix(0.4).filled())),
             )
             .map_err(|e| e.to_string())?;
+        if !s.curve.is_empty() {
+            chart
+                .draw_series(LineSeries::new(
+                    s.curve.iter().copied(),
+                    RED.stroke_width(2),
+                ))
+                .map_err(|e| e.to_string())?;
+        }
         root.present().map_err(|e| e.to_string())?;
     }
     Ok(svg)
+}
+
+/// The discovery's answer (empty without one) and the plot of its slot's residual against
+/// the best term's argument, the term drawn over it.
+fn discovery_section(discovered: Option<&Discovery>) -> Result<String, String> {
+    let Some(x) = discovered else {
+        return Ok(String::new());
+    };
+    let mut h = format!(
+        "<h2>Discovery: what the catalogue leaves</h2>\n<pre>{}</pre>\n",
+        esc(&x.text())
+    );
+    if let (Some(s), Some(best)) = (&x.scatter, &x.best) {
+        let title = format!(
+            "{}: residual (blue) and {} (red)",
+            best.table.slot.equation(),
+            best.table.formula()
+        );
+        h += &scatter_svg(s, &title)?;
+        h.push('\n');
+    }
+    Ok(h)
 }
 
 /// The share of the mismatch each graded item removes, as an HTML table (empty without
@@ -185,6 +216,7 @@ fn grade_table(d: &Diagnosis) -> String {
 pub fn write_report(
     dir: &Path,
     d: &Diagnosis,
+    discovered: Option<&Discovery>,
     json: &str,
     train_name: &str,
     check_name: Option<&str>,
@@ -281,6 +313,7 @@ pub fn write_report(
             h.push('\n');
         }
     }
+    h += &discovery_section(discovered)?;
     h += "<h2>Candidate scores</h2>\n<p>Each candidate refitted by output error on the first 70 % of TRAIN and scored on the last 30 %: held-out cost = sum over channels of mean squared error / variance; explained = share of the held-out error beyond noise it removes; BIC delta = change of N ln(cost) + k ln(N) (negative: better).</p>\n<table><tr><th>candidate</th><th>round</th><th>screening R^2</th><th>held-out cost</th><th>explained</th><th>BIC delta</th><th>accepted</th><th>refit s</th><th>parameters</th></tr>\n";
     for s in &d.candidates {
         let params: Vec<String> = s

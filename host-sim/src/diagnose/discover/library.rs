@@ -4,8 +4,8 @@
 //! equation's units), then the sparse supports STLSQ finds over a grid of thresholds.
 
 use crate::plant::channel::Channel;
-use crate::plant::effects::candidate::Evidence;
-use crate::plant::effects::discovered::{Slot, Term, TermInput};
+use crate::plant::effects::candidate::{Evidence, Scatter};
+use crate::plant::effects::discovered::{Discovered, Slot, Term, TermInput};
 
 use super::sparse::{stlsq, Design, SparseFit};
 
@@ -31,35 +31,12 @@ pub fn design(
     library: &[Term],
     range: std::ops::Range<usize>,
 ) -> Option<Design> {
-    let n = ev.angle_rad.len();
-    let lo = range.start + EDGE;
-    let hi = range.end.min(n).saturating_sub(EDGE);
-    if hi <= lo + 50 {
-        return None;
-    }
+    let idx = rows(ev, range)?;
     let plant = &ev.plant;
-    let r = plant.joint.sprocket_radius_m;
-    // The tensions the torque residual used: measured when both force channels were, else
-    // the nominal tension law at the measured state.
-    let forces = |k: usize| -> [f64; 2] {
-        let model = plant.tensions_n(&ev.states[k]);
-        match ev.force_residual_n.as_ref() {
-            Some([Some(a), Some(b)]) => [model[0] + a[k], model[1] + b[k]],
-            _ => model,
-        }
-    };
-    let input = |k: usize| TermInput {
-        angle_rad: ev.angle_rad[k],
-        speed_rad_s: ev.omega_rad_s[k],
-        tensions_n: forces(k),
-        sprocket_radius_m: r,
-        ..TermInput::default()
-    };
-    let idx = lo..hi;
     let (y, columns): (Vec<f64>, Vec<Vec<f64>>) = match slot {
-        Slot::Transmission => transmission_design(ev, library, idx.clone(), &forces),
+        Slot::Transmission => transmission_design(ev, library, idx.clone(), &|k| tensions(ev, k)),
         Slot::Joint => {
-            let inputs: Vec<TermInput> = idx.clone().map(input).collect();
+            let inputs: Vec<TermInput> = idx.clone().map(|k| sample_input(ev, slot, k)).collect();
             (
                 ev.torque_residual_nm[idx.clone()].to_vec(),
                 library
@@ -69,37 +46,17 @@ pub fn design(
             )
         }
         Slot::ChamberP1 | Slot::ChamberP2 | Slot::Chambers => {
-            let chambers: &[usize] = match slot {
-                Slot::ChamberP1 => &[0],
-                Slot::ChamberP2 => &[1],
-                _ => &[0, 1],
-            };
             let factor = plant.effects.pressure_rate_factor();
             let mut y = Vec::new();
             let mut columns: Vec<Vec<f64>> = vec![Vec::new(); library.len()];
-            for &i in chambers {
+            for &i in chambers_of(slot) {
                 let res = ev.pressure_residual_pa_s[i].as_ref()?;
                 y.extend_from_slice(&res[idx.clone()]);
                 for k in idx.clone() {
                     // dp/dt gains p_atm Q / V from an added standard flow Q.
                     let chi = plant.joint.contractions(ev.angle_rad[k])[i];
                     let g = factor * plant.p_atm_pa / plant.muscle.volume_m3(chi);
-                    let p_abs = ev.p_gauge_pa[i][k] + plant.p_atm_pa;
-                    let u = &ev.inputs[k];
-                    let (u_in, u_ex) = if i == 0 {
-                        (u.u_in1, u.u_ex1)
-                    } else {
-                        (u.u_in2, u.u_ex2)
-                    };
-                    let x = TermInput {
-                        p_gauge_kpa: ev.p_gauge_pa[i][k] * 1e-3,
-                        openings: [u_in, u_ex],
-                        valve_flows_m3_s: [
-                            u_in * plant.valve.flow_m3_s(plant.p_supply_abs_pa, p_abs),
-                            -u_ex * plant.valve.flow_m3_s(p_abs, plant.p_atm_pa),
-                        ],
-                        ..TermInput::default()
-                    };
+                    let x = chamber_input(ev, i, k);
                     for (col, t) in columns.iter_mut().zip(library) {
                         col.push(g * t.eval(&x));
                     }
@@ -108,29 +65,15 @@ pub fn design(
             (y, columns)
         }
         Slot::SensorAngle | Slot::SensorP1 | Slot::SensorP2 => {
-            let c = match slot {
-                Slot::SensorAngle => Channel::AngleDeg,
-                Slot::SensorP1 => Channel::P1Kpa,
-                _ => Channel::P2Kpa,
-            };
-            let res = ev.residual[c.index()].as_ref()?;
-            let nom = ev.nominal[c.index()].as_ref()?;
-            let rate = ev.nominal_rate[c.index()].as_ref()?;
+            let res = ev.residual[sensor_channel(slot).index()].as_ref()?;
+            ev.nominal[sensor_channel(slot).index()].as_ref()?;
+            ev.nominal_rate[sensor_channel(slot).index()].as_ref()?;
+            let inputs: Vec<TermInput> = idx.clone().map(|k| sample_input(ev, slot, k)).collect();
             (
                 res[idx.clone()].to_vec(),
                 library
                     .iter()
-                    .map(|t| {
-                        idx.clone()
-                            .map(|k| {
-                                t.eval(&TermInput {
-                                    reading: nom[k],
-                                    reading_rate: rate[k],
-                                    ..TermInput::default()
-                                })
-                            })
-                            .collect()
-                    })
+                    .map(|t| inputs.iter().map(|x| t.eval(x)).collect())
                     .collect(),
             )
         }
@@ -143,9 +86,150 @@ pub fn design(
     }
     Some(block_average(
         Design { y, columns },
-        hi - lo,
+        idx.len(),
         block_len(ev.dt_s),
     ))
+}
+
+/// The samples of `range` a regression uses: [`EDGE`] left out at each end; `None` when
+/// fewer than 50 remain.
+fn rows(ev: &Evidence, range: std::ops::Range<usize>) -> Option<std::ops::Range<usize>> {
+    let n = ev.angle_rad.len();
+    let lo = range.start + EDGE;
+    let hi = range.end.min(n).saturating_sub(EDGE);
+    (hi > lo + 50).then_some(lo..hi)
+}
+
+/// The tensions the torque residual used at sample `k`: measured when both force channels
+/// were, else the nominal tension law at the measured state.
+fn tensions(ev: &Evidence, k: usize) -> [f64; 2] {
+    let model = ev.plant.tensions_n(&ev.states[k]);
+    match ev.force_residual_n.as_ref() {
+        Some([Some(a), Some(b)]) => [model[0] + a[k], model[1] + b[k]],
+        _ => model,
+    }
+}
+
+/// The chambers (0, 1) a chamber slot's equation covers.
+fn chambers_of(slot: Slot) -> &'static [usize] {
+    match slot {
+        Slot::ChamberP1 => &[0],
+        Slot::ChamberP2 => &[1],
+        _ => &[0, 1],
+    }
+}
+
+/// The channel a sensor slot maps.
+fn sensor_channel(slot: Slot) -> Channel {
+    match slot {
+        Slot::SensorAngle => Channel::AngleDeg,
+        Slot::SensorP1 => Channel::P1Kpa,
+        _ => Channel::P2Kpa,
+    }
+}
+
+/// What chamber `i`'s terms are computed from at sample `k`: its gauge pressure, its
+/// valves' openings and their nominal flows.
+fn chamber_input(ev: &Evidence, i: usize, k: usize) -> TermInput {
+    let plant = &ev.plant;
+    let p_abs = ev.p_gauge_pa[i][k] + plant.p_atm_pa;
+    let u = &ev.inputs[k];
+    let (u_in, u_ex) = if i == 0 {
+        (u.u_in1, u.u_ex1)
+    } else {
+        (u.u_in2, u.u_ex2)
+    };
+    TermInput {
+        p_gauge_kpa: ev.p_gauge_pa[i][k] * 1e-3,
+        openings: [u_in, u_ex],
+        valve_flows_m3_s: [
+            u_in * plant.valve.flow_m3_s(plant.p_supply_abs_pa, p_abs),
+            -u_ex * plant.valve.flow_m3_s(p_abs, plant.p_atm_pa),
+        ],
+        ..TermInput::default()
+    }
+}
+
+/// What `slot`'s terms are computed from at sample `k` (a chamber slot: its first chamber).
+fn sample_input(ev: &Evidence, slot: Slot, k: usize) -> TermInput {
+    match slot {
+        Slot::Joint | Slot::Transmission => TermInput {
+            angle_rad: ev.angle_rad[k],
+            speed_rad_s: ev.omega_rad_s[k],
+            tensions_n: tensions(ev, k),
+            sprocket_radius_m: ev.plant.joint.sprocket_radius_m,
+            ..TermInput::default()
+        },
+        Slot::ChamberP1 | Slot::ChamberP2 | Slot::Chambers => {
+            chamber_input(ev, chambers_of(slot)[0], k)
+        }
+        Slot::SensorAngle | Slot::SensorP1 | Slot::SensorP2 => {
+            let c = sensor_channel(slot).index();
+            TermInput {
+                reading: ev.nominal[c].as_ref().map_or(f64::NAN, |v| v[k]),
+                reading_rate: ev.nominal_rate[c].as_ref().map_or(f64::NAN, |v| v[k]),
+                ..TermInput::default()
+            }
+        }
+    }
+}
+
+/// What the residual of `slot`'s equation is, with its unit (the y axis of the plot).
+fn residual_label(slot: Slot) -> &'static str {
+    match slot {
+        Slot::Joint | Slot::Transmission => "torque balance residual [N m]",
+        Slot::ChamberP1 | Slot::ChamberP2 | Slot::Chambers => "dp/dt residual [Pa/s]",
+        Slot::SensorAngle => "angle residual [deg]",
+        Slot::SensorP1 | Slot::SensorP2 => "pressure residual [kPa]",
+    }
+}
+
+/// The residual of the table's equation on samples `range` (block-averaged as the
+/// regression sees it; a chamber slot: its first chamber, the transmission: the torque
+/// balance) against the argument of its first term, with the table's terms at its
+/// coefficients as the curve: the report's picture of what the discovered term explains.
+pub fn residual_scatter(
+    ev: &Evidence,
+    table: &Discovered,
+    range: std::ops::Range<usize>,
+) -> Option<Scatter> {
+    let first = *table.terms.first()?;
+    let idx = rows(ev, range.clone())?;
+    let d = design(ev, table.slot, &table.terms, range)?;
+    let b = block_len(ev.dt_s);
+    let (x_label, arg) = first.argument();
+    let seg = idx.len();
+    let x: Vec<f64> = idx.map(|k| arg(&sample_input(ev, table.slot, k))).collect();
+    let x = block_average(
+        Design {
+            y: x,
+            columns: Vec::new(),
+        },
+        seg,
+        b,
+    )
+    .y;
+    // The first segment of the stacked design (its x has as many blocks).
+    let m = x.len().min(d.y.len());
+    let term: Vec<f64> = (0..m)
+        .map(|j| {
+            d.columns
+                .iter()
+                .zip(&table.coefficients)
+                .map(|(col, c)| c * col[j])
+                .sum()
+        })
+        .collect();
+    let mut s = Scatter::new(x_label, residual_label(table.slot), &x[..m], &d.y[..m]);
+    let mut curve: Vec<(f64, f64)> = x[..m]
+        .iter()
+        .copied()
+        .zip(term)
+        .filter(|(a, v)| a.is_finite() && v.is_finite())
+        .collect();
+    curve.sort_by(|a, b| a.0.total_cmp(&b.0));
+    s.curve = curve;
+    Some(s)
 }
 
 /// Length in time of the blocks [`block_average`] averages over.

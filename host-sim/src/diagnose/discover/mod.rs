@@ -32,7 +32,7 @@ use std::collections::BTreeMap;
 use crate::fit::fit_percent;
 use crate::io::recording::{Channel, Recording};
 use crate::plant::config::PlantConfig;
-use crate::plant::effects::candidate::{Candidate, Evidence};
+use crate::plant::effects::candidate::{Candidate, Evidence, Scatter};
 use crate::plant::effects::discovered::{Discovered, Slot};
 use crate::plant::Measurement;
 use crate::sim::SolverOptions;
@@ -141,7 +141,37 @@ pub struct Discovery {
     /// The best catalogue refit (id, share of the best term's tail gain it reaches).
     pub catalogue_best: Option<(String, f64)>,
     pub tried: Vec<Tried>,
+    /// The best term's slot residual on TRAIN's head against the term's argument, with the
+    /// term as its curve (the report's plot).
+    pub scatter: Option<Scatter>,
     pub seconds: f64,
+}
+
+/// The plant file `plant_text` (read from `plant_path`) with the discovered term appended as
+/// its `[effects.discovered]` table, under a comment naming the command and the recording it
+/// was found on; checked to read back as a plant file. An error when the file already has
+/// such a table (a plant holds one).
+pub fn plant_text_with(
+    plant_text: &str,
+    plant_path: &std::path::Path,
+    found_by: &str,
+    table: &Discovered,
+) -> Result<String, String> {
+    if plant_text.contains("[effects.discovered]") {
+        return Err(format!(
+            "{} already has an [effects.discovered] table; remove it (or run against the file \
+             without it) so that the written file has one",
+            plant_path.display()
+        ));
+    }
+    let text = format!(
+        "{}\n# Found by {found_by}: {}\n{}",
+        plant_text.trim_end(),
+        table.formula(),
+        table.to_toml()
+    );
+    PlantConfig::from_toml_str(&text, plant_path).map_err(|e| e.to_string())?;
+    Ok(text)
 }
 
 /// The sum of a table's terms as a formula ([`Discovered::formula`]).
@@ -301,6 +331,7 @@ pub fn discover(
     let table = best_cand.table(&bp);
     let mut corrected = nominal.clone();
     corrected.effects.discovered = Some(table.clone());
+    d.scatter = library::residual_scatter(&ev, &table, 0..n_fit);
     let best = Found {
         table,
         ci95: bci,
@@ -551,6 +582,7 @@ impl Discovery {
             check_explained: None,
             catalogue_best: None,
             tried: Vec::new(),
+            scatter: None,
             seconds: 0.0,
         }
     }

@@ -160,6 +160,8 @@ pub struct Scatter {
     pub x_label: String,
     pub y_label: String,
     pub points: Vec<(f64, f64)>,
+    /// A model's curve over the same axes, by increasing x (empty: none drawn).
+    pub curve: Vec<(f64, f64)>,
 }
 
 impl Scatter {
@@ -174,6 +176,7 @@ impl Scatter {
                 .filter(|k| x[*k].is_finite() && y[*k].is_finite())
                 .map(|k| (x[k], y[k]))
                 .collect(),
+            curve: Vec::new(),
         }
     }
 }

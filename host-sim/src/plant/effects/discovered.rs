@@ -491,6 +491,30 @@ impl Term {
         }
     }
 
+    /// The variable the term is a function of, with its label and unit (the x axis of the
+    /// report's plot of the residual against the term): speed, angle, a tension, the gauge
+    /// pressure, the valve opening, the sensor's reading or its rate.
+    pub fn argument(&self) -> (&'static str, fn(&TermInput) -> f64) {
+        use Term::*;
+        match *self {
+            Speed | SignSpeed | TanhSpeed(_) | SpeedAbsSpeed => {
+                ("speed [rad/s]", |x| x.speed_rad_s)
+            }
+            Angle | AngleSq | AngleCubed | DeadbandAngle(_) | SaturationAngle(_)
+            | ShiftOneMinusCos | ShiftSin | ShiftAngleSq | ShiftAngleCubed => {
+                ("angle [rad]", |x| x.angle_rad)
+            }
+            Force1 | Stretch => ("muscle 1 tension [N]", |x| x.tensions_n[0]),
+            Force2 => ("muscle 2 tension [N]", |x| x.tensions_n[1]),
+            ForceDiff => ("F1 - F2 [N]", |x| x.tensions_n[0] - x.tensions_n[1]),
+            Pressure | PressureSq | SqrtPressure => ("gauge pressure [kPa]", |x| x.p_gauge_kpa),
+            InletFlow | InletDeadZone(_) => ("inlet opening [1]", |x| x.openings[0]),
+            ExhaustFlow | ExhaustDeadZone(_) => ("exhaust opening [1]", |x| x.openings[1]),
+            Reading | ReadingSq | ReadingCubed => ("reading [deg or kPa]", |x| x.reading),
+            ReadingRate => ("reading rate [deg/s or kPa/s]", |x| x.reading_rate),
+        }
+    }
+
     /// d/dbeta of a transmission term's travel [m/rad] (0 for other terms).
     pub fn travel_slope(&self, angle_rad: f64, sprocket_radius_m: f64) -> f64 {
         use Term::*;
