@@ -195,7 +195,12 @@ impl Diagnosis {
                         .chain(self.check_after.iter().flatten())
                         .map(|(_, v)| *v)
                         .fold(f64::INFINITY, f64::min);
-                    if let Some(departs) = &self.check_departs {
+                    if let Some(term) = &self.stood_in {
+                        format!(
+                            "Unexplained: the catalogue's best answer ({}) only stands in for a term outside the catalogue: the discovered {term}; no catalogue effect is named (the term is below).",
+                            self.best_attempt.join(" + ")
+                        )
+                    } else if let Some(departs) = &self.check_departs {
                         format!(
                             "Unexplained: the nominal model explains the training recording within its noise (fits {}), but not the check recording ({departs}): the check run went where the training run did not (another load or rig, or an effect the training run's excitation did not reach); no effect is named. Diagnose the check recording itself, or record one run that covers both.",
                             fits(&self.fit_before)
@@ -356,6 +361,9 @@ impl Diagnosis {
             }
             if let Some(departs) = &self.check_departs {
                 out["check"]["departs"] = serde_json::Value::String(departs.clone());
+            }
+            if let Some(term) = &self.stood_in {
+                out["check"]["stood_in"] = serde_json::Value::String(term.clone());
             }
         }
         out["black_box"] = self

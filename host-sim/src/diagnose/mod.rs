@@ -263,6 +263,10 @@ pub struct Diagnosis {
     /// ([`verdict::check_departs`]): the channels that depart (the verdict is then
     /// unexplained).
     pub check_departs: Option<String>,
+    /// When the named items only stood in for a term outside the catalogue
+    /// ([`stand_in_check`]): the discovered term and the CHECK fits that showed it (the
+    /// verdict is then unexplained).
+    pub stood_in: Option<String>,
     pub candidates: Vec<CandidateScore>,
     /// Every item of the best set graded on held-out data ([`grade`]): its share of the
     /// mismatch removed, kept or dropped and why; and what the kept ones remove together.
@@ -1017,6 +1021,7 @@ pub(crate) fn diagnose_pass(
     step("check");
     // 6. Verdict and answer.
     let j = judge(&s, &heldout_after, &chk, &fin, &g, &failures, &graded, opts);
+    let j = stand_in_check(j, nominal, train, check, &chk, opts);
     let check_not_held = j.check_not_held.clone().or(not_held_before_grading);
     let v = j.verdict;
     let fit_best_attempt = fin.replay.fits.clone();
@@ -1048,6 +1053,7 @@ pub(crate) fn diagnose_pass(
         check_after: chk.after,
         check_not_held: check_not_held.filter(|_| v == Verdict::Unexplained),
         check_departs: j.check_departs,
+        stood_in: j.stood_in,
         candidates: sel.scores,
         grade: graded,
         remaining,
@@ -1562,6 +1568,61 @@ struct Judged {
     residual_x_noise: (f64, &'static str),
     check_not_held: Option<String>,
     check_departs: Option<String>,
+    stood_in: Option<String>,
+}
+
+/// Stage 5b: a `partly_explained` answer whose items only stand in for a term outside the
+/// catalogue. The discovery runs on the nominal plant (a slot's term in closed form, kept
+/// only when it holds on TRAIN's tail and on CHECK); when the term it keeps fits CHECK's
+/// departing channel (the nominal model's worst there) better than the named items by more
+/// than [`verdict::MAX_CHECK_FIT_LOSS_PCT`], the margin within which two CHECK fits count as
+/// equal, the items are not named: the verdict is `unexplained`, and `stood_in` says which
+/// term held better.
+fn stand_in_check(
+    mut j: Judged,
+    nominal: &PlantConfig,
+    train: &Recording,
+    check: Option<&Recording>,
+    chk: &CheckReplay,
+    opts: &DiagnoseOptions,
+) -> Judged {
+    if j.verdict != Verdict::PartlyExplained {
+        return j;
+    }
+    let (Some(check), Some(before), Some(after)) = (check, &chk.before, &chk.after) else {
+        return j;
+    };
+    let Some(ch) = before
+        .iter()
+        .min_by(|a, b| a.1.total_cmp(b.1))
+        .map(|(c, _)| *c)
+    else {
+        return j;
+    };
+    let dopts = discover::DiscoverOptions {
+        catalogue_share: None,
+        threads: opts.threads,
+        solver: opts.solver,
+        ..discover::DiscoverOptions::default()
+    };
+    let Ok(x) = discover::discover(nominal, train, Some(check), &dopts) else {
+        return j;
+    };
+    let (Some(found), Some(fits)) = (&x.found, &x.check_after) else {
+        return j;
+    };
+    let (named, term) = (after.get(ch).copied(), fits.get(ch).copied());
+    if let (Some(named), Some(term)) = (named, term) {
+        if term - named > verdict::MAX_CHECK_FIT_LOSS_PCT {
+            j.verdict = Verdict::Unexplained;
+            j.stood_in = Some(format!(
+                "{} (in {}): {ch} {term:.1} % on the check recording, against {named:.1} %",
+                found.table.formula(),
+                found.table.slot.equation()
+            ));
+        }
+    }
+    j
 }
 
 /// Stage 5: the verdict ([`verdict_of`]) from the fits the answer reaches on the held-out
@@ -1628,6 +1689,7 @@ fn judge(
         residual_x_noise,
         check_not_held,
         check_departs,
+        stood_in: None,
     }
 }
 
