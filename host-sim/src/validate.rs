@@ -612,6 +612,18 @@ fn same_target(input: &Path, output: &Path) -> bool {
     }
 }
 
+/// Whether `a` and `b` name the same path: the same file or folder where both exist, else
+/// the same absolute path (`./d/x.json` and `d/x.json`).
+pub fn same_path(a: &Path, b: &Path) -> bool {
+    a == b
+        || (a.exists() && same_target(a, b))
+        || (b.exists() && same_target(b, a))
+        || matches!(
+            (std::path::absolute(a), std::path::absolute(b)),
+            (Ok(x), Ok(y)) if x == y
+        )
+}
+
 /// Refuses an output that is one of the inputs (the run would replace the user's data), two
 /// outputs that are the same file, or an output that exists and is not a regular file (a
 /// directory, a device such as /dev/null, a pipe: the rename of the finished file would
@@ -644,7 +656,7 @@ pub fn distinct_outputs(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> 
     }
     for (k, (aflag, a)) in outputs.iter().enumerate() {
         for (bflag, b) in &outputs[k + 1..] {
-            if a == b || (a.exists() && same_target(a, b)) {
+            if same_path(a, b) {
                 return Err(format!(
                     "{aflag} and {bflag} are the same file {}: give two different files",
                     a.display()

@@ -2,7 +2,7 @@
 //! written against: the independent test rig (`tests/support/testrig.rs`, its own plant code
 //! and effect forms, CHECK from another excitation and seed).
 //!
-//! - `a_joint_term_is_discovered_and_written_back` (CI, debug build OK): a small synthetic
+//! - `a_joint_term_is_discovered_plotted_and_written_back` (CI, debug build OK): a small synthetic
 //!   case from the simulator with a velocity-squared joint damping; the discovery must name
 //!   the joint slot with `speed*|speed|`, keep it on CHECK, and the plant it writes must
 //!   replay CHECK with the fit it reported.
@@ -270,6 +270,15 @@ fn record(cfg: &PlantConfig, inputs: Vec<ValveInputs>, dt_s: f64, seed: u64) -> 
     }
 }
 
+/// A 6 s TRAIN and a 4 s CHECK of other valve pulses, sampled at 2 ms, of the plant `truth`.
+fn train_and_check(truth: &PlantConfig) -> (Recording, Recording) {
+    let dt = 2e-3;
+    (
+        record(truth, pulses(6.0, dt, 1), dt, 2),
+        record(truth, pulses(4.0, dt, 3), dt, 4),
+    )
+}
+
 /// `cfg` with the joint torque term `coefficient * speed * |speed|` (N m s^2 / rad^2), the
 /// ground truth of the recovery tests below.
 fn with_speed_squared_damping(cfg: &PlantConfig, coefficient: f64) -> PlantConfig {
@@ -283,13 +292,36 @@ fn with_speed_squared_damping(cfg: &PlantConfig, coefficient: f64) -> PlantConfi
     truth
 }
 
+/// The discovery's plot data: the joint's torque residual against speed, with the
+/// velocity-squared term as its curve; the residual opposes the motion (the damping's sign).
+fn assert_residual_plotted_against_speed(d: &Discovery) {
+    let s = d.scatter.as_ref().expect("a scatter of the best term");
+    assert_eq!(s.x_label, "speed [rad/s]");
+    assert!(s.points.len() > 100 && s.curve.len() > 100);
+    let mut speeds: Vec<f64> = s.points.iter().map(|(x, _)| x.abs()).collect();
+    speeds.sort_by(f64::total_cmp);
+    let fast = speeds[speeds.len() / 2];
+    let moving: Vec<&(f64, f64)> = s.points.iter().filter(|(x, _)| x.abs() > fast).collect();
+    let opposing = moving.iter().filter(|(x, y)| x * y < 0.0).count();
+    assert!(
+        opposing as f64 >= 0.8 * moving.len() as f64,
+        "{opposing} of {} fast points oppose the motion",
+        moving.len()
+    );
+    // The curve is the term: -0.12 speed |speed| within the fit's tolerance, by increasing speed.
+    assert!(s.curve.windows(2).all(|w| w[0].0 <= w[1].0));
+    let (x, v) = *s.curve.last().unwrap();
+    assert!(
+        v < 0.0 && (v / (x * x.abs()) + 0.12).abs() < 0.03,
+        "{x} {v}"
+    );
+}
+
 #[test]
-fn a_joint_term_is_discovered_and_written_back() {
+fn a_joint_term_is_discovered_plotted_and_written_back() {
     let cfg = nominal();
     let truth = with_speed_squared_damping(&cfg, -0.12);
-    let dt = 2e-3;
-    let train = record(&truth, pulses(6.0, dt, 1), dt, 2);
-    let check = record(&truth, pulses(4.0, dt, 3), dt, 4);
+    let (train, check) = train_and_check(&truth);
     let opts = DiscoverOptions {
         catalogue_share: None,
         ..DiscoverOptions::default()
@@ -297,6 +329,7 @@ fn a_joint_term_is_discovered_and_written_back() {
     let d = discover(&cfg, &train, Some(&check), &opts).unwrap();
     let f = d.found.as_ref().unwrap_or_else(|| panic!("{}", d.text()));
     assert_eq!(f.table.slot, Slot::Joint, "{}", d.text());
+    assert_residual_plotted_against_speed(&d);
     assert!(f.table.terms.contains(&Term::SpeedAbsSpeed), "{}", d.text());
     let (_, b, a) = d.departing().unwrap();
     assert!(a - b >= 0.5 * (100.0 - b), "{}", d.text());
@@ -306,6 +339,7 @@ fn a_joint_term_is_discovered_and_written_back() {
     let text = format!("{base}\n{}", f.table.to_toml());
     let written = PlantConfig::from_toml_str(&text, "written.toml").unwrap();
     let plant = Plant::from_config(&written);
+    let dt = check.sample_period_s();
     let sim = simulate(&plant, &check.inputs, dt, &d_solver()).unwrap();
     let m = plant.measure_series(&sim.states, dt);
     let reported = d.check_after.as_ref().unwrap();
@@ -366,12 +400,9 @@ fn the_command_line_answers_with_its_exit_status_json_and_plant_file() {
     let truth = with_speed_squared_damping(&cfg, -0.12);
     let dt = 2e-3;
     let p = |n: &str| dir.join(n);
-    record(&truth, pulses(6.0, dt, 1), dt, 2)
-        .write(p("train.csv"))
-        .unwrap();
-    record(&truth, pulses(4.0, dt, 3), dt, 4)
-        .write(p("check.csv"))
-        .unwrap();
+    let (train, check) = train_and_check(&truth);
+    train.write(p("train.csv")).unwrap();
+    check.write(p("check.csv")).unwrap();
     record(&cfg, pulses(6.0, dt, 5), dt, 6)
         .write(p("nominal.csv"))
         .unwrap();
@@ -437,14 +468,10 @@ fn diagnose_writes_the_discovered_term_and_the_next_diagnosis_starts_from_it() {
     std::fs::create_dir_all(&dir).unwrap();
     let p = |n: &str| dir.join(n);
     let truth = with_speed_squared_damping(&nominal(), -0.12);
-    let dt = 2e-3;
-    record(&truth, pulses(6.0, dt, 1), dt, 2)
-        .write(p("train.csv"))
-        .unwrap();
-    record(&truth, pulses(4.0, dt, 3), dt, 4)
-        .write(p("check.csv"))
-        .unwrap();
-    let diagnose = |plant: &std::path::Path, json: &str, extra: &[&std::ffi::OsStr]| {
+    let (train, check) = train_and_check(&truth);
+    train.write(p("train.csv")).unwrap();
+    check.write(p("check.csv")).unwrap();
+    let diagnose = |plant: &std::path::Path, json: &std::path::Path, extra: &[&std::ffi::OsStr]| {
         let out = std::process::Command::new(env!("CARGO_BIN_EXE_host-sim"))
             .arg("diagnose")
             .arg("--plant")
@@ -454,7 +481,7 @@ fn diagnose_writes_the_discovered_term_and_the_next_diagnosis_starts_from_it() {
             .arg("--check")
             .arg(p("check.csv"))
             .arg("--json")
-            .arg(p(json))
+            .arg(json)
             .args(extra)
             .output()
             .unwrap();
@@ -466,9 +493,36 @@ fn diagnose_writes_the_discovered_term_and_the_next_diagnosis_starts_from_it() {
         (out.status.code(), text)
     };
     let (report, written) = (p("report"), p("written.toml"));
+    // An output inside --report that is one of the report's own files, or the folder itself,
+    // is refused before the run, nothing written.
+    std::fs::create_dir_all(&report).unwrap();
+    let fresh = p("fresh");
+    for (json, folder, extra) in [
+        (report.join("diagnosis.json"), &report, written.clone()),
+        (p("clash.json"), &report, report.join("index.html")),
+        (fresh.clone(), &fresh, written.clone()),
+    ] {
+        let (code, text) = diagnose(
+            &fixture("reference-1dof.toml"),
+            &json,
+            &[
+                "--report".as_ref(),
+                folder.as_os_str(),
+                "--write-plant".as_ref(),
+                extra.as_os_str(),
+            ],
+        );
+        assert_eq!(code, Some(2), "{text}");
+        assert!(text.contains("--report"), "{text}");
+        assert_eq!(std::fs::read_dir(&report).unwrap().count(), 0, "{text}");
+        assert!(
+            !written.exists() && !p("clash.json").exists() && !fresh.exists(),
+            "{text}"
+        );
+    }
     let (code, text) = diagnose(
         &fixture("reference-1dof.toml"),
-        "first.json",
+        &p("first.json"),
         &[
             "--report".as_ref(),
             report.as_os_str(),
@@ -499,13 +553,13 @@ fn diagnose_writes_the_discovered_term_and_the_next_diagnosis_starts_from_it() {
         "no plot of the residual against speed"
     );
     // The next diagnosis starts from the written file: nothing is missing any more.
-    let (code, text) = diagnose(&written, "second.json", &[]);
+    let (code, text) = diagnose(&written, &p("second.json"), &[]);
     assert_eq!(code, Some(0), "{text}");
     // A plant that already holds a discovered table is refused, nothing written.
     let again = p("again.toml");
     let (code, text) = diagnose(
         &written,
-        "third.json",
+        &p("third.json"),
         &["--write-plant".as_ref(), again.as_os_str()],
     );
     assert_eq!(code, Some(2), "{text}");
@@ -517,38 +571,35 @@ fn diagnose_writes_the_discovered_term_and_the_next_diagnosis_starts_from_it() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// The discovery's plot data: the joint's torque residual against speed, with the
-/// velocity-squared term as its curve; the residual opposes the motion (the damping's sign).
+/// A catalogue answer that only stands in: end stops (a dead band of the joint's angle
+/// beyond which a stiff spring acts), which the catalogue answers with a gravity load and a
+/// sensor gain that remove most of the mismatch. The term the discovery finds on the nominal
+/// plant fits the check recording better, so the verdict is unexplained, nothing from the
+/// catalogue is named, and the answer says which term held better.
 #[test]
-fn the_residual_is_plotted_against_the_terms_argument() {
+fn catalogue_items_that_only_stand_in_for_a_discovered_term_are_not_named() {
+    use host_sim::diagnose::{diagnose, DiagnoseOptions, Verdict};
     let cfg = nominal();
-    let truth = with_speed_squared_damping(&cfg, -0.12);
-    let dt = 2e-3;
-    let train = record(&truth, pulses(6.0, dt, 1), dt, 2);
-    let check = record(&truth, pulses(4.0, dt, 3), dt, 4);
-    let opts = DiscoverOptions {
-        catalogue_share: None,
-        ..DiscoverOptions::default()
-    };
-    let d = discover(&cfg, &train, Some(&check), &opts).unwrap();
-    let s = d.scatter.as_ref().expect("a scatter of the best term");
-    assert_eq!(s.x_label, "speed [rad/s]");
-    assert!(s.points.len() > 100 && s.curve.len() > 100);
-    let mut speeds: Vec<f64> = s.points.iter().map(|(x, _)| x.abs()).collect();
-    speeds.sort_by(f64::total_cmp);
-    let fast = speeds[speeds.len() / 2];
-    let moving: Vec<&(f64, f64)> = s.points.iter().filter(|(x, _)| x.abs() > fast).collect();
-    let opposing = moving.iter().filter(|(x, y)| x * y < 0.0).count();
-    assert!(
-        opposing as f64 >= 0.8 * moving.len() as f64,
-        "{opposing} of {} fast points oppose the motion",
-        moving.len()
-    );
-    // The curve is the term: -0.12 speed |speed| within the fit's tolerance, by increasing speed.
-    assert!(s.curve.windows(2).all(|w| w[0].0 <= w[1].0));
-    let (x, v) = *s.curve.last().unwrap();
-    assert!(
-        v < 0.0 && (v / (x * x.abs()) + 0.12).abs() < 0.03,
-        "{x} {v}"
-    );
+    let mut truth = cfg.clone();
+    truth.effects.discovered = Some(Discovered {
+        enabled: true,
+        slot: Slot::Joint,
+        terms: vec![Term::DeadbandAngle(0.2)],
+        coefficients: vec![-20.0],
+    });
+    let (train, check) = train_and_check(&truth);
+    let d = diagnose(
+        &cfg,
+        &train,
+        Some(&check),
+        &DiagnoseOptions::default(),
+        &|_, _, _| {},
+    )
+    .unwrap();
+    assert_eq!(d.verdict, Verdict::Unexplained, "{}", d.answer());
+    assert!(d.effects.is_empty() && d.recalibrated.is_empty());
+    assert!(!d.best_attempt.is_empty(), "{}", d.answer());
+    let term = d.stood_in.as_deref().expect("the term that held better");
+    assert!(term.contains("joint torque"), "{term}");
+    assert!(d.answer().contains("only stands in"), "{}", d.answer());
 }

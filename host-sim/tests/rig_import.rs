@@ -231,6 +231,9 @@ fn jittered_40hz_bar_and_volts_rig_file_imports_simulates_and_diagnoses() {
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     eprintln!("diagnose: {stdout}");
     assert_eq!(d["effects"].as_array().unwrap().len(), 0, "{stdout}\n{d:#}");
+    // docs/rig.md's answer for this example.
+    assert_eq!(d["verdict"], "nothing_missing", "{stdout}");
+    assert!(stdout.contains("Nothing is missing"), "{stdout}");
 }
 
 #[test]

@@ -76,8 +76,9 @@ enum Command {
     Calibrate(identify::CalibrateArgs),
     /// Diagnosis: locate where a recording departs from the nominal model, tell a mis-set
     /// parameter (recalibration) from left-out physics (a named effect), model it and report
-    /// the fit before/after. Exit status 0: explained or nothing missing; 3: unexplained or
-    /// not this plant (nothing named, the JSON is written); 2: bad input.
+    /// the fit before/after. Exit status 0: explained or nothing missing; 4: partly explained
+    /// (named items hold, but something else is missing too); 3: unexplained or not this
+    /// plant (nothing named, the JSON is written); 2: bad input.
     ///
     /// The recording needs t_s,u_in1,u_ex1,u_in2,u_ex2 and the measured angle_deg,p1_kpa,
     /// p2_kpa (f1_n,f2_n used when present), as in RECORDING.md; with an arm plant, the same
@@ -86,7 +87,8 @@ enum Command {
     /// Diagnose every recording (*.csv) of a directory against one plant, in parallel: one
     /// JSON per recording and a summary table (summary.csv). Exit status: the worst over the
     /// recordings: 1 if one could not be diagnosed (its error is in the summary), else 3 if one
-    /// is unexplained or not this plant (as `diagnose` exits 3), else 0; 2: bad input.
+    /// is unexplained or not this plant (as `diagnose` exits 3), else 4 if one is partly
+    /// explained, else 0; 2: bad input.
     ///
     /// Each recording needs t_s,u_in1,u_ex1,u_in2,u_ex2 and the measured angle_deg,p1_kpa,
     /// p2_kpa (f1_n,f2_n used when present), as in RECORDING.md.
@@ -1052,6 +1054,25 @@ fn check_diagnose_files(a: &DiagnoseArgs) -> Result<()> {
         let index = dir.join("index.html");
         validate::distinct_outputs(&inputs, &[("--report", &report_json), ("--report", &index)])
             .map_err(anyhow::Error::msg)?;
+        // --json and --write-plant are neither the report folder nor one of its files.
+        for (flag, file) in &outputs {
+            if validate::same_path(file, dir) {
+                anyhow::bail!(
+                    "{flag} {} is the --report folder: give a file outside it",
+                    file.display()
+                );
+            }
+            for own in [&report_json, &index] {
+                if validate::same_path(file, own) {
+                    anyhow::bail!(
+                        "{flag} {} is the report's own {}: give a file outside --report {}",
+                        file.display(),
+                        own.file_name().unwrap_or_default().to_string_lossy(),
+                        dir.display()
+                    );
+                }
+            }
+        }
         // The report's own files (arm plants: one folder per joint).
         let files: Vec<PathBuf> = [
             PathBuf::new(),
@@ -1163,6 +1184,8 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
     )
     .and_then(|r| r.ok());
     let mut json_value = d.to_json();
+    // The option that moved the valve columns, so that the answer can be traced to it.
+    json_value["shift_valves_ms"] = a.shift_valves_ms.into();
     json_value["discovered"] = discovered
         .as_ref()
         .map(|x| x.to_json())

@@ -350,6 +350,8 @@ impl Diagnosis {
             // The discovery stage's answer, set by the command that runs it after the
             // diagnosis (`host-sim diagnose`); null when it did not run or found nothing.
             "discovered": serde_json::Value::Null,
+            // The shift of the valve columns the command applied first (`--shift-valves-ms`).
+            "shift_valves_ms": serde_json::Value::Null,
             "lookalikes": self.lookalikes,
             "hints": self.hints,
             "failures": self.failures,

@@ -1062,6 +1062,7 @@ pub(crate) fn diagnose_pass(
         lookalikes,
         data_notes: [
             verdict::coarse_onoff_note(train),
+            verdict::unrecorded_note(train),
             verdict::start_note(file_nominal, train, recorded_start.is_some()),
             chk.start_note,
             absolute_note,

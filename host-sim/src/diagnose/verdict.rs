@@ -509,6 +509,23 @@ pub fn coarse_onoff_note(rec: &Recording) -> Option<String> {
     })
 }
 
+/// A note when one of the channels every rig has (angle, p1, p2) was not recorded: the
+/// answer says nothing about it.
+pub fn unrecorded_note(rec: &Recording) -> Option<String> {
+    let missing: Vec<&str> = [Channel::AngleDeg, Channel::P1Kpa, Channel::P2Kpa]
+        .into_iter()
+        .filter(|c| rec.channel(*c).is_none())
+        .map(|c| c.name())
+        .collect();
+    (!missing.is_empty()).then(|| {
+        format!(
+            "{} not recorded: the answer says nothing about {}",
+            missing.join(", "),
+            if missing.len() == 1 { "it" } else { "them" }
+        )
+    })
+}
+
 /// A fitted pressure offset within this of the atmosphere (either sign) is the atmosphere:
 /// pressures logged absolute (or the offset of a gauge column subtracted twice) [kPa].
 pub const ABSOLUTE_OFFSET_WITHIN_KPA: f64 = 5.0;
@@ -665,6 +682,22 @@ mod coarse_tests {
             t += &format!("{},{u},0,0,{u},0\n", k as f64 * dt_s);
         }
         Recording::parse(&t, "r.csv").unwrap()
+    }
+
+    #[test]
+    fn channels_a_rig_always_has_are_noted_when_not_recorded() {
+        // Only the angle was recorded.
+        let note = unrecorded_note(&rec(0.001, 0.4)).expect("p1, p2 missing");
+        assert_eq!(
+            note,
+            "p1_kpa, p2_kpa not recorded: the answer says nothing about them"
+        );
+        let full = Recording::parse(
+            "t_s,u_in1,u_ex1,u_in2,u_ex2,angle_deg,p1_kpa,p2_kpa\n0,0,0,0,0,0,1,1\n0.001,0,0,0,0,0,1,1\n",
+            "r.csv",
+        )
+        .unwrap();
+        assert!(unrecorded_note(&full).is_none());
     }
 
     #[test]

@@ -261,7 +261,6 @@ pub fn discover(
         .as_ref()
         .map(|(p, pred, _)| fits(p.recording, pred, 0..p.recording.len()));
     let mut d = Discovery::before(heldout_before, check_before);
-    let excess = nom_tail - noise_cost;
     let check_departs = check_problem.as_ref().is_some_and(|(p, pred, nc)| {
         let c: f64 = p.channel_costs(pred, 0..p.recording.len()).iter().sum();
         c > opts.null_ratio * nc
@@ -344,13 +343,14 @@ pub fn discover(
     if let Some(pred) = problem.predict(&parts) {
         d.heldout_after = fits(train, &pred, tail.clone());
     }
-    d.heldout_explained = (nom_tail - best_tail) / excess.max(1e-300);
-    // 4. The held-out check.
+    d.heldout_explained = share_beyond_noise(nom_tail, best_tail, noise_cost);
+    // 4. The held-out check (a tail within its noise already: the term must still lower it).
     let mut why_not: Vec<String> = Vec::new();
-    if !(d.heldout_explained >= opts.min_explained && best_tail < 0.98 * nom_tail) {
+    let explains_enough = d.heldout_explained.is_nan() || d.heldout_explained >= opts.min_explained;
+    if !(explains_enough && best_tail < 0.98 * nom_tail) {
         why_not.push(format!(
-            "it removes {:.0} % of TRAIN tail's error beyond noise (needs {:.0} %)",
-            100.0 * d.heldout_explained,
+            "{} of TRAIN tail's error beyond noise (needs {:.0} %)",
+            removes_text(d.heldout_explained),
             100.0 * opts.min_explained
         ));
     }
@@ -422,7 +422,7 @@ fn check_holds(
     match p.predict(parts) {
         Some(pred) => {
             let c1: f64 = p.channel_costs(&pred, 0..m).iter().sum();
-            let ex = (c0 - c1) / (c0 - nc).max(1e-300);
+            let ex = share_beyond_noise(c0, c1, *nc);
             d.check_explained = Some(ex);
             let after = fits(p.recording, &pred, 0..m);
             let before = d.check_before.clone().unwrap_or_default();
@@ -436,10 +436,10 @@ fn check_holds(
                 .map(|(k, b)| format!("{k} {b:.1} % -> {:.1} %", after[k]))
                 .collect();
             d.check_after = Some(after);
-            if !(ex >= opts.min_explained && c1 < 0.98 * c0) {
+            if !((ex.is_nan() || ex >= opts.min_explained) && c1 < 0.98 * c0) {
                 why_not.push(format!(
-                    "on CHECK it removes {:.0} % of the error beyond noise (needs {:.0} %)",
-                    100.0 * ex,
+                    "on CHECK {} of the error beyond noise (needs {:.0} %)",
+                    removes_text(ex),
                     100.0 * opts.min_explained
                 ));
             }
@@ -523,16 +523,36 @@ fn catalogue_objection(
     None
 }
 
+/// The share of the error beyond noise that a cost `after` removes from `before` (noise
+/// cost `noise`); NaN when `before` is within the noise already (no share to take).
+fn share_beyond_noise(before: f64, after: f64, noise: f64) -> f64 {
+    let excess = before - noise;
+    if excess > 1e-9 * before.abs() {
+        (before - after) / excess
+    } else {
+        f64::NAN
+    }
+}
+
+/// "it removes 42 %" of a share of [`share_beyond_noise`], or what a NaN share means.
+fn removes_text(share: f64) -> String {
+    if share.is_nan() {
+        "it leaves no error beyond noise to remove (within its noise already)".into()
+    } else {
+        format!("it removes {:.0} %", 100.0 * share)
+    }
+}
+
 /// The discovery's reason, and its term when `why_not` is empty.
 fn conclude(d: &mut Discovery, best: &Found, why_not: &[String]) {
     let f = formula(&best.table);
     if why_not.is_empty() {
         d.reason = format!(
-            "discovered in {}: {f}; it removes {:.0} % of TRAIN tail's error beyond noise{}",
+            "discovered in {}: {f}; {} of TRAIN tail's error beyond noise{}",
             best.table.slot.equation(),
-            100.0 * d.heldout_explained,
+            removes_text(d.heldout_explained),
             d.check_explained
-                .map(|e| format!(" and {:.0} % of CHECK's", 100.0 * e))
+                .map(|e| format!("; on CHECK {}", removes_text(e)))
                 .unwrap_or_default()
         );
         d.found = Some(best.clone());
@@ -764,15 +784,18 @@ impl Discovery {
                 t.slot.equation()
             );
             for ((term, c), ci) in t.terms.iter().zip(&t.coefficients).zip(&f.ci95) {
+                let interval = if ci.iter().all(|v| v.is_finite()) {
+                    format!("95 % [{:.4e}, {:.4e}]", ci[0], ci[1])
+                } else {
+                    "95 % interval undetermined by the recording".into()
+                };
                 let _ = writeln!(
                     s,
-                    "  {} += {c:+.4e} {}/({}) * {}   95 % [{:.4e}, {:.4e}]: {}",
+                    "  {} += {c:+.4e} {}/({}) * {}   {interval}: {}",
                     t.slot.lhs(),
                     t.slot.unit(),
                     term.unit(t.slot),
                     term.symbol(),
-                    ci[0],
-                    ci[1],
                     term.sentence()
                 );
             }
