@@ -454,7 +454,17 @@ impl Diagnosis {
                     s += &b.describe();
                     s.push('\n');
                 }
-                s += LIKELY_CAUSES;
+                if self.verdict == Verdict::Unexplained {
+                    // `diagnose` runs the discovery next; its term, when it keeps one, is
+                    // the likelier cause.
+                    s += &LIKELY_CAUSES.replacen(
+                        "Likely causes:",
+                        "Likely causes, unless a term outside the catalogue is missing (the discovery, when it runs, follows):",
+                        1,
+                    );
+                } else {
+                    s += LIKELY_CAUSES;
+                }
                 s.push('\n');
             }
         }
