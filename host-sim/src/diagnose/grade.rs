@@ -35,12 +35,13 @@ pub const MIN_ITEM_SHARE: f64 = 0.01;
 
 /// A `partly_explained` answer removes at least this share of the nominal model's mismatch
 /// on the held-out tail and on CHECK (relative residual energy summed over the channels:
-/// 90 % cuts the rms mismatch to about a third). Chosen on the tuning seeds of the
-/// independent rig, where right effects in other functional forms remove 97-99.9 % and
-/// catalogue items standing in for physics outside the catalogue remove 63-99.4 %: no
-/// held-out share separates the two, and this bar trades one against the other
-/// (docs/diagnosis.md gives both rates).
-pub const MIN_PARTLY_SHARE: f64 = 0.9;
+/// 75 % halves the rms mismatch). Chosen on the tuning seeds of the independent rig
+/// (EVIDENCE lines of `evidence_full_matrix`, seeds 11 and 12): catalogue effects in other
+/// functional forms that lift CHECK's departing channel by half its gap remove 77-100 %;
+/// catalogue items standing in for physics outside the catalogue remove 63-99.4 %, and those
+/// above this bar are answered by the stand-in check (`diagnose`'s stage 5b), which the
+/// discovered term wins on those seeds.
+pub const MIN_PARTLY_SHARE: f64 = 0.75;
 
 /// Residual energy per channel (sums of squared errors) of one replay; `None`: it failed.
 pub type Energy = Option<[f64; 5]>;
