@@ -1574,7 +1574,8 @@ struct Judged {
 
 /// Stage 5b: a `partly_explained` answer whose items only stand in for a term outside the
 /// catalogue. The discovery runs on the nominal plant (a slot's term in closed form, kept
-/// only when it holds on TRAIN's tail and on CHECK); when the term it keeps fits CHECK's
+/// only when it holds on TRAIN's tail and on CHECK); when the term it keeps has physics the
+/// catalogue lacks ([`discover::library::catalogue_counterpart`]) and fits CHECK's
 /// departing channel (the nominal model's worst there) better than the named items by more
 /// than [`verdict::MAX_CHECK_FIT_LOSS_PCT`], the margin within which two CHECK fits count as
 /// equal, the items are not named: the verdict is `unexplained`, and `stood_in` says which
@@ -1612,6 +1613,15 @@ fn stand_in_check(
     let (Some(found), Some(fits)) = (&x.found, &x.check_after) else {
         return j;
     };
+    // A term made only of the catalogue's own physics in other forms refines the answer.
+    let new_physics = found
+        .table
+        .terms
+        .iter()
+        .any(|t| discover::library::catalogue_counterpart(t).is_none());
+    if !new_physics {
+        return j;
+    }
     let (named, term) = (after.get(ch).copied(), fits.get(ch).copied());
     if let (Some(named), Some(term)) = (named, term) {
         if term - named > verdict::MAX_CHECK_FIT_LOSS_PCT {

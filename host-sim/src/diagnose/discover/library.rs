@@ -9,6 +9,29 @@ use crate::plant::effects::discovered::{Discovered, Slot, Term, TermInput};
 
 use super::sparse::{stlsq, Design, SparseFit};
 
+/// The catalogue's counterpart of a library term: the effect or plant key that models the
+/// same physics in another form (a sensor's gain or lag, friction, a leak, a valve's
+/// conductance, a muscle's force keys, gravity), or `None` for physics the catalogue lacks
+/// (velocity-squared damping, a nonlinear spring, end stops, a compliant or eccentric
+/// transmission, a nonlinear transducer, a valve dead zone). A discovered term made only of
+/// counterparts refines a catalogue answer; one with a term of its own shows that answer to
+/// be a stand-in (`diagnose`'s stand-in check).
+pub fn catalogue_counterpart(term: &Term) -> Option<&'static str> {
+    use Term::*;
+    match term {
+        Speed | SignSpeed | TanhSpeed(_) => Some("joint_friction"),
+        Angle => Some("gravity"),
+        Force1 | Force2 | ForceDiff => Some("muscle.radius_m"),
+        Pressure | SqrtPressure => Some("leakage"),
+        InletFlow | ExhaustFlow => Some("valve.sonic_conductance_m3_per_s_pa"),
+        Reading => Some("sensor_gain"),
+        ReadingRate => Some("sensor_lag"),
+        SpeedAbsSpeed | AngleSq | AngleCubed | DeadbandAngle(_) | SaturationAngle(_)
+        | ShiftOneMinusCos | ShiftSin | ShiftAngleSq | ShiftAngleCubed | Stretch | PressureSq
+        | InletDeadZone(_) | ExhaustDeadZone(_) | ReadingSq | ReadingCubed => None,
+    }
+}
+
 /// Samples left out at each end of the head (the smoothed derivatives' edges).
 const EDGE: usize = 20;
 
@@ -425,4 +448,29 @@ pub fn slot_models(
     }
     out.sort_by(|a, b| b.r2.total_cmp(&a.r2));
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_lag_a_gain_and_a_leak_have_counterparts_and_new_physics_has_none() {
+        assert_eq!(
+            catalogue_counterpart(&Term::ReadingRate),
+            Some("sensor_lag")
+        );
+        assert_eq!(catalogue_counterpart(&Term::Reading), Some("sensor_gain"));
+        assert_eq!(catalogue_counterpart(&Term::Pressure), Some("leakage"));
+        for t in [
+            Term::SpeedAbsSpeed,
+            Term::AngleCubed,
+            Term::Stretch,
+            Term::ReadingSq,
+            Term::DeadbandAngle(0.2),
+            Term::InletDeadZone(0.2),
+        ] {
+            assert_eq!(catalogue_counterpart(&t), None, "{t:?}");
+        }
+    }
 }
