@@ -1572,8 +1572,8 @@ struct Judged {
     stood_in: Option<String>,
 }
 
-/// Stage 5b: a `partly_explained` answer whose items only stand in for a term outside the
-/// catalogue. The discovery runs on the nominal plant (a slot's term in closed form, kept
+/// Stage 5b: an answer (`explained` or `partly_explained`) whose items only stand in for a
+/// term outside the catalogue. The discovery runs on the nominal plant (a slot's term in closed form, kept
 /// only when it holds on TRAIN's tail and on CHECK); when the term it keeps has physics the
 /// catalogue lacks ([`discover::library::catalogue_counterpart`]) and fits CHECK's
 /// departing channel (the nominal model's worst there) better than the named items by more
@@ -1588,7 +1588,7 @@ fn stand_in_check(
     chk: &CheckReplay,
     opts: &DiagnoseOptions,
 ) -> Judged {
-    if j.verdict != Verdict::PartlyExplained {
+    if !j.verdict.names_items() {
         return j;
     }
     let (Some(check), Some(before), Some(after)) = (check, &chk.before, &chk.after) else {
