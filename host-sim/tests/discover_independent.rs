@@ -496,6 +496,15 @@ fn diagnose_writes_the_discovered_term_and_the_next_diagnosis_starts_from_it() {
     // An output inside --report that is one of the report's own files, or the folder itself,
     // is refused before the run, nothing written.
     std::fs::create_dir_all(&report).unwrap();
+    // The recording as --write-plant is named as the input it is.
+    let train_csv = p("train.csv");
+    let (code, text) = diagnose(
+        &fixture("reference-1dof.toml"),
+        &p("unused.json"),
+        &["--write-plant".as_ref(), train_csv.as_os_str()],
+    );
+    assert_eq!(code, Some(2), "{text}");
+    assert!(text.contains("is the input --recording"), "{text}");
     let fresh = p("fresh");
     for (json, folder, extra) in [
         (report.join("diagnosis.json"), &report, written.clone()),
@@ -533,6 +542,11 @@ fn diagnose_writes_the_discovered_term_and_the_next_diagnosis_starts_from_it() {
     assert_eq!(code, Some(3), "{text}");
     assert!(
         text.contains(&format!("wrote {}", written.display())),
+        "{text}"
+    );
+    let index = report.join("index.html");
+    assert!(
+        text.contains(&format!("wrote {}", index.display())),
         "{text}"
     );
     let plant = PlantConfig::load(&written).unwrap();

@@ -67,11 +67,14 @@ pub fn run(a: &DiscoverArgs) -> Result<ExitCode> {
         outputs.push(("--json", j));
     }
     if let Some(p) = &a.write_plant {
-        validate::replaceable("--write-plant", p, validate::OutputKind::PLANT)
-            .map_err(anyhow::Error::msg)?;
         outputs.push(("--write-plant", p));
     }
+    // An output that is an input is named as such before its content is judged.
     validate::distinct_file_outputs(&inputs, &outputs).map_err(anyhow::Error::msg)?;
+    if let Some(p) = &a.write_plant {
+        validate::replaceable("--write-plant", p, validate::OutputKind::PLANT)
+            .map_err(anyhow::Error::msg)?;
+    }
     let plant_text = std::fs::read_to_string(&a.plant)
         .with_context(|| format!("--plant {}", a.plant.display()))?;
     let cfg = host_sim::PlantConfig::from_toml_str(&plant_text, &a.plant)?;

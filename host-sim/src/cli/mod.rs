@@ -1041,11 +1041,14 @@ fn check_diagnose_files(a: &DiagnoseArgs) -> Result<()> {
     }
     let mut outputs: Vec<(&str, &Path)> = vec![("--json", &a.json)];
     if let Some(p) = &a.write_plant {
-        validate::replaceable("--write-plant", p, validate::OutputKind::PLANT)
-            .map_err(anyhow::Error::msg)?;
         outputs.push(("--write-plant", p));
     }
+    // An output that is an input is named as such before its content is judged.
     validate::distinct_file_outputs(&inputs, &outputs).map_err(anyhow::Error::msg)?;
+    if let Some(p) = &a.write_plant {
+        validate::replaceable("--write-plant", p, validate::OutputKind::PLANT)
+            .map_err(anyhow::Error::msg)?;
+    }
     validate::replaceable("--json", &a.json, validate::OutputKind::JSON)
         .map_err(anyhow::Error::msg)?;
     if let Some(dir) = &a.report {
@@ -1215,6 +1218,9 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
         let _ = write!(out, "Discovery (what the catalogue leaves):\n{}", x.text());
     }
     let _ = writeln!(out, "wrote {}", a.json.display());
+    if let Some(dir) = &a.report {
+        let _ = writeln!(out, "wrote {}", dir.join("index.html").display());
+    }
     if let Some(p) = &a.write_plant {
         let line = write_discovered_plant(a, p, &plant_text, &d, discovered.as_ref())?;
         let _ = writeln!(out, "{line}");
