@@ -44,6 +44,42 @@ pub struct DiscoverArgs {
     pub threads: usize,
 }
 
+/// The file outputs of `discover` and `diagnose` (`--json`, `--write-plant`) before the run:
+/// no output is an input (named as the input before its content is judged) or another
+/// output, and each may be replaced.
+pub(super) fn check_outputs(
+    inputs: &[(&str, &Path)],
+    json: Option<&Path>,
+    write_plant: Option<&Path>,
+) -> Result<()> {
+    let outputs: Vec<(&str, &Path)> = [("--json", json), ("--write-plant", write_plant)]
+        .into_iter()
+        .filter_map(|(flag, p)| Some((flag, p?)))
+        .collect();
+    validate::distinct_file_outputs(inputs, &outputs).map_err(anyhow::Error::msg)?;
+    if let Some(p) = write_plant {
+        validate::replaceable("--write-plant", p, validate::OutputKind::PLANT)
+            .map_err(anyhow::Error::msg)?;
+    }
+    if let Some(j) = json {
+        validate::replaceable("--json", j, validate::OutputKind::JSON)
+            .map_err(anyhow::Error::msg)?;
+    }
+    Ok(())
+}
+
+/// The text of the plant file `--plant`; when the run is to write a discovered table into it
+/// (`--write-plant`), refused if it has one already.
+pub(super) fn plant_text_to_write(plant: &Path, write_plant: bool) -> Result<String> {
+    let text =
+        std::fs::read_to_string(plant).with_context(|| format!("--plant {}", plant.display()))?;
+    if write_plant {
+        host_sim::diagnose::discover::has_no_discovered_table(&text, plant)
+            .map_err(|e| anyhow::anyhow!("--write-plant: {e}"))?;
+    }
+    Ok(text)
+}
+
 /// Runs `discover`: exit status 0 when a term is discovered, 3 when nothing is (the JSON is
 /// written), 2 on bad input.
 pub fn run(a: &DiscoverArgs) -> Result<ExitCode> {
@@ -60,31 +96,9 @@ pub fn run(a: &DiscoverArgs) -> Result<ExitCode> {
         }
         inputs.push(("--check", c));
     }
-    let mut outputs: Vec<(&str, &Path)> = Vec::new();
-    if let Some(j) = &a.json {
-        validate::replaceable("--json", j, validate::OutputKind::JSON)
-            .map_err(anyhow::Error::msg)?;
-        outputs.push(("--json", j));
-    }
-    if let Some(p) = &a.write_plant {
-        outputs.push(("--write-plant", p));
-    }
-    // An output that is an input is named as such before its content is judged.
-    validate::distinct_file_outputs(&inputs, &outputs).map_err(anyhow::Error::msg)?;
-    if let Some(p) = &a.write_plant {
-        validate::replaceable("--write-plant", p, validate::OutputKind::PLANT)
-            .map_err(anyhow::Error::msg)?;
-    }
-    let plant_text = std::fs::read_to_string(&a.plant)
-        .with_context(|| format!("--plant {}", a.plant.display()))?;
+    check_outputs(&inputs, a.json.as_deref(), a.write_plant.as_deref())?;
+    let plant_text = plant_text_to_write(&a.plant, a.write_plant.is_some())?;
     let cfg = host_sim::PlantConfig::from_toml_str(&plant_text, &a.plant)?;
-    if a.write_plant.is_some() && plant_text.contains("[effects.discovered]") {
-        anyhow::bail!(
-            "--write-plant: {} already has an [effects.discovered] table; remove it (or \
-             discover against the file without it) so that the written file has one",
-            a.plant.display()
-        );
-    }
     let train = Recording::read(&a.recording)?;
     let check = a.check.as_ref().map(Recording::read).transpose()?;
     let opts = DiscoverOptions {

@@ -1039,18 +1039,11 @@ fn check_diagnose_files(a: &DiagnoseArgs) -> Result<()> {
         }
         inputs.push(("--check", c));
     }
+    discover::check_outputs(&inputs, Some(&a.json), a.write_plant.as_deref())?;
     let mut outputs: Vec<(&str, &Path)> = vec![("--json", &a.json)];
     if let Some(p) = &a.write_plant {
         outputs.push(("--write-plant", p));
     }
-    // An output that is an input is named as such before its content is judged.
-    validate::distinct_file_outputs(&inputs, &outputs).map_err(anyhow::Error::msg)?;
-    if let Some(p) = &a.write_plant {
-        validate::replaceable("--write-plant", p, validate::OutputKind::PLANT)
-            .map_err(anyhow::Error::msg)?;
-    }
-    validate::replaceable("--json", &a.json, validate::OutputKind::JSON)
-        .map_err(anyhow::Error::msg)?;
     if let Some(dir) = &a.report {
         validate::output_dir("--report", dir).map_err(anyhow::Error::msg)?;
         let report_json = dir.join("diagnosis.json");
@@ -1116,15 +1109,7 @@ fn run_diagnose(a: &DiagnoseArgs) -> Result<ExitCode> {
         return run_diagnose_arm(a, &opts, &bar);
     }
     let cfg = host_sim::PlantConfig::load(&a.plant)?;
-    let plant_text = std::fs::read_to_string(&a.plant)
-        .with_context(|| format!("--plant {}", a.plant.display()))?;
-    if a.write_plant.is_some() && plant_text.contains("[effects.discovered]") {
-        anyhow::bail!(
-            "--write-plant: {} already has an [effects.discovered] table; remove it (or \
-             diagnose against the file without it) so that the written file has one",
-            a.plant.display()
-        );
-    }
+    let plant_text = discover::plant_text_to_write(&a.plant, a.write_plant.is_some())?;
     let mut train = Recording::read(&a.recording)?;
     let mut check = a.check.as_ref().map(Recording::read).transpose()?;
     if let Some(ms) = a.shift_valves_ms {

@@ -267,6 +267,9 @@ pub struct Diagnosis {
     /// ([`stand_in_check`]): the discovered term and the CHECK fits that showed it (the
     /// verdict is then unexplained).
     pub stood_in: Option<String>,
+    /// The discovery on the nominal plant whose term showed the items to be stand-ins (what
+    /// the discovery after an `unexplained` answer would compute again).
+    pub stand_in_discovery: Option<discover::Discovery>,
     pub candidates: Vec<CandidateScore>,
     /// Every item of the best set graded on held-out data ([`grade`]): its share of the
     /// mismatch removed, kept or dropped and why; and what the kept ones remove together.
@@ -1054,6 +1057,7 @@ pub(crate) fn diagnose_pass(
         check_not_held: check_not_held.filter(|_| v == Verdict::Unexplained),
         check_departs: j.check_departs,
         stood_in: j.stood_in,
+        stand_in_discovery: j.stand_in_discovery,
         candidates: sel.scores,
         grade: graded,
         remaining,
@@ -1570,6 +1574,7 @@ struct Judged {
     check_not_held: Option<String>,
     check_departs: Option<String>,
     stood_in: Option<String>,
+    stand_in_discovery: Option<discover::Discovery>,
 }
 
 /// Stage 5b: an answer (`explained` or `partly_explained`) whose items only stand in for a
@@ -1631,6 +1636,7 @@ fn stand_in_check(
                 found.table.formula(),
                 found.table.slot.equation()
             ));
+            j.stand_in_discovery = Some(x);
         }
     }
     j
@@ -1701,6 +1707,7 @@ fn judge(
         check_not_held,
         check_departs,
         stood_in: None,
+        stand_in_discovery: None,
     }
 }
 

@@ -157,13 +157,7 @@ pub fn plant_text_with(
     found_by: &str,
     table: &Discovered,
 ) -> Result<String, String> {
-    if plant_text.contains("[effects.discovered]") {
-        return Err(format!(
-            "{} already has an [effects.discovered] table; remove it (or run against the file \
-             without it) so that the written file has one",
-            plant_path.display()
-        ));
-    }
+    has_no_discovered_table(plant_text, plant_path)?;
     let text = format!(
         "{}\n# Found by {found_by}: {}\n{}",
         plant_text.trim_end(),
@@ -172,6 +166,22 @@ pub fn plant_text_with(
     );
     PlantConfig::from_toml_str(&text, plant_path).map_err(|e| e.to_string())?;
     Ok(text)
+}
+
+/// Refuses plant text that already has an `[effects.discovered]` table (a plant holds one):
+/// checked before a run that is to write one into it.
+pub fn has_no_discovered_table(
+    plant_text: &str,
+    plant_path: &std::path::Path,
+) -> Result<(), String> {
+    if plant_text.contains("[effects.discovered]") {
+        return Err(format!(
+            "{} already has an [effects.discovered] table; remove it (or run against the file \
+             without it) so that the written file has one",
+            plant_path.display()
+        ));
+    }
+    Ok(())
 }
 
 /// The sum of a table's terms as a formula ([`Discovered::formula`]).
@@ -626,7 +636,11 @@ pub fn after_diagnosis(
         ..opts.clone()
     };
     match diagnosis.verdict {
-        super::Verdict::Unexplained => Some(discover(nominal, train, check, &opts)),
+        // After the stand-in check, its discovery on the nominal plant is the answer.
+        super::Verdict::Unexplained => Some(match &diagnosis.stand_in_discovery {
+            Some(x) => Ok(x.clone()),
+            None => discover(nominal, train, check, &opts),
+        }),
         // What the named items leave: discovered on the plant they corrected.
         super::Verdict::PartlyExplained => {
             Some(discover(&diagnosis.corrected, train, check, &opts))
